@@ -1,0 +1,34 @@
+"""ament_python package swarm_ros; also a plain pip-installable Python package."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "swarm_ros"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    description="Self-organized shape formation in large robot swarms (ROS 2 Jazzy)",
+    license="Apache-2.0",
+    python_requires=">=3.11",
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/shapes", sorted(glob("shapes/*.txt"))),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+    ],
+    install_requires=[
+        "numpy>=2.0,<2.5",
+        "numba>=0.61",
+        "scipy>=1.13",
+        "matplotlib>=3.8",
+        "pillow>=10",
+        "PyYAML>=6",
+        "tqdm>=4.66",
+    ],
+    extras_require={"test": ["pytest>=8", "hypothesis>=6.100"]},
+    entry_points={"console_scripts": ["swarm-ros = swarm_ros.cli:main"]},
+    zip_safe=False,
+)

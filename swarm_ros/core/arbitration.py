@@ -1,0 +1,111 @@
+"""The world's side of a tick: settle join claims and apply every robot's decision.
+
+Conflict rule: when several robots claim one patch, the claim with the lowest lottery
+ticket wins, where a robot's ticket is 64 bits of its own random stream for that tick
+(ties, which need a 64-bit collision, go to the lower robot id). The rule depends only on
+(seed, tick, robot id), so it is the same whichever process hosts which robot and in
+whatever order decisions arrive.
+
+Join outcomes follow the original study's Z specification: a claim is granted
+(``SUCCESS``) only to a robot that is not yet localized, on an empty shape patch, while
+fewer robots are localized than the shape has patches; a refused claim's outcome is
+``ALREADY_COMPLETE`` if the shape is complete after the tick, else ``INCOMPLETE``. A
+refused robot keeps its position and heading for the tick.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+import numba
+import numpy as np
+
+from .rng import STREAM_PRIORITY, draw_bits
+from .rules import patch_index
+from .state import RobotState
+
+_MOVING_OUTSIDE = np.int8(RobotState.MOVING_OUTSIDE)
+_MOVING_INSIDE = np.int8(RobotState.MOVING_INSIDE)
+_LOCALIZED = np.int8(RobotState.LOCALIZED)
+
+
+class JoinOutcome(IntEnum):
+    """Result of one robot's decision at a tick."""
+
+    NO_CLAIM = -1  #: the robot did not try to join (it wandered)
+    SUCCESS = 0  #: granted: the robot is localized on the patch it claimed
+    ALREADY_COMPLETE = 1  #: refused; the shape is complete
+    INCOMPLETE = 2  #: refused (another robot won the patch); the shape is still incomplete
+
+
+_PENDING = -2
+
+
+@numba.njit(cache=True, inline="always")
+def _wins(a, b, ids, seed, tick) -> bool:
+    ta = draw_bits(seed, ids[a], tick, STREAM_PRIORITY)
+    tb = draw_bits(seed, ids[b], tick, STREAM_PRIORITY)
+    return ta < tb or (ta == tb and ids[a] < ids[b])
+
+
+@numba.njit(cache=True)
+def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier,
+                   shape, radius, size, seed, tick, best, localized, shape_patches, outcome):
+    """Apply the decisions of robots ``ids`` to the state arrays in place.
+
+    ``best`` is a W*W int array of -1 (scratch; left as found). ``localized`` is the number of
+    localized robots (seeds included) before the tick. Writes each robot's
+    :class:`JoinOutcome` to ``outcome[k]``. Returns (joined, moving inside, moving outside)
+    counted over ``ids`` after the tick.
+    """
+    n = ids.size
+    for k in range(n):
+        p = claim[k]
+        if p < 0 or occupancy[p] >= 0 or not shape[p]:
+            continue
+        b = best[p]
+        if b < 0 or _wins(k, b, ids, seed, tick):
+            best[p] = k
+    joined = 0
+    inside = 0
+    outside = 0
+    for k in range(n):
+        i = ids[k]
+        p = claim[k]
+        if p >= 0:
+            st = state[i]
+            if best[p] == k and localized < shape_patches and (st == _MOVING_INSIDE or st == _MOVING_OUTSIDE):
+                occupancy[p] = i
+                state[i] = _LOCALIZED
+                x[i] = float(p % size - radius)
+                y[i] = float(p // size - radius)
+                localized += 1
+                joined += 1
+                outcome[k] = 0
+                frontier[p] = False
+                for dy in (-size, 0, size):
+                    for dx in (-1, 0, 1):
+                        q = p + dy + dx
+                        if shape[q] and occupancy[q] < 0:
+                            frontier[q] = True
+                continue
+            outcome[k] = _PENDING
+        else:
+            outcome[k] = -1
+            x[i] = new_x[k]
+            y[i] = new_y[k]
+            heading[i] = new_heading[k]
+        if shape[patch_index(x[i], y[i], radius, size)]:
+            state[i] = _MOVING_INSIDE
+            inside += 1
+        else:
+            state[i] = _MOVING_OUTSIDE
+            outside += 1
+    refused = 1 if localized >= shape_patches else 2
+    for k in range(n):
+        p = claim[k]
+        if p >= 0:
+            best[p] = -1
+            if outcome[k] == _PENDING:
+                outcome[k] = refused
+    return joined, inside, outside

@@ -1,0 +1,106 @@
+"""Checks of the original study's Z-schema invariants (MODEL.md, "Formal specification").
+
+:func:`check_tick` compares the state before and after one tick of a
+:class:`~swarm_ros.core.engine.Simulation` and raises :class:`InvariantError` naming
+the first broken rule. It costs O(N + W^2) per tick: for tests and for
+``swarm-ros simulate --check``, not for production runs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .arbitration import JoinOutcome
+from .engine import Simulation
+from .metrics import Outcome, tick_metrics
+from .state import RobotState, SwarmState, frontier_of
+
+_STATIONARY = (RobotState.SEED, RobotState.LOCALIZED)
+_MOVING = (RobotState.MOVING_OUTSIDE, RobotState.MOVING_INSIDE)
+
+
+class InvariantError(AssertionError):
+    """A Z-schema invariant does not hold after a tick."""
+
+
+def _require(ok: bool, tick: int, rule: str) -> None:
+    if not ok:
+        raise InvariantError(f"tick {tick}: {rule}")
+
+
+def shape_status(localized_on_shape: int, shape_patches: int) -> int:
+    """0 empty, 1 partial, 2 complete."""
+    return 0 if localized_on_shape == 0 else (2 if localized_on_shape == shape_patches else 1)
+
+
+def check_state(sim: Simulation) -> None:
+    """Invariants of a single state: partition, occupancy, counts, metrics, frontier."""
+    s, shape, t = sim.state, sim.shape, sim.state.tick
+    world = shape.world
+    n, patches = s.robots, shape.patches
+    _require(bool(np.all((s.state >= 0) & (s.state <= RobotState.SEPARATED))), t, "unknown robot state code")
+    localized = np.isin(s.state, _STATIONARY)
+    _require(bool(np.all(s.state[:4] == RobotState.SEED)) and int(np.sum(s.state == RobotState.SEED)) == 4, t,
+             "robots 0-3, and only they, are seeds")
+    # at most one localized robot per patch, only on shape patches
+    px, py = world.patch_of(s.x, s.y)
+    _require(bool(np.all((np.abs(px) < world.radius) & (np.abs(py) < world.radius))), t, "a robot is on a wall")
+    flat = world.flat_index(px, py)
+    loc_ids = np.flatnonzero(localized)
+    _require(np.unique(flat[loc_ids]).size == loc_ids.size, t, "two localized robots on one patch")
+    _require(bool(np.all(shape.mask.ravel()[flat[loc_ids]])), t, "a localized robot is off the shape")
+    occupied = np.flatnonzero(s.occupancy >= 0)
+    _require(occupied.size == loc_ids.size, t, "occupancy count differs from localized robots")
+    _require(bool(np.array_equal(s.occupancy[flat[loc_ids]], loc_ids)), t, "occupancy names the wrong robot")
+    _require(bool(np.all((s.x[loc_ids] == px[loc_ids]) & (s.y[loc_ids] == py[loc_ids]))), t,
+             "a localized robot is off its patch centre")
+    _require(loc_ids.size <= min(n, patches), t, "#localized > min(N, shape patches)")
+    _require(bool(np.array_equal(s.frontier, frontier_of(shape, s.occupancy))), t, "frontier out of date")
+    counts = s.counts()
+    _require(sim.metrics == tick_metrics(t, counts, patches), t, f"metrics {sim.metrics} do not match the state")
+    inside_ok = shape.mask.ravel()[flat] == (s.state == RobotState.MOVING_INSIDE)
+    _require(bool(np.all(inside_ok | ~np.isin(s.state, _MOVING))), t, "moving inside/outside mislabelled")
+    if sim.outcome is Outcome.COMPLETE_WITH_EXTRAS:
+        _require(bool(np.all(localized | (s.state == RobotState.SEPARATED))), t, "extras not separated")
+    _require(not np.any(s.state == RobotState.SEPARATED) or sim.outcome is Outcome.COMPLETE_WITH_EXTRAS, t,
+             "separated robots before the shape completed")
+    if sim.outcome is Outcome.COMPLETE:
+        _require(n == patches == loc_ids.size, t, "complete, yet robots or patches left over")
+    if sim.outcome is Outcome.INCOMPLETE:
+        _require(not np.any(np.isin(s.state, _MOVING)) and loc_ids.size < patches, t, "incomplete, yet robots moving")
+
+
+def check_tick(prev: SwarmState, sim: Simulation) -> None:
+    """Invariants across one tick: ``prev`` is a copy of the state before ``sim``'s last tick."""
+    s, shape, t = sim.state, sim.shape, sim.state.tick
+    check_state(sim)
+    _require(t == prev.tick + 1, t, "tick did not advance by one")
+    was_loc = np.isin(prev.state, _STATIONARY)
+    now_loc = np.isin(s.state, _STATIONARY)
+    _require(bool(np.all(now_loc[was_loc])), t, "a localized robot became unlocalized")
+    _require(bool(np.all((s.x[was_loc] == prev.x[was_loc]) & (s.y[was_loc] == prev.y[was_loc]))), t,
+             "a localized robot moved")
+    before, after = int(was_loc.sum()), int(now_loc.sum())
+    _require(shape_status(after, shape.patches) >= shape_status(before, shape.patches), t,
+             "shape state went backwards")
+    # joins: success only for an unlocalized robot while #localized < patches, on a frontier patch
+    ids, claim, outcome = sim.last_joins()
+    _require(bool(np.all(np.isin(prev.state[ids], _MOVING))), t, "a non-moving robot decided")
+    valid = {int(o) for o in JoinOutcome}
+    _require(set(np.unique(outcome).tolist()) <= valid, t, "join outcome outside {success, already complete, incomplete}")
+    won = outcome == JoinOutcome.SUCCESS
+    _require(int(won.sum()) == after - before, t, "successful joins differ from new localized robots")
+    _require(before + int(won.sum()) <= shape.patches, t, "a join succeeded on a complete shape")
+    _require(bool(np.all(prev.frontier[claim[won]])), t, "a join succeeded off the frontier")
+    _require(bool(np.all(s.occupancy[claim[won]] == ids[won])), t, "a winner is not on its patch")
+    tried = claim >= 0
+    _require(bool(np.all((outcome == JoinOutcome.NO_CLAIM) == ~tried)), t, "claim and outcome disagree")
+    refused = tried & ~won
+    expected = JoinOutcome.ALREADY_COMPLETE if after == shape.patches else JoinOutcome.INCOMPLETE
+    _require(bool(np.all(outcome[refused] == expected)), t, "wrong outcome for a refused join")
+    # wandering robots move exactly one patch or not at all; refused robots stay put
+    walked = ~tried
+    step = np.hypot(s.x[ids] - prev.x[ids], s.y[ids] - prev.y[ids])
+    _require(bool(np.all((step[walked] < 1e-12) | (np.abs(step[walked] - 1.0) < 1e-9))), t,
+             "a robot moved other than one patch")
+    _require(bool(np.all(step[refused] == 0.0)), t, "a refused robot moved")

@@ -1,0 +1,95 @@
+"""Metrics and termination, defined once for every engine and consumer.
+
+Per tick (``metrics.csv``): stationary (seeds, localized and separated robots), localized
+(seeds included), inside (moving robots on a shape patch), moving, and empty shape
+patches. Per run (``summary.json``): outcome, convergence tick (the tick the run
+ended), localized, unlocalized, separated, empty patches, and convergence rate: robots
+that joined per tick, ``(localized - 4) / convergence_tick`` (0 at tick 0).
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+from typing import NamedTuple
+
+import numpy as np
+
+from .state import RobotState
+
+SEEDS = 4
+
+
+class Outcome(str, Enum):
+    """How a run ended (MODEL.md, "Termination")."""
+
+    COMPLETE = "complete"  #: every shape patch localized, no robot left over
+    COMPLETE_WITH_EXTRAS = "complete_with_extras"  #: shape complete; left-over robots separated
+    INCOMPLETE = "incomplete"  #: no robot moving, shape patches still empty
+    TIMEOUT = "timeout"  #: the tick limit was reached first
+
+    def __str__(self) -> str:
+        return self.value
+
+
+class TickMetrics(NamedTuple):
+    """One row of ``metrics.csv``; counts of robots or patches at the end of ``tick``."""
+
+    tick: int
+    stationary: int
+    localized: int
+    inside: int
+    moving: int
+    empty_patches: int
+
+
+METRIC_COLUMNS: tuple[str, ...] = TickMetrics._fields
+
+
+def tick_metrics(tick: int, counts: np.ndarray, shape_patches: int) -> TickMetrics:
+    """Metrics from the number of robots in each :class:`RobotState` (``counts[code]``)."""
+    localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
+    inside = int(counts[RobotState.MOVING_INSIDE])
+    moving = inside + int(counts[RobotState.MOVING_OUTSIDE])
+    stationary = localized + int(counts[RobotState.SEPARATED])
+    return TickMetrics(tick, stationary, localized, inside, moving, shape_patches - localized)
+
+
+def outcome_of(metrics: TickMetrics, shape_patches: int, robots: int, max_ticks: int) -> Outcome | None:
+    """The run's outcome if it ends at this tick, else None. Checked in the order of MODEL.md."""
+    if metrics.localized == shape_patches:
+        return Outcome.COMPLETE if robots == shape_patches else Outcome.COMPLETE_WITH_EXTRAS
+    if metrics.moving == 0:
+        return Outcome.INCOMPLETE
+    if metrics.tick >= max_ticks:
+        return Outcome.TIMEOUT
+    return None
+
+
+def convergence_rate(final: TickMetrics) -> float:
+    """Robots that joined the shape per tick over the run."""
+    return (final.localized - SEEDS) / final.tick if final.tick > 0 else 0.0
+
+
+def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, outcome: Outcome,
+                final: TickMetrics, separated: int, world_radius: int, wall_seconds: float) -> dict:
+    """The per-run record written to ``summary.json`` (and, later, one row of an experiment)."""
+    robots = params["robots"]
+    return {
+        "shape": shape,
+        "shape_patches": shape_patches,
+        "robots": robots,
+        "vision_radius": params["vision_radius"],
+        "seed": params["seed"],
+        "max_ticks": params["max_ticks"],
+        "wiggle_deg": params["wiggle_deg"],
+        "world_radius": world_radius,
+        "engine": engine,
+        "outcome": outcome.value,
+        "convergence_tick": final.tick,
+        "localized": final.localized,
+        "unlocalized": robots - final.localized,
+        "separated": separated,
+        "empty_patches": final.empty_patches,
+        "convergence_rate": round(convergence_rate(final), 6),
+        "wall_seconds": round(wall_seconds, 3),
+    }

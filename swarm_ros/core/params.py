@@ -1,0 +1,66 @@
+"""Run parameters, validated on construction."""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import asdict, dataclass
+
+from .errors import ParameterError
+
+DEFAULT_SEED = 1
+DEFAULT_VISION = 1.0
+DEFAULT_WIGGLE_DEG = 45.0
+DEFAULT_MAX_TICKS = 100_000
+MAX_SEED = 2**63 - 1
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """Everything that, with the shape, fixes a run.
+
+    Attributes:
+        robots: N, all robots including the four seeds.
+        vision_radius: patches; how far a robot sees join targets and other robots.
+        seed: run seed, 0 <= seed < 2**63.
+        max_ticks: tick limit; a run still going then ends with outcome ``timeout``.
+        wiggle_deg: a wandering robot turns by a uniform angle in [-wiggle, +wiggle] degrees per tick.
+    """
+
+    robots: int
+    vision_radius: float = DEFAULT_VISION
+    seed: int = DEFAULT_SEED
+    max_ticks: int = DEFAULT_MAX_TICKS
+    wiggle_deg: float = DEFAULT_WIGGLE_DEG
+
+    def __post_init__(self) -> None:
+        for name, low, high in (("robots", 4, None), ("seed", 0, MAX_SEED), ("max_ticks", 1, None)):
+            object.__setattr__(self, name, _int(name, getattr(self, name), low, high))
+        object.__setattr__(self, "vision_radius", _real("vision_radius", self.vision_radius, 0.0, 100.0))
+        object.__setattr__(self, "wiggle_deg", _real("wiggle_deg", self.wiggle_deg, 0.0, 180.0, True))
+
+    @property
+    def wiggle_rad(self) -> float:
+        return math.radians(self.wiggle_deg)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _int(name: str, value: object, low: int, high: int | None) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ParameterError(f"{name} must be an integer, got {value!r}")
+    if value < low or (high is not None and value > high):
+        bound = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ParameterError(f"{name} must be {bound}, got {value}")
+    return int(value)
+
+
+def _real(name: str, value: object, low: float, high: float, inclusive_low: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        raise ParameterError(f"{name} must be a finite number, got {value!r}")
+    too_low = value < low if inclusive_low else value <= low
+    if too_low or value > high:
+        op = ">=" if inclusive_low else ">"
+        raise ParameterError(f"{name} must be {op} {low:g} and <= {high:g}, got {value:g}")
+    return float(value)

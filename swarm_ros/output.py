@@ -1,0 +1,107 @@
+"""A run's output directory: summary.json, metrics.csv, final_state.csv, final.png.
+
+Everything is written into a hidden temporary directory beside the target and renamed
+into place at the end, so a run directory is either complete or absent. Number
+formats are fixed (integers; floats as Python's shortest round-trip repr), so the same
+run gives byte-identical files apart from ``wall_seconds``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import shutil
+from datetime import datetime
+from pathlib import Path
+
+from .core.engine import Simulation
+from .core.errors import SwarmError
+from .core.metrics import METRIC_COLUMNS
+from .core.state import RobotState
+
+RUNS_DIR = Path("runs")
+FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
+
+
+class OutputError(SwarmError):
+    """The output directory cannot be used."""
+
+
+def default_run_dir(shape: str, robots: int, vision: float, seed: int, now: datetime | None = None) -> Path:
+    """``runs/<time>_<shape>_n<N>_v<R>_s<seed>`` under the current directory."""
+    stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
+    return RUNS_DIR / f"{stamp}_{shape}_n{robots}_v{vision:g}_s{seed}"
+
+
+def check_out_dir(out: Path, overwrite: bool) -> None:
+    """Fail early, before a run, if ``out`` cannot be written.
+
+    Raises:
+        OutputError: ``out`` exists (and is not an empty directory) without ``overwrite``,
+            is a file, or its parent cannot be created or written.
+    """
+    if out.exists():
+        if not out.is_dir():
+            raise OutputError(f"{out}: exists and is not a directory")
+        if any(out.iterdir()) and not overwrite:
+            raise OutputError(f"{out}: output directory exists and is not empty (use --overwrite to replace it)")
+    parent = out.absolute().parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{parent}: cannot create output directory ({exc.strerror or exc})") from None
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{parent}: output directory is not writable")
+
+
+def metrics_csv(sim: Simulation) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(METRIC_COLUMNS)
+    writer.writerows(sim.history)
+    return buf.getvalue()
+
+
+def final_state_csv(sim: Simulation) -> str:
+    s = sim.state
+    labels = [st.label for st in RobotState]
+    lines = [",".join(FINAL_STATE_COLUMNS)]
+    for i, (x, y, h, st) in enumerate(zip(s.x.tolist(), s.y.tolist(), s.heading.tolist(), s.state.tolist())):
+        lines.append(f"{i},{x!r},{y!r},{h!r},{labels[st]}")
+    return "\n".join(lines) + "\n"
+
+
+def summary_json(summary: dict) -> str:
+    return json.dumps(summary, indent=2) + "\n"
+
+
+def write_run(out: Path, sim: Simulation, summary: dict, overwrite: bool = False) -> Path:
+    """Write the run's files into ``out`` atomically (temp dir + rename). Returns ``out``.
+
+    Raises:
+        OutputError: the directory cannot be written.
+    """
+    from .plots import save_final_png
+
+    check_out_dir(out, overwrite)
+    out = out.absolute()
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    trash = out.parent / f".{out.name}.old-{os.getpid()}"
+    try:
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        (tmp / "summary.json").write_text(summary_json(summary), encoding="utf-8")
+        (tmp / "metrics.csv").write_text(metrics_csv(sim), encoding="utf-8")
+        (tmp / "final_state.csv").write_text(final_state_csv(sim), encoding="utf-8")
+        save_final_png(sim, tmp / "final.png")
+        if out.exists():
+            out.rename(trash)
+        tmp.rename(out)
+    except OSError as exc:
+        raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc})") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(trash, ignore_errors=True)
+    return out
