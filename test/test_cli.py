@@ -1,0 +1,134 @@
+"""The swarm-ros command line: simulate's run directory, reproducibility, bad input."""
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from swarm_ros import cli, output
+from swarm_ros.core.metrics import METRIC_COLUMNS
+
+SUMMARY_KEYS = {"shape", "shape_patches", "robots", "vision_radius", "seed", "engine", "outcome",
+                "convergence_tick", "localized", "unlocalized", "empty_patches", "wall_seconds"}
+
+
+def simulate(out: Path, *extra: str) -> int:
+    return cli.main(["simulate", "--shape", "rectangle", "--robots", "460", "--seed", "3", "--quiet",
+                     "--out", str(out), *extra])
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "run"
+    assert simulate(out) == 0
+    return out
+
+
+def test_simulate_writes_the_run_directory(run_dir):
+    assert sorted(p.name for p in run_dir.iterdir()) == ["final.png", "final_state.csv", "metrics.csv",
+                                                        "summary.json"]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(summary)
+    assert summary["engine"] == "inprocess" and summary["outcome"] == "complete_with_extras"
+    assert summary["robots"] == 460 and summary["shape_patches"] == 442 and summary["separated"] == 18
+    rows = list(csv.reader((run_dir / "metrics.csv").open()))
+    assert tuple(rows[0]) == METRIC_COLUMNS
+    assert len(rows) == summary["convergence_tick"] + 2 and rows[-1][0] == str(summary["convergence_tick"])
+    final = list(csv.DictReader((run_dir / "final_state.csv").open()))
+    assert len(final) == 460 and {r["state"] for r in final} == {"seed", "localized", "separated"}
+    assert (run_dir / "final.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_same_command_same_seed_gives_identical_files(run_dir, tmp_path):
+    again = tmp_path / "again"
+    assert simulate(again) == 0
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (again / name).read_bytes() == (run_dir / name).read_bytes()
+    a, b = (json.loads((d / "summary.json").read_text()) for d in (run_dir, again))
+    a.pop("wall_seconds"), b.pop("wall_seconds")
+    assert a == b
+
+
+def test_summary_is_printed(tmp_path, capsys):
+    assert cli.main(["simulate", "--shape", "rectangle", "--max-ticks", "10", "--out", str(tmp_path / "r")]) == 0
+    text = capsys.readouterr().out
+    assert "outcome           timeout" in text and "convergence tick  10" in text
+
+
+def test_params_file_sets_values_and_flags_override_it(tmp_path):
+    pf = tmp_path / "p.yaml"
+    pf.write_text("/**:\n  ros__parameters:\n    shape: wrench\n    robots: 300\n    max_ticks: 7\n")
+    assert cli.main(["simulate", "--params-file", str(pf), "--robots", "200", "--quiet",
+                     "--out", str(tmp_path / "r")]) == 0
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert (s["shape"], s["robots"], s["max_ticks"]) == ("wrench", 200, 7)
+
+
+def test_check_flag_runs_the_invariant_checks(tmp_path):
+    assert simulate(tmp_path / "r", "--check", "--overwrite") == 0
+
+
+def test_existing_output_is_refused_unless_overwrite(run_dir, tmp_path, capsys):
+    out = tmp_path / "r"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    assert simulate(out) == 2
+    assert "exists and is not empty" in capsys.readouterr().err
+    assert (out / "keep.txt").exists()
+    assert simulate(out, "--overwrite") == 0
+    assert not (out / "keep.txt").exists() and (out / "summary.json").exists()
+
+
+def test_shapes_lists_the_six_builtins(capsys):
+    assert cli.main(["shapes"]) == 0
+    text = capsys.readouterr().out
+    for name, patches in [("star", 1036), ("tyre", 1284), ("spinner", 1041)]:
+        assert any(line.split()[:2] == [name, str(patches)] for line in text.splitlines())
+
+
+BAD = [
+    (["--shape", "nosuch"], "no such shape file or built-in shape"),
+    (["--robots", "0"], "must be a positive integer"),
+    (["--robots", "-5"], "must be a positive integer"),
+    (["--robots", "abc"], "invalid integer"),
+    (["--robots", "5000"], "5000 robots do not fit on the 3969 free patches"),
+    (["--robots", "3"], "robots must be >= 4"),
+    (["--vision", "0"], "must be a positive number"),
+    (["--vision", "nan"], "must be a positive number"),
+    (["--max-ticks", "0"], "must be a positive integer"),
+    (["--seed", "-1"], "seed must be in"),
+    (["--world-radius", "27"], "touches the wall"),
+    (["--world-radius", "20"], "reaches beyond the walls"),
+    (["--frobnicate"], "unrecognized arguments"),
+]
+
+
+@pytest.mark.parametrize("args,message", BAD, ids=[" ".join(a) for a, _ in BAD])
+def test_bad_input_gets_one_line_exit_2_and_writes_nothing(tmp_path, capsys, args, message):
+    out = tmp_path / "run"
+    assert cli.main(["simulate", "--quiet", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("swarm-ros: error: ") and message in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
+    def broken(sim, path):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("swarm_ros.plots.save_final_png", broken)
+    assert simulate(tmp_path / "run") == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_installed_console_script_reports_errors_without_a_traceback(tmp_path):
+    exe = Path(sys.executable).parent / "swarm-ros"
+    result = subprocess.run([str(exe), "simulate", "--shape", str(tmp_path / "missing.png")],
+                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.startswith("swarm-ros: error: ") and "Traceback" not in result.stderr
+    assert not (tmp_path / output.RUNS_DIR).exists()

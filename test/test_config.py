@@ -1,0 +1,43 @@
+"""ROS 2 style parameter files."""
+
+from dataclasses import asdict
+
+import pytest
+
+from swarm_ros.config import ConfigError, Settings, load_params_file
+from swarm_ros.core.resources import data_dir
+
+
+def test_shipped_parameter_file_holds_exactly_the_defaults():
+    assert load_params_file(data_dir("config") / "swarm_ros.yaml", Settings(shape="other")) == Settings()
+
+
+def test_sections_apply_in_order_and_override_the_base(tmp_path):
+    path = tmp_path / "p.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    robots: 500\n    vision_radius: 2\n"
+                    "/world:\n  ros__parameters:\n    robots: 600\n")
+    s = load_params_file(path, Settings(seed=9))
+    assert asdict(s) == {**asdict(Settings()), "robots": 600, "vision_radius": 2.0, "seed": 9}
+
+
+@pytest.mark.parametrize("text,message", [
+    ("/**:\n  ros__parameters:\n    robtos: 5\n", "unknown parameter 'robtos'"),
+    ("/**:\n  ros__parameters:\n    robots: many\n", "'robots' must be an integer"),
+    ("/**:\n  ros__parameters:\n    robots: 5.5\n", "'robots' must be an integer"),
+    ("/**:\n  ros__parameters:\n    vision_radius: true\n", "'vision_radius' must be a number"),
+    ("/**:\n  ros__parameters:\n    shape: 3\n", "'shape' must be a string"),
+    ("robots: 5\n", "section 'robots' must hold exactly one 'ros__parameters'"),
+    ("", "expected '/node_name: ros__parameters"),
+    ("/**: [unclosed\n", "not valid YAML"),
+])
+def test_bad_parameter_files_name_the_file_and_the_key(tmp_path, text, message):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_params_file(path)
+    assert message in str(info.value) and str(path) in str(info.value)
+
+
+def test_missing_parameter_file(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read parameter file"):
+        load_params_file(tmp_path / "nope.yaml")

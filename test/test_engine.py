@@ -1,0 +1,102 @@
+"""Whole runs: every outcome, every built-in shape with all invariants checked, determinism,
+and equality between the fused in-process step and the batched decide/apply data flow."""
+
+import numpy as np
+import pytest
+
+from conftest import disc_shape, params, run_checked
+from swarm_ros.core import Outcome, RobotState, Shape, Simulation, World, decide
+from swarm_ros.core.rules import Decisions
+
+BUILTINS = ["k-letter", "rectangle", "spinner", "star", "tyre", "wrench"]
+
+
+@pytest.mark.parametrize("name", BUILTINS)
+def test_builtin_shape_completes_with_its_patch_count_and_every_invariant_holds(name):
+    shape = Shape.load(name)
+    sim = run_checked(Simulation(shape, params(shape.patches, seed=2)))
+    assert sim.outcome is Outcome.COMPLETE
+    assert sim.metrics.empty_patches == 0 and sim.metrics.moving == 0
+
+
+def test_fewer_robots_than_patches_ends_incomplete():
+    shape = disc_shape(World(radius=10), 5.0)  # 81 patches
+    sim = run_checked(Simulation(shape, params(60, seed=4)))
+    assert sim.outcome is Outcome.INCOMPLETE
+    assert sim.metrics.localized == 60 and sim.metrics.empty_patches == 21
+
+
+def test_more_robots_than_patches_completes_and_separates_the_extras():
+    shape = disc_shape(World(radius=10), 5.0)
+    sim = run_checked(Simulation(shape, params(100, seed=4)))
+    assert sim.outcome is Outcome.COMPLETE_WITH_EXTRAS
+    summary = sim.summary()
+    assert summary["separated"] == summary["unlocalized"] == 19
+    assert (sim.state.state == RobotState.SEPARATED).sum() == 19
+    assert sim.metrics.stationary == 100 and sim.metrics.moving == 0
+
+
+def test_tick_limit_ends_in_timeout():
+    sim = run_checked(Simulation(Shape.load("star"), params(1036, seed=1, max_ticks=25)))
+    assert sim.outcome is Outcome.TIMEOUT and sim.tick == 25
+    assert sim.summary()["convergence_tick"] == 25
+
+
+def test_only_the_seeds_is_incomplete_at_tick_zero():
+    sim = Simulation(Shape.load("star"), params(4))
+    assert sim.outcome is Outcome.INCOMPLETE and sim.tick == 0
+
+
+def test_history_has_one_row_per_tick_and_matches_the_final_state():
+    sim = Simulation(Shape.load("rectangle"), params(450, seed=8))
+    seen = []
+    sim.run(on_tick=lambda s: seen.append(s.tick))
+    assert [m.tick for m in sim.history] == list(range(sim.tick + 1))
+    assert seen == list(range(1, sim.tick + 1))
+    with pytest.raises(RuntimeError, match="has ended"):
+        sim.step()
+
+
+def _final(sim):
+    return (sim.outcome, sim.history, sim.state.x.tobytes(), sim.state.y.tobytes(),
+            sim.state.heading.tobytes(), sim.state.state.tobytes())
+
+
+def test_same_seed_same_run_different_seed_different_run():
+    shape = Shape.load("wrench")
+    a = Simulation(shape, params(566, seed=21))
+    b = Simulation(shape, params(566, seed=21))
+    c = Simulation(shape, params(566, seed=22))
+    for s in (a, b, c):
+        s.run()
+    assert _final(a) == _final(b)
+    assert _final(a) != _final(c)
+
+
+def run_in_batches(shape: Shape, p, batches: int, seed: int) -> Simulation:
+    """The distributed data flow in one process: robots split over ``batches`` by a random
+    owner map, each batch decides from the shared view, the world applies the union."""
+    sim = Simulation(shape, p)
+    owner = np.random.default_rng(seed).integers(0, batches, p.robots)
+    while not sim.done:
+        ids = sim.moving_ids()
+        parts = [decide(sim.state, ids[owner[ids] == b], shape, p, sim.tick + 1) for b in range(batches)]
+        sim.apply(Decisions.concatenate(parts[::-1]))
+    return sim
+
+
+@pytest.mark.parametrize("name,robots,vision", [("star", 1036, 1.0), ("tyre", 1300, 1.0)])
+@pytest.mark.parametrize("batches", [1, 2, 4])
+def test_batched_decide_and_apply_equal_the_fused_engine(name, robots, vision, batches):
+    shape = Shape.load(name)
+    p = params(robots, seed=5, vision_radius=vision, max_ticks=4000)
+    fused = Simulation(shape, p)
+    fused.run()
+    assert _final(run_in_batches(shape, p, batches, seed=batches)) == _final(fused)
+
+
+def test_batched_equals_fused_with_wider_vision_on_a_small_ring(small_ring):
+    p = params(90, seed=3, vision_radius=2.0, max_ticks=3000)
+    fused = Simulation(small_ring, p)
+    fused.run()
+    assert _final(run_in_batches(small_ring, p, 3, seed=1)) == _final(fused)

@@ -1,0 +1,29 @@
+"""Metric definitions and termination order."""
+
+import numpy as np
+import pytest
+
+from swarm_ros.core.metrics import Outcome, TickMetrics, convergence_rate, outcome_of, tick_metrics
+
+
+def test_metrics_from_state_counts():
+    # seed, moving outside, moving inside, localized, separated
+    m = tick_metrics(12, np.array([4, 30, 7, 50, 0]), shape_patches=100)
+    assert m == TickMetrics(tick=12, stationary=54, localized=54, inside=7, moving=37, empty_patches=46)
+
+
+@pytest.mark.parametrize("m,robots,expected", [
+    (TickMetrics(5, 100, 100, 0, 0, 0), 100, Outcome.COMPLETE),
+    (TickMetrics(5, 100, 100, 0, 3, 0), 103, Outcome.COMPLETE_WITH_EXTRAS),
+    (TickMetrics(5, 90, 90, 0, 0, 10), 90, Outcome.INCOMPLETE),
+    (TickMetrics(50, 90, 90, 1, 5, 10), 95, Outcome.TIMEOUT),
+    (TickMetrics(49, 90, 90, 1, 5, 10), 95, None),
+    (TickMetrics(50, 100, 100, 0, 0, 0), 100, Outcome.COMPLETE),  # completion wins over the limit
+])
+def test_outcome_is_checked_in_model_order(m, robots, expected):
+    assert outcome_of(m, shape_patches=100, robots=robots, max_ticks=50) is expected
+
+
+def test_convergence_rate_counts_joins_per_tick_without_the_seeds():
+    assert convergence_rate(TickMetrics(100, 54, 54, 0, 0, 0)) == 0.5
+    assert convergence_rate(TickMetrics(0, 4, 4, 0, 0, 0)) == 0.0

@@ -1,0 +1,60 @@
+"""Initial placement (tick 0)."""
+
+import numpy as np
+import pytest
+
+from swarm_ros.core import ParameterError, RobotState, Shape
+from swarm_ros.core.state import frontier_of, initial_state
+
+
+@pytest.fixture(scope="module")
+def star():
+    return Shape.load("star")
+
+
+def test_seeds_are_robots_0_to_3_on_the_seed_block(star):
+    s = initial_state(star, 1036, seed=5)
+    assert (s.state[:4] == RobotState.SEED).all()
+    assert np.array_equal(np.c_[s.x[:4], s.y[:4]], star.seed_patches)
+    assert sorted(s.occupancy[s.occupancy >= 0].tolist()) == [0, 1, 2, 3]
+
+
+def test_other_robots_start_on_distinct_free_patches_inside_or_outside_the_shape(star):
+    s = initial_state(star, 3000, seed=5)
+    world = star.world
+    px, py = world.patch_of(s.x, s.y)
+    flat = world.flat_index(px, py)
+    assert np.unique(flat).size == 3000
+    assert not world.wall_mask().ravel()[flat].any()
+    inside = star.mask.ravel()[flat[4:]]
+    assert inside.any() and (~inside).any()
+    expected = np.where(inside, RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE)
+    assert np.array_equal(s.state[4:], expected)
+    assert (s.heading >= 0).all() and (s.heading < 2 * np.pi).all()
+
+
+def test_positions_are_spread_uniformly_over_free_patches(star):
+    s = initial_state(star, 3000, seed=9)
+    offsets = np.r_[s.x[4:] - np.floor(s.x[4:] + 0.5), s.y[4:] - np.floor(s.y[4:] + 0.5)]
+    assert -0.5 <= offsets.min() and offsets.max() < 0.5
+    assert abs(offsets.mean()) < 0.02
+
+
+def test_same_seed_same_start_different_seed_different_start(star):
+    a, b, c = initial_state(star, 500, 1), initial_state(star, 500, 1), initial_state(star, 500, 2)
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.heading, b.heading)
+    assert not np.array_equal(a.x, c.x)
+
+
+def test_frontier_is_the_ring_around_the_seeds(star):
+    s = initial_state(star, 100, 1)
+    assert s.frontier.sum() == 12  # the 4 x 4 ring around a 2 x 2 block inside the star
+    assert np.array_equal(s.frontier, frontier_of(star, s.occupancy))
+
+
+def test_too_many_or_too_few_robots_are_rejected(star):
+    with pytest.raises(ParameterError, match="3970 robots do not fit on the 3969 free patches"):
+        initial_state(star, 3970, 1)
+    with pytest.raises(ParameterError, match="at least 4"):
+        initial_state(star, 3, 1)
+    assert initial_state(star, 3969, 1).robots == 3969  # every free patch taken is fine
