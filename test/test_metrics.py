@@ -27,3 +27,10 @@ def test_outcome_is_checked_in_model_order(m, robots, expected):
 def test_convergence_rate_counts_joins_per_tick_without_the_seeds():
     assert convergence_rate(TickMetrics(100, 54, 54, 0, 0, 0)) == 0.5
     assert convergence_rate(TickMetrics(0, 4, 4, 0, 0, 0)) == 0.0
+
+
+def test_state_codes_are_stable():
+    from swarm_ros.core import RobotState
+
+    assert [(s.value, s.label) for s in RobotState] == [
+        (0, "seed"), (1, "moving_outside"), (2, "moving_inside"), (3, "localized"), (4, "separated")]

@@ -28,19 +28,8 @@ from .shapes import Shape
 from .state import RobotState, SwarmState, initial_state
 
 ENGINE_NAME = "inprocess"
-
-
-@numba.njit(cache=True)
-def _step_kernel(moving, m, x, y, heading, state, shape, wall, frontier, occupancy, radius, size, vision,
-                 wiggle, seed, tick, head, nxt, best, claim, new_x, new_y, new_heading, outcome,
-                 localized, shape_patches):
-    ids = moving[:m]
-    index_build(ids, x, y, radius, size, head, nxt)
-    decide_kernel(ids, x, y, heading, shape, wall, frontier, radius, size, vision, wiggle, seed, tick,
-                  head, nxt, claim, new_x, new_y, new_heading)
-    index_clear(ids, x, y, radius, size, head)
-    return resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy,
-                          frontier, shape, radius, size, seed, tick, best, localized, shape_patches, outcome)
+_MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState.MOVING_INSIDE)
+_LOCALIZED, _SEPARATED = int(RobotState.LOCALIZED), int(RobotState.SEPARATED)
 
 
 @numba.njit(cache=True)
@@ -53,6 +42,23 @@ def _compact_moving(moving, m, state):
             moving[j] = i
             j += 1
     return j
+
+
+@numba.njit(cache=True)
+def _step_kernel(moving, x, y, heading, state, shape, wall, frontier, occupancy, radius, size, vision, wiggle,
+                 seed, head, nxt, best, claim, new_x, new_y, new_heading, outcome, last_ids, shape_patches,
+                 m, tick, localized):
+    """One whole tick for the robots ``moving[:m]``; returns (joined, inside, outside, still moving)."""
+    ids = moving[:m]
+    last_ids[:m] = ids
+    index_build(ids, x, y, radius, size, head, nxt)
+    decide_kernel(ids, x, y, heading, shape, wall, frontier, radius, size, vision, wiggle, seed, tick,
+                  head, nxt, claim, new_x, new_y, new_heading)
+    index_clear(ids, x, y, radius, size, head)
+    joined, inside, outside = resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state,
+                                             occupancy, frontier, shape, radius, size, seed, tick, best,
+                                             localized, shape_patches, outcome)
+    return joined, inside, outside, _compact_moving(moving, m, state)
 
 
 class Simulation:
@@ -87,11 +93,17 @@ class Simulation:
         self._claim = np.empty(n, dtype=np.int64)
         self._new_x, self._new_y, self._new_heading = np.empty(n), np.empty(n), np.empty(n)
         self._outcome = np.empty(n, dtype=np.int8)
+        self._last_ids = np.empty(n, dtype=np.int64)
         self._moving = self.state.moving_ids()
         self._m = int(self._moving.size)
-        self._counts = self.state.counts()
+        self._counts = [int(c) for c in self.state.counts()]
         self._decided = 0
-        self._last_ids = self._moving[:0].copy()
+        s = self.state
+        self._kernel_args = (
+            self._moving, s.x, s.y, s.heading, s.state, self._shape, self._wall, s.frontier, s.occupancy,
+            self._radius, self._size, params.vision_radius, params.wiggle_rad, params.seed, self._head,
+            self._nxt, self._best, self._claim, self._new_x, self._new_y, self._new_heading, self._outcome,
+            self._last_ids, shape.patches)
         self.history: list[TickMetrics] = []
         self.outcome: Outcome | None = None
         self._finish_tick()
@@ -122,15 +134,11 @@ class Simulation:
     # -- advancing --------------------------------------------------------------
     def step(self) -> TickMetrics:
         """Advance one tick with every robot in this process."""
-        self._check_running()
+        if self.outcome is not None:
+            self._check_running()
         m = self._m
-        self._last_ids = self._moving[:m].copy()
-        joined, inside, outside = _step_kernel(
-            self._moving, m, self.state.x, self.state.y, self.state.heading, self.state.state, self._shape,
-            self._wall, self.state.frontier, self.state.occupancy, self._radius, self._size,
-            self.params.vision_radius, self.params.wiggle_rad, self.params.seed, self.state.tick + 1,
-            self._head, self._nxt, self._best, self._claim, self._new_x, self._new_y, self._new_heading,
-            self._outcome, self.metrics.localized, self.shape.patches)
+        joined, inside, outside, self._m = _step_kernel(*self._kernel_args, m, self.state.tick + 1,
+                                                        self.history[-1].localized)
         return self._advance(m, joined, inside, outside)
 
     def apply(self, decisions: Decisions) -> TickMetrics:
@@ -148,13 +156,14 @@ class Simulation:
         m = self._m
         if decisions.ids.size != m or not np.array_equal(np.sort(decisions.ids), self._moving[:m]):
             raise ValueError("decisions must cover every moving robot exactly once")
-        self._last_ids = decisions.ids.copy()
+        self._last_ids[:m] = decisions.ids
         self._claim[:m] = decisions.claim
         joined, inside, outside = resolve_kernel(
-            self._last_ids, self._claim, decisions.x, decisions.y, decisions.heading, self.state.x,
+            self._last_ids[:m], self._claim, decisions.x, decisions.y, decisions.heading, self.state.x,
             self.state.y, self.state.heading, self.state.state, self.state.occupancy, self.state.frontier,
             self._shape, self._radius, self._size, self.params.seed, decisions.tick, self._best,
             self.metrics.localized, self.shape.patches, self._outcome)
+        self._m = _compact_moving(self._moving, m, self.state.state)
         return self._advance(m, joined, inside, outside)
 
     def run(self, on_tick: Callable[[Simulation], None] | None = None) -> Outcome:
@@ -173,11 +182,10 @@ class Simulation:
     def _advance(self, decided: int, joined: int, inside: int, outside: int) -> TickMetrics:
         self._decided = decided
         self.state.tick += 1
-        self._m = _compact_moving(self._moving, self._m, self.state.state)
         c = self._counts
-        c[RobotState.LOCALIZED] += joined
-        c[RobotState.MOVING_INSIDE] = inside
-        c[RobotState.MOVING_OUTSIDE] = outside
+        c[_LOCALIZED] += joined
+        c[_MOVING_INSIDE] = inside
+        c[_MOVING_OUTSIDE] = outside
         return self._finish_tick()
 
     def _finish_tick(self) -> TickMetrics:
@@ -186,8 +194,8 @@ class Simulation:
         if outcome is Outcome.COMPLETE_WITH_EXTRAS:
             left = self._moving[: self._m]
             self.state.state[left] = RobotState.SEPARATED
-            self._counts[RobotState.SEPARATED] += left.size
-            self._counts[RobotState.MOVING_INSIDE] = self._counts[RobotState.MOVING_OUTSIDE] = 0
+            self._counts[_SEPARATED] += int(left.size)
+            self._counts[_MOVING_INSIDE] = self._counts[_MOVING_OUTSIDE] = 0
             self._m = 0
             metrics = tick_metrics(self.state.tick, self._counts, self.shape.patches)
         self.outcome = outcome
@@ -201,6 +209,6 @@ class Simulation:
         return run_summary(
             shape=self.shape.name, shape_patches=self.shape.patches, params=self.params.as_dict(),
             engine=self.engine, outcome=self.outcome, final=self.metrics,
-            separated=int(self._counts[RobotState.SEPARATED]), world_radius=self._radius,
+            separated=self._counts[_SEPARATED], world_radius=self._radius,
             wall_seconds=wall_seconds)
 

@@ -9,6 +9,7 @@ that joined per tick, ``(localized - 4) / convergence_tick`` (0 at tick 0).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from enum import Enum
 from typing import NamedTuple
 
@@ -45,13 +46,11 @@ class TickMetrics(NamedTuple):
 METRIC_COLUMNS: tuple[str, ...] = TickMetrics._fields
 
 
-def tick_metrics(tick: int, counts: np.ndarray, shape_patches: int) -> TickMetrics:
-    """Metrics from the number of robots in each :class:`RobotState` (``counts[code]``)."""
-    localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
-    inside = int(counts[RobotState.MOVING_INSIDE])
-    moving = inside + int(counts[RobotState.MOVING_OUTSIDE])
-    stationary = localized + int(counts[RobotState.SEPARATED])
-    return TickMetrics(tick, stationary, localized, inside, moving, shape_patches - localized)
+def tick_metrics(tick: int, counts: Sequence[int] | np.ndarray, shape_patches: int) -> TickMetrics:
+    """Metrics from the number of robots in each :class:`RobotState` (``counts[code]``, codes 0-4 in order)."""
+    seed, outside, inside, localized, separated = (int(c) for c in counts)
+    localized += seed
+    return TickMetrics(tick, localized + separated, localized, inside, inside + outside, shape_patches - localized)
 
 
 def outcome_of(metrics: TickMetrics, shape_patches: int, robots: int, max_ticks: int) -> Outcome | None:

@@ -1,0 +1,127 @@
+#!/usr/bin/env python3
+"""Benchmark the in-process engine on one core: robot-steps per second and tick cost.
+
+A robot-step is one moving robot's decision at one tick (stationary robots cost
+nothing and are not counted). Cases:
+
+  * star, 1036 robots: the first 200 ticks, and a whole run;
+  * a disc-shaped world at the star's density with 10,000 and 100,000 robots: the
+    first 200 ticks;
+  * tick cost against the number of moving robots over the whole star run, with a
+    least-squares fit ``cost = a + b * moving``.
+
+Only ``Simulation.step()`` is timed (set-up and compilation are not). Pinned to one
+CPU. Compare the numbers as ratios within one run: the machines are shared and noisy.
+
+    .venv/bin/python scripts/bench_engine.py [--seeds 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from swarm_ros.core import RunParams, Shape, Simulation, World  # noqa: E402
+
+STAR_DENSITY = 1036 / 63**2  # robots per free patch in the default star run
+
+
+def disc_world(robots: int) -> Shape:
+    """A disc of ``robots`` patches in a world where the robots have the star's density."""
+    inner = int(np.ceil(np.sqrt(robots / STAR_DENSITY)))
+    world = World(radius=(inner + 1) // 2 + 1)
+    r = world.radius
+    c = np.arange(-r, r + 1)
+    x, y = np.meshgrid(c, c)
+    d2 = (x * x + y * y).ravel()
+    order = np.argsort(d2, kind="stable")[:robots]  # the `robots` patches nearest the origin
+    mask = np.zeros(world.patch_count, dtype=bool)
+    mask[order] = True
+    return Shape(name=f"disc{robots}", mask=mask.reshape(world.size, world.size), world=world,
+                 source=f"bench disc of {robots} patches")
+
+
+def timed_ticks(sim: Simulation, ticks: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """Step up to ``ticks`` times (or to the end); per tick: seconds and robots that decided."""
+    secs, moving = [], []
+    clock = time.perf_counter
+    while not sim.done and (ticks is None or len(secs) < ticks):
+        m = sim.metrics.moving
+        t0 = clock()
+        sim.step()
+        secs.append(clock() - t0)
+        moving.append(m)
+    return np.array(secs), np.array(moving)
+
+
+def report(label: str, secs: np.ndarray, moving: np.ndarray) -> float:
+    steps = int(moving.sum())
+    rate = steps / secs.sum()
+    print(f"{label:<34} {len(secs):>7} ticks {steps:>12,} robot-steps {secs.sum():8.3f} s "
+          f"{rate / 1e6:8.2f} M robot-steps/s {len(secs) / secs.sum():10,.0f} ticks/s")
+    return rate
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=3, help="repetitions of each case (median reported)")
+    args = ap.parse_args()
+    try:
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+        pinned = "pinned to 1 CPU"
+    except (AttributeError, OSError):
+        pinned = "not pinned"
+    star = Shape.load("star")
+    Simulation(star, RunParams(robots=50, max_ticks=3)).run()  # compile / load the kernels
+    print(f"swarm_ros engine benchmark ({pinned}; median of {args.seeds} seeds)\n")
+
+    def median_case(label, make, ticks):
+        rates, runs = [], []
+        for seed in range(1, args.seeds + 1):
+            secs, moving = timed_ticks(make(seed), ticks)
+            rates.append(moving.sum() / secs.sum())
+            runs.append((secs, moving))
+        k = int(np.argsort(rates)[len(rates) // 2])
+        return report(label, *runs[k]), runs[k]
+
+    first, _ = median_case("star 1036, first 200 ticks", lambda s: Simulation(star, RunParams(1036, seed=s)), 200)
+    whole, (secs, moving) = median_case("star 1036, whole run", lambda s: Simulation(star, RunParams(1036, seed=s)),
+                                        None)
+    per_size = {1036: first}
+    for n in (10_000, 100_000):
+        shape = disc_world(n)
+        label = f"disc {n:,} (world {shape.world.size}^2), 200 ticks"
+        per_size[n], _ = median_case(label, lambda s, sh=shape, n=n: Simulation(sh, RunParams(n, seed=s)), 200)
+
+    print("\nCost per robot-step across swarm sizes (first 200 ticks; flat = linear in N):")
+    for n, rate in per_size.items():
+        print(f"  {n:>7,} robots: {1e9 / rate:7.1f} ns per robot-step  ({per_size[1036] / rate:5.2f} x the star's)")
+
+    print("\nTick cost vs moving robots over the whole star run (median seed):")
+    edges = [0, 25, 50, 100, 200, 400, 700, 1100]
+    print(f"  {'moving robots':>15} {'ticks':>7} {'us/tick':>9} {'ns/robot-step':>14}")
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        sel = (moving >= lo) & (moving < hi)
+        if sel.any():
+            print(f"  {f'{lo}-{hi - 1}':>15} {sel.sum():>7} {1e6 * secs[sel].mean():9.1f} "
+                  f"{1e9 * secs[sel].sum() / max(moving[sel].sum(), 1):14.1f}")
+    b, a = np.polyfit(moving, secs, 1)
+    pred = a + b * moving
+    r2 = 1 - ((secs - pred) ** 2).sum() / ((secs - secs.mean()) ** 2).sum()
+    print(f"  least squares: cost = {1e6 * a:.2f} us + {1e9 * b:.1f} ns x moving  (R^2 = {r2:.3f})")
+    target = 3e6
+    print()
+    for label, rate in (("first 200 ticks", first), ("whole run", whole)):
+        print(f"Target >= 3 M robot-steps/s, star {label}: {'MET' if rate >= target else 'NOT MET'} "
+              f"({rate / 1e6:.2f} M)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
