@@ -14,6 +14,8 @@ if [ ! -x .venv/bin/python ]; then
 fi
 stamp=.venv/.swarm_ros-installed
 if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ setup.py -nt "$stamp" ]; then
+  # A pip new enough for PEP 660 editable installs (the one venv bundles is not).
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check pip==26.3
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt
   .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
   touch "$stamp"
