@@ -132,3 +132,9 @@ def test_installed_console_script_reports_errors_without_a_traceback(tmp_path):
     assert result.returncode == 2
     assert result.stderr.startswith("swarm-ros: error: ") and "Traceback" not in result.stderr
     assert not (tmp_path / output.RUNS_DIR).exists()
+
+
+def test_output_piped_into_a_closed_pipe_stops_quietly():
+    exe = Path(sys.executable).parent / "swarm-ros"
+    result = subprocess.run(f"'{exe}' shapes | head -1", shell=True, capture_output=True, text=True, timeout=120)
+    assert result.stdout.startswith("shape") and "Traceback" not in result.stderr
