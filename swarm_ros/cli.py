@@ -22,6 +22,7 @@ from .core.world import World
 PROG = "swarm-ros"
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+_PROGRESS_TICKS = 200  # ticks between progress-bar updates
 
 
 def _positive_int(text: str) -> int:
@@ -136,11 +137,10 @@ def _run_with_progress(sim: Simulation, check: bool, quiet: bool) -> None:
                 sim.step()
                 check_tick(prev, sim)
             else:
-                sim.step()
-            if sim.tick % 64 == 0 or sim.done:
-                m = sim.metrics
-                bar.update(m.localized - bar.n)
-                bar.set_postfix(tick=m.tick, moving=m.moving, refresh=False)
+                sim.run(max_ticks=_PROGRESS_TICKS)
+            m = sim.metrics
+            bar.update(m.localized - bar.n)
+            bar.set_postfix(tick=m.tick, moving=m.moving, refresh=False)
 
 
 def _print_summary(s: dict, out: Path) -> None:

@@ -60,7 +60,7 @@ def metrics_csv(sim: Simulation) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(METRIC_COLUMNS)
-    writer.writerows(sim.history)
+    writer.writerows(sim.history.tolist())
     return buf.getvalue()
 
 

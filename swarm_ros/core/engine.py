@@ -4,9 +4,10 @@ A tick has two halves. Robots decide from the state at the end of the last tick
 (:func:`swarm_ros.core.rules.decide`, any batch of robots, anywhere); the world
 applies all decisions at once (:meth:`Simulation.apply`), then counts, checks for the
 end of the run and, if the shape is complete with robots left over, separates them.
-:meth:`Simulation.step` does both halves in one compiled call for speed; a distributed
-engine gathers its batches' decisions and calls :meth:`Simulation.apply`. Both share
-every kernel and the same bookkeeping, so they give identical runs.
+:meth:`Simulation.step` and :meth:`Simulation.run` do both halves in compiled code
+(``run`` many ticks per call); a distributed engine gathers its batches' decisions and
+calls :meth:`Simulation.apply`. All paths share every kernel and the end-of-tick
+bookkeeping (:func:`_close_tick`), so they give identical runs.
 
 Only moving robots cost anything per tick: the cell list, the claims and the list of
 moving robots are touched only where moving robots are, and the metrics are kept as
@@ -21,7 +22,8 @@ import numba
 import numpy as np
 
 from .arbitration import resolve_kernel
-from .metrics import Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
+from .metrics import (END_EXTRAS, METRIC_COLUMNS, OUTCOME_OF_CODE, RUNNING, Outcome, TickMetrics, end_code,
+                      metric_values, run_summary)
 from .params import RunParams
 from .rules import Decisions, decide_kernel, index_build, index_clear
 from .shapes import Shape
@@ -29,7 +31,8 @@ from .state import RobotState, SwarmState, initial_state
 
 ENGINE_NAME = "inprocess"
 _MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState.MOVING_INSIDE)
-_LOCALIZED, _SEPARATED = int(RobotState.LOCALIZED), int(RobotState.SEPARATED)
+_SEPARATED = int(RobotState.SEPARATED)
+_CHUNK = 4096  # ticks per compiled call in run(): long enough to hide the call, short enough for progress
 
 
 @numba.njit(cache=True)
@@ -38,27 +41,61 @@ def _compact_moving(moving, m, state):
     j = 0
     for k in range(m):
         i = moving[k]
-        if state[i] == 1 or state[i] == 2:
+        if state[i] == _MOVING_OUTSIDE or state[i] == _MOVING_INSIDE:
             moving[j] = i
             j += 1
     return j
 
 
 @numba.njit(cache=True)
-def _step_kernel(moving, x, y, heading, state, shape, wall, frontier, occupancy, radius, size, vision, wiggle,
-                 seed, head, nxt, best, claim, new_x, new_y, new_heading, outcome, last_ids, shape_patches,
-                 m, tick, localized):
-    """One whole tick for the robots ``moving[:m]``; returns (joined, inside, outside, still moving)."""
-    ids = moving[:m]
-    last_ids[:m] = ids
-    index_build(ids, x, y, radius, size, head, nxt)
-    decide_kernel(ids, x, y, heading, shape, wall, frontier, radius, size, vision, wiggle, seed, tick,
-                  head, nxt, claim, new_x, new_y, new_heading)
-    index_clear(ids, x, y, radius, size, head)
-    joined, inside, outside = resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state,
-                                             occupancy, frontier, shape, radius, size, seed, tick, best,
-                                             localized, shape_patches, outcome)
-    return joined, inside, outside, _compact_moving(moving, m, state)
+def _close_tick(moving, m, state, tick, localized, inside, outside, shape_patches, robots, max_ticks, row):
+    """End of a tick, for every engine path: check for the end, separate the robots left over
+    if the shape is complete, write the tick's metrics into ``row``. Returns (end code, still moving)."""
+    code = end_code(localized, inside + outside, tick, shape_patches, robots, max_ticks)
+    separated = 0
+    if code == END_EXTRAS:
+        for k in range(m):
+            state[moving[k]] = _SEPARATED
+        separated = m
+        m = 0
+        inside = 0
+        outside = 0
+    values = metric_values(tick, localized, inside, outside, separated, shape_patches)
+    for c in range(len(values)):
+        row[c] = values[c]
+    return code, m
+
+
+@numba.njit(cache=True)
+def _run_kernel(moving, x, y, heading, state, shape, wall, frontier, occupancy, radius, size, vision, wiggle,
+                seed, head, nxt, best, claim, new_x, new_y, new_heading, outcome, last_ids, shape_patches,
+                robots, max_ticks, rows, m, tick, localized, limit):
+    """Up to ``limit`` whole ticks for the robots ``moving[:m]``, stopping when the run ends.
+
+    Row r of ``rows`` gets the metrics of the r-th tick run. Returns (ticks run, still
+    moving, localized, robots that decided in the last tick, end code).
+    """
+    n = 0
+    code = RUNNING
+    decided = 0
+    while n < limit and code == RUNNING:
+        tick += 1
+        ids = moving[:m]
+        last_ids[:m] = ids
+        index_build(ids, x, y, radius, size, head, nxt)
+        decide_kernel(ids, x, y, heading, shape, wall, frontier, radius, size, vision, wiggle, seed, tick,
+                      head, nxt, claim, new_x, new_y, new_heading)
+        index_clear(ids, x, y, radius, size, head)
+        joined, inside, outside = resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state,
+                                                 occupancy, frontier, shape, radius, size, seed, tick, best,
+                                                 localized, shape_patches, outcome)
+        localized += joined
+        decided = m
+        m = _compact_moving(moving, m, state)
+        code, m = _close_tick(moving, m, state, tick, localized, inside, outside, shape_patches, robots,
+                              max_ticks, rows[n])
+        n += 1
+    return n, m, localized, decided, code
 
 
 class Simulation:
@@ -72,7 +109,6 @@ class Simulation:
         shape: the shape being formed.
         params: the run's parameters.
         state: the swarm at the end of the current tick (read it, do not write it).
-        history: metrics of every tick so far, tick 0 first.
         outcome: how the run ended, or None while it goes on.
     """
 
@@ -96,17 +132,22 @@ class Simulation:
         self._last_ids = np.empty(n, dtype=np.int64)
         self._moving = self.state.moving_ids()
         self._m = int(self._moving.size)
-        self._counts = [int(c) for c in self.state.counts()]
         self._decided = 0
+        self._rows = np.zeros((1024, len(METRIC_COLUMNS)), dtype=np.int64)
+        self._nrows = 0
         s = self.state
         self._kernel_args = (
             self._moving, s.x, s.y, s.heading, s.state, self._shape, self._wall, s.frontier, s.occupancy,
             self._radius, self._size, params.vision_radius, params.wiggle_rad, params.seed, self._head,
             self._nxt, self._best, self._claim, self._new_x, self._new_y, self._new_heading, self._outcome,
-            self._last_ids, shape.patches)
-        self.history: list[TickMetrics] = []
+            self._last_ids, shape.patches, params.robots, params.max_ticks)
+        counts = s.counts()
+        self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
         self.outcome: Outcome | None = None
-        self._finish_tick()
+        code, self._m = _close_tick(self._moving, self._m, s.state, 0, self._localized,
+                                    int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
+                                    shape.patches, params.robots, params.max_ticks, self._rows[0])
+        self._record(0, 1, code)
 
     # -- reading ----------------------------------------------------------------
     @property
@@ -120,7 +161,14 @@ class Simulation:
     @property
     def metrics(self) -> TickMetrics:
         """Metrics at the end of the current tick."""
-        return self.history[-1]
+        return TickMetrics(*self._rows[self._nrows - 1].tolist())
+
+    @property
+    def history(self) -> np.ndarray:
+        """Metrics of every tick so far, tick 0 first: int64 array, columns ``METRIC_COLUMNS`` (read-only)."""
+        view = self._rows[: self._nrows]
+        view.flags.writeable = False
+        return view
 
     def moving_ids(self) -> np.ndarray:
         """Ids of the robots that decide at the next tick, ascending (a copy)."""
@@ -134,12 +182,24 @@ class Simulation:
     # -- advancing --------------------------------------------------------------
     def step(self) -> TickMetrics:
         """Advance one tick with every robot in this process."""
-        if self.outcome is not None:
-            self._check_running()
-        m = self._m
-        joined, inside, outside, self._m = _step_kernel(*self._kernel_args, m, self.state.tick + 1,
-                                                        self.history[-1].localized)
-        return self._advance(m, joined, inside, outside)
+        self._run_compiled(1)
+        return self.metrics
+
+    def run(self, max_ticks: int | None = None, on_tick: Callable[[Simulation], None] | None = None) -> Outcome | None:
+        """Run until the end, or for at most ``max_ticks`` more ticks; return the outcome (None if still going).
+
+        With ``on_tick``, it is called after every tick (and ticks run one compiled call each);
+        without it, many ticks run per compiled call.
+        """
+        left = float("inf") if max_ticks is None else max_ticks
+        while self.outcome is None and left > 0:
+            if on_tick is None:
+                left -= self._run_compiled(int(min(left, _CHUNK)))
+            else:
+                self._run_compiled(1)
+                left -= 1
+                on_tick(self)
+        return self.outcome
 
     def apply(self, decisions: Decisions) -> TickMetrics:
         """Advance one tick with decisions made elsewhere (the world's half of a tick).
@@ -162,45 +222,41 @@ class Simulation:
             self._last_ids[:m], self._claim, decisions.x, decisions.y, decisions.heading, self.state.x,
             self.state.y, self.state.heading, self.state.state, self.state.occupancy, self.state.frontier,
             self._shape, self._radius, self._size, self.params.seed, decisions.tick, self._best,
-            self.metrics.localized, self.shape.patches, self._outcome)
+            self._localized, self.shape.patches, self._outcome)
+        self._localized += joined
+        self._decided = m
         self._m = _compact_moving(self._moving, m, self.state.state)
-        return self._advance(m, joined, inside, outside)
+        self._reserve(1)
+        code, self._m = _close_tick(self._moving, self._m, self.state.state, decisions.tick, self._localized,
+                                    inside, outside, self.shape.patches, self.params.robots,
+                                    self.params.max_ticks, self._rows[self._nrows])
+        self._record(1, 1, code)
+        return self.metrics
 
-    def run(self, on_tick: Callable[[Simulation], None] | None = None) -> Outcome:
-        """Step until the run ends; call ``on_tick(self)`` after every tick. Returns the outcome."""
-        while self.outcome is None:
-            self.step()
-            if on_tick is not None:
-                on_tick(self)
-        return self.outcome
-
-    # -- bookkeeping shared by step() and apply() -------------------------------
+    # -- bookkeeping ------------------------------------------------------------
     def _check_running(self) -> None:
         if self.outcome is not None:
             raise RuntimeError(f"the run has ended ({self.outcome}) at tick {self.tick}")
 
-    def _advance(self, decided: int, joined: int, inside: int, outside: int) -> TickMetrics:
-        self._decided = decided
-        self.state.tick += 1
-        c = self._counts
-        c[_LOCALIZED] += joined
-        c[_MOVING_INSIDE] = inside
-        c[_MOVING_OUTSIDE] = outside
-        return self._finish_tick()
+    def _reserve(self, rows: int) -> None:
+        need = self._nrows + rows
+        if need > self._rows.shape[0]:
+            grown = np.zeros((max(need, 2 * self._rows.shape[0]), self._rows.shape[1]), dtype=np.int64)
+            grown[: self._nrows] = self._rows[: self._nrows]
+            self._rows = grown
 
-    def _finish_tick(self) -> TickMetrics:
-        metrics = tick_metrics(self.state.tick, self._counts, self.shape.patches)
-        outcome = outcome_of(metrics, self.shape.patches, self.params.robots, self.params.max_ticks)
-        if outcome is Outcome.COMPLETE_WITH_EXTRAS:
-            left = self._moving[: self._m]
-            self.state.state[left] = RobotState.SEPARATED
-            self._counts[_SEPARATED] += int(left.size)
-            self._counts[_MOVING_INSIDE] = self._counts[_MOVING_OUTSIDE] = 0
-            self._m = 0
-            metrics = tick_metrics(self.state.tick, self._counts, self.shape.patches)
-        self.outcome = outcome
-        self.history.append(metrics)
-        return metrics
+    def _run_compiled(self, limit: int) -> int:
+        self._check_running()
+        self._reserve(limit)
+        n, self._m, self._localized, self._decided, code = _run_kernel(
+            *self._kernel_args, self._rows[self._nrows:], self._m, self.tick, self._localized, limit)
+        self._record(n, n, code)
+        return n
+
+    def _record(self, ticks: int, rows: int, code: int) -> None:
+        self.state.tick += ticks
+        self._nrows += rows
+        self.outcome = OUTCOME_OF_CODE[code]
 
     def summary(self, wall_seconds: float = 0.0) -> dict:
         """The run's record (see :func:`swarm_ros.core.metrics.run_summary`); needs a finished run."""
@@ -209,6 +265,6 @@ class Simulation:
         return run_summary(
             shape=self.shape.name, shape_patches=self.shape.patches, params=self.params.as_dict(),
             engine=self.engine, outcome=self.outcome, final=self.metrics,
-            separated=self._counts[_SEPARATED], world_radius=self._radius,
+            separated=self.metrics.stationary - self.metrics.localized, world_radius=self._radius,
             wall_seconds=wall_seconds)
 

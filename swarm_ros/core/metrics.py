@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from enum import Enum
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
-from .state import RobotState
 
 SEEDS = 4
 
@@ -32,6 +32,14 @@ class Outcome(str, Enum):
         return self.value
 
 
+# Integer codes of the outcomes inside compiled code; 0 = the run goes on.
+RUNNING, END_COMPLETE, END_EXTRAS, END_INCOMPLETE, END_TIMEOUT = range(5)
+OUTCOME_OF_CODE: dict[int, Outcome | None] = {
+    RUNNING: None, END_COMPLETE: Outcome.COMPLETE, END_EXTRAS: Outcome.COMPLETE_WITH_EXTRAS,
+    END_INCOMPLETE: Outcome.INCOMPLETE, END_TIMEOUT: Outcome.TIMEOUT,
+}
+
+
 class TickMetrics(NamedTuple):
     """One row of ``metrics.csv``; counts of robots or patches at the end of ``tick``."""
 
@@ -46,22 +54,34 @@ class TickMetrics(NamedTuple):
 METRIC_COLUMNS: tuple[str, ...] = TickMetrics._fields
 
 
+@numba.njit(cache=True)
+def metric_values(tick, localized, inside, outside, separated, shape_patches):
+    """The :class:`TickMetrics` fields, in order, from running counts (``localized`` includes seeds)."""
+    return tick, localized + separated, localized, inside, inside + outside, shape_patches - localized
+
+
+@numba.njit(cache=True)
+def end_code(localized, moving, tick, shape_patches, robots, max_ticks):
+    """The run's end code at this tick (``RUNNING`` if it goes on), checked in MODEL.md's order."""
+    if localized == shape_patches:
+        return END_COMPLETE if robots == shape_patches else END_EXTRAS
+    if moving == 0:
+        return END_INCOMPLETE
+    if tick >= max_ticks:
+        return END_TIMEOUT
+    return RUNNING
+
+
 def tick_metrics(tick: int, counts: Sequence[int] | np.ndarray, shape_patches: int) -> TickMetrics:
     """Metrics from the number of robots in each :class:`RobotState` (``counts[code]``, codes 0-4 in order)."""
     seed, outside, inside, localized, separated = (int(c) for c in counts)
-    localized += seed
-    return TickMetrics(tick, localized + separated, localized, inside, inside + outside, shape_patches - localized)
+    return TickMetrics(*metric_values(tick, seed + localized, inside, outside, separated, shape_patches))
 
 
 def outcome_of(metrics: TickMetrics, shape_patches: int, robots: int, max_ticks: int) -> Outcome | None:
-    """The run's outcome if it ends at this tick, else None. Checked in the order of MODEL.md."""
-    if metrics.localized == shape_patches:
-        return Outcome.COMPLETE if robots == shape_patches else Outcome.COMPLETE_WITH_EXTRAS
-    if metrics.moving == 0:
-        return Outcome.INCOMPLETE
-    if metrics.tick >= max_ticks:
-        return Outcome.TIMEOUT
-    return None
+    """The run's outcome if it ends at this tick, else None."""
+    return OUTCOME_OF_CODE[end_code(metrics.localized, metrics.moving, metrics.tick, shape_patches, robots,
+                                    max_ticks)]
 
 
 def convergence_rate(final: TickMetrics) -> float:
