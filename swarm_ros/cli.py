@@ -140,7 +140,7 @@ def _run_with_progress(sim: Simulation, check: bool, quiet: bool) -> None:
                 sim.run(max_ticks=_PROGRESS_TICKS)
             m = sim.metrics
             bar.update(m.localized - bar.n)
-            bar.set_postfix(tick=m.tick, moving=m.moving, refresh=False)
+            bar.set_postfix(tick=str(m.tick), moving=str(m.moving), refresh=False)
 
 
 def _print_summary(s: dict, out: Path) -> None:
