@@ -102,7 +102,7 @@ def _settings(args: argparse.Namespace) -> Settings:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from .output import check_out_dir, default_run_dir, write_run
+    from .output import RunRecord, check_out_dir, default_run_dir, write_run
 
     settings = _settings(args)
     shape = Shape.load(settings.shape, World(settings.world_radius))
@@ -114,11 +114,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     sim = Simulation(shape, params)
     _run_with_progress(sim, check=args.check, quiet=args.quiet)
-    wall = time.perf_counter() - start
-    summary = sim.summary(wall_seconds=wall)
-    out = write_run(out, sim, summary, overwrite=args.overwrite)
+    record = RunRecord.of(sim, wall_seconds=time.perf_counter() - start)
+    out = write_run(out, record, overwrite=args.overwrite)
     if not args.quiet:
-        _print_summary(summary, out)
+        _print_summary(record.summary, out)
     return 0
 
 

@@ -10,7 +10,9 @@ A parameter file maps node names to ``ros__parameters``, so the same file serves
         robots: 0          # 0 = the shape's patch count
         vision_radius: 1.0
 
-Sections are read in file order; a later section overrides an earlier one.
+Sections are read in file order; a later section overrides an earlier one. A section
+named after a node (``/world``, ``/robot_batch``, ``/monitor``) may also hold that node's
+own parameters (:data:`NODE_PARAMETERS`); ``simulate`` checks and ignores them.
 """
 
 from __future__ import annotations
@@ -49,10 +51,32 @@ class Settings:
 
 _TYPES = {f.name: f.type for f in fields(Settings)}
 
+#: Each ROS node's own parameters and their defaults (the type is the default's type).
+NODE_PARAMETERS: dict[str, dict[str, object]] = {
+    "world": {
+        "monitor_window": 128,  # max ticks the world runs ahead of the monitor; 0 = do not wait for one
+        "start_timeout": 60.0,  # seconds to wait for robot batches to cover every robot
+    },
+    "robot_batch": {
+        "batch": 0,  # this process hosts batch `batch` of `batches` (contiguous ids) ...
+        "batches": 1,
+        "robot_ids": "",  # ... unless robot_ids lists them, e.g. "4-99,150"
+    },
+    "monitor": {
+        "out_dir": "",  # run directory; "" = runs/<time>_<shape>_n<N>_v<R>_s<seed>
+        "overwrite": False,  # replace an existing run directory
+    },
+}
+_NODE_TYPES = {node: {k: type(v).__name__ for k, v in own.items()} for node, own in NODE_PARAMETERS.items()}
 
-def _check_type(path: Path, key: str, value: object) -> object:
-    want = _TYPES[key]
-    if want == "str":
+
+_TYPE_WORDS = {"str": "a string", "int": "an integer", "float": "a number", "bool": "a boolean"}
+
+
+def _check_type(path: Path, key: str, value: object, want: str) -> object:
+    if want == "bool":
+        ok = isinstance(value, bool)
+    elif want == "str":
         ok = isinstance(value, str)
     elif want == "int":
         ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
@@ -60,8 +84,7 @@ def _check_type(path: Path, key: str, value: object) -> object:
         ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
         value = float(value) if ok else value
     if not ok:
-        raise ConfigError(f"{path}: parameter '{key}' must be {'a' if want != 'int' else 'an'} "
-                          f"{ {'str': 'string', 'int': 'integer', 'float': 'number'}[want]}, got {value!r}")
+        raise ConfigError(f"{path}: parameter '{key}' must be {_TYPE_WORDS[want]}, got {value!r}")
     return value
 
 
@@ -86,9 +109,13 @@ def load_params_file(path: str | Path, base: Settings | None = None) -> Settings
         if not isinstance(section, dict) or set(section) != {"ros__parameters"} \
                 or not isinstance(section["ros__parameters"], dict):
             raise ConfigError(f"{path}: section '{node}' must hold exactly one 'ros__parameters' mapping")
+        own = _NODE_TYPES.get(str(node).lstrip("/"), {})
+        known = {**_TYPES, **own}
         for key, value in section["ros__parameters"].items():
-            if key not in _TYPES:
+            if key not in known:
                 raise ConfigError(f"{path}: unknown parameter '{key}' in '{node}' "
-                                  f"(known: {', '.join(sorted(_TYPES))})")
-            values[key] = _check_type(path, key, value)
+                                  f"(known: {', '.join(sorted(known))})")
+            checked = _check_type(path, key, value, known[key])
+            if key in _TYPES:
+                values[key] = checked
     return (base or Settings()).updated(**values)

@@ -16,10 +16,16 @@ import shutil
 from datetime import datetime
 from pathlib import Path
 
+from dataclasses import dataclass
+
+import numpy as np
+
 from .core.engine import Simulation
 from .core.errors import SwarmError
-from .core.metrics import METRIC_COLUMNS
-from .core.state import RobotState
+from .core.metrics import METRIC_COLUMNS, Outcome, TickMetrics
+from .core.params import RunParams
+from .core.shapes import Shape
+from .core.state import RobotState, SwarmState
 
 RUNS_DIR = Path("runs")
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
@@ -27,6 +33,36 @@ FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
 
 class OutputError(SwarmError):
     """The output directory cannot be used."""
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What a finished run leaves behind, whichever engine ran it.
+
+    Attributes:
+        shape, params: what was run.
+        state: the swarm at the last tick.
+        history: metrics of every tick, tick 0 first (int64, columns ``METRIC_COLUMNS``).
+        outcome: how the run ended.
+        summary: the summary.json record (:func:`swarm_ros.core.metrics.run_summary`).
+    """
+
+    shape: Shape
+    params: RunParams
+    state: SwarmState
+    history: np.ndarray
+    outcome: Outcome
+    summary: dict
+
+    @property
+    def final(self) -> TickMetrics:
+        return TickMetrics(*self.history[-1].tolist())
+
+    @staticmethod
+    def of(sim: Simulation, wall_seconds: float) -> RunRecord:
+        """The record of a finished in-process run."""
+        return RunRecord(shape=sim.shape, params=sim.params, state=sim.state, history=sim.history,
+                         outcome=sim.outcome, summary=sim.summary(wall_seconds=wall_seconds))
 
 
 def default_run_dir(shape: str, robots: int, vision: float, seed: int, now: datetime | None = None) -> Path:
@@ -56,16 +92,15 @@ def check_out_dir(out: Path, overwrite: bool) -> None:
         raise OutputError(f"{parent}: output directory is not writable")
 
 
-def metrics_csv(sim: Simulation) -> str:
+def metrics_csv(history: np.ndarray) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(METRIC_COLUMNS)
-    writer.writerows(sim.history.tolist())
+    writer.writerows(history.tolist())
     return buf.getvalue()
 
 
-def final_state_csv(sim: Simulation) -> str:
-    s = sim.state
+def final_state_csv(s: SwarmState) -> str:
     labels = [st.label for st in RobotState]
     lines = [",".join(FINAL_STATE_COLUMNS)]
     for i, (x, y, h, st) in enumerate(zip(s.x.tolist(), s.y.tolist(), s.heading.tolist(), s.state.tolist())):
@@ -77,7 +112,7 @@ def summary_json(summary: dict) -> str:
     return json.dumps(summary, indent=2) + "\n"
 
 
-def write_run(out: Path, sim: Simulation, summary: dict, overwrite: bool = False) -> Path:
+def write_run(out: Path, record: RunRecord, overwrite: bool = False) -> Path:
     """Write the run's files into ``out`` atomically (temp dir + rename). Returns ``out``.
 
     Raises:
@@ -92,10 +127,10 @@ def write_run(out: Path, sim: Simulation, summary: dict, overwrite: bool = False
     try:
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
-        (tmp / "summary.json").write_text(summary_json(summary), encoding="utf-8")
-        (tmp / "metrics.csv").write_text(metrics_csv(sim), encoding="utf-8")
-        (tmp / "final_state.csv").write_text(final_state_csv(sim), encoding="utf-8")
-        save_final_png(sim, tmp / "final.png")
+        (tmp / "summary.json").write_text(summary_json(record.summary), encoding="utf-8")
+        (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
+        (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
+        save_final_png(record, tmp / "final.png")
         if out.exists():
             out.rename(trash)
         tmp.rename(out)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -12,8 +13,10 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from .core.engine import Simulation  # noqa: E402
 from .core.state import RobotState  # noqa: E402
+
+if TYPE_CHECKING:
+    from .output import RunRecord
 
 # Patch classes of the picture and their colours (colour-blind safe, Okabe-Ito based).
 _CLASSES = (
@@ -27,13 +30,13 @@ _MOVING_COLOUR = "#009e73"
 _SEPARATED_COLOUR = "#cc79a7"
 
 
-def save_final_png(sim: Simulation, path: Path) -> None:
+def save_final_png(run: RunRecord, path: Path) -> None:
     """The formed shape: walls, shape patches, localized robots, seeds and left-over robots."""
-    world, s = sim.shape.world, sim.state
+    world, s = run.shape.world, run.state
     r = world.radius
     grid = np.zeros((world.size, world.size), dtype=np.int8)
     grid[world.wall_mask()] = 1
-    grid[sim.shape.mask] = 2
+    grid[run.shape.mask] = 2
     occ = s.occupancy.reshape(world.size, world.size)
     grid[occ >= 0] = 3
     grid[np.isin(occ, np.arange(4))] = 4
@@ -48,10 +51,10 @@ def save_final_png(sim: Simulation, path: Path) -> None:
         if mask.any():
             ax.scatter(s.x[mask], s.y[mask], s=9, c=colour, linewidths=0, zorder=3)
             handles.append(Patch(facecolor=colour, label=f"{label} ({int(mask.sum())})"))
-    m = sim.metrics
-    ax.set_title(f"{sim.shape.name}: {sim.outcome or 'running'} at tick {m.tick}\n"
-                 f"{sim.params.robots} robots, vision {sim.params.vision_radius:g}, seed {sim.params.seed}; "
-                 f"{m.localized}/{sim.shape.patches} patches filled", fontsize=10)
+    m, p = run.final, run.params
+    ax.set_title(f"{run.shape.name}: {run.outcome} at tick {m.tick}\n"
+                 f"{p.robots} robots, vision {p.vision_radius:g}, seed {p.seed}; "
+                 f"{m.localized}/{run.shape.patches} patches filled", fontsize=10)
     ax.set_xlabel("x (patches)")
     ax.set_ylabel("y (patches)")
     ax.set_aspect("equal")

@@ -179,29 +179,61 @@ class Decisions:
         )
 
 
+class Decider:
+    """Decides for batches of robots tick after tick, keeping its scratch arrays between calls.
+
+    A robot-batch process holds one; :func:`decide` makes a throwaway one.
+    """
+
+    def __init__(self, shape: Shape, params: RunParams) -> None:
+        world = shape.world
+        self.shape, self.params = shape, params
+        self._radius, self._size = world.radius, world.size
+        self._shape = shape.mask.ravel().copy()
+        self._wall = world.wall_mask().ravel()
+        self._head = np.full(world.patch_count, -1, dtype=np.int32)
+        self._nxt = np.empty(params.robots, dtype=np.int32)
+
+    def decide(self, view: SwarmState, ids: np.ndarray, tick: int, moving: np.ndarray | None = None) -> Decisions:
+        """Decisions of the moving robots ``ids`` at ``tick`` from ``view``, the state at tick - 1.
+
+        ``view`` is read, never written. ``moving`` (all moving robots of ``view``, which
+        the robots sense) is computed when not given. Any split of the moving robots into
+        batches gives, concatenated, the same decisions as one batch.
+
+        Raises:
+            ValueError: an id is out of range or not a moving robot in ``view``.
+        """
+        ids = np.asarray(ids, dtype=np.int64)
+        if view.robots != self.params.robots:
+            raise ValueError(f"the view has {view.robots} robots, the run {self.params.robots}")
+        if ids.size and (ids.min() < 0 or ids.max() >= view.robots):
+            raise ValueError(f"robot ids must be in [0, {view.robots}), got {ids.min()}..{ids.max()}")
+        st = view.state[ids]
+        if np.any((st != RobotState.MOVING_INSIDE) & (st != RobotState.MOVING_OUTSIDE)):
+            raise ValueError("decide() takes moving robots only")
+        if moving is None:
+            moving = view.moving_ids()
+        n = ids.size
+        claim = np.empty(n, dtype=np.int64)
+        x, y, heading = np.empty(n), np.empty(n), np.empty(n)
+        r, w = self._radius, self._size
+        index_build(moving, view.x, view.y, r, w, self._head, self._nxt)
+        try:
+            decide_kernel(ids, view.x, view.y, view.heading, self._shape, self._wall, view.frontier, r, w,
+                          self.params.vision_radius, self.params.wiggle_rad, self.params.seed, tick,
+                          self._head, self._nxt, claim, x, y, heading)
+        finally:
+            index_clear(moving, view.x, view.y, r, w, self._head)
+        return Decisions(tick=tick, ids=ids, claim=claim, x=x, y=y, heading=heading)
+
+
 def decide(view: SwarmState, ids: np.ndarray, shape: Shape, params: RunParams, tick: int) -> Decisions:
     """Decisions of the moving robots ``ids`` at ``tick`` from ``view``, the state at tick - 1.
 
-    This is what one robot batch runs; ``view`` is read, never written. Any split of the
-    moving robots into batches gives, concatenated, the same decisions as one batch.
+    This is what one robot batch runs (see :class:`Decider`); ``view`` is read, never written.
 
     Raises:
         ValueError: an id is out of range or not a moving robot in ``view``.
     """
-    ids = np.asarray(ids, dtype=np.int64)
-    if ids.size and (ids.min() < 0 or ids.max() >= view.robots):
-        raise ValueError(f"robot ids must be in [0, {view.robots}), got {ids.min()}..{ids.max()}")
-    st = view.state[ids]
-    if np.any((st != RobotState.MOVING_INSIDE) & (st != RobotState.MOVING_OUTSIDE)):
-        raise ValueError("decide() takes moving robots only")
-    world = shape.world
-    head = np.full(world.patch_count, -1, dtype=np.int32)
-    nxt = np.empty(view.robots, dtype=np.int32)
-    index_build(view.moving_ids(), view.x, view.y, world.radius, world.size, head, nxt)
-    n = ids.size
-    claim = np.empty(n, dtype=np.int64)
-    x, y, heading = np.empty(n), np.empty(n), np.empty(n)
-    decide_kernel(ids, view.x, view.y, view.heading, shape.mask.ravel(), world.wall_mask().ravel(),
-                  view.frontier, world.radius, world.size, params.vision_radius, params.wiggle_rad,
-                  params.seed, tick, head, nxt, claim, x, y, heading)
-    return Decisions(tick=tick, ids=ids, claim=claim, x=x, y=y, heading=heading)
+    return Decider(shape, params).decide(view, ids, tick)

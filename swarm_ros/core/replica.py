@@ -1,0 +1,108 @@
+"""A copy of the world's state rebuilt from what the world broadcasts, for robot batches and the monitor.
+
+The distributed engine's world publishes, after each tick, one row per robot whose
+row changed in that tick (at tick 0, every robot): id, state, x, y, heading. Only
+moving robots change, so those rows are exactly the robots that decided in the tick.
+A :class:`Replica` applies the rows in tick order and keeps the occupancy and frontier
+grids in step, so after tick t it holds the same :class:`~swarm_ros.core.state.SwarmState`
+as the world: a robot batch decides from it, the monitor counts it.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .rules import patch_index
+from .shapes import Shape
+from .state import NO_ROBOT, RobotState, SwarmState
+
+_SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
+_MOVING_OUTSIDE, _MOVING_INSIDE = np.int8(RobotState.MOVING_OUTSIDE), np.int8(RobotState.MOVING_INSIDE)
+UNKNOWN = np.int8(-1)  #: state of a robot before the tick-0 rows arrive
+
+
+@numba.njit(cache=True)
+def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, shape,
+                radius, size):
+    """Write the rows into the state arrays; occupy the patch of every robot that became stationary-localized.
+
+    Returns the number of rows that were rejected (-1 per row whose id is out of range
+    or whose localized patch is not an empty shape patch), else 0.
+    """
+    n = state.size
+    for k in range(ids.size):
+        i = ids[k]
+        if i < 0 or i >= n:
+            return k + 1
+        was = state[i]
+        st = new_state[k]
+        x[i] = new_x[k]
+        y[i] = new_y[k]
+        heading[i] = new_heading[k]
+        state[i] = st
+        if (st == _SEED or st == _LOCALIZED) and was != _SEED and was != _LOCALIZED:
+            p = patch_index(x[i], y[i], radius, size)
+            if not shape[p] or occupancy[p] >= 0:
+                return k + 1
+            occupancy[p] = i
+            frontier[p] = False
+            for dy in (-size, 0, size):
+                for dx in (-1, 0, 1):
+                    q = p + dy + dx
+                    if shape[q] and occupancy[q] < 0:
+                        frontier[q] = True
+    return 0
+
+
+class Replica:
+    """The swarm's state as seen through the world's per-tick rows.
+
+    Attributes:
+        state: the rebuilt :class:`SwarmState`; ``state.tick`` is -1 until tick 0 arrives.
+    """
+
+    def __init__(self, shape: Shape, robots: int) -> None:
+        world = shape.world
+        self.shape = shape
+        self._radius, self._size = world.radius, world.size
+        self._shape = shape.mask.ravel().copy()
+        self.state = SwarmState(
+            x=np.zeros(robots), y=np.zeros(robots), heading=np.zeros(robots),
+            state=np.full(robots, UNKNOWN, dtype=np.int8),
+            occupancy=np.full(world.patch_count, NO_ROBOT, dtype=np.int32),
+            frontier=np.zeros(world.patch_count, dtype=bool), tick=-1)
+
+    @property
+    def tick(self) -> int:
+        return self.state.tick
+
+    def update(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
+               heading: np.ndarray) -> None:
+        """Apply the rows of ``tick``, which must be the tick after the last one applied.
+
+        Raises:
+            ValueError: a tick was skipped or repeated, tick 0 does not cover every robot,
+                an id is out of range, a state code is unknown, or a robot localizes on a
+                patch that is not an empty shape patch. The replica is then unusable.
+        """
+        s = self.state
+        if tick != s.tick + 1:
+            raise ValueError(f"rows for tick {tick} arrived after tick {s.tick}")
+        ids = np.asarray(ids, dtype=np.int64)
+        state = np.asarray(state, dtype=np.int8)
+        if tick == 0 and (ids.size != s.robots or not np.array_equal(np.sort(ids), np.arange(s.robots))):
+            raise ValueError(f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows")
+        if state.size and (state.min() < 0 or state.max() > max(RobotState)):
+            raise ValueError(f"unknown robot state code in the rows of tick {tick}")
+        bad = _apply_rows(ids, state, np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64),
+                          np.asarray(heading, dtype=np.float64), s.x, s.y, s.heading, s.state, s.occupancy,
+                          s.frontier, self._shape, self._radius, self._size)
+        if bad:
+            raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range or "
+                             f"localizes on a patch that is not an empty shape patch")
+        s.tick = tick
+
+    def moving_ids(self) -> np.ndarray:
+        """Ids of the moving robots, ascending."""
+        return self.state.moving_ids()

@@ -1,0 +1,152 @@
+"""Topics, QoS and message builders of the swarm's ROS 2 graph (docs/ros_graph.md documents them).
+
+Standard message types only. The per-tick robot rows ride in ``sensor_msgs/PointCloud2``
+(see :mod:`swarm_ros.wire`): one numpy record per robot, copied in and out of the
+message's byte array in one go, which keeps a tick's messages at tens of microseconds
+where a ``PoseArray`` of message objects would cost milliseconds.
+"""
+
+from __future__ import annotations
+
+import array
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from nav_msgs.msg import OccupancyGrid
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import PointCloud2, PointField
+from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
+
+from ..core.metrics import METRIC_COLUMNS
+from ..core.shapes import Shape
+from ..wire import FRAME_ID, PATCH_METRES, TICK_SECONDS, check_fields, point_fields
+
+# -- topics -----------------------------------------------------------------------
+ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
+DECISIONS = "/swarm/decisions"  # robot batches -> world: their robots' decisions (PointCloud2)
+BATCHES = "/swarm/batches"  # robot batches -> world: the ids each batch hosts (Int64MultiArray)
+SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
+OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
+STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
+METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
+CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
+
+# -- QoS ----------------------------------------------------------------------------
+#: Lockstep traffic: nothing may be lost, and a reader that matches late (a monitor
+#: started after the world) still gets the ticks it missed, up to the depth.
+ROBOTS_DEPTH = 512
+ROBOTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ROBOTS_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DECISIONS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=8, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: State that a late joiner needs once: the latest message is kept for it ("latched").
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+METRICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=64, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       durability=DurabilityPolicy.VOLATILE)
+
+# OccupancyGrid cell values
+CELL_OFF_SHAPE = -1  # wall or floor outside the shape ("unknown" to map tools)
+CELL_EMPTY = 0  # shape patch without a localized robot
+CELL_FULL = 100  # shape patch with a localized or seed robot
+
+
+def stamp(tick: int) -> Time:
+    return Time(sec=int(tick) * TICK_SECONDS, nanosec=0)
+
+
+def tick_of(header: Header) -> int:
+    return int(header.stamp.sec) // TICK_SECONDS
+
+
+def make_cloud(rows: np.ndarray, tick: int) -> PointCloud2:
+    """A PointCloud2 holding ``rows`` (a numpy record array of a :mod:`swarm_ros.wire` row type)."""
+    msg = PointCloud2()
+    msg.header = Header(stamp=stamp(tick), frame_id=FRAME_ID)
+    msg.height = 1
+    msg.width = int(rows.size)
+    msg.fields = [PointField(name=n, offset=o, datatype=d, count=c) for n, o, d, c in point_fields(rows.dtype)]
+    msg.is_bigendian = False
+    msg.point_step = rows.dtype.itemsize
+    msg.row_step = rows.dtype.itemsize * int(rows.size)
+    data = array.array("B")
+    data.frombytes(rows.tobytes())
+    msg.data = data
+    msg.is_dense = True
+    return msg
+
+
+def cloud_rows(msg: PointCloud2, dtype: np.dtype) -> np.ndarray:
+    """The records of a PointCloud2 (a read-only view of its bytes).
+
+    Raises:
+        ValueError: the message's layout is not ``dtype``'s.
+    """
+    check_fields([(f.name, f.offset, f.datatype, f.count) for f in msg.fields], msg.point_step, dtype)
+    if msg.is_bigendian or len(msg.data) != msg.width * msg.height * dtype.itemsize:
+        raise ValueError("point cloud size or byte order does not match its layout")
+    return np.frombuffer(msg.data, dtype=dtype)
+
+
+def ids_message(ids: np.ndarray) -> Int64MultiArray:
+    msg = Int64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label="robot_id", size=int(ids.size), stride=int(ids.size))]
+    data = array.array("q")
+    data.frombytes(np.ascontiguousarray(ids, dtype="<i8").tobytes())
+    msg.data = data
+    return msg
+
+
+def metrics_message(row: np.ndarray | list[int]) -> Int64MultiArray:
+    """One tick's metrics, labelled: dim[0].label lists the columns in order."""
+    msg = Int64MultiArray()
+    n = len(METRIC_COLUMNS)
+    msg.layout.dim = [MultiArrayDimension(label=",".join(METRIC_COLUMNS), size=n, stride=n)]
+    msg.data = array.array("q", [int(v) for v in row])
+    return msg
+
+
+def metrics_of(msg: Int64MultiArray) -> dict[str, int]:
+    labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
+    return dict(zip(labels, (int(v) for v in msg.data)))
+
+
+def grid_message(shape: Shape, cells: np.ndarray, tick: int) -> OccupancyGrid:
+    """An OccupancyGrid over the whole world (walls included), one cell per patch, origin at the corner."""
+    world = shape.world
+    msg = OccupancyGrid()
+    msg.header = Header(stamp=stamp(tick), frame_id=FRAME_ID)
+    msg.info.map_load_time = stamp(tick)
+    msg.info.resolution = float(PATCH_METRES)
+    msg.info.width = msg.info.height = world.size
+    msg.info.origin.position.x = msg.info.origin.position.y = -(world.radius + 0.5) * PATCH_METRES
+    msg.info.origin.orientation.w = 1.0
+    data = array.array("b")
+    data.frombytes(np.ascontiguousarray(cells, dtype=np.int8).tobytes())
+    msg.data = data
+    return msg
+
+
+def shape_cells(shape: Shape) -> np.ndarray:
+    return np.where(shape.mask.ravel(), CELL_EMPTY, CELL_OFF_SHAPE).astype(np.int8)
+
+
+def status_message(tick: int, outcome: str, message: str, level: bytes = DiagnosticStatus.OK,
+                   extra: dict[str, object] | None = None) -> DiagnosticArray:
+    """The world's status: ``outcome`` is 'starting', 'running' or the run's outcome."""
+    values = {"tick": tick, "outcome": outcome, **(extra or {})}
+    status = DiagnosticStatus(level=level, name="swarm_ros/world", message=message, hardware_id="swarm_ros",
+                              values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+    return DiagnosticArray(header=Header(stamp=stamp(tick), frame_id=FRAME_ID), status=[status])
+
+
+def status_values(msg: DiagnosticArray) -> dict[str, str]:
+    return {kv.key: kv.value for s in msg.status for kv in s.values}
+
+
+def clock_message(tick: int) -> Clock:
+    return Clock(clock=stamp(tick))

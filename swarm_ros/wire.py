@@ -1,0 +1,122 @@
+"""The hot-path message layouts, as numpy record types (no ROS here; :mod:`swarm_ros.nodes.messages` wraps them).
+
+Robot rows travel as the ``data`` of ``sensor_msgs/PointCloud2`` messages: one point per
+robot, little-endian, with the fields named below, so stock tools (``ros2 topic echo``,
+RViz) can read them, while a node turns a whole message into a numpy array without a
+Python loop. Positions are float64 so the distributed engine carries the exact state.
+
+Units: one patch is one metre (:data:`PATCH_METRES`), and one tick is one second of
+simulation time (:data:`TICK_SECONDS`), so a message of tick t is stamped t s, 0 ns.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .core.rules import Decisions
+
+PATCH_METRES = 1.0
+TICK_SECONDS = 1
+FRAME_ID = "world"
+
+# sensor_msgs/PointField datatype codes
+INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
+_CODE_OF = {"i1": INT8, "u1": UINT8, "i2": INT16, "u2": UINT16, "i4": INT32, "u4": UINT32, "f4": FLOAT32,
+            "f8": FLOAT64}
+_DTYPE_OF = {code: np.dtype("<" + kind) for kind, code in _CODE_OF.items()}
+
+#: World -> everyone, after each tick: the robots whose row changed (all robots at tick 0).
+ROBOT_ROW = np.dtype({"names": ["x", "y", "z", "heading", "id", "state"],
+                      "formats": ["<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
+                      "offsets": [0, 8, 16, 24, 32, 36], "itemsize": 40})
+
+#: Robot batch -> world, each tick: what each of its moving robots decided.
+#: ``claim`` is the flat index (py + R) * W + (px + R) of the patch claimed, or -1;
+#: x, y, heading are the pose the robot takes if it does not join.
+DECISION_ROW = np.dtype({"names": ["x", "y", "z", "heading", "id", "claim"],
+                         "formats": ["<f8", "<f8", "<f8", "<f8", "<u4", "<i4"],
+                         "offsets": [0, 8, 16, 24, 32, 36], "itemsize": 40})
+
+
+def point_fields(dtype: np.dtype) -> list[tuple[str, int, int, int]]:
+    """(name, offset, PointField datatype, count) of each field of a row type."""
+    out = []
+    for name in dtype.names:
+        sub, offset = dtype.fields[name][:2]
+        out.append((name, offset, _CODE_OF[sub.str[1:]], 1))
+    return out
+
+
+def check_fields(fields: list[tuple[str, int, int, int]], point_step: int, dtype: np.dtype) -> None:
+    """Raise ValueError unless a message's fields and point step are exactly those of ``dtype``."""
+    if point_step != dtype.itemsize or list(fields) != point_fields(dtype):
+        raise ValueError(f"unexpected point layout {fields} (step {point_step}); "
+                         f"expected {point_fields(dtype)} (step {dtype.itemsize})")
+
+
+def robot_rows(ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
+               heading: np.ndarray) -> np.ndarray:
+    """Rows of the robots ``ids`` from whole-swarm state arrays."""
+    rows = np.zeros(ids.size, dtype=ROBOT_ROW)
+    rows["id"] = ids
+    rows["state"] = state[ids]
+    rows["x"] = x[ids] * PATCH_METRES
+    rows["y"] = y[ids] * PATCH_METRES
+    rows["heading"] = heading[ids]
+    return rows
+
+
+def decision_rows(decisions: Decisions) -> np.ndarray:
+    rows = np.zeros(decisions.ids.size, dtype=DECISION_ROW)
+    rows["id"] = decisions.ids
+    rows["claim"] = decisions.claim
+    rows["x"] = decisions.x * PATCH_METRES
+    rows["y"] = decisions.y * PATCH_METRES
+    rows["heading"] = decisions.heading
+    return rows
+
+
+def decisions_of(tick: int, rows: np.ndarray) -> Decisions:
+    """The :class:`Decisions` a message of DECISION_ROW rows carries."""
+    return Decisions(tick=tick, ids=rows["id"].astype(np.int64), claim=rows["claim"].astype(np.int64),
+                     x=rows["x"] / PATCH_METRES, y=rows["y"] / PATCH_METRES,
+                     heading=rows["heading"].astype(np.float64))
+
+
+def parse_ranges(text: str) -> np.ndarray:
+    """Robot ids from a list like ``"4-99,120,200-210"`` (inclusive ranges), sorted, unique.
+
+    Raises:
+        ValueError: not of that form, or a range runs backwards.
+    """
+    ids: list[np.ndarray] = []
+    for part in text.replace(" ", "").split(","):
+        if not part:
+            continue
+        lo, sep, hi = part.partition("-")
+        if not lo.isdigit() or (sep and not hi.isdigit()):
+            raise ValueError(f"robot ids must look like '4-99,120', got {text!r}")
+        a, b = int(lo), int(hi) if sep else int(lo)
+        if b < a:
+            raise ValueError(f"robot id range {part!r} runs backwards")
+        ids.append(np.arange(a, b + 1, dtype=np.int64))
+    return np.unique(np.concatenate(ids)) if ids else np.empty(0, dtype=np.int64)
+
+
+def format_ranges(ids: np.ndarray) -> str:
+    """The inverse of :func:`parse_ranges` for sorted unique ids."""
+    ids = np.asarray(ids, dtype=np.int64)
+    if ids.size == 0:
+        return ""
+    breaks = np.flatnonzero(np.diff(ids) != 1)
+    starts = np.concatenate([[ids[0]], ids[breaks + 1]])
+    ends = np.concatenate([ids[breaks], [ids[-1]]])
+    return ",".join(f"{a}" if a == b else f"{a}-{b}" for a, b in zip(starts.tolist(), ends.tolist()))
+
+
+def batch_ids(robots: int, batch: int, batches: int) -> np.ndarray:
+    """The non-seed robot ids that batch ``batch`` of ``batches`` hosts: contiguous, sizes differ by at most 1."""
+    if batches < 1 or not 0 <= batch < batches:
+        raise ValueError(f"batch must be in [0, {batches}), got {batch}")
+    bounds = np.linspace(4, robots, batches + 1).round().astype(np.int64)
+    return np.arange(bounds[batch], bounds[batch + 1], dtype=np.int64)
