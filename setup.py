@@ -29,6 +29,12 @@ setup(
         "tqdm>=4.66",
     ],
     extras_require={"test": ["pytest>=8", "hypothesis>=6.100"]},
-    entry_points={"console_scripts": ["swarm-ros = swarm_ros.cli:main"]},
+    # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
+    entry_points={"console_scripts": [
+        "swarm-ros = swarm_ros.cli:main",
+        "world = swarm_ros.nodes.world:main",
+        "robot_batch = swarm_ros.nodes.robot_batch:main",
+        "monitor = swarm_ros.nodes.monitor:main",
+    ]},
     zip_safe=False,
 )

@@ -1,4 +1,4 @@
-"""The ``swarm-ros`` command line: ``simulate`` and ``shapes``.
+"""The ``swarm-ros`` command line: ``simulate``, ``run``, ``topics`` and ``shapes``.
 
 Bad input ends with one line ``swarm-ros: error: ...`` on stderr and exit status 2.
 """
@@ -60,24 +60,47 @@ def build_parser() -> argparse.ArgumentParser:
 
     sim = sub.add_parser("simulate", help="run the in-process engine once and write a run directory",
                          description="Run one simulation with the fast in-process engine.")
-    sim.add_argument("--shape", help="built-in shape name or a .txt/.png shape file (default: star)")
-    sim.add_argument("--robots", type=_positive_int, help="robots N, seeds included (default: the shape's patch count)")
-    sim.add_argument("--vision", type=_positive_float, dest="vision_radius", help="vision radius in patches (default: 1)")
-    sim.add_argument("--seed", type=int, help="run seed (default: 1)")
-    sim.add_argument("--max-ticks", type=_positive_int, dest="max_ticks", help="tick limit (default: 100000)")
-    sim.add_argument("--wiggle", type=float, dest="wiggle_deg", help="max turn per tick, degrees (default: 45)")
-    sim.add_argument("--world-radius", type=int, dest="world_radius", help="world spans [-R, R] (default: 32)")
-    sim.add_argument("--params-file", type=Path, help="ROS 2 style YAML parameter file; flags override it")
-    sim.add_argument("--out", type=Path, help="output directory (default: runs/<time>_<shape>_n<N>_v<R>_s<seed>)")
-    sim.add_argument("--overwrite", action="store_true", help="replace an existing output directory")
+    _add_run_options(sim)
     sim.add_argument("--check", action="store_true", help="check the Z-spec invariants after every tick (slow)")
-    sim.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     sim.set_defaults(func=cmd_simulate)
+
+    run = sub.add_parser("run", help="run once over the ROS 2 graph (world, robot batches, monitor)",
+                         description="Run one simulation as a ROS 2 graph: a world, K robot-batch processes "
+                                     "and a monitor, each its own process. Same results as 'simulate'.")
+    _add_run_options(run)
+    run.add_argument("--processes", type=_positive_int, default=2, help="robot-batch processes K (default: 2)")
+    run.add_argument("--domain-id", type=int, help="ROS domain id (default: $ROS_DOMAIN_ID, else a free one)")
+    run.set_defaults(func=cmd_run)
+
+    topics = sub.add_parser("topics", help="list or echo the topics of a running swarm",
+                            description="List the live topics of a run (types, publishers, rates), "
+                                        "or print the messages of one (--echo).")
+    topics.add_argument("--domain-id", type=int, help="ROS domain id of the run (default: $ROS_DOMAIN_ID or 0)")
+    topics.add_argument("--echo", metavar="TOPIC", help="print this topic's messages instead of the list")
+    topics.add_argument("--count", type=_positive_int, default=1, help="with --echo: messages to print (default: 1)")
+    topics.add_argument("--seconds", type=_positive_float, default=2.0,
+                        help="listen this long to measure rates, or to wait for --echo (default: 2)")
+    topics.add_argument("--full", action="store_true", help="with --echo: print whole arrays, not the first items")
+    topics.set_defaults(func=cmd_topics)
 
     shapes = sub.add_parser("shapes", help="list the built-in shapes", description="List the built-in shapes.")
     shapes.add_argument("--world-radius", type=int, default=World().radius, help="world spans [-R, R] (default: 32)")
     shapes.set_defaults(func=cmd_shapes)
     return parser
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--shape", help="built-in shape name or a .txt/.png shape file (default: star)")
+    p.add_argument("--robots", type=_positive_int, help="robots N, seeds included (default: the shape's patch count)")
+    p.add_argument("--vision", type=_positive_float, dest="vision_radius", help="vision radius in patches (default: 1)")
+    p.add_argument("--seed", type=int, help="run seed (default: 1)")
+    p.add_argument("--max-ticks", type=_positive_int, dest="max_ticks", help="tick limit (default: 100000)")
+    p.add_argument("--wiggle", type=float, dest="wiggle_deg", help="max turn per tick, degrees (default: 45)")
+    p.add_argument("--world-radius", type=int, dest="world_radius", help="world spans [-R, R] (default: 32)")
+    p.add_argument("--params-file", type=Path, help="ROS 2 style YAML parameter file; flags override it")
+    p.add_argument("--out", type=Path, help="output directory (default: runs/<time>_<shape>_n<N>_v<R>_s<seed>)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output directory")
+    p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
 
 
 def cmd_shapes(args: argparse.Namespace) -> int:
@@ -101,15 +124,26 @@ def _settings(args: argparse.Namespace) -> Settings:
                             world_radius=args.world_radius)
 
 
-def cmd_simulate(args: argparse.Namespace) -> int:
-    from .output import RunRecord, check_out_dir, default_run_dir, write_run
+def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path]:
+    """Settings, shape, parameters and a usable output directory, or a SwarmError before anything runs."""
+    from .core.state import initial_state
+    from .output import check_out_dir, default_run_dir
 
     settings = _settings(args)
     shape = Shape.load(settings.shape, World(settings.world_radius))
     params = RunParams(robots=settings.robots or shape.patches, vision_radius=settings.vision_radius,
                        seed=settings.seed, max_ticks=settings.max_ticks, wiggle_deg=settings.wiggle_deg)
+    if params.robots > shape.free_patches:
+        initial_state(shape, params.robots, params.seed)  # raises the one error message for this
     out = args.out or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
     check_out_dir(out, args.overwrite)
+    return settings, shape, params, out
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from .output import RunRecord, write_run
+
+    _, shape, params, out = _prepare(args)
 
     start = time.perf_counter()
     sim = Simulation(shape, params)
@@ -119,6 +153,44 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if not args.quiet:
         _print_summary(record.summary, out)
     return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    import json
+
+    from .launcher import Launch
+
+    settings, shape, params, out = _prepare(args)
+    if args.processes > params.robots - 4:
+        raise SwarmError(f"--processes {args.processes} is more than the {params.robots - 4} non-seed robots")
+    domain = args.domain_id
+    if domain is None and os.environ.get("ROS_DOMAIN_ID", "").strip():
+        try:
+            domain = int(os.environ["ROS_DOMAIN_ID"])
+        except ValueError:
+            raise SwarmError(f"ROS_DOMAIN_ID must be an integer, got {os.environ['ROS_DOMAIN_ID']!r}") from None
+    if domain is not None and not 0 <= domain <= 232:
+        raise SwarmError(f"ROS domain id must be in [0, 232], got {domain}")
+    launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
+                    overwrite=args.overwrite, quiet=args.quiet, domain_id=domain)
+    out = launch.run()
+    if not args.quiet:
+        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+        _print_summary(summary, out)
+        print(f"{'ROS graph':<17} domain {launch.domain}, {args.processes} robot-batch processes; logs in {out / 'logs'}")
+    return 0
+
+
+def cmd_topics(args: argparse.Namespace) -> int:
+    from .nodes.inspect import run_topics
+
+    domain = args.domain_id
+    if domain is None:
+        text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
+        if not text.isdigit():
+            raise SwarmError(f"ROS_DOMAIN_ID must be an integer, got {text!r}")
+        domain = int(text)
+    return run_topics(domain, echo=args.echo, count=args.count, seconds=args.seconds, full=args.full)
 
 
 def _run_with_progress(sim: Simulation, check: bool, quiet: bool) -> None:

@@ -39,8 +39,12 @@ CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs
 ROBOTS_DEPTH = 512
 ROBOTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ROBOTS_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-DECISIONS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=8, reliability=ReliabilityPolicy.RELIABLE,
+#: Several writers (one per batch) share these topics and a KEEP_LAST reader keeps ``depth``
+#: samples over all of them, so the depth must exceed the batches that can answer at once.
+DECISIONS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
+BATCHES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: State that a late joiner needs once: the latest message is kept for it ("latched").
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -1,0 +1,219 @@
+"""``swarm-ros run``: one run over the ROS 2 graph, each node its own OS process.
+
+The launcher starts the monitor, K robot-batch processes and the world, follows the
+run's progress on /swarm/metrics, and waits for the monitor to write the run
+directory. Then it lets every process end by itself, and stops those that do not
+(SIGINT, then SIGTERM, then SIGKILL, to the process group of each). If any process
+fails, or the user interrupts, it stops them all the same way.
+
+Each run gets a ROS domain id of its own (unless ROS_DOMAIN_ID is set), held through a
+lock file so two runs on one machine never share one, and discovery stays on the host
+(unless ROS_AUTOMATIC_DISCOVERY_RANGE is set). The processes' output and ROS logs go
+to ``<run>/logs``; if the run fails they are kept in ``<run>.logs`` instead.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+from .config import Settings
+from .core.errors import SwarmError
+from .core.params import RunParams
+from .core.shapes import Shape
+from .nodes.params import params_yaml
+
+DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
+_STOP_STEPS = ((signal.SIGINT, 3.0), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0))
+_GRACE = 10.0  # seconds the world and batches get to end by themselves after the monitor is done
+
+
+class LaunchError(SwarmError):
+    """The graph could not run to the end; the message says which process and where its log is."""
+
+
+@dataclass
+class Child:
+    name: str
+    proc: subprocess.Popen
+    log: Path
+    log_file: IO = field(repr=False)
+
+    def last_error(self) -> str:
+        """The process's last 'error' line, else its last non-empty line."""
+        try:
+            lines = [ln.strip() for ln in self.log.read_text(errors="replace").splitlines() if ln.strip()]
+        except OSError:
+            return ""
+        errors = [ln for ln in lines if "error" in ln.lower()]
+        return (errors or lines or [""])[-1]
+
+
+class DomainLock:
+    """A ROS domain id reserved for this run through an exclusive lock file (released by close())."""
+
+    def __init__(self, fixed: int | None = None) -> None:
+        self.file: IO | None = None
+        if fixed is not None:
+            self.domain_id = fixed
+            return
+        lock_dir = Path(tempfile.gettempdir()) / "swarm_ros-domains"
+        lock_dir.mkdir(exist_ok=True)
+        ids = list(DOMAIN_IDS)
+        start = random.randrange(len(ids))
+        for d in ids[start:] + ids[:start]:
+            f = open(lock_dir / f"{d}.lock", "w")  # noqa: SIM115 - held for the run
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                f.close()
+                continue
+            self.file, self.domain_id = f, d
+            return
+        raise LaunchError(f"every ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is in use by "
+                          f"other swarm-ros runs; set ROS_DOMAIN_ID to choose one")
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+
+
+def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env["ROS_LOG_DIR"] = str(log_dir / "ros")
+    env.setdefault("HOME", str(log_dir))
+    env["PYTHONUNBUFFERED"] = "1"
+    env["RCUTILS_COLORIZED_OUTPUT"] = "0"
+    return env
+
+
+def node_command(module: str, params_file: Path, name: str, extra: dict[str, object] | None = None) -> list[str]:
+    cmd = [sys.executable, "-m", f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params_file),
+           "-r", f"__node:={name}"]
+    for key, value in (extra or {}).items():
+        cmd += ["-p", f"{key}:={value}"]
+    return cmd
+
+
+def stop(children: list[Child]) -> None:
+    """End every child still running: SIGINT, SIGTERM, SIGKILL to its process group, waiting between."""
+    for sig, wait in _STOP_STEPS:
+        alive = [c for c in children if c.proc.poll() is None]
+        if not alive:
+            break
+        for c in alive:
+            try:
+                os.killpg(c.proc.pid, sig)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + wait
+        while time.monotonic() < deadline and any(c.proc.poll() is None for c in alive):
+            time.sleep(0.02)
+    for c in children:
+        c.proc.wait()
+        c.log_file.close()
+
+
+@dataclass
+class Launch:
+    """One ``swarm-ros run``. Call :meth:`run`; it returns the run directory."""
+
+    settings: Settings
+    shape: Shape
+    params: RunParams
+    processes: int
+    out: Path
+    overwrite: bool = False
+    quiet: bool = False
+    domain_id: int | None = None
+    children: list[Child] = field(default_factory=list)
+
+    def run(self) -> Path:
+        out = self.out.absolute()
+        logs = out.parent / f".{out.name}.logs-{os.getpid()}"
+        shutil.rmtree(logs, ignore_errors=True)
+        (logs / "ros").mkdir(parents=True)
+        lock = DomainLock(self.domain_id)
+        ok = False
+        try:
+            self._start(logs, lock.domain_id, out)
+            self._follow()
+            ok = True
+        except LaunchError as exc:
+            raise LaunchError(f"{exc} (logs: {self._logs_target(out, False)})") from None
+        finally:
+            stop(self.children)
+            lock.close()
+            self._keep_logs(logs, out, ok)
+        return out
+
+    def _start(self, logs: Path, domain_id: int, out: Path) -> None:
+        shape_arg = self.settings.shape
+        if Path(shape_arg).suffix.lower() in (".txt", ".png"):
+            shape_arg = str(Path(shape_arg).absolute())
+        run = Settings(**{**self.settings.__dict__, "shape": shape_arg, "robots": self.params.robots})
+        params_file = logs / "params.yaml"
+        params_file.write_text(params_yaml(run, {"world": {}, "monitor": {
+            "out_dir": str(out), "overwrite": self.overwrite}}), encoding="utf-8")
+        env = node_env(domain_id, logs)
+        self.domain = domain_id
+        plan = [("monitor", "monitor", {})]
+        plan += [(f"robot_batch_{k}", "robot_batch", {"batch": k, "batches": self.processes})
+                 for k in range(self.processes)]
+        plan.append(("world", "world", {}))
+        for name, module, extra in plan:
+            log = logs / f"{name}.log"
+            f = open(log, "wb")  # noqa: SIM115 - closed in stop()
+            proc = subprocess.Popen(node_command(module, params_file, name, extra), env=env, stdout=f,
+                                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+            self.children.append(Child(name, proc, log, f))
+
+    def _follow(self) -> None:
+        """Show progress until the monitor has written the run; raise LaunchError if a process fails."""
+        from .nodes.progress import Progress
+
+        monitor = next(c for c in self.children if c.name == "monitor")
+        others_done_at = None
+        with Progress(self.domain, self.shape.patches, quiet=self.quiet) as progress:
+            while True:
+                progress.spin(0.1)
+                codes = [c.proc.poll() for c in self.children]
+                if monitor.proc.returncode is not None or any(code not in (None, 0) for code in codes):
+                    break
+                if others_done_at is None and any(code == 0 for code in codes):
+                    others_done_at = time.monotonic()
+                if others_done_at is not None and time.monotonic() - others_done_at > 3 * _GRACE:
+                    raise LaunchError(f"the run ended but the monitor did not write it within {3 * _GRACE:g} s")
+        failed = [c for c in self.children if c.proc.returncode not in (None, 0)]
+        if failed:
+            first = failed[0]
+            raise LaunchError(f"{first.name} exited with status {first.proc.returncode}: "
+                              f"{first.last_error() or 'no output'}")
+        deadline = time.monotonic() + _GRACE
+        while time.monotonic() < deadline and any(c.proc.poll() is None for c in self.children):
+            time.sleep(0.05)
+
+    @staticmethod
+    def _logs_target(out: Path, ok: bool) -> Path:
+        return out / "logs" if ok and out.is_dir() else out.parent / f"{out.name}.logs"
+
+    def _keep_logs(self, logs: Path, out: Path, ok: bool) -> None:
+        target = self._logs_target(out, ok)
+        shutil.rmtree(target, ignore_errors=True)
+        try:
+            logs.rename(target)
+        except OSError:
+            shutil.rmtree(logs, ignore_errors=True)

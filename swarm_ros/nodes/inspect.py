@@ -1,0 +1,184 @@
+"""``swarm-ros topics``: look inside a running swarm without a ROS 2 install (ros2cli is not on PyPI).
+
+Lists the graph's topics with their types, publisher and subscriber counts and
+measured rates, or prints a topic's messages as YAML-like text, arrays shortened
+unless asked, and the robot rows of a PointCloud2 decoded into a small table.
+"""
+
+from __future__ import annotations
+
+import array
+import importlib
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from ..core.errors import SwarmError
+from ..wire import DECISION_ROW, ROBOT_ROW, check_fields
+
+_SHOWN_ITEMS = 8  # array items printed without --full
+_SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
+
+
+def message_class(type_name: str) -> type:
+    """The Python class of a ROS type name like ``sensor_msgs/msg/PointCloud2``."""
+    package, kind, name = type_name.split("/")
+    try:
+        return getattr(importlib.import_module(f"{package}.{kind}"), name)
+    except (ImportError, AttributeError):
+        raise SwarmError(f"message type {type_name} is not installed here") from None
+
+
+def to_yaml(msg: object, full: bool = False, indent: int = 0) -> str:
+    """A message as YAML-like text, in field order; long arrays shortened unless ``full``."""
+    pad = "  " * indent
+    lines = []
+    for name in msg.get_fields_and_field_types():
+        value = getattr(msg, name)
+        if hasattr(value, "get_fields_and_field_types"):
+            lines.append(f"{pad}{name}:")
+            lines.append(to_yaml(value, full, indent + 1))
+        elif isinstance(value, (list, tuple, array.array, np.ndarray)):
+            items = list(value)
+            if items and hasattr(items[0], "get_fields_and_field_types"):
+                lines.append(f"{pad}{name}:")
+                for item in items if full else items[:_SHOWN_ITEMS]:
+                    body = to_yaml(item, full, indent + 2).lstrip()
+                    lines.append(f"{pad}- {body}".replace("\n", "\n  "))
+                if not full and len(items) > _SHOWN_ITEMS:
+                    lines.append(f"{pad}- '... {len(items) - _SHOWN_ITEMS} more'")
+            else:
+                shown = items if full else items[:_SHOWN_ITEMS]
+                more = [] if full or len(items) <= _SHOWN_ITEMS else [f"'... {len(items) - _SHOWN_ITEMS} more'"]
+                lines.append(f"{pad}{name}: [{', '.join([repr(v) for v in shown] + more)}]")
+        else:
+            lines.append(f"{pad}{name}: {value!r}" if isinstance(value, str) else f"{pad}{name}: {value}")
+    return "\n".join(lines)
+
+
+def decoded_rows(msg: object, full: bool = False) -> str:
+    """The rows of a swarm_ros PointCloud2 as a table, or '' for any other message."""
+    if type(msg).__name__ != "PointCloud2":
+        return ""
+    fields = [(f.name, f.offset, f.datatype, f.count) for f in msg.fields]
+    for dtype in (ROBOT_ROW, DECISION_ROW):
+        try:
+            check_fields(fields, msg.point_step, dtype)
+        except ValueError:
+            continue
+        rows = np.frombuffer(msg.data, dtype=dtype)
+        names = [n for n in dtype.names if n != "z"]
+        out = [f"# {rows.size} rows decoded: " + "  ".join(f"{n:>10}" for n in names)]
+        for r in rows if full else rows[:_SHOWN_ROWS]:
+            out.append("#" + " " * 19 + "  ".join(f"{r[n]:>10.4f}" if r.dtype[n].kind == "f" else f"{r[n]:>10}"
+                                                    for n in names))
+        if not full and rows.size > _SHOWN_ROWS:
+            out.append(f"# ... {rows.size - _SHOWN_ROWS} more rows (--full shows all)")
+        return "\n".join(out)
+    return ""
+
+
+class _Inspector:
+    def __init__(self, domain_id: int) -> None:
+        self.context = Context()
+        rclpy.init(args=[], context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = Node("swarm_ros_topics", context=self.context, start_parameter_services=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_for(self, seconds: float, until=lambda: False) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and not until():
+            self.executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
+
+    def topics(self) -> dict[str, str]:
+        own = {"/parameter_events", "/rosout"}
+        return {name: types[0] for name, types in self.node.get_topic_names_and_types() if name not in own}
+
+    def publisher_qos(self, topic: str) -> QoSProfile:
+        """A QoS that receives what the topic's publishers keep: reliable and latched if they all are."""
+        infos = self.node.get_publishers_info_by_topic(topic)
+        reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+        latched = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+        return QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE if reliable else
+                          ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+def run_topics(domain_id: int, echo: str | None = None, count: int = 1, seconds: float = 2.0,
+               full: bool = False) -> int:
+    """List the topics on ``domain_id`` with rates, or echo ``count`` messages of one. Returns an exit code."""
+    inspector = _Inspector(domain_id)
+    try:
+        inspector.spin_for(min(1.0, seconds))  # discovery
+        return _echo(inspector, echo, count, seconds, full) if echo else _list(inspector, domain_id, seconds)
+    finally:
+        inspector.close()
+
+
+def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
+    topics = inspector.topics()
+    if not topics:
+        print(f"no topics on ROS domain {domain_id} (is a run going? 'swarm-ros run' prints its domain id)")
+        return 1
+    counts = dict.fromkeys(topics, 0)
+    best_effort = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
+                             durability=DurabilityPolicy.VOLATILE)
+    for name, type_name in topics.items():
+        def bump(_msg: bytes, name: str = name) -> None:
+            counts[name] += 1
+        inspector.node.create_subscription(message_class(type_name), name, bump, best_effort, raw=True)
+    start = time.monotonic()
+    inspector.spin_for(seconds)
+    elapsed = time.monotonic() - start
+    node = inspector.node
+    print(f"{'topic':<22} {'type':<34} {'pubs':>4} {'subs':>4} {'rate (Hz)':>10}  qos")
+    for name, type_name in sorted(topics.items()):
+        infos = node.get_publishers_info_by_topic(name)
+        qos = infos[0].qos_profile if infos else None
+        kind = "" if qos is None else (
+            f"{qos.reliability.name.lower()}, {qos.durability.name.lower()}, "
+            f"{qos.history.name.lower()} {qos.depth}")
+        print(f"{name:<22} {type_name:<34} {len(infos):>4} {node.count_subscribers(name) - 1:>4} "
+              f"{counts[name] / elapsed:>10.1f}  {kind}")
+    return 0
+
+
+def _echo(inspector: _Inspector, topic: str, count: int, seconds: float, full: bool) -> int:
+    topics = inspector.topics()
+    inspector.spin_for(seconds, until=lambda: topic in inspector.topics())
+    topics = inspector.topics()
+    if topic not in topics:
+        raise SwarmError(f"no topic {topic} on this domain (known: {', '.join(sorted(topics)) or 'none'})")
+    got: list[object] = []
+    inspector.node.create_subscription(message_class(topics[topic]), topic, got.append,
+                                       inspector.publisher_qos(topic))
+    printed = 0
+    deadline = time.monotonic() + max(seconds, 5.0)
+    while printed < count and time.monotonic() < deadline:
+        inspector.spin_for(0.1, until=lambda: len(got) > printed)
+        while got and printed < count:
+            msg = got.pop(0)
+            print(to_yaml(msg, full))
+            rows = decoded_rows(msg, full)
+            if rows:
+                print(rows)
+            print("---")
+            printed += 1
+            sys.stdout.flush()
+    if printed == 0:
+        print(f"no message on {topic} within {max(seconds, 5.0):g} s", file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,118 @@
+"""The monitor node: per-tick metrics from what the world publishes, and the run's output directory.
+
+It rebuilds the swarm's state from /swarm/robots (:class:`swarm_ros.core.replica.Replica`),
+counts it with the in-process engine's own functions
+(:func:`swarm_ros.core.metrics.tick_metrics`, :func:`~swarm_ros.core.metrics.outcome_of`),
+publishes each tick's metrics on /swarm/metrics, and when the run ends writes
+summary.json, metrics.csv, final_state.csv and final.png exactly as ``swarm-ros simulate``
+does, with ``engine: ros2``. It checks its outcome against the world's /swarm/status.
+
+    ros2 run swarm_ros monitor --ros-args --params-file config/swarm_ros.yaml -p out_dir:=runs/star
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
+
+from ..core.metrics import run_summary, outcome_of, tick_metrics
+from ..core.replica import Replica
+from ..core.state import STATE_COUNT, RobotState
+from ..output import RunRecord, check_out_dir, default_run_dir, write_run
+from ..wire import PATCH_METRES, ROBOT_ROW
+from . import messages as msgs
+from .params import make_node, read_parameters
+from .runner import RunFailed, load_run, run_node
+
+ENGINE_NAME = "ros2"
+_STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
+
+
+class MonitorNode:
+    def __init__(self) -> None:
+        self.node = node = make_node("monitor")
+        run, own = read_parameters(node, "monitor")
+        self.shape, self.params = load_run(run)
+        p = self.params
+        self.out = Path(own["out_dir"]) if own["out_dir"] else \
+            default_run_dir(self.shape.name, p.robots, p.vision_radius, p.seed)
+        self.overwrite = bool(own["overwrite"])
+        check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
+        self.world_radius = run.world_radius
+        self.replica = Replica(self.shape, p.robots)
+        self.rows: list[tuple[int, ...]] = []
+        self.outcome = None
+        self.world_outcome: str | None = None
+        self.ended_at: float | None = None
+        self.started_at: float | None = None
+        self.finished = False
+        self.written: Path | None = None
+
+        self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
+        node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
+        node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
+        node.get_logger().info(f"monitor: writing to {self.out}")
+
+    def _on_robots(self, msg: PointCloud2) -> None:
+        if self.outcome is not None:
+            return
+        tick = msgs.tick_of(msg.header)
+        if tick == 0:
+            self.started_at = time.perf_counter()
+        rows = msgs.cloud_rows(msg, ROBOT_ROW)
+        try:
+            self.replica.update(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES,
+                                rows["y"] / PATCH_METRES, rows["heading"])
+        except ValueError as exc:
+            raise RunFailed(str(exc)) from None
+        counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
+        metrics = tick_metrics(tick, counts, self.shape.patches)
+        self.rows.append(tuple(metrics))
+        self.pub_metrics.publish(msgs.metrics_message(metrics))
+        p = self.params
+        self.outcome = outcome_of(metrics, self.shape.patches, p.robots, p.max_ticks)
+        if self.outcome is not None:
+            self.ended_at = time.monotonic()
+            self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
+
+    def _on_status(self, msg: DiagnosticArray) -> None:
+        outcome = msgs.status_values(msg).get("outcome")
+        if outcome not in (None, "starting", "running"):
+            self.world_outcome = outcome
+
+    def poll(self) -> None:
+        if self.outcome is None:
+            return
+        if self.world_outcome is None and time.monotonic() - self.ended_at < _STATUS_WAIT:
+            return
+        if self.world_outcome is not None and self.world_outcome != self.outcome.value:
+            raise RunFailed(f"the world reports '{self.world_outcome}', the monitor counted "
+                            f"'{self.outcome.value}' at tick {self.replica.tick}")
+        self._write()
+        self.finished = True
+
+    def _write(self) -> None:
+        history = np.array(self.rows, dtype=np.int64)
+        final = tick_metrics(self.replica.tick, np.bincount(self.replica.state.state, minlength=STATE_COUNT),
+                             self.shape.patches)
+        separated = int((self.replica.state.state == RobotState.SEPARATED).sum())
+        summary = run_summary(shape=self.shape.name, shape_patches=self.shape.patches,
+                              params=self.params.as_dict(), engine=ENGINE_NAME, outcome=self.outcome, final=final,
+                              separated=separated, world_radius=self.world_radius, wall_seconds=self.wall)
+        record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
+                           outcome=self.outcome, summary=summary)
+        self.written = write_run(self.out, record, overwrite=self.overwrite)
+        self.node.get_logger().info(f"run written to {self.written}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("monitor", MonitorNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,96 @@
+"""A robot-batch node: hosts a set of robots and runs the core's robot rule for them every tick.
+
+It announces its robot ids on /swarm/batches, rebuilds the swarm's state from the
+world's rows on /swarm/robots (:class:`swarm_ros.core.replica.Replica`), and after each
+tick publishes, on /swarm/decisions, what each of its moving robots decided for the
+next one. A robot senses only what arrived on the topics, and the rule reads only the
+robots within its vision radius of the point ahead. It stops when /swarm/status
+reports the run's outcome.
+
+    ros2 run swarm_ros robot_batch --ros-args --params-file config/swarm_ros.yaml -p batch:=0 -p batches:=2
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
+
+from ..core.errors import ParameterError
+from ..core.replica import Replica
+from ..core.rules import Decider
+from ..wire import PATCH_METRES, ROBOT_ROW, batch_ids, decision_rows, format_ranges, parse_ranges
+from . import messages as msgs
+from .params import make_node, read_parameters
+from .runner import RunFailed, load_run, run_node
+
+RUNNING_STATES = ("starting", "running")
+
+
+class RobotBatchNode:
+    def __init__(self) -> None:
+        self.node = node = make_node("robot_batch")
+        run, own = read_parameters(node, "robot_batch")
+        self.shape, self.params = load_run(run)
+        n = self.params.robots
+        self.ids = self._hosted(n, own)
+        self.mine = np.zeros(n, dtype=bool)
+        self.mine[self.ids] = True
+        self.replica = Replica(self.shape, n)
+        self.decider = Decider(self.shape, self.params)
+        self.finished = False
+
+        self.pub_decisions = node.create_publisher(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)
+        node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
+        node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
+        announce = node.create_publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
+        hello = msgs.ids_message(self.ids)
+        hello.layout.dim[0].label = node.get_name()
+        announce.publish(hello)
+        node.get_logger().info(f"{node.get_name()}: robots {format_ranges(self.ids)}")
+
+    @staticmethod
+    def _hosted(n: int, own: dict) -> np.ndarray:
+        try:
+            if own["robot_ids"]:
+                ids = parse_ranges(own["robot_ids"])
+            else:
+                ids = batch_ids(n, own["batch"], own["batches"])
+        except ValueError as exc:
+            raise ParameterError(str(exc)) from None
+        if ids.size == 0:
+            raise ParameterError("this batch hosts no robots (robot_ids, or batches > robots - 4)")
+        if ids[0] < 4 or ids[-1] >= n:
+            raise ParameterError(f"robot_ids must be within 4..{n - 1} (0-3 are the seeds), "
+                                 f"got {format_ranges(ids)}")
+        return ids
+
+    def _on_robots(self, msg: PointCloud2) -> None:
+        tick = msgs.tick_of(msg.header)
+        rows = msgs.cloud_rows(msg, ROBOT_ROW)
+        try:
+            self.replica.update(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES,
+                                rows["y"] / PATCH_METRES, rows["heading"])
+        except ValueError as exc:
+            raise RunFailed(str(exc)) from None
+        moving = self.replica.moving_ids()
+        own = moving[self.mine[moving]]
+        if own.size:
+            decisions = self.decider.decide(self.replica.state, own, tick + 1, moving)
+            self.pub_decisions.publish(msgs.make_cloud(decision_rows(decisions), tick + 1))
+
+    def _on_status(self, msg: DiagnosticArray) -> None:
+        if msgs.status_values(msg).get("outcome", "running") not in RUNNING_STATES:
+            self.finished = True
+
+    def poll(self) -> None:
+        pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("robot_batch", RobotBatchNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

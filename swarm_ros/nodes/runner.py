@@ -1,0 +1,86 @@
+"""What every node's ``main`` shares: rclpy set-up, the spin loop, one-line errors, exit codes.
+
+Exit codes: 0 done, 1 the run failed (a peer sent something impossible, a timeout),
+2 bad parameters, 130 interrupted (SIGINT/SIGTERM, which rclpy turns into a shutdown).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from typing import Protocol
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+
+from ..config import Settings
+from ..core.errors import SwarmError
+from ..core.params import RunParams
+from ..core.shapes import Shape
+from ..core.world import World
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+_SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
+
+
+class RunFailed(Exception):
+    """The run cannot go on (not bad input: something the graph did)."""
+
+
+class SwarmNode(Protocol):
+    node: Node
+    finished: bool
+
+    def poll(self) -> None:
+        """Called between callbacks: check timeouts, raise RunFailed to stop."""
+
+
+def load_run(run: Settings) -> tuple[Shape, RunParams]:
+    """The shape and run parameters every node derives, identically, from the run settings."""
+    shape = Shape.load(run.shape, World(run.world_radius))
+    params = RunParams(robots=run.robots or shape.patches, vision_radius=run.vision_radius, seed=run.seed,
+                       max_ticks=run.max_ticks, wiggle_deg=run.wiggle_deg)
+    if params.robots > shape.free_patches:
+        raise SwarmError(f"{params.robots} robots do not fit on the {shape.free_patches} free patches")
+    return shape, params
+
+
+def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None = None) -> int:
+    """Init rclpy with ``argv`` (ROS arguments included), build the node, spin until it finishes."""
+    args = sys.argv if argv is None else argv
+    try:
+        rclpy.init(args=args)
+    except Exception as exc:  # rclpy reports bad --ros-args (e.g. a missing params file) as RCLError
+        return _fail(name, f"cannot start ROS 2: {_first_line(exc)}", EXIT_USAGE)
+    swarm = None
+    try:
+        swarm = factory()
+        executor = EventsExecutor()
+        executor.add_node(swarm.node)
+        while not swarm.finished:
+            executor.spin_once(timeout_sec=_SPIN_TIMEOUT)
+            swarm.poll()
+        return EXIT_OK
+    except SwarmError as exc:
+        return _fail(name, str(exc), EXIT_USAGE)
+    except RunFailed as exc:
+        return _fail(name, str(exc), EXIT_FAILED)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return EXIT_INTERRUPTED
+    finally:
+        if swarm is not None:
+            swarm.node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _fail(name: str, message: str, code: int) -> int:
+    print(f"swarm_ros {name}: error: {message}", file=sys.stderr, flush=True)
+    return code

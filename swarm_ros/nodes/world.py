@@ -1,0 +1,185 @@
+"""The world node: owns the shape and the patch occupancy, settles claims, drives the lockstep ticks.
+
+A tick: the world has published the rows of tick t on /swarm/robots; every robot batch
+decides for its moving robots and publishes on /swarm/decisions; once the decisions of
+every moving robot are in, the world applies them with the in-process engine's own
+code (:meth:`swarm_ros.core.engine.Simulation.apply`), checks for the end, and publishes
+the rows of tick t + 1, the occupancy if a robot joined, and the clock. It starts when
+the robot batches' announcements on /swarm/batches cover every robot, and never runs
+more than ``monitor_window`` ticks ahead of the monitor's /swarm/metrics.
+
+    ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
+
+from ..core.engine import Simulation
+from ..core.metrics import Outcome
+from ..core.rules import Decisions
+from ..core.state import RobotState
+from ..wire import DECISION_ROW, decisions_of, format_ranges, robot_rows
+from . import messages as msgs
+from .params import make_node, read_parameters
+from .runner import RunFailed, load_run, run_node
+
+_LINGER = 0.5  # seconds to let the last messages reach their readers before exiting
+_FINAL_WAIT = 30.0  # seconds to wait, after the end, for the monitor to catch up
+
+
+class WorldNode:
+    def __init__(self) -> None:
+        self.node = node = make_node("world")
+        run, own = read_parameters(node, "world")
+        self.shape, self.params = load_run(run)
+        self.window = int(own["monitor_window"])
+        self.start_timeout = float(own["start_timeout"])
+        if self.window < 0 or self.start_timeout <= 0:
+            raise RunFailed("monitor_window must be >= 0 and start_timeout > 0")
+        self.sim = Simulation(self.shape, self.params)
+        self.finished = False
+
+        self.pub_robots = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
+        self.pub_shape = node.create_publisher(msgs.OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
+        self.pub_occupancy = node.create_publisher(msgs.OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
+        self.pub_status = node.create_publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
+        self.pub_clock = node.create_publisher(msgs.Clock, msgs.CLOCK, msgs.CLOCK_QOS)
+        node.create_subscription(PointCloud2, msgs.DECISIONS, self._on_decisions, msgs.DECISIONS_QOS)
+        node.create_subscription(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
+        node.create_subscription(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
+
+        n = self.params.robots
+        self.host = np.full(n, -1, dtype=np.int64)  # batch number hosting each robot
+        self.batch_names: list[str] = []
+        self.started = False
+        self.created = time.monotonic()
+        self.parts: list[np.ndarray] = []
+        self.received = 0
+        self.monitor_tick = -1
+        self.queued: deque = deque()  # (tick, rows message, joined) held while the monitor is behind
+        self.ended_at: float | None = None
+
+        self.shape_cells = msgs.shape_cells(self.shape)
+        self.pub_shape.publish(msgs.grid_message(self.shape, self.shape_cells, 0))
+        self._publish_occupancy()
+        self.pub_status.publish(msgs.status_message(0, "starting", "waiting for robot batches"))
+        node.get_logger().info(f"world: {self.shape.name} ({self.shape.patches} patches), {n} robots, "
+                               f"waiting for robot batches")
+
+    # -- start --------------------------------------------------------------------
+    def _on_batch(self, msg: Int64MultiArray) -> None:
+        if self.started:
+            return
+        name = msg.layout.dim[0].label if msg.layout.dim else f"batch{len(self.batch_names)}"
+        ids = np.asarray(msg.data, dtype=np.int64)
+        n = self.params.robots
+        if ids.size and (ids.min() < 4 or ids.max() >= n):
+            raise RunFailed(f"{name} hosts robots outside 4..{n - 1} ({format_ranges(np.unique(ids))})")
+        taken = ids[self.host[ids] >= 0]
+        if taken.size:
+            other = self.batch_names[self.host[taken[0]]]
+            raise RunFailed(f"robot {taken[0]} is hosted by both {other} and {name}")
+        self.host[ids] = len(self.batch_names)
+        self.batch_names.append(name)
+        covered = int((self.host[4:] >= 0).sum())
+        self.node.get_logger().info(f"{name} hosts {ids.size} robots; {covered}/{n - 4} covered")
+        if covered == n - 4:
+            self._start()
+
+    def _start(self) -> None:
+        self.started = True
+        self.node.get_logger().info(f"all robots hosted by {len(self.batch_names)} batches: tick 0")
+        s = self.sim.state
+        self._emit(0, msgs.make_cloud(robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading), 0))
+
+    # -- ticks --------------------------------------------------------------------
+    def _on_decisions(self, msg: PointCloud2) -> None:
+        tick = msgs.tick_of(msg.header)
+        if not self.started or self.sim.done or tick != self.sim.tick + 1:
+            return  # a batch answering a tick that is over (e.g. after the end)
+        rows = msgs.cloud_rows(msg, DECISION_ROW)
+        self.parts.append(rows)
+        self.received += rows.size
+        moving = self.sim.metrics.moving
+        if self.received > moving:
+            raise RunFailed(f"tick {tick}: {self.received} decisions for {moving} moving robots")
+        if self.received == moving:
+            self._advance(tick)
+
+    def _advance(self, tick: int) -> None:
+        decisions = Decisions.concatenate([decisions_of(tick, r) for r in self.parts])
+        self.parts, self.received = [], 0
+        localized_before = self.sim.metrics.localized
+        try:
+            self.sim.apply(decisions)
+        except ValueError as exc:
+            raise RunFailed(f"tick {tick}: {exc}") from None
+        s = self.sim.state
+        ids = self.sim.last_joins()[0]
+        self._emit(tick, msgs.make_cloud(robot_rows(ids, s.state, s.x, s.y, s.heading), tick),
+                   joined=self.sim.metrics.localized != localized_before)
+
+    def _emit(self, tick: int, robots_msg: PointCloud2, joined: bool = False) -> None:
+        """Publish a tick now, or queue it while the monitor is more than ``monitor_window`` ticks behind."""
+        self.queued.append((tick, robots_msg, joined))
+        self._flush()
+
+    def _flush(self) -> None:
+        while self.queued and (self.window == 0 or self.queued[0][0] - self.monitor_tick <= self.window):
+            tick, robots_msg, joined = self.queued.popleft()
+            self.pub_robots.publish(robots_msg)
+            if joined:
+                self._publish_occupancy(tick)
+            self.pub_clock.publish(msgs.clock_message(tick))
+            if tick == self.sim.tick and self.sim.done:
+                self._announce_end()
+            elif tick == 0:
+                self.pub_status.publish(msgs.status_message(0, "running", "running"))
+
+    def _publish_occupancy(self, tick: int = 0) -> None:
+        cells = self.shape_cells.copy()
+        cells[self.sim.state.occupancy >= 0] = msgs.CELL_FULL
+        self.pub_occupancy.publish(msgs.grid_message(self.shape, cells, tick))
+
+    def _announce_end(self) -> None:
+        m, outcome = self.sim.metrics, self.sim.outcome
+        level = DiagnosticStatus.OK if outcome in (Outcome.COMPLETE, Outcome.COMPLETE_WITH_EXTRAS) \
+            else DiagnosticStatus.WARN
+        self.pub_status.publish(msgs.status_message(
+            m.tick, outcome.value, f"{outcome.value} at tick {m.tick}", level,
+            {"localized": m.localized, "separated": int((self.sim.state.state == RobotState.SEPARATED).sum())}))
+        self.ended_at = time.monotonic()
+        self.node.get_logger().info(f"run ended: {outcome.value} at tick {m.tick}, {m.localized} localized")
+
+    def _on_metrics(self, msg: Int64MultiArray) -> None:
+        tick = msgs.metrics_of(msg).get("tick", -1)
+        if tick > self.monitor_tick:
+            self.monitor_tick = tick
+            self._flush()
+
+    # -- housekeeping --------------------------------------------------------------
+    def poll(self) -> None:
+        now = time.monotonic()
+        if not self.started and now - self.created > self.start_timeout:
+            covered = int((self.host[4:] >= 0).sum())
+            raise RunFailed(f"robot batches cover {covered} of {self.params.robots - 4} robots after "
+                            f"{self.start_timeout:g} s (start_timeout)")
+        if self.ended_at is not None:
+            caught_up = self.window == 0 or self.monitor_tick >= self.sim.tick
+            if (caught_up and now - self.ended_at > _LINGER) or now - self.ended_at > _FINAL_WAIT:
+                self.finished = True
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("world", WorldNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
