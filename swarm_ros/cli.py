@@ -173,12 +173,23 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise SwarmError(f"ROS domain id must be in [0, 232], got {domain}")
     launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
                     overwrite=args.overwrite, quiet=args.quiet, domain_id=domain)
+    _interrupt_on_sigterm()
     out = launch.run()
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         _print_summary(summary, out)
         print(f"{'ROS graph':<17} domain {launch.domain}, {args.processes} robot-batch processes; logs in {out / 'logs'}")
     return 0
+
+
+def _interrupt_on_sigterm() -> None:
+    """SIGTERM ends the command like Ctrl-C does, so its child processes are stopped, not orphaned."""
+    import signal
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
 
 
 def cmd_topics(args: argparse.Namespace) -> int:

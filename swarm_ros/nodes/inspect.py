@@ -25,6 +25,7 @@ from ..wire import DECISION_ROW, ROBOT_ROW, check_fields
 
 _SHOWN_ITEMS = 8  # array items printed without --full
 _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
+_ECHO_WAIT = 10.0  # seconds --echo waits at least for a publisher and a message
 
 
 def message_class(type_name: str) -> type:
@@ -50,8 +51,9 @@ def to_yaml(msg: object, full: bool = False, indent: int = 0) -> str:
             if items and hasattr(items[0], "get_fields_and_field_types"):
                 lines.append(f"{pad}{name}:")
                 for item in items if full else items[:_SHOWN_ITEMS]:
-                    body = to_yaml(item, full, indent + 2).lstrip()
-                    lines.append(f"{pad}- {body}".replace("\n", "\n  "))
+                    body = to_yaml(item, full).splitlines()
+                    lines.append(f"{pad}- {body[0]}")
+                    lines.extend(f"{pad}  {line}" for line in body[1:])
                 if not full and len(items) > _SHOWN_ITEMS:
                     lines.append(f"{pad}- '... {len(items) - _SHOWN_ITEMS} more'")
             else:
@@ -98,6 +100,16 @@ class _Inspector:
         while time.monotonic() < end and not until():
             self.executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
 
+    def discover(self, seconds: float) -> None:
+        """Spin until the set of topics has not changed for half a second (at most ``seconds``)."""
+        end = time.monotonic() + seconds
+        seen, stable_since = None, time.monotonic()
+        while time.monotonic() < end and time.monotonic() - stable_since < 1.0:
+            self.spin_for(0.1)
+            now = self.topics()
+            if now != seen:
+                seen, stable_since = now, time.monotonic()
+
     def topics(self) -> dict[str, str]:
         own = {"/parameter_events", "/rosout"}
         return {name: types[0] for name, types in self.node.get_topic_names_and_types() if name not in own}
@@ -122,7 +134,7 @@ def run_topics(domain_id: int, echo: str | None = None, count: int = 1, seconds:
     """List the topics on ``domain_id`` with rates, or echo ``count`` messages of one. Returns an exit code."""
     inspector = _Inspector(domain_id)
     try:
-        inspector.spin_for(min(1.0, seconds))  # discovery
+        inspector.discover(seconds)
         return _echo(inspector, echo, count, seconds, full) if echo else _list(inspector, domain_id, seconds)
     finally:
         inspector.close()
@@ -148,25 +160,28 @@ def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
     for name, type_name in sorted(topics.items()):
         infos = node.get_publishers_info_by_topic(name)
         qos = infos[0].qos_profile if infos else None
-        kind = "" if qos is None else (
-            f"{qos.reliability.name.lower()}, {qos.durability.name.lower()}, "
-            f"{qos.history.name.lower()} {qos.depth}")
+        kind = "" if qos is None else f"{qos.reliability.name.lower()}, {qos.durability.name.lower()}"
         print(f"{name:<22} {type_name:<34} {len(infos):>4} {node.count_subscribers(name) - 1:>4} "
               f"{counts[name] / elapsed:>10.1f}  {kind}")
     return 0
 
 
 def _echo(inspector: _Inspector, topic: str, count: int, seconds: float, full: bool) -> int:
+    # A busy graph can take seconds to show every participant: wait for the topic's publishers.
+    wait = max(seconds, _ECHO_WAIT)
+    inspector.spin_for(wait, until=lambda: inspector.node.count_publishers(topic) > 0)
     topics = inspector.topics()
-    inspector.spin_for(seconds, until=lambda: topic in inspector.topics())
-    topics = inspector.topics()
-    if topic not in topics:
-        raise SwarmError(f"no topic {topic} on this domain (known: {', '.join(sorted(topics)) or 'none'})")
+    if topic not in topics or inspector.node.count_publishers(topic) == 0:
+        raise SwarmError(f"no publisher of {topic} on this domain within {wait:g} s "
+                         f"(topics seen: {', '.join(sorted(topics)) or 'none'})")
     got: list[object] = []
     inspector.node.create_subscription(message_class(topics[topic]), topic, got.append,
                                        inspector.publisher_qos(topic))
+    # A latched stream replays its history first; of that burst only the newest messages matter.
+    inspector.spin_for(0.3)
+    del got[: max(0, len(got) - count)]
     printed = 0
-    deadline = time.monotonic() + max(seconds, 5.0)
+    deadline = time.monotonic() + wait
     while printed < count and time.monotonic() < deadline:
         inspector.spin_for(0.1, until=lambda: len(got) > printed)
         while got and printed < count:
@@ -179,6 +194,6 @@ def _echo(inspector: _Inspector, topic: str, count: int, seconds: float, full: b
             printed += 1
             sys.stdout.flush()
     if printed == 0:
-        print(f"no message on {topic} within {max(seconds, 5.0):g} s", file=sys.stderr)
+        print(f"no message on {topic} within {wait:g} s", file=sys.stderr)
         return 1
     return 0

@@ -1,0 +1,87 @@
+"""The Replica rebuilds the world's state from broadcast rows; the Decider equals decide()."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.replica import Replica
+from swarm_ros.core.rules import Decider, Decisions, decide
+from swarm_ros.core.state import RobotState
+
+from conftest import params
+
+
+def _feed(replica: Replica, sim: Simulation, ids: np.ndarray) -> None:
+    s = sim.state
+    replica.update(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.heading[ids])
+
+
+def _assert_same(a, b) -> None:
+    for name in ("x", "y", "heading", "state", "occupancy", "frontier"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert a.tick == b.tick
+
+
+@pytest.mark.parametrize("robots_over_patches", [-30, 0, 25])
+def test_replica_fed_the_changed_rows_equals_the_world_every_tick(small_ring, robots_over_patches):
+    sim = Simulation(small_ring, params(small_ring.patches + robots_over_patches, seed=3))
+    replica = Replica(small_ring, sim.params.robots)
+    _feed(replica, sim, np.arange(sim.params.robots))
+    _assert_same(replica.state, sim.state)
+    while not sim.done:
+        sim.step()
+        _feed(replica, sim, sim.last_joins()[0])
+        _assert_same(replica.state, sim.state)
+    assert sim.outcome is not None
+
+
+def test_decider_from_a_replica_gives_the_fused_engines_run(small_ring):
+    p = params(small_ring.patches + 5, seed=11, vision_radius=2.0)
+    fused = Simulation(small_ring, p)
+    fused.run()
+    sim = Simulation(small_ring, p)
+    replica = Replica(small_ring, p.robots)
+    _feed(replica, sim, np.arange(p.robots))
+    decider = Decider(small_ring, p)
+    while not sim.done:
+        moving = replica.moving_ids()
+        halves = [decider.decide(replica.state, part, sim.tick + 1, moving) for part in np.array_split(moving, 2)]
+        sim.apply(Decisions.concatenate([h for h in halves if h.ids.size]))
+        _feed(replica, sim, sim.last_joins()[0])
+    np.testing.assert_array_equal(sim.history, fused.history)
+    _assert_same(sim.state, fused.state)
+
+
+def test_decider_reused_across_ticks_equals_one_shot_decide():
+    shape = Shape.load("wrench")
+    p = RunParams(robots=400, seed=5)
+    sim = Simulation(shape, p)
+    decider = Decider(shape, p)
+    for _ in range(30):
+        ids = sim.moving_ids()
+        a = decider.decide(sim.state, ids, sim.tick + 1)
+        b = decide(sim.state, ids, shape, p, sim.tick + 1)
+        for name in ("ids", "claim", "x", "y", "heading"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        sim.apply(a)
+
+
+def test_replica_rejects_skipped_ticks_partial_tick_zero_and_impossible_joins(small_disc):
+    sim = Simulation(small_disc, params(40, seed=2))
+    s, all_ids = sim.state, np.arange(40)
+    replica = Replica(small_disc, 40)
+    with pytest.raises(ValueError, match="tick 0 must hold every robot"):
+        replica.update(0, all_ids[:-1], s.state[:-1], s.x[:-1], s.y[:-1], s.heading[:-1])
+    replica = Replica(small_disc, 40)
+    with pytest.raises(ValueError, match="arrived after tick -1"):
+        replica.update(1, all_ids, s.state, s.x, s.y, s.heading)
+    replica.update(0, all_ids, s.state, s.x, s.y, s.heading)
+    with pytest.raises(ValueError, match="unknown robot state"):
+        replica.update(1, all_ids[4:5], np.array([9]), s.x[4:5], s.y[4:5], s.heading[4:5])
+    replica = Replica(small_disc, 40)
+    replica.update(0, all_ids, s.state, s.x, s.y, s.heading)
+    # robot 4 "localizes" on a seed's patch: not an empty shape patch
+    with pytest.raises(ValueError, match="not an empty shape patch"):
+        replica.update(1, np.array([4]), np.array([RobotState.LOCALIZED]), s.x[:1], s.y[:1], s.heading[:1])

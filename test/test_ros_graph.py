@@ -1,0 +1,217 @@
+"""The ROS 2 graph as separate processes: `swarm-ros run` equals `swarm-ros simulate`, and the launcher cleans up.
+
+These start real processes (world, K robot batches, monitor) on a ROS domain of
+their own, so they take a few seconds each.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarm_ros.cli import main as cli_main
+from swarm_ros.launcher import Child, stop
+
+PY = sys.executable
+TIMEOUT = 240
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("ROS_DOMAIN_ID", None)  # every run picks a free domain of its own
+    env.setdefault("HOME", "/tmp")
+    return env
+
+
+def swarm_ros(*args: str, timeout: float = TIMEOUT, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([PY, "-m", "swarm_ros.cli", *args], capture_output=True, text=True, timeout=timeout,
+                          env=_env(), **kw)
+
+
+def _shape_file(path: Path, outer: float, hole: float = 0.0, cross: bool = False, half: int = 16) -> Path:
+    c = np.arange(-half, half + 1)
+    x, y = np.meshgrid(c, c)
+    d = np.hypot(x, y)
+    mask = (d <= outer) & (d >= hole)
+    if cross:
+        mask = ((np.abs(x) <= 2) & (np.abs(y) <= outer)) | ((np.abs(y) <= 2) & (np.abs(x) <= outer))
+    rows = ["".join("#" if v else "." for v in row) for row in mask[::-1]]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def _processes_mentioning(text: str) -> list[int]:
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                if text in (proc / "cmdline").read_bytes().decode(errors="replace"):
+                    found.append(int(proc.name))
+            except OSError:
+                pass
+    return found
+
+
+def _assert_same_run(ref: Path, got: Path) -> None:
+    assert (ref / "metrics.csv").read_bytes() == (got / "metrics.csv").read_bytes()
+    assert (ref / "final_state.csv").read_bytes() == (got / "final_state.csv").read_bytes()
+    a = json.loads((ref / "summary.json").read_text())
+    b = json.loads((got / "summary.json").read_text())
+    assert (a.pop("engine"), b.pop("engine")) == ("inprocess", "ros2")
+    a.pop("wall_seconds"), b.pop("wall_seconds")
+    assert a == b
+    assert (got / "final.png").stat().st_size > 0
+
+
+CASES = {
+    # name: (shape builder args, run flags); robots relative to the shape's patches (420 ring, 245 cross)
+    "ring-extras": (dict(outer=12.5, hole=5), ["--world-radius", "16", "--robots", "+20"]),  # ~310 ticks
+    "cross-incomplete": (dict(outer=13, cross=True), ["--world-radius", "16", "--robots", "-25"]),  # ~280 ticks
+    "ring-timeout": (dict(outer=12.5, hole=5), ["--world-radius", "16", "--robots", "-120", "--vision", "2",
+                                                 "--max-ticks", "1500"]),
+}
+
+
+def _resolve(tmp_path: Path, case: str) -> tuple[list[str], str]:
+    builder, flags = CASES[case]
+    shape = _shape_file(tmp_path / f"{case}.txt", **builder)
+    from swarm_ros.core import Shape, World
+
+    patches = Shape.load(str(shape), World(16)).patches
+    flags = list(flags)
+    if "--robots" in flags:
+        i = flags.index("--robots") + 1
+        flags[i] = str(patches + int(flags[i]))
+    return ["--shape", str(shape), "--seed", "7", *flags], case
+
+
+@pytest.fixture(scope="module")
+def references(tmp_path_factory) -> dict[str, tuple[list[str], Path]]:
+    """Each case's flags and its in-process run directory."""
+    base = tmp_path_factory.mktemp("ref")
+    refs = {}
+    for case in CASES:
+        flags, _ = _resolve(base, case)
+        out = base / f"ref-{case}"
+        assert cli_main(["simulate", *flags, "--out", str(out), "--quiet"]) == 0
+        refs[case] = (flags, out)
+    return refs
+
+
+@pytest.mark.parametrize("processes", [1, 2, 4])
+@pytest.mark.parametrize("case", ["ring-extras", "cross-incomplete"])
+def test_ros_graph_equals_in_process_engine(references, tmp_path, case, processes):
+    flags, ref = references[case]
+    out = tmp_path / "run"
+    done = swarm_ros("run", *flags, "--processes", str(processes), "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    _assert_same_run(ref, out)
+    assert sorted(p.name for p in (out / "logs").iterdir()) == sorted(
+        ["monitor.log", "world.log", "params.yaml", "ros"] + [f"robot_batch_{k}.log" for k in range(processes)])
+    assert not _processes_mentioning(str(out)), "a node process outlived the run"
+
+
+def test_ros_graph_equals_in_process_engine_at_a_timeout(references, tmp_path):
+    flags, ref = references["ring-timeout"]
+    out = tmp_path / "run"
+    done = swarm_ros("run", *flags, "--processes", "2", "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert json.loads((out / "summary.json").read_text())["outcome"] == "timeout"
+    _assert_same_run(ref, out)
+
+
+def test_full_size_star_over_the_graph_equals_in_process_engine(tmp_path):
+    ref, out = tmp_path / "ref", tmp_path / "run"
+    assert cli_main(["simulate", "--shape", "star", "--out", str(ref), "--quiet"]) == 0
+    done = swarm_ros("run", "--shape", "star", "--processes", "2", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    _assert_same_run(ref, out)
+    assert "engine ros2" in done.stdout and "domain" in done.stdout
+
+
+def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_path):
+    out = tmp_path / "live"
+    domain = str(150 + os.getpid() % 80)
+    env = {**_env(), "ROS_DOMAIN_ID": domain}
+    launcher = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--vision", "2", "--out",
+                                 str(out), "--quiet"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+    try:
+        listing = ""
+        for _ in range(20):
+            listing = swarm_ros("topics", "--domain-id", domain, "--seconds", "2").stdout
+            if "/swarm/robots" in listing and "/swarm/metrics" in listing:
+                break
+        for topic, kind in (("/swarm/robots", "sensor_msgs/msg/PointCloud2"), ("/clock", "rosgraph_msgs/msg/Clock"),
+                            ("/swarm/shape", "nav_msgs/msg/OccupancyGrid"),
+                            ("/swarm/status", "diagnostic_msgs/msg/DiagnosticArray")):
+            line = next(ln for ln in listing.splitlines() if ln.startswith(topic + " "))
+            assert kind in line
+        rate = float(next(ln for ln in listing.splitlines() if ln.startswith("/swarm/robots ")).split()[4])
+        assert rate > 10
+        echo = swarm_ros("topics", "--domain-id", domain, "--echo", "/swarm/metrics").stdout
+        assert "label: 'tick,stationary,localized,inside,moving,empty_patches'" in echo
+        echo = swarm_ros("topics", "--domain-id", domain, "--echo", "/swarm/robots").stdout
+        assert "frame_id: 'world'" in echo and "rows decoded" in echo
+        status = swarm_ros("topics", "--domain-id", domain, "--echo", "/swarm/status").stdout
+        assert "value: 'running'" in status
+    finally:
+        launcher.send_signal(signal.SIGINT)
+        start = time.monotonic()
+        _, err = launcher.communicate(timeout=30)
+    assert launcher.returncode == 130, err
+    assert time.monotonic() - start < 10
+    assert "interrupted" in err
+    assert not out.exists()
+    assert (tmp_path / "live.logs" / "world.log").is_file()
+    assert not _processes_mentioning(str(out)), "a node process outlived the interrupted run"
+
+
+def test_stop_escalates_to_sigkill_for_a_process_that_ignores_int_and_term(tmp_path):
+    code = "import signal,time; [signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)]; " \
+           "print('ready', flush=True); time.sleep(60)"
+    log = tmp_path / "stubborn.log"
+    f = open(log, "wb")
+    proc = subprocess.Popen([PY, "-c", code], stdout=f, start_new_session=True)
+    while b"ready" not in log.read_bytes():
+        time.sleep(0.05)
+    start = time.monotonic()
+    stop([Child("stubborn", proc, log, f)])
+    assert proc.returncode == -signal.SIGKILL
+    assert time.monotonic() - start < 8
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--processes", "2000"], "--processes 2000 is more than the 1032 non-seed robots"),
+    (["--domain-id", "500"], "ROS domain id must be in [0, 232], got 500"),
+    (["--shape", "nope"], "nope: no such shape file or built-in shape"),
+    (["--robots", "99999"], "do not fit"),
+])
+def test_run_refuses_bad_input_in_one_line_before_starting_anything(tmp_path, args, message):
+    done = swarm_ros("run", *args, "--out", str(tmp_path / "x"), timeout=60)
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and message in done.stderr
+    assert not (tmp_path / "x").exists() and not (tmp_path / "x.logs").exists()
+
+
+@pytest.mark.parametrize("node,ros_args,message", [
+    ("world", ["-p", "bogus:=1"], "swarm_ros world: error: node 'world': unknown parameter 'bogus'"),
+    ("robot_batch", ["-p", "robots:=abc"], "parameter 'robots' must be an integer, got 'abc'"),
+    ("monitor", ["--params-file", "/nonexistent.yaml"], "swarm_ros monitor: error: cannot start ROS 2"),
+    ("robot_batch", ["-p", "robot_ids:=0-9"], "robot_ids must be within 4..1035"),
+    ("world", ["-p", "shape:=nope"], "nope: no such shape file or built-in shape"),
+])
+def test_nodes_refuse_bad_parameters_in_one_line(node, ros_args, message):
+    done = subprocess.run([PY, "-m", f"swarm_ros.nodes.{node}", "--ros-args", *ros_args], capture_output=True,
+                          text=True, timeout=60, env={**_env(), "ROS_DOMAIN_ID": "231"})
+    assert done.returncode == 2
+    errors = [ln for ln in done.stderr.splitlines() if "error" in ln]
+    assert len(errors) == 1 and message in errors[0], done.stderr

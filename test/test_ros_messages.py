@@ -1,0 +1,90 @@
+"""Messages and node parameters of the ROS 2 graph, in one process."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
+
+from swarm_ros.config import ConfigError, Settings
+from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.nodes import messages as msgs
+from swarm_ros.nodes.params import read_parameters
+from swarm_ros.wire import DECISION_ROW, ROBOT_ROW, robot_rows
+
+
+def test_robot_rows_survive_serialization_exactly_and_carry_the_tick():
+    sim = Simulation(Shape.load("star"), RunParams(robots=1036, seed=9))
+    sim.run(max_ticks=40)
+    s = sim.state
+    sent = robot_rows(np.arange(1036), s.state, s.x, s.y, s.heading)
+    wire = serialize_message(msgs.make_cloud(sent, 40))
+    msg = deserialize_message(wire, PointCloud2)
+    assert msgs.tick_of(msg.header) == 40 and msg.header.frame_id == "world"
+    assert (msg.width, msg.point_step, msg.row_step) == (1036, 40, 1036 * 40)
+    got = msgs.cloud_rows(msg, ROBOT_ROW)
+    assert got.tobytes() == sent.tobytes()
+    with pytest.raises(ValueError, match="unexpected point layout"):
+        msgs.cloud_rows(msg, DECISION_ROW)
+
+
+def test_metrics_message_is_labelled_and_exact():
+    row = [12, 400, 390, 17, 600, 646]
+    msg = deserialize_message(serialize_message(msgs.metrics_message(row)), Int64MultiArray)
+    assert msgs.metrics_of(msg) == dict(zip(METRIC_COLUMNS, row))
+
+
+def test_occupancy_grid_places_patch_centres_on_cells():
+    shape = Shape.load("tyre")
+    grid = msgs.grid_message(shape, msgs.shape_cells(shape), 3)
+    w = shape.world.size
+    assert (grid.info.width, grid.info.height, grid.info.resolution) == (w, w, 1.0)
+    assert grid.info.origin.position.x == -(shape.world.radius + 0.5)
+    cells = np.asarray(grid.data, dtype=np.int8)
+    assert (cells == msgs.CELL_EMPTY).sum() == shape.patches
+    assert (cells == msgs.CELL_OFF_SHAPE).sum() == w * w - shape.patches
+
+
+@pytest.fixture
+def ros_context():
+    context = Context()
+    rclpy.init(args=[], context=context)
+    yield context
+    rclpy.shutdown(context=context)
+
+
+def _node(context, kind, **values):
+    return Node(kind, context=context, allow_undeclared_parameters=True,
+                automatically_declare_parameters_from_overrides=True,
+                parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+
+
+def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
+    node = _node(ros_context, "world", robots=500, vision_radius=2, monitor_window=0)
+    run, own = read_parameters(node, "world")
+    assert run == Settings(robots=500, vision_radius=2.0)
+    assert isinstance(run.vision_radius, float)
+    assert own == {"monitor_window": 0, "start_timeout": 60.0}
+    node.destroy_node()
+
+
+@pytest.mark.parametrize("kind,values,message", [
+    ("world", {"bogus": 1}, "node 'world': unknown parameter 'bogus'"),
+    ("world", {"batch": 1}, "unknown parameter 'batch'"),
+    ("robot_batch", {"robots": "many"}, "parameter 'robots' must be an integer, got 'many'"),
+    ("monitor", {"overwrite": 1}, "parameter 'overwrite' must be a boolean, got 1"),
+    ("monitor", {"seed": 1.5}, "parameter 'seed' must be an integer, got 1.5"),
+    ("robot_batch", {"robot_ids": [4, 5]}, "parameter 'robot_ids' must be a string, got a value of type"),
+])
+def test_unknown_or_ill_typed_parameters_are_refused(ros_context, kind, values, message):
+    node = _node(ros_context, kind, **values)
+    with pytest.raises(ConfigError, match=message):
+        read_parameters(node, kind)
+    node.destroy_node()
