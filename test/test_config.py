@@ -41,3 +41,25 @@ def test_bad_parameter_files_name_the_file_and_the_key(tmp_path, text, message):
 def test_missing_parameter_file(tmp_path):
     with pytest.raises(ConfigError, match="cannot read parameter file"):
         load_params_file(tmp_path / "nope.yaml")
+
+
+def test_node_sections_of_the_shipped_file_hold_every_node_default():
+    import yaml
+
+    from swarm_ros.config import NODE_PARAMETERS
+
+    data = yaml.safe_load((data_dir("config") / "swarm_ros.yaml").read_text())
+    for node, own in NODE_PARAMETERS.items():
+        assert data[f"/{node}"]["ros__parameters"] == own
+
+
+@pytest.mark.parametrize("text,message", [
+    ("/world:\n  ros__parameters:\n    monitor_window: fast\n", "'monitor_window' must be an integer"),
+    ("/monitor:\n  ros__parameters:\n    overwrite: 1\n", "'overwrite' must be a boolean"),
+    ("/**:\n  ros__parameters:\n    out_dir: x\n", "unknown parameter 'out_dir'"),
+])
+def test_node_sections_are_checked_too(tmp_path, text, message):
+    path = tmp_path / "p.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_params_file(path)
