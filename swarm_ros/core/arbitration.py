@@ -49,6 +49,18 @@ def _wins(a, b, ids, seed, tick) -> bool:
 
 
 @numba.njit(cache=True)
+def occupy(p, i, occupancy, frontier, shape, size):
+    """Robot ``i`` localizes on patch ``p``: occupy it and move the frontier around it."""
+    occupancy[p] = i
+    frontier[p] = False
+    for dy in (-size, 0, size):
+        for dx in (-1, 0, 1):
+            q = p + dy + dx
+            if shape[q] and occupancy[q] < 0:
+                frontier[q] = True
+
+
+@numba.njit(cache=True)
 def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier,
                    shape, radius, size, seed, tick, best, localized, shape_patches, outcome):
     """Apply the decisions of robots ``ids`` to the state arrays in place.
@@ -75,19 +87,13 @@ def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, 
         if p >= 0:
             st = state[i]
             if best[p] == k and localized < shape_patches and (st == _MOVING_INSIDE or st == _MOVING_OUTSIDE):
-                occupancy[p] = i
+                occupy(p, i, occupancy, frontier, shape, size)
                 state[i] = _LOCALIZED
                 x[i] = float(p % size - radius)
                 y[i] = float(p // size - radius)
                 localized += 1
                 joined += 1
                 outcome[k] = 0
-                frontier[p] = False
-                for dy in (-size, 0, size):
-                    for dx in (-1, 0, 1):
-                        q = p + dy + dx
-                        if shape[q] and occupancy[q] < 0:
-                            frontier[q] = True
                 continue
             outcome[k] = _PENDING
         else:

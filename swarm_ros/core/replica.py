@@ -13,6 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from .arbitration import occupy
 from .rules import patch_index
 from .shapes import Shape
 from .state import NO_ROBOT, RobotState, SwarmState
@@ -45,13 +46,7 @@ def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state,
             p = patch_index(x[i], y[i], radius, size)
             if not shape[p] or occupancy[p] >= 0:
                 return k + 1
-            occupancy[p] = i
-            frontier[p] = False
-            for dy in (-size, 0, size):
-                for dx in (-1, 0, 1):
-                    q = p + dy + dx
-                    if shape[q] and occupancy[q] < 0:
-                        frontier[q] = True
+            occupy(p, i, occupancy, frontier, shape, size)
     return 0
 
 

@@ -20,14 +20,13 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
-from ..core.metrics import run_summary, outcome_of, tick_metrics
+from ..core.metrics import outcome_of, run_summary, tick_metrics
 from ..core.replica import Replica
 from ..core.state import STATE_COUNT, RobotState
 from ..output import RunRecord, check_out_dir, default_run_dir, write_run
-from ..wire import PATCH_METRES, ROBOT_ROW
 from . import messages as msgs
 from .params import make_node, read_parameters
-from .runner import RunFailed, load_run, run_node
+from .runner import RunFailed, apply_robots, load_run, run_node
 
 ENGINE_NAME = "ros2"
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
@@ -61,15 +60,9 @@ class MonitorNode:
     def _on_robots(self, msg: PointCloud2) -> None:
         if self.outcome is not None:
             return
-        tick = msgs.tick_of(msg.header)
-        if tick == 0:
+        if self.started_at is None:
             self.started_at = time.perf_counter()
-        rows = msgs.cloud_rows(msg, ROBOT_ROW)
-        try:
-            self.replica.update(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES,
-                                rows["y"] / PATCH_METRES, rows["heading"])
-        except ValueError as exc:
-            raise RunFailed(str(exc)) from None
+        tick = apply_robots(self.replica, msg)
         counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
         metrics = tick_metrics(tick, counts, self.shape.patches)
         self.rows.append(tuple(metrics))

@@ -20,10 +20,10 @@ from std_msgs.msg import Int64MultiArray
 from ..core.errors import ParameterError
 from ..core.replica import Replica
 from ..core.rules import Decider
-from ..wire import PATCH_METRES, ROBOT_ROW, batch_ids, decision_rows, format_ranges, parse_ranges
+from ..wire import batch_ids, decision_rows, format_ranges, parse_ranges
 from . import messages as msgs
 from .params import make_node, read_parameters
-from .runner import RunFailed, load_run, run_node
+from .runner import apply_robots, load_run, run_node
 
 RUNNING_STATES = ("starting", "running")
 
@@ -67,13 +67,7 @@ class RobotBatchNode:
         return ids
 
     def _on_robots(self, msg: PointCloud2) -> None:
-        tick = msgs.tick_of(msg.header)
-        rows = msgs.cloud_rows(msg, ROBOT_ROW)
-        try:
-            self.replica.update(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES,
-                                rows["y"] / PATCH_METRES, rows["heading"])
-        except ValueError as exc:
-            raise RunFailed(str(exc)) from None
+        tick = apply_robots(self.replica, msg)
         moving = self.replica.moving_ids()
         own = moving[self.mine[moving]]
         if own.size:

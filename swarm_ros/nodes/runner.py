@@ -14,12 +14,16 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from sensor_msgs.msg import PointCloud2
 
 from ..config import Settings
 from ..core.errors import SwarmError
+from ..core.replica import Replica
 from ..core.params import RunParams
 from ..core.shapes import Shape
 from ..core.world import World
+from ..wire import PATCH_METRES, ROBOT_ROW
+from . import messages as msgs
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
@@ -45,6 +49,22 @@ def load_run(run: Settings) -> tuple[Shape, RunParams]:
     if params.robots > shape.free_patches:
         raise SwarmError(f"{params.robots} robots do not fit on the {shape.free_patches} free patches")
     return shape, params
+
+
+def apply_robots(replica: Replica, msg: PointCloud2) -> int:
+    """Apply a /swarm/robots message to ``replica``; return its tick.
+
+    Raises:
+        RunFailed: the message does not follow the replica's last tick, or is malformed.
+    """
+    tick = msgs.tick_of(msg.header)
+    try:
+        rows = msgs.cloud_rows(msg, ROBOT_ROW)
+        replica.update(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES,
+                       rows["heading"])
+    except ValueError as exc:
+        raise RunFailed(str(exc)) from None
+    return tick
 
 
 def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None = None) -> int:
