@@ -126,15 +126,10 @@ def _settings(args: argparse.Namespace) -> Settings:
 
 def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path]:
     """Settings, shape, parameters and a usable output directory, or a SwarmError before anything runs."""
-    from .core.state import initial_state
     from .output import check_out_dir, default_run_dir
 
     settings = _settings(args)
-    shape = Shape.load(settings.shape, World(settings.world_radius))
-    params = RunParams(robots=settings.robots or shape.patches, vision_radius=settings.vision_radius,
-                       seed=settings.seed, max_ticks=settings.max_ticks, wiggle_deg=settings.wiggle_deg)
-    if params.robots > shape.free_patches:
-        initial_state(shape, params.robots, params.seed)  # raises the one error message for this
+    shape, params = settings.resolve()
     out = args.out or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
     check_out_dir(out, args.overwrite)
     return settings, shape, params, out

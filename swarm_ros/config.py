@@ -23,9 +23,10 @@ from pathlib import Path
 
 import yaml
 
-from .core.errors import SwarmError
-from .core.params import DEFAULT_MAX_TICKS, DEFAULT_SEED, DEFAULT_VISION, DEFAULT_WIGGLE_DEG
-from .core.world import DEFAULT_RADIUS
+from .core.errors import ParameterError, SwarmError
+from .core.params import DEFAULT_MAX_TICKS, DEFAULT_SEED, DEFAULT_VISION, DEFAULT_WIGGLE_DEG, RunParams
+from .core.shapes import Shape
+from .core.world import DEFAULT_RADIUS, World
 
 
 class ConfigError(SwarmError):
@@ -47,6 +48,21 @@ class Settings:
     def updated(self, **values: object) -> Settings:
         """A copy with the given non-None values."""
         return replace(self, **{k: v for k, v in values.items() if v is not None})
+
+    def resolve(self) -> tuple[Shape, RunParams]:
+        """The shape and run parameters these settings stand for (every engine and node derives them so).
+
+        Raises:
+            SwarmError: a bad shape, a bad value, or more robots than free patches.
+        """
+        shape = Shape.load(self.shape, World(self.world_radius))
+        params = RunParams(robots=self.robots or shape.patches, vision_radius=self.vision_radius, seed=self.seed,
+                           max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg)
+        if params.robots > shape.free_patches:
+            w = shape.world.size
+            raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "
+                                 f"{shape.free_patches} free patches of the {w} x {w} world")
+        return shape, params
 
 
 _TYPES = {f.name: f.type for f in fields(Settings)}

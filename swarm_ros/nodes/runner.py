@@ -21,7 +21,6 @@ from ..core.errors import SwarmError
 from ..core.replica import Replica
 from ..core.params import RunParams
 from ..core.shapes import Shape
-from ..core.world import World
 from ..wire import PATCH_METRES, ROBOT_ROW
 from . import messages as msgs
 
@@ -43,12 +42,7 @@ class SwarmNode(Protocol):
 
 def load_run(run: Settings) -> tuple[Shape, RunParams]:
     """The shape and run parameters every node derives, identically, from the run settings."""
-    shape = Shape.load(run.shape, World(run.world_radius))
-    params = RunParams(robots=run.robots or shape.patches, vision_radius=run.vision_radius, seed=run.seed,
-                       max_ticks=run.max_ticks, wiggle_deg=run.wiggle_deg)
-    if params.robots > shape.free_patches:
-        raise SwarmError(f"{params.robots} robots do not fit on the {shape.free_patches} free patches")
-    return shape, params
+    return run.resolve()
 
 
 def apply_robots(replica: Replica, msg: PointCloud2) -> int:
