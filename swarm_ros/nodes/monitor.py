@@ -26,7 +26,7 @@ from ..core.state import STATE_COUNT, RobotState
 from ..output import RunRecord, check_out_dir, default_run_dir, write_run
 from . import messages as msgs
 from .params import make_node, read_parameters
-from .runner import RunFailed, apply_robots, load_run, run_node
+from .runner import RunFailed, apply_robots, run_node
 
 ENGINE_NAME = "ros2"
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
@@ -36,7 +36,7 @@ class MonitorNode:
     def __init__(self) -> None:
         self.node = node = make_node("monitor")
         run, own = read_parameters(node, "monitor")
-        self.shape, self.params = load_run(run)
+        self.shape, self.params = run.resolve()
         p = self.params
         self.out = Path(own["out_dir"]) if own["out_dir"] else \
             default_run_dir(self.shape.name, p.robots, p.vision_radius, p.seed)

@@ -24,9 +24,9 @@ _RCLPY_OWN = {"use_sim_time", "start_type_description_service"}
 
 RUN_PARAMETERS: dict[str, Any] = {f.name: getattr(Settings(), f.name) for f in fields(Settings)}
 
-def make_node(kind: str, name: str | None = None) -> Node:
+def make_node(kind: str) -> Node:
     """A node that takes every override as given, so :func:`read_parameters` can check them all."""
-    return Node(name or kind, allow_undeclared_parameters=True,
+    return Node(kind, allow_undeclared_parameters=True,
                 automatically_declare_parameters_from_overrides=True)
 
 

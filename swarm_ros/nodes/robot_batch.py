@@ -23,7 +23,7 @@ from ..core.rules import Decider
 from ..wire import batch_ids, decision_rows, format_ranges, parse_ranges
 from . import messages as msgs
 from .params import make_node, read_parameters
-from .runner import apply_robots, load_run, run_node
+from .runner import apply_robots, run_node
 
 RUNNING_STATES = ("starting", "running")
 
@@ -32,7 +32,7 @@ class RobotBatchNode:
     def __init__(self) -> None:
         self.node = node = make_node("robot_batch")
         run, own = read_parameters(node, "robot_batch")
-        self.shape, self.params = load_run(run)
+        self.shape, self.params = run.resolve()
         n = self.params.robots
         self.ids = self._hosted(n, own)
         self.mine = np.zeros(n, dtype=bool)

@@ -16,11 +16,8 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 
-from ..config import Settings
 from ..core.errors import SwarmError
 from ..core.replica import Replica
-from ..core.params import RunParams
-from ..core.shapes import Shape
 from ..wire import PATCH_METRES, ROBOT_ROW
 from . import messages as msgs
 
@@ -38,11 +35,6 @@ class SwarmNode(Protocol):
 
     def poll(self) -> None:
         """Called between callbacks: check timeouts, raise RunFailed to stop."""
-
-
-def load_run(run: Settings) -> tuple[Shape, RunParams]:
-    """The shape and run parameters every node derives, identically, from the run settings."""
-    return run.resolve()
 
 
 def apply_robots(replica: Replica, msg: PointCloud2) -> int:

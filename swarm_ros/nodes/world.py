@@ -22,13 +22,14 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from ..core.engine import Simulation
+from ..core.errors import ParameterError
 from ..core.metrics import Outcome
 from ..core.rules import Decisions
 from ..core.state import RobotState
 from ..wire import DECISION_ROW, decisions_of, format_ranges, robot_rows
 from . import messages as msgs
 from .params import make_node, read_parameters
-from .runner import RunFailed, load_run, run_node
+from .runner import RunFailed, run_node
 
 _LINGER = 0.5  # seconds to let the last messages reach their readers before exiting
 _FINAL_WAIT = 30.0  # seconds to wait, after the end, for the monitor to catch up
@@ -38,11 +39,11 @@ class WorldNode:
     def __init__(self) -> None:
         self.node = node = make_node("world")
         run, own = read_parameters(node, "world")
-        self.shape, self.params = load_run(run)
+        self.shape, self.params = run.resolve()
         self.window = int(own["monitor_window"])
         self.start_timeout = float(own["start_timeout"])
         if self.window < 0 or self.start_timeout <= 0:
-            raise RunFailed("monitor_window must be >= 0 and start_timeout > 0")
+            raise ParameterError("monitor_window must be >= 0 and start_timeout > 0")
         self.sim = Simulation(self.shape, self.params)
         self.finished = False
 
