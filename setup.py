@@ -27,6 +27,7 @@ setup(
         "pillow>=10",
         "PyYAML>=6",
         "tqdm>=4.66",
+        "rerun-sdk>=0.41,<0.42",
     ],
     extras_require={"test": ["pytest>=8", "hypothesis>=6.100"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.

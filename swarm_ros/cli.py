@@ -10,14 +10,18 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from . import __version__
-from .config import Settings, load_params_file
+from .config import RecordingOptions, Settings, load_params_file
 from .core.engine import Simulation
 from .core.errors import SwarmError
 from .core.params import RunParams
 from .core.shapes import Shape, builtin_shapes
 from .core.world import World
+
+if TYPE_CHECKING:
+    from .recording import Recorder
 
 PROG = "swarm-ros"
 EXIT_USAGE = 2
@@ -101,6 +105,14 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, help="output directory (default: runs/<time>_<shape>_n<N>_v<R>_s<seed>)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output directory")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    rec = p.add_argument_group("recording", "Every run writes a Rerun recording, recording.rrd, into its "
+                                            "output directory; open it with 'rerun <run>/recording.rrd'.")
+    rec.add_argument("--no-recording", action="store_false", dest="record", help="do not write recording.rrd")
+    rec.add_argument("--record-every", type=_positive_int, default=1, metavar="K",
+                     help="log the robots every K-th tick only, for very large runs (default: 1, every tick)")
+    rec.add_argument("--spawn", action="store_true", help="also stream live to a new Rerun viewer (needs a display)")
+    rec.add_argument("--connect", metavar="URL",
+                     help="also stream live to a running Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
 
 
 def cmd_shapes(args: argparse.Namespace) -> int:
@@ -124,27 +136,42 @@ def _settings(args: argparse.Namespace) -> Settings:
                             world_radius=args.world_radius)
 
 
-def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path]:
-    """Settings, shape, parameters and a usable output directory, or a SwarmError before anything runs."""
+def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions]:
+    """Settings, shape, parameters, a usable output directory and the recording options,
+    or a SwarmError before anything runs."""
     from .output import check_out_dir, default_run_dir
 
     settings = _settings(args)
     shape, params = settings.resolve()
     out = args.out or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
     check_out_dir(out, args.overwrite)
-    return settings, shape, params, out
+    recording = RecordingOptions(enabled=args.record, every=args.record_every, spawn=args.spawn,
+                                 connect=args.connect)
+    return settings, shape, params, out, recording
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from .output import RunRecord, write_run
+    from .output import RunRecord, partial_recording, write_run
 
-    _, shape, params, out = _prepare(args)
+    _, shape, params, out, options = _prepare(args)
 
+    rrd = partial_recording(out)
+    recorder = options.open(rrd, shape, params)
     start = time.perf_counter()
     sim = Simulation(shape, params)
-    _run_with_progress(sim, check=args.check, quiet=args.quiet)
+    try:
+        _run_with_progress(sim, check=args.check, quiet=args.quiet, recorder=recorder)
+    except BaseException as exc:
+        if recorder is not None:
+            recorder.outcome("interrupted" if isinstance(exc, KeyboardInterrupt) else "failed", sim.metrics)
+            recorder.close()
+            _note_partial(rrd, options)
+        raise
     record = RunRecord.of(sim, wall_seconds=time.perf_counter() - start)
-    out = write_run(out, record, overwrite=args.overwrite)
+    if recorder is not None:
+        recorder.outcome(record.outcome.value, record.final)
+        recorder.close()
+    out = write_run(out, record, overwrite=args.overwrite, recording=rrd if options.enabled else None)
     if not args.quiet:
         _print_summary(record.summary, out)
     return 0
@@ -154,8 +181,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     import json
 
     from .launcher import Launch
+    from .output import partial_recording
 
-    settings, shape, params, out = _prepare(args)
+    settings, shape, params, out, options = _prepare(args)
     if args.processes > params.robots - 4:
         raise SwarmError(f"--processes {args.processes} is more than the {params.robots - 4} non-seed robots")
     domain = args.domain_id
@@ -167,14 +195,24 @@ def cmd_run(args: argparse.Namespace) -> int:
     if domain is not None and not 0 <= domain <= 232:
         raise SwarmError(f"ROS domain id must be in [0, 232], got {domain}")
     launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
-                    overwrite=args.overwrite, quiet=args.quiet, domain_id=domain)
+                    overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options)
     _interrupt_on_sigterm()
-    out = launch.run()
+    try:
+        out = launch.run()
+    except BaseException:
+        _note_partial(partial_recording(out), options)
+        raise
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         _print_summary(summary, out)
         print(f"{'ROS graph':<17} domain {launch.domain}, {args.processes} robot-batch processes; logs in {out / 'logs'}")
     return 0
+
+
+def _note_partial(rrd: Path, options: RecordingOptions) -> None:
+    """Tell where the recording of a run that stopped early is."""
+    if options.enabled and rrd.exists():
+        print(f"{PROG}: the recording so far is in {rrd}", file=sys.stderr)
 
 
 def _interrupt_on_sigterm() -> None:
@@ -199,22 +237,32 @@ def cmd_topics(args: argparse.Namespace) -> int:
     return run_topics(domain, echo=args.echo, count=args.count, seconds=args.seconds, full=args.full)
 
 
-def _run_with_progress(sim: Simulation, check: bool, quiet: bool) -> None:
+def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Recorder | None = None) -> None:
+    """Run ``sim`` to its end with a progress bar, checking invariants and recording if asked."""
     from tqdm import tqdm
 
     if check:
         from .core.invariants import check_state, check_tick
 
         check_state(sim)
+    if recorder is not None:
+        recorder.metrics(sim.history)
+        recorder.robots(sim.state)
     with tqdm(total=sim.shape.patches, initial=sim.metrics.localized, unit="patch", desc="localized",
               disable=True if quiet else None, file=sys.stderr, dynamic_ncols=True) as bar:
         while not sim.done:
+            before = sim.tick
             if check:
                 prev = sim.state.copy()
                 sim.step()
                 check_tick(prev, sim)
+            elif recorder is not None:  # stop on every tick whose robots are logged
+                sim.run(max_ticks=min(_PROGRESS_TICKS, recorder.every - before % recorder.every))
             else:
                 sim.run(max_ticks=_PROGRESS_TICKS)
+            if recorder is not None:
+                recorder.metrics(sim.history[before + 1:])
+                recorder.robots(sim.state, force=sim.done)
             m = sim.metrics
             bar.update(m.localized - bar.n)
             bar.set_postfix(tick=str(m.tick), moving=str(m.moving), refresh=False)

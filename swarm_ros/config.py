@@ -20,6 +20,7 @@ from __future__ import annotations
 import numbers
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import yaml
 
@@ -27,6 +28,9 @@ from .core.errors import ParameterError, SwarmError
 from .core.params import DEFAULT_MAX_TICKS, DEFAULT_SEED, DEFAULT_VISION, DEFAULT_WIGGLE_DEG, RunParams
 from .core.shapes import Shape
 from .core.world import DEFAULT_RADIUS, World
+
+if TYPE_CHECKING:
+    from .recording import Recorder
 
 
 class ConfigError(SwarmError):
@@ -81,6 +85,9 @@ NODE_PARAMETERS: dict[str, dict[str, object]] = {
     "monitor": {
         "out_dir": "",  # run directory; "" = runs/<time>_<shape>_n<N>_v<R>_s<seed>
         "overwrite": False,  # replace an existing run directory
+        "record": True,  # write recording.rrd (Rerun) into the run directory
+        "record_every": 1,  # log the robots every k-th tick (metrics: every tick)
+        "viewer_url": "",  # also stream live to this Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy
     },
 }
 _NODE_TYPES = {node: {k: type(v).__name__ for k, v in own.items()} for node, own in NODE_PARAMETERS.items()}
@@ -135,3 +142,44 @@ def load_params_file(path: str | Path, base: Settings | None = None) -> Settings
             if key in _TYPES:
                 values[key] = checked
     return (base or Settings()).updated(**values)
+
+
+_URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
+
+
+@dataclass(frozen=True)
+class RecordingOptions:
+    """How a run is recorded; the same for both engines (CLI flags, monitor parameters).
+
+    Attributes:
+        enabled: write recording.rrd (default on).
+        every: log the robots every ``every``-th tick (>= 1).
+        spawn: start a viewer and stream to it live.
+        connect: stream live to the viewer at this URL.
+    """
+
+    enabled: bool = True
+    every: int = 1
+    spawn: bool = False
+    connect: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.every, int) or isinstance(self.every, bool) or self.every < 1:
+            raise ParameterError(f"record_every must be an integer >= 1, got {self.every!r}")
+        if self.connect and not self.connect.startswith(_URL_SCHEMES):
+            raise ParameterError(f"viewer URL must start with one of {', '.join(_URL_SCHEMES)}, "
+                                 f"got {self.connect!r} (e.g. rerun+http://127.0.0.1:9876/proxy)")
+
+    @property
+    def active(self) -> bool:
+        """Whether anything is recorded at all (to a file or a viewer)."""
+        return self.enabled or self.spawn or bool(self.connect)
+
+    def open(self, path: Path, shape: Shape, params: RunParams) -> Recorder | None:
+        """A :class:`Recorder` streaming to ``path`` (if enabled) and the viewer, or None if nothing is recorded."""
+        if not self.active:
+            return None
+        from .recording import Recorder
+
+        return Recorder(path if self.enabled else None, shape, params, every=self.every, spawn=self.spawn,
+                        connect=self.connect)

@@ -1,4 +1,4 @@
-"""A run's output directory: summary.json, metrics.csv, final_state.csv, final.png.
+"""A run's output directory: summary.json, metrics.csv, final_state.csv, final.png, convergence.png, recording.rrd.
 
 Everything is written into a hidden temporary directory beside the target and renamed
 into place at the end, so a run directory is either complete or absent. Number
@@ -29,6 +29,7 @@ from .core.state import RobotState, SwarmState
 
 RUNS_DIR = Path("runs")
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
+RECORDING_FILE = "recording.rrd"
 
 
 class OutputError(SwarmError):
@@ -112,13 +113,25 @@ def summary_json(summary: dict) -> str:
     return json.dumps(summary, indent=2) + "\n"
 
 
-def write_run(out: Path, record: RunRecord, overwrite: bool = False) -> Path:
+def partial_recording(out: Path) -> Path:
+    """Where a run streams its recording while it goes on: ``<out>.partial.rrd``, beside ``out``.
+
+    :func:`write_run` moves it into the run directory as ``recording.rrd``; a run that is
+    interrupted, crashes or is killed leaves it here, readable up to that point.
+    """
+    return out.parent / f"{out.name}.partial.rrd"
+
+
+def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: Path | None = None) -> Path:
     """Write the run's files into ``out`` atomically (temp dir + rename). Returns ``out``.
+
+    ``recording``, a finished .rrd file, is moved in as ``recording.rrd`` (and back if
+    the write fails).
 
     Raises:
         OutputError: the directory cannot be written.
     """
-    from .plots import save_final_png
+    from .plots import save_convergence_png, save_final_png
 
     check_out_dir(out, overwrite)
     out = out.absolute()
@@ -131,11 +144,19 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False) -> Path:
         (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
         save_final_png(record, tmp / "final.png")
+        save_convergence_png(record, tmp / "convergence.png")
+        if recording is not None:
+            recording.rename(tmp / RECORDING_FILE)
         if out.exists():
             out.rename(trash)
         tmp.rename(out)
     except OSError as exc:
-        raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc})") from None
+        kept = ""
+        if recording is not None and (tmp / RECORDING_FILE).exists():
+            (tmp / RECORDING_FILE).rename(recording)
+        if recording is not None and recording.exists():
+            kept = f"; the recording is kept in {recording}"
+        raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc}){kept}") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(trash, ignore_errors=True)

@@ -62,3 +62,40 @@ def save_final_png(run: RunRecord, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+# Series of convergence.png: metrics.csv column, legend label, colour (as in the recording).
+_CONVERGENCE_SERIES = (
+    ("localized", "localized robots (seeds included)", "#0072b2"),
+    ("stationary", "stationary robots (localized + separated)", "#e69f00"),
+    ("inside", "moving robots inside the shape", "#c9b800"),
+    ("empty_patches", "empty shape patches", "#cc79a7"),
+)
+
+
+def save_convergence_png(run: RunRecord, path: Path) -> None:
+    """Stationary, localized, inside and empty patches against ticks, with the outcome marked."""
+    from .core.metrics import METRIC_COLUMNS
+
+    h = run.history
+    ticks = h[:, 0]
+    fig, ax = plt.subplots(figsize=(7.2, 4.4), dpi=120)
+    for column, label, colour in _CONVERGENCE_SERIES:
+        style = "--" if column == "stationary" else "-"
+        ax.plot(ticks, h[:, METRIC_COLUMNS.index(column)], style, color=colour, lw=1.4, label=label)
+    ax.axhline(run.shape.patches, color="#999999", lw=0.8, ls=":", label=f"shape patches ({run.shape.patches})")
+    m = run.final
+    ax.axvline(m.tick, color="#333333", lw=1.0)
+    ax.text(m.tick, 0.97, f"{run.outcome} at tick {m.tick} ", transform=ax.get_xaxis_transform(), ha="right",
+            va="top", fontsize=9, color="#333333", bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.85})
+    p = run.params
+    ax.set_title(f"{run.shape.name}: {p.robots} robots, vision {p.vision_radius:g}, seed {p.seed}", fontsize=10)
+    ax.set_xlabel("tick")
+    ax.set_ylabel("robots or patches")
+    ax.set_xlim(0, max(int(m.tick), 1) * 1.03)
+    ax.set_ylim(0, max(p.robots, run.shape.patches) * 1.12)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="center right", frameon=False)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -28,8 +28,8 @@ def run_dir(tmp_path_factory):
 
 
 def test_simulate_writes_the_run_directory(run_dir):
-    assert sorted(p.name for p in run_dir.iterdir()) == ["final.png", "final_state.csv", "metrics.csv",
-                                                        "summary.json"]
+    assert sorted(p.name for p in run_dir.iterdir()) == ["convergence.png", "final.png", "final_state.csv",
+                                                        "metrics.csv", "recording.rrd", "summary.json"]
     summary = json.loads((run_dir / "summary.json").read_text())
     assert SUMMARY_KEYS <= set(summary)
     assert summary["engine"] == "inprocess" and summary["outcome"] == "complete_with_extras"
@@ -121,8 +121,11 @@ def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch, ca
 
     monkeypatch.setattr("swarm_ros.plots.save_final_png", broken)
     assert simulate(tmp_path / "run") == 2
-    assert "No space left on device" in capsys.readouterr().err
-    assert list(tmp_path.iterdir()) == []
+    err = capsys.readouterr().err
+    assert "No space left on device" in err and err.count("\n") == 1
+    # no run directory, no temporary files; the finished recording is kept and named in the message
+    assert [p.name for p in tmp_path.iterdir()] == ["run.partial.rrd"]
+    assert f"the recording is kept in {tmp_path / 'run.partial.rrd'}" in err
 
 
 def test_installed_console_script_reports_errors_without_a_traceback(tmp_path):

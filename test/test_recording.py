@@ -1,0 +1,209 @@
+"""recording.rrd: what the in-process engine logs, read back with rerun's reader and checked
+against metrics.csv and final_state.csv; every k-th tick; runs stopped early; live streaming.
+
+The ROS 2 engine's recordings are compared with these in test_ros_graph.py.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import Recording, rrd_verify
+
+from swarm_ros import cli
+from swarm_ros.core.engine import Simulation
+from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.core.state import RobotState
+from swarm_ros.recording import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
+
+FLAGS = ["--shape", "rectangle", "--robots", "460", "--seed", "3", "--quiet"]  # complete_with_extras, 716 ticks
+
+
+def simulate(out: Path, *extra: str) -> int:
+    return cli.main(["simulate", *FLAGS, "--out", str(out), *extra])
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("rec") / "run"
+    assert simulate(out) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def recording(run_dir) -> Recording:
+    return Recording(run_dir / "recording.rrd")
+
+
+def metrics_rows(run_dir: Path) -> np.ndarray:
+    rows = list(csv.reader((run_dir / "metrics.csv").open()))
+    assert tuple(rows[0]) == METRIC_COLUMNS
+    return np.array(rows[1:], dtype=np.int64)
+
+
+def final_state(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    rows = list(csv.DictReader((run_dir / "final_state.csv").open()))
+    codes = {s.label: int(s) for s in RobotState}
+    xy = np.array([(float(r["x"]), float(r["y"])) for r in rows])
+    return xy, np.array([codes[r["state"]] for r in rows])
+
+
+def assert_matches_run(rec: Recording, run_dir: Path, every: int = 1) -> None:
+    """The recording's series equal metrics.csv, its last robots equal final_state.csv, its event the outcome."""
+    rows = metrics_rows(run_dir)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    last = summary["convergence_tick"]
+    assert set(rec.series) == set(SERIES)
+    for name in SERIES:
+        col = rows[:, METRIC_COLUMNS.index(name)]
+        assert rec.series[name] == dict(zip(rows[:, 0].tolist(), col.astype(float).tolist())), name
+    expected_ticks = sorted({t for t in range(0, last + 1, every)} | {last})
+    assert sorted(rec.robots) == expected_ticks
+    xy, codes = final_state(run_dir)
+    positions, classes = rec.robots[last]
+    assert positions.dtype == np.float32
+    assert np.array_equal(positions, xy.astype(np.float32))
+    assert np.array_equal(classes, codes)
+    assert rec.events == [(last, rec.events[0][1])]
+    assert rec.events[0][1].startswith(f"{summary['outcome']} at tick {last}: {summary['localized']} localized")
+
+
+def test_simulate_writes_recording_and_convergence_plot(run_dir):
+    assert sorted(p.name for p in run_dir.iterdir()) == [
+        "convergence.png", "final.png", "final_state.csv", "metrics.csv", "recording.rrd", "summary.json"]
+    assert (run_dir / "convergence.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(run_dir.parent.glob("*.partial.rrd"))
+
+
+def test_recording_holds_every_tick_of_metrics_and_robots(recording, run_dir):
+    assert_matches_run(recording, run_dir)
+
+
+def test_recording_holds_the_static_world_blueprint_and_occupancy(recording, run_dir):
+    assert {f"/{e}" for e in (WORLD, MAP, OCCUPANCY, ROBOTS, RUN_INFO)} <= recording.static
+    assert recording.blueprints == 1
+    # occupancy is logged when it changes; the last image is the final filled shape
+    summary = json.loads((run_dir / "summary.json").read_text())
+    last_image = recording.occupancy[max(recording.occupancy)]
+    assert set(np.unique(last_image)) <= {FREE, FILLED}
+    assert int((last_image == FILLED).sum()) == summary["localized"]
+    assert min(recording.occupancy) == 0 and int((recording.occupancy[0] == FILLED).sum()) == 4  # the seeds
+    counts = [int((img == FILLED).sum()) for _, img in sorted(recording.occupancy.items())]
+    assert counts == sorted(set(counts)), "an image is logged only when the filled patches changed"
+
+
+def test_rerun_rrd_verify_passes(run_dir):
+    done = rrd_verify(run_dir / "recording.rrd")
+    assert done.returncode == 0, done.stderr
+
+
+def test_every_kth_tick_logs_fewer_robots_and_every_metric(tmp_path):
+    out = tmp_path / "every"
+    assert simulate(out, "--record-every", "50") == 0
+    assert_matches_run(Recording(out / "recording.rrd"), out, every=50)
+
+
+def test_same_seed_gives_a_recording_with_the_same_data(recording, tmp_path):
+    out = tmp_path / "again"
+    assert simulate(out) == 0
+    assert Recording(out / "recording.rrd").same_data(recording)
+
+
+def test_no_recording_flag_writes_none(tmp_path):
+    out = tmp_path / "none"
+    assert simulate(out, "--no-recording") == 0
+    assert not (out / "recording.rrd").exists() and (out / "convergence.png").exists()
+
+
+@pytest.mark.parametrize("error,code,event", [(KeyboardInterrupt, 130, "interrupted"), (RuntimeError, None, "failed")])
+def test_a_run_stopped_early_keeps_a_readable_recording_up_to_that_tick(tmp_path, monkeypatch, capsys, error, code,
+                                                                        event):
+    real_run = Simulation.run
+
+    def stop_at_tick_120(self, max_ticks=None, on_tick=None):
+        if self.tick >= 120:
+            raise error("stop")
+        return real_run(self, max_ticks=min(max_ticks or 10**9, 120 - self.tick), on_tick=on_tick)
+
+    monkeypatch.setattr(Simulation, "run", stop_at_tick_120)
+    out = tmp_path / "run"
+    if code is None:
+        with pytest.raises(error):
+            simulate(out)
+    else:
+        assert simulate(out) == code
+    assert not out.exists()
+    partial = tmp_path / "run.partial.rrd"
+    assert f"the recording so far is in {partial}" in capsys.readouterr().err
+    assert rrd_verify(partial).returncode == 0
+    rec = Recording(partial)
+    assert max(rec.robots) == 120 and max(rec.series["localized"]) == 120
+    assert rec.events == [(120, rec.events[0][1])] and rec.events[0][1].startswith(f"{event} at tick 120")
+
+
+def test_a_killed_run_leaves_a_recording_readable_up_to_the_last_batch(tmp_path):
+    """SIGKILL: no footer is written, but what was sent before is in the file and reads back."""
+    out = tmp_path / "killed"
+    code = ("import sys, numpy as np; from swarm_ros import cli, recording; from swarm_ros.core.engine import "
+            "Simulation\n"
+            "real = Simulation.run\n"
+            "def run(self, max_ticks=None, on_tick=None):\n"
+            "    if self.tick >= 300:\n"
+            "        import os, signal, time; time.sleep(0.5); os.kill(os.getpid(), signal.SIGKILL)\n"
+            "    return real(self, max_ticks=min(max_ticks or 10**9, 300 - self.tick), on_tick=on_tick)\n"
+            "Simulation.run = run\n"
+            f"cli.main(['simulate', *{FLAGS!r}, '--out', {str(out)!r}])\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == -signal.SIGKILL, done.stderr
+    rec = Recording(tmp_path / "killed.partial.rrd")
+    batch = 64  # recording.BATCH_TICKS: ticks 0..255 were sent in whole batches before the kill
+    assert set(range(4 * batch)) <= set(rec.robots) and max(rec.robots) <= 300
+    assert rec.events == []
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_connect_streams_the_same_data_to_a_running_viewer(recording, tmp_path):
+    """A headless `rerun --serve-grpc --save` stands in for a viewer and saves what it receives."""
+    port, saved = _free_port(), tmp_path / "live.rrd"
+    server = subprocess.Popen([str(Path(sys.executable).with_name("rerun")), "--serve-grpc", "--port", str(port),
+                               "--save", str(saved)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            time.sleep(0.1)
+        out = tmp_path / "run"
+        assert simulate(out, "--connect", f"rerun+http://127.0.0.1:{port}/proxy") == 0
+        time.sleep(1.0)
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.communicate(timeout=30)
+    assert Recording(saved).same_data(recording)
+    assert Recording(out / "recording.rrd").same_data(recording)
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--record-every", "0"], "must be a positive integer"),
+    (["--connect", "http://localhost:9876"], "viewer URL must start with one of rerun://"),
+])
+def test_bad_recording_options_get_one_line_and_write_nothing(tmp_path, capsys, args, message):
+    assert simulate(tmp_path / "run", *args) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
