@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from .config import Settings
+from .config import RecordingOptions, Settings
 from .core.errors import SwarmError
 from .core.params import RunParams
 from .core.shapes import Shape
@@ -139,6 +139,7 @@ class Launch:
     overwrite: bool = False
     quiet: bool = False
     domain_id: int | None = None
+    recording: RecordingOptions = field(default_factory=RecordingOptions)
     children: list[Child] = field(default_factory=list)
 
     def run(self) -> Path:
@@ -165,9 +166,15 @@ class Launch:
         if Path(shape_arg).suffix.lower() in (".txt", ".png"):
             shape_arg = str(Path(shape_arg).absolute())
         run = Settings(**{**self.settings.__dict__, "shape": shape_arg, "robots": self.params.robots})
+        viewer = self.recording.connect or ""
+        if self.recording.spawn:
+            from .recording import spawn_viewer
+
+            viewer = spawn_viewer()
         params_file = logs / "params.yaml"
         params_file.write_text(params_yaml(run, {"world": {}, "monitor": {
-            "out_dir": str(out), "overwrite": self.overwrite}}), encoding="utf-8")
+            "out_dir": str(out), "overwrite": self.overwrite, "record": self.recording.enabled,
+            "record_every": self.recording.every, "viewer_url": viewer}}), encoding="utf-8")
         env = node_env(domain_id, logs)
         self.domain = domain_id
         plan = [("monitor", "monitor", {})]

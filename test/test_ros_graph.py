@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import Recording, rrd_verify
 
 from swarm_ros.cli import main as cli_main
 from swarm_ros.launcher import Child, stop
@@ -68,7 +69,9 @@ def _assert_same_run(ref: Path, got: Path) -> None:
     assert (a.pop("engine"), b.pop("engine")) == ("inprocess", "ros2")
     a.pop("wall_seconds"), b.pop("wall_seconds")
     assert a == b
-    assert (got / "final.png").stat().st_size > 0
+    assert (got / "final.png").stat().st_size > 0 and (got / "convergence.png").stat().st_size > 0
+    # the monitor records with the same module: the same data (ids, timestamps and chunking may differ)
+    assert Recording(got / "recording.rrd").same_data(Recording(ref / "recording.rrd"))
 
 
 CASES = {
@@ -119,13 +122,15 @@ def test_ros_graph_equals_in_process_engine(references, tmp_path, case, processe
     assert not _processes_mentioning(str(out)), "a node process outlived the run"
 
 
-def test_ros_graph_equals_in_process_engine_at_a_timeout(references, tmp_path):
-    flags, ref = references["ring-timeout"]
-    out = tmp_path / "run"
-    done = swarm_ros("run", *flags, "--processes", "2", "--out", str(out), "--quiet")
+def test_ros_graph_equals_in_process_engine_at_a_timeout_recording_every_7th_tick(references, tmp_path):
+    flags, _ = references["ring-timeout"]
+    ref, out = tmp_path / "ref", tmp_path / "run"
+    assert cli_main(["simulate", *flags, "--record-every", "7", "--out", str(ref), "--quiet"]) == 0
+    done = swarm_ros("run", *flags, "--record-every", "7", "--processes", "2", "--out", str(out), "--quiet")
     assert done.returncode == 0, done.stderr
     assert json.loads((out / "summary.json").read_text())["outcome"] == "timeout"
     _assert_same_run(ref, out)
+    assert sorted(Recording(out / "recording.rrd").robots) == list(range(0, 1500, 7)) + [1500]
 
 
 def test_full_size_star_over_the_graph_equals_in_process_engine(tmp_path):
@@ -174,6 +179,14 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
     assert not out.exists()
     assert (tmp_path / "live.logs" / "world.log").is_file()
     assert not _processes_mentioning(str(out)), "a node process outlived the interrupted run"
+    # the monitor closed its recording on the way out: readable, marked, up to the tick it had reached
+    partial = tmp_path / "live.partial.rrd"
+    assert f"the recording so far is in {partial}" in err
+    assert rrd_verify(partial).returncode == 0
+    rec = Recording(partial)
+    last = max(rec.series["localized"])
+    assert last > 0 and max(rec.robots) == last
+    assert len(rec.events) == 1 and rec.events[0][0] == last and rec.events[0][1].startswith("interrupted at tick")
 
 
 def test_stop_escalates_to_sigkill_for_a_process_that_ignores_int_and_term(tmp_path):
@@ -209,6 +222,8 @@ def test_run_refuses_bad_input_in_one_line_before_starting_anything(tmp_path, ar
     ("monitor", ["--params-file", "/nonexistent.yaml"], "swarm_ros monitor: error: cannot start ROS 2"),
     ("robot_batch", ["-p", "robot_ids:=0-9"], "robot_ids must be within 4..1035"),
     ("world", ["-p", "shape:=nope"], "nope: no such shape file or built-in shape"),
+    ("monitor", ["-p", "record_every:=0"], "record_every must be an integer >= 1, got 0"),
+    ("monitor", ["-p", "viewer_url:=localhost:9876"], "viewer URL must start with one of rerun://"),
 ])
 def test_nodes_refuse_bad_parameters_in_one_line(node, ros_args, message):
     done = subprocess.run([PY, "-m", f"swarm_ros.nodes.{node}", "--ros-args", *ros_args], capture_output=True,

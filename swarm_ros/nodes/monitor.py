@@ -3,9 +3,11 @@
 It rebuilds the swarm's state from /swarm/robots (:class:`swarm_ros.core.replica.Replica`),
 counts it with the in-process engine's own functions
 (:func:`swarm_ros.core.metrics.tick_metrics`, :func:`~swarm_ros.core.metrics.outcome_of`),
-publishes each tick's metrics on /swarm/metrics, and when the run ends writes
-summary.json, metrics.csv, final_state.csv and final.png exactly as ``swarm-ros simulate``
-does, with ``engine: ros2``. It checks its outcome against the world's /swarm/status.
+publishes each tick's metrics on /swarm/metrics, records the run with the in-process
+engine's own :class:`~swarm_ros.recording.Recorder` (streamed to ``<out_dir>.partial.rrd``
+while the run goes on), and when the run ends writes the run directory exactly as
+``swarm-ros simulate`` does, with ``engine: ros2``. It checks its outcome against the
+world's /swarm/status.
 
     ros2 run swarm_ros monitor --ros-args --params-file config/swarm_ros.yaml -p out_dir:=runs/star
 """
@@ -20,13 +22,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
-from ..core.metrics import outcome_of, run_summary, tick_metrics
+from ..core.metrics import TickMetrics, outcome_of, run_summary, tick_metrics
 from ..core.replica import Replica
 from ..core.state import STATE_COUNT, RobotState
-from ..output import RunRecord, check_out_dir, default_run_dir, write_run
+from ..config import RecordingOptions
+from ..output import RunRecord, check_out_dir, default_run_dir, partial_recording, write_run
 from . import messages as msgs
 from .params import make_node, read_parameters
-from .runner import RunFailed, apply_robots, run_node
+from .runner import EXIT_INTERRUPTED, RunFailed, apply_robots, run_node
 
 ENGINE_NAME = "ros2"
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
@@ -43,6 +46,10 @@ class MonitorNode:
         self.overwrite = bool(own["overwrite"])
         check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
         self.world_radius = run.world_radius
+        self.recording = RecordingOptions(enabled=bool(own["record"]), every=int(own["record_every"]),
+                                          connect=str(own["viewer_url"]) or None)
+        self.rrd = partial_recording(self.out)
+        self.recorder = self.recording.open(self.rrd, self.shape, p)
         self.replica = Replica(self.shape, p.robots)
         self.rows: list[tuple[int, ...]] = []
         self.outcome = None
@@ -69,7 +76,13 @@ class MonitorNode:
         self.pub_metrics.publish(msgs.metrics_message(metrics))
         p = self.params
         self.outcome = outcome_of(metrics, self.shape.patches, p.robots, p.max_ticks)
+        if self.recorder is not None:
+            self.recorder.metrics([metrics])
+            self.recorder.robots(self.replica.state, force=self.outcome is not None)
         if self.outcome is not None:
+            if self.recorder is not None:
+                self.recorder.outcome(self.outcome.value, metrics)
+                self.recorder.close()
             self.ended_at = time.monotonic()
             self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
 
@@ -99,8 +112,17 @@ class MonitorNode:
                               separated=separated, world_radius=self.world_radius, wall_seconds=self.wall)
         record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
                            outcome=self.outcome, summary=summary)
-        self.written = write_run(self.out, record, overwrite=self.overwrite)
+        self.written = write_run(self.out, record, overwrite=self.overwrite,
+                                 recording=self.rrd if self.recording.enabled else None)
         self.node.get_logger().info(f"run written to {self.written}")
+
+    def close(self, code: int) -> None:
+        """On the way out: a run stopped before its end keeps its recording so far, closed and marked."""
+        if self.recorder is None or self.outcome is not None:
+            return
+        if self.rows:
+            self.recorder.outcome("interrupted" if code == EXIT_INTERRUPTED else "failed", TickMetrics(*self.rows[-1]))
+        self.recorder.close()
 
 
 def main(argv: list[str] | None = None) -> int:

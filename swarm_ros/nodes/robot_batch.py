@@ -78,6 +78,9 @@ class RobotBatchNode:
         if msgs.status_values(msg).get("outcome", "running") not in RUNNING_STATES:
             self.finished = True
 
+    def close(self, code: int) -> None:
+        """Nothing to release."""
+
     def poll(self) -> None:
         pass
 

@@ -1,11 +1,12 @@
 """What every node's ``main`` shares: rclpy set-up, the spin loop, one-line errors, exit codes.
 
 Exit codes: 0 done, 1 the run failed (a peer sent something impossible, a timeout),
-2 bad parameters, 130 interrupted (SIGINT/SIGTERM, which rclpy turns into a shutdown).
+2 bad parameters, 130 interrupted (SIGINT or SIGTERM, acted on between callbacks).
 """
 
 from __future__ import annotations
 
+import signal
 import sys
 from collections.abc import Callable
 from typing import Protocol
@@ -14,6 +15,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 
 from ..core.errors import SwarmError
@@ -36,6 +38,9 @@ class SwarmNode(Protocol):
     def poll(self) -> None:
         """Called between callbacks: check timeouts, raise RunFailed to stop."""
 
+    def close(self, code: int) -> None:
+        """Called once on the way out with the exit code (release files, mark a stopped run)."""
+
 
 def apply_robots(replica: Replica, msg: PointCloud2) -> int:
     """Apply a /swarm/robots message to ``replica``; return its tick.
@@ -57,29 +62,47 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
     """Init rclpy with ``argv`` (ROS arguments included), build the node, spin until it finishes."""
     args = sys.argv if argv is None else argv
     try:
-        rclpy.init(args=args)
+        # Our own SIGINT/SIGTERM handling: a flag checked between callbacks, so a signal never
+        # lands inside one (an exception raised there comes out of rclpy as a bare RuntimeError).
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:  # rclpy reports bad --ros-args (e.g. a missing params file) as RCLError
         return _fail(name, f"cannot start ROS 2: {_first_line(exc)}", EXIT_USAGE)
+    stop = _StopFlag()
     swarm = None
+    code = EXIT_FAILED  # an unexpected exception
     try:
         swarm = factory()
         executor = EventsExecutor()
         executor.add_node(swarm.node)
-        while not swarm.finished:
+        while not swarm.finished and not stop.signum:
             executor.spin_once(timeout_sec=_SPIN_TIMEOUT)
             swarm.poll()
-        return EXIT_OK
+        code = EXIT_INTERRUPTED if stop.signum and not swarm.finished else EXIT_OK
     except SwarmError as exc:
-        return _fail(name, str(exc), EXIT_USAGE)
+        code = _fail(name, str(exc), EXIT_USAGE)
     except RunFailed as exc:
-        return _fail(name, str(exc), EXIT_FAILED)
+        code = _fail(name, str(exc), EXIT_FAILED)
     except (KeyboardInterrupt, ExternalShutdownException):
-        return EXIT_INTERRUPTED
+        code = EXIT_INTERRUPTED
     finally:
         if swarm is not None:
+            swarm.close(code)
             swarm.node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+    return code
+
+
+class _StopFlag:
+    """Records SIGINT or SIGTERM instead of raising; ``signum`` is 0 until one arrives."""
+
+    def __init__(self) -> None:
+        self.signum = 0
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._set)
+
+    def _set(self, signum: int, frame: object) -> None:
+        self.signum = signum
 
 
 def _first_line(exc: BaseException) -> str:

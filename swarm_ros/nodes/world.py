@@ -166,6 +166,9 @@ class WorldNode:
             self._flush()
 
     # -- housekeeping --------------------------------------------------------------
+    def close(self, code: int) -> None:
+        """Nothing to release."""
+
     def poll(self) -> None:
         now = time.monotonic()
         if not self.started and now - self.created > self.start_timeout:
