@@ -11,6 +11,10 @@ within this one invocation, since the machine is shared and noisy.
 
 Targets (issue 3): >= 500 ticks/s with K = 2; within 4x of the in-process engine.
 
+Then the cost of the Rerun recording (issue 4): ``swarm-ros run`` with K = 2 and
+``swarm-ros simulate``, each with and without ``--no-recording``, alternately, best of
+``--repeats``. Target: the recording slows ``swarm-ros run`` by at most 25%.
+
     .venv/bin/python scripts/bench_ros.py [--seed 1] [--repeats 2] [--processes 1 2 4]
 """
 
@@ -47,17 +51,47 @@ def in_process(seed: int, repeats: int) -> tuple[int, float, float]:
     return ticks, min(fast), min(stepped)
 
 
-def over_graph(seed: int, processes: int, out: Path) -> tuple[int, float, float]:
-    """(ticks, run seconds as the monitor measured them, whole command seconds)."""
+def command(seed: int, out: Path, *args: str, record: bool = False) -> tuple[int, float, float]:
+    """Run ``swarm-ros ARGS`` on the star: (ticks, run seconds from summary.json, whole command seconds)."""
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "swarm_ros.cli", "run", "--shape", "star", "--seed", str(seed),
-                           "--processes", str(processes), "--out", str(out), "--overwrite", "--quiet"],
+    done = subprocess.run([sys.executable, "-m", "swarm_ros.cli", *args, "--shape", "star", "--seed", str(seed),
+                           "--out", str(out), "--overwrite", "--quiet", *([] if record else ["--no-recording"])],
                           capture_output=True, text=True)
     whole = time.perf_counter() - t0
     if done.returncode != 0:
-        sys.exit(f"bench_ros: swarm-ros run failed: {done.stderr.strip()}")
+        sys.exit(f"bench_ros: swarm-ros {args[0]} failed: {done.stderr.strip()}")
     summary = json.loads((out / "summary.json").read_text())
     return summary["convergence_tick"], summary["wall_seconds"], whole
+
+
+def over_graph(seed: int, processes: int, out: Path, record: bool = False) -> tuple[int, float, float]:
+    """(ticks, run seconds as the monitor measured them, whole command seconds)."""
+    return command(seed, out, "run", "--processes", str(processes), record=record)
+
+
+def recording_cost(seed: int, repeats: int, tmp: Path) -> None:
+    """Print run and command seconds with and without the recording (alternating; best of ``repeats``)."""
+    cases = {("run", False): [], ("run", True): [], ("simulate", False): [], ("simulate", True): []}
+    for r in range(repeats):
+        for record in ((False, True) if r % 2 == 0 else (True, False)):
+            cases[("run", record)].append(over_graph(seed, 2, tmp / f"rec-run-{r}", record=record))
+            cases[("simulate", record)].append(command(seed, tmp / f"rec-sim-{r}", "simulate", record=record))
+    best = {key: (min(g[1] for g in got), min(g[2] for g in got)) for key, got in cases.items()}
+    size = (tmp / "rec-run-0" / "recording.rrd").stat().st_size
+    print(f"\nRerun recording, star, best of {repeats} (recording.rrd {size / 1e6:.1f} MB)")
+    print(f"{'command':<34} {'run s':>8} {'command s':>10}")
+    for (what, record), (secs, whole) in best.items():
+        label = f"swarm-ros {what}" + (" (K = 2)" if what == "run" else "") + (", recording" if record else
+                                                                                ", --no-recording")
+        print(f"{label:<34} {secs:>8.3f} {whole:>10.2f}")
+    for what in ("run", "simulate"):
+        (off, off_whole), (on, on_whole) = best[(what, False)], best[(what, True)]
+        print(f"recording slows swarm-ros {what:<9}: run {100 * (on / off - 1):+.0f}%, "
+              f"command {100 * (on_whole / off_whole - 1):+.0f}%")
+    (off, off_whole), (on, on_whole) = best[("run", False)], best[("run", True)]
+    worst = max(on / off, on_whole / off_whole)
+    print(f"Target: the recording slows swarm-ros run by <= 25%: {'MET' if worst <= 1.25 else 'NOT MET'} "
+          f"(worst of run and command time: {100 * (worst - 1):+.0f}%)")
 
 
 def main() -> None:
@@ -95,6 +129,8 @@ def main() -> None:
               f"({fast_rate / r2:,.0f}x slower)")
         print(f"Same, against one step() per tick: {'MET' if step_rate / r2 <= 4 else 'NOT MET'} "
               f"({step_rate / r2:,.1f}x slower)")
+    with tempfile.TemporaryDirectory() as tmp:
+        recording_cost(args.seed, max(args.repeats, 3), Path(tmp))
 
 
 if __name__ == "__main__":
