@@ -22,10 +22,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
+from ..config import RecordingOptions
 from ..core.metrics import TickMetrics, outcome_of, run_summary, tick_metrics
 from ..core.replica import Replica
 from ..core.state import STATE_COUNT, RobotState
-from ..config import RecordingOptions
 from ..output import RunRecord, check_out_dir, default_run_dir, partial_recording, write_run
 from . import messages as msgs
 from .params import make_node, read_parameters
@@ -121,7 +121,8 @@ class MonitorNode:
         if self.recorder is None or self.outcome is not None:
             return
         if self.rows:
-            self.recorder.outcome("interrupted" if code == EXIT_INTERRUPTED else "failed", TickMetrics(*self.rows[-1]))
+            ended = "interrupted" if code == EXIT_INTERRUPTED else "failed"
+            self.recorder.outcome(ended, TickMetrics(*self.rows[-1]))
         self.recorder.close()
 
 
