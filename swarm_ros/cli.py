@@ -1,4 +1,4 @@
-"""The ``swarm-ros`` command line: ``simulate``, ``run``, ``topics`` and ``shapes``.
+"""The ``swarm-ros`` command line: ``simulate``, ``run``, ``experiment``, ``report``, ``topics`` and ``shapes``.
 
 Bad input ends with one line ``swarm-ros: error: ...`` on stderr and exit status 2.
 """
@@ -86,6 +86,27 @@ def build_parser() -> argparse.ArgumentParser:
                         help="listen this long to measure rates, or to wait for --echo (default: 2)")
     topics.add_argument("--full", action="store_true", help="with --echo: print whole arrays, not the first items")
     topics.set_defaults(func=cmd_topics)
+
+    exp = sub.add_parser("experiment", help="run a grid of runs (shapes x sizes x radii x repetitions) with statistics",
+                         description="Run an experiment file's grid of runs in parallel, append each finished run "
+                                     "to DIR/results.csv, then write statistics, tables and figures. Running the "
+                                     "same command again resumes an interrupted experiment.")
+    exp.add_argument("config", type=Path, metavar="CONFIG.yaml", help="experiment file, e.g. "
+                                                                        "config/experiments/paper.yaml")
+    exp.add_argument("--out", type=Path, help="experiment directory (default: experiments/<name>)")
+    exp.add_argument("--jobs", type=_positive_int, help="worker processes (default: the machine's cores)")
+    exp.add_argument("--engine", choices=("inprocess", "ros2"), default="inprocess",
+                     help="engine of each run (default: inprocess; ros2 gives the same results, slower)")
+    exp.add_argument("--processes", type=_positive_int, default=2,
+                     help="with --engine ros2: robot-batch processes per run (default: 2)")
+    exp.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    exp.set_defaults(func=cmd_experiment)
+
+    rep = sub.add_parser("report", help="(re)build an experiment's statistics, tables and figures",
+                         description="Rebuild stats.csv, stats.md and figures/ of an experiment directory "
+                                     "from its results.csv alone.")
+    rep.add_argument("dir", type=Path, metavar="DIR", help="experiment directory holding results.csv")
+    rep.set_defaults(func=cmd_report)
 
     shapes = sub.add_parser("shapes", help="list the built-in shapes", description="List the built-in shapes.")
     shapes.add_argument("--world-radius", type=int, default=World().radius, help="world spans [-R, R] (default: 32)")
@@ -206,6 +227,29 @@ def cmd_run(args: argparse.Namespace) -> int:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         _print_summary(summary, out)
         print(f"{'ROS graph':<17} domain {launch.domain}, {args.processes} robot-batch processes; logs in {out / 'logs'}")
+    return 0
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    from .experiment import default_jobs, run_experiment
+
+    _interrupt_on_sigterm()
+    start = time.perf_counter()
+    jobs = args.jobs or (1 if args.engine == "ros2" else default_jobs())
+    out = run_experiment(args.config, args.out, jobs=jobs, engine=args.engine, processes=args.processes,
+                         quiet=args.quiet)
+    if not args.quiet:
+        print(f"experiment done in {time.perf_counter() - start:.1f} s ({jobs} jobs, engine {args.engine})")
+        print(f"results  {out / 'results.csv'}\nstats    {out / 'stats.csv'}, {out / 'stats.md'}\n"
+              f"figures  {out / 'figures'}")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from .report import build_report
+
+    for path in build_report(args.dir):
+        print(path)
     return 0
 
 

@@ -111,6 +111,17 @@ def _check_type(path: Path, key: str, value: object, want: str) -> object:
     return value
 
 
+def read_yaml(path: Path, what: str, error: type[SwarmError]) -> object:
+    """The YAML document in ``path``, or ``error`` with one line naming the file (unreadable, bad YAML)."""
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise error(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise error(f"{path}: not valid YAML ({first})") from None
+
+
 def load_params_file(path: str | Path, base: Settings | None = None) -> Settings:
     """Read a ROS 2 style parameter file over ``base`` (defaults if None).
 
@@ -118,13 +129,7 @@ def load_params_file(path: str | Path, base: Settings | None = None) -> Settings
         ConfigError: unreadable file, bad YAML, wrong layout, unknown key or wrong type.
     """
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read parameter file ({exc.strerror or exc})") from None
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ConfigError(f"{path}: not valid YAML ({first})") from None
+    data = read_yaml(path, "parameter file", ConfigError)
     if not isinstance(data, dict) or not data:
         raise ConfigError(f"{path}: expected '/node_name: ros__parameters: {{...}}' sections")
     values: dict[str, object] = {}

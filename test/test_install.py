@@ -42,6 +42,7 @@ def test_node_scripts_and_data_land_where_ros2_run_and_the_ament_index_look(pref
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "swarm_ros").is_file()
     share = prefix / "share" / "swarm_ros"
     assert (share / "package.xml").is_file() and (share / "config" / "swarm_ros.yaml").is_file()
+    assert (share / "config" / "experiments" / "paper.yaml").is_file()
     assert sorted(p.stem for p in (share / "shapes").glob("*.txt")) == \
         sorted(p.stem for p in (ROOT / "shapes").glob("*.txt"))
 

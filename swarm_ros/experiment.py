@@ -1,0 +1,424 @@
+"""``swarm-ros experiment``: a grid of shapes x group sizes x vision radii x repetitions.
+
+An experiment file is YAML::
+
+    name: paper                 # names the default output directory, experiments/<name>
+    seed: 2026                  # experiment seed; each run's seed derives from it and the run's coordinates
+    repetitions: 10
+    vision_radius: [1]          # one number or a list
+    max_ticks: 100000           # optional, as for one run
+    wiggle_deg: 45              # optional
+    world_radius: 32            # optional
+    shapes:                     # built-in name or shape file (relative to this file) -> group sizes
+      star: [1025, 1030, 1035, 1040, 1045, patches]   # 'patches' = the shape's exact patch count
+
+Runs go to J worker processes. Each finished run is appended at once, as one line, to
+``results.csv`` in the output directory, so an interrupted experiment loses only the
+runs in flight, and running the same command again skips the runs already there. A
+run's seed depends only on the experiment seed and its coordinates (shape, group size,
+vision radius, repetition), never on J or on the order runs finish. At the end the
+statistics and figures are (re)built (:mod:`swarm_ros.report`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import numbers
+import os
+import sys
+import tempfile
+import zlib
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .config import read_yaml
+from .core.errors import SwarmError
+from .core.params import DEFAULT_MAX_TICKS, DEFAULT_WIGGLE_DEG, MAX_SEED, RunParams
+from .core.shapes import Shape
+from .core.world import DEFAULT_RADIUS, World
+
+EXPERIMENTS_DIR = Path("experiments")
+RESULTS_FILE = "results.csv"
+EXPERIMENT_FILE = "experiment.json"
+PATCHES = "patches"  #: a group size written as this word is the shape's exact patch count
+ENGINES = ("inprocess", "ros2")
+
+#: One row of results.csv: the run's coordinates, then every summary.json field.
+RESULT_COLUMNS = ("shape", "shape_file", "robots", "vision_radius", "repetition", "seed", "shape_patches",
+                  "max_ticks", "wiggle_deg", "world_radius", "engine", "outcome", "convergence_tick",
+                  "localized", "unlocalized", "separated", "empty_patches", "convergence_rate", "wall_seconds")
+_INT_COLUMNS = {"robots", "repetition", "seed", "shape_patches", "max_ticks", "world_radius", "convergence_tick",
+                "localized", "unlocalized", "separated", "empty_patches"}
+_FLOAT_COLUMNS = {"vision_radius", "wiggle_deg", "convergence_rate", "wall_seconds"}
+_KEYS = ("name", "seed", "repetitions", "vision_radius", "max_ticks", "wiggle_deg", "world_radius", "shapes")
+_REQUIRED = ("seed", "repetitions", "vision_radius", "shapes")
+
+
+class ExperimentError(SwarmError):
+    """A bad experiment file or output directory; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of an experiment: its coordinates and everything needed to run it in another process."""
+
+    shape: str  #: the shape's name (the file stem for a shape file)
+    shape_file: str  #: what Shape.load takes: a built-in name or an absolute path
+    robots: int
+    vision_radius: float
+    repetition: int
+    seed: int
+    max_ticks: int
+    wiggle_deg: float
+    world_radius: int
+
+    @property
+    def key(self) -> tuple[str, int, float, int]:
+        return self.shape, self.robots, self.vision_radius, self.repetition
+
+    def params(self) -> RunParams:
+        return RunParams(robots=self.robots, vision_radius=self.vision_radius, seed=self.seed,
+                         max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg)
+
+
+def run_seed(experiment_seed: int, shape: str, robots: int, vision_radius: float, repetition: int) -> int:
+    """The seed of the run at these coordinates: numpy's SeedSequence over the experiment seed and the coordinates."""
+    key = (zlib.crc32(shape.encode()), robots, round(vision_radius * 1000), repetition)
+    words = np.random.SeedSequence(entropy=experiment_seed, spawn_key=key).generate_state(2, dtype=np.uint32)
+    return (int(words[0]) << 32 | int(words[1])) & MAX_SEED
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A parsed, checked experiment file."""
+
+    name: str
+    seed: int
+    repetitions: int
+    vision_radius: tuple[float, ...]
+    max_ticks: int
+    wiggle_deg: float
+    world_radius: int
+    shapes: tuple[tuple[str, str, int, tuple[int, ...]], ...]  #: (name, file, patches, sizes)
+
+    def runs(self) -> list[RunSpec]:
+        """Every run, in the canonical order: shape, group size, vision radius, repetition."""
+        return [RunSpec(shape=name, shape_file=file, robots=n, vision_radius=v, repetition=r,
+                        seed=run_seed(self.seed, name, n, v, r), max_ticks=self.max_ticks,
+                        wiggle_deg=self.wiggle_deg, world_radius=self.world_radius)
+                for name, file, _, sizes in self.shapes for n in sizes for v in self.vision_radius
+                for r in range(self.repetitions)]
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _fail(path: Path, key: str, message: str) -> ExperimentError:
+    return ExperimentError(f"{path}: {key}: {message}" if key else f"{path}: {message}")
+
+
+def _integer(path: Path, key: str, value: object, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+        raise _fail(path, key, f"must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+def _number(path: Path, key: str, value: object, low: float, inclusive: bool) -> float:
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or (value < low if inclusive else value <= low):
+        raise _fail(path, key, f"must be a number {'>=' if inclusive else '>'} {low:g}, got {value!r}")
+    return float(value)
+
+
+def load_experiment(path: str | Path) -> Experiment:
+    """Read and check an experiment file; every run's parameters are checked too, before any run starts.
+
+    Raises:
+        ExperimentError: unreadable file, bad YAML, unknown or missing key, bad value,
+            unknown shape, or a group size that does not fit the world. The message
+            names the file and the key.
+    """
+    path = Path(path)
+    data = read_yaml(path, "experiment file", ExperimentError)
+    if not isinstance(data, dict):
+        raise _fail(path, "", f"expected a mapping with the keys {', '.join(_KEYS)}")
+    for key in data:
+        if key not in _KEYS:
+            raise _fail(path, str(key), f"unknown key (known: {', '.join(_KEYS)})")
+    for key in _REQUIRED:
+        if key not in data:
+            raise _fail(path, key, "missing")
+    name = data.get("name", path.stem)
+    if not isinstance(name, str) or not name.strip() or "/" in name:
+        raise _fail(path, "name", f"must be a non-empty name without '/', got {name!r}")
+    seed = _integer(path, "seed", data["seed"], 0)
+    if seed > MAX_SEED:
+        raise _fail(path, "seed", f"must be < 2**63, got {seed}")
+    repetitions = _integer(path, "repetitions", data["repetitions"], 1)
+    visions = data["vision_radius"]
+    visions = visions if isinstance(visions, list) else [visions]
+    if not visions:
+        raise _fail(path, "vision_radius", "no vision radius given")
+    vision = tuple(_number(path, f"vision_radius[{i}]", v, 0.0, False) for i, v in enumerate(visions))
+    if len(set(vision)) != len(vision):
+        raise _fail(path, "vision_radius", f"lists a radius twice: {list(vision)}")
+    max_ticks = _integer(path, "max_ticks", data.get("max_ticks", DEFAULT_MAX_TICKS), 1)
+    wiggle = _number(path, "wiggle_deg", data.get("wiggle_deg", DEFAULT_WIGGLE_DEG), 0.0, True)
+    world_radius = _integer(path, "world_radius", data.get("world_radius", DEFAULT_RADIUS), 3)
+    shapes = _load_shapes(path, data["shapes"], World(world_radius))
+    exp = Experiment(name=name.strip(), seed=seed, repetitions=repetitions, vision_radius=vision,
+                     max_ticks=max_ticks, wiggle_deg=wiggle, world_radius=world_radius, shapes=shapes)
+    for spec in exp.runs()[:: exp.repetitions]:  # the parameters of every grid point
+        try:
+            spec.params()
+        except SwarmError as exc:
+            raise _fail(path, f"shapes.{spec.shape}", str(exc)) from None
+    return exp
+
+
+def _load_shapes(path: Path, shapes: object, world: World) -> tuple[tuple[str, str, int, tuple[int, ...]], ...]:
+    if not isinstance(shapes, dict) or not shapes:
+        raise _fail(path, "shapes", "must map at least one shape to its group sizes, e.g. 'star: [1025, patches]'")
+    out, names = [], set()
+    for key, sizes in shapes.items():
+        where = f"shapes.{key}"
+        source = str(key)
+        if Path(source).suffix.lower() in (".txt", ".png") or "/" in source:
+            source = str((path.parent / source).resolve())
+        try:
+            shape = Shape.load(source, world)
+        except SwarmError as exc:
+            raise _fail(path, where, str(exc)) from None
+        if shape.name in names:
+            raise _fail(path, where, f"a second shape named '{shape.name}'")
+        names.add(shape.name)
+        if not isinstance(sizes, list) or not sizes:
+            raise _fail(path, where, f"must be a non-empty list of group sizes (integers or '{PATCHES}')")
+        robots = []
+        for i, n in enumerate(sizes):
+            if n == PATCHES:
+                n = shape.patches
+            n = _integer(path, f"{where}[{i}]", n, 5)
+            if n > shape.free_patches:
+                raise _fail(path, f"{where}[{i}]", f"{n} robots do not fit on the {shape.free_patches} free "
+                                                   f"patches of the {world.size} x {world.size} world")
+            robots.append(n)
+        out.append((shape.name, source, shape.patches, tuple(sorted(set(robots)))))
+    return tuple(out)
+
+
+# -- the results file -------------------------------------------------------------
+
+
+def result_row(spec: RunSpec, summary: dict) -> dict:
+    """A results.csv row from a run's coordinates and its summary.json record."""
+    row = {**summary, "shape_file": spec.shape_file, "repetition": spec.repetition}
+    return {col: row[col] for col in RESULT_COLUMNS}
+
+
+def _csv_line(row: dict) -> str:
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow([row[c] for c in RESULT_COLUMNS])
+    return buf.getvalue()
+
+
+def read_results(path: Path) -> list[dict]:
+    """The rows of a results.csv (typed); a last line cut short by a crash is ignored.
+
+    Raises:
+        ExperimentError: the file is not a results file of this version.
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ExperimentError(f"{path}: cannot read results ({exc.strerror or exc})") from None
+    text = text[: text.rfind("\n") + 1]  # drop a last line cut short
+    if text.split("\n", 1)[0] != ",".join(RESULT_COLUMNS):
+        raise ExperimentError(f"{path}: not a swarm-ros results file (expected the columns "
+                              f"{', '.join(RESULT_COLUMNS)})")
+    rows = list(csv.DictReader(io.StringIO(text)))
+    try:
+        return [{k: int(v) if k in _INT_COLUMNS else float(v) if k in _FLOAT_COLUMNS else v for k, v in r.items()}
+                for r in rows]
+    except (TypeError, ValueError):
+        raise ExperimentError(f"{path}: a row has a malformed number") from None
+
+
+class ResultsFile:
+    """results.csv, appended one whole line per finished run, flushed and synced at once."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        if path.exists():
+            text = path.read_bytes()
+            cut = text.rfind(b"\n") + 1
+            if cut < len(text):  # a line cut short by a crash: drop it, the run is redone
+                with open(path, "r+b") as f:
+                    f.truncate(cut)
+            self.rows = read_results(path)
+        else:
+            part = path.with_name(f".{path.name}.tmp")
+            part.write_text(",".join(RESULT_COLUMNS) + "\n", encoding="utf-8")
+            part.replace(path)
+            self.rows = []
+        self._file = open(path, "a", encoding="utf-8")  # noqa: SIM115 - closed in close()
+
+    def done(self) -> set[tuple]:
+        return {(r["shape"], r["robots"], r["vision_radius"], r["repetition"]) for r in self.rows}
+
+    def append(self, row: dict) -> None:
+        self._file.write(_csv_line(row))
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self.rows.append(row)
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def prepare_out_dir(out: Path, exp: Experiment, config: Path) -> None:
+    """Create ``out`` for ``exp``, or check that it holds this same experiment (to resume it).
+
+    Raises:
+        ExperimentError: ``out`` is a file, cannot be created, or holds another experiment.
+    """
+    record = json.dumps({"config": str(config), "experiment": exp.as_dict()}, indent=2) + "\n"
+    marker = out / EXPERIMENT_FILE
+    if out.exists() and not out.is_dir():
+        raise ExperimentError(f"{out}: exists and is not a directory")
+    if marker.exists():
+        try:
+            before = json.loads(marker.read_text(encoding="utf-8"))["experiment"]
+        except (OSError, ValueError, KeyError):
+            raise ExperimentError(f"{marker}: unreadable; not a swarm-ros experiment directory") from None
+        if before != json.loads(json.dumps(exp.as_dict())):
+            raise ExperimentError(f"{out}: holds the results of a different experiment (its {EXPERIMENT_FILE} "
+                                  f"differs from {config}); choose another --out")
+        return
+    if out.exists() and any(out.iterdir()):
+        raise ExperimentError(f"{out}: exists, is not empty and holds no {EXPERIMENT_FILE}; choose another --out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        part = out / f".{EXPERIMENT_FILE}.tmp"
+        part.write_text(record, encoding="utf-8")
+        os.replace(part, marker)
+    except OSError as exc:
+        raise ExperimentError(f"{out}: cannot create the experiment directory ({exc.strerror or exc})") from None
+
+
+# -- running ----------------------------------------------------------------------
+
+_SHAPES: dict[tuple[str, int], Shape] = {}
+
+
+def _shape(spec: RunSpec) -> Shape:
+    key = (spec.shape_file, spec.world_radius)
+    if key not in _SHAPES:
+        _SHAPES[key] = Shape.load(spec.shape_file, World(spec.world_radius))
+    return _SHAPES[key]
+
+
+def run_inprocess(spec: RunSpec) -> dict:
+    """Run ``spec`` with the in-process engine; its results.csv row."""
+    import time
+
+    from .core.engine import Simulation
+
+    start = time.perf_counter()
+    sim = Simulation(_shape(spec), spec.params())
+    sim.run()
+    return result_row(spec, sim.summary(wall_seconds=time.perf_counter() - start))
+
+
+def run_ros2(spec: RunSpec, processes: int = 2) -> dict:
+    """Run ``spec`` over the ROS 2 graph (``swarm-ros run``, no recording) in a scratch directory."""
+    import shutil
+
+    from .config import RecordingOptions, Settings
+    from .launcher import Launch
+
+    shape = _shape(spec)
+    settings = Settings(shape=spec.shape_file, robots=spec.robots, vision_radius=spec.vision_radius, seed=spec.seed,
+                        max_ticks=spec.max_ticks, wiggle_deg=spec.wiggle_deg, world_radius=spec.world_radius)
+    scratch = Path(tempfile.mkdtemp(prefix="swarm_ros-exp-"))
+    try:
+        launch = Launch(settings=settings, shape=shape, params=spec.params(), processes=processes,
+                        out=scratch / "run", quiet=True, recording=RecordingOptions(enabled=False))
+        out = launch.run()
+        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return result_row(spec, summary)
+
+
+def _worker_init() -> None:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides what Ctrl-C does
+
+
+def _work(job: tuple[RunSpec, str, int]) -> dict:
+    spec, engine, processes = job
+    return run_ros2(spec, processes) if engine == "ros2" else run_inprocess(spec)
+
+
+def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes: int = 2) -> Iterator[dict]:
+    """Yield the row of each run as it finishes, over ``jobs`` worker processes (spawned).
+
+    Closing the generator (or an exception in the caller, e.g. Ctrl-C) terminates the workers.
+    """
+    import multiprocessing as mp
+
+    if not todo:
+        return
+    ctx = mp.get_context("spawn")
+    pool = ctx.Pool(min(jobs, len(todo)), initializer=_worker_init)
+    try:
+        yield from pool.imap_unordered(_work, [(s, engine, processes) for s in todo], chunksize=1)
+        pool.close()
+    finally:
+        pool.terminate()
+        pool.join()
+
+
+def default_jobs() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, processes: int, quiet: bool) -> Path:
+    """Run (or resume) the experiment of ``config`` into ``out``; build its report; return ``out``."""
+    from tqdm import tqdm
+
+    from .report import build_report
+
+    exp = load_experiment(config)
+    out = out or EXPERIMENTS_DIR / exp.name
+    prepare_out_dir(out, exp, config)
+    results = ResultsFile(out / RESULTS_FILE)
+    runs = exp.runs()
+    done = results.done()
+    todo = [s for s in runs if s.key not in done]
+    if not quiet and done:
+        print(f"resuming: {len(runs) - len(todo)} of {len(runs)} runs already in {out / RESULTS_FILE}",
+              file=sys.stderr)
+    try:
+        with tqdm(total=len(runs), initial=len(runs) - len(todo), unit="run", desc=exp.name, file=sys.stderr,
+                  disable=True if quiet else None, dynamic_ncols=True) as bar:
+            for row in execute(todo, jobs, engine, processes):
+                results.append(row)
+                bar.update(1)
+    except KeyboardInterrupt:
+        left = len(runs) - len(results.done() & {s.key for s in runs})
+        print(f"swarm-ros: interrupted with {left} of {len(runs)} runs to go; the finished ones are in "
+              f"{out / RESULTS_FILE}; run the same command again to resume", file=sys.stderr)
+        raise
+    finally:
+        results.close()
+    build_report(out)
+    return out

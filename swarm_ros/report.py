@@ -1,0 +1,279 @@
+"""``swarm-ros report DIR``: statistics, tables and figures of an experiment, from its results.csv alone.
+
+Per (shape, group size, vision radius): runs, mean convergence tick, its standard
+deviation and 95% confidence interval (Student t), mean localized, unlocalized,
+separated and empty patches, outcome counts, and mean convergence rate. Written as
+``stats.csv`` and as ``stats.md``, a Markdown table laid out like the original study's
+summary (shape, patches, robots, mean time, 95% CI). Figures go to ``figures/``:
+
+- ``<shape>_v<R>.png``: (a) mean convergence time against group size, (b) the same with
+  95% CI bars, (c) completeness (localized, unlocalized, empty patches) against group
+  size, (d) one run's convergence curve per group size;
+- ``all_shapes_v<R>.png``: mean convergence time with 95% CI for every shape;
+- ``vision.png`` (with more than one radius): convergence time and localized fraction
+  against vision radius at each shape's exact patch count.
+
+Panel (d) needs per-tick metrics, which results.csv does not hold. The report re-runs
+the first repetition of each group size with the in-process engine from the seed in its
+row (the engines give identical runs), and checks that the convergence tick matches.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections import defaultdict
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import stats as st  # noqa: E402
+
+from .core.metrics import METRIC_COLUMNS, Outcome  # noqa: E402
+from .experiment import RESULTS_FILE, ExperimentError, read_results  # noqa: E402
+
+STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"
+OUTCOMES = tuple(o.value for o in Outcome)
+STATS_COLUMNS = ("shape", "shape_patches", "robots", "vision_radius", "runs", "mean_convergence_tick",
+                 "sd_convergence_tick", "ci95_low", "ci95_high", "mean_localized", "mean_unlocalized",
+                 "mean_separated", "mean_empty_patches", *OUTCOMES, "completed_fraction", "mean_convergence_rate")
+_COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000")
+
+
+def group_stats(rows: list[dict]) -> list[dict]:
+    """One statistics row per (shape, group size, vision radius), sorted by them.
+
+    ``completed_fraction`` is the fraction of runs that completed the shape (outcome
+    complete or complete_with_extras); ``mean_convergence_rate`` is the mean of the
+    runs' convergence rates (robots joined per tick).
+    """
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in rows:
+        groups[(r["shape"], r["robots"], r["vision_radius"])].append(r)
+    out = []
+    for (shape, robots, vision), runs in sorted(groups.items()):
+        ticks = np.array([r["convergence_tick"] for r in runs], dtype=float)
+        n = ticks.size
+        mean = float(ticks.mean())
+        sd = float(ticks.std(ddof=1)) if n > 1 else math.nan
+        half = float(st.t.ppf(0.975, n - 1) * sd / math.sqrt(n)) if n > 1 else math.nan
+        counts = {o: sum(r["outcome"] == o for r in runs) for o in OUTCOMES}
+        out.append({
+            "shape": shape, "shape_patches": runs[0]["shape_patches"], "robots": robots, "vision_radius": vision,
+            "runs": n, "mean_convergence_tick": mean, "sd_convergence_tick": sd,
+            "ci95_low": mean - half, "ci95_high": mean + half,
+            **{f"mean_{k}": float(np.mean([r[k] for r in runs]))
+               for k in ("localized", "unlocalized", "separated", "empty_patches")},
+            **counts,
+            "completed_fraction": (counts["complete"] + counts["complete_with_extras"]) / n,
+            "mean_convergence_rate": float(np.mean([r["convergence_rate"] for r in runs])),
+        })
+    return out
+
+
+def stats_csv(stats: list[dict]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(STATS_COLUMNS)
+    for s in stats:
+        w.writerow([_fmt(s[c]) for c in STATS_COLUMNS])
+    return buf.getvalue()
+
+
+def _fmt(value: object) -> str:
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else f"{value:.6g}" if abs(value) < 1e6 else f"{value:.1f}"
+    return str(value)
+
+
+def stats_markdown(stats: list[dict]) -> str:
+    """The summary table, one section per vision radius, in the original study's layout."""
+    lines = []
+    for vision in sorted({s["vision_radius"] for s in stats}):
+        lines += [f"### Vision radius {vision:g}", "",
+                  "| shape | patches | robots | runs | mean time (ticks) | 95% CI | localized | unlocalized "
+                  "| empty patches | outcomes |",
+                  "|---|---:|---:|---:|---:|---|---:|---:|---:|---|"]
+        for s in (s for s in stats if s["vision_radius"] == vision):
+            ci = "–" if math.isnan(s["ci95_low"]) else f"[{s['ci95_low']:.0f}, {s['ci95_high']:.0f}]"
+            outcomes = ", ".join(f"{s[o]} {o}" for o in OUTCOMES if s[o])
+            mark = " **=**" if s["robots"] == s["shape_patches"] else ""
+            lines.append(f"| {s['shape']} | {s['shape_patches']} | {s['robots']}{mark} | {s['runs']} | "
+                         f"{s['mean_convergence_tick']:.0f} | {ci} | {s['mean_localized']:.1f} | "
+                         f"{s['mean_unlocalized']:.1f} | {s['mean_empty_patches']:.1f} | {outcomes} |")
+        lines.append("")
+    lines.append("Times are convergence ticks (the tick the run ended). 95% CI: Student t on the runs' "
+                 "convergence ticks. **=** marks the group size equal to the shape's patch count.")
+    return "\n".join(lines) + "\n"
+
+
+def _write_text(path: Path, text: str) -> None:
+    part = path.with_name(f".{path.name}.tmp")
+    part.write_text(text, encoding="utf-8")
+    os.replace(part, path)
+
+
+def _save(fig: plt.Figure, path: Path) -> None:
+    part = path.with_name(f".{path.name}.tmp.png")
+    fig.savefig(part)
+    plt.close(fig)
+    os.replace(part, path)
+
+
+def _curve(row: dict) -> np.ndarray:
+    """Per-tick metrics of the run in ``row``, re-run in process (checked against the row)."""
+    from .core.engine import Simulation
+    from .core.params import RunParams
+    from .core.shapes import Shape
+    from .core.world import World
+
+    shape = Shape.load(row["shape_file"], World(row["world_radius"]))
+    sim = Simulation(shape, RunParams(robots=row["robots"], vision_radius=row["vision_radius"], seed=row["seed"],
+                                      max_ticks=row["max_ticks"], wiggle_deg=row["wiggle_deg"]))
+    sim.run()
+    if sim.tick != row["convergence_tick"] or sim.outcome.value != row["outcome"]:
+        raise ExperimentError(f"re-running {row['shape']} n={row['robots']} seed {row['seed']} gave "
+                              f"{sim.outcome} at tick {sim.tick}, the results say {row['outcome']} at tick "
+                              f"{row['convergence_tick']}")
+    return sim.history.copy()
+
+
+def shape_figure(stats: list[dict], rows: list[dict], path: Path) -> None:
+    """Panels (a)-(d) for one shape at one vision radius."""
+    s0 = stats[0]
+    n = np.array([s["robots"] for s in stats])
+    mean = np.array([s["mean_convergence_tick"] for s in stats])
+    lo = np.array([s["ci95_low"] for s in stats])
+    hi = np.array([s["ci95_high"] for s in stats])
+    patches = s0["shape_patches"]
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8), dpi=110)
+    (a, b), (c, d) = axes
+    fig.suptitle(f"{s0['shape']} ({patches} patches), vision radius {s0['vision_radius']:g}, "
+                 f"{s0['runs']} runs per group size", fontsize=12)
+    a.plot(n, mean, "o-", color=_COLOURS[0])
+    a.set_title("(a) mean convergence time", fontsize=10)
+    b.errorbar(n, mean, yerr=np.nan_to_num(np.vstack([mean - lo, hi - mean])), fmt="o-", capsize=4,
+               color=_COLOURS[0])
+    b.set_title("(b) mean convergence time, 95% CI (Student t)", fontsize=10)
+    for ax in (a, b):
+        ax.set_xlabel("group size N (robots)")
+        ax.set_ylabel("convergence time (ticks)")
+    c.plot(n, [s["mean_localized"] for s in stats], "o-", color=_COLOURS[0], label="localized robots (left)")
+    c.set_ylabel("localized robots", color=_COLOURS[0])
+    right = c.twinx()
+    for key, label, colour in (("mean_unlocalized", "unlocalized robots (right)", _COLOURS[1]),
+                               ("mean_empty_patches", "empty shape patches (right)", _COLOURS[3])):
+        right.plot(n, [s[key] for s in stats], "s--", color=colour, label=label)
+    right.set_ylabel("unlocalized robots, empty patches")
+    right.set_ylim(bottom=0)
+    handles = c.get_legend_handles_labels()[0] + right.get_legend_handles_labels()[0]
+    c.legend(handles=handles, fontsize=8, loc="upper center")
+    c.set_title("(c) completeness (means over the runs)", fontsize=10)
+    c.set_xlabel("group size N (robots)")
+    empty = METRIC_COLUMNS.index("empty_patches")
+    for k, s in enumerate(stats):
+        first = min((r for r in rows if r["robots"] == s["robots"]), key=lambda r: r["repetition"])
+        h = _curve(first)
+        d.plot(h[:, 0], h[:, empty], color=_COLOURS[k % len(_COLOURS)], lw=1.2,
+               label=f"N = {s['robots']}: {first['outcome']} at {first['convergence_tick']}")
+    d.set_yscale("symlog", linthresh=1)
+    d.set_ylim(bottom=0)
+    d.set_title("(d) one run per group size: empty shape patches", fontsize=10)
+    d.set_xlabel("tick")
+    d.set_ylabel("empty shape patches")
+    d.legend(fontsize=7)
+    for ax in (a, b, c):
+        ax.set_xticks(n)
+        ax.tick_params(axis="x", labelrotation=45 if len(n) > 6 else 0)
+    for ax in (a, b, c):
+        ax.axvline(patches, color="#999999", lw=0.8, ls=":")
+        ax.grid(alpha=0.3)
+    d.grid(alpha=0.3)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def all_shapes_figure(stats: list[dict], vision: float, path: Path) -> None:
+    """Mean convergence time with 95% CI against group size relative to the patch count, every shape."""
+    fig, ax = plt.subplots(figsize=(9, 5.5), dpi=110)
+    shapes = sorted({s["shape"] for s in stats})
+    for k, shape in enumerate(shapes):
+        ss = [s for s in stats if s["shape"] == shape]
+        x = np.array([s["robots"] - s["shape_patches"] for s in ss])
+        m = np.array([s["mean_convergence_tick"] for s in ss])
+        err = np.nan_to_num(np.vstack([m - [s["ci95_low"] for s in ss], [s["ci95_high"] for s in ss] - m]))
+        ax.errorbar(x, m, yerr=err, fmt="o-", capsize=3, color=_COLOURS[k % len(_COLOURS)],
+                    label=f"{shape} ({ss[0]['shape_patches']} patches)")
+    ax.axvline(0, color="#999999", lw=0.8, ls=":")
+    ax.set_title(f"Mean convergence time, 95% CI, vision radius {vision:g}", fontsize=11)
+    ax.set_xlabel("group size minus the shape's patch count (robots)")
+    ax.set_ylabel("convergence time (ticks)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def vision_figure(stats: list[dict], path: Path) -> None:
+    """At each shape's exact patch count: convergence time and localized fraction against vision radius."""
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.6), dpi=110)
+    exact = [s for s in stats if s["robots"] == s["shape_patches"]]
+    for k, shape in enumerate(sorted({s["shape"] for s in exact})):
+        ss = sorted((s for s in exact if s["shape"] == shape), key=lambda s: s["vision_radius"])
+        v = [s["vision_radius"] for s in ss]
+        m = np.array([s["mean_convergence_tick"] for s in ss])
+        err = np.nan_to_num(np.vstack([m - [s["ci95_low"] for s in ss], [s["ci95_high"] for s in ss] - m]))
+        colour = _COLOURS[k % len(_COLOURS)]
+        a.errorbar(v, m, yerr=err, fmt="o-", capsize=3, color=colour, label=shape)
+        b.plot(v, [s["mean_localized"] / s["shape_patches"] for s in ss], "o-", color=colour, label=shape)
+    a.set_title("(a) mean convergence time, 95% CI (N = patch count)", fontsize=10)
+    a.set_ylabel("convergence time (ticks)")
+    b.set_title("(b) shape patches filled (N = patch count)", fontsize=10)
+    b.set_ylabel("mean localized / patches")
+    b.set_ylim(0, 1.05)
+    for ax in (a, b):
+        ax.set_xlabel("vision radius (patches)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def build_report(out: Path) -> list[Path]:
+    """(Re)build stats.csv, stats.md and figures/ in ``out`` from ``out``/results.csv; return what was written.
+
+    Raises:
+        ExperimentError: no results file, or it holds no runs.
+    """
+    results = out / RESULTS_FILE
+    if not results.is_file():
+        raise ExperimentError(f"{out}: no {RESULTS_FILE} here; is it an experiment directory?")
+    rows = read_results(results)
+    if not rows:
+        raise ExperimentError(f"{results}: holds no finished runs yet")
+    stats = group_stats(rows)
+    written = [out / STATS_CSV, out / STATS_MD]
+    _write_text(written[0], stats_csv(stats))
+    _write_text(written[1], stats_markdown(stats))
+    figures = out / FIGURES
+    figures.mkdir(exist_ok=True)
+    visions = sorted({s["vision_radius"] for s in stats})
+    for vision in visions:
+        vs = [s for s in stats if s["vision_radius"] == vision]
+        for shape in sorted({s["shape"] for s in vs}):
+            path = figures / f"{shape}_v{vision:g}.png"
+            shape_figure([s for s in vs if s["shape"] == shape],
+                         [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision], path)
+            written.append(path)
+        path = figures / f"all_shapes_v{vision:g}.png"
+        all_shapes_figure(vs, vision, path)
+        written.append(path)
+    if len(visions) > 1:
+        vision_figure(stats, figures / "vision.png")
+        written.append(figures / "vision.png")
+    return written

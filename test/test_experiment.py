@@ -1,0 +1,292 @@
+"""swarm-ros experiment and report: the grid, seeds, parallel runs, resume, statistics, figures, bad configs."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from swarm_ros import cli
+from swarm_ros.experiment import (RESULT_COLUMNS, ExperimentError, load_experiment, read_results, run_seed)
+from swarm_ros.report import group_stats
+
+ROOT = Path(__file__).resolve().parents[1]
+PY = sys.executable
+
+
+def disc_file(path: Path, radius: float = 4.5, half: int = 6) -> Path:
+    c = np.arange(-half, half + 1)
+    x, y = np.meshgrid(c, c)
+    rows = ["".join("#" if v else "." for v in row) for row in (np.hypot(x, y) <= radius)[::-1]]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def small_config(tmp_path: Path, **over) -> Path:
+    """A small grid in a 21 x 21 world: one disc shape (69 patches), three sizes, two radii."""
+    disc_file(tmp_path / "disc.txt")
+    data = {"name": "small", "seed": 11, "repetitions": 3, "vision_radius": [1, 1.5], "max_ticks": 4000,
+            "world_radius": 10, "shapes": {"disc.txt": [50, "patches", 80]}, **over}
+    path = tmp_path / "small.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def experiment(config: Path, out: Path, *extra: str) -> int:
+    return cli.main(["experiment", str(config), "--out", str(out), "--quiet", *extra])
+
+
+def rows_without_timing(out: Path) -> list[dict]:
+    rows = read_results(out / "results.csv")
+    for r in rows:
+        r.pop("wall_seconds")
+    return sorted(rows, key=lambda r: (r["shape"], r["robots"], r["vision_radius"], r["repetition"]))
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> tuple[Path, Path]:
+    """(config, experiment directory) of the small grid, run with 2 jobs."""
+    base = tmp_path_factory.mktemp("exp")
+    config = small_config(base)
+    out = base / "out"
+    assert experiment(config, out, "--jobs", "2") == 0
+    return config, out
+
+
+# -- the grid and its seeds --------------------------------------------------------
+
+
+def test_paper_protocol_file_is_the_studys_grid():
+    exp = load_experiment(ROOT / "config/experiments/paper.yaml")
+    runs = exp.runs()
+    assert len(runs) == 6 * 6 * 10 and exp.vision_radius == (1.0,) and exp.repetitions == 10
+    sizes = {name: sizes for name, _, _, sizes in exp.shapes}
+    assert sizes["star"] == (1025, 1030, 1035, 1036, 1040, 1045)
+    assert sizes["wrench"] == (500, 525, 550, 565, 575, 600)
+    assert all(patches in sizes[name] for name, _, patches, _ in exp.shapes)
+    assert len({r.seed for r in runs}) == len(runs)
+    vision = load_experiment(ROOT / "config/experiments/paper_vision.yaml")
+    assert vision.vision_radius == (1.0, 2.0, 3.0) and len(vision.runs()) == 3 * len(runs)
+
+
+def test_a_runs_seed_depends_only_on_the_experiment_seed_and_its_coordinates(tmp_path):
+    a = {r.key: r.seed for r in load_experiment(small_config(tmp_path)).runs()}
+    b = {r.key: r.seed for r in load_experiment(small_config(tmp_path, vision_radius=[1.5], repetitions=5)).runs()}
+    shared = a.keys() & b.keys()
+    assert len(shared) == 9 and all(a[k] == b[k] for k in shared)
+    c = load_experiment(small_config(tmp_path, seed=12)).runs()
+    assert all(a[r.key] != r.seed for r in c)
+    assert run_seed(11, "disc", 50, 1.0, 0) == a[("disc", 50, 1.0, 0)]
+
+
+# -- running -----------------------------------------------------------------------
+
+
+def test_experiment_writes_results_stats_and_figures(small):
+    config, out = small
+    rows = read_results(out / "results.csv")
+    assert len(rows) == 3 * 2 * 3 and list(next(csv.reader((out / "results.csv").open()))) == list(RESULT_COLUMNS)
+    patches = rows[0]["shape_patches"]
+    assert patches == 69 and {r["robots"] for r in rows} == {50, 69, 80}
+    assert {r["engine"] for r in rows} == {"inprocess"}
+    for r in (r for r in rows if r["vision_radius"] == 1):  # what the study found, on a small disc
+        if r["robots"] < patches:
+            assert r["outcome"] == "incomplete" and r["empty_patches"] == patches - r["robots"]
+        elif r["robots"] > patches:
+            assert r["outcome"] == "complete_with_extras" and r["separated"] == r["robots"] - patches
+    stats = list(csv.DictReader((out / "stats.csv").open()))
+    assert len(stats) == 6 and all(s["runs"] == "3" for s in stats)
+    md = (out / "stats.md").read_text()
+    assert "| shape | patches | robots | runs | mean time (ticks) | 95% CI |" in md
+    assert md.count("| disc | 69 |") == 6 and "### Vision radius 1.5" in md
+    figures = sorted(p.name for p in (out / "figures").iterdir())
+    assert figures == ["all_shapes_v1.5.png", "all_shapes_v1.png", "disc_v1.5.png", "disc_v1.png", "vision.png"]
+    assert all((out / "figures" / f).read_bytes()[:4] == b"\x89PNG" for f in figures)
+
+
+def test_results_do_not_depend_on_the_number_of_jobs(small, tmp_path):
+    config, out = small
+    one = tmp_path / "one"
+    assert experiment(config, one, "--jobs", "1") == 0
+    assert rows_without_timing(one) == rows_without_timing(out)
+
+
+def test_report_rebuilds_tables_and_figures_from_the_results_file_alone(small, tmp_path, capsys):
+    _, out = small
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    (copy / "results.csv").write_bytes((out / "results.csv").read_bytes())
+    assert cli.main(["report", str(copy)]) == 0
+    assert (copy / "stats.csv").read_bytes() == (out / "stats.csv").read_bytes()
+    assert (copy / "stats.md").read_bytes() == (out / "stats.md").read_bytes()
+    assert sorted(p.name for p in (copy / "figures").iterdir()) == sorted(p.name for p in (out / "figures").iterdir())
+    assert str(copy / "stats.md") in capsys.readouterr().out
+
+
+def test_rerunning_a_finished_experiment_runs_nothing_again(small, capsys):
+    config, out = small
+    before = (out / "results.csv").read_bytes()
+    assert cli.main(["experiment", str(config), "--out", str(out)]) == 0
+    assert (out / "results.csv").read_bytes() == before
+    assert "resuming: 18 of 18 runs already" in capsys.readouterr().err
+
+
+def test_a_line_cut_short_by_a_crash_is_dropped_and_its_run_redone(small, tmp_path):
+    config, out = small
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for name in ("results.csv", "experiment.json"):
+        (copy / name).write_bytes((out / name).read_bytes())
+    lines = (out / "results.csv").read_text().splitlines(keepends=True)
+    (copy / "results.csv").write_text("".join(lines[:-2]) + lines[-2][:25])  # 2 runs lost, one half-written
+    assert experiment(config, copy) == 0
+    assert rows_without_timing(copy) == rows_without_timing(out)
+
+
+def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(small, tmp_path):
+    config, out = small
+    big = small_config(tmp_path, repetitions=40)  # 240 runs, the first 3 repetitions are the small grid
+    run_dir = tmp_path / "run"
+    cmd = [PY, "-m", "swarm_ros.cli", "experiment", str(big), "--out", str(run_dir), "--jobs", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    results = run_dir / "results.csv"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if results.exists() and len(results.read_text().splitlines()) > 4:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert "run the same command again to resume" in err and "Traceback" not in err
+    kept = read_results(results)
+    assert 3 <= len(kept) < 240
+    assert not _children_of(proc.pid), "a worker outlived the interrupted experiment"
+    done = subprocess.run(cmd + ["--quiet"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    full = read_results(results)
+    assert len(full) == 240 and len({(r["robots"], r["vision_radius"], r["repetition"]) for r in full}) == 240
+    assert full[: len(kept)] == kept  # the finished runs were kept, not redone
+    # the first three repetitions are the small experiment's runs: same coordinates, same seeds, same results
+    head = [r for r in rows_without_timing(run_dir) if r["repetition"] < 3]
+    small_rows = rows_without_timing(out)
+    for r in head + small_rows:
+        r.pop("shape_file")  # the same shape, copied into another directory
+    assert head == small_rows
+
+
+def _children_of(pid: int) -> list[int]:
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(proc.name))
+    return found
+
+
+# -- statistics --------------------------------------------------------------------
+
+
+def test_statistics_match_a_hand_computed_t_interval():
+    rows = [{"shape": "s", "shape_patches": 10, "robots": 10, "vision_radius": 1.0, "convergence_tick": t,
+             "outcome": o, "localized": 10, "unlocalized": 0, "separated": 0, "empty_patches": 0,
+             "convergence_rate": 0.5} for t, o in ((10, "complete"), (12, "complete"), (14, "timeout"))]
+    (s,) = group_stats(rows)
+    # mean 12, sd 2, t(0.975, 2 d.f.) = 4.303 from a printed table: half width 4.303 * 2 / sqrt(3) = 4.969
+    assert s["mean_convergence_tick"] == 12 and s["sd_convergence_tick"] == pytest.approx(2.0)
+    assert s["ci95_low"] == pytest.approx(12 - 4.969, abs=1e-3) and s["ci95_high"] == pytest.approx(16.969, abs=1e-3)
+    assert (s["complete"], s["timeout"], s["incomplete"]) == (2, 1, 0)
+    assert s["completed_fraction"] == pytest.approx(2 / 3)
+    (one,) = group_stats(rows[:1])
+    assert math.isnan(one["sd_convergence_tick"]) and math.isnan(one["ci95_low"])
+
+
+# -- bad input ---------------------------------------------------------------------
+
+BAD = [
+    ({"shapes": {"nope": [10]}}, "shapes.nope: nope: no such shape file or built-in shape"),
+    ({"repetitons": 3}, "repetitons: unknown key"),
+    ({"shapes": {"disc.txt": [50, -3]}}, "shapes.disc.txt[1]: must be an integer >= 5, got -3"),
+    ({"shapes": {"disc.txt": [0]}}, "shapes.disc.txt[0]: must be an integer >= 5, got 0"),
+    ({"shapes": {"disc.txt": []}}, "shapes.disc.txt: must be a non-empty list of group sizes"),
+    ({"shapes": {}}, "shapes: must map at least one shape to its group sizes"),
+    ({"vision_radius": []}, "vision_radius: no vision radius given"),
+    ({"vision_radius": [1, -2]}, "vision_radius[1]: must be a number > 0, got -2"),
+    ({"repetitions": 0}, "repetitions: must be an integer >= 1, got 0"),
+    ({"max_ticks": "many"}, "max_ticks: must be an integer >= 1, got 'many'"),
+    ({"shapes": {"disc.txt": [500]}}, "shapes.disc.txt[0]: 500 robots do not fit on the 361 free patches"),
+    ({"seed": None}, "seed: must be an integer >= 0, got None"),
+]
+
+
+@pytest.mark.parametrize("over,message", BAD, ids=[m.split(":")[0] for _, m in BAD])
+def test_bad_configs_fail_before_any_run_naming_file_and_key(tmp_path, capsys, over, message):
+    config = small_config(tmp_path, **over)
+    out = tmp_path / "out"
+    assert experiment(config, out) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"swarm-ros: error: {config}: ") and message in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_missing_keys_unreadable_files_and_foreign_directories_are_refused(tmp_path, capsys):
+    config = small_config(tmp_path)
+    data = yaml.safe_load(config.read_text())
+    del data["repetitions"]
+    (tmp_path / "missing.yaml").write_text(yaml.safe_dump(data))
+    (tmp_path / "broken.yaml").write_text("shapes: [\n")
+    for path, message in ((tmp_path / "missing.yaml", "repetitions: missing"),
+                          (tmp_path / "broken.yaml", "not valid YAML"),
+                          (tmp_path / "absent.yaml", "cannot read experiment file")):
+        assert experiment(path, tmp_path / "out") == 2
+        assert message in capsys.readouterr().err
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "notes.txt").write_text("mine")
+    assert experiment(config, tmp_path / "foreign") == 2
+    assert "holds no experiment.json" in capsys.readouterr().err
+    assert cli.main(["report", str(tmp_path / "foreign")]) == 2
+    assert "no results.csv here" in capsys.readouterr().err
+
+
+def test_another_experiment_in_the_same_directory_is_refused(small, tmp_path, capsys):
+    _, out = small
+    other = small_config(tmp_path, seed=99)
+    assert experiment(other, out) == 2
+    assert "holds the results of a different experiment" in capsys.readouterr().err
+
+
+def test_read_results_rejects_a_file_that_is_not_a_results_file(tmp_path):
+    path = tmp_path / "results.csv"
+    path.write_text("a,b\n1,2\n")
+    with pytest.raises(ExperimentError, match="not a swarm-ros results file"):
+        read_results(path)
+
+
+# -- the ROS 2 engine --------------------------------------------------------------
+
+
+def test_ros2_engine_gives_the_in_process_results(small, tmp_path):
+    config = small_config(tmp_path, repetitions=1, vision_radius=[1], shapes={"disc.txt": [50, 80]})
+    ros, ref = tmp_path / "ros", tmp_path / "ref"
+    env = {**os.environ}
+    env.pop("ROS_DOMAIN_ID", None)
+    done = subprocess.run([PY, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(ros), "--engine",
+                           "ros2", "--quiet"], capture_output=True, text=True, timeout=600, env=env)
+    assert done.returncode == 0, done.stderr
+    assert experiment(config, ref) == 0
+    a, b = rows_without_timing(ros), rows_without_timing(ref)
+    assert {r.pop("engine") for r in a} == {"ros2"} and {r.pop("engine") for r in b} == {"inprocess"}
+    assert a == b
