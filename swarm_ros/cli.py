@@ -16,6 +16,7 @@ from . import __version__
 from .config import RecordingOptions, Settings, load_params_file
 from .core.engine import Simulation
 from .core.errors import SwarmError
+from .core.metrics import Outcome
 from .core.params import RunParams
 from .core.shapes import Shape, builtin_shapes
 from .core.world import World
@@ -178,21 +179,28 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     rrd = partial_recording(out)
     recorder = options.open(rrd, shape, params)
+    _interrupt_on_sigterm()
     start = time.perf_counter()
     sim = Simulation(shape, params)
+    stopped = None
     try:
         _run_with_progress(sim, check=args.check, quiet=args.quiet, recorder=recorder)
-    except BaseException as exc:
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the run so far becomes an 'interrupted' run directory
+        stopped = Outcome.INTERRUPTED
+    except BaseException:
         if recorder is not None:
-            recorder.outcome("interrupted" if isinstance(exc, KeyboardInterrupt) else "failed", sim.metrics)
+            recorder.outcome("failed", sim.metrics)
             recorder.close()
             _note_partial(rrd, options)
         raise
-    record = RunRecord.of(sim, wall_seconds=time.perf_counter() - start)
+    record = RunRecord.of(sim, wall_seconds=time.perf_counter() - start, stopped=stopped)
     if recorder is not None:
         recorder.outcome(record.outcome.value, record.final)
         recorder.close()
     out = write_run(out, record, overwrite=args.overwrite, recording=rrd if options.enabled else None)
+    if stopped is not None:
+        print(f"{PROG}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if not args.quiet:
         _print_summary(record.summary, out)
     return 0
@@ -201,7 +209,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     import json
 
-    from .launcher import Launch
+    from .launcher import Launch, interrupted_run
     from .output import partial_recording
 
     settings, shape, params, out, options = _prepare(args)
@@ -220,6 +228,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     _interrupt_on_sigterm()
     try:
         out = launch.run()
+    except KeyboardInterrupt:
+        stopped = interrupted_run(out.absolute())
+        if stopped is None:
+            _note_partial(partial_recording(out), options)
+            raise
+        print(f"{PROG}: interrupted at tick {stopped['convergence_tick']}; the run so far is in {out}",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
     except BaseException:
         _note_partial(partial_recording(out), options)
         raise

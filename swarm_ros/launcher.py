@@ -127,6 +127,17 @@ def stop(children: list[Child]) -> None:
         c.log_file.close()
 
 
+def interrupted_run(out: Path) -> dict | None:
+    """The summary in ``out`` if it is the run directory of an interrupted run, else None."""
+    import json
+
+    try:
+        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return summary if summary.get("outcome") == "interrupted" else None
+
+
 @dataclass
 class Launch:
     """One ``swarm-ros run``. Call :meth:`run`; it returns the run directory."""
@@ -148,17 +159,20 @@ class Launch:
         shutil.rmtree(logs, ignore_errors=True)
         (logs / "ros").mkdir(parents=True)
         lock = DomainLock(self.domain_id)
-        ok = False
+        ok = interrupted = False
         try:
             self._start(logs, lock.domain_id, out)
             self._follow()
             ok = True
         except LaunchError as exc:
             raise LaunchError(f"{exc} (logs: {self._logs_target(out, False)})") from None
+        except KeyboardInterrupt:
+            interrupted = True
+            raise
         finally:
-            stop(self.children)
+            stop(self.children)  # an interrupted monitor writes the run so far before it exits
             lock.close()
-            self._keep_logs(logs, out, ok)
+            self._keep_logs(logs, out, ok or (interrupted and interrupted_run(out) is not None))
         return out
 
     def _start(self, logs: Path, domain_id: int, out: Path) -> None:

@@ -60,10 +60,11 @@ class RunRecord:
         return TickMetrics(*self.history[-1].tolist())
 
     @staticmethod
-    def of(sim: Simulation, wall_seconds: float) -> RunRecord:
-        """The record of a finished in-process run."""
+    def of(sim: Simulation, wall_seconds: float, stopped: Outcome | None = None) -> RunRecord:
+        """The record of an in-process run: finished, or ``stopped`` (interrupted) at its current tick."""
+        summary = sim.summary(wall_seconds=wall_seconds, stopped=stopped)
         return RunRecord(shape=sim.shape, params=sim.params, state=sim.state, history=sim.history,
-                         outcome=sim.outcome, summary=sim.summary(wall_seconds=wall_seconds))
+                         outcome=Outcome(summary["outcome"]), summary=summary)
 
 
 def default_run_dir(shape: str, robots: int, vision: float, seed: int, now: datetime | None = None) -> Path:

@@ -124,30 +124,43 @@ def test_no_recording_flag_writes_none(tmp_path):
     assert not (out / "recording.rrd").exists() and (out / "convergence.png").exists()
 
 
-@pytest.mark.parametrize("error,code,event", [(KeyboardInterrupt, 130, "interrupted"), (RuntimeError, None, "failed")])
-def test_a_run_stopped_early_keeps_a_readable_recording_up_to_that_tick(tmp_path, monkeypatch, capsys, error, code,
-                                                                        event):
+def _stop_at_tick_120(monkeypatch, error):
     real_run = Simulation.run
 
-    def stop_at_tick_120(self, max_ticks=None, on_tick=None):
+    def run(self, max_ticks=None, on_tick=None):
         if self.tick >= 120:
             raise error("stop")
         return real_run(self, max_ticks=min(max_ticks or 10**9, 120 - self.tick), on_tick=on_tick)
 
-    monkeypatch.setattr(Simulation, "run", stop_at_tick_120)
+    monkeypatch.setattr(Simulation, "run", run)
+
+
+def test_a_crashed_run_keeps_a_readable_recording_up_to_that_tick(tmp_path, monkeypatch, capsys):
+    _stop_at_tick_120(monkeypatch, RuntimeError)
     out = tmp_path / "run"
-    if code is None:
-        with pytest.raises(error):
-            simulate(out)
-    else:
-        assert simulate(out) == code
+    with pytest.raises(RuntimeError):
+        simulate(out)
     assert not out.exists()
     partial = tmp_path / "run.partial.rrd"
     assert f"the recording so far is in {partial}" in capsys.readouterr().err
     assert rrd_verify(partial).returncode == 0
     rec = Recording(partial)
     assert max(rec.robots) == 120 and max(rec.series["localized"]) == 120
-    assert rec.events == [(120, rec.events[0][1])] and rec.events[0][1].startswith(f"{event} at tick 120")
+    assert rec.events == [(120, rec.events[0][1])] and rec.events[0][1].startswith("failed at tick 120")
+
+
+def test_an_interrupted_run_writes_its_run_directory_so_far(tmp_path, monkeypatch, capsys):
+    _stop_at_tick_120(monkeypatch, KeyboardInterrupt)
+    out = tmp_path / "run"
+    assert simulate(out) == 130
+    assert f"interrupted at tick 120; the run so far is in {out}" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no partial file left beside it
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "interrupted" and summary["convergence_tick"] == 120
+    assert len(metrics_rows(out)) == 121
+    assert rrd_verify(out / "recording.rrd").returncode == 0
+    assert_matches_run(Recording(out / "recording.rrd"), out)
+    assert (out / "final.png").stat().st_size > 0 and (out / "convergence.png").stat().st_size > 0
 
 
 def test_a_killed_run_leaves_a_recording_readable_up_to_the_last_batch(tmp_path):

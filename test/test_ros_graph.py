@@ -174,18 +174,19 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
         start = time.monotonic()
         _, err = launcher.communicate(timeout=30)
     assert launcher.returncode == 130, err
-    assert time.monotonic() - start < 10
-    assert "interrupted" in err
-    assert not out.exists()
-    assert (tmp_path / "live.logs" / "world.log").is_file()
+    assert time.monotonic() - start < 5, "the launcher and its children took 5 s or more to stop"
     assert not _processes_mentioning(str(out)), "a node process outlived the interrupted run"
-    # the monitor closed its recording on the way out: readable, marked, up to the tick it had reached
-    partial = tmp_path / "live.partial.rrd"
-    assert f"the recording so far is in {partial}" in err
-    assert rrd_verify(partial).returncode == 0
-    rec = Recording(partial)
-    last = max(rec.series["localized"])
-    assert last > 0 and max(rec.robots) == last
+    # the monitor wrote the run so far: summary 'interrupted', metrics, final state, recording, logs
+    summary = json.loads((out / "summary.json").read_text())
+    last = summary["convergence_tick"]
+    assert summary["outcome"] == "interrupted" and summary["engine"] == "ros2" and last > 0
+    assert f"interrupted at tick {last}; the run so far is in {out}" in err
+    assert len((out / "metrics.csv").read_text().splitlines()) == last + 2
+    assert (out / "logs" / "world.log").is_file() and not (tmp_path / "live.logs").exists()
+    assert not (tmp_path / "live.partial.rrd").exists()
+    assert rrd_verify(out / "recording.rrd").returncode == 0
+    rec = Recording(out / "recording.rrd")
+    assert max(rec.series["localized"]) == last and max(rec.robots) == last
     assert len(rec.events) == 1 and rec.events[0][0] == last and rec.events[0][1].startswith("interrupted at tick")
 
 

@@ -258,13 +258,18 @@ class Simulation:
         self._nrows += rows
         self.outcome = OUTCOME_OF_CODE[code]
 
-    def summary(self, wall_seconds: float = 0.0) -> dict:
-        """The run's record (see :func:`swarm_ros.core.metrics.run_summary`); needs a finished run."""
-        if self.outcome is None:
+    def summary(self, wall_seconds: float = 0.0, stopped: Outcome | None = None) -> dict:
+        """The run's record (see :func:`swarm_ros.core.metrics.run_summary`).
+
+        A run that has not ended needs ``stopped``, the outcome to record instead
+        (``Outcome.INTERRUPTED``); its record describes the run up to the current tick.
+        """
+        outcome = self.outcome or stopped
+        if outcome is None:
             raise RuntimeError("the run has not ended yet")
         return run_summary(
             shape=self.shape.name, shape_patches=self.shape.patches, params=self.params.as_dict(),
-            engine=self.engine, outcome=self.outcome, final=self.metrics,
+            engine=self.engine, outcome=outcome, final=self.metrics,
             separated=self.metrics.stationary - self.metrics.localized, world_radius=self._radius,
             wall_seconds=wall_seconds)
 

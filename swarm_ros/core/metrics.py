@@ -27,6 +27,7 @@ class Outcome(str, Enum):
     COMPLETE_WITH_EXTRAS = "complete_with_extras"  #: shape complete; left-over robots separated
     INCOMPLETE = "incomplete"  #: no robot moving, shape patches still empty
     TIMEOUT = "timeout"  #: the tick limit was reached first
+    INTERRUPTED = "interrupted"  #: stopped from outside (Ctrl-C, SIGTERM) before any of the above
 
     def __str__(self) -> str:
         return self.value

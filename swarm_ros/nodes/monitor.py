@@ -23,10 +23,11 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from ..config import RecordingOptions
-from ..core.metrics import TickMetrics, outcome_of, run_summary, tick_metrics
+from ..core.metrics import Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
 from ..core.replica import Replica
 from ..core.state import STATE_COUNT, RobotState
 from ..output import RunRecord, check_out_dir, default_run_dir, partial_recording, write_run
+from ..plots import save_final_png  # noqa: F401 - import matplotlib now, not while an interrupted run is written
 from . import messages as msgs
 from .params import make_node, read_parameters
 from .runner import EXIT_INTERRUPTED, RunFailed, apply_robots, run_node
@@ -102,28 +103,38 @@ class MonitorNode:
         self._write()
         self.finished = True
 
-    def _write(self) -> None:
+    def _write(self, outcome: Outcome | None = None) -> None:
+        outcome = outcome or self.outcome
         history = np.array(self.rows, dtype=np.int64)
         final = tick_metrics(self.replica.tick, np.bincount(self.replica.state.state, minlength=STATE_COUNT),
                              self.shape.patches)
         separated = int((self.replica.state.state == RobotState.SEPARATED).sum())
         summary = run_summary(shape=self.shape.name, shape_patches=self.shape.patches,
-                              params=self.params.as_dict(), engine=ENGINE_NAME, outcome=self.outcome, final=final,
+                              params=self.params.as_dict(), engine=ENGINE_NAME, outcome=outcome, final=final,
                               separated=separated, world_radius=self.world_radius, wall_seconds=self.wall)
         record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
-                           outcome=self.outcome, summary=summary)
+                           outcome=outcome, summary=summary)
         self.written = write_run(self.out, record, overwrite=self.overwrite,
                                  recording=self.rrd if self.recording.enabled else None)
         self.node.get_logger().info(f"run written to {self.written}")
 
     def close(self, code: int) -> None:
-        """On the way out: a run stopped before its end keeps its recording so far, closed and marked."""
-        if self.recorder is None or self.outcome is not None:
+        """On the way out of a run stopped before its end.
+
+        Interrupted (SIGINT/SIGTERM) after tick 0: the run so far becomes the run
+        directory, with outcome ``interrupted``. Failed: the recording so far is kept,
+        closed and marked, as ``<out_dir>.partial.rrd``.
+        """
+        if self.outcome is not None or self.written is not None:
             return
-        if self.rows:
-            ended = "interrupted" if code == EXIT_INTERRUPTED else "failed"
-            self.recorder.outcome(ended, TickMetrics(*self.rows[-1]))
-        self.recorder.close()
+        interrupted = code == EXIT_INTERRUPTED and bool(self.rows)
+        if self.recorder is not None:
+            if self.rows:
+                self.recorder.outcome("interrupted" if interrupted else "failed", TickMetrics(*self.rows[-1]))
+            self.recorder.close()
+        if interrupted:
+            self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
+            self._write(Outcome.INTERRUPTED)
 
 
 def main(argv: list[str] | None = None) -> int:

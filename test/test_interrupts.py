@@ -1,0 +1,70 @@
+"""SIGTERM (what a service manager or `kill` sends) to simulate and experiment: out within 5 s, nothing lost.
+
+Ctrl-C (SIGINT) is covered for `run` in test_ros_graph.py and for `experiment` in
+test_experiment.py; in-process interrupts of `simulate` in test_recording.py.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from conftest import Recording, rrd_verify
+from test_experiment import _children_of, small_config
+
+from swarm_ros.experiment import read_results
+
+PY = sys.executable
+
+
+def _wait_for(predicate, timeout: float = 120) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not predicate():
+        time.sleep(0.05)
+    assert predicate(), "timed out"
+
+
+def test_sigterm_to_simulate_writes_an_interrupted_run_directory(tmp_path):
+    out = tmp_path / "run"
+    # vision 3 at this density nearly freezes the swarm: a long run (docs/model.md)
+    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "simulate", "--shape", "star", "--vision", "3",
+                             "--record-every", "50", "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    _wait_for(lambda: (tmp_path / "run.partial.rrd").exists() and (tmp_path / "run.partial.rrd").stat().st_size
+              > 200_000)  # running and recording
+    start = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert time.monotonic() - start < 5
+    summary = json.loads((out / "summary.json").read_text())
+    last = summary["convergence_tick"]
+    assert summary["outcome"] == "interrupted" and 0 < last < 100_000
+    assert f"interrupted at tick {last}; the run so far is in {out}" in err and "Traceback" not in err
+    assert len((out / "metrics.csv").read_text().splitlines()) == last + 2
+    assert rrd_verify(out / "recording.rrd").returncode == 0
+    rec = Recording(out / "recording.rrd")
+    assert max(rec.series["moving"]) == last and max(rec.robots) == last
+    assert rec.events[-1][1].startswith(f"interrupted at tick {last}")
+
+
+def test_sigterm_to_an_experiment_stops_its_workers_and_keeps_finished_runs(tmp_path):
+    config = small_config(tmp_path, repetitions=40)
+    out = tmp_path / "exp"
+    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(out), "--jobs", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    results = out / "results.csv"
+    _wait_for(lambda: results.exists() and len(results.read_text().splitlines()) > 4)
+    start = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert time.monotonic() - start < 5
+    assert not _children_of(proc.pid), "a worker outlived the experiment"
+    assert "run the same command again to resume" in err
+    assert 3 <= len(read_results(results)) < 240
+    assert not Path(out / "stats.csv").exists()  # the report is built at the end only
