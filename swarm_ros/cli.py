@@ -165,10 +165,10 @@ def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path
 
     settings = _settings(args)
     shape, params = settings.resolve()
-    out = args.out or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
-    check_out_dir(out, args.overwrite)
     recording = RecordingOptions(enabled=args.record, every=args.record_every, spawn=args.spawn,
                                  connect=args.connect)
+    out = args.out or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
+    check_out_dir(out, args.overwrite)
     return settings, shape, params, out, recording
 
 

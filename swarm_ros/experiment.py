@@ -174,11 +174,13 @@ def load_experiment(path: str | Path) -> Experiment:
     shapes = _load_shapes(path, data["shapes"], World(world_radius))
     exp = Experiment(name=name.strip(), seed=seed, repetitions=repetitions, vision_radius=vision,
                      max_ticks=max_ticks, wiggle_deg=wiggle, world_radius=world_radius, shapes=shapes)
-    for spec in exp.runs()[:: exp.repetitions]:  # the parameters of every grid point
-        try:
-            spec.params()
-        except SwarmError as exc:
-            raise _fail(path, f"shapes.{spec.shape}", str(exc)) from None
+    for shape, _, _, sizes in exp.shapes:  # the parameters of every grid point
+        for n in sizes:
+            for v in vision:
+                try:
+                    RunParams(robots=n, vision_radius=v, seed=0, max_ticks=max_ticks, wiggle_deg=wiggle)
+                except SwarmError as exc:
+                    raise _fail(path, f"shapes.{shape}", str(exc)) from None
     return exp
 
 

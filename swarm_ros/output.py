@@ -78,20 +78,21 @@ def check_out_dir(out: Path, overwrite: bool) -> None:
 
     Raises:
         OutputError: ``out`` exists (and is not an empty directory) without ``overwrite``,
-            is a file, or its parent cannot be created or written.
+            is a file, or its nearest existing ancestor is not a writable directory.
     """
     if out.exists():
         if not out.is_dir():
             raise OutputError(f"{out}: exists and is not a directory")
         if any(out.iterdir()) and not overwrite:
             raise OutputError(f"{out}: output directory exists and is not empty (use --overwrite to replace it)")
-    parent = out.absolute().parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{parent}: cannot create output directory ({exc.strerror or exc})") from None
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputError(f"{parent}: output directory is not writable")
+    # Nothing is created here: the nearest existing ancestor must be a directory we may write.
+    base = out.absolute().parent
+    while not base.exists():
+        base = base.parent
+    if not base.is_dir():
+        raise OutputError(f"{base}: is not a directory, so {out} cannot be created")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise OutputError(f"{base}: directory is not writable, so {out} cannot be created")
 
 
 def metrics_csv(history: np.ndarray) -> str:
@@ -136,6 +137,10 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
 
     check_out_dir(out, overwrite)
     out = out.absolute()
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{out.parent}: cannot create output directory ({exc.strerror or exc})") from None
     tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
     trash = out.parent / f".{out.name}.old-{os.getpid()}"
     try:

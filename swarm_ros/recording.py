@@ -131,6 +131,7 @@ class Recorder:
         self.rec.send_recording_name(f"{shape.name} n{params.robots} v{params.vision_radius:g} s{params.seed}")
         sinks: list = []
         if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)  # the run is starting: runs/ may not exist yet
             sinks.append(rr.FileSink(str(path)))
         if spawn:
             connect = connect or spawn_viewer()

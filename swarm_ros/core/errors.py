@@ -2,7 +2,17 @@
 
 
 class SwarmError(ValueError):
-    """Base class for every user-facing input error of swarm_ros."""
+    """Base class for every user-facing input error of swarm_ros.
+
+    Its text is always one line: characters that are not printable (a newline in a YAML
+    key, say) are shown escaped, as in ``'\\n'``.
+    """
+
+    def __str__(self) -> str:
+        text = super().__str__()
+        if text.isprintable():
+            return text
+        return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 class ShapeError(SwarmError):

@@ -1,0 +1,77 @@
+"""Every row of docs/bad_input.md, run as written: one line, exit 2, nothing written."""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from PIL import Image
+
+from swarm_ros import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+ROW = re.compile(r"^\| (\d+) \| (.+?) \| `(.+?)` \| `(.+?)` \|$")
+EXPERIMENT = "seed: 1\nrepetitions: 2\nvision_radius: 1\nshapes:\n  {shape}: [{sizes}]\n"
+
+
+def table() -> list[tuple[str, str, str]]:
+    rows = [ROW.match(line) for line in (ROOT / "docs" / "bad_input.md").read_text().splitlines()]
+    return [(m.group(1), m.group(3), m.group(4)) for m in rows if m]
+
+
+def make_fixtures(d: Path) -> None:
+    """The files docs/bad_input.md names."""
+    files = {
+        "empty.txt": "", "comments.txt": "; only a comment\n", "badchar.txt": "....\n.#x.\n....\n",
+        "ragged.txt": "....\n.##\n....\n", "garbage.png": "this is not a png", "empty.png": "",
+        "split.txt": "........\n.##..##.\n.##..##.\n........\n", "huge.txt": ("#" * 70 + "\n") * 70,
+        "thin.txt": ".....\n.###.\n.....\n", "bad.yaml": "/**:\n  ros__parameters:\n    robotz: 100\n",
+        "typed.yaml": "/**:\n  ros__parameters:\n    robots: many\n", "broken.yaml": "/**:\n  ros__parameters: [\n",
+        "notadir": "a file\n", "badexp.yaml": EXPERIMENT.format(shape="stra", sizes="100"),
+        "negexp.yaml": EXPERIMENT.format(shape="star", sizes="1030, -3"),
+    }
+    for name, text in files.items():
+        (d / name).write_text(text)
+    Image.new("L", (9, 9), 255).save(d / "white.png")
+    (d / "taken").mkdir()
+    (d / "taken" / "summary.json").write_text("{}")
+    (d / "emptydir").mkdir()
+
+
+def listing(d: Path) -> dict[str, int]:
+    return {str(p.relative_to(d)): p.stat().st_size for p in d.rglob("*")}
+
+
+def test_the_table_has_at_least_20_rows_numbered_in_order():
+    rows = table()
+    assert len(rows) >= 20
+    assert [int(n) for n, _, _ in rows] == list(range(1, len(rows) + 1))
+
+
+@pytest.mark.parametrize("number,command,message", table(), ids=[f"row{n}" for n, _, _ in table()])
+def test_bad_input_row(tmp_path, monkeypatch, capsys, number, command, message):
+    make_fixtures(tmp_path)
+    before = listing(tmp_path)
+    words = shlex.split(command)
+    if words[:3] == ["ros2", "run", "swarm_ros"]:  # ros2cli is not installed: run the node's module
+        home = tmp_path.parent / f"{tmp_path.name}-home"  # ROS and matplotlib caches go there, not in tmp_path
+        env = {**os.environ, "ROS_DOMAIN_ID": "231", "HOME": str(home), "ROS_LOG_DIR": str(home / "ros")}
+        done = subprocess.run([sys.executable, "-m", f"swarm_ros.nodes.{words[3]}", *words[4:]], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=120, env=env)
+        code, err = done.returncode, done.stderr
+        err = "\n".join(ln for ln in err.splitlines() if "error" in ln) + "\n"  # rclpy may log at start-up
+        prefix = f"swarm_ros {words[3]}: error: "
+    else:
+        assert words[0] == "swarm-ros"
+        monkeypatch.chdir(tmp_path)
+        code, err = cli.main(words[1:]), capsys.readouterr().err
+        prefix = "swarm-ros: error: "
+    assert code == 2, err
+    assert err.startswith(prefix) and err.count("\n") == 1, err
+    assert message in err, err
+    assert listing(tmp_path) == before, "bad input wrote something"
