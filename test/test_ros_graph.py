@@ -232,3 +232,21 @@ def test_nodes_refuse_bad_parameters_in_one_line(node, ros_args, message):
     assert done.returncode == 2
     errors = [ln for ln in done.stderr.splitlines() if "error" in ln]
     assert len(errors) == 1 and message in errors[0], done.stderr
+
+
+def test_two_runs_started_together_do_not_see_each_other(references, tmp_path):
+    """Each launcher takes a free ROS domain of its own (a lock file per id), so their topics never mix."""
+    procs = {}
+    for case in ("ring-extras", "cross-incomplete"):
+        flags, _ = references[case]
+        out = tmp_path / case
+        procs[case] = (out, subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", *flags, "--processes", "2",
+                                              "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                             text=True, env=_env()))
+    domains = []
+    for case, (out, proc) in procs.items():
+        stdout, stderr = proc.communicate(timeout=TIMEOUT)
+        assert proc.returncode == 0, stderr
+        _assert_same_run(references[case][1], out)
+        domains += [ln.split()[3].rstrip(",") for ln in stdout.splitlines() if ln.startswith("ROS graph")]
+    assert len(domains) == 2 and domains[0] != domains[1], domains
