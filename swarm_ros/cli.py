@@ -50,6 +50,18 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _failure(text: str) -> tuple[float, int]:
+    """``P@T``: a fraction in (0, 1) and a tick >= 1."""
+    fraction, at, tick = text.partition("@")
+    try:
+        p, t = float(fraction), int(tick)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected P@T, e.g. 0.1@500, got {text!r}") from None
+    if not 0 < p < 1 or t < 1 or not at:
+        raise argparse.ArgumentTypeError(f"P must be in (0, 1) and T >= 1, got {text!r}")
+    return p, t
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors."""
 
@@ -122,6 +134,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, help="run seed (default: 1)")
     p.add_argument("--max-ticks", type=_positive_int, dest="max_ticks", help="tick limit (default: 100000)")
     p.add_argument("--wiggle", type=float, dest="wiggle_deg", help="max turn per tick, degrees (default: 45)")
+    p.add_argument("--fail-robots", type=_failure, metavar="P@T",
+                   help="a fraction P of the robots fails at the end of tick T and is removed, e.g. 0.1@500")
     p.add_argument("--world-radius", type=int, dest="world_radius", help="world spans [-R, R] (default: 32)")
     p.add_argument("--params-file", type=Path, help="ROS 2 style YAML parameter file; flags override it")
     p.add_argument("--out", type=Path, help="output directory (default: runs/<time>_<shape>_n<N>_v<R>_s<seed>)")
@@ -155,6 +169,8 @@ def _settings(args: argparse.Namespace) -> Settings:
         settings = load_params_file(args.params_file, settings)
     return settings.updated(shape=args.shape, robots=args.robots, vision_radius=args.vision_radius,
                             seed=args.seed, max_ticks=args.max_ticks, wiggle_deg=args.wiggle_deg,
+                            fail_fraction=args.fail_robots[0] if args.fail_robots else None,
+                            fail_tick=args.fail_robots[1] if args.fail_robots else None,
                             world_radius=args.world_radius)
 
 
@@ -338,6 +354,9 @@ def _print_summary(s: dict, out: Path) -> None:
         ("localized", f"{s['localized']} / {s['shape_patches']} patches"),
         ("unlocalized", f"{s['unlocalized']}  (separated {s['separated']})"),
         ("empty patches", f"{s['empty_patches']}"),
+        *([("lost robots", f"{s['lost_robots']}  (" + ", ".join(f"{x['robots']} at tick {x['tick']}"
+                                                           for x in s["losses"]) + ")")]
+          if s.get("lost_robots") else []),
         ("convergence rate", f"{s['convergence_rate']:.4f} robots/tick"),
         ("wall time", f"{s['wall_seconds']:.2f} s  ({rate:,.0f} ticks/s)"),
         ("output", str(out)),

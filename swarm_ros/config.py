@@ -47,6 +47,8 @@ class Settings:
     seed: int = DEFAULT_SEED
     max_ticks: int = DEFAULT_MAX_TICKS
     wiggle_deg: float = DEFAULT_WIGGLE_DEG
+    fail_fraction: float = 0.0
+    fail_tick: int = 0
     world_radius: int = DEFAULT_RADIUS
 
     def updated(self, **values: object) -> Settings:
@@ -61,7 +63,8 @@ class Settings:
         """
         shape = Shape.load(self.shape, World(self.world_radius))
         params = RunParams(robots=self.robots or shape.patches, vision_radius=self.vision_radius, seed=self.seed,
-                           max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg)
+                           max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg, fail_fraction=self.fail_fraction,
+                           fail_tick=self.fail_tick)
         if params.robots > shape.free_patches:
             w = shape.world.size
             raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "

@@ -9,6 +9,8 @@ An experiment file is YAML::
     max_ticks: 100000           # optional, as for one run
     wiggle_deg: 45              # optional
     world_radius: 32            # optional
+    fail_fraction: 0.1          # optional: this fraction of the robots fails at the end of tick fail_tick
+    fail_tick: 500
     shapes:                     # built-in name or shape file (relative to this file) -> group sizes
       star: [1025, 1030, 1035, 1040, 1045, patches]   # 'patches' = the shape's exact patch count
 
@@ -51,12 +53,14 @@ ENGINES = ("inprocess", "ros2")
 
 #: One row of results.csv: the run's coordinates, then every summary.json field.
 RESULT_COLUMNS = ("shape", "shape_file", "robots", "vision_radius", "repetition", "seed", "shape_patches",
-                  "max_ticks", "wiggle_deg", "world_radius", "engine", "outcome", "convergence_tick",
-                  "localized", "unlocalized", "separated", "empty_patches", "convergence_rate", "wall_seconds")
-_INT_COLUMNS = {"robots", "repetition", "seed", "shape_patches", "max_ticks", "world_radius", "convergence_tick",
-                "localized", "unlocalized", "separated", "empty_patches"}
-_FLOAT_COLUMNS = {"vision_radius", "wiggle_deg", "convergence_rate", "wall_seconds"}
-_KEYS = ("name", "seed", "repetitions", "vision_radius", "max_ticks", "wiggle_deg", "world_radius", "shapes")
+                  "max_ticks", "wiggle_deg", "world_radius", "fail_fraction", "fail_tick", "engine", "outcome",
+                  "convergence_tick", "localized", "unlocalized", "separated", "empty_patches", "lost_robots",
+                  "convergence_rate", "wall_seconds")
+_INT_COLUMNS = {"robots", "repetition", "seed", "shape_patches", "max_ticks", "world_radius", "fail_tick",
+                "convergence_tick", "localized", "unlocalized", "separated", "empty_patches", "lost_robots"}
+_FLOAT_COLUMNS = {"vision_radius", "wiggle_deg", "fail_fraction", "convergence_rate", "wall_seconds"}
+_KEYS = ("name", "seed", "repetitions", "vision_radius", "max_ticks", "wiggle_deg", "world_radius", "fail_fraction",
+         "fail_tick", "shapes")
 _REQUIRED = ("seed", "repetitions", "vision_radius", "shapes")
 
 
@@ -77,6 +81,8 @@ class RunSpec:
     max_ticks: int
     wiggle_deg: float
     world_radius: int
+    fail_fraction: float = 0.0
+    fail_tick: int = 0
 
     @property
     def key(self) -> tuple[str, int, float, int]:
@@ -84,7 +90,8 @@ class RunSpec:
 
     def params(self) -> RunParams:
         return RunParams(robots=self.robots, vision_radius=self.vision_radius, seed=self.seed,
-                         max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg)
+                         max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg, fail_fraction=self.fail_fraction,
+                         fail_tick=self.fail_tick)
 
 
 def run_seed(experiment_seed: int, shape: str, robots: int, vision_radius: float, repetition: int) -> int:
@@ -105,13 +112,16 @@ class Experiment:
     max_ticks: int
     wiggle_deg: float
     world_radius: int
+    fail_fraction: float
+    fail_tick: int
     shapes: tuple[tuple[str, str, int, tuple[int, ...]], ...]  #: (name, file, patches, sizes)
 
     def runs(self) -> list[RunSpec]:
         """Every run, in the canonical order: shape, group size, vision radius, repetition."""
         return [RunSpec(shape=name, shape_file=file, robots=n, vision_radius=v, repetition=r,
                         seed=run_seed(self.seed, name, n, v, r), max_ticks=self.max_ticks,
-                        wiggle_deg=self.wiggle_deg, world_radius=self.world_radius)
+                        wiggle_deg=self.wiggle_deg, world_radius=self.world_radius,
+                        fail_fraction=self.fail_fraction, fail_tick=self.fail_tick)
                 for name, file, _, sizes in self.shapes for n in sizes for v in self.vision_radius
                 for r in range(self.repetitions)]
 
@@ -171,14 +181,22 @@ def load_experiment(path: str | Path) -> Experiment:
     max_ticks = _integer(path, "max_ticks", data.get("max_ticks", DEFAULT_MAX_TICKS), 1)
     wiggle = _number(path, "wiggle_deg", data.get("wiggle_deg", DEFAULT_WIGGLE_DEG), 0.0, True)
     world_radius = _integer(path, "world_radius", data.get("world_radius", DEFAULT_RADIUS), 3)
+    fail_fraction = _number(path, "fail_fraction", data.get("fail_fraction", 0.0), 0.0, True)
+    fail_tick = _integer(path, "fail_tick", data.get("fail_tick", 0), 0)
+    try:
+        RunParams(robots=5, fail_fraction=fail_fraction, fail_tick=fail_tick)
+    except SwarmError as exc:
+        raise _fail(path, "fail_fraction", str(exc)) from None
     shapes = _load_shapes(path, data["shapes"], World(world_radius))
     exp = Experiment(name=name.strip(), seed=seed, repetitions=repetitions, vision_radius=vision,
-                     max_ticks=max_ticks, wiggle_deg=wiggle, world_radius=world_radius, shapes=shapes)
+                     max_ticks=max_ticks, wiggle_deg=wiggle, world_radius=world_radius, fail_fraction=fail_fraction,
+                     fail_tick=fail_tick, shapes=shapes)
     for shape, _, _, sizes in exp.shapes:  # the parameters of every grid point
         for n in sizes:
             for v in vision:
                 try:
-                    RunParams(robots=n, vision_radius=v, seed=0, max_ticks=max_ticks, wiggle_deg=wiggle)
+                    RunParams(robots=n, vision_radius=v, seed=0, max_ticks=max_ticks, wiggle_deg=wiggle,
+                              fail_fraction=fail_fraction, fail_tick=fail_tick)
                 except SwarmError as exc:
                     raise _fail(path, f"shapes.{shape}", str(exc)) from None
     return exp
@@ -347,7 +365,8 @@ def run_ros2(spec: RunSpec, processes: int = 2) -> dict:
 
     shape = _shape(spec)
     settings = Settings(shape=spec.shape_file, robots=spec.robots, vision_radius=spec.vision_radius, seed=spec.seed,
-                        max_ticks=spec.max_ticks, wiggle_deg=spec.wiggle_deg, world_radius=spec.world_radius)
+                        max_ticks=spec.max_ticks, wiggle_deg=spec.wiggle_deg, world_radius=spec.world_radius,
+                        fail_fraction=spec.fail_fraction, fail_tick=spec.fail_tick)
     scratch = Path(tempfile.mkdtemp(prefix="swarm_ros-exp-"))
     try:
         launch = Launch(settings=settings, shape=shape, params=spec.params(), processes=processes,

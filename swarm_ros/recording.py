@@ -60,6 +60,7 @@ _ROBOT_CLASSES = {
     RobotState.MOVING_INSIDE: ("moving inside", (240, 228, 66)),
     RobotState.LOCALIZED: ("localized", (0, 114, 178)),
     RobotState.SEPARATED: ("separated", (204, 121, 167)),
+    RobotState.REMOVED: ("removed (failed)", (0, 0, 0, 0)),
 }
 _PATCH_CLASSES = {
     FREE: ("free patch", (0, 0, 0, 0)),

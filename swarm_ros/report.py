@@ -41,7 +41,7 @@ STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"
 OUTCOMES = tuple(o.value for o in Outcome)
 STATS_COLUMNS = ("shape", "shape_patches", "robots", "vision_radius", "runs", "mean_convergence_tick",
                  "sd_convergence_tick", "ci95_low", "ci95_high", "mean_localized", "mean_unlocalized",
-                 "mean_separated", "mean_empty_patches", *OUTCOMES, "completed_fraction", "mean_convergence_rate")
+                 "mean_separated", "mean_empty_patches", "mean_lost_robots", *OUTCOMES, "completed_fraction", "mean_convergence_rate")
 _COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000")
 
 
@@ -68,7 +68,7 @@ def group_stats(rows: list[dict]) -> list[dict]:
             "runs": n, "mean_convergence_tick": mean, "sd_convergence_tick": sd,
             "ci95_low": mean - half, "ci95_high": mean + half,
             **{f"mean_{k}": float(np.mean([r[k] for r in runs]))
-               for k in ("localized", "unlocalized", "separated", "empty_patches")},
+               for k in ("localized", "unlocalized", "separated", "empty_patches", "lost_robots")},
             **counts,
             "completed_fraction": (counts["complete"] + counts["complete_with_extras"]) / n,
             "mean_convergence_rate": float(np.mean([r["convergence_rate"] for r in runs])),
@@ -134,7 +134,8 @@ def _curve(row: dict) -> np.ndarray:
 
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
     sim = Simulation(shape, RunParams(robots=row["robots"], vision_radius=row["vision_radius"], seed=row["seed"],
-                                      max_ticks=row["max_ticks"], wiggle_deg=row["wiggle_deg"]))
+                                      max_ticks=row["max_ticks"], wiggle_deg=row["wiggle_deg"],
+                                      fail_fraction=row["fail_fraction"], fail_tick=row["fail_tick"]))
     sim.run()
     if sim.tick != row["convergence_tick"] or sim.outcome.value != row["outcome"]:
         raise ExperimentError(f"re-running {row['shape']} n={row['robots']} seed {row['seed']} gave "

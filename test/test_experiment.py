@@ -202,7 +202,7 @@ def _children_of(pid: int) -> list[int]:
 
 def test_statistics_match_a_hand_computed_t_interval():
     rows = [{"shape": "s", "shape_patches": 10, "robots": 10, "vision_radius": 1.0, "convergence_tick": t,
-             "outcome": o, "localized": 10, "unlocalized": 0, "separated": 0, "empty_patches": 0,
+             "outcome": o, "localized": 10, "unlocalized": 0, "separated": 0, "empty_patches": 0, "lost_robots": 0,
              "convergence_rate": 0.5} for t, o in ((10, "complete"), (12, "complete"), (14, "timeout"))]
     (s,) = group_stats(rows)
     # mean 12, sd 2, t(0.975, 2 d.f.) = 4.303 from a printed table: half width 4.303 * 2 / sqrt(3) = 4.969
@@ -290,3 +290,17 @@ def test_ros2_engine_gives_the_in_process_results(small, tmp_path):
     a, b = rows_without_timing(ros), rows_without_timing(ref)
     assert {r.pop("engine") for r in a} == {"ros2"} and {r.pop("engine") for r in b} == {"inprocess"}
     assert a == b
+
+
+def test_experiments_can_damage_the_swarm_with_failing_robots(tmp_path):
+    config = small_config(tmp_path, repetitions=2, vision_radius=[1], fail_fraction=0.2, fail_tick=20)
+    out = tmp_path / "out"
+    assert experiment(config, out) == 0
+    rows = read_results(out / "results.csv")
+    assert {(r["fail_fraction"], r["fail_tick"]) for r in rows} == {(0.2, 20)}
+    for r in rows:
+        lost = round(0.2 * r["robots"])
+        assert r["lost_robots"] == lost
+        assert r["localized"] == min(r["robots"] - lost, r["shape_patches"])  # the shape repaired itself
+    stats = list(csv.DictReader((out / "stats.csv").open()))
+    assert {s["mean_lost_robots"] for s in stats} == {str(round(0.2 * n)) for n in (50, 69, 80)}

@@ -33,4 +33,5 @@ def test_state_codes_are_stable():
     from swarm_ros.core import RobotState
 
     assert [(s.value, s.label) for s in RobotState] == [
-        (0, "seed"), (1, "moving_outside"), (2, "moving_inside"), (3, "localized"), (4, "separated")]
+        (0, "seed"), (1, "moving_outside"), (2, "moving_inside"), (3, "localized"), (4, "separated"),
+        (5, "removed")]

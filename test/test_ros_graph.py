@@ -80,6 +80,7 @@ CASES = {
     "cross-incomplete": (dict(outer=13, cross=True), ["--world-radius", "16", "--robots", "-25"]),  # ~280 ticks
     "ring-timeout": (dict(outer=12.5, hole=5), ["--world-radius", "16", "--robots", "-120", "--vision", "2",
                                                  "--max-ticks", "1500"]),
+    "ring-fail": (dict(outer=12.5, hole=5), ["--world-radius", "16", "--robots", "+20", "--fail-robots", "0.15@120"]),
 }
 
 
@@ -250,3 +251,14 @@ def test_two_runs_started_together_do_not_see_each_other(references, tmp_path):
         _assert_same_run(references[case][1], out)
         domains += [ln.split()[3].rstrip(",") for ln in stdout.splitlines() if ln.startswith("ROS graph")]
     assert len(domains) == 2 and domains[0] != domains[1], domains
+
+
+def test_ros_graph_equals_in_process_engine_with_failing_robots(references, tmp_path):
+    """--fail-robots: the world removes the same robots at the same tick, the replicas free their patches."""
+    flags, ref = references["ring-fail"]
+    out = tmp_path / "run"
+    done = swarm_ros("run", *flags, "--processes", "3", "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["lost_robots"] == 66 and summary["losses"] == [{"tick": 120, "robots": 66}]
+    _assert_same_run(ref, out)

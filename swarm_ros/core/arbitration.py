@@ -61,6 +61,24 @@ def occupy(p, i, occupancy, frontier, shape, size):
 
 
 @numba.njit(cache=True)
+def vacate(p, occupancy, frontier, shape, size):
+    """The robot on patch ``p`` is removed: empty it and recompute the frontier around it (``occupy``'s inverse)."""
+    occupancy[p] = -1
+    for dy in (-size, 0, size):
+        for dx in (-1, 0, 1):
+            q = p + dy + dx
+            if not shape[q] or occupancy[q] >= 0:
+                continue
+            near = False
+            for ey in (-size, 0, size):
+                for ex in (-1, 0, 1):
+                    r = q + ey + ex
+                    if r != q and occupancy[r] >= 0:
+                        near = True
+            frontier[q] = near
+
+
+@numba.njit(cache=True)
 def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier,
                    shape, radius, size, seed, tick, best, localized, shape_patches, outcome):
     """Apply the decisions of robots ``ids`` to the state arrays in place.

@@ -22,16 +22,27 @@ import numba
 import numpy as np
 
 from .arbitration import resolve_kernel
+from .arbitration import vacate
 from .metrics import (END_EXTRAS, METRIC_COLUMNS, OUTCOME_OF_CODE, RUNNING, Outcome, TickMetrics, end_code,
                       metric_values, run_summary)
 from .params import RunParams
-from .rules import Decisions, decide_kernel, index_build, index_clear
+from .rng import STREAM_FAIL, uniform_array
+from .rules import Decisions, decide_kernel, index_build, index_clear, patch_index
 from .shapes import Shape
 from .state import RobotState, SwarmState, initial_state
 
 ENGINE_NAME = "inprocess"
 _MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState.MOVING_INSIDE)
 _SEPARATED = int(RobotState.SEPARATED)
+_STATIONARY_LOCALIZED = (int(RobotState.SEED), int(RobotState.LOCALIZED))
+
+
+def failing_robots(params: RunParams) -> np.ndarray:
+    """The ids of the robots that fail at ``params.fail_tick``: the ``params.failures`` robots with the
+    lowest draws of the failure stream (a pure function of seed and ids, so every engine picks the same)."""
+    ids = np.arange(params.robots)
+    draws = uniform_array(params.seed, ids, params.fail_tick, STREAM_FAIL)
+    return np.sort(ids[np.argsort(draws, kind="stable")[: params.failures]])
 _CHUNK = 4096  # ticks per compiled call in run(): long enough to hide the call, short enough for progress
 
 
@@ -135,12 +146,10 @@ class Simulation:
         self._decided = 0
         self._rows = np.zeros((1024, len(METRIC_COLUMNS)), dtype=np.int64)
         self._nrows = 0
+        self.losses: list[tuple[int, int]] = []  #: (tick, robots removed at its end), in tick order
+        self.last_removed = np.empty(0, dtype=np.int64)  #: ids removed at the end of the last tick
         s = self.state
-        self._kernel_args = (
-            self._moving, s.x, s.y, s.heading, s.state, self._shape, self._wall, s.frontier, s.occupancy,
-            self._radius, self._size, params.vision_radius, params.wiggle_rad, params.seed, self._head,
-            self._nxt, self._best, self._claim, self._new_x, self._new_y, self._new_heading, self._outcome,
-            self._last_ids, shape.patches, params.robots, params.max_ticks)
+        self._set_kernel_args(params.robots)
         counts = s.counts()
         self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
         self.outcome: Outcome | None = None
@@ -148,6 +157,15 @@ class Simulation:
                                     int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
                                     shape.patches, params.robots, params.max_ticks, self._rows[0])
         self._record(0, 1, code)
+
+    def _set_kernel_args(self, alive: int) -> None:
+        s, params = self.state, self.params
+        self._alive = alive
+        self._kernel_args = (
+            self._moving, s.x, s.y, s.heading, s.state, self._shape, self._wall, s.frontier, s.occupancy,
+            self._radius, self._size, params.vision_radius, params.wiggle_rad, params.seed, self._head,
+            self._nxt, self._best, self._claim, self._new_x, self._new_y, self._new_heading, self._outcome,
+            self._last_ids, self.shape.patches, alive, params.max_ticks)
 
     # -- reading ----------------------------------------------------------------
     @property
@@ -194,7 +212,10 @@ class Simulation:
         left = float("inf") if max_ticks is None else max_ticks
         while self.outcome is None and left > 0:
             if on_tick is None:
-                left -= self._run_compiled(int(min(left, _CHUNK)))
+                chunk = min(left, _CHUNK)
+                if self._failure_pending():  # stop at the failure tick's end
+                    chunk = min(chunk, self.params.fail_tick - self.tick)
+                left -= self._run_compiled(int(chunk))
             else:
                 self._run_compiled(1)
                 left -= 1
@@ -231,9 +252,60 @@ class Simulation:
                                     inside, outside, self.shape.patches, self.params.robots,
                                     self.params.max_ticks, self._rows[self._nrows])
         self._record(1, 1, code)
+        self._after_tick()
         return self.metrics
 
+    def remove(self, ids: np.ndarray) -> int:
+        """Take robots out of the world at the end of the current tick (failures, a lost process).
+
+        A removed robot frees the patch it held, if it was localized (the frontier
+        follows), and no longer decides, is sensed or is counted; the remaining robots
+        can refill the patch (self-repair). The current tick's metrics and the end check
+        are redone. Returns how many robots were removed (robots already removed, or an
+        ended run, count 0).
+        """
+        s = self.state
+        ids = np.unique(np.asarray(ids, dtype=np.int64))
+        if self.outcome is not None or ids.size == 0:
+            self.last_removed = np.empty(0, dtype=np.int64)
+            return 0
+        if ids[0] < 0 or ids[-1] >= s.robots:
+            raise ValueError(f"robot ids must be in [0, {s.robots - 1}]")
+        ids = ids[s.state[ids] != RobotState.REMOVED]
+        for i in ids.tolist():
+            if s.state[i] in _STATIONARY_LOCALIZED:
+                vacate(patch_index(s.x[i], s.y[i], self._radius, self._size), s.occupancy, s.frontier,
+                       self._shape, self._size)
+        s.state[ids] = RobotState.REMOVED
+        self.last_removed = ids
+        if ids.size:
+            self.losses.append((self.tick, int(ids.size)))
+        counts = s.counts()
+        self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
+        self._m = _compact_moving(self._moving, self._m, s.state)
+        self._set_kernel_args(self._alive - int(ids.size))
+        code, self._m = _close_tick(self._moving, self._m, s.state, self.tick, self._localized,
+                                    int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
+                                    self.shape.patches, self._alive, self.params.max_ticks,
+                                    self._rows[self._nrows - 1])
+        self.outcome = OUTCOME_OF_CODE[code]
+        return int(ids.size)
+
+    @property
+    def removed(self) -> int:
+        """Robots removed so far."""
+        return self.params.robots - self._alive
+
     # -- bookkeeping ------------------------------------------------------------
+    def _failure_pending(self) -> bool:
+        return self.params.failures > 0 and self.tick < self.params.fail_tick
+
+    def _after_tick(self) -> None:
+        """Scheduled failures (``params.fail_fraction`` at the end of ``params.fail_tick``)."""
+        self.last_removed = np.empty(0, dtype=np.int64)
+        if self.params.failures > 0 and self.tick == self.params.fail_tick and self.outcome is None:
+            self.remove(failing_robots(self.params))
+
     def _check_running(self) -> None:
         if self.outcome is not None:
             raise RuntimeError(f"the run has ended ({self.outcome}) at tick {self.tick}")
@@ -251,6 +323,7 @@ class Simulation:
         n, self._m, self._localized, self._decided, code = _run_kernel(
             *self._kernel_args, self._rows[self._nrows:], self._m, self.tick, self._localized, limit)
         self._record(n, n, code)
+        self._after_tick()
         return n
 
     def _record(self, ticks: int, rows: int, code: int) -> None:
@@ -269,7 +342,7 @@ class Simulation:
             raise RuntimeError("the run has not ended yet")
         return run_summary(
             shape=self.shape.name, shape_patches=self.shape.patches, params=self.params.as_dict(),
-            engine=self.engine, outcome=outcome, final=self.metrics,
+            engine=self.engine, outcome=outcome, final=self.metrics, losses=self.losses,
             separated=self.metrics.stationary - self.metrics.localized, world_radius=self._radius,
             wall_seconds=wall_seconds)
 

@@ -38,10 +38,12 @@ def check_state(sim: Simulation) -> None:
     s, shape, t = sim.state, sim.shape, sim.state.tick
     world = shape.world
     n, patches = s.robots, shape.patches
-    _require(bool(np.all((s.state >= 0) & (s.state <= RobotState.SEPARATED))), t, "unknown robot state code")
+    _require(bool(np.all((s.state >= 0) & (s.state <= RobotState.REMOVED))), t, "unknown robot state code")
     localized = np.isin(s.state, _STATIONARY)
-    _require(bool(np.all(s.state[:4] == RobotState.SEED)) and int(np.sum(s.state == RobotState.SEED)) == 4, t,
-             "robots 0-3, and only they, are seeds")
+    seeds = s.state[:4]
+    _require(bool(np.all((seeds == RobotState.SEED) | (seeds == RobotState.REMOVED)))
+             and int(np.sum(s.state == RobotState.SEED)) == int(np.sum(seeds == RobotState.SEED)), t,
+             "robots 0-3, and only they, are seeds (or removed)")
     # at most one localized robot per patch, only on shape patches
     px, py = world.patch_of(s.x, s.y)
     _require(bool(np.all((np.abs(px) < world.radius) & (np.abs(py) < world.radius))), t, "a robot is on a wall")
@@ -54,7 +56,9 @@ def check_state(sim: Simulation) -> None:
     _require(bool(np.array_equal(s.occupancy[flat[loc_ids]], loc_ids)), t, "occupancy names the wrong robot")
     _require(bool(np.all((s.x[loc_ids] == px[loc_ids]) & (s.y[loc_ids] == py[loc_ids]))), t,
              "a localized robot is off its patch centre")
-    _require(loc_ids.size <= min(n, patches), t, "#localized > min(N, shape patches)")
+    alive = n - int(np.sum(s.state == RobotState.REMOVED))
+    _require(alive == n - sim.removed, t, "removed robots miscounted")
+    _require(loc_ids.size <= min(alive, patches), t, "#localized > min(N, shape patches)")
     _require(bool(np.array_equal(s.frontier, frontier_of(shape, s.occupancy))), t, "frontier out of date")
     counts = s.counts()
     _require(sim.metrics == tick_metrics(t, counts, patches), t, f"metrics {sim.metrics} do not match the state")
@@ -65,7 +69,7 @@ def check_state(sim: Simulation) -> None:
     _require(not np.any(s.state == RobotState.SEPARATED) or sim.outcome is Outcome.COMPLETE_WITH_EXTRAS, t,
              "separated robots before the shape completed")
     if sim.outcome is Outcome.COMPLETE:
-        _require(n == patches == loc_ids.size, t, "complete, yet robots or patches left over")
+        _require(alive == patches == loc_ids.size, t, "complete, yet robots or patches left over")
     if sim.outcome is Outcome.INCOMPLETE:
         _require(not np.any(np.isin(s.state, _MOVING)) and loc_ids.size < patches, t, "incomplete, yet robots moving")
 
@@ -75,24 +79,34 @@ def check_tick(prev: SwarmState, sim: Simulation) -> None:
     s, shape, t = sim.state, sim.shape, sim.state.tick
     check_state(sim)
     _require(t == prev.tick + 1, t, "tick did not advance by one")
-    was_loc = np.isin(prev.state, _STATIONARY)
+    # Robots removed at the end of this tick (failures) are the one exception to "localized stays
+    # localized" and "the shape state never goes back": the rules below are checked without them.
+    removed = np.zeros(s.robots, dtype=bool)
+    removed[sim.last_removed] = True
+    _require(bool(np.all(s.state[removed] == RobotState.REMOVED)), t, "a removed robot is still in the world")
+    _require(bool(np.all(prev.state[removed] != RobotState.REMOVED)), t, "a robot was removed twice")
+    _require(bool(np.all((s.state == RobotState.REMOVED) == (removed | (prev.state == RobotState.REMOVED)))), t,
+             "a robot left the world without a failure")
+    was_loc = np.isin(prev.state, _STATIONARY) & ~removed
     now_loc = np.isin(s.state, _STATIONARY)
     _require(bool(np.all(now_loc[was_loc])), t, "a localized robot became unlocalized")
     _require(bool(np.all((s.x[was_loc] == prev.x[was_loc]) & (s.y[was_loc] == prev.y[was_loc]))), t,
              "a localized robot moved")
     before, after = int(was_loc.sum()), int(now_loc.sum())
-    _require(shape_status(after, shape.patches) >= shape_status(before, shape.patches), t,
-             "shape state went backwards")
+    if not removed.any():
+        _require(shape_status(after, shape.patches) >= shape_status(before, shape.patches), t,
+                 "shape state went backwards")
     # joins: success only for an unlocalized robot while #localized < patches, on a frontier patch
     ids, claim, outcome = sim.last_joins()
     _require(bool(np.all(np.isin(prev.state[ids], _MOVING))), t, "a non-moving robot decided")
     valid = {int(o) for o in JoinOutcome}
     _require(set(np.unique(outcome).tolist()) <= valid, t, "join outcome outside {success, already complete, incomplete}")
     won = outcome == JoinOutcome.SUCCESS
-    _require(int(won.sum()) == after - before, t, "successful joins differ from new localized robots")
+    kept = won & ~removed[ids]  # a robot may join and then fail at the end of the same tick
+    _require(int(kept.sum()) == after - before, t, "successful joins differ from new localized robots")
     _require(before + int(won.sum()) <= shape.patches, t, "a join succeeded on a complete shape")
     _require(bool(np.all(prev.frontier[claim[won]])), t, "a join succeeded off the frontier")
-    _require(bool(np.all(s.occupancy[claim[won]] == ids[won])), t, "a winner is not on its patch")
+    _require(bool(np.all(s.occupancy[claim[kept]] == ids[kept])), t, "a winner is not on its patch")
     tried = claim >= 0
     _require(bool(np.all((outcome == JoinOutcome.NO_CLAIM) == ~tried)), t, "claim and outcome disagree")
     refused = tried & ~won

@@ -74,13 +74,14 @@ def end_code(localized, moving, tick, shape_patches, robots, max_ticks):
 
 
 def tick_metrics(tick: int, counts: Sequence[int] | np.ndarray, shape_patches: int) -> TickMetrics:
-    """Metrics from the number of robots in each :class:`RobotState` (``counts[code]``, codes 0-4 in order)."""
-    seed, outside, inside, localized, separated = (int(c) for c in counts)
+    """Metrics from the number of robots in each :class:`RobotState` (``counts[code]``, codes in order;
+    removed robots, code 5, count nowhere)."""
+    seed, outside, inside, localized, separated = (int(c) for c in counts[:5])
     return TickMetrics(*metric_values(tick, seed + localized, inside, outside, separated, shape_patches))
 
 
 def outcome_of(metrics: TickMetrics, shape_patches: int, robots: int, max_ticks: int) -> Outcome | None:
-    """The run's outcome if it ends at this tick, else None."""
+    """The run's outcome if it ends at this tick, else None (``robots``: those not removed)."""
     return OUTCOME_OF_CODE[end_code(metrics.localized, metrics.moving, metrics.tick, shape_patches, robots,
                                     max_ticks)]
 
@@ -91,9 +92,15 @@ def convergence_rate(final: TickMetrics) -> float:
 
 
 def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, outcome: Outcome,
-                final: TickMetrics, separated: int, world_radius: int, wall_seconds: float) -> dict:
-    """The per-run record written to ``summary.json`` (and, later, one row of an experiment)."""
+                final: TickMetrics, separated: int, world_radius: int, wall_seconds: float,
+                losses: Sequence[tuple[int, int]] = ()) -> dict:
+    """The per-run record written to ``summary.json`` (and one row of an experiment).
+
+    ``losses`` are (tick, robots) of robot removals (failures, lost processes);
+    ``unlocalized`` counts the robots still in the world that did not localize.
+    """
     robots = params["robots"]
+    lost = sum(k for _, k in losses)
     return {
         "shape": shape,
         "shape_patches": shape_patches,
@@ -107,9 +114,13 @@ def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, ou
         "outcome": outcome.value,
         "convergence_tick": final.tick,
         "localized": final.localized,
-        "unlocalized": robots - final.localized,
+        "unlocalized": robots - lost - final.localized,
         "separated": separated,
         "empty_patches": final.empty_patches,
         "convergence_rate": round(convergence_rate(final), 6),
         "wall_seconds": round(wall_seconds, 3),
+        "fail_fraction": params.get("fail_fraction", 0.0),
+        "fail_tick": params.get("fail_tick", 0),
+        "lost_robots": lost,
+        "losses": [{"tick": t, "robots": k} for t, k in losses],
     }

@@ -25,6 +25,9 @@ class RunParams:
         seed: run seed, 0 <= seed < 2**63.
         max_ticks: tick limit; a run still going then ends with outcome ``timeout``.
         wiggle_deg: a wandering robot turns by a uniform angle in [-wiggle, +wiggle] degrees per tick.
+        fail_fraction: the fraction of the robots that fail at the end of tick ``fail_tick``
+            and are removed (0 = none): damage for studying self-repair.
+        fail_tick: the tick at whose end they fail (>= 1 when ``fail_fraction`` > 0).
     """
 
     robots: int
@@ -32,12 +35,23 @@ class RunParams:
     seed: int = DEFAULT_SEED
     max_ticks: int = DEFAULT_MAX_TICKS
     wiggle_deg: float = DEFAULT_WIGGLE_DEG
+    fail_fraction: float = 0.0
+    fail_tick: int = 0
 
     def __post_init__(self) -> None:
-        for name, low, high in (("robots", 4, None), ("seed", 0, MAX_SEED), ("max_ticks", 1, None)):
+        for name, low, high in (("robots", 4, None), ("seed", 0, MAX_SEED), ("max_ticks", 1, None),
+                                ("fail_tick", 0, None)):
             object.__setattr__(self, name, _int(name, getattr(self, name), low, high))
         object.__setattr__(self, "vision_radius", _real("vision_radius", self.vision_radius, 0.0, 100.0))
         object.__setattr__(self, "wiggle_deg", _real("wiggle_deg", self.wiggle_deg, 0.0, 180.0, True))
+        object.__setattr__(self, "fail_fraction", _real("fail_fraction", self.fail_fraction, 0.0, 1.0, True))
+        if self.fail_fraction > 0 and self.fail_tick < 1:
+            raise ParameterError(f"fail_tick must be >= 1 when fail_fraction > 0, got {self.fail_tick}")
+
+    @property
+    def failures(self) -> int:
+        """How many robots fail at ``fail_tick``: ``round(fail_fraction * robots)``."""
+        return round(self.fail_fraction * self.robots)
 
     @property
     def wiggle_rad(self) -> float:

@@ -13,20 +13,22 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .arbitration import occupy
+from .arbitration import occupy, vacate
 from .rules import patch_index
 from .shapes import Shape
 from .state import NO_ROBOT, RobotState, SwarmState
 
 _SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
 _MOVING_OUTSIDE, _MOVING_INSIDE = np.int8(RobotState.MOVING_OUTSIDE), np.int8(RobotState.MOVING_INSIDE)
+_REMOVED = np.int8(RobotState.REMOVED)
 UNKNOWN = np.int8(-1)  #: state of a robot before the tick-0 rows arrive
 
 
 @numba.njit(cache=True)
 def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, shape,
                 radius, size):
-    """Write the rows into the state arrays; occupy the patch of every robot that became stationary-localized.
+    """Write the rows into the state arrays; occupy the patch of every robot that became stationary-localized,
+    free the patch of every localized robot that was removed.
 
     Returns the number of rows that were rejected (-1 per row whose id is out of range
     or whose localized patch is not an empty shape patch), else 0.
@@ -38,6 +40,10 @@ def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state,
             return k + 1
         was = state[i]
         st = new_state[k]
+        if was == _REMOVED and st != _REMOVED:
+            return k + 1  # removed robots never come back
+        if st == _REMOVED and (was == _SEED or was == _LOCALIZED):
+            vacate(patch_index(x[i], y[i], radius, size), occupancy, frontier, shape, size)
         x[i] = new_x[k]
         y[i] = new_y[k]
         heading[i] = new_heading[k]
@@ -94,8 +100,8 @@ class Replica:
                           np.asarray(heading, dtype=np.float64), s.x, s.y, s.heading, s.state, s.occupancy,
                           s.frontier, self._shape, self._radius, self._size)
         if bad:
-            raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range or "
-                             f"localizes on a patch that is not an empty shape patch")
+            raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
+                             f"localizes on a patch that is not an empty shape patch, or returns after removal")
         s.tick = tick
 
     def moving_ids(self) -> np.ndarray:

@@ -20,6 +20,7 @@ STREAM_PRIORITY = 2  #: lottery ticket when several robots claim one patch
 STREAM_PLACE_X = 3  #: x offset within the start patch (tick 0)
 STREAM_PLACE_Y = 4  #: y offset within the start patch (tick 0)
 STREAM_PLACE_HEADING = 5  #: start heading (tick 0)
+STREAM_FAIL = 6  #: which robots fail at the failure tick (``RunParams.fail_fraction``)
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)

@@ -24,6 +24,7 @@ class RobotState(IntEnum):
     MOVING_INSIDE = 2  #: wandering on a shape patch, looking for a place to join
     LOCALIZED = 3  #: joined the shape: stationary on a shape patch
     SEPARATED = 4  #: left over after the shape completed: stationary, unlocalized
+    REMOVED = 5  #: failed and taken out of the world (``--fail-robots``, a lost process): holds no patch
 
     @property
     def label(self) -> str:
@@ -66,7 +67,7 @@ class SwarmState:
                              for f in fields(self)})
 
     def counts(self) -> np.ndarray:
-        """Robots per :class:`RobotState` code (int64, (5,))."""
+        """Robots per :class:`RobotState` code (int64, (STATE_COUNT,))."""
         return np.bincount(self.state, minlength=STATE_COUNT)
 
     def moving_ids(self) -> np.ndarray:

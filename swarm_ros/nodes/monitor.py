@@ -52,6 +52,7 @@ class MonitorNode:
         self.rrd = partial_recording(self.out)
         self.recorder = self.recording.open(self.rrd, self.shape, p)
         self.replica = Replica(self.shape, p.robots)
+        self.losses: list[tuple[int, int]] = []  # (tick, robots removed), seen as rows turning 'removed'
         self.rows: list[tuple[int, ...]] = []
         self.outcome = None
         self.world_outcome: str | None = None
@@ -70,13 +71,16 @@ class MonitorNode:
             return
         if self.started_at is None:
             self.started_at = time.perf_counter()
+        removed_before = self.removed
         tick = apply_robots(self.replica, msg)
         counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
         metrics = tick_metrics(tick, counts, self.shape.patches)
         self.rows.append(tuple(metrics))
         self.pub_metrics.publish(msgs.metrics_message(metrics))
+        if self.removed > removed_before:
+            self.losses.append((tick, self.removed - removed_before))
         p = self.params
-        self.outcome = outcome_of(metrics, self.shape.patches, p.robots, p.max_ticks)
+        self.outcome = outcome_of(metrics, self.shape.patches, p.robots - self.removed, p.max_ticks)
         if self.recorder is not None:
             self.recorder.metrics([metrics])
             self.recorder.robots(self.replica.state, force=self.outcome is not None)
@@ -86,6 +90,10 @@ class MonitorNode:
                 self.recorder.close()
             self.ended_at = time.monotonic()
             self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
+
+    @property
+    def removed(self) -> int:
+        return int((self.replica.state.state == RobotState.REMOVED).sum())
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         outcome = msgs.status_values(msg).get("outcome")
@@ -111,7 +119,8 @@ class MonitorNode:
         separated = int((self.replica.state.state == RobotState.SEPARATED).sum())
         summary = run_summary(shape=self.shape.name, shape_patches=self.shape.patches,
                               params=self.params.as_dict(), engine=ENGINE_NAME, outcome=outcome, final=final,
-                              separated=separated, world_radius=self.world_radius, wall_seconds=self.wall)
+                              separated=separated, world_radius=self.world_radius, wall_seconds=self.wall,
+                              losses=self.losses)
         record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
                            outcome=outcome, summary=summary)
         self.written = write_run(self.out, record, overwrite=self.overwrite,

@@ -123,9 +123,9 @@ class WorldNode:
         except ValueError as exc:
             raise RunFailed(f"tick {tick}: {exc}") from None
         s = self.sim.state
-        ids = self.sim.last_joins()[0]
+        ids = np.union1d(self.sim.last_joins()[0], self.sim.last_removed)  # deciders and failed robots changed
         self._emit(tick, msgs.make_cloud(robot_rows(ids, s.state, s.x, s.y, s.heading), tick),
-                   joined=self.sim.metrics.localized != localized_before)
+                   joined=self.sim.metrics.localized != localized_before or self.sim.last_removed.size > 0)
 
     def _emit(self, tick: int, robots_msg: PointCloud2, joined: bool = False) -> None:
         """Publish a tick now, or queue it while the monitor is more than ``monitor_window`` ticks behind."""
