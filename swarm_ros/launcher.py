@@ -152,6 +152,7 @@ class Launch:
     domain_id: int | None = None
     recording: RecordingOptions = field(default_factory=RecordingOptions)
     children: list[Child] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  #: processes lost during the run
 
     def run(self) -> Path:
         out = self.out.absolute()
@@ -203,26 +204,44 @@ class Launch:
             self.children.append(Child(name, proc, log, f))
 
     def _follow(self) -> None:
-        """Show progress until the monitor has written the run; raise LaunchError if a process fails."""
+        """Show progress until the monitor has written the run.
+
+        A robot-batch process that dies is the world's business: it notices (liveliness),
+        removes that batch's robots and goes on; the launcher reports the exit. A monitor
+        that dies is reported too, and the swarm runs to its end without it; the command
+        then fails, as nothing wrote the run directory (the recording so far stays in
+        ``<run>.partial.rrd``). The world failing fails the run at once.
+        """
         from .nodes.progress import Progress
 
         monitor = next(c for c in self.children if c.name == "monitor")
-        others_done_at = None
+        world = next(c for c in self.children if c.name == "world")
+        reported: set[str] = set()
+        world_done_at = None
         with Progress(self.domain, self.shape.patches, quiet=self.quiet) as progress:
             while True:
                 progress.spin(0.1)
-                codes = [c.proc.poll() for c in self.children]
-                if monitor.proc.returncode is not None or any(code not in (None, 0) for code in codes):
+                for c in self.children:
+                    code = c.proc.poll()
+                    if code not in (None, 0) and c is not world and c.name not in reported:
+                        reported.add(c.name)
+                        then = ("the world removes its robots and the run goes on" if c is not monitor else
+                                "the swarm goes on without it, but nothing will write the run directory")
+                        self.warnings.append(f"{c.name} exited with status {code} ({c.last_error() or 'no output'})"
+                                             f"; {then}")
+                        progress.bar.write(f"swarm-ros: warning: {self.warnings[-1]}", file=sys.stderr)
+                if world.proc.returncode not in (None, 0):
+                    raise LaunchError(f"world exited with status {world.proc.returncode}: "
+                                      f"{world.last_error() or 'no output'}")
+                if monitor.proc.returncode == 0:
                     break
-                if others_done_at is None and any(code == 0 for code in codes):
-                    others_done_at = time.monotonic()
-                if others_done_at is not None and time.monotonic() - others_done_at > 3 * _GRACE:
+                if world.proc.returncode == 0 and world_done_at is None:
+                    world_done_at = time.monotonic()
+                if world_done_at is not None and monitor.proc.returncode is not None:
+                    raise LaunchError(f"the monitor was lost (status {monitor.proc.returncode}); the swarm ran to its "
+                                      f"end without it, but no run directory was written")
+                if world_done_at is not None and time.monotonic() - world_done_at > 3 * _GRACE:
                     raise LaunchError(f"the run ended but the monitor did not write it within {3 * _GRACE:g} s")
-        failed = [c for c in self.children if c.proc.returncode not in (None, 0)]
-        if failed:
-            first = failed[0]
-            raise LaunchError(f"{first.name} exited with status {first.proc.returncode}: "
-                              f"{first.last_error() or 'no output'}")
         deadline = time.monotonic() + _GRACE
         while time.monotonic() < deadline and any(c.proc.poll() is None for c in self.children):
             time.sleep(0.05)

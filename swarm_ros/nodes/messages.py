@@ -14,7 +14,8 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import OccupancyGrid
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.duration import Duration
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
@@ -32,6 +33,7 @@ OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (Occupanc
 STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
 METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
 CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
+ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
 
 # -- QoS ----------------------------------------------------------------------------
 #: Lockstep traffic: nothing may be lost, and a reader that matches late (a monitor
@@ -52,6 +54,16 @@ METRICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=64, reliability=
                          durability=DurabilityPolicy.VOLATILE)
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)
+#: Liveliness only: nothing is published. DDS asserts an AUTOMATIC writer alive while its process
+#: runs; a killed or stopped (SIGSTOP) process misses the lease and its readers are told within it.
+LIVELINESS_LEASE_S = 1.0
+ALIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE, liveliness=LivelinessPolicy.AUTOMATIC,
+                       liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE_S))
+
+
+def alive_topic(node_name: str) -> str:
+    return f"{ALIVE}/{node_name}"
 
 # OccupancyGrid cell values
 CELL_OFF_SHAPE = -1  # wall or floor outside the shape ("unknown" to map tools)

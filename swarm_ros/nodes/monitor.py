@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Int64MultiArray
+from std_msgs.msg import Empty, Int64MultiArray
 
 from ..config import RecordingOptions
 from ..core.metrics import Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
@@ -62,6 +62,7 @@ class MonitorNode:
         self.written: Path | None = None
 
         self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
+        self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
         node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
         node.get_logger().info(f"monitor: writing to {self.out}")

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Int64MultiArray
+from std_msgs.msg import Empty, Int64MultiArray
 
 from ..core.errors import ParameterError
 from ..core.replica import Replica
@@ -44,6 +44,7 @@ class RobotBatchNode:
         self.pub_decisions = node.create_publisher(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)
         node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
         node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
+        self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         announce = node.create_publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
         hello = msgs.ids_message(self.ids)
         hello.layout.dim[0].label = node.get_name()

@@ -19,7 +19,8 @@ from collections import deque
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Int64MultiArray
+from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
+from std_msgs.msg import Empty, Int64MultiArray
 
 from ..core.engine import Simulation
 from ..core.errors import ParameterError
@@ -31,6 +32,8 @@ from . import messages as msgs
 from .params import make_node, read_parameters
 from .runner import RunFailed, run_node
 
+_MONITOR = "monitor"  # the monitor's node name (the launcher's)
+_STALL_S = 5.0  # seconds without progress after which a silent batch or monitor counts as lost
 _LINGER = 0.5  # seconds to let the last messages reach their readers before exiting
 _FINAL_WAIT = 30.0  # seconds to wait, after the end, for the monitor to catch up
 
@@ -55,6 +58,7 @@ class WorldNode:
         node.create_subscription(PointCloud2, msgs.DECISIONS, self._on_decisions, msgs.DECISIONS_QOS)
         node.create_subscription(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
         node.create_subscription(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
+        self._watch(msgs.alive_topic(_MONITOR), self._on_monitor_liveliness)
 
         n = self.params.robots
         self.host = np.full(n, -1, dtype=np.int64)  # batch number hosting each robot
@@ -66,6 +70,9 @@ class WorldNode:
         self.monitor_tick = -1
         self.queued: deque = deque()  # (tick, rows message, joined) held while the monitor is behind
         self.ended_at: float | None = None
+        self.lost: list[str] = []  # batches (and the monitor) whose liveliness lapsed
+        self.progress_at = time.monotonic()  # the last tick published or metrics received
+        self.pending = np.empty(0, dtype=np.int64)  # robots of lost batches, removed at the end of the next tick
 
         self.shape_cells = msgs.shape_cells(self.shape)
         self.pub_shape.publish(msgs.grid_message(self.shape, self.shape_cells, 0))
@@ -87,8 +94,10 @@ class WorldNode:
         if taken.size:
             other = self.batch_names[self.host[taken[0]]]
             raise RunFailed(f"robot {taken[0]} is hosted by both {other} and {name}")
-        self.host[ids] = len(self.batch_names)
+        k = len(self.batch_names)
+        self.host[ids] = k
         self.batch_names.append(name)
+        self._watch(msgs.alive_topic(name), lambda info, k=k: self._on_batch_liveliness(k, info))
         covered = int((self.host[4:] >= 0).sum())
         self.node.get_logger().info(f"{name} hosts {ids.size} robots; {covered}/{n - 4} covered")
         if covered == n - 4:
@@ -106,22 +115,45 @@ class WorldNode:
         if not self.started or self.sim.done or tick != self.sim.tick + 1:
             return  # a batch answering a tick that is over (e.g. after the end)
         rows = msgs.cloud_rows(msg, DECISION_ROW)
+        if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
+            rows = rows[~np.isin(rows["id"], self.pending)]
+        rows = rows[self.sim.state.state[rows["id"]] != RobotState.REMOVED]
         self.parts.append(rows)
         self.received += rows.size
-        moving = self.sim.metrics.moving
-        if self.received > moving:
-            raise RunFailed(f"tick {tick}: {self.received} decisions for {moving} moving robots")
-        if self.received == moving:
+        self._maybe_advance(tick)
+
+    def _maybe_advance(self, tick: int) -> None:
+        """Apply the tick once every moving robot that is not being removed has decided."""
+        expected = self.sim.metrics.moving - len(self._standing())
+        if self.received > expected:
+            raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
+        if self.received == expected:
             self._advance(tick)
 
+    def _standing(self) -> np.ndarray:
+        """Moving robots of lost batches: they stand still in their last tick, then are removed."""
+        state = self.sim.state.state[self.pending]
+        return self.pending[(state == RobotState.MOVING_INSIDE) | (state == RobotState.MOVING_OUTSIDE)]
+
     def _advance(self, tick: int) -> None:
-        decisions = Decisions.concatenate([decisions_of(tick, r) for r in self.parts])
+        parts = [decisions_of(tick, r) for r in self.parts]
+        standing = self._standing()
+        if standing.size:
+            s = self.sim.state
+            parts.append(Decisions(tick=tick, ids=standing, claim=np.full(standing.size, -1, dtype=np.int64),
+                                   x=s.x[standing].copy(), y=s.y[standing].copy(),
+                                   heading=s.heading[standing].copy()))
+        decisions = Decisions.concatenate(parts)
         self.parts, self.received = [], 0
         localized_before = self.sim.metrics.localized
         try:
             self.sim.apply(decisions)
         except ValueError as exc:
             raise RunFailed(f"tick {tick}: {exc}") from None
+        if self.pending.size:
+            removed = self.sim.remove(self.pending)
+            self.node.get_logger().warn(f"tick {tick}: removed the {removed} robots of lost batches")
+            self.pending = np.empty(0, dtype=np.int64)
         s = self.sim.state
         ids = np.union1d(self.sim.last_joins()[0], self.sim.last_removed)  # deciders and failed robots changed
         self._emit(tick, msgs.make_cloud(robot_rows(ids, s.state, s.x, s.y, s.heading), tick),
@@ -136,6 +168,7 @@ class WorldNode:
         while self.queued and (self.window == 0 or self.queued[0][0] - self.monitor_tick <= self.window):
             tick, robots_msg, joined = self.queued.popleft()
             self.pub_robots.publish(robots_msg)
+            self.progress_at = time.monotonic()
             if joined:
                 self._publish_occupancy(tick)
             self.pub_clock.publish(msgs.clock_message(tick))
@@ -163,14 +196,72 @@ class WorldNode:
         tick = msgs.metrics_of(msg).get("tick", -1)
         if tick > self.monitor_tick:
             self.monitor_tick = tick
+            self.progress_at = time.monotonic()
             self._flush()
+
+    # -- lost processes (liveliness) ------------------------------------------------
+    def _watch(self, topic: str, on_change) -> None:
+        self.node.create_subscription(Empty, topic, lambda msg: None, msgs.ALIVE_QOS,
+                                      event_callbacks=SubscriptionEventCallbacks(liveliness=on_change))
+
+    def _on_batch_liveliness(self, k: int, info: QoSLivelinessChangedInfo) -> None:
+        if info.alive_count == 0 and info.not_alive_count > 0:
+            self._lose_batch(k, "liveliness lapsed")
+
+    def _lose_batch(self, k: int, why: str) -> None:
+        name = self.batch_names[k]
+        if name in self.lost or self.sim.done:
+            return
+        if not self.started:
+            raise RunFailed(f"{name} was lost before the run started")
+        ids = np.flatnonzero(self.host == k)
+        ids = ids[self.sim.state.state[ids] != RobotState.REMOVED]
+        self.lost.append(name)
+        self.pending = np.union1d(self.pending, ids)
+        tick = self.sim.tick
+        self.node.get_logger().warn(f"{name} lost ({why}) at tick {tick}: its {ids.size} robots "
+                                    f"are removed at the end of tick {tick + 1}")
+        self.pub_status.publish(msgs.status_message(tick, "running", f"lost {name}", DiagnosticStatus.WARN,
+                                                    {"lost": ",".join(self.lost)}))
+        self._maybe_advance(tick + 1)  # the lost robots' decisions are no longer awaited
+
+    def _on_monitor_liveliness(self, info: QoSLivelinessChangedInfo) -> None:
+        if info.alive_count == 0 and info.not_alive_count > 0:
+            self._lose_monitor("liveliness lapsed")
+
+    def _lose_monitor(self, why: str) -> None:
+        if _MONITOR in self.lost:
+            return
+        self.lost.append(_MONITOR)
+        self.window = 0  # nobody to wait for: run on
+        self.node.get_logger().warn(f"the monitor was lost ({why}) at tick {self.sim.tick}; "
+                                    f"the swarm goes on without it")
+        self.pub_status.publish(msgs.status_message(self.sim.tick, "running", "lost the monitor",
+                                                    DiagnosticStatus.WARN, {"lost": ",".join(self.lost)}))
+        self._flush()
 
     # -- housekeeping --------------------------------------------------------------
     def close(self, code: int) -> None:
         """Nothing to release."""
 
+    def _check_stalls(self, now: float) -> None:
+        """The fallback to liveliness (a process lost before DDS matched its liveliness topic): a batch
+        whose robots have not decided, or a monitor that has not reported, for ``_STALL_S`` is lost."""
+        if not self.started or self.sim.done or now - self.progress_at < _STALL_S:
+            return
+        if self.queued:
+            if self.window:
+                self._lose_monitor(f"no metrics for {_STALL_S:g} s")
+            return
+        decided = np.concatenate([r["id"] for r in self.parts]) if self.parts else np.empty(0, dtype=np.int64)
+        missing = np.setdiff1d(np.setdiff1d(self.sim.moving_ids(), decided), self.pending)
+        for k in np.unique(self.host[missing]).tolist():
+            self._lose_batch(k, f"no decisions for {_STALL_S:g} s")
+        self.progress_at = now
+
     def poll(self) -> None:
         now = time.monotonic()
+        self._check_stalls(now)
         if not self.started and now - self.created > self.start_timeout:
             covered = int((self.host[4:] >= 0).sum())
             raise RunFailed(f"robot batches cover {covered} of {self.params.robots - 4} robots after "

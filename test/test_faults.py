@@ -1,0 +1,139 @@
+"""Process faults in a running graph: a robot batch killed (SIGKILL) or stalled (SIGSTOP), the monitor killed.
+
+The world notices through DDS liveliness (1 s lease), removes the lost batch's robots at
+the end of the next tick, and the rest of the swarm repairs the shape. These runs are
+timing-dependent by nature (which tick the loss lands on), so they check consistency,
+not equality with the in-process engine; --fail-robots covers equality.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from conftest import Recording, rrd_verify
+from test_ros_graph import _env, _processes_mentioning
+
+from swarm_ros.wire import batch_ids
+
+PY = sys.executable
+ROBOTS = 1036  # the star, ~2700 ticks: a few seconds over the graph
+
+
+def _launch(out: Path, processes: int = 3) -> subprocess.Popen:
+    return subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--processes", str(processes),
+                             "--out", str(out), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=_env())
+
+
+def _wait_until_running(out: Path, timeout: float = 120) -> Path:
+    """The run's staged log directory, once ticks flow: the monitor has recorded a few batches of ticks
+    (so every process has been discovered, liveliness topics included)."""
+    partial = out.parent / f"{out.name}.partial.rrd"
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        logs = list(out.parent.glob(f".{out.name}.logs-*"))
+        if logs and partial.exists() and partial.stat().st_size > 300_000:
+            return logs[0]
+        time.sleep(0.05)
+    raise AssertionError("the run never got going")
+
+
+def _pid_of(node: str, logs: Path) -> int:
+    for pid in _processes_mentioning(str(logs)):
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+        if f"__node:={node}\0" in cmdline + "\0":
+            return pid
+    raise AssertionError(f"no process for {node}")
+
+
+def _lost_at(world_log: str, name: str) -> tuple[float, int]:
+    """(ROS log time, tick) of the world's 'lost' warning for ``name``."""
+    m = re.search(rf"\[WARN\] \[(\d+\.\d+)\] \[world\]: {name} lost \(liveliness lapsed\) at tick (\d+)", world_log)
+    assert m, world_log[-2000:]
+    return float(m.group(1)), int(m.group(2))
+
+
+def _check_consistent_run(out: Path, lost_ids: np.ndarray) -> dict:
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["lost_robots"] == lost_ids.size and len(summary["losses"]) == 1
+    loss_tick = summary["losses"][0]["tick"]
+    final = list(csv.DictReader((out / "final_state.csv").open()))
+    removed = np.array([int(r["id"]) for r in final if r["state"] == "removed"])
+    assert np.array_equal(removed, lost_ids)
+    rows = np.array(list(csv.reader((out / "metrics.csv").open()))[1:], dtype=np.int64)
+    tick, stationary, moving = rows[:, 0], rows[:, 1], rows[:, 4]
+    before = tick < loss_tick
+    assert np.all(stationary[before] + moving[before] == ROBOTS)
+    assert np.all(stationary[~before] + moving[~before] == ROBOTS - lost_ids.size)
+    # self-repair: the robots left refill the shape as far as they go
+    assert summary["outcome"] == "incomplete" and summary["localized"] == ROBOTS - lost_ids.size
+    assert summary["empty_patches"] == lost_ids.size
+    assert rrd_verify(out / "recording.rrd").returncode == 0
+    rec = Recording(out / "recording.rrd")
+    assert rec.series["localized"] == dict(zip(tick.tolist(), rows[:, 2].astype(float).tolist()))
+    return summary
+
+
+def test_a_killed_robot_batch_is_noticed_within_2_s_and_the_swarm_repairs_the_shape(tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    logs = _wait_until_running(out)
+    victim = _pid_of("robot_batch_1", logs)
+    killed_at = time.time()
+    os.kill(victim, signal.SIGKILL)
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 0, err
+    assert "robot_batch_1 exited with status -9" in err and "the run goes on" in err
+    detected, tick = _lost_at((out / "logs" / "world.log").read_text(), "robot_batch_1")
+    assert detected - killed_at < 2.0, f"noticed {detected - killed_at:.2f} s after the kill"
+    summary = _check_consistent_run(out, batch_ids(ROBOTS, 1, 3))
+    assert summary["losses"][0]["tick"] == tick + 1  # removed at the end of the tick after the notice
+    assert not _processes_mentioning(str(out)), "a process outlived the run"
+
+
+def test_a_stalled_robot_batch_is_dropped_and_cannot_corrupt_the_world_when_it_resumes(tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    logs = _wait_until_running(out)
+    victim = _pid_of("robot_batch_2", logs)
+    os.kill(victim, signal.SIGSTOP)
+    try:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and "robot_batch_2 lost" not in (logs / "world.log").read_text():
+            time.sleep(0.05)
+    finally:
+        os.kill(victim, signal.SIGCONT)  # back, with decisions for ticks long gone and robots it no longer has
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 0, err
+    _check_consistent_run(out, batch_ids(ROBOTS, 2, 3))
+    assert not _processes_mentioning(str(out)), "a process outlived the run"
+
+
+def test_a_killed_monitor_does_not_stop_the_swarm_and_its_recording_stays_readable(tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, processes=2)
+    logs = _wait_until_running(out)
+    partial = tmp_path / "run.partial.rrd"
+    os.kill(_pid_of("monitor", logs), signal.SIGKILL)
+    start = time.monotonic()
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 2, err
+    assert "monitor exited with status -9" in err and "the swarm ran to its end without it" in err
+    world_log = (tmp_path / "run.logs" / "world.log").read_text()
+    assert "the monitor was lost" in world_log and "run ended: " in world_log  # the swarm went on to its end
+    assert not out.exists()
+    rec = Recording(partial)  # no footer (killed), but what was sent reads back
+    ticks = sorted(rec.series["localized"])
+    assert len(ticks) >= 64 and ticks == list(range(len(ticks))) and rec.events == []
+    assert len(rec.robots) >= 64 and sorted(rec.robots) == list(range(len(rec.robots)))
+    assert time.monotonic() - start < 120
+    assert not _processes_mentioning(str(out)), "a process outlived the run"
