@@ -1,0 +1,103 @@
+"""The graph over two hosts: the world and monitor in one Linux network namespace, the robot batches
+in another, joined by a veth pair, talking UDP only. The result equals the in-process engine's.
+
+Needs root and iproute2 (``ip netns``); skipped, with the reason, where namespaces cannot
+be made. Only this test's own namespaces are touched (named after its process id).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from test_ros_graph import _assert_same_run, _shape_file
+
+from swarm_ros import cli
+from swarm_ros.config import Settings
+from swarm_ros.nodes.params import params_yaml
+
+PY = sys.executable
+SUBNET = "10.231.{}.{}"
+
+
+def _ip(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+
+
+@pytest.fixture
+def two_hosts():
+    """(namespace of host A, namespace of host B, host A's end of the veth); removed afterwards."""
+    if shutil.which("ip") is None:
+        pytest.skip("iproute2's 'ip' is not installed: cannot make network namespaces")
+    if os.geteuid() != 0:
+        pytest.skip("making network namespaces needs root")
+    tag = os.getpid() % 10000
+    a, b = f"swarm_ros_a{tag}", f"swarm_ros_b{tag}"
+    made = _ip("netns", "add", a)
+    if made.returncode != 0:
+        pytest.skip(f"cannot make a network namespace here: {made.stderr.strip()}")
+    try:
+        net = tag % 250
+        steps = [("netns", "add", b),
+                 ("link", "add", f"swra{tag}", "netns", a, "type", "veth", "peer", "name", f"swrb{tag}", "netns", b),
+                 ("-n", a, "addr", "add", SUBNET.format(net, 1) + "/24", "dev", f"swra{tag}"),
+                 ("-n", b, "addr", "add", SUBNET.format(net, 2) + "/24", "dev", f"swrb{tag}"),
+                 ("-n", a, "link", "set", f"swra{tag}", "up"), ("-n", b, "link", "set", f"swrb{tag}", "up"),
+                 ("-n", a, "link", "set", "lo", "up"), ("-n", b, "link", "set", "lo", "up")]
+        for step in steps:
+            done = _ip(*step)
+            if done.returncode != 0:
+                pytest.skip(f"cannot set up the namespaces ({' '.join(step)}): {done.stderr.strip()}")
+        yield a, b, f"swra{tag}"
+    finally:
+        for ns in (a, b):
+            _ip("netns", "del", ns)
+
+
+def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two_hosts, tmp_path):
+    a, b, link = two_hosts
+    shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
+    flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "7", "--robots", "440"]
+    ref = tmp_path / "ref"
+    assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
+    run = tmp_path / "run"
+    params = tmp_path / "params.yaml"
+    params.write_text(params_yaml(Settings(shape=str(shape), robots=440, seed=7, world_radius=16),
+                                  {"world": {}, "monitor": {"out_dir": str(run)}}))
+    env = {**os.environ, "ROS_DOMAIN_ID": str(100 + os.getpid() % 100), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+           "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",  # shared memory would bypass the namespaces
+           "HOME": str(tmp_path), "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"}
+    plan = [(a, "world", "world", []), (a, "monitor", "monitor", []),
+            (b, "robot_batch_0", "robot_batch", ["-p", "batch:=0", "-p", "batches:=2"]),
+            (b, "robot_batch_1", "robot_batch", ["-p", "batch:=1", "-p", "batches:=2"])]
+    procs = {}
+    try:
+        for ns, name, module, extra in plan:
+            log = open(tmp_path / f"{name}.log", "w")  # noqa: SIM115 - closed with the process
+            procs[name] = (subprocess.Popen(["ip", "netns", "exec", ns, PY, "-m", f"swarm_ros.nodes.{module}",
+                                             "--ros-args", "--params-file", str(params), "-r", f"__node:={name}",
+                                             *extra], env=env, stdout=log, stderr=subprocess.STDOUT), log)
+        monitor = procs["monitor"][0]
+        assert monitor.wait(timeout=180) == 0, (tmp_path / "monitor.log").read_text()[-2000:]
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and any(p.poll() is None for p, _ in procs.values()):
+            time.sleep(0.1)
+    finally:
+        for proc, log in procs.values():
+            if proc.poll() is None:
+                proc.kill()
+            proc.wait()
+            log.close()
+    assert {name: p.returncode for name, (p, _) in procs.items()} == dict.fromkeys(procs, 0)
+    world_log = (tmp_path / "world.log").read_text()
+    assert "robot_batch_0 hosts" in world_log and "robot_batch_1 hosts" in world_log
+    _assert_same_run(ref, run)
+    # and the traffic really crossed the link between the hosts: a tick's rows each way, hundreds of ticks
+    stats = json.loads(_ip("-n", a, "-j", "-s", "link", "show", "dev", link).stdout)[0]["stats64"]
+    assert stats["rx"]["bytes"] > 1_000_000 and stats["tx"]["bytes"] > 1_000_000, stats
