@@ -378,15 +378,26 @@ def run_ros2(spec: RunSpec, processes: int = 2) -> dict:
     return result_row(spec, summary)
 
 
-def _worker_init() -> None:
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def _worker_init(engine: str) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides what Ctrl-C does
+    if engine == "ros2":
+        # The parent stops workers with SIGTERM (Pool.terminate): unwind, so that a worker running a
+        # ROS 2 graph stops its node processes (Launch.run's finally) instead of orphaning them.
+        signal.signal(signal.SIGTERM, _interrupt)
 
 
 def _work(job: tuple[RunSpec, str, int]) -> dict:
     spec, engine, processes = job
-    return run_ros2(spec, processes) if engine == "ros2" else run_inprocess(spec)
+    try:
+        return run_ros2(spec, processes) if engine == "ros2" else run_inprocess(spec)
+    except KeyboardInterrupt:  # stopped by the parent; a graph's processes are already stopped
+        os._exit(130)
 
 
 def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes: int = 2) -> Iterator[dict]:
@@ -399,7 +410,7 @@ def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes
     if not todo:
         return
     ctx = mp.get_context("spawn")
-    pool = ctx.Pool(min(jobs, len(todo)), initializer=_worker_init)
+    pool = ctx.Pool(min(jobs, len(todo)), initializer=_worker_init, initargs=(engine,))
     try:
         yield from pool.imap_unordered(_work, [(s, engine, processes) for s in todo], chunksize=1)
         pool.close()

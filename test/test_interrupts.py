@@ -68,3 +68,20 @@ def test_sigterm_to_an_experiment_stops_its_workers_and_keeps_finished_runs(tmp_
     assert "run the same command again to resume" in err
     assert 3 <= len(read_results(results)) < 240
     assert not Path(out / "stats.csv").exists()  # the report is built at the end only
+
+
+def test_sigterm_to_a_ros2_experiment_stops_the_graphs_of_its_workers(tmp_path):
+    from test_ros_graph import _processes_mentioning
+
+    config = small_config(tmp_path, repetitions=3, vision_radius=[1], shapes={"disc.txt": [60]})
+    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(tmp_path / "exp"),
+                             "--engine", "ros2", "--jobs", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    _wait_for(lambda: bool(_processes_mentioning("swarm_ros-exp-")))  # a worker's graph is up
+    start = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    _wait_for(lambda: not _processes_mentioning("swarm_ros-exp-"), timeout=5)
+    assert time.monotonic() - start < 5
+    assert "Traceback" not in err
