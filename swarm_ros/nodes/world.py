@@ -218,6 +218,9 @@ class WorldNode:
         ids = ids[self.sim.state.state[ids] != RobotState.REMOVED]
         self.lost.append(name)
         self.pending = np.union1d(self.pending, ids)
+        # decisions it sent for this tick before it was lost no longer count either
+        self.parts = [r[~np.isin(r["id"], self.pending)] for r in self.parts]
+        self.received = sum(r.size for r in self.parts)
         tick = self.sim.tick
         self.node.get_logger().warn(f"{name} lost ({why}) at tick {tick}: its {ids.size} robots "
                                     f"are removed at the end of tick {tick + 1}")
