@@ -34,6 +34,7 @@ from .runner import RunFailed, run_node
 
 _MONITOR = "monitor"  # the monitor's node name (the launcher's)
 _STALL_S = 5.0  # seconds without progress after which a silent batch or monitor counts as lost
+_FIRST_STALL_S = 30.0  # the same before its first decisions or report (discovery may be slow)
 _LINGER = 0.5  # seconds to let the last messages reach their readers before exiting
 _FINAL_WAIT = 30.0  # seconds to wait, after the end, for the monitor to catch up
 
@@ -249,17 +250,23 @@ class WorldNode:
 
     def _check_stalls(self, now: float) -> None:
         """The fallback to liveliness (a process lost before DDS matched its liveliness topic): a batch
-        whose robots have not decided, or a monitor that has not reported, for ``_STALL_S`` is lost."""
-        if not self.started or self.sim.done or now - self.progress_at < _STALL_S:
+        whose robots have not decided, or a monitor that has not reported, for ``_STALL_S`` is lost.
+        Before the first decisions or report, while discovery may still be going on, the limit is
+        ``_FIRST_STALL_S``."""
+        if not self.started or self.sim.done:
             return
         if self.queued:
-            if self.window:
-                self._lose_monitor(f"no metrics for {_STALL_S:g} s")
+            limit = _STALL_S if self.monitor_tick >= 0 else _FIRST_STALL_S
+            if self.window and now - self.progress_at >= limit:
+                self._lose_monitor(f"no metrics for {limit:g} s")
+            return
+        limit = _STALL_S if self.sim.tick > 0 else _FIRST_STALL_S
+        if now - self.progress_at < limit:
             return
         decided = np.concatenate([r["id"] for r in self.parts]) if self.parts else np.empty(0, dtype=np.int64)
         missing = np.setdiff1d(np.setdiff1d(self.sim.moving_ids(), decided), self.pending)
         for k in np.unique(self.host[missing]).tolist():
-            self._lose_batch(k, f"no decisions for {_STALL_S:g} s")
+            self._lose_batch(k, f"no decisions for {limit:g} s")
         self.progress_at = now
 
     def poll(self) -> None:
