@@ -20,6 +20,7 @@ from .core.metrics import Outcome
 from .core.params import RunParams
 from .core.shapes import Shape, builtin_shapes
 from .core.world import World
+from .signals import StopFlag
 
 if TYPE_CHECKING:
     from .recording import Recorder
@@ -195,14 +196,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     rrd = partial_recording(out)
     recorder = options.open(rrd, shape, params)
-    _interrupt_on_sigterm()
     start = time.perf_counter()
     sim = Simulation(shape, params)
     stopped = None
     try:
-        _run_with_progress(sim, check=args.check, quiet=args.quiet, recorder=recorder)
-    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the run so far becomes an 'interrupted' run directory
-        stopped = Outcome.INTERRUPTED
+        with StopFlag() as stop:  # Ctrl-C or SIGTERM: the run so far becomes an 'interrupted' run directory
+            _run_with_progress(sim, check=args.check, quiet=args.quiet, recorder=recorder, stop=stop)
+        if stop.signum and not sim.done:
+            stopped = Outcome.INTERRUPTED
     except BaseException:
         if recorder is not None:
             recorder.outcome("failed", sim.metrics)
@@ -313,8 +314,10 @@ def cmd_topics(args: argparse.Namespace) -> int:
     return run_topics(domain, echo=args.echo, count=args.count, seconds=args.seconds, full=args.full)
 
 
-def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Recorder | None = None) -> None:
-    """Run ``sim`` to its end with a progress bar, checking invariants and recording if asked."""
+def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Recorder | None = None,
+                       stop: StopFlag | None = None) -> None:
+    """Run ``sim`` to its end (or until ``stop`` is set) with a progress bar, checking invariants and
+    recording if asked."""
     from tqdm import tqdm
 
     if check:
@@ -326,7 +329,7 @@ def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Reco
         recorder.robots(sim.state)
     with tqdm(total=sim.shape.patches, initial=sim.metrics.localized, unit="patch", desc="localized",
               disable=True if quiet else None, file=sys.stderr, dynamic_ncols=True) as bar:
-        while not sim.done:
+        while not sim.done and not (stop and stop.signum):
             before = sim.tick
             if check:
                 prev = sim.state.copy()

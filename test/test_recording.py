@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -125,10 +126,14 @@ def test_no_recording_flag_writes_none(tmp_path):
 
 
 def _stop_at_tick_120(monkeypatch, error):
+    """From tick 120 on, Simulation.run raises ``error``, or, for SIGINT, sends it to this process."""
     real_run = Simulation.run
 
     def run(self, max_ticks=None, on_tick=None):
         if self.tick >= 120:
+            if error is signal.SIGINT:
+                os.kill(os.getpid(), signal.SIGINT)  # what Ctrl-C does; simulate checks for it between chunks
+                return None
             raise error("stop")
         return real_run(self, max_ticks=min(max_ticks or 10**9, 120 - self.tick), on_tick=on_tick)
 
@@ -150,7 +155,7 @@ def test_a_crashed_run_keeps_a_readable_recording_up_to_that_tick(tmp_path, monk
 
 
 def test_an_interrupted_run_writes_its_run_directory_so_far(tmp_path, monkeypatch, capsys):
-    _stop_at_tick_120(monkeypatch, KeyboardInterrupt)
+    _stop_at_tick_120(monkeypatch, signal.SIGINT)
     out = tmp_path / "run"
     assert simulate(out) == 130
     assert f"interrupted at tick 120; the run so far is in {out}" in capsys.readouterr().err

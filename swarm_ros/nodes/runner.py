@@ -6,7 +6,6 @@ Exit codes: 0 done, 1 the run failed (a peer sent something impossible, a timeou
 
 from __future__ import annotations
 
-import signal
 import sys
 from collections.abc import Callable
 from typing import Protocol
@@ -20,6 +19,7 @@ from sensor_msgs.msg import PointCloud2
 
 from ..core.errors import SwarmError
 from ..core.replica import Replica
+from ..signals import StopFlag
 from ..wire import PATCH_METRES, ROBOT_ROW
 from . import messages as msgs
 
@@ -67,7 +67,7 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:  # rclpy reports bad --ros-args (e.g. a missing params file) as RCLError
         return _fail(name, f"cannot start ROS 2: {_first_line(exc)}", EXIT_USAGE)
-    stop = _StopFlag()
+    stop = StopFlag()
     swarm = None
     code = EXIT_FAILED  # an unexpected exception
     try:
@@ -91,18 +91,6 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         if rclpy.ok():
             rclpy.shutdown()
     return code
-
-
-class _StopFlag:
-    """Records SIGINT or SIGTERM instead of raising; ``signum`` is 0 until one arrives."""
-
-    def __init__(self) -> None:
-        self.signum = 0
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, self._set)
-
-    def _set(self, signum: int, frame: object) -> None:
-        self.signum = signum
 
 
 def _first_line(exc: BaseException) -> str:
