@@ -18,6 +18,7 @@ from .core.engine import Simulation
 from .core.errors import SwarmError
 from .core.metrics import Outcome
 from .core.params import RunParams
+from .core.rulesets import CROWDING_VALUES, JOIN_VALUES, RULE_SETS, STEPS_VALUES
 from .core.shapes import Shape, builtin_shapes
 from .core.world import World
 from .signals import StopFlag
@@ -132,6 +133,12 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--shape", help="built-in shape name or a .txt/.png shape file (default: star)")
     p.add_argument("--robots", type=_positive_int, help="robots N, seeds included (default: the shape's patch count)")
     p.add_argument("--vision", type=_positive_float, dest="vision_radius", help="vision radius in patches (default: 1)")
+    p.add_argument("--rules", choices=tuple(RULE_SETS),
+                   help="rule set: paper (join walk, crowding ahead, steps one), local (join local), literal "
+                        "(join local, steps literal); see docs/model.md (default: paper)")
+    p.add_argument("--join", choices=JOIN_VALUES, help="override the rule set's join switch")
+    p.add_argument("--crowding", choices=CROWDING_VALUES, help="override the rule set's crowding switch")
+    p.add_argument("--steps", choices=STEPS_VALUES, help="override the rule set's steps switch")
     p.add_argument("--seed", type=int, help="run seed (default: 1)")
     p.add_argument("--max-ticks", type=_positive_int, dest="max_ticks", help="tick limit (default: 100000)")
     p.add_argument("--wiggle", type=float, dest="wiggle_deg", help="max turn per tick, degrees (default: 45)")
@@ -169,6 +176,7 @@ def _settings(args: argparse.Namespace) -> Settings:
     if args.params_file is not None:
         settings = load_params_file(args.params_file, settings)
     return settings.updated(shape=args.shape, robots=args.robots, vision_radius=args.vision_radius,
+                            rules=args.rules, join=args.join, crowding=args.crowding, steps=args.steps,
                             seed=args.seed, max_ticks=args.max_ticks, wiggle_deg=args.wiggle_deg,
                             fail_fraction=args.fail_robots[0] if args.fail_robots else None,
                             fail_tick=args.fail_robots[1] if args.fail_robots else None,
@@ -352,6 +360,7 @@ def _print_summary(s: dict, out: Path) -> None:
     rows = [
         ("shape", f"{s['shape']} ({s['shape_patches']} patches)"),
         ("robots", f"{s['robots']}  (vision {s['vision_radius']:g}, seed {s['seed']}, engine {s['engine']})"),
+        ("rules", f"{s['rules']}  (join {s['join']}, crowding {s['crowding']}, steps {s['steps']})"),
         ("outcome", s["outcome"]),
         ("convergence tick", f"{s['convergence_tick']}"),
         ("localized", f"{s['localized']} / {s['shape_patches']} patches"),

@@ -26,6 +26,7 @@ import yaml
 
 from .core.errors import ParameterError, SwarmError
 from .core.params import DEFAULT_MAX_TICKS, DEFAULT_SEED, DEFAULT_VISION, DEFAULT_WIGGLE_DEG, RunParams
+from .core.rulesets import DEFAULT_RULES
 from .core.shapes import Shape
 from .core.world import DEFAULT_RADIUS, World
 
@@ -39,11 +40,16 @@ class ConfigError(SwarmError):
 
 @dataclass(frozen=True)
 class Settings:
-    """What a run needs before the shape is loaded. ``robots = 0`` means the shape's patch count."""
+    """What a run needs before the shape is loaded. ``robots = 0`` means the shape's patch count;
+    ``join``, ``crowding`` and ``steps`` = "" mean the rule set's own value."""
 
     shape: str = "star"
     robots: int = 0
     vision_radius: float = DEFAULT_VISION
+    rules: str = DEFAULT_RULES
+    join: str = ""
+    crowding: str = ""
+    steps: str = ""
     seed: int = DEFAULT_SEED
     max_ticks: int = DEFAULT_MAX_TICKS
     wiggle_deg: float = DEFAULT_WIGGLE_DEG
@@ -64,7 +70,8 @@ class Settings:
         shape = Shape.load(self.shape, World(self.world_radius))
         params = RunParams(robots=self.robots or shape.patches, vision_radius=self.vision_radius, seed=self.seed,
                            max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg, fail_fraction=self.fail_fraction,
-                           fail_tick=self.fail_tick)
+                           fail_tick=self.fail_tick, rules=self.rules, join=self.join, crowding=self.crowding,
+                           steps=self.steps)
         if params.robots > shape.free_patches:
             w = shape.world.size
             raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "

@@ -27,6 +27,7 @@ _CLASSES = (
     ("seed robot", "#d55e00"),
 )
 _MOVING_COLOUR = "#009e73"
+_WALKING_COLOUR = "#e69f00"
 _SEPARATED_COLOUR = "#cc79a7"
 
 
@@ -46,14 +47,15 @@ def save_final_png(run: RunRecord, path: Path) -> None:
               extent=(-r - 0.5, r + 0.5, -r - 0.5, r + 0.5), interpolation="nearest")
     handles = [Patch(facecolor=c, edgecolor="#999999", label=name) for name, c in _CLASSES[1:]]
     moving = (s.state == RobotState.MOVING_INSIDE) | (s.state == RobotState.MOVING_OUTSIDE)
-    for mask, colour, label in ((moving, _MOVING_COLOUR, "moving robot"),
+    for mask, colour, label in ((moving, _MOVING_COLOUR, "wandering robot"),
+                                (s.state == RobotState.WALKING, _WALKING_COLOUR, "walking robot"),
                                 (s.state == RobotState.SEPARATED, _SEPARATED_COLOUR, "separated robot")):
         if mask.any():
             ax.scatter(s.x[mask], s.y[mask], s=9, c=colour, linewidths=0, zorder=3)
             handles.append(Patch(facecolor=colour, label=f"{label} ({int(mask.sum())})"))
     m, p = run.final, run.params
     ax.set_title(f"{run.shape.name}: {run.outcome} at tick {m.tick}\n"
-                 f"{p.robots} robots, vision {p.vision_radius:g}, seed {p.seed}; "
+                 f"{p.robots} robots, rules {p.ruleset.label}, vision {p.vision_radius:g}, seed {p.seed}; "
                  f"{m.localized}/{run.shape.patches} patches filled", fontsize=10)
     ax.set_xlabel("x (patches)")
     ax.set_ylabel("y (patches)")
@@ -68,13 +70,15 @@ def save_final_png(run: RunRecord, path: Path) -> None:
 _CONVERGENCE_SERIES = (
     ("localized", "localized robots (seeds included)", "#0072b2"),
     ("stationary", "stationary robots (localized + separated)", "#e69f00"),
-    ("inside", "moving robots inside the shape", "#c9b800"),
+    ("inside", "robots wandering inside the shape", "#c9b800"),
+    ("walking", "robots walking to the frontier", "#009e73"),
     ("empty_patches", "empty shape patches", "#cc79a7"),
 )
 
 
 def save_convergence_png(run: RunRecord, path: Path) -> None:
-    """Stationary, localized, inside and empty patches against ticks, with the outcome marked."""
+    """Stationary, localized, wandering-inside and walking robots, and empty patches against ticks, with the
+    outcome marked."""
     from .core.metrics import METRIC_COLUMNS
 
     h = run.history
@@ -89,7 +93,8 @@ def save_convergence_png(run: RunRecord, path: Path) -> None:
     ax.text(m.tick, 0.97, f"{run.outcome} at tick {m.tick} ", transform=ax.get_xaxis_transform(), ha="right",
             va="top", fontsize=9, color="#333333", bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.85})
     p = run.params
-    ax.set_title(f"{run.shape.name}: {p.robots} robots, vision {p.vision_radius:g}, seed {p.seed}", fontsize=10)
+    ax.set_title(f"{run.shape.name}: {p.robots} robots, rules {p.ruleset.label}, vision {p.vision_radius:g}, "
+                 f"seed {p.seed}", fontsize=10)
     ax.set_xlabel("tick")
     ax.set_ylabel("robots or patches")
     ax.set_xlim(0, max(int(m.tick), 1) * 1.03)

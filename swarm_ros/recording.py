@@ -9,10 +9,10 @@ the same data. What is logged, on one timeline ``tick`` (sequence):
 ``world/occupancy``           SegmentationImage of the filled shape patches, logged when it changed
 ``world/robots``              :class:`rerun.Points2D` of every robot in id order (instance i is
                               robot i), positions in patches, ``class_ids`` = the robot's
-                              :class:`~swarm_ros.core.state.RobotState` code
+                              :class:`~swarm_ros.core.state.RobotState` code (0-6)
 ``metrics/<column>``          :class:`rerun.Scalars`, one series per ``metrics.csv`` column, every tick
 ``events``                    :class:`rerun.TextLog`: the outcome, at the final tick
-``run`` (static)              :class:`rerun.TextDocument`: the run's parameters
+``run`` (static)              :class:`rerun.TextDocument`: the run's parameters, rule set included
 
 One :class:`rerun.AnnotationContext` on ``world`` names and colours the robot states
 and the patch classes. Robots (and occupancy) can be logged every k-th tick only
@@ -50,7 +50,7 @@ WORLD, MAP, OCCUPANCY, ROBOTS, EVENTS, RUN_INFO = (
 METRICS = "metrics"
 SERIES: tuple[str, ...] = METRIC_COLUMNS[1:]  #: the logged series (every metrics.csv column but tick)
 
-# Patch classes of the map and occupancy images (robot classes are the RobotState codes 0-4).
+# Patch classes of the map and occupancy images (robot classes are the RobotState codes 0-6).
 FREE, WALL, SHAPE_PATCH, FILLED = 10, 11, 12, 13
 
 # Colour-blind-safe colours (Okabe-Ito), as in final.png.
@@ -61,6 +61,7 @@ _ROBOT_CLASSES = {
     RobotState.LOCALIZED: ("localized", (0, 114, 178)),
     RobotState.SEPARATED: ("separated", (204, 121, 167)),
     RobotState.REMOVED: ("removed (failed)", (0, 0, 0, 0)),
+    RobotState.WALKING: ("walking to the frontier", (230, 159, 0)),
 }
 _PATCH_CLASSES = {
     FREE: ("free patch", (0, 0, 0, 0)),
@@ -70,7 +71,7 @@ _PATCH_CLASSES = {
 }
 _SERIES_COLOURS = {
     "stationary": (230, 159, 0), "localized": (0, 114, 178), "inside": (240, 228, 66),
-    "moving": (0, 158, 115), "empty_patches": (204, 121, 167),
+    "moving": (0, 158, 115), "empty_patches": (204, 121, 167), "walking": (230, 159, 0),
 }
 _ROBOT_RADIUS = 0.35  # patches
 
@@ -230,6 +231,7 @@ class Recorder:
         lines = [f"# {shape.name}", "", "| parameter | value |", "|---|---|",
                  f"| shape patches | {shape.patches} |", f"| world | {world.size} x {world.size} patches |"]
         lines += [f"| {key} | {value} |" for key, value in params.as_dict().items()]
+        lines += [f"| rule set in force | {params.ruleset.label} |"]
         lines += [f"| robots logged | every {self.every} tick(s) |"]
         rec.log(RUN_INFO, rr.TextDocument("\n".join(lines) + "\n", media_type=rr.MediaType.MARKDOWN), static=True)
 

@@ -43,10 +43,13 @@ def runs(draw):
     robots = draw(st.integers(4, min(shape.free_patches, 2 * shape.patches + 10)))
     vision = draw(st.sampled_from([1.0, 1.5, 2.0, 3.0]))
     seed = draw(st.integers(0, 2**63 - 1))
-    return shape, RunParams(robots=robots, vision_radius=vision, seed=seed, max_ticks=300)
+    rules = draw(st.sampled_from(["paper", "local", "literal"]))
+    crowding = draw(st.sampled_from(["", "ahead", "disc"]))
+    return shape, RunParams(robots=robots, vision_radius=vision, seed=seed, max_ticks=300, rules=rules,
+                            crowding=crowding)
 
 
-SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 @SETTINGS

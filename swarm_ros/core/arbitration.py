@@ -10,7 +10,14 @@ Join outcomes follow the original study's Z specification: a claim is granted
 (``SUCCESS``) only to a robot that is not yet localized, on an empty shape patch, while
 fewer robots are localized than the shape has patches; a refused claim's outcome is
 ``ALREADY_COMPLETE`` if the shape is complete after the tick, else ``INCOMPLETE``. A
-refused robot keeps its position and heading for the tick.
+refused robot takes the position and heading it decided (under ``steps: literal`` it may
+have moved before it claimed).
+
+The world, not the robot, sets each robot's new state, from the previous state, the
+decision and the rule set: a winner is localized; under ``join: walk`` a robot that
+was inside the shape or walking, while the frontier was not empty, is walking unless it
+claimed from standing inside (a walking loser stays walking); every other robot is
+moving inside or outside by the patch it now stands on.
 """
 
 from __future__ import annotations
@@ -22,10 +29,12 @@ import numpy as np
 
 from .rng import STREAM_PRIORITY, draw_bits
 from .rules import patch_index
-from .state import RobotState
+from .rulesets import JOIN_WALK
+from .state import FRONTIER_BLOCK, RobotState
 
 _MOVING_OUTSIDE = np.int8(RobotState.MOVING_OUTSIDE)
 _MOVING_INSIDE = np.int8(RobotState.MOVING_INSIDE)
+_WALKING = np.int8(RobotState.WALKING)
 _LOCALIZED = np.int8(RobotState.LOCALIZED)
 
 
@@ -48,20 +57,32 @@ def _wins(a, b, ids, seed, tick) -> bool:
     return ta < tb or (ta == tb and ids[a] < ids[b])
 
 
+@numba.njit(cache=True, inline="always")
+def _mark(q, on, frontier, blocks, size):
+    """Set patch ``q``'s frontier flag to ``on``, keeping its block's count and the total in step."""
+    if frontier[q] != on:
+        frontier[q] = on
+        nb = (size + FRONTIER_BLOCK - 1) // FRONTIER_BLOCK
+        b = ((q // size) // FRONTIER_BLOCK) * nb + (q % size) // FRONTIER_BLOCK
+        d = 1 if on else -1
+        blocks[b] += d
+        blocks[blocks.size - 1] += d
+
+
 @numba.njit(cache=True)
-def occupy(p, i, occupancy, frontier, shape, size):
+def occupy(p, i, occupancy, frontier, blocks, shape, size):
     """Robot ``i`` localizes on patch ``p``: occupy it and move the frontier around it."""
     occupancy[p] = i
-    frontier[p] = False
+    _mark(p, False, frontier, blocks, size)
     for dy in (-size, 0, size):
         for dx in (-1, 0, 1):
             q = p + dy + dx
             if shape[q] and occupancy[q] < 0:
-                frontier[q] = True
+                _mark(q, True, frontier, blocks, size)
 
 
 @numba.njit(cache=True)
-def vacate(p, occupancy, frontier, shape, size):
+def vacate(p, occupancy, frontier, blocks, shape, size):
     """The robot on patch ``p`` is removed: empty it and recompute the frontier around it (``occupy``'s inverse)."""
     occupancy[p] = -1
     for dy in (-size, 0, size):
@@ -75,20 +96,21 @@ def vacate(p, occupancy, frontier, shape, size):
                     r = q + ey + ex
                     if r != q and occupancy[r] >= 0:
                         near = True
-            frontier[q] = near
+            _mark(q, near, frontier, blocks, size)
 
 
 @numba.njit(cache=True)
-def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier,
-                   shape, radius, size, seed, tick, best, localized, shape_patches, outcome):
+def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, blocks,
+                   shape, radius, size, seed, tick, best, localized, shape_patches, join, outcome):
     """Apply the decisions of robots ``ids`` to the state arrays in place.
 
     ``best`` is a W*W int array of -1 (scratch; left as found). ``localized`` is the number of
-    localized robots (seeds included) before the tick. Writes each robot's
-    :class:`JoinOutcome` to ``outcome[k]``. Returns (joined, moving inside, moving outside)
-    counted over ``ids`` after the tick.
+    localized robots (seeds included) before the tick; ``join`` the rule set's join code.
+    Writes each robot's :class:`JoinOutcome` to ``outcome[k]``. Returns (joined, moving
+    inside, moving outside, walking) counted over ``ids`` after the tick.
     """
     n = ids.size
+    walk = join == JOIN_WALK and blocks[blocks.size - 1] > 0  # the frontier the robots saw was not empty
     for k in range(n):
         p = claim[k]
         if p < 0 or occupancy[p] >= 0 or not shape[p]:
@@ -99,13 +121,15 @@ def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, 
     joined = 0
     inside = 0
     outside = 0
+    walking = 0
     for k in range(n):
         i = ids[k]
         p = claim[k]
+        st = state[i]
         if p >= 0:
-            st = state[i]
-            if best[p] == k and localized < shape_patches and (st == _MOVING_INSIDE or st == _MOVING_OUTSIDE):
-                occupy(p, i, occupancy, frontier, shape, size)
+            if best[p] == k and localized < shape_patches and (
+                    st == _MOVING_INSIDE or st == _MOVING_OUTSIDE or st == _WALKING):
+                occupy(p, i, occupancy, frontier, blocks, shape, size)
                 state[i] = _LOCALIZED
                 x[i] = float(p % size - radius)
                 y[i] = float(p // size - radius)
@@ -116,10 +140,13 @@ def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, 
             outcome[k] = _PENDING
         else:
             outcome[k] = -1
-            x[i] = new_x[k]
-            y[i] = new_y[k]
-            heading[i] = new_heading[k]
-        if shape[patch_index(x[i], y[i], radius, size)]:
+        x[i] = new_x[k]
+        y[i] = new_y[k]
+        heading[i] = new_heading[k]
+        if walk and (st == _WALKING or (st == _MOVING_INSIDE and p < 0)):
+            state[i] = _WALKING
+            walking += 1
+        elif shape[patch_index(x[i], y[i], radius, size)]:
             state[i] = _MOVING_INSIDE
             inside += 1
         else:
@@ -132,4 +159,4 @@ def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, 
             best[p] = -1
             if outcome[k] == _PENDING:
                 outcome[k] = refused
-    return joined, inside, outside
+    return joined, inside, outside, walking

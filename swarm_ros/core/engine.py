@@ -33,6 +33,7 @@ from .state import RobotState, SwarmState, initial_state
 
 ENGINE_NAME = "inprocess"
 _MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState.MOVING_INSIDE)
+_WALKING = int(RobotState.WALKING)
 _SEPARATED = int(RobotState.SEPARATED)
 _STATIONARY_LOCALIZED = (int(RobotState.SEED), int(RobotState.LOCALIZED))
 
@@ -52,17 +53,17 @@ def _compact_moving(moving, m, state):
     j = 0
     for k in range(m):
         i = moving[k]
-        if state[i] == _MOVING_OUTSIDE or state[i] == _MOVING_INSIDE:
+        if state[i] == _MOVING_OUTSIDE or state[i] == _MOVING_INSIDE or state[i] == _WALKING:
             moving[j] = i
             j += 1
     return j
 
 
 @numba.njit(cache=True)
-def _close_tick(moving, m, state, tick, localized, inside, outside, shape_patches, robots, max_ticks, row):
+def _close_tick(moving, m, state, tick, localized, inside, outside, walking, shape_patches, robots, max_ticks, row):
     """End of a tick, for every engine path: check for the end, separate the robots left over
     if the shape is complete, write the tick's metrics into ``row``. Returns (end code, still moving)."""
-    code = end_code(localized, inside + outside, tick, shape_patches, robots, max_ticks)
+    code = end_code(localized, inside + outside + walking, tick, shape_patches, robots, max_ticks)
     separated = 0
     if code == END_EXTRAS:
         for k in range(m):
@@ -71,16 +72,17 @@ def _close_tick(moving, m, state, tick, localized, inside, outside, shape_patche
         m = 0
         inside = 0
         outside = 0
-    values = metric_values(tick, localized, inside, outside, separated, shape_patches)
+        walking = 0
+    values = metric_values(tick, localized, inside, outside, walking, separated, shape_patches)
     for c in range(len(values)):
         row[c] = values[c]
     return code, m
 
 
 @numba.njit(cache=True)
-def _run_kernel(moving, x, y, heading, state, shape, wall, frontier, occupancy, radius, size, vision, wiggle,
-                seed, head, nxt, best, claim, new_x, new_y, new_heading, outcome, last_ids, shape_patches,
-                robots, max_ticks, rows, m, tick, localized, limit):
+def _run_kernel(moving, x, y, heading, state, shape, wall, frontier, blocks, occupancy, radius, size, vision, wiggle,
+                seed, join, crowd, steps, head, nxt, best, claim, new_x, new_y, new_heading, outcome, last_ids,
+                shape_patches, robots, max_ticks, rows, m, tick, localized, limit):
     """Up to ``limit`` whole ticks for the robots ``moving[:m]``, stopping when the run ends.
 
     Row r of ``rows`` gets the metrics of the r-th tick run. Returns (ticks run, still
@@ -94,16 +96,16 @@ def _run_kernel(moving, x, y, heading, state, shape, wall, frontier, occupancy, 
         ids = moving[:m]
         last_ids[:m] = ids
         index_build(ids, x, y, radius, size, head, nxt)
-        decide_kernel(ids, x, y, heading, shape, wall, frontier, radius, size, vision, wiggle, seed, tick,
-                      head, nxt, claim, new_x, new_y, new_heading)
+        decide_kernel(ids, x, y, heading, state, shape, wall, frontier, blocks, radius, size, vision, wiggle,
+                      seed, tick, join, crowd, steps, head, nxt, claim, new_x, new_y, new_heading)
         index_clear(ids, x, y, radius, size, head)
-        joined, inside, outside = resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state,
-                                                 occupancy, frontier, shape, radius, size, seed, tick, best,
-                                                 localized, shape_patches, outcome)
+        joined, inside, outside, walking = resolve_kernel(
+            ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, blocks, shape, radius,
+            size, seed, tick, best, localized, shape_patches, join, outcome)
         localized += joined
         decided = m
         m = _compact_moving(moving, m, state)
-        code, m = _close_tick(moving, m, state, tick, localized, inside, outside, shape_patches, robots,
+        code, m = _close_tick(moving, m, state, tick, localized, inside, outside, walking, shape_patches, robots,
                               max_ticks, rows[n])
         n += 1
     return n, m, localized, decided, code
@@ -140,6 +142,7 @@ class Simulation:
         self._claim = np.empty(n, dtype=np.int64)
         self._new_x, self._new_y, self._new_heading = np.empty(n), np.empty(n), np.empty(n)
         self._outcome = np.empty(n, dtype=np.int8)
+        self._codes = params.ruleset.codes()
         self._last_ids = np.empty(n, dtype=np.int64)
         self._moving = self.state.moving_ids()
         self._m = int(self._moving.size)
@@ -155,17 +158,18 @@ class Simulation:
         self.outcome: Outcome | None = None
         code, self._m = _close_tick(self._moving, self._m, s.state, 0, self._localized,
                                     int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
-                                    shape.patches, params.robots, params.max_ticks, self._rows[0])
+                                    int(counts[RobotState.WALKING]), shape.patches, params.robots, params.max_ticks,
+                                    self._rows[0])
         self._record(0, 1, code)
 
     def _set_kernel_args(self, alive: int) -> None:
         s, params = self.state, self.params
         self._alive = alive
         self._kernel_args = (
-            self._moving, s.x, s.y, s.heading, s.state, self._shape, self._wall, s.frontier, s.occupancy,
-            self._radius, self._size, params.vision_radius, params.wiggle_rad, params.seed, self._head,
-            self._nxt, self._best, self._claim, self._new_x, self._new_y, self._new_heading, self._outcome,
-            self._last_ids, self.shape.patches, alive, params.max_ticks)
+            self._moving, s.x, s.y, s.heading, s.state, self._shape, self._wall, s.frontier, s.frontier_blocks,
+            s.occupancy, self._radius, self._size, params.vision_radius, params.wiggle_rad, params.seed,
+            *self._codes, self._head, self._nxt, self._best, self._claim, self._new_x, self._new_y,
+            self._new_heading, self._outcome, self._last_ids, self.shape.patches, alive, params.max_ticks)
 
     # -- reading ----------------------------------------------------------------
     @property
@@ -196,6 +200,12 @@ class Simulation:
         """(robot ids, claimed patch or -1, :class:`JoinOutcome`) of the robots that decided last tick."""
         n = self._decided
         return self._last_ids[:n].copy(), self._claim[:n].copy(), self._outcome[:n].copy()
+
+    def last_decisions(self) -> Decisions:
+        """The decisions applied in the last tick (ids in the order applied): claims and the poses decided."""
+        n = self._decided
+        return Decisions(tick=self.tick, ids=self._last_ids[:n].copy(), claim=self._claim[:n].copy(),
+                         x=self._new_x[:n].copy(), y=self._new_y[:n].copy(), heading=self._new_heading[:n].copy())
 
     # -- advancing --------------------------------------------------------------
     def step(self) -> TickMetrics:
@@ -239,17 +249,19 @@ class Simulation:
             raise ValueError("decisions must cover every moving robot exactly once")
         self._last_ids[:m] = decisions.ids
         self._claim[:m] = decisions.claim
-        joined, inside, outside = resolve_kernel(
-            self._last_ids[:m], self._claim, decisions.x, decisions.y, decisions.heading, self.state.x,
-            self.state.y, self.state.heading, self.state.state, self.state.occupancy, self.state.frontier,
-            self._shape, self._radius, self._size, self.params.seed, decisions.tick, self._best,
-            self._localized, self.shape.patches, self._outcome)
+        self._new_x[:m], self._new_y[:m], self._new_heading[:m] = decisions.x, decisions.y, decisions.heading
+        s = self.state
+        joined, inside, outside, walking = resolve_kernel(
+            self._last_ids[:m], self._claim, self._new_x, self._new_y, self._new_heading, s.x, s.y, s.heading,
+            s.state, s.occupancy, s.frontier, s.frontier_blocks, self._shape, self._radius, self._size,
+            self.params.seed, decisions.tick, self._best, self._localized, self.shape.patches, self._codes[0],
+            self._outcome)
         self._localized += joined
         self._decided = m
         self._m = _compact_moving(self._moving, m, self.state.state)
         self._reserve(1)
         code, self._m = _close_tick(self._moving, self._m, self.state.state, decisions.tick, self._localized,
-                                    inside, outside, self.shape.patches, self.params.robots,
+                                    inside, outside, walking, self.shape.patches, self._alive,
                                     self.params.max_ticks, self._rows[self._nrows])
         self._record(1, 1, code)
         self._after_tick()
@@ -275,7 +287,7 @@ class Simulation:
         for i in ids.tolist():
             if s.state[i] in _STATIONARY_LOCALIZED:
                 vacate(patch_index(s.x[i], s.y[i], self._radius, self._size), s.occupancy, s.frontier,
-                       self._shape, self._size)
+                       s.frontier_blocks, self._shape, self._size)
         s.state[ids] = RobotState.REMOVED
         self.last_removed = ids
         if ids.size:
@@ -286,8 +298,8 @@ class Simulation:
         self._set_kernel_args(self._alive - int(ids.size))
         code, self._m = _close_tick(self._moving, self._m, s.state, self.tick, self._localized,
                                     int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
-                                    self.shape.patches, self._alive, self.params.max_ticks,
-                                    self._rows[self._nrows - 1])
+                                    int(counts[RobotState.WALKING]), self.shape.patches, self._alive,
+                                    self.params.max_ticks, self._rows[self._nrows - 1])
         self.outcome = OUTCOME_OF_CODE[code]
         return int(ids.size)
 

@@ -1,22 +1,28 @@
-"""Checks of the original study's Z-schema invariants (MODEL.md, "Formal specification").
+"""Checks of the original study's Z-schema invariants (docs/model.md, "Formal specification"),
+and of the rule set's moves.
 
 :func:`check_tick` compares the state before and after one tick of a
 :class:`~swarm_ros.core.engine.Simulation` and raises :class:`InvariantError` naming
-the first broken rule. It costs O(N + W^2) per tick: for tests and for
-``swarm-ros simulate --check``, not for production runs.
+the first broken rule. Besides the Z schemas it checks each robot's move against its
+rule set, with plain numpy re-statements of the rules (the nearest frontier patch by
+brute force, not the engine's block search). It costs O(N + W^2 + walkers x frontier)
+per tick: for tests and for ``swarm-ros simulate --check``, not for production runs.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from .arbitration import JoinOutcome
 from .engine import Simulation
 from .metrics import Outcome, tick_metrics
-from .state import RobotState, SwarmState, frontier_of
+from .state import MOVING_STATES, RobotState, SwarmState, frontier_blocks_of, frontier_of
 
 _STATIONARY = (RobotState.SEED, RobotState.LOCALIZED)
-_MOVING = (RobotState.MOVING_OUTSIDE, RobotState.MOVING_INSIDE)
+_MOVING = MOVING_STATES
+_EPS = 1e-9
 
 
 class InvariantError(AssertionError):
@@ -38,7 +44,7 @@ def check_state(sim: Simulation) -> None:
     s, shape, t = sim.state, sim.shape, sim.state.tick
     world = shape.world
     n, patches = s.robots, shape.patches
-    _require(bool(np.all((s.state >= 0) & (s.state <= RobotState.REMOVED))), t, "unknown robot state code")
+    _require(bool(np.all((s.state >= 0) & (s.state < len(RobotState)))), t, "unknown robot state code")
     localized = np.isin(s.state, _STATIONARY)
     seeds = s.state[:4]
     _require(bool(np.all((seeds == RobotState.SEED) | (seeds == RobotState.REMOVED)))
@@ -60,10 +66,15 @@ def check_state(sim: Simulation) -> None:
     _require(alive == n - sim.removed, t, "removed robots miscounted")
     _require(loc_ids.size <= min(alive, patches), t, "#localized > min(N, shape patches)")
     _require(bool(np.array_equal(s.frontier, frontier_of(shape, s.occupancy))), t, "frontier out of date")
+    _require(bool(np.array_equal(s.frontier_blocks, frontier_blocks_of(s.frontier, world.size))), t,
+             "frontier block counts out of date")
+    _require(sim.params.join == "walk" or not np.any(s.state == RobotState.WALKING), t,
+             "a robot walks, yet the rule set's join is not 'walk'")
     counts = s.counts()
     _require(sim.metrics == tick_metrics(t, counts, patches), t, f"metrics {sim.metrics} do not match the state")
+    wandering = np.isin(s.state, (RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE))
     inside_ok = shape.mask.ravel()[flat] == (s.state == RobotState.MOVING_INSIDE)
-    _require(bool(np.all(inside_ok | ~np.isin(s.state, _MOVING))), t, "moving inside/outside mislabelled")
+    _require(bool(np.all(inside_ok | ~wandering)), t, "moving inside/outside mislabelled")
     if sim.outcome is Outcome.COMPLETE_WITH_EXTRAS:
         _require(bool(np.all(localized | (s.state == RobotState.SEPARATED))), t, "extras not separated")
     _require(not np.any(s.state == RobotState.SEPARATED) or sim.outcome is Outcome.COMPLETE_WITH_EXTRAS, t,
@@ -112,9 +123,73 @@ def check_tick(prev: SwarmState, sim: Simulation) -> None:
     refused = tried & ~won
     expected = JoinOutcome.ALREADY_COMPLETE if after == shape.patches else JoinOutcome.INCOMPLETE
     _require(bool(np.all(outcome[refused] == expected)), t, "wrong outcome for a refused join")
-    # wandering robots move exactly one patch or not at all; refused robots stay put
-    walked = ~tried
-    step = np.hypot(s.x[ids] - prev.x[ids], s.y[ids] - prev.y[ids])
-    _require(bool(np.all((step[walked] < 1e-12) | (np.abs(step[walked] - 1.0) < 1e-9))), t,
-             "a robot moved other than one patch")
-    _require(bool(np.all(step[refused] == 0.0)), t, "a refused robot moved")
+    _check_moves(prev, sim, removed)
+
+
+def nearest_frontier_patch(frontier: np.ndarray, x: float, y: float, world) -> int:
+    """The nearest frontier patch to (x, y) by brute force (ties to the lowest flat index), or -1."""
+    cells = np.flatnonzero(frontier)
+    if cells.size == 0:
+        return -1
+    px, py = world.patch_xy(cells)
+    dx, dy = px - x, py - y
+    d2 = dx * dx + dy * dy
+    return int(cells[np.lexsort((cells, d2))[0]])
+
+
+def _check_moves(prev: SwarmState, sim: Simulation, removed: np.ndarray) -> None:
+    """Each decider's move against its rule set: claims within reach, walkers towards the nearest
+    frontier patch, wanderers' step lengths, and the state the world gave it."""
+    s, shape, t, p = sim.state, sim.shape, sim.state.tick, sim.params
+    world = shape.world
+    d = sim.last_decisions()
+    _, _, outcome = sim.last_joins()
+    ids = d.ids
+    won = outcome == JoinOutcome.SUCCESS
+    keep = ~removed[ids]
+    # a robot that did not win takes exactly the pose it decided
+    lost = ~won & keep
+    _require(bool(np.all((s.x[ids[lost]] == d.x[lost]) & (s.y[ids[lost]] == d.y[lost])
+                         & (s.heading[ids[lost]] == d.heading[lost]))), t, "a robot is not at the pose it decided")
+    px, py = world.patch_of(prev.x[ids], prev.y[ids])
+    was_inside = shape.mask.ravel()[world.flat_index(px, py)]
+    prev_state = prev.state[ids]
+    step = np.hypot(d.x - prev.x[ids], d.y - prev.y[ids])
+    tried = d.claim >= 0
+    cx, cy = world.patch_xy(np.where(tried, d.claim, 0))
+    reach = np.hypot(cx - d.x, cy - d.y)
+    walk = p.join == "walk" and bool(prev.frontier.any())
+    walkers = ((prev_state == RobotState.WALKING) | was_inside) if walk else np.zeros(ids.size, dtype=bool)
+    for k in np.flatnonzero(walkers):
+        target = nearest_frontier_patch(prev.frontier, prev.x[ids[k]], prev.y[ids[k]], world)
+        tx, ty = world.patch_xy(target)
+        dx, dy = tx - prev.x[ids[k]], ty - prev.y[ids[k]]
+        d2 = dx * dx + dy * dy  # "within 1 patch" is d2 <= 1 with d2 computed so, as the rule states it
+        if tried[k]:
+            _require(int(d.claim[k]) == target and d2 <= 1.0 and step[k] == 0.0, t,
+                     f"robot {ids[k]} claimed other than the nearest frontier patch within 1 patch")
+        else:
+            toward = np.hypot(tx - d.x[k], ty - d.y[k])
+            _require(d2 > 1.0 and abs(step[k] - 1.0) < _EPS and abs(toward - (math.sqrt(d2) - 1.0)) < _EPS, t,
+                     f"robot {ids[k]} did not step 1 patch towards the nearest frontier patch")
+    wander = ~walkers
+    if p.steps == "one":
+        _require(bool(np.all((step[wander & ~tried] < 1e-12) | (np.abs(step[wander & ~tried] - 1.0) < _EPS))), t,
+                 "a wandering robot moved other than one patch")
+        _require(bool(np.all(step[wander & tried] == 0.0)), t, "a claiming robot moved")
+        _require(bool(np.all(reach[wander & tried] <= p.vision_radius + _EPS)), t,
+                 "a claim beyond the vision radius")
+        _require(bool(np.all(was_inside[wander & tried])), t, "a robot outside the shape claimed")
+    else:
+        limit = np.where(was_inside, 2.0, 3.0)
+        _require(bool(np.all(step[wander] <= limit[wander] + _EPS)), t,
+                 "a robot moved more than 3 patches outside or 2 inside the shape")
+        _require(bool(np.all(reach[wander & tried] <= p.vision_radius + _EPS)), t,
+                 "a claim beyond the vision radius")
+        _require(bool(np.all(was_inside[wander & tried])), t, "a robot outside the shape claimed")
+    # the state the world gave each robot that did not win (unless the end separated it)
+    after = s.state[ids]
+    should_walk = walkers & (~tried | (prev_state == RobotState.WALKING))
+    open_ = lost & (after != RobotState.SEPARATED)
+    _require(bool(np.all((after[open_] == RobotState.WALKING) == should_walk[open_])), t,
+             "a robot walks against the rule set, or stopped walking")

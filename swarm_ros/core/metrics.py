@@ -1,8 +1,9 @@
 """Metrics and termination, defined once for every engine and consumer.
 
 Per tick (``metrics.csv``): stationary (seeds, localized and separated robots), localized
-(seeds included), inside (moving robots on a shape patch), moving, and empty shape
-patches. Per run (``summary.json``): outcome, convergence tick (the tick the run
+(seeds included), inside (robots wandering on a shape patch), moving (wandering or
+walking), empty shape patches, and walking (robots heading for a frontier patch under
+``join: walk``). Per run (``summary.json``): outcome, convergence tick (the tick the run
 ended), localized, unlocalized, separated, empty patches, and convergence rate: robots
 that joined per tick, ``(localized - 4) / convergence_tick`` (0 at tick 0).
 """
@@ -21,7 +22,7 @@ SEEDS = 4
 
 
 class Outcome(str, Enum):
-    """How a run ended (MODEL.md, "Termination")."""
+    """How a run ended (docs/model.md, "Termination")."""
 
     COMPLETE = "complete"  #: every shape patch localized, no robot left over
     COMPLETE_WITH_EXTRAS = "complete_with_extras"  #: shape complete; left-over robots separated
@@ -50,20 +51,22 @@ class TickMetrics(NamedTuple):
     inside: int
     moving: int
     empty_patches: int
+    walking: int
 
 
 METRIC_COLUMNS: tuple[str, ...] = TickMetrics._fields
 
 
 @numba.njit(cache=True)
-def metric_values(tick, localized, inside, outside, separated, shape_patches):
+def metric_values(tick, localized, inside, outside, walking, separated, shape_patches):
     """The :class:`TickMetrics` fields, in order, from running counts (``localized`` includes seeds)."""
-    return tick, localized + separated, localized, inside, inside + outside, shape_patches - localized
+    return (tick, localized + separated, localized, inside, inside + outside + walking, shape_patches - localized,
+            walking)
 
 
 @numba.njit(cache=True)
 def end_code(localized, moving, tick, shape_patches, robots, max_ticks):
-    """The run's end code at this tick (``RUNNING`` if it goes on), checked in MODEL.md's order."""
+    """The run's end code at this tick (``RUNNING`` if it goes on): complete, then incomplete, then timeout."""
     if localized == shape_patches:
         return END_COMPLETE if robots == shape_patches else END_EXTRAS
     if moving == 0:
@@ -76,8 +79,8 @@ def end_code(localized, moving, tick, shape_patches, robots, max_ticks):
 def tick_metrics(tick: int, counts: Sequence[int] | np.ndarray, shape_patches: int) -> TickMetrics:
     """Metrics from the number of robots in each :class:`RobotState` (``counts[code]``, codes in order;
     removed robots, code 5, count nowhere)."""
-    seed, outside, inside, localized, separated = (int(c) for c in counts[:5])
-    return TickMetrics(*metric_values(tick, seed + localized, inside, outside, separated, shape_patches))
+    seed, outside, inside, localized, separated, _removed, walking = (int(c) for c in counts[:7])
+    return TickMetrics(*metric_values(tick, seed + localized, inside, outside, walking, separated, shape_patches))
 
 
 def outcome_of(metrics: TickMetrics, shape_patches: int, robots: int, max_ticks: int) -> Outcome | None:
@@ -106,6 +109,10 @@ def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, ou
         "shape_patches": shape_patches,
         "robots": robots,
         "vision_radius": params["vision_radius"],
+        "rules": params["rules"],
+        "join": params["join"],
+        "crowding": params["crowding"],
+        "steps": params["steps"],
         "seed": params["seed"],
         "max_ticks": params["max_ticks"],
         "wiggle_deg": params["wiggle_deg"],

@@ -7,6 +7,7 @@ import numbers
 from dataclasses import asdict, dataclass
 
 from .errors import ParameterError
+from .rulesets import DEFAULT_RULES, RuleSet
 
 DEFAULT_SEED = 1
 DEFAULT_VISION = 1.0
@@ -28,6 +29,10 @@ class RunParams:
         fail_fraction: the fraction of the robots that fail at the end of tick ``fail_tick``
             and are removed (0 = none): damage for studying self-repair.
         fail_tick: the tick at whose end they fail (>= 1 when ``fail_fraction`` > 0).
+        rules: the named rule set (:mod:`swarm_ros.core.rulesets`): ``paper``, ``local`` or ``literal``.
+        join, crowding, steps: the switches in force. Given as "" (the default), each takes
+            the rule set's own value; given a value, it overrides it. After construction
+            they always hold the resolved values.
     """
 
     robots: int
@@ -37,8 +42,15 @@ class RunParams:
     wiggle_deg: float = DEFAULT_WIGGLE_DEG
     fail_fraction: float = 0.0
     fail_tick: int = 0
+    rules: str = DEFAULT_RULES
+    join: str = ""
+    crowding: str = ""
+    steps: str = ""
 
     def __post_init__(self) -> None:
+        ruleset = RuleSet.resolve(self.rules, self.join, self.crowding, self.steps)
+        for name in ("join", "crowding", "steps"):
+            object.__setattr__(self, name, getattr(ruleset, name))
         for name, low, high in (("robots", 4, None), ("seed", 0, MAX_SEED), ("max_ticks", 1, None),
                                 ("fail_tick", 0, None)):
             object.__setattr__(self, name, _int(name, getattr(self, name), low, high))
@@ -52,6 +64,11 @@ class RunParams:
     def failures(self) -> int:
         """How many robots fail at ``fail_tick``: ``round(fail_fraction * robots)``."""
         return round(self.fail_fraction * self.robots)
+
+    @property
+    def ruleset(self) -> RuleSet:
+        """The rule set in force, switches resolved."""
+        return RuleSet(self.rules, self.join, self.crowding, self.steps)
 
     @property
     def wiggle_rad(self) -> float:

@@ -16,17 +16,16 @@ import numpy as np
 from .arbitration import occupy, vacate
 from .rules import patch_index
 from .shapes import Shape
-from .state import NO_ROBOT, RobotState, SwarmState
+from .state import NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
 
 _SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
-_MOVING_OUTSIDE, _MOVING_INSIDE = np.int8(RobotState.MOVING_OUTSIDE), np.int8(RobotState.MOVING_INSIDE)
 _REMOVED = np.int8(RobotState.REMOVED)
 UNKNOWN = np.int8(-1)  #: state of a robot before the tick-0 rows arrive
 
 
 @numba.njit(cache=True)
-def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, shape,
-                radius, size):
+def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, blocks,
+                shape, radius, size):
     """Write the rows into the state arrays; occupy the patch of every robot that became stationary-localized,
     free the patch of every localized robot that was removed.
 
@@ -43,7 +42,7 @@ def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state,
         if was == _REMOVED and st != _REMOVED:
             return k + 1  # removed robots never come back
         if st == _REMOVED and (was == _SEED or was == _LOCALIZED):
-            vacate(patch_index(x[i], y[i], radius, size), occupancy, frontier, shape, size)
+            vacate(patch_index(x[i], y[i], radius, size), occupancy, frontier, blocks, shape, size)
         x[i] = new_x[k]
         y[i] = new_y[k]
         heading[i] = new_heading[k]
@@ -52,7 +51,7 @@ def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state,
             p = patch_index(x[i], y[i], radius, size)
             if not shape[p] or occupancy[p] >= 0:
                 return k + 1
-            occupy(p, i, occupancy, frontier, shape, size)
+            occupy(p, i, occupancy, frontier, blocks, shape, size)
     return 0
 
 
@@ -68,11 +67,12 @@ class Replica:
         self.shape = shape
         self._radius, self._size = world.radius, world.size
         self._shape = shape.mask.ravel().copy()
+        frontier = np.zeros(world.patch_count, dtype=bool)
         self.state = SwarmState(
             x=np.zeros(robots), y=np.zeros(robots), heading=np.zeros(robots),
             state=np.full(robots, UNKNOWN, dtype=np.int8),
             occupancy=np.full(world.patch_count, NO_ROBOT, dtype=np.int32),
-            frontier=np.zeros(world.patch_count, dtype=bool), tick=-1)
+            frontier=frontier, frontier_blocks=frontier_blocks_of(frontier, world.size), tick=-1)
 
     @property
     def tick(self) -> int:
@@ -98,7 +98,7 @@ class Replica:
             raise ValueError(f"unknown robot state code in the rows of tick {tick}")
         bad = _apply_rows(ids, state, np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64),
                           np.asarray(heading, dtype=np.float64), s.x, s.y, s.heading, s.state, s.occupancy,
-                          s.frontier, self._shape, self._radius, self._size)
+                          s.frontier, s.frontier_blocks, self._shape, self._radius, self._size)
         if bad:
             raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
                              f"localizes on a patch that is not an empty shape patch, or returns after removal")

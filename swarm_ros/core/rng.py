@@ -21,6 +21,11 @@ STREAM_PLACE_X = 3  #: x offset within the start patch (tick 0)
 STREAM_PLACE_Y = 4  #: y offset within the start patch (tick 0)
 STREAM_PLACE_HEADING = 5  #: start heading (tick 0)
 STREAM_FAIL = 6  #: which robots fail at the failure tick (``RunParams.fail_fraction``)
+# ``steps: literal`` makes up to three Move calls and two turns a tick; the first of each
+# uses STREAM_WIGGLE / STREAM_TURN, the others these.
+STREAM_WIGGLE_2 = 7  #: second wiggle of a tick
+STREAM_WIGGLE_3 = 8  #: third wiggle of a tick
+STREAM_TURN_2 = 9  #: second random turn of a tick
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)

@@ -1,24 +1,30 @@
 """The robot rule: what each moving robot decides at a tick, from a read-only view of the last one.
 
-A decision depends only on the robot's own state, the shape, the moving robots within
-its vision radius of the point ahead, the frontier patches within its vision radius,
-and its own random stream, so any batch of robots can decide in any process and the
-union of the batches' decisions equals the decision of the whole swarm. The world then
-settles the claims (:mod:`swarm_ros.core.arbitration`).
+A decision depends only on the robot's own state, the shape and its fill state (the
+frontier), the moving robots it senses, and its own random stream, so any batch of
+robots can decide in any process and the union of the batches' decisions equals the
+decision of the whole swarm. The world then settles the claims and sets the new states
+(:mod:`swarm_ros.core.arbitration`).
 
-A moving robot, each tick (MODEL.md):
+A moving robot, each tick, under the run's rule set (:mod:`swarm_ros.core.rulesets`;
+docs/model.md states the rule in full):
 
-1. if its patch is a shape patch, it looks for a join target: the nearest frontier
-   patch (empty shape patch with a localized 8-neighbour) whose centre is within the
-   vision radius of the robot; ties go to the lowest (y, x). If there is one, the robot
-   claims it and does nothing else this tick;
-2. otherwise it turns by a uniform angle in [-wiggle, +wiggle]; if the patch one step
-   ahead is a wall, or another moving robot is within the vision radius of the point
-   one step ahead, it turns to a uniform random heading and stays; else it steps one
-   patch forward.
+* ``join: walk``, a robot inside the shape or already walking: it targets the nearest
+  frontier patch anywhere (ties to the lowest (y, x)); within one patch of its centre it
+  claims it, else it faces it and steps exactly one patch towards it. With no frontier
+  patch at all it wanders.
+* ``join: local``, a robot inside the shape (``steps: one``): it claims the nearest
+  frontier patch within its vision radius, if any; else it wanders.
+* wandering, ``steps: one``: turn by a uniform wiggle; if the patch one step ahead is a
+  wall, or the robot is crowded (``crowding``), turn to a uniform random heading and
+  stay; else step one patch forward.
+* wandering, ``steps: literal``: the pseudo-code's Move calls as written, up to three
+  steps outside the shape and two inside, then (``join: local``) a claim from where the
+  robot now stands.
 
-The hot loops are compiled with numba: they visit each moving robot once and each of
-its nearby cells of a patch-sized cell list, so a tick costs O(moving robots).
+The hot loops are compiled with numba: they visit each moving robot once, each of its
+nearby cells of a patch-sized cell list, and (``walk``) the blocks of frontier patches
+out to the nearest one, so a tick costs O(moving robots).
 """
 
 from __future__ import annotations
@@ -30,11 +36,13 @@ import numba
 import numpy as np
 
 from .params import RunParams
-from .rng import STREAM_TURN, STREAM_WIGGLE, draw_uniform
+from .rng import STREAM_TURN, STREAM_TURN_2, STREAM_WIGGLE, STREAM_WIGGLE_2, STREAM_WIGGLE_3, draw_uniform
+from .rulesets import CROWD_AHEAD, JOIN_LOCAL, JOIN_WALK, STEPS_ONE
 from .shapes import Shape
-from .state import RobotState, SwarmState
+from .state import FRONTIER_BLOCK, MOVING_STATES, RobotState, SwarmState
 
 TWO_PI = 2.0 * math.pi
+_WALKING = np.int8(RobotState.WALKING)
 
 
 @numba.njit(cache=True, inline="always")
@@ -66,7 +74,7 @@ def index_clear(ids, x, y, radius, size, head):
 
 
 @numba.njit(cache=True)
-def crowded(ax, ay, me, vision, x, y, radius, size, head, nxt) -> bool:
+def crowded_disc(ax, ay, me, vision, x, y, radius, size, head, nxt) -> bool:
     """True if a robot in the cell list other than ``me`` is within ``vision`` of (ax, ay)."""
     v2 = vision * vision
     reach = int(math.floor(vision + 1.0))
@@ -87,8 +95,31 @@ def crowded(ax, ay, me, vision, x, y, radius, size, head, nxt) -> bool:
 
 
 @numba.njit(cache=True)
+def crowded_ahead(xi, yi, h, me, vision, radius, size, head, nxt) -> bool:
+    """True if a robot in the cell list other than ``me`` is on the patch ``vision`` ahead of (xi, yi) along ``h``."""
+    px = int(math.floor(xi + vision * math.cos(h) + 0.5))
+    py = int(math.floor(yi + vision * math.sin(h) + 0.5))
+    if px < -radius or px > radius or py < -radius or py > radius:
+        return False  # beyond the walls: nobody there
+    j = head[(py + radius) * size + px + radius]
+    while j >= 0:
+        if j != me:
+            return True
+        j = nxt[j]
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def crowded(crowd, xi, yi, h, me, vision, x, y, radius, size, head, nxt) -> bool:
+    """The rule set's crowding test for a robot at (xi, yi) facing ``h``."""
+    if crowd == CROWD_AHEAD:
+        return crowded_ahead(xi, yi, h, me, vision, radius, size, head, nxt)
+    return crowded_disc(xi + math.cos(h), yi + math.sin(h), me, vision, x, y, radius, size, head, nxt)
+
+
+@numba.njit(cache=True)
 def join_target(xi, yi, vision, frontier, radius, size) -> int:
-    """Flat index of the nearest frontier patch within ``vision`` of (xi, yi), or -1."""
+    """Flat index of the nearest frontier patch within ``vision`` of (xi, yi), or -1 (``join: local``)."""
     v2 = vision * vision
     reach = int(math.floor(vision + 0.5))
     cx = int(math.floor(xi + 0.5))
@@ -109,39 +140,153 @@ def join_target(xi, yi, vision, frontier, radius, size) -> int:
     return best
 
 
+@numba.njit(cache=True, inline="always")
+def _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2):
+    """Fold the frontier patches of block (ux, uy) into the nearest-so-far (best, best_d2)."""
+    if blocks[uy * nb + ux] == 0:
+        return best, best_d2
+    b = FRONTIER_BLOCK
+    x0 = ux * b - radius
+    x1 = min(ux * b + b - 1, size - 1) - radius
+    y0 = uy * b - radius
+    y1 = min(uy * b + b - 1, size - 1) - radius
+    gx = max(x0 - xi, 0.0, xi - x1)
+    gy = max(y0 - yi, 0.0, yi - y1)
+    if gx * gx + gy * gy > best_d2:
+        return best, best_d2
+    for py in range(y0, y1 + 1):
+        row = (py + radius) * size + radius
+        for px in range(x0, x1 + 1):
+            q = row + px
+            if frontier[q]:
+                dx = px - xi
+                dy = py - yi
+                d2 = dx * dx + dy * dy
+                if d2 < best_d2 or (d2 == best_d2 and q < best):
+                    best_d2 = d2
+                    best = q
+    return best, best_d2
+
+
 @numba.njit(cache=True)
-def decide_kernel(ids, x, y, heading, shape, wall, frontier, radius, size, vision, wiggle, seed, tick,
-                  head, nxt, out_claim, out_x, out_y, out_heading):
-    """Decide for robots ``ids`` (moving, all inserted in the cell list) at ``tick``.
+def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
+    """Flat index of the nearest frontier patch anywhere (``join: walk``), or -1 if there is none.
+
+    Distance is Euclidean from (xi, yi) to the patch centre; ties go to the lowest flat
+    index, i.e. the lowest (y, x). The search goes outward ring by ring over blocks of
+    ``FRONTIER_BLOCK`` patches, skips blocks without frontier patches (``blocks``) or
+    farther than the best so far, and stops once a whole ring is farther: it costs about
+    the blocks within the distance found, not the frontier's size.
+    """
+    if blocks[blocks.size - 1] == 0:
+        return -1
+    b = FRONTIER_BLOCK
+    nb = (size + b - 1) // b
+    bx = (int(math.floor(xi + 0.5)) + radius) // b
+    by = (int(math.floor(yi + 0.5)) + radius) // b
+    best = -1
+    best_d2 = math.inf
+    for k in range(max(bx, by, nb - 1 - bx, nb - 1 - by) + 1):
+        if k > 0:
+            # every patch centre in ring k is at least (k - 1) * b + 0.5 away along x or y
+            gap = (k - 1) * b + 0.5
+            if gap * gap > best_d2:
+                break
+        for uy in range(max(by - k, 0), min(by + k, nb - 1) + 1):
+            if uy == by - k or uy == by + k:  # the ring's bottom or top row: every block in it
+                for ux in range(max(bx - k, 0), min(bx + k, nb - 1) + 1):
+                    best, best_d2 = _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
+            else:  # the rows between: the ring's left and right blocks
+                if bx - k >= 0:
+                    best, best_d2 = _scan_block(bx - k, uy, xi, yi, frontier, blocks, radius, size, nb, best,
+                                                best_d2)
+                if bx + k < nb:
+                    best, best_d2 = _scan_block(bx + k, uy, xi, yi, frontier, blocks, radius, size, nb, best,
+                                                best_d2)
+    return best
+
+
+@numba.njit(cache=True, inline="always")
+def _move(xi, yi, h, wiggle, u, wall, radius, size):
+    """The pseudo-code's Move: turn by a wiggle (``u`` uniform in [0, 1)), then step 1 patch forward
+    unless that patch is a wall. Returns (x, y, heading)."""
+    h = h + wiggle * (2.0 * u - 1.0)
+    ax = xi + math.cos(h)
+    ay = yi + math.sin(h)
+    if wall[patch_index(ax, ay, radius, size)]:
+        return xi, yi, h
+    return ax, ay, h
+
+
+@numba.njit(cache=True)
+def decide_kernel(ids, x, y, heading, state, shape, wall, frontier, blocks, radius, size, vision, wiggle, seed,
+                  tick, join, crowd, steps, head, nxt, out_claim, out_x, out_y, out_heading):
+    """Decide for robots ``ids`` (moving, all inserted in the cell list) at ``tick`` under the rule set
+    (``join``, ``crowd``, ``steps``: :mod:`swarm_ros.core.rulesets` codes).
 
     Writes, per position k of ``ids``: the claimed patch (flat index, or -1) and the
-    position and heading the robot will have if it does not join. Reads only the
+    position and heading the robot takes if it does not win a claim. Reads only the
     previous tick's arrays; writes only the ``out_*`` arrays.
     """
     for k in range(ids.size):
         i = ids[k]
         xi = x[i]
         yi = y[i]
+        hi = heading[i]
         claim = -1
-        if shape[patch_index(xi, yi, radius, size)]:
-            claim = join_target(xi, yi, vision, frontier, radius, size)
+        inside = shape[patch_index(xi, yi, radius, size)]
+        if join == JOIN_WALK and (state[i] == _WALKING or inside):
+            q = nearest_frontier(xi, yi, frontier, blocks, radius, size)
+            if q >= 0:
+                dx = (q % size - radius) - xi
+                dy = (q // size - radius) - yi
+                d2 = dx * dx + dy * dy
+                if d2 <= 1.0:
+                    claim = q  # within one patch: claim it, standing
+                else:  # face it and step exactly one patch towards it
+                    d = math.sqrt(d2)
+                    xi += dx / d
+                    yi += dy / d
+                    hi = math.atan2(dy, dx) % TWO_PI
+                out_claim[k] = claim
+                out_x[k] = xi
+                out_y[k] = yi
+                out_heading[k] = hi
+                continue
+            # an empty frontier: nothing to walk to, so the robot wanders
+        if steps == STEPS_ONE:
+            if join == JOIN_LOCAL and inside:
+                claim = join_target(xi, yi, vision, frontier, radius, size)
+            if claim < 0:
+                h = hi + wiggle * (2.0 * draw_uniform(seed, i, tick, STREAM_WIGGLE) - 1.0)
+                ax = xi + math.cos(h)
+                ay = yi + math.sin(h)
+                if wall[patch_index(ax, ay, radius, size)] or crowded(crowd, xi, yi, h, i, vision, x, y, radius,
+                                                                      size, head, nxt):
+                    hi = TWO_PI * draw_uniform(seed, i, tick, STREAM_TURN)
+                else:
+                    xi, yi, hi = ax, ay, h % TWO_PI
+        else:  # the pseudo-code's Move calls, as written
+            xi, yi, hi = _move(xi, yi, hi, wiggle, draw_uniform(seed, i, tick, STREAM_WIGGLE), wall, radius, size)
+            if not inside:
+                if wall[patch_index(xi + math.cos(hi), yi + math.sin(hi), radius, size)]:
+                    hi = TWO_PI * draw_uniform(seed, i, tick, STREAM_TURN)
+                else:
+                    xi, yi, hi = _move(xi, yi, hi, wiggle, draw_uniform(seed, i, tick, STREAM_WIGGLE_2), wall,
+                                       radius, size)
+            if crowded(crowd, xi, yi, hi, i, vision, x, y, radius, size, head, nxt):
+                hi = TWO_PI * draw_uniform(seed, i, tick, STREAM_TURN_2 if not inside else STREAM_TURN)
+            else:
+                xi, yi, hi = _move(xi, yi, hi, wiggle,
+                                   draw_uniform(seed, i, tick, STREAM_WIGGLE_3 if not inside else STREAM_WIGGLE_2),
+                                   wall, radius, size)
+            hi = hi % TWO_PI
+            if inside and join == JOIN_LOCAL:
+                claim = join_target(xi, yi, vision, frontier, radius, size)
         out_claim[k] = claim
-        if claim >= 0:
-            out_x[k] = xi
-            out_y[k] = yi
-            out_heading[k] = heading[i]
-            continue
-        h = heading[i] + wiggle * (2.0 * draw_uniform(seed, i, tick, STREAM_WIGGLE) - 1.0)
-        ax = xi + math.cos(h)
-        ay = yi + math.sin(h)
-        if wall[patch_index(ax, ay, radius, size)] or crowded(ax, ay, i, vision, x, y, radius, size, head, nxt):
-            out_x[k] = xi
-            out_y[k] = yi
-            out_heading[k] = TWO_PI * draw_uniform(seed, i, tick, STREAM_TURN)
-        else:
-            out_x[k] = ax
-            out_y[k] = ay
-            out_heading[k] = h % TWO_PI
+        out_x[k] = xi
+        out_y[k] = yi
+        out_heading[k] = hi
 
 
 @dataclass(frozen=True)
@@ -193,6 +338,7 @@ class Decider:
         self._wall = world.wall_mask().ravel()
         self._head = np.full(world.patch_count, -1, dtype=np.int32)
         self._nxt = np.empty(params.robots, dtype=np.int32)
+        self._codes = params.ruleset.codes()
 
     def decide(self, view: SwarmState, ids: np.ndarray, tick: int, moving: np.ndarray | None = None) -> Decisions:
         """Decisions of the moving robots ``ids`` at ``tick`` from ``view``, the state at tick - 1.
@@ -209,8 +355,7 @@ class Decider:
             raise ValueError(f"the view has {view.robots} robots, the run {self.params.robots}")
         if ids.size and (ids.min() < 0 or ids.max() >= view.robots):
             raise ValueError(f"robot ids must be in [0, {view.robots}), got {ids.min()}..{ids.max()}")
-        st = view.state[ids]
-        if np.any((st != RobotState.MOVING_INSIDE) & (st != RobotState.MOVING_OUTSIDE)):
+        if not np.all(np.isin(view.state[ids], MOVING_STATES)):
             raise ValueError("decide() takes moving robots only")
         if moving is None:
             moving = view.moving_ids()
@@ -220,9 +365,9 @@ class Decider:
         r, w = self._radius, self._size
         index_build(moving, view.x, view.y, r, w, self._head, self._nxt)
         try:
-            decide_kernel(ids, view.x, view.y, view.heading, self._shape, self._wall, view.frontier, r, w,
-                          self.params.vision_radius, self.params.wiggle_rad, self.params.seed, tick,
-                          self._head, self._nxt, claim, x, y, heading)
+            decide_kernel(ids, view.x, view.y, view.heading, view.state, self._shape, self._wall, view.frontier,
+                          view.frontier_blocks, r, w, self.params.vision_radius, self.params.wiggle_rad,
+                          self.params.seed, tick, *self._codes, self._head, self._nxt, claim, x, y, heading)
         finally:
             index_clear(moving, view.x, view.y, r, w, self._head)
         return Decisions(tick=tick, ids=ids, claim=claim, x=x, y=y, heading=heading)

@@ -14,6 +14,7 @@ from .rng import STREAM_PLACE_HEADING, STREAM_PLACE_X, STREAM_PLACE_Y, uniform_a
 from .shapes import Shape
 
 NO_ROBOT = -1  #: occupancy value of a patch without a localized robot
+FRONTIER_BLOCK = 8  #: side, in patches, of the blocks whose frontier patches are counted (nearest-frontier search)
 
 
 class RobotState(IntEnum):
@@ -25,6 +26,7 @@ class RobotState(IntEnum):
     LOCALIZED = 3  #: joined the shape: stationary on a shape patch
     SEPARATED = 4  #: left over after the shape completed: stationary, unlocalized
     REMOVED = 5  #: failed and taken out of the world (``--fail-robots``, a lost process): holds no patch
+    WALKING = 6  #: (join ``walk``) heading straight for the nearest frontier patch, one patch a tick
 
     @property
     def label(self) -> str:
@@ -32,6 +34,8 @@ class RobotState(IntEnum):
 
 
 STATE_COUNT = len(RobotState)
+#: The states of robots that decide each tick.
+MOVING_STATES = (RobotState.MOVING_OUTSIDE, RobotState.MOVING_INSIDE, RobotState.WALKING)
 
 
 @dataclass
@@ -47,6 +51,9 @@ class SwarmState:
             on each patch, or ``NO_ROBOT``.
         frontier: flat world grid (bool, (W*W,)): empty shape patches with at least
             one localized 8-neighbour, i.e. the patches robots may join.
+        frontier_blocks: frontier patches per block of ``FRONTIER_BLOCK`` x ``FRONTIER_BLOCK``
+            patches (int32, (B*B + 1,), blocks row by row from the world's bottom-left corner),
+            the last entry the total; kept in step with ``frontier`` (:func:`frontier_blocks_of`).
         tick: the tick this state is the end of (0 = initial placement).
     """
 
@@ -56,6 +63,7 @@ class SwarmState:
     state: np.ndarray
     occupancy: np.ndarray
     frontier: np.ndarray
+    frontier_blocks: np.ndarray
     tick: int = 0
 
     @property
@@ -72,7 +80,7 @@ class SwarmState:
 
     def moving_ids(self) -> np.ndarray:
         """Ids of moving robots, ascending (int64)."""
-        return np.flatnonzero((self.state == RobotState.MOVING_OUTSIDE) | (self.state == RobotState.MOVING_INSIDE))
+        return np.flatnonzero(np.isin(self.state, MOVING_STATES))
 
 
 def frontier_of(shape: Shape, occupancy: np.ndarray) -> np.ndarray:
@@ -81,6 +89,16 @@ def frontier_of(shape: Shape, occupancy: np.ndarray) -> np.ndarray:
     occupied = (occupancy >= 0).reshape(w, w)
     near = ndimage.binary_dilation(occupied, structure=np.ones((3, 3), dtype=bool))
     return (shape.mask & ~occupied & near).ravel()
+
+
+def frontier_blocks_of(frontier: np.ndarray, size: int) -> np.ndarray:
+    """Frontier patches per ``FRONTIER_BLOCK``-sided block of a ``size`` x ``size`` flat grid, then the total."""
+    b = FRONTIER_BLOCK
+    nb = -(-size // b)
+    grid = np.zeros((nb * b, nb * b), dtype=np.int32)
+    grid[:size, :size] = frontier.reshape(size, size)
+    counts = grid.reshape(nb, b, nb, b).sum(axis=(1, 3)).ravel()
+    return np.append(counts, counts.sum()).astype(np.int32)
 
 
 def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
@@ -127,5 +145,6 @@ def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
 
     occupancy = np.full(w * w, -1, dtype=np.int32)
     occupancy[seed_flat] = np.arange(4, dtype=np.int32)
-    return SwarmState(x=x, y=y, heading=heading, state=state, occupancy=occupancy,
-                      frontier=frontier_of(shape, occupancy), tick=0)
+    frontier = frontier_of(shape, occupancy)
+    return SwarmState(x=x, y=y, heading=heading, state=state, occupancy=occupancy, frontier=frontier,
+                      frontier_blocks=frontier_blocks_of(frontier, w), tick=0)

@@ -26,7 +26,7 @@ from ..core.engine import Simulation
 from ..core.errors import ParameterError
 from ..core.metrics import Outcome
 from ..core.rules import Decisions
-from ..core.state import RobotState
+from ..core.state import MOVING_STATES, RobotState
 from ..wire import DECISION_ROW, decisions_of, format_ranges, robot_rows
 from . import messages as msgs
 from .params import make_node, read_parameters
@@ -133,8 +133,7 @@ class WorldNode:
 
     def _standing(self) -> np.ndarray:
         """Moving robots of lost batches: they stand still in their last tick, then are removed."""
-        state = self.sim.state.state[self.pending]
-        return self.pending[(state == RobotState.MOVING_INSIDE) | (state == RobotState.MOVING_OUTSIDE)]
+        return self.pending[np.isin(self.sim.state.state[self.pending], MOVING_STATES)]
 
     def _advance(self, tick: int) -> None:
         parts = [decisions_of(tick, r) for r in self.parts]
