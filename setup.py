@@ -18,7 +18,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/shapes", sorted(glob("shapes/*.txt"))),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
-        (f"share/{PACKAGE}/config/experiments", sorted(glob("config/experiments/*.yaml"))),
+        (f"share/{PACKAGE}/config/experiments", sorted(glob("config/experiments/*.yaml") + glob("config/experiments/*.csv"))),
     ],
     install_requires=[
         "numpy>=2.0,<2.5",

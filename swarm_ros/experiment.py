@@ -6,6 +6,9 @@ An experiment file is YAML::
     seed: 2026                  # experiment seed; each run's seed derives from it and the run's coordinates
     repetitions: 10
     vision_radius: [1]          # one number or a list
+    rules: [paper, local]       # optional: one rule set or a list (default: paper)
+    crowding: disc              # optional: override a switch (join, crowding, steps) for every rule set
+    reference: study_reference.csv  # optional: published numbers to set beside ours (relative to this file)
     max_ticks: 100000           # optional, as for one run
     wiggle_deg: 45              # optional
     world_radius: 32            # optional
@@ -18,8 +21,10 @@ Runs go to J worker processes. Each finished run is appended at once, as one lin
 ``results.csv`` in the output directory, so an interrupted experiment loses only the
 runs in flight, and running the same command again skips the runs already there. A
 run's seed depends only on the experiment seed and its coordinates (shape, group size,
-vision radius, repetition), never on J or on the order runs finish. At the end the
-statistics and figures are (re)built (:mod:`swarm_ros.report`).
+vision radius, repetition), never on J, on the order runs finish or on the rule set: the
+rule sets of one experiment start from the same placements (common random numbers). At
+the end the statistics and figures are (re)built (:mod:`swarm_ros.report`); a reference
+file is copied into the output directory so the report can always find it.
 """
 
 from __future__ import annotations
@@ -42,25 +47,28 @@ import numpy as np
 from .config import read_yaml
 from .core.errors import SwarmError
 from .core.params import DEFAULT_MAX_TICKS, DEFAULT_WIGGLE_DEG, MAX_SEED, RunParams
+from .core.rulesets import DEFAULT_RULES, RULE_SETS, SWITCHES
 from .core.shapes import Shape
 from .core.world import DEFAULT_RADIUS, World
 
 EXPERIMENTS_DIR = Path("experiments")
 RESULTS_FILE = "results.csv"
 EXPERIMENT_FILE = "experiment.json"
+REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied into its directory
 PATCHES = "patches"  #: a group size written as this word is the shape's exact patch count
 ENGINES = ("inprocess", "ros2")
 
 #: One row of results.csv: the run's coordinates, then every summary.json field.
-RESULT_COLUMNS = ("shape", "shape_file", "robots", "vision_radius", "repetition", "seed", "shape_patches",
+RESULT_COLUMNS = ("shape", "shape_file", "robots", "vision_radius", "rules", "join", "crowding", "steps",
+                  "repetition", "seed", "shape_patches",
                   "max_ticks", "wiggle_deg", "world_radius", "fail_fraction", "fail_tick", "engine", "outcome",
                   "convergence_tick", "localized", "unlocalized", "separated", "empty_patches", "lost_robots",
                   "convergence_rate", "wall_seconds")
 _INT_COLUMNS = {"robots", "repetition", "seed", "shape_patches", "max_ticks", "world_radius", "fail_tick",
                 "convergence_tick", "localized", "unlocalized", "separated", "empty_patches", "lost_robots"}
 _FLOAT_COLUMNS = {"vision_radius", "wiggle_deg", "fail_fraction", "convergence_rate", "wall_seconds"}
-_KEYS = ("name", "seed", "repetitions", "vision_radius", "max_ticks", "wiggle_deg", "world_radius", "fail_fraction",
-         "fail_tick", "shapes")
+_KEYS = ("name", "seed", "repetitions", "vision_radius", "rules", "join", "crowding", "steps", "max_ticks",
+         "wiggle_deg", "world_radius", "fail_fraction", "fail_tick", "reference", "shapes")
 _REQUIRED = ("seed", "repetitions", "vision_radius", "shapes")
 
 
@@ -83,19 +91,26 @@ class RunSpec:
     world_radius: int
     fail_fraction: float = 0.0
     fail_tick: int = 0
+    rules: str = DEFAULT_RULES
+    join: str = ""  #: switch overrides ("" = the rule set's own)
+    crowding: str = ""
+    steps: str = ""
 
     @property
-    def key(self) -> tuple[str, int, float, int]:
-        return self.shape, self.robots, self.vision_radius, self.repetition
+    def key(self) -> tuple[str, int, float, str, int]:
+        return self.shape, self.robots, self.vision_radius, self.rules, self.repetition
 
     def params(self) -> RunParams:
         return RunParams(robots=self.robots, vision_radius=self.vision_radius, seed=self.seed,
                          max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg, fail_fraction=self.fail_fraction,
-                         fail_tick=self.fail_tick)
+                         fail_tick=self.fail_tick, rules=self.rules, join=self.join, crowding=self.crowding,
+                         steps=self.steps)
 
 
 def run_seed(experiment_seed: int, shape: str, robots: int, vision_radius: float, repetition: int) -> int:
-    """The seed of the run at these coordinates: numpy's SeedSequence over the experiment seed and the coordinates."""
+    """The seed of the run at these coordinates: numpy's SeedSequence over the experiment seed and the coordinates.
+
+    The rule set is not a coordinate here: every rule set starts from the same placements."""
     key = (zlib.crc32(shape.encode()), robots, round(vision_radius * 1000), repetition)
     words = np.random.SeedSequence(entropy=experiment_seed, spawn_key=key).generate_state(2, dtype=np.uint32)
     return (int(words[0]) << 32 | int(words[1])) & MAX_SEED
@@ -115,15 +130,21 @@ class Experiment:
     fail_fraction: float
     fail_tick: int
     shapes: tuple[tuple[str, str, int, tuple[int, ...]], ...]  #: (name, file, patches, sizes)
+    rules: tuple[str, ...] = (DEFAULT_RULES,)
+    join: str = ""
+    crowding: str = ""
+    steps: str = ""
+    reference: str = ""  #: absolute path of the reference file, or ""
 
     def runs(self) -> list[RunSpec]:
-        """Every run, in the canonical order: shape, group size, vision radius, repetition."""
+        """Every run, in the canonical order: shape, group size, vision radius, rule set, repetition."""
         return [RunSpec(shape=name, shape_file=file, robots=n, vision_radius=v, repetition=r,
                         seed=run_seed(self.seed, name, n, v, r), max_ticks=self.max_ticks,
                         wiggle_deg=self.wiggle_deg, world_radius=self.world_radius,
-                        fail_fraction=self.fail_fraction, fail_tick=self.fail_tick)
+                        fail_fraction=self.fail_fraction, fail_tick=self.fail_tick, rules=rules, join=self.join,
+                        crowding=self.crowding, steps=self.steps)
                 for name, file, _, sizes in self.shapes for n in sizes for v in self.vision_radius
-                for r in range(self.repetitions)]
+                for rules in self.rules for r in range(self.repetitions)]
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -178,6 +199,32 @@ def load_experiment(path: str | Path) -> Experiment:
     vision = tuple(_number(path, f"vision_radius[{i}]", v, 0.0, False) for i, v in enumerate(visions))
     if len(set(vision)) != len(vision):
         raise _fail(path, "vision_radius", f"lists a radius twice: {list(vision)}")
+    rules = data.get("rules", DEFAULT_RULES)
+    rules = rules if isinstance(rules, list) else [rules]
+    if not rules:
+        raise _fail(path, "rules", "no rule set given")
+    switches = {}
+    for key, values in SWITCHES.items():
+        value = data.get(key, "")
+        if value != "" and value not in values:
+            raise _fail(path, key, f"must be one of {', '.join(values)}, got {value!r}")
+        switches[key] = value
+    for i, name in enumerate(rules):
+        if not isinstance(name, str) or name not in RULE_SETS:
+            raise _fail(path, f"rules[{i}]", f"must be one of {', '.join(RULE_SETS)}, got {name!r}")
+    if len(set(rules)) != len(rules):
+        raise _fail(path, "rules", f"lists a rule set twice: {rules}")
+    reference = data.get("reference", "")
+    if reference:
+        if not isinstance(reference, str):
+            raise _fail(path, "reference", f"must be a file name, got {reference!r}")
+        from .reference import load_reference
+
+        reference = str((path.parent / reference).resolve())
+        try:
+            load_reference(Path(reference))
+        except SwarmError as exc:
+            raise _fail(path, "reference", str(exc)) from None
     max_ticks = _integer(path, "max_ticks", data.get("max_ticks", DEFAULT_MAX_TICKS), 1)
     wiggle = _number(path, "wiggle_deg", data.get("wiggle_deg", DEFAULT_WIGGLE_DEG), 0.0, True)
     world_radius = _integer(path, "world_radius", data.get("world_radius", DEFAULT_RADIUS), 3)
@@ -190,7 +237,7 @@ def load_experiment(path: str | Path) -> Experiment:
     shapes = _load_shapes(path, data["shapes"], World(world_radius))
     exp = Experiment(name=name.strip(), seed=seed, repetitions=repetitions, vision_radius=vision,
                      max_ticks=max_ticks, wiggle_deg=wiggle, world_radius=world_radius, fail_fraction=fail_fraction,
-                     fail_tick=fail_tick, shapes=shapes)
+                     fail_tick=fail_tick, shapes=shapes, rules=tuple(rules), reference=reference, **switches)
     for shape, _, _, sizes in exp.shapes:  # the parameters of every grid point
         for n in sizes:
             for v in vision:
@@ -290,7 +337,7 @@ class ResultsFile:
         self._file = open(path, "a", encoding="utf-8")  # noqa: SIM115 - closed in close()
 
     def done(self) -> set[tuple]:
-        return {(r["shape"], r["robots"], r["vision_radius"], r["repetition"]) for r in self.rows}
+        return {(r["shape"], r["robots"], r["vision_radius"], r["rules"], r["repetition"]) for r in self.rows}
 
     def append(self, row: dict) -> None:
         self._file.write(_csv_line(row))
@@ -366,7 +413,8 @@ def run_ros2(spec: RunSpec, processes: int = 2) -> dict:
     shape = _shape(spec)
     settings = Settings(shape=spec.shape_file, robots=spec.robots, vision_radius=spec.vision_radius, seed=spec.seed,
                         max_ticks=spec.max_ticks, wiggle_deg=spec.wiggle_deg, world_radius=spec.world_radius,
-                        fail_fraction=spec.fail_fraction, fail_tick=spec.fail_tick)
+                        fail_fraction=spec.fail_fraction, fail_tick=spec.fail_tick, rules=spec.rules,
+                        join=spec.join, crowding=spec.crowding, steps=spec.steps)
     scratch = Path(tempfile.mkdtemp(prefix="swarm_ros-exp-"))
     try:
         launch = Launch(settings=settings, shape=shape, params=spec.params(), processes=processes,
@@ -432,6 +480,10 @@ def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, proce
     exp = load_experiment(config)
     out = out or EXPERIMENTS_DIR / exp.name
     prepare_out_dir(out, exp, config)
+    if exp.reference:  # the report finds it in the directory, wherever the experiment file goes
+        part = out / f".{REFERENCE_FILE}.tmp"
+        part.write_bytes(Path(exp.reference).read_bytes())
+        os.replace(part, out / REFERENCE_FILE)
     results = ResultsFile(out / RESULTS_FILE)
     runs = exp.runs()
     done = results.done()

@@ -1,17 +1,25 @@
 """``swarm-ros report DIR``: statistics, tables and figures of an experiment, from its results.csv alone.
 
-Per (shape, group size, vision radius): runs, mean convergence tick, its standard
-deviation and 95% confidence interval (Student t), mean localized, unlocalized,
+Per (shape, group size, vision radius, rule set): runs, mean convergence tick, its
+standard deviation and 95% confidence interval (Student t), mean localized, unlocalized,
 separated and empty patches, outcome counts, and mean convergence rate. Written as
 ``stats.csv`` and as ``stats.md``, a Markdown table laid out like the original study's
-summary (shape, patches, robots, mean time, 95% CI). Figures go to ``figures/``:
+summary (shape, patches, robots, mean time, 95% CI). When the directory holds a
+reference file (``reference.csv``, copied there from the experiment's ``reference``),
+``stats.md`` also sets each shape's result at N = its patch count beside the published
+one: both means and CIs, the ratio, and whether our mean lies in the published CI.
 
-- ``<shape>_v<R>.png``: (a) mean convergence time against group size, (b) the same with
-  95% CI bars, (c) completeness (localized, unlocalized, empty patches) against group
-  size, (d) one run's convergence curve per group size;
-- ``all_shapes_v<R>.png``: mean convergence time with 95% CI for every shape;
+Figures go to ``figures/``, one set per rule set (``<rules>`` below):
+
+- ``<shape>_<rules>_v<R>.png``: (a) mean convergence time against group size, (b) the
+  same with 95% CI bars and the published point, (c) completeness (localized,
+  unlocalized, empty patches) against group size, (d) one run's convergence curve per
+  group size;
+- ``all_shapes_<rules>_v<R>.png``: mean convergence time with 95% CI for every shape;
 - ``vision.png`` (with more than one radius): convergence time and localized fraction
-  against vision radius at each shape's exact patch count.
+  against vision radius at each shape's exact patch count, a column per rule set;
+- ``study.png`` (with a reference): our time / the published time at each shape's patch
+  count, per rule set and radius.
 
 Panel (d) needs per-tick metrics, which results.csv does not hold. The report re-runs
 the first repetition of each group size with the in-process engine from the seed in its
@@ -35,28 +43,35 @@ import numpy as np  # noqa: E402
 from scipy import stats as st  # noqa: E402
 
 from .core.metrics import METRIC_COLUMNS, Outcome  # noqa: E402
-from .experiment import RESULTS_FILE, ExperimentError, read_results  # noqa: E402
+from .core.rulesets import RuleSet  # noqa: E402
+from .experiment import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
+from .reference import Reference, load_reference  # noqa: E402
 
 STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"
 OUTCOMES = tuple(o.value for o in Outcome)
-STATS_COLUMNS = ("shape", "shape_patches", "robots", "vision_radius", "runs", "mean_convergence_tick",
+STATS_COLUMNS = ("shape", "shape_patches", "robots", "vision_radius", "rules", "runs", "mean_convergence_tick",
                  "sd_convergence_tick", "ci95_low", "ci95_high", "mean_localized", "mean_unlocalized",
                  "mean_separated", "mean_empty_patches", "mean_lost_robots", *OUTCOMES, "completed_fraction", "mean_convergence_rate")
 _COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000")
 
 
-def group_stats(rows: list[dict]) -> list[dict]:
-    """One statistics row per (shape, group size, vision radius), sorted by them.
+def rules_label(row: dict) -> str:
+    """The rule set a results row ran under: its name, plus any switch overrides (``local+crowding=disc``)."""
+    return RuleSet(row["rules"], row["join"], row["crowding"], row["steps"]).label
 
-    ``completed_fraction`` is the fraction of runs that completed the shape (outcome
-    complete or complete_with_extras); ``mean_convergence_rate`` is the mean of the
-    runs' convergence rates (robots joined per tick).
+
+def group_stats(rows: list[dict]) -> list[dict]:
+    """One statistics row per (shape, group size, vision radius, rule set), sorted by them.
+
+    ``rules`` is the rule set's label (:func:`rules_label`). ``completed_fraction`` is the
+    fraction of runs that completed the shape (outcome complete or complete_with_extras);
+    ``mean_convergence_rate`` is the mean of the runs' convergence rates (robots joined per tick).
     """
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for r in rows:
-        groups[(r["shape"], r["robots"], r["vision_radius"])].append(r)
+        groups[(r["shape"], r["robots"], r["vision_radius"], rules_label(r))].append(r)
     out = []
-    for (shape, robots, vision), runs in sorted(groups.items()):
+    for (shape, robots, vision, rules), runs in sorted(groups.items()):
         ticks = np.array([r["convergence_tick"] for r in runs], dtype=float)
         n = ticks.size
         mean = float(ticks.mean())
@@ -65,7 +80,7 @@ def group_stats(rows: list[dict]) -> list[dict]:
         counts = {o: sum(r["outcome"] == o for r in runs) for o in OUTCOMES}
         out.append({
             "shape": shape, "shape_patches": runs[0]["shape_patches"], "robots": robots, "vision_radius": vision,
-            "runs": n, "mean_convergence_tick": mean, "sd_convergence_tick": sd,
+            "rules": rules, "runs": n, "mean_convergence_tick": mean, "sd_convergence_tick": sd,
             "ci95_low": mean - half, "ci95_high": mean + half,
             **{f"mean_{k}": float(np.mean([r[k] for r in runs]))
                for k in ("localized", "unlocalized", "separated", "empty_patches", "lost_robots")},
@@ -91,25 +106,68 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
-def stats_markdown(stats: list[dict]) -> str:
-    """The summary table, one section per vision radius, in the original study's layout."""
+def _ci(s: dict) -> str:
+    return "–" if math.isnan(s["ci95_low"]) else f"[{s['ci95_low']:.0f}, {s['ci95_high']:.0f}]"
+
+
+def _sections(stats: list[dict]) -> list[tuple[str, float]]:
+    """(rule set, vision radius) of the stats, rule sets in order of first appearance, radii ascending."""
+    rules = list(dict.fromkeys(s["rules"] for s in stats))
+    return [(r, v) for r in rules for v in sorted({s["vision_radius"] for s in stats if s["rules"] == r})]
+
+
+def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = None) -> str:
+    """The summary table, one section per rule set and vision radius, in the original study's layout;
+    with ``reference``, a comparison with the published numbers after it."""
     lines = []
-    for vision in sorted({s["vision_radius"] for s in stats}):
-        lines += [f"### Vision radius {vision:g}", "",
+    for rules, vision in _sections(stats):
+        lines += [f"### Rules `{rules}`, vision radius {vision:g}", "",
                   "| shape | patches | robots | runs | mean time (ticks) | 95% CI | localized | unlocalized "
                   "| empty patches | outcomes |",
                   "|---|---:|---:|---:|---:|---|---:|---:|---:|---|"]
-        for s in (s for s in stats if s["vision_radius"] == vision):
-            ci = "–" if math.isnan(s["ci95_low"]) else f"[{s['ci95_low']:.0f}, {s['ci95_high']:.0f}]"
+        for s in (s for s in stats if s["vision_radius"] == vision and s["rules"] == rules):
             outcomes = ", ".join(f"{s[o]} {o}" for o in OUTCOMES if s[o])
             mark = " **=**" if s["robots"] == s["shape_patches"] else ""
             lines.append(f"| {s['shape']} | {s['shape_patches']} | {s['robots']}{mark} | {s['runs']} | "
-                         f"{s['mean_convergence_tick']:.0f} | {ci} | {s['mean_localized']:.1f} | "
+                         f"{s['mean_convergence_tick']:.0f} | {_ci(s)} | {s['mean_localized']:.1f} | "
                          f"{s['mean_unlocalized']:.1f} | {s['mean_empty_patches']:.1f} | {outcomes} |")
         lines.append("")
     lines.append("Times are convergence ticks (the tick the run ended). 95% CI: Student t on the runs' "
                  "convergence ticks. **=** marks the group size equal to the shape's patch count.")
+    if reference:
+        lines += ["", *against_reference(stats, reference)]
     return "\n".join(lines) + "\n"
+
+
+def against_reference(stats: list[dict], reference: dict[str, Reference]) -> list[str]:
+    """Markdown: each shape's result at N = its patch count beside the published one, per rule set and radius;
+    and the range of the mean over the other group sizes beside the published range."""
+    lines = ["## Against the published numbers", "",
+             "Each shape at N = its exact patch count (the study's count is its own, given in brackets). "
+             "Ratio = our mean / the published mean. *In CI*: whether our mean lies in the published 95% CI. "
+             "Range: the mean over the other group sizes, lowest to highest.", ""]
+    for rules, vision in _sections(stats):
+        rows = [s for s in stats if s["rules"] == rules and s["vision_radius"] == vision]
+        exact = {s["shape"]: s for s in rows if s["robots"] == s["shape_patches"]}
+        shapes = [name for name in reference if name in exact]
+        if not shapes:
+            continue
+        lines += [f"### Rules `{rules}`, vision radius {vision:g}", "",
+                  "| shape | published mean [95% CI] | ours (N) | our mean [95% CI] | ratio | in CI "
+                  "| published range | our range |",
+                  "|---|---|---:|---|---:|---|---|---|"]
+        for name in shapes:
+            ref, s = reference[name], exact[name]
+            others = [o["mean_convergence_tick"] for o in rows if o["shape"] == name and o is not s]
+            ours = f"{min(others):.0f}–{max(others):.0f}" if others else "–"
+            lines.append(
+                f"| {name} ({ref.study_robots}) | {ref.mean:g} [{ref.ci95_low:g}, {ref.ci95_high:g}] | "
+                f"{s['robots']} | {s['mean_convergence_tick']:.1f} {_ci(s)} | "
+                f"{s['mean_convergence_tick'] / ref.mean:.2f} | "
+                f"{'yes' if ref.contains(s['mean_convergence_tick']) else 'no'} | "
+                f"{ref.sizes_mean_min:g}–{ref.sizes_mean_max:g} | {ours} |")
+        lines.append("")
+    return lines
 
 
 def _write_text(path: Path, text: str) -> None:
@@ -135,7 +193,9 @@ def _curve(row: dict) -> np.ndarray:
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
     sim = Simulation(shape, RunParams(robots=row["robots"], vision_radius=row["vision_radius"], seed=row["seed"],
                                       max_ticks=row["max_ticks"], wiggle_deg=row["wiggle_deg"],
-                                      fail_fraction=row["fail_fraction"], fail_tick=row["fail_tick"]))
+                                      fail_fraction=row["fail_fraction"], fail_tick=row["fail_tick"],
+                                      rules=row["rules"], join=row["join"], crowding=row["crowding"],
+                                      steps=row["steps"]))
     sim.run()
     if sim.tick != row["convergence_tick"] or sim.outcome.value != row["outcome"]:
         raise ExperimentError(f"re-running {row['shape']} n={row['robots']} seed {row['seed']} gave "
@@ -144,8 +204,8 @@ def _curve(row: dict) -> np.ndarray:
     return sim.history.copy()
 
 
-def shape_figure(stats: list[dict], rows: list[dict], path: Path) -> None:
-    """Panels (a)-(d) for one shape at one vision radius."""
+def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference | None = None) -> None:
+    """Panels (a)-(d) for one shape at one vision radius and rule set; ``ref`` adds the published point to (b)."""
     s0 = stats[0]
     n = np.array([s["robots"] for s in stats])
     mean = np.array([s["mean_convergence_tick"] for s in stats])
@@ -154,13 +214,19 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path) -> None:
     patches = s0["shape_patches"]
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), dpi=110)
     (a, b), (c, d) = axes
-    fig.suptitle(f"{s0['shape']} ({patches} patches), vision radius {s0['vision_radius']:g}, "
+    fig.suptitle(f"{s0['shape']} ({patches} patches), rules {s0['rules']}, vision radius {s0['vision_radius']:g}, "
                  f"{s0['runs']} runs per group size", fontsize=12)
     a.plot(n, mean, "o-", color=_COLOURS[0])
     a.set_title("(a) mean convergence time", fontsize=10)
     b.errorbar(n, mean, yerr=np.nan_to_num(np.vstack([mean - lo, hi - mean])), fmt="o-", capsize=4,
-               color=_COLOURS[0])
+               color=_COLOURS[0], label="this project")
     b.set_title("(b) mean convergence time, 95% CI (Student t)", fontsize=10)
+    if ref is not None:
+        b.errorbar([ref.study_robots], [ref.mean], yerr=[[ref.mean - ref.ci95_low], [ref.ci95_high - ref.mean]],
+                   fmt="D", capsize=4, color=_COLOURS[1], label=f"published (N = {ref.study_robots})")
+        b.axhspan(ref.sizes_mean_min, ref.sizes_mean_max, color=_COLOURS[1], alpha=0.08,
+                  label=f"published range over {ref.group_sizes}")
+        b.legend(fontsize=8)
     for ax in (a, b):
         ax.set_xlabel("group size N (robots)")
         ax.set_ylabel("convergence time (ticks)")
@@ -199,7 +265,7 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path) -> None:
     _save(fig, path)
 
 
-def all_shapes_figure(stats: list[dict], vision: float, path: Path) -> None:
+def all_shapes_figure(stats: list[dict], vision: float, rules: str, path: Path) -> None:
     """Mean convergence time with 95% CI against group size relative to the patch count, every shape."""
     fig, ax = plt.subplots(figsize=(9, 5.5), dpi=110)
     shapes = sorted({s["shape"] for s in stats})
@@ -211,7 +277,7 @@ def all_shapes_figure(stats: list[dict], vision: float, path: Path) -> None:
         ax.errorbar(x, m, yerr=err, fmt="o-", capsize=3, color=_COLOURS[k % len(_COLOURS)],
                     label=f"{shape} ({ss[0]['shape_patches']} patches)")
     ax.axvline(0, color="#999999", lw=0.8, ls=":")
-    ax.set_title(f"Mean convergence time, 95% CI, vision radius {vision:g}", fontsize=11)
+    ax.set_title(f"Mean convergence time, 95% CI, rules {rules}, vision radius {vision:g}", fontsize=11)
     ax.set_xlabel("group size minus the shape's patch count (robots)")
     ax.set_ylabel("convergence time (ticks)")
     ax.grid(alpha=0.3)
@@ -221,35 +287,85 @@ def all_shapes_figure(stats: list[dict], vision: float, path: Path) -> None:
 
 
 def vision_figure(stats: list[dict], path: Path) -> None:
-    """At each shape's exact patch count: convergence time and localized fraction against vision radius."""
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.6), dpi=110)
+    """At each shape's exact patch count: convergence time and localized fraction against vision radius,
+    one column per rule set."""
+    rules = list(dict.fromkeys(s["rules"] for s in stats))
+    fig, axes = plt.subplots(2, len(rules), figsize=(5.2 * len(rules), 8.4), dpi=110, squeeze=False, sharey="row")
     exact = [s for s in stats if s["robots"] == s["shape_patches"]]
-    for k, shape in enumerate(sorted({s["shape"] for s in exact})):
-        ss = sorted((s for s in exact if s["shape"] == shape), key=lambda s: s["vision_radius"])
-        v = [s["vision_radius"] for s in ss]
-        m = np.array([s["mean_convergence_tick"] for s in ss])
-        err = np.nan_to_num(np.vstack([m - [s["ci95_low"] for s in ss], [s["ci95_high"] for s in ss] - m]))
-        colour = _COLOURS[k % len(_COLOURS)]
-        a.errorbar(v, m, yerr=err, fmt="o-", capsize=3, color=colour, label=shape)
-        b.plot(v, [s["mean_localized"] / s["shape_patches"] for s in ss], "o-", color=colour, label=shape)
-    a.set_title("(a) mean convergence time, 95% CI (N = patch count)", fontsize=10)
-    a.set_ylabel("convergence time (ticks)")
-    b.set_title("(b) shape patches filled (N = patch count)", fontsize=10)
-    b.set_ylabel("mean localized / patches")
-    b.set_ylim(0, 1.05)
-    for ax in (a, b):
-        ax.set_xlabel("vision radius (patches)")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+    for col, label in enumerate(rules):
+        a, b = axes[0, col], axes[1, col]
+        mine = [s for s in exact if s["rules"] == label]
+        for k, shape in enumerate(sorted({s["shape"] for s in mine})):
+            ss = sorted((s for s in mine if s["shape"] == shape), key=lambda s: s["vision_radius"])
+            v = [s["vision_radius"] for s in ss]
+            m = np.array([s["mean_convergence_tick"] for s in ss])
+            err = np.nan_to_num(np.vstack([m - [s["ci95_low"] for s in ss], [s["ci95_high"] for s in ss] - m]))
+            colour = _COLOURS[k % len(_COLOURS)]
+            a.errorbar(v, m, yerr=err, fmt="o-", capsize=3, color=colour, label=shape)
+            b.plot(v, [s["mean_localized"] / s["shape_patches"] for s in ss], "o-", color=colour, label=shape)
+        a.set_title(f"rules {label}: mean convergence time, 95% CI", fontsize=10)
+        b.set_title(f"rules {label}: shape patches filled", fontsize=10)
+        a.set_yscale("log")
+        b.set_ylim(0, 1.05)
+        for ax in (a, b):
+            ax.set_xlabel("vision radius (patches)")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
+    axes[0, 0].set_ylabel("convergence time (ticks), N = patch count")
+    axes[1, 0].set_ylabel("mean localized / patches")
     fig.tight_layout()
     _save(fig, path)
 
 
+def study_figure(stats: list[dict], reference: dict[str, Reference], path: Path) -> None:
+    """Our mean time / the published mean at each shape's patch count, per rule set and vision radius."""
+    exact = [s for s in stats if s["robots"] == s["shape_patches"] and s["shape"] in reference]
+    shapes = [name for name in reference if any(s["shape"] == name for s in exact)]
+    series = _sections(exact)
+    fig, ax = plt.subplots(figsize=(9.5, 5.2), dpi=110)
+    width = 0.8 / max(len(series), 1)
+    for k, (rules, vision) in enumerate(series):
+        xs, ys, lo, hi = [], [], [], []
+        for j, name in enumerate(shapes):
+            s = next((s for s in exact if s["shape"] == name and s["rules"] == rules
+                      and s["vision_radius"] == vision), None)
+            if s is None:
+                continue
+            m = reference[name].mean
+            xs.append(j - 0.4 + width * (k + 0.5))
+            ys.append(s["mean_convergence_tick"] / m)
+            lo.append(np.nan_to_num(s["mean_convergence_tick"] - s["ci95_low"]) / m)
+            hi.append(np.nan_to_num(s["ci95_high"] - s["mean_convergence_tick"]) / m)
+        ax.errorbar(xs, ys, yerr=[lo, hi], fmt="os^Dv<>"[k % 7], capsize=2, ls="none",
+                    color=_COLOURS[k % len(_COLOURS)], label=f"{rules}, vision {vision:g}")
+    for j, name in enumerate(shapes):  # the published CI, relative to its mean
+        ref = reference[name]
+        ax.fill_between([j - 0.45, j + 0.45], ref.ci95_low / ref.mean, ref.ci95_high / ref.mean, color="#999999",
+                        alpha=0.2, lw=0)
+    ax.axhline(1.0, color="#333333", lw=0.8)
+    ax.set_yscale("log")
+    ax.set_xticks(range(len(shapes)), [f"{n}\n({reference[n].study_robots})" for n in shapes])
+    ax.set_ylabel("our mean time / published mean time")
+    ax.set_title("Convergence time at each shape's patch count against the published one (grey: published 95% CI)",
+                 fontsize=10)
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def _safe(label: str) -> str:
+    """A rule set label as a file-name part."""
+    return label.replace("=", "-")
+
+
 def build_report(out: Path) -> list[Path]:
-    """(Re)build stats.csv, stats.md and figures/ in ``out`` from ``out``/results.csv; return what was written.
+    """(Re)build stats.csv, stats.md and figures/ in ``out`` from ``out``/results.csv (and ``out``/reference.csv,
+    if present); return what was written.
 
     Raises:
         ExperimentError: no results file, or it holds no runs.
+        ReferenceError: a reference file that is malformed.
     """
     results = out / RESULTS_FILE
     if not results.is_file():
@@ -257,24 +373,28 @@ def build_report(out: Path) -> list[Path]:
     rows = read_results(results)
     if not rows:
         raise ExperimentError(f"{results}: holds no finished runs yet")
+    reference = load_reference(out / REFERENCE_FILE) if (out / REFERENCE_FILE).is_file() else {}
     stats = group_stats(rows)
     written = [out / STATS_CSV, out / STATS_MD]
     _write_text(written[0], stats_csv(stats))
-    _write_text(written[1], stats_markdown(stats))
+    _write_text(written[1], stats_markdown(stats, reference))
     figures = out / FIGURES
     figures.mkdir(exist_ok=True)
-    visions = sorted({s["vision_radius"] for s in stats})
-    for vision in visions:
-        vs = [s for s in stats if s["vision_radius"] == vision]
+    for rules, vision in _sections(stats):
+        vs = [s for s in stats if s["vision_radius"] == vision and s["rules"] == rules]
         for shape in sorted({s["shape"] for s in vs}):
-            path = figures / f"{shape}_v{vision:g}.png"
+            path = figures / f"{shape}_{_safe(rules)}_v{vision:g}.png"
             shape_figure([s for s in vs if s["shape"] == shape],
-                         [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision], path)
+                         [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision
+                          and rules_label(r) == rules], path, reference.get(shape))
             written.append(path)
-        path = figures / f"all_shapes_v{vision:g}.png"
-        all_shapes_figure(vs, vision, path)
+        path = figures / f"all_shapes_{_safe(rules)}_v{vision:g}.png"
+        all_shapes_figure(vs, vision, rules, path)
         written.append(path)
-    if len(visions) > 1:
+    if len({s["vision_radius"] for s in stats}) > 1:
         vision_figure(stats, figures / "vision.png")
         written.append(figures / "vision.png")
+    if any(s["shape"] in reference and s["robots"] == s["shape_patches"] for s in stats):
+        study_figure(stats, reference, figures / "study.png")
+        written.append(figures / "study.png")
     return written

@@ -10,7 +10,7 @@ import pytest
 from swarm_ros.core import RunParams, Shape, Simulation, World
 from swarm_ros.core.invariants import check_state, check_tick
 
-# Robot counts that complete each built-in shape in the original study (MODEL.md).
+# Robot counts that complete each built-in shape in the original study (docs/model.md, "Shapes").
 STUDY_PATCHES = {"star": 1036, "wrench": 566, "k-letter": 1352, "rectangle": 438, "tyre": 1282, "spinner": 1040}
 
 

@@ -34,6 +34,10 @@ def make_fixtures(d: Path) -> None:
         "typed.yaml": "/**:\n  ros__parameters:\n    robots: many\n", "broken.yaml": "/**:\n  ros__parameters: [\n",
         "notadir": "a file\n", "badexp.yaml": EXPERIMENT.format(shape="stra", sizes="100"),
         "negexp.yaml": EXPERIMENT.format(shape="star", sizes="1030, -3"),
+        "rules.yaml": "/**:\n  ros__parameters:\n    rules: fast\n",
+        "rulesexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "rules: [paper, fast]\n",
+        "refexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "reference: notes.csv\n",
+        "notes.csv": "a,b\n1,2\n",
     }
     for name, text in files.items():
         (d / name).write_text(text)

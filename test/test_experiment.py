@@ -17,6 +17,7 @@ import yaml
 
 from swarm_ros import cli
 from swarm_ros.experiment import (RESULT_COLUMNS, ExperimentError, load_experiment, read_results, run_seed)
+from swarm_ros.reference import ReferenceError, load_reference
 from swarm_ros.report import group_stats
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,7 +50,7 @@ def rows_without_timing(out: Path) -> list[dict]:
     rows = read_results(out / "results.csv")
     for r in rows:
         r.pop("wall_seconds")
-    return sorted(rows, key=lambda r: (r["shape"], r["robots"], r["vision_radius"], r["repetition"]))
+    return sorted(rows, key=lambda r: (r["shape"], r["robots"], r["vision_radius"], r["rules"], r["repetition"]))
 
 
 @pytest.fixture(scope="module")
@@ -69,13 +70,34 @@ def test_paper_protocol_file_is_the_studys_grid():
     exp = load_experiment(ROOT / "config/experiments/paper.yaml")
     runs = exp.runs()
     assert len(runs) == 6 * 6 * 10 and exp.vision_radius == (1.0,) and exp.repetitions == 10
+    assert exp.rules == ("paper",) and Path(exp.reference).name == "study_reference.csv"
     sizes = {name: sizes for name, _, _, sizes in exp.shapes}
     assert sizes["star"] == (1025, 1030, 1035, 1036, 1040, 1045)
     assert sizes["wrench"] == (500, 525, 550, 565, 575, 600)
     assert all(patches in sizes[name] for name, _, patches, _ in exp.shapes)
     assert len({r.seed for r in runs}) == len(runs)
-    vision = load_experiment(ROOT / "config/experiments/paper_vision.yaml")
-    assert vision.vision_radius == (1.0, 2.0, 3.0) and len(vision.runs()) == 3 * len(runs)
+
+
+def test_rules_study_file_crosses_every_rule_set_with_three_radii_at_the_patch_counts():
+    exp = load_experiment(ROOT / "config/experiments/rules.yaml")
+    runs = exp.runs()
+    assert exp.rules == ("paper", "local", "literal") and exp.vision_radius == (1.0, 2.0, 3.0)
+    assert len(runs) == 6 * 3 * 3 * 10
+    assert all(sizes == (patches,) for _, _, patches, sizes in exp.shapes)
+    # common random numbers: the rule sets of one coordinate share its seed
+    seeds = {}
+    for r in runs:
+        seeds.setdefault((r.shape, r.robots, r.vision_radius, r.repetition), set()).add(r.seed)
+    assert all(len(v) == 1 for v in seeds.values()) and len(seeds) == len(runs) // 3
+
+
+def test_the_shipped_reference_holds_the_published_numbers():
+    ref = load_reference(ROOT / "config/experiments/study_reference.csv")
+    assert list(ref) == ["star", "wrench", "k-letter", "rectangle", "tyre", "spinner"]
+    star, k = ref["star"], ref["k-letter"]
+    assert (star.study_robots, star.mean, star.ci95_low, star.ci95_high) == (1036, 861.8, 599.1, 1124.49)
+    assert (k.study_robots, k.sizes_mean_min, k.sizes_mean_max) == (1352, 14.6, 702.7)
+    assert [r.study_robots for r in ref.values()] == [1036, 566, 1352, 438, 1282, 1040]
 
 
 def test_a_runs_seed_depends_only_on_the_experiment_seed_and_its_coordinates(tmp_path):
@@ -85,7 +107,7 @@ def test_a_runs_seed_depends_only_on_the_experiment_seed_and_its_coordinates(tmp
     assert len(shared) == 9 and all(a[k] == b[k] for k in shared)
     c = load_experiment(small_config(tmp_path, seed=12)).runs()
     assert all(a[r.key] != r.seed for r in c)
-    assert run_seed(11, "disc", 50, 1.0, 0) == a[("disc", 50, 1.0, 0)]
+    assert run_seed(11, "disc", 50, 1.0, 0) == a[("disc", 50, 1.0, "paper", 0)]
 
 
 # -- running -----------------------------------------------------------------------
@@ -107,9 +129,11 @@ def test_experiment_writes_results_stats_and_figures(small):
     assert len(stats) == 6 and all(s["runs"] == "3" for s in stats)
     md = (out / "stats.md").read_text()
     assert "| shape | patches | robots | runs | mean time (ticks) | 95% CI |" in md
-    assert md.count("| disc | 69 |") == 6 and "### Vision radius 1.5" in md
+    assert md.count("| disc | 69 |") == 6 and "### Rules `paper`, vision radius 1.5" in md
+    assert "Against the published numbers" not in md  # no reference file
     figures = sorted(p.name for p in (out / "figures").iterdir())
-    assert figures == ["all_shapes_v1.5.png", "all_shapes_v1.png", "disc_v1.5.png", "disc_v1.png", "vision.png"]
+    assert figures == ["all_shapes_paper_v1.5.png", "all_shapes_paper_v1.png", "disc_paper_v1.5.png",
+                       "disc_paper_v1.png", "vision.png"]
     assert all((out / "figures" / f).read_bytes()[:4] == b"\x89PNG" for f in figures)
 
 
@@ -197,11 +221,72 @@ def _children_of(pid: int) -> list[int]:
     return found
 
 
+# -- rule sets and the published numbers -------------------------------------------
+
+
+def test_one_experiment_compares_rule_sets_from_the_same_starts_against_a_reference(tmp_path):
+    (tmp_path / "ref.csv").write_text(
+        "# a made-up published number for the small disc\n"
+        "shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
+        "disc,70,150.0,100.0,200.0,50-80,20.5,300\n")
+    config = small_config(tmp_path, vision_radius=[1], rules=["paper", "literal"], reference="ref.csv")
+    out = tmp_path / "out"
+    assert experiment(config, out) == 0
+    rows = read_results(out / "results.csv")
+    assert {(r["rules"], r["join"], r["steps"]) for r in rows} == {("paper", "walk", "one"),
+                                                                   ("literal", "local", "literal")}
+    by_rules = {}
+    for r in rows:
+        by_rules.setdefault(r["rules"], {})[(r["robots"], r["repetition"])] = r["seed"]
+    assert by_rules["paper"] == by_rules["literal"]  # the same starts for both rule sets
+    assert (out / "reference.csv").read_bytes() == (tmp_path / "ref.csv").read_bytes()
+    stats = {(s["rules"], s["robots"]): s for s in group_stats(rows)}
+    md = (out / "stats.md").read_text()
+    assert "### Rules `paper`, vision radius 1" in md and "### Rules `literal`, vision radius 1" in md
+    section = md[md.index("## Against the published numbers"):]
+    for rules in ("paper", "literal"):
+        s = stats[(rules, 69)]
+        others = [stats[(rules, n)]["mean_convergence_tick"] for n in (50, 80)]
+        line = next(ln for ln in section[section.index(f"Rules `{rules}`"):].splitlines() if ln.startswith("| disc"))
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        assert cells[0] == "disc (70)" and cells[1] == "150 [100, 200]" and cells[2] == "69"
+        assert cells[4] == f"{s['mean_convergence_tick'] / 150:.2f}"
+        assert cells[5] == ("yes" if 100 <= s["mean_convergence_tick"] <= 200 else "no")
+        assert cells[6] == "20.5–300" and cells[7] == f"{min(others):.0f}–{max(others):.0f}"
+    figures = sorted(p.name for p in (out / "figures").iterdir())
+    assert figures == ["all_shapes_literal_v1.png", "all_shapes_paper_v1.png", "disc_literal_v1.png",
+                       "disc_paper_v1.png", "study.png"]
+
+
+BAD_REFERENCES = [
+    ("shape,mean\nstar,1\n", "expected the columns"),
+    ("shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
+     "star,1036,861.8,900,1124.49,x,1,2\n", "the CI must hold the mean"),
+    ("shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
+     "star,1036,lots,1,2,x,1,2\n", "not a number"),
+    ("shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
+     "star,1036,5,1,9,x,1,2\nstar,1036,5,1,9,x,1,2\n", "listed twice"),
+]
+
+
+@pytest.mark.parametrize("text,message", BAD_REFERENCES, ids=[m for _, m in BAD_REFERENCES])
+def test_bad_reference_files_are_refused_with_the_line(tmp_path, capsys, text, message):
+    (tmp_path / "ref.csv").write_text(text)
+    with pytest.raises(ReferenceError, match=message):
+        load_reference(tmp_path / "ref.csv")
+    config = small_config(tmp_path, reference="ref.csv")
+    assert experiment(config, tmp_path / "out") == 2
+    err = capsys.readouterr().err
+    assert "reference: " in err and message in err and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
 # -- statistics --------------------------------------------------------------------
 
 
 def test_statistics_match_a_hand_computed_t_interval():
-    rows = [{"shape": "s", "shape_patches": 10, "robots": 10, "vision_radius": 1.0, "convergence_tick": t,
+    rows = [{"shape": "s", "shape_patches": 10, "robots": 10, "vision_radius": 1.0, "rules": "paper", "join": "walk",
+             "crowding": "ahead", "steps": "one", "convergence_tick": t,
              "outcome": o, "localized": 10, "unlocalized": 0, "separated": 0, "empty_patches": 0, "lost_robots": 0,
              "convergence_rate": 0.5} for t, o in ((10, "complete"), (12, "complete"), (14, "timeout"))]
     (s,) = group_stats(rows)
@@ -229,6 +314,11 @@ BAD = [
     ({"max_ticks": "many"}, "max_ticks: must be an integer >= 1, got 'many'"),
     ({"shapes": {"disc.txt": [500]}}, "shapes.disc.txt[0]: 500 robots do not fit on the 361 free patches"),
     ({"seed": None}, "seed: must be an integer >= 0, got None"),
+    ({"rules": ["paper", "fast"]}, "rules[1]: must be one of paper, local, literal, got 'fast'"),
+    ({"rules": []}, "rules: no rule set given"),
+    ({"rules": ["local", "local"]}, "rules: lists a rule set twice"),
+    ({"crowding": "ring"}, "crowding: must be one of ahead, disc, got 'ring'"),
+    ({"reference": "absent.csv"}, "reference: "),
 ]
 
 

@@ -30,9 +30,10 @@ def _wait_for(predicate, timeout: float = 120) -> None:
 
 def test_sigterm_to_simulate_writes_an_interrupted_run_directory(tmp_path):
     out = tmp_path / "run"
-    # vision 3 at this density nearly freezes the swarm: a long run (docs/model.md)
-    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "simulate", "--shape", "star", "--vision", "3",
-                             "--record-every", "50", "--out", str(out)], stdout=subprocess.PIPE,
+    # crowding 'disc' at vision 3 nearly freezes the swarm at this density: a long run (docs/model.md)
+    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "simulate", "--shape", "star", "--vision", "3", "--rules",
+                             "local", "--crowding", "disc", "--record-every", "50", "--out", str(out)],
+                            stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     _wait_for(lambda: (tmp_path / "run.partial.rrd").exists() and (tmp_path / "run.partial.rrd").stat().st_size
               > 200_000)  # running and recording

@@ -63,12 +63,13 @@ def two_hosts():
 def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two_hosts, tmp_path):
     a, b, link = two_hosts
     shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
-    flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "7", "--robots", "440"]
+    # rules 'local': a run of several hundred ticks, so that megabytes cross the link
+    flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "7", "--robots", "440", "--rules", "local"]
     ref = tmp_path / "ref"
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
     run = tmp_path / "run"
     params = tmp_path / "params.yaml"
-    params.write_text(params_yaml(Settings(shape=str(shape), robots=440, seed=7, world_radius=16),
+    params.write_text(params_yaml(Settings(shape=str(shape), robots=440, seed=7, world_radius=16, rules="local"),
                                   {"world": {}, "monitor": {"out_dir": str(run)}}))
     env = {**os.environ, "ROS_DOMAIN_ID": str(100 + os.getpid() % 100), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
            "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",  # shared memory would bypass the namespaces
