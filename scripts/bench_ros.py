@@ -30,11 +30,13 @@ from pathlib import Path
 
 from swarm_ros.core import RunParams, Shape, Simulation
 
+RULES: dict[str, str] = {"rules": "paper"}  #: rule set and switch overrides of every run (set from the flags)
+
 
 def in_process(seed: int, repeats: int) -> tuple[int, float, float]:
     """(ticks, best seconds with run(), best seconds with step() per tick) for the star."""
     shape = Shape.load("star")
-    params = RunParams(robots=shape.patches, seed=seed)
+    params = RunParams(robots=shape.patches, seed=seed, **RULES)
     Simulation(shape, params).run(max_ticks=10)  # compile
     fast, stepped, ticks = [], [], 0
     for _ in range(repeats):
@@ -55,6 +57,7 @@ def command(seed: int, out: Path, *args: str, record: bool = False) -> tuple[int
     """Run ``swarm-ros ARGS`` on the star: (ticks, run seconds from summary.json, whole command seconds)."""
     t0 = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "swarm_ros.cli", *args, "--shape", "star", "--seed", str(seed),
+                           *[a for k, v in RULES.items() for a in (f"--{k}", v)],
                            "--out", str(out), "--overwrite", "--quiet", *([] if record else ["--no-recording"])],
                           capture_output=True, text=True)
     whole = time.perf_counter() - t0
@@ -99,11 +102,18 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=2, help="runs per case; the best is kept")
     parser.add_argument("--processes", type=int, nargs="+", default=[1, 2, 4])
+    parser.add_argument("--rules", default="paper", help="rule set of every run (default: paper)")
+    parser.add_argument("--crowding", help="override the crowding switch (e.g. disc, for the reading before "
+                                           "rule sets: --rules local --crowding disc)")
     args = parser.parse_args()
+    RULES["rules"] = args.rules
+    if args.crowding:
+        RULES["crowding"] = args.crowding
 
     ticks, fast, stepped = in_process(args.seed, args.repeats)
     fast_rate, step_rate = ticks / fast, ticks / stepped
-    print(f"star, 1036 robots, seed {args.seed}: {ticks} ticks")
+    print(f"star, 1036 robots, seed {args.seed}, rules {' '.join(f'{k} {v}' for k, v in RULES.items())}: "
+          f"{ticks} ticks")
     print(f"{'engine':<34} {'run s':>8} {'ticks/s':>10} {'vs run()':>9} {'vs step()':>10} {'command s':>10}")
     print(f"{'in-process, run()':<34} {fast:>8.3f} {fast_rate:>10,.0f} {1:>8.1f}x {fast_rate / step_rate:>9.2f}x")
     print(f"{'in-process, step() per tick':<34} {stepped:>8.3f} {step_rate:>10,.0f} "

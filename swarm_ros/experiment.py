@@ -134,7 +134,7 @@ class Experiment:
     join: str = ""
     crowding: str = ""
     steps: str = ""
-    reference: str = ""  #: absolute path of the reference file, or ""
+    reference: str = ""  #: the reference file as the experiment file names it (relative to it), or ""
 
     def runs(self) -> list[RunSpec]:
         """Every run, in the canonical order: shape, group size, vision radius, rule set, repetition."""
@@ -220,9 +220,8 @@ def load_experiment(path: str | Path) -> Experiment:
             raise _fail(path, "reference", f"must be a file name, got {reference!r}")
         from .reference import load_reference
 
-        reference = str((path.parent / reference).resolve())
         try:
-            load_reference(Path(reference))
+            load_reference(path.parent / reference)
         except SwarmError as exc:
             raise _fail(path, "reference", str(exc)) from None
     max_ticks = _integer(path, "max_ticks", data.get("max_ticks", DEFAULT_MAX_TICKS), 1)
@@ -482,7 +481,7 @@ def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, proce
     prepare_out_dir(out, exp, config)
     if exp.reference:  # the report finds it in the directory, wherever the experiment file goes
         part = out / f".{REFERENCE_FILE}.tmp"
-        part.write_bytes(Path(exp.reference).read_bytes())
+        part.write_bytes((config.parent / exp.reference).read_bytes())
         os.replace(part, out / REFERENCE_FILE)
     results = ResultsFile(out / RESULTS_FILE)
     runs = exp.runs()

@@ -71,7 +71,7 @@ _CONVERGENCE_SERIES = (
     ("localized", "localized robots (seeds included)", "#0072b2"),
     ("stationary", "stationary robots (localized + separated)", "#e69f00"),
     ("inside", "robots wandering inside the shape", "#c9b800"),
-    ("walking", "robots walking to the frontier", "#009e73"),
+    ("walking", "robots walking to the frontier", "#56b4e9"),
     ("empty_patches", "empty shape patches", "#cc79a7"),
 )
 

@@ -71,7 +71,7 @@ _PATCH_CLASSES = {
 }
 _SERIES_COLOURS = {
     "stationary": (230, 159, 0), "localized": (0, 114, 178), "inside": (240, 228, 66),
-    "moving": (0, 158, 115), "empty_patches": (204, 121, 167), "walking": (230, 159, 0),
+    "moving": (0, 158, 115), "empty_patches": (204, 121, 167), "walking": (86, 180, 233),
 }
 _ROBOT_RADIUS = 0.35  # patches
 

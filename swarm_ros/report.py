@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 from scipy import stats as st  # noqa: E402
 
 from .core.metrics import METRIC_COLUMNS, Outcome  # noqa: E402
-from .core.rulesets import RuleSet  # noqa: E402
+from .core.rulesets import RULE_SETS, RuleSet  # noqa: E402
 from .experiment import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
 from .reference import Reference, load_reference  # noqa: E402
 
@@ -110,10 +110,18 @@ def _ci(s: dict) -> str:
     return "–" if math.isnan(s["ci95_low"]) else f"[{s['ci95_low']:.0f}, {s['ci95_high']:.0f}]"
 
 
+def _rules_order(stats: list[dict]) -> list[str]:
+    """The rule set labels of the stats: the named sets in their own order (paper, local, literal), each
+    before its variants with overrides, then any other label alphabetically."""
+    names = list(RULE_SETS)
+    return sorted({s["rules"] for s in stats}, key=lambda label: (
+        names.index(label.split("+")[0]) if label.split("+")[0] in names else len(names), label))
+
+
 def _sections(stats: list[dict]) -> list[tuple[str, float]]:
-    """(rule set, vision radius) of the stats, rule sets in order of first appearance, radii ascending."""
-    rules = list(dict.fromkeys(s["rules"] for s in stats))
-    return [(r, v) for r in rules for v in sorted({s["vision_radius"] for s in stats if s["rules"] == r})]
+    """(rule set, vision radius) of the stats, rule sets in :func:`_rules_order`, radii ascending."""
+    return [(r, v) for r in _rules_order(stats)
+            for v in sorted({s["vision_radius"] for s in stats if s["rules"] == r})]
 
 
 def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = None) -> str:
@@ -166,7 +174,15 @@ def against_reference(stats: list[dict], reference: dict[str, Reference]) -> lis
                 f"{s['mean_convergence_tick'] / ref.mean:.2f} | "
                 f"{'yes' if ref.contains(s['mean_convergence_tick']) else 'no'} | "
                 f"{ref.sizes_mean_min:g}–{ref.sizes_mean_max:g} | {ours} |")
-        lines.append("")
+        ratios = np.array([exact[n]["mean_convergence_tick"] / reference[n].mean for n in shapes])
+        summary = (f"Ratio {ratios.min():.2f}–{ratios.max():.2f}, geometric mean "
+                   f"{float(np.exp(np.log(ratios).mean())):.2f}; our mean within the published CI for "
+                   f"{sum(reference[n].contains(exact[n]['mean_convergence_tick']) for n in shapes)} of {len(shapes)}")
+        if len(shapes) >= 3:
+            rho = st.spearmanr([reference[n].mean for n in shapes],
+                               [exact[n]["mean_convergence_tick"] for n in shapes]).statistic
+            summary += f"; the shapes' order by time against the published order: Spearman ρ = {rho:.2f}"
+        lines += ["", summary + ".", ""]
     return lines
 
 
@@ -289,7 +305,7 @@ def all_shapes_figure(stats: list[dict], vision: float, rules: str, path: Path) 
 def vision_figure(stats: list[dict], path: Path) -> None:
     """At each shape's exact patch count: convergence time and localized fraction against vision radius,
     one column per rule set."""
-    rules = list(dict.fromkeys(s["rules"] for s in stats))
+    rules = _rules_order(stats)
     fig, axes = plt.subplots(2, len(rules), figsize=(5.2 * len(rules), 8.4), dpi=110, squeeze=False, sharey="row")
     exact = [s for s in stats if s["robots"] == s["shape_patches"]]
     for col, label in enumerate(rules):
@@ -322,9 +338,13 @@ def study_figure(stats: list[dict], reference: dict[str, Reference], path: Path)
     exact = [s for s in stats if s["robots"] == s["shape_patches"] and s["shape"] in reference]
     shapes = [name for name in reference if any(s["shape"] == name for s in exact)]
     series = _sections(exact)
+    rule_sets = _rules_order(exact)
+    visions = sorted({v for _, v in series})
     fig, ax = plt.subplots(figsize=(9.5, 5.2), dpi=110)
     width = 0.8 / max(len(series), 1)
     for k, (rules, vision) in enumerate(series):
+        colour = _COLOURS[rule_sets.index(rules) % len(_COLOURS)]
+        marker = "os^Dv<>"[visions.index(vision) % 7]
         xs, ys, lo, hi = [], [], [], []
         for j, name in enumerate(shapes):
             s = next((s for s in exact if s["shape"] == name and s["rules"] == rules
@@ -336,8 +356,8 @@ def study_figure(stats: list[dict], reference: dict[str, Reference], path: Path)
             ys.append(s["mean_convergence_tick"] / m)
             lo.append(np.nan_to_num(s["mean_convergence_tick"] - s["ci95_low"]) / m)
             hi.append(np.nan_to_num(s["ci95_high"] - s["mean_convergence_tick"]) / m)
-        ax.errorbar(xs, ys, yerr=[lo, hi], fmt="os^Dv<>"[k % 7], capsize=2, ls="none",
-                    color=_COLOURS[k % len(_COLOURS)], label=f"{rules}, vision {vision:g}")
+        ax.errorbar(xs, ys, yerr=[lo, hi], fmt=marker, capsize=2, ls="none", color=colour,
+                    label=f"{rules}, vision {vision:g}")
     for j, name in enumerate(shapes):  # the published CI, relative to its mean
         ref = reference[name]
         ax.fill_between([j - 0.45, j + 0.45], ref.ci95_low / ref.mean, ref.ci95_high / ref.mean, color="#999999",

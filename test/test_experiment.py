@@ -70,7 +70,7 @@ def test_paper_protocol_file_is_the_studys_grid():
     exp = load_experiment(ROOT / "config/experiments/paper.yaml")
     runs = exp.runs()
     assert len(runs) == 6 * 6 * 10 and exp.vision_radius == (1.0,) and exp.repetitions == 10
-    assert exp.rules == ("paper",) and Path(exp.reference).name == "study_reference.csv"
+    assert exp.rules == ("paper",) and exp.reference == "study_reference.csv"
     sizes = {name: sizes for name, _, _, sizes in exp.shapes}
     assert sizes["star"] == (1025, 1030, 1035, 1036, 1040, 1045)
     assert sizes["wrench"] == (500, 525, 550, 565, 575, 600)
