@@ -50,6 +50,7 @@ from .core.params import DEFAULT_MAX_TICKS, DEFAULT_WIGGLE_DEG, MAX_SEED, RunPar
 from .core.rulesets import DEFAULT_RULES, RULE_SETS, SWITCHES
 from .core.shapes import Shape
 from .core.world import DEFAULT_RADIUS, World
+from .reference import load_reference
 
 EXPERIMENTS_DIR = Path("experiments")
 RESULTS_FILE = "results.csv"
@@ -218,8 +219,6 @@ def load_experiment(path: str | Path) -> Experiment:
     if reference:
         if not isinstance(reference, str):
             raise _fail(path, "reference", f"must be a file name, got {reference!r}")
-        from .reference import load_reference
-
         try:
             load_reference(path.parent / reference)
         except SwarmError as exc:

@@ -11,8 +11,8 @@ import pytest
 from swarm_ros import cli, output
 from swarm_ros.core.metrics import METRIC_COLUMNS
 
-SUMMARY_KEYS = {"shape", "shape_patches", "robots", "vision_radius", "seed", "engine", "outcome",
-                "convergence_tick", "localized", "unlocalized", "empty_patches", "wall_seconds"}
+SUMMARY_KEYS = {"shape", "shape_patches", "robots", "vision_radius", "rules", "join", "crowding", "steps", "seed",
+                "engine", "outcome", "convergence_tick", "localized", "unlocalized", "empty_patches", "wall_seconds"}
 
 
 def simulate(out: Path, *extra: str) -> int:
@@ -50,6 +50,18 @@ def test_same_command_same_seed_gives_identical_files(run_dir, tmp_path):
     a, b = (json.loads((d / "summary.json").read_text()) for d in (run_dir, again))
     a.pop("wall_seconds"), b.pop("wall_seconds")
     assert a == b
+
+
+def test_the_rule_set_and_its_switches_come_from_flags_over_the_parameter_file(run_dir, tmp_path):
+    assert json.loads((run_dir / "summary.json").read_text())["rules"] == "paper"  # the default
+    params = tmp_path / "params.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    rules: local\n    crowding: disc\n    steps: literal\n")
+    assert simulate(tmp_path / "file", "--params-file", str(params)) == 0
+    summary = json.loads((tmp_path / "file" / "summary.json").read_text())
+    assert [summary[k] for k in ("rules", "join", "crowding", "steps")] == ["local", "local", "disc", "literal"]
+    assert simulate(tmp_path / "flags", "--params-file", str(params), "--rules", "paper", "--crowding", "ahead") == 0
+    summary = json.loads((tmp_path / "flags" / "summary.json").read_text())
+    assert [summary[k] for k in ("rules", "join", "crowding", "steps")] == ["paper", "walk", "ahead", "literal"]
 
 
 def test_summary_is_printed(tmp_path, capsys):

@@ -102,6 +102,22 @@ def test_recording_holds_the_static_world_blueprint_and_occupancy(recording, run
     assert counts == sorted(set(counts)), "an image is logged only when the filled patches changed"
 
 
+def test_the_run_table_names_the_rule_set_and_its_switches(run_dir):
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        chunks = RrdReader(str(run_dir / "recording.rrd")).stream().to_chunks()
+    texts = [c.to_record_batch().column("TextDocument:text").flatten().to_pylist()[0]
+             for c in chunks if c.entity_path == f"/{RUN_INFO}" and c.is_static]
+    assert len(texts) == 1
+    for row in ("| rules | paper |", "| join | walk |", "| crowding | ahead |", "| steps | one |",
+                "| rule set in force | paper |"):
+        assert row in texts[0], row
+
+
 def test_rerun_rrd_verify_passes(run_dir):
     done = rrd_verify(run_dir / "recording.rrd")
     assert done.returncode == 0, done.stderr
