@@ -26,7 +26,8 @@ def main() -> int:
     parser.add_argument("--config", type=Path, default=ROOT / "config/experiments/paper.yaml")
     parser.add_argument("--jobs", type=int, help="worker processes (default: the command's default, all cores)")
     args = parser.parse_args()
-    from swarm_ros.experiment import load_experiment, read_results
+    from swarm_ros.experiment import load_experiment
+    from swarm_ros.results import read_results
 
     exp = load_experiment(args.config)
     with tempfile.TemporaryDirectory() as tmp:

@@ -87,7 +87,7 @@ def main() -> int:
     args = ap.parse_args()
     from swarm_ros.core import Shape
     from swarm_ros.core.state import RobotState, initial_state
-    from swarm_ros.experiment import read_results
+    from swarm_ros.results import read_results
     from swarm_ros.reference import load_reference
 
     reference = load_reference(args.reference)

@@ -198,7 +198,8 @@ def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from .output import RunRecord, partial_recording, write_run
+    from .core.record import RunRecord
+    from .output import partial_recording, write_run
 
     _, shape, params, out, options = _prepare(args)
 

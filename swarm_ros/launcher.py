@@ -156,9 +156,9 @@ class Launch:
 
     def run(self) -> Path:
         out = self.out.absolute()
-        logs = out.parent / f".{out.name}.logs-{os.getpid()}"
-        shutil.rmtree(logs, ignore_errors=True)
-        (logs / "ros").mkdir(parents=True)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        logs = Path(tempfile.mkdtemp(prefix=f".{out.name}.logs-", dir=out.parent))  # a fresh name: replaces nothing
+        (logs / "ros").mkdir()
         lock = DomainLock(self.domain_id)
         ok = interrupted = False
         try:
@@ -248,12 +248,21 @@ class Launch:
 
     @staticmethod
     def _logs_target(out: Path, ok: bool) -> Path:
-        return out / "logs" if ok and out.is_dir() else out.parent / f"{out.name}.logs"
+        """Where the logs go: ``<run>/logs``, or for a failed run ``<run>.logs`` (``<run>.logs.2``, ... if taken:
+        an existing directory is never replaced)."""
+        if ok and out.is_dir():
+            return out / "logs"
+        target, n = out.parent / f"{out.name}.logs", 1
+        while target.exists():
+            n += 1
+            target = out.parent / f"{out.name}.logs.{n}"
+        return target
 
     def _keep_logs(self, logs: Path, out: Path, ok: bool) -> None:
         target = self._logs_target(out, ok)
-        shutil.rmtree(target, ignore_errors=True)
         try:
+            if target.exists():
+                raise FileExistsError(target)  # an existing directory is never replaced
             logs.rename(target)
         except OSError:
             shutil.rmtree(logs, ignore_errors=True)

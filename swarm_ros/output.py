@@ -11,21 +11,18 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
 import shutil
+import tempfile
 from datetime import datetime
 from pathlib import Path
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from .core.engine import Simulation
 from .core.errors import SwarmError
-from .core.metrics import METRIC_COLUMNS, Outcome, TickMetrics
-from .core.params import RunParams
-from .core.shapes import Shape
+from .core.metrics import METRIC_COLUMNS
+from .core.record import RunRecord
 from .core.state import RobotState, SwarmState
+from .plots import save_convergence_png, save_final_png
 
 RUNS_DIR = Path("runs")
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
@@ -36,63 +33,81 @@ class OutputError(SwarmError):
     """The output directory cannot be used."""
 
 
-@dataclass(frozen=True)
-class RunRecord:
-    """What a finished run leaves behind, whichever engine ran it.
-
-    Attributes:
-        shape, params: what was run.
-        state: the swarm at the last tick.
-        history: metrics of every tick, tick 0 first (int64, columns ``METRIC_COLUMNS``).
-        outcome: how the run ended.
-        summary: the summary.json record (:func:`swarm_ros.core.metrics.run_summary`).
-    """
-
-    shape: Shape
-    params: RunParams
-    state: SwarmState
-    history: np.ndarray
-    outcome: Outcome
-    summary: dict
-
-    @property
-    def final(self) -> TickMetrics:
-        return TickMetrics(*self.history[-1].tolist())
-
-    @staticmethod
-    def of(sim: Simulation, wall_seconds: float, stopped: Outcome | None = None) -> RunRecord:
-        """The record of an in-process run: finished, or ``stopped`` (interrupted) at its current tick."""
-        summary = sim.summary(wall_seconds=wall_seconds, stopped=stopped)
-        return RunRecord(shape=sim.shape, params=sim.params, state=sim.state, history=sim.history,
-                         outcome=Outcome(summary["outcome"]), summary=summary)
-
-
 def default_run_dir(shape: str, robots: int, vision: float, seed: int, now: datetime | None = None) -> Path:
     """``runs/<time>_<shape>_n<N>_v<R>_s<seed>`` under the current directory."""
     stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
     return RUNS_DIR / f"{stamp}_{shape}_n{robots}_v{vision:g}_s{seed}"
 
 
+#: Everything a run directory holds: what :func:`write_run` writes, and ``logs`` (``swarm-ros run``).
+RUN_ENTRIES = frozenset({"summary.json", "metrics.csv", "final_state.csv", "final.png", "convergence.png",
+                         RECORDING_FILE, "logs"})
+#: summary.json fields that mark a directory as a run directory this tool wrote.
+_SUMMARY_MARKS = ("shape", "engine", "outcome", "convergence_tick", "seed", "robots")
+
+
+def foreign_content(out: Path) -> str | None:
+    """Why ``out`` is not a run directory that ``--overwrite`` may replace, or None if it is one.
+
+    A run directory holds a summary.json with this tool's fields and nothing but the
+    entries a run writes (:data:`RUN_ENTRIES`). Anything else, a file a user added
+    included, makes it foreign: replacing it would delete what the tool did not write.
+    """
+    try:
+        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return "it holds no summary.json written by swarm-ros"
+    if not isinstance(summary, dict) or any(k not in summary for k in _SUMMARY_MARKS):
+        return "its summary.json was not written by swarm-ros"
+    try:
+        extra = sorted(e.name for e in out.iterdir() if e.name not in RUN_ENTRIES)
+    except OSError as exc:
+        return f"it cannot be listed ({exc.strerror or exc})"
+    if extra:
+        return f"it holds {extra[0]!r}, which no run writes"
+    return None
+
+
 def check_out_dir(out: Path, overwrite: bool) -> None:
-    """Fail early, before a run, if ``out`` cannot be written.
+    """Fail early, before a run, if ``out`` cannot be written, or may not be replaced.
+
+    ``overwrite`` replaces only a run directory this tool wrote (:func:`foreign_content`);
+    nothing is touched here. Whether the directory that will receive the run (and, beside
+    it, the partial recording and the logs) is writable is tried for real, with a
+    temporary file made and removed at once: permission bits do not tell (root, /sys).
 
     Raises:
         OutputError: ``out`` exists (and is not an empty directory) without ``overwrite``,
-            is a file, or its nearest existing ancestor is not a writable directory.
+            or with it but is not a run directory; is a file; or its nearest existing
+            ancestor is not a writable directory.
     """
     if out.exists():
         if not out.is_dir():
             raise OutputError(f"{out}: exists and is not a directory")
-        if any(out.iterdir()) and not overwrite:
-            raise OutputError(f"{out}: output directory exists and is not empty (use --overwrite to replace it)")
+        if any(out.iterdir()):
+            if not overwrite:
+                raise OutputError(f"{out}: output directory exists and is not empty (use --overwrite to replace it)")
+            why = foreign_content(out)
+            if why is not None:
+                raise OutputError(f"{out}: not a swarm-ros run directory ({why}); --overwrite replaces only run "
+                                  f"directories, so nothing was touched")
     # Nothing is created here: the nearest existing ancestor must be a directory we may write.
     base = out.absolute().parent
     while not base.exists():
         base = base.parent
     if not base.is_dir():
         raise OutputError(f"{base}: is not a directory, so {out} cannot be created")
-    if not os.access(base, os.W_OK | os.X_OK):
+    if not writable_dir(base):
         raise OutputError(f"{base}: directory is not writable, so {out} cannot be created")
+
+
+def writable_dir(path: Path) -> bool:
+    """Whether a file can be created in the directory ``path`` (tried with a temporary file, removed at once)."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".swarm_ros-probe-"):
+            return True
+    except OSError:
+        return False
 
 
 def metrics_csv(history: np.ndarray) -> str:
@@ -133,19 +148,18 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
     Raises:
         OutputError: the directory cannot be written.
     """
-    from .plots import save_convergence_png, save_final_png
-
     check_out_dir(out, overwrite)
     out = out.absolute()
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputError(f"{out.parent}: cannot create output directory ({exc.strerror or exc})") from None
-    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
-    trash = out.parent / f".{out.name}.old-{os.getpid()}"
+    try:  # fresh names: nothing that exists is ever replaced but ``out``, and only a run directory
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+        trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+    except OSError as exc:
+        raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc})") from None
     try:
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir()
         (tmp / "summary.json").write_text(summary_json(record.summary), encoding="utf-8")
         (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
@@ -154,7 +168,7 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
         if recording is not None:
             recording.rename(tmp / RECORDING_FILE)
         if out.exists():
-            out.rename(trash)
+            out.rename(trash / out.name)
         tmp.rename(out)
     except OSError as exc:
         kept = ""

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -13,10 +12,8 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from .core.record import RunRecord  # noqa: E402
 from .core.state import RobotState  # noqa: E402
-
-if TYPE_CHECKING:
-    from .output import RunRecord
 
 # Patch classes of the picture and their colours (colour-blind safe, Okabe-Ito based).
 _CLASSES = (

@@ -44,7 +44,7 @@ from scipy import stats as st  # noqa: E402
 
 from .core.metrics import METRIC_COLUMNS, Outcome  # noqa: E402
 from .core.rulesets import RULE_SETS, RuleSet  # noqa: E402
-from .experiment import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
+from .results import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
 from .reference import Reference, load_reference  # noqa: E402
 
 STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"

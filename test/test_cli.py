@@ -83,15 +83,68 @@ def test_check_flag_runs_the_invariant_checks(tmp_path):
     assert simulate(tmp_path / "r", "--check", "--overwrite") == 0
 
 
-def test_existing_output_is_refused_unless_overwrite(run_dir, tmp_path, capsys):
+def _tree(d: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(d)): p.read_bytes() if p.is_file() else b"<dir>" for p in sorted(d.rglob("*"))}
+
+
+def test_existing_output_is_refused_unless_overwrite_and_overwrite_replaces_only_a_run_directory(tmp_path, capsys):
     out = tmp_path / "r"
-    out.mkdir()
-    (out / "keep.txt").write_text("mine")
+    assert simulate(out) == 0
+    before = _tree(out)
     assert simulate(out) == 2
     assert "exists and is not empty" in capsys.readouterr().err
-    assert (out / "keep.txt").exists()
-    assert simulate(out, "--overwrite") == 0
-    assert not (out / "keep.txt").exists() and (out / "summary.json").exists()
+    assert _tree(out) == before
+    assert simulate(out, "--overwrite", "--seed", "4") == 0  # a run directory: replaced
+    assert json.loads((out / "summary.json").read_text())["seed"] == 4
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r"]  # no temporary or trash directory left
+
+
+@pytest.mark.parametrize("content,why", [
+    ({"important.txt": "x", "sub/notes.txt": "y"}, "holds no summary.json written by swarm-ros"),
+    ({"summary.json": "{}"}, "its summary.json was not written by swarm-ros"),
+    ({"summary.json": "[1, 2]"}, "its summary.json was not written by swarm-ros"),
+    ({"summary.json": "not json"}, "holds no summary.json written by swarm-ros"),
+])
+def test_overwrite_refuses_a_directory_this_tool_did_not_write_and_touches_nothing(tmp_path, capsys, content, why):
+    out = tmp_path / "mine"
+    for name, text in content.items():
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text(text)
+    before = _tree(tmp_path)
+    assert simulate(out, "--overwrite") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a swarm-ros run directory" in err and why in err, err
+    assert "nothing was touched" in err
+    assert _tree(tmp_path) == before
+
+
+def test_overwrite_refuses_a_run_directory_a_user_added_a_file_to(tmp_path, capsys):
+    out = tmp_path / "r"
+    assert simulate(out) == 0
+    (out / "analysis.ipynb").write_text("{}")
+    before = _tree(tmp_path)
+    assert simulate(out, "--overwrite") == 2
+    assert "it holds 'analysis.ipynb', which no run writes" in capsys.readouterr().err
+    assert _tree(tmp_path) == before
+
+
+def test_overwrite_of_the_current_directory_is_refused(tmp_path, monkeypatch, capsys):
+    (tmp_path / "important.txt").write_text("keep me")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "notes.txt").write_text("and me")
+    monkeypatch.chdir(tmp_path)
+    before = _tree(tmp_path)
+    assert cli.main(["simulate", "--shape", "rectangle", "--out", ".", "--overwrite", "--quiet"]) == 2
+    assert "not a swarm-ros run directory" in capsys.readouterr().err
+    assert _tree(tmp_path) == before
+
+
+def test_an_unwritable_output_place_is_refused_before_anything_runs(tmp_path, monkeypatch, capsys):
+    """Permission bits do not tell (root may write anywhere but /sys, /proc): the check really tries."""
+    assert not output.writable_dir(Path("/sys"))
+    assert output.writable_dir(tmp_path) and list(tmp_path.iterdir()) == []  # the probe file is gone
+    assert simulate(Path("/sys/x"), "--max-ticks", "5") == 2
+    assert capsys.readouterr().err == "swarm-ros: error: /sys: directory is not writable, so /sys/x cannot be created\n"
 
 
 def test_shapes_lists_the_six_builtins(capsys):
@@ -131,7 +184,7 @@ def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch, ca
     def broken(sim, path):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr("swarm_ros.plots.save_final_png", broken)
+    monkeypatch.setattr("swarm_ros.output.save_final_png", broken)
     assert simulate(tmp_path / "run") == 2
     err = capsys.readouterr().err
     assert "No space left on device" in err and err.count("\n") == 1

@@ -35,3 +35,79 @@ def test_blocker_really_blocks():
             "sys.meta_path.insert(0, B())\nimport json\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.returncode != 0 and "blocked" in result.stderr
+
+
+def _imports_of(path, module: str, package: str) -> set[str]:
+    """The swarm_ros modules that ``module`` (file ``path``) imports, lazy and TYPE_CHECKING imports included."""
+    import ast
+
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = package.split(".")
+            if node.level:
+                base = base[: len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module
+            found.add(target)
+            found |= {f"{target}.{a.name}" for a in node.names}  # `from . import messages`
+    return found
+
+
+def module_graph() -> dict[str, set[str]]:
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "swarm_ros"
+    modules = {}
+    for path in root.rglob("*.py"):
+        parts = list(path.relative_to(root.parent).with_suffix("").parts)
+        package = ".".join(parts if parts[-1] == "__init__" else parts[:-1]).removesuffix(".__init__")
+        name = ".".join(parts).removesuffix(".__init__")
+        modules[name] = (path, package)
+    return {name: {m for m in _imports_of(path, name, package) if m in modules and m != name}
+            for name, (path, package) in modules.items()}
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm)."""
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                part.append(w)
+                if w == v:
+                    break
+            if len(part) > 1:
+                cycles.append(sorted(part))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return cycles
+
+
+def test_no_module_of_the_package_imports_itself_round_a_circle():
+    graph = module_graph()
+    assert "swarm_ros.core.record" in graph["swarm_ros.plots"]  # the scan sees imports at all
+    assert import_cycles(graph) == []
+
+
+def test_the_cycle_finder_finds_a_circle():
+    assert import_cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert import_cycles({"a": {"b"}, "b": set()}) == []

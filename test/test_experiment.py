@@ -16,7 +16,8 @@ import pytest
 import yaml
 
 from swarm_ros import cli
-from swarm_ros.experiment import (RESULT_COLUMNS, ExperimentError, load_experiment, read_results, run_seed)
+from swarm_ros.experiment import load_experiment, run_seed
+from swarm_ros.results import RESULT_COLUMNS, ExperimentError, read_results
 from swarm_ros.reference import ReferenceError, load_reference
 from swarm_ros.report import group_stats
 
@@ -343,12 +344,19 @@ def test_missing_keys_unreadable_files_and_foreign_directories_are_refused(tmp_p
                           (tmp_path / "absent.yaml", "cannot read experiment file")):
         assert experiment(path, tmp_path / "out") == 2
         assert message in capsys.readouterr().err
-    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "sub").mkdir(parents=True)
     (tmp_path / "foreign" / "notes.txt").write_text("mine")
+    (tmp_path / "foreign" / "sub" / "more.txt").write_text("also mine")
+    (tmp_path / "foreign" / "results.csv").write_text("a results file of another tool\n")
+    before = {p: p.read_bytes() for p in (tmp_path / "foreign").rglob("*") if p.is_file()}
     assert experiment(config, tmp_path / "foreign") == 2
     assert "holds no experiment.json" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in (tmp_path / "foreign").rglob("*") if p.is_file()} == before
+    assert experiment(config, Path("/sys/x")) == 2  # unwritable: one line
+    assert capsys.readouterr().err.count("\n") == 1
     assert cli.main(["report", str(tmp_path / "foreign")]) == 2
-    assert "no results.csv here" in capsys.readouterr().err
+    assert "results.csv: not a swarm-ros results file" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in (tmp_path / "foreign").rglob("*") if p.is_file()} == before
 
 
 def test_another_experiment_in_the_same_directory_is_refused(small, tmp_path, capsys):

@@ -16,7 +16,7 @@ from pathlib import Path
 from conftest import Recording, rrd_verify
 from test_experiment import _children_of, small_config
 
-from swarm_ros.experiment import read_results
+from swarm_ros.results import read_results
 
 PY = sys.executable
 

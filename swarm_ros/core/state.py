@@ -119,7 +119,7 @@ def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
             f"{shape.source}: {robots} robots do not fit on the {shape.free_patches} free patches "
             f"of the {world.size} x {world.size} world"
         )
-    r, w = world.radius, world.size
+    w = world.size
     seeds = shape.seed_patches
     seed_flat = world.flat_index(seeds[:, 0], seeds[:, 1])
     free = ~world.wall_mask().ravel()

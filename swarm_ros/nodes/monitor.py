@@ -26,7 +26,8 @@ from ..config import RecordingOptions
 from ..core.metrics import Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
 from ..core.replica import Replica
 from ..core.state import STATE_COUNT, RobotState
-from ..output import RunRecord, check_out_dir, default_run_dir, partial_recording, write_run
+from ..core.record import RunRecord
+from ..output import check_out_dir, default_run_dir, partial_recording, write_run
 from ..plots import save_final_png  # noqa: F401 - import matplotlib now, not while an interrupted run is written
 from . import messages as msgs
 from .params import make_node, read_parameters

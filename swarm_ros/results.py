@@ -1,0 +1,91 @@
+"""The results file of an experiment (``results.csv``): its columns, reading it, appending to it.
+
+:mod:`swarm_ros.experiment` writes it and :mod:`swarm_ros.report` reads it; both depend
+on this module and neither on the other's internals.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from pathlib import Path
+
+from .core.errors import SwarmError
+
+RESULTS_FILE = "results.csv"
+REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied into its directory
+
+#: One row of results.csv: the run's coordinates, then every summary.json field.
+RESULT_COLUMNS = ("shape", "shape_file", "robots", "vision_radius", "rules", "join", "crowding", "steps",
+                  "repetition", "seed", "shape_patches",
+                  "max_ticks", "wiggle_deg", "world_radius", "fail_fraction", "fail_tick", "engine", "outcome",
+                  "convergence_tick", "localized", "unlocalized", "separated", "empty_patches", "lost_robots",
+                  "convergence_rate", "wall_seconds")
+_INT_COLUMNS = {"robots", "repetition", "seed", "shape_patches", "max_ticks", "world_radius", "fail_tick",
+                "convergence_tick", "localized", "unlocalized", "separated", "empty_patches", "lost_robots"}
+_FLOAT_COLUMNS = {"vision_radius", "wiggle_deg", "fail_fraction", "convergence_rate", "wall_seconds"}
+
+
+class ExperimentError(SwarmError):
+    """A bad experiment file or output directory; the message names the file and the key."""
+
+
+def _csv_line(row: dict) -> str:
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow([row[c] for c in RESULT_COLUMNS])
+    return buf.getvalue()
+
+
+def read_results(path: Path) -> list[dict]:
+    """The rows of a results.csv (typed); a last line cut short by a crash is ignored.
+
+    Raises:
+        ExperimentError: the file is not a results file of this version.
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ExperimentError(f"{path}: cannot read results ({exc.strerror or exc})") from None
+    text = text[: text.rfind("\n") + 1]  # drop a last line cut short
+    if text.split("\n", 1)[0] != ",".join(RESULT_COLUMNS):
+        raise ExperimentError(f"{path}: not a swarm-ros results file (expected the columns "
+                              f"{', '.join(RESULT_COLUMNS)})")
+    rows = list(csv.DictReader(io.StringIO(text)))
+    try:
+        return [{k: int(v) if k in _INT_COLUMNS else float(v) if k in _FLOAT_COLUMNS else v for k, v in r.items()}
+                for r in rows]
+    except (TypeError, ValueError):
+        raise ExperimentError(f"{path}: a row has a malformed number") from None
+
+
+class ResultsFile:
+    """results.csv, appended one whole line per finished run, flushed and synced at once."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        if path.exists():
+            text = path.read_bytes()
+            cut = text.rfind(b"\n") + 1
+            if cut < len(text):  # a line cut short by a crash: drop it, the run is redone
+                with open(path, "r+b") as f:
+                    f.truncate(cut)
+            self.rows = read_results(path)
+        else:
+            part = path.with_name(f".{path.name}.tmp")
+            part.write_text(",".join(RESULT_COLUMNS) + "\n", encoding="utf-8")
+            part.replace(path)
+            self.rows = []
+        self._file = open(path, "a", encoding="utf-8")  # noqa: SIM115 - closed in close()
+
+    def done(self) -> set[tuple]:
+        return {(r["shape"], r["robots"], r["vision_radius"], r["rules"], r["repetition"]) for r in self.rows}
+
+    def append(self, row: dict) -> None:
+        self._file.write(_csv_line(row))
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self.rows.append(row)
+
+    def close(self) -> None:
+        self._file.close()
