@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import __version__
-from .config import RecordingOptions, Settings, load_params_file
+from .config import BATCH_LOSS_POLICIES, MAX_RESTARTS, RecordingOptions, Settings, load_params_file
 from .core.engine import Simulation
 from .core.errors import SwarmError
 from .core.metrics import Outcome
@@ -89,6 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_options(run)
     run.add_argument("--processes", type=_positive_int, default=2, help="robot-batch processes K (default: 2)")
     run.add_argument("--domain-id", type=int, help="ROS domain id (default: $ROS_DOMAIN_ID, else a free one)")
+    run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES, default="restart",
+                     help="a robot-batch process that dies: restart it, nothing lost (default; up to "
+                          f"{MAX_RESTARTS} times per batch), or remove its robots, as robots lost for good")
     run.set_defaults(func=cmd_run)
 
     topics = sub.add_parser("topics", help="list or echo the topics of a running swarm",
@@ -250,7 +253,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if domain is not None and not 0 <= domain <= 232:
         raise SwarmError(f"ROS domain id must be in [0, 232], got {domain}")
     launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
-                    overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options)
+                    overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
+                    on_batch_loss=args.on_batch_loss)
     _interrupt_on_sigterm()
     try:
         out = launch.run()

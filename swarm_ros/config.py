@@ -81,16 +81,23 @@ class Settings:
 
 _TYPES = {f.name: f.type for f in fields(Settings)}
 
+BATCH_LOSS_POLICIES = ("restart", "remove")  #: what the graph does when a robot-batch process dies
+MAX_RESTARTS = 3  #: restarts of one robot batch's process, at most, before its robots are removed
+
 #: Each ROS node's own parameters and their defaults (the type is the default's type).
 NODE_PARAMETERS: dict[str, dict[str, object]] = {
     "world": {
         "monitor_window": 128,  # max ticks the world runs ahead of the monitor; 0 = do not wait for one
         "start_timeout": 60.0,  # seconds to wait for robot batches to cover every robot
+        "on_batch_loss": "restart",  # restart: wait for a lost batch process to come back; remove: remove its robots
+        "max_restarts": MAX_RESTARTS,  # restarts per batch waited for; a batch lost once more has its robots removed
+        "restart_timeout": 30.0,  # seconds to wait for a lost batch to come back before removing its robots
     },
     "robot_batch": {
         "batch": 0,  # this process hosts batch `batch` of `batches` (contiguous ids) ...
         "batches": 1,
         "robot_ids": "",  # ... unless robot_ids lists them, e.g. "4-99,150"
+        "incarnation": 0,  # 0 for a batch's first process; the launcher counts restarts up from 1
     },
     "monitor": {
         "out_dir": "",  # run directory; "" = runs/<time>_<shape>_n<N>_v<R>_s<seed>
@@ -101,6 +108,29 @@ NODE_PARAMETERS: dict[str, dict[str, object]] = {
     },
 }
 _NODE_TYPES = {node: {k: type(v).__name__ for k, v in own.items()} for node, own in NODE_PARAMETERS.items()}
+
+
+def check_node_values(kind: str, values: dict[str, object], where: str = "") -> None:
+    """Range checks of a node's own parameters (types are checked where they are read).
+
+    Raises:
+        ParameterError: a value out of its range, in one line naming the parameter (and ``where``).
+    """
+    limits = {
+        "monitor_window": (lambda v: v >= 0, "an integer >= 0"),
+        "start_timeout": (lambda v: 0 < v < float("inf"), "a number > 0"),
+        "max_restarts": (lambda v: v >= 0, "an integer >= 0"),
+        "restart_timeout": (lambda v: 0 < v < float("inf"), "a number > 0"),
+        "on_batch_loss": (lambda v: v in BATCH_LOSS_POLICIES, f"one of {', '.join(BATCH_LOSS_POLICIES)}"),
+        "batches": (lambda v: v >= 1, "an integer >= 1"),
+        "batch": (lambda v: v >= 0, "an integer >= 0"),
+        "incarnation": (lambda v: v >= 0, "an integer >= 0"),
+        "record_every": (lambda v: v >= 1, "an integer >= 1"),
+    }
+    prefix = f"{where}: " if where else ""
+    for key, value in values.items():
+        if key in limits and key in NODE_PARAMETERS[kind] and not limits[key][0](value):
+            raise ParameterError(f"{prefix}{key} must be {limits[key][1]}, got {value!r}")
 
 
 _TYPE_WORDS = {"str": "a string", "int": "an integer", "float": "a number", "bool": "a boolean"}

@@ -6,6 +6,17 @@ directory. Then it lets every process end by itself, and stops those that do not
 (SIGINT, then SIGTERM, then SIGKILL, to the process group of each). If any process
 fails, or the user interrupts, it stops them all the same way.
 
+A robot-batch process that dies is started again (``on_batch_loss="restart"``, up to
+``max_restarts`` times per batch) with the same robots and the next incarnation
+number; the world sends it the current tick and the run goes on as if nothing had
+happened. Under ``"remove"`` a batch lost after tick 0 is not restarted and the world
+removes its robots; one lost before tick 0 is restarted under both policies, since
+none of its robots has moved yet. Every node ends by itself within moments of the
+launcher's death (SIGTERM from the kernel: ``PR_SET_PDEATHSIG``, set by the node at
+start-up, see :func:`swarm_ros.nodes.runner.follow_parent`). After the run, the
+shared-memory files of Fast DDS that its dead processes left in /dev/shm are removed
+(only files those processes had open, and only if no live process holds them).
+
 Each run gets a ROS domain id of its own (unless ROS_DOMAIN_ID is set), held through a
 lock file so two runs on one machine never share one, and discovery stays on the host
 (unless ROS_AUTOMATIC_DISCOVERY_RANGE is set). The processes' output and ROS logs go
@@ -27,12 +38,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from .config import RecordingOptions, Settings
+from .config import MAX_RESTARTS, RecordingOptions, Settings
 from .core.errors import SwarmError
 from .core.params import RunParams
 from .core.shapes import Shape
 from .nodes.params import params_yaml
+from .signals import PARENT_ENV
 
+SHM_DIR = Path("/dev/shm")
+WORLD_STARTED = "batches: tick 0"  #: what the world logs as it sends tick 0
 DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
 _STOP_STEPS = ((signal.SIGINT, 3.0), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0))
 _GRACE = 10.0  # seconds the world and batches get to end by themselves after the monitor is done
@@ -48,6 +62,30 @@ class Child:
     proc: subprocess.Popen
     log: Path
     log_file: IO = field(repr=False)
+    command: list[str] = field(default_factory=list)
+    incarnation: int = 0
+    shm: set[str] = field(default_factory=set)  #: Fast DDS shared-memory lock files it was seen holding open
+
+    def scan_shm(self) -> None:
+        """Remember the Fast DDS shared-memory files this process has open (while it runs)."""
+        try:
+            fds = os.listdir(f"/proc/{self.proc.pid}/fd")
+        except OSError:
+            return
+        for fd in fds:
+            try:
+                target = os.readlink(f"/proc/{self.proc.pid}/fd/{fd}")
+            except OSError:
+                continue
+            if target.startswith(f"{SHM_DIR}/fastrtps_") and target.endswith("_el"):
+                self.shm.add(target)
+
+    def started(self) -> bool:
+        """For the world: whether it has sent tick 0 (its log says so; the metrics may not have come yet)."""
+        try:
+            return WORLD_STARTED in self.log.read_text(errors="replace")
+        except OSError:
+            return False
 
     def last_error(self) -> str:
         """The process's last 'error' line, else its last non-empty line."""
@@ -91,6 +129,7 @@ class DomainLock:
 
 def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
     env = dict(os.environ)
+    env[PARENT_ENV] = str(os.getpid())
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     env["ROS_LOG_DIR"] = str(log_dir / "ros")
@@ -127,6 +166,38 @@ def stop(children: list[Child]) -> None:
         c.log_file.close()
 
 
+def clean_shm(lock_files: set[str]) -> list[str]:
+    """Remove the Fast DDS shared-memory segments of ``lock_files`` that no live process holds; return them.
+
+    Each segment ``/dev/shm/fastrtps_X`` comes with a lock file ``fastrtps_X_el`` that its
+    users keep locked, and may have a semaphore ``sem.fastrtps_X_mutex``. A lock file we
+    can lock ourselves has no live user left: the three files are leftovers of processes
+    that were killed (Fast DDS's own ``fastdds shm clean`` reasons the same way).
+    """
+    removed = []
+    for el in sorted(lock_files):
+        try:
+            f = open(el, "rb")  # noqa: SIM115 - closed below
+        except OSError:
+            continue  # gone already (cleaned up by its owner)
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.close()
+            continue  # a live process uses it
+        try:
+            segment = el.removesuffix("_el")
+            for path in (segment, el, str(SHM_DIR / f"sem.{Path(segment).name}_mutex")):
+                try:
+                    os.unlink(path)
+                    removed.append(path)
+                except FileNotFoundError:
+                    pass
+        finally:
+            f.close()
+    return removed
+
+
 def interrupted_run(out: Path) -> dict | None:
     """The summary in ``out`` if it is the run directory of an interrupted run, else None."""
     import json
@@ -151,8 +222,12 @@ class Launch:
     quiet: bool = False
     domain_id: int | None = None
     recording: RecordingOptions = field(default_factory=RecordingOptions)
+    on_batch_loss: str = "restart"
+    max_restarts: int = MAX_RESTARTS
     children: list[Child] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)  #: processes lost during the run
+    restarts: list[str] = field(default_factory=list)  #: names of the batches restarted, once per restart
+    shm_removed: list[str] = field(default_factory=list)  #: shared-memory files left by dead processes, removed
 
     def run(self) -> Path:
         out = self.out.absolute()
@@ -173,6 +248,7 @@ class Launch:
         finally:
             stop(self.children)  # an interrupted monitor writes the run so far before it exits
             lock.close()
+            self.shm_removed += clean_shm(set().union(*(c.shm for c in self.children)))
             self._keep_logs(logs, out, ok or (interrupted and interrupted_run(out) is not None))
         return out
 
@@ -187,29 +263,51 @@ class Launch:
 
             viewer = spawn_viewer()
         params_file = logs / "params.yaml"
-        params_file.write_text(params_yaml(run, {"world": {}, "monitor": {
+        params_file.write_text(params_yaml(run, {"world": {
+            "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts}, "monitor": {
             "out_dir": str(out), "overwrite": self.overwrite, "record": self.recording.enabled,
             "record_every": self.recording.every, "viewer_url": viewer}}), encoding="utf-8")
-        env = node_env(domain_id, logs)
+        self.env = node_env(domain_id, logs)
         self.domain = domain_id
+        self.params_file = params_file
         plan = [("monitor", "monitor", {})]
         plan += [(f"robot_batch_{k}", "robot_batch", {"batch": k, "batches": self.processes})
                  for k in range(self.processes)]
         plan.append(("world", "world", {}))
         for name, module, extra in plan:
             log = logs / f"{name}.log"
-            f = open(log, "wb")  # noqa: SIM115 - closed in stop()
-            proc = subprocess.Popen(node_command(module, params_file, name, extra), env=env, stdout=f,
-                                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
-            self.children.append(Child(name, proc, log, f))
+            self.children.append(self._spawn(name, node_command(module, params_file, name, extra), log, 0))
+        if not self.quiet:
+            print(f"swarm-ros: ROS domain {domain_id}, {self.processes} robot-batch processes, logs in {logs} "
+                  f"(kept in the run directory at the end)", file=sys.stderr, flush=True)
+
+    def _spawn(self, name: str, command: list[str], log: Path, incarnation: int) -> Child:
+        f = open(log, "ab")  # noqa: SIM115 - closed in stop()
+        if incarnation:
+            f.write(f"--- swarm-ros: restarted, incarnation {incarnation} ---\n".encode())
+            f.flush()
+        full = command + (["-p", f"incarnation:={incarnation}"] if incarnation else [])
+        proc = subprocess.Popen(full, env=self.env, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                start_new_session=True)
+        return Child(name, proc, log, f, command=command, incarnation=incarnation)
+
+    def _restart(self, old: Child) -> Child:
+        """Start a dead robot batch's process again: same robots, next incarnation."""
+        old.log_file.close()
+        new = self._spawn(old.name, old.command, old.log, old.incarnation + 1)
+        new.shm = old.shm  # cleaned up after the run, with everyone's
+        self.children[self.children.index(old)] = new
+        self.restarts.append(old.name)
+        return new
 
     def _follow(self) -> None:
         """Show progress until the monitor has written the run.
 
-        A robot-batch process that dies is the world's business: it notices (liveliness),
-        removes that batch's robots and goes on; the launcher reports the exit. A monitor
-        that dies is reported too, and the swarm runs to its end without it; the command
-        then fails, as nothing wrote the run directory (the recording so far stays in
+        A robot-batch process that dies is restarted (see the module's doc); one that may
+        not be restarted is the world's business: it notices (liveliness), removes that
+        batch's robots and goes on; the launcher reports the exit. A monitor that dies is
+        reported too, and the swarm runs to its end without it; the command then fails, as
+        nothing wrote the run directory (the recording so far stays in
         ``<run>.partial.rrd``). The world failing fails the run at once.
         """
         from .nodes.progress import Progress
@@ -218,18 +316,36 @@ class Launch:
         world = next(c for c in self.children if c.name == "world")
         reported: set[str] = set()
         world_done_at = None
+        scanned_at = 0.0
         with Progress(self.domain, self.shape.patches, quiet=self.quiet) as progress:
             while True:
                 progress.spin(0.1)
-                for c in self.children:
+                now = time.monotonic()
+                if now - scanned_at > 0.5:  # processes open their shared memory once, at start-up
+                    scanned_at = now
+                    for c in self.children:
+                        c.scan_shm()
+                for c in list(self.children):
                     code = c.proc.poll()
-                    if code not in (None, 0) and c is not world and c.name not in reported:
-                        reported.add(c.name)
-                        then = ("the world removes its robots and the run goes on" if c is not monitor else
-                                "the swarm goes on without it, but nothing will write the run directory")
-                        self.warnings.append(f"{c.name} exited with status {code} ({c.last_error() or 'no output'})"
-                                             f"; {then}")
-                        progress.bar.write(f"swarm-ros: warning: {self.warnings[-1]}", file=sys.stderr)
+                    if code in (None, 0) or c is world or c.name in reported:
+                        continue
+                    batch = c is not monitor
+                    started = progress.tick >= 0 or world.started()
+                    if batch and world_done_at is None and (self.on_batch_loss == "restart" or not started):
+                        if c.incarnation < self.max_restarts:
+                            why = c.last_error() or "no output"
+                            new = self._restart(c)
+                            self._warn(progress, f"{c.name} exited with status {code} ({why}); restarted "
+                                                 f"({new.incarnation} of {self.max_restarts})")
+                            continue
+                        if not started:
+                            raise LaunchError(f"{c.name} exited with status {code} before the run started, "
+                                              f"{self.max_restarts + 1} times ({c.last_error() or 'no output'})")
+                    reported.add(c.name)
+                    then = ("the world removes its robots and the run goes on" if batch else
+                            "the swarm goes on without it, but nothing will write the run directory")
+                    self._warn(progress, f"{c.name} exited with status {code} ({c.last_error() or 'no output'})"
+                                         f"; {then}")
                 if world.proc.returncode not in (None, 0):
                     raise LaunchError(f"world exited with status {world.proc.returncode}: "
                                       f"{world.last_error() or 'no output'}")
@@ -245,6 +361,10 @@ class Launch:
         deadline = time.monotonic() + _GRACE
         while time.monotonic() < deadline and any(c.proc.poll() is None for c in self.children):
             time.sleep(0.05)
+
+    def _warn(self, progress, text: str) -> None:
+        self.warnings.append(text)
+        progress.bar.write(f"swarm-ros: warning: {text}", file=sys.stderr)
 
     @staticmethod
     def _logs_target(out: Path, ok: bool) -> Path:

@@ -11,7 +11,7 @@ the same data. What is logged, on one timeline ``tick`` (sequence):
                               robot i), positions in patches, ``class_ids`` = the robot's
                               :class:`~swarm_ros.core.state.RobotState` code (0-6)
 ``metrics/<column>``          :class:`rerun.Scalars`, one series per ``metrics.csv`` column, every tick
-``events``                    :class:`rerun.TextLog`: the outcome, at the final tick
+``events``                    :class:`rerun.TextLog`: the outcome, at the final tick; restarts
 ``run`` (static)              :class:`rerun.TextDocument`: the run's parameters, rule set included
 
 One :class:`rerun.AnnotationContext` on ``world`` names and colours the robot states
@@ -184,10 +184,19 @@ class Recorder:
         level = {"interrupted": "WARN", "failed": "ERROR"}.get(text, "INFO")
         self.rec.log(EVENTS, rr.TextLog(line, level=level))
 
+    def event(self, tick: int, text: str, level: str = "WARN") -> None:
+        """Log a text event (e.g. a restarted process) at ``tick``."""
+        self.rec.set_time(TIMELINE, sequence=tick)
+        self.rec.log(EVENTS, rr.TextLog(text, level=level))
+
     def flush(self) -> None:
         """Send everything buffered."""
         self._send_robot_columns()
         self._send_metric_columns()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
 
     def close(self) -> None:
         """Send what is buffered, write the file's footer and disconnect; safe to call twice."""

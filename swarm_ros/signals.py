@@ -35,3 +35,7 @@ class StopFlag:
 
     def __exit__(self, *exc: object) -> None:
         self.restore()
+
+
+#: Set by ``swarm-ros run`` in each node's environment: the launcher's pid, which the node dies with.
+PARENT_ENV = "SWARM_ROS_LAUNCHER_PID"

@@ -1,7 +1,8 @@
 """Process faults in a running graph: a robot batch killed (SIGKILL) or stalled (SIGSTOP), the monitor killed.
 
-The world notices through DDS liveliness (1 s lease), removes the lost batch's robots at
-the end of the next tick, and the rest of the swarm repairs the shape. These runs are
+Under ``--on-batch-loss remove`` (robots lost for good; the default restarts the process,
+see test_restarts.py) the world notices through DDS liveliness (1 s lease), removes the
+lost batch's robots at the end of the next tick, and the rest of the swarm repairs the shape. These runs are
 timing-dependent by nature (which tick the loss lands on), so they check consistency,
 not equality with the in-process engine; --fail-robots covers equality.
 """
@@ -30,7 +31,7 @@ ROBOTS = 1036  # the star, ~2700 ticks: a few seconds over the graph
 
 def _launch(out: Path, processes: int = 3) -> subprocess.Popen:
     return subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--processes", str(processes),
-                             "--out", str(out), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             "--out", str(out), "--quiet", "--on-batch-loss", "remove"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=_env())
 
 

@@ -96,10 +96,11 @@ def convergence_rate(final: TickMetrics) -> float:
 
 def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, outcome: Outcome,
                 final: TickMetrics, separated: int, world_radius: int, wall_seconds: float,
-                losses: Sequence[tuple[int, int]] = ()) -> dict:
+                losses: Sequence[tuple[int, int]] = (), restarts: Sequence[tuple[int, str]] = ()) -> dict:
     """The per-run record written to ``summary.json`` (and one row of an experiment).
 
     ``losses`` are (tick, robots) of robot removals (failures, lost processes);
+    ``restarts`` are (tick, node) of robot-batch processes restarted (ROS graph only);
     ``unlocalized`` counts the robots still in the world that did not localize.
     """
     robots = params["robots"]
@@ -130,4 +131,5 @@ def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, ou
         "fail_tick": params.get("fail_tick", 0),
         "lost_robots": lost,
         "losses": [{"tick": t, "robots": k} for t, k in losses],
+        "restarts": [{"tick": t, "node": node} for t, node in restarts],
     }

@@ -67,12 +67,33 @@ class Replica:
         self.shape = shape
         self._radius, self._size = world.radius, world.size
         self._shape = shape.mask.ravel().copy()
+        self.state = self._empty(robots)
+
+    def _empty(self, robots: int) -> SwarmState:
+        world = self.shape.world
         frontier = np.zeros(world.patch_count, dtype=bool)
-        self.state = SwarmState(
+        return SwarmState(
             x=np.zeros(robots), y=np.zeros(robots), heading=np.zeros(robots),
             state=np.full(robots, UNKNOWN, dtype=np.int8),
             occupancy=np.full(world.patch_count, NO_ROBOT, dtype=np.int32),
             frontier=frontier, frontier_blocks=frontier_blocks_of(frontier, world.size), tick=-1)
+
+    def load(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
+             heading: np.ndarray) -> None:
+        """Start again from a snapshot: every robot's row at ``tick`` (how a restarted robot batch catches up).
+
+        The occupancy and frontier are rebuilt from the rows, so the replica equals one
+        that applied every tick's rows from tick 0 to ``tick``.
+
+        Raises:
+            ValueError: as :meth:`update` for tick 0; the replica is then unusable.
+        """
+        if tick < 0:
+            raise ValueError(f"a snapshot of tick {tick}")
+        self.state = self._empty(self.state.robots)
+        self.state.tick = -1
+        self._apply(0, ids, state, x, y, heading)  # the checks of a tick-0 message: every robot once
+        self.state.tick = tick
 
     @property
     def tick(self) -> int:
@@ -87,9 +108,13 @@ class Replica:
                 an id is out of range, a state code is unknown, or a robot localizes on a
                 patch that is not an empty shape patch. The replica is then unusable.
         """
+        if tick != self.state.tick + 1:
+            raise ValueError(f"rows for tick {tick} arrived after tick {self.state.tick}")
+        self._apply(tick, ids, state, x, y, heading)
+
+    def _apply(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
+               heading: np.ndarray) -> None:
         s = self.state
-        if tick != s.tick + 1:
-            raise ValueError(f"rows for tick {tick} arrived after tick {s.tick}")
         ids = np.asarray(ids, dtype=np.int64)
         state = np.asarray(state, dtype=np.int8)
         if tick == 0 and (ids.size != s.robots or not np.array_equal(np.sort(ids), np.arange(s.robots))):

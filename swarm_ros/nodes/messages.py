@@ -33,6 +33,7 @@ OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (Occupanc
 STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
 METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
 CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
+SNAPSHOT = "/swarm/snapshot"  # /swarm/snapshot/<batch>: world -> one batch: every robot's row at a tick (PointCloud2)
 ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
 
 # -- QoS ----------------------------------------------------------------------------
@@ -64,6 +65,23 @@ ALIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=Rel
 
 def alive_topic(node_name: str) -> str:
     return f"{ALIVE}/{node_name}"
+
+
+def snapshot_topic(node_name: str) -> str:
+    return f"{SNAPSHOT}/{node_name}"
+
+
+def batch_label(node_name: str, incarnation: int) -> str:
+    """The label of a batch's announcement on /swarm/batches: ``<node>/<incarnation>`` (0 = its first process)."""
+    return f"{node_name}/{incarnation}"
+
+
+def parse_batch_label(label: str) -> tuple[str, int]:
+    """(node name, incarnation) of an announcement's label; a label without ``/<n>`` is incarnation 0."""
+    name, sep, number = label.rpartition("/")
+    if sep and number.isdigit():
+        return name, int(number)
+    return label, 0
 
 # OccupancyGrid cell values
 CELL_OFF_SHAPE = -1  # wall or floor outside the shape ("unknown" to map tools)
@@ -162,6 +180,21 @@ def status_message(tick: int, outcome: str, message: str, level: bytes = Diagnos
 
 def status_values(msg: DiagnosticArray) -> dict[str, str]:
     return {kv.key: kv.value for s in msg.status for kv in s.values}
+
+
+def restarts_text(restarts: list[tuple[int, str]]) -> str:
+    """The ``restarts`` value of /swarm/status: ``tick:node`` items joined by ``;``, oldest first."""
+    return ";".join(f"{tick}:{node}" for tick, node in restarts)
+
+
+def restarts_of(text: str) -> list[tuple[int, str]]:
+    """The inverse of :func:`restarts_text`; malformed items are skipped."""
+    out = []
+    for item in text.split(";"):
+        tick, sep, node = item.partition(":")
+        if sep and tick.isdigit() and node:
+            out.append((int(tick), node))
+    return out
 
 
 def clock_message(tick: int) -> Clock:

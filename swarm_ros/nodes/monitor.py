@@ -61,6 +61,7 @@ class MonitorNode:
         self.started_at: float | None = None
         self.finished = False
         self.written: Path | None = None
+        self.restarts: list[tuple[int, str]] = []  # (tick, batch) from the world's status
 
         self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
@@ -87,9 +88,6 @@ class MonitorNode:
             self.recorder.metrics([metrics])
             self.recorder.robots(self.replica.state, force=self.outcome is not None)
         if self.outcome is not None:
-            if self.recorder is not None:
-                self.recorder.outcome(self.outcome.value, metrics)
-                self.recorder.close()
             self.ended_at = time.monotonic()
             self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
 
@@ -98,7 +96,14 @@ class MonitorNode:
         return int((self.replica.state.state == RobotState.REMOVED).sum())
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        outcome = msgs.status_values(msg).get("outcome")
+        values = msgs.status_values(msg)
+        restarts = msgs.restarts_of(values.get("restarts", ""))
+        for tick, node in restarts[len(self.restarts):]:  # the list only grows
+            self.node.get_logger().warn(f"{node} was restarted at tick {tick}")
+            if self.recorder is not None and not self.recorder.closed:
+                self.recorder.event(tick, f"{node} restarted at tick {tick}: a new process took over its robots")
+        self.restarts = max(self.restarts, restarts, key=len)
+        outcome = values.get("outcome")
         if outcome not in (None, "starting", "running"):
             self.world_outcome = outcome
 
@@ -110,6 +115,9 @@ class MonitorNode:
         if self.world_outcome is not None and self.world_outcome != self.outcome.value:
             raise RunFailed(f"the world reports '{self.world_outcome}', the monitor counted "
                             f"'{self.outcome.value}' at tick {self.replica.tick}")
+        if self.recorder is not None:  # closed only now: the world's last status may add restart events
+            self.recorder.outcome(self.outcome.value, TickMetrics(*self.rows[-1]))
+            self.recorder.close()
         self._write()
         self.finished = True
 
@@ -122,7 +130,7 @@ class MonitorNode:
         summary = run_summary(shape=self.shape.name, shape_patches=self.shape.patches,
                               params=self.params.as_dict(), engine=ENGINE_NAME, outcome=outcome, final=final,
                               separated=separated, world_radius=self.world_radius, wall_seconds=self.wall,
-                              losses=self.losses)
+                              losses=self.losses, restarts=self.restarts)
         record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
                            outcome=outcome, summary=summary)
         self.written = write_run(self.out, record, overwrite=self.overwrite,
@@ -136,7 +144,12 @@ class MonitorNode:
         directory, with outcome ``interrupted``. Failed: the recording so far is kept,
         closed and marked, as ``<out_dir>.partial.rrd``.
         """
-        if self.outcome is not None or self.written is not None:
+        if self.written is not None:
+            return
+        if self.outcome is not None:  # ended, but stopped before the world confirmed it: keep the recording
+            if self.recorder is not None:
+                self.recorder.outcome("interrupted", TickMetrics(*self.rows[-1]))
+                self.recorder.close()
             return
         interrupted = code == EXIT_INTERRUPTED and bool(self.rows)
         if self.recorder is not None:

@@ -14,7 +14,7 @@ from typing import Any
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..config import NODE_PARAMETERS, ConfigError, Settings
+from ..config import NODE_PARAMETERS, ConfigError, Settings, check_node_values
 
 _TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
 _ROS_TYPES = {Parameter.Type.BOOL: bool, Parameter.Type.INTEGER: int, Parameter.Type.DOUBLE: float,
@@ -23,6 +23,7 @@ _ROS_TYPES = {Parameter.Type.BOOL: bool, Parameter.Type.INTEGER: int, Parameter.
 _RCLPY_OWN = {"use_sim_time", "start_type_description_service"}
 
 RUN_PARAMETERS: dict[str, Any] = {f.name: getattr(Settings(), f.name) for f in fields(Settings)}
+
 
 def make_node(kind: str) -> Node:
     """A node that takes every override as given, so :func:`read_parameters` can check them all."""
@@ -47,6 +48,7 @@ def read_parameters(node: Node, kind: str) -> tuple[Settings, dict[str, Any]]:
         param = node.get_parameter(pname)
         given[pname] = _typed(node.get_name(), pname, param, type(schema[pname]))
     values = {**schema, **given}
+    check_node_values(kind, {k: values[k] for k in NODE_PARAMETERS[kind]})
     run = Settings(**{k: values[k] for k in RUN_PARAMETERS})
     return run, {k: values[k] for k in NODE_PARAMETERS[kind]}
 

@@ -32,9 +32,11 @@ class Progress:
         self.bar = tqdm(total=patches, unit="patch", desc="localized", disable=True if quiet else None,
                         file=sys.stderr, dynamic_ncols=True)
         self.bar.set_postfix(tick="starting", refresh=False)
+        self.tick = -1  #: the last tick the monitor reported; -1 before tick 0
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:
         m = msgs.metrics_of(msg)
+        self.tick = max(self.tick, m.get("tick", -1))
         self.bar.update(m.get("localized", 0) - self.bar.n)
         self.bar.set_postfix(tick=str(m.get("tick")), moving=str(m.get("moving")), refresh=False)
 

@@ -1,9 +1,13 @@
 """A robot-batch node: hosts a set of robots and runs the core's robot rule for them every tick.
 
-It announces its robot ids on /swarm/batches, rebuilds the swarm's state from the
-world's rows on /swarm/robots (:class:`swarm_ros.core.replica.Replica`), and after each
-tick publishes, on /swarm/decisions, what each of its moving robots decided for the
-next one. A robot senses only what arrived on the topics, and the rule reads only the
+It announces its robot ids on /swarm/batches. The world answers with a snapshot of
+every robot on /swarm/snapshot/<batch> (at tick 0, or at the current tick for a batch
+process that was restarted in the middle of a run); the batch builds its copy of the
+swarm's state from it (:class:`swarm_ros.core.replica.Replica`), follows the world's
+rows on /swarm/robots from there, and after each tick publishes, on /swarm/decisions,
+what each of its moving robots decided for the next one. A decision is a pure function
+of the state, the seed, the robot and the tick, so a restarted batch decides exactly
+as the one it replaces would have. A robot senses only what arrived on the topics, and the rule reads only the
 robots within its vision radius of the point ahead. It stops when /swarm/status
 reports the run's outcome.
 
@@ -20,10 +24,10 @@ from std_msgs.msg import Empty, Int64MultiArray
 from ..core.errors import ParameterError
 from ..core.replica import Replica
 from ..core.rules import Decider
-from ..wire import batch_ids, decision_rows, format_ranges, parse_ranges
+from ..wire import PATCH_METRES, ROBOT_ROW, batch_ids, decision_rows, format_ranges, parse_ranges
 from . import messages as msgs
 from .params import make_node, read_parameters
-from .runner import apply_robots, run_node
+from .runner import RunFailed, apply_robots, run_node
 
 RUNNING_STATES = ("starting", "running")
 
@@ -41,13 +45,17 @@ class RobotBatchNode:
         self.decider = Decider(self.shape, self.params)
         self.finished = False
 
+        self.early: dict[int, PointCloud2] = {}  # rows that arrived before the snapshot, by tick
+
         self.pub_decisions = node.create_publisher(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)
+        node.create_subscription(PointCloud2, msgs.snapshot_topic(node.get_name()), self._on_snapshot,
+                                 msgs.LATCHED_QOS)
         node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
         node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         announce = node.create_publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
         hello = msgs.ids_message(self.ids)
-        hello.layout.dim[0].label = node.get_name()
+        hello.layout.dim[0].label = msgs.batch_label(node.get_name(), int(own["incarnation"]))
         announce.publish(hello)
         node.get_logger().info(f"{node.get_name()}: robots {format_ranges(self.ids)}")
 
@@ -67,13 +75,44 @@ class RobotBatchNode:
                                  f"got {format_ranges(ids)}")
         return ids
 
+    def _on_snapshot(self, msg: PointCloud2) -> None:
+        """Every robot's row at some tick: start (again) from it if it is newer than what we hold."""
+        tick = msgs.tick_of(msg.header)
+        if tick <= self.replica.tick:
+            return  # an older snapshot (latched from an earlier restart of this batch)
+        try:
+            rows = msgs.cloud_rows(msg, ROBOT_ROW)
+            self.replica.load(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES,
+                              rows["heading"])
+        except ValueError as exc:
+            raise RunFailed(f"snapshot of tick {tick}: {exc}") from None
+        while self.replica.tick + 1 in self.early:  # rows published after the snapshot was taken
+            apply_robots(self.replica, self.early.pop(self.replica.tick + 1))
+        self.early.clear()
+        self._decide()
+
     def _on_robots(self, msg: PointCloud2) -> None:
-        tick = apply_robots(self.replica, msg)
+        tick = msgs.tick_of(msg.header)
+        if tick <= self.replica.tick:
+            return  # history from before the snapshot
+        if tick > self.replica.tick + 1:
+            # No snapshot yet, or an old one (latched from before a restart): keep the newest rows
+            # until the world's answer to our announcement, a snapshot of the current tick, comes.
+            self.early[tick] = msg
+            if len(self.early) > msgs.ROBOTS_DEPTH:
+                del self.early[min(self.early)]
+            return
+        apply_robots(self.replica, msg)
+        self._decide()
+
+    def _decide(self) -> None:
+        """Publish the decisions of this batch's moving robots for the tick after the replica's."""
         moving = self.replica.moving_ids()
         own = moving[self.mine[moving]]
         if own.size:
-            decisions = self.decider.decide(self.replica.state, own, tick + 1, moving)
-            self.pub_decisions.publish(msgs.make_cloud(decision_rows(decisions), tick + 1))
+            tick = self.replica.tick + 1
+            decisions = self.decider.decide(self.replica.state, own, tick, moving)
+            self.pub_decisions.publish(msgs.make_cloud(decision_rows(decisions), tick))
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         if msgs.status_values(msg).get("outcome", "running") not in RUNNING_STATES:

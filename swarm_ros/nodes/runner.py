@@ -6,6 +6,8 @@ Exit codes: 0 done, 1 the run failed (a peer sent something impossible, a timeou
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
 from collections.abc import Callable
 from typing import Protocol
@@ -19,7 +21,7 @@ from sensor_msgs.msg import PointCloud2
 
 from ..core.errors import SwarmError
 from ..core.replica import Replica
-from ..signals import StopFlag
+from ..signals import PARENT_ENV, StopFlag
 from ..wire import PATCH_METRES, ROBOT_ROW
 from . import messages as msgs
 
@@ -58,8 +60,31 @@ def apply_robots(replica: Replica, msg: PointCloud2) -> int:
     return tick
 
 
+_PR_SET_PDEATHSIG = 1
+
+
+def follow_parent() -> None:
+    """Under ``swarm-ros run``: receive SIGTERM when the launcher dies, so no node outlives it.
+
+    The kernel sends it (``prctl(PR_SET_PDEATHSIG)``), also if the launcher is SIGKILLed;
+    the node then stops as on Ctrl-C. If the launcher died before this call, exit now.
+    Nothing happens for a node started another way (``ros2 run``, ``ros2 launch``).
+    """
+    parent = os.environ.get(PARENT_ENV, "")
+    if not parent.isdigit():
+        return
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
+        return  # not Linux: the launcher's own stop() is the only guard
+    if os.getppid() != int(parent):
+        raise SystemExit(EXIT_INTERRUPTED)
+
+
 def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None = None) -> int:
     """Init rclpy with ``argv`` (ROS arguments included), build the node, spin until it finishes."""
+    follow_parent()
     args = sys.argv if argv is None else argv
     try:
         # Our own SIGINT/SIGTERM handling: a flag checked between callbacks, so a signal never

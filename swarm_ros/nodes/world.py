@@ -5,8 +5,20 @@ decides for its moving robots and publishes on /swarm/decisions; once the decisi
 every moving robot are in, the world applies them with the in-process engine's own
 code (:meth:`swarm_ros.core.engine.Simulation.apply`), checks for the end, and publishes
 the rows of tick t + 1, the occupancy if a robot joined, and the clock. It starts when
-the robot batches' announcements on /swarm/batches cover every robot, and never runs
-more than ``monitor_window`` ticks ahead of the monitor's /swarm/metrics.
+the robot batches' announcements on /swarm/batches cover every robot, sends each batch
+a snapshot of every robot to start from, and never runs more than ``monitor_window``
+ticks ahead of the monitor's /swarm/metrics.
+
+A robot batch whose process is lost (liveliness lapses, or its robots stop deciding)
+is waited for under ``on_batch_loss: restart`` (the default): the launcher restarts
+the process, which announces the same robots again; the world sends it a snapshot of
+the current tick and the lockstep goes on, with nothing lost, since a decision is a
+pure function of the state, the seed, the robot and the tick. After ``max_restarts``
+restarts, or ``restart_timeout`` seconds without one, or always under ``remove``, the
+lost batch's robots are removed at the end of the next tick.
+
+/swarm/status (and /swarm/occupancy) are published at least once a second of wall
+time, and at once on every change of the run's state.
 
     ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml
 """
@@ -23,11 +35,10 @@ from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallb
 from std_msgs.msg import Empty, Int64MultiArray
 
 from ..core.engine import Simulation
-from ..core.errors import ParameterError
 from ..core.metrics import Outcome
 from ..core.rules import Decisions
 from ..core.state import MOVING_STATES, RobotState
-from ..wire import DECISION_ROW, decisions_of, format_ranges, robot_rows
+from ..wire import DECISION_ROW, decisions_of, robot_rows
 from . import messages as msgs
 from .params import make_node, read_parameters
 from .runner import RunFailed, run_node
@@ -37,6 +48,7 @@ _STALL_S = 5.0  # seconds without progress after which a silent batch or monitor
 _FIRST_STALL_S = 30.0  # the same before its first decisions or report (discovery may be slow)
 _LINGER = 0.5  # seconds to let the last messages reach their readers before exiting
 _FINAL_WAIT = 30.0  # seconds to wait, after the end, for the monitor to catch up
+STATUS_PERIOD = 1.0  # seconds of wall time between /swarm/status (and /swarm/occupancy) messages
 
 
 class WorldNode:
@@ -44,10 +56,11 @@ class WorldNode:
         self.node = node = make_node("world")
         run, own = read_parameters(node, "world")
         self.shape, self.params = run.resolve()
-        self.window = int(own["monitor_window"])
+        self.window = self.monitor_window = int(own["monitor_window"])
         self.start_timeout = float(own["start_timeout"])
-        if self.window < 0 or self.start_timeout <= 0:
-            raise ParameterError("monitor_window must be >= 0 and start_timeout > 0")
+        self.on_loss = str(own["on_batch_loss"])
+        self.max_restarts = int(own["max_restarts"])
+        self.restart_timeout = float(own["restart_timeout"])
         self.sim = Simulation(self.shape, self.params)
         self.finished = False
 
@@ -74,23 +87,38 @@ class WorldNode:
         self.lost: list[str] = []  # batches (and the monitor) whose liveliness lapsed
         self.progress_at = time.monotonic()  # the last tick published or metrics received
         self.pending = np.empty(0, dtype=np.int64)  # robots of lost batches, removed at the end of the next tick
+        self.decided = np.zeros(n, dtype=bool)  # robots whose decision for the coming tick is in
+        self.snapshot_pubs: list = []  # per batch: /swarm/snapshot/<batch>
+        self.restart_counts: list[int] = []  # per batch
+        self.incarnations: list[int] = []  # per batch: the newest process's incarnation heard of
+        self.down_since: dict[int, float] = {}  # batches lost and waited for: when
+        self.removed_batches: set[int] = set()
+        self.restarts: list[tuple[int, str]] = []  # (tick, batch) of every restart
+        self.status_at = -1.0  # when /swarm/status was last published
+        self.published_tick = -1
 
         self.shape_cells = msgs.shape_cells(self.shape)
         self.pub_shape.publish(msgs.grid_message(self.shape, self.shape_cells, 0))
         self._publish_occupancy()
-        self.pub_status.publish(msgs.status_message(0, "starting", "waiting for robot batches"))
+        self._publish_status()
         node.get_logger().info(f"world: {self.shape.name} ({self.shape.patches} patches), {n} robots, "
                                f"waiting for robot batches")
 
     # -- start --------------------------------------------------------------------
     def _on_batch(self, msg: Int64MultiArray) -> None:
-        if self.started:
-            return
-        name = msg.layout.dim[0].label if msg.layout.dim else f"batch{len(self.batch_names)}"
-        ids = np.asarray(msg.data, dtype=np.int64)
+        name, incarnation = msgs.parse_batch_label(msg.layout.dim[0].label if msg.layout.dim else "")
+        ids = np.unique(np.asarray(msg.data, dtype=np.int64))
         n = self.params.robots
-        if ids.size and (ids.min() < 4 or ids.max() >= n):
-            raise RunFailed(f"{name} hosts robots outside 4..{n - 1} ({format_ranges(np.unique(ids))})")
+        log = self.node.get_logger()
+        if not name or ids.size == 0 or ids.min() < 4 or ids.max() >= n:
+            log.warn(f"ignored an announcement of '{name}': no name, no robots or robots outside 4..{n - 1}")
+            return
+        if name in self.batch_names:
+            self._on_reannounce(self.batch_names.index(name), ids, incarnation)
+            return
+        if self.started:
+            log.warn(f"ignored an announcement of '{name}' after the start: every robot is hosted already")
+            return
         taken = ids[self.host[ids] >= 0]
         if taken.size:
             other = self.batch_names[self.host[taken[0]]]
@@ -98,15 +126,51 @@ class WorldNode:
         k = len(self.batch_names)
         self.host[ids] = k
         self.batch_names.append(name)
+        self.restart_counts.append(0)
+        self.incarnations.append(0)
+        self.snapshot_pubs.append(self.node.create_publisher(PointCloud2, msgs.snapshot_topic(name),
+                                                             msgs.LATCHED_QOS))
         self._watch(msgs.alive_topic(name), lambda info, k=k: self._on_batch_liveliness(k, info))
         covered = int((self.host[4:] >= 0).sum())
-        self.node.get_logger().info(f"{name} hosts {ids.size} robots; {covered}/{n - 4} covered")
+        log.info(f"{name} hosts {ids.size} robots; {covered}/{n - 4} covered")
+        if incarnation:  # restarted before the world heard from the processes before it
+            self._on_reannounce(k, ids, incarnation)
         if covered == n - 4:
             self._start()
+
+    def _on_reannounce(self, k: int, ids: np.ndarray, incarnation: int) -> None:
+        """A batch announced again: its process was restarted. Send it the current tick to start from."""
+        name = self.batch_names[k]
+        log = self.node.get_logger()
+        if incarnation <= self.incarnations[k]:
+            return  # the same process again (a duplicate), or an older one's announcement
+        if not np.array_equal(ids, np.flatnonzero(self.host == k)):
+            log.warn(f"ignored a new announcement of {name}: it names other robots than before")
+            return
+        if k in self.removed_batches or self.sim.done:
+            log.warn(f"ignored a new announcement of {name}: its robots are removed or the run is over")
+            return
+        tick = self.sim.tick if self.started else 0
+        self.restart_counts[k] += incarnation - self.incarnations[k]
+        self.restarts += [(tick, name)] * (incarnation - self.incarnations[k])
+        self.incarnations[k] = incarnation
+        self.down_since.pop(k, None)
+        log.warn(f"{name} is back (restart {self.restart_counts[k]}) at tick {tick}"
+                 + ("; sending it a snapshot" if self.started else ""))
+        if self.started:
+            self._send_snapshot(k)
+        self._publish_status()
+
+    def _send_snapshot(self, k: int) -> None:
+        s = self.sim.state
+        rows = robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading)
+        self.snapshot_pubs[k].publish(msgs.make_cloud(rows, self.sim.tick))
 
     def _start(self) -> None:
         self.started = True
         self.node.get_logger().info(f"all robots hosted by {len(self.batch_names)} batches: tick 0")
+        for k in range(len(self.batch_names)):
+            self._send_snapshot(k)
         s = self.sim.state
         self._emit(0, msgs.make_cloud(robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading), 0))
 
@@ -116,9 +180,21 @@ class WorldNode:
         if not self.started or self.sim.done or tick != self.sim.tick + 1:
             return  # a batch answering a tick that is over (e.g. after the end)
         rows = msgs.cloud_rows(msg, DECISION_ROW)
+        ids = rows["id"].astype(np.int64)
+        keep = ids < self.params.robots
+        keep[keep] = np.isin(self.sim.state.state[ids[keep]], MOVING_STATES) & ~self.decided[ids[keep]]
         if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
-            rows = rows[~np.isin(rows["id"], self.pending)]
-        rows = rows[self.sim.state.state[rows["id"]] != RobotState.REMOVED]
+            keep &= ~np.isin(ids, self.pending)
+        # one decision per robot per tick: a restarted batch may send again what its predecessor sent
+        first = np.zeros(ids.size, dtype=bool)
+        first[np.unique(ids, return_index=True)[1]] = True
+        rows = rows[keep & first]
+        if not rows.size:
+            return
+        self.decided[rows["id"]] = True
+        if self.down_since:  # a batch deciding is not lost
+            for k in np.unique(self.host[rows["id"]]).tolist():
+                self.down_since.pop(k, None)
         self.parts.append(rows)
         self.received += rows.size
         self._maybe_advance(tick)
@@ -145,6 +221,7 @@ class WorldNode:
                                    heading=s.heading[standing].copy()))
         decisions = Decisions.concatenate(parts)
         self.parts, self.received = [], 0
+        self.decided[:] = False
         localized_before = self.sim.metrics.localized
         try:
             self.sim.apply(decisions)
@@ -170,27 +247,56 @@ class WorldNode:
             self.pub_robots.publish(robots_msg)
             self.progress_at = time.monotonic()
             if joined:
-                self._publish_occupancy(tick)
+                self._publish_occupancy()
             self.pub_clock.publish(msgs.clock_message(tick))
+            self.published_tick = tick
             if tick == self.sim.tick and self.sim.done:
                 self._announce_end()
             elif tick == 0:
-                self.pub_status.publish(msgs.status_message(0, "running", "running"))
+                self._publish_status()
 
-    def _publish_occupancy(self, tick: int = 0) -> None:
+    def _publish_occupancy(self) -> None:
+        """The occupancy now, stamped with the world's tick (it may be ahead of the last published rows)."""
         cells = self.shape_cells.copy()
         cells[self.sim.state.occupancy >= 0] = msgs.CELL_FULL
-        self.pub_occupancy.publish(msgs.grid_message(self.shape, cells, tick))
+        self.pub_occupancy.publish(msgs.grid_message(self.shape, cells, self.sim.tick))
 
     def _announce_end(self) -> None:
         m, outcome = self.sim.metrics, self.sim.outcome
-        level = DiagnosticStatus.OK if outcome in (Outcome.COMPLETE, Outcome.COMPLETE_WITH_EXTRAS) \
-            else DiagnosticStatus.WARN
-        self.pub_status.publish(msgs.status_message(
-            m.tick, outcome.value, f"{outcome.value} at tick {m.tick}", level,
-            {"localized": m.localized, "separated": int((self.sim.state.state == RobotState.SEPARATED).sum())}))
         self.ended_at = time.monotonic()
+        self._publish_status()
         self.node.get_logger().info(f"run ended: {outcome.value} at tick {m.tick}, {m.localized} localized")
+
+    def _publish_status(self, note: str = "") -> None:
+        """The run's state on /swarm/status (latched): outcome, the last published tick and its counts, the rule
+        set, restarts and lost processes; also /swarm/occupancy, for readers that joined late."""
+        self.status_at = time.monotonic()
+        tick = max(self.published_tick, 0)
+        level = DiagnosticStatus.OK
+        if not self.started:
+            outcome, message = "starting", "waiting for robot batches"
+        elif self.ended_at is not None:
+            outcome = self.sim.outcome.value
+            message = f"{outcome} at tick {tick}"
+            if self.sim.outcome not in (Outcome.COMPLETE, Outcome.COMPLETE_WITH_EXTRAS):
+                level = DiagnosticStatus.WARN
+        else:
+            outcome, message = "running", note or "running"
+        if note or self.lost or self.down_since:
+            level = DiagnosticStatus.WARN
+        m = self.sim.history[min(tick, self.sim.tick)] if self.started else None
+        s = self.sim.state
+        values = {"rules": self.params.ruleset.label, "robots": self.params.robots}
+        if m is not None:
+            values.update(localized=int(m[2]), moving=int(m[4]), walking=int(m[6]))
+        if self.ended_at is not None:
+            values["separated"] = int((s.state == RobotState.SEPARATED).sum())
+        values["restarts"] = msgs.restarts_text(self.restarts)
+        values["lost"] = ",".join(self.lost)
+        values["waiting_for"] = ",".join(self.batch_names[k] for k in sorted(self.down_since))
+        self.pub_status.publish(msgs.status_message(tick, outcome, message, level, values))
+        if self.started:
+            self._publish_occupancy()
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:
         tick = msgs.metrics_of(msg).get("tick", -1)
@@ -207,13 +313,31 @@ class WorldNode:
     def _on_batch_liveliness(self, k: int, info: QoSLivelinessChangedInfo) -> None:
         if info.alive_count == 0 and info.not_alive_count > 0:
             self._lose_batch(k, "liveliness lapsed")
+        elif info.alive_count > 0 and k in self.down_since:  # a process of this batch is alive (again)
+            self.down_since.pop(k)
 
     def _lose_batch(self, k: int, why: str) -> None:
+        """Batch ``k``'s process is gone (or stalled). Wait for it to come back, or remove its robots."""
         name = self.batch_names[k]
-        if name in self.lost or self.sim.done:
+        if k in self.removed_batches or k in self.down_since or self.sim.done:
             return
-        if not self.started:
-            raise RunFailed(f"{name} was lost before the run started")
+        log = self.node.get_logger()
+        tick = self.sim.tick
+        if not self.started or (self.on_loss == "restart" and self.restart_counts[k] < self.max_restarts):
+            # Before tick 0 a lost batch is always waited for (the launcher restarts it in both
+            # policies): none of its robots has moved yet, so nothing is lost by waiting.
+            self.down_since[k] = time.monotonic()
+            log.warn(f"{name} lost ({why}) at tick {tick}: waiting up to {self.restart_timeout:g} s for it to "
+                     f"restart (restarts so far: {self.restart_counts[k]} of {self.max_restarts})")
+            self._publish_status(f"waiting for {name}")
+            return
+        self._remove_batch(k, why)
+
+    def _remove_batch(self, k: int, why: str) -> None:
+        """Remove batch ``k``'s robots at the end of the next tick (robots lost for good)."""
+        name = self.batch_names[k]
+        self.down_since.pop(k, None)
+        self.removed_batches.add(k)
         ids = np.flatnonzero(self.host == k)
         ids = ids[self.sim.state.state[ids] != RobotState.REMOVED]
         self.lost.append(name)
@@ -224,13 +348,17 @@ class WorldNode:
         tick = self.sim.tick
         self.node.get_logger().warn(f"{name} lost ({why}) at tick {tick}: its {ids.size} robots "
                                     f"are removed at the end of tick {tick + 1}")
-        self.pub_status.publish(msgs.status_message(tick, "running", f"lost {name}", DiagnosticStatus.WARN,
-                                                    {"lost": ",".join(self.lost)}))
+        self._publish_status(f"lost {name}")
         self._maybe_advance(tick + 1)  # the lost robots' decisions are no longer awaited
 
     def _on_monitor_liveliness(self, info: QoSLivelinessChangedInfo) -> None:
         if info.alive_count == 0 and info.not_alive_count > 0:
             self._lose_monitor("liveliness lapsed")
+        elif info.alive_count > 0 and _MONITOR in self.lost:  # it was only starved of CPU for a moment
+            self.lost.remove(_MONITOR)
+            self.window = self.monitor_window
+            self.node.get_logger().warn(f"the monitor is back at tick {self.sim.tick}")
+            self._publish_status()
 
     def _lose_monitor(self, why: str) -> None:
         if _MONITOR in self.lost:
@@ -239,8 +367,7 @@ class WorldNode:
         self.window = 0  # nobody to wait for: run on
         self.node.get_logger().warn(f"the monitor was lost ({why}) at tick {self.sim.tick}; "
                                     f"the swarm goes on without it")
-        self.pub_status.publish(msgs.status_message(self.sim.tick, "running", "lost the monitor",
-                                                    DiagnosticStatus.WARN, {"lost": ",".join(self.lost)}))
+        self._publish_status("lost the monitor")
         self._flush()
 
     # -- housekeeping --------------------------------------------------------------
@@ -262,8 +389,8 @@ class WorldNode:
         limit = _STALL_S if self.sim.tick > 0 else _FIRST_STALL_S
         if now - self.progress_at < limit:
             return
-        decided = np.concatenate([r["id"] for r in self.parts]) if self.parts else np.empty(0, dtype=np.int64)
-        missing = np.setdiff1d(np.setdiff1d(self.sim.moving_ids(), decided), self.pending)
+        moving = self.sim.moving_ids()
+        missing = np.setdiff1d(moving[~self.decided[moving]], self.pending)
         for k in np.unique(self.host[missing]).tolist():
             self._lose_batch(k, f"no decisions for {limit:g} s")
         self.progress_at = now
@@ -271,6 +398,14 @@ class WorldNode:
     def poll(self) -> None:
         now = time.monotonic()
         self._check_stalls(now)
+        for k, since in list(self.down_since.items()):
+            if now - since > self.restart_timeout:
+                if not self.started:
+                    raise RunFailed(f"{self.batch_names[k]} was lost before the run started and did not come back "
+                                    f"within {self.restart_timeout:g} s (restart_timeout)")
+                self._remove_batch(k, f"not back within {self.restart_timeout:g} s")
+        if not self.sim.done and now - self.status_at >= STATUS_PERIOD:
+            self._publish_status()
         if not self.started and now - self.created > self.start_timeout:
             covered = int((self.host[4:] >= 0).sum())
             raise RunFailed(f"robot batches cover {covered} of {self.params.robots - 4} robots after "

@@ -1,0 +1,253 @@
+"""A robot-batch process lost at any moment is restarted and the run is byte-identical to one without the fault.
+
+A decision is a pure function of the state, the seed, the robot and the tick, and the
+world waits in lockstep for every moving robot's decision, so a batch process killed
+before tick 0, in the middle of the run, or twice in a row changes nothing the run
+writes but ``restarts`` in summary.json (and the recording's events). Also here: the
+bound on restarts, the launcher's death (every node ends within 2 s) and the Fast DDS
+shared-memory files a killed process leaves in /dev/shm.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import Recording
+from test_ros_graph import _env, _processes_mentioning
+
+from swarm_ros import cli
+from swarm_ros.launcher import Launch
+
+PY = sys.executable
+# The star under the local join rule: ~3600 ticks, several seconds over the graph, long enough to kill in
+RUN = ["--shape", "star", "--seed", "5", "--rules", "local"]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("restart-ref") / "ref"
+    assert cli.main(["simulate", *RUN, "--out", str(out), "--quiet", "--no-recording"]) == 0
+    return out
+
+
+def _launch(out: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", *RUN, "--processes", "3", "--out", str(out),
+                             "--quiet", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=_env())
+
+
+def _node_pid(out: Path, node: str, timeout: float = 60, not_pid: int | None = None) -> int:
+    """The pid of the process running ``node`` for the run into ``out`` (a new one if ``not_pid`` is given)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for pid in _processes_mentioning(f".{out.name}.logs-"):
+            try:
+                cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+            except OSError:
+                continue
+            if f"__node:={node}\0" in cmdline + "\0" and str(out.parent) in cmdline and pid != not_pid:
+                return pid
+        time.sleep(0.02)
+    raise AssertionError(f"no process for {node}")
+
+
+def _ticks_recorded(out: Path, size: int, timeout: float = 120) -> None:
+    """Wait until the run's partial recording holds ``size`` bytes: ticks are flowing."""
+    partial = out.parent / f"{out.name}.partial.rrd"
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if partial.exists() and partial.stat().st_size > size:
+            return
+        time.sleep(0.02)
+    raise AssertionError("the run never got going")
+
+
+def _wait_for_tick_0(out: Path, timeout: float = 120) -> Path:
+    """Wait until the world has sent tick 0; return the run's staged log directory."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for logs in out.parent.glob(f".{out.name}.logs-*"):
+            world = logs / "world.log"
+            if world.exists() and ": tick 0" in world.read_text(errors="replace"):
+                return logs
+        time.sleep(0.05)
+    raise AssertionError("tick 0 never came")
+
+
+def _assert_identical(reference: Path, out: Path) -> dict:
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (reference / name).read_bytes(), name
+    got, ref = (json.loads((d / "summary.json").read_text()) for d in (out, reference))
+    assert got["outcome"] == ref["outcome"] and got["lost_robots"] == 0 and got["losses"] == []
+    return got
+
+
+def _world_log(out: Path) -> str:
+    return (out / "logs" / "world.log").read_text()
+
+
+def test_a_batch_killed_before_tick_0_is_restarted_and_the_run_is_identical(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording")
+    victim = _node_pid(out, "robot_batch_1")
+    time.sleep(0.8)  # importing, or announcing: long before every batch is in and tick 0 goes out
+    os.kill(victim, signal.SIGKILL)
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 0, err
+    assert "robot_batch_1 exited with status -9" in err and "restarted (1 of 3)" in err
+    summary = _assert_identical(reference, out)
+    assert summary["restarts"] == [{"tick": 0, "node": "robot_batch_1"}]
+    assert "robot_batch_1 is back (restart 1) at tick 0" in _world_log(out)
+    assert not _processes_mentioning(str(out)), "a process outlived the run"
+
+
+def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_identical(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    _ticks_recorded(out, 400_000)
+    os.kill(_node_pid(out, "robot_batch_2"), signal.SIGKILL)
+    killed = time.time()
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 0, err
+    summary = _assert_identical(reference, out)
+    [restart] = summary["restarts"]
+    assert restart["node"] == "robot_batch_2" and 0 < restart["tick"] < summary["convergence_tick"]
+    back = re.search(r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_2 is back \(restart 1\) at tick (\d+); "
+                     r"sending it a snapshot", _world_log(out))
+    assert back and int(back.group(2)) == restart["tick"]
+    print(f"restart to resume: {float(back.group(1)) - killed:.2f} s after the SIGKILL")
+    events = Recording(out / "recording.rrd").events
+    assert (restart["tick"], f"robot_batch_2 restarted at tick {restart['tick']}: a new process took over its "
+                             f"robots") in events
+
+
+def test_a_batch_killed_twice_in_a_row_is_restarted_twice_and_the_run_is_identical(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording")
+    _wait_for_tick_0(out)
+    time.sleep(1.0)
+    first = _node_pid(out, "robot_batch_0")
+    os.kill(first, signal.SIGKILL)
+    second = _node_pid(out, "robot_batch_0", not_pid=first)
+    time.sleep(0.3)  # the new process is still starting up
+    os.kill(second, signal.SIGKILL)
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 0, err
+    assert "restarted (1 of 3)" in err and "restarted (2 of 3)" in err
+    summary = _assert_identical(reference, out)
+    assert [r["node"] for r in summary["restarts"]] == ["robot_batch_0", "robot_batch_0"]
+
+
+def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference, tmp_path):
+    """max_restarts 1: the second death is for good, and the world removes that batch's robots."""
+    from swarm_ros.config import Settings
+
+    settings = Settings(shape="star", seed=5, rules="local")
+    shape, params = settings.resolve()
+    out = tmp_path / "run"
+    launch = Launch(settings=settings, shape=shape, params=params, processes=3, out=out, quiet=True,
+                    recording=cli.RecordingOptions(enabled=False), max_restarts=1)
+    import threading
+
+    errors: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            launch.run()
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    pid = _node_pid(out, "robot_batch_1", timeout=60)
+    logs = _wait_for_tick_0(out)
+    time.sleep(0.5)
+    os.kill(pid, signal.SIGKILL)
+    again = _node_pid(out, "robot_batch_1", not_pid=pid)
+    deadline = time.monotonic() + 60
+    while "sending it a snapshot" not in (logs / "world.log").read_text() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    os.kill(again, signal.SIGKILL)
+    thread.join(240)
+    assert not errors, errors
+    assert launch.restarts == ["robot_batch_1"]
+    assert any("restarted (1 of 1)" in w for w in launch.warnings)
+    assert any("the world removes its robots" in w for w in launch.warnings)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["lost_robots"] == 344 and [r["node"] for r in summary["restarts"]] == ["robot_batch_1"]
+
+
+def test_on_batch_loss_remove_removes_instead_of_restarting(tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--on-batch-loss", "remove")
+    _ticks_recorded(out, 400_000)
+    os.kill(_node_pid(out, "robot_batch_1"), signal.SIGKILL)
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 0, err
+    assert "the world removes its robots" in err and "restarted" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["lost_robots"] == 344 and summary["restarts"] == []
+
+
+def test_a_killed_batch_leaves_none_of_its_shared_memory_behind(tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording")
+    victim = _node_pid(out, "robot_batch_1")
+    deadline = time.monotonic() + 60
+    held: set[str] = set()
+    while time.monotonic() < deadline and not held:
+        for fd in os.listdir(f"/proc/{victim}/fd"):
+            try:
+                target = os.readlink(f"/proc/{victim}/fd/{fd}")
+            except OSError:
+                continue
+            if target.startswith("/dev/shm/fastrtps_") and target.endswith("_el"):
+                held.add(target)
+        time.sleep(0.1)
+    assert held, "the batch never opened Fast DDS shared memory"
+    time.sleep(1.0)  # let the launcher see them too
+    os.kill(victim, signal.SIGKILL)
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 0, err
+    own = {p for p in held if not p.removesuffix("_el").rsplit("_", 1)[-1].startswith("port")}
+    assert own, held  # its participant's own segment, which only it used
+    left = [p for p in own | {p.removesuffix("_el") for p in own} if os.path.exists(p)]
+    assert left == [], f"left in /dev/shm: {left}"
+
+
+def test_every_node_ends_within_2_s_of_a_sigkilled_launcher(tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    _ticks_recorded(out, 200_000)
+    nodes = _processes_mentioning(f".{out.name}.logs-")
+    assert len(nodes) == 5
+    launcher.kill()
+    killed = time.monotonic()
+    while any(Path(f"/proc/{pid}").exists() and _alive(pid) for pid in nodes) and time.monotonic() - killed < 10:
+        time.sleep(0.01)
+    took = time.monotonic() - killed
+    launcher.communicate()
+    print(f"all {len(nodes)} nodes gone {took:.2f} s after the launcher's SIGKILL")
+    assert took < 2.0, f"nodes outlived the launcher by {took:.2f} s"
+    # no half-written run directory: none, or a whole 'interrupted' one
+    if out.exists():
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["outcome"] == "interrupted"
+        assert {"metrics.csv", "final_state.csv", "final.png", "convergence.png"} <= {p.name for p in out.iterdir()}
+    assert not list(tmp_path.glob(".run.tmp-*")), "a half-written run directory was left"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
