@@ -30,6 +30,8 @@ PROG = "swarm-ros"
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 _PROGRESS_TICKS = 200  # ticks between progress-bar updates
+MAX_DOMAIN_ID = 232  # Fast DDS's ports overflow above this (on Linux, 101 with ephemeral ports in use)
+LIST_SECONDS, ECHO_SECONDS = 2.0, 10.0  # topics: listening time, and --echo's wait
 
 
 def _positive_int(text: str) -> int:
@@ -100,8 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
     topics.add_argument("--domain-id", type=int, help="ROS domain id of the run (default: $ROS_DOMAIN_ID or 0)")
     topics.add_argument("--echo", metavar="TOPIC", help="print this topic's messages instead of the list")
     topics.add_argument("--count", type=_positive_int, default=1, help="with --echo: messages to print (default: 1)")
-    topics.add_argument("--seconds", type=_positive_float, default=2.0,
-                        help="listen this long to measure rates, or to wait for --echo (default: 2)")
+    topics.add_argument("--seconds", type=_positive_float,
+                        help="listen this long to measure rates (default: 2), or with --echo wait at most this "
+                             "long in all for the topic and its messages (default: 10)")
     topics.add_argument("--full", action="store_true", help="with --echo: print whole arrays, not the first items")
     topics.set_defaults(func=cmd_topics)
 
@@ -244,14 +247,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     settings, shape, params, out, options = _prepare(args)
     if args.processes > params.robots - 4:
         raise SwarmError(f"--processes {args.processes} is more than the {params.robots - 4} non-seed robots")
-    domain = args.domain_id
-    if domain is None and os.environ.get("ROS_DOMAIN_ID", "").strip():
-        try:
-            domain = int(os.environ["ROS_DOMAIN_ID"])
-        except ValueError:
-            raise SwarmError(f"ROS_DOMAIN_ID must be an integer, got {os.environ['ROS_DOMAIN_ID']!r}") from None
-    if domain is not None and not 0 <= domain <= 232:
-        raise SwarmError(f"ROS domain id must be in [0, 232], got {domain}")
+    domain = _domain_id(args.domain_id)
     launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
                     overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
                     on_batch_loss=args.on_batch_loss)
@@ -315,16 +311,26 @@ def _interrupt_on_sigterm() -> None:
     signal.signal(signal.SIGTERM, interrupt)
 
 
+def _domain_id(flag: int | None) -> int | None:
+    """The ROS domain id of ``--domain-id``, else of $ROS_DOMAIN_ID, else None; checked against [0, 232]."""
+    domain = flag
+    if domain is None and os.environ.get("ROS_DOMAIN_ID", "").strip():
+        try:
+            domain = int(os.environ["ROS_DOMAIN_ID"])
+        except ValueError:
+            raise SwarmError(f"ROS_DOMAIN_ID must be an integer, got {os.environ['ROS_DOMAIN_ID']!r}") from None
+    if domain is not None and not 0 <= domain <= MAX_DOMAIN_ID:
+        raise SwarmError(f"ROS domain id must be in [0, {MAX_DOMAIN_ID}], got {domain}")
+    return domain
+
+
 def cmd_topics(args: argparse.Namespace) -> int:
     from .nodes.inspect import run_topics
 
-    domain = args.domain_id
-    if domain is None:
-        text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
-        if not text.isdigit():
-            raise SwarmError(f"ROS_DOMAIN_ID must be an integer, got {text!r}")
-        domain = int(text)
-    return run_topics(domain, echo=args.echo, count=args.count, seconds=args.seconds, full=args.full)
+    domain = _domain_id(args.domain_id)
+    seconds = args.seconds or (ECHO_SECONDS if args.echo else LIST_SECONDS)
+    return run_topics(0 if domain is None else domain, echo=args.echo, count=args.count, seconds=seconds,
+                      full=args.full)
 
 
 def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Recorder | None = None,

@@ -85,3 +85,38 @@ def test_replica_rejects_skipped_ticks_partial_tick_zero_and_impossible_joins(sm
     # robot 4 "localizes" on a seed's patch: not an empty shape patch
     with pytest.raises(ValueError, match="not an empty shape patch"):
         replica.update(1, np.array([4]), np.array([RobotState.LOCALIZED]), s.x[:1], s.y[:1], s.heading[:1])
+
+
+@pytest.mark.parametrize("fail", [0.0, 0.2])
+def test_a_replica_loaded_from_a_snapshot_equals_one_that_followed_every_tick(small_ring, fail):
+    """How a restarted robot batch catches up: every robot's row at tick t gives the same state,
+    occupancy, frontier and frontier blocks as following the rows from tick 0 (removals included)."""
+    sim = Simulation(small_ring, params(small_ring.patches + 10, seed=5, fail_fraction=fail, fail_tick=12))
+    every = np.arange(sim.params.robots)
+    followed = Replica(small_ring, sim.params.robots)
+    _feed(followed, sim, every)
+    loads = 0
+    while not sim.done:
+        sim.step()
+        _feed(followed, sim, np.union1d(sim.last_joins()[0], sim.last_removed))
+        if sim.tick % 7 == 0 or sim.done:
+            loaded = Replica(small_ring, sim.params.robots)
+            s = sim.state
+            loaded.load(sim.tick, every[::-1], s.state[::-1], s.x[::-1], s.y[::-1], s.heading[::-1])  # any order
+            _assert_same(loaded.state, followed.state)
+            np.testing.assert_array_equal(loaded.state.frontier_blocks, followed.state.frontier_blocks)
+            loads += 1
+            # and it follows the next ticks like the other
+            followed, loaded = loaded, followed
+    assert loads > 3 and (fail == 0 or (sim.state.state == RobotState.REMOVED).any())
+
+
+def test_a_snapshot_must_hold_every_robot_once(small_disc):
+    sim = Simulation(small_disc, params(small_disc.patches, seed=1))
+    s = sim.state
+    replica = Replica(small_disc, sim.params.robots)
+    ids = np.arange(sim.params.robots)
+    with pytest.raises(ValueError, match="must hold every robot once"):
+        replica.load(5, ids[1:], s.state[1:], s.x[1:], s.y[1:], s.heading[1:])
+    with pytest.raises(ValueError, match="a snapshot of tick -1"):
+        replica.load(-1, ids, s.state, s.x, s.y, s.heading)

@@ -153,7 +153,7 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
     env = {**_env(), "ROS_DOMAIN_ID": domain}
     # the reading before rule sets gridlocks at vision 2: a run that lasts until it is stopped
     launcher = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--vision", "2", "--rules",
-                                 "local", "--crowding", "disc", "--out", str(out), "--quiet"], env=env,
+                                 "local", "--crowding", "disc", "--out", str(out)], env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         expected = {"/swarm/robots": "sensor_msgs/msg/PointCloud2", "/clock": "rosgraph_msgs/msg/Clock",
@@ -175,11 +175,20 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
         assert "frame_id: 'world'" in echo and "rows decoded" in echo
         status = swarm_ros("topics", "--domain-id", domain, "--echo", "/swarm/status").stdout
         assert "value: 'running'" in status
+        # a reader that joins at any moment hears the live state within a second or so (not only at start/end)
+        heard = _listen_volatile(int(domain), seconds=3.5)
+        ticks = [int(v["tick"]) for v in heard["status"]]
+        assert len(ticks) >= 3 and ticks == sorted(ticks) and ticks[-1] > ticks[0], ticks
+        last = heard["status"][-1]
+        assert last["outcome"] == "running" and last["rules"] == "local+crowding=disc"
+        assert int(last["localized"]) > 4 and int(last["moving"]) > 0 and last["restarts"] == ""
+        assert heard["occupancy"] >= 3
     finally:
         launcher.send_signal(signal.SIGINT)
         start = time.monotonic()
         _, err = launcher.communicate(timeout=30)
     assert launcher.returncode == 130, err
+    assert f"swarm-ros: ROS domain {domain}, 2 robot-batch processes, logs in {tmp_path}/.live.logs-" in err
     assert time.monotonic() - start < 5, "the launcher and its children took 5 s or more to stop"
     assert not _processes_mentioning(str(out)), "a node process outlived the interrupted run"
     # the monitor wrote the run so far: summary 'interrupted', metrics, final state, recording, logs
@@ -194,6 +203,38 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
     rec = Recording(out / "recording.rrd")
     assert max(rec.series["localized"]) == last and max(rec.robots) == last
     assert len(rec.events) == 1 and rec.events[0][0] == last and rec.events[0][1].startswith("interrupted at tick")
+
+
+def _listen_volatile(domain: int, seconds: float) -> dict:
+    """/swarm/status values and the number of /swarm/occupancy messages a VOLATILE reader hears in ``seconds``."""
+    code = f"""
+import json, time, rclpy
+from rclpy.context import Context
+from rclpy.qos import QoSProfile, DurabilityPolicy, ReliabilityPolicy
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import OccupancyGrid
+ctx = Context(); rclpy.init(context=ctx, domain_id={domain})
+node = rclpy.create_node("listener", context=ctx)
+qos = QoSProfile(depth=10, durability=DurabilityPolicy.VOLATILE, reliability=ReliabilityPolicy.RELIABLE)
+heard = {{"status": [], "occupancy": 0}}
+node.create_subscription(DiagnosticArray, "/swarm/status",
+    lambda m: heard["status"].append({{kv.key: kv.value for s in m.status for kv in s.values}}), qos)
+def occ(m): heard["occupancy"] += 1
+node.create_subscription(OccupancyGrid, "/swarm/occupancy", occ, qos)
+ex = rclpy.executors.SingleThreadedExecutor(context=ctx); ex.add_node(node)
+start = None
+end = time.monotonic() + 30
+while time.monotonic() < end:
+    ex.spin_once(timeout_sec=0.05)
+    if start is None and heard["status"]:
+        start = time.monotonic(); heard = {{"status": heard["status"][-1:], "occupancy": 0}}
+    if start is not None and time.monotonic() - start > {seconds}:
+        break
+print(json.dumps(heard))
+"""
+    done = subprocess.run([PY, "-c", code], capture_output=True, text=True, timeout=60, env=_env())
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def test_stop_escalates_to_sigkill_for_a_process_that_ignores_int_and_term(tmp_path):
@@ -269,3 +310,14 @@ def test_ros_graph_equals_in_process_engine_with_failing_robots(references, tmp_
     summary = json.loads((out / "summary.json").read_text())
     assert summary["lost_robots"] == 66 and summary["losses"] == [{"tick": 40, "robots": 66}]
     _assert_same_run(ref, out)
+
+
+def test_topics_echo_gives_up_after_the_seconds_it_was_given(tmp_path):
+    domain = str(40 + os.getpid() % 50)  # nothing runs here: no publisher will ever come
+    start = time.monotonic()
+    done = swarm_ros("topics", "--domain-id", domain, "--echo", "/nope", "--seconds", "1")
+    took = time.monotonic() - start
+    assert done.returncode == 2 and done.stderr.startswith("swarm-ros: error: no publisher of /nope on this domain "
+                                                           "within 1 s"), done.stderr
+    assert done.stderr.count("\n") == 1
+    assert took < 8, f"--seconds 1 took {took:.1f} s (start-up included)"  # it was 11.9 s: the 10 s floor is gone

@@ -25,7 +25,6 @@ from ..wire import DECISION_ROW, ROBOT_ROW, check_fields
 
 _SHOWN_ITEMS = 8  # array items printed without --full
 _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
-_ECHO_WAIT = 10.0  # seconds --echo waits at least for a publisher and a message
 
 
 def message_class(type_name: str) -> type:
@@ -132,10 +131,13 @@ class _Inspector:
 def run_topics(domain_id: int, echo: str | None = None, count: int = 1, seconds: float = 2.0,
                full: bool = False) -> int:
     """List the topics on ``domain_id`` with rates, or echo ``count`` messages of one. Returns an exit code."""
+    deadline = time.monotonic() + seconds
     inspector = _Inspector(domain_id)
     try:
+        if echo:
+            return _echo(inspector, echo, count, seconds, deadline, full)
         inspector.discover(seconds)
-        return _echo(inspector, echo, count, seconds, full) if echo else _list(inspector, domain_id, seconds)
+        return _list(inspector, domain_id, seconds)
     finally:
         inspector.close()
 
@@ -166,10 +168,11 @@ def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
     return 0
 
 
-def _echo(inspector: _Inspector, topic: str, count: int, seconds: float, full: bool) -> int:
+def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: float, full: bool) -> int:
+    """Print ``count`` messages of ``topic``; give up at ``deadline`` (``wait`` seconds after the start)."""
     # A busy graph can take seconds to show every participant: wait for the topic's publishers.
-    wait = max(seconds, _ECHO_WAIT)
-    inspector.spin_for(wait, until=lambda: inspector.node.count_publishers(topic) > 0)
+    inspector.spin_for(deadline - time.monotonic(),
+                       until=lambda: inspector.node.count_publishers(topic) > 0 and topic in inspector.topics())
     topics = inspector.topics()
     if topic not in topics or inspector.node.count_publishers(topic) == 0:
         raise SwarmError(f"no publisher of {topic} on this domain within {wait:g} s "
@@ -178,10 +181,9 @@ def _echo(inspector: _Inspector, topic: str, count: int, seconds: float, full: b
     inspector.node.create_subscription(message_class(topics[topic]), topic, got.append,
                                        inspector.publisher_qos(topic))
     # A latched stream replays its history first; of that burst only the newest messages matter.
-    inspector.spin_for(0.3)
+    inspector.spin_for(min(0.3, max(0.0, deadline - time.monotonic())))
     del got[: max(0, len(got) - count)]
     printed = 0
-    deadline = time.monotonic() + wait
     while printed < count and time.monotonic() < deadline:
         inspector.spin_for(0.1, until=lambda: len(got) > printed)
         while got and printed < count:
