@@ -13,7 +13,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import __version__
-from .config import BATCH_LOSS_POLICIES, MAX_RESTARTS, RecordingOptions, Settings, load_params_file
+from .config import (BATCH_LOSS_POLICIES, MAX_RESTARTS, NODE_PARAMETERS, RecordingOptions, Settings,
+                     read_params_file)
 from .core.engine import Simulation
 from .core.errors import SwarmError
 from .core.metrics import Outcome
@@ -91,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_options(run)
     run.add_argument("--processes", type=_positive_int, default=2, help="robot-batch processes K (default: 2)")
     run.add_argument("--domain-id", type=int, help="ROS domain id (default: $ROS_DOMAIN_ID, else a free one)")
-    run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES, default="restart",
+    run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES,
                      help="a robot-batch process that dies: restart it, nothing lost (default; up to "
                           f"{MAX_RESTARTS} times per batch), or remove its robots, as robots lost for good")
     run.set_defaults(func=cmd_run)
@@ -153,12 +154,14 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--world-radius", type=int, dest="world_radius", help="world spans [-R, R] (default: 32)")
     p.add_argument("--params-file", type=Path, help="ROS 2 style YAML parameter file; flags override it")
     p.add_argument("--out", type=Path, help="output directory (default: runs/<time>_<shape>_n<N>_v<R>_s<seed>)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output directory")
+    p.add_argument("--overwrite", action="store_true", default=None,
+                   help="replace an existing run directory (only one this tool wrote)")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     rec = p.add_argument_group("recording", "Every run writes a Rerun recording, recording.rrd, into its "
                                             "output directory; open it with 'rerun <run>/recording.rrd'.")
-    rec.add_argument("--no-recording", action="store_false", dest="record", help="do not write recording.rrd")
-    rec.add_argument("--record-every", type=_positive_int, default=1, metavar="K",
+    rec.add_argument("--no-recording", action="store_false", dest="record", default=None,
+                     help="do not write recording.rrd")
+    rec.add_argument("--record-every", type=_positive_int, metavar="K",
                      help="log the robots every K-th tick only, for very large runs (default: 1, every tick)")
     rec.add_argument("--spawn", action="store_true", help="also stream live to a new Rerun viewer (needs a display)")
     rec.add_argument("--connect", metavar="URL",
@@ -168,46 +171,64 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 def cmd_shapes(args: argparse.Namespace) -> int:
     world = World(args.world_radius)
     print(f"{'shape':<10} {'patches':>7} {'holes':>5}  bounding box (xmin, ymin)-(xmax, ymax)  file")
+    misfits = 0
     for name, path in builtin_shapes().items():
-        shape = Shape.load(name, world)
+        try:
+            shape = Shape.load(name, world)
+        except SwarmError as exc:  # e.g. larger than this world: say so and list the others
+            misfits += 1
+            reason = str(exc).split(": ", 1)[-1].split(" at patch")[0]  # e.g. reaches beyond the walls
+            print(f"{name:<10} {'-':>7} {'-':>5}  does not fit: {reason}  {path}")
+            continue
         x0, y0, x1, y1 = shape.bbox
         print(f"{name:<10} {shape.patches:>7} {shape.holes:>5}  ({x0:>3}, {y0:>3})-({x1:>3}, {y1:>3})"
               f"{'':18}{path}")
-    print(f"world: {world.size} x {world.size} patches, walls on the border ring")
+    print(f"world: {world.size} x {world.size} patches, walls on the border ring"
+          + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
     return 0
 
 
-def _settings(args: argparse.Namespace) -> Settings:
-    settings = Settings()
+def _settings(args: argparse.Namespace) -> tuple[Settings, dict[str, dict[str, object]]]:
+    """The run settings (parameter file, then flags) and the node parameters the file sets."""
+    settings, nodes = Settings(), {kind: {} for kind in NODE_PARAMETERS}
     if args.params_file is not None:
-        settings = load_params_file(args.params_file, settings)
+        settings, nodes = read_params_file(args.params_file, settings)
     return settings.updated(shape=args.shape, robots=args.robots, vision_radius=args.vision_radius,
                             rules=args.rules, join=args.join, crowding=args.crowding, steps=args.steps,
                             seed=args.seed, max_ticks=args.max_ticks, wiggle_deg=args.wiggle_deg,
                             fail_fraction=args.fail_robots[0] if args.fail_robots else None,
                             fail_tick=args.fail_robots[1] if args.fail_robots else None,
-                            world_radius=args.world_radius)
+                            world_radius=args.world_radius), nodes
 
 
-def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions]:
-    """Settings, shape, parameters, a usable output directory and the recording options,
-    or a SwarmError before anything runs."""
+def _flag(value: object, section: dict[str, object], key: str) -> object:
+    """A flag's value if given, else the parameter file's /monitor value, else the monitor's default."""
+    return value if value is not None else section.get(key, NODE_PARAMETERS["monitor"][key])
+
+
+def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions, dict]:
+    """Settings, shape, parameters, a usable output directory, the recording options and the node
+    parameters of the parameter file, or a SwarmError before anything runs."""
     from .output import check_out_dir, default_run_dir
 
-    settings = _settings(args)
+    settings, nodes = _settings(args)
     shape, params = settings.resolve()
-    recording = RecordingOptions(enabled=args.record, every=args.record_every, spawn=args.spawn,
-                                 connect=args.connect)
-    out = args.out or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
+    monitor = nodes["monitor"]
+    recording = RecordingOptions(enabled=bool(_flag(args.record, monitor, "record")),
+                                 every=int(_flag(args.record_every, monitor, "record_every")), spawn=args.spawn,
+                                 connect=args.connect or str(monitor.get("viewer_url", "")) or None)
+    out = args.out or (Path(str(monitor["out_dir"])) if monitor.get("out_dir") else
+                       default_run_dir(shape.name, params.robots, params.vision_radius, params.seed))
+    args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
     check_out_dir(out, args.overwrite)
-    return settings, shape, params, out, recording
+    return settings, shape, params, out, recording.reachable(), nodes
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .core.record import RunRecord
     from .output import partial_recording, write_run
 
-    _, shape, params, out, options = _prepare(args)
+    _, shape, params, out, options, _ = _prepare(args)
 
     rrd = partial_recording(out)
     recorder = options.open(rrd, shape, params)
@@ -244,13 +265,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .launcher import Launch, interrupted_run
     from .output import partial_recording
 
-    settings, shape, params, out, options = _prepare(args)
+    settings, shape, params, out, options, nodes = _prepare(args)
+    changed = {k: v for k, v in nodes["robot_batch"].items() if v != NODE_PARAMETERS["robot_batch"][k]}
+    if changed:
+        raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
+                         f"assigns each of its --processes its robots itself (use ros2 run for your own split)")
+    world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {})}
     if args.processes > params.robots - 4:
         raise SwarmError(f"--processes {args.processes} is more than the {params.robots - 4} non-seed robots")
     domain = _domain_id(args.domain_id)
     launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
                     overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
-                    on_batch_loss=args.on_batch_loss)
+                    world=world)
     _interrupt_on_sigterm()
     try:
         out = launch.run()

@@ -12,7 +12,12 @@ A parameter file maps node names to ``ros__parameters``, so the same file serves
 
 Sections are read in file order; a later section overrides an earlier one. A section
 named after a node (``/world``, ``/robot_batch``, ``/monitor``) may also hold that node's
-own parameters (:data:`NODE_PARAMETERS`); ``simulate`` checks and ignores them.
+own parameters (:data:`NODE_PARAMETERS`), checked like the run's. The command line
+applies them where they mean something: ``/monitor`` (recording and output directory)
+in ``simulate`` and ``run``, ``/world`` in ``run``; flags override them. ``run`` refuses
+``/robot_batch`` values other than the defaults, since it assigns each of its processes
+its robots itself; ``simulate`` has no graph, and checks and ignores ``/world`` and
+``/robot_batch``.
 """
 
 from __future__ import annotations
@@ -72,6 +77,7 @@ class Settings:
                            max_ticks=self.max_ticks, wiggle_deg=self.wiggle_deg, fail_fraction=self.fail_fraction,
                            fail_tick=self.fail_tick, rules=self.rules, join=self.join, crowding=self.crowding,
                            steps=self.steps)
+        params.check_vision(shape.world.radius)
         if params.robots > shape.free_patches:
             w = shape.world.size
             raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "
@@ -163,21 +169,36 @@ def read_yaml(path: Path, what: str, error: type[SwarmError]) -> object:
 
 
 def load_params_file(path: str | Path, base: Settings | None = None) -> Settings:
-    """Read a ROS 2 style parameter file over ``base`` (defaults if None).
+    """The run settings of a ROS 2 style parameter file over ``base`` (defaults if None).
 
     Raises:
         ConfigError: unreadable file, bad YAML, wrong layout, unknown key or wrong type.
+    """
+    return read_params_file(path, base)[0]
+
+
+def read_params_file(path: str | Path, base: Settings | None = None) -> tuple[Settings, dict[str, dict[str, object]]]:
+    """The run settings of a parameter file over ``base``, and the node parameters its node sections set.
+
+    The second item maps each node kind (``world``, ``robot_batch``, ``monitor``) to the
+    parameters of its own that the file sets, types and ranges checked.
+
+    Raises:
+        ConfigError: unreadable file, bad YAML, wrong layout, unknown key or wrong type.
+        ParameterError: a node parameter out of its range.
     """
     path = Path(path)
     data = read_yaml(path, "parameter file", ConfigError)
     if not isinstance(data, dict) or not data:
         raise ConfigError(f"{path}: expected '/node_name: ros__parameters: {{...}}' sections")
     values: dict[str, object] = {}
+    nodes: dict[str, dict[str, object]] = {kind: {} for kind in NODE_PARAMETERS}
     for node, section in data.items():
         if not isinstance(section, dict) or set(section) != {"ros__parameters"} \
                 or not isinstance(section["ros__parameters"], dict):
             raise ConfigError(f"{path}: section '{node}' must hold exactly one 'ros__parameters' mapping")
-        own = _NODE_TYPES.get(str(node).lstrip("/"), {})
+        kind = str(node).lstrip("/")
+        own = _NODE_TYPES.get(kind, {})
         known = {**_TYPES, **own}
         for key, value in section["ros__parameters"].items():
             if key not in known:
@@ -186,7 +207,11 @@ def load_params_file(path: str | Path, base: Settings | None = None) -> Settings
             checked = _check_type(path, key, value, known[key])
             if key in _TYPES:
                 values[key] = checked
-    return (base or Settings()).updated(**values)
+            else:
+                nodes[kind][key] = checked
+    for kind, given in nodes.items():
+        check_node_values(kind, given, where=f"{path}: /{kind}")
+    return (base or Settings()).updated(**values), nodes
 
 
 _URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
@@ -214,6 +239,31 @@ class RecordingOptions:
         if self.connect and not self.connect.startswith(_URL_SCHEMES):
             raise ParameterError(f"viewer URL must start with one of {', '.join(_URL_SCHEMES)}, "
                                  f"got {self.connect!r} (e.g. rerun+http://127.0.0.1:9876/proxy)")
+
+    def reachable(self, timeout: float = 1.0) -> RecordingOptions:
+        """These options, without ``connect`` if no viewer answers there (said in one line on stderr).
+
+        Rerun would otherwise retry for about ten seconds and print its own errors; the
+        recording file does not depend on the viewer, so the run goes on without it.
+        """
+        if not self.connect:
+            return self
+        import socket
+        import sys
+        from urllib.parse import urlsplit
+
+        try:
+            url = urlsplit(self.connect)
+            host, port = url.hostname or "127.0.0.1", url.port or 9876
+        except ValueError as exc:
+            raise ParameterError(f"viewer URL {self.connect!r}: {exc}") from None
+        try:
+            socket.create_connection((host, port), timeout=timeout).close()
+            return self
+        except OSError as exc:
+            print(f"swarm-ros: warning: no Rerun viewer answers at {self.connect} ({exc.strerror or exc}); "
+                  f"going on without it", file=sys.stderr, flush=True)
+            return replace(self, connect=None)
 
     @property
     def active(self) -> bool:

@@ -181,7 +181,7 @@ def load_experiment(path: str | Path) -> Experiment:
     visions = visions if isinstance(visions, list) else [visions]
     if not visions:
         raise _fail(path, "vision_radius", "no vision radius given")
-    vision = tuple(_number(path, f"vision_radius[{i}]", v, 0.0, False) for i, v in enumerate(visions))
+    vision = tuple(_number(path, f"vision_radius[{i}]", v, 1.0, True) for i, v in enumerate(visions))
     if len(set(vision)) != len(vision):
         raise _fail(path, "vision_radius", f"lists a radius twice: {list(vision)}")
     rules = data.get("rules", DEFAULT_RULES)
@@ -213,9 +213,14 @@ def load_experiment(path: str | Path) -> Experiment:
     fail_fraction = _number(path, "fail_fraction", data.get("fail_fraction", 0.0), 0.0, True)
     fail_tick = _integer(path, "fail_tick", data.get("fail_tick", 0), 0)
     try:
-        RunParams(robots=5, fail_fraction=fail_fraction, fail_tick=fail_tick)
+        RunParams(robots=5, fail_fraction=fail_fraction, fail_tick=fail_tick, max_ticks=max_ticks)
     except SwarmError as exc:
         raise _fail(path, "fail_fraction", str(exc)) from None
+    for i, v in enumerate(vision):
+        try:
+            RunParams(robots=5, vision_radius=v).check_vision(world_radius)
+        except SwarmError as exc:
+            raise _fail(path, f"vision_radius[{i}]", str(exc)) from None
     shapes = _load_shapes(path, data["shapes"], World(world_radius))
     exp = Experiment(name=name.strip(), seed=seed, repetitions=repetitions, vision_radius=vision,
                      max_ticks=max_ticks, wiggle_deg=wiggle, world_radius=world_radius, fail_fraction=fail_fraction,

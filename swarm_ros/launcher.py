@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from .config import MAX_RESTARTS, RecordingOptions, Settings
+from .config import NODE_PARAMETERS, RecordingOptions, Settings
 from .core.errors import SwarmError
 from .core.params import RunParams
 from .core.shapes import Shape
@@ -222,12 +222,19 @@ class Launch:
     quiet: bool = False
     domain_id: int | None = None
     recording: RecordingOptions = field(default_factory=RecordingOptions)
-    on_batch_loss: str = "restart"
-    max_restarts: int = MAX_RESTARTS
+    world: dict = field(default_factory=dict)  #: the world node's own parameters (on_batch_loss, max_restarts, ...)
     children: list[Child] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)  #: processes lost during the run
     restarts: list[str] = field(default_factory=list)  #: names of the batches restarted, once per restart
     shm_removed: list[str] = field(default_factory=list)  #: shared-memory files left by dead processes, removed
+
+    @property
+    def on_batch_loss(self) -> str:
+        return str(self.world.get("on_batch_loss", NODE_PARAMETERS["world"]["on_batch_loss"]))
+
+    @property
+    def max_restarts(self) -> int:
+        return int(self.world.get("max_restarts", NODE_PARAMETERS["world"]["max_restarts"]))
 
     def run(self) -> Path:
         out = self.out.absolute()
@@ -264,7 +271,7 @@ class Launch:
             viewer = spawn_viewer()
         params_file = logs / "params.yaml"
         params_file.write_text(params_yaml(run, {"world": {
-            "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts}, "monitor": {
+            **self.world, "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts}, "monitor": {
             "out_dir": str(out), "overwrite": self.overwrite, "record": self.recording.enabled,
             "record_every": self.recording.every, "viewer_url": viewer}}), encoding="utf-8")
         self.env = node_env(domain_id, logs)

@@ -270,15 +270,32 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
     d.set_xlabel("tick")
     d.set_ylabel("empty shape patches")
     d.legend(fontsize=7)
+    labels = tick_labels(n, keep=patches)
     for ax in (a, b, c):
-        ax.set_xticks(n)
-        ax.tick_params(axis="x", labelrotation=45 if len(n) > 6 else 0)
+        ax.set_xticks(n, labels)
+        ax.tick_params(axis="x", labelrotation=45 if sum(map(bool, labels)) > 6 else 0)
     for ax in (a, b, c):
         ax.axvline(patches, color="#999999", lw=0.8, ls=":")
         ax.grid(alpha=0.3)
     d.grid(alpha=0.3)
     fig.tight_layout()
     _save(fig, path)
+
+
+def tick_labels(ticks: np.ndarray, keep: int | None = None, share: float = 0.08) -> list[str]:
+    """Labels for x ticks: a tick closer than ``share`` of the axis span to a labelled one gets none.
+
+    Group sizes next to the patch count (1035, 1036) would otherwise print on top of each
+    other. ``keep`` (the patch count, marked by a line) is always labelled.
+    """
+    ticks = np.asarray(ticks)
+    span = float(ticks.max() - ticks.min()) if ticks.size else 0.0
+    gap = share * span
+    chosen: list[float] = [float(keep)] if keep is not None and keep in ticks else []
+    for t in sorted(ticks.tolist()):
+        if all(abs(t - c) >= gap for c in chosen) or gap == 0:
+            chosen.append(float(t))
+    return [f"{t:g}" if float(t) in chosen else "" for t in ticks.tolist()]
 
 
 def all_shapes_figure(stats: list[dict], vision: float, rules: str, path: Path) -> None:

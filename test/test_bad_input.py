@@ -38,6 +38,9 @@ def make_fixtures(d: Path) -> None:
         "rulesexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "rules: [paper, fast]\n",
         "refexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "reference: notes.csv\n",
         "notes.csv": "a,b\n1,2\n",
+        "window.yaml": "/world:\n  ros__parameters:\n    monitor_window: -5\n",
+        "split.yaml": "/robot_batch:\n  ros__parameters:\n    batches: 3\n",
+        "farexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("vision_radius: 1", "vision_radius: 40"),
     }
     for name, text in files.items():
         (d / name).write_text(text)

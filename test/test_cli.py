@@ -154,6 +154,25 @@ def test_shapes_lists_the_six_builtins(capsys):
         assert any(line.split()[:2] == [name, str(patches)] for line in text.splitlines())
 
 
+def test_shapes_in_a_small_world_lists_every_shape_and_marks_those_that_do_not_fit(capsys):
+    assert cli.main(["shapes", "--world-radius", "20"]) == 0
+    lines = {ln.split()[0]: ln for ln in capsys.readouterr().out.splitlines()[1:-1]}
+    assert sorted(lines) == ["k-letter", "rectangle", "spinner", "star", "tyre", "wrench"]
+    assert lines["rectangle"].split()[1] == "442" and "does not fit" not in lines["rectangle"]
+    for name in ("k-letter", "spinner", "star", "tyre", "wrench"):
+        assert "does not fit: shape reaches beyond the walls of the 41 x 41 world" in lines[name]
+
+
+def test_a_parameter_files_monitor_section_sets_the_recording_and_flags_override_it(tmp_path):
+    pf = tmp_path / "p.yaml"
+    pf.write_text("/monitor:\n  ros__parameters:\n    record: false\n    record_every: 3\n")
+    assert simulate(tmp_path / "off", "--params-file", str(pf)) == 0
+    assert not (tmp_path / "off" / "recording.rrd").exists()
+    pf.write_text(f"/monitor:\n  ros__parameters:\n    out_dir: {tmp_path / 'there'}\n")
+    assert cli.main(["simulate", "--shape", "rectangle", "--max-ticks", "3", "--quiet", "--params-file", str(pf)]) == 0
+    assert (tmp_path / "there" / "recording.rrd").exists()
+
+
 BAD = [
     (["--shape", "nosuch"], "no such shape file or built-in shape"),
     (["--robots", "0"], "must be a positive integer"),

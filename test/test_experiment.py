@@ -402,3 +402,13 @@ def test_experiments_can_damage_the_swarm_with_failing_robots(tmp_path):
         assert r["localized"] == min(r["robots"] - lost, r["shape_patches"])  # the shape repaired itself
     stats = list(csv.DictReader((out / "stats.csv").open()))
     assert {s["mean_lost_robots"] for s in stats} == {str(round(0.2 * n)) for n in (50, 69, 80)}
+
+
+def test_tick_labels_too_close_to_read_are_left_out_but_the_patch_count_keeps_its_own():
+    from swarm_ros.report import tick_labels
+
+    sizes = np.array([1025, 1030, 1035, 1036, 1040, 1045])
+    assert tick_labels(sizes, keep=1036) == ["1025", "1030", "", "1036", "1040", "1045"]
+    assert tick_labels(sizes) == ["1025", "1030", "1035", "", "1040", "1045"]
+    assert tick_labels(np.array([100, 200, 300])) == ["100", "200", "300"]
+    assert tick_labels(np.array([1036]), keep=1036) == ["1036"]

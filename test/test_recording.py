@@ -210,6 +210,19 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def test_connect_to_a_port_where_no_viewer_listens_says_so_in_one_line_and_goes_on(tmp_path, capsys):
+    import socket
+
+    with socket.socket() as s:  # a port that was free a moment ago: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    url = f"rerun+http://127.0.0.1:{port}/proxy"
+    assert simulate(tmp_path / "run", "--connect", url) == 0
+    err = capsys.readouterr().err
+    assert err == f"swarm-ros: warning: no Rerun viewer answers at {url} (Connection refused); going on without it\n"
+    assert (tmp_path / "run" / "recording.rrd").is_file()
+
+
 def test_connect_streams_the_same_data_to_a_running_viewer(recording, tmp_path):
     """A headless `rerun --serve-grpc --save` stands in for a viewer and saves what it receives."""
     port, saved = _free_port(), tmp_path / "live.rrd"

@@ -154,7 +154,7 @@ def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference
     shape, params = settings.resolve()
     out = tmp_path / "run"
     launch = Launch(settings=settings, shape=shape, params=params, processes=3, out=out, quiet=True,
-                    recording=cli.RecordingOptions(enabled=False), max_restarts=1)
+                    recording=cli.RecordingOptions(enabled=False), world={"max_restarts": 1})
     import threading
 
     errors: list[BaseException] = []

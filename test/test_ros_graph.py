@@ -138,6 +138,26 @@ def test_ros_graph_equals_in_process_engine_at_a_timeout_recording_every_7th_tic
     assert sorted(Recording(out / "recording.rrd").robots) == list(range(0, 1500, 7)) + [1500]
 
 
+def test_run_applies_the_node_sections_of_a_parameter_file_and_flags_override_them(references, tmp_path):
+    flags, ref = references["cross-incomplete"]
+    pf = tmp_path / "params.yaml"
+    pf.write_text("/world:\n  ros__parameters:\n    monitor_window: 0\n    on_batch_loss: remove\n"
+                  "    max_restarts: 2\n/monitor:\n  ros__parameters:\n    record: false\n")
+    out = tmp_path / "run"
+    done = swarm_ros("run", *flags, "--params-file", str(pf), "--on-batch-loss", "restart", "--out", str(out),
+                     "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert not (out / "recording.rrd").exists()
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes()
+    import yaml
+
+    given = yaml.safe_load((out / "logs" / "params.yaml").read_text())
+    world, monitor = given["/world"]["ros__parameters"], given["/monitor"]["ros__parameters"]
+    assert (world["monitor_window"], world["on_batch_loss"], world["max_restarts"]) == (0, "restart", 2)
+    assert monitor["record"] is False
+
+
 def test_full_size_star_over_the_graph_equals_in_process_engine(tmp_path):
     ref, out = tmp_path / "ref", tmp_path / "run"
     assert cli_main(["simulate", "--shape", "star", "--out", str(ref), "--quiet"]) == 0

@@ -157,3 +157,17 @@ def test_unknown_name_lists_the_builtins():
 def test_disc_helper_builds_a_valid_shape():
     shape = disc_shape(World(radius=10), 4.0)
     assert shape.patches == 49 and shape.holes == 0
+
+
+def test_a_text_grid_may_start_with_a_utf8_byte_order_mark(tmp_path):
+    plain, marked = tmp_path / "plain.txt", tmp_path / "marked.txt"
+    grid = "......\n.####.\n.####.\n......\n"
+    plain.write_text(grid, encoding="utf-8")
+    marked.write_bytes(b"\xef\xbb\xbf" + grid.encode())
+    world = World(5)
+    assert np.array_equal(Shape.load(str(marked), world).mask, Shape.load(str(plain), world).mask)
+
+
+def test_a_directory_given_as_a_shape_is_named_as_such(tmp_path):
+    with pytest.raises(ShapeError, match="is a directory, not a shape file"):
+        Shape.load(str(tmp_path), World())

@@ -54,11 +54,25 @@ class RunParams:
         for name, low, high in (("robots", 4, None), ("seed", 0, MAX_SEED), ("max_ticks", 1, None),
                                 ("fail_tick", 0, None)):
             object.__setattr__(self, name, _int(name, getattr(self, name), low, high))
-        object.__setattr__(self, "vision_radius", _real("vision_radius", self.vision_radius, 0.0, 100.0))
+        # below one patch a robot sees not even its neighbours' patches (check_vision bounds it by the world)
+        object.__setattr__(self, "vision_radius", _real("vision_radius", self.vision_radius, 1.0, 100.0, True))
         object.__setattr__(self, "wiggle_deg", _real("wiggle_deg", self.wiggle_deg, 0.0, 180.0, True))
         object.__setattr__(self, "fail_fraction", _real("fail_fraction", self.fail_fraction, 0.0, 1.0, True))
         if self.fail_fraction > 0 and self.fail_tick < 1:
             raise ParameterError(f"fail_tick must be >= 1 when fail_fraction > 0, got {self.fail_tick}")
+        if self.fail_fraction > 0 and self.fail_tick >= self.max_ticks:
+            raise ParameterError(f"fail_tick must be before max_ticks ({self.max_ticks}) when fail_fraction > 0, "
+                                 f"got {self.fail_tick}: no robot would fail")
+
+    def check_vision(self, world_radius: int) -> None:
+        """Refuse a vision radius beyond the world's radius: a robot would see across the whole world.
+
+        Raises:
+            ParameterError: ``vision_radius > world_radius``.
+        """
+        if self.vision_radius > world_radius:
+            raise ParameterError(f"vision_radius must be <= the world radius {world_radius} (a robot would see "
+                                 f"across the whole world), got {self.vision_radius:g}")
 
     @property
     def failures(self) -> int:

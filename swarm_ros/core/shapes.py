@@ -53,7 +53,7 @@ def read_text_grid(path: Path) -> np.ndarray:
         ShapeError: unreadable file, stray characters, ragged or missing rows.
     """
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = path.read_bytes().decode("utf-8-sig")  # a byte-order mark (as some Windows editors write) is fine
     except OSError as exc:
         raise ShapeError(f"{path}: cannot read shape file ({exc.strerror or exc})") from None
     except UnicodeDecodeError:
@@ -113,6 +113,8 @@ def write_text_grid(grid: np.ndarray, path: Path, comments: list[str] | tuple[st
 
 def read_grid(path: Path) -> np.ndarray:
     """Read a shape file by its extension: ``.png`` as an image, anything else as a text grid."""
+    if path.is_dir():
+        raise ShapeError(f"{path}: is a directory, not a shape file (a .txt grid or a .png image)")
     if not path.is_file():
         raise ShapeError(f"{path}: no such shape file")
     if path.suffix.lower() == ".png":

@@ -49,7 +49,7 @@ class MonitorNode:
         check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
         self.world_radius = run.world_radius
         self.recording = RecordingOptions(enabled=bool(own["record"]), every=int(own["record_every"]),
-                                          connect=str(own["viewer_url"]) or None)
+                                          connect=str(own["viewer_url"]) or None).reachable()
         self.rrd = partial_recording(self.out)
         self.recorder = self.recording.open(self.rrd, self.shape, p)
         self.replica = Replica(self.shape, p.robots)
