@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import rclpy
@@ -14,6 +16,7 @@ from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.config import ConfigError, Settings
 from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.nodes import messages as msgs
 from swarm_ros.nodes.params import read_parameters
@@ -71,7 +74,8 @@ def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
     run, own = read_parameters(node, "world")
     assert run == Settings(robots=500, vision_radius=2.0)
     assert isinstance(run.vision_radius, float)
-    assert own == {"monitor_window": 0, "start_timeout": 60.0}
+    assert own == {"monitor_window": 0, "start_timeout": 60.0, "on_batch_loss": "restart", "max_restarts": 3,
+                   "restart_timeout": 30.0}
     node.destroy_node()
 
 
@@ -86,5 +90,21 @@ def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
 def test_unknown_or_ill_typed_parameters_are_refused(ros_context, kind, values, message):
     node = _node(ros_context, kind, **values)
     with pytest.raises(ConfigError, match=message):
+        read_parameters(node, kind)
+    node.destroy_node()
+
+
+@pytest.mark.parametrize("kind,values,message", [
+    ("world", {"monitor_window": -5}, "monitor_window must be an integer >= 0, got -5"),
+    ("world", {"start_timeout": 0}, "start_timeout must be a number > 0, got 0.0"),
+    ("world", {"on_batch_loss": "ignore"}, "on_batch_loss must be one of restart, remove, got 'ignore'"),
+    ("world", {"max_restarts": -1}, "max_restarts must be an integer >= 0, got -1"),
+    ("world", {"restart_timeout": -2.0}, "restart_timeout must be a number > 0, got -2.0"),
+    ("robot_batch", {"incarnation": -1}, "incarnation must be an integer >= 0, got -1"),
+    ("monitor", {"record_every": 0}, "record_every must be an integer >= 1, got 0"),
+])
+def test_node_parameters_out_of_range_are_refused(ros_context, kind, values, message):
+    node = _node(ros_context, kind, **values)
+    with pytest.raises(ParameterError, match=re.escape(message)):
         read_parameters(node, kind)
     node.destroy_node()
