@@ -12,7 +12,7 @@ number; the world sends it the current tick and the run goes on as if nothing ha
 happened. Under ``"remove"`` a batch lost after tick 0 is not restarted and the world
 removes its robots; one lost before tick 0 is restarted under both policies, since
 none of its robots has moved yet. Every node ends by itself within moments of the
-launcher's death (SIGTERM from the kernel: ``PR_SET_PDEATHSIG``, set by the node at
+launcher's death (SIGHUP from the kernel: ``PR_SET_PDEATHSIG``, set by the node at
 start-up, see :func:`swarm_ros.nodes.runner.follow_parent`). After the run, the
 shared-memory files of Fast DDS that its dead processes left in /dev/shm are removed
 (only files those processes had open, and only if no live process holds them).

@@ -17,7 +17,7 @@ class StopFlag:
     Use as a context manager to restore the previous handlers on exit.
     """
 
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # SIGHUP: the terminal, or the launcher, is gone
 
     def __init__(self) -> None:
         self.signum = 0
@@ -37,5 +37,6 @@ class StopFlag:
         self.restore()
 
 
-#: Set by ``swarm-ros run`` in each node's environment: the launcher's pid, which the node dies with.
+#: Set by ``swarm-ros run`` in each node's environment: the launcher's pid, which the node dies with
+#: (the kernel sends it SIGHUP when the launcher dies).
 PARENT_ENV = "SWARM_ROS_LAUNCHER_PID"

@@ -31,7 +31,7 @@ from ..output import check_out_dir, default_run_dir, partial_recording, write_ru
 from ..plots import save_final_png  # noqa: F401 - import matplotlib now, not while an interrupted run is written
 from . import messages as msgs
 from .params import make_node, read_parameters
-from .runner import EXIT_INTERRUPTED, RunFailed, apply_robots, run_node
+from .runner import EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, run_node
 
 ENGINE_NAME = "ros2"
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
@@ -141,8 +141,9 @@ class MonitorNode:
         """On the way out of a run stopped before its end.
 
         Interrupted (SIGINT/SIGTERM) after tick 0: the run so far becomes the run
-        directory, with outcome ``interrupted``. Failed: the recording so far is kept,
-        closed and marked, as ``<out_dir>.partial.rrd``.
+        directory, with outcome ``interrupted``. Failed, or stopped because the launcher
+        died (nobody is left to report to, and the node must be gone at once): the
+        recording so far is kept, closed and marked, as ``<out_dir>.partial.rrd``.
         """
         if self.written is not None:
             return
@@ -154,7 +155,8 @@ class MonitorNode:
         interrupted = code == EXIT_INTERRUPTED and bool(self.rows)
         if self.recorder is not None:
             if self.rows:
-                self.recorder.outcome("interrupted" if interrupted else "failed", TickMetrics(*self.rows[-1]))
+                stopped = code in (EXIT_INTERRUPTED, EXIT_ORPHANED)
+                self.recorder.outcome("interrupted" if stopped else "failed", TickMetrics(*self.rows[-1]))
             self.recorder.close()
         if interrupted:
             self.wall = time.perf_counter() - (self.started_at or time.perf_counter())

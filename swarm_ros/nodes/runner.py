@@ -1,7 +1,8 @@
 """What every node's ``main`` shares: rclpy set-up, the spin loop, one-line errors, exit codes.
 
 Exit codes: 0 done, 1 the run failed (a peer sent something impossible, a timeout),
-2 bad parameters, 130 interrupted (SIGINT or SIGTERM, acted on between callbacks).
+2 bad parameters, 130 interrupted (SIGINT or SIGTERM, acted on between callbacks), 129
+the launcher died (SIGHUP, sent by the kernel: see :func:`follow_parent`).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from ..signals import PARENT_ENV, StopFlag
 from ..wire import PATCH_METRES, ROBOT_ROW
 from . import messages as msgs
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_ORPHANED = 0, 1, 2, 130, 129
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
 
 
@@ -64,10 +65,11 @@ _PR_SET_PDEATHSIG = 1
 
 
 def follow_parent() -> None:
-    """Under ``swarm-ros run``: receive SIGTERM when the launcher dies, so no node outlives it.
+    """Under ``swarm-ros run``: receive SIGHUP when the launcher dies, so no node outlives it.
 
     The kernel sends it (``prctl(PR_SET_PDEATHSIG)``), also if the launcher is SIGKILLed;
-    the node then stops as on Ctrl-C. If the launcher died before this call, exit now.
+    the node then stops between callbacks with exit status 129. If the launcher died
+    before this call, exit now.
     Nothing happens for a node started another way (``ros2 run``, ``ros2 launch``).
     """
     parent = os.environ.get(PARENT_ENV, "")
@@ -76,10 +78,10 @@ def follow_parent() -> None:
     import ctypes
 
     libc = ctypes.CDLL(None, use_errno=True)
-    if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
+    if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGHUP), 0, 0, 0) != 0:
         return  # not Linux: the launcher's own stop() is the only guard
     if os.getppid() != int(parent):
-        raise SystemExit(EXIT_INTERRUPTED)
+        raise SystemExit(EXIT_ORPHANED)
 
 
 def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None = None) -> int:
@@ -102,7 +104,8 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         while not swarm.finished and not stop.signum:
             executor.spin_once(timeout_sec=_SPIN_TIMEOUT)
             swarm.poll()
-        code = EXIT_INTERRUPTED if stop.signum and not swarm.finished else EXIT_OK
+        code = EXIT_OK if swarm.finished or not stop.signum else \
+            EXIT_ORPHANED if stop.signum == signal.SIGHUP else EXIT_INTERRUPTED
     except SwarmError as exc:
         code = _fail(name, str(exc), EXIT_USAGE)
     except RunFailed as exc:
