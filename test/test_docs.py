@@ -43,3 +43,23 @@ def test_the_model_page_states_the_whole_model():
         assert f"\n{heading}" in text, heading
     for word in ("`paper`", "`local`", "`literal`", "`walk`", "`ahead`", "`disc`", "`one`"):
         assert word in text, word
+
+
+def test_the_readme_lists_every_summary_field():
+    """The README's summary.json row names each field a run writes (losses and restarts included)."""
+    import re
+
+    from swarm_ros.core import RunParams, Shape, Simulation, World
+
+    sim = Simulation(Shape.load("rectangle", World()), RunParams(robots=442, max_ticks=3))
+    sim.run()
+    fields = set(sim.summary(wall_seconds=0.0))
+    row = next(ln for ln in (ROOT / "README.md").read_text().splitlines() if ln.startswith("| `summary.json` |"))
+    listed = set(re.findall(r"\b[a-z][a-z0-9]*(?:_[a-z0-9]+)+\b|\b[a-z]+\b", row.split("|")[2]))
+    assert fields <= listed, sorted(fields - listed)
+    assert "restarts" in fields and "losses" in fields
+
+
+def test_generated_output_directories_are_ignored_by_git():
+    ignored = (ROOT / ".gitignore").read_text().split()
+    assert "runs/" in ignored and "experiments/" in ignored
