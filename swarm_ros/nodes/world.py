@@ -35,7 +35,7 @@ from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallb
 from std_msgs.msg import Empty, Int64MultiArray
 
 from ..core.engine import Simulation
-from ..core.metrics import Outcome
+from ..core.metrics import METRIC_COLUMNS, Outcome
 from ..core.rules import Decisions
 from ..core.state import MOVING_STATES, RobotState
 from ..wire import DECISION_ROW, decisions_of, robot_rows
@@ -288,7 +288,7 @@ class WorldNode:
         s = self.sim.state
         values = {"rules": self.params.ruleset.label, "robots": self.params.robots}
         if m is not None:
-            values.update(localized=int(m[2]), moving=int(m[4]), walking=int(m[6]))
+            values.update({key: int(m[METRIC_COLUMNS.index(key)]) for key in ("localized", "moving", "walking")})
         if self.ended_at is not None:
             values["separated"] = int((s.state == RobotState.SEPARATED).sum())
         values["restarts"] = msgs.restarts_text(self.restarts)
