@@ -141,7 +141,7 @@ def test_ros_graph_equals_in_process_engine_at_a_timeout_recording_every_7th_tic
 def test_run_applies_the_node_sections_of_a_parameter_file_and_flags_override_them(references, tmp_path):
     flags, ref = references["cross-incomplete"]
     pf = tmp_path / "params.yaml"
-    pf.write_text("/world:\n  ros__parameters:\n    monitor_window: 0\n    on_batch_loss: remove\n"
+    pf.write_text("/world:\n  ros__parameters:\n    monitor_window: 64\n    on_batch_loss: remove\n"
                   "    max_restarts: 2\n/monitor:\n  ros__parameters:\n    record: false\n")
     out = tmp_path / "run"
     done = swarm_ros("run", *flags, "--params-file", str(pf), "--on-batch-loss", "restart", "--out", str(out),
@@ -154,7 +154,7 @@ def test_run_applies_the_node_sections_of_a_parameter_file_and_flags_override_th
 
     given = yaml.safe_load((out / "logs" / "params.yaml").read_text())
     world, monitor = given["/world"]["ros__parameters"], given["/monitor"]["ros__parameters"]
-    assert (world["monitor_window"], world["on_batch_loss"], world["max_restarts"]) == (0, "restart", 2)
+    assert (world["monitor_window"], world["on_batch_loss"], world["max_restarts"]) == (64, "restart", 2)
     assert monitor["record"] is False
 
 
