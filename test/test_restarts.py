@@ -16,6 +16,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from conftest import Recording, rrd_verify
 from test_ros_graph import _env, _processes_mentioning
 
 from swarm_ros import cli
+from swarm_ros.config import RecordingOptions, Settings
 from swarm_ros.launcher import Launch
 
 PY = sys.executable
@@ -148,15 +150,11 @@ def test_a_batch_killed_twice_in_a_row_is_restarted_twice_and_the_run_is_identic
 
 def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference, tmp_path):
     """max_restarts 1: the second death is for good, and the world removes that batch's robots."""
-    from swarm_ros.config import Settings
-
     settings = Settings(shape="star", seed=5, rules="local")
     shape, params = settings.resolve()
     out = tmp_path / "run"
     launch = Launch(settings=settings, shape=shape, params=params, processes=3, out=out, quiet=True,
-                    recording=cli.RecordingOptions(enabled=False), world={"max_restarts": 1})
-    import threading
-
+                    recording=RecordingOptions(enabled=False), world={"max_restarts": 1})
     errors: list[BaseException] = []
 
     def run() -> None:
