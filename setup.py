@@ -17,7 +17,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/shapes", sorted(glob("shapes/*.txt"))),
-        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.xml"))),
         (f"share/{PACKAGE}/config/experiments", sorted(glob("config/experiments/*.yaml") + glob("config/experiments/*.csv"))),
     ],
     install_requires=[
@@ -33,7 +33,7 @@ setup(
     extras_require={"test": ["pytest>=8", "hypothesis>=6.100"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
     entry_points={"console_scripts": [
-        "swarm-ros = swarm_ros.cli:main",
+        "swarm-ros = swarm_ros.cli:entry",
         "world = swarm_ros.nodes.world:main",
         "robot_batch = swarm_ros.nodes.robot_batch:main",
         "monitor = swarm_ros.nodes.monitor:main",

@@ -11,6 +11,16 @@ within this one invocation, since the machine is shared and noisy.
 
 Targets (issue 3): >= 500 ticks/s with K = 2; within 4x of the in-process engine.
 
+Then where a command's time goes (issue 13): for K = 1, 2, 4, with the recording and the
+bag on (the defaults), the seconds from the command's start to each milestone, read from
+the launcher's clock (``logs/launcher.log``) and the nodes' logs: node processes started,
+every node ready (imports, warm-up), tick 0 (all participants discovered and matched),
+the last tick, the run directory written, every node process gone, the command done.
+Target: the star, K = 2, whole command under 4 s (median of ``--repeats``).
+
+Then the cost of the bag (issue 13): ``swarm-ros run`` with K = 2 with and without
+``--no-bag``, alternately. Target: the bag slows ``swarm-ros run`` by at most 15%.
+
 Then the cost of the Rerun recording (issue 4): ``swarm-ros run`` with K = 2 and
 ``swarm-ros simulate``, each with and without ``--no-recording``, alternately, best of
 ``--repeats``. Target: the recording slows ``swarm-ros run`` by at most 25%.
@@ -22,6 +32,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -61,15 +73,88 @@ def command(seed: int, out: Path, *args: str, record: bool = False) -> tuple[int
                            "--out", str(out), "--overwrite", "--quiet", *([] if record else ["--no-recording"])],
                           capture_output=True, text=True)
     whole = time.perf_counter() - t0
+    command.started_at = time.time() - whole  # the epoch of the start, for milestones()
     if done.returncode != 0:
         sys.exit(f"bench_ros: swarm-ros {args[0]} failed: {done.stderr.strip()}")
     summary = json.loads((out / "summary.json").read_text())
     return summary["convergence_tick"], summary["wall_seconds"], whole
 
 
-def over_graph(seed: int, processes: int, out: Path, record: bool = False) -> tuple[int, float, float]:
-    """(ticks, run seconds as the monitor measured them, whole command seconds)."""
-    return command(seed, out, "run", "--processes", str(processes), record=record)
+def over_graph(seed: int, processes: int, out: Path, record: bool = False, *extra: str) -> tuple[int, float, float]:
+    """(ticks, run seconds (the world's tick 0 to its outcome), whole command seconds)."""
+    return command(seed, out, "run", "--processes", str(processes), *extra, record=record)
+
+
+#: (milestone, where it is logged: a log file of the run's logs/ and what its line says)
+MILESTONES = (
+    ("node processes started", "launcher.log", "started world"),
+    ("every node ready", "*.log", "ready, "),
+    ("tick 0 (discovered, matched)", "world.log", ": tick 0"),
+    ("last tick", "world.log", "run ended"),
+    ("run directory written", "monitor.log", "run written"),
+    ("every node process gone", "launcher.log", "all node processes gone"),
+)
+_STAMP = re.compile(r"^(?:\[\w+\] )?\[(\d+\.\d+)\]")
+
+
+def milestones(out: Path, started_at: float, whole: float) -> list[float]:
+    """Seconds from the command's start to each of :data:`MILESTONES` (the last of several lines), then the end."""
+    got = []
+    for _, pattern, text in MILESTONES:
+        stamps = [float(m[1]) for log in (out / "logs").glob(pattern)
+                  for line in log.read_text(errors="replace").splitlines()
+                  if text in line and (m := _STAMP.match(line))]
+        if not stamps:
+            sys.exit(f"bench_ros: no '{text}' in {out / 'logs' / pattern}")
+        got.append(max(stamps) - started_at)
+    return got + [whole]
+
+
+def breakdown(seed: int, processes: list[int], repeats: int, tmp: Path) -> dict[int, list[float]]:
+    """Print the median seconds to each milestone for each K; return {K: medians}."""
+    names = [name for name, _, _ in MILESTONES] + ["command done"]
+    medians = {}
+    for k in processes:
+        runs = []
+        for r in range(repeats):
+            out = tmp / f"steps-k{k}-{r}"
+            _, _, whole = over_graph(seed, k, out, True)
+            runs.append(milestones(out, command.started_at, whole))
+        medians[k] = [statistics.median(run[i] for run in runs) for i in range(len(names))]
+    print(f"\nWhere a command's time goes: the star, recording and bag on, seconds from the command's start "
+          f"(median of {repeats})")
+    print(f"{'milestone':<30}" + "".join(f"{f'K = {k}':>9}" for k in processes))
+    for i, name in enumerate(names):
+        print(f"{name:<30}" + "".join(f"{medians[k][i]:>9.2f}" for k in processes))
+    if 2 in medians:
+        whole = medians[2][-1]
+        print(f"Target: the star with K = 2, recording on, whole command under 4 s: "
+              f"{'MET' if whole < 4 else 'NOT MET'} ({whole:.2f} s)")
+    return medians
+
+
+def bag_cost(seed: int, repeats: int, tmp: Path) -> None:
+    """Print run and command seconds with and without the bag (K = 2, recording on; alternating; median)."""
+    cases: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+    for r in range(repeats):
+        for bag in ((False, True) if r % 2 == 0 else (True, False)):
+            out = tmp / f"bag-{bag}-{r}"
+            _, secs, whole = over_graph(seed, 2, out, True, *([] if bag else ["--no-bag"]))
+            cases[bag].append((secs, whole))
+    med = {bag: (statistics.median(s for s, _ in got), statistics.median(w for _, w in got))
+           for bag, got in cases.items()}
+    bag_dir = tmp / "bag-True-0" / "bag"
+    size = sum(f.stat().st_size for f in bag_dir.iterdir())
+    print(f"\nThe bag (bag/, rosbag2 MCAP), star, K = 2, median of {repeats}: {size / 1e6:.1f} MB")
+    print(f"{'command':<34} {'run s':>8} {'command s':>10}")
+    for bag in (False, True):
+        label = "swarm-ros run" + (" (bag)" if bag else " --no-bag")
+        print(f"{label:<34} {med[bag][0]:>8.3f} {med[bag][1]:>10.2f}")
+    (off, off_whole), (on, on_whole) = med[False], med[True]
+    worst = max(on / off, on_whole / off_whole)
+    print(f"bag slows swarm-ros run: run {100 * (on / off - 1):+.0f}%, command {100 * (on_whole / off_whole - 1):+.0f}%")
+    print(f"Target: the bag slows swarm-ros run by <= 15%: {'MET' if worst <= 1.15 else 'NOT MET'} "
+          f"(worst of run and command time: {100 * (worst - 1):+.0f}%)")
 
 
 def recording_cost(seed: int, repeats: int, tmp: Path) -> None:
@@ -97,22 +182,11 @@ def recording_cost(seed: int, repeats: int, tmp: Path) -> None:
           f"(worst of run and command time: {100 * (worst - 1):+.0f}%)")
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--repeats", type=int, default=2, help="runs per case; the best is kept")
-    parser.add_argument("--processes", type=int, nargs="+", default=[1, 2, 4])
-    parser.add_argument("--rules", default="paper", help="rule set of every run (default: paper)")
-    parser.add_argument("--crowding", help="override the crowding switch (e.g. disc, for the reading before "
-                                           "rule sets: --rules local --crowding disc)")
-    args = parser.parse_args()
-    RULES["rules"] = args.rules
-    if args.crowding:
-        RULES["crowding"] = args.crowding
-
-    ticks, fast, stepped = in_process(args.seed, args.repeats)
+def speed(seed: int, repeats: int, processes: list[int]) -> None:
+    """Print the graph's ticks/s against the in-process engine (issue 3's targets)."""
+    ticks, fast, stepped = in_process(seed, repeats)
     fast_rate, step_rate = ticks / fast, ticks / stepped
-    print(f"star, 1036 robots, seed {args.seed}, rules {' '.join(f'{k} {v}' for k, v in RULES.items())}: "
+    print(f"star, 1036 robots, seed {seed}, rules {' '.join(f'{k} {v}' for k, v in RULES.items())}: "
           f"{ticks} ticks")
     print(f"{'engine':<34} {'run s':>8} {'ticks/s':>10} {'vs run()':>9} {'vs step()':>10} {'command s':>10}")
     print(f"{'in-process, run()':<34} {fast:>8.3f} {fast_rate:>10,.0f} {1:>8.1f}x {fast_rate / step_rate:>9.2f}x")
@@ -120,10 +194,10 @@ def main() -> None:
           f"{step_rate / fast_rate:>8.3f}x {1:>9.2f}x")
     rates = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for k in args.processes:
+        for k in processes:
             best = None
-            for r in range(args.repeats):
-                got = over_graph(args.seed, k, Path(tmp) / f"k{k}-{r}")
+            for r in range(repeats):
+                got = over_graph(seed, k, Path(tmp) / f"k{k}-{r}")
                 if got[0] != ticks:
                     sys.exit(f"bench_ros: the graph ran {got[0]} ticks, the in-process engine {ticks}")
                 best = got if best is None or got[1] < best[1] else best
@@ -139,8 +213,33 @@ def main() -> None:
               f"({fast_rate / r2:,.0f}x slower)")
         print(f"Same, against one step() per tick: {'MET' if step_rate / r2 <= 4 else 'NOT MET'} "
               f"({step_rate / r2:,.1f}x slower)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--repeats", type=int, default=2, help="runs per case; the best is kept")
+    parser.add_argument("--processes", type=int, nargs="+", default=[1, 2, 4])
+    parser.add_argument("--rules", default="paper", help="rule set of every run (default: paper)")
+    parser.add_argument("--only", choices=("speed", "breakdown", "bag", "recording"), nargs="+",
+                        help="run only these parts (default: all)")
+    parser.add_argument("--crowding", help="override the crowding switch (e.g. disc, for the reading before "
+                                           "rule sets: --rules local --crowding disc)")
+    args = parser.parse_args()
+    RULES["rules"] = args.rules
+    if args.crowding:
+        RULES["crowding"] = args.crowding
+
+    parts = set(args.only or ("speed", "breakdown", "bag", "recording"))
+    if "speed" in parts:
+        speed(args.seed, args.repeats, args.processes)
     with tempfile.TemporaryDirectory() as tmp:
-        recording_cost(args.seed, max(args.repeats, 3), Path(tmp))
+        if "breakdown" in parts:
+            breakdown(args.seed, args.processes, max(args.repeats, 3), Path(tmp))
+        if "bag" in parts:
+            bag_cost(args.seed, max(args.repeats, 3), Path(tmp))
+        if "recording" in parts:
+            recording_cost(args.seed, max(args.repeats, 3), Path(tmp))
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""The ``swarm-ros`` command line: ``simulate``, ``run``, ``experiment``, ``report``, ``topics`` and ``shapes``.
+"""The ``swarm-ros`` command line: ``simulate``, ``run``, ``experiment``, ``report``, ``replay``, ``topics``
+and ``shapes``.
 
 Bad input ends with one line ``swarm-ros: error: ...`` on stderr and exit status 2.
 """
@@ -33,6 +34,7 @@ EXIT_INTERRUPTED = 130
 _PROGRESS_TICKS = 200  # ticks between progress-bar updates
 MAX_DOMAIN_ID = 232  # Fast DDS's ports overflow above this (on Linux, 101 with ephemeral ports in use)
 LIST_SECONDS, ECHO_SECONDS = 2.0, 10.0  # topics: listening time, and --echo's wait
+_EXIT_AT_ONCE = False  # set by a finished 'run': see entry()
 
 
 def _positive_int(text: str) -> int:
@@ -52,6 +54,16 @@ def _positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"invalid number {text!r}") from None
     if not value > 0 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid number {text!r}") from None
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text}")
     return value
 
 
@@ -95,7 +107,22 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES,
                      help="a robot-batch process that dies: restart it, nothing lost (default; up to "
                           f"{MAX_RESTARTS} times per batch), or remove its robots, as robots lost for good")
+    run.add_argument("--no-bag", action="store_false", dest="bag", default=None,
+                     help="do not write bag/, the rosbag2 (MCAP) of every message on the swarm's topics")
     run.set_defaults(func=cmd_run)
+
+    replay = sub.add_parser("replay", help="publish a run's bag again, so ROS tools can watch a past run",
+                            description="Publish every message of a run's rosbag2 (<run>/bag) again on its topic, "
+                                        "with its type and QoS, paced as recorded.")
+    replay.add_argument("bag", type=Path, metavar="BAG", help="a run's bag directory (or the run directory)")
+    replay.add_argument("--domain-id", type=int, help="ROS domain id to publish on (default: $ROS_DOMAIN_ID or 0)")
+    replay.add_argument("--rate", type=_positive_float, default=1.0,
+                        help="speed factor against the recorded pace (default: 1)")
+    replay.add_argument("--delay", type=_non_negative_float, default=1.0,
+                        help="seconds between creating the publishers and the first message (default: 1), "
+                             "for subscribers to be matched")
+    replay.add_argument("--quiet", action="store_true", help="no progress bar")
+    replay.set_defaults(func=cmd_replay)
 
     topics = sub.add_parser("topics", help="list or echo the topics of a running swarm",
                             description="List the live topics of a run (types, publishers, rates), "
@@ -276,7 +303,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     domain = _domain_id(args.domain_id)
     launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
                     overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
-                    world=world)
+                    world=world, bag=bool(_flag(args.bag, nodes["monitor"], "bag")))
     _interrupt_on_sigterm()
     try:
         out = launch.run()
@@ -295,6 +322,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         _print_summary(summary, out)
         print(f"{'ROS graph':<17} domain {launch.domain}, {args.processes} robot-batch processes; logs in {out / 'logs'}")
+    global _EXIT_AT_ONCE
+    _EXIT_AT_ONCE = True
     return 0
 
 
@@ -348,6 +377,17 @@ def _domain_id(flag: int | None) -> int | None:
     if domain is not None and not 0 <= domain <= MAX_DOMAIN_ID:
         raise SwarmError(f"ROS domain id must be in [0, {MAX_DOMAIN_ID}], got {domain}")
     return domain
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from .nodes.replay import replay
+
+    bag = args.bag / "bag" if (args.bag / "bag" / "metadata.yaml").is_file() else args.bag
+    domain = _domain_id(args.domain_id)
+    code = replay(bag, 0 if domain is None else domain, rate=args.rate, delay=args.delay, quiet=args.quiet)
+    if code == EXIT_INTERRUPTED:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+    return code
 
 
 def cmd_topics(args: argparse.Namespace) -> int:
@@ -429,5 +469,20 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
+def entry() -> None:
+    """The ``swarm-ros`` console script (and ``python -m swarm_ros.cli``).
+
+    After ``run`` the process ends at once (:func:`os._exit`): its files are closed, its
+    node processes are gone and the output is flushed here, while the interpreter's own
+    teardown (rclpy, numba) would add a fifth of a second to every run.
+    """
+    code = main()
+    if _EXIT_AT_ONCE:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

@@ -110,6 +110,7 @@ NODE_PARAMETERS: dict[str, dict[str, object]] = {
         "overwrite": False,  # replace an existing run directory
         "record": True,  # write recording.rrd (Rerun) into the run directory
         "record_every": 1,  # log the robots every k-th tick (metrics: every tick)
+        "bag": True,  # write bag/, a rosbag2 (MCAP) of every message on the swarm's topics
         "viewer_url": "",  # also stream live to this Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy
     },
 }

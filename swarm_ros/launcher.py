@@ -42,8 +42,10 @@ from .config import NODE_PARAMETERS, RecordingOptions, Settings
 from .core.errors import SwarmError
 from .core.params import RunParams
 from .core.shapes import Shape
+from .nodes.dds import apply_dds_defaults
 from .nodes.params import params_yaml
-from .signals import PARENT_ENV
+from .output import fill_summary
+from .signals import PARENT_ENV, process_age
 
 SHM_DIR = Path("/dev/shm")
 WORLD_STARTED = "batches: tick 0"  #: what the world logs as it sends tick 0
@@ -65,6 +67,7 @@ class Child:
     command: list[str] = field(default_factory=list)
     incarnation: int = 0
     shm: set[str] = field(default_factory=set)  #: Fast DDS shared-memory lock files it was seen holding open
+    exit_noted: bool = False
 
     def scan_shm(self) -> None:
         """Remember the Fast DDS shared-memory files this process has open (while it runs)."""
@@ -131,7 +134,7 @@ def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
     env = dict(os.environ)
     env[PARENT_ENV] = str(os.getpid())
     env["ROS_DOMAIN_ID"] = str(domain_id)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    apply_dds_defaults(env)
     env["ROS_LOG_DIR"] = str(log_dir / "ros")
     env.setdefault("HOME", str(log_dir))
     env["PYTHONUNBUFFERED"] = "1"
@@ -223,10 +226,16 @@ class Launch:
     domain_id: int | None = None
     recording: RecordingOptions = field(default_factory=RecordingOptions)
     world: dict = field(default_factory=dict)  #: the world node's own parameters (on_batch_loss, max_restarts, ...)
+    bag: bool = True  #: the monitor writes bag/, a rosbag2 of the run
     children: list[Child] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)  #: processes lost during the run
     restarts: list[str] = field(default_factory=list)  #: names of the batches restarted, once per restart
     shm_removed: list[str] = field(default_factory=list)  #: shared-memory files left by dead processes, removed
+    timeline: list[tuple[float, str]] = field(default_factory=list)  #: (epoch seconds, event), to logs/launcher.log
+    ended_at: float | None = None  #: time.monotonic() when the world's outcome arrived
+
+    def _note(self, event: str, at: float | None = None) -> None:
+        self.timeline.append((time.time() if at is None else at, event))
 
     @property
     def on_batch_loss(self) -> str:
@@ -241,6 +250,7 @@ class Launch:
         out.parent.mkdir(parents=True, exist_ok=True)
         logs = Path(tempfile.mkdtemp(prefix=f".{out.name}.logs-", dir=out.parent))  # a fresh name: replaces nothing
         (logs / "ros").mkdir()
+        self._note("command started", at=time.time() - process_age())
         lock = DomainLock(self.domain_id)
         ok = interrupted = False
         try:
@@ -254,8 +264,13 @@ class Launch:
             raise
         finally:
             stop(self.children)  # an interrupted monitor writes the run so far before it exits
+            self._note_exits()
+            self._note("all node processes gone")
+            if ok and self.ended_at is not None:
+                fill_summary(out, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
             lock.close()
             self.shm_removed += clean_shm(set().union(*(c.shm for c in self.children)))
+            self._write_timeline(logs / "launcher.log")
             self._keep_logs(logs, out, ok or (interrupted and interrupted_run(out) is not None))
         return out
 
@@ -273,7 +288,7 @@ class Launch:
         params_file.write_text(params_yaml(run, {"world": {
             **self.world, "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts}, "monitor": {
             "out_dir": str(out), "overwrite": self.overwrite, "record": self.recording.enabled,
-            "record_every": self.recording.every, "viewer_url": viewer}}), encoding="utf-8")
+            "record_every": self.recording.every, "viewer_url": viewer, "bag": self.bag}}), encoding="utf-8")
         self.env = node_env(domain_id, logs)
         self.domain = domain_id
         self.params_file = params_file
@@ -296,6 +311,7 @@ class Launch:
         full = command + (["-p", f"incarnation:={incarnation}"] if incarnation else [])
         proc = subprocess.Popen(full, env=self.env, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                 start_new_session=True)
+        self._note(f"started {name} (pid {proc.pid})")
         return Child(name, proc, log, f, command=command, incarnation=incarnation)
 
     def _restart(self, old: Child) -> Child:
@@ -327,11 +343,13 @@ class Launch:
         with Progress(self.domain, self.shape.patches, quiet=self.quiet) as progress:
             while True:
                 progress.spin(0.1)
+                self.ended_at = progress.ended_at
                 now = time.monotonic()
                 if now - scanned_at > 0.5:  # processes open their shared memory once, at start-up
                     scanned_at = now
                     for c in self.children:
                         c.scan_shm()
+                self._note_exits()
                 for c in list(self.children):
                     code = c.proc.poll()
                     if code in (None, 0) or c is world or c.name in reported:
@@ -367,7 +385,21 @@ class Launch:
                     raise LaunchError(f"the run ended but the monitor did not write it within {3 * _GRACE:g} s")
         deadline = time.monotonic() + _GRACE
         while time.monotonic() < deadline and any(c.proc.poll() is None for c in self.children):
-            time.sleep(0.05)
+            self._note_exits()
+            time.sleep(0.01)
+
+    def _note_exits(self) -> None:
+        for c in self.children:
+            if c.proc.poll() is not None and not c.exit_noted:
+                c.exit_noted = True
+                self._note(f"{c.name} exited with status {c.proc.returncode}")
+
+    def _write_timeline(self, path: Path) -> None:
+        """The launcher's clock: when each process started and ended (epoch seconds, as in the ROS logs)."""
+        try:
+            path.write_text("".join(f"[{at:.6f}] {event}\n" for at, event in self.timeline), encoding="utf-8")
+        except OSError:
+            pass  # the logs are a convenience; never fail a finished run over them
 
     def _warn(self, progress, text: str) -> None:
         self.warnings.append(text)

@@ -22,7 +22,6 @@ from .core.errors import SwarmError
 from .core.metrics import METRIC_COLUMNS
 from .core.record import RunRecord
 from .core.state import RobotState, SwarmState
-from .plots import save_convergence_png, save_final_png
 
 RUNS_DIR = Path("runs")
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
@@ -40,8 +39,9 @@ def default_run_dir(shape: str, robots: int, vision: float, seed: int, now: date
 
 
 #: Everything a run directory holds: what :func:`write_run` writes, and ``logs`` (``swarm-ros run``).
+BAG_DIR = "bag"  #: the rosbag2 of a ROS run, in its run directory
 RUN_ENTRIES = frozenset({"summary.json", "metrics.csv", "final_state.csv", "final.png", "convergence.png",
-                         RECORDING_FILE, "logs"})
+                         RECORDING_FILE, "logs", BAG_DIR})
 #: summary.json fields that mark a directory as a run directory this tool wrote.
 _SUMMARY_MARKS = ("shape", "engine", "outcome", "convergence_tick", "seed", "robots")
 
@@ -130,6 +130,25 @@ def summary_json(summary: dict) -> str:
     return json.dumps(summary, indent=2) + "\n"
 
 
+def fill_summary(out: Path, **values: object) -> bool:
+    """Set fields of the run's ``summary.json`` that it holds as null (e.g. ``shutdown_seconds``, known only
+    after the run directory was written); written to a fresh name and renamed over. Return whether it was."""
+    path = out / "summary.json"
+    try:
+        summary = json.loads(path.read_text(encoding="utf-8"))
+        fields = {key: value for key, value in values.items() if key in summary and summary[key] is None}
+        if not fields:
+            return False
+        summary.update(fields)
+        fd, tmp = tempfile.mkstemp(prefix=".summary.json.", dir=out)
+        with open(fd, "w", encoding="utf-8") as f:
+            f.write(summary_json(summary))
+        Path(tmp).replace(path)
+    except (OSError, ValueError, AttributeError):
+        return False
+    return True
+
+
 def partial_recording(out: Path) -> Path:
     """Where a run streams its recording while it goes on: ``<out>.partial.rrd``, beside ``out``.
 
@@ -139,11 +158,12 @@ def partial_recording(out: Path) -> Path:
     return out.parent / f"{out.name}.partial.rrd"
 
 
-def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: Path | None = None) -> Path:
+def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: Path | None = None,
+              bag: Path | None = None) -> Path:
     """Write the run's files into ``out`` atomically (temp dir + rename). Returns ``out``.
 
-    ``recording``, a finished .rrd file, is moved in as ``recording.rrd`` (and back if
-    the write fails).
+    ``recording``, a finished .rrd file, is moved in as ``recording.rrd``, and ``bag``, a
+    finished rosbag2 directory, as ``bag/`` (each back where it was if the write fails).
 
     Raises:
         OutputError: the directory cannot be written.
@@ -163,10 +183,14 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
         (tmp / "summary.json").write_text(summary_json(record.summary), encoding="utf-8")
         (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
+        from .plots import save_convergence_png, save_final_png  # matplotlib: only when a run is written
+
         save_final_png(record, tmp / "final.png")
         save_convergence_png(record, tmp / "convergence.png")
         if recording is not None:
             recording.rename(tmp / RECORDING_FILE)
+        if bag is not None:
+            bag.rename(tmp / BAG_DIR)
         if out.exists():
             out.rename(trash / out.name)
         tmp.rename(out)
@@ -176,6 +200,8 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
             (tmp / RECORDING_FILE).rename(recording)
         if recording is not None and recording.exists():
             kept = f"; the recording is kept in {recording}"
+        if bag is not None and (tmp / BAG_DIR).exists():
+            (tmp / BAG_DIR).rename(bag)
         raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc}){kept}") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -1,4 +1,5 @@
-"""Ctrl-C and SIGTERM as a flag, checked at safe points, instead of an exception raised anywhere.
+"""Ctrl-C and SIGTERM as a flag, checked at safe points, instead of an exception raised anywhere;
+and the age of a process (for the launcher's and the nodes' timelines).
 
 A KeyboardInterrupt can land in the middle of any statement: halfway through sending a
 recording's buffered columns, say, or inside a ROS callback, where rclpy turns it into a
@@ -8,7 +9,9 @@ install a :class:`StopFlag` and check ``signum`` between units of work.
 
 from __future__ import annotations
 
+import os
 import signal
+import time
 
 
 class StopFlag:
@@ -40,3 +43,15 @@ class StopFlag:
 #: Set by ``swarm-ros run`` in each node's environment: the launcher's pid, which the node dies with
 #: (the kernel sends it SIGHUP when the launcher dies).
 PARENT_ENV = "SWARM_ROS_LAUNCHER_PID"
+
+
+def process_age(pid: int | str = "self") -> float:
+    """Seconds since process ``pid`` (this one by default) started, interpreter start-up included,
+    to the kernel's 10 ms; NaN where that cannot be read (no such process, not Linux)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+        started = int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22, starttime, after the command name
+        return time.clock_gettime(time.CLOCK_BOOTTIME) - started
+    except (OSError, ValueError, IndexError):
+        return float("nan")  # not Linux

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bagcheck import assert_bag_holds_run
 from conftest import Recording, rrd_verify
 
 from swarm_ros.cli import main as cli_main
@@ -61,15 +62,22 @@ def _processes_mentioning(text: str) -> list[int]:
     return found
 
 
-def _assert_same_run(ref: Path, got: Path) -> None:
+def _assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
+    """``got`` (a ROS run; ``launched``: by ``swarm-ros run``) equals ``ref`` (``simulate``) but for timings."""
     assert (ref / "metrics.csv").read_bytes() == (got / "metrics.csv").read_bytes()
     assert (ref / "final_state.csv").read_bytes() == (got / "final_state.csv").read_bytes()
     a = json.loads((ref / "summary.json").read_text())
     b = json.loads((got / "summary.json").read_text())
     assert (a.pop("engine"), b.pop("engine")) == ("inprocess", "ros2")
     a.pop("wall_seconds"), b.pop("wall_seconds")
+    # a ROS run's overheads: from the command's start to tick 0, and from the outcome to the last process gone
+    # (only the launcher knows the latter, from the world's status: its progress listener heard the graph)
+    startup, shutdown = b.pop("startup_seconds"), b.pop("shutdown_seconds")
+    assert isinstance(startup, float) and 0 < startup < 120
+    assert (isinstance(shutdown, float) and 0 < shutdown < 60) if launched else shutdown is None
     assert a == b
     assert (got / "final.png").stat().st_size > 0 and (got / "convergence.png").stat().st_size > 0
+    assert_bag_holds_run(got)  # the rosbag2 of the run, read with another library than the one that wrote it
     # the monitor records with the same module: the same data (ids, timestamps and chunking may differ)
     assert Recording(got / "recording.rrd").same_data(Recording(ref / "recording.rrd"))
 
@@ -123,7 +131,7 @@ def test_ros_graph_equals_in_process_engine(references, tmp_path, case, processe
     assert done.returncode == 0, done.stderr
     _assert_same_run(ref, out)
     assert sorted(p.name for p in (out / "logs").iterdir()) == sorted(
-        ["monitor.log", "world.log", "params.yaml", "ros"] + [f"robot_batch_{k}.log" for k in range(processes)])
+        ["launcher.log", "monitor.log", "world.log", "params.yaml", "ros"] + [f"robot_batch_{k}.log" for k in range(processes)])
     assert not _processes_mentioning(str(out)), "a node process outlived the run"
 
 

@@ -14,26 +14,35 @@ world's /swarm/status.
 
 from __future__ import annotations
 
+import importlib
+import math
 import time
 from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
+from nav_msgs.msg import OccupancyGrid
+from rclpy.serialization import deserialize_message, serialize_message
+from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Empty, Int64MultiArray
 
 from ..config import RecordingOptions
 from ..core.metrics import Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
 from ..core.replica import Replica
 from ..core.state import STATE_COUNT, RobotState
+from ..core.warmup import warm_up
 from ..core.record import RunRecord
 from ..output import check_out_dir, default_run_dir, partial_recording, write_run
-from ..plots import save_final_png  # noqa: F401 - import matplotlib now, not while an interrupted run is written
 from . import messages as msgs
+from .bag import TOPICS, BagRecorder, partial_bag, reader_qos
 from .params import make_node, read_parameters
 from .runner import EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, run_node
 
 ENGINE_NAME = "ros2"
+TYPES = {"sensor_msgs/msg/PointCloud2": PointCloud2, "nav_msgs/msg/OccupancyGrid": OccupancyGrid,
+         "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray, "std_msgs/msg/Int64MultiArray": Int64MultiArray,
+         "rosgraph_msgs/msg/Clock": Clock}
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
 
 
@@ -51,8 +60,6 @@ class MonitorNode:
         self.recording = RecordingOptions(enabled=bool(own["record"]), every=int(own["record_every"]),
                                           connect=str(own["viewer_url"]) or None).reachable()
         self.rrd = partial_recording(self.out)
-        self.recorder = self.recording.open(self.rrd, self.shape, p)
-        self.replica = Replica(self.shape, p.robots)
         self.losses: list[tuple[int, int]] = []  # (tick, robots removed), seen as rows turning 'removed'
         self.rows: list[tuple[int, ...]] = []
         self.outcome = None
@@ -62,12 +69,33 @@ class MonitorNode:
         self.finished = False
         self.written: Path | None = None
         self.restarts: list[tuple[int, str]] = []  # (tick, batch) from the world's status
+        self.world_times: dict[str, float] = {}  # wall_seconds, startup_seconds from the world's status
 
         self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
-        node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
-        node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
+        # Serialized subscriptions: each message goes into the bag as it came, then to its handler.
+        self.bag = BagRecorder(self.out) if own["bag"] else None
+        handlers = {msgs.ROBOTS: (PointCloud2, self._on_robots), msgs.STATUS: (DiagnosticArray, self._on_status)}
+        for topic, (kind, qos) in TOPICS.items():
+            if topic in handlers or (self.bag is not None and topic != msgs.METRICS):  # metrics: sent from here
+                node.create_subscription(TYPES[kind], topic, self._receiver(topic, *handlers.get(topic, (None, None))),
+                                         reader_qos(qos), raw=True)
+        # The heavy part last: discovery goes on meanwhile in the DDS threads, and once the world
+        # sees this node it starts; the first ticks wait for the monitor in their history (depth 512).
+        self.recorder = self.recording.open(self.rrd, self.shape, p)
+        self.replica = Replica(self.shape, p.robots)
+        warm_up(self.shape, p)
+        importlib.import_module("swarm_ros.plots")  # matplotlib: now, not at the end, when the run is written
         node.get_logger().info(f"monitor: writing to {self.out}")
+
+    def _receiver(self, topic: str, kind, handler):
+        """The callback of a serialized subscription: into the bag, then (deserialized) to ``handler``."""
+        def receive(data: bytes) -> None:
+            if self.bag is not None:
+                self.bag.write(topic, data)
+            if handler is not None:
+                handler(deserialize_message(data, kind))
+        return receive
 
     def _on_robots(self, msg: PointCloud2) -> None:
         if self.outcome is not None:
@@ -79,7 +107,10 @@ class MonitorNode:
         counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
         metrics = tick_metrics(tick, counts, self.shape.patches)
         self.rows.append(tuple(metrics))
-        self.pub_metrics.publish(msgs.metrics_message(metrics))
+        message = msgs.metrics_message(metrics)
+        self.pub_metrics.publish(message)
+        if self.bag is not None:
+            self.bag.write(msgs.METRICS, serialize_message(message))
         if self.removed > removed_before:
             self.losses.append((tick, self.removed - removed_before))
         p = self.params
@@ -103,6 +134,13 @@ class MonitorNode:
             if self.recorder is not None and not self.recorder.closed:
                 self.recorder.event(tick, f"{node} restarted at tick {tick}: a new process took over its robots")
         self.restarts = max(self.restarts, restarts, key=len)
+        for key in ("wall_seconds", "startup_seconds"):  # the world's clock: tick 0 to its outcome
+            try:
+                seconds = float(values[key])
+            except (KeyError, ValueError):
+                continue
+            if math.isfinite(seconds) and seconds >= 0:
+                self.world_times[key] = seconds
         outcome = values.get("outcome")
         if outcome not in (None, "starting", "running"):
             self.world_outcome = outcome
@@ -129,12 +167,18 @@ class MonitorNode:
         separated = int((self.replica.state.state == RobotState.SEPARATED).sum())
         summary = run_summary(shape=self.shape.name, shape_patches=self.shape.patches,
                               params=self.params.as_dict(), engine=ENGINE_NAME, outcome=outcome, final=final,
-                              separated=separated, world_radius=self.world_radius, wall_seconds=self.wall,
-                              losses=self.losses, restarts=self.restarts)
+                              separated=separated, world_radius=self.world_radius,
+                              wall_seconds=self.world_times.get("wall_seconds", self.wall),
+                              losses=self.losses, restarts=self.restarts,
+                              overhead={"startup_seconds": self.world_times.get("startup_seconds"),
+                                        "shutdown_seconds": None})  # swarm-ros run fills it in at the end
         record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
                            outcome=outcome, summary=summary)
         self.written = write_run(self.out, record, overwrite=self.overwrite,
-                                 recording=self.rrd if self.recording.enabled else None)
+                                 recording=self.rrd if self.recording.enabled else None,
+                                 bag=self.bag.close() if self.bag is not None else None)
+        if self.bag is not None:
+            self.bag.discard_holder()
         self.node.get_logger().info(f"run written to {self.written}")
 
     def close(self, code: int) -> None:
@@ -147,6 +191,8 @@ class MonitorNode:
         """
         if self.written is not None:
             return
+        if self.bag is not None and not (code == EXIT_INTERRUPTED and self.rows and self.outcome is None):
+            self.bag.move_to(partial_bag(self.out))  # closed and kept beside the run (an interrupted run takes it)
         if self.outcome is not None:  # ended, but stopped before the world confirmed it: keep the recording
             if self.recorder is not None:
                 self.recorder.outcome("interrupted", TickMetrics(*self.rows[-1]))

@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
-import os
 import sys
+import time
 
 import rclpy
 from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Int64MultiArray
 
 from . import messages as msgs
+from .dds import apply_dds_defaults
+
+
+_MAX_BATCH = 10_000  # messages handled per spin() at most
 
 
 class Progress:
@@ -21,27 +26,46 @@ class Progress:
     def __init__(self, domain_id: int, patches: int, quiet: bool = False) -> None:
         from tqdm import tqdm
 
-        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        apply_dds_defaults()  # as the nodes have them (launcher.node_env)
         self.context = Context()
         # Ctrl-C stays a KeyboardInterrupt for the launcher, which then stops its children.
         rclpy.init(args=[], context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node("swarm_ros_launcher", context=self.context, start_parameter_services=False)
         self.node.create_subscription(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
+        self.node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
         self.executor = EventsExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.bar = tqdm(total=patches, unit="patch", desc="localized", disable=True if quiet else None,
                         file=sys.stderr, dynamic_ncols=True)
         self.bar.set_postfix(tick="starting", refresh=False)
         self.tick = -1  #: the last tick the monitor reported; -1 before tick 0
+        self.ended_at: float | None = None  #: time.monotonic() when the world's outcome arrived
+        self.events = 0  # messages handled
+
+    def _on_status(self, msg: DiagnosticArray) -> None:
+        self.events += 1
+        if self.ended_at is None and msgs.status_values(msg).get("outcome") not in (None, "starting", "running"):
+            self.ended_at = time.monotonic()
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:
+        self.events += 1
         m = msgs.metrics_of(msg)
         self.tick = max(self.tick, m.get("tick", -1))
         self.bar.update(m.get("localized", 0) - self.bar.n)
         self.bar.set_postfix(tick=str(m.get("tick")), moving=str(m.get("moving")), refresh=False)
 
     def spin(self, timeout: float) -> None:
+        """Handle what arrived, waiting up to ``timeout`` for the first message.
+
+        A spin of the executor handles one message; the monitor sends one a tick, so
+        everything queued is handled here, or the launcher would fall behind the run.
+        """
         self.executor.spin_once(timeout_sec=timeout)
+        for _ in range(_MAX_BATCH):
+            handled = self.events
+            self.executor.spin_once(timeout_sec=0)
+            if self.events == handled:
+                break
 
     def __enter__(self) -> Progress:
         return self

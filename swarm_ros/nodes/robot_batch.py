@@ -24,6 +24,7 @@ from std_msgs.msg import Empty, Int64MultiArray
 from ..core.errors import ParameterError
 from ..core.replica import Replica
 from ..core.rules import Decider
+from ..core.warmup import warm_up
 from ..wire import PATCH_METRES, ROBOT_ROW, batch_ids, decision_rows, format_ranges, parse_ranges
 from . import messages as msgs
 from .params import make_node, read_parameters
@@ -58,6 +59,7 @@ class RobotBatchNode:
         hello.layout.dim[0].label = msgs.batch_label(node.get_name(), int(own["incarnation"]))
         announce.publish(hello)
         node.get_logger().info(f"{node.get_name()}: robots {format_ranges(self.ids)}")
+        warm_up(self.shape, self.params)  # while the world and the other batches are being discovered
 
     @staticmethod
     def _hosted(n: int, own: dict) -> np.ndarray:

@@ -25,12 +25,14 @@ time, and at once on every change of the run's state.
 
 from __future__ import annotations
 
+import os
 import time
 from collections import deque
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import PointCloud2
+from rclpy.duration import Duration
 from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
 from std_msgs.msg import Empty, Int64MultiArray
 
@@ -38,6 +40,8 @@ from ..core.engine import Simulation
 from ..core.metrics import METRIC_COLUMNS, Outcome
 from ..core.rules import Decisions
 from ..core.state import MOVING_STATES, RobotState
+from ..core.warmup import warm_up
+from ..signals import PARENT_ENV, process_age
 from ..wire import DECISION_ROW, decisions_of, robot_rows
 from . import messages as msgs
 from .params import make_node, read_parameters
@@ -46,7 +50,8 @@ from .runner import RunFailed, run_node
 _MONITOR = "monitor"  # the monitor's node name (the launcher's)
 _STALL_S = 5.0  # seconds without progress after which a silent batch or monitor counts as lost
 _FIRST_STALL_S = 30.0  # the same before its first decisions or report (discovery may be slow)
-_LINGER = 0.5  # seconds to let the last messages reach their readers before exiting
+_LINGER = 1.0  # at most this many seconds for the last messages to reach their readers before exiting
+_NO_WAIT = Duration(seconds=0)
 _FINAL_WAIT = 30.0  # seconds to wait, after the end, for the monitor to catch up
 STATUS_PERIOD = 1.0  # seconds of wall time between /swarm/status (and /swarm/occupancy) messages
 
@@ -61,7 +66,6 @@ class WorldNode:
         self.on_loss = str(own["on_batch_loss"])
         self.max_restarts = int(own["max_restarts"])
         self.restart_timeout = float(own["restart_timeout"])
-        self.sim = Simulation(self.shape, self.params)
         self.finished = False
 
         self.pub_robots = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
@@ -96,7 +100,13 @@ class WorldNode:
         self.restarts: list[tuple[int, str]] = []  # (tick, batch) of every restart
         self.status_at = -1.0  # when /swarm/status was last published
         self.published_tick = -1
+        self.monitor_alive = False
+        self.start_time: float | None = None  # time.monotonic() of tick 0
+        self.startup_seconds = float("nan")
 
+        # the heavy part last: discovery of the peers goes on meanwhile, in the DDS threads
+        self.sim = Simulation(self.shape, self.params)
+        warm_up(self.shape, self.params)
         self.shape_cells = msgs.shape_cells(self.shape)
         self.pub_shape.publish(msgs.grid_message(self.shape, self.shape_cells, 0))
         self._publish_occupancy()
@@ -136,7 +146,7 @@ class WorldNode:
         if incarnation:  # restarted before the world heard from the processes before it
             self._on_reannounce(k, ids, incarnation)
         if covered == n - 4:
-            self._start()
+            self._maybe_start()
 
     def _on_reannounce(self, k: int, ids: np.ndarray, incarnation: int) -> None:
         """A batch announced again: its process was restarted. Send it the current tick to start from."""
@@ -166,9 +176,26 @@ class WorldNode:
         rows = robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading)
         self.snapshot_pubs[k].publish(msgs.make_cloud(rows, self.sim.tick))
 
+    def _maybe_start(self) -> None:
+        """Tick 0 once batches host every robot and the monitor is there (so the run never stalls for it).
+
+        Without a monitor to wait for (``monitor_window: 0``), or one that did not appear
+        within ``_FIRST_STALL_S``, the swarm starts without it.
+        """
+        if self.started or int((self.host[4:] >= 0).sum()) < self.params.robots - 4:
+            return
+        if self.window and not self.monitor_alive and _MONITOR not in self.lost:
+            if time.monotonic() - self.created < _FIRST_STALL_S:
+                return
+            self._lose_monitor(f"not seen within {_FIRST_STALL_S:g} s")
+        self._start()
+
     def _start(self) -> None:
         self.started = True
-        self.node.get_logger().info(f"all robots hosted by {len(self.batch_names)} batches: tick 0")
+        self.start_time = time.monotonic()
+        self.startup_seconds = _startup_seconds()
+        waited = " and the monitor" if self.window else ""
+        self.node.get_logger().info(f"all robots hosted by {len(self.batch_names)} batches{waited}: tick 0")
         for k in range(len(self.batch_names)):
             self._send_snapshot(k)
         s = self.sim.state
@@ -289,8 +316,11 @@ class WorldNode:
         values = {"rules": self.params.ruleset.label, "robots": self.params.robots}
         if m is not None:
             values.update({key: int(m[METRIC_COLUMNS.index(key)]) for key in ("localized", "moving", "walking")})
+        if self.started:
+            values["startup_seconds"] = f"{self.startup_seconds:.3f}"
         if self.ended_at is not None:
             values["separated"] = int((s.state == RobotState.SEPARATED).sum())
+            values["wall_seconds"] = f"{self.ended_at - self.start_time:.3f}"
         values["restarts"] = msgs.restarts_text(self.restarts)
         values["lost"] = ",".join(self.lost)
         values["waiting_for"] = ",".join(self.batch_names[k] for k in sorted(self.down_since))
@@ -352,6 +382,9 @@ class WorldNode:
         self._maybe_advance(tick + 1)  # the lost robots' decisions are no longer awaited
 
     def _on_monitor_liveliness(self, info: QoSLivelinessChangedInfo) -> None:
+        self.monitor_alive = info.alive_count > 0
+        if self.monitor_alive:
+            self._maybe_start()
         if info.alive_count == 0 and info.not_alive_count > 0:
             self._lose_monitor("liveliness lapsed")
         elif info.alive_count > 0 and _MONITOR in self.lost:  # it was only starved of CPU for a moment
@@ -410,10 +443,26 @@ class WorldNode:
             covered = int((self.host[4:] >= 0).sum())
             raise RunFailed(f"robot batches cover {covered} of {self.params.robots - 4} robots after "
                             f"{self.start_timeout:g} s (start_timeout)")
+        if not self.started:
+            self._maybe_start()
         if self.ended_at is not None:
             caught_up = self.window == 0 or self.monitor_tick >= self.sim.tick
-            if (caught_up and now - self.ended_at > _LINGER) or now - self.ended_at > _FINAL_WAIT:
+            # the end is out once every reader acknowledged the last status and rows; a reader that died
+            # never does, so wait at most _LINGER for that
+            delivered = all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots))
+            if (caught_up and (delivered or now - self.ended_at > _LINGER)) or now - self.ended_at > _FINAL_WAIT:
                 self.finished = True
+
+
+def _startup_seconds() -> float:
+    """Seconds from the start of ``swarm-ros run`` (its process, if it is this process's parent),
+    else from the start of this process, to now."""
+    parent = os.environ.get(PARENT_ENV, "")
+    if parent.isdigit() and int(parent) == os.getppid():
+        age = process_age(int(parent))
+        if age == age:  # not NaN
+            return age
+    return process_age()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,41 @@
+"""Load the compiled kernels of the distributed engine's code path before a run needs them.
+
+numba keeps compiled kernels in an on-disk cache, but loading them costs time on the
+first call in each process: about 0.3 s for the first kernel (numba sets up its typing
+machinery) and milliseconds for each further one. A ROS node that paid this on its
+first tick would hold up the lockstep for every other node. Each node therefore calls
+:func:`warm_up` once it has announced itself, so the loading overlaps the discovery of
+its peers instead.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .engine import Simulation
+from .metrics import tick_metrics
+from .params import RunParams
+from .replica import Replica
+from .rules import Decider
+from .shapes import Shape
+from .state import STATE_COUNT
+
+
+def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
+    """Run ``ticks`` ticks of the graph's code path in this process and throw the result away:
+    a robot batch's decisions, the world's :meth:`Simulation.apply`, a replica's rows and the
+    monitor's metrics. Nothing is shared with the caller's own objects."""
+    sim = Simulation(shape, params)
+    decider = Decider(shape, params)
+    replica = Replica(shape, params.robots)
+    s = sim.state
+    everyone = np.arange(s.robots)
+    replica.load(0, everyone, s.state, s.x, s.y, s.heading)
+    for _ in range(ticks):
+        if sim.done:
+            break
+        moving = sim.moving_ids()
+        sim.apply(decider.decide(sim.state, moving, sim.tick + 1, moving))
+        changed = sim.last_joins()[0]  # the deciders: the rows the world would publish
+        replica.update(sim.tick, changed, s.state[changed], s.x[changed], s.y[changed], s.heading[changed])
+        tick_metrics(sim.tick, np.bincount(replica.state.state, minlength=STATE_COUNT), shape.patches)

@@ -1,0 +1,159 @@
+"""The run's rosbag2: every message of the swarm's topics, as the monitor received them, in MCAP storage.
+
+The monitor subscribes to the topics in serialized form (CDR bytes, as they travel) and
+hands each message to :class:`BagRecorder`, which stores it unchanged with the
+``rosbags`` library: ``bag/metadata.yaml`` and ``bag/bag_0.mcap``, the layout of
+``ros2 bag record -s mcap``, with each topic's type, QoS and full message definition,
+so Foxglove, PlotJuggler, ``ros2 bag play`` or any MCAP reader open it with no ROS
+install. Timestamps are the monitor's receive times (wall clock, ns), as rosbag2's.
+
+While the run goes on the bag is written beside the run directory (a hidden
+``.<run>.bag-XXXX/bag``); the run directory gets it as ``bag/`` when it is written. A
+failed run leaves it, closed and readable, as ``<run>.partial.bag``.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.interfaces import Qos
+from rosbags.interfaces import QosDurability as Durability
+from rosbags.interfaces import QosHistory as History
+from rosbags.interfaces import QosLiveliness as Liveliness
+from rosbags.interfaces import QosReliability as Reliability
+from rosbags.interfaces import QosTime
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from ..output import BAG_DIR
+from . import messages as msgs
+#: The recorded topics: name -> (ROS type, QoS its publisher offers).
+TOPICS: dict[str, tuple[str, QoSProfile]] = {
+    msgs.ROBOTS: ("sensor_msgs/msg/PointCloud2", msgs.ROBOTS_QOS),
+    msgs.DECISIONS: ("sensor_msgs/msg/PointCloud2", msgs.DECISIONS_QOS),
+    msgs.OCCUPANCY: ("nav_msgs/msg/OccupancyGrid", msgs.LATCHED_QOS),
+    msgs.SHAPE: ("nav_msgs/msg/OccupancyGrid", msgs.LATCHED_QOS),
+    msgs.STATUS: ("diagnostic_msgs/msg/DiagnosticArray", msgs.LATCHED_QOS),
+    msgs.METRICS: ("std_msgs/msg/Int64MultiArray", msgs.METRICS_QOS),
+    msgs.CLOCK: ("rosgraph_msgs/msg/Clock", msgs.CLOCK_QOS),
+}
+STORE = Stores.ROS2_JAZZY
+
+
+#: Messages a recording reader keeps before its node takes them: the monitor may be busy (starting,
+#: catching up) for the 128 ticks the world runs ahead, and a reader that keeps too few drops the oldest.
+READER_DEPTH = 4096
+
+
+def reader_qos(offered: QoSProfile) -> QoSProfile:
+    """The QoS to read a topic with: its writers' (so the two match), with a deep history."""
+    return QoSProfile(history=offered.history, depth=max(offered.depth, READER_DEPTH), reliability=offered.reliability,
+                      durability=offered.durability, liveliness=offered.liveliness,
+                      liveliness_lease_duration=offered.liveliness_lease_duration)
+
+
+def partial_bag(out: Path) -> Path:
+    """Where a failed run's bag is left: ``<out>.partial.bag``, beside ``out``."""
+    return out.parent / f"{out.name}.partial.bag"
+
+
+def _duration(d) -> QosTime:  # rclpy Duration -> rosbags time; "infinite" is rclpy's 0
+    sec, nsec = divmod(d.nanoseconds, 1_000_000_000)
+    return QosTime(sec=sec, nsec=nsec)
+
+
+def bag_qos(qos: QoSProfile) -> Qos:
+    """A QoS profile as rosbag2 stores it (``offered_qos_profiles``)."""
+    return Qos(history=History(int(qos.history)), depth=qos.depth, reliability=Reliability(int(qos.reliability)),
+               durability=Durability(int(qos.durability)), deadline=_duration(qos.deadline),
+               lifespan=_duration(qos.lifespan), liveliness=Liveliness(int(qos.liveliness)),
+               liveliness_lease_duration=_duration(qos.liveliness_lease_duration),
+               avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions)
+
+
+def ros_qos(qos: Qos) -> QoSProfile:
+    """The inverse of :func:`bag_qos` (for replay); unknown policies fall back to the system default."""
+    from rclpy.duration import Duration
+
+    def policy(kind, value):
+        try:
+            return kind(int(getattr(value, "value", value)))
+        except (TypeError, ValueError):
+            return kind.SYSTEM_DEFAULT
+
+    def duration(t: QosTime) -> Duration:
+        return Duration(seconds=t.sec, nanoseconds=t.nsec)
+
+    return QoSProfile(history=policy(HistoryPolicy, qos.history), depth=max(int(qos.depth), 1),
+                      reliability=policy(ReliabilityPolicy, qos.reliability),
+                      durability=policy(DurabilityPolicy, qos.durability), deadline=duration(qos.deadline),
+                      lifespan=duration(qos.lifespan), liveliness=policy(LivelinessPolicy, qos.liveliness),
+                      liveliness_lease_duration=duration(qos.liveliness_lease_duration))
+
+
+def _name_first_file(bag: Path) -> None:
+    """Rename the storage file ``bag.mcap`` to ``bag_0.mcap``, as rosbag2 names a bag's first file
+    (rosbags names it after the directory alone), and say so in metadata.yaml."""
+    from ruamel.yaml import YAML
+
+    old = f"{bag.name}.mcap"
+    new = f"{bag.name}_0.mcap"
+    yaml = YAML()  # round trip: the rest of the file stays as rosbags wrote it
+    meta = bag / "metadata.yaml"
+    info = yaml.load(meta.read_text(encoding="utf-8"))
+    body = info["rosbag2_bagfile_information"]
+    body["relative_file_paths"] = [new if p == old else p for p in body["relative_file_paths"]]
+    for entry in body.get("files") or []:
+        if entry.get("path") == old:
+            entry["path"] = new
+    (bag / old).rename(bag / new)
+    with open(meta, "w", encoding="utf-8") as f:
+        yaml.dump(info, f)
+
+
+class BagRecorder:
+    """Writes the recorded topics' serialized messages into a new rosbag2 (MCAP storage)."""
+
+    def __init__(self, out: Path) -> None:
+        """Open a bag for the run directory ``out`` (in a fresh hidden place beside it)."""
+        out.parent.mkdir(parents=True, exist_ok=True)
+        self.holder = Path(tempfile.mkdtemp(prefix=f".{out.name}.bag-", dir=out.parent))
+        self.path = self.holder / BAG_DIR
+        self.writer = Writer(self.path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
+        self.writer.open()
+        store = get_typestore(STORE)
+        self.connections = {topic: self.writer.add_connection(topic, kind, typestore=store,
+                                                              offered_qos_profiles=[bag_qos(qos)])
+                            for topic, (kind, qos) in TOPICS.items()}
+        self.closed = False
+
+    def write(self, topic: str, data: bytes) -> None:
+        """Store one message of ``topic`` (CDR bytes), stamped now."""
+        if not self.closed:
+            self.writer.write(self.connections[topic], time.time_ns(), data)
+
+    def close(self) -> Path:
+        """Finish the bag (the MCAP summary and metadata.yaml); return its directory. Safe to call again."""
+        if not self.closed:
+            self.closed = True
+            self.writer.close()
+            _name_first_file(self.path)
+        return self.path
+
+    def discard_holder(self) -> None:
+        """Remove the hidden folder the bag was written in, once the bag was moved out of it."""
+        if not self.path.exists():
+            shutil.rmtree(self.holder, ignore_errors=True)
+
+    def move_to(self, target: Path) -> Path | None:
+        """Close, then move the bag directory to ``target`` (which must not exist); return where it is."""
+        self.close()
+        if target.exists():
+            return None
+        self.path.rename(target)
+        shutil.rmtree(self.holder, ignore_errors=True)
+        return target

@@ -1,0 +1,31 @@
+"""The DDS settings of a run's processes on one host (the launcher's and its nodes')."""
+
+from __future__ import annotations
+
+import os
+
+from ..core.resources import data_dir
+
+PROFILE_FILE = "fastdds.xml"  #: in the package's config folder
+
+
+def dds_defaults() -> dict[str, str]:
+    """Environment variables a run's processes get unless the user set them.
+
+    Discovery stays on this host (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), and Fast
+    DDS loads ``config/fastdds.xml``, whose participants keep announcing themselves for
+    their first seconds, so processes that start a few seconds apart find each other at
+    once (the file says why).
+    """
+    defaults = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    try:
+        defaults["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(data_dir("config") / PROFILE_FILE)
+    except FileNotFoundError:
+        pass  # a broken install: Fast DDS's defaults still work, only slower to discover
+    return defaults
+
+
+def apply_dds_defaults(env: dict[str, str] | os._Environ = os.environ) -> None:
+    """Set :func:`dds_defaults` in ``env`` where unset (in this process: before rclpy creates a participant)."""
+    for key, value in dds_defaults().items():
+        env.setdefault(key, value)

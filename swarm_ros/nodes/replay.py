@@ -1,0 +1,108 @@
+"""``swarm-ros replay BAG``: publish a recorded run's topics again, with their types and QoS.
+
+Every message of the bag is published as it was recorded (the CDR bytes, unchanged) on
+its topic, with the message type and the QoS its publisher offered (from metadata.yaml),
+paced by the recorded receive times divided by ``rate``. RViz, Foxglove, ``ros2 topic``
+or ``swarm-ros topics`` on the same ROS domain then see the past run as if it were live.
+Like ``ros2 bag play``, it waits ``delay`` seconds after creating the publishers, so that
+subscribers started beforehand are matched before the first message.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import time
+from pathlib import Path
+
+from ..core.errors import SwarmError
+
+_ACK_WAIT_S = 2.0  # seconds to let readers acknowledge the last messages before exiting
+
+
+class ReplayError(SwarmError):
+    """The bag cannot be replayed (not a bag, unreadable, or a message type that is not installed)."""
+
+
+def message_class(msgtype: str):
+    """The rclpy message class of a type name like ``sensor_msgs/msg/PointCloud2``."""
+    package, _, name = msgtype.replace("/msg/", "/").partition("/")
+    try:
+        return getattr(importlib.import_module(f"{package}.msg"), name)
+    except (ImportError, AttributeError, ValueError):
+        raise ReplayError(f"message type {msgtype} is not installed here, so its topic cannot be published")
+
+
+def open_bag(bag: Path):
+    """A rosbags Reader, opened; ReplayError in one line if ``bag`` is not a readable rosbag2."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.errors import ReaderError
+
+    if not bag.is_dir() or not (bag / "metadata.yaml").is_file():
+        raise ReplayError(f"{bag}: not a rosbag2 directory (it has no metadata.yaml); a run's bag is <run>/bag")
+    try:
+        reader = Reader(bag)
+        reader.open()
+    except (ReaderError, OSError, ValueError, KeyError) as exc:
+        raise ReplayError(f"{bag}: cannot read this bag ({str(exc).strip().splitlines()[0] if str(exc) else exc!r})")
+    return reader
+
+
+def replay(bag: Path, domain_id: int, rate: float = 1.0, delay: float = 1.0, quiet: bool = False) -> int:
+    """Publish the bag's messages on ``domain_id``; return an exit code (0, or 130 if interrupted)."""
+    reader = open_bag(bag)
+    try:
+        classes = {c.id: message_class(c.msgtype) for c in reader.connections}
+        if reader.message_count == 0:
+            raise ReplayError(f"{bag}: the bag holds no messages")
+        return _publish(reader, classes, domain_id, rate, delay, quiet)
+    finally:
+        reader.close()
+
+
+def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, quiet: bool) -> int:
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile
+    from rclpy.signals import SignalHandlerOptions
+    from tqdm import tqdm
+
+    from .bag import ros_qos
+    from .dds import apply_dds_defaults
+
+    apply_dds_defaults()  # on this host, as a run's nodes (set ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET to share it)
+    context = Context()
+    rclpy.init(args=[], context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    node = Node("swarm_ros_replay", context=context, start_parameter_services=False)
+    try:
+        pubs = {}
+        for c in reader.connections:
+            offered = c.ext.offered_qos_profiles
+            qos = ros_qos(offered[0]) if offered else QoSProfile(depth=10)
+            pubs[c.id] = node.create_publisher(classes[c.id], c.topic, qos)
+        if not quiet:
+            print(f"swarm-ros: replaying {reader.message_count} messages on {len(pubs)} topics, ROS domain "
+                  f"{domain_id}, at {rate:g}x", file=sys.stderr, flush=True)
+        time.sleep(delay)
+        start, first = time.monotonic(), reader.start_time
+        with tqdm(total=reader.message_count, unit="msg", desc="replayed", disable=True if quiet else None,
+                  file=sys.stderr, dynamic_ncols=True) as bar:
+            try:
+                for connection, stamp, data in reader.messages():
+                    wait = start + (stamp - first) / 1e9 / rate - time.monotonic()
+                    if wait > 0:
+                        time.sleep(wait)
+                    pubs[connection.id].publish(bytes(data))
+                    bar.update()
+            except KeyboardInterrupt:
+                return 130
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + _ACK_WAIT_S
+        for pub in pubs.values():
+            pub.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 0.0)))
+        return 0
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)

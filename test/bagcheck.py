@@ -1,0 +1,98 @@
+"""Reading a run's bag/ back with a library other than the one that wrote it.
+
+The monitor writes the bag with ``rosbags``; these checks read it with ``mcap`` and
+``mcap-ros2-support`` (their own CDR decoder, from the message definitions embedded in
+the file), and compare it with the run's own files.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import yaml
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from swarm_ros.core.state import MOVING_STATES, RobotState
+from swarm_ros.wire import DECISION_ROW, PATCH_METRES, ROBOT_ROW
+
+TYPES = {
+    "/swarm/robots": "sensor_msgs/msg/PointCloud2", "/swarm/decisions": "sensor_msgs/msg/PointCloud2",
+    "/swarm/occupancy": "nav_msgs/msg/OccupancyGrid", "/swarm/shape": "nav_msgs/msg/OccupancyGrid",
+    "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray", "/swarm/metrics": "std_msgs/msg/Int64MultiArray",
+    "/clock": "rosgraph_msgs/msg/Clock",
+}
+
+
+def bag_metadata(bag: Path) -> dict:
+    """metadata.yaml, checked against what rosbag2 (version 9) requires of it."""
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+    assert info["relative_file_paths"] == ["bag_0.mcap"] and [f["path"] for f in info["files"]] == ["bag_0.mcap"]
+    topics = {t["topic_metadata"]["name"]: t for t in info["topics_with_message_count"]}
+    assert {name: t["topic_metadata"]["type"] for name, t in topics.items()} == TYPES
+    for t in topics.values():
+        meta = t["topic_metadata"]
+        assert meta["serialization_format"] == "cdr" and meta["type_description_hash"].startswith("RIHS01_")
+        assert len(meta["offered_qos_profiles"]) == 1 and meta["offered_qos_profiles"][0]["reliability"]
+    assert info["message_count"] == sum(t["message_count"] for t in topics.values())
+    assert info["files"][0]["message_count"] == info["message_count"]
+    assert info["duration"]["nanoseconds"] >= 0 and info["starting_time"]["nanoseconds_since_epoch"] > 0
+    return info
+
+
+def read_bag(bag: Path) -> tuple[dict, dict[str, list]]:
+    """(metadata.yaml, {topic: decoded messages in log order}); counts and times checked against the MCAP file."""
+    info = bag_metadata(bag)
+    with open(bag / "bag_0.mcap", "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        messages: dict[str, list] = {topic: [] for topic in TYPES}
+        for _, channel, _, decoded in reader.iter_decoded_messages(log_time_order=True):
+            messages[channel.topic].append(decoded)
+    counts = {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
+    assert {topic: len(got) for topic, got in messages.items()} == counts
+    assert summary.statistics.message_count == info["message_count"]
+    stats = summary.statistics
+    assert stats.message_start_time == info["starting_time"]["nanoseconds_since_epoch"]
+    assert stats.message_end_time - stats.message_start_time == info["duration"]["nanoseconds"]
+    return info, messages
+
+
+def assert_bag_holds_run(run: Path) -> None:
+    """Every tick's robot rows in the bag rebuild final_state.csv; its metrics equal metrics.csv; the
+    decisions of each tick come from exactly the robots moving after the tick before."""
+    _, messages = read_bag(run / "bag")
+    robots = messages["/swarm/robots"]
+    ticks = [m.header.stamp.sec for m in robots]
+    assert ticks == list(range(len(robots))), "one robots message per tick, in order"
+    first = np.frombuffer(robots[0].data, dtype=ROBOT_ROW)
+    n = first.size
+    x, y, heading, state = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, dtype=np.int64)
+    moving_after: list[set[int]] = []
+    for m in robots:
+        rows = np.frombuffer(m.data, dtype=ROBOT_ROW)
+        ids = rows["id"].astype(np.int64)
+        x[ids], y[ids], heading[ids], state[ids] = rows["x"], rows["y"], rows["heading"], rows["state"]
+        moving_after.append(set(np.flatnonzero(np.isin(state, MOVING_STATES)).tolist()))
+    labels = [s.label for s in RobotState]
+    xs, ys, hs = (x / PATCH_METRES).tolist(), (y / PATCH_METRES).tolist(), heading.tolist()
+    rebuilt = ["id,x,y,heading,state"] + [f"{i},{xs[i]!r},{ys[i]!r},{hs[i]!r},{labels[state[i]]}" for i in range(n)]
+    assert "\n".join(rebuilt) + "\n" == (run / "final_state.csv").read_text()
+
+    with open(run / "metrics.csv", newline="") as f:
+        table = list(csv.reader(f))
+    got = [[str(v) for v in m.data] for m in messages["/swarm/metrics"]]
+    assert [m.layout.dim[0].label for m in messages["/swarm/metrics"][:1]] == [",".join(table[0])]
+    assert got == table[1:]
+
+    decided: dict[int, set[int]] = {}
+    for m in messages["/swarm/decisions"]:
+        decided.setdefault(m.header.stamp.sec, set()).update(np.frombuffer(m.data, dtype=DECISION_ROW)["id"].tolist())
+    for tick in range(1, len(robots)):
+        assert decided.get(tick, set()) == moving_after[tick - 1], f"decisions of tick {tick}"
+    assert len(messages["/swarm/shape"]) == 1 and messages["/swarm/occupancy"] and messages["/swarm/status"]
+    clock = [m.clock.sec for m in messages["/clock"]]
+    assert clock and clock == sorted(clock) and clock[-1] <= len(robots) - 1
