@@ -29,8 +29,9 @@ setup(
         "PyYAML>=6",
         "tqdm>=4.66",
         "rerun-sdk>=0.41,<0.42",
+        "rosbags>=0.11,<0.12",
     ],
-    extras_require={"test": ["pytest>=8", "hypothesis>=6.100"]},
+    extras_require={"test": ["pytest>=8", "hypothesis>=6.100", "mcap>=1.6", "mcap-ros2-support>=0.6"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
     entry_points={"console_scripts": [
         "swarm-ros = swarm_ros.cli:entry",

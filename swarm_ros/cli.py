@@ -16,9 +16,7 @@ from typing import TYPE_CHECKING
 from . import __version__
 from .config import (BATCH_LOSS_POLICIES, MAX_RESTARTS, NODE_PARAMETERS, RecordingOptions, Settings,
                      read_params_file)
-from .core.engine import Simulation
 from .core.errors import SwarmError
-from .core.metrics import Outcome
 from .core.params import RunParams
 from .core.rulesets import CROWDING_VALUES, JOIN_VALUES, RULE_SETS, STEPS_VALUES
 from .core.shapes import Shape, builtin_shapes
@@ -26,6 +24,7 @@ from .core.world import World
 from .signals import StopFlag
 
 if TYPE_CHECKING:
+    from .core.engine import Simulation
     from .recording import Recorder
 
 PROG = "swarm-ros"
@@ -260,6 +259,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     rrd = partial_recording(out)
     recorder = options.open(rrd, shape, params)
     start = time.perf_counter()
+    from .core.engine import Simulation  # here: numba is not needed by the other commands' start
+    from .core.metrics import Outcome
+
     sim = Simulation(shape, params)
     stopped = None
     try:

@@ -15,13 +15,15 @@ import shutil
 import tempfile
 from datetime import datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .core.errors import SwarmError
-from .core.metrics import METRIC_COLUMNS
-from .core.record import RunRecord
-from .core.state import RobotState, SwarmState
+
+if TYPE_CHECKING:
+    from .core.record import RunRecord
+    from .core.state import SwarmState
 
 RUNS_DIR = Path("runs")
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
@@ -113,12 +115,16 @@ def writable_dir(path: Path) -> bool:
 def metrics_csv(history: np.ndarray) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
+    from .core.metrics import METRIC_COLUMNS  # the core's compiled modules load only when a run is written
+
     writer.writerow(METRIC_COLUMNS)
     writer.writerows(history.tolist())
     return buf.getvalue()
 
 
 def final_state_csv(s: SwarmState) -> str:
+    from .core.state import RobotState
+
     labels = [st.label for st in RobotState]
     lines = [",".join(FINAL_STATE_COLUMNS)]
     for i, (x, y, h, st) in enumerate(zip(s.x.tolist(), s.y.tolist(), s.heading.tolist(), s.state.tolist())):

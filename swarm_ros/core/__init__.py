@@ -2,20 +2,31 @@
 
 Nothing here imports rclpy, ROS message packages or rerun; the ROS 2 nodes and the
 recorder convert to and from these types at their edges.
+
+The names below load their module on first use (PEP 562), so a program that needs only
+shapes and parameters (the ``swarm-ros run`` launcher) does not pay for numba.
 """
 
-from .arbitration import JoinOutcome
-from .engine import Simulation
-from .errors import ParameterError, ShapeError, SwarmError
-from .metrics import METRIC_COLUMNS, Outcome, TickMetrics
-from .params import RunParams
-from .rules import Decisions, decide
-from .shapes import Shape, builtin_shapes
-from .state import RobotState, SwarmState
-from .world import World
+from __future__ import annotations
 
-__all__ = [
-    "Decisions", "JoinOutcome", "METRIC_COLUMNS", "Outcome", "ParameterError", "RobotState", "RunParams",
-    "Shape", "ShapeError", "Simulation", "SwarmError", "SwarmState", "TickMetrics", "World", "builtin_shapes",
-    "decide",
-]
+import importlib
+
+_HOME = {
+    "JoinOutcome": "arbitration", "Simulation": "engine", "ParameterError": "errors", "ShapeError": "errors",
+    "SwarmError": "errors", "METRIC_COLUMNS": "metrics", "Outcome": "metrics", "TickMetrics": "metrics",
+    "RunParams": "params", "Decisions": "rules", "decide": "rules", "Shape": "shapes", "builtin_shapes": "shapes",
+    "RobotState": "state", "SwarmState": "state", "World": "world",
+}
+__all__ = sorted(_HOME)
+
+
+def __getattr__(name: str) -> object:
+    if name not in _HOME:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOME))

@@ -19,15 +19,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-from rosbags.interfaces import Qos
-from rosbags.interfaces import QosDurability as Durability
-from rosbags.interfaces import QosHistory as History
-from rosbags.interfaces import QosLiveliness as Liveliness
-from rosbags.interfaces import QosReliability as Reliability
-from rosbags.interfaces import QosTime
-from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from ..output import BAG_DIR
 from . import messages as msgs
@@ -41,7 +35,10 @@ TOPICS: dict[str, tuple[str, QoSProfile]] = {
     msgs.METRICS: ("std_msgs/msg/Int64MultiArray", msgs.METRICS_QOS),
     msgs.CLOCK: ("rosgraph_msgs/msg/Clock", msgs.CLOCK_QOS),
 }
-STORE = Stores.ROS2_JAZZY
+STORE = "ros2_jazzy"  #: the rosbags type store of the message definitions (rosbags.typesys.Stores)
+
+if TYPE_CHECKING:  # rosbags loads when a bag is opened: off the start of the nodes
+    from rosbags.interfaces import Qos, QosTime
 
 
 #: Messages a recording reader keeps before its node takes them: the monitor may be busy (starting,
@@ -62,12 +59,20 @@ def partial_bag(out: Path) -> Path:
 
 
 def _duration(d) -> QosTime:  # rclpy Duration -> rosbags time; "infinite" is rclpy's 0
+    from rosbags.interfaces import QosTime
+
     sec, nsec = divmod(d.nanoseconds, 1_000_000_000)
     return QosTime(sec=sec, nsec=nsec)
 
 
 def bag_qos(qos: QoSProfile) -> Qos:
     """A QoS profile as rosbag2 stores it (``offered_qos_profiles``)."""
+    from rosbags.interfaces import Qos
+    from rosbags.interfaces import QosDurability as Durability
+    from rosbags.interfaces import QosHistory as History
+    from rosbags.interfaces import QosLiveliness as Liveliness
+    from rosbags.interfaces import QosReliability as Reliability
+
     return Qos(history=History(int(qos.history)), depth=qos.depth, reliability=Reliability(int(qos.reliability)),
                durability=Durability(int(qos.durability)), deadline=_duration(qos.deadline),
                lifespan=_duration(qos.lifespan), liveliness=Liveliness(int(qos.liveliness)),
@@ -120,12 +125,15 @@ class BagRecorder:
 
     def __init__(self, out: Path) -> None:
         """Open a bag for the run directory ``out`` (in a fresh hidden place beside it)."""
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.typesys import Stores, get_typestore
+
         out.parent.mkdir(parents=True, exist_ok=True)
         self.holder = Path(tempfile.mkdtemp(prefix=f".{out.name}.bag-", dir=out.parent))
         self.path = self.holder / BAG_DIR
         self.writer = Writer(self.path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
-        store = get_typestore(STORE)
+        store = get_typestore(Stores(STORE))
         self.connections = {topic: self.writer.add_connection(topic, kind, typestore=store,
                                                               offered_qos_profiles=[bag_qos(qos)])
                             for topic, (kind, qos) in TOPICS.items()}

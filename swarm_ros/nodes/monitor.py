@@ -74,15 +74,16 @@ class MonitorNode:
         self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         # Serialized subscriptions: each message goes into the bag as it came, then to its handler.
-        self.bag = BagRecorder(self.out) if own["bag"] else None
+        self.bag: BagRecorder | None = None  # opened below, with the heavy part
         handlers = {msgs.ROBOTS: (PointCloud2, self._on_robots), msgs.STATUS: (DiagnosticArray, self._on_status)}
         for topic, (kind, qos) in TOPICS.items():
-            if topic in handlers or (self.bag is not None and topic != msgs.METRICS):  # metrics: sent from here
+            if topic in handlers or (own["bag"] and topic != msgs.METRICS):  # metrics: sent from here
                 node.create_subscription(TYPES[kind], topic, self._receiver(topic, *handlers.get(topic, (None, None))),
                                          reader_qos(qos), raw=True)
         # The heavy part last: discovery goes on meanwhile in the DDS threads, and once the world
         # sees this node it starts; the first ticks wait for the monitor in their history (depth 512).
         self.recorder = self.recording.open(self.rrd, self.shape, p)
+        self.bag = BagRecorder(self.out) if own["bag"] else None
         self.replica = Replica(self.shape, p.robots)
         warm_up(self.shape, p)
         importlib.import_module("swarm_ros.plots")  # matplotlib: now, not at the end, when the run is written

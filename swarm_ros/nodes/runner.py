@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import time
 from collections.abc import Callable
 from typing import Protocol
 
@@ -106,7 +107,8 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
     code = EXIT_FAILED  # an unexpected exception
     try:
         swarm = factory()
-        swarm.node.get_logger().info(f"ready, {process_age():.2f} s after the process started")
+        swarm.node.get_logger().info(f"ready, {process_age():.2f} s after the process started "
+                                     f"({time.process_time():.2f} s of CPU)")
         executor = EventsExecutor()
         executor.add_node(swarm.node)
         while not swarm.finished and not stop.signum:

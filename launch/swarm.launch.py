@@ -1,0 +1,75 @@
+"""The swarm's ROS 2 graph, as ``swarm-ros run`` starts it: a world, K robot batches and a monitor.
+
+    ros2 launch swarm_ros swarm.launch.py shape:=star processes:=2
+    ros2 launch swarm_ros swarm.launch.py params_file:=/path/to/params.yaml out_dir:=runs/mine
+
+Launch arguments: the run parameters (each overrides the parameter file when given), the
+number of robot-batch processes, the parameter file and the monitor's output directory.
+Robot batches are respawned when they die: the world sends the new process a snapshot
+of the current tick and the run goes on unchanged (docs/ros_graph.md, Faults).
+"""
+
+from __future__ import annotations
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+PACKAGE = "swarm_ros"
+#: run parameters a launch argument may set ("" = leave it to the parameter file / the default)
+RUN_ARGUMENTS = ("shape", "robots", "vision_radius", "rules", "join", "crowding", "steps", "seed", "max_ticks",
+                 "wiggle_deg", "fail_fraction", "fail_tick", "world_radius")
+_INTEGERS = {"robots", "seed", "max_ticks", "fail_tick", "world_radius"}
+_FLOATS = {"vision_radius", "wiggle_deg", "fail_fraction"}
+
+
+def _value(name: str, text: str) -> object:
+    """A launch argument's text as the parameter's type (ROS parameters are typed)."""
+    if name in _INTEGERS:
+        return int(text)
+    if name in _FLOATS:
+        return float(text)
+    return text
+
+
+def graph(context) -> list:
+    """The nodes, from the launch arguments' values."""
+    share = get_package_share_directory(PACKAGE)
+    arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
+    params_file = arg("params_file") or os.path.join(share, "config", "swarm_ros.yaml")
+    run = {name: _value(name, arg(name)) for name in RUN_ARGUMENTS if arg(name)}
+    processes = int(arg("processes"))
+    monitor = {"out_dir": arg("out_dir")} if arg("out_dir") else {}
+    nodes = [Node(package=PACKAGE, executable="monitor", name="monitor", output="screen",
+                  parameters=[params_file, run, monitor])]
+    nodes += [Node(package=PACKAGE, executable="robot_batch", name=f"robot_batch_{k}", output="screen",
+                   parameters=[params_file, run, {"batch": k, "batches": processes}], respawn=True,
+                   respawn_delay=0.0)
+              for k in range(processes)]
+    nodes.append(Node(package=PACKAGE, executable="world", name="world", output="screen",
+                      parameters=[params_file, run]))
+    return nodes
+
+
+def generate_launch_description() -> LaunchDescription:
+    share = get_package_share_directory(PACKAGE)
+    return LaunchDescription([
+        DeclareLaunchArgument("processes", default_value="2", description="robot-batch processes K"),
+        DeclareLaunchArgument("params_file", default_value="",
+                              description="parameter file (default: the package's config/swarm_ros.yaml)"),
+        DeclareLaunchArgument("out_dir", default_value="",
+                              description="the monitor's run directory (default: runs/<time>_<shape>_...)"),
+        *[DeclareLaunchArgument(name, default_value="", description=f"run parameter {name} (default: the "
+                                f"parameter file's, else the model's)") for name in RUN_ARGUMENTS],
+        # discovery on this host, and Fast DDS's announcements as swarm-ros run sets them (config/fastdds.xml)
+        SetEnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE",
+                               os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")),
+        SetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE",
+                               os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE",
+                                              os.path.join(share, "config", "fastdds.xml"))),
+        OpaqueFunction(function=graph),
+    ])
