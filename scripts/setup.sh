@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set up (or refresh) the project's virtual environment in .venv: pinned dependencies
-# from requirements.txt and swarm_ros itself in editable mode. Safe to run again.
+# from requirements.txt and swarm_ros itself in editable mode; and colcon in .venv-colcon. Safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -19,4 +19,14 @@ if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ setup.py -nt "$st
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt
   .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
   touch "$stamp"
+fi
+
+# colcon, for the test that builds the package as a ROS 2 workspace. Its own venv: colcon-core pulls in
+# pytest plugins that must not load into the project's tests (requirements-colcon.txt pins it all).
+cstamp=.venv-colcon/.installed
+if [ ! -f "$cstamp" ] || [ requirements-colcon.txt -nt "$cstamp" ]; then
+  "$PYTHON" -m venv .venv-colcon
+  .venv-colcon/bin/python -m pip install --quiet --disable-pip-version-check pip==26.3
+  .venv-colcon/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-colcon.txt
+  touch "$cstamp"
 fi

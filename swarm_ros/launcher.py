@@ -292,16 +292,22 @@ class Launch:
         self.env = node_env(domain_id, logs)
         self.domain = domain_id
         self.params_file = params_file
-        plan = [("monitor", "monitor", {})]
-        plan += [(f"robot_batch_{k}", "robot_batch", {"batch": k, "batches": self.processes})
-                 for k in range(self.processes)]
-        plan.append(("world", "world", {}))
-        for name, module, extra in plan:
+        for name, module, extra in self.plan():
             log = logs / f"{name}.log"
             self.children.append(self._spawn(name, node_command(module, params_file, name, extra), log, 0))
         if not self.quiet:
             print(f"swarm-ros: ROS domain {domain_id}, {self.processes} robot-batch processes, logs in {logs} "
                   f"(kept in the run directory at the end)", file=sys.stderr, flush=True)
+
+    def plan(self) -> list[tuple[str, str, dict[str, int]]]:
+        """The node processes, in start order: (node name, executable, parameters beyond the file's).
+
+        ``launch/swarm.launch.py`` starts the same graph (a test compares the two).
+        """
+        return [("monitor", "monitor", {}),
+                *[(f"robot_batch_{k}", "robot_batch", {"batch": k, "batches": self.processes})
+                  for k in range(self.processes)],
+                ("world", "world", {})]
 
     def _spawn(self, name: str, command: list[str], log: Path, incarnation: int) -> Child:
         f = open(log, "ab")  # noqa: SIM115 - closed in stop()

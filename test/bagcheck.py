@@ -93,6 +93,7 @@ def assert_bag_holds_run(run: Path) -> None:
         decided.setdefault(m.header.stamp.sec, set()).update(np.frombuffer(m.data, dtype=DECISION_ROW)["id"].tolist())
     for tick in range(1, len(robots)):
         assert decided.get(tick, set()) == moving_after[tick - 1], f"decisions of tick {tick}"
-    assert len(messages["/swarm/shape"]) == 1 and messages["/swarm/occupancy"] and messages["/swarm/status"]
+    counts = {topic: len(got) for topic, got in messages.items()}
+    assert counts["/swarm/shape"] == 1 and counts["/swarm/occupancy"] >= 1 and counts["/swarm/status"] >= 1, counts
     clock = [m.clock.sec for m in messages["/clock"]]
     assert clock and clock == sorted(clock) and clock[-1] <= len(robots) - 1

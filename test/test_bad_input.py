@@ -48,6 +48,10 @@ def make_fixtures(d: Path) -> None:
     (d / "taken").mkdir()
     (d / "taken" / "summary.json").write_text("{}")
     (d / "emptydir").mkdir()
+    (d / "brokenbag").mkdir()
+    (d / "brokenbag" / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
+    (d / "oldbag").mkdir()
+    (d / "oldbag" / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: 99\n")
 
 
 def listing(d: Path) -> dict[str, int]:

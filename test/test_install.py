@@ -1,9 +1,10 @@
-"""Installed copies find their shapes and configs, and the node scripts land where `ros2 run` looks.
+"""The package as colcon builds it: the install space has what `ros2 run` and `ros2 launch` look for, and
+the installed nodes run a swarm to its end from there.
 
-A normal install is made the way colcon builds an ament_python package
-(``setup.py install`` into a prefix, which setup.cfg points at lib/swarm_ros) from a
-copy of the sources, then used from another directory with only AMENT_PREFIX_PATH
-telling it where the prefix is, as a sourced ROS 2 workspace does.
+The sources are copied and built with the real colcon (``colcon build``, from
+``.venv-colcon``, which scripts/setup.sh makes) in a temporary workspace, then used
+from another directory with only the paths a sourced workspace sets (AMENT_PREFIX_PATH,
+PYTHONPATH) telling them where the install is.
 """
 
 from __future__ import annotations
@@ -15,25 +16,49 @@ import sys
 from pathlib import Path
 
 import pytest
+from test_ros_graph import _assert_same_run, _shape_file
+
+from swarm_ros import cli
+from swarm_ros.config import Settings
+from swarm_ros.nodes.params import params_yaml
 
 ROOT = Path(__file__).resolve().parent.parent
-SOURCES = ("setup.py", "setup.cfg", "package.xml", "pyproject.toml", "resource", "swarm_ros", "shapes", "config")
+SOURCES = ("setup.py", "setup.cfg", "package.xml", "pyproject.toml", "resource", "swarm_ros", "shapes", "config",
+           "launch", "rviz")
+COLCON = ROOT / ".venv-colcon" / "bin" / "colcon"
 
 
 @pytest.fixture(scope="module")
 def prefix(tmp_path_factory) -> Path:
-    src, prefix = tmp_path_factory.mktemp("src"), tmp_path_factory.mktemp("install")
+    """The package's prefix in a colcon install space (install/swarm_ros)."""
+    if not COLCON.exists():
+        pytest.skip("colcon is not installed in .venv-colcon (scripts/setup.sh installs it)")
+    ws = tmp_path_factory.mktemp("ws")
+    src = ws / "src" / "swarm_ros"
+    src.mkdir(parents=True)
     for name in SOURCES:
         path = ROOT / name
         if path.is_dir():
             shutil.copytree(path, src / name, ignore=shutil.ignore_patterns("__pycache__"))
         else:
             shutil.copy2(path, src / name)
-    done = subprocess.run([sys.executable, "setup.py", "-q", "install", "--single-version-externally-managed",
-                           "--root", "/", "--prefix", str(prefix), "--record", str(src / "files.txt")],
-                          cwd=src, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    return prefix
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}
+    done = subprocess.run([str(COLCON), "--log-base", "log", "build", "--base-paths", "src"], cwd=ws, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "1 package finished" in done.stdout
+    assert (ws / "install" / "setup.sh").is_file() and (ws / "install" / "local_setup.bash").is_file()
+    return ws / "install" / "swarm_ros"
+
+
+def _installed_env(prefix: Path, home: Path) -> dict[str, str]:
+    """What sourcing install/setup.sh sets for this package (its hooks: AMENT_PREFIX_PATH, PYTHONPATH)."""
+    site = next(prefix.glob("lib/python3*/site-packages"))
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}
+    hooks = (prefix / "share" / "swarm_ros" / "hook").iterdir()
+    assert {"ament_prefix_path.dsv", "pythonpath.dsv"} <= {h.name for h in hooks}
+    return {**env, "PYTHONPATH": str(site), "AMENT_PREFIX_PATH": str(prefix), "HOME": str(home),
+            "ROS_LOG_DIR": str(home / "ros"), "PYTHONUNBUFFERED": "1"}
 
 
 def test_node_scripts_and_data_land_where_ros2_run_and_the_ament_index_look(prefix):
@@ -42,9 +67,41 @@ def test_node_scripts_and_data_land_where_ros2_run_and_the_ament_index_look(pref
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "swarm_ros").is_file()
     share = prefix / "share" / "swarm_ros"
     assert (share / "package.xml").is_file() and (share / "config" / "swarm_ros.yaml").is_file()
-    assert (share / "config" / "experiments" / "paper.yaml").is_file()
+    assert (share / "config" / "fastdds.xml").is_file() and (share / "config" / "experiments" / "paper.yaml").is_file()
+    assert (share / "launch" / "swarm.launch.py").is_file() and (share / "rviz" / "swarm.rviz").is_file()
     assert sorted(p.stem for p in (share / "shapes").glob("*.txt")) == \
         sorted(p.stem for p in (ROOT / "shapes").glob("*.txt"))
+
+
+def test_installed_nodes_run_a_swarm_to_its_end_from_the_install_space(prefix, tmp_path):
+    shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
+    flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "3", "--robots", "430"]
+    ref = tmp_path / "ref"
+    assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
+    run = tmp_path / "run"
+    params = tmp_path / "params.yaml"
+    params.write_text(params_yaml(Settings(shape=str(shape), robots=430, seed=3, world_radius=16),
+                                  {"monitor": {"out_dir": str(run)}}))
+    env = {**_installed_env(prefix, tmp_path), "ROS_DOMAIN_ID": str(150 + os.getpid() % 50),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+           "FASTRTPS_DEFAULT_PROFILES_FILE": str(prefix / "share" / "swarm_ros" / "config" / "fastdds.xml")}
+    procs = {}
+    try:
+        for name, extra in (("monitor", []), ("robot_batch", ["-p", "batch:=0", "-p", "batches:=1"]), ("world", [])):
+            # what `ros2 run swarm_ros <name>` runs: the install's script, with this machine's Python
+            exe = prefix / "lib" / "swarm_ros" / name
+            procs[name] = subprocess.Popen([sys.executable, str(exe), "--ros-args", "--params-file", str(params),
+                                            *extra], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                                           stderr=subprocess.STDOUT, text=True)
+        outputs = {name: p.communicate(timeout=120)[0] for name, p in procs.items()}
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert {name: p.returncode for name, p in procs.items()} == dict.fromkeys(procs, 0), outputs
+    assert "run ended: complete" in outputs["world"]
+    _assert_same_run(ref, run, launched=False)
 
 
 def test_installed_copy_finds_its_shapes_and_config_through_the_ament_prefix(prefix, tmp_path):
@@ -59,7 +116,8 @@ def test_installed_copy_finds_its_shapes_and_config_through_the_ament_prefix(pre
     assert module.startswith(str(site)), "the installed copy, not the source tree, must be imported"
     assert shapes == str(prefix / "share" / "swarm_ros" / "shapes")
     assert config == str(prefix / "share" / "swarm_ros" / "config")
-    listed = subprocess.run([str(prefix / "lib" / "swarm_ros" / "swarm-ros"), "shapes"], cwd=tmp_path, env=env,
+    # the script colcon installed, run by this machine's Python (its shebang names colcon's own venv)
+    listed = subprocess.run([sys.executable, str(prefix / "lib" / "swarm_ros" / "swarm-ros"), "shapes"], cwd=tmp_path, env=env,
                             capture_output=True, text=True, timeout=60)
     assert listed.returncode == 0, listed.stderr
     assert "star" in listed.stdout and str(prefix / "share" / "swarm_ros" / "shapes" / "star.txt") in listed.stdout

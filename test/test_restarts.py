@@ -247,3 +247,47 @@ def _alive(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
     except OSError:
         return False
+
+
+def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_path):
+    """``ros2 launch``'s respawn starts a dead batch again with the very same command (incarnation 0).
+    The world takes the new process back once the old one's liveliness lapsed; nothing changes."""
+    from swarm_ros.nodes.dds import dds_defaults
+    from swarm_ros.nodes.params import params_yaml
+
+    out = tmp_path / "run"
+    params = tmp_path / "params.yaml"
+    params.write_text(params_yaml(Settings(shape="star", seed=5, rules="local"),
+                                  {"monitor": {"out_dir": str(out), "record": False, "bag": False}}))
+    env = {**_env(), **dds_defaults(), "ROS_DOMAIN_ID": str(200 + os.getpid() % 30), "HOME": str(tmp_path),
+           "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"}
+
+    def start(name: str, module: str, *extra: str) -> subprocess.Popen:
+        log = open(tmp_path / f"{name}.log", "a")  # noqa: SIM115 - the process holds it
+        return subprocess.Popen([PY, "-m", f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params),
+                                 "-r", f"__node:={name}", *extra], env=env, stdout=log, stderr=subprocess.STDOUT)
+
+    batch = ["-p", "batch:=1", "-p", "batches:=2"]
+    procs = {"monitor": start("monitor", "monitor"), "world": start("world", "world"),
+             "robot_batch_0": start("robot_batch_0", "robot_batch", "-p", "batch:=0", "-p", "batches:=2"),
+             "robot_batch_1": start("robot_batch_1", "robot_batch", *batch)}
+    try:
+        deadline = time.monotonic() + 120
+        while "tick 0" not in (tmp_path / "world.log").read_text() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(1.0)  # mid-run
+        procs["robot_batch_1"].kill()
+        procs["robot_batch_1"].wait()
+        procs["robot_batch_1"] = start("robot_batch_1", "robot_batch", *batch)  # the same command again
+        assert procs["monitor"].wait(timeout=180) == 0, (tmp_path / "monitor.log").read_text()[-2000:]
+        for p in procs.values():
+            p.wait(timeout=30)
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert {name: p.returncode for name, p in procs.items()} == dict.fromkeys(procs, 0)
+    got = _assert_identical(reference, out)
+    assert [r["node"] for r in got["restarts"]] == ["robot_batch_1"]
+    assert "robot_batch_1 is back (restart 1)" in (tmp_path / "world.log").read_text()

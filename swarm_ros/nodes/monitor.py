@@ -28,7 +28,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Empty, Int64MultiArray
 
 from ..config import RecordingOptions
-from ..core.metrics import Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
+from ..core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
 from ..core.replica import Replica
 from ..core.state import STATE_COUNT, RobotState
 from ..core.warmup import warm_up
@@ -44,6 +44,7 @@ TYPES = {"sensor_msgs/msg/PointCloud2": PointCloud2, "nav_msgs/msg/OccupancyGrid
          "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray, "std_msgs/msg/Int64MultiArray": Int64MultiArray,
          "rosgraph_msgs/msg/Clock": Clock}
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
+_BAG_WAIT = 1.0  # seconds to wait, after the end, for the last tick's decisions to reach the bag
 
 
 class MonitorNode:
@@ -70,14 +71,16 @@ class MonitorNode:
         self.written: Path | None = None
         self.restarts: list[tuple[int, str]] = []  # (tick, batch) from the world's status
         self.world_times: dict[str, float] = {}  # wall_seconds, startup_seconds from the world's status
+        self.decided_rows: dict[int, int] = {}  # tick -> decision rows seen (with the bag on)
 
         self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         # Serialized subscriptions: each message goes into the bag as it came, then to its handler.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
-        handlers = {msgs.ROBOTS: (PointCloud2, self._on_robots), msgs.STATUS: (DiagnosticArray, self._on_status)}
+        handlers = {msgs.ROBOTS: (PointCloud2, self._on_robots), msgs.STATUS: (DiagnosticArray, self._on_status),
+                    msgs.DECISIONS: (PointCloud2, self._on_decisions)}
         for topic, (kind, qos) in TOPICS.items():
-            if topic in handlers or (own["bag"] and topic != msgs.METRICS):  # metrics: sent from here
+            if (topic in handlers and topic != msgs.DECISIONS) or (own["bag"] and topic != msgs.METRICS):
                 node.create_subscription(TYPES[kind], topic, self._receiver(topic, *handlers.get(topic, (None, None))),
                                          reader_qos(qos), raw=True)
         # The heavy part last: discovery goes on meanwhile in the DDS threads, and once the world
@@ -123,6 +126,18 @@ class MonitorNode:
             self.ended_at = time.monotonic()
             self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
 
+    def _on_decisions(self, msg: PointCloud2) -> None:
+        """Count the decision rows of each tick (for the bag: see :meth:`_bag_complete`)."""
+        tick = msgs.tick_of(msg.header)
+        self.decided_rows[tick] = self.decided_rows.get(tick, 0) + msg.width
+
+    def _bag_complete(self) -> bool:
+        """Whether the last tick's decisions are in the bag: they may arrive after the world's last rows."""
+        last = self.replica.tick
+        if last <= 0 or len(self.rows) < last:
+            return True
+        return self.decided_rows.get(last, 0) >= self.rows[last - 1][METRIC_COLUMNS.index("moving")]
+
     @property
     def removed(self) -> int:
         return int((self.replica.state.state == RobotState.REMOVED).sum())
@@ -150,6 +165,8 @@ class MonitorNode:
         if self.outcome is None:
             return
         if self.world_outcome is None and time.monotonic() - self.ended_at < _STATUS_WAIT:
+            return
+        if self.bag is not None and not self._bag_complete() and time.monotonic() - self.ended_at < _BAG_WAIT:
             return
         if self.world_outcome is not None and self.world_outcome != self.outcome.value:
             raise RunFailed(f"the world reports '{self.world_outcome}', the monitor counted "

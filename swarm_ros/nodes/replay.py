@@ -30,7 +30,8 @@ def message_class(msgtype: str):
     try:
         return getattr(importlib.import_module(f"{package}.msg"), name)
     except (ImportError, AttributeError, ValueError):
-        raise ReplayError(f"message type {msgtype} is not installed here, so its topic cannot be published")
+        raise ReplayError(f"message type {msgtype} is not installed here, so its topic cannot be published") \
+            from None
 
 
 def open_bag(bag: Path):
@@ -44,7 +45,8 @@ def open_bag(bag: Path):
         reader = Reader(bag)
         reader.open()
     except (ReaderError, OSError, ValueError, KeyError) as exc:
-        raise ReplayError(f"{bag}: cannot read this bag ({str(exc).strip().splitlines()[0] if str(exc) else exc!r})")
+        detail = str(exc.args[0] if exc.args else exc).strip().splitlines() or [type(exc).__name__]
+        raise ReplayError(f"{bag}: cannot read this bag ({detail[0]})") from None
     return reader
 
 

@@ -97,6 +97,8 @@ class WorldNode:
         self.incarnations: list[int] = []  # per batch: the newest process's incarnation heard of
         self.down_since: dict[int, float] = {}  # batches lost and waited for: when
         self.removed_batches: set[int] = set()
+        self.respawned: dict[int, np.ndarray] = {}  # batch -> robots: re-announced with no higher incarnation
+        self.lapsed: set[int] = set()  # batches whose liveliness lapsed since their last accepted announcement
         self.restarts: list[tuple[int, str]] = []  # (tick, batch) of every restart
         self.status_at = -1.0  # when /swarm/status was last published
         self.published_tick = -1
@@ -148,12 +150,19 @@ class WorldNode:
         if covered == n - 4:
             self._maybe_start()
 
-    def _on_reannounce(self, k: int, ids: np.ndarray, incarnation: int) -> None:
+    def _on_reannounce(self, k: int, ids: np.ndarray, incarnation: int, respawn: bool = False) -> None:
         """A batch announced again: its process was restarted. Send it the current tick to start from."""
         name = self.batch_names[k]
         log = self.node.get_logger()
         if incarnation <= self.incarnations[k]:
-            return  # the same process again (a duplicate), or an older one's announcement
+            # The same process again, an older one's announcement, or a new process that a launcher
+            # without restart counting (ros2 launch's respawn) started: that one is taken once the
+            # batch is known to be lost, now or when its liveliness lapses.
+            if respawn or (self.started and (k in self.down_since or k in self.lapsed)):
+                incarnation = self.incarnations[k] + 1
+            else:
+                self.respawned[k] = ids
+                return
         if not np.array_equal(ids, np.flatnonzero(self.host == k)):
             log.warn(f"ignored a new announcement of {name}: it names other robots than before")
             return
@@ -161,6 +170,8 @@ class WorldNode:
             log.warn(f"ignored a new announcement of {name}: its robots are removed or the run is over")
             return
         tick = self.sim.tick if self.started else 0
+        self.respawned.pop(k, None)
+        self.lapsed.discard(k)
         self.restart_counts[k] += incarnation - self.incarnations[k]
         self.restarts += [(tick, name)] * (incarnation - self.incarnations[k])
         self.incarnations[k] = incarnation
@@ -342,7 +353,10 @@ class WorldNode:
 
     def _on_batch_liveliness(self, k: int, info: QoSLivelinessChangedInfo) -> None:
         if info.alive_count == 0 and info.not_alive_count > 0:
+            self.lapsed.add(k)
             self._lose_batch(k, "liveliness lapsed")
+        elif info.alive_count > 0 and k in self.respawned and self.started:  # a respawned process is up
+            self._on_reannounce(k, self.respawned[k], self.incarnations[k], respawn=True)
         elif info.alive_count > 0 and k in self.down_since:  # a process of this batch is alive (again)
             self.down_since.pop(k)
 
@@ -360,6 +374,8 @@ class WorldNode:
             log.warn(f"{name} lost ({why}) at tick {tick}: waiting up to {self.restart_timeout:g} s for it to "
                      f"restart (restarts so far: {self.restart_counts[k]} of {self.max_restarts})")
             self._publish_status(f"waiting for {name}")
+            if k in self.respawned and self.started:  # its new process announced itself already
+                self._on_reannounce(k, self.respawned[k], self.incarnations[k], respawn=True)
             return
         self._remove_batch(k, why)
 

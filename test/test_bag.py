@@ -1,0 +1,128 @@
+"""The run's rosbag2: off with --no-bag, kept by an interrupted run, and published again by `swarm-ros replay`.
+
+(Every ROS run that test_ros_graph.py makes has its bag read back and compared with the
+run's files: see bagcheck.py.)
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from bagcheck import read_bag
+from test_ros_graph import _env, _shape_file
+
+from swarm_ros.wire import ROBOT_ROW
+
+PY = sys.executable
+
+
+def _run(out: Path, *extra: str) -> subprocess.CompletedProcess:
+    return subprocess.run([PY, "-m", "swarm_ros.cli", "run", "--processes", "1", "--out", str(out), "--quiet",
+                           "--no-recording", *extra], capture_output=True, text=True, timeout=240, env=_env())
+
+
+@pytest.fixture(scope="module")
+def ring_run(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("bagrun")
+    shape = _shape_file(d / "ring.txt", outer=12.5, hole=5)
+    out = d / "run"
+    done = _run(out, "--shape", str(shape), "--world-radius", "16", "--seed", "2")
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def test_no_bag_writes_none_and_leaves_nothing_beside_the_run(tmp_path):
+    shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
+    out = tmp_path / "run"
+    done = _run(out, "--shape", str(shape), "--world-radius", "16", "--no-bag")
+    assert done.returncode == 0, done.stderr
+    assert not (out / "bag").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ring.txt", "run"]
+
+
+def test_an_interrupted_run_keeps_a_readable_bag_of_its_ticks(tmp_path):
+    out = tmp_path / "run"
+    # the star under the local join rule: thousands of ticks, time to interrupt
+    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--seed", "5", "--rules", "local",
+                             "--processes", "2", "--out", str(out), "--quiet", "--no-recording"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not any(
+                ": tick 0" in (logs / "world.log").read_text(errors="replace")
+                for logs in tmp_path.glob(".run.logs-*") if (logs / "world.log").exists()):
+            time.sleep(0.05)
+        time.sleep(1.5)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    info, messages = read_bag(out / "bag")
+    with open(out / "metrics.csv", newline="") as f:
+        ticks = len(list(csv.reader(f))) - 1
+    assert ticks > 1 and len(messages["/swarm/robots"]) >= ticks
+    assert [m.header.stamp.sec for m in messages["/swarm/robots"]][:ticks] == list(range(ticks))
+    assert not list(tmp_path.glob(".run.bag-*")), "the hidden bag folder is gone"
+
+
+def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_path):
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from sensor_msgs.msg import PointCloud2
+    from std_msgs.msg import Int64MultiArray
+
+    from swarm_ros.nodes import messages as msgs
+    from swarm_ros.nodes.bag import reader_qos
+    from swarm_ros.nodes.dds import dds_defaults
+
+    domain = 180 + os.getpid() % 40
+    env = {**_env(), **dds_defaults()}
+    saved = {k: os.environ.get(k) for k in env if k in dds_defaults()}
+    os.environ.update(dds_defaults())  # this process's participant discovers as the replay's does
+    # (if this process made a participant before, Fast DDS kept its first profile: announcing every 3 s,
+    # so the replay waits 4 s for the listener to be matched before its first message)
+    context = Context()
+    rclpy.init(args=[], context=context, domain_id=domain)
+    try:
+        node = Node("replay_listener", context=context, start_parameter_services=False)
+        robots, metrics = [], []
+        node.create_subscription(PointCloud2, msgs.ROBOTS, robots.append, reader_qos(msgs.ROBOTS_QOS))
+        node.create_subscription(Int64MultiArray, msgs.METRICS, metrics.append, reader_qos(msgs.METRICS_QOS))
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        replay = subprocess.Popen([PY, "-m", "swarm_ros.cli", "replay", str(ring_run), "--domain-id", str(domain),
+                                   "--rate", "0.5", "--delay", "4", "--quiet"], stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True, env=env)
+        deadline = time.monotonic() + 60
+        _, bagged = read_bag(ring_run / "bag")
+        want = len(bagged["/swarm/metrics"])
+        while time.monotonic() < deadline and (replay.poll() is None or len(metrics) < want):
+            executor.spin_once(timeout_sec=0.05)
+        _, err = replay.communicate(timeout=30)
+        assert replay.returncode == 0, err
+    finally:
+        rclpy.shutdown(context=context)
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    with open(ring_run / "metrics.csv", newline="") as f:
+        table = list(csv.reader(f))[1:]
+    assert [[str(v) for v in m.data] for m in metrics] == table
+    assert [m.header.stamp.sec for m in robots] == list(range(len(table)))
+    first = np.frombuffer(bytes(robots[0].data), dtype=ROBOT_ROW)
+    assert first.size == len(np.frombuffer(bagged["/swarm/robots"][0].data, dtype=ROBOT_ROW))
