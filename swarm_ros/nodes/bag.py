@@ -23,17 +23,23 @@ from typing import TYPE_CHECKING
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import OccupancyGrid
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
+
 from ..output import BAG_DIR
 from . import messages as msgs
-#: The recorded topics: name -> (ROS type, QoS its publisher offers).
-TOPICS: dict[str, tuple[str, QoSProfile]] = {
-    msgs.ROBOTS: ("sensor_msgs/msg/PointCloud2", msgs.ROBOTS_QOS),
-    msgs.DECISIONS: ("sensor_msgs/msg/PointCloud2", msgs.DECISIONS_QOS),
-    msgs.OCCUPANCY: ("nav_msgs/msg/OccupancyGrid", msgs.LATCHED_QOS),
-    msgs.SHAPE: ("nav_msgs/msg/OccupancyGrid", msgs.LATCHED_QOS),
-    msgs.STATUS: ("diagnostic_msgs/msg/DiagnosticArray", msgs.LATCHED_QOS),
-    msgs.METRICS: ("std_msgs/msg/Int64MultiArray", msgs.METRICS_QOS),
-    msgs.CLOCK: ("rosgraph_msgs/msg/Clock", msgs.CLOCK_QOS),
+#: The recorded topics: name -> (message class, QoS its publisher offers).
+TOPICS: dict[str, tuple[type, QoSProfile]] = {
+    msgs.ROBOTS: (PointCloud2, msgs.ROBOTS_QOS),
+    msgs.DECISIONS: (PointCloud2, msgs.DECISIONS_QOS),
+    msgs.OCCUPANCY: (OccupancyGrid, msgs.LATCHED_QOS),
+    msgs.SHAPE: (OccupancyGrid, msgs.LATCHED_QOS),
+    msgs.STATUS: (DiagnosticArray, msgs.LATCHED_QOS),
+    msgs.METRICS: (Int64MultiArray, msgs.METRICS_QOS),
+    msgs.CLOCK: (Clock, msgs.CLOCK_QOS),
 }
 STORE = "ros2_jazzy"  #: the rosbags type store of the message definitions (rosbags.typesys.Stores)
 
@@ -51,6 +57,11 @@ def reader_qos(offered: QoSProfile) -> QoSProfile:
     return QoSProfile(history=offered.history, depth=max(offered.depth, READER_DEPTH), reliability=offered.reliability,
                       durability=offered.durability, liveliness=offered.liveliness,
                       liveliness_lease_duration=offered.liveliness_lease_duration)
+
+
+def type_name(kind: type) -> str:
+    """A message class's ROS type name, e.g. ``sensor_msgs/msg/PointCloud2``."""
+    return f"{kind.__module__.split('.')[0]}/msg/{kind.__name__}"
 
 
 def partial_bag(out: Path) -> Path:
@@ -134,7 +145,7 @@ class BagRecorder:
         self.writer = Writer(self.path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
         store = get_typestore(Stores(STORE))
-        self.connections = {topic: self.writer.add_connection(topic, kind, typestore=store,
+        self.connections = {topic: self.writer.add_connection(topic, type_name(kind), typestore=store,
                                                               offered_qos_profiles=[bag_qos(qos)])
                             for topic, (kind, qos) in TOPICS.items()}
         self.closed = False

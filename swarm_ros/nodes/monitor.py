@@ -22,9 +22,7 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
-from nav_msgs.msg import OccupancyGrid
 from rclpy.serialization import deserialize_message, serialize_message
-from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Empty, Int64MultiArray
 
 from ..config import RecordingOptions
@@ -40,9 +38,6 @@ from .params import make_node, read_parameters
 from .runner import EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, run_node
 
 ENGINE_NAME = "ros2"
-TYPES = {"sensor_msgs/msg/PointCloud2": PointCloud2, "nav_msgs/msg/OccupancyGrid": OccupancyGrid,
-         "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray, "std_msgs/msg/Int64MultiArray": Int64MultiArray,
-         "rosgraph_msgs/msg/Clock": Clock}
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
 _BAG_WAIT = 1.0  # seconds to wait, after the end, for the last tick's decisions to reach the bag
 
@@ -77,12 +72,13 @@ class MonitorNode:
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         # Serialized subscriptions: each message goes into the bag as it came, then to its handler.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
-        handlers = {msgs.ROBOTS: (PointCloud2, self._on_robots), msgs.STATUS: (DiagnosticArray, self._on_status),
-                    msgs.DECISIONS: (PointCloud2, self._on_decisions)}
-        for topic, (kind, qos) in TOPICS.items():
-            if (topic in handlers and topic != msgs.DECISIONS) or (own["bag"] and topic != msgs.METRICS):
-                node.create_subscription(TYPES[kind], topic, self._receiver(topic, *handlers.get(topic, (None, None))),
-                                         reader_qos(qos), raw=True)
+        # Robots and status always; with the bag, every recorded topic but the metrics (sent from here).
+        handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status, msgs.DECISIONS: self._on_decisions}
+        wanted = set(TOPICS) - {msgs.METRICS} if own["bag"] else {msgs.ROBOTS, msgs.STATUS}
+        for topic in wanted:
+            kind, qos = TOPICS[topic]
+            node.create_subscription(kind, topic, self._receiver(topic, kind, handlers.get(topic)), reader_qos(qos),
+                                     raw=True)
         # The heavy part last: discovery goes on meanwhile in the DDS threads, and once the world
         # sees this node it starts; the first ticks wait for the monitor in their history (depth 512).
         self.recorder = self.recording.open(self.rrd, self.shape, p)
