@@ -26,6 +26,7 @@ setup(
         "numpy>=2.0,<2.5",
         "numba>=0.61",
         "scipy>=1.13",
+        "connected-components-3d>=3.12",
         "matplotlib>=3.8",
         "pillow>=10",
         "PyYAML>=6",

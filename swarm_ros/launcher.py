@@ -348,7 +348,9 @@ class Launch:
         scanned_at = 0.0
         with Progress(self.domain, self.shape.patches, quiet=self.quiet) as progress:
             while True:
-                progress.spin(0.1)
+                # once the world's outcome is out no messages come to wake the spin: look at the
+                # processes every 10 ms, so the monitor's exit is seen as it happens
+                progress.spin(0.1 if progress.ended_at is None else 0.01)
                 self.ended_at = progress.ended_at
                 now = time.monotonic()
                 if now - scanned_at > 0.5:  # processes open their shared memory once, at start-up

@@ -11,9 +11,12 @@ simulation time (:data:`TICK_SECONDS`), so a message of tick t is stamped t s, 0
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from .core.rules import Decisions
+if TYPE_CHECKING:  # the rules load numba: readers of rows (the launcher's progress) do without it
+    from .core.rules import Decisions
 
 PATCH_METRES = 1.0
 TICK_SECONDS = 1
@@ -78,6 +81,7 @@ def decision_rows(decisions: Decisions) -> np.ndarray:
 
 def decisions_of(tick: int, rows: np.ndarray) -> Decisions:
     """The :class:`Decisions` a message of DECISION_ROW rows carries."""
+    from .core.rules import Decisions
     return Decisions(tick=tick, ids=rows["id"].astype(np.int64), claim=rows["claim"].astype(np.int64),
                      x=rows["x"] / PATCH_METRES, y=rows["y"] / PATCH_METRES,
                      heading=rows["heading"].astype(np.float64))

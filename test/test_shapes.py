@@ -4,11 +4,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from PIL import Image
+from scipy import ndimage
 
 from conftest import STUDY_PATCHES, disc_shape
 from swarm_ros.core import Shape, ShapeError, World, builtin_shapes
-from swarm_ros.core.shapes import read_text_grid, write_text_grid
+from swarm_ros.core.shapes import read_text_grid, regions, write_text_grid
 
 BUILTINS = sorted(STUDY_PATCHES)
 
@@ -171,3 +175,16 @@ def test_a_text_grid_may_start_with_a_utf8_byte_order_mark(tmp_path):
 def test_a_directory_given_as_a_shape_is_named_as_such(tmp_path):
     with pytest.raises(ShapeError, match="is a directory, not a shape file"):
         Shape.load(str(tmp_path), World())
+
+
+@settings(max_examples=200, deadline=None)
+@given(arrays(bool, st.tuples(st.integers(1, 24), st.integers(1, 24))), st.sampled_from([4, 8]))
+def test_regions_label_grids_as_scipy_ndimage_does(mask, connectivity):
+    """cc3d replaced ndimage.label (for its import time): the same regions, up to the labels' numbering."""
+    structure = np.ones((3, 3), bool) if connectivity == 8 else None
+    want, want_count = ndimage.label(mask, structure=structure)
+    got, count = regions(mask, connectivity)
+    assert count == want_count
+    assert np.array_equal(got == 0, want == 0)
+    pairs = {(int(a), int(b)) for a, b in zip(got[mask], want[mask])}
+    assert len(pairs) == count  # one ndimage label per cc3d label, and the other way round

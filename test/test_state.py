@@ -2,9 +2,13 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy import ndimage
 
 from swarm_ros.core import ParameterError, RobotState, Shape
-from swarm_ros.core.state import frontier_of, initial_state
+from swarm_ros.core.state import frontier_of, initial_state, near_any
 
 
 @pytest.fixture(scope="module")
@@ -58,3 +62,9 @@ def test_too_many_or_too_few_robots_are_rejected(star):
     with pytest.raises(ParameterError, match="at least 4"):
         initial_state(star, 3, 1)
     assert initial_state(star, 3969, 1).robots == 3969  # every free patch taken is fine
+
+
+@settings(max_examples=200, deadline=None)
+@given(arrays(bool, st.tuples(st.integers(1, 20), st.integers(1, 20))))
+def test_near_any_is_a_3x3_binary_dilation(grid):
+    assert np.array_equal(near_any(grid), ndimage.binary_dilation(grid, structure=np.ones((3, 3), bool)))

@@ -23,8 +23,8 @@ import numpy as np
 
 from .arbitration import resolve_kernel
 from .arbitration import vacate
-from .metrics import (END_EXTRAS, METRIC_COLUMNS, OUTCOME_OF_CODE, RUNNING, Outcome, TickMetrics, end_code,
-                      metric_values, run_summary)
+from . import metrics
+from .metrics import END_EXTRAS, METRIC_COLUMNS, OUTCOME_OF_CODE, RUNNING, Outcome, TickMetrics, run_summary
 from .params import RunParams
 from .rng import STREAM_FAIL, uniform_array
 from .rules import Decisions, decide_kernel, index_build, index_clear, patch_index
@@ -36,6 +36,9 @@ _MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState
 _WALKING = int(RobotState.WALKING)
 _SEPARATED = int(RobotState.SEPARATED)
 _STATIONARY_LOCALIZED = (int(RobotState.SEED), int(RobotState.LOCALIZED))
+# The metrics' arithmetic, compiled for the kernels below: the same functions metrics.py runs in Python.
+end_code = numba.njit(cache=True)(metrics.end_code)
+metric_values = numba.njit(cache=True)(metrics.metric_values)
 
 
 def failing_robots(params: RunParams) -> np.ndarray:

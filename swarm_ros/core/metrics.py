@@ -14,7 +14,6 @@ from collections.abc import Sequence
 from enum import Enum
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
 
@@ -57,14 +56,14 @@ class TickMetrics(NamedTuple):
 METRIC_COLUMNS: tuple[str, ...] = TickMetrics._fields
 
 
-@numba.njit(cache=True)
+# metric_values and end_code are plain Python here, so that a reader of metrics (the launcher's progress,
+# the monitor) needs no numba; engine.py compiles the same functions for its kernels.
 def metric_values(tick, localized, inside, outside, walking, separated, shape_patches):
     """The :class:`TickMetrics` fields, in order, from running counts (``localized`` includes seeds)."""
     return (tick, localized + separated, localized, inside, inside + outside + walking, shape_patches - localized,
             walking)
 
 
-@numba.njit(cache=True)
 def end_code(localized, moving, tick, shape_patches, robots, max_ticks):
     """The run's end code at this tick (``RUNNING`` if it goes on): complete, then incomplete, then timeout."""
     if localized == shape_patches:

@@ -7,7 +7,6 @@ from dataclasses import dataclass, fields
 from enum import IntEnum
 
 import numpy as np
-from scipy import ndimage
 
 from .errors import ParameterError
 from .rng import STREAM_PLACE_HEADING, STREAM_PLACE_X, STREAM_PLACE_Y, uniform_array
@@ -87,8 +86,23 @@ def frontier_of(shape: Shape, occupancy: np.ndarray) -> np.ndarray:
     """Recompute the frontier grid (flat bool) from scratch: empty shape patches next to a localized robot."""
     w = shape.world.size
     occupied = (occupancy >= 0).reshape(w, w)
-    near = ndimage.binary_dilation(occupied, structure=np.ones((3, 3), dtype=bool))
-    return (shape.mask & ~occupied & near).ravel()
+    return (shape.mask & ~occupied & near_any(occupied)).ravel()
+
+
+def near_any(grid: np.ndarray) -> np.ndarray:
+    """Cells of a 2-D bool grid that are set or have a set 8-neighbour (a 3 x 3 binary dilation).
+
+    Nine slices of the zero-padded grid, ORed: the same as ``scipy.ndimage.binary_dilation``
+    with a 3 x 3 structure (a test checks it), without the 0.3 s of CPU it takes every node
+    process to import ``scipy.ndimage``.
+    """
+    h, w = grid.shape
+    padded = np.pad(grid, 1)
+    near = np.zeros_like(grid)
+    for dy in range(3):
+        for dx in range(3):
+            near |= padded[dy:dy + h, dx:dx + w]
+    return near
 
 
 def frontier_blocks_of(frontier: np.ndarray, size: int) -> np.ndarray:
