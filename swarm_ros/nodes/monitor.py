@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import threading
 import time
 from pathlib import Path
 
@@ -35,10 +36,11 @@ from ..output import check_out_dir, default_run_dir, partial_recording, write_ru
 from . import messages as msgs
 from .bag import TOPICS, BagRecorder, partial_bag, reader_qos
 from .params import make_node, read_parameters
-from .runner import EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, run_node
+from .runner import EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, handle_missed, run_node
 
 ENGINE_NAME = "ros2"
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
+_MATCH_POLL = 0.005  # seconds between looks at the readers' matches, before the liveliness writer appears
 _BAG_WAIT = 1.0  # seconds to wait, after the end, for the last tick's decisions to reach the bag
 
 
@@ -69,24 +71,47 @@ class MonitorNode:
         self.decided_rows: dict[int, int] = {}  # tick -> decision rows seen (with the bag on)
 
         self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
-        self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
-        # Serialized subscriptions: each message goes into the bag as it came, then to its handler.
+        # Serialized subscriptions to every recorded topic but the metrics (sent from here), bag or no bag
+        # (messages.MONITOR_READS). Each message goes into the bag as it came, then to its handler.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
-        # Robots and status always; with the bag, every recorded topic but the metrics (sent from here).
         handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status, msgs.DECISIONS: self._on_decisions}
-        wanted = set(TOPICS) - {msgs.METRICS} if own["bag"] else {msgs.ROBOTS, msgs.STATUS}
-        for topic in wanted:
-            kind, qos = TOPICS[topic]
-            node.create_subscription(kind, topic, self._receiver(topic, kind, handlers.get(topic)), reader_qos(qos),
-                                     raw=True)
-        # The heavy part last: discovery goes on meanwhile in the DDS threads, and once the world
-        # sees this node it starts; the first ticks wait for the monitor in their history (depth 512).
+        self.readers = {topic: node.create_subscription(TOPICS[topic][0], topic,
+                                                        self._receiver(topic, TOPICS[topic][0], handlers.get(topic)),
+                                                        reader_qos(TOPICS[topic][1]), raw=True)
+                        for topic in msgs.MONITOR_READS}
+        # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
+        # readers have matched their writers (a thread watches, while the heavy part below loads): a reader
+        # that matches after a topic's first messages would miss them, or keep only the last.
+        self.alive = None
+        self.closing = threading.Event()
+        threading.Thread(target=self._announce_when_matched, name="monitor-ready", daemon=True).start()
+        self.bag_on = bool(own["bag"])
+
+    def load(self) -> None:
+        """The heavy part, once the endpoints exist: discovery goes on meanwhile in the DDS threads, and
+        once the world sees this node it starts; the first ticks wait for the monitor in their history."""
+        node, p = self.node, self.params
         self.recorder = self.recording.open(self.rrd, self.shape, p)
-        self.bag = BagRecorder(self.out) if own["bag"] else None
+        self.bag = BagRecorder(self.out) if self.bag_on else None
         self.replica = Replica(self.shape, p.robots)
         warm_up(self.shape, p)
         importlib.import_module("swarm_ros.plots")  # matplotlib: now, not at the end, when the run is written
         node.get_logger().info(f"monitor: writing to {self.out}")
+
+    def _readers_matched(self) -> bool:
+        """Every reader has matched a writer; the decisions reader, every batch's the graph shows."""
+        for topic, reader in self.readers.items():
+            matched = reader.get_publisher_count()
+            if matched < 1 or (topic == msgs.DECISIONS and matched < self.node.count_publishers(topic)):
+                return False
+        return True
+
+    def _announce_when_matched(self) -> None:
+        while not self.closing.wait(_MATCH_POLL):
+            if self._readers_matched():
+                self.alive = self.node.create_publisher(Empty, msgs.alive_topic(self.node.get_name()),
+                                                        msgs.ALIVE_QOS)
+                return
 
     def _receiver(self, topic: str, kind, handler):
         """The callback of a serialized subscription: into the bag, then (deserialized) to ``handler``."""
@@ -164,6 +189,10 @@ class MonitorNode:
             return
         if self.bag is not None and not self._bag_complete() and time.monotonic() - self.ended_at < _BAG_WAIT:
             return
+        missed = handle_missed(self.node)  # what the executor may not have handed over (runner.handle_missed)
+        if missed:
+            self.node.get_logger().warn(f"{missed} messages were still in the readers, not handed over by the "
+                                        f"executor; handled before writing the run")
         if self.world_outcome is not None and self.world_outcome != self.outcome.value:
             raise RunFailed(f"the world reports '{self.world_outcome}', the monitor counted "
                             f"'{self.outcome.value}' at tick {self.replica.tick}")
@@ -203,6 +232,7 @@ class MonitorNode:
         died (nobody is left to report to, and the node must be gone at once): the
         recording so far is kept, closed and marked, as ``<out_dir>.partial.rrd``.
         """
+        self.closing.set()
         if self.written is not None:
             return
         if self.bag is not None and not (code == EXIT_INTERRUPTED and self.rows and self.outcome is None):

@@ -59,7 +59,10 @@ class RobotBatchNode:
         hello.layout.dim[0].label = msgs.batch_label(node.get_name(), int(own["incarnation"]))
         announce.publish(hello)
         node.get_logger().info(f"{node.get_name()}: robots {format_ranges(self.ids)}")
-        warm_up(self.shape, self.params)  # while the world and the other batches are being discovered
+
+    def load(self) -> None:
+        """The heavy part, once the endpoints exist: the world and the other batches are discovered meanwhile."""
+        warm_up(self.shape, self.params)
 
     @staticmethod
     def _hosted(n: int, own: dict) -> np.ndarray:

@@ -106,7 +106,9 @@ class WorldNode:
         self.start_time: float | None = None  # time.monotonic() of tick 0
         self.startup_seconds = float("nan")
 
-        # the heavy part last: discovery of the peers goes on meanwhile, in the DDS threads
+    def load(self) -> None:
+        """The heavy part, once the endpoints exist: discovery of the peers goes on meanwhile."""
+        node, n = self.node, self.params.robots
         self.sim = Simulation(self.shape, self.params)
         warm_up(self.shape, self.params)
         self.shape_cells = msgs.shape_cells(self.shape)
@@ -195,11 +197,24 @@ class WorldNode:
         """
         if self.started or int((self.host[4:] >= 0).sum()) < self.params.robots - 4:
             return
-        if self.window and not self.monitor_alive and _MONITOR not in self.lost:
+        if self.window and not (self.monitor_alive and self._monitor_reads_all()) and _MONITOR not in self.lost:
             if time.monotonic() - self.created < _FIRST_STALL_S:
                 return
             self._lose_monitor(f"not seen within {_FIRST_STALL_S:g} s")
         self._start()
+
+    def _monitor_reads_all(self) -> bool:
+        """Whether this node has discovered the monitor's reader of every topic the run's bag records.
+
+        Discovery of a reader is when this node's writers match it; the batches, on the same
+        discovery traffic, match its reader of decisions at about the same time (and their
+        history, TRANSIENT_LOCAL, covers a late match). Waiting for these, not only for the
+        monitor's liveliness, keeps the bag whole from tick 0: a reader that matched after a
+        topic's first messages would miss them (``/clock``, volatile) or keep only the last
+        (``/swarm/occupancy``).
+        """
+        return all(any(info.node_name == _MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
+                   for topic in msgs.MONITOR_READS)
 
     def _start(self) -> None:
         self.started = True
