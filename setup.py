@@ -33,6 +33,7 @@ setup(
         "tqdm>=4.66",
         "rerun-sdk>=0.41,<0.42",
         "rosbags>=0.11,<0.12",
+        "dask[distributed]>=2024.1",
     ],
     extras_require={"test": ["pytest>=8", "hypothesis>=6.100", "mcap>=1.6", "mcap-ros2-support>=0.6"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.

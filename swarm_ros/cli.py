@@ -147,6 +147,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="engine of each run (default: inprocess; ros2 gives the same results, slower)")
     exp.add_argument("--processes", type=_positive_int, default=2,
                      help="with --engine ros2: robot-batch processes per run (default: 2)")
+    exp.add_argument("--executor", choices=("local", "dask"), default="local",
+                     help="where the runs go: local worker processes (default), or a Dask cluster")
+    exp.add_argument("--scheduler", metavar="ADDRESS",
+                     help="with --executor dask: a running scheduler, e.g. tcp://host:8786 (default: start a "
+                          "LocalCluster of --jobs workers)")
     exp.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
     exp.set_defaults(func=cmd_experiment)
 
@@ -332,13 +337,17 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_experiment(args: argparse.Namespace) -> int:
     from .experiment import default_jobs, run_experiment
 
+    if args.scheduler and args.executor != "dask":
+        raise SwarmError("--scheduler needs --executor dask")
     _interrupt_on_sigterm()
     start = time.perf_counter()
     jobs = args.jobs or (1 if args.engine == "ros2" else default_jobs())
     out = run_experiment(args.config, args.out, jobs=jobs, engine=args.engine, processes=args.processes,
-                         quiet=args.quiet)
+                         quiet=args.quiet, executor=args.executor, scheduler=args.scheduler)
     if not args.quiet:
-        print(f"experiment done in {time.perf_counter() - start:.1f} s ({jobs} jobs, engine {args.engine})")
+        where = f"Dask at {args.scheduler}" if args.scheduler else f"{jobs} jobs" + \
+            (" on a Dask LocalCluster" if args.executor == "dask" else "")
+        print(f"experiment done in {time.perf_counter() - start:.1f} s ({where}, engine {args.engine})")
         print(f"results  {out / 'results.csv'}\nstats    {out / 'stats.csv'}, {out / 'stats.md'}\n"
               f"figures  {out / 'figures'}")
     return 0

@@ -35,8 +35,10 @@ import numbers
 import os
 import sys
 import tempfile
+import uuid
 import zlib
 from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -59,6 +61,8 @@ ENGINES = ("inprocess", "ros2")
 _KEYS = ("name", "seed", "repetitions", "vision_radius", "rules", "join", "crowding", "steps", "max_ticks",
          "wiggle_deg", "world_radius", "fail_fraction", "fail_tick", "reference", "shapes")
 _REQUIRED = ("seed", "repetitions", "vision_radius", "shapes")
+EXECUTORS = ("local", "dask")  #: where the runs go: worker processes here, or a Dask cluster
+_CONNECT_TIMEOUT = "5s"  # to reach a Dask scheduler given by address
 
 
 @dataclass(frozen=True)
@@ -394,17 +398,123 @@ def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes
         pool.join()
 
 
+def run_spec(spec: RunSpec, engine: str, processes: int) -> dict:
+    """One run's results.csv row: what a Dask worker computes (it gets the run's coordinates only)."""
+    return run_ros2(spec, processes) if engine == "ros2" else run_inprocess(spec)
+
+
+def _ros_environment() -> dict[str, str]:
+    """What decides, on a worker's host, whether each of its ROS runs gets a ROS domain of its own."""
+    return {key: os.environ.get(key, "") for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")}
+
+
+def _check_ros_workers(client) -> None:
+    """Refuse the ros2 engine on workers where two runs could share a ROS domain.
+
+    A run takes a domain id of its own on its host (a lock file, as ``swarm-ros run``), and keeps
+    its discovery on that host; neither holds with ``ROS_DOMAIN_ID`` fixed, or with discovery
+    reaching other hosts (whose runs lock their ids independently).
+    """
+    for worker, env in sorted(client.run(_ros_environment).items()):
+        if env["ROS_DOMAIN_ID"]:
+            why = f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} fixes one ROS domain for all its runs"
+        elif env["ROS_AUTOMATIC_DISCOVERY_RANGE"] not in ("", "LOCALHOST"):
+            why = (f"ROS_AUTOMATIC_DISCOVERY_RANGE={env['ROS_AUTOMATIC_DISCOVERY_RANGE']} lets runs on different "
+                   f"hosts meet in one domain")
+        else:
+            continue
+        raise ExperimentError(f"--engine ros2 on Dask needs a ROS domain of its own for each run, but on worker "
+                              f"{worker} {why}; unset it where the workers start")
+
+
+@contextmanager
+def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> Iterator:
+    """A Dask client: of the scheduler at ``scheduler``, or of a LocalCluster of ``jobs``
+    single-threaded worker processes started here and stopped on the way out (also on Ctrl-C).
+
+    Raises:
+        ExperimentError: the scheduler cannot be reached, or the ros2 engine is refused
+            (:func:`_check_ros_workers`).
+    """
+    import logging
+
+    from dask.distributed import Client, LocalCluster
+
+    cluster = client = None
+    try:
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout=_CONNECT_TIMEOUT)
+            except (OSError, TimeoutError, ValueError) as exc:
+                text = str(exc).strip()
+                raise ExperimentError(f"cannot reach the Dask scheduler at {scheduler}: "
+                                      f"{text.splitlines()[0] if text else type(exc).__name__}") from None
+        else:
+            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                   silence_logs=logging.ERROR)
+            client = Client(cluster)
+        if not quiet:
+            where = scheduler or f"a LocalCluster of {jobs} workers"
+            print(f"swarm-ros: Dask: {where}, dashboard {client.dashboard_link}", file=sys.stderr, flush=True)
+        if engine == "ros2":
+            _check_ros_workers(client)
+        yield client
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def execute_dask(client, todo: list[RunSpec], engine: str, processes: int) -> Iterator[dict]:
+    """Yield the row of each run as it finishes, computed on ``client``'s cluster.
+
+    Only the runs' coordinates (:class:`RunSpec`) go to the workers and only rows come back.
+    A worker that dies loses nothing finished here: Dask runs its tasks again elsewhere.
+    Closing the generator (or an exception in the caller, e.g. Ctrl-C) cancels what is left.
+    """
+    from dask.distributed import as_completed
+
+    if not todo:
+        return
+    futures = [client.submit(run_spec, spec, engine, processes, pure=False,
+                             key=f"swarm_ros-run-{spec.shape}-{spec.robots}-{spec.vision_radius:g}-{spec.rules}-"
+                                 f"{spec.repetition}-{uuid.uuid4().hex[:8]}")
+               for spec in todo]
+    try:
+        for future in as_completed(futures):
+            yield future.result()
+    finally:
+        client.cancel(futures)
+
+
 def default_jobs() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, processes: int, quiet: bool) -> Path:
-    """Run (or resume) the experiment of ``config`` into ``out``; build its report; return ``out``."""
-    from tqdm import tqdm
+def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, processes: int, quiet: bool,
+                   executor: str = "local", scheduler: str | None = None) -> Path:
+    """Run (or resume) the experiment of ``config`` into ``out``; build its report; return ``out``.
 
+    ``executor`` "local" runs on ``jobs`` worker processes here; "dask" on the Dask cluster at
+    ``scheduler``, or on a LocalCluster of ``jobs`` workers. Either way only this process
+    appends to results.csv, a line per finished run, in the order they finish.
+    """
     from .report import build_report
 
     exp = load_experiment(config)
+    with ExitStack() as stack:  # a cluster is reached (or refused) before anything is written
+        client = stack.enter_context(dask_client(scheduler, jobs, engine, quiet)) if executor == "dask" else None
+        out = _run_grid(exp, config, out, client, jobs, engine, processes, quiet)
+    build_report(out)
+    return out
+
+
+def _run_grid(exp: Experiment, config: Path, out: Path | None, client, jobs: int, engine: str, processes: int,
+              quiet: bool) -> Path:
+    """Run what is not yet in results.csv, locally or (``client``) on Dask; return the experiment directory."""
+    from tqdm import tqdm
+
     out = out or EXPERIMENTS_DIR / exp.name
     prepare_out_dir(out, exp, config)
     if exp.reference:  # the report finds it in the directory, wherever the experiment file goes
@@ -421,7 +531,9 @@ def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, proce
     try:
         with tqdm(total=len(runs), initial=len(runs) - len(todo), unit="run", desc=exp.name, file=sys.stderr,
                   disable=True if quiet else None, dynamic_ncols=True) as bar:
-            for row in execute(todo, jobs, engine, processes):
+            rows = execute_dask(client, todo, engine, processes) if client is not None else \
+                execute(todo, jobs, engine, processes)
+            for row in rows:
                 results.append(row)
                 bar.update(1)
     except KeyboardInterrupt:
@@ -431,5 +543,4 @@ def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, proce
         raise
     finally:
         results.close()
-    build_report(out)
     return out

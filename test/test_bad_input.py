@@ -40,6 +40,7 @@ def make_fixtures(d: Path) -> None:
         "notes.csv": "a,b\n1,2\n",
         "window.yaml": "/world:\n  ros__parameters:\n    monitor_window: -5\n",
         "split.yaml": "/robot_batch:\n  ros__parameters:\n    batches: 3\n",
+        "okexp.yaml": EXPERIMENT.format(shape="star", sizes="1036"),
         "farexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("vision_radius: 1", "vision_radius: 40"),
     }
     for name, text in files.items():

@@ -1,0 +1,162 @@
+"""swarm-ros experiment --executor dask: the same rows as the local executor, resume, a killed
+worker, Ctrl-C, and what it refuses. One LocalCluster serves the tests that pass --scheduler."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+
+from swarm_ros.results import read_results
+
+SMALL = """\
+name: small
+seed: 3
+repetitions: {reps}
+vision_radius: 1
+rules: paper
+max_ticks: 20000
+shapes:
+  rectangle: [400, patches]
+  wrench: [500]
+"""
+
+
+def _experiment(tmp_path: Path, reps: int = 2) -> Path:
+    config = tmp_path / f"small{reps}.yaml"
+    config.write_text(SMALL.format(reps=reps), encoding="utf-8")
+    return config
+
+
+def _cli(*args: str, env: dict | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "swarm_ros.cli", "experiment", *args], capture_output=True,
+                          text=True, timeout=timeout, env=env)
+
+
+def _rows(results: Path) -> list[tuple]:
+    """results.csv as sorted rows, without the one column that may differ (wall time)."""
+    rows = read_results(results)
+    return sorted(tuple((k, v) for k, v in row.items() if k != "wall_seconds") for row in rows)
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    import logging
+
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                      silence_logs=logging.ERROR) as cluster:
+        yield cluster.scheduler_address
+
+
+@pytest.fixture(scope="module")
+def local_rows(tmp_path_factory) -> list[tuple]:
+    tmp = tmp_path_factory.mktemp("local")
+    done = _cli(str(_experiment(tmp)), "--out", str(tmp / "exp"), "--jobs", "2", "--quiet")
+    assert done.returncode == 0, done.stderr
+    return _rows(tmp / "exp" / "results.csv")
+
+
+def test_a_sweep_on_a_scheduler_gives_the_local_executors_rows(tmp_path, scheduler, local_rows):
+    out = tmp_path / "exp"
+    done = _cli(str(_experiment(tmp_path)), "--out", str(out), "--executor", "dask", "--scheduler", scheduler)
+    assert done.returncode == 0, done.stderr
+    assert f"Dask: {scheduler}, dashboard http" in done.stderr
+    assert len(local_rows) == 6 and _rows(out / "results.csv") == local_rows
+    assert (out / "stats.csv").exists()
+
+
+def test_rerunning_resumes_only_the_missing_runs(tmp_path, scheduler, local_rows):
+    out = tmp_path / "exp"
+    config = str(_experiment(tmp_path))
+    assert _cli(config, "--out", str(out), "--executor", "dask", "--scheduler", scheduler, "--quiet").returncode == 0
+    results = out / "results.csv"
+    lines = results.read_text(encoding="utf-8").splitlines(keepends=True)
+    results.write_text("".join(lines[:-2]), encoding="utf-8")  # as if stopped before the last two finished
+    done = _cli(config, "--out", str(out), "--executor", "dask", "--scheduler", scheduler)
+    assert done.returncode == 0, done.stderr
+    assert "resuming: 4 of 6 runs already in" in done.stderr
+    assert _rows(results) == local_rows  # each run once
+
+
+def _started(config: Path, out: Path, env: dict | None = None) -> subprocess.Popen:
+    """An experiment on its own LocalCluster (2 workers), in the background."""
+    return subprocess.Popen([sys.executable, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(out),
+                             "--executor", "dask", "--jobs", "2", "--quiet"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+
+
+def _wait_for_rows(results: Path, proc: subprocess.Popen, n: int = 1, limit: float = 60) -> None:
+    deadline = time.monotonic() + limit
+    while time.monotonic() < deadline and proc.poll() is None:
+        if results.exists() and len(results.read_text(encoding="utf-8").splitlines()) > n:  # header + n rows
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"no {n} finished runs within {limit} s: {proc.poll()}")
+
+
+def _workers(proc: subprocess.Popen) -> list[psutil.Process]:
+    """The LocalCluster's worker processes: the command's children that run a Dask worker."""
+    found = []
+    for child in psutil.Process(proc.pid).children(recursive=True):
+        try:
+            if "multiprocessing" in " ".join(child.cmdline()):
+                found.append(child)
+        except psutil.NoSuchProcess:
+            pass
+    return found
+
+
+def test_a_worker_killed_mid_sweep_loses_no_row(tmp_path):
+    config, out = _experiment(tmp_path, reps=4), tmp_path / "exp"
+    reference = tmp_path / "ref"
+    assert _cli(str(config), "--out", str(reference), "--jobs", "2", "--quiet").returncode == 0
+    proc = _started(config, out)
+    _wait_for_rows(out / "results.csv", proc)
+    workers = _workers(proc)
+    assert workers, "the LocalCluster's workers"
+    workers[0].kill()  # SIGKILL, mid-sweep: its run is lost with it, and Dask runs it again
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    assert _rows(out / "results.csv") == _rows(reference / "results.csv")
+
+
+def test_ctrl_c_keeps_the_finished_rows_and_leaves_no_worker(tmp_path, local_rows):
+    config, out = _experiment(tmp_path, reps=4), tmp_path / "exp"
+    proc = _started(config, out)
+    _wait_for_rows(out / "results.csv", proc)
+    workers = _workers(proc)
+    assert workers
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "run the same command again to resume" in stderr
+    rows = read_results(out / "results.csv")
+    assert 1 <= len(rows) < 12
+    gone, alive = psutil.wait_procs(workers, timeout=10)
+    assert not alive, [p.pid for p in alive]
+
+
+def test_the_ros2_engine_is_refused_where_runs_could_share_a_domain(tmp_path):
+    env = {**os.environ, "ROS_DOMAIN_ID": "7"}
+    done = _cli(str(_experiment(tmp_path)), "--out", str(tmp_path / "exp"), "--engine", "ros2", "--executor", "dask",
+                "--jobs", "1", "--quiet", env=env)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        done.stderr.strip()] and "--engine ros2 on Dask needs a ROS domain of its own for each run" in done.stderr
+    assert "ROS_DOMAIN_ID=7" in done.stderr and not (tmp_path / "exp").exists()  # refused before writing
+
+
+def test_an_unreachable_scheduler_is_one_line(tmp_path):
+    done = _cli(str(_experiment(tmp_path)), "--out", str(tmp_path / "exp"), "--executor", "dask",
+                "--scheduler", "tcp://127.0.0.1:9", "--quiet")
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in done.stderr
+    assert not (tmp_path / "exp").exists()
