@@ -16,8 +16,11 @@ reports the run's outcome.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.duration import Duration
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
@@ -29,6 +32,9 @@ from ..wire import PATCH_METRES, ROBOT_ROW, batch_ids, decision_rows, format_ran
 from . import messages as msgs
 from .params import make_node, read_parameters
 from .runner import RunFailed, apply_robots, run_node
+
+_LINGER = 2.0  # seconds, at most, for the last decisions to be acknowledged before exiting
+_NO_WAIT = Duration(seconds=0)
 
 RUNNING_STATES = ("starting", "running")
 
@@ -45,6 +51,7 @@ class RobotBatchNode:
         self.replica = Replica(self.shape, n)
         self.decider = Decider(self.shape, self.params)
         self.finished = False
+        self.ended_at: float | None = None  # time.monotonic() when the world's outcome arrived
 
         self.early: dict[int, PointCloud2] = {}  # rows that arrived before the snapshot, by tick
 
@@ -120,14 +127,19 @@ class RobotBatchNode:
             self.pub_decisions.publish(msgs.make_cloud(decision_rows(decisions), tick))
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        if msgs.status_values(msg).get("outcome", "running") not in RUNNING_STATES:
-            self.finished = True
+        if self.ended_at is None and msgs.status_values(msg).get("outcome", "running") not in RUNNING_STATES:
+            self.ended_at = time.monotonic()
 
     def close(self, code: int) -> None:
         """Nothing to release."""
 
     def poll(self) -> None:
-        pass
+        # After the outcome, exit once every reader has acknowledged this batch's decisions: the world
+        # has them all, but the monitor, which records them in the bag, may be far behind. A reader
+        # that died never acknowledges, so wait at most _LINGER.
+        if self.ended_at is not None and (self.pub_decisions.wait_for_all_acked(_NO_WAIT)
+                                          or time.monotonic() - self.ended_at > _LINGER):
+            self.finished = True
 
 
 def main(argv: list[str] | None = None) -> int:
