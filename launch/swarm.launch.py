@@ -15,7 +15,10 @@ import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
+from launch.actions import (DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler,
+                            SetEnvironmentVariable, TimerAction)
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
@@ -25,6 +28,7 @@ RUN_ARGUMENTS = ("shape", "robots", "vision_radius", "rules", "join", "crowding"
                  "wiggle_deg", "fail_fraction", "fail_tick", "world_radius")
 _INTEGERS = {"robots", "seed", "max_ticks", "fail_tick", "world_radius"}
 _FLOATS = {"vision_radius", "wiggle_deg", "fail_fraction"}
+MONITOR_GRACE = 30.0  # seconds the monitor has to write the run after the world's end (as swarm-ros run)
 
 
 def _value(name: str, text: str) -> object:
@@ -52,7 +56,36 @@ def graph(context) -> list:
               for k in range(processes)]
     nodes.append(Node(package=PACKAGE, executable="world", name="world", output="screen",
                       parameters=[params_file, run]))
-    return nodes
+    return nodes + end_of_run(world=nodes[-1], monitor=nodes[0])
+
+
+def end_of_run(world, monitor) -> list:
+    """Event handlers that end the launch with the run, as ``swarm-ros run`` ends.
+
+    Without them ``ros2 launch`` would never return: it respawns a robot batch whatever its
+    exit status, so the batches that leave after the outcome would come back and wait for a
+    world that is gone. The run is over when the monitor has written it (exit 0), when the
+    world fails (non-zero), or once both have exited (a monitor that died mid-run does not
+    stop the swarm: the world runs on without it, as under ``swarm-ros run``). A monitor
+    that has not written the run ``MONITOR_GRACE`` seconds after the world's end is given up on.
+    """
+    exited: dict[str, int] = {}
+
+    def on_exit(name: str):
+        def handle(event, context):
+            exited[name] = event.returncode
+            why = ", ".join(f"{node} exited with status {code}" for node, code in exited.items())
+            if (name == "monitor" and event.returncode == 0) or (name == "world" and event.returncode != 0) \
+                    or len(exited) == 2:
+                return [EmitEvent(event=Shutdown(reason=f"the run is over: {why}"))]
+            if name == "world":
+                return [TimerAction(period=MONITOR_GRACE, actions=[EmitEvent(event=Shutdown(
+                    reason=f"{why}, but the monitor did not write the run within {MONITOR_GRACE:g} s"))])]
+            return None
+        return handle
+
+    return [RegisterEventHandler(OnProcessExit(target_action=world, on_exit=on_exit("world"))),
+            RegisterEventHandler(OnProcessExit(target_action=monitor, on_exit=on_exit("monitor")))]
 
 
 def generate_launch_description() -> LaunchDescription:

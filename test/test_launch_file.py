@@ -18,6 +18,7 @@ import yaml
 
 from swarm_ros.config import Settings
 from swarm_ros.core import Shape
+from swarm_ros import launcher
 from swarm_ros.launcher import Launch
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -47,8 +48,13 @@ def _stub_modules(monkeypatch) -> None:
     launch = types.ModuleType("launch")
     launch.LaunchDescription = type("LaunchDescription", (_Action,), {})
     actions = types.ModuleType("launch.actions")
-    for name in ("DeclareLaunchArgument", "OpaqueFunction", "SetEnvironmentVariable"):
+    for name in ("DeclareLaunchArgument", "OpaqueFunction", "SetEnvironmentVariable", "EmitEvent",
+                 "RegisterEventHandler", "TimerAction"):
         setattr(actions, name, type(name, (_Action,), {}))
+    event_handlers = types.ModuleType("launch.event_handlers")
+    event_handlers.OnProcessExit = type("OnProcessExit", (_Action,), {})
+    events = types.ModuleType("launch.events")
+    events.Shutdown = type("Shutdown", (_Action,), {})
     substitutions = types.ModuleType("launch.substitutions")
     substitutions.LaunchConfiguration = _LaunchConfiguration
     launch_ros = types.ModuleType("launch_ros")
@@ -57,6 +63,7 @@ def _stub_modules(monkeypatch) -> None:
     index = types.ModuleType("ament_index_python.packages")
     index.get_package_share_directory = lambda package: str(ROOT)  # the source tree has config/, shapes/
     for name, module in {"launch": launch, "launch.actions": actions, "launch.substitutions": substitutions,
+                         "launch.event_handlers": event_handlers, "launch.events": events,
                          "launch_ros": launch_ros, "launch_ros.actions": ros_actions,
                          "ament_index_python.packages": index}.items():
         monkeypatch.setitem(sys.modules, name, module)
@@ -64,6 +71,12 @@ def _stub_modules(monkeypatch) -> None:
 
 def _launched(monkeypatch, **arguments: str) -> tuple[list, dict[str, str]]:
     """(the Node actions, the environment it sets) of the launch file for these launch arguments."""
+    nodes, env, _ = _launch_actions(monkeypatch, **arguments)
+    return nodes, env
+
+
+def _launch_actions(monkeypatch, **arguments: str) -> tuple[list, dict[str, str], list]:
+    """(the Node actions, the environment, the other actions of the graph) for these launch arguments."""
     _stub_modules(monkeypatch)
     for name in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "FASTRTPS_DEFAULT_PROFILES_FILE"):
         monkeypatch.delenv(name, raising=False)
@@ -78,7 +91,9 @@ def _launched(monkeypatch, **arguments: str) -> tuple[list, dict[str, str]]:
     env = {e.args[0]: e.args[1] for e in entities if type(e).__name__ == "SetEnvironmentVariable"}
     context = _Context({**declared, **arguments})
     (function,) = [e.kwargs["function"] for e in entities if type(e).__name__ == "OpaqueFunction"]
-    return function(context), env
+    graph = function(context)
+    nodes = [a for a in graph if type(a).__name__ == "Node"]
+    return nodes, env, [a for a in graph if type(a).__name__ != "Node"]
 
 
 def _effective(parameters: list, node: str) -> dict:
@@ -135,3 +150,55 @@ def test_the_launch_file_passes_a_parameter_file_and_an_output_directory(monkeyp
     by_name = {n.kwargs["name"]: _effective(n.kwargs["parameters"], n.kwargs["name"]) for n in nodes}
     assert {name: (v["shape"], v["seed"]) for name, v in by_name.items()} == dict.fromkeys(by_name, ("tyre", 5))
     assert by_name["monitor"]["record"] is False and by_name["monitor"]["out_dir"] == str(tmp_path / "out")
+
+
+class _Exited:
+    """A ProcessExited event, as far as the handlers read it."""
+
+    def __init__(self, returncode: int):
+        self.returncode = returncode
+
+
+def _end_handlers(monkeypatch) -> dict:
+    """{node name: the on_exit callable the launch file registers for it}."""
+    nodes, _, others = _launch_actions(monkeypatch)
+    assert {type(a).__name__ for a in others} == {"RegisterEventHandler"}
+    handlers = [a.args[0] for a in others]
+    assert {type(h).__name__ for h in handlers} == {"OnProcessExit"}
+    by_action = {id(n): n.kwargs["name"] for n in nodes}
+    return {by_action[id(h.kwargs["target_action"])]: h.kwargs["on_exit"] for h in handlers}
+
+
+def _shutdown(actions) -> str | None:
+    """The reason of the Shutdown these actions emit at once; None if they emit none."""
+    for action in actions or []:
+        if type(action).__name__ == "EmitEvent" and type(action.kwargs["event"]).__name__ == "Shutdown":
+            return action.kwargs["event"].kwargs["reason"]
+    return None
+
+
+@pytest.mark.parametrize("exits,ends_at", [
+    ([("world", 0), ("monitor", 0)], 1),  # the normal end: the monitor writes the run after the world's outcome
+    ([("monitor", 0)], 0),  # the monitor is done: the batches' respawns must not keep the launch going
+    ([("world", 1)], 0),  # the world failed: nobody will end the run
+    ([("monitor", 1), ("world", 0)], 1),  # the monitor died mid-run: the swarm runs to its end without it
+    ([("monitor", 1), ("world", 1)], 1),
+])
+def test_the_launch_ends_with_the_run(monkeypatch, exits, ends_at):
+    handlers = _end_handlers(monkeypatch)
+    assert set(handlers) == {"world", "monitor"}
+    for i, (name, code) in enumerate(exits):
+        actions = handlers[name](_Exited(code), None)
+        reason = _shutdown(actions)
+        assert (reason is not None) == (i == ends_at), (name, code, actions)
+        if reason is not None:
+            assert f"{name} exited with status {code}" in reason
+            return
+    raise AssertionError("the launch never ended")
+
+
+def test_a_monitor_that_never_writes_the_run_is_given_up_on(monkeypatch):
+    handlers = _end_handlers(monkeypatch)
+    (timer,) = handlers["world"](_Exited(0), None)
+    assert type(timer).__name__ == "TimerAction" and timer.kwargs["period"] == 3 * launcher._GRACE  # as swarm-ros run
+    assert "did not write the run" in _shutdown(timer.kwargs["actions"])

@@ -61,6 +61,12 @@ def two_hosts():
             _ip("netns", "del", ns)
 
 
+def _logs(tmp_path, procs) -> str:
+    """Each node's exit status (None: still running) and the end of its log, for a failure's message."""
+    return "\n".join(f"--- {name} (exit {proc.poll()}):\n{(tmp_path / f'{name}.log').read_text()[-1500:]}"
+                     for name, (proc, _) in procs.items())
+
+
 def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two_hosts, tmp_path):
     a, b, link = two_hosts
     shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
@@ -86,7 +92,11 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
                                              "--ros-args", "--params-file", str(params), "-r", f"__node:={name}",
                                              *extra], env=env, stdout=log, stderr=subprocess.STDOUT), log)
         monitor = procs["monitor"][0]
-        assert monitor.wait(timeout=180) == 0, (tmp_path / "monitor.log").read_text()[-2000:]
+        deadline = time.monotonic() + 120  # the run takes a few seconds; a node that failed ends the wait
+        while monitor.poll() is None and time.monotonic() < deadline and \
+                not any(p.poll() not in (None, 0) for p, _ in procs.values()):
+            time.sleep(0.1)
+        assert monitor.poll() == 0, _logs(tmp_path, procs)
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and any(p.poll() is None for p, _ in procs.values()):
             time.sleep(0.1)
@@ -96,7 +106,7 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
                 proc.kill()
             proc.wait()
             log.close()
-    assert {name: p.returncode for name, (p, _) in procs.items()} == dict.fromkeys(procs, 0)
+    assert {name: p.returncode for name, (p, _) in procs.items()} == dict.fromkeys(procs, 0), _logs(tmp_path, procs)
     world_log = (tmp_path / "world.log").read_text()
     assert "robot_batch_0 hosts" in world_log and "robot_batch_1 hosts" in world_log
     _assert_same_run(ref, run, launched=False)
