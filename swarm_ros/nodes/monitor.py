@@ -62,6 +62,7 @@ class MonitorNode:
         self.rows: list[tuple[int, ...]] = []
         self.outcome = None
         self.world_outcome: str | None = None
+        self.world_end: tuple[float, int] | None = None  # (time.monotonic(), tick) when the world's outcome came
         self.ended_at: float | None = None
         self.started_at: float | None = None
         self.finished = False
@@ -181,9 +182,12 @@ class MonitorNode:
         outcome = values.get("outcome")
         if outcome not in (None, "starting", "running"):
             self.world_outcome = outcome
+            if self.world_end is None:
+                self.world_end = (time.monotonic(), msgs.tick_of(msg.header))
 
     def poll(self) -> None:
         if self.outcome is None:
+            self._check_world_end()
             return
         if self.world_outcome is None and time.monotonic() - self.ended_at < _STATUS_WAIT:
             return
@@ -201,6 +205,18 @@ class MonitorNode:
             self.recorder.close()
         self._write()
         self.finished = True
+
+    def _check_world_end(self) -> None:
+        """Fail, rather than wait forever, when the world has ended the run but this node's count has not:
+        the robots' last messages never came (a process that is not under ``swarm-ros run`` or ``ros2
+        launch`` has nobody else to stop it)."""
+        if self.world_end is None or time.monotonic() - self.world_end[0] < _STATUS_WAIT:
+            return
+        handle_missed(self.node)
+        if self.outcome is None:
+            raise RunFailed(f"the world ended the run ('{self.world_outcome}') at tick {self.world_end[1]}, but the "
+                            f"robots' messages reached the monitor only up to tick {self.replica.tick} within "
+                            f"{_STATUS_WAIT:g} s")
 
     def _write(self, outcome: Outcome | None = None) -> None:
         outcome = outcome or self.outcome
