@@ -35,6 +35,7 @@ import numbers
 import os
 import sys
 import tempfile
+import threading
 import uuid
 import zlib
 from collections.abc import Iterator
@@ -63,6 +64,9 @@ _KEYS = ("name", "seed", "repetitions", "vision_radius", "rules", "join", "crowd
 _REQUIRED = ("seed", "repetitions", "vision_radius", "shapes")
 EXECUTORS = ("local", "dask")  #: where the runs go: worker processes here, or a Dask cluster
 _CONNECT_TIMEOUT = "5s"  # to reach a Dask scheduler given by address
+_TASK_SECONDS = 0.25  # seconds of runs a Dask task holds, once the runs' length is known (chunk_size)
+_MIN_TASK_SECONDS = 0.05  # ... and at least this, near the end of a sweep of short runs
+_IN_FLIGHT = 3  # Dask tasks submitted ahead per worker: it starts the next as soon as one ends
 
 
 @dataclass(frozen=True)
@@ -466,26 +470,71 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
             cluster.close()
 
 
+def run_specs(specs: list[RunSpec], engine: str, processes: int) -> list[dict]:
+    """The rows of a few runs, one after the other: one Dask task (see :func:`execute_dask`)."""
+    return [run_spec(spec, engine, processes) for spec in specs]
+
+
+def chunk_size(run_seconds: float | None, remaining: int, workers: int) -> int:
+    """How many runs the next Dask task holds, given the typical time of a run (None: not known yet).
+
+    One, until finished runs tell how long runs take. Then about ``_TASK_SECONDS`` of runs,
+    so that Dask's cost per task (a few milliseconds of scheduling and messages, much of a
+    12 ms paper-protocol run) is spread over many short runs, while runs that take seconds
+    (a ROS 2 graph, a large world) go one per task. Near the end, tasks shrink to half a
+    worker's share of what is left, so that the workers finish together, but not below
+    ``_MIN_TASK_SECONDS`` of runs.
+    """
+    if run_seconds is None or remaining <= 0:
+        return 1
+    run_seconds = max(run_seconds, 1e-6)
+    balanced = max(remaining // (2 * max(workers, 1)), math.ceil(_MIN_TASK_SECONDS / run_seconds))
+    return max(1, min(int(_TASK_SECONDS / run_seconds), balanced, remaining))
+
+
 def execute_dask(client, todo: list[RunSpec], engine: str, processes: int) -> Iterator[dict]:
     """Yield the row of each run as it finishes, computed on ``client``'s cluster.
 
     Only the runs' coordinates (:class:`RunSpec`) go to the workers and only rows come back.
-    A worker that dies loses nothing finished here: Dask runs its tasks again elsewhere.
-    Closing the generator (or an exception in the caller, e.g. Ctrl-C) cancels what is left.
+    Runs go out a few tasks at a time (``_IN_FLIGHT`` per worker), each holding
+    :func:`chunk_size` runs, judged by the median time of the last runs (a worker's first
+    run also loads the engine). A worker that dies loses nothing finished here: Dask runs
+    its tasks again elsewhere. Closing the generator (or an exception in the caller, e.g.
+    Ctrl-C) cancels what is left.
     """
+    from collections import deque
+
     from dask.distributed import as_completed
 
     if not todo:
         return
-    futures = [client.submit(run_spec, spec, engine, processes, pure=False,
-                             key=f"swarm_ros-run-{spec.shape}-{spec.robots}-{spec.vision_radius:g}-{spec.rules}-"
-                                 f"{spec.repetition}-{uuid.uuid4().hex[:8]}")
-               for spec in todo]
+    workers = max(1, len(client.scheduler_info().get("workers", {})))
+    queue = list(todo)
+    submitted = []
+    pending = as_completed()
+    recent: deque[float] = deque(maxlen=32)  # seconds of the last runs
+
+    def submit() -> None:
+        chunk = chunk_size(float(np.median(recent)) if recent else None, len(queue), workers)
+        specs = queue[:chunk]
+        del queue[:chunk]
+        future = client.submit(run_specs, specs, engine, processes, pure=False,
+                               key=f"swarm_ros-runs-{specs[0].shape}-{specs[0].robots}-{specs[0].repetition}-"
+                                   f"{len(specs)}-{uuid.uuid4().hex[:8]}")
+        submitted.append(future)
+        pending.add(future)
+
     try:
-        for future in as_completed(futures):
-            yield future.result()
+        while queue and len(submitted) < _IN_FLIGHT * workers:
+            submit()
+        for future in pending:
+            rows = future.result()
+            recent.extend(max(float(row["wall_seconds"]), 0.0) for row in rows)
+            while queue and pending.count() < _IN_FLIGHT * workers:
+                submit()
+            yield from rows
     finally:
-        client.cancel(futures)
+        client.cancel(submitted)
 
 
 def default_jobs() -> int:
@@ -503,10 +552,18 @@ def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, proce
     from .report import build_report
 
     exp = load_experiment(config)
+    closing = None
     with ExitStack() as stack:  # a cluster is reached (or refused) before anything is written
         client = stack.enter_context(dask_client(scheduler, jobs, engine, quiet)) if executor == "dask" else None
         out = _run_grid(exp, config, out, client, jobs, engine, processes, quiet)
-    build_report(out)
+        if client is not None:  # every run is in: the cluster stops while the report is built
+            closing = threading.Thread(target=stack.pop_all().close, name="swarm_ros-dask-close")
+            closing.start()
+    try:
+        build_report(out)
+    finally:
+        if closing is not None:
+            closing.join()
     return out
 
 

@@ -160,3 +160,48 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path):
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in done.stderr
     assert not (tmp_path / "exp").exists()
+
+
+@pytest.mark.parametrize("run_seconds,remaining,workers,expected", [
+    (None, 360, 2, 1),  # no run finished yet: one per task
+    (3.0, 360, 2, 1),  # runs of seconds (a ROS 2 graph): one per task
+    (0.0125, 300, 2, 20),  # 12.5 ms paper-protocol runs: a quarter of a second of runs per task
+    (0.0125, 12, 2, 4),  # near the end: no less than 50 ms of runs...
+    (0.0125, 3, 2, 3),  # ...but no more than is left
+    (0.0125, 60, 4, 7),  # half a worker's share of what is left
+])
+def test_a_dask_task_holds_a_quarter_second_of_runs_but_the_workers_finish_together(run_seconds, remaining,
+                                                                                  workers, expected):
+    from swarm_ros.experiment import chunk_size
+
+    assert chunk_size(run_seconds, remaining, workers) == expected
+
+
+def test_short_runs_share_dask_tasks_and_each_run_comes_back_once(tmp_path, scheduler):
+    from dask.distributed import Client, get_task_stream
+
+    from swarm_ros.experiment import execute_dask, load_experiment, run_inprocess
+
+    todo = load_experiment(_experiment(tmp_path, reps=15)).runs()
+    with Client(scheduler) as client, get_task_stream(client) as stream:
+        rows = list(execute_dask(client, todo, "inprocess", 2))
+    tasks = [t for t in stream.data if t["key"].startswith("swarm_ros-runs-")]
+    assert len(rows) == len(todo) == 45  # 3 (shape, group size) pairs x 15
+    assert len(tasks) < len(todo), "the short runs were sent one per task"
+    without_time = lambda row: {k: v for k, v in row.items() if k != "wall_seconds"}  # noqa: E731
+    assert sorted(map(str, map(without_time, rows))) == sorted(str(without_time(run_inprocess(s))) for s in todo)
+
+
+def test_the_ros2_engine_runs_on_dask_workers_and_equals_the_in_process_engine(tmp_path, scheduler):
+    config = tmp_path / "tiny.yaml"
+    config.write_text("name: tiny\nseed: 5\nrepetitions: 1\nvision_radius: 1\nrules: paper\nmax_ticks: 20000\n"
+                      "shapes:\n  rectangle: [120]\n", encoding="utf-8")
+    out, ref = tmp_path / "exp", tmp_path / "ref"
+    done = _cli(str(config), "--out", str(out), "--executor", "dask", "--scheduler", scheduler, "--engine", "ros2",
+                "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert _cli(str(config), "--out", str(ref), "--jobs", "1", "--quiet").returncode == 0
+    (ros,), (inprocess,) = read_results(out / "results.csv"), read_results(ref / "results.csv")
+    assert (ros["engine"], inprocess["engine"]) == ("ros2", "inprocess")
+    same = lambda row: {k: v for k, v in row.items() if k not in ("engine", "wall_seconds")}  # noqa: E731
+    assert same(ros) == same(inprocess)
