@@ -284,8 +284,9 @@ def result_row(spec: RunSpec, summary: dict) -> dict:
     return {col: row[col] for col in RESULT_COLUMNS}
 
 
-def prepare_out_dir(out: Path, exp: Experiment, config: Path) -> None:
+def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = True) -> None:
     """Create ``out`` for ``exp``, or check that it holds this same experiment (to resume it).
+    With ``create`` False, only check that it could.
 
     Raises:
         ExperimentError: ``out`` is a file, cannot be created, or holds another experiment.
@@ -305,6 +306,8 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path) -> None:
         return
     if out.exists() and any(out.iterdir()):
         raise ExperimentError(f"{out}: exists, is not empty and holds no {EXPERIMENT_FILE}; choose another --out")
+    if not create:
+        return
     try:
         out.mkdir(parents=True, exist_ok=True)
         part = out / f".{EXPERIMENT_FILE}.tmp"
@@ -552,6 +555,7 @@ def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, proce
     from .report import build_report
 
     exp = load_experiment(config)
+    prepare_out_dir(out or EXPERIMENTS_DIR / exp.name, exp, config, create=False)  # before a cluster starts
     closing = None
     with ExitStack() as stack:  # a cluster is reached (or refused) before anything is written
         client = stack.enter_context(dask_client(scheduler, jobs, engine, quiet)) if executor == "dask" else None

@@ -205,3 +205,13 @@ def test_the_ros2_engine_runs_on_dask_workers_and_equals_the_in_process_engine(t
     assert (ros["engine"], inprocess["engine"]) == ("ros2", "inprocess")
     same = lambda row: {k: v for k, v in row.items() if k not in ("engine", "wall_seconds")}  # noqa: E731
     assert same(ros) == same(inprocess)
+
+
+def test_an_output_directory_of_something_else_is_refused_before_a_cluster_starts(tmp_path):
+    out = tmp_path / "exp"
+    out.mkdir()
+    (out / "mine.txt").write_text("not the tool's", encoding="utf-8")
+    done = _cli(str(_experiment(tmp_path)), "--out", str(out), "--executor", "dask", "--jobs", "1")
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and "is not empty and holds no" in done.stderr  # no "Dask: ..." line
+    assert [p.name for p in out.iterdir()] == ["mine.txt"]
