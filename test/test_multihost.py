@@ -61,10 +61,13 @@ def two_hosts():
             _ip("netns", "del", ns)
 
 
-def _logs(tmp_path, procs) -> str:
-    """Each node's exit status (None: still running) and the end of its log, for a failure's message."""
-    return "\n".join(f"--- {name} (exit {proc.poll()}):\n{(tmp_path / f'{name}.log').read_text()[-1500:]}"
-                     for name, (proc, _) in procs.items())
+def _logs(tmp_path, procs, link: str) -> str:
+    """Each node's exit status (None: still running) and the end of its log, and the link's counters,
+    for a failure's message."""
+    logs = [f"--- {name} (exit {proc.poll()}):\n{(tmp_path / f'{name}.log').read_text()[-1500:]}"
+            for name, (proc, _) in procs.items()]
+    ns = "swarm_ros_a" + link.removeprefix("swra")
+    return "\n".join([*logs, f"--- {link} in {ns}:\n{_ip('-n', ns, '-s', 'link', 'show', 'dev', link).stdout}"])
 
 
 def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two_hosts, tmp_path):
@@ -78,9 +81,15 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
     params = tmp_path / "params.yaml"
     params.write_text(params_yaml(Settings(shape=str(shape), robots=440, seed=7, world_radius=16, rules="local"),
                                   {"world": {}, "monitor": {"out_dir": str(run)}}))
-    env = {**os.environ, "ROS_DOMAIN_ID": str(100 + os.getpid() % 100), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
-           "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",  # shared memory would bypass the namespaces
-           "HOME": str(tmp_path), "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"}
+    # The environment each host gets, whole: nothing ROS or DDS that an earlier test set in this process
+    # (a Fast DDS profile, a discovery range) leaks in. Discovery as docs/ros_graph.md says for several
+    # hosts: the subnet, plus each host's address as a static peer (unicast, should multicast be lost).
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "FASTRTPS_", "RMW_"))}
+    net = int(link.removeprefix("swra")) % 250
+    env.update({"ROS_DOMAIN_ID": str(100 + os.getpid() % 100), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+                "ROS_STATIC_PEERS": f"{SUBNET.format(net, 1)};{SUBNET.format(net, 2)}",
+                "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",  # shared memory would bypass the namespaces
+                "HOME": str(tmp_path), "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"})
     plan = [(a, "world", "world", []), (a, "monitor", "monitor", []),
             (b, "robot_batch_0", "robot_batch", ["-p", "batch:=0", "-p", "batches:=2"]),
             (b, "robot_batch_1", "robot_batch", ["-p", "batch:=1", "-p", "batches:=2"])]
@@ -96,7 +105,7 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
         while monitor.poll() is None and time.monotonic() < deadline and \
                 not any(p.poll() not in (None, 0) for p, _ in procs.values()):
             time.sleep(0.1)
-        assert monitor.poll() == 0, _logs(tmp_path, procs)
+        assert monitor.poll() == 0, _logs(tmp_path, procs, link)
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and any(p.poll() is None for p, _ in procs.values()):
             time.sleep(0.1)
@@ -106,7 +115,7 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
                 proc.kill()
             proc.wait()
             log.close()
-    assert {name: p.returncode for name, (p, _) in procs.items()} == dict.fromkeys(procs, 0), _logs(tmp_path, procs)
+    assert {name: p.returncode for name, (p, _) in procs.items()} == dict.fromkeys(procs, 0), _logs(tmp_path, procs, link)
     world_log = (tmp_path / "world.log").read_text()
     assert "robot_batch_0 hosts" in world_log and "robot_batch_1 hosts" in world_log
     _assert_same_run(ref, run, launched=False)
