@@ -75,6 +75,7 @@ def _assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
     startup, shutdown = b.pop("startup_seconds"), b.pop("shutdown_seconds")
     assert isinstance(startup, float) and 0 < startup < 120
     assert (isinstance(shutdown, float) and 0 < shutdown < 60) if launched else shutdown is None
+    assert b.pop("rejected_messages") == {"world": 0, "monitor": 0}  # an honest run: nothing dropped
     assert a == b
     assert (got / "final.png").stat().st_size > 0 and (got / "convergence.png").stat().st_size > 0
     assert_bag_holds_run(got)  # the rosbag2 of the run, read with another library than the one that wrote it

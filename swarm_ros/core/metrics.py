@@ -96,14 +96,15 @@ def convergence_rate(final: TickMetrics) -> float:
 def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, outcome: Outcome,
                 final: TickMetrics, separated: int, world_radius: int, wall_seconds: float,
                 losses: Sequence[tuple[int, int]] = (), restarts: Sequence[tuple[int, str]] = (),
-                overhead: dict[str, float | None] | None = None) -> dict:
+                overhead: dict[str, float | None] | None = None, rejected: dict[str, int] | None = None) -> dict:
     """The per-run record written to ``summary.json`` (and one row of an experiment).
 
     ``losses`` are (tick, robots) of robot removals (failures, lost processes);
     ``restarts`` are (tick, node) of robot-batch processes restarted (ROS graph only);
     ``unlocalized`` counts the robots still in the world that did not localize;
     ``overhead`` (ROS graph only) adds ``startup_seconds`` and ``shutdown_seconds``, placed
-    after ``wall_seconds``.
+    after ``wall_seconds``; ``rejected`` (ROS graph only) the messages the world and the
+    monitor dropped as malformed or illegal, as ``rejected_messages``.
     """
     robots = params["robots"]
     lost = sum(k for _, k in losses)
@@ -130,6 +131,7 @@ def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, ou
         "convergence_rate": round(convergence_rate(final), 6),
         "wall_seconds": round(wall_seconds, 3),
         **{key: None if value is None else round(value, 3) for key, value in (overhead or {}).items()},
+        **({"rejected_messages": dict(rejected)} if rejected is not None else {}),
         "fail_fraction": params.get("fail_fraction", 0.0),
         "fail_tick": params.get("fail_tick", 0),
         "lost_robots": lost,

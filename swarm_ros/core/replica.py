@@ -16,7 +16,7 @@ import numpy as np
 from .arbitration import occupy, vacate
 from .rules import patch_index
 from .shapes import Shape
-from .state import NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
+from .state import MOVING_STATES, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
 
 _SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
 _REMOVED = np.int8(RobotState.REMOVED)
@@ -128,6 +128,38 @@ class Replica:
             raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
                              f"localizes on a patch that is not an empty shape patch, or returns after removal")
         s.tick = tick
+
+    def inconsistent(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray) -> str | None:
+        """Why the rows of ``tick`` cannot be the world's next ones (None if they can), changing nothing.
+
+        Checks what :meth:`update` would otherwise find half-way through, leaving the replica
+        unusable: the tick follows the last one; tick 0 holds every robot once; after tick 0,
+        only robots that were moving change, except that any robot may be removed, once; a
+        robot that localizes does so on a frontier patch, one robot per patch. Ids and state
+        codes must be in range (:mod:`swarm_ros.nodes.guard` checks them first).
+        """
+        s = self.state
+        if tick != s.tick + 1:
+            return f"rows for tick {tick} after tick {s.tick}"
+        ids = np.asarray(ids, dtype=np.int64)
+        if tick == 0:
+            if ids.size != s.robots or not np.array_equal(np.sort(ids), np.arange(s.robots)):
+                return f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows"
+            return None
+        before, after = s.state[ids], np.asarray(state, dtype=np.int8)
+        moving = np.isin(before, MOVING_STATES)
+        if (~moving & ((after != _REMOVED) | (before == _REMOVED))).any():
+            return "a robot that was not moving changed"
+        joins = moving & ((after == _LOCALIZED) | (after == _SEED))
+        if joins.any():
+            px = np.floor(np.asarray(x)[joins] + 0.5).astype(np.int64) + self._radius
+            py = np.floor(np.asarray(y)[joins] + 0.5).astype(np.int64) + self._radius
+            if px.min() < 0 or py.min() < 0 or px.max() >= self._size or py.max() >= self._size:
+                return "a robot localizes outside the world"
+            p = py * self._size + px
+            if not s.frontier[p].all() or np.unique(p).size != p.size:
+                return "a robot localizes off the frontier, or two on one patch"
+        return None
 
     def moving_ids(self) -> np.ndarray:
         """Ids of the moving robots, ascending."""

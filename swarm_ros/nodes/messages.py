@@ -26,7 +26,8 @@ from ..wire import FRAME_ID, PATCH_METRES, TICK_SECONDS, check_fields, point_fie
 
 # -- topics -----------------------------------------------------------------------
 ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
-DECISIONS = "/swarm/decisions"  # robot batches -> world: their robots' decisions (PointCloud2)
+DECISIONS = "/swarm/decisions"  # world -> all: the decisions it applied in the tick (PointCloud2)
+BATCH_DECISIONS = "/swarm/decisions"  # /swarm/decisions/<batch>: one batch -> world: its robots' decisions
 BATCHES = "/swarm/batches"  # robot batches -> world: the ids each batch hosts (Int64MultiArray)
 SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
 OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
@@ -45,8 +46,8 @@ MONITOR_READS = (ROBOTS, DECISIONS, OCCUPANCY, SHAPE, STATUS, CLOCK)
 ROBOTS_DEPTH = 512
 ROBOTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ROBOTS_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: Several writers (one per batch) share these topics and a KEEP_LAST reader keeps ``depth``
-#: samples over all of them, so the depth must exceed the batches that can answer at once.
+#: A KEEP_LAST reader keeps ``depth`` samples over all the writers of a topic (the batches on
+#: /swarm/batches), so the depth must exceed the batches that can announce at once.
 DECISIONS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
 BATCHES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.RELIABLE,
@@ -72,6 +73,11 @@ def alive_topic(node_name: str) -> str:
 
 def snapshot_topic(node_name: str) -> str:
     return f"{SNAPSHOT}/{node_name}"
+
+
+def decisions_topic(node_name: str) -> str:
+    """A batch's own decisions topic: the world takes a robot's decisions only from its batch's topic."""
+    return f"{BATCH_DECISIONS}/{node_name}"
 
 
 def batch_label(node_name: str, incarnation: int) -> str:

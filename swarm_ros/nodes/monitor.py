@@ -32,11 +32,15 @@ from ..core.replica import Replica
 from ..core.state import STATE_COUNT, RobotState
 from ..core.warmup import warm_up
 from ..core.record import RunRecord
+from ..wire import DECISION_ROW
 from ..output import check_out_dir, default_run_dir, partial_recording, write_run
+from . import guard
 from . import messages as msgs
+from .guard import Rejected, Rejections
 from .bag import TOPICS, BagRecorder, partial_bag, reader_qos
 from .params import make_node, read_parameters
-from .runner import EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, handle_missed, run_node
+from .runner import (EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, checked_robots, handle_missed,
+                     run_node)
 
 ENGINE_NAME = "ros2"
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
@@ -70,6 +74,8 @@ class MonitorNode:
         self.restarts: list[tuple[int, str]] = []  # (tick, batch) from the world's status
         self.world_times: dict[str, float] = {}  # wall_seconds, startup_seconds from the world's status
         self.decided_rows: dict[int, int] = {}  # tick -> decision rows seen (with the bag on)
+        self.rejections = Rejections(node.get_logger())
+        self.world_rejected = 0  # messages the world dropped, from its status
 
         self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         # Serialized subscriptions to every recorded topic but the metrics (sent from here), bag or no bag
@@ -126,10 +132,17 @@ class MonitorNode:
     def _on_robots(self, msg: PointCloud2) -> None:
         if self.outcome is not None:
             return
+        removed_before = self.removed
+        try:
+            tick, rows = checked_robots(self.replica, msg, self.world_radius)
+            if tick <= self.replica.tick:
+                return  # again (a late-matched reader's history)
+            apply_robots(self.replica, tick, rows)
+        except Rejected as fault:
+            self.rejections.drop(msgs.ROBOTS, fault)
+            return
         if self.started_at is None:
             self.started_at = time.perf_counter()
-        removed_before = self.removed
-        tick = apply_robots(self.replica, msg)
         counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
         metrics = tick_metrics(tick, counts, self.shape.patches)
         self.rows.append(tuple(metrics))
@@ -150,8 +163,13 @@ class MonitorNode:
 
     def _on_decisions(self, msg: PointCloud2) -> None:
         """Count the decision rows of each tick (for the bag: see :meth:`_bag_complete`)."""
-        tick = msgs.tick_of(msg.header)
-        self.decided_rows[tick] = self.decided_rows.get(tick, 0) + msg.width
+        try:
+            tick = guard.tick_stamp(msg.header)
+            rows = guard.cloud(msg, DECISION_ROW, self.params.robots)
+        except Rejected as fault:
+            self.rejections.drop(msgs.DECISIONS, fault)
+            return
+        self.decided_rows[tick] = self.decided_rows.get(tick, 0) + rows.size
 
     def _bag_complete(self) -> bool:
         """Whether the last tick's decisions are in the bag: they may arrive after the world's last rows."""
@@ -179,6 +197,8 @@ class MonitorNode:
                 continue
             if math.isfinite(seconds) and seconds >= 0:
                 self.world_times[key] = seconds
+        if values.get("rejected_messages", "").isdigit():
+            self.world_rejected = max(self.world_rejected, int(values["rejected_messages"]))
         outcome = values.get("outcome")
         if outcome not in (None, "starting", "running"):
             self.world_outcome = outcome
@@ -230,7 +250,8 @@ class MonitorNode:
                               wall_seconds=self.world_times.get("wall_seconds", self.wall),
                               losses=self.losses, restarts=self.restarts,
                               overhead={"startup_seconds": self.world_times.get("startup_seconds"),
-                                        "shutdown_seconds": None})  # swarm-ros run fills it in at the end
+                                        "shutdown_seconds": None},  # swarm-ros run fills it in at the end
+                              rejected={"world": self.world_rejected, "monitor": self.rejections.total})
         record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
                            outcome=outcome, summary=summary)
         self.written = write_run(self.out, record, overwrite=self.overwrite,

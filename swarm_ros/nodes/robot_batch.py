@@ -4,8 +4,10 @@ It announces its robot ids on /swarm/batches. The world answers with a snapshot 
 every robot on /swarm/snapshot/<batch> (at tick 0, or at the current tick for a batch
 process that was restarted in the middle of a run); the batch builds its copy of the
 swarm's state from it (:class:`swarm_ros.core.replica.Replica`), follows the world's
-rows on /swarm/robots from there, and after each tick publishes, on /swarm/decisions,
-what each of its moving robots decided for the next one. A decision is a pure function
+rows on /swarm/robots from there, and after each tick publishes, on its own
+/swarm/decisions/<batch>, what each of its moving robots decided for the next one.
+Every message it takes is checked first (:mod:`swarm_ros.nodes.guard`, and
+:meth:`Replica.inconsistent` for rows); one that fails is dropped, counted and logged. A decision is a pure function
 of the state, the seed, the robot and the tick, so a restarted batch decides exactly
 as the one it replaces would have. A robot senses only what arrived on the topics, and the rule reads only the
 robots within its vision radius of the point ahead. It stops when /swarm/status
@@ -28,10 +30,12 @@ from ..core.errors import ParameterError
 from ..core.replica import Replica
 from ..core.rules import Decider
 from ..core.warmup import warm_up
-from ..wire import PATCH_METRES, ROBOT_ROW, batch_ids, decision_rows, format_ranges, parse_ranges
+from ..wire import PATCH_METRES, batch_ids, decision_rows, format_ranges, parse_ranges
+from . import guard
 from . import messages as msgs
+from .guard import Rejected, Rejections
 from .params import make_node, read_parameters
-from .runner import RunFailed, apply_robots, run_node
+from .runner import RunFailed, apply_robots, checked_robots, run_node
 
 _LINGER = 2.0  # seconds, at most, for the last decisions to be acknowledged before exiting
 _NO_WAIT = Duration(seconds=0)
@@ -53,9 +57,12 @@ class RobotBatchNode:
         self.finished = False
         self.ended_at: float | None = None  # time.monotonic() when the world's outcome arrived
 
-        self.early: dict[int, PointCloud2] = {}  # rows that arrived before the snapshot, by tick
+        self.early: dict[int, np.ndarray] = {}  # checked rows that arrived before the snapshot, by tick
+        self.radius = self.shape.world.radius
+        self.rejections = Rejections(node.get_logger())
 
-        self.pub_decisions = node.create_publisher(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)
+        self.pub_decisions = node.create_publisher(PointCloud2, msgs.decisions_topic(node.get_name()),
+                                                   msgs.DECISIONS_QOS)
         node.create_subscription(PointCloud2, msgs.snapshot_topic(node.get_name()), self._on_snapshot,
                                  msgs.LATCHED_QOS)
         node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
@@ -89,33 +96,52 @@ class RobotBatchNode:
 
     def _on_snapshot(self, msg: PointCloud2) -> None:
         """Every robot's row at some tick: start (again) from it if it is newer than what we hold."""
-        tick = msgs.tick_of(msg.header)
-        if tick <= self.replica.tick:
-            return  # an older snapshot (latched from an earlier restart of this batch)
         try:
-            rows = msgs.cloud_rows(msg, ROBOT_ROW)
+            tick = guard.tick_stamp(msg.header)
+            if tick <= self.replica.tick:
+                return  # an older snapshot (latched from an earlier restart of this batch)
+            rows = guard.robot_rows(msg, self.params.robots, self.radius)
+            if rows.size != self.params.robots:
+                raise Rejected("incomplete snapshot", f"{rows.size} rows for {self.params.robots} robots")
+        except Rejected as fault:
+            self.rejections.drop(msgs.snapshot_topic(self.node.get_name()), fault)
+            return
+        try:
             self.replica.load(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES,
                               rows["heading"])
         except ValueError as exc:
             raise RunFailed(f"snapshot of tick {tick}: {exc}") from None
         while self.replica.tick + 1 in self.early:  # rows published after the snapshot was taken
-            apply_robots(self.replica, self.early.pop(self.replica.tick + 1))
+            self._apply(self.replica.tick + 1, self.early.pop(self.replica.tick + 1))
         self.early.clear()
         self._decide()
 
     def _on_robots(self, msg: PointCloud2) -> None:
-        tick = msgs.tick_of(msg.header)
+        try:
+            tick, rows = checked_robots(self.replica, msg, self.radius)
+        except Rejected as fault:
+            self.rejections.drop(msgs.ROBOTS, fault)
+            return
         if tick <= self.replica.tick:
             return  # history from before the snapshot
         if tick > self.replica.tick + 1:
             # No snapshot yet, or an old one (latched from before a restart): keep the newest rows
             # until the world's answer to our announcement, a snapshot of the current tick, comes.
-            self.early[tick] = msg
+            self.early[tick] = rows
             if len(self.early) > msgs.ROBOTS_DEPTH:
                 del self.early[min(self.early)]
             return
-        apply_robots(self.replica, msg)
-        self._decide()
+        if self._apply(tick, rows):
+            self._decide()
+
+    def _apply(self, tick: int, rows) -> bool:
+        """Apply checked rows to the replica; False (and counted) if they cannot be the world's."""
+        try:
+            apply_robots(self.replica, tick, rows)
+        except Rejected as fault:
+            self.rejections.drop(msgs.ROBOTS, fault)
+            return False
+        return True
 
     def _decide(self) -> None:
         """Publish the decisions of this batch's moving robots for the tick after the replica's."""

@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable
 from typing import Protocol
 
+import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
@@ -25,8 +26,8 @@ from sensor_msgs.msg import PointCloud2
 from ..core.errors import SwarmError
 from ..core.replica import Replica
 from ..signals import PARENT_ENV, StopFlag, process_age
-from ..wire import PATCH_METRES, ROBOT_ROW
-from . import messages as msgs
+from ..wire import PATCH_METRES
+from . import guard
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_ORPHANED = 0, 1, 2, 130, 129
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
@@ -51,20 +52,31 @@ class SwarmNode(Protocol):
         """Called once on the way out with the exit code (release files, mark a stopped run)."""
 
 
-def apply_robots(replica: Replica, msg: PointCloud2) -> int:
-    """Apply a /swarm/robots message to ``replica``; return its tick.
+def checked_robots(replica: Replica, msg: PointCloud2, radius: int) -> tuple[int, np.ndarray]:
+    """(tick, rows) of a /swarm/robots message, checked as a message (:func:`guard.robot_rows`).
 
     Raises:
-        RunFailed: the message does not follow the replica's last tick, or is malformed.
+        Rejected: malformed, out of range or outside the world.
     """
-    tick = msgs.tick_of(msg.header)
+    tick = guard.tick_stamp(msg.header)
+    return tick, guard.robot_rows(msg, replica.state.robots, radius)
+
+
+def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
+    """Apply checked rows of ``tick`` (:func:`checked_robots`) to ``replica``.
+
+    Raises:
+        Rejected: they cannot be the world's next rows (:meth:`Replica.inconsistent`); the
+            replica is unchanged.
+    """
+    x, y = rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES
+    why = replica.inconsistent(tick, rows["id"], rows["state"], x, y)
+    if why is not None:
+        raise guard.Rejected("inconsistent rows", why)
     try:
-        rows = msgs.cloud_rows(msg, ROBOT_ROW)
-        replica.update(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES,
-                       rows["heading"])
-    except ValueError as exc:
+        replica.update(tick, rows["id"], rows["state"], x, y, rows["heading"])
+    except ValueError as exc:  # checked above: a gap in those checks
         raise RunFailed(str(exc)) from None
-    return tick
 
 
 _PR_SET_PDEATHSIG = 1

@@ -1,10 +1,16 @@
 """The world node: owns the shape and the patch occupancy, settles claims, drives the lockstep ticks.
 
 A tick: the world has published the rows of tick t on /swarm/robots; every robot batch
-decides for its moving robots and publishes on /swarm/decisions; once the decisions of
-every moving robot are in, the world applies them with the in-process engine's own
-code (:meth:`swarm_ros.core.engine.Simulation.apply`), checks for the end, and publishes
-the rows of tick t + 1, the occupancy if a robot joined, and the clock. It starts when
+decides for its moving robots and publishes on its own /swarm/decisions/<batch>; once the
+decisions of every moving robot are in, the world applies them with the in-process
+engine's own code (:meth:`swarm_ros.core.engine.Simulation.apply`), checks for the end,
+and publishes what it applied on /swarm/decisions, the rows of tick t + 1, the occupancy
+if a robot joined, and the clock.
+
+Every message is checked before use (:mod:`swarm_ros.nodes.guard`): a decision counts
+only from the batch hosting its robot, for a moving robot, once per robot and tick, for
+the tick being decided, and within the rule set's bounds (:mod:`swarm_ros.core.legality`).
+A message that fails is dropped whole and counted (``rejected_messages`` on /swarm/status). It starts when
 the robot batches' announcements on /swarm/batches cover every robot, sends each batch
 a snapshot of every robot to start from, and never runs more than ``monitor_window``
 ticks ahead of the monitor's /swarm/metrics.
@@ -37,13 +43,16 @@ from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallb
 from std_msgs.msg import Empty, Int64MultiArray
 
 from ..core.engine import Simulation
+from ..core.legality import illegal
 from ..core.metrics import METRIC_COLUMNS, Outcome
 from ..core.rules import Decisions
 from ..core.state import MOVING_STATES, RobotState
 from ..core.warmup import warm_up
 from ..signals import PARENT_ENV, process_age
-from ..wire import DECISION_ROW, decisions_of, robot_rows
+from ..wire import DECISION_ROW, decision_rows, decisions_of, robot_rows
+from . import guard
 from . import messages as msgs
+from .guard import Rejected, Rejections
 from .params import make_node, read_parameters
 from .runner import RunFailed, run_node
 
@@ -67,13 +76,14 @@ class WorldNode:
         self.max_restarts = int(own["max_restarts"])
         self.restart_timeout = float(own["restart_timeout"])
         self.finished = False
+        self.rejections = Rejections(node.get_logger())
 
         self.pub_robots = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
         self.pub_shape = node.create_publisher(msgs.OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
         self.pub_occupancy = node.create_publisher(msgs.OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
         self.pub_status = node.create_publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
         self.pub_clock = node.create_publisher(msgs.Clock, msgs.CLOCK, msgs.CLOCK_QOS)
-        node.create_subscription(PointCloud2, msgs.DECISIONS, self._on_decisions, msgs.DECISIONS_QOS)
+        self.pub_decisions = node.create_publisher(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
         node.create_subscription(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
         node.create_subscription(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
         self._watch(msgs.alive_topic(_MONITOR), self._on_monitor_liveliness)
@@ -86,7 +96,7 @@ class WorldNode:
         self.parts: list[np.ndarray] = []
         self.received = 0
         self.monitor_tick = -1
-        self.queued: deque = deque()  # (tick, rows message, joined) held while the monitor is behind
+        self.queued: deque = deque()  # (tick, rows, joined, decisions applied) held while the monitor is behind
         self.ended_at: float | None = None
         self.lost: list[str] = []  # batches (and the monitor) whose liveliness lapsed
         self.progress_at = time.monotonic()  # the last tick published or metrics received
@@ -120,23 +130,24 @@ class WorldNode:
 
     # -- start --------------------------------------------------------------------
     def _on_batch(self, msg: Int64MultiArray) -> None:
-        name, incarnation = msgs.parse_batch_label(msg.layout.dim[0].label if msg.layout.dim else "")
-        ids = np.unique(np.asarray(msg.data, dtype=np.int64))
+        try:
+            name, incarnation, ids = guard.announcement(msg, self.params.robots)
+            if name not in self.batch_names and not self.started:
+                taken = ids[self.host[ids] >= 0]
+                if taken.size:
+                    raise Rejected("robots of another batch", f"'{name}' names robot {taken[0]}, hosted by "
+                                                              f"{self.batch_names[self.host[taken[0]]]}")
+        except Rejected as fault:
+            self.rejections.drop(msgs.BATCHES, fault)
+            return
         n = self.params.robots
         log = self.node.get_logger()
-        if not name or ids.size == 0 or ids.min() < 4 or ids.max() >= n:
-            log.warn(f"ignored an announcement of '{name}': no name, no robots or robots outside 4..{n - 1}")
-            return
         if name in self.batch_names:
             self._on_reannounce(self.batch_names.index(name), ids, incarnation)
             return
         if self.started:
             log.warn(f"ignored an announcement of '{name}' after the start: every robot is hosted already")
             return
-        taken = ids[self.host[ids] >= 0]
-        if taken.size:
-            other = self.batch_names[self.host[taken[0]]]
-            raise RunFailed(f"robot {taken[0]} is hosted by both {other} and {name}")
         k = len(self.batch_names)
         self.host[ids] = k
         self.batch_names.append(name)
@@ -144,6 +155,9 @@ class WorldNode:
         self.incarnations.append(0)
         self.snapshot_pubs.append(self.node.create_publisher(PointCloud2, msgs.snapshot_topic(name),
                                                              msgs.LATCHED_QOS))
+        topic = msgs.decisions_topic(name)
+        self.node.create_subscription(PointCloud2, topic, lambda m, k=k, t=topic: self._on_decisions(k, t, m),
+                                      msgs.DECISIONS_QOS)
         self._watch(msgs.alive_topic(name), lambda info, k=k: self._on_batch_liveliness(k, info))
         covered = int((self.host[4:] >= 0).sum())
         log.info(f"{name} hosts {ids.size} robots; {covered}/{n - 4} covered")
@@ -166,7 +180,8 @@ class WorldNode:
                 self.respawned[k] = ids
                 return
         if not np.array_equal(ids, np.flatnonzero(self.host == k)):
-            log.warn(f"ignored a new announcement of {name}: it names other robots than before")
+            self.rejections.drop(msgs.BATCHES, Rejected("robots of another batch",
+                                                        f"'{name}' announced other robots than before"))
             return
         if k in self.removed_batches or self.sim.done:
             log.warn(f"ignored a new announcement of {name}: its robots are removed or the run is over")
@@ -228,22 +243,20 @@ class WorldNode:
         self._emit(0, msgs.make_cloud(robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading), 0))
 
     # -- ticks --------------------------------------------------------------------
-    def _on_decisions(self, msg: PointCloud2) -> None:
-        tick = msgs.tick_of(msg.header)
-        if not self.started or self.sim.done or tick != self.sim.tick + 1:
-            return  # a batch answering a tick that is over (e.g. after the end)
-        rows = msgs.cloud_rows(msg, DECISION_ROW)
-        ids = rows["id"].astype(np.int64)
-        keep = ids < self.params.robots
-        keep[keep] = np.isin(self.sim.state.state[ids[keep]], MOVING_STATES) & ~self.decided[ids[keep]]
-        if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
-            keep &= ~np.isin(ids, self.pending)
-        # one decision per robot per tick: a restarted batch may send again what its predecessor sent
-        first = np.zeros(ids.size, dtype=bool)
-        first[np.unique(ids, return_index=True)[1]] = True
-        rows = rows[keep & first]
-        if not rows.size:
+    def _on_decisions(self, k: int, topic: str, msg: PointCloud2) -> None:
+        """Batch ``k``'s decisions (on ``topic``, its own): used whole once checked, or dropped and counted."""
+        if self.started and self.sim.done:
+            return  # answers to the tick after the last: the run is over
+        try:
+            rows = self._checked_decisions(k, msg)
+        except Rejected as fault:
+            self.rejections.drop(topic, fault)
             return
+        if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
+            rows = rows[~np.isin(rows["id"], self.pending)]
+            if not rows.size:
+                return
+        tick = self.sim.tick + 1
         self.decided[rows["id"]] = True
         if self.down_since:  # a batch deciding is not lost
             for k in np.unique(self.host[rows["id"]]).tolist():
@@ -251,6 +264,40 @@ class WorldNode:
         self.parts.append(rows)
         self.received += rows.size
         self._maybe_advance(tick)
+
+    def _checked_decisions(self, k: int, msg: PointCloud2) -> np.ndarray:
+        """The rows of a decisions message from batch ``k``, if the rules allow every one of them.
+
+        Raises:
+            Rejected: before tick 0, a tick other than the one being decided, a malformed
+                cloud, a robot out of range, repeated, not hosted by batch ``k``, not moving
+                or decided already this tick, or a decision out of the rules' bounds.
+        """
+        if not self.started:
+            raise Rejected("before tick 0")
+        tick, now = guard.tick_stamp(msg.header), self.sim.tick
+        if tick <= now:
+            raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {now + 1}")
+        if tick > now + 1:
+            raise Rejected("future tick", f"tick {tick}; the world is deciding tick {now + 1}")
+        rows = guard.cloud(msg, DECISION_ROW, self.params.robots)
+        ids = rows["id"].astype(np.int64)
+        guard.ids_in_range(ids, 0, self.params.robots)
+        if (self.host[ids] != k).any():
+            i = int(ids[self.host[ids] != k][0])
+            raise Rejected("not the batch's robot", f"robot {i} is not hosted by {self.batch_names[k]}")
+        s = self.sim.state
+        if not np.isin(s.state[ids], MOVING_STATES).all():
+            raise Rejected("robot not moving", f"robot {int(ids[~np.isin(s.state[ids], MOVING_STATES)][0])}")
+        if self.decided[ids].any():
+            raise Rejected("decided already", f"robot {int(ids[self.decided[ids]][0])} at tick {tick}")
+        bad = illegal(self.params, self.shape.world.radius, s.frontier, s.x[ids], s.y[ids],
+                      rows["claim"].astype(np.int64), rows["x"], rows["y"], rows["heading"])
+        if bad.any():
+            row = rows[int(np.flatnonzero(bad)[0])]
+            raise Rejected("illegal decision", f"robot {int(row['id'])}: claim {int(row['claim'])}, pose "
+                                               f"({row['x']!r}, {row['y']!r}, {row['heading']!r})")
+        return rows
 
     def _maybe_advance(self, tick: int) -> None:
         """Apply the tick once every moving robot that is not being removed has decided."""
@@ -273,6 +320,7 @@ class WorldNode:
                                    x=s.x[standing].copy(), y=s.y[standing].copy(),
                                    heading=s.heading[standing].copy()))
         decisions = Decisions.concatenate(parts)
+        applied = msgs.make_cloud(decision_rows(decisions), tick)
         self.parts, self.received = [], 0
         self.decided[:] = False
         localized_before = self.sim.metrics.localized
@@ -287,16 +335,21 @@ class WorldNode:
         s = self.sim.state
         ids = np.union1d(self.sim.last_joins()[0], self.sim.last_removed)  # deciders and failed robots changed
         self._emit(tick, msgs.make_cloud(robot_rows(ids, s.state, s.x, s.y, s.heading), tick),
-                   joined=self.sim.metrics.localized != localized_before or self.sim.last_removed.size > 0)
+                   joined=self.sim.metrics.localized != localized_before or self.sim.last_removed.size > 0,
+                   decisions=applied)
 
-    def _emit(self, tick: int, robots_msg: PointCloud2, joined: bool = False) -> None:
-        """Publish a tick now, or queue it while the monitor is more than ``monitor_window`` ticks behind."""
-        self.queued.append((tick, robots_msg, joined))
+    def _emit(self, tick: int, robots_msg: PointCloud2, joined: bool = False,
+              decisions: PointCloud2 | None = None) -> None:
+        """Publish a tick (with the decisions applied in it) now, or queue it while the monitor is more than
+        ``monitor_window`` ticks behind."""
+        self.queued.append((tick, robots_msg, joined, decisions))
         self._flush()
 
     def _flush(self) -> None:
         while self.queued and (self.window == 0 or self.queued[0][0] - self.monitor_tick <= self.window):
-            tick, robots_msg, joined = self.queued.popleft()
+            tick, robots_msg, joined, decisions = self.queued.popleft()
+            if decisions is not None:
+                self.pub_decisions.publish(decisions)
             self.pub_robots.publish(robots_msg)
             self.progress_at = time.monotonic()
             if joined:
@@ -348,6 +401,8 @@ class WorldNode:
             values["separated"] = int((s.state == RobotState.SEPARATED).sum())
             values["wall_seconds"] = f"{self.ended_at - self.start_time:.3f}"
         values["restarts"] = msgs.restarts_text(self.restarts)
+        values["rejected_messages"] = self.rejections.total
+        values["rejected"] = self.rejections.text()
         values["lost"] = ",".join(self.lost)
         values["waiting_for"] = ",".join(self.batch_names[k] for k in sorted(self.down_since))
         self.pub_status.publish(msgs.status_message(tick, outcome, message, level, values))
@@ -355,7 +410,11 @@ class WorldNode:
             self._publish_occupancy()
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:
-        tick = msgs.metrics_of(msg).get("tick", -1)
+        try:
+            tick = guard.metrics_tick(msg, METRIC_COLUMNS, self.published_tick)
+        except Rejected as fault:
+            self.rejections.drop(msgs.METRICS, fault)
+            return
         if tick > self.monitor_tick:
             self.monitor_tick = tick
             self.progress_at = time.monotonic()
@@ -472,8 +531,9 @@ class WorldNode:
             self._publish_status()
         if not self.started and now - self.created > self.start_timeout:
             covered = int((self.host[4:] >= 0).sum())
+            dropped = f"; dropped: {self.rejections.text()}" if self.rejections.total else ""
             raise RunFailed(f"robot batches cover {covered} of {self.params.robots - 4} robots after "
-                            f"{self.start_timeout:g} s (start_timeout)")
+                            f"{self.start_timeout:g} s (start_timeout){dropped}")
         if not self.started:
             self._maybe_start()
         if self.ended_at is not None:

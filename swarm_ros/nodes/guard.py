@@ -1,0 +1,147 @@
+"""Every message a node takes is checked here first, one function per message type.
+
+A message that fails is dropped, never raised: the node counts it by kind of fault and
+logs one line per kind at most every ``LOG_PERIOD`` seconds (:class:`Rejections`); the
+world reports its counts on /swarm/status (``rejected_messages``), the monitor in the
+run's summary. docs/security.md says what these checks keep out and what they cannot.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections import Counter
+
+import numpy as np
+
+from ..core.state import STATE_COUNT
+from ..wire import PATCH_METRES, ROBOT_ROW, check_fields
+
+LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
+_NODE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")  # a ROS node name, as batch names are
+
+
+class Rejected(ValueError):
+    """A message that must be dropped: ``kind`` names the fault (a key of the counts)."""
+
+    def __init__(self, kind: str, detail: str = "") -> None:
+        super().__init__(f"{kind}: {detail}" if detail else kind)
+        self.kind = kind
+
+
+class Rejections:
+    """Counts of the messages a node dropped, by topic and kind of fault, with rate-limited log lines."""
+
+    def __init__(self, logger) -> None:
+        self.logger = logger
+        self.counts: Counter[str] = Counter()
+        self._logged: dict[str, float] = {}
+
+    def drop(self, topic: str, fault: Rejected) -> None:
+        key = f"{topic}: {fault.kind}"
+        self.counts[key] += 1
+        now = time.monotonic()
+        if now - self._logged.get(key, -math.inf) >= LOG_PERIOD:
+            self._logged[key] = now
+            self.logger.warn(f"dropped a message on {topic} ({fault}); {self.counts[key]} so far of this kind")
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def text(self) -> str:
+        """``topic: kind=n`` items joined by ``; `` (the ``rejected_messages`` value of /swarm/status)."""
+        return "; ".join(f"{key}={n}" for key, n in sorted(self.counts.items()))
+
+
+def cloud(msg, dtype: np.dtype, max_rows: int) -> np.ndarray:
+    """The rows of a PointCloud2 of ``dtype`` rows (a read-only view of its bytes).
+
+    Raises:
+        Rejected: another point layout, a size that does not match it, big-endian data,
+            no rows, or more than ``max_rows``.
+    """
+    try:
+        check_fields([(f.name, f.offset, f.datatype, f.count) for f in msg.fields], msg.point_step, dtype)
+    except ValueError as exc:
+        raise Rejected("point layout", str(exc)) from None
+    rows = int(msg.width) * int(msg.height)
+    if msg.is_bigendian:
+        raise Rejected("byte order", "big-endian data")
+    if len(msg.data) != rows * dtype.itemsize or int(msg.row_step) != int(msg.width) * dtype.itemsize:
+        raise Rejected("size", f"{len(msg.data)} bytes for {msg.width} x {msg.height} points of "
+                               f"{dtype.itemsize} bytes (row step {msg.row_step})")
+    if rows == 0:
+        raise Rejected("empty")
+    if rows > max_rows:
+        raise Rejected("too many rows", f"{rows} rows, at most {max_rows}")
+    return np.frombuffer(msg.data, dtype=dtype)
+
+
+def ids_in_range(ids: np.ndarray, low: int, robots: int) -> None:
+    """Raises Rejected unless every id is in ``low``..``robots - 1`` and none repeats."""
+    if ids.min() < low or ids.max() >= robots:
+        raise Rejected("robot id out of range", f"ids {int(ids.min())}..{int(ids.max())}, "
+                                                f"the run has {low}..{robots - 1}")
+    if np.unique(ids).size != ids.size:
+        raise Rejected("repeated robot id")
+
+
+def inside_world(x: np.ndarray, y: np.ndarray, heading: np.ndarray, radius: int) -> None:
+    """Raises Rejected unless every pose is finite, inside the world and headed in [0, 2 pi]."""
+    limit = (radius + 0.5) * PATCH_METRES
+    with np.errstate(invalid="ignore"):
+        ok = (np.abs(x) <= limit) & (np.abs(y) <= limit) & (heading >= 0) & (heading <= 2 * math.pi)
+    if not ok.all():
+        i = int(np.flatnonzero(~ok)[0])
+        raise Rejected("pose outside the world", f"({x[i]!r}, {y[i]!r}, heading {heading[i]!r})")
+
+
+def robot_rows(msg, robots: int, radius: int) -> np.ndarray:
+    """The rows of a /swarm/robots or snapshot message, checked: layout, ids, states, poses."""
+    rows = cloud(msg, ROBOT_ROW, robots)
+    ids_in_range(rows["id"].astype(np.int64), 0, robots)
+    if rows["state"].max() >= STATE_COUNT:
+        raise Rejected("robot state out of range", f"state {int(rows['state'].max())}")
+    inside_world(rows["x"], rows["y"], rows["heading"], radius)
+    return rows
+
+
+def announcement(msg, robots: int) -> tuple[str, int, np.ndarray]:
+    """(batch name, incarnation, robot ids) of a /swarm/batches message, checked."""
+    from .messages import parse_batch_label
+
+    label = msg.layout.dim[0].label if msg.layout.dim else ""
+    name, incarnation = parse_batch_label(label)
+    if not _NODE_NAME.fullmatch(name):
+        raise Rejected("batch name", f"{label[:80]!r} is not a node name")
+    if len(msg.data) == 0 or len(msg.data) > robots:
+        raise Rejected("robot ids", f"{len(msg.data)} ids, the run has {robots} robots")
+    ids = np.asarray(msg.data, dtype=np.int64)
+    ids_in_range(ids, 4, robots)
+    return name, incarnation, np.sort(ids)
+
+
+def tick_stamp(header) -> int:
+    """A message's tick, from its stamp (whole seconds, as the world stamps them)."""
+    from .messages import tick_of
+
+    if header.stamp.nanosec != 0 or header.stamp.sec < 0:
+        raise Rejected("stamp", f"{header.stamp.sec} s {header.stamp.nanosec} ns is not a tick")
+    return tick_of(header)
+
+
+def metrics_tick(msg, labels: tuple[str, ...], newest: int) -> int:
+    """The tick of a /swarm/metrics message, checked: the monitor's columns, and a tick the world published.
+
+    Raises:
+        Rejected: other columns, or a tick after ``newest`` (the last tick the world published).
+    """
+    label = msg.layout.dim[0].label if msg.layout.dim else ""
+    if label != ",".join(labels) or len(msg.data) != len(labels):
+        raise Rejected("metrics layout", f"columns {label[:80]!r} with {len(msg.data)} values")
+    tick = int(msg.data[labels.index("tick")])
+    if not 0 <= tick <= newest:
+        raise Rejected("future tick", f"metrics of tick {tick}; the world published up to {newest}")
+    return tick
