@@ -146,7 +146,7 @@ class WorldNode:
             self._on_reannounce(self.batch_names.index(name), ids, incarnation)
             return
         if self.started:
-            log.warn(f"ignored an announcement of '{name}' after the start: every robot is hosted already")
+            self.rejections.drop(msgs.BATCHES, Rejected("new batch after tick 0", f"'{name}'"))
             return
         k = len(self.batch_names)
         self.host[ids] = k

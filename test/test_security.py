@@ -1,0 +1,219 @@
+"""Hostile and malformed messages on a run's domain (docs/security.md).
+
+The world and the monitor run as processes; this test process plays the two robot
+batches, deciding honestly with the core's own rule, and before its honest decisions of
+a tick sends one kind of bad message. Every bad message must be dropped and counted, and
+the run must equal ``simulate``'s, byte for byte.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from swarm_ros import cli
+from swarm_ros.config import Settings
+from swarm_ros.launcher import DomainLock, node_command, node_env
+from swarm_ros.nodes.params import params_yaml
+from swarm_ros.wire import DECISION_ROW, ROBOT_ROW, batch_ids, decision_rows
+
+pytest.importorskip("rclpy")
+
+PY = sys.executable
+ROBOTS, SEED = 200, 4
+FLAGS = ["--shape", "rectangle", "--robots", str(ROBOTS), "--seed", str(SEED)]
+
+
+class _Batches:
+    """Two robot batches in this process, honest but for the bad messages ``attack`` sends."""
+
+    def __init__(self, node, shape, params) -> None:
+        from sensor_msgs.msg import PointCloud2
+        from std_msgs.msg import Empty
+
+        from swarm_ros.core.replica import Replica
+        from swarm_ros.core.rules import Decider
+        from swarm_ros.nodes import messages as msgs
+
+        self.msgs, self.node, self.params, self.shape = msgs, node, params, shape
+        self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
+        self.radius = shape.world.radius
+        self.names = ["robot_batch_0", "robot_batch_1"]
+        self.ids = [batch_ids(params.robots, k, 2) for k in range(2)]
+        self.pubs = [node.create_publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS)
+                     for n in self.names]
+        self.alive = [node.create_publisher(Empty, msgs.alive_topic(n), msgs.ALIVE_QOS) for n in self.names]
+        self.announce = node.create_publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
+        self.robots_pub = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
+        self.metrics_pub = node.create_publisher(msgs.Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
+        node.create_subscription(PointCloud2, msgs.snapshot_topic(self.names[0]), self._on_snapshot, msgs.LATCHED_QOS)
+        node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
+        self.sent: dict[str, int] = {}  # kind of bad message -> how many were sent to the world / the monitor
+        for k, name in enumerate(self.names):
+            hello = msgs.ids_message(self.ids[k])
+            hello.layout.dim[0].label = msgs.batch_label(name, 0)
+            self.announce.publish(hello)
+
+    def _on_snapshot(self, msg) -> None:
+        if self.replica.tick >= 0:
+            return
+        rows = self.msgs.cloud_rows(msg, ROBOT_ROW)
+        self.replica.load(self.msgs.tick_of(msg.header), rows["id"], rows["state"], rows["x"], rows["y"],
+                          rows["heading"])
+        self._decide()
+
+    def _on_robots(self, msg) -> None:
+        from swarm_ros.nodes.guard import Rejected
+        from swarm_ros.nodes.runner import apply_robots, checked_robots
+
+        if self.replica.tick < 0:
+            return
+        try:
+            tick, rows = checked_robots(self.replica, msg, self.radius)
+            if tick != self.replica.tick + 1:
+                return
+            apply_robots(self.replica, tick, rows)
+        except Rejected:
+            return  # the garbage this test sends on /swarm/robots itself
+        self._decide()
+
+    def _cloud(self, rows: np.ndarray, tick: int):
+        return self.msgs.make_cloud(rows, tick)
+
+    def _send(self, kind: str, k: int, msg) -> None:
+        self.pubs[k].publish(msg)
+        self.sent[f"world: {kind}"] = self.sent.get(f"world: {kind}", 0) + 1
+
+    def _decide(self) -> None:
+        s = self.replica.state
+        moving = self.replica.moving_ids()
+        tick = self.replica.tick + 1
+        honest = []
+        for k in range(2):
+            own = moving[np.isin(moving, self.ids[k])]
+            honest.append(decision_rows(self.decider.decide(s, own, tick, moving)) if own.size else None)
+        self.attack(tick, honest)
+        for k in range(2):
+            if honest[k] is not None:
+                self.pubs[k].publish(self._cloud(honest[k], tick))
+        if tick == 12 and honest[0] is not None:  # the same decisions again: once per robot and tick
+            self._send("duplicate", 0, self._cloud(honest[0], tick))
+
+    def attack(self, tick: int, honest: list) -> None:
+        """One kind of bad message per tick, sent before the honest decisions of that tick."""
+        from sensor_msgs.msg import PointField
+
+        mine = honest[0]
+        if tick == 2:  # another point layout
+            msg = self._cloud(mine, tick)
+            msg.fields = [PointField(name="a", offset=0, datatype=7, count=1)]
+            msg.point_step = 13
+            self._send("point layout", 0, msg)
+        elif tick == 3:  # the right layout, nonsense rows
+            rows = np.zeros(3, dtype=DECISION_ROW)
+            rows["id"] = [10 ** 9, 5, 6]
+            rows["claim"] = [10 ** 8, -1, -1]
+            rows["x"], rows["y"] = [np.nan, 1e300, -1e300], [0.0, np.inf, 0.0]
+            self._send("nonsense rows", 0, self._cloud(rows, tick))
+        elif tick == 4:  # empty
+            self._send("empty", 0, self._cloud(np.zeros(0, dtype=DECISION_ROW), tick))
+        elif tick == 5:  # data shorter than width x point_step
+            msg = self._cloud(mine, tick)
+            msg.data = bytes(msg.data)[: len(msg.data) // 2]
+            self._send("short data", 0, msg)
+        elif tick == 6:  # a future tick, and a stale one
+            self._send("future tick", 0, self._cloud(mine, tick + 3))
+            self._send("stale tick", 0, self._cloud(mine, tick - 1))
+        elif tick == 7:  # well-formed rows for robots 100-104 at (5, 5): not where they are
+            rows = np.zeros(5, dtype=DECISION_ROW)
+            rows["id"], rows["claim"], rows["x"], rows["y"], rows["heading"] = np.arange(100, 105), -1, 5.0, 5.0, 0.0
+            self._send("robots 100-104 jump", int(100 >= self.ids[1][0]), self._cloud(rows, tick))
+        elif tick == 8:  # batch 1's robots on batch 0's topic
+            self._send("wrong batch", 0, self._cloud(honest[1], tick))
+        elif tick == 9:  # a move of 5 patches
+            rows = mine.copy()
+            rows["x"][0] += 5.0
+            self._send("move of 5", 0, self._cloud(rows, tick))
+        elif tick == 10:  # a claim on a shape patch off the frontier
+            s = self.replica.state
+            off = int(np.flatnonzero(self.shape.mask.ravel() & ~s.frontier & (s.occupancy < 0))[0])
+            rows = mine[:1].copy()
+            rows["claim"] = off
+            self._send("claim off the frontier", 0, self._cloud(rows, tick))
+        elif tick == 11:  # a seed (not moving, and no batch's)
+            rows = mine[:1].copy()
+            rows["id"] = 0
+            self._send("a seed", 0, self._cloud(rows, tick))
+        elif tick == 13:  # a new batch claiming robots, after tick 0
+            hello = self.msgs.ids_message(self.ids[0][:5])
+            hello.layout.dim[0].label = "intruder/0"
+            self.announce.publish(hello)
+            self.sent["world: announcement"] = 1
+        elif tick == 14:  # metrics of a tick the world has not reached
+            self.metrics_pub.publish(self.msgs.metrics_message([10 ** 6] + [0] * 6))
+            self.sent["world: metrics"] = 1
+        elif tick == 15:  # garbage on /swarm/robots, for the monitor (and the batches)
+            msg = self._cloud(np.zeros(2, dtype=ROBOT_ROW), tick)
+            msg.point_step = 13
+            self.robots_pub.publish(msg)
+            rows = np.zeros(2, dtype=ROBOT_ROW)
+            rows["id"], rows["state"] = [10 ** 6, 3], [1, 9]
+            self.robots_pub.publish(self._cloud(rows, tick))
+            self.sent["monitor: robots"] = 2
+
+
+def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_path, monkeypatch):
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from swarm_ros.nodes.dds import dds_defaults
+
+    ref = tmp_path / "ref"
+    assert cli.main(["simulate", *FLAGS, "--out", str(ref), "--quiet", "--no-recording"]) == 0
+    settings = Settings(shape="rectangle", robots=ROBOTS, seed=SEED)
+    shape, params = settings.resolve()
+    out = tmp_path / "run"
+    params_file = tmp_path / "params.yaml"
+    params_file.write_text(params_yaml(settings, {"monitor": {"out_dir": str(out), "record": False}}))
+    lock = DomainLock()
+    env = node_env(lock.domain_id, tmp_path)
+    procs = {name: subprocess.Popen(node_command(name, params_file, name), env=env, stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, text=True) for name in ("world", "monitor")}
+    for key, value in dds_defaults().items():
+        monkeypatch.setenv(key, value)
+    context = Context()
+    rclpy.init(args=[], context=context, domain_id=lock.domain_id)
+    try:
+        node = Node("robot_batches", context=context, start_parameter_services=False)
+        batches = _Batches(node, shape, params)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and procs["monitor"].poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        rclpy.shutdown(context=context)
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.kill()
+        logs = {name: proc.communicate()[0] for name, proc in procs.items()}
+        lock.close()
+    assert {n: p.returncode for n, p in procs.items()} == {"world": 0, "monitor": 0}, logs
+    assert batches.replica.tick > 15, "the run ended before every kind of bad message was sent"
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (ref / name).read_bytes() == (out / name).read_bytes(), name
+    summary = json.loads((out / "summary.json").read_text())
+    to_world = sum(n for kind, n in batches.sent.items() if kind.startswith("world: "))
+    to_monitor = sum(n for kind, n in batches.sent.items() if kind.startswith("monitor: "))
+    assert to_world == 14 and to_monitor == 2, batches.sent
+    assert summary["rejected_messages"] == {"world": to_world, "monitor": to_monitor}, (batches.sent, logs["world"])
+    assert "dropped a message on /swarm/decisions/robot_batch_0 (point layout" in logs["world"]
+    assert "dropped a message on /swarm/robots" in logs["monitor"]
+
