@@ -33,7 +33,9 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -45,7 +47,7 @@ from .core.shapes import Shape
 from .nodes.dds import apply_dds_defaults
 from .nodes.params import params_yaml
 from .output import fill_summary
-from .signals import PARENT_ENV, process_age
+from .signals import PARENT_ENV, StopFlag, process_age
 
 SHM_DIR = Path("/dev/shm")
 WORLD_STARTED = "batches: tick 0"  #: what the world logs as it sends tick 0
@@ -346,8 +348,14 @@ class Launch:
         reported: set[str] = set()
         world_done_at = None
         scanned_at = 0.0
-        with Progress(self.domain, self.shape.patches, quiet=self.quiet) as progress:
+        # Ctrl-C and SIGTERM are taken as a flag and acted on between spins: a KeyboardInterrupt raised
+        # inside the executor's call of a Python callback comes out as a RuntimeError from pybind11.
+        # (Signal handlers can only be set from the main thread; a Dask worker runs this in another.)
+        stop = StopFlag() if threading.current_thread() is threading.main_thread() else None
+        with stop or nullcontext(), Progress(self.domain, self.shape.patches, quiet=self.quiet) as progress:
             while True:
+                if stop is not None and stop.signum:
+                    raise KeyboardInterrupt
                 # once the world's outcome is out no messages come to wake the spin: look at the
                 # processes every 10 ms, so the monitor's exit is seen as it happens
                 progress.spin(0.1 if progress.ended_at is None else 0.01)
