@@ -18,6 +18,7 @@ import pytest
 
 from swarm_ros import cli
 from swarm_ros.config import Settings
+from swarm_ros.core.state import RobotState
 from swarm_ros.launcher import DomainLock, node_command, node_env
 from swarm_ros.nodes.params import params_yaml
 from swarm_ros.wire import DECISION_ROW, ROBOT_ROW, batch_ids, decision_rows
@@ -58,6 +59,11 @@ class _Batches:
             hello = msgs.ids_message(self.ids[k])
             hello.layout.dim[0].label = msgs.batch_label(name, 0)
             self.announce.publish(hello)
+        hello = msgs.ids_message(self.ids[1][:3])  # before tick 0: another batch's robots
+        hello.layout.dim[0].label = "intruder/0"
+        self.announce.publish(hello)
+        self.sent["world: robots of another batch"] = 1
+        self.localized_sent = False
 
     def _on_snapshot(self, msg) -> None:
         if self.replica.tick >= 0:
@@ -157,7 +163,16 @@ class _Batches:
         elif tick == 14:  # metrics of a tick the world has not reached
             self.metrics_pub.publish(self.msgs.metrics_message([10 ** 6] + [0] * 6))
             self.sent["world: metrics"] = 1
-        elif tick == 15:  # garbage on /swarm/robots, for the monitor (and the batches)
+        elif tick >= 16 and not self.localized_sent:  # a localized robot of the batch, once there is one
+            s = self.replica.state
+            localized = self.ids[0][s.state[self.ids[0]] == RobotState.LOCALIZED]
+            if localized.size:
+                rows = np.zeros(1, dtype=DECISION_ROW)
+                rows["id"], rows["claim"] = localized[0], -1
+                rows["x"], rows["y"] = s.x[localized[0]], s.y[localized[0]]
+                self._send("localized robot", 0, self._cloud(rows, tick))
+                self.localized_sent = True
+        if tick == 15:  # garbage on /swarm/robots, for the monitor (and the batches)
             msg = self._cloud(np.zeros(2, dtype=ROBOT_ROW), tick)
             msg.point_step = 13
             self.robots_pub.publish(msg)
@@ -212,7 +227,7 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
     summary = json.loads((out / "summary.json").read_text())
     to_world = sum(n for kind, n in batches.sent.items() if kind.startswith("world: "))
     to_monitor = sum(n for kind, n in batches.sent.items() if kind.startswith("monitor: "))
-    assert to_world == 14 and to_monitor == 2, batches.sent
+    assert to_world == 16 and to_monitor == 2, batches.sent
     assert summary["rejected_messages"] == {"world": to_world, "monitor": to_monitor}, (batches.sent, logs["world"])
     assert "dropped a message on /swarm/decisions/robot_batch_0 (point layout" in logs["world"]
     assert "dropped a message on /swarm/robots" in logs["monitor"]
