@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import json
+import os
+import shutil
 import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -119,3 +123,61 @@ def rrd_verify(path) -> subprocess.CompletedProcess:
 
     exe = Path(sys.executable).with_name("rerun")
     return subprocess.run([str(exe), "rrd", "verify", str(path)], capture_output=True, text=True, timeout=120)
+
+
+# -- two hosts on one machine: Linux network namespaces joined by a veth pair --------------
+
+SUBNET = "10.231.{}.{}"
+
+
+def ip_in(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+
+
+def _wait_until_up(*links: tuple[str, str], limit: float = 10.0) -> None:
+    """Wait until each (namespace, device) reports operstate UP, with its carrier.
+
+    The kernel reports a veth's carrier (operstate UP) asynchronously, after both ends are set
+    up; it usually takes milliseconds. Fast DDS lists a host's interfaces once, when a
+    participant starts, so a node must not start before its interface is really up.
+    """
+    deadline = time.monotonic() + limit
+    while True:
+        states = {dev: json.loads(ip_in("-n", ns, "-j", "link", "show", "dev", dev).stdout or "[{}]")[0].get("operstate")
+                  for ns, dev in links}
+        if all(state == "UP" for state in states.values()):
+            return
+        if time.monotonic() > deadline:
+            pytest.fail(f"the veth pair did not come up within {limit:g} s: {states}")
+        time.sleep(0.05)
+
+
+@pytest.fixture
+def two_hosts():
+    """(namespace of host A, namespace of host B, host A's end of the veth); removed afterwards."""
+    if shutil.which("ip") is None:
+        pytest.skip("iproute2's 'ip' is not installed: cannot make network namespaces")
+    if os.geteuid() != 0:
+        pytest.skip("making network namespaces needs root")
+    tag = os.getpid() % 10000
+    a, b = f"swarm_ros_a{tag}", f"swarm_ros_b{tag}"
+    made = ip_in("netns", "add", a)
+    if made.returncode != 0:
+        pytest.skip(f"cannot make a network namespace here: {made.stderr.strip()}")
+    try:
+        net = tag % 250
+        steps = [("netns", "add", b),
+                 ("link", "add", f"swra{tag}", "netns", a, "type", "veth", "peer", "name", f"swrb{tag}", "netns", b),
+                 ("-n", a, "addr", "add", SUBNET.format(net, 1) + "/24", "dev", f"swra{tag}"),
+                 ("-n", b, "addr", "add", SUBNET.format(net, 2) + "/24", "dev", f"swrb{tag}"),
+                 ("-n", a, "link", "set", f"swra{tag}", "up"), ("-n", b, "link", "set", f"swrb{tag}", "up"),
+                 ("-n", a, "link", "set", "lo", "up"), ("-n", b, "link", "set", "lo", "up")]
+        for step in steps:
+            done = ip_in(*step)
+            if done.returncode != 0:
+                pytest.skip(f"cannot set up the namespaces ({' '.join(step)}): {done.stderr.strip()}")
+        _wait_until_up((a, f"swra{tag}"), (b, f"swrb{tag}"))
+        yield a, b, f"swra{tag}"
+    finally:
+        for ns in (a, b):
+            ip_in("netns", "del", ns)

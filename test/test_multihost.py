@@ -10,12 +10,11 @@ from __future__ import annotations
 import csv
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
 
-import pytest
+from conftest import SUBNET, ip_in
 from test_ros_graph import _assert_same_run, _shape_file
 
 from swarm_ros import cli
@@ -24,41 +23,6 @@ from swarm_ros.nodes.params import params_yaml
 from swarm_ros.wire import DECISION_ROW, ROBOT_ROW
 
 PY = sys.executable
-SUBNET = "10.231.{}.{}"
-
-
-def _ip(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
-
-
-@pytest.fixture
-def two_hosts():
-    """(namespace of host A, namespace of host B, host A's end of the veth); removed afterwards."""
-    if shutil.which("ip") is None:
-        pytest.skip("iproute2's 'ip' is not installed: cannot make network namespaces")
-    if os.geteuid() != 0:
-        pytest.skip("making network namespaces needs root")
-    tag = os.getpid() % 10000
-    a, b = f"swarm_ros_a{tag}", f"swarm_ros_b{tag}"
-    made = _ip("netns", "add", a)
-    if made.returncode != 0:
-        pytest.skip(f"cannot make a network namespace here: {made.stderr.strip()}")
-    try:
-        net = tag % 250
-        steps = [("netns", "add", b),
-                 ("link", "add", f"swra{tag}", "netns", a, "type", "veth", "peer", "name", f"swrb{tag}", "netns", b),
-                 ("-n", a, "addr", "add", SUBNET.format(net, 1) + "/24", "dev", f"swra{tag}"),
-                 ("-n", b, "addr", "add", SUBNET.format(net, 2) + "/24", "dev", f"swrb{tag}"),
-                 ("-n", a, "link", "set", f"swra{tag}", "up"), ("-n", b, "link", "set", f"swrb{tag}", "up"),
-                 ("-n", a, "link", "set", "lo", "up"), ("-n", b, "link", "set", "lo", "up")]
-        for step in steps:
-            done = _ip(*step)
-            if done.returncode != 0:
-                pytest.skip(f"cannot set up the namespaces ({' '.join(step)}): {done.stderr.strip()}")
-        yield a, b, f"swra{tag}"
-    finally:
-        for ns in (a, b):
-            _ip("netns", "del", ns)
 
 
 def _logs(tmp_path, procs, link: str) -> str:
@@ -67,7 +31,7 @@ def _logs(tmp_path, procs, link: str) -> str:
     logs = [f"--- {name} (exit {proc.poll()}):\n{(tmp_path / f'{name}.log').read_text()[-1500:]}"
             for name, (proc, _) in procs.items()]
     ns = "swarm_ros_a" + link.removeprefix("swra")
-    return "\n".join([*logs, f"--- {link} in {ns}:\n{_ip('-n', ns, '-s', 'link', 'show', 'dev', link).stdout}"])
+    return "\n".join([*logs, f"--- {link} in {ns}:\n{ip_in('-n', ns, '-s', 'link', 'show', 'dev', link).stdout}"])
 
 
 def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two_hosts, tmp_path):
@@ -124,6 +88,6 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
     # each batch its start snapshot of every robot.
     with open(ref / "metrics.csv", newline="") as f:
         moving = [int(row["moving"]) for row in csv.DictReader(f)]
-    stats = json.loads(_ip("-n", a, "-j", "-s", "link", "show", "dev", link).stdout)[0]["stats64"]
+    stats = json.loads(ip_in("-n", a, "-j", "-s", "link", "show", "dev", link).stdout)[0]["stats64"]
     assert stats["rx"]["bytes"] >= DECISION_ROW.itemsize * sum(moving[:-1]), stats
     assert stats["tx"]["bytes"] >= 2 * ROBOT_ROW.itemsize * 440, stats

@@ -8,10 +8,13 @@ the run must equal ``simulate``'s, byte for byte.
 
 from __future__ import annotations
 
+import ast
 import json
+import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -232,3 +235,52 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
     assert "dropped a message on /swarm/decisions/robot_batch_0 (point layout" in logs["world"]
     assert "dropped a message on /swarm/robots" in logs["monitor"]
 
+
+
+_INTRUDER = """
+import sys, time
+import rclpy
+from rclpy.node import Node
+rclpy.init(domain_id=int(sys.argv[1]))
+node = Node("intruder")
+seen, end = set(), time.monotonic() + float(sys.argv[2])
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.1)
+    seen |= {name for name, _ in node.get_topic_names_and_types() if name.startswith("/swarm")}
+print(sorted(seen))
+"""
+
+
+@pytest.mark.parametrize("discovery,seen", [("LOCALHOST", False), ("SUBNET", True)])
+def test_a_one_host_run_is_not_discovered_from_another_network_namespace(two_hosts, tmp_path, discovery, seen):
+    """A run on host A, with swarm-ros run's default discovery (LOCALHOST), and an intruder on host B,
+    joined by a veth pair, on the run's domain with discovery open to the subnet: the intruder sees
+    none of the run's topics. The control, the same run with SUBNET discovery, shows that it would."""
+    a, b, _ = two_hosts
+    domain = str(120 + os.getpid() % 80)
+    base = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "FASTRTPS_", "RMW_"))}
+    common = {**base, "ROS_DOMAIN_ID": domain, "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4", "HOME": str(tmp_path)}
+    # the intruder announces itself every 50 ms for its first 5 s (the run's own Fast DDS profile)
+    intruder_env = {**common, "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+                    "FASTRTPS_DEFAULT_PROFILES_FILE": str(Path(__file__).parent.parent / "config" / "fastdds.xml")}
+    run_env = {**common, **({"ROS_AUTOMATIC_DISCOVERY_RANGE": discovery} if discovery != "LOCALHOST" else {})}
+    intruder = subprocess.Popen(["ip", "netns", "exec", b, PY, "-c", _INTRUDER, domain, "10"], env=intruder_env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.5)
+    run = subprocess.Popen(["ip", "netns", "exec", a, PY, "-m", "swarm_ros.cli", "run", *FLAGS,
+                            "--out", str(tmp_path / "run"), "--quiet", "--no-recording", "--no-bag"],
+                           env=run_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _, err = run.communicate(timeout=120)
+        out, intruder_err = intruder.communicate(timeout=60)
+    finally:
+        for proc in (run, intruder):
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert run.returncode == 0, err
+    assert intruder.returncode == 0, intruder_err
+    topics = ast.literal_eval(out.strip().splitlines()[-1])  # the list the script printed
+    assert ("/swarm/robots" in topics) == seen, (topics, intruder_err[-2000:], domain)
+    if not seen:
+        assert topics == []
