@@ -284,3 +284,54 @@ def test_a_one_host_run_is_not_discovered_from_another_network_namespace(two_hos
     assert ("/swarm/robots" in topics) == seen, (topics, intruder_err[-2000:], domain)
     if not seen:
         assert topics == []
+
+
+def test_garbage_on_the_robots_topic_is_dropped_by_real_batches_and_the_monitor(tmp_path, monkeypatch):
+    """swarm-ros run as a user starts it, and a stranger on its domain publishing malformed rows on
+    /swarm/robots while it runs: every node drops them, and the run equals simulate's."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+    from sensor_msgs.msg import PointCloud2
+
+    from swarm_ros.nodes import messages as msgs
+    from swarm_ros.nodes.dds import dds_defaults
+
+    flags = ["--shape", "star", "--seed", "2"]
+    ref, out = tmp_path / "ref", tmp_path / "run"
+    assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet", "--no-recording"]) == 0
+    lock = DomainLock()
+    run = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", *flags, "--domain-id", str(lock.domain_id),
+                            "--out", str(out), "--quiet", "--no-recording", "--no-bag", "--processes", "2"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for key, value in dds_defaults().items():
+        monkeypatch.setenv(key, value)
+    context = Context()
+    rclpy.init(args=[], context=context, domain_id=lock.domain_id)
+    sent = 0
+    try:
+        node = Node("stranger", context=context, start_parameter_services=False)
+        pub = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
+        while run.poll() is None:
+            bad = msgs.make_cloud(np.zeros(3, dtype=ROBOT_ROW), 10 ** 6)
+            bad.point_step = 13  # another layout
+            pub.publish(bad)
+            rows = np.zeros(2, dtype=ROBOT_ROW)
+            rows["id"], rows["x"] = [7, 7], [np.nan, 1e300]  # a repeated robot, off the world
+            pub.publish(msgs.make_cloud(rows, 1))
+            sent += 2
+            time.sleep(0.05)
+        _, err = run.communicate(timeout=120)
+    finally:
+        rclpy.shutdown(context=context)
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+        lock.close()
+    assert run.returncode == 0, err
+    assert sent >= 20
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (ref / name).read_bytes() == (out / name).read_bytes(), name
+    assert json.loads((out / "summary.json").read_text())["rejected_messages"]["monitor"] >= 1
+    for node_name in ("robot_batch_0", "robot_batch_1", "monitor"):
+        assert "dropped a message on /swarm/robots" in (out / "logs" / f"{node_name}.log").read_text(), node_name
