@@ -10,8 +10,9 @@ if a robot joined, and the clock.
 Every message is checked before use (:mod:`swarm_ros.nodes.guard`): a decision counts
 only from the batch hosting its robot, for a moving robot, once per robot and tick, for
 the tick being decided, and within the rule set's bounds (:mod:`swarm_ros.core.legality`).
-A message that fails is dropped whole and counted (``rejected_messages`` on /swarm/status). It starts when
-the robot batches' announcements on /swarm/batches cover every robot, sends each batch
+A message that fails is dropped whole and counted (``rejected_messages`` on /swarm/status).
+
+It starts when the robot batches' announcements on /swarm/batches cover every robot, sends each batch
 a snapshot of every robot to start from, and never runs more than ``monitor_window``
 ticks ahead of the monitor's /swarm/metrics.
 
