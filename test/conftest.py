@@ -130,6 +130,12 @@ def rrd_verify(path) -> subprocess.CompletedProcess:
 SUBNET = "10.231.{}.{}"
 
 
+def host_env() -> dict[str, str]:
+    """This process's environment without any ROS or DDS setting (an earlier test may have left some):
+    what a process on another host starts from."""
+    return {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "FASTRTPS_", "RMW_"))}
+
+
 def ip_in(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
 

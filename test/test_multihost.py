@@ -14,7 +14,7 @@ import subprocess
 import sys
 import time
 
-from conftest import SUBNET, ip_in
+from conftest import SUBNET, host_env, ip_in
 from test_ros_graph import _assert_same_run, _shape_file
 
 from swarm_ros import cli
@@ -48,7 +48,7 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
     # The environment each host gets, whole: nothing ROS or DDS that an earlier test set in this process
     # (a Fast DDS profile, a discovery range) leaks in. Discovery as docs/ros_graph.md says for several
     # hosts: the subnet, plus each host's address as a static peer (unicast, should multicast be lost).
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "FASTRTPS_", "RMW_"))}
+    env = host_env()
     net = int(link.removeprefix("swra")) % 250
     env.update({"ROS_DOMAIN_ID": str(100 + os.getpid() % 100), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
                 "ROS_STATIC_PEERS": f"{SUBNET.format(net, 1)};{SUBNET.format(net, 2)}",

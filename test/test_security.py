@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import host_env
 
 from swarm_ros import cli
 from swarm_ros.config import Settings
@@ -258,8 +259,7 @@ def test_a_one_host_run_is_not_discovered_from_another_network_namespace(two_hos
     none of the run's topics. The control, the same run with SUBNET discovery, shows that it would."""
     a, b, _ = two_hosts
     domain = str(120 + os.getpid() % 80)
-    base = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "FASTRTPS_", "RMW_"))}
-    common = {**base, "ROS_DOMAIN_ID": domain, "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4", "HOME": str(tmp_path)}
+    common = {**host_env(), "ROS_DOMAIN_ID": domain, "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4", "HOME": str(tmp_path)}
     # the intruder announces itself every 50 ms for its first 5 s (the run's own Fast DDS profile)
     intruder_env = {**common, "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
                     "FASTRTPS_DEFAULT_PROFILES_FILE": str(Path(__file__).parent.parent / "config" / "fastdds.xml")}
