@@ -12,6 +12,7 @@ of the current tick and the run goes on unchanged (docs/ros_graph.md, Faults).
 from __future__ import annotations
 
 import os
+import secrets
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
@@ -28,6 +29,7 @@ RUN_ARGUMENTS = ("shape", "robots", "vision_radius", "rules", "join", "crowding"
                  "wiggle_deg", "fail_fraction", "fail_tick", "world_radius")
 _INTEGERS = {"robots", "seed", "max_ticks", "fail_tick", "world_radius"}
 _FLOATS = {"vision_radius", "wiggle_deg", "fail_fraction"}
+KEY_ENV = "SWARM_ROS_RUN_KEY"  # as swarm_ros.nodes.runkey.KEY_ENV
 MONITOR_GRACE = 30.0  # seconds the monitor has to write the run after the world's end (as swarm-ros run)
 
 
@@ -104,5 +106,8 @@ def generate_launch_description() -> LaunchDescription:
         SetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE",
                                os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE",
                                               os.path.join(share, "config", "fastdds.xml"))),
+        # the run's key, which its nodes vouch for their messages with (docs/security.md): a new one
+        # for each launch unless SWARM_ROS_RUN_KEY is set
+        SetEnvironmentVariable(KEY_ENV, os.environ.get(KEY_ENV) or secrets.token_hex(32)),
         OpaqueFunction(function=graph),
     ])

@@ -47,6 +47,7 @@ from .core.shapes import Shape
 from .nodes.dds import apply_dds_defaults
 from .nodes.params import params_yaml
 from .output import fill_summary
+from .nodes.runkey import KEY_ENV, run_key, with_run_key
 from .signals import PARENT_ENV, StopFlag, process_age
 
 SHM_DIR = Path("/dev/shm")
@@ -141,7 +142,7 @@ def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
     env.setdefault("HOME", str(log_dir))
     env["PYTHONUNBUFFERED"] = "1"
     env["RCUTILS_COLORIZED_OUTPUT"] = "0"
-    return env
+    return with_run_key(env)
 
 
 def node_command(module: str, params_file: Path, name: str, extra: dict[str, object] | None = None) -> list[str]:
@@ -248,6 +249,7 @@ class Launch:
         return int(self.world.get("max_restarts", NODE_PARAMETERS["world"]["max_restarts"]))
 
     def run(self) -> Path:
+        run_key()  # a SWARM_ROS_RUN_KEY that is set but unusable fails here, before anything is made
         out = self.out.absolute()
         out.parent.mkdir(parents=True, exist_ok=True)
         logs = Path(tempfile.mkdtemp(prefix=f".{out.name}.logs-", dir=out.parent))  # a fresh name: replaces nothing
@@ -352,7 +354,8 @@ class Launch:
         # inside the executor's call of a Python callback comes out as a RuntimeError from pybind11.
         # (Signal handlers can only be set from the main thread; a Dask worker runs this in another.)
         stop = StopFlag() if threading.current_thread() is threading.main_thread() else None
-        with stop or nullcontext(), Progress(self.domain, self.shape.patches, quiet=self.quiet) as progress:
+        with stop or nullcontext(), Progress(self.domain, self.shape.patches, self.env[KEY_ENV].encode(),
+                                                      quiet=self.quiet) as progress:
             while True:
                 if stop is not None and stop.signum:
                     raise KeyboardInterrupt

@@ -20,6 +20,7 @@ from swarm_ros.config import Settings
 from swarm_ros.core import Shape
 from swarm_ros import launcher
 from swarm_ros.launcher import Launch
+from swarm_ros.nodes.runkey import KEY_ENV, run_key
 
 ROOT = Path(__file__).resolve().parent.parent
 LAUNCH_FILE = ROOT / "launch" / "swarm.launch.py"
@@ -75,11 +76,15 @@ def _launched(monkeypatch, **arguments: str) -> tuple[list, dict[str, str]]:
     return nodes, env
 
 
-def _launch_actions(monkeypatch, **arguments: str) -> tuple[list, dict[str, str], list]:
-    """(the Node actions, the environment, the other actions of the graph) for these launch arguments."""
+def _launch_actions(monkeypatch, user_env: dict[str, str] | None = None,
+                    **arguments: str) -> tuple[list, dict[str, str], list]:
+    """(the Node actions, the environment, the other actions of the graph) for these launch arguments,
+    with only ``user_env`` of the variables the launch file reads set."""
     _stub_modules(monkeypatch)
-    for name in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "FASTRTPS_DEFAULT_PROFILES_FILE"):
+    for name in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "FASTRTPS_DEFAULT_PROFILES_FILE", KEY_ENV):
         monkeypatch.delenv(name, raising=False)
+    for name, value in (user_env or {}).items():
+        monkeypatch.setenv(name, value)
     spec = importlib.util.spec_from_file_location("swarm_launch", LAUNCH_FILE)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -136,9 +141,11 @@ def test_the_launch_file_starts_the_graph_swarm_ros_run_starts(monkeypatch, tmp_
         values = _effective(node.kwargs["parameters"], name)
         assert {k: values[k] for k in expected} == expected, name
         assert {k: values[k] for k in extra} == extra, name
-    # the environment swarm-ros run gives its nodes (launcher.node_env)
+    # the environment swarm-ros run gives its nodes (launcher.node_env), with a new run key
+    key = env.pop(KEY_ENV)
     assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
                    "FASTRTPS_DEFAULT_PROFILES_FILE": str(ROOT / "config" / "fastdds.xml")}
+    assert run_key({KEY_ENV: key})[1] and len(key) == 64 and key != _launched(monkeypatch, **arguments)[1][KEY_ENV]
     assert Shape.load(values["shape"]).name == shape.name
 
 
@@ -150,6 +157,11 @@ def test_the_launch_file_passes_a_parameter_file_and_an_output_directory(monkeyp
     by_name = {n.kwargs["name"]: _effective(n.kwargs["parameters"], n.kwargs["name"]) for n in nodes}
     assert {name: (v["shape"], v["seed"]) for name, v in by_name.items()} == dict.fromkeys(by_name, ("tyre", 5))
     assert by_name["monitor"]["record"] is False and by_name["monitor"]["out_dir"] == str(tmp_path / "out")
+
+
+def test_the_launch_file_keeps_a_run_key_the_user_set(monkeypatch):
+    _, env, _ = _launch_actions(monkeypatch, user_env={KEY_ENV: "a key for every host of mine"})
+    assert env[KEY_ENV] == "a key for every host of mine"
 
 
 class _Exited:

@@ -16,6 +16,7 @@ import pytest
 from swarm_ros.config import Settings
 from swarm_ros.launcher import DomainLock, node_command, node_env
 from swarm_ros.nodes.params import params_yaml
+from swarm_ros.nodes.runkey import KEY_ENV
 
 pytest.importorskip("rclpy")
 
@@ -43,16 +44,16 @@ def _peer(domain: int, monkeypatch):
 
 @contextmanager
 def _monitor(tmp_path: Path, settings: Settings):
-    """A monitor process on a domain of its own: (the process, its domain, its run directory)."""
+    """A monitor process on a domain of its own: (the process, its domain, the run's key)."""
     out = tmp_path / "run"
     params = tmp_path / "params.yaml"
     params.write_text(params_yaml(settings, {"monitor": {"out_dir": str(out), "record": False}}))
     lock = DomainLock()
     log = open(tmp_path / "monitor.log", "w")  # noqa: SIM115 - closed below
-    proc = subprocess.Popen(node_command("monitor", params, "monitor"), env=node_env(lock.domain_id, tmp_path),
-                            stdout=log, stderr=subprocess.STDOUT)
+    env = node_env(lock.domain_id, tmp_path)
+    proc = subprocess.Popen(node_command("monitor", params, "monitor"), env=env, stdout=log, stderr=subprocess.STDOUT)
     try:
-        yield proc, lock.domain_id, out
+        yield proc, lock.domain_id, env[KEY_ENV].encode()
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -67,9 +68,10 @@ def test_a_monitor_whose_robots_never_come_fails_once_the_world_has_ended_instea
     from diagnostic_msgs.msg import DiagnosticArray
 
     from swarm_ros.nodes import messages as msgs
+    from swarm_ros.nodes.auth import Signer
 
-    with _monitor(tmp_path, Settings(shape="star", robots=60)) as (proc, domain, out), _peer(domain, monkeypatch) as node:
-        status = node.create_publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
+    with _monitor(tmp_path, Settings(shape="star", robots=60)) as (proc, domain, key), _peer(domain, monkeypatch) as node:
+        status = Signer(node, key, "world").publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
         status.publish(msgs.status_message(40, "complete", "complete at tick 40"))
         try:
             code = proc.wait(timeout=60)
@@ -78,4 +80,4 @@ def test_a_monitor_whose_robots_never_come_fails_once_the_world_has_ended_instea
     log = (tmp_path / "monitor.log").read_text()
     assert code == 1, log[-2000:]
     assert "the world ended the run ('complete') at tick 40, but the robots' messages reached the monitor only" in log
-    assert not (out / "summary.json").exists()
+    assert not (tmp_path / "run" / "summary.json").exists()

@@ -2,8 +2,10 @@
 
 The world and the monitor run as processes; this test process plays the two robot
 batches, deciding honestly with the core's own rule, and before its honest decisions of
-a tick sends one kind of bad message. Every bad message must be dropped and counted, and
-the run must equal ``simulate``'s, byte for byte.
+a tick sends bad messages of two sorts: malformed or illegal ones vouched for with the
+run's key (a buggy node of the run), and well-formed ones nobody vouched for (an outsider
+on the domain). Every bad message must be dropped and counted, and the run must equal
+``simulate``'s, byte for byte.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from swarm_ros.config import Settings
 from swarm_ros.core.state import RobotState
 from swarm_ros.launcher import DomainLock, node_command, node_env
 from swarm_ros.nodes.params import params_yaml
+from swarm_ros.nodes.runkey import KEY_ENV
 from swarm_ros.wire import DECISION_ROW, ROBOT_ROW, batch_ids, decision_rows
 
 pytest.importorskip("rclpy")
@@ -37,28 +40,51 @@ FLAGS = ["--shape", "rectangle", "--robots", str(ROBOTS), "--seed", str(SEED)]
 class _Batches:
     """Two robot batches in this process, honest but for the bad messages ``attack`` sends."""
 
-    def __init__(self, node, shape, params) -> None:
+    def __init__(self, node, shape, params, key: bytes) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
         from sensor_msgs.msg import PointCloud2
         from std_msgs.msg import Empty
 
         from swarm_ros.core.replica import Replica
         from swarm_ros.core.rules import Decider
         from swarm_ros.nodes import messages as msgs
+        from swarm_ros.nodes.auth import AUTH_QOS, Gate, Signer, auth_topic
+        from swarm_ros.nodes.guard import Rejections
 
         self.msgs, self.node, self.params, self.shape = msgs, node, params, shape
         self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
         self.radius = shape.world.radius
         self.names = ["robot_batch_0", "robot_batch_1"]
         self.ids = [batch_ids(params.robots, k, 2) for k in range(2)]
-        self.pubs = [node.create_publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS)
-                     for n in self.names]
+        # vouched for with the run's key, as the run's own nodes do
+        signer = Signer(node, key, "batches")
+        self.pubs = [signer.publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS) for n in self.names]
         self.alive = [node.create_publisher(Empty, msgs.alive_topic(n), msgs.ALIVE_QOS) for n in self.names]
-        self.announce = node.create_publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
-        self.robots_pub = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
-        self.metrics_pub = node.create_publisher(msgs.Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
-        node.create_subscription(PointCloud2, msgs.snapshot_topic(self.names[0]), self._on_snapshot, msgs.LATCHED_QOS)
-        node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
+        self.announce = signer.publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
+        self.robots_pub = Signer(node, key, "world").publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
+        self.metrics_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.METRICS,
+                                                                  msgs.METRICS_QOS)
+        # an outsider's: well-formed messages without a voucher
+        self.forged = {topic: node.create_publisher(kind, topic, qos) for topic, kind, qos in (
+            (msgs.decisions_topic(self.names[0]), PointCloud2, msgs.DECISIONS_QOS),
+            (msgs.BATCHES, msgs.Int64MultiArray, msgs.BATCHES_QOS),
+            (msgs.METRICS, msgs.Int64MultiArray, msgs.METRICS_QOS),
+            (msgs.STATUS, DiagnosticArray, msgs.LATCHED_QOS),
+            (msgs.ROBOTS, PointCloud2, msgs.ROBOTS_QOS),
+            (auth_topic("world"), DiagnosticStatus, AUTH_QOS))}
+        self.world_vouchers: list = []  # the world's, as an outsider records them (to replay one)
+        node.create_subscription(DiagnosticStatus, auth_topic("world"), self.world_vouchers.append, AUTH_QOS)
+        # these batches take only what the world vouched for, as the run's own do
+        gate = Gate(node, key, Rejections(node.get_logger()))
+        gate.subscribe(PointCloud2, msgs.snapshot_topic(self.names[0]), self._on_snapshot, msgs.LATCHED_QOS)
+        gate.subscribe(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
+        self.gate = gate
         self.sent: dict[str, int] = {}  # kind of bad message -> how many were sent to the world / the monitor
+        # before the batches' own: an outsider's announcement of batch 1's robots under another name
+        forged = msgs.ids_message(self.ids[1])
+        forged.layout.dim[0].label = "impostor/0"
+        self.forged[msgs.BATCHES].publish(forged)
+        self.sent["world: unvouched announcement"] = 1
         for k, name in enumerate(self.names):
             hello = msgs.ids_message(self.ids[k])
             hello.layout.dim[0].label = msgs.batch_label(name, 0)
@@ -90,6 +116,10 @@ class _Batches:
             apply_robots(self.replica, tick, rows)
         except Rejected:
             return  # the garbage this test sends on /swarm/robots itself
+        if tick == 5:  # an outsider's copy of the world's rows, restamped as the next tick's, before them
+            copy = self.msgs.make_cloud(rows.copy(), tick + 1)
+            self.forged[self.msgs.ROBOTS].publish(copy)
+            self.sent["monitor: unvouched rows"] = 1
         self._decide()
 
     def _cloud(self, rows: np.ndarray, tick: int):
@@ -184,6 +214,24 @@ class _Batches:
             rows["id"], rows["state"] = [10 ** 6, 3], [1, 9]
             self.robots_pub.publish(self._cloud(rows, tick))
             self.sent["monitor: robots"] = 2
+        self.forge(tick, honest)
+
+    def forge(self, tick: int, honest: list) -> None:
+        """An outsider's messages: well-formed, legal, consistent, but not vouched for."""
+        if tick == 2 and honest[0] is not None:  # batch 0's decisions, turned, before its own
+            rows = honest[0].copy()
+            rows["heading"] = (rows["heading"] + 1.0) % (2 * np.pi)
+            self.forged[self.msgs.decisions_topic(self.names[0])].publish(self._cloud(rows, tick))
+            self.sent["world: unvouched decisions"] = 1
+        elif tick == 3:  # the monitor's metrics of a tick the world published
+            self.forged[self.msgs.METRICS].publish(self.msgs.metrics_message([tick - 1] + [0] * 6))
+            self.sent["world: unvouched metrics"] = 1
+        elif tick == 4:  # the world's status, with an outcome
+            self.forged[self.msgs.STATUS].publish(self.msgs.status_message(tick, "complete", "complete"))
+            self.sent["monitor: unvouched status"] = 1
+        elif tick == 6 and self.world_vouchers:  # one of the world's vouchers, again
+            self.forged["/swarm/auth/world"].publish(self.world_vouchers[-1])
+            self.sent["monitor: replayed voucher"] = 1
 
 
 def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_path, monkeypatch):
@@ -211,7 +259,7 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
     rclpy.init(args=[], context=context, domain_id=lock.domain_id)
     try:
         node = Node("robot_batches", context=context, start_parameter_services=False)
-        batches = _Batches(node, shape, params)
+        batches = _Batches(node, shape, params, env[KEY_ENV].encode())
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         deadline = time.monotonic() + 120
@@ -224,17 +272,21 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
                 proc.kill()
         logs = {name: proc.communicate()[0] for name, proc in procs.items()}
         lock.close()
-    assert {n: p.returncode for n, p in procs.items()} == {"world": 0, "monitor": 0}, logs
+    assert {n: p.returncode for n, p in procs.items()} == {"world": 0, "monitor": 0}, \
+        "\n".join(f"--- {n}:\n{text[-3000:]}" for n, text in logs.items())
     assert batches.replica.tick > 15, "the run ended before every kind of bad message was sent"
     for name in ("metrics.csv", "final_state.csv"):
         assert (ref / name).read_bytes() == (out / name).read_bytes(), name
     summary = json.loads((out / "summary.json").read_text())
     to_world = sum(n for kind, n in batches.sent.items() if kind.startswith("world: "))
     to_monitor = sum(n for kind, n in batches.sent.items() if kind.startswith("monitor: "))
-    assert to_world == 16 and to_monitor == 2, batches.sent
+    assert to_world == 19 and to_monitor == 5, batches.sent
     assert summary["rejected_messages"] == {"world": to_world, "monitor": to_monitor}, (batches.sent, logs["world"])
     assert "dropped a message on /swarm/decisions/robot_batch_0 (point layout" in logs["world"]
     assert "dropped a message on /swarm/robots" in logs["monitor"]
+    assert "dropped a message on /swarm/decisions/robot_batch_0 (unauthenticated" in logs["world"]
+    assert "dropped a message on /swarm/status (unauthenticated" in logs["monitor"]
+    assert "dropped a message on /swarm/auth/world (replayed voucher" in logs["monitor"]
 
 
 
@@ -286,11 +338,16 @@ def test_a_one_host_run_is_not_discovered_from_another_network_namespace(two_hos
         assert topics == []
 
 
-def test_garbage_on_the_robots_topic_is_dropped_by_real_batches_and_the_monitor(tmp_path, monkeypatch):
-    """swarm-ros run as a user starts it, and a stranger on its domain publishing malformed rows on
-    /swarm/robots while it runs: every node drops them, and the run equals simulate's."""
+def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(tmp_path, monkeypatch):
+    """swarm-ros run as a user starts it (a new key for the run), and a stranger on its domain that
+    reads the run's messages and sends, without vouchers: malformed rows; every tick's rows again,
+    restamped as the next tick's (consistent, and before the world's); a batch's snapshot restamped
+    later; a status with an outcome. Each would change the run if taken. Every node drops them, and
+    the run equals simulate's."""
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from sensor_msgs.msg import PointCloud2
 
@@ -308,10 +365,37 @@ def test_garbage_on_the_robots_topic_is_dropped_by_real_batches_and_the_monitor(
         monkeypatch.setenv(key, value)
     context = Context()
     rclpy.init(args=[], context=context, domain_id=lock.domain_id)
-    sent = 0
+    sent: dict[str, int] = {}
     try:
         node = Node("stranger", context=context, start_parameter_services=False)
         pub = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
+        snapshot_pub = node.create_publisher(PointCloud2, msgs.snapshot_topic("robot_batch_0"), msgs.LATCHED_QOS)
+        status_pub = node.create_publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
+
+        def count(kind: str) -> None:
+            sent[kind] = sent.get(kind, 0) + 1
+
+        def on_robots(msg) -> None:  # the world's rows of tick t, sent again as tick t + 1's
+            try:
+                rows = msgs.cloud_rows(msg, ROBOT_ROW)
+            except ValueError:
+                return  # this stranger's own garbage, back
+            if rows.size and rows["z"][0] == 0.0 and rows["id"][0] != 7:  # not ours (they come back here)
+                copy = rows.copy()
+                copy["z"] = 0.5
+                pub.publish(msgs.make_cloud(copy, msgs.tick_of(msg.header) + 1))
+                count("rows of the next tick")
+
+        def on_snapshot(msg) -> None:  # the world's snapshot for robot_batch_0, as a later tick's
+            if msgs.tick_of(msg.header) < 50:
+                msg.header.stamp = msgs.stamp(msgs.tick_of(msg.header) + 50)
+                snapshot_pub.publish(msg)
+                count("snapshot")
+
+        node.create_subscription(PointCloud2, msgs.ROBOTS, on_robots, msgs.ROBOTS_QOS)
+        node.create_subscription(PointCloud2, msgs.snapshot_topic("robot_batch_0"), on_snapshot, msgs.LATCHED_QOS)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
         while run.poll() is None:
             bad = msgs.make_cloud(np.zeros(3, dtype=ROBOT_ROW), 10 ** 6)
             bad.point_step = 13  # another layout
@@ -319,8 +403,11 @@ def test_garbage_on_the_robots_topic_is_dropped_by_real_batches_and_the_monitor(
             rows = np.zeros(2, dtype=ROBOT_ROW)
             rows["id"], rows["x"] = [7, 7], [np.nan, 1e300]  # a repeated robot, off the world
             pub.publish(msgs.make_cloud(rows, 1))
-            sent += 2
-            time.sleep(0.05)
+            status_pub.publish(msgs.status_message(1, "complete", "complete at tick 1"))
+            count("garbage and status")
+            end = time.monotonic() + 0.05
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.01)
         _, err = run.communicate(timeout=120)
     finally:
         rclpy.shutdown(context=context)
@@ -329,9 +416,14 @@ def test_garbage_on_the_robots_topic_is_dropped_by_real_batches_and_the_monitor(
             run.wait()
         lock.close()
     assert run.returncode == 0, err
-    assert sent >= 20
+    assert sent.get("garbage and status", 0) >= 10 and sent.get("rows of the next tick", 0) >= 100, sent
+    assert sent.get("snapshot") == 1, sent  # robot_batch_0's tick-0 snapshot (the forgery comes back as tick 50)
     for name in ("metrics.csv", "final_state.csv"):
         assert (ref / name).read_bytes() == (out / name).read_bytes(), name
-    assert json.loads((out / "summary.json").read_text())["rejected_messages"]["monitor"] >= 1
+    assert json.loads((out / "summary.json").read_text())["rejected_messages"]["monitor"] >= 20
     for node_name in ("robot_batch_0", "robot_batch_1", "monitor"):
-        assert "dropped a message on /swarm/robots" in (out / "logs" / f"{node_name}.log").read_text(), node_name
+        log = (out / "logs" / f"{node_name}.log").read_text()
+        for topic in (msgs.ROBOTS, msgs.STATUS):
+            assert f"dropped a message on {topic} (unauthenticated" in log, (node_name, topic)
+    assert "dropped a message on /swarm/snapshot/robot_batch_0 (unauthenticated" in \
+        (out / "logs" / "robot_batch_0.log").read_text()

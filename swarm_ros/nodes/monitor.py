@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
-from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Empty, Int64MultiArray
 
 from ..config import RecordingOptions
@@ -36,6 +35,7 @@ from ..wire import DECISION_ROW
 from ..output import check_out_dir, default_run_dir, partial_recording, write_run
 from . import guard
 from . import messages as msgs
+from .auth import open_auth
 from .guard import Rejected, Rejections
 from .bag import TOPICS, BagRecorder, partial_bag, reader_qos
 from .params import make_node, read_parameters
@@ -77,14 +77,15 @@ class MonitorNode:
         self.rejections = Rejections(node.get_logger())
         self.world_rejected = 0  # messages the world dropped, from its status
 
-        self.pub_metrics = node.create_publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
+        self.signer, self.gate = open_auth(node, "monitor", self.rejections)
+        self.pub_metrics = self.signer.publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         # Serialized subscriptions to every recorded topic but the metrics (sent from here), bag or no bag
-        # (messages.MONITOR_READS). Each message goes into the bag as it came, then to its handler.
+        # (messages.MONITOR_READS). Each message, once vouched for (auth.Gate), goes into the bag as it
+        # came, then to its handler.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
         handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status, msgs.DECISIONS: self._on_decisions}
-        self.readers = {topic: node.create_subscription(TOPICS[topic][0], topic,
-                                                        self._receiver(topic, TOPICS[topic][0], handlers.get(topic)),
-                                                        reader_qos(TOPICS[topic][1]), raw=True)
+        self.readers = {topic: self.gate.subscribe(TOPICS[topic][0], topic, handlers.get(topic),
+                                                   reader_qos(TOPICS[topic][1]), raw_handler=self._bagger(topic))
                         for topic in msgs.MONITOR_READS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
         # readers have matched their writers (a thread watches, while the heavy part below loads): a reader
@@ -111,7 +112,7 @@ class MonitorNode:
             matched = reader.get_publisher_count()
             if matched < 1 or (topic == msgs.DECISIONS and matched < self.node.count_publishers(topic)):
                 return False
-        return True
+        return self.gate.readers_matched()
 
     def _announce_when_matched(self) -> None:
         while not self.closing.wait(_MATCH_POLL):
@@ -120,14 +121,12 @@ class MonitorNode:
                                                         msgs.ALIVE_QOS)
                 return
 
-    def _receiver(self, topic: str, kind, handler):
-        """The callback of a serialized subscription: into the bag, then (deserialized) to ``handler``."""
-        def receive(data: bytes) -> None:
+    def _bagger(self, topic: str):
+        """What writes a vouched message of ``topic``, as it came, into the bag (if there is one)."""
+        def write(data: bytes) -> None:
             if self.bag is not None:
                 self.bag.write(topic, data)
-            if handler is not None:
-                handler(deserialize_message(data, kind))
-        return receive
+        return write
 
     def _on_robots(self, msg: PointCloud2) -> None:
         if self.outcome is not None:
@@ -146,10 +145,9 @@ class MonitorNode:
         counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
         metrics = tick_metrics(tick, counts, self.shape.patches)
         self.rows.append(tuple(metrics))
-        message = msgs.metrics_message(metrics)
-        self.pub_metrics.publish(message)
+        data = self.pub_metrics.publish(msgs.metrics_message(metrics))
         if self.bag is not None:
-            self.bag.write(msgs.METRICS, serialize_message(message))
+            self.bag.write(msgs.METRICS, data)
         if self.removed > removed_before:
             self.losses.append((tick, self.removed - removed_before))
         p = self.params
@@ -206,6 +204,7 @@ class MonitorNode:
                 self.world_end = (time.monotonic(), msgs.tick_of(msg.header))
 
     def poll(self) -> None:
+        self.gate.expire()
         if self.outcome is None:
             self._check_world_end()
             return
@@ -214,6 +213,7 @@ class MonitorNode:
         if self.bag is not None and not self._bag_complete() and time.monotonic() - self.ended_at < _BAG_WAIT:
             return
         missed = handle_missed(self.node)  # what the executor may not have handed over (runner.handle_missed)
+        self.gate.settle()  # the run's counts, for its summary
         if missed:
             self.node.get_logger().warn(f"{missed} messages were still in the readers, not handed over by the "
                                         f"executor; handled before writing the run")

@@ -14,6 +14,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Int64MultiArray
 
 from . import messages as msgs
+from .auth import Gate
+from .guard import Rejections
 from .dds import apply_dds_defaults
 
 
@@ -23,7 +25,7 @@ _MAX_BATCH = 10_000  # messages handled per spin() at most
 class Progress:
     """Follows /swarm/metrics on ``domain_id`` and shows localized robots against the shape's patches."""
 
-    def __init__(self, domain_id: int, patches: int, quiet: bool = False) -> None:
+    def __init__(self, domain_id: int, patches: int, key: bytes, quiet: bool = False) -> None:
         from tqdm import tqdm
 
         apply_dds_defaults()  # as the nodes have them (launcher.node_env)
@@ -31,8 +33,10 @@ class Progress:
         # Ctrl-C stays a KeyboardInterrupt for the launcher, which then stops its children.
         rclpy.init(args=[], context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node("swarm_ros_launcher", context=self.context, start_parameter_services=False)
-        self.node.create_subscription(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
-        self.node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
+        # only what the run's nodes vouched for (auth.Gate): a stranger's status cannot end the run here
+        self.gate = Gate(self.node, key, Rejections(self.node.get_logger()))
+        self.gate.subscribe(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
+        self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
         self.executor = EventsExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.bar = tqdm(total=patches, unit="patch", desc="localized", disable=True if quiet else None,
@@ -40,15 +44,12 @@ class Progress:
         self.bar.set_postfix(tick="starting", refresh=False)
         self.tick = -1  #: the last tick the monitor reported; -1 before tick 0
         self.ended_at: float | None = None  #: time.monotonic() when the world's outcome arrived
-        self.events = 0  # messages handled
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        self.events += 1
         if self.ended_at is None and msgs.status_values(msg).get("outcome") not in (None, "starting", "running"):
             self.ended_at = time.monotonic()
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:
-        self.events += 1
         m = msgs.metrics_of(msg)
         self.tick = max(self.tick, m.get("tick", -1))
         self.bar.update(m.get("localized", 0) - self.bar.n)
@@ -62,9 +63,9 @@ class Progress:
         """
         self.executor.spin_once(timeout_sec=timeout)
         for _ in range(_MAX_BATCH):
-            handled = self.events
+            handled = self.gate.received
             self.executor.spin_once(timeout_sec=0)
-            if self.events == handled:
+            if self.gate.received == handled:
                 break
 
     def __enter__(self) -> Progress:

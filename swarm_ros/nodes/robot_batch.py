@@ -33,6 +33,7 @@ from ..core.warmup import warm_up
 from ..wire import PATCH_METRES, batch_ids, decision_rows, format_ranges, parse_ranges
 from . import guard
 from . import messages as msgs
+from .auth import open_auth
 from .guard import Rejected, Rejections
 from .params import make_node, read_parameters
 from .runner import RunFailed, apply_robots, checked_robots, run_node
@@ -61,14 +62,14 @@ class RobotBatchNode:
         self.radius = self.shape.world.radius
         self.rejections = Rejections(node.get_logger())
 
-        self.pub_decisions = node.create_publisher(PointCloud2, msgs.decisions_topic(node.get_name()),
+        self.signer, self.gate = open_auth(node, "batches", self.rejections)
+        self.pub_decisions = self.signer.publisher(PointCloud2, msgs.decisions_topic(node.get_name()),
                                                    msgs.DECISIONS_QOS)
-        node.create_subscription(PointCloud2, msgs.snapshot_topic(node.get_name()), self._on_snapshot,
-                                 msgs.LATCHED_QOS)
-        node.create_subscription(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
-        node.create_subscription(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
+        self.gate.subscribe(PointCloud2, msgs.snapshot_topic(node.get_name()), self._on_snapshot, msgs.LATCHED_QOS)
+        self.gate.subscribe(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
+        self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
-        announce = node.create_publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
+        announce = self.signer.publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
         hello = msgs.ids_message(self.ids)
         hello.layout.dim[0].label = msgs.batch_label(node.get_name(), int(own["incarnation"]))
         announce.publish(hello)
@@ -155,11 +156,13 @@ class RobotBatchNode:
     def _on_status(self, msg: DiagnosticArray) -> None:
         if self.ended_at is None and msgs.status_values(msg).get("outcome", "running") not in RUNNING_STATES:
             self.ended_at = time.monotonic()
+            self.gate.settle()  # its log says what it dropped
 
     def close(self, code: int) -> None:
         """Nothing to release."""
 
     def poll(self) -> None:
+        self.gate.expire()
         # After the outcome, exit once every reader has acknowledged this batch's decisions: the world
         # has them all, but the monitor, which records them in the bag, may be far behind. A reader
         # that died never acknowledges, so wait at most _LINGER.

@@ -53,6 +53,7 @@ from ..signals import PARENT_ENV, process_age
 from ..wire import DECISION_ROW, decision_rows, decisions_of, robot_rows
 from . import guard
 from . import messages as msgs
+from .auth import auth_topic, open_auth
 from .guard import Rejected, Rejections
 from .params import make_node, read_parameters
 from .runner import RunFailed, run_node
@@ -78,15 +79,17 @@ class WorldNode:
         self.restart_timeout = float(own["restart_timeout"])
         self.finished = False
         self.rejections = Rejections(node.get_logger())
+        self.signer, self.gate = open_auth(node, "world", self.rejections)
 
-        self.pub_robots = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
-        self.pub_shape = node.create_publisher(msgs.OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
-        self.pub_occupancy = node.create_publisher(msgs.OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
-        self.pub_status = node.create_publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
-        self.pub_clock = node.create_publisher(msgs.Clock, msgs.CLOCK, msgs.CLOCK_QOS)
-        self.pub_decisions = node.create_publisher(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
-        node.create_subscription(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
-        node.create_subscription(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
+        signed = self.signer.publisher
+        self.pub_robots = signed(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
+        self.pub_shape = signed(msgs.OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
+        self.pub_occupancy = signed(msgs.OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
+        self.pub_status = signed(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
+        self.pub_clock = signed(msgs.Clock, msgs.CLOCK, msgs.CLOCK_QOS)
+        self.pub_decisions = signed(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
+        self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
+        self.gate.subscribe(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
         self._watch(msgs.alive_topic(_MONITOR), self._on_monitor_liveliness)
 
         n = self.params.robots
@@ -154,11 +157,10 @@ class WorldNode:
         self.batch_names.append(name)
         self.restart_counts.append(0)
         self.incarnations.append(0)
-        self.snapshot_pubs.append(self.node.create_publisher(PointCloud2, msgs.snapshot_topic(name),
-                                                             msgs.LATCHED_QOS))
+        self.snapshot_pubs.append(self.signer.publisher(PointCloud2, msgs.snapshot_topic(name), msgs.LATCHED_QOS))
         topic = msgs.decisions_topic(name)
-        self.node.create_subscription(PointCloud2, topic, lambda m, k=k, t=topic: self._on_decisions(k, t, m),
-                                      msgs.DECISIONS_QOS)
+        self.gate.subscribe(PointCloud2, topic, lambda m, k=k, t=topic: self._on_decisions(k, t, m),
+                            msgs.DECISIONS_QOS)
         self._watch(msgs.alive_topic(name), lambda info, k=k: self._on_batch_liveliness(k, info))
         covered = int((self.host[4:] >= 0).sum())
         log.info(f"{name} hosts {ids.size} robots; {covered}/{n - 4} covered")
@@ -230,7 +232,7 @@ class WorldNode:
         (``/swarm/occupancy``).
         """
         return all(any(info.node_name == _MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
-                   for topic in msgs.MONITOR_READS)
+                   for topic in (*msgs.MONITOR_READS, auth_topic("world")))
 
     def _start(self) -> None:
         self.started = True
@@ -349,18 +351,19 @@ class WorldNode:
     def _flush(self) -> None:
         while self.queued and (self.window == 0 or self.queued[0][0] - self.monitor_tick <= self.window):
             tick, robots_msg, joined, decisions = self.queued.popleft()
-            if decisions is not None:
-                self.pub_decisions.publish(decisions)
-            self.pub_robots.publish(robots_msg)
-            self.progress_at = time.monotonic()
-            if joined:
-                self._publish_occupancy()
-            self.pub_clock.publish(msgs.clock_message(tick))
-            self.published_tick = tick
-            if tick == self.sim.tick and self.sim.done:
-                self._announce_end()
-            elif tick == 0:
-                self._publish_status()
+            with self.signer.batch():  # one voucher for the tick's messages
+                if decisions is not None:
+                    self.pub_decisions.publish(decisions)
+                self.pub_robots.publish(robots_msg)
+                self.progress_at = time.monotonic()
+                if joined:
+                    self._publish_occupancy()
+                self.pub_clock.publish(msgs.clock_message(tick))
+                self.published_tick = tick
+                if tick == self.sim.tick and self.sim.done:
+                    self._announce_end()
+                elif tick == 0:
+                    self._publish_status()
 
     def _publish_occupancy(self) -> None:
         """The occupancy now, stamped with the world's tick (it may be ahead of the last published rows)."""
@@ -371,6 +374,7 @@ class WorldNode:
     def _announce_end(self) -> None:
         m, outcome = self.sim.metrics, self.sim.outcome
         self.ended_at = time.monotonic()
+        self.gate.settle()  # the last status has the run's counts
         self._publish_status()
         self.node.get_logger().info(f"run ended: {outcome.value} at tick {m.tick}, {m.localized} localized")
 
@@ -406,9 +410,10 @@ class WorldNode:
         values["rejected"] = self.rejections.text()
         values["lost"] = ",".join(self.lost)
         values["waiting_for"] = ",".join(self.batch_names[k] for k in sorted(self.down_since))
-        self.pub_status.publish(msgs.status_message(tick, outcome, message, level, values))
-        if self.started:
-            self._publish_occupancy()
+        with self.signer.batch():
+            self.pub_status.publish(msgs.status_message(tick, outcome, message, level, values))
+            if self.started:
+                self._publish_occupancy()
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:
         try:
@@ -521,6 +526,7 @@ class WorldNode:
 
     def poll(self) -> None:
         now = time.monotonic()
+        self.gate.expire(now)
         self._check_stalls(now)
         for k, since in list(self.down_since.items()):
             if now - since > self.restart_timeout:
