@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections import deque
+
 import pytest
 
 pytest.importorskip("rclpy")
@@ -34,11 +36,29 @@ class _Pub:
         self.log.append((self.topic, msg))
 
 
+class _Subscription:
+    """What Gate takes from a reader itself (as runner.handle_missed does): messages still waiting in it."""
+
+    def __init__(self, msg_type, callback, raw: bool, waiting: list) -> None:
+        self.msg_type, self.callback, self.raw, self.waiting = msg_type, callback, raw, waiting
+        self.handle = self
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+    def take_message(self, msg_type, raw):
+        return (self.waiting.pop(0), {}) if self.waiting else None
+
+
 class _Node:
     """What Signer and Gate use of an rclpy node: publishers append to ``sent``, subscriptions are kept."""
 
     def __init__(self, name: str = "world") -> None:
         self.name, self.sent, self.callbacks = name, [], {}
+        self.waiting: dict[str, list] = {}  # topic -> messages in its reader, not handed to the callback
 
     def get_name(self) -> str:
         return self.name
@@ -48,7 +68,7 @@ class _Node:
 
     def create_subscription(self, msg_type, topic, callback, qos, raw=False):
         self.callbacks[topic] = callback
-        return object()
+        return _Subscription(msg_type, callback, raw, self.waiting.setdefault(topic, []))
 
 
 class _Clock:
@@ -104,6 +124,15 @@ def test_a_vouched_message_is_taken_once_whichever_comes_first(clock):
     gate.expire()
     assert got == [1, 2]
     assert gate.rejections.counts == {f"{msgs.STATUS}: unauthenticated": 1}
+
+
+def test_a_voucher_waiting_in_its_reader_is_taken_when_its_message_arrives(clock):
+    node, signer, pub = _world()
+    pub.publish(_status(1))
+    rx, gate, got = _receiver()
+    rx.waiting[auth.auth_topic("world")].append(node.sent[0][1])  # arrived, not handed over by the executor
+    _deliver(rx, node.sent, [1])
+    assert got == [1] and gate.held[msgs.STATUS] == deque() and rx.waiting[auth.auth_topic("world")] == []
 
 
 def test_a_message_nobody_vouched_for_is_dropped_and_counted_after_the_hold(clock):
@@ -218,6 +247,22 @@ def test_vouchers_for_other_topics_are_not_kept_and_kept_digests_are_bounded(clo
     assert len(gate.digests) == 3 and all(topic == msgs.STATUS for topic, _ in gate.digests)
     _deliver(rx, [s for s in node.sent if s[0] == msgs.STATUS])
     assert got == [2, 3, 4]  # the two oldest listings were forgotten
+
+
+def test_a_voucher_counts_only_for_its_roles_topics(clock):
+    from std_msgs.msg import Int64MultiArray
+
+    node = _Node("robot_batch_0")
+    signer = auth.Signer(node, KEY, "batches")  # on /swarm/auth/batches, vouching for a monitor's topic
+    signer.publisher(Int64MultiArray, msgs.METRICS, None).publish(msgs.metrics_message([3] + [0] * 6))
+    assert node.sent[0][0] == auth.auth_topic("batches")
+    rx = _Node("world")
+    gate = auth.Gate(rx, KEY, Rejections(_Log()))
+    got = []
+    gate.subscribe(Int64MultiArray, msgs.METRICS, got.append, None)
+    gate.subscribe(Int64MultiArray, msgs.BATCHES, got.append, None)  # the world reads /swarm/auth/batches too
+    _deliver(rx, node.sent)
+    assert got == [] and not gate.digests
 
 
 def test_messages_are_aligned_to_four_bytes_as_dds_delivers_them():

@@ -32,7 +32,7 @@ import hashlib
 import hmac
 import secrets
 import time
-from collections import Counter, deque
+from collections import OrderedDict, deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -194,8 +194,8 @@ class Gate:
         self.node, self.key, self.rejections = node, key, rejections
         self.handlers: dict[str, tuple[type, Callable[[object], None], Callable[[bytes], None] | None]] = {}
         self.held: dict[str, deque[tuple[float, bytes, bytes]]] = {}  # topic -> (arrived, digest, data)
-        self.digests: Counter[tuple[str, bytes]] = Counter()  # vouched for, not yet matched
-        self._order: deque[tuple[str, bytes]] = deque()  # the same, oldest first (to forget the oldest)
+        #: (topic, digest) -> listings not yet matched by a message, oldest first (the oldest are forgotten)
+        self.digests: OrderedDict[tuple[str, bytes], int] = OrderedDict()
         self.last_seq: dict[str, int] = {}  # sender process nonce -> the highest sequence number taken
         self.auth_readers: dict[str, object] = {}
         self.received = 0  # callbacks so far (messages and vouchers)
@@ -217,7 +217,9 @@ class Gate:
     def _on_message(self, topic: str, data: bytes) -> None:
         self.received += 1
         d = digest(topic, data)
-        if self.digests[(topic, d)] > 0:
+        if (topic, d) not in self.digests:
+            self._drain_vouchers(role_of(topic))
+        if (topic, d) in self.digests:
             self._take(topic, d)
             self._deliver(topic, data)
         else:
@@ -239,25 +241,37 @@ class Gate:
             return
         self.last_seq[nonce] = seq
         for topic, d in entries:
-            if topic not in self.handlers:
-                continue
+            if topic not in self.handlers or auth_topic(role_of(topic)) != auth:
+                continue  # not read here, or not this role's topic (a batch cannot vouch for the world's)
             held = self.held[topic]
             match = next((i for i, (_, hd, _) in enumerate(held) if hd == d), None)
             if match is None:
-                self.digests[(topic, d)] += 1
-                self._order.append((topic, d))
-                if len(self._order) > KEPT_DIGESTS:
-                    self._take(*self._order.popleft())
+                self.digests[(topic, d)] = self.digests.get((topic, d), 0) + 1
+                self.digests.move_to_end((topic, d))
+                if len(self.digests) > KEPT_DIGESTS:
+                    self.digests.popitem(last=False)
                 continue
             data = held[match][2]
             del held[match]
             self._deliver(topic, data)
         self.expire()
 
+    def _drain_vouchers(self, role: str) -> None:
+        """Take the vouchers waiting in ``role``'s reader now: the voucher of a message that just arrived
+        was sent before it, and is usually there, but the executor may not have handed it over yet (it
+        hands over events in its own order, and sometimes loses one: runner.handle_missed)."""
+        reader = self.auth_readers[role]
+        while True:
+            with reader.handle:
+                taken = reader.handle.take_message(reader.msg_type, reader.raw)
+            if taken is None:
+                return
+            reader.callback(taken[0])
+
     def _take(self, topic: str, d: bytes) -> None:
         key = (topic, d)
         self.digests[key] -= 1
-        if self.digests[key] <= 0:
+        if self.digests[key] == 0:
             del self.digests[key]
 
     def _deliver(self, topic: str, data: bytes) -> None:
