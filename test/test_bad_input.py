@@ -70,9 +70,14 @@ def test_bad_input_row(tmp_path, monkeypatch, capsys, number, command, message):
     make_fixtures(tmp_path)
     before = listing(tmp_path)
     words = shlex.split(command)
+    assigned = {}  # VAR=value words before the command, as a shell takes them
+    while words and re.fullmatch(r"[A-Z_]+=.*", words[0]):
+        name, _, value = words.pop(0).partition("=")
+        assigned[name] = value
     if words[:3] == ["ros2", "run", "swarm_ros"]:  # ros2cli is not installed: run the node's module
         home = tmp_path.parent / f"{tmp_path.name}-home"  # ROS and matplotlib caches go there, not in tmp_path
-        env = {**os.environ, "ROS_DOMAIN_ID": "231", "HOME": str(home), "ROS_LOG_DIR": str(home / "ros")}
+        env = {**os.environ, "ROS_DOMAIN_ID": "231", "HOME": str(home), "ROS_LOG_DIR": str(home / "ros"),
+               **assigned}
         done = subprocess.run([sys.executable, "-m", f"swarm_ros.nodes.{words[3]}", *words[4:]], cwd=tmp_path,
                               capture_output=True, text=True, timeout=120, env=env)
         code, err = done.returncode, done.stderr
@@ -81,6 +86,8 @@ def test_bad_input_row(tmp_path, monkeypatch, capsys, number, command, message):
     else:
         assert words[0] == "swarm-ros"
         monkeypatch.chdir(tmp_path)
+        for name, value in assigned.items():
+            monkeypatch.setenv(name, value)
         code, err = cli.main(words[1:]), capsys.readouterr().err
         prefix = "swarm-ros: error: "
     assert code == 2, err

@@ -20,6 +20,7 @@ from test_ros_graph import _assert_same_run, _shape_file
 from swarm_ros import cli
 from swarm_ros.config import Settings
 from swarm_ros.nodes.params import params_yaml
+from swarm_ros.nodes.runkey import KEY_ENV, new_key
 from swarm_ros.wire import DECISION_ROW, ROBOT_ROW
 
 PY = sys.executable
@@ -53,7 +54,8 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
     env.update({"ROS_DOMAIN_ID": str(100 + os.getpid() % 100), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
                 "ROS_STATIC_PEERS": f"{SUBNET.format(net, 1)};{SUBNET.format(net, 2)}",
                 "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",  # shared memory would bypass the namespaces
-                "HOME": str(tmp_path), "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"})
+                "HOME": str(tmp_path), "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1",
+                KEY_ENV: new_key()})  # one run key on both hosts (docs/ros_graph.md, Several hosts)
     plan = [(a, "world", "world", []), (a, "monitor", "monitor", []),
             (b, "robot_batch_0", "robot_batch", ["-p", "batch:=0", "-p", "batches:=2"]),
             (b, "robot_batch_1", "robot_batch", ["-p", "batch:=1", "-p", "batches:=2"])]
@@ -82,6 +84,7 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
     assert {name: p.returncode for name, (p, _) in procs.items()} == dict.fromkeys(procs, 0), _logs(tmp_path, procs, link)
     world_log = (tmp_path / "world.log").read_text()
     assert "robot_batch_0 hosts" in world_log and "robot_batch_1 hosts" in world_log
+    assert not any("public key" in (tmp_path / f"{name}.log").read_text() for name in procs)  # the run's key
     _assert_same_run(ref, run, launched=False)
     # and the traffic really crossed the link between the hosts. Lower bounds that must hold:
     # host A received every decision row (one per moving robot per tick) from host B, and sent

@@ -7,7 +7,8 @@ publishes each tick's metrics on /swarm/metrics, records the run with the in-pro
 engine's own :class:`~swarm_ros.recording.Recorder` (streamed to ``<out_dir>.partial.rrd``
 while the run goes on), and when the run ends writes the run directory exactly as
 ``swarm-ros simulate`` does, with ``engine: ros2``. It checks its outcome against the
-world's /swarm/status.
+world's /swarm/status. It takes only what the world vouched for (:mod:`swarm_ros.nodes.auth`),
+and records only that in the bag.
 
     ros2 run swarm_ros monitor --ros-args --params-file config/swarm_ros.yaml -p out_dir:=runs/star
 """

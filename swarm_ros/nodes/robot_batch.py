@@ -6,6 +6,7 @@ process that was restarted in the middle of a run); the batch builds its copy of
 swarm's state from it (:class:`swarm_ros.core.replica.Replica`), follows the world's
 rows on /swarm/robots from there, and after each tick publishes, on its own
 /swarm/decisions/<batch>, what each of its moving robots decided for the next one.
+It takes only messages the world vouched for (:mod:`swarm_ros.nodes.auth`), and vouches for its own.
 Every message it takes is checked first (:mod:`swarm_ros.nodes.guard`, and
 :meth:`Replica.inconsistent` for rows); one that fails is dropped, counted and logged. A decision is a pure function
 of the state, the seed, the robot and the tick, so a restarted batch decides exactly

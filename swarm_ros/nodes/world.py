@@ -7,7 +7,9 @@ engine's own code (:meth:`swarm_ros.core.engine.Simulation.apply`), checks for t
 and publishes what it applied on /swarm/decisions, the rows of tick t + 1, the occupancy
 if a robot joined, and the clock.
 
-Every message is checked before use (:mod:`swarm_ros.nodes.guard`): a decision counts
+Every message is taken only once a voucher under the run's key lists it
+(:mod:`swarm_ros.nodes.auth`; the world vouches for each tick's messages with one voucher),
+and checked before use (:mod:`swarm_ros.nodes.guard`): a decision counts
 only from the batch hosting its robot, for a moving robot, once per robot and tick, for
 the tick being decided, and within the rule set's bounds (:mod:`swarm_ros.core.legality`).
 A message that fails is dropped whole and counted (``rejected_messages`` on /swarm/status).
