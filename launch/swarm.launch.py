@@ -50,14 +50,17 @@ def graph(context) -> list:
     run = {name: _value(name, arg(name)) for name in RUN_ARGUMENTS if arg(name)}
     processes = int(arg("processes"))
     monitor = {"out_dir": arg("out_dir")} if arg("out_dir") else {}
+    enclaves = arg("enclaves")
+    # SROS2: each node in its enclave <enclaves>/<node> (as swarm-ros run --enclaves)
+    sros = lambda name: {"ros_arguments": ["--enclave", f"{enclaves}/{name}"]} if enclaves else {}  # noqa: E731
     nodes = [Node(package=PACKAGE, executable="monitor", name="monitor", output="screen",
-                  parameters=[params_file, run, monitor])]
+                  parameters=[params_file, run, monitor], **sros("monitor"))]
     nodes += [Node(package=PACKAGE, executable="robot_batch", name=f"robot_batch_{k}", output="screen",
                    parameters=[params_file, run, {"batch": k, "batches": processes}], respawn=True,
-                   respawn_delay=0.0)
+                   respawn_delay=0.0, **sros(f"robot_batch_{k}"))
               for k in range(processes)]
     nodes.append(Node(package=PACKAGE, executable="world", name="world", output="screen",
-                      parameters=[params_file, run]))
+                      parameters=[params_file, run], **sros("world")))
     return nodes + end_of_run(world=nodes[-1], monitor=nodes[0])
 
 
@@ -96,6 +99,9 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument("processes", default_value="2", description="robot-batch processes K"),
         DeclareLaunchArgument("params_file", default_value="",
                               description="parameter file (default: the package's config/swarm_ros.yaml)"),
+        DeclareLaunchArgument("enclaves", default_value="",
+                              description="SROS2: run each node in the enclave <enclaves>/<node> (e.g. /swarm_ros; "
+                                          "untested here, docs/security.md)"),
         DeclareLaunchArgument("out_dir", default_value="",
                               description="the monitor's run directory (default: runs/<time>_<shape>_...)"),
         *[DeclareLaunchArgument(name, default_value="", description=f"run parameter {name} (default: the "

@@ -108,6 +108,10 @@ def build_parser() -> argparse.ArgumentParser:
                           f"{MAX_RESTARTS} times per batch), or remove its robots, as robots lost for good")
     run.add_argument("--no-bag", action="store_false", dest="bag", default=None,
                      help="do not write bag/, the rosbag2 (MCAP) of every message on the swarm's topics")
+    run.add_argument("--enclaves", metavar="PREFIX",
+                     help="SROS2: start each node with --enclave PREFIX/<node>, and this command's own node with "
+                          "PREFIX/swarm_ros_launcher (for a ROS install with DDS security; untested here: "
+                          "docs/security.md)")
     run.set_defaults(func=cmd_run)
 
     replay = sub.add_parser("replay", help="publish a run's bag again, so ROS tools can watch a past run",
@@ -296,7 +300,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     import json
 
-    from .launcher import Launch, interrupted_run
+    from .launcher import ENCLAVE_PREFIX, Launch, interrupted_run
     from .output import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args)
@@ -308,9 +312,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.processes > params.robots - 4:
         raise SwarmError(f"--processes {args.processes} is more than the {params.robots - 4} non-seed robots")
     domain = _domain_id(args.domain_id)
+    if args.enclaves is not None and not ENCLAVE_PREFIX.fullmatch(args.enclaves):
+        raise SwarmError(f"--enclaves must be an enclave path like /swarm_ros (names of letters, digits and _ "
+                         f"after each /), got {args.enclaves!r}")
     launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
                     overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
-                    world=world, bag=bool(_flag(args.bag, nodes["monitor"], "bag")))
+                    world=world, bag=bool(_flag(args.bag, nodes["monitor"], "bag")), enclaves=args.enclaves)
     _interrupt_on_sigterm()
     try:
         out = launch.run()

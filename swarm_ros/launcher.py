@@ -28,6 +28,7 @@ from __future__ import annotations
 import fcntl
 import os
 import random
+import re
 import shutil
 import signal
 import subprocess
@@ -133,6 +134,10 @@ class DomainLock:
             self.file = None
 
 
+#: An SROS2 enclave path prefix: ``/name`` parts of letters, digits and underscores.
+ENCLAVE_PREFIX = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+
+
 def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
     env = dict(os.environ)
     env[PARENT_ENV] = str(os.getpid())
@@ -145,9 +150,13 @@ def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
     return with_run_key(env)
 
 
-def node_command(module: str, params_file: Path, name: str, extra: dict[str, object] | None = None) -> list[str]:
+def node_command(module: str, params_file: Path, name: str, extra: dict[str, object] | None = None,
+                 enclaves: str | None = None) -> list[str]:
+    """The command of a node process; with ``enclaves`` (SROS2), its enclave is ``<enclaves>/<name>``."""
     cmd = [sys.executable, "-m", f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params_file),
            "-r", f"__node:={name}"]
+    if enclaves:
+        cmd += ["--enclave", f"{enclaves}/{name}"]
     for key, value in (extra or {}).items():
         cmd += ["-p", f"{key}:={value}"]
     return cmd
@@ -230,6 +239,7 @@ class Launch:
     recording: RecordingOptions = field(default_factory=RecordingOptions)
     world: dict = field(default_factory=dict)  #: the world node's own parameters (on_batch_loss, max_restarts, ...)
     bag: bool = True  #: the monitor writes bag/, a rosbag2 of the run
+    enclaves: str | None = None  #: SROS2: each node's enclave is <enclaves>/<node> (docs/security.md)
     children: list[Child] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)  #: processes lost during the run
     restarts: list[str] = field(default_factory=list)  #: names of the batches restarted, once per restart
@@ -298,7 +308,8 @@ class Launch:
         self.params_file = params_file
         for name, module, extra in self.plan():
             log = logs / f"{name}.log"
-            self.children.append(self._spawn(name, node_command(module, params_file, name, extra), log, 0))
+            self.children.append(self._spawn(name, node_command(module, params_file, name, extra, self.enclaves),
+                                             log, 0))
         if not self.quiet:
             print(f"swarm-ros: ROS domain {domain_id}, {self.processes} robot-batch processes, logs in {logs} "
                   f"(kept in the run directory at the end)", file=sys.stderr, flush=True)
@@ -355,7 +366,7 @@ class Launch:
         # (Signal handlers can only be set from the main thread; a Dask worker runs this in another.)
         stop = StopFlag() if threading.current_thread() is threading.main_thread() else None
         with stop or nullcontext(), Progress(self.domain, self.shape.patches, self.env[KEY_ENV].encode(),
-                                                      quiet=self.quiet) as progress:
+                                                      quiet=self.quiet, enclaves=self.enclaves) as progress:
             while True:
                 if stop is not None and stop.signum:
                     raise KeyboardInterrupt

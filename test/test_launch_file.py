@@ -159,6 +159,21 @@ def test_the_launch_file_passes_a_parameter_file_and_an_output_directory(monkeyp
     assert by_name["monitor"]["record"] is False and by_name["monitor"]["out_dir"] == str(tmp_path / "out")
 
 
+def test_the_launch_file_passes_sros2_enclaves_as_swarm_ros_run_does(monkeypatch, tmp_path):
+    assert all("ros_arguments" not in n.kwargs for n in _launched(monkeypatch)[0])  # none unless asked
+    nodes, _ = _launched(monkeypatch, enclaves="/swarm_ros")
+    run = Settings()
+    shape, params = run.resolve()
+    launch = Launch(settings=run, shape=shape, params=params, processes=2, out=tmp_path / "run", enclaves="/swarm_ros")
+    commands = {name: launcher.node_command(exe, tmp_path / "p.yaml", name, extra, launch.enclaves)
+                for name, exe, extra in launch.plan()}
+    for node in nodes:
+        name = node.kwargs["name"]
+        assert node.kwargs["ros_arguments"] == ["--enclave", f"/swarm_ros/{name}"]
+        i = commands[name].index("--enclave")
+        assert commands[name][i:i + 2] == node.kwargs["ros_arguments"], name
+
+
 def test_the_launch_file_keeps_a_run_key_the_user_set(monkeypatch):
     _, env, _ = _launch_actions(monkeypatch, user_env={KEY_ENV: "a key for every host of mine"})
     assert env[KEY_ENV] == "a key for every host of mine"

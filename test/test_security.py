@@ -290,6 +290,25 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
 
 
 
+def test_sros2_enclaves_reach_every_node_and_the_run_is_unchanged(tmp_path):
+    """swarm-ros run --enclaves: every node process starts with its enclave, and with DDS security off
+    (this ROS 2 build has none) rcl accepts the argument and the run is the same. What SROS2 does with
+    the enclaves cannot be tried here (docs/security.md)."""
+    from swarm_ros.launcher import Launch
+
+    ref = tmp_path / "ref"
+    assert cli.main(["simulate", *FLAGS, "--out", str(ref), "--quiet", "--no-recording"]) == 0
+    settings = Settings(shape="rectangle", robots=ROBOTS, seed=SEED)
+    shape, params = settings.resolve()
+    launch = Launch(settings=settings, shape=shape, params=params, processes=2, out=tmp_path / "run", quiet=True,
+                    bag=False, enclaves="/swarm_ros")
+    out = launch.run()
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (ref / name).read_bytes() == (out / name).read_bytes(), name
+    assert {c.name: c.command[c.command.index("--enclave") + 1] for c in launch.children} == {
+        name: f"/swarm_ros/{name}" for name in ("monitor", "robot_batch_0", "robot_batch_1", "world")}
+
+
 _INTRUDER = """
 import sys, time
 import rclpy

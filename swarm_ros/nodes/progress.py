@@ -25,13 +25,16 @@ _MAX_BATCH = 10_000  # messages handled per spin() at most
 class Progress:
     """Follows /swarm/metrics on ``domain_id`` and shows localized robots against the shape's patches."""
 
-    def __init__(self, domain_id: int, patches: int, key: bytes, quiet: bool = False) -> None:
+    def __init__(self, domain_id: int, patches: int, key: bytes, quiet: bool = False,
+                 enclaves: str | None = None) -> None:
         from tqdm import tqdm
 
         apply_dds_defaults()  # as the nodes have them (launcher.node_env)
         self.context = Context()
         # Ctrl-C stays a KeyboardInterrupt for the launcher, which then stops its children.
-        rclpy.init(args=[], context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        args = ["--ros-args", "--enclave", f"{enclaves}/swarm_ros_launcher"] if enclaves else []
+        rclpy.init(args=args, context=self.context, domain_id=domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node("swarm_ros_launcher", context=self.context, start_parameter_services=False)
         # only what the run's nodes vouched for (auth.Gate): a stranger's status cannot end the run here
         self.gate = Gate(self.node, key, Rejections(self.node.get_logger()))
