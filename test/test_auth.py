@@ -265,6 +265,17 @@ def test_a_voucher_counts_only_for_its_roles_topics(clock):
     assert got == [] and not gate.digests
 
 
+def test_what_waits_for_a_voucher_is_bounded_in_count_and_bytes(clock, monkeypatch):
+    monkeypatch.setattr(auth, "HOLD_MESSAGES", 3)
+    rx, gate, got = _receiver()
+    for tick in range(5):
+        rx.callbacks[msgs.STATUS](auth.aligned(serialize_message(_status(tick))))
+    assert len(gate.held[msgs.STATUS]) == 3 and gate.rejections.total == 2
+    monkeypatch.setattr(auth, "HOLD_BYTES", 1000)
+    rx.callbacks[msgs.STATUS](b"x" * 2000)  # bigger than all that may wait: dropped with the rest
+    assert len(gate.held[msgs.STATUS]) == 0 and gate.held_bytes == 0 and gate.rejections.total == 6
+
+
 def test_messages_are_aligned_to_four_bytes_as_dds_delivers_them():
     assert auth.aligned(b"abcde") == b"abcde\0\0\0" and auth.aligned(b"abcd") == b"abcd"
     assert auth.digest("/t", b"abcde") == auth.digest("/t", b"abcde\0\0\0") != auth.digest("/u", b"abcde")

@@ -58,6 +58,7 @@ HOLD_SECONDS = 5.0
 #: At the end of a run, what has waited this long is judged at once (:meth:`Gate.settle`).
 SETTLE_SECONDS = 0.2
 HOLD_MESSAGES = 1024  # at most this many messages held per topic (the oldest is dropped)
+HOLD_BYTES = 64 << 20  # at most this many bytes held in all (a flood of big messages cannot exhaust memory)
 KEPT_DIGESTS = 16384  # digests vouched for but not yet matched, at most (the oldest is forgotten)
 
 
@@ -194,6 +195,7 @@ class Gate:
         self.node, self.key, self.rejections = node, key, rejections
         self.handlers: dict[str, tuple[type, Callable[[object], None], Callable[[bytes], None] | None]] = {}
         self.held: dict[str, deque[tuple[float, bytes, bytes]]] = {}  # topic -> (arrived, digest, data)
+        self.held_bytes = 0
         #: (topic, digest) -> listings not yet matched by a message, oldest first (the oldest are forgotten)
         self.digests: OrderedDict[tuple[str, bytes], int] = OrderedDict()
         self.last_seq: dict[str, int] = {}  # sender process nonce -> the highest sequence number taken
@@ -225,8 +227,9 @@ class Gate:
         else:
             held = self.held[topic]
             held.append((time.monotonic(), d, data))
-            if len(held) > HOLD_MESSAGES:
-                held.popleft()
+            self.held_bytes += len(data)
+            while held and (len(held) > HOLD_MESSAGES or self.held_bytes > HOLD_BYTES):
+                self.held_bytes -= len(held.popleft()[2])
                 self.rejections.drop(topic, Rejected("unauthenticated", "no voucher (held messages overflowed)"))
         self.expire()
 
@@ -253,6 +256,7 @@ class Gate:
                 continue
             data = held[match][2]
             del held[match]
+            self.held_bytes -= len(data)
             self._deliver(topic, data)
         self.expire()
 
@@ -286,7 +290,7 @@ class Gate:
         now = time.monotonic() if now is None else now
         for topic, held in self.held.items():
             while held and now - held[0][0] > hold:
-                held.popleft()
+                self.held_bytes -= len(held.popleft()[2])
                 self.rejections.drop(topic, Rejected("unauthenticated", f"no voucher within {hold:g} s"))
 
     def settle(self) -> None:
