@@ -15,7 +15,6 @@ from collections import Counter
 
 import numpy as np
 
-from ..core.state import STATE_COUNT
 from ..wire import PATCH_METRES, ROBOT_ROW, check_fields
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
@@ -100,6 +99,8 @@ def inside_world(x: np.ndarray, y: np.ndarray, heading: np.ndarray, radius: int)
 
 def robot_rows(msg, robots: int, radius: int) -> np.ndarray:
     """The rows of a /swarm/robots or snapshot message, checked: layout, ids, states, poses."""
+    from ..core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
+
     rows = cloud(msg, ROBOT_ROW, robots)
     ids_in_range(rows["id"].astype(np.int64), 0, robots)
     if rows["state"].max() >= STATE_COUNT:
