@@ -180,9 +180,6 @@ class SignedPublisher:
         """Whether every reader has acknowledged the messages and their vouchers."""
         return self.pub.wait_for_all_acked(timeout) and self.signer.pub.wait_for_all_acked(timeout)
 
-    def get_subscription_count(self) -> int:
-        return self.pub.get_subscription_count()
-
 
 class Gate:
     """The receiving side: serialized subscriptions whose messages reach their handler once vouched for.
