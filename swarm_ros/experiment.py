@@ -202,9 +202,9 @@ def load_experiment(path: str | Path) -> Experiment:
         if value != "" and value not in values:
             raise _fail(path, key, f"must be one of {', '.join(values)}, got {value!r}")
         switches[key] = value
-    for i, name in enumerate(rules):
-        if not isinstance(name, str) or name not in RULE_SETS:
-            raise _fail(path, f"rules[{i}]", f"must be one of {', '.join(RULE_SETS)}, got {name!r}")
+    for i, rule_set in enumerate(rules):
+        if not isinstance(rule_set, str) or rule_set not in RULE_SETS:
+            raise _fail(path, f"rules[{i}]", f"must be one of {', '.join(RULE_SETS)}, got {rule_set!r}")
     if len(set(rules)) != len(rules):
         raise _fail(path, "rules", f"lists a rule set twice: {rules}")
     reference = data.get("reference", "")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 import signal
@@ -77,6 +78,18 @@ def test_paper_protocol_file_is_the_studys_grid():
     assert sizes["wrench"] == (500, 525, 550, 565, 575, 600)
     assert all(patches in sizes[name] for name, _, patches, _ in exp.shapes)
     assert len({r.seed for r in runs}) == len(runs)
+
+
+def test_the_experiments_name_survives_a_list_of_rule_sets(tmp_path, monkeypatch):
+    """The name (not the last rule set) names experiment.json and the default directory experiments/<name>."""
+    assert load_experiment(ROOT / "config/experiments/rules.yaml").name == "rules"
+    config = small_config(tmp_path, name="tiny", rules=["paper", "literal"], vision_radius=1, repetitions=1,
+                          shapes={"disc.txt": [50]})
+    assert load_experiment(config).name == "tiny"
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["experiment", str(config), "--quiet"]) == 0
+    assert json.loads((tmp_path / "experiments/tiny/experiment.json").read_text())["experiment"]["name"] == "tiny"
+    assert sorted(p.name for p in (tmp_path / "experiments").iterdir()) == ["tiny"]
 
 
 def test_rules_study_file_crosses_every_rule_set_with_three_radii_at_the_patch_counts():
