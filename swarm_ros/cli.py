@@ -310,7 +310,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                          f"assigns each of its --processes its robots itself (use ros2 run for your own split)")
     world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {})}
     if args.processes > params.robots - 4:
-        raise SwarmError(f"--processes {args.processes} is more than the {params.robots - 4} non-seed robots")
+        raise SwarmError(f"{params.robots} robots leave {params.robots - 4} non-seed robots for {args.processes} "
+                         f"robot-batch processes (--processes, default 2); each process needs at least one")
     domain = _domain_id(args.domain_id)
     if args.enclaves is not None and not ENCLAVE_PREFIX.fullmatch(args.enclaves):
         raise SwarmError(f"--enclaves must be an enclave path like /swarm_ros (names of letters, digits and _ "

@@ -11,8 +11,9 @@ A parameter file maps node names to ``ros__parameters``, so the same file serves
         vision_radius: 1.0
 
 Sections are read in file order; a later section overrides an earlier one. A section
-named after a node (``/world``, ``/robot_batch``, ``/monitor``) may also hold that node's
-own parameters (:data:`NODE_PARAMETERS`), checked like the run's. The command line
+named after a node (``/world``, ``/robot_batch``, ``/monitor``) holds only that node's
+own parameters (:data:`NODE_PARAMETERS`), checked like the run's: a run parameter there
+is refused, since nodes that read different values would not run the same swarm. The command line
 applies them where they mean something: ``/monitor`` (recording and output directory)
 in ``simulate`` and ``run``, ``/world`` in ``run``; flags override them. ``run`` refuses
 ``/robot_batch`` values other than the defaults, since it assigns each of its processes
@@ -206,6 +207,9 @@ def read_params_file(path: str | Path, base: Settings | None = None) -> tuple[Se
                 raise ConfigError(f"{path}: unknown parameter '{key}' in '{node}' "
                                   f"(known: {', '.join(sorted(known))})")
             checked = _check_type(path, key, value, known[key])
+            if key in _TYPES and own:
+                raise ConfigError(f"{path}: '{node}' sets the run parameter '{key}'; run parameters go in '/**', "
+                                  f"which every node reads, so that all nodes run the same swarm")
             if key in _TYPES:
                 values[key] = checked
             else:

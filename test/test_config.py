@@ -15,9 +15,18 @@ def test_shipped_parameter_file_holds_exactly_the_defaults():
 def test_sections_apply_in_order_and_override_the_base(tmp_path):
     path = tmp_path / "p.yaml"
     path.write_text("/**:\n  ros__parameters:\n    robots: 500\n    vision_radius: 2\n"
-                    "/world:\n  ros__parameters:\n    robots: 600\n")
+                    "'**':\n  ros__parameters:\n    robots: 600\n")  # two spellings of every node
     s = load_params_file(path, Settings(seed=9))
     assert asdict(s) == {**asdict(Settings()), "robots": 600, "vision_radius": 2.0, "seed": 9}
+
+
+@pytest.mark.parametrize("node", ["world", "robot_batch", "monitor"])
+def test_a_run_parameter_in_a_node_section_is_refused(tmp_path, node):
+    """Nodes that read different run parameters would not run the same swarm: run parameters go in /**."""
+    path = tmp_path / "p.yaml"
+    path.write_text(f"/**:\n  ros__parameters:\n    robots: 500\n/{node}:\n  ros__parameters:\n    seed: 3\n")
+    with pytest.raises(ConfigError, match=f"'/{node}' sets the run parameter 'seed'; run parameters go in '/\\*\\*'"):
+        load_params_file(path)
 
 
 @pytest.mark.parametrize("text,message", [

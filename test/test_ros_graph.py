@@ -281,7 +281,7 @@ def test_stop_escalates_to_sigkill_for_a_process_that_ignores_int_and_term(tmp_p
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--processes", "2000"], "--processes 2000 is more than the 1032 non-seed robots"),
+    (["--processes", "2000"], "1036 robots leave 1032 non-seed robots for 2000 robot-batch processes"),
     (["--domain-id", "500"], "ROS domain id must be in [0, 232], got 500"),
     (["--shape", "nope"], "nope: no such shape file or built-in shape"),
     (["--robots", "99999"], "do not fit"),
