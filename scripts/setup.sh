@@ -20,6 +20,9 @@ if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ setup.py -nt "$st
   .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
   touch "$stamp"
 fi
+# numba's cache of the core's kernels (nothing to do when it is full; about 15 s to fill it), so the first run
+# does not compile them
+.venv/bin/python -m swarm_ros.core.kernels
 
 # colcon, for the test that builds the package as a ROS 2 workspace. Its own venv: colcon-core pulls in
 # pytest plugins that must not load into the project's tests (requirements-colcon.txt pins it all).

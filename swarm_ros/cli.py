@@ -244,7 +244,7 @@ def _flag(value: object, section: dict[str, object], key: str) -> object:
 def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions, dict]:
     """Settings, shape, parameters, a usable output directory, the recording options and the node
     parameters of the parameter file, or a SwarmError before anything runs."""
-    from .output import check_out_dir, default_run_dir
+    from .output import check_leftovers, check_out_dir, claim_out_dir, default_run_dir
 
     settings, nodes = _settings(args)
     shape, params = settings.resolve()
@@ -256,6 +256,8 @@ def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path
                        default_run_dir(shape.name, params.robots, params.vision_radius, params.seed))
     args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
     check_out_dir(out, args.overwrite)
+    claim_out_dir(out)  # a second command for the same directory is refused now, not after its run
+    check_leftovers(out)
     return settings, shape, params, out, recording.reachable(), nodes
 
 
@@ -265,13 +267,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     _, shape, params, out, options, _ = _prepare(args)
 
-    rrd = partial_recording(out)
-    recorder = options.open(rrd, shape, params)
-    start = time.perf_counter()
     from .core.engine import Simulation  # here: numba is not needed by the other commands' start
     from .core.metrics import Outcome
 
-    sim = Simulation(shape, params)
+    note_compiling(args.quiet)
+    start = time.perf_counter()
+    sim = Simulation(shape, params)  # tick 0; an interrupt before it leaves nothing behind
+    rrd = partial_recording(out)
+    recorder = options.open(rrd, shape, params)
     stopped = None
     try:
         with StopFlag() as stop:  # Ctrl-C or SIGTERM: the run so far becomes an 'interrupted' run directory
@@ -324,11 +327,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         out = launch.run()
     except KeyboardInterrupt:
         stopped = interrupted_run(out.absolute())
-        if stopped is None:
+        if stopped is not None:
+            print(f"{PROG}: interrupted at tick {stopped['convergence_tick']}; the run so far is in {out}",
+                  file=sys.stderr)
+        elif not launch.started:  # the launcher removed what the run had made (launcher.discard_unstarted)
+            print(f"{PROG}: interrupted before tick 0; nothing was written", file=sys.stderr)
+        else:
+            print(f"{PROG}: interrupted, but the monitor wrote no run directory (logs: {launch.logs_kept})",
+                  file=sys.stderr)
             _note_partial(partial_recording(out), options)
-            raise
-        print(f"{PROG}: interrupted at tick {stopped['convergence_tick']}; the run so far is in {out}",
-              file=sys.stderr)
         return EXIT_INTERRUPTED
     except BaseException:
         _note_partial(partial_recording(out), options)
@@ -367,6 +374,17 @@ def cmd_report(args: argparse.Namespace) -> int:
     for path in build_report(args.dir):
         print(path)
     return 0
+
+
+def note_compiling(quiet: bool) -> bool:
+    """Say in one line (unless ``quiet``) that the numba kernels must be compiled first; return whether."""
+    from .core.kernels import COMPILING, kernels_cached
+
+    if kernels_cached():
+        return False
+    if not quiet:
+        print(f"{PROG}: {COMPILING}", file=sys.stderr, flush=True)
+    return True
 
 
 def _note_partial(rrd: Path, options: RecordingOptions) -> None:
@@ -474,6 +492,8 @@ def _print_summary(s: dict, out: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .output import release_out_dirs
+
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)
@@ -486,6 +506,8 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
+    finally:
+        release_out_dirs()
 
 
 def entry() -> None:

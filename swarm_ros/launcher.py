@@ -3,7 +3,7 @@
 The launcher starts the monitor, K robot-batch processes and the world, follows the
 run's progress on /swarm/metrics, and waits for the monitor to write the run
 directory. Then it lets every process end by itself, and stops those that do not
-(SIGINT, then SIGTERM, then SIGKILL, to the process group of each). If any process
+(SIGTERM, then SIGKILL, to the process group of each). If any process
 fails, or the user interrupts, it stops them all the same way.
 
 A robot-batch process that dies is started again (``on_batch_loss="restart"``, up to
@@ -47,14 +47,16 @@ from .core.params import RunParams
 from .core.shapes import Shape
 from .nodes.dds import apply_dds_defaults
 from .nodes.params import params_yaml
-from .output import fill_summary
+from .output import fill_summary, partial_bag, partial_recording, public_mode
 from .nodes.runkey import KEY_ENV, run_key, with_run_key
 from .signals import PARENT_ENV, StopFlag, process_age
 
 SHM_DIR = Path("/dev/shm")
-WORLD_STARTED = "batches: tick 0"  #: what the world logs as it sends tick 0
 DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
-_STOP_STEPS = ((signal.SIGINT, 3.0), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0))
+# SIGTERM first, not SIGINT: a process started from a background job inherits SIGINT *ignored*, and a node
+# ignores it until its own handler is in (after rclpy.init); SIGTERM ends it at once before that, and after it
+# means what SIGINT means (stop between callbacks, write what there is to write).
+_STOP_STEPS = ((signal.SIGTERM, 5.0), (signal.SIGKILL, 2.0))
 _GRACE = 10.0  # seconds the world and batches get to end by themselves after the monitor is done
 
 
@@ -75,33 +77,28 @@ class Child:
 
     def scan_shm(self) -> None:
         """Remember the Fast DDS shared-memory files this process has open (while it runs)."""
-        try:
-            fds = os.listdir(f"/proc/{self.proc.pid}/fd")
-        except OSError:
-            return
-        for fd in fds:
-            try:
-                target = os.readlink(f"/proc/{self.proc.pid}/fd/{fd}")
-            except OSError:
-                continue
-            if target.startswith(f"{SHM_DIR}/fastrtps_") and target.endswith("_el"):
-                self.shm.add(target)
-
-    def started(self) -> bool:
-        """For the world: whether it has sent tick 0 (its log says so; the metrics may not have come yet)."""
-        try:
-            return WORLD_STARTED in self.log.read_text(errors="replace")
-        except OSError:
-            return False
+        self.shm |= shm_locks(self.proc.pid)
 
     def last_error(self) -> str:
-        """The process's last 'error' line, else its last non-empty line."""
+        """The last line of the process's log that reports an error, or "" if none does."""
         try:
             lines = [ln.strip() for ln in self.log.read_text(errors="replace").splitlines() if ln.strip()]
         except OSError:
             return ""
         errors = [ln for ln in lines if "error" in ln.lower()]
-        return (errors or lines or [""])[-1]
+        return errors[-1] if errors else ""
+
+    def death(self) -> str:
+        """How the process ended, for a message: 'was killed by SIGKILL', or 'exited with status 1 (<its last
+        error line>)'; a log line is quoted only when it reports an error."""
+        code = self.proc.returncode
+        if code is not None and code < 0:
+            try:
+                return f"was killed by {signal.Signals(-code).name}"
+            except ValueError:
+                return f"was killed by signal {-code}"
+        why = self.last_error()
+        return f"exited with status {code}" + (f" ({why})" if why else "")
 
 
 class DomainLock:
@@ -163,7 +160,7 @@ def node_command(module: str, params_file: Path, name: str, extra: dict[str, obj
 
 
 def stop(children: list[Child]) -> None:
-    """End every child still running: SIGINT, SIGTERM, SIGKILL to its process group, waiting between."""
+    """End every child still running: SIGTERM, then SIGKILL, to its process group, waiting between."""
     for sig, wait in _STOP_STEPS:
         alive = [c for c in children if c.proc.poll() is None]
         if not alive:
@@ -181,36 +178,108 @@ def stop(children: list[Child]) -> None:
         c.log_file.close()
 
 
-def clean_shm(lock_files: set[str]) -> list[str]:
-    """Remove the Fast DDS shared-memory segments of ``lock_files`` that no live process holds; return them.
+def shm_locks(pid: int | str) -> set[str]:
+    """The Fast DDS shared-memory lock files (``/dev/shm/fastrtps_*_el``) process ``pid`` has open now."""
+    found = set()
+    try:
+        fds = os.listdir(f"/proc/{pid}/fd")
+    except OSError:
+        return found
+    for fd in fds:
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith(f"{SHM_DIR}/fastrtps_") and target.endswith("_el"):
+            found.add(target)
+    return found
 
-    Each segment ``/dev/shm/fastrtps_X`` comes with a lock file ``fastrtps_X_el`` that its
-    users keep locked, and may have a semaphore ``sem.fastrtps_X_mutex``. A lock file we
-    can lock ourselves has no live user left: the three files are leftovers of processes
-    that were killed (Fast DDS's own ``fastdds shm clean`` reasons the same way).
+
+def _in_use(paths: set[str]) -> set[str]:
+    """Those of ``paths`` that a live process has mapped or open (every process's /proc maps and fds)."""
+    used: set[str] = set()
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            with open(proc / "maps", encoding="utf-8", errors="replace") as f:
+                for line in f:
+                    path = line.rstrip("\n").partition(" /")[2]
+                    if path and f"/{path}".removesuffix(" (deleted)") in paths:
+                        used.add(f"/{path}".removesuffix(" (deleted)"))
+            for fd in os.listdir(proc / "fd"):
+                target = os.readlink(proc / "fd" / fd)
+                if target in paths:
+                    used.add(target)
+        except OSError:
+            continue  # gone meanwhile, or not ours to read
+    return used
+
+
+def clean_shm(lock_files: set[str]) -> list[str]:
+    """Remove the Fast DDS shared-memory files behind ``lock_files`` that no live process uses; return them.
+
+    Each segment ``/dev/shm/fastrtps_X`` (a participant's, or a port ``fastrtps_portN``)
+    comes with a lock file ``fastrtps_X_el`` that its owner keeps locked, and a port with a
+    semaphore ``sem.fastrtps_X_mutex``. A lock file we can lock ourselves has no live
+    owner left (Fast DDS's own ``fastdds shm clean`` reasons the same way). A port whose
+    owner ended normally removes its lock file but keeps the segment while another process
+    still counts as its user, and a SIGKILLed process always does: so a port of this run's
+    processes is left behind by every process that talked to a killed one. Such files go
+    when no live process has them mapped or open (read from /proc), whatever their lock
+    file says; only the files of ``lock_files``, which this run's processes held, are
+    looked at.
     """
-    removed = []
+    groups = []
     for el in sorted(lock_files):
+        segment = el.removesuffix("_el")
         try:
-            f = open(el, "rb")  # noqa: SIM115 - closed below
+            with open(el, "rb") as f:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released at close: we only look
+        except FileNotFoundError:
+            pass  # its owner removed it: the segment may remain
         except OSError:
-            continue  # gone already (cleaned up by its owner)
-        try:
-            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            f.close()
-            continue  # a live process uses it
-        try:
-            segment = el.removesuffix("_el")
-            for path in (segment, el, str(SHM_DIR / f"sem.{Path(segment).name}_mutex")):
-                try:
-                    os.unlink(path)
-                    removed.append(path)
-                except FileNotFoundError:
-                    pass
-        finally:
-            f.close()
+            continue  # locked: a live process owns it
+        groups.append((segment, el, str(SHM_DIR / f"sem.{Path(segment).name}_mutex")))
+    used = _in_use({path for group in groups for path in group}) if groups else set()
+    removed = []
+    for group in groups:
+        if used.intersection(group):
+            continue
+        for path in group:
+            try:
+                os.unlink(path)
+                removed.append(path)
+            except FileNotFoundError:
+                pass
     return removed
+
+
+def _bag_holders(out: Path) -> set[Path]:
+    """The hidden folders a monitor streams the bag of ``out`` into while it runs (``.<run>.bag-XXXX``)."""
+    return set(out.parent.glob(f".{out.name}.bag-*"))
+
+
+def discard_unstarted(logs: Path, out: Path, holders_before: set[Path], made: list[Path]) -> None:
+    """Remove what a run interrupted before tick 0 made: its logs, and the recording and bag its monitor had
+    opened (``<out>.partial.rrd``, ``<out>.partial-bag``), and the folders ``made`` for it while empty.
+    Nothing else can be there: the command refuses to
+    start while an earlier run's are (:func:`swarm_ros.output.check_leftovers`) or while another command
+    holds ``out`` (:func:`swarm_ros.output.claim_out_dir`)."""
+    shutil.rmtree(logs, ignore_errors=True)
+    rrd, bag = partial_recording(out), partial_bag(out)
+    try:
+        rrd.unlink()
+    except FileNotFoundError:
+        pass
+    shutil.rmtree(bag, ignore_errors=True)
+    for hidden in _bag_holders(out) - holders_before:  # this run's monitor was killed with its bag open
+        shutil.rmtree(hidden, ignore_errors=True)
+    for d in made:  # the folders the run made for ``out`` (e.g. runs/), if still empty
+        try:
+            d.rmdir()
+        except OSError:
+            break
 
 
 def interrupted_run(out: Path) -> dict | None:
@@ -244,8 +313,11 @@ class Launch:
     warnings: list[str] = field(default_factory=list)  #: processes lost during the run
     restarts: list[str] = field(default_factory=list)  #: names of the batches restarted, once per restart
     shm_removed: list[str] = field(default_factory=list)  #: shared-memory files left by dead processes, removed
+    own_shm: set[str] = field(default_factory=set)  #: Fast DDS lock files of this process's own node
     timeline: list[tuple[float, str]] = field(default_factory=list)  #: (epoch seconds, event), to logs/launcher.log
     ended_at: float | None = None  #: time.monotonic() when the world's outcome arrived
+    started: bool = False  #: the world has sent tick 0 (as far as this process has heard)
+    logs_kept: Path | None = None  #: where the processes' logs went at the end
 
     def _note(self, event: str, at: float | None = None) -> None:
         self.timeline.append((time.time() if at is None else at, event))
@@ -261,10 +333,13 @@ class Launch:
     def run(self) -> Path:
         run_key()  # a SWARM_ROS_RUN_KEY that is set but unusable fails here, before anything is made
         out = self.out.absolute()
+        made = [d for d in (out.parent, *out.parent.parents) if not d.exists()]  # deepest first
         out.parent.mkdir(parents=True, exist_ok=True)
         logs = Path(tempfile.mkdtemp(prefix=f".{out.name}.logs-", dir=out.parent))  # a fresh name: replaces nothing
+        public_mode(logs, directory=True)
         (logs / "ros").mkdir()
         self._note("command started", at=time.time() - process_age())
+        holders = _bag_holders(out)
         lock = DomainLock(self.domain_id)
         ok = interrupted = False
         try:
@@ -283,12 +358,34 @@ class Launch:
             if ok and self.ended_at is not None:
                 fill_summary(out, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
             lock.close()
-            self.shm_removed += clean_shm(set().union(*(c.shm for c in self.children)))
-            self._write_timeline(logs / "launcher.log")
-            self._keep_logs(logs, out, ok or (interrupted and interrupted_run(out) is not None))
+            self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
+            kept = ok or (interrupted and interrupted_run(out) is not None)
+            if interrupted and not kept and not self.started:
+                discard_unstarted(logs, out, holders, made)
+            else:
+                self._write_timeline(logs / "launcher.log")
+                self._keep_logs(logs, out, kept)
         return out
 
+    def _compile_kernels(self) -> None:
+        """Fill numba's cache once, here, if it is empty: every node process would otherwise compile the same
+        kernels at the same time (about 24 s of start-up on 2 cores instead of about 12)."""
+        from .core.kernels import COMPILING, kernels_cached
+
+        if kernels_cached():
+            return
+        if not self.quiet:
+            print(f"swarm-ros: {COMPILING}", file=sys.stderr, flush=True)
+        self._note("compiling the numba kernels")
+        done = subprocess.run([sys.executable, "-m", "swarm_ros.core.kernels"], stdin=subprocess.DEVNULL,
+                              capture_output=True, text=True)
+        if done.returncode != 0:
+            lines = (done.stderr or done.stdout).strip().splitlines()
+            raise LaunchError(f"compiling the numba kernels failed ({lines[-1] if lines else done.returncode})")
+        self._note("numba kernels compiled")
+
     def _start(self, logs: Path, domain_id: int, out: Path) -> None:
+        self._compile_kernels()
         shape_arg = self.settings.shape
         if Path(shape_arg).suffix.lower() in (".txt", ".png"):
             shape_arg = str(Path(shape_arg).absolute())
@@ -374,43 +471,50 @@ class Launch:
                 # processes every 10 ms, so the monitor's exit is seen as it happens
                 progress.spin(0.1 if progress.ended_at is None else 0.01)
                 self.ended_at = progress.ended_at
+                self.started = progress.started
                 now = time.monotonic()
                 if now - scanned_at > 0.5:  # processes open their shared memory once, at start-up
                     scanned_at = now
                     for c in self.children:
                         c.scan_shm()
+                    self.own_shm |= shm_locks(os.getpid())  # this process's node (the progress bar's)
                 self._note_exits()
                 for c in list(self.children):
                     code = c.proc.poll()
                     if code in (None, 0) or c is world or c.name in reported:
                         continue
                     batch = c is not monitor
-                    started = progress.tick >= 0 or world.started()
+                    # the world's own word that tick 0 went out (its status, or the monitor's metrics): under
+                    # 'remove', a batch lost before tick 0 is restarted (none of its robots has moved yet)
+                    started = progress.started
                     if batch and world_done_at is None and (self.on_batch_loss == "restart" or not started):
                         if c.incarnation < self.max_restarts:
-                            why = c.last_error() or "no output"
+                            death = c.death()
                             new = self._restart(c)
-                            self._warn(progress, f"{c.name} exited with status {code} ({why}); restarted "
-                                                 f"({new.incarnation} of {self.max_restarts})")
+                            self._warn(progress, f"{c.name} {death}; restarted ({new.incarnation} of "
+                                                 f"{self.max_restarts})")
                             continue
                         if not started:
-                            raise LaunchError(f"{c.name} exited with status {code} before the run started, "
-                                              f"{self.max_restarts + 1} times ({c.last_error() or 'no output'})")
+                            raise LaunchError(f"{c.name} {c.death()} before the run started, "
+                                              f"{self.max_restarts + 1} times")
                     reported.add(c.name)
-                    then = ("the world removes its robots and the run goes on" if batch else
-                            "the swarm goes on without it, but nothing will write the run directory")
-                    self._warn(progress, f"{c.name} exited with status {code} ({c.last_error() or 'no output'})"
-                                         f"; {then}")
+                    if not batch:
+                        then = "the swarm goes on without it, but nothing will write the run directory"
+                    elif self.on_batch_loss == "remove":
+                        then = "the world removes its robots (--on-batch-loss remove) and the run goes on"
+                    else:
+                        then = (f"it was restarted {self.max_restarts} times already: the world removes its robots "
+                                f"and the run goes on")
+                    self._warn(progress, f"{c.name} {c.death()}; {then}")
                 if world.proc.returncode not in (None, 0):
-                    raise LaunchError(f"world exited with status {world.proc.returncode}: "
-                                      f"{world.last_error() or 'no output'}")
+                    raise LaunchError(f"world {world.death()}")
                 if monitor.proc.returncode == 0:
                     break
                 if world.proc.returncode == 0 and world_done_at is None:
                     world_done_at = time.monotonic()
                 if world_done_at is not None and monitor.proc.returncode is not None:
-                    raise LaunchError(f"the monitor was lost (status {monitor.proc.returncode}); the swarm ran to its "
-                                      f"end without it, but no run directory was written")
+                    raise LaunchError(f"the monitor {monitor.death()}; the swarm ran to its end without it, but no "
+                                      f"run directory was written")
                 if world_done_at is not None and time.monotonic() - world_done_at > 3 * _GRACE:
                     raise LaunchError(f"the run ended but the monitor did not write it within {3 * _GRACE:g} s")
         deadline = time.monotonic() + _GRACE
@@ -453,5 +557,6 @@ class Launch:
             if target.exists():
                 raise FileExistsError(target)  # an existing directory is never replaced
             logs.rename(target)
+            self.logs_kept = target
         except OSError:
             shutil.rmtree(logs, ignore_errors=True)

@@ -132,6 +132,20 @@ def final_state_csv(s: SwarmState) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _umask() -> int:
+    import os
+
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def public_mode(path: Path, directory: bool = False) -> None:
+    """Give a file or directory made under a temporary name (``mkstemp``/``mkdtemp`` make them 0600/0700) the
+    mode the user's umask gives everything else, before it is renamed into place."""
+    path.chmod((0o777 if directory else 0o666) & ~_umask())
+
+
 def summary_json(summary: dict) -> str:
     return json.dumps(summary, indent=2) + "\n"
 
@@ -149,10 +163,94 @@ def fill_summary(out: Path, **values: object) -> bool:
         fd, tmp = tempfile.mkstemp(prefix=".summary.json.", dir=out)
         with open(fd, "w", encoding="utf-8") as f:
             f.write(summary_json(summary))
+        public_mode(Path(tmp))
         Path(tmp).replace(path)
     except (OSError, ValueError, AttributeError):
         return False
     return True
+
+
+def partial_bag(out: Path) -> Path:
+    """Where a run that stopped early leaves its bag, closed and readable: ``<out>.partial-bag``, beside ``out``
+    (not ``.bag``: readers such as rosbags' AnyReader take a path ending in ``.bag`` for a ROS 1 bag)."""
+    return out.parent / f"{out.name}.partial-bag"
+
+
+def check_leftovers(out: Path) -> None:
+    """Fail if an earlier run of ``out`` that stopped early left its recording or bag beside it.
+
+    A new run would stream to the same names; what an earlier run left for the user is
+    never replaced, so the new run is refused until the user moves or deletes it.
+
+    Raises:
+        OutputError: naming the file or directory left there.
+    """
+    for left in (partial_recording(out), partial_bag(out)):
+        if left.exists() or left.is_symlink():
+            raise OutputError(f"{left}: left by an earlier run of {out} that stopped early; move or delete it "
+                              f"first (a new run would write there, and never replaces it)")
+
+
+_CLAIMS: list = []  # (lock file, its path) of the run directories this process writes now
+
+
+def claim_out_dir(out: Path) -> None:
+    """Reserve ``out`` for this process until :func:`release_out_dirs` (or its exit), or fail at once if
+    another swarm-ros command holds it.
+
+    The lock is an exclusive ``flock`` on a file named after ``out``'s absolute path in
+    the system's temporary directory (nothing is created beside ``out``); the kernel
+    releases it when the process ends, however it ends. The file holds the holder's pid
+    and command, for the message.
+
+    Raises:
+        OutputError: another command is writing ``out``.
+    """
+    import fcntl
+    import hashlib
+    import os
+    import sys
+
+    resolved = str(Path(os.path.abspath(out)).resolve())
+    lock_dir = Path(tempfile.gettempdir()) / "swarm_ros-runs"
+    path = lock_dir / (hashlib.sha256(resolved.encode()).hexdigest()[:32] + ".lock")
+    while True:
+        try:
+            lock_dir.mkdir(exist_ok=True)
+            f = open(path, "a+", encoding="utf-8")  # noqa: SIM115 - held until released
+        except OSError as exc:
+            raise OutputError(f"{lock_dir}: cannot reserve {out} ({exc.strerror or exc})") from None
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.seek(0)
+            holder = " ".join(f.read().split()) or "another process"
+            f.close()
+            raise OutputError(f"{out}: another swarm-ros command is writing this run directory now "
+                              f"({holder})") from None
+        try:
+            same = os.stat(path).st_ino == os.fstat(f.fileno()).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        f.close()  # its holder released (and removed) it between our open and our lock: take the new one
+    f.seek(0)
+    f.truncate()
+    f.write(f"pid {os.getpid()}: {' '.join(['swarm-ros', *sys.argv[1:]])}\n")
+    f.flush()
+    _CLAIMS.append((f, path))
+
+
+def release_out_dirs() -> None:
+    """Give up this process's claims (:func:`claim_out_dir`), removing their lock files."""
+    while _CLAIMS:
+        f, path = _CLAIMS.pop()
+        try:
+            path.unlink()  # while still locked: a waiting claimant then sees another file and retries
+        except OSError:
+            pass
+        f.close()
 
 
 def partial_recording(out: Path) -> Path:
@@ -197,6 +295,7 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
             recording.rename(tmp / RECORDING_FILE)
         if bag is not None:
             bag.rename(tmp / BAG_DIR)
+        public_mode(tmp, directory=True)
         if out.exists():
             out.rename(trash / out.name)
         tmp.rename(out)

@@ -93,10 +93,12 @@ def test_a_killed_robot_batch_is_noticed_within_2_s_and_the_swarm_repairs_the_sh
     os.kill(victim, signal.SIGKILL)
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
-    assert "robot_batch_1 exited with status -9" in err and "the run goes on" in err
+    assert "robot_batch_1 was killed by SIGKILL; the world removes its robots (--on-batch-loss remove)" in err
+    assert "restarted" not in err and "[INFO]" not in err  # no restart under 'remove', and no unrelated log line
     detected, tick = _lost_at((out / "logs" / "world.log").read_text(), "robot_batch_1")
     assert detected - killed_at < 2.0, f"noticed {detected - killed_at:.2f} s after the kill"
     summary = _check_consistent_run(out, batch_ids(ROBOTS, 1, 3))
+    assert summary["restarts"] == [] and (out / "logs" / "launcher.log").read_text().count("started robot_batch_1 ") == 1
     assert summary["losses"][0]["tick"] == tick + 1  # removed at the end of the tick after the notice
     assert not _processes_mentioning(str(out)), "a process outlived the run"
 
@@ -128,7 +130,7 @@ def test_a_killed_monitor_does_not_stop_the_swarm_and_its_recording_stays_readab
     start = time.monotonic()
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 2, err
-    assert "monitor exited with status -9" in err and "the swarm ran to its end without it" in err
+    assert "monitor was killed by SIGKILL" in err and "the swarm ran to its end without it" in err
     world_log = (tmp_path / "run.logs" / "world.log").read_text()
     assert "the monitor was lost" in world_log and "run ended: " in world_log  # the swarm went on to its end
     assert not out.exists()

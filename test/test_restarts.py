@@ -26,7 +26,7 @@ from test_ros_graph import _env, _processes_mentioning
 
 from swarm_ros import cli
 from swarm_ros.config import RecordingOptions, Settings
-from swarm_ros.launcher import Launch
+from swarm_ros.launcher import Launch, shm_locks
 
 PY = sys.executable
 # The star under the local join rule: ~3600 ticks, several seconds over the graph, long enough to kill in
@@ -104,7 +104,7 @@ def test_a_batch_killed_before_tick_0_is_restarted_and_the_run_is_identical(refe
     os.kill(victim, signal.SIGKILL)
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
-    assert "robot_batch_1 exited with status -9" in err and "restarted (1 of 3)" in err
+    assert "robot_batch_1 was killed by SIGKILL; restarted (1 of 3)" in err and "[INFO]" not in err
     summary = _assert_identical(reference, out)
     assert summary["restarts"] == [{"tick": 0, "node": "robot_batch_1"}]
     assert "robot_batch_1 is back (restart 1) at tick 0" in _world_log(out)
@@ -196,29 +196,37 @@ def test_on_batch_loss_remove_removes_instead_of_restarting(tmp_path):
     assert summary["lost_robots"] == 344 and summary["restarts"] == []
 
 
-def test_a_killed_batch_leaves_none_of_its_shared_memory_behind(tmp_path):
+def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
+    """Neither its own segments nor the ports of the processes it talked to, which they keep while it counts
+    as their user (every process of the run is watched: the launcher, each node, the restarted batch)."""
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
     victim = _node_pid(out, "robot_batch_1")
-    deadline = time.monotonic() + 60
     held: set[str] = set()
-    while time.monotonic() < deadline and not held:
-        for fd in os.listdir(f"/proc/{victim}/fd"):
-            try:
-                target = os.readlink(f"/proc/{victim}/fd/{fd}")
-            except OSError:
-                continue
-            if target.startswith("/dev/shm/fastrtps_") and target.endswith("_el"):
-                held.add(target)
+
+    def look() -> None:
+        for pid in [launcher.pid, *_processes_mentioning(f".{out.name}.logs-")]:
+            held.update(shm_locks(pid))
+
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not shm_locks(victim):
+        look()
         time.sleep(0.1)
-    assert held, "the batch never opened Fast DDS shared memory"
-    time.sleep(1.0)  # let the launcher see them too
+    time.sleep(1.0)  # every process has its participant by now; let the launcher see them too
+    look()
     os.kill(victim, signal.SIGKILL)
+    while launcher.poll() is None:
+        look()
+        time.sleep(0.1)
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
-    own = {p for p in held if not p.removesuffix("_el").rsplit("_", 1)[-1].startswith("port")}
-    assert own, held  # its participant's own segment, which only it used
-    left = [p for p in own | {p.removesuffix("_el") for p in own} if os.path.exists(p)]
+    ports = {p for p in held if Path(p).name.startswith("fastrtps_port")}
+    assert ports and held - ports, held  # ports and participants' own segments were seen
+    files = set()
+    for el in held:
+        segment = el.removesuffix("_el")
+        files |= {el, segment, f"/dev/shm/sem.{Path(segment).name}_mutex"}
+    left = sorted(p for p in files if os.path.exists(p))
     assert left == [], f"left in /dev/shm: {left}"
 
 

@@ -9,7 +9,7 @@ install. Timestamps are the monitor's receive times (wall clock, ns), as rosbag2
 
 While the run goes on the bag is written beside the run directory (a hidden
 ``.<run>.bag-XXXX/bag``); the run directory gets it as ``bag/`` when it is written. A
-failed run leaves it, closed and readable, as ``<run>.partial.bag``.
+failed run leaves it, closed and readable, as ``<run>.partial-bag`` (:func:`swarm_ros.output.partial_bag`).
 """
 
 from __future__ import annotations
@@ -62,11 +62,6 @@ def reader_qos(offered: QoSProfile) -> QoSProfile:
 def type_name(kind: type) -> str:
     """A message class's ROS type name, e.g. ``sensor_msgs/msg/PointCloud2``."""
     return f"{kind.__module__.split('.')[0]}/msg/{kind.__name__}"
-
-
-def partial_bag(out: Path) -> Path:
-    """Where a failed run's bag is left: ``<out>.partial.bag``, beside ``out``."""
-    return out.parent / f"{out.name}.partial.bag"
 
 
 def _duration(d) -> QosTime:  # rclpy Duration -> rosbags time; "infinite" is rclpy's 0

@@ -33,12 +33,12 @@ from ..core.state import STATE_COUNT, RobotState
 from ..core.warmup import warm_up
 from ..core.record import RunRecord
 from ..wire import DECISION_ROW
-from ..output import check_out_dir, default_run_dir, partial_recording, write_run
+from ..output import check_leftovers, check_out_dir, default_run_dir, partial_bag, partial_recording, write_run
 from . import guard
 from . import messages as msgs
 from .auth import open_auth
 from .guard import Rejected, Rejections
-from .bag import TOPICS, BagRecorder, partial_bag, reader_qos
+from .bag import TOPICS, BagRecorder, reader_qos
 from .params import make_node, read_parameters
 from .runner import (EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, checked_robots, handle_missed,
                      run_node)
@@ -59,6 +59,7 @@ class MonitorNode:
             default_run_dir(self.shape.name, p.robots, p.vision_radius, p.seed)
         self.overwrite = bool(own["overwrite"])
         check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
+        check_leftovers(self.out)
         self.world_radius = run.world_radius
         self.recording = RecordingOptions(enabled=bool(own["record"]), every=int(own["record_every"]),
                                           connect=str(own["viewer_url"]) or None).reachable()
@@ -273,6 +274,12 @@ class MonitorNode:
         self.closing.set()
         if self.written is not None:
             return
+        if code == EXIT_INTERRUPTED and self.outcome is None and hasattr(self, "replica"):
+            # stopped while loading or behind: what the world sent is the run so far (it waits in the readers)
+            try:
+                handle_missed(self.node)
+            except RunFailed as exc:
+                self.node.get_logger().error(f"while taking the ticks already sent: {exc}")
         if self.bag is not None and not (code == EXIT_INTERRUPTED and self.rows and self.outcome is None):
             self.bag.move_to(partial_bag(self.out))  # closed and kept beside the run (an interrupted run takes it)
         if self.outcome is not None:  # ended, but stopped before the world confirmed it: keep the recording

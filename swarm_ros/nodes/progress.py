@@ -46,15 +46,22 @@ class Progress:
                         file=sys.stderr, dynamic_ncols=True)
         self.bar.set_postfix(tick="starting", refresh=False)
         self.tick = -1  #: the last tick the monitor reported; -1 before tick 0
+        self.started = False  #: the world has sent tick 0 (its status says 'running', or a tick was counted)
         self.ended_at: float | None = None  #: time.monotonic() when the world's outcome arrived
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        if self.ended_at is None and msgs.status_values(msg).get("outcome") not in (None, "starting", "running"):
+        outcome = msgs.status_values(msg).get("outcome")
+        if outcome not in (None, "starting"):
+            self.started = True
+        if self.ended_at is None and outcome not in (None, "starting", "running"):
             self.ended_at = time.monotonic()
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:
         m = msgs.metrics_of(msg)
+        if self.tick < 0 <= m.get("tick", -1):  # rate and time left count from tick 0, not from start-up
+            self.bar.reset(total=self.bar.total)
         self.tick = max(self.tick, m.get("tick", -1))
+        self.started = self.started or self.tick >= 0
         self.bar.update(m.get("localized", 0) - self.bar.n)
         self.bar.set_postfix(tick=str(m.get("tick")), moving=str(m.get("moving")), refresh=False)
 

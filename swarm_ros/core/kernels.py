@@ -1,0 +1,79 @@
+"""numba's on-disk cache of the core's compiled kernels: is it filled, and fill it.
+
+The core's hot loops are numba functions compiled with ``cache=True``: the first
+process that calls one after an install (or after a change to the core) compiles it,
+about 13 s for all of them on a 2-core machine, and writes it into ``__pycache__``
+beside the source; later processes load it in milliseconds. ``scripts/setup.sh`` fills
+the cache (``python -m swarm_ros.core.kernels``), so the first run does not pay for it;
+``swarm-ros simulate`` and ``swarm-ros run`` say so in one line when they have to, and
+``run`` compiles once, before its node processes start, rather than in each of them.
+
+:func:`kernels_cached` loads neither numba nor the kernels: it only looks at files.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+_CORE = Path(__file__).resolve().parent
+_CACHE = _CORE / "__pycache__"
+_MARK = "cache=True"  # a module with a cached kernel says so in its source
+#: What the commands say before they compile (one line, on stderr).
+COMPILING = ("compiling the numba kernels first (once after an install or a change to the core, about 15 s; "
+             "scripts/setup.sh does it too)")
+
+
+def _kernel_modules() -> list[Path]:
+    return [p for p in sorted(_CORE.glob("*.py")) if p.name != "kernels.py" and _MARK in p.read_text("utf-8")]
+
+
+def kernels_cached() -> bool:
+    """Whether every core module with a cached kernel has an index in numba's cache newer than its source.
+
+    Answers True when the cache is somewhere this function does not look
+    (``NUMBA_CACHE_DIR`` set): it never claims work it cannot see.
+    """
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return True
+    try:
+        indexes = {p.name: p.stat().st_mtime for p in _CACHE.glob("*.nbi")}
+        for source in _kernel_modules():
+            changed = source.stat().st_mtime
+            if not any(name.startswith(f"{source.stem}.") and at >= changed for name, at in indexes.items()):
+                return False
+    except OSError:
+        return False
+    return True
+
+
+def compile_kernels() -> None:
+    """Compile every kernel into numba's cache: two ticks of the graph's code path and a few of the
+    in-process engine's, on the star, with the default parameters (the kernels' types do not depend on them)."""
+    from .engine import Simulation
+    from .params import RunParams
+    from .shapes import Shape
+    from .warmup import warm_up
+    from .world import World
+
+    shape = Shape.load("star", World())
+    params = RunParams(robots=shape.patches)
+    warm_up(shape, params)
+    Simulation(shape, params).run(max_ticks=5)
+
+
+def main() -> int:
+    """``python -m swarm_ros.core.kernels``: fill the cache if it is not (prints what it did)."""
+    if kernels_cached():
+        print("swarm_ros: the numba kernels are compiled and cached")
+        return 0
+    import time
+
+    start = time.perf_counter()
+    compile_kernels()
+    print(f"swarm_ros: compiled the numba kernels into their cache in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
