@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from . import __version__
 from .config import (BATCH_LOSS_POLICIES, MAX_RESTARTS, NODE_PARAMETERS, RecordingOptions, Settings,
-                     read_params_file)
+                     check_world_memory, read_params_file)
 from .core.errors import SwarmError
 from .core.params import RunParams
 from .core.rulesets import CROWDING_VALUES, JOIN_VALUES, RULE_SETS, STEPS_VALUES
@@ -79,7 +79,12 @@ def _failure(text: str) -> tuple[float, int]:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors."""
+    """argparse with one-line errors, and no abbreviated flags (``--shap`` is an error, not ``--shape``: a typo
+    must not quietly mean another flag)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         raise SwarmError(message)
@@ -204,6 +209,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_shapes(args: argparse.Namespace) -> int:
+    check_world_memory(args.world_radius)
     world = World(args.world_radius)
     print(f"{'shape':<10} {'patches':>7} {'holes':>5}  bounding box (xmin, ymin)-(xmax, ymax)  file")
     misfits = 0
@@ -272,21 +278,22 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     note_compiling(args.quiet)
     start = time.perf_counter()
-    sim = Simulation(shape, params)  # tick 0; an interrupt before it leaves nothing behind
-    rrd = partial_recording(out)
-    recorder = options.open(rrd, shape, params)
-    stopped = None
-    try:
-        with StopFlag() as stop:  # Ctrl-C or SIGTERM: the run so far becomes an 'interrupted' run directory
+    stopped = recorder = None
+    # Ctrl-C or SIGTERM, from here on: the run so far (tick 0 at least) becomes an 'interrupted' run directory
+    with StopFlag() as stop:
+        sim = Simulation(shape, params)
+        rrd = partial_recording(out)
+        recorder = options.open(rrd, shape, params)
+        try:
             _run_with_progress(sim, check=args.check, quiet=args.quiet, recorder=recorder, stop=stop)
+        except BaseException:
+            if recorder is not None:
+                recorder.outcome("failed", sim.metrics)
+                recorder.close()
+                _note_partial(rrd, options)
+            raise
         if stop.signum and not sim.done:
             stopped = Outcome.INTERRUPTED
-    except BaseException:
-        if recorder is not None:
-            recorder.outcome("failed", sim.metrics)
-            recorder.close()
-            _note_partial(rrd, options)
-        raise
     record = RunRecord.of(sim, wall_seconds=time.perf_counter() - start, stopped=stopped)
     if recorder is not None:
         recorder.outcome(record.outcome.value, record.final)
@@ -303,7 +310,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     import json
 
-    from .launcher import ENCLAVE_PREFIX, Launch, interrupted_run
+    from .launcher import ENCLAVE_PREFIX, Launch, interrupted_run, plural
     from .output import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args)
@@ -312,6 +319,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
                          f"assigns each of its --processes its robots itself (use ros2 run for your own split)")
     world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {})}
+    check_world_memory(shape.world.radius, copies=args.processes + 2)  # the world, the monitor, each batch
     if args.processes > params.robots - 4:
         raise SwarmError(f"{params.robots} robots leave {params.robots - 4} non-seed robots for {args.processes} "
                          f"robot-batch processes (--processes, default 2); each process needs at least one")
@@ -343,7 +351,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         _print_summary(summary, out)
-        print(f"{'ROS graph':<17} domain {launch.domain}, {args.processes} robot-batch processes; logs in {out / 'logs'}")
+        print(f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
+              f"logs in {out / 'logs'}")
     global _EXIT_AT_ONCE
     _EXIT_AT_ONCE = True
     return 0

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import read_yaml
+from .config import check_world_memory, read_yaml
 from .core.errors import SwarmError
 from .core.params import DEFAULT_MAX_TICKS, DEFAULT_WIGGLE_DEG, MAX_SEED, RunParams
 from .core.rulesets import DEFAULT_RULES, RULE_SETS, SWITCHES
@@ -218,6 +218,10 @@ def load_experiment(path: str | Path) -> Experiment:
     max_ticks = _integer(path, "max_ticks", data.get("max_ticks", DEFAULT_MAX_TICKS), 1)
     wiggle = _number(path, "wiggle_deg", data.get("wiggle_deg", DEFAULT_WIGGLE_DEG), 0.0, True)
     world_radius = _integer(path, "world_radius", data.get("world_radius", DEFAULT_RADIUS), 3)
+    try:
+        check_world_memory(world_radius)
+    except SwarmError as exc:
+        raise _fail(path, "world_radius", str(exc)) from None
     fail_fraction = _number(path, "fail_fraction", data.get("fail_fraction", 0.0), 0.0, True)
     fail_tick = _integer(path, "fail_tick", data.get("fail_tick", 0), 0)
     try:
@@ -364,7 +368,12 @@ def run_ros2(spec: RunSpec, processes: int = 2) -> dict:
     return result_row(spec, summary)
 
 
+_IN_RUN = False  # in a worker: whether it is running a run now (else it waits for one, with nothing to stop)
+
+
 def _interrupt(signum: int, frame: object) -> None:
+    if not _IN_RUN:
+        os._exit(130)  # idle: nothing to unwind (a KeyboardInterrupt there is a traceback from the pool's loop)
     raise KeyboardInterrupt
 
 
@@ -379,11 +388,15 @@ def _worker_init(engine: str) -> None:
 
 
 def _work(job: tuple[RunSpec, str, int]) -> dict:
+    global _IN_RUN
     spec, engine, processes = job
+    _IN_RUN = True
     try:
         return run_ros2(spec, processes) if engine == "ros2" else run_inprocess(spec)
     except KeyboardInterrupt:  # stopped by the parent; a graph's processes are already stopped
         os._exit(130)
+    finally:
+        _IN_RUN = False
 
 
 def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes: int = 2) -> Iterator[dict]:
@@ -400,6 +413,7 @@ def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes
     try:
         yield from pool.imap_unordered(_work, [(s, engine, processes) for s in todo], chunksize=1)
         pool.close()
+        pool.join()  # done: the workers leave by themselves (terminate() below then has nobody to stop)
     finally:
         pool.terminate()
         pool.join()

@@ -178,6 +178,11 @@ def stop(children: list[Child]) -> None:
         c.log_file.close()
 
 
+def plural(n: int, noun: str) -> str:
+    """``1 robot-batch process``, ``2 robot-batch processes``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}{'es' if noun.endswith('s') else 's'}"
+
+
 def shm_locks(pid: int | str) -> set[str]:
     """The Fast DDS shared-memory lock files (``/dev/shm/fastrtps_*_el``) process ``pid`` has open now."""
     found = set()
@@ -408,7 +413,7 @@ class Launch:
             self.children.append(self._spawn(name, node_command(module, params_file, name, extra, self.enclaves),
                                              log, 0))
         if not self.quiet:
-            print(f"swarm-ros: ROS domain {domain_id}, {self.processes} robot-batch processes, logs in {logs} "
+            print(f"swarm-ros: ROS domain {domain_id}, {plural(self.processes, 'robot-batch process')}, logs in {logs} "
                   f"(kept in the run directory at the end)", file=sys.stderr, flush=True)
 
     def plan(self) -> list[tuple[str, str, dict[str, int]]]:

@@ -32,6 +32,8 @@ import csv
 import io
 import math
 import os
+import shutil
+import tempfile
 from collections import defaultdict
 from pathlib import Path
 
@@ -44,6 +46,7 @@ from scipy import stats as st  # noqa: E402
 
 from .core.metrics import METRIC_COLUMNS, Outcome  # noqa: E402
 from .core.rulesets import RULE_SETS, RuleSet  # noqa: E402
+from .output import public_mode  # noqa: E402
 from .results import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
 from .reference import Reference, load_reference  # noqa: E402
 
@@ -332,7 +335,8 @@ def vision_figure(stats: list[dict], path: Path) -> None:
             ss = sorted((s for s in mine if s["shape"] == shape), key=lambda s: s["vision_radius"])
             v = [s["vision_radius"] for s in ss]
             m = np.array([s["mean_convergence_tick"] for s in ss])
-            err = np.nan_to_num(np.vstack([m - [s["ci95_low"] for s in ss], [s["ci95_high"] for s in ss] - m]))
+            low = np.maximum([s["ci95_low"] for s in ss], 1.0)  # a CI reaching below one tick ends at 1 (log axis)
+            err = np.nan_to_num(np.vstack([m - low, [s["ci95_high"] for s in ss] - m]))
             colour = _COLOURS[k % len(_COLOURS)]
             a.errorbar(v, m, yerr=err, fmt="o-", capsize=3, color=colour, label=shape)
             b.plot(v, [s["mean_localized"] / s["shape_patches"] for s in ss], "o-", color=colour, label=shape)
@@ -415,8 +419,25 @@ def build_report(out: Path) -> list[Path]:
     written = [out / STATS_CSV, out / STATS_MD]
     _write_text(written[0], stats_csv(stats))
     _write_text(written[1], stats_markdown(stats, reference))
-    figures = out / FIGURES
-    figures.mkdir(exist_ok=True)
+    # figures/ is built whole under a hidden name and swapped in: an interrupt leaves the old set (or none)
+    final = out / FIGURES
+    figures = Path(tempfile.mkdtemp(prefix=f".{FIGURES}.tmp-", dir=out))
+    try:
+        written += _figures(stats, rows, reference, figures)
+        public_mode(figures, directory=True)
+        old = Path(tempfile.mkdtemp(prefix=f".{FIGURES}.old-", dir=out))
+        if final.exists():
+            final.rename(old / FIGURES)
+        figures.rename(final)
+        shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(figures, ignore_errors=True)
+    return [final / p.relative_to(figures) if p.is_relative_to(figures) else p for p in written]
+
+
+def _figures(stats: list[dict], rows: list[dict], reference: dict, figures: Path) -> list[Path]:
+    """Every figure of the report, into ``figures``; return their paths."""
+    written = []
     for rules, vision in _sections(stats):
         vs = [s for s in stats if s["vision_radius"] == vision and s["rules"] == rules]
         for shape in sorted({s["shape"] for s in vs}):

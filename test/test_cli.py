@@ -225,3 +225,55 @@ def test_output_piped_into_a_closed_pipe_stops_quietly():
     exe = Path(sys.executable).parent / "swarm-ros"
     result = subprocess.run(f"'{exe}' shapes | head -1", shell=True, capture_output=True, text=True, timeout=120)
     assert result.stdout.startswith("shape") and "Traceback" not in result.stderr
+
+
+def test_a_second_command_for_a_run_directory_in_use_is_refused_at_once(tmp_path, capsys):
+    """Two commands with one --out: the second gets one line naming the first, before it runs anything."""
+    import signal
+    import time
+
+    out = tmp_path / "run"
+    first = subprocess.Popen([sys.executable, "-m", "swarm_ros.cli", "simulate", "--shape", "star", "--vision", "3",
+                              "--rules", "local", "--crowding", "disc", "--no-recording", "--quiet", "--max-ticks",
+                              "60000", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        lock_dir = Path(__import__("tempfile").gettempdir()) / "swarm_ros-runs"
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not any(
+                f"pid {first.pid}:" in p.read_text() for p in lock_dir.glob("*.lock") if p.is_file()):
+            time.sleep(0.05)
+        for command in ("simulate", "run"):
+            started = time.monotonic()
+            assert cli.main([command, "--out", str(out), "--quiet"]) == 2
+            err = capsys.readouterr().err
+            assert err.count("\n") == 1 and time.monotonic() - started < 5, err
+            assert f"{out}: another swarm-ros command is writing this run directory now (pid {first.pid}: " \
+                   f"swarm-ros simulate --shape star" in err
+        assert first.poll() is None  # the first goes on, untouched
+    finally:
+        first.send_signal(signal.SIGTERM)
+        first.communicate(timeout=30)
+    assert json.loads((out / "summary.json").read_text())["outcome"] == "interrupted"
+    assert cli.main(["simulate", "--out", str(tmp_path / "next"), "--quiet", "--max-ticks", "3"]) == 0  # released
+
+
+def test_a_leftover_of_an_earlier_run_is_refused_and_kept(tmp_path, capsys):
+    """A killed run's recording or bag beside --out is never replaced by a new run."""
+    for left in ("run.partial.rrd", "run.partial-bag"):
+        path = tmp_path / left
+        path.mkdir() if left.endswith("bag") else path.write_bytes(b"earlier")
+        assert simulate(tmp_path / "run") == 2
+        err = capsys.readouterr().err
+        assert f"{path}: left by an earlier run of {tmp_path / 'run'} that stopped early" in err
+        assert path.exists() and not (tmp_path / "run").exists()
+        path.rmdir() if path.is_dir() else path.unlink()
+
+
+def test_run_directories_and_their_files_get_the_umasks_mode(run_dir):
+    import os
+    import stat
+
+    mask = os.umask(0)
+    os.umask(mask)
+    assert stat.S_IMODE(run_dir.stat().st_mode) == 0o777 & ~mask
+    assert {stat.S_IMODE(p.stat().st_mode) for p in run_dir.iterdir() if p.is_file()} == {0o666 & ~mask}

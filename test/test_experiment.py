@@ -400,6 +400,7 @@ def test_ros2_engine_gives_the_in_process_results(small, tmp_path):
     done = subprocess.run([PY, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(ros), "--engine",
                            "ros2", "--quiet"], capture_output=True, text=True, timeout=600, env=env)
     assert done.returncode == 0, done.stderr
+    assert done.stderr == "", done.stderr  # no worker's traceback, no leaked semaphore on the way out
     assert experiment(config, ref) == 0
     a, b = rows_without_timing(ros), rows_without_timing(ref)
     assert {r.pop("engine") for r in a} == {"ros2"} and {r.pop("engine") for r in b} == {"inprocess"}
@@ -428,3 +429,50 @@ def test_tick_labels_too_close_to_read_are_left_out_but_the_patch_count_keeps_it
     assert tick_labels(sizes) == ["1025", "1030", "1035", "", "1040", "1045"]
     assert tick_labels(np.array([100, 200, 300])) == ["100", "200", "300"]
     assert tick_labels(np.array([1036]), keep=1036) == ["1036"]
+
+
+def test_a_report_interrupted_while_it_draws_keeps_the_figures_it_had(small, tmp_path, monkeypatch):
+    """figures/ is swapped in whole: stopped halfway, the directory holds the old set, and nothing half-made."""
+    import shutil
+
+    from swarm_ros import report
+
+    _, done = small
+    out = tmp_path / "copy"
+    shutil.copytree(done, out)
+    before = sorted(p.name for p in (out / "figures").iterdir())
+    calls = []
+
+    def stop_on_the_second(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    real = report.shape_figure
+    monkeypatch.setattr(report, "shape_figure", stop_on_the_second)
+    with pytest.raises(KeyboardInterrupt):
+        report.build_report(out)
+    assert sorted(p.name for p in (out / "figures").iterdir()) == before
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+    shutil.rmtree(out / "figures")
+    with pytest.raises(KeyboardInterrupt):
+        calls.clear()
+        report.build_report(out)
+    assert not (out / "figures").exists()  # none rather than a few
+
+
+def test_the_vision_figure_keeps_a_ci_reaching_below_zero_on_its_log_axis(monkeypatch, tmp_path):
+    from swarm_ros import report
+
+    stats = [{"shape": "disc", "shape_patches": 69, "robots": 69, "vision_radius": v, "rules": "paper",
+              "mean_convergence_tick": m, "ci95_low": lo, "ci95_high": hi, "mean_localized": 69.0}
+             for v, m, lo, hi in ((1.0, 40.0, -25.0, 105.0), (2.0, 30.0, 20.0, 40.0))]
+    figs = []
+    monkeypatch.setattr(report, "_save", lambda fig, path: figs.append(fig))
+    report.vision_figure(stats, tmp_path / "vision.png")
+    ax = figs[0].axes[0]
+    assert ax.get_yscale() == "log"
+    bars = [seg for coll in ax.collections for seg in coll.get_segments()]
+    lows = [min(seg[:, 1]) for seg in bars]
+    assert bars and min(lows) == 1.0  # the CI below one tick is drawn to 1, not off the axis

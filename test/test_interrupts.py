@@ -86,3 +86,39 @@ def test_sigterm_to_a_ros2_experiment_stops_the_graphs_of_its_workers(tmp_path):
     _wait_for(lambda: not _processes_mentioning("swarm_ros-exp-"), timeout=5)
     assert time.monotonic() - start < 5
     assert "Traceback" not in err
+
+
+def test_sigterm_to_run_before_tick_0_leaves_nothing_behind(tmp_path):
+    """Stopped while its processes start: no run directory (there is no run yet), and nothing the run made
+    (logs, partial recording or bag, the folders made for --out) is left; said in one line."""
+    out = tmp_path / "made" / "for" / "run"
+    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _wait_for(lambda: any((logs / "world.log").exists() for logs in out.parent.glob(".run.logs-*"))
+              if out.parent.exists() else False)  # every node process has been started; none is ready
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert "interrupted before tick 0; nothing was written" in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == [], list(tmp_path.rglob("*"))
+
+
+def test_sigterm_to_run_as_tick_0_goes_out_keeps_the_ticks_the_world_sent(tmp_path):
+    """Stopped once the world has sent tick 0, whether or not the monitor has loaded: an interrupted run
+    directory of the ticks sent, and no litter beside it."""
+    out = tmp_path / "run"
+    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--rules", "local", "--out",
+                             str(out), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def world_started() -> bool:
+        return any(": tick 0" in (logs / "world.log").read_text(errors="replace")
+                   for logs in tmp_path.glob(".run.logs-*") if (logs / "world.log").exists())
+
+    _wait_for(world_started, timeout=120)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "interrupted"
+    assert f"interrupted at tick {summary['convergence_tick']}; the run so far is in {out}" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]

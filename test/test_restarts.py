@@ -248,6 +248,12 @@ def test_every_node_ends_within_2_s_of_a_sigkilled_launcher(tmp_path):
     assert not out.exists() and not list(tmp_path.glob(".run.tmp-*")), "a run directory was left"
     assert rrd_verify(tmp_path / "run.partial.rrd").returncode == 0
     assert Recording(tmp_path / "run.partial.rrd").events[-1][1].startswith("interrupted at tick")
+    # and the bag so far, which a standard reader opens as a rosbag2 (a name ending in .bag is a ROS 1 bag to it)
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([tmp_path / "run.partial-bag"]) as reader:
+        robots = [c for c in reader.connections if c.topic == "/swarm/robots"]
+        assert robots and sum(1 for _ in reader.messages(connections=robots)) >= 1
 
 
 def _alive(pid: int) -> bool:

@@ -194,6 +194,8 @@ class Shape:
         world = world or World()
         text = str(name_or_path)
         builtins = builtin_shapes()
+        if not text.strip():
+            raise ShapeError(f"the shape name is empty (built-in: {', '.join(builtins)}; or a .txt / .png file)")
         if text in builtins:
             path = builtins[text]
             name = text

@@ -39,6 +39,8 @@ def open_bag(bag: Path):
     from rosbags.rosbag2 import Reader
     from rosbags.rosbag2.errors import ReaderError
 
+    if not bag.exists():
+        raise ReplayError(f"{bag}: no such file or directory")
     if not bag.is_dir() or not (bag / "metadata.yaml").is_file():
         raise ReplayError(f"{bag}: not a rosbag2 directory (it has no metadata.yaml); a run's bag is <run>/bag")
     try:
