@@ -40,6 +40,10 @@ def make_fixtures(d: Path) -> None:
         "notes.csv": "a,b\n1,2\n",
         "window.yaml": "/world:\n  ros__parameters:\n    monitor_window: -5\n",
         "split.yaml": "/robot_batch:\n  ros__parameters:\n    batches: 3\n",
+        "batchrobots.yaml": "/robot_batch:\n  ros__parameters:\n    robots: 600\n",
+        "worldseed.yaml": "/**:\n  ros__parameters:\n    robots: 500\n/world:\n  ros__parameters:\n    seed: 3\n",
+        "left.partial.rrd": "what an earlier, killed run recorded\n",
+        "bigexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "world_radius: 100000\n",
         "okexp.yaml": EXPERIMENT.format(shape="star", sizes="1036"),
         "farexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("vision_radius: 1", "vision_radius: 40"),
     }
@@ -63,6 +67,12 @@ def test_the_table_has_at_least_20_rows_numbered_in_order():
     rows = table()
     assert len(rows) >= 20
     assert [int(n) for n, _, _ in rows] == list(range(1, len(rows) + 1))
+
+
+def test_the_readme_counts_the_rows_of_the_table():
+    said = re.search(r"docs/bad_input\.md\]\(docs/bad_input\.md\)\s+lists\s+(\d+) bad inputs",
+                     (ROOT / "README.md").read_text())
+    assert said and int(said.group(1)) == len(table())
 
 
 @pytest.mark.parametrize("number,command,message", table(), ids=[f"row{n}" for n, _, _ in table()])
