@@ -14,6 +14,7 @@ Dask executor at least 80% of the local executor's runs per second (issue 14).
 from __future__ import annotations
 
 import argparse
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -30,6 +31,7 @@ def main() -> int:
     parser.add_argument("--config", type=Path, default=ROOT / "config/experiments/paper.yaml")
     parser.add_argument("--jobs", type=int, help="worker processes (default: the command's default, all cores)")
     parser.add_argument("--executors", nargs="+", choices=("local", "dask"), default=["local", "dask"])
+    parser.add_argument("--repeats", type=int, default=1, help="whole commands per executor (min, median, max)")
     args = parser.parse_args()
     from swarm_ros.experiment import load_experiment
     from swarm_ros.results import read_results
@@ -37,26 +39,30 @@ def main() -> int:
     exp = load_experiment(args.config)
     rate = {}
     for executor in args.executors:
-        with tempfile.TemporaryDirectory() as tmp:
-            out = Path(tmp) / "exp"
-            cmd = [sys.executable, "-m", "swarm_ros.cli", "experiment", str(args.config), "--out", str(out), "--quiet",
-                   "--executor", executor]
-            if args.jobs:
-                cmd += ["--jobs", str(args.jobs)]
-            start = time.perf_counter()
-            done = subprocess.run(cmd, capture_output=True, text=True)
-            wall = time.perf_counter() - start
-            if done.returncode != 0:
-                sys.exit(f"bench_experiment: the experiment failed ({executor}): {done.stderr.strip()}")
-            rows = read_results(out / "results.csv")
-            ticks = sum(r["convergence_tick"] for r in rows)
-            in_runs = sum(r["wall_seconds"] for r in rows)
+        walls = []
+        for _ in range(args.repeats):
+            with tempfile.TemporaryDirectory() as tmp:
+                out = Path(tmp) / "exp"
+                cmd = [sys.executable, "-m", "swarm_ros.cli", "experiment", str(args.config), "--out", str(out),
+                       "--quiet", "--executor", executor]
+                if args.jobs:
+                    cmd += ["--jobs", str(args.jobs)]
+                start = time.perf_counter()
+                done = subprocess.run(cmd, capture_output=True, text=True)
+                walls.append(time.perf_counter() - start)
+                if done.returncode != 0:
+                    sys.exit(f"bench_experiment: the experiment failed ({executor}): {done.stderr.strip()}")
+                rows = read_results(out / "results.csv")
+                ticks = sum(r["convergence_tick"] for r in rows)
+                in_runs = sum(r["wall_seconds"] for r in rows)
+        wall = statistics.median(walls)
         rate[executor] = len(rows) / wall
         print(f"{args.config.name}, executor {executor}: {len(rows)} runs ({len(exp.shapes)} shapes, "
               f"{exp.repetitions} repetitions, vision {', '.join(f'{v:g}' for v in exp.vision_radius)}, "
               f"rules {', '.join(exp.rules)}), {ticks:,} ticks in all")
-        print(f"  whole command (workers, results, statistics, figures): {wall:.1f} s, {rate[executor]:.2f} runs/s")
-        print(f"  time inside the runs, summed over workers: {in_runs:.1f} s")
+        print(f"  whole command (workers, results, statistics, figures), {len(walls)} runs: median {wall:.1f} s "
+              f"(min {min(walls):.1f}, max {max(walls):.1f}), {rate[executor]:.2f} runs/s")
+        print(f"  time inside the runs, summed over workers (last run): {in_runs:.1f} s")
         print(f"  Target: the paper protocol in under {TARGET_SECONDS:g} s: "
               f"{'MET' if wall < TARGET_SECONDS else 'NOT MET'} ({wall:.1f} s)")
     if {"local", "dask"} <= set(rate):

@@ -114,9 +114,9 @@ def milestones(out: Path, started_at: float, whole: float) -> list[float]:
 def breakdown(seed: int, processes: list[int], repeats: int, tmp: Path) -> dict[int, list[float]]:
     """Print the median seconds to each milestone for each K; return {K: medians}."""
     names = [name for name, _, _ in MILESTONES] + ["command done"]
-    medians = {}
+    medians, all_runs = {}, {}
     for k in processes:
-        runs = []
+        runs = all_runs[k] = []
         for r in range(repeats):
             out = tmp / f"steps-k{k}-{r}"
             _, _, whole = over_graph(seed, k, out, True)
@@ -127,6 +127,10 @@ def breakdown(seed: int, processes: list[int], repeats: int, tmp: Path) -> dict[
     print(f"{'milestone':<30}" + "".join(f"{f'K = {k}':>9}" for k in processes))
     for i, name in enumerate(names):
         print(f"{name:<30}" + "".join(f"{medians[k][i]:>9.2f}" for k in processes))
+    for k in processes:  # the spread of what a user waits for
+        wholes = sorted(run[-1] for run in all_runs[k])
+        print(f"command, K = {k}, over {len(wholes)} runs: min {wholes[0]:.2f} s, median "
+              f"{statistics.median(wholes):.2f} s, max {wholes[-1]:.2f} s")
     if 2 in medians:
         whole = medians[2][-1]
         print(f"Target: the star with K = 2, recording on, whole command under 4 s: "
