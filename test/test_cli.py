@@ -277,3 +277,11 @@ def test_run_directories_and_their_files_get_the_umasks_mode(run_dir):
     os.umask(mask)
     assert stat.S_IMODE(run_dir.stat().st_mode) == 0o777 & ~mask
     assert {stat.S_IMODE(p.stat().st_mode) for p in run_dir.iterdir() if p.is_file()} == {0o666 & ~mask}
+
+
+def test_counts_of_processes_read_as_english():
+    from swarm_ros.launcher import plural
+
+    assert plural(1, "robot-batch process") == "1 robot-batch process"
+    assert plural(2, "robot-batch process") == "2 robot-batch processes"
+    assert plural(3, "robot") == "3 robots"

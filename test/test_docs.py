@@ -63,3 +63,20 @@ def test_the_readme_lists_every_summary_field():
 def test_generated_output_directories_are_ignored_by_git():
     ignored = (ROOT / ".gitignore").read_text().split()
     assert "runs/" in ignored and "experiments/" in ignored
+
+
+def test_the_readme_synopses_name_every_flag_of_simulate_and_run():
+    import re
+
+    from swarm_ros.cli import build_parser
+
+    readme = (ROOT / "README.md").read_text()
+    subparsers = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+    for command in ("simulate", "run"):
+        synopsis = re.search(rf"```\nswarm-ros {command} (.*?)```", readme, re.S).group(1)
+        if command == "run":  # '... the same options as simulate, except --check'
+            synopsis += re.search(r"```\nswarm-ros simulate (.*?)```", readme, re.S).group(1)
+        flags = {f for a in subparsers.choices[command]._actions for f in a.option_strings
+                 if f.startswith("--") and f != "--help"}
+        missing = sorted(f for f in flags if f not in synopsis)
+        assert not missing, f"the README's synopsis of {command} omits {missing}"
