@@ -187,3 +187,20 @@ def two_hosts():
     finally:
         for ns in (a, b):
             ip_in("netns", "del", ns)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _no_shared_memory_left_by_the_tests():
+    """The tests kill processes on purpose (a launcher, nodes, in-process rclpy contexts left to the end of the
+    session): at the end, remove the Fast DDS shared-memory files made during the session that no live process
+    uses, as the launcher does after a run (launcher.clean_shm). Files that were there before are not touched."""
+    from pathlib import Path
+
+    def segments() -> set[str]:
+        return {str(p) for p in Path("/dev/shm").glob("fastrtps_*") if not p.name.endswith("_el")}
+
+    before = segments()
+    yield
+    from swarm_ros.launcher import clean_shm  # only now: the launcher's imports are not the tests' business
+
+    clean_shm({f"{seg}_el" for seg in segments() - before})
