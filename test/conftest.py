@@ -193,7 +193,7 @@ def two_hosts():
 def _no_shared_memory_left_by_the_tests():
     """The tests kill processes on purpose (a launcher, nodes, in-process rclpy contexts left to the end of the
     session): at the end, remove the Fast DDS shared-memory files made during the session that no live process
-    uses, as the launcher does after a run (launcher.clean_shm). Files that were there before are not touched."""
+    uses, as the launcher does after a run (nodes.shm.clean_shm). Files that were there before are not touched."""
     from pathlib import Path
 
     def segments() -> set[str]:
@@ -201,6 +201,6 @@ def _no_shared_memory_left_by_the_tests():
 
     before = segments()
     yield
-    from swarm_ros.launcher import clean_shm  # only now: the launcher's imports are not the tests' business
+    from swarm_ros.nodes.shm import clean_shm
 
     clean_shm({f"{seg}_el" for seg in segments() - before})

@@ -26,7 +26,8 @@ from test_ros_graph import _env, _processes_mentioning
 
 from swarm_ros import cli
 from swarm_ros.config import RecordingOptions, Settings
-from swarm_ros.launcher import Launch, shm_locks
+from swarm_ros.launcher import Launch
+from swarm_ros.nodes.shm import shm_locks
 
 PY = sys.executable
 # The star under the local join rule: ~3600 ticks, several seconds over the graph, long enough to kill in

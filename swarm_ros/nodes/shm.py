@@ -1,0 +1,87 @@
+"""The Fast DDS shared-memory files of a run's processes in /dev/shm: which a process holds, and removing
+those no live process uses any more (after a run, or a test session). Plain files and /proc: no ROS import."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+from pathlib import Path
+
+SHM_DIR = Path("/dev/shm")
+
+
+def shm_locks(pid: int | str) -> set[str]:
+    """The Fast DDS shared-memory lock files (``/dev/shm/fastrtps_*_el``) process ``pid`` has open now."""
+    found = set()
+    try:
+        fds = os.listdir(f"/proc/{pid}/fd")
+    except OSError:
+        return found
+    for fd in fds:
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith(f"{SHM_DIR}/fastrtps_") and target.endswith("_el"):
+            found.add(target)
+    return found
+
+
+def _in_use(paths: set[str]) -> set[str]:
+    """Those of ``paths`` that a live process has mapped or open (every process's /proc maps and fds)."""
+    used: set[str] = set()
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            with open(proc / "maps", encoding="utf-8", errors="replace") as f:
+                for line in f:
+                    path = line.rstrip("\n").partition(" /")[2]
+                    if path and f"/{path}".removesuffix(" (deleted)") in paths:
+                        used.add(f"/{path}".removesuffix(" (deleted)"))
+            for fd in os.listdir(proc / "fd"):
+                target = os.readlink(proc / "fd" / fd)
+                if target in paths:
+                    used.add(target)
+        except OSError:
+            continue  # gone meanwhile, or not ours to read
+    return used
+
+
+def clean_shm(lock_files: set[str]) -> list[str]:
+    """Remove the Fast DDS shared-memory files behind ``lock_files`` that no live process uses; return them.
+
+    Each segment ``/dev/shm/fastrtps_X`` (a participant's, or a port ``fastrtps_portN``)
+    comes with a lock file ``fastrtps_X_el`` that its owner keeps locked, and a port with a
+    semaphore ``sem.fastrtps_X_mutex``. A lock file we can lock ourselves has no live
+    owner left (Fast DDS's own ``fastdds shm clean`` reasons the same way). A port whose
+    owner ended normally removes its lock file but keeps the segment while another process
+    still counts as its user, and a SIGKILLed process always does: so a port of this run's
+    processes is left behind by every process that talked to a killed one. Such files go
+    when no live process has them mapped or open (read from /proc), whatever their lock
+    file says; only the files of ``lock_files``, which this run's processes held, are
+    looked at.
+    """
+    groups = []
+    for el in sorted(lock_files):
+        segment = el.removesuffix("_el")
+        try:
+            with open(el, "rb") as f:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released at close: we only look
+        except FileNotFoundError:
+            pass  # its owner removed it: the segment may remain
+        except OSError:
+            continue  # locked: a live process owns it
+        groups.append((segment, el, str(SHM_DIR / f"sem.{Path(segment).name}_mutex")))
+    used = _in_use({path for group in groups for path in group}) if groups else set()
+    removed = []
+    for group in groups:
+        if used.intersection(group):
+            continue
+        for path in group:
+            try:
+                os.unlink(path)
+                removed.append(path)
+            except FileNotFoundError:
+                pass
+    return removed
