@@ -133,11 +133,16 @@ def final_state_csv(s: SwarmState) -> str:
 
 
 def _umask() -> int:
-    import os
-
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+    """This process's umask, read without changing it (setting it to read it back would briefly open every file
+    another thread creates meanwhile), from /proc; 0o022 where that cannot be read."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0o022
 
 
 def public_mode(path: Path, directory: bool = False) -> None:
