@@ -385,15 +385,12 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def note_compiling(quiet: bool) -> bool:
-    """Say in one line (unless ``quiet``) that the numba kernels must be compiled first; return whether."""
+def note_compiling(quiet: bool) -> None:
+    """Say in one line (unless ``quiet``) that the numba kernels must be compiled first, if they must."""
     from .core.kernels import COMPILING, kernels_cached
 
-    if kernels_cached():
-        return False
-    if not quiet:
+    if not quiet and not kernels_cached():
         print(f"{PROG}: {COMPILING}", file=sys.stderr, flush=True)
-    return True
 
 
 def _note_partial(rrd: Path, options: RecordingOptions) -> None:

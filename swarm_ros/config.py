@@ -62,7 +62,7 @@ def available_memory() -> int | None:
     return None
 
 
-def check_world_memory(radius: int, copies: int = 1, what: str = "world_radius") -> None:
+def check_world_memory(radius: int, copies: int = 1) -> None:
     """Refuse a world too large for this machine's memory, before anything is allocated.
 
     ``copies``: the processes that each hold the world (1 in-process; for the ROS graph the
@@ -80,7 +80,7 @@ def check_world_memory(radius: int, copies: int = 1, what: str = "world_radius")
         largest = int(((available / (BYTES_PER_PATCH * copies)) ** 0.5 - 1) // 2)
         gib = 1024 ** 3
         each = f" in each of {copies} processes" if copies > 1 else ""
-        raise ParameterError(f"{what} {radius} needs about {needed / gib:,.1f} GiB ({side} x {side} patches at "
+        raise ParameterError(f"world_radius {radius} needs about {needed / gib:,.1f} GiB ({side} x {side} patches at "
                              f"{BYTES_PER_PATCH} bytes each{each}), more than the {available / gib:.1f} GiB of "
                              f"memory available now; at most {largest} fits")
 

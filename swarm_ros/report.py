@@ -423,7 +423,7 @@ def build_report(out: Path) -> list[Path]:
     final = out / FIGURES
     figures = Path(tempfile.mkdtemp(prefix=f".{FIGURES}.tmp-", dir=out))
     try:
-        written += _figures(stats, rows, reference, figures)
+        written += [final / p.name for p in _figures(stats, rows, reference, figures)]
         public_mode(figures, directory=True)
         old = Path(tempfile.mkdtemp(prefix=f".{FIGURES}.old-", dir=out))
         if final.exists():
@@ -432,7 +432,7 @@ def build_report(out: Path) -> list[Path]:
         shutil.rmtree(old, ignore_errors=True)
     finally:
         shutil.rmtree(figures, ignore_errors=True)
-    return [final / p.relative_to(figures) if p.is_relative_to(figures) else p for p in written]
+    return written
 
 
 def _figures(stats: list[dict], rows: list[dict], reference: dict, figures: Path) -> list[Path]:
