@@ -29,7 +29,7 @@ RUN_ARGUMENTS = ("shape", "robots", "vision_radius", "rules", "join", "crowding"
                  "wiggle_deg", "fail_fraction", "fail_tick", "world_radius")
 _INTEGERS = {"robots", "seed", "max_ticks", "fail_tick", "world_radius"}
 _FLOATS = {"vision_radius", "wiggle_deg", "fail_fraction"}
-KEY_ENV = "SWARM_ROS_RUN_KEY"  # as swarm_ros.nodes.runkey.KEY_ENV
+KEY_ENV = "SWARM_ROS_RUN_KEY"  # as swarm_ros.protocol.runkey.KEY_ENV
 MONITOR_GRACE = 30.0  # seconds the monitor has to write the run after the world's end (as swarm-ros run)
 
 

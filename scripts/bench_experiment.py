@@ -33,8 +33,8 @@ def main() -> int:
     parser.add_argument("--executors", nargs="+", choices=("local", "dask"), default=["local", "dask"])
     parser.add_argument("--repeats", type=int, default=1, help="whole commands per executor (min, median, max)")
     args = parser.parse_args()
-    from swarm_ros.experiment import load_experiment
-    from swarm_ros.results import read_results
+    from swarm_ros.app.experiment import load_experiment
+    from swarm_ros.app.results_file import read_results
 
     exp = load_experiment(args.config)
     rate = {}
@@ -43,7 +43,7 @@ def main() -> int:
         for _ in range(args.repeats):
             with tempfile.TemporaryDirectory() as tmp:
                 out = Path(tmp) / "exp"
-                cmd = [sys.executable, "-m", "swarm_ros.cli", "experiment", str(args.config), "--out", str(out),
+                cmd = [sys.executable, "-m", "swarm_ros", "experiment", str(args.config), "--out", str(out),
                        "--quiet", "--executor", executor]
                 if args.jobs:
                     cmd += ["--jobs", str(args.jobs)]

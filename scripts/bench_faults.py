@@ -58,7 +58,7 @@ def _wait_ticks(out: Path, size: int = 400_000, timeout: float = 120) -> None:
 
 def restart_trial(base: Path) -> float:
     out = base / "restart"
-    launcher = subprocess.Popen([sys.executable, "-m", "swarm_ros.cli", "run", *RUN, "--out", str(out)],
+    launcher = subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     _wait_ticks(out)
     victim = _nodes(out)["robot_batch_1"]
@@ -76,7 +76,7 @@ def restart_trial(base: Path) -> float:
 
 def launcher_trial(base: Path) -> float:
     out = base / "launcher"
-    launcher = subprocess.Popen([sys.executable, "-m", "swarm_ros.cli", "run", *RUN, "--out", str(out)],
+    launcher = subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     _wait_ticks(out, 200_000)
     pids = list(_nodes(out).values())

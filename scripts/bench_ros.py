@@ -69,7 +69,7 @@ def in_process(seed: int, repeats: int) -> tuple[int, float, float]:
 def command(seed: int, out: Path, *args: str, record: bool = False) -> tuple[int, float, float]:
     """Run ``swarm-ros ARGS`` on the star: (ticks, run seconds from summary.json, whole command seconds)."""
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "swarm_ros.cli", *args, "--shape", "star", "--seed", str(seed),
+    done = subprocess.run([sys.executable, "-m", "swarm_ros", *args, "--shape", "star", "--seed", str(seed),
                            *[a for k, v in RULES.items() for a in (f"--{k}", v)],
                            "--out", str(out), "--overwrite", "--quiet", *([] if record else ["--no-recording"])],
                           capture_output=True, text=True)

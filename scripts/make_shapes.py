@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from swarm_ros.core.shapes import Shape, write_text_grid  # noqa: E402
-from swarm_ros.core.world import World  # noqa: E402
+from swarm_ros.core.grid import World  # noqa: E402
 
 HALF = 30  # grid covers [-HALF, HALF]
 

@@ -87,8 +87,8 @@ def main() -> int:
     args = ap.parse_args()
     from swarm_ros.core import Shape
     from swarm_ros.core.state import RobotState, initial_state
-    from swarm_ros.results import read_results
-    from swarm_ros.reference import load_reference
+    from swarm_ros.app.results_file import read_results
+    from swarm_ros.app.published import load_reference
 
     reference = load_reference(args.reference)
     rows = read_results(args.results / "results.csv")

@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from swarm_ros.core.state import MOVING_STATES, RobotState
-from swarm_ros.wire import DECISION_ROW, PATCH_METRES, ROBOT_ROW
+from swarm_ros.protocol.rows import DECISION_ROW, PATCH_METRES, ROBOT_ROW
 
 TYPES = {
     "/swarm/robots": "sensor_msgs/msg/PointCloud2", "/swarm/decisions": "sensor_msgs/msg/PointCloud2",

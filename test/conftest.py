@@ -201,6 +201,6 @@ def _no_shared_memory_left_by_the_tests():
 
     before = segments()
     yield
-    from swarm_ros.nodes.shm import clean_shm
+    from swarm_ros.ros.shm import clean_shm
 
     clean_shm({f"{seg}_el" for seg in segments() - before})

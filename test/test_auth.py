@@ -1,4 +1,4 @@
-"""Vouchers (swarm_ros.nodes.auth) without DDS: a stub node hands the Gate's callbacks to the test."""
+"""Vouchers (swarm_ros.ros.auth) without DDS: a stub node hands the Gate's callbacks to the test."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ pytest.importorskip("rclpy")
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 
-from swarm_ros.config import ConfigError  # noqa: E402
-from swarm_ros.nodes import auth  # noqa: E402
-from swarm_ros.nodes import messages as msgs  # noqa: E402
-from swarm_ros.nodes.guard import Rejections  # noqa: E402
-from swarm_ros.nodes.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key  # noqa: E402
+from swarm_ros.app.param_file import ConfigError  # noqa: E402
+from swarm_ros.ros import auth  # noqa: E402
+from swarm_ros.ros import graph as msgs  # noqa: E402
+from swarm_ros.protocol.checks import Rejections  # noqa: E402
+from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key  # noqa: E402
 
 KEY = b"k" * 32
 

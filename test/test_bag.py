@@ -19,13 +19,13 @@ import pytest
 from bagcheck import read_bag
 from test_ros_graph import _env, _shape_file
 
-from swarm_ros.wire import ROBOT_ROW
+from swarm_ros.protocol.rows import ROBOT_ROW
 
 PY = sys.executable
 
 
 def _run(out: Path, *extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([PY, "-m", "swarm_ros.cli", "run", "--processes", "1", "--out", str(out), "--quiet",
+    return subprocess.run([PY, "-m", "swarm_ros", "run", "--processes", "1", "--out", str(out), "--quiet",
                            "--no-recording", *extra], capture_output=True, text=True, timeout=240, env=_env())
 
 
@@ -51,7 +51,7 @@ def test_no_bag_writes_none_and_leaves_nothing_beside_the_run(tmp_path):
 def test_an_interrupted_run_keeps_a_readable_bag_of_its_ticks(tmp_path):
     out = tmp_path / "run"
     # the star under the local join rule: thousands of ticks, time to interrupt
-    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--seed", "5", "--rules", "local",
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--seed", "5", "--rules", "local",
                              "--processes", "2", "--out", str(out), "--quiet", "--no-recording"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
     def logged(node: str, text: str) -> bool:
@@ -85,9 +85,9 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
     from sensor_msgs.msg import PointCloud2
     from std_msgs.msg import Int64MultiArray
 
-    from swarm_ros.nodes import messages as msgs
-    from swarm_ros.nodes.bag import reader_qos
-    from swarm_ros.nodes.dds import dds_defaults
+    from swarm_ros.ros import graph as msgs
+    from swarm_ros.ros.bag_writer import reader_qos
+    from swarm_ros.ros.dds import dds_defaults
 
     domain = 180 + os.getpid() % 40
     env = {**_env(), **dds_defaults()}
@@ -104,7 +104,7 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
         node.create_subscription(Int64MultiArray, msgs.METRICS, metrics.append, reader_qos(msgs.METRICS_QOS))
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        replay = subprocess.Popen([PY, "-m", "swarm_ros.cli", "replay", str(ring_run), "--domain-id", str(domain),
+        replay = subprocess.Popen([PY, "-m", "swarm_ros", "replay", str(ring_run), "--domain-id", str(domain),
                                    "--rate", "0.5", "--delay", "4", "--quiet"], stdout=subprocess.PIPE,
                                   stderr=subprocess.PIPE, text=True, env=env)
         deadline = time.monotonic() + 60

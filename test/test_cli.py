@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from swarm_ros import cli, output
+from swarm_ros.app import cli
+from swarm_ros.artifacts import run_dir as output
 from swarm_ros.core.metrics import METRIC_COLUMNS
 
 SUMMARY_KEYS = {"shape", "shape_patches", "robots", "vision_radius", "rules", "join", "crowding", "steps", "seed",
@@ -203,7 +204,7 @@ def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch, ca
     def broken(sim, path):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr("swarm_ros.plots.save_final_png", broken)
+    monkeypatch.setattr("swarm_ros.artifacts.plots.save_final_png", broken)
     assert simulate(tmp_path / "run") == 2
     err = capsys.readouterr().err
     assert "No space left on device" in err and err.count("\n") == 1
@@ -233,7 +234,7 @@ def test_a_second_command_for_a_run_directory_in_use_is_refused_at_once(tmp_path
     import time
 
     out = tmp_path / "run"
-    first = subprocess.Popen([sys.executable, "-m", "swarm_ros.cli", "simulate", "--shape", "star", "--vision", "3",
+    first = subprocess.Popen([sys.executable, "-m", "swarm_ros", "simulate", "--shape", "star", "--vision", "3",
                               "--rules", "local", "--crowding", "disc", "--no-recording", "--quiet", "--max-ticks",
                               "60000", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -280,7 +281,7 @@ def test_run_directories_and_their_files_get_the_umasks_mode(run_dir):
 
 
 def test_counts_of_processes_read_as_english():
-    from swarm_ros.launcher import plural
+    from swarm_ros.app.launcher import plural
 
     assert plural(1, "robot-batch process") == "1 robot-batch process"
     assert plural(2, "robot-batch process") == "2 robot-batch processes"

@@ -4,7 +4,7 @@ from dataclasses import asdict
 
 import pytest
 
-from swarm_ros.config import ConfigError, Settings, load_params_file
+from swarm_ros.app.param_file import ConfigError, Settings, load_params_file
 from swarm_ros.core.resources import data_dir
 
 
@@ -55,7 +55,7 @@ def test_missing_parameter_file(tmp_path):
 def test_node_sections_of_the_shipped_file_hold_every_node_default():
     import yaml
 
-    from swarm_ros.config import NODE_PARAMETERS
+    from swarm_ros.app.param_file import NODE_PARAMETERS
 
     data = yaml.safe_load((data_dir("config") / "swarm_ros.yaml").read_text())
     for node, own in NODE_PARAMETERS.items():

@@ -104,7 +104,7 @@ def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_no_module_of_the_package_imports_itself_round_a_circle():
     graph = module_graph()
-    assert "swarm_ros.core.record" in graph["swarm_ros.plots"]  # the scan sees imports at all
+    assert "swarm_ros.core.run_result" in graph["swarm_ros.artifacts.plots"]  # the scan sees imports at all
     assert import_cycles(graph) == []
 
 
@@ -118,8 +118,8 @@ def test_the_launcher_loads_none_of_the_nodes_heavy_libraries():
     matplotlib, Rerun and rosbags cost the launcher ~0.5 s of CPU on the 2 cores the nodes start on."""
     code = textwrap.dedent("""
         import sys
-        import swarm_ros.cli, swarm_ros.launcher, swarm_ros.nodes.progress, swarm_ros.nodes.messages
-        from swarm_ros.config import Settings
+        import swarm_ros.app.cli, swarm_ros.app.launcher, swarm_ros.tools.progress, swarm_ros.ros.graph
+        from swarm_ros.app.param_file import Settings
         shape, params = Settings(shape="star").resolve()
         heavy = ("numba", "scipy", "matplotlib", "rerun", "rosbags")
         print(sorted({m.split(".")[0] for m in sys.modules} & set(heavy)), shape.patches)

@@ -13,7 +13,7 @@ from pathlib import Path
 import psutil
 import pytest
 
-from swarm_ros.results import read_results
+from swarm_ros.app.results_file import read_results
 
 SMALL = """\
 name: small
@@ -35,7 +35,7 @@ def _experiment(tmp_path: Path, reps: int = 2) -> Path:
 
 
 def _cli(*args: str, env: dict | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "swarm_ros.cli", "experiment", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "swarm_ros", "experiment", *args], capture_output=True,
                           text=True, timeout=timeout, env=env)
 
 
@@ -88,7 +88,7 @@ def test_rerunning_resumes_only_the_missing_runs(tmp_path, scheduler, local_rows
 
 def _started(config: Path, out: Path, env: dict | None = None) -> subprocess.Popen:
     """An experiment on its own LocalCluster (2 workers), in the background."""
-    return subprocess.Popen([sys.executable, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(out),
+    return subprocess.Popen([sys.executable, "-m", "swarm_ros", "experiment", str(config), "--out", str(out),
                              "--executor", "dask", "--jobs", "2", "--quiet"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
 
@@ -172,7 +172,7 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path):
 ])
 def test_a_dask_task_holds_a_quarter_second_of_runs_but_the_workers_finish_together(run_seconds, remaining,
                                                                                   workers, expected):
-    from swarm_ros.experiment import chunk_size
+    from swarm_ros.app.experiment import chunk_size
 
     assert chunk_size(run_seconds, remaining, workers) == expected
 
@@ -180,7 +180,7 @@ def test_a_dask_task_holds_a_quarter_second_of_runs_but_the_workers_finish_toget
 def test_short_runs_share_dask_tasks_and_each_run_comes_back_once(tmp_path, scheduler):
     from dask.distributed import Client, get_task_stream
 
-    from swarm_ros.experiment import execute_dask, load_experiment, run_inprocess
+    from swarm_ros.app.experiment import execute_dask, load_experiment, run_inprocess
 
     todo = load_experiment(_experiment(tmp_path, reps=15)).runs()
     with Client(scheduler) as client, get_task_stream(client) as stream:

@@ -68,7 +68,7 @@ def test_generated_output_directories_are_ignored_by_git():
 def test_the_readme_synopses_name_every_flag_of_simulate_and_run():
     import re
 
-    from swarm_ros.cli import build_parser
+    from swarm_ros.app.cli import build_parser
 
     readme = (ROOT / "README.md").read_text()
     subparsers = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")

@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 import yaml
 
-from swarm_ros import cli
-from swarm_ros.experiment import load_experiment, run_seed
-from swarm_ros.results import RESULT_COLUMNS, ExperimentError, read_results
-from swarm_ros.reference import ReferenceError, load_reference
-from swarm_ros.report import group_stats
+from swarm_ros.app import cli
+from swarm_ros.app.experiment import load_experiment, run_seed
+from swarm_ros.app.results_file import RESULT_COLUMNS, ExperimentError, read_results
+from swarm_ros.app.published import ReferenceError, load_reference
+from swarm_ros.app.report import group_stats
 
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
@@ -194,7 +194,7 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(small, tmp_path
     config, out = small
     big = small_config(tmp_path, repetitions=40)  # 240 runs, the first 3 repetitions are the small grid
     run_dir = tmp_path / "run"
-    cmd = [PY, "-m", "swarm_ros.cli", "experiment", str(big), "--out", str(run_dir), "--jobs", "2"]
+    cmd = [PY, "-m", "swarm_ros", "experiment", str(big), "--out", str(run_dir), "--jobs", "2"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     results = run_dir / "results.csv"
     deadline = time.monotonic() + 120
@@ -397,7 +397,7 @@ def test_ros2_engine_gives_the_in_process_results(small, tmp_path):
     ros, ref = tmp_path / "ros", tmp_path / "ref"
     env = {**os.environ}
     env.pop("ROS_DOMAIN_ID", None)
-    done = subprocess.run([PY, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(ros), "--engine",
+    done = subprocess.run([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(ros), "--engine",
                            "ros2", "--quiet"], capture_output=True, text=True, timeout=600, env=env)
     assert done.returncode == 0, done.stderr
     assert done.stderr == "", done.stderr  # no worker's traceback, no leaked semaphore on the way out
@@ -422,7 +422,7 @@ def test_experiments_can_damage_the_swarm_with_failing_robots(tmp_path):
 
 
 def test_tick_labels_too_close_to_read_are_left_out_but_the_patch_count_keeps_its_own():
-    from swarm_ros.report import tick_labels
+    from swarm_ros.app.report import tick_labels
 
     sizes = np.array([1025, 1030, 1035, 1036, 1040, 1045])
     assert tick_labels(sizes, keep=1036) == ["1025", "1030", "", "1036", "1040", "1045"]
@@ -435,7 +435,7 @@ def test_a_report_interrupted_while_it_draws_keeps_the_figures_it_had(small, tmp
     """figures/ is swapped in whole: stopped halfway, the directory holds the old set, and nothing half-made."""
     import shutil
 
-    from swarm_ros import report
+    from swarm_ros.app import report
 
     _, done = small
     out = tmp_path / "copy"
@@ -463,7 +463,7 @@ def test_a_report_interrupted_while_it_draws_keeps_the_figures_it_had(small, tmp
 
 
 def test_the_vision_figure_keeps_a_ci_reaching_below_zero_on_its_log_axis(monkeypatch, tmp_path):
-    from swarm_ros import report
+    from swarm_ros.app import report
 
     stats = [{"shape": "disc", "shape_patches": 69, "robots": 69, "vision_radius": v, "rules": "paper",
               "mean_convergence_tick": m, "ci95_low": lo, "ci95_high": hi, "mean_localized": 69.0}

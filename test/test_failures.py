@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import disc_shape, run_checked
 
-from swarm_ros import cli
+from swarm_ros.app import cli
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.arbitration import JoinOutcome
 from swarm_ros.core.engine import failing_robots

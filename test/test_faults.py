@@ -23,14 +23,14 @@ import numpy as np
 from conftest import Recording, rrd_verify
 from test_ros_graph import _env, _processes_mentioning
 
-from swarm_ros.wire import batch_ids
+from swarm_ros.protocol.rows import batch_ids
 
 PY = sys.executable
 ROBOTS = 1036  # the star, ~2700 ticks: a few seconds over the graph
 
 
 def _launch(out: Path, processes: int = 3) -> subprocess.Popen:
-    return subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--processes", str(processes),
+    return subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--processes", str(processes),
                              "--out", str(out), "--quiet", "--on-batch-loss", "remove"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=_env())
 

@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 from test_ros_graph import _assert_same_run, _shape_file
 
-from swarm_ros import cli
-from swarm_ros.config import Settings
-from swarm_ros.nodes.params import params_yaml
+from swarm_ros.app import cli
+from swarm_ros.app.param_file import Settings
+from swarm_ros.ros.node_params import params_yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 SOURCES = ("setup.py", "setup.cfg", "package.xml", "pyproject.toml", "resource", "swarm_ros", "shapes", "config",

@@ -16,7 +16,7 @@ from pathlib import Path
 from conftest import Recording, rrd_verify
 from test_experiment import _children_of, small_config
 
-from swarm_ros.results import read_results
+from swarm_ros.app.results_file import read_results
 
 PY = sys.executable
 
@@ -31,7 +31,7 @@ def _wait_for(predicate, timeout: float = 120) -> None:
 def test_sigterm_to_simulate_writes_an_interrupted_run_directory(tmp_path):
     out = tmp_path / "run"
     # crowding 'disc' at vision 3 nearly freezes the swarm at this density: a long run (docs/model.md)
-    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "simulate", "--shape", "star", "--vision", "3", "--rules",
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "simulate", "--shape", "star", "--vision", "3", "--rules",
                              "local", "--crowding", "disc", "--record-every", "50", "--out", str(out)],
                             stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
@@ -56,7 +56,7 @@ def test_sigterm_to_simulate_writes_an_interrupted_run_directory(tmp_path):
 def test_sigterm_to_an_experiment_stops_its_workers_and_keeps_finished_runs(tmp_path):
     config = small_config(tmp_path, repetitions=40)
     out = tmp_path / "exp"
-    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(out), "--jobs", "2"],
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(out), "--jobs", "2"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     results = out / "results.csv"
     _wait_for(lambda: results.exists() and len(results.read_text().splitlines()) > 4)
@@ -75,7 +75,7 @@ def test_sigterm_to_a_ros2_experiment_stops_the_graphs_of_its_workers(tmp_path):
     from test_ros_graph import _processes_mentioning
 
     config = small_config(tmp_path, repetitions=3, vision_radius=[1], shapes={"disc.txt": [60]})
-    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "experiment", str(config), "--out", str(tmp_path / "exp"),
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(tmp_path / "exp"),
                              "--engine", "ros2", "--jobs", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     _wait_for(lambda: bool(_processes_mentioning("swarm_ros-exp-")))  # a worker's graph is up
@@ -92,7 +92,7 @@ def test_sigterm_to_run_before_tick_0_leaves_nothing_behind(tmp_path):
     """Stopped while its processes start: no run directory (there is no run yet), and nothing the run made
     (logs, partial recording or bag, the folders made for --out) is left; said in one line."""
     out = tmp_path / "made" / "for" / "run"
-    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--out", str(out)],
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     _wait_for(lambda: any((logs / "world.log").exists() for logs in out.parent.glob(".run.logs-*"))
               if out.parent.exists() else False)  # every node process has been started; none is ready
@@ -107,7 +107,7 @@ def test_sigterm_to_run_as_tick_0_goes_out_keeps_the_ticks_the_world_sent(tmp_pa
     """Stopped once the world has sent tick 0, whether or not the monitor has loaded: an interrupted run
     directory of the ticks sent, and no litter beside it."""
     out = tmp_path / "run"
-    proc = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--rules", "local", "--out",
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--rules", "local", "--out",
                              str(out), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
     def world_started() -> bool:

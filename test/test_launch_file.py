@@ -16,11 +16,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-from swarm_ros.config import Settings
+from swarm_ros.app.param_file import Settings
 from swarm_ros.core import Shape
-from swarm_ros import launcher
-from swarm_ros.launcher import Launch
-from swarm_ros.nodes.runkey import KEY_ENV, run_key
+from swarm_ros.app import launcher
+from swarm_ros.app.launcher import Launch
+from swarm_ros.protocol.runkey import KEY_ENV, run_key
 
 ROOT = Path(__file__).resolve().parent.parent
 LAUNCH_FILE = ROOT / "launch" / "swarm.launch.py"

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from swarm_ros.config import Settings
-from swarm_ros.launcher import DomainLock, node_command, node_env
-from swarm_ros.nodes.params import params_yaml
-from swarm_ros.nodes.runkey import KEY_ENV
+from swarm_ros.app.param_file import Settings
+from swarm_ros.app.launcher import DomainLock, node_command, node_env
+from swarm_ros.ros.node_params import params_yaml
+from swarm_ros.protocol.runkey import KEY_ENV
 
 pytest.importorskip("rclpy")
 
@@ -30,7 +30,7 @@ def _peer(domain: int, monkeypatch):
     from rclpy.context import Context
     from rclpy.node import Node
 
-    from swarm_ros.nodes.dds import dds_defaults
+    from swarm_ros.ros.dds import dds_defaults
 
     for key, value in dds_defaults().items():
         monkeypatch.setenv(key, value)
@@ -67,8 +67,8 @@ def test_a_monitor_whose_robots_never_come_fails_once_the_world_has_ended_instea
     # launcher to stop it, it used to wait for them forever.
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from swarm_ros.nodes import messages as msgs
-    from swarm_ros.nodes.auth import Signer
+    from swarm_ros.ros import graph as msgs
+    from swarm_ros.ros.auth import Signer
 
     with _monitor(tmp_path, Settings(shape="star", robots=60)) as (proc, domain, key), _peer(domain, monkeypatch) as node:
         status = Signer(node, key, "world").publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)

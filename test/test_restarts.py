@@ -24,10 +24,10 @@ import pytest
 from conftest import Recording, rrd_verify
 from test_ros_graph import _env, _processes_mentioning
 
-from swarm_ros import cli
-from swarm_ros.config import RecordingOptions, Settings
-from swarm_ros.launcher import Launch
-from swarm_ros.nodes.shm import shm_locks
+from swarm_ros.app import cli
+from swarm_ros.app.param_file import RecordingOptions, Settings
+from swarm_ros.app.launcher import Launch
+from swarm_ros.ros.shm import shm_locks
 
 PY = sys.executable
 # The star under the local join rule: ~3600 ticks, several seconds over the graph, long enough to kill in
@@ -42,7 +42,7 @@ def reference(tmp_path_factory) -> Path:
 
 
 def _launch(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", *RUN, "--processes", "3", "--out", str(out),
+    return subprocess.Popen([PY, "-m", "swarm_ros", "run", *RUN, "--processes", "3", "--out", str(out),
                              "--quiet", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=_env())
 
@@ -267,8 +267,8 @@ def _alive(pid: int) -> bool:
 def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_path):
     """``ros2 launch``'s respawn starts a dead batch again with the very same command (incarnation 0).
     The world takes the new process back once the old one's liveliness lapsed; nothing changes."""
-    from swarm_ros.nodes.dds import dds_defaults
-    from swarm_ros.nodes.params import params_yaml
+    from swarm_ros.ros.dds import dds_defaults
+    from swarm_ros.ros.node_params import params_yaml
 
     out = tmp_path / "run"
     params = tmp_path / "params.yaml"

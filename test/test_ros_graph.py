@@ -19,8 +19,8 @@ import pytest
 from bagcheck import assert_bag_holds_run
 from conftest import Recording, rrd_verify
 
-from swarm_ros.cli import main as cli_main
-from swarm_ros.launcher import Child, stop
+from swarm_ros.app.cli import main as cli_main
+from swarm_ros.app.launcher import Child, stop
 
 PY = sys.executable
 TIMEOUT = 240
@@ -34,7 +34,7 @@ def _env() -> dict[str, str]:
 
 
 def swarm_ros(*args: str, timeout: float = TIMEOUT, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([PY, "-m", "swarm_ros.cli", *args], capture_output=True, text=True, timeout=timeout,
+    return subprocess.run([PY, "-m", "swarm_ros", *args], capture_output=True, text=True, timeout=timeout,
                           env=_env(), **kw)
 
 
@@ -181,7 +181,7 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
     domain = str(150 + os.getpid() % 80)
     env = {**_env(), "ROS_DOMAIN_ID": domain}
     # the reading before rule sets gridlocks at vision 2: a run that lasts until it is stopped
-    launcher = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", "--shape", "star", "--vision", "2", "--rules",
+    launcher = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--vision", "2", "--rules",
                                  "local", "--crowding", "disc", "--out", str(out)], env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -318,7 +318,7 @@ def test_two_runs_started_together_do_not_see_each_other(references, tmp_path):
     for case in ("ring-extras", "cross-incomplete"):
         flags, _ = references[case]
         out = tmp_path / case
-        procs[case] = (out, subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", *flags, "--processes", "2",
+        procs[case] = (out, subprocess.Popen([PY, "-m", "swarm_ros", "run", *flags, "--processes", "2",
                                               "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                              text=True, env=_env()))
     domains = []

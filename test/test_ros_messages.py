@@ -14,13 +14,13 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
-from swarm_ros.config import ConfigError, Settings
+from swarm_ros.app.param_file import ConfigError, Settings
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.metrics import METRIC_COLUMNS
-from swarm_ros.nodes import messages as msgs
-from swarm_ros.nodes.params import read_parameters
-from swarm_ros.wire import DECISION_ROW, ROBOT_ROW, robot_rows
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.node_params import read_parameters
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, robot_rows
 
 
 def test_robot_rows_survive_serialization_exactly_and_carry_the_tick():

@@ -22,13 +22,13 @@ import numpy as np
 import pytest
 from conftest import host_env
 
-from swarm_ros import cli
-from swarm_ros.config import Settings
+from swarm_ros.app import cli
+from swarm_ros.app.param_file import Settings
 from swarm_ros.core.state import RobotState
-from swarm_ros.launcher import DomainLock, node_command, node_env
-from swarm_ros.nodes.params import params_yaml
-from swarm_ros.nodes.runkey import KEY_ENV
-from swarm_ros.wire import DECISION_ROW, ROBOT_ROW, batch_ids, decision_rows
+from swarm_ros.app.launcher import DomainLock, node_command, node_env
+from swarm_ros.ros.node_params import params_yaml
+from swarm_ros.protocol.runkey import KEY_ENV
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_ids, decision_rows
 
 pytest.importorskip("rclpy")
 
@@ -47,9 +47,9 @@ class _Batches:
 
         from swarm_ros.core.replica import Replica
         from swarm_ros.core.rules import Decider
-        from swarm_ros.nodes import messages as msgs
-        from swarm_ros.nodes.auth import AUTH_QOS, Gate, Signer, auth_topic
-        from swarm_ros.nodes.guard import Rejections
+        from swarm_ros.ros import graph as msgs
+        from swarm_ros.ros.auth import AUTH_QOS, Gate, Signer, auth_topic
+        from swarm_ros.protocol.checks import Rejections
 
         self.msgs, self.node, self.params, self.shape = msgs, node, params, shape
         self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
@@ -104,8 +104,8 @@ class _Batches:
         self._decide()
 
     def _on_robots(self, msg) -> None:
-        from swarm_ros.nodes.guard import Rejected
-        from swarm_ros.nodes.runner import apply_robots, checked_robots
+        from swarm_ros.protocol.checks import Rejected
+        from swarm_ros.ros.runtime import apply_robots, checked_robots
 
         if self.replica.tick < 0:
             return
@@ -240,7 +240,7 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
-    from swarm_ros.nodes.dds import dds_defaults
+    from swarm_ros.ros.dds import dds_defaults
 
     ref = tmp_path / "ref"
     assert cli.main(["simulate", *FLAGS, "--out", str(ref), "--quiet", "--no-recording"]) == 0
@@ -294,7 +294,7 @@ def test_sros2_enclaves_reach_every_node_and_the_run_is_unchanged(tmp_path):
     """swarm-ros run --enclaves: every node process starts with its enclave, and with DDS security off
     (this ROS 2 build has none) rcl accepts the argument and the run is the same. What SROS2 does with
     the enclaves cannot be tried here (docs/security.md)."""
-    from swarm_ros.launcher import Launch
+    from swarm_ros.app.launcher import Launch
 
     ref = tmp_path / "ref"
     assert cli.main(["simulate", *FLAGS, "--out", str(ref), "--quiet", "--no-recording"]) == 0
@@ -338,7 +338,7 @@ def test_a_one_host_run_is_not_discovered_from_another_network_namespace(two_hos
     intruder = subprocess.Popen(["ip", "netns", "exec", b, PY, "-c", _INTRUDER, domain, "10"], env=intruder_env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(0.5)
-    run = subprocess.Popen(["ip", "netns", "exec", a, PY, "-m", "swarm_ros.cli", "run", *FLAGS,
+    run = subprocess.Popen(["ip", "netns", "exec", a, PY, "-m", "swarm_ros", "run", *FLAGS,
                             "--out", str(tmp_path / "run"), "--quiet", "--no-recording", "--no-bag"],
                            env=run_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -370,14 +370,14 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
     from rclpy.node import Node
     from sensor_msgs.msg import PointCloud2
 
-    from swarm_ros.nodes import messages as msgs
-    from swarm_ros.nodes.dds import dds_defaults
+    from swarm_ros.ros import graph as msgs
+    from swarm_ros.ros.dds import dds_defaults
 
     flags = ["--shape", "star", "--seed", "2"]
     ref, out = tmp_path / "ref", tmp_path / "run"
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet", "--no-recording"]) == 0
     lock = DomainLock()
-    run = subprocess.Popen([PY, "-m", "swarm_ros.cli", "run", *flags, "--domain-id", str(lock.domain_id),
+    run = subprocess.Popen([PY, "-m", "swarm_ros", "run", *flags, "--domain-id", str(lock.domain_id),
                             "--out", str(out), "--quiet", "--no-recording", "--no-bag", "--processes", "2"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     for key, value in dds_defaults().items():

@@ -8,8 +8,21 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from swarm_ros.core import RunParams, Shape, Simulation
-from swarm_ros.wire import (DECISION_ROW, FLOAT64, ROBOT_ROW, UINT8, UINT32, batch_ids, check_fields,
-                            decision_rows, decisions_of, format_ranges, parse_ranges, point_fields, robot_rows)
+from swarm_ros.protocol.rows import (
+    DECISION_ROW,
+    FLOAT64,
+    ROBOT_ROW,
+    UINT8,
+    UINT32,
+    batch_ids,
+    check_fields,
+    decision_rows,
+    decisions_of,
+    format_ranges,
+    parse_ranges,
+    point_fields,
+    robot_rows,
+)
 
 
 def test_row_layouts_are_the_documented_point_fields():

@@ -15,7 +15,7 @@ _HOME = {
     "JoinOutcome": "arbitration", "Simulation": "engine", "ParameterError": "errors", "ShapeError": "errors",
     "SwarmError": "errors", "METRIC_COLUMNS": "metrics", "Outcome": "metrics", "TickMetrics": "metrics",
     "RunParams": "params", "Decisions": "rules", "decide": "rules", "Shape": "shapes", "builtin_shapes": "shapes",
-    "RobotState": "state", "SwarmState": "state", "World": "world",
+    "RobotState": "state", "SwarmState": "state", "World": "grid",
 }
 __all__ = sorted(_HOME)
 

@@ -27,10 +27,10 @@ from enum import IntEnum
 import numba
 import numpy as np
 
-from .rng import STREAM_PRIORITY, draw_bits
-from .rules import patch_index
-from .rulesets import JOIN_WALK
-from .state import FRONTIER_BLOCK, RobotState
+from swarm_ros.core.rng import STREAM_PRIORITY, draw_bits
+from swarm_ros.core.rules import patch_index
+from swarm_ros.core.rulesets import JOIN_WALK
+from swarm_ros.core.state import FRONTIER_BLOCK, RobotState
 
 _MOVING_OUTSIDE = np.int8(RobotState.MOVING_OUTSIDE)
 _MOVING_INSIDE = np.int8(RobotState.MOVING_INSIDE)

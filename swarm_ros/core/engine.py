@@ -21,15 +21,23 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
-from .arbitration import resolve_kernel
-from .arbitration import vacate
-from . import metrics
-from .metrics import END_EXTRAS, METRIC_COLUMNS, OUTCOME_OF_CODE, RUNNING, Outcome, TickMetrics, run_summary
-from .params import RunParams
-from .rng import STREAM_FAIL, uniform_array
-from .rules import Decisions, decide_kernel, index_build, index_clear, patch_index
-from .shapes import Shape
-from .state import RobotState, SwarmState, initial_state
+from swarm_ros.core.arbitration import resolve_kernel
+from swarm_ros.core.arbitration import vacate
+from swarm_ros.core import metrics
+from swarm_ros.core.metrics import (
+    END_EXTRAS,
+    METRIC_COLUMNS,
+    OUTCOME_OF_CODE,
+    RUNNING,
+    Outcome,
+    TickMetrics,
+    run_summary,
+)
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.rng import STREAM_FAIL, uniform_array
+from swarm_ros.core.rules import Decisions, decide_kernel, index_build, index_clear, patch_index
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.state import RobotState, SwarmState, initial_state
 
 ENGINE_NAME = "inprocess"
 _MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState.MOVING_INSIDE)

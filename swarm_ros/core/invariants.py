@@ -15,10 +15,10 @@ import math
 
 import numpy as np
 
-from .arbitration import JoinOutcome
-from .engine import Simulation
-from .metrics import Outcome, tick_metrics
-from .state import MOVING_STATES, RobotState, SwarmState, frontier_blocks_of, frontier_of
+from swarm_ros.core.arbitration import JoinOutcome
+from swarm_ros.core.engine import Simulation
+from swarm_ros.core.metrics import Outcome, tick_metrics
+from swarm_ros.core.state import MOVING_STATES, RobotState, SwarmState, frontier_blocks_of, frontier_of
 
 _STATIONARY = (RobotState.SEED, RobotState.LOCALIZED)
 _MOVING = MOVING_STATES

@@ -50,11 +50,11 @@ def kernels_cached() -> bool:
 def compile_kernels() -> None:
     """Compile every kernel into numba's cache: two ticks of the graph's code path and a few of the
     in-process engine's, on the star, with the default parameters (the kernels' types do not depend on them)."""
-    from .engine import Simulation
-    from .params import RunParams
-    from .shapes import Shape
-    from .warmup import warm_up
-    from .world import World
+    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.params import RunParams
+    from swarm_ros.core.shapes import Shape
+    from swarm_ros.core.warmup import warm_up
+    from swarm_ros.core.grid import World
 
     shape = Shape.load("star", World())
     params = RunParams(robots=shape.patches)

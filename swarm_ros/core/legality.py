@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
-from .params import RunParams
-from .rulesets import JOIN_VALUES
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.rulesets import JOIN_VALUES
 
 #: Longest move of a tick, in patches, by ``steps`` value.
 MAX_STEP = {"one": 1.0, "literal": 3.0}

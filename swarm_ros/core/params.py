@@ -6,8 +6,8 @@ import math
 import numbers
 from dataclasses import asdict, dataclass
 
-from .errors import ParameterError
-from .rulesets import DEFAULT_RULES, RuleSet
+from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.rulesets import DEFAULT_RULES, RuleSet
 
 DEFAULT_SEED = 1
 DEFAULT_VISION = 1.0

@@ -13,10 +13,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .arbitration import occupy, vacate
-from .rules import patch_index
-from .shapes import Shape
-from .state import MOVING_STATES, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
+from swarm_ros.core.arbitration import occupy, vacate
+from swarm_ros.core.rules import patch_index
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.state import MOVING_STATES, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
 
 _SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
 _REMOVED = np.int8(RobotState.REMOVED)
@@ -136,7 +136,7 @@ class Replica:
         unusable: the tick follows the last one; tick 0 holds every robot once; after tick 0,
         only robots that were moving change, except that any robot may be removed, once; a
         robot that localizes does so on a frontier patch, one robot per patch. Ids and state
-        codes must be in range (:mod:`swarm_ros.nodes.guard` checks them first).
+        codes must be in range (:mod:`swarm_ros.protocol.checks` checks them first).
         """
         s = self.state
         if tick != s.tick + 1:

@@ -35,11 +35,18 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .params import RunParams
-from .rng import STREAM_TURN, STREAM_TURN_2, STREAM_WIGGLE, STREAM_WIGGLE_2, STREAM_WIGGLE_3, draw_uniform
-from .rulesets import CROWD_AHEAD, JOIN_LOCAL, JOIN_WALK, STEPS_ONE
-from .shapes import Shape
-from .state import FRONTIER_BLOCK, MOVING_STATES, RobotState, SwarmState
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.rng import (
+    STREAM_TURN,
+    STREAM_TURN_2,
+    STREAM_WIGGLE,
+    STREAM_WIGGLE_2,
+    STREAM_WIGGLE_3,
+    draw_uniform,
+)
+from swarm_ros.core.rulesets import CROWD_AHEAD, JOIN_LOCAL, JOIN_WALK, STEPS_ONE
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.state import FRONTIER_BLOCK, MOVING_STATES, RobotState, SwarmState
 
 TWO_PI = 2.0 * math.pi
 _WALKING = np.int8(RobotState.WALKING)

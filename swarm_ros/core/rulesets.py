@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .errors import ParameterError
+from swarm_ros.core.errors import ParameterError
 
 JOIN_VALUES = ("walk", "local")
 CROWDING_VALUES = ("ahead", "disc")

@@ -31,9 +31,9 @@ from pathlib import Path
 import cc3d
 import numpy as np
 
-from .errors import ShapeError
-from .resources import data_dir
-from .world import World
+from swarm_ros.core.errors import ShapeError
+from swarm_ros.core.resources import data_dir
+from swarm_ros.core.grid import World
 
 def regions(mask: np.ndarray, connectivity: int) -> tuple[np.ndarray, int]:
     """The connected regions of a 2-D bool grid: labels (0 where unset, 1..n) and n.

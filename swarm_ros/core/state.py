@@ -8,9 +8,9 @@ from enum import IntEnum
 
 import numpy as np
 
-from .errors import ParameterError
-from .rng import STREAM_PLACE_HEADING, STREAM_PLACE_X, STREAM_PLACE_Y, uniform_array
-from .shapes import Shape
+from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.rng import STREAM_PLACE_HEADING, STREAM_PLACE_X, STREAM_PLACE_Y, uniform_array
+from swarm_ros.core.shapes import Shape
 
 NO_ROBOT = -1  #: occupancy value of a patch without a localized robot
 FRONTIER_BLOCK = 8  #: side, in patches, of the blocks whose frontier patches are counted (nearest-frontier search)

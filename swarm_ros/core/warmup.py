@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .engine import Simulation
-from .metrics import tick_metrics
-from .params import RunParams
-from .replica import Replica
-from .rules import Decider
-from .shapes import Shape
-from .state import STATE_COUNT
+from swarm_ros.core.engine import Simulation
+from swarm_ros.core.metrics import tick_metrics
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.replica import Replica
+from swarm_ros.core.rules import Decider
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.state import STATE_COUNT
 
 
 def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:

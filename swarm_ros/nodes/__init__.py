@@ -1,5 +1,5 @@
-"""The ROS 2 side: world, robot-batch and monitor nodes, their messages and parameters.
+"""The graph's node executables: world, robot_batch and monitor.
 
-Everything here is a thin shell over :mod:`swarm_ros.core`; the only logic of its own is
-moving rows between messages and numpy arrays and keeping the ticks in lockstep.
+Each is a thin shell: it wires ROS callbacks to the plain classes of the protocol layer and
+the core, and owns no rule of its own.
 """

@@ -4,10 +4,10 @@ It rebuilds the swarm's state from /swarm/robots (:class:`swarm_ros.core.replica
 counts it with the in-process engine's own functions
 (:func:`swarm_ros.core.metrics.tick_metrics`, :func:`~swarm_ros.core.metrics.outcome_of`),
 publishes each tick's metrics on /swarm/metrics, records the run with the in-process
-engine's own :class:`~swarm_ros.recording.Recorder` (streamed to ``<out_dir>.partial.rrd``
+engine's own :class:`~swarm_ros.artifacts.rerun_recording.Recorder` (streamed to ``<out_dir>.partial.rrd``
 while the run goes on), and when the run ends writes the run directory exactly as
 ``swarm-ros simulate`` does, with ``engine: ros2``. It checks its outcome against the
-world's /swarm/status. It takes only what the world vouched for (:mod:`swarm_ros.nodes.auth`),
+world's /swarm/status. It takes only what the world vouched for (:mod:`swarm_ros.ros.auth`),
 and records only that in the bag.
 
     ros2 run swarm_ros monitor --ros-args --params-file config/swarm_ros.yaml -p out_dir:=runs/star
@@ -26,22 +26,36 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from ..config import RecordingOptions
-from ..core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
-from ..core.replica import Replica
-from ..core.state import STATE_COUNT, RobotState
-from ..core.warmup import warm_up
-from ..core.record import RunRecord
-from ..wire import DECISION_ROW
-from ..output import check_leftovers, check_out_dir, default_run_dir, partial_bag, partial_recording, write_run
-from . import guard
-from . import messages as msgs
-from .auth import open_auth
-from .guard import Rejected, Rejections
-from .bag import TOPICS, BagRecorder, reader_qos
-from .params import make_node, read_parameters
-from .runner import (EXIT_INTERRUPTED, EXIT_ORPHANED, RunFailed, apply_robots, checked_robots, handle_missed,
-                     run_node)
+from swarm_ros.app.param_file import RecordingOptions
+from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
+from swarm_ros.core.replica import Replica
+from swarm_ros.core.state import STATE_COUNT, RobotState
+from swarm_ros.core.warmup import warm_up
+from swarm_ros.core.run_result import RunRecord
+from swarm_ros.protocol.rows import DECISION_ROW
+from swarm_ros.artifacts.run_dir import (
+    check_leftovers,
+    check_out_dir,
+    default_run_dir,
+    partial_bag,
+    partial_recording,
+    write_run,
+)
+from swarm_ros.protocol import checks as guard
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.auth import open_auth
+from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.ros.bag_writer import TOPICS, BagRecorder, reader_qos
+from swarm_ros.ros.node_params import make_node, read_parameters
+from swarm_ros.ros.runtime import (
+    EXIT_INTERRUPTED,
+    EXIT_ORPHANED,
+    RunFailed,
+    apply_robots,
+    checked_robots,
+    handle_missed,
+    run_node,
+)
 
 ENGINE_NAME = "ros2"
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
@@ -105,7 +119,7 @@ class MonitorNode:
         self.bag = BagRecorder(self.out) if self.bag_on else None
         self.replica = Replica(self.shape, p.robots)
         warm_up(self.shape, p)
-        importlib.import_module("swarm_ros.plots")  # matplotlib: now, not at the end, when the run is written
+        importlib.import_module("swarm_ros.artifacts.plots")  # matplotlib: now, not at the end, when the run is written
         node.get_logger().info(f"monitor: writing to {self.out}")
 
     def _readers_matched(self) -> bool:

@@ -6,8 +6,8 @@ process that was restarted in the middle of a run); the batch builds its copy of
 swarm's state from it (:class:`swarm_ros.core.replica.Replica`), follows the world's
 rows on /swarm/robots from there, and after each tick publishes, on its own
 /swarm/decisions/<batch>, what each of its moving robots decided for the next one.
-It takes only messages the world vouched for (:mod:`swarm_ros.nodes.auth`), and vouches for its own.
-Every message it takes is checked first (:mod:`swarm_ros.nodes.guard`, and
+It takes only messages the world vouched for (:mod:`swarm_ros.ros.auth`), and vouches for its own.
+Every message it takes is checked first (:mod:`swarm_ros.protocol.checks`, and
 :meth:`Replica.inconsistent` for rows); one that fails is dropped, counted and logged. A decision is a pure function
 of the state, the seed, the robot and the tick, so a restarted batch decides exactly
 as the one it replaces would have. A robot senses only what arrived on the topics, and the rule reads only the
@@ -27,17 +27,17 @@ from rclpy.duration import Duration
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from ..core.errors import ParameterError
-from ..core.replica import Replica
-from ..core.rules import Decider
-from ..core.warmup import warm_up
-from ..wire import PATCH_METRES, batch_ids, decision_rows, format_ranges, parse_ranges
-from . import guard
-from . import messages as msgs
-from .auth import open_auth
-from .guard import Rejected, Rejections
-from .params import make_node, read_parameters
-from .runner import RunFailed, apply_robots, checked_robots, run_node
+from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.replica import Replica
+from swarm_ros.core.rules import Decider
+from swarm_ros.core.warmup import warm_up
+from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, decision_rows, format_ranges, parse_ranges
+from swarm_ros.protocol import checks as guard
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.auth import open_auth
+from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.ros.node_params import make_node, read_parameters
+from swarm_ros.ros.runtime import RunFailed, apply_robots, checked_robots, run_node
 
 _LINGER = 2.0  # seconds, at most, for the last decisions to be acknowledged before exiting
 _NO_WAIT = Duration(seconds=0)

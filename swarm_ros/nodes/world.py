@@ -8,8 +8,8 @@ and publishes what it applied on /swarm/decisions, the rows of tick t + 1, the o
 if a robot joined, and the clock.
 
 Every message is taken only once a voucher under the run's key lists it
-(:mod:`swarm_ros.nodes.auth`; the world vouches for each tick's messages with one voucher),
-and checked before use (:mod:`swarm_ros.nodes.guard`): a decision counts
+(:mod:`swarm_ros.ros.auth`; the world vouches for each tick's messages with one voucher),
+and checked before use (:mod:`swarm_ros.protocol.checks`): a decision counts
 only from the batch hosting its robot, for a moving robot, once per robot and tick, for
 the tick being decided, and within the rule set's bounds (:mod:`swarm_ros.core.legality`).
 A message that fails is dropped whole and counted (``rejected_messages`` on /swarm/status).
@@ -45,20 +45,20 @@ from rclpy.duration import Duration
 from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
 from std_msgs.msg import Empty, Int64MultiArray
 
-from ..core.engine import Simulation
-from ..core.legality import illegal
-from ..core.metrics import METRIC_COLUMNS, Outcome
-from ..core.rules import Decisions
-from ..core.state import MOVING_STATES, RobotState
-from ..core.warmup import warm_up
-from ..signals import PARENT_ENV, process_age
-from ..wire import DECISION_ROW, decision_rows, decisions_of, robot_rows
-from . import guard
-from . import messages as msgs
-from .auth import auth_topic, open_auth
-from .guard import Rejected, Rejections
-from .params import make_node, read_parameters
-from .runner import RunFailed, run_node
+from swarm_ros.core.engine import Simulation
+from swarm_ros.core.legality import illegal
+from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
+from swarm_ros.core.rules import Decisions
+from swarm_ros.core.state import MOVING_STATES, RobotState
+from swarm_ros.core.warmup import warm_up
+from swarm_ros.core.signals import PARENT_ENV, process_age
+from swarm_ros.protocol.rows import DECISION_ROW, decision_rows, decisions_of, robot_rows
+from swarm_ros.protocol import checks as guard
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.auth import auth_topic, open_auth
+from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.ros.node_params import make_node, read_parameters
+from swarm_ros.ros.runtime import RunFailed, run_node
 
 _MONITOR = "monitor"  # the monitor's node name (the launcher's)
 _STALL_S = 5.0  # seconds without progress after which a silent batch or monitor counts as lost

@@ -19,11 +19,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .core.errors import SwarmError
+from swarm_ros.core.errors import SwarmError
 
 if TYPE_CHECKING:
-    from .core.record import RunRecord
-    from .core.state import SwarmState
+    from swarm_ros.core.run_result import RunRecord
+    from swarm_ros.core.state import SwarmState
 
 RUNS_DIR = Path("runs")
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
@@ -115,7 +115,7 @@ def writable_dir(path: Path) -> bool:
 def metrics_csv(history: np.ndarray) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    from .core.metrics import METRIC_COLUMNS  # the core's compiled modules load only when a run is written
+    from swarm_ros.core.metrics import METRIC_COLUMNS  # the core's compiled modules load only when a run is written
 
     writer.writerow(METRIC_COLUMNS)
     writer.writerows(history.tolist())
@@ -123,7 +123,7 @@ def metrics_csv(history: np.ndarray) -> str:
 
 
 def final_state_csv(s: SwarmState) -> str:
-    from .core.state import RobotState
+    from swarm_ros.core.state import RobotState
 
     labels = [st.label for st in RobotState]
     lines = [",".join(FINAL_STATE_COLUMNS)]
@@ -292,7 +292,7 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
         (tmp / "summary.json").write_text(summary_json(record.summary), encoding="utf-8")
         (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
-        from .plots import save_convergence_png, save_final_png  # matplotlib: only when a run is written
+        from swarm_ros.artifacts.plots import save_convergence_png, save_final_png  # matplotlib: only when a run is written
 
         save_final_png(record, tmp / "final.png")
         save_convergence_png(record, tmp / "convergence.png")

@@ -15,7 +15,7 @@ from collections import Counter
 
 import numpy as np
 
-from ..wire import PATCH_METRES, ROBOT_ROW, check_fields
+from swarm_ros.protocol.rows import PATCH_METRES, ROBOT_ROW, check_fields
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
 _NODE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")  # a ROS node name, as batch names are
@@ -99,7 +99,7 @@ def inside_world(x: np.ndarray, y: np.ndarray, heading: np.ndarray, radius: int)
 
 def robot_rows(msg, robots: int, radius: int) -> np.ndarray:
     """The rows of a /swarm/robots or snapshot message, checked: layout, ids, states, poses."""
-    from ..core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
+    from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
 
     rows = cloud(msg, ROBOT_ROW, robots)
     ids_in_range(rows["id"].astype(np.int64), 0, robots)
@@ -111,7 +111,7 @@ def robot_rows(msg, robots: int, radius: int) -> np.ndarray:
 
 def announcement(msg, robots: int) -> tuple[str, int, np.ndarray]:
     """(batch name, incarnation, robot ids) of a /swarm/batches message, checked."""
-    from .messages import parse_batch_label
+    from swarm_ros.ros.graph import parse_batch_label
 
     label = msg.layout.dim[0].label if msg.layout.dim else ""
     name, incarnation = parse_batch_label(label)
@@ -126,7 +126,7 @@ def announcement(msg, robots: int) -> tuple[str, int, np.ndarray]:
 
 def tick_stamp(header) -> int:
     """A message's tick, from its stamp (whole seconds, as the world stamps them)."""
-    from .messages import tick_of
+    from swarm_ros.ros.graph import tick_of
 
     if header.stamp.nanosec != 0 or header.stamp.sec < 0:
         raise Rejected("stamp", f"{header.stamp.sec} s {header.stamp.nanosec} ns is not a tick")

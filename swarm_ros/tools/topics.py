@@ -20,8 +20,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from ..core.errors import SwarmError
-from ..wire import DECISION_ROW, ROBOT_ROW, check_fields
+from swarm_ros.core.errors import SwarmError
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, check_fields
 
 _SHOWN_ITEMS = 8  # array items printed without --full
 _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full

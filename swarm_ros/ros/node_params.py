@@ -1,6 +1,6 @@
 """Node parameters: one schema, read from rclpy's overrides (``--params-file`` and ``-p``), checked strictly.
 
-Every node takes the run's parameters (:class:`swarm_ros.config.Settings`: shape,
+Every node takes the run's parameters (:class:`swarm_ros.app.param_file.Settings`: shape,
 robots, vision_radius, seed, max_ticks, wiggle_deg, world_radius) plus a few of its own.
 A parameter the node does not know, or of the wrong type, is an error (rclpy would
 silently ignore the first), reported in one line that names it.
@@ -14,7 +14,7 @@ from typing import Any
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..config import NODE_PARAMETERS, ConfigError, Settings, check_node_values
+from swarm_ros.app.param_file import NODE_PARAMETERS, ConfigError, Settings, check_node_values
 
 _TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
 _ROS_TYPES = {Parameter.Type.BOOL: bool, Parameter.Type.INTEGER: int, Parameter.Type.DOUBLE: float,

@@ -23,11 +23,11 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import get_default_context
 from sensor_msgs.msg import PointCloud2
 
-from ..core.errors import SwarmError
-from ..core.replica import Replica
-from ..signals import PARENT_ENV, StopFlag, process_age
-from ..wire import PATCH_METRES
-from . import guard
+from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.replica import Replica
+from swarm_ros.core.signals import PARENT_ENV, StopFlag, process_age
+from swarm_ros.protocol.rows import PATCH_METRES
+from swarm_ros.protocol import checks as guard
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_ORPHANED = 0, 1, 2, 130, 129
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives

@@ -9,7 +9,7 @@ install. Timestamps are the monitor's receive times (wall clock, ns), as rosbag2
 
 While the run goes on the bag is written beside the run directory (a hidden
 ``.<run>.bag-XXXX/bag``); the run directory gets it as ``bag/`` when it is written. A
-failed run leaves it, closed and readable, as ``<run>.partial-bag`` (:func:`swarm_ros.output.partial_bag`).
+failed run leaves it, closed and readable, as ``<run>.partial-bag`` (:func:`swarm_ros.artifacts.run_dir.partial_bag`).
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
-from ..output import BAG_DIR
-from . import messages as msgs
+from swarm_ros.artifacts.run_dir import BAG_DIR
+from swarm_ros.ros import graph as msgs
 #: The recorded topics: name -> (message class, QoS its publisher offers).
 TOPICS: dict[str, tuple[type, QoSProfile]] = {
     msgs.ROBOTS: (PointCloud2, msgs.ROBOTS_QOS),

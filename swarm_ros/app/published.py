@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from .core.errors import SwarmError
+from swarm_ros.core.errors import SwarmError
 
 COLUMNS = ("shape", "study_robots", "mean_ticks", "ci95_low", "ci95_high", "group_sizes", "sizes_mean_min",
            "sizes_mean_max")

@@ -1,7 +1,7 @@
 """Topics, QoS and message builders of the swarm's ROS 2 graph (docs/ros_graph.md documents them).
 
 Standard message types only. The per-tick robot rows ride in ``sensor_msgs/PointCloud2``
-(see :mod:`swarm_ros.wire`): one numpy record per robot, copied in and out of the
+(see :mod:`swarm_ros.protocol.rows`): one numpy record per robot, copied in and out of the
 message's byte array in one go, which keeps a tick's messages at tens of microseconds
 where a ``PoseArray`` of message objects would cost milliseconds.
 """
@@ -20,9 +20,9 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
 
-from ..core.metrics import METRIC_COLUMNS
-from ..core.shapes import Shape
-from ..wire import FRAME_ID, PATCH_METRES, TICK_SECONDS, check_fields, point_fields
+from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.core.shapes import Shape
+from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS, check_fields, point_fields
 
 # -- topics -----------------------------------------------------------------------
 ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
@@ -107,7 +107,7 @@ def tick_of(header: Header) -> int:
 
 
 def make_cloud(rows: np.ndarray, tick: int) -> PointCloud2:
-    """A PointCloud2 holding ``rows`` (a numpy record array of a :mod:`swarm_ros.wire` row type)."""
+    """A PointCloud2 holding ``rows`` (a numpy record array of a :mod:`swarm_ros.protocol.rows` row type)."""
     msg = PointCloud2()
     msg.header = Header(stamp=stamp(tick), frame_id=FRAME_ID)
     msg.height = 1

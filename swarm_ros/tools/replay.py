@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..core.errors import SwarmError
+from swarm_ros.core.errors import SwarmError
 
 _ACK_WAIT_S = 2.0  # seconds to let readers acknowledge the last messages before exiting
 
@@ -72,8 +72,8 @@ def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, q
     from rclpy.signals import SignalHandlerOptions
     from tqdm import tqdm
 
-    from .bag import ros_qos
-    from .dds import apply_dds_defaults
+    from swarm_ros.ros.bag_writer import ros_qos
+    from swarm_ros.ros.dds import apply_dds_defaults
 
     apply_dds_defaults()  # on this host, as a run's nodes (set ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET to share it)
     context = Context()

@@ -23,7 +23,7 @@ runs in flight, and running the same command again skips the runs already there.
 run's seed depends only on the experiment seed and its coordinates (shape, group size,
 vision radius, repetition), never on J, on the order runs finish or on the rule set: the
 rule sets of one experiment start from the same placements (common random numbers). At
-the end the statistics and figures are (re)built (:mod:`swarm_ros.report`); a reference
+the end the statistics and figures are (re)built (:mod:`swarm_ros.app.report`); a reference
 file is copied into the output directory so the report can always find it.
 """
 
@@ -45,14 +45,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import check_world_memory, read_yaml
-from .core.errors import SwarmError
-from .core.params import DEFAULT_MAX_TICKS, DEFAULT_WIGGLE_DEG, MAX_SEED, RunParams
-from .core.rulesets import DEFAULT_RULES, RULE_SETS, SWITCHES
-from .core.shapes import Shape
-from .core.world import DEFAULT_RADIUS, World
-from .reference import load_reference
-from .results import REFERENCE_FILE, RESULT_COLUMNS, RESULTS_FILE, ExperimentError, ResultsFile
+from swarm_ros.app.param_file import check_world_memory, read_yaml
+from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.params import DEFAULT_MAX_TICKS, DEFAULT_WIGGLE_DEG, MAX_SEED, RunParams
+from swarm_ros.core.rulesets import DEFAULT_RULES, RULE_SETS, SWITCHES
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.grid import DEFAULT_RADIUS, World
+from swarm_ros.app.published import load_reference
+from swarm_ros.app.results_file import REFERENCE_FILE, RESULT_COLUMNS, RESULTS_FILE, ExperimentError, ResultsFile
 
 EXPERIMENTS_DIR = Path("experiments")
 EXPERIMENT_FILE = "experiment.json"
@@ -337,7 +337,7 @@ def run_inprocess(spec: RunSpec) -> dict:
     """Run ``spec`` with the in-process engine; its results.csv row."""
     import time
 
-    from .core.engine import Simulation
+    from swarm_ros.core.engine import Simulation
 
     start = time.perf_counter()
     sim = Simulation(_shape(spec), spec.params())
@@ -349,8 +349,8 @@ def run_ros2(spec: RunSpec, processes: int = 2) -> dict:
     """Run ``spec`` over the ROS 2 graph (``swarm-ros run``, no recording) in a scratch directory."""
     import shutil
 
-    from .config import RecordingOptions, Settings
-    from .launcher import Launch
+    from swarm_ros.app.param_file import RecordingOptions, Settings
+    from swarm_ros.app.launcher import Launch
 
     shape = _shape(spec)
     settings = Settings(shape=spec.shape_file, robots=spec.robots, vision_radius=spec.vision_radius, seed=spec.seed,
@@ -566,7 +566,7 @@ def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, proce
     ``scheduler``, or on a LocalCluster of ``jobs`` workers. Either way only this process
     appends to results.csv, a line per finished run, in the order they finish.
     """
-    from .report import build_report
+    from swarm_ros.app.report import build_report
 
     exp = load_experiment(config)
     prepare_out_dir(out or EXPERIMENTS_DIR / exp.name, exp, config, create=False)  # before a cluster starts

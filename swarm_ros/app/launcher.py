@@ -13,7 +13,7 @@ happened. Under ``"remove"`` a batch lost after tick 0 is not restarted and the 
 removes its robots; one lost before tick 0 is restarted under both policies, since
 none of its robots has moved yet. Every node ends by itself within moments of the
 launcher's death (SIGHUP from the kernel: ``PR_SET_PDEATHSIG``, set by the node at
-start-up, see :func:`swarm_ros.nodes.runner.follow_parent`). After the run, the
+start-up, see :func:`swarm_ros.ros.runtime.follow_parent`). After the run, the
 shared-memory files of Fast DDS that its dead processes left in /dev/shm are removed
 (only files those processes had open, and only if no live process holds them).
 
@@ -41,16 +41,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from .config import NODE_PARAMETERS, RecordingOptions, Settings
-from .core.errors import SwarmError
-from .core.params import RunParams
-from .core.shapes import Shape
-from .nodes.dds import apply_dds_defaults
-from .nodes.params import params_yaml
-from .nodes.shm import clean_shm, shm_locks
-from .output import fill_summary, partial_bag, partial_recording, public_mode
-from .nodes.runkey import KEY_ENV, run_key, with_run_key
-from .signals import PARENT_ENV, StopFlag, process_age
+from swarm_ros.app.param_file import NODE_PARAMETERS, RecordingOptions, Settings
+from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.shapes import Shape
+from swarm_ros.ros.dds import apply_dds_defaults
+from swarm_ros.ros.node_params import params_yaml
+from swarm_ros.ros.shm import clean_shm, shm_locks
+from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
+from swarm_ros.protocol.runkey import KEY_ENV, run_key, with_run_key
+from swarm_ros.core.signals import PARENT_ENV, StopFlag, process_age
 
 DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
 # SIGTERM first, not SIGINT: a process started from a background job inherits SIGINT *ignored*, and a node
@@ -192,8 +192,8 @@ def discard_unstarted(logs: Path, out: Path, holders_before: set[Path], made: li
     """Remove what a run interrupted before tick 0 made: its logs, and the recording and bag its monitor had
     opened (``<out>.partial.rrd``, ``<out>.partial-bag``), and the folders ``made`` for it while empty.
     Nothing else can be there: the command refuses to
-    start while an earlier run's are (:func:`swarm_ros.output.check_leftovers`) or while another command
-    holds ``out`` (:func:`swarm_ros.output.claim_out_dir`)."""
+    start while an earlier run's are (:func:`swarm_ros.artifacts.run_dir.check_leftovers`) or while another command
+    holds ``out`` (:func:`swarm_ros.artifacts.run_dir.claim_out_dir`)."""
     shutil.rmtree(logs, ignore_errors=True)
     rrd, bag = partial_recording(out), partial_bag(out)
     try:
@@ -298,7 +298,7 @@ class Launch:
     def _compile_kernels(self) -> None:
         """Fill numba's cache once, here, if it is empty: every node process would otherwise compile the same
         kernels at the same time (about 24 s of start-up on 2 cores instead of about 12)."""
-        from .core.kernels import COMPILING, kernels_cached
+        from swarm_ros.core.kernels import COMPILING, kernels_cached
 
         if kernels_cached():
             return
@@ -320,7 +320,7 @@ class Launch:
         run = Settings(**{**self.settings.__dict__, "shape": shape_arg, "robots": self.params.robots})
         viewer = self.recording.connect or ""
         if self.recording.spawn:
-            from .recording import spawn_viewer
+            from swarm_ros.artifacts.rerun_recording import spawn_viewer
 
             viewer = spawn_viewer()
         params_file = logs / "params.yaml"
@@ -379,7 +379,7 @@ class Launch:
         nothing wrote the run directory (the recording so far stays in
         ``<run>.partial.rrd``). The world failing fails the run at once.
         """
-        from .nodes.progress import Progress
+        from swarm_ros.tools.progress import Progress
 
         monitor = next(c for c in self.children if c.name == "monitor")
         world = next(c for c in self.children if c.name == "world")

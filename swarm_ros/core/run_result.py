@@ -6,11 +6,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .engine import Simulation
-from .metrics import Outcome, TickMetrics
-from .params import RunParams
-from .shapes import Shape
-from .state import SwarmState
+from swarm_ros.core.engine import Simulation
+from swarm_ros.core.metrics import Outcome, TickMetrics
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.state import SwarmState
 
 
 @dataclass(frozen=True)

@@ -30,14 +30,14 @@ from typing import TYPE_CHECKING
 
 import yaml
 
-from .core.errors import ParameterError, SwarmError
-from .core.params import DEFAULT_MAX_TICKS, DEFAULT_SEED, DEFAULT_VISION, DEFAULT_WIGGLE_DEG, RunParams
-from .core.rulesets import DEFAULT_RULES
-from .core.shapes import Shape
-from .core.world import DEFAULT_RADIUS, World
+from swarm_ros.core.errors import ParameterError, SwarmError
+from swarm_ros.core.params import DEFAULT_MAX_TICKS, DEFAULT_SEED, DEFAULT_VISION, DEFAULT_WIGGLE_DEG, RunParams
+from swarm_ros.core.rulesets import DEFAULT_RULES
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.grid import DEFAULT_RADIUS, World
 
 if TYPE_CHECKING:
-    from .recording import Recorder
+    from swarm_ros.artifacts.rerun_recording import Recorder
 
 
 class ConfigError(SwarmError):
@@ -321,7 +321,7 @@ class RecordingOptions:
         """A :class:`Recorder` streaming to ``path`` (if enabled) and the viewer, or None if nothing is recorded."""
         if not self.active:
             return None
-        from .recording import Recorder
+        from swarm_ros.artifacts.rerun_recording import Recorder
 
         return Recorder(path if self.enabled else None, shape, params, every=self.every, spawn=self.spawn,
                         connect=self.connect)

@@ -12,8 +12,8 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from .core.record import RunRecord  # noqa: E402
-from .core.state import RobotState  # noqa: E402
+from swarm_ros.core.run_result import RunRecord  # noqa: E402
+from swarm_ros.core.state import RobotState  # noqa: E402
 
 # Patch classes of the picture and their colours (colour-blind safe, Okabe-Ito based).
 _CLASSES = (
@@ -76,7 +76,7 @@ _CONVERGENCE_SERIES = (
 def save_convergence_png(run: RunRecord, path: Path) -> None:
     """Stationary, localized, wandering-inside and walking robots, and empty patches against ticks, with the
     outcome marked."""
-    from .core.metrics import METRIC_COLUMNS
+    from swarm_ros.core.metrics import METRIC_COLUMNS
 
     h = run.history
     ticks = h[:, 0]

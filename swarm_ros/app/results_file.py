@@ -1,6 +1,6 @@
 """The results file of an experiment (``results.csv``): its columns, reading it, appending to it.
 
-:mod:`swarm_ros.experiment` writes it and :mod:`swarm_ros.report` reads it; both depend
+:mod:`swarm_ros.app.experiment` writes it and :mod:`swarm_ros.app.report` reads it; both depend
 on this module and neither on the other's internals.
 """
 
@@ -11,7 +11,7 @@ import io
 import os
 from pathlib import Path
 
-from .core.errors import SwarmError
+from swarm_ros.core.errors import SwarmError
 
 RESULTS_FILE = "results.csv"
 REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied into its directory

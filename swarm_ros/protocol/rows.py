@@ -1,4 +1,4 @@
-"""The hot-path message layouts, as numpy record types (no ROS here; :mod:`swarm_ros.nodes.messages` wraps them).
+"""The hot-path message layouts, as numpy record types (no ROS here; :mod:`swarm_ros.ros.graph` wraps them).
 
 Robot rows travel as the ``data`` of ``sensor_msgs/PointCloud2`` messages: one point per
 robot, little-endian, with the fields named below, so stock tools (``ros2 topic echo``,
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # the rules load numba: readers of rows (the launcher's progress) do without it
-    from .core.rules import Decisions
+    from swarm_ros.core.rules import Decisions
 
 PATCH_METRES = 1.0
 TICK_SECONDS = 1
@@ -81,7 +81,7 @@ def decision_rows(decisions: Decisions) -> np.ndarray:
 
 def decisions_of(tick: int, rows: np.ndarray) -> Decisions:
     """The :class:`Decisions` a message of DECISION_ROW rows carries."""
-    from .core.rules import Decisions
+    from swarm_ros.core.rules import Decisions
     return Decisions(tick=tick, ids=rows["id"].astype(np.int64), claim=rows["claim"].astype(np.int64),
                      x=rows["x"] / PATCH_METRES, y=rows["y"] / PATCH_METRES,
                      heading=rows["heading"].astype(np.float64))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ParameterError
+from swarm_ros.core.errors import ParameterError
 
 DEFAULT_RADIUS = 32
 

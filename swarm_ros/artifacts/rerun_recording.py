@@ -36,10 +36,10 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from .core.metrics import METRIC_COLUMNS, TickMetrics
-from .core.params import RunParams
-from .core.shapes import Shape
-from .core.state import RobotState, SwarmState
+from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.state import RobotState, SwarmState
 
 APP_ID = "swarm_ros"
 TIMELINE = "tick"

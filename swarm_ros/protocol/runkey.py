@@ -1,4 +1,4 @@
-"""The run's secret key, which its nodes vouch for their messages with (:mod:`swarm_ros.nodes.auth`).
+"""The run's secret key, which its nodes vouch for their messages with (:mod:`swarm_ros.ros.auth`).
 
 It reaches the nodes in their environment (``SWARM_ROS_RUN_KEY``), never over the network:
 ``swarm-ros run`` and the launch file make a new one for each run unless the variable is
@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import secrets
 
-from ..config import ConfigError
+from swarm_ros.app.param_file import ConfigError
 
 KEY_ENV = "SWARM_ROS_RUN_KEY"
 MIN_KEY_CHARS = 16

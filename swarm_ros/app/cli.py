@@ -13,19 +13,26 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from . import __version__
-from .config import (BATCH_LOSS_POLICIES, MAX_RESTARTS, NODE_PARAMETERS, RecordingOptions, Settings,
-                     check_world_memory, read_params_file)
-from .core.errors import SwarmError
-from .core.params import RunParams
-from .core.rulesets import CROWDING_VALUES, JOIN_VALUES, RULE_SETS, STEPS_VALUES
-from .core.shapes import Shape, builtin_shapes
-from .core.world import World
-from .signals import StopFlag
+from swarm_ros import __version__
+from swarm_ros.app.param_file import (
+    BATCH_LOSS_POLICIES,
+    MAX_RESTARTS,
+    NODE_PARAMETERS,
+    RecordingOptions,
+    Settings,
+    check_world_memory,
+    read_params_file,
+)
+from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.rulesets import CROWDING_VALUES, JOIN_VALUES, RULE_SETS, STEPS_VALUES
+from swarm_ros.core.shapes import Shape, builtin_shapes
+from swarm_ros.core.grid import World
+from swarm_ros.core.signals import StopFlag
 
 if TYPE_CHECKING:
-    from .core.engine import Simulation
-    from .recording import Recorder
+    from swarm_ros.core.engine import Simulation
+    from swarm_ros.artifacts.rerun_recording import Recorder
 
 PROG = "swarm-ros"
 EXIT_USAGE = 2
@@ -250,7 +257,7 @@ def _flag(value: object, section: dict[str, object], key: str) -> object:
 def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions, dict]:
     """Settings, shape, parameters, a usable output directory, the recording options and the node
     parameters of the parameter file, or a SwarmError before anything runs."""
-    from .output import check_leftovers, check_out_dir, claim_out_dir, default_run_dir
+    from swarm_ros.artifacts.run_dir import check_leftovers, check_out_dir, claim_out_dir, default_run_dir
 
     settings, nodes = _settings(args)
     shape, params = settings.resolve()
@@ -268,13 +275,13 @@ def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from .core.record import RunRecord
-    from .output import partial_recording, write_run
+    from swarm_ros.core.run_result import RunRecord
+    from swarm_ros.artifacts.run_dir import partial_recording, write_run
 
     _, shape, params, out, options, _ = _prepare(args)
 
-    from .core.engine import Simulation  # here: numba is not needed by the other commands' start
-    from .core.metrics import Outcome
+    from swarm_ros.core.engine import Simulation  # here: numba is not needed by the other commands' start
+    from swarm_ros.core.metrics import Outcome
 
     note_compiling(args.quiet)
     start = time.perf_counter()
@@ -310,8 +317,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     import json
 
-    from .launcher import ENCLAVE_PREFIX, Launch, interrupted_run, plural
-    from .output import partial_recording
+    from swarm_ros.app.launcher import ENCLAVE_PREFIX, Launch, interrupted_run, plural
+    from swarm_ros.artifacts.run_dir import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args)
     changed = {k: v for k, v in nodes["robot_batch"].items() if v != NODE_PARAMETERS["robot_batch"][k]}
@@ -359,7 +366,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from .experiment import default_jobs, run_experiment
+    from swarm_ros.app.experiment import default_jobs, run_experiment
 
     if args.scheduler and args.executor != "dask":
         raise SwarmError("--scheduler needs --executor dask")
@@ -378,7 +385,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report import build_report
+    from swarm_ros.app.report import build_report
 
     for path in build_report(args.dir):
         print(path)
@@ -387,7 +394,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def note_compiling(quiet: bool) -> None:
     """Say in one line (unless ``quiet``) that the numba kernels must be compiled first, if they must."""
-    from .core.kernels import COMPILING, kernels_cached
+    from swarm_ros.core.kernels import COMPILING, kernels_cached
 
     if not quiet and not kernels_cached():
         print(f"{PROG}: {COMPILING}", file=sys.stderr, flush=True)
@@ -423,7 +430,7 @@ def _domain_id(flag: int | None) -> int | None:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from .nodes.replay import replay
+    from swarm_ros.tools.replay import replay
 
     bag = args.bag / "bag" if (args.bag / "bag" / "metadata.yaml").is_file() else args.bag
     domain = _domain_id(args.domain_id)
@@ -434,7 +441,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_topics(args: argparse.Namespace) -> int:
-    from .nodes.inspect import run_topics
+    from swarm_ros.tools.topics import run_topics
 
     domain = _domain_id(args.domain_id)
     seconds = args.seconds or (ECHO_SECONDS if args.echo else LIST_SECONDS)
@@ -449,7 +456,7 @@ def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Reco
     from tqdm import tqdm
 
     if check:
-        from .core.invariants import check_state, check_tick
+        from swarm_ros.core.invariants import check_state, check_tick
 
         check_state(sim)
     if recorder is not None:
@@ -498,7 +505,7 @@ def _print_summary(s: dict, out: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .output import release_out_dirs
+    from swarm_ros.artifacts.run_dir import release_out_dirs
 
     try:
         args = build_parser().parse_args(argv)
@@ -517,7 +524,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def entry() -> None:
-    """The ``swarm-ros`` console script (and ``python -m swarm_ros.cli``).
+    """The ``swarm-ros`` console script (and ``python -m swarm_ros.app.cli``).
 
     After ``run`` the process ends at once (:func:`os._exit`): its files are closed, its
     node processes are gone and the output is flushed here, while the interpreter's own

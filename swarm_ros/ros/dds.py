@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from ..core.resources import data_dir
+from swarm_ros.core.resources import data_dir
 
 PROFILE_FILE = "fastdds.xml"  #: in the package's config folder
 

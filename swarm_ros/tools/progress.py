@@ -13,10 +13,10 @@ from rclpy.signals import SignalHandlerOptions
 from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Int64MultiArray
 
-from . import messages as msgs
-from .auth import Gate
-from .guard import Rejections
-from .dds import apply_dds_defaults
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.auth import Gate
+from swarm_ros.protocol.checks import Rejections
+from swarm_ros.ros.dds import apply_dds_defaults
 
 
 _MAX_BATCH = 10_000  # messages handled per spin() at most

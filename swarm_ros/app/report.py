@@ -44,11 +44,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import stats as st  # noqa: E402
 
-from .core.metrics import METRIC_COLUMNS, Outcome  # noqa: E402
-from .core.rulesets import RULE_SETS, RuleSet  # noqa: E402
-from .output import public_mode  # noqa: E402
-from .results import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
-from .reference import Reference, load_reference  # noqa: E402
+from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome  # noqa: E402
+from swarm_ros.core.rulesets import RULE_SETS, RuleSet  # noqa: E402
+from swarm_ros.artifacts.run_dir import public_mode  # noqa: E402
+from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
+from swarm_ros.app.published import Reference, load_reference  # noqa: E402
 
 STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"
 OUTCOMES = tuple(o.value for o in Outcome)
@@ -204,10 +204,10 @@ def _save(fig: plt.Figure, path: Path) -> None:
 
 def _curve(row: dict) -> np.ndarray:
     """Per-tick metrics of the run in ``row``, re-run in process (checked against the row)."""
-    from .core.engine import Simulation
-    from .core.params import RunParams
-    from .core.shapes import Shape
-    from .core.world import World
+    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.params import RunParams
+    from swarm_ros.core.shapes import Shape
+    from swarm_ros.core.grid import World
 
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
     sim = Simulation(shape, RunParams(robots=row["robots"], vision_radius=row["vision_radius"], seed=row["seed"],

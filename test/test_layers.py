@@ -1,0 +1,66 @@
+"""The package's layers import one way only: core <- protocol <- artifacts <- ros <- nodes, tools <- app.
+
+docs/architecture.md draws the layers and says what each one holds. A module may import
+modules of its own package and of lower layers, never of its own layer's other package or
+of a higher one: a newcomer then finds a concern in one place, and the core and the
+protocol run (and are tested) without rclpy.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from test_core_isolation import module_graph
+
+pytestmark = pytest.mark.unit
+
+#: Each subpackage's layer, lowest first. ``swarm_ros`` itself (its ``__main__``) is above them all.
+LAYERS = {"core": 0, "protocol": 1, "artifacts": 2, "ros": 3, "nodes": 4, "tools": 4, "app": 5}
+
+
+def layer_of(module: str) -> tuple[str, int]:
+    parts = module.split(".")
+    if len(parts) < 2 or parts[1] not in LAYERS:
+        return "swarm_ros", max(LAYERS.values()) + 1
+    return parts[1], LAYERS[parts[1]]
+
+
+def wrong_way(graph: dict[str, set[str]]) -> list[str]:
+    """Every import from a module to one of its own layer's other package or of a higher layer."""
+    found = []
+    for module, imports in sorted(graph.items()):
+        package, rank = layer_of(module)
+        for target in sorted(imports):
+            other, other_rank = layer_of(target)
+            if other != package and other_rank >= rank:
+                found.append(f"{module} -> {target}")
+    return found
+
+
+def test_every_module_lives_in_a_layer():
+    stray = [m for m in module_graph() if layer_of(m)[0] == "swarm_ros" and m not in ("swarm_ros", "swarm_ros.__main__")]
+    assert stray == []
+
+
+def test_imports_point_down_the_layers_only():
+    graph = module_graph()
+    assert "swarm_ros.core.params" in graph["swarm_ros.nodes.world"] or graph["swarm_ros.nodes.world"]  # sees imports
+    assert wrong_way(graph) == []
+
+
+def test_the_check_finds_an_import_pointing_up_or_sideways():
+    assert wrong_way({"swarm_ros.core.a": {"swarm_ros.protocol.b"}}) == ["swarm_ros.core.a -> swarm_ros.protocol.b"]
+    assert wrong_way({"swarm_ros.nodes.a": {"swarm_ros.tools.b"}}) == ["swarm_ros.nodes.a -> swarm_ros.tools.b"]
+    assert wrong_way({"swarm_ros.app.a": {"swarm_ros.core.b", "swarm_ros.app.c"}}) == []
+
+
+def test_no_two_modules_share_a_file_name_or_shadow_the_standard_library():
+    import sys
+
+    names: dict[str, list[str]] = {}
+    for module in module_graph():
+        leaf = module.rsplit(".", 1)[-1]
+        if leaf not in ("swarm_ros", "__main__") and module.count(".") >= 2:
+            names.setdefault(leaf, []).append(module)
+    assert {k: v for k, v in names.items() if len(v) > 1} == {}
+    assert sorted(set(names) & set(sys.stdlib_module_names)) == []
