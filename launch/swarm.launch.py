@@ -23,23 +23,20 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from swarm_ros.core.params import RUN_PARAMETERS
+from swarm_ros.protocol.plan import MONITOR, ROBOT_BATCH, graph_plan
+
 PACKAGE = "swarm_ros"
-#: run parameters a launch argument may set ("" = leave it to the parameter file / the default)
-RUN_ARGUMENTS = ("shape", "robots", "vision_radius", "rules", "join", "crowding", "steps", "seed", "max_ticks",
-                 "wiggle_deg", "fail_fraction", "fail_tick", "world_radius")
-_INTEGERS = {"robots", "seed", "max_ticks", "fail_tick", "world_radius"}
-_FLOATS = {"vision_radius", "wiggle_deg", "fail_fraction"}
+#: run parameters a launch argument may set ("" = leave it to the parameter file / the default): all of them
+RUN_ARGUMENTS = {p.name: p for p in RUN_PARAMETERS}
 KEY_ENV = "SWARM_ROS_RUN_KEY"  # as swarm_ros.protocol.runkey.KEY_ENV
 MONITOR_GRACE = 30.0  # seconds the monitor has to write the run after the world's end (as swarm-ros run)
 
 
 def _value(name: str, text: str) -> object:
     """A launch argument's text as the parameter's type (ROS parameters are typed)."""
-    if name in _INTEGERS:
-        return int(text)
-    if name in _FLOATS:
-        return float(text)
-    return text
+    kind = RUN_ARGUMENTS[name].kind
+    return kind(text) if kind in (int, float) else text
 
 
 def graph(context) -> list:
@@ -53,14 +50,13 @@ def graph(context) -> list:
     enclaves = arg("enclaves")
     # SROS2: each node in its enclave <enclaves>/<node> (as swarm-ros run --enclaves)
     sros = lambda name: {"ros_arguments": ["--enclave", f"{enclaves}/{name}"]} if enclaves else {}  # noqa: E731
-    nodes = [Node(package=PACKAGE, executable="monitor", name="monitor", output="screen",
-                  parameters=[params_file, run, monitor], **sros("monitor"))]
-    nodes += [Node(package=PACKAGE, executable="robot_batch", name=f"robot_batch_{k}", output="screen",
-                   parameters=[params_file, run, {"batch": k, "batches": processes}], respawn=True,
-                   respawn_delay=0.0, **sros(f"robot_batch_{k}"))
-              for k in range(processes)]
-    nodes.append(Node(package=PACKAGE, executable="world", name="world", output="screen",
-                      parameters=[params_file, run], **sros("world")))
+    nodes = []
+    for name, executable, own in graph_plan(processes):  # the graph swarm-ros run starts, in its order
+        batch = executable == ROBOT_BATCH  # respawned when it dies, as swarm-ros run restarts it
+        params = [params_file, run, monitor if executable == MONITOR else {}, own]
+        nodes.append(Node(package=PACKAGE, executable=executable, name=name, output="screen",
+                          parameters=[p for p in params if p != {}], **({"respawn": True, "respawn_delay": 0.0}
+                                                                         if batch else {}), **sros(name)))
     return nodes + end_of_run(world=nodes[-1], monitor=nodes[0])
 
 

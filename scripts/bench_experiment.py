@@ -33,7 +33,7 @@ def main() -> int:
     parser.add_argument("--executors", nargs="+", choices=("local", "dask"), default=["local", "dask"])
     parser.add_argument("--repeats", type=int, default=1, help="whole commands per executor (min, median, max)")
     args = parser.parse_args()
-    from swarm_ros.app.experiment import load_experiment
+    from swarm_ros.app.experiment_file import load_experiment
     from swarm_ros.app.results_file import read_results
 
     exp = load_experiment(args.config)

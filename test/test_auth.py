@@ -11,7 +11,7 @@ pytest.importorskip("rclpy")
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 
-from swarm_ros.app.param_file import ConfigError  # noqa: E402
+from swarm_ros.core.errors import ConfigError  # noqa: E402
 from swarm_ros.ros import auth  # noqa: E402
 from swarm_ros.ros import graph as msgs  # noqa: E402
 from swarm_ros.protocol.checks import Rejections  # noqa: E402

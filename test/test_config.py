@@ -4,7 +4,9 @@ from dataclasses import asdict
 
 import pytest
 
-from swarm_ros.app.param_file import ConfigError, Settings, load_params_file
+from swarm_ros.core.errors import ConfigError
+from swarm_ros.core.params import Settings
+from swarm_ros.app.param_file import load_params_file
 from swarm_ros.core.resources import data_dir
 
 
@@ -31,10 +33,10 @@ def test_a_run_parameter_in_a_node_section_is_refused(tmp_path, node):
 
 @pytest.mark.parametrize("text,message", [
     ("/**:\n  ros__parameters:\n    robtos: 5\n", "unknown parameter 'robtos'"),
-    ("/**:\n  ros__parameters:\n    robots: many\n", "'robots' must be an integer"),
-    ("/**:\n  ros__parameters:\n    robots: 5.5\n", "'robots' must be an integer"),
-    ("/**:\n  ros__parameters:\n    vision_radius: true\n", "'vision_radius' must be a number"),
-    ("/**:\n  ros__parameters:\n    shape: 3\n", "'shape' must be a string"),
+    ("/**:\n  ros__parameters:\n    robots: many\n", "robots must be an integer"),
+    ("/**:\n  ros__parameters:\n    robots: 5.5\n", "robots must be an integer"),
+    ("/**:\n  ros__parameters:\n    vision_radius: true\n", "vision_radius must be a number"),
+    ("/**:\n  ros__parameters:\n    shape: 3\n", "shape must be a string"),
     ("robots: 5\n", "section 'robots' must hold exactly one 'ros__parameters'"),
     ("", "expected '/node_name: ros__parameters"),
     ("/**: [unclosed\n", "not valid YAML"),
@@ -55,16 +57,16 @@ def test_missing_parameter_file(tmp_path):
 def test_node_sections_of_the_shipped_file_hold_every_node_default():
     import yaml
 
-    from swarm_ros.app.param_file import NODE_PARAMETERS
+    from swarm_ros.core.params import NODE_PARAMETERS, node_defaults
 
     data = yaml.safe_load((data_dir("config") / "swarm_ros.yaml").read_text())
-    for node, own in NODE_PARAMETERS.items():
-        assert data[f"/{node}"]["ros__parameters"] == own
+    for node in NODE_PARAMETERS:
+        assert data[f"/{node}"]["ros__parameters"] == node_defaults(node)
 
 
 @pytest.mark.parametrize("text,message", [
-    ("/world:\n  ros__parameters:\n    monitor_window: fast\n", "'monitor_window' must be an integer"),
-    ("/monitor:\n  ros__parameters:\n    overwrite: 1\n", "'overwrite' must be a boolean"),
+    ("/world:\n  ros__parameters:\n    monitor_window: fast\n", "monitor_window must be an integer"),
+    ("/monitor:\n  ros__parameters:\n    overwrite: 1\n", "overwrite must be a boolean"),
     ("/**:\n  ros__parameters:\n    out_dir: x\n", "unknown parameter 'out_dir'"),
 ])
 def test_node_sections_are_checked_too(tmp_path, text, message):

@@ -172,7 +172,7 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path):
 ])
 def test_a_dask_task_holds_a_quarter_second_of_runs_but_the_workers_finish_together(run_seconds, remaining,
                                                                                   workers, expected):
-    from swarm_ros.app.experiment import chunk_size
+    from swarm_ros.app.executors import chunk_size
 
     assert chunk_size(run_seconds, remaining, workers) == expected
 
@@ -180,7 +180,8 @@ def test_a_dask_task_holds_a_quarter_second_of_runs_but_the_workers_finish_toget
 def test_short_runs_share_dask_tasks_and_each_run_comes_back_once(tmp_path, scheduler):
     from dask.distributed import Client, get_task_stream
 
-    from swarm_ros.app.experiment import execute_dask, load_experiment, run_inprocess
+    from swarm_ros.app.executors import execute_dask, run_inprocess
+    from swarm_ros.app.experiment_file import load_experiment
 
     todo = load_experiment(_experiment(tmp_path, reps=15)).runs()
     with Client(scheduler) as client, get_task_stream(client) as stream:

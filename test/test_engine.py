@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import disc_shape, params, run_checked
+from swarm_ros.core.run_result import summary_of
 from swarm_ros.core import METRIC_COLUMNS, Outcome, RobotState, Shape, Simulation, World, decide
 from swarm_ros.core.rules import Decisions
 
@@ -55,7 +56,7 @@ def test_more_robots_than_patches_completes_and_separates_the_extras():
     shape = disc_shape(World(radius=10), 5.0)
     sim = run_checked(Simulation(shape, params(100, seed=4)))
     assert sim.outcome is Outcome.COMPLETE_WITH_EXTRAS
-    summary = sim.summary()
+    summary = summary_of(sim)
     assert summary["separated"] == summary["unlocalized"] == 19
     assert (sim.state.state == RobotState.SEPARATED).sum() == 19
     assert sim.metrics.stationary == 100 and sim.metrics.moving == 0
@@ -64,7 +65,7 @@ def test_more_robots_than_patches_completes_and_separates_the_extras():
 def test_tick_limit_ends_in_timeout():
     sim = run_checked(Simulation(Shape.load("star"), params(1036, seed=1, max_ticks=25)))
     assert sim.outcome is Outcome.TIMEOUT and sim.tick == 25
-    assert sim.summary()["convergence_tick"] == 25
+    assert summary_of(sim)["convergence_tick"] == 25
 
 
 def test_only_the_seeds_is_incomplete_at_tick_zero():

@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from swarm_ros.app import cli
-from swarm_ros.app.experiment import load_experiment, run_seed
+from swarm_ros.app.experiment_file import load_experiment, run_seed
 from swarm_ros.app.results_file import RESULT_COLUMNS, ExperimentError, read_results
 from swarm_ros.app.published import ReferenceError, load_reference
 from swarm_ros.app.report import group_stats
@@ -318,23 +318,23 @@ def test_statistics_match_a_hand_computed_t_interval():
 BAD = [
     ({"shapes": {"nope": [10]}}, "shapes.nope: nope: no such shape file or built-in shape"),
     ({"repetitons": 3}, "repetitons: unknown key"),
-    ({"shapes": {"disc.txt": [50, -3]}}, "shapes.disc.txt[1]: must be an integer >= 5, got -3"),
-    ({"shapes": {"disc.txt": [0]}}, "shapes.disc.txt[0]: must be an integer >= 5, got 0"),
+    ({"shapes": {"disc.txt": [50, -3]}}, "shapes.disc.txt[1]: robots must be an integer >= 5, got -3"),
+    ({"shapes": {"disc.txt": [0]}}, "shapes.disc.txt[0]: robots must be an integer >= 5, got 0"),
     ({"shapes": {"disc.txt": []}}, "shapes.disc.txt: must be a non-empty list of group sizes"),
     ({"shapes": {}}, "shapes: must map at least one shape to its group sizes"),
-    ({"vision_radius": []}, "vision_radius: no vision radius given"),
-    ({"vision_radius": [1, -2]}, "vision_radius[1]: must be a number >= 1, got -2"),
-    ({"vision_radius": [1, 0.5]}, "vision_radius[1]: must be a number >= 1, got 0.5"),
+    ({"vision_radius": []}, "vision_radius: no vision_radius given"),
+    ({"vision_radius": [1, -2]}, "vision_radius[1]: vision_radius must be a number >= 1 and <= 100, got -2"),
+    ({"vision_radius": [1, 0.5]}, "vision_radius[1]: vision_radius must be a number >= 1 and <= 100, got 0.5"),
     ({"vision_radius": 40}, "vision_radius[0]: vision_radius must be <= the world radius 10"),
     ({"fail_fraction": 0.1, "fail_tick": 500, "max_ticks": 400}, "fail_tick must be before max_ticks (400)"),
-    ({"repetitions": 0}, "repetitions: must be an integer >= 1, got 0"),
-    ({"max_ticks": "many"}, "max_ticks: must be an integer >= 1, got 'many'"),
+    ({"repetitions": 0}, "repetitions: repetitions must be an integer >= 1, got 0"),
+    ({"max_ticks": "many"}, "max_ticks: max_ticks must be an integer >= 1, got 'many'"),
     ({"shapes": {"disc.txt": [500]}}, "shapes.disc.txt[0]: 500 robots do not fit on the 361 free patches"),
-    ({"seed": None}, "seed: must be an integer >= 0, got None"),
-    ({"rules": ["paper", "fast"]}, "rules[1]: must be one of paper, local, literal, got 'fast'"),
-    ({"rules": []}, "rules: no rule set given"),
-    ({"rules": ["local", "local"]}, "rules: lists a rule set twice"),
-    ({"crowding": "ring"}, "crowding: must be one of ahead, disc, got 'ring'"),
+    ({"seed": None}, "seed: seed must be an integer >= 0 and <= 9223372036854775807, got None"),
+    ({"rules": ["paper", "fast"]}, "rules[1]: rules must be one of paper, local, literal, got 'fast'"),
+    ({"rules": []}, "rules: no rules given"),
+    ({"rules": ["local", "local"]}, "rules: lists a value twice"),
+    ({"crowding": "ring"}, "crowding: crowding must be one of ahead, disc ('' = the rule set's own), got 'ring'"),
     ({"reference": "absent.csv"}, "reference: "),
 ]
 

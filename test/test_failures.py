@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from conftest import disc_shape, run_checked
 
+from swarm_ros.core.run_result import summary_of
 from swarm_ros.app import cli
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.arbitration import JoinOutcome
@@ -30,7 +31,7 @@ def test_failures_keep_every_invariant_and_the_swarm_repairs_the_shape(disc, ext
     assert sim.losses == [(tick, lost)] and sim.removed == lost
     s = sim.state
     assert int((s.state == RobotState.REMOVED).sum()) == lost
-    summary = sim.summary()
+    summary = summary_of(sim)
     assert summary["lost_robots"] == lost and summary["losses"] == [{"tick": tick, "robots": lost}]
     assert summary["localized"] + summary["unlocalized"] + lost == n
     # self-repair: the remaining robots refill the freed patches, as far as there are robots

@@ -19,7 +19,7 @@ import pytest
 from test_ros_graph import _assert_same_run, _shape_file
 
 from swarm_ros.app import cli
-from swarm_ros.app.param_file import Settings
+from swarm_ros.core.params import Settings
 from swarm_ros.ros.node_params import params_yaml
 
 ROOT = Path(__file__).resolve().parent.parent

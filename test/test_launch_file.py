@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from swarm_ros.app.param_file import Settings
+from swarm_ros.core.params import Settings
 from swarm_ros.core import Shape
 from swarm_ros.app import launcher
 from swarm_ros.app.launcher import Launch

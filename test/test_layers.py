@@ -20,6 +20,8 @@ LAYERS = {"core": 0, "protocol": 1, "artifacts": 2, "ros": 3, "nodes": 4, "tools
 
 def layer_of(module: str) -> tuple[str, int]:
     parts = module.split(".")
+    if module == "swarm_ros":
+        return "swarm_ros", -1  # the package itself: only its version, which any layer may read
     if len(parts) < 2 or parts[1] not in LAYERS:
         return "swarm_ros", max(LAYERS.values()) + 1
     return parts[1], LAYERS[parts[1]]

@@ -18,7 +18,7 @@ from conftest import SUBNET, host_env, ip_in
 from test_ros_graph import _assert_same_run, _shape_file
 
 from swarm_ros.app import cli
-from swarm_ros.app.param_file import Settings
+from swarm_ros.core.params import Settings
 from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.protocol.runkey import KEY_ENV, new_key
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW

@@ -187,7 +187,7 @@ def test_an_interrupted_run_writes_its_run_directory_so_far(tmp_path, monkeypatc
 def test_a_killed_run_leaves_a_recording_readable_up_to_the_last_batch(tmp_path):
     """SIGKILL: no footer is written, but what was sent before is in the file and reads back."""
     out = tmp_path / "killed"
-    code = ("import sys, numpy as np; from swarm_ros import cli, recording; from swarm_ros.core.engine import "
+    code = ("import sys, numpy as np; from swarm_ros.app import cli; from swarm_ros.core.engine import "
             "Simulation\n"
             "real = Simulation.run\n"
             "def run(self, max_ticks=None, on_tick=None):\n"

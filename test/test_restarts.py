@@ -25,7 +25,8 @@ from conftest import Recording, rrd_verify
 from test_ros_graph import _env, _processes_mentioning
 
 from swarm_ros.app import cli
-from swarm_ros.app.param_file import RecordingOptions, Settings
+from swarm_ros.artifacts.recording_options import RecordingOptions
+from swarm_ros.core.params import Settings
 from swarm_ros.app.launcher import Launch
 from swarm_ros.ros.shm import shm_locks
 

@@ -14,7 +14,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
-from swarm_ros.app.param_file import ConfigError, Settings
+from swarm_ros.core.errors import ConfigError
+from swarm_ros.core.params import Settings
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.metrics import METRIC_COLUMNS

@@ -23,12 +23,12 @@ import pytest
 from conftest import host_env
 
 from swarm_ros.app import cli
-from swarm_ros.app.param_file import Settings
+from swarm_ros.core.params import Settings
 from swarm_ros.core.state import RobotState
 from swarm_ros.app.launcher import DomainLock, node_command, node_env
 from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.protocol.runkey import KEY_ENV
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_ids, decision_rows
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_ids, batch_label, decision_rows
 
 pytest.importorskip("rclpy")
 
@@ -87,7 +87,7 @@ class _Batches:
         self.sent["world: unvouched announcement"] = 1
         for k, name in enumerate(self.names):
             hello = msgs.ids_message(self.ids[k])
-            hello.layout.dim[0].label = msgs.batch_label(name, 0)
+            hello.layout.dim[0].label = batch_label(name, 0)
             self.announce.publish(hello)
         hello = msgs.ids_message(self.ids[1][:3])  # before tick 0: another batch's robots
         hello.layout.dim[0].label = "intruder/0"

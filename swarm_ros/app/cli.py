@@ -14,18 +14,20 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarm_ros import __version__
-from swarm_ros.app.param_file import (
+from swarm_ros.core.params import (
     BATCH_LOSS_POLICIES,
     MAX_RESTARTS,
     NODE_PARAMETERS,
-    RecordingOptions,
+    RUN_PARAMETERS,
+    Param,
     Settings,
-    check_world_memory,
-    read_params_file,
+    node_defaults,
 )
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.artifacts.recording_options import RecordingOptions
+from swarm_ros.core.resources import check_world_memory
+from swarm_ros.app.param_file import read_params_file
+from swarm_ros.core.errors import ParameterError, SwarmError
 from swarm_ros.core.params import RunParams
-from swarm_ros.core.rulesets import CROWDING_VALUES, JOIN_VALUES, RULE_SETS, STEPS_VALUES
 from swarm_ros.core.shapes import Shape, builtin_shapes
 from swarm_ros.core.grid import World
 from swarm_ros.core.signals import StopFlag
@@ -71,6 +73,21 @@ def _non_negative_float(text: str) -> float:
     if not 0 <= value < float("inf"):
         raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text}")
     return value
+
+
+def _checked(param: Param):
+    """An argparse type for a run parameter's flag: the text as the parameter's type, checked by its declaration."""
+    def convert(text: str) -> object:
+        try:
+            value = param.kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"invalid {'integer' if param.kind is int else 'number'} "
+                                             f"{text!r}") from None
+        try:
+            return param.check(value)
+        except ParameterError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    return convert
 
 
 def _failure(text: str) -> tuple[float, int]:
@@ -184,21 +201,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_run_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--shape", help="built-in shape name or a .txt/.png shape file (default: star)")
-    p.add_argument("--robots", type=_positive_int, help="robots N, seeds included (default: the shape's patch count)")
-    p.add_argument("--vision", type=_positive_float, dest="vision_radius", help="vision radius in patches (default: 1)")
-    p.add_argument("--rules", choices=tuple(RULE_SETS),
-                   help="rule set: paper (join walk, crowding ahead, steps one), local (join local), literal "
-                        "(join local, steps literal); see docs/model.md (default: paper)")
-    p.add_argument("--join", choices=JOIN_VALUES, help="override the rule set's join switch")
-    p.add_argument("--crowding", choices=CROWDING_VALUES, help="override the rule set's crowding switch")
-    p.add_argument("--steps", choices=STEPS_VALUES, help="override the rule set's steps switch")
-    p.add_argument("--seed", type=int, help="run seed (default: 1)")
-    p.add_argument("--max-ticks", type=_positive_int, dest="max_ticks", help="tick limit (default: 100000)")
-    p.add_argument("--wiggle", type=float, dest="wiggle_deg", help="max turn per tick, degrees (default: 45)")
+    for param in RUN_PARAMETERS:  # one flag per run parameter, from its declaration
+        if param.flag == "":
+            continue  # fail_fraction and fail_tick: together, as --fail-robots
+        default = param.blank if param.blank else param.default
+        kwargs = {"choices": param.choices} if param.choices else {"type": _checked(param)}
+        p.add_argument(param.cli_flag, dest=param.name, help=f"{param.help} (default: {default})", **kwargs)
     p.add_argument("--fail-robots", type=_failure, metavar="P@T",
                    help="a fraction P of the robots fails at the end of tick T and is removed, e.g. 0.1@500")
-    p.add_argument("--world-radius", type=int, dest="world_radius", help="world spans [-R, R] (default: 32)")
     p.add_argument("--params-file", type=Path, help="ROS 2 style YAML parameter file; flags override it")
     p.add_argument("--out", type=Path, help="output directory (default: runs/<time>_<shape>_n<N>_v<R>_s<seed>)")
     p.add_argument("--overwrite", action="store_true", default=None,
@@ -241,17 +251,15 @@ def _settings(args: argparse.Namespace) -> tuple[Settings, dict[str, dict[str, o
     settings, nodes = Settings(), {kind: {} for kind in NODE_PARAMETERS}
     if args.params_file is not None:
         settings, nodes = read_params_file(args.params_file, settings)
-    return settings.updated(shape=args.shape, robots=args.robots, vision_radius=args.vision_radius,
-                            rules=args.rules, join=args.join, crowding=args.crowding, steps=args.steps,
-                            seed=args.seed, max_ticks=args.max_ticks, wiggle_deg=args.wiggle_deg,
-                            fail_fraction=args.fail_robots[0] if args.fail_robots else None,
-                            fail_tick=args.fail_robots[1] if args.fail_robots else None,
-                            world_radius=args.world_radius), nodes
+    flags = {p.name: getattr(args, p.name) for p in RUN_PARAMETERS if p.flag != ""}
+    if args.fail_robots:
+        flags["fail_fraction"], flags["fail_tick"] = args.fail_robots
+    return settings.updated(**flags), nodes
 
 
 def _flag(value: object, section: dict[str, object], key: str) -> object:
     """A flag's value if given, else the parameter file's /monitor value, else the monitor's default."""
-    return value if value is not None else section.get(key, NODE_PARAMETERS["monitor"][key])
+    return value if value is not None else section.get(key, node_defaults("monitor")[key])
 
 
 def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions, dict]:
@@ -321,7 +329,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarm_ros.artifacts.run_dir import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args)
-    changed = {k: v for k, v in nodes["robot_batch"].items() if v != NODE_PARAMETERS["robot_batch"][k]}
+    changed = {k: v for k, v in nodes["robot_batch"].items() if v != node_defaults("robot_batch")[k]}
     if changed:
         raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
                          f"assigns each of its --processes its robots itself (use ros2 run for your own split)")
@@ -366,7 +374,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from swarm_ros.app.experiment import default_jobs, run_experiment
+    from swarm_ros.app.executors import default_jobs
+    from swarm_ros.app.experiment import run_experiment
 
     if args.scheduler and args.executor != "dask":
         raise SwarmError("--scheduler needs --executor dask")

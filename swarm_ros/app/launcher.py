@@ -41,7 +41,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from swarm_ros.app.param_file import NODE_PARAMETERS, RecordingOptions, Settings
+from swarm_ros.core.params import Settings, node_defaults
+from swarm_ros.protocol.plan import graph_plan
+from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import SwarmError
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
@@ -252,11 +254,11 @@ class Launch:
 
     @property
     def on_batch_loss(self) -> str:
-        return str(self.world.get("on_batch_loss", NODE_PARAMETERS["world"]["on_batch_loss"]))
+        return str(self.world.get("on_batch_loss", node_defaults("world")["on_batch_loss"]))
 
     @property
     def max_restarts(self) -> int:
-        return int(self.world.get("max_restarts", NODE_PARAMETERS["world"]["max_restarts"]))
+        return int(self.world.get("max_restarts", node_defaults("world")["max_restarts"]))
 
     def run(self) -> Path:
         run_key()  # a SWARM_ROS_RUN_KEY that is set but unusable fails here, before anything is made
@@ -342,12 +344,9 @@ class Launch:
     def plan(self) -> list[tuple[str, str, dict[str, int]]]:
         """The node processes, in start order: (node name, executable, parameters beyond the file's).
 
-        ``launch/swarm.launch.py`` starts the same graph (a test compares the two).
+        ``launch/swarm.launch.py`` starts the same graph (:func:`swarm_ros.protocol.plan.graph_plan`).
         """
-        return [("monitor", "monitor", {}),
-                *[(f"robot_batch_{k}", "robot_batch", {"batch": k, "batches": self.processes})
-                  for k in range(self.processes)],
-                ("world", "world", {})]
+        return graph_plan(self.processes)
 
     def _spawn(self, name: str, command: list[str], log: Path, incarnation: int) -> Child:
         f = open(log, "ab")  # noqa: SIM115 - closed in stop()

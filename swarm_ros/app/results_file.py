@@ -12,19 +12,21 @@ import os
 from pathlib import Path
 
 from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.params import EXPERIMENT_AXES, RUN_PARAMETERS
 
 RESULTS_FILE = "results.csv"
 REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied into its directory
 
-#: One row of results.csv: the run's coordinates, then every summary.json field.
-RESULT_COLUMNS = ("shape", "shape_file", "robots", "vision_radius", "rules", "join", "crowding", "steps",
-                  "repetition", "seed", "shape_patches",
-                  "max_ticks", "wiggle_deg", "world_radius", "fail_fraction", "fail_tick", "engine", "outcome",
-                  "convergence_tick", "localized", "unlocalized", "separated", "empty_patches", "lost_robots",
-                  "convergence_rate", "wall_seconds")
-_INT_COLUMNS = {"robots", "repetition", "seed", "shape_patches", "max_ticks", "world_radius", "fail_tick",
-                "convergence_tick", "localized", "unlocalized", "separated", "empty_patches", "lost_robots"}
-_FLOAT_COLUMNS = {"vision_radius", "wiggle_deg", "fail_fraction", "convergence_rate", "wall_seconds"}
+#: Columns results.csv adds after a run parameter's: the shape's file, the repetition, the shape's size.
+_AFTER = {"shape": ("shape_file",), "steps": ("repetition",), "seed": ("shape_patches",)}
+#: One row of results.csv: the run's coordinates (every run parameter, in its declaration's order), then the
+#: summary.json fields of its outcome.
+RESULT_COLUMNS = (*(c for p in RUN_PARAMETERS for c in (p.name, *_AFTER.get(p.name, ()))),
+                  "engine", "outcome", "convergence_tick", "localized", "unlocalized", "separated", "empty_patches",
+                  "lost_robots", "convergence_rate", "wall_seconds")
+_INT_COLUMNS = {"repetition", "shape_patches", "convergence_tick", "localized", "unlocalized", "separated",
+                "empty_patches", "lost_robots", *(p.name for p in RUN_PARAMETERS if p.kind is int)}
+_FLOAT_COLUMNS = {"convergence_rate", "wall_seconds", *(p.name for p in RUN_PARAMETERS if p.kind is float)}
 
 
 class ExperimentError(SwarmError):
@@ -79,7 +81,8 @@ class ResultsFile:
         self._file = open(path, "a", encoding="utf-8")  # noqa: SIM115 - closed in close()
 
     def done(self) -> set[tuple]:
-        return {(r["shape"], r["robots"], r["vision_radius"], r["rules"], r["repetition"]) for r in self.rows}
+        """The coordinates of the runs in the file, as :attr:`~swarm_ros.app.experiment_file.RunSpec.key`."""
+        return {(r["shape"], r["robots"], *(r[a] for a in EXPERIMENT_AXES), r["repetition"]) for r in self.rows}
 
     def append(self, row: dict) -> None:
         self._file.write(_csv_line(row))
@@ -89,3 +92,10 @@ class ResultsFile:
 
     def close(self) -> None:
         self._file.close()
+
+
+def result_row(spec, summary: dict) -> dict:
+    """A results.csv row from a run's coordinates (a :class:`~swarm_ros.app.experiment_file.RunSpec`) and its
+    summary.json record."""
+    row = {**summary, "shape_file": spec.shape_file, "repetition": spec.repetition}
+    return {col: row[col] for col in RESULT_COLUMNS}

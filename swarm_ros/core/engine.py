@@ -31,7 +31,6 @@ from swarm_ros.core.metrics import (
     RUNNING,
     Outcome,
     TickMetrics,
-    run_summary,
 )
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
@@ -39,7 +38,6 @@ from swarm_ros.core.rules import Decisions, decide_kernel, index_build, index_cl
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import RobotState, SwarmState, initial_state
 
-ENGINE_NAME = "inprocess"
 _MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState.MOVING_INSIDE)
 _WALKING = int(RobotState.WALKING)
 _SEPARATED = int(RobotState.SEPARATED)
@@ -135,8 +133,6 @@ class Simulation:
         state: the swarm at the end of the current tick (read it, do not write it).
         outcome: how the run ended, or None while it goes on.
     """
-
-    engine = ENGINE_NAME
 
     def __init__(self, shape: Shape, params: RunParams) -> None:
         self.shape = shape
@@ -353,19 +349,3 @@ class Simulation:
         self.state.tick += ticks
         self._nrows += rows
         self.outcome = OUTCOME_OF_CODE[code]
-
-    def summary(self, wall_seconds: float = 0.0, stopped: Outcome | None = None) -> dict:
-        """The run's record (see :func:`swarm_ros.core.metrics.run_summary`).
-
-        A run that has not ended needs ``stopped``, the outcome to record instead
-        (``Outcome.INTERRUPTED``); its record describes the run up to the current tick.
-        """
-        outcome = self.outcome or stopped
-        if outcome is None:
-            raise RuntimeError("the run has not ended yet")
-        return run_summary(
-            shape=self.shape.name, shape_patches=self.shape.patches, params=self.params.as_dict(),
-            engine=self.engine, outcome=outcome, final=self.metrics, losses=self.losses,
-            separated=self.metrics.stationary - self.metrics.localized, world_radius=self._radius,
-            wall_seconds=wall_seconds)
-

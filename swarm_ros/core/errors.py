@@ -21,3 +21,7 @@ class ShapeError(SwarmError):
 
 class ParameterError(SwarmError):
     """A model or run parameter is out of range; the message names the parameter."""
+
+
+class ConfigError(SwarmError):
+    """A parameter file is unreadable or holds an unknown or ill-typed key; the message names both."""

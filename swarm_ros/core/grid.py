@@ -17,6 +17,7 @@ import numpy as np
 from swarm_ros.core.errors import ParameterError
 
 DEFAULT_RADIUS = 32
+MIN_RADIUS = 3  # a wall ring, the seeds' 2 x 2 block and room to move
 
 
 @dataclass(frozen=True)
@@ -30,8 +31,8 @@ class World:
     radius: int = DEFAULT_RADIUS
 
     def __post_init__(self) -> None:
-        if not isinstance(self.radius, (int, np.integer)) or self.radius < 3:
-            raise ParameterError(f"world_radius must be an integer >= 3, got {self.radius!r}")
+        if not isinstance(self.radius, (int, np.integer)) or self.radius < MIN_RADIUS:
+            raise ParameterError(f"world_radius must be an integer >= {MIN_RADIUS}, got {self.radius!r}")
 
     @property
     def size(self) -> int:

@@ -16,6 +16,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from swarm_ros.core.params import RUN_PARAMETERS
+
 
 SEEDS = 4
 
@@ -111,16 +113,8 @@ def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, ou
     return {
         "shape": shape,
         "shape_patches": shape_patches,
-        "robots": robots,
-        "vision_radius": params["vision_radius"],
-        "rules": params["rules"],
-        "join": params["join"],
-        "crowding": params["crowding"],
-        "steps": params["steps"],
-        "seed": params["seed"],
-        "max_ticks": params["max_ticks"],
-        "wiggle_deg": params["wiggle_deg"],
-        "world_radius": world_radius,
+        **{p.name: robots if p.name == "robots" else world_radius if p.name == "world_radius" else params[p.name]
+           for p in RUN_PARAMETERS if p.name != "shape"},  # every run parameter, as declared
         "engine": engine,
         "outcome": outcome.value,
         "convergence_tick": final.tick,
@@ -132,8 +126,6 @@ def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, ou
         "wall_seconds": round(wall_seconds, 3),
         **{key: None if value is None else round(value, 3) for key, value in (overhead or {}).items()},
         **({"rejected_messages": dict(rejected)} if rejected is not None else {}),
-        "fail_fraction": params.get("fail_fraction", 0.0),
-        "fail_tick": params.get("fail_tick", 0),
         "lost_robots": lost,
         "losses": [{"tick": t, "robots": k} for t, k in losses],
         "restarts": [{"tick": t, "node": node} for t, node in restarts],

@@ -1,63 +1,248 @@
-"""Run parameters, validated on construction."""
+"""A run's parameters, declared once: everything else is derived from :data:`RUN_PARAMETERS`.
+
+From this one table come the run settings (:class:`Settings`, what a parameter file or the
+command line sets), the model's resolved parameters (:class:`RunParams`), the command-line
+flags (``swarm_ros.app.cli``), the keys of a parameter file and of each node's ROS
+parameters, the keys of an experiment file (``swarm_ros.app.experiment_file``), the
+columns of ``results.csv`` and the launch file's arguments. Every value is checked by
+:meth:`Param.check`, so every input path says the same thing about a bad value:
+``<name> must be <what>, got <value>``.
+
+A node's own parameters (the world's restart policy, the monitor's output folder, ...) are
+declared the same way in :data:`NODE_PARAMETERS`.
+"""
 
 from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, make_dataclass, replace
+from typing import TYPE_CHECKING, Any
 
-from swarm_ros.core.errors import ParameterError
-from swarm_ros.core.rulesets import DEFAULT_RULES, RuleSet
+from .errors import ParameterError
+from .grid import DEFAULT_RADIUS, MIN_RADIUS, World
+from .rulesets import CROWDING_VALUES, DEFAULT_RULES, JOIN_VALUES, RULE_SETS, STEPS_VALUES, RuleSet
+
+if TYPE_CHECKING:
+    from .shapes import Shape
 
 DEFAULT_SEED = 1
 DEFAULT_VISION = 1.0
 DEFAULT_WIGGLE_DEG = 45.0
 DEFAULT_MAX_TICKS = 100_000
 MAX_SEED = 2**63 - 1
+MIN_ROBOTS = 4  # the four seeds
+
+_KIND_WORDS = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
 
 
 @dataclass(frozen=True)
-class RunParams:
-    """Everything that, with the shape, fixes a run.
+class Param:
+    """One parameter: its name, default (whose type is the parameter's type), meaning and bounds.
 
     Attributes:
-        robots: N, all robots including the four seeds.
-        vision_radius: patches; how far a robot sees join targets and other robots.
-        seed: run seed, 0 <= seed < 2**63.
-        max_ticks: tick limit; a run still going then ends with outcome ``timeout``.
-        wiggle_deg: a wandering robot turns by a uniform angle in [-wiggle, +wiggle] degrees per tick.
-        fail_fraction: the fraction of the robots that fail at the end of tick ``fail_tick``
-            and are removed (0 = none): damage for studying self-repair.
-        fail_tick: the tick at whose end they fail (>= 1 when ``fail_fraction`` > 0).
-        rules: the named rule set (:mod:`swarm_ros.core.rulesets`): ``paper``, ``local`` or ``literal``.
-        join, crowding, steps: the switches in force. Given as "" (the default), each takes
-            the rule set's own value; given a value, it overrides it. After construction
-            they always hold the resolved values.
+        low, high: bounds of a number (None: unbounded); ``low_open``: ``low`` itself is out.
+        choices: the values a string may take ("" always allowed when ``blank`` is set).
+        blank: meaning of the empty string or of 0, if that is a value of its own.
+        flag: the command-line flag ("" = none; None = ``--`` and the name with dashes).
+        experiment: ``"axis"`` (an experiment file may list several values), ``"fixed"``
+            (one value for the whole experiment), or ``""`` (not an experiment file key).
+        model: whether it is a field of :class:`RunParams` (the shape and the world are not).
     """
 
-    robots: int
-    vision_radius: float = DEFAULT_VISION
-    seed: int = DEFAULT_SEED
-    max_ticks: int = DEFAULT_MAX_TICKS
-    wiggle_deg: float = DEFAULT_WIGGLE_DEG
-    fail_fraction: float = 0.0
-    fail_tick: int = 0
-    rules: str = DEFAULT_RULES
-    join: str = ""
-    crowding: str = ""
-    steps: str = ""
+    name: str
+    default: Any
+    help: str
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    choices: tuple[str, ...] = ()
+    blank: str = ""
+    flag: str | None = None
+    experiment: str = "fixed"
+    model: bool = True
 
+    @property
+    def kind(self) -> type:
+        return type(self.default)
+
+    @property
+    def cli_flag(self) -> str:
+        return "--" + self.name.replace("_", "-") if self.flag is None else self.flag
+
+    def describe(self) -> str:
+        """What a valid value is, in words: ``an integer >= 3``, ``one of paper, local, literal``."""
+        if self.choices:
+            text = f"one of {', '.join(self.choices)}"
+        else:
+            text = _KIND_WORDS[self.kind]
+            if self.low is not None:
+                text += f" {'>' if self.low_open else '>='} {_number(self.low)}"
+            if self.high is not None:
+                text += f" and <= {_number(self.high)}"
+        return text + (f" ({self.blank_value!r} = {self.blank})" if self.blank else "")
+
+    @property
+    def blank_value(self) -> object:
+        return self.kind()
+
+    def check(self, value: object) -> Any:
+        """``value`` as this parameter's type, if it is one this parameter takes.
+
+        Raises:
+            ParameterError: ``<name> must be <describe()>, got <value>``, in one line.
+        """
+        kind = self.kind
+        if kind is bool:
+            ok = isinstance(value, bool)
+        elif kind is str:
+            ok = isinstance(value, str)
+        elif kind is int:
+            ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+        else:
+            ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+        if ok and not (self.blank and value == self.blank_value):
+            if self.choices:
+                ok = value in self.choices
+            elif kind in (int, float):
+                ok = (self.low is None or (value > self.low if self.low_open else value >= self.low)) \
+                    and (self.high is None or value <= self.high)
+        if not ok:
+            shown = _number(value) if isinstance(value, float) and math.isfinite(value) else repr(value)
+            raise ParameterError(f"{self.name} must be {self.describe()}, got {shown}")
+        return kind(value)
+
+
+def _number(x: float) -> str:
+    """``3``, ``0.5``, ``9223372036854775807``: a bound or value as a user would write it."""
+    if isinstance(x, numbers.Integral):
+        return str(x)
+    return str(int(x)) if float(x).is_integer() else f"{x:g}"
+
+
+#: The run's parameters, in the order of results.csv's columns. A new one goes here, and only here.
+RUN_PARAMETERS: tuple[Param, ...] = (
+    Param("shape", "star", "built-in shape name or a .txt/.png shape file", experiment="", model=False),
+    Param("robots", 0, "robots N, seeds included", low=MIN_ROBOTS, blank="the shape's patch count", experiment=""),
+    Param("vision_radius", DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision",
+          experiment="axis"),
+    Param("rules", DEFAULT_RULES, "rule set: paper (join walk, crowding ahead, steps one), local (join local), "
+          "literal (join local, steps literal); see docs/model.md", choices=tuple(RULE_SETS), experiment="axis"),
+    Param("join", "", "override the rule set's join switch", choices=JOIN_VALUES, blank="the rule set's own"),
+    Param("crowding", "", "override the rule set's crowding switch", choices=CROWDING_VALUES,
+          blank="the rule set's own"),
+    Param("steps", "", "override the rule set's steps switch", choices=STEPS_VALUES, blank="the rule set's own"),
+    Param("seed", DEFAULT_SEED, "run seed", low=0, high=MAX_SEED, experiment=""),
+    Param("max_ticks", DEFAULT_MAX_TICKS, "tick limit", low=1),
+    Param("wiggle_deg", DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle"),
+    Param("world_radius", DEFAULT_RADIUS, "the world spans [-R, R] patches", low=MIN_RADIUS, model=False),
+    Param("fail_fraction", 0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0, high=1.0,
+          flag=""),
+    Param("fail_tick", 0, "the tick at whose end fail_fraction of the robots fail", low=0, flag=""),
+)
+RUN_PARAMETER = {p.name: p for p in RUN_PARAMETERS}
+EXPERIMENT_AXES = tuple(p.name for p in RUN_PARAMETERS if p.experiment == "axis")  #: may list several values
+
+BATCH_LOSS_POLICIES = ("restart", "remove")  #: what the graph does when a robot-batch process dies
+MAX_RESTARTS = 3  #: restarts of one robot batch's process, at most, before its robots are removed
+
+#: Each ROS node's own parameters (not run parameters: they do not change what the swarm does).
+NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
+    "world": (
+        Param("monitor_window", 128, "max ticks the world runs ahead of the monitor", low=0,
+              blank="do not wait for one"),
+        Param("start_timeout", 60.0, "seconds to wait for robot batches to cover every robot", low=0, low_open=True),
+        Param("on_batch_loss", "restart", "restart: wait for a lost batch process to come back; remove: remove "
+              "its robots", choices=BATCH_LOSS_POLICIES),
+        Param("max_restarts", MAX_RESTARTS, "restarts per batch waited for; a batch lost once more has its "
+              "robots removed", low=0),
+        Param("restart_timeout", 30.0, "seconds to wait for a lost batch to come back before removing its robots",
+              low=0, low_open=True),
+    ),
+    "robot_batch": (
+        Param("batch", 0, "this process hosts batch `batch` of `batches` (contiguous ids) ...", low=0),
+        Param("batches", 1, "... of this many", low=1),
+        Param("robot_ids", "", "... unless this lists its robots, e.g. 4-99,150"),
+        Param("incarnation", 0, "0 for a batch's first process; the launcher counts restarts up from 1", low=0),
+    ),
+    "monitor": (
+        Param("out_dir", "", "run directory", blank="runs/<time>_<shape>_n<N>_v<R>_s<seed>"),
+        Param("overwrite", False, "replace an existing run directory"),
+        Param("record", True, "write recording.rrd (Rerun) into the run directory"),
+        Param("record_every", 1, "log the robots every k-th tick (metrics: every tick)", low=1),
+        Param("bag", True, "write bag/, a rosbag2 (MCAP) of every message on the swarm's topics"),
+        Param("viewer_url", "", "also stream live to this Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy"),
+    ),
+}
+
+
+def node_defaults(kind: str) -> dict[str, object]:
+    """A node's own parameters and their defaults."""
+    return {p.name: p.default for p in NODE_PARAMETERS[kind]}
+
+
+def check_node_values(kind: str, values: dict[str, object], where: str = "") -> dict[str, object]:
+    """A node's own parameters, each checked by its declaration (``where`` prefixes the error).
+
+    Raises:
+        ParameterError: an unknown parameter or a bad value, in one line naming it.
+    """
+    own = {p.name: p for p in NODE_PARAMETERS[kind]}
+    try:
+        return {key: own[key].check(value) for key, value in values.items()}
+    except ParameterError as exc:
+        raise ParameterError(f"{where}: {exc}" if where else str(exc)) from None
+
+
+class _SettingsMethods:
+    def updated(self, **values: object) -> Settings:
+        """A copy with the given non-None values."""
+        return replace(self, **{k: v for k, v in values.items() if v is not None})
+
+    def run_params(self, robots: int | None = None) -> RunParams:
+        """The model's parameters these settings stand for, ``robots`` resolved (0: the shape's count)."""
+        values = {p.name: getattr(self, p.name) for p in RUN_PARAMETERS if p.model}
+        values["robots"] = robots or self.robots
+        return RunParams(**values)
+
+    def resolve(self) -> tuple[Shape, RunParams]:
+        """The shape and run parameters these settings stand for (every engine and node derives them so).
+
+        Raises:
+            SwarmError: a bad shape, a bad value, or more robots than free patches.
+        """
+        from .resources import check_world_memory
+        from .shapes import Shape
+
+        RUN_PARAMETER["world_radius"].check(self.world_radius)
+        check_world_memory(self.world_radius)
+        shape = Shape.load(self.shape, World(self.world_radius))
+        params = self.run_params(self.robots or shape.patches)
+        params.check_vision(shape.world.radius)
+        if params.robots > shape.free_patches:
+            w = shape.world.size
+            raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "
+                                 f"{shape.free_patches} free patches of the {w} x {w} world")
+        return shape, params
+
+
+#: What a run needs before the shape is loaded: every run parameter, each with its default.
+#: ``robots = 0`` means the shape's patch count; ``join``, ``crowding`` and ``steps`` = "" the rule set's own.
+Settings = make_dataclass("Settings", [(p.name, p.kind, field(default=p.default)) for p in RUN_PARAMETERS],
+                          bases=(_SettingsMethods,), frozen=True)
+Settings.__module__ = __name__  # so that it pickles (to experiment workers) by name
+
+
+class _RunParamsMethods:
     def __post_init__(self) -> None:
+        for p in RUN_PARAMETERS:
+            if p.model and p.name not in ("join", "crowding", "steps", "rules"):
+                object.__setattr__(self, p.name, p.check(getattr(self, p.name)))
+        if self.robots == 0:
+            raise ParameterError(f"robots must be an integer >= {MIN_ROBOTS}, got 0")
         ruleset = RuleSet.resolve(self.rules, self.join, self.crowding, self.steps)
         for name in ("join", "crowding", "steps"):
             object.__setattr__(self, name, getattr(ruleset, name))
-        for name, low, high in (("robots", 4, None), ("seed", 0, MAX_SEED), ("max_ticks", 1, None),
-                                ("fail_tick", 0, None)):
-            object.__setattr__(self, name, _int(name, getattr(self, name), low, high))
-        # below one patch a robot sees not even its neighbours' patches (check_vision bounds it by the world)
-        object.__setattr__(self, "vision_radius", _real("vision_radius", self.vision_radius, 1.0, 100.0, True))
-        object.__setattr__(self, "wiggle_deg", _real("wiggle_deg", self.wiggle_deg, 0.0, 180.0, True))
-        object.__setattr__(self, "fail_fraction", _real("fail_fraction", self.fail_fraction, 0.0, 1.0, True))
         if self.fail_fraction > 0 and self.fail_tick < 1:
             raise ParameterError(f"fail_tick must be >= 1 when fail_fraction > 0, got {self.fail_tick}")
         if self.fail_fraction > 0 and self.fail_tick >= self.max_ticks:
@@ -92,20 +277,11 @@ class RunParams:
         return asdict(self)
 
 
-def _int(name: str, value: object, low: int, high: int | None) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise ParameterError(f"{name} must be an integer, got {value!r}")
-    if value < low or (high is not None and value > high):
-        bound = f">= {low}" if high is None else f"in [{low}, {high}]"
-        raise ParameterError(f"{name} must be {bound}, got {value}")
-    return int(value)
-
-
-def _real(name: str, value: object, low: float, high: float, inclusive_low: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise ParameterError(f"{name} must be a finite number, got {value!r}")
-    too_low = value < low if inclusive_low else value <= low
-    if too_low or value > high:
-        op = ">=" if inclusive_low else ">"
-        raise ParameterError(f"{name} must be {op} {low:g} and <= {high:g}, got {value:g}")
-    return float(value)
+#: Everything that, with the shape, fixes a run: the model's run parameters, validated on construction,
+#: ``robots`` resolved (>= 4) and the rule set's switches resolved ("" becomes the rule set's own value).
+RunParams = make_dataclass(
+    "RunParams",
+    [("robots", int)] + [(p.name, p.kind, field(default=p.default)) for p in RUN_PARAMETERS
+                         if p.model and p.name != "robots"],
+    bases=(_RunParamsMethods,), frozen=True)
+RunParams.__module__ = __name__

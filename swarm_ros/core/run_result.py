@@ -1,4 +1,5 @@
-"""What a finished run leaves behind, whichever engine ran it: the data a run directory is written from."""
+"""What a finished run leaves behind, whichever engine ran it: its summary and the data a run directory is
+written from. Both engines build their summary here (:func:`summarize`)."""
 
 from __future__ import annotations
 
@@ -7,10 +8,32 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
-from swarm_ros.core.metrics import Outcome, TickMetrics
+from swarm_ros.core.metrics import Outcome, TickMetrics, run_summary
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import SwarmState
+from swarm_ros.core.state import RobotState, SwarmState
+
+INPROCESS, ROS2 = "inprocess", "ros2"
+ENGINES = (INPROCESS, ROS2)  #: the engines, as summary.json and results.csv name them
+
+
+def summarize(*, shape: Shape, params: RunParams, state: SwarmState, final: TickMetrics, outcome: Outcome,
+              engine: str, wall_seconds: float, losses=(), restarts=(), overhead=None, rejected=None) -> dict:
+    """The summary.json record of a run, from either engine (fields: :func:`swarm_ros.core.metrics.run_summary`)."""
+    return run_summary(shape=shape.name, shape_patches=shape.patches, params=params.as_dict(), engine=engine,
+                       outcome=outcome, final=final, separated=int((state.state == RobotState.SEPARATED).sum()),
+                       world_radius=shape.world.radius, wall_seconds=wall_seconds, losses=losses,
+                       restarts=restarts, overhead=overhead, rejected=rejected)
+
+
+def summary_of(sim: Simulation, wall_seconds: float = 0.0, stopped: Outcome | None = None) -> dict:
+    """The record of an in-process run. A run that has not ended needs ``stopped``, the outcome to record
+    instead (``Outcome.INTERRUPTED``); its record describes the run up to the current tick."""
+    outcome = sim.outcome or stopped
+    if outcome is None:
+        raise RuntimeError("the run has not ended yet")
+    return summarize(shape=sim.shape, params=sim.params, state=sim.state, final=sim.metrics, outcome=outcome,
+                     engine=INPROCESS, wall_seconds=wall_seconds, losses=sim.losses)
 
 
 @dataclass(frozen=True)
@@ -39,6 +62,6 @@ class RunRecord:
     @staticmethod
     def of(sim: Simulation, wall_seconds: float, stopped: Outcome | None = None) -> RunRecord:
         """The record of an in-process run: finished, or ``stopped`` (interrupted) at its current tick."""
-        summary = sim.summary(wall_seconds=wall_seconds, stopped=stopped)
+        summary = summary_of(sim, wall_seconds=wall_seconds, stopped=stopped)
         return RunRecord(shape=sim.shape, params=sim.params, state=sim.state, history=sim.history,
                          outcome=Outcome(summary["outcome"]), summary=summary)

@@ -26,12 +26,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.app.param_file import RecordingOptions
-from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, run_summary, tick_metrics
+from swarm_ros.artifacts.recording_options import RecordingOptions
+from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, tick_metrics
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.state import STATE_COUNT, RobotState
 from swarm_ros.core.warmup import warm_up
-from swarm_ros.core.run_result import RunRecord
+from swarm_ros.core.run_result import ROS2, RunRecord, summarize
 from swarm_ros.protocol.rows import DECISION_ROW
 from swarm_ros.artifacts.run_dir import (
     check_leftovers,
@@ -57,7 +57,6 @@ from swarm_ros.ros.runtime import (
     run_node,
 )
 
-ENGINE_NAME = "ros2"
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
 _MATCH_POLL = 0.005  # seconds between looks at the readers' matches, before the liveliness writer appears
 _BAG_WAIT = 1.0  # seconds to wait, after the end, for the last tick's decisions to reach the bag
@@ -259,15 +258,12 @@ class MonitorNode:
         history = np.array(self.rows, dtype=np.int64)
         final = tick_metrics(self.replica.tick, np.bincount(self.replica.state.state, minlength=STATE_COUNT),
                              self.shape.patches)
-        separated = int((self.replica.state.state == RobotState.SEPARATED).sum())
-        summary = run_summary(shape=self.shape.name, shape_patches=self.shape.patches,
-                              params=self.params.as_dict(), engine=ENGINE_NAME, outcome=outcome, final=final,
-                              separated=separated, world_radius=self.world_radius,
-                              wall_seconds=self.world_times.get("wall_seconds", self.wall),
-                              losses=self.losses, restarts=self.restarts,
-                              overhead={"startup_seconds": self.world_times.get("startup_seconds"),
-                                        "shutdown_seconds": None},  # swarm-ros run fills it in at the end
-                              rejected={"world": self.world_rejected, "monitor": self.rejections.total})
+        summary = summarize(shape=self.shape, params=self.params, state=self.replica.state, final=final,
+                            outcome=outcome, engine=ROS2, wall_seconds=self.world_times.get("wall_seconds", self.wall),
+                            losses=self.losses, restarts=self.restarts,
+                            overhead={"startup_seconds": self.world_times.get("startup_seconds"),
+                                      "shutdown_seconds": None},  # swarm-ros run fills it in at the end
+                            rejected={"world": self.world_rejected, "monitor": self.rejections.total})
         record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
                            outcome=outcome, summary=summary)
         self.written = write_run(self.out, record, overwrite=self.overwrite,

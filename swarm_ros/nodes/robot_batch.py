@@ -31,7 +31,7 @@ from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.warmup import warm_up
-from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, decision_rows, format_ranges, parse_ranges
+from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, batch_label, decision_rows, format_ranges, parse_ranges
 from swarm_ros.protocol import checks as guard
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
@@ -72,7 +72,7 @@ class RobotBatchNode:
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         announce = self.signer.publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
         hello = msgs.ids_message(self.ids)
-        hello.layout.dim[0].label = msgs.batch_label(node.get_name(), int(own["incarnation"]))
+        hello.layout.dim[0].label = batch_label(node.get_name(), int(own["incarnation"]))
         announce.publish(hello)
         node.get_logger().info(f"{node.get_name()}: robots {format_ranges(self.ids)}")
 

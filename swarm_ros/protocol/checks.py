@@ -15,7 +15,7 @@ from collections import Counter
 
 import numpy as np
 
-from swarm_ros.protocol.rows import PATCH_METRES, ROBOT_ROW, check_fields
+from swarm_ros.protocol.rows import PATCH_METRES, ROBOT_ROW, TICK_SECONDS, check_fields, parse_batch_label
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
 _NODE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")  # a ROS node name, as batch names are
@@ -54,12 +54,12 @@ class Rejections:
         return "; ".join(f"{key}={n}" for key, n in sorted(self.counts.items()))
 
 
-def cloud(msg, dtype: np.dtype, max_rows: int) -> np.ndarray:
+def cloud(msg, dtype: np.dtype, max_rows: int, min_rows: int = 1) -> np.ndarray:
     """The rows of a PointCloud2 of ``dtype`` rows (a read-only view of its bytes).
 
     Raises:
         Rejected: another point layout, a size that does not match it, big-endian data,
-            no rows, or more than ``max_rows``.
+            fewer rows than ``min_rows``, or more than ``max_rows``.
     """
     try:
         check_fields([(f.name, f.offset, f.datatype, f.count) for f in msg.fields], msg.point_step, dtype)
@@ -71,7 +71,7 @@ def cloud(msg, dtype: np.dtype, max_rows: int) -> np.ndarray:
     if len(msg.data) != rows * dtype.itemsize or int(msg.row_step) != int(msg.width) * dtype.itemsize:
         raise Rejected("size", f"{len(msg.data)} bytes for {msg.width} x {msg.height} points of "
                                f"{dtype.itemsize} bytes (row step {msg.row_step})")
-    if rows == 0:
+    if rows < min_rows:
         raise Rejected("empty")
     if rows > max_rows:
         raise Rejected("too many rows", f"{rows} rows, at most {max_rows}")
@@ -111,8 +111,6 @@ def robot_rows(msg, robots: int, radius: int) -> np.ndarray:
 
 def announcement(msg, robots: int) -> tuple[str, int, np.ndarray]:
     """(batch name, incarnation, robot ids) of a /swarm/batches message, checked."""
-    from swarm_ros.ros.graph import parse_batch_label
-
     label = msg.layout.dim[0].label if msg.layout.dim else ""
     name, incarnation = parse_batch_label(label)
     if not _NODE_NAME.fullmatch(name):
@@ -126,11 +124,9 @@ def announcement(msg, robots: int) -> tuple[str, int, np.ndarray]:
 
 def tick_stamp(header) -> int:
     """A message's tick, from its stamp (whole seconds, as the world stamps them)."""
-    from swarm_ros.ros.graph import tick_of
-
     if header.stamp.nanosec != 0 or header.stamp.sec < 0:
         raise Rejected("stamp", f"{header.stamp.sec} s {header.stamp.nanosec} ns is not a tick")
-    return tick_of(header)
+    return int(header.stamp.sec) // TICK_SECONDS
 
 
 def metrics_tick(msg, labels: tuple[str, ...], newest: int) -> int:

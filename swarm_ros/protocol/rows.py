@@ -124,3 +124,16 @@ def batch_ids(robots: int, batch: int, batches: int) -> np.ndarray:
         raise ValueError(f"batch must be in [0, {batches}), got {batch}")
     bounds = np.linspace(4, robots, batches + 1).round().astype(np.int64)
     return np.arange(bounds[batch], bounds[batch + 1], dtype=np.int64)
+
+
+def batch_label(node_name: str, incarnation: int) -> str:
+    """The label of a batch's announcement on /swarm/batches: ``<node>/<incarnation>`` (0 = its first process)."""
+    return f"{node_name}/{incarnation}"
+
+
+def parse_batch_label(label: str) -> tuple[str, int]:
+    """(node name, incarnation) of an announcement's label; a label without ``/<n>`` is incarnation 0."""
+    name, sep, number = label.rpartition("/")
+    if sep and number.isdigit():
+        return name, int(number)
+    return label, 0

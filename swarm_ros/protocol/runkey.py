@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import secrets
 
-from swarm_ros.app.param_file import ConfigError
+from swarm_ros.core.errors import ConfigError
 
 KEY_ENV = "SWARM_ROS_RUN_KEY"
 MIN_KEY_CHARS = 16

@@ -9,6 +9,7 @@ where a ``PoseArray`` of message objects would cost milliseconds.
 from __future__ import annotations
 
 import array
+import sys
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -22,7 +23,8 @@ from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.shapes import Shape
-from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS, check_fields, point_fields
+from swarm_ros.protocol.checks import cloud
+from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS, point_fields
 
 # -- topics -----------------------------------------------------------------------
 ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
@@ -80,18 +82,6 @@ def decisions_topic(node_name: str) -> str:
     return f"{BATCH_DECISIONS}/{node_name}"
 
 
-def batch_label(node_name: str, incarnation: int) -> str:
-    """The label of a batch's announcement on /swarm/batches: ``<node>/<incarnation>`` (0 = its first process)."""
-    return f"{node_name}/{incarnation}"
-
-
-def parse_batch_label(label: str) -> tuple[str, int]:
-    """(node name, incarnation) of an announcement's label; a label without ``/<n>`` is incarnation 0."""
-    name, sep, number = label.rpartition("/")
-    if sep and number.isdigit():
-        return name, int(number)
-    return label, 0
-
 # OccupancyGrid cell values
 CELL_OFF_SHAPE = -1  # wall or floor outside the shape ("unknown" to map tools)
 CELL_EMPTY = 0  # shape patch without a localized robot
@@ -124,15 +114,12 @@ def make_cloud(rows: np.ndarray, tick: int) -> PointCloud2:
 
 
 def cloud_rows(msg: PointCloud2, dtype: np.dtype) -> np.ndarray:
-    """The records of a PointCloud2 (a read-only view of its bytes).
+    """The records of a PointCloud2 of ``dtype`` rows, none or more (a read-only view of its bytes).
 
     Raises:
-        ValueError: the message's layout is not ``dtype``'s.
+        ValueError: (:class:`swarm_ros.protocol.checks.Rejected`) the message's layout is not ``dtype``'s.
     """
-    check_fields([(f.name, f.offset, f.datatype, f.count) for f in msg.fields], msg.point_step, dtype)
-    if msg.is_bigendian or len(msg.data) != msg.width * msg.height * dtype.itemsize:
-        raise ValueError("point cloud size or byte order does not match its layout")
-    return np.frombuffer(msg.data, dtype=dtype)
+    return cloud(msg, dtype, max_rows=sys.maxsize, min_rows=0)
 
 
 def ids_message(ids: np.ndarray) -> Int64MultiArray:
