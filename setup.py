@@ -20,7 +20,8 @@ setup(
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.xml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),
         (f"share/{PACKAGE}/rviz", sorted(glob("rviz/*.rviz"))),
-        (f"share/{PACKAGE}/config/experiments", sorted(glob("config/experiments/*.yaml") + glob("config/experiments/*.csv"))),
+        (f"share/{PACKAGE}/config/experiments",
+         sorted(glob("config/experiments/*.yaml") + glob("config/experiments/*.csv"))),
     ],
     install_requires=[
         "numpy>=2.0,<2.5",

@@ -156,7 +156,8 @@ def bag_cost(seed: int, repeats: int, tmp: Path) -> None:
         label = "swarm-ros run" + (" (bag)" if bag else " --no-bag")
         print(f"{label:<34} {med[bag][0]:>8.3f} {med[bag][1]:>10.2f}")
     (off, off_whole), (on, on_whole) = med[False], med[True]
-    print(f"bag slows swarm-ros run: run {100 * (on / off - 1):+.0f}%, command {100 * (on_whole / off_whole - 1):+.0f}%")
+    print(f"bag slows swarm-ros run: run {100 * (on / off - 1):+.0f}%, "
+          f"command {100 * (on_whole / off_whole - 1):+.0f}%")
     # The command is what a user waits for. The bag's cost is a fixed ~0.2 s of the monitor's CPU (opening
     # rosbags' type store, closing the file), spent while the world runs: on a 1-second run the run time
     # swings by tens of percent either way with it (measured -23% and +28% on the same code).

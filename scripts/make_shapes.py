@@ -23,8 +23,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from swarm_ros.core.shapes import Shape, write_text_grid  # noqa: E402
 from swarm_ros.core.grid import World  # noqa: E402
+from swarm_ros.core.shapes import Shape, write_text_grid  # noqa: E402
 
 HALF = 30  # grid covers [-HALF, HALF]
 

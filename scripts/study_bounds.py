@@ -85,10 +85,10 @@ def main() -> int:
                     help="the paper experiment's directory (its seeds and our times)")
     ap.add_argument("--out", type=Path, help="also write the table to this file (via a temporary name)")
     args = ap.parse_args()
+    from swarm_ros.app.published import load_reference
+    from swarm_ros.app.results_file import read_results
     from swarm_ros.core import Shape
     from swarm_ros.core.state import RobotState, initial_state
-    from swarm_ros.app.results_file import read_results
-    from swarm_ros.app.published import load_reference
 
     reference = load_reference(args.reference)
     rows = read_results(args.results / "results.csv")

@@ -2,11 +2,13 @@
 
 import numpy as np
 import pytest
+from helpers import disc_shape, params
 
-from conftest import disc_shape, params
 from swarm_ros.core import JoinOutcome, Outcome, RobotState, Shape, Simulation, World
 from swarm_ros.core.rng import STREAM_PRIORITY, draw_bits
 from swarm_ros.core.rules import Decisions
+
+pytestmark = pytest.mark.unit
 
 
 def claims(sim: Simulation, patch_of_robot: dict[int, int]) -> Decisions:

@@ -12,10 +12,12 @@ from diagnostic_msgs.msg import DiagnosticArray, KeyValue  # noqa: E402
 from rclpy.serialization import serialize_message  # noqa: E402
 
 from swarm_ros.core.errors import ConfigError  # noqa: E402
-from swarm_ros.ros import auth  # noqa: E402
-from swarm_ros.ros import graph as msgs  # noqa: E402
 from swarm_ros.protocol.checks import Rejections  # noqa: E402
 from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key  # noqa: E402
+from swarm_ros.ros import auth  # noqa: E402
+from swarm_ros.ros import graph as msgs  # noqa: E402
+
+pytestmark = pytest.mark.unit
 
 KEY = b"k" * 32
 

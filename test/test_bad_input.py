@@ -14,6 +14,8 @@ from PIL import Image
 
 from swarm_ros.app import cli
 
+pytestmark = pytest.mark.process
+
 ROOT = Path(__file__).resolve().parents[1]
 ROW = re.compile(r"^\| (\d+) \| (.+?) \| `(.+?)` \| `(.+?)` \|$")
 EXPERIMENT = "seed: 1\nrepetitions: 2\nvision_radius: 1\nshapes:\n  {shape}: [{sizes}]\n"

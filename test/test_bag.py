@@ -21,6 +21,8 @@ from test_ros_graph import _env, _shape_file
 
 from swarm_ros.protocol.rows import ROBOT_ROW
 
+pytestmark = pytest.mark.process
+
 PY = sys.executable
 
 

@@ -12,6 +12,8 @@ from swarm_ros.app import cli
 from swarm_ros.artifacts import run_dir as output
 from swarm_ros.core.metrics import METRIC_COLUMNS
 
+pytestmark = pytest.mark.process
+
 SUMMARY_KEYS = {"shape", "shape_patches", "robots", "vision_radius", "rules", "join", "crowding", "steps", "seed",
                 "engine", "outcome", "convergence_tick", "localized", "unlocalized", "empty_patches", "wall_seconds"}
 
@@ -176,15 +178,15 @@ def test_a_parameter_files_monitor_section_sets_the_recording_and_flags_override
 
 BAD = [
     (["--shape", "nosuch"], "no such shape file or built-in shape"),
-    (["--robots", "0"], "must be a positive integer"),
-    (["--robots", "-5"], "must be a positive integer"),
+    (["--robots", "2.5"], "invalid integer '2.5'"),
+    (["--robots", "-5"], "robots must be an integer >= 4 (0 = the shape's patch count), got -5"),
     (["--robots", "abc"], "invalid integer"),
     (["--robots", "5000"], "5000 robots do not fit on the 3969 free patches"),
-    (["--robots", "3"], "robots must be >= 4"),
-    (["--vision", "0"], "must be a positive number"),
-    (["--vision", "nan"], "must be a positive number"),
-    (["--max-ticks", "0"], "must be a positive integer"),
-    (["--seed", "-1"], "seed must be in"),
+    (["--robots", "3"], "robots must be an integer >= 4"),
+    (["--vision", "0"], "vision_radius must be a number >= 1 and <= 100, got 0"),
+    (["--vision", "nan"], "vision_radius must be a number >= 1 and <= 100, got nan"),
+    (["--max-ticks", "0"], "max_ticks must be an integer >= 1, got 0"),
+    (["--seed", "-1"], "seed must be an integer >= 0 and <= 9223372036854775807, got -1"),
     (["--world-radius", "27"], "touches the wall"),
     (["--world-radius", "20"], "reaches beyond the walls"),
     (["--frobnicate"], "unrecognized arguments"),

@@ -4,10 +4,12 @@ from dataclasses import asdict
 
 import pytest
 
+from swarm_ros.app.param_file import load_params_file
 from swarm_ros.core.errors import ConfigError
 from swarm_ros.core.params import Settings
-from swarm_ros.app.param_file import load_params_file
 from swarm_ros.core.resources import data_dir
+
+pytestmark = pytest.mark.unit
 
 
 def test_shipped_parameter_file_holds_exactly_the_defaults():

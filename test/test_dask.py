@@ -15,6 +15,8 @@ import pytest
 
 from swarm_ros.app.results_file import read_results
 
+pytestmark = pytest.mark.process
+
 SMALL = """\
 name: small
 seed: 3

@@ -7,6 +7,10 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.unit
+
 ROOT = Path(__file__).resolve().parents[1]
 # Built from pieces so that this file does not match itself.
 FORBIDDEN = ("../" + "shared", "ROS2" + "_NOTES", "MODEL" + ".md", "STYLE" + ".md")

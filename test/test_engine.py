@@ -3,11 +3,13 @@ and equality between the fused in-process step and the batched decide/apply data
 
 import numpy as np
 import pytest
+from helpers import disc_shape, params, run_checked
 
-from conftest import disc_shape, params, run_checked
-from swarm_ros.core.run_result import summary_of
 from swarm_ros.core import METRIC_COLUMNS, Outcome, RobotState, Shape, Simulation, World, decide
 from swarm_ros.core.rules import Decisions
+from swarm_ros.core.run_result import summary_of
+
+pytestmark = pytest.mark.unit
 
 BUILTINS = ["k-letter", "rectangle", "spinner", "star", "tyre", "wrench"]
 

@@ -18,9 +18,11 @@ import yaml
 
 from swarm_ros.app import cli
 from swarm_ros.app.experiment_file import load_experiment, run_seed
-from swarm_ros.app.results_file import RESULT_COLUMNS, ExperimentError, read_results
 from swarm_ros.app.published import ReferenceError, load_reference
 from swarm_ros.app.report import group_stats
+from swarm_ros.app.results_file import RESULT_COLUMNS, ExperimentError, read_results
+
+pytestmark = pytest.mark.process
 
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable

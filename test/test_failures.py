@@ -5,16 +5,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import disc_shape, run_checked
+from helpers import disc_shape, run_checked
 
-from swarm_ros.core.run_result import summary_of
 from swarm_ros.app import cli
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.arbitration import JoinOutcome
 from swarm_ros.core.engine import failing_robots
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.replica import Replica
+from swarm_ros.core.run_result import summary_of
 from swarm_ros.core.state import RobotState, frontier_of
+
+pytestmark = pytest.mark.unit
 
 
 @pytest.fixture(scope="module")

@@ -20,10 +20,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from conftest import Recording, rrd_verify
+import pytest
+from helpers import Recording, rrd_verify
 from test_ros_graph import _env, _processes_mentioning
 
 from swarm_ros.protocol.rows import batch_ids
+
+pytestmark = pytest.mark.process
 
 PY = sys.executable
 ROBOTS = 1036  # the star, ~2700 ticks: a few seconds over the graph
@@ -31,8 +34,8 @@ ROBOTS = 1036  # the star, ~2700 ticks: a few seconds over the graph
 
 def _launch(out: Path, processes: int = 3) -> subprocess.Popen:
     return subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--processes", str(processes),
-                             "--out", str(out), "--quiet", "--on-batch-loss", "remove"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=_env())
+                             "--out", str(out), "--quiet", "--on-batch-loss", "remove"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
 
 
 def _wait_until_running(out: Path, timeout: float = 120) -> Path:
@@ -98,7 +101,8 @@ def test_a_killed_robot_batch_is_noticed_within_2_s_and_the_swarm_repairs_the_sh
     detected, tick = _lost_at((out / "logs" / "world.log").read_text(), "robot_batch_1")
     assert detected - killed_at < 2.0, f"noticed {detected - killed_at:.2f} s after the kill"
     summary = _check_consistent_run(out, batch_ids(ROBOTS, 1, 3))
-    assert summary["restarts"] == [] and (out / "logs" / "launcher.log").read_text().count("started robot_batch_1 ") == 1
+    assert summary["restarts"] == []
+    assert (out / "logs" / "launcher.log").read_text().count("started robot_batch_1 ") == 1
     assert summary["losses"][0]["tick"] == tick + 1  # removed at the end of the tick after the notice
     assert not _processes_mentioning(str(out)), "a process outlived the run"
 

@@ -9,17 +9,20 @@ from __future__ import annotations
 import io
 
 import numpy as np
+import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from swarm_ros.core.params import Settings
+from swarm_ros.app.experiment_file import Experiment, load_experiment
 from swarm_ros.app.param_file import load_params_file
 from swarm_ros.core.errors import SwarmError
-from swarm_ros.core.shapes import Shape
 from swarm_ros.core.grid import World
-from swarm_ros.app.experiment_file import Experiment, load_experiment
+from swarm_ros.core.params import Settings
+from swarm_ros.core.shapes import Shape
+
+pytestmark = pytest.mark.unit
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 

@@ -22,6 +22,8 @@ from swarm_ros.app import cli
 from swarm_ros.core.params import Settings
 from swarm_ros.ros.node_params import params_yaml
 
+pytestmark = pytest.mark.process
+
 ROOT = Path(__file__).resolve().parent.parent
 SOURCES = ("setup.py", "setup.cfg", "package.xml", "pyproject.toml", "resource", "swarm_ros", "shapes", "config",
            "launch", "rviz")
@@ -117,8 +119,8 @@ def test_installed_copy_finds_its_shapes_and_config_through_the_ament_prefix(pre
     assert shapes == str(prefix / "share" / "swarm_ros" / "shapes")
     assert config == str(prefix / "share" / "swarm_ros" / "config")
     # the script colcon installed, run by this machine's Python (its shebang names colcon's own venv)
-    listed = subprocess.run([sys.executable, str(prefix / "lib" / "swarm_ros" / "swarm-ros"), "shapes"], cwd=tmp_path, env=env,
-                            capture_output=True, text=True, timeout=60)
+    listed = subprocess.run([sys.executable, str(prefix / "lib" / "swarm_ros" / "swarm-ros"), "shapes"], cwd=tmp_path,
+                            env=env, capture_output=True, text=True, timeout=60)
     assert listed.returncode == 0, listed.stderr
     assert "star" in listed.stdout and str(prefix / "share" / "swarm_ros" / "shapes" / "star.txt") in listed.stdout
 

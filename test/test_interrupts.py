@@ -13,10 +13,13 @@ import sys
 import time
 from pathlib import Path
 
-from conftest import Recording, rrd_verify
+import pytest
+from helpers import Recording, rrd_verify
 from test_experiment import _children_of, small_config
 
 from swarm_ros.app.results_file import read_results
+
+pytestmark = pytest.mark.process
 
 PY = sys.executable
 

@@ -2,11 +2,13 @@
 
 import numpy as np
 import pytest
+from helpers import disc_shape, params
 
-from conftest import disc_shape, params
 from swarm_ros.core import RobotState, Shape, Simulation, World
 from swarm_ros.core.arbitration import JoinOutcome
 from swarm_ros.core.invariants import InvariantError, check_state, check_tick
+
+pytestmark = pytest.mark.unit
 
 
 def ticked(rules="local"):

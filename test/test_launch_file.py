@@ -16,11 +16,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-from swarm_ros.core.params import Settings
-from swarm_ros.core import Shape
 from swarm_ros.app import launcher
 from swarm_ros.app.launcher import Launch
+from swarm_ros.core import Shape
+from swarm_ros.core.params import Settings
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
+
+pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parent.parent
 LAUNCH_FILE = ROOT / "launch" / "swarm.launch.py"

@@ -9,8 +9,7 @@ protocol run (and are tested) without rclpy.
 from __future__ import annotations
 
 import pytest
-
-from test_core_isolation import module_graph
+from helpers import module_graph
 
 pytestmark = pytest.mark.unit
 
@@ -40,7 +39,8 @@ def wrong_way(graph: dict[str, set[str]]) -> list[str]:
 
 
 def test_every_module_lives_in_a_layer():
-    stray = [m for m in module_graph() if layer_of(m)[0] == "swarm_ros" and m not in ("swarm_ros", "swarm_ros.__main__")]
+    top = ("swarm_ros", "swarm_ros.__main__")
+    stray = [m for m in module_graph() if layer_of(m)[0] == "swarm_ros" and m not in top]
     assert stray == []
 
 

@@ -13,6 +13,8 @@ from swarm_ros.core.legality import illegal, max_step, reach
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rules import Decider, Decisions
 
+pytestmark = pytest.mark.unit
+
 
 def _check(sim: Simulation, d: Decisions) -> np.ndarray:
     s = sim.state

@@ -5,6 +5,8 @@ import pytest
 
 from swarm_ros.core.metrics import Outcome, TickMetrics, convergence_rate, outcome_of, tick_metrics
 
+pytestmark = pytest.mark.unit
+
 
 def test_metrics_from_state_counts():
     # seed, moving outside, moving inside, localized, separated, removed, walking

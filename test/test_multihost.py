@@ -14,14 +14,17 @@ import subprocess
 import sys
 import time
 
-from conftest import SUBNET, host_env, ip_in
+import pytest
+from helpers import SUBNET, host_env, ip_in
 from test_ros_graph import _assert_same_run, _shape_file
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import Settings
-from swarm_ros.ros.node_params import params_yaml
-from swarm_ros.protocol.runkey import KEY_ENV, new_key
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+from swarm_ros.protocol.runkey import KEY_ENV, new_key
+from swarm_ros.ros.node_params import params_yaml
+
+pytestmark = pytest.mark.process
 
 PY = sys.executable
 
@@ -81,7 +84,8 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
                 proc.kill()
             proc.wait()
             log.close()
-    assert {name: p.returncode for name, (p, _) in procs.items()} == dict.fromkeys(procs, 0), _logs(tmp_path, procs, link)
+    codes = {name: p.returncode for name, (p, _) in procs.items()}
+    assert codes == dict.fromkeys(procs, 0), _logs(tmp_path, procs, link)
     world_log = (tmp_path / "world.log").read_text()
     assert "robot_batch_0 hosts" in world_log and "robot_batch_1 hosts" in world_log
     assert not any("public key" in (tmp_path / f"{name}.log").read_text() for name in procs)  # the run's key

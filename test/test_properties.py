@@ -5,12 +5,15 @@ reproducible and independent of how robots are split into batches.
 """
 
 import numpy as np
+import pytest
+from helpers import run_checked
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-
-from conftest import run_checked
-from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
 from test_engine import _final, run_in_batches
+
+from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
+
+pytestmark = pytest.mark.unit
 
 STEPS = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)]
 

@@ -18,13 +18,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Recording, rrd_verify
+from helpers import Recording, rrd_verify
 
 from swarm_ros.app import cli
+from swarm_ros.artifacts.rerun_recording import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
 from swarm_ros.core.engine import Simulation
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.state import RobotState
-from swarm_ros.artifacts.rerun_recording import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
+
+pytestmark = pytest.mark.process
 
 FLAGS = ["--shape", "rectangle", "--robots", "460", "--seed", "3", "--quiet"]  # complete_with_extras, 716 ticks
 

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import params
 
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider, Decisions, decide
 from swarm_ros.core.state import RobotState
 
-from conftest import params
+pytestmark = pytest.mark.unit
 
 
 def _feed(replica: Replica, sim: Simulation, ids: np.ndarray) -> None:

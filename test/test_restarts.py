@@ -21,14 +21,16 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import Recording, rrd_verify
+from helpers import Recording, rrd_verify
 from test_ros_graph import _env, _processes_mentioning
 
 from swarm_ros.app import cli
+from swarm_ros.app.launcher import Launch
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.params import Settings
-from swarm_ros.app.launcher import Launch
 from swarm_ros.ros.shm import shm_locks
+
+pytestmark = pytest.mark.process
 
 PY = sys.executable
 # The star under the local join rule: ~3600 ticks, several seconds over the graph, long enough to kill in

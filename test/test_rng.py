@@ -6,6 +6,8 @@ from scipy import stats
 
 from swarm_ros.core.rng import STREAM_TURN, STREAM_WIGGLE, draw_bits, draw_uniform, uniform_array
 
+pytestmark = pytest.mark.unit
+
 MASK = (1 << 64) - 1
 
 

@@ -17,10 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bagcheck import assert_bag_holds_run
-from conftest import Recording, rrd_verify
+from helpers import Recording, rrd_verify
 
 from swarm_ros.app.cli import main as cli_main
 from swarm_ros.app.launcher import Child, stop
+
+pytestmark = pytest.mark.process
 
 PY = sys.executable
 TIMEOUT = 240
@@ -132,7 +134,8 @@ def test_ros_graph_equals_in_process_engine(references, tmp_path, case, processe
     assert done.returncode == 0, done.stderr
     _assert_same_run(ref, out)
     assert sorted(p.name for p in (out / "logs").iterdir()) == sorted(
-        ["launcher.log", "monitor.log", "world.log", "params.yaml", "ros"] + [f"robot_batch_{k}.log" for k in range(processes)])
+        ["launcher.log", "monitor.log", "world.log", "params.yaml", "ros"]
+        + [f"robot_batch_{k}.log" for k in range(processes)])
     assert not _processes_mentioning(str(out)), "a node process outlived the run"
 
 
@@ -295,14 +298,14 @@ def test_run_refuses_bad_input_in_one_line_before_starting_anything(tmp_path, ar
 
 @pytest.mark.parametrize("node,ros_args,message", [
     ("world", ["-p", "bogus:=1"], "swarm_ros world: error: node 'world': unknown parameter 'bogus'"),
-    ("robot_batch", ["-p", "robots:=abc"], "parameter 'robots' must be an integer, got 'abc'"),
+    ("robot_batch", ["-p", "robots:=abc"], "robots must be an integer >= 4 (0 = the shape's patch count), got 'abc'"),
     ("monitor", ["--params-file", "/nonexistent.yaml"], "swarm_ros monitor: error: cannot start ROS 2"),
     ("robot_batch", ["-p", "robot_ids:=0-9"], "robot_ids must be within 4..1035"),
     ("world", ["-p", "shape:=nope"], "nope: no such shape file or built-in shape"),
     ("monitor", ["-p", "record_every:=0"], "record_every must be an integer >= 1, got 0"),
     ("monitor", ["-p", "viewer_url:=localhost:9876"], "viewer URL must start with one of rerun://"),
     ("world", ["-p", "rules:=fast"], "rules must be one of paper, local, literal, got 'fast'"),
-    ("robot_batch", ["-p", "steps:=two"], "steps must be one of one, literal, got 'two'"),
+    ("robot_batch", ["-p", "steps:=two"], "steps must be one of one, literal ('' = the rule set's own), got 'two'"),
 ])
 def test_nodes_refuse_bad_parameters_in_one_line(node, ros_args, message):
     done = subprocess.run([PY, "-m", f"swarm_ros.nodes.{node}", "--ros-args", *ros_args], capture_output=True,

@@ -14,14 +14,15 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
-from swarm_ros.core.errors import ConfigError
-from swarm_ros.core.params import Settings
 from swarm_ros.core import RunParams, Shape, Simulation
-from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.errors import ConfigError
 from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.core.params import Settings
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, robot_rows
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.node_params import read_parameters
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, robot_rows
+
+pytestmark = pytest.mark.process
 
 
 def test_robot_rows_survive_serialization_exactly_and_carry_the_tick():
@@ -83,10 +84,10 @@ def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
 @pytest.mark.parametrize("kind,values,message", [
     ("world", {"bogus": 1}, "node 'world': unknown parameter 'bogus'"),
     ("world", {"batch": 1}, "unknown parameter 'batch'"),
-    ("robot_batch", {"robots": "many"}, "parameter 'robots' must be an integer, got 'many'"),
-    ("monitor", {"overwrite": 1}, "parameter 'overwrite' must be a boolean, got 1"),
-    ("monitor", {"seed": 1.5}, "parameter 'seed' must be an integer, got 1.5"),
-    ("robot_batch", {"robot_ids": [4, 5]}, "parameter 'robot_ids' must be a string, got a value of type"),
+    ("robot_batch", {"robots": "many"}, "robots must be an integer >= 4 \\(0 = the shape's patch count\\), got 'many'"),
+    ("monitor", {"overwrite": 1}, "overwrite must be a boolean, got 1"),
+    ("monitor", {"seed": 1.5}, "seed must be an integer >= 0 and <= 9223372036854775807, got 1.5"),
+    ("robot_batch", {"robot_ids": [4, 5]}, "robot_ids must be a string, got "),
 ])
 def test_unknown_or_ill_typed_parameters_are_refused(ros_context, kind, values, message):
     node = _node(ros_context, kind, **values)
@@ -96,16 +97,16 @@ def test_unknown_or_ill_typed_parameters_are_refused(ros_context, kind, values, 
 
 
 @pytest.mark.parametrize("kind,values,message", [
-    ("world", {"monitor_window": -5}, "monitor_window must be an integer >= 0, got -5"),
-    ("world", {"start_timeout": 0}, "start_timeout must be a number > 0, got 0.0"),
+    ("world", {"monitor_window": -5}, "monitor_window must be an integer >= 0 (0 = do not wait for one), got -5"),
+    ("world", {"start_timeout": 0}, "start_timeout must be a number > 0, got 0"),
     ("world", {"on_batch_loss": "ignore"}, "on_batch_loss must be one of restart, remove, got 'ignore'"),
     ("world", {"max_restarts": -1}, "max_restarts must be an integer >= 0, got -1"),
-    ("world", {"restart_timeout": -2.0}, "restart_timeout must be a number > 0, got -2.0"),
+    ("world", {"restart_timeout": -2.0}, "restart_timeout must be a number > 0, got -2"),
     ("robot_batch", {"incarnation": -1}, "incarnation must be an integer >= 0, got -1"),
     ("monitor", {"record_every": 0}, "record_every must be an integer >= 1, got 0"),
 ])
 def test_node_parameters_out_of_range_are_refused(ros_context, kind, values, message):
     node = _node(ros_context, kind, **values)
-    with pytest.raises(ParameterError, match=re.escape(message)):
+    with pytest.raises(ConfigError, match=re.escape(f"node '{kind}': {message}")):
         read_parameters(node, kind)
     node.destroy_node()

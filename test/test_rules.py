@@ -5,14 +5,16 @@ import math
 
 import numpy as np
 import pytest
+from helpers import disc_shape, params
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import disc_shape, params
 from swarm_ros.core import RobotState, Shape, Simulation, World, decide
 from swarm_ros.core.invariants import nearest_frontier_patch
 from swarm_ros.core.rules import Decisions, nearest_frontier
 from swarm_ros.core.state import SwarmState, frontier_blocks_of, initial_state
+
+pytestmark = pytest.mark.unit
 
 RULES = ["paper", "local", "literal"]
 

@@ -20,17 +20,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import host_env
+from helpers import host_env
 
 from swarm_ros.app import cli
+from swarm_ros.app.launcher import DomainLock, node_command, node_env
 from swarm_ros.core.params import Settings
 from swarm_ros.core.state import RobotState
-from swarm_ros.app.launcher import DomainLock, node_command, node_env
-from swarm_ros.ros.node_params import params_yaml
-from swarm_ros.protocol.runkey import KEY_ENV
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_ids, batch_label, decision_rows
+from swarm_ros.protocol.runkey import KEY_ENV
+from swarm_ros.ros.node_params import params_yaml
 
 pytest.importorskip("rclpy")
+
+pytestmark = pytest.mark.process
 
 PY = sys.executable
 ROBOTS, SEED = 200, 4
@@ -47,9 +49,9 @@ class _Batches:
 
         from swarm_ros.core.replica import Replica
         from swarm_ros.core.rules import Decider
+        from swarm_ros.protocol.checks import Rejections
         from swarm_ros.ros import graph as msgs
         from swarm_ros.ros.auth import AUTH_QOS, Gate, Signer, auth_topic
-        from swarm_ros.protocol.checks import Rejections
 
         self.msgs, self.node, self.params, self.shape = msgs, node, params, shape
         self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
@@ -104,8 +106,7 @@ class _Batches:
         self._decide()
 
     def _on_robots(self, msg) -> None:
-        from swarm_ros.protocol.checks import Rejected
-        from swarm_ros.ros.runtime import apply_robots, checked_robots
+        from swarm_ros.protocol.checks import Rejected, apply_robots, checked_robots
 
         if self.replica.tick < 0:
             return

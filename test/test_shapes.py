@@ -4,15 +4,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import STUDY_PATCHES, disc_shape
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from PIL import Image
 from scipy import ndimage
 
-from conftest import STUDY_PATCHES, disc_shape
 from swarm_ros.core import Shape, ShapeError, World, builtin_shapes
 from swarm_ros.core.shapes import read_text_grid, regions, write_text_grid
+
+pytestmark = pytest.mark.unit
 
 BUILTINS = sorted(STUDY_PATCHES)
 

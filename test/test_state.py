@@ -10,6 +10,8 @@ from scipy import ndimage
 from swarm_ros.core import ParameterError, RobotState, Shape
 from swarm_ros.core.state import frontier_of, initial_state, near_any
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.fixture(scope="module")
 def star():

@@ -24,6 +24,8 @@ from swarm_ros.protocol.rows import (
     robot_rows,
 )
 
+pytestmark = pytest.mark.unit
+
 
 def test_row_layouts_are_the_documented_point_fields():
     assert point_fields(ROBOT_ROW) == [("x", 0, FLOAT64, 1), ("y", 8, FLOAT64, 1), ("z", 16, FLOAT64, 1),

@@ -3,6 +3,8 @@ import pytest
 
 from swarm_ros.core import ParameterError, World
 
+pytestmark = pytest.mark.unit
+
 
 def test_default_world_is_65_by_65_with_a_wall_ring():
     w = World()

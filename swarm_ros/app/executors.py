@@ -21,9 +21,7 @@ import numpy as np
 from swarm_ros.app.experiment_file import RunSpec
 from swarm_ros.app.results_file import ExperimentError, result_row
 from swarm_ros.core.grid import World
-from swarm_ros.core.run_result import ENGINES
 from swarm_ros.core.shapes import Shape
-
 
 EXECUTORS = ("local", "dask")  #: where the runs go: worker processes here, or a Dask cluster
 _CONNECT_TIMEOUT = "5s"  # to reach a Dask scheduler given by address

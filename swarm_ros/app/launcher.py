@@ -41,18 +41,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from swarm_ros.core.params import Settings, node_defaults
-from swarm_ros.protocol.plan import graph_plan
 from swarm_ros.artifacts.recording_options import RecordingOptions
+from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
 from swarm_ros.core.errors import SwarmError
-from swarm_ros.core.params import RunParams
+from swarm_ros.core.params import RunParams, Settings, node_defaults
 from swarm_ros.core.shapes import Shape
+from swarm_ros.core.signals import PARENT_ENV, StopFlag, process_age
+from swarm_ros.protocol.plan import graph_plan
+from swarm_ros.protocol.runkey import KEY_ENV, run_key, with_run_key
 from swarm_ros.ros.dds import apply_dds_defaults
 from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.ros.shm import clean_shm, shm_locks
-from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
-from swarm_ros.protocol.runkey import KEY_ENV, run_key, with_run_key
-from swarm_ros.core.signals import PARENT_ENV, StopFlag, process_age
 
 DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
 # SIGTERM first, not SIGINT: a process started from a background job inherits SIGINT *ignored*, and a node

@@ -30,6 +30,7 @@ import yaml
 from swarm_ros.core.errors import ConfigError, ParameterError, SwarmError
 from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETER, Settings
 
+
 def read_yaml(path: Path, what: str, error: type[SwarmError]) -> object:
     """The YAML document in ``path``, or ``error`` with one line naming the file (unreadable, bad YAML)."""
     try:

@@ -44,17 +44,18 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import stats as st  # noqa: E402
 
+from swarm_ros.app.published import Reference, load_reference  # noqa: E402
+from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
+from swarm_ros.artifacts.run_dir import public_mode  # noqa: E402
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome  # noqa: E402
 from swarm_ros.core.rulesets import RULE_SETS, RuleSet  # noqa: E402
-from swarm_ros.artifacts.run_dir import public_mode  # noqa: E402
-from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, read_results  # noqa: E402
-from swarm_ros.app.published import Reference, load_reference  # noqa: E402
 
 STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"
 OUTCOMES = tuple(o.value for o in Outcome)
 STATS_COLUMNS = ("shape", "shape_patches", "robots", "vision_radius", "rules", "runs", "mean_convergence_tick",
                  "sd_convergence_tick", "ci95_low", "ci95_high", "mean_localized", "mean_unlocalized",
-                 "mean_separated", "mean_empty_patches", "mean_lost_robots", *OUTCOMES, "completed_fraction", "mean_convergence_rate")
+                 "mean_separated", "mean_empty_patches", "mean_lost_robots", *OUTCOMES, "completed_fraction",
+                 "mean_convergence_rate")
 _COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000")
 
 
@@ -205,9 +206,9 @@ def _save(fig: plt.Figure, path: Path) -> None:
 def _curve(row: dict) -> np.ndarray:
     """Per-tick metrics of the run in ``row``, re-run in process (checked against the row)."""
     from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.grid import World
     from swarm_ros.core.params import RunParams
     from swarm_ros.core.shapes import Shape
-    from swarm_ros.core.grid import World
 
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
     sim = Simulation(shape, RunParams(robots=row["robots"], vision_radius=row["vision_radius"], seed=row["seed"],

@@ -292,7 +292,10 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
         (tmp / "summary.json").write_text(summary_json(record.summary), encoding="utf-8")
         (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
-        from swarm_ros.artifacts.plots import save_convergence_png, save_final_png  # matplotlib: only when a run is written
+        from swarm_ros.artifacts.plots import (  # matplotlib: only when a run is written
+            save_convergence_png,
+            save_final_png,
+        )
 
         save_final_png(record, tmp / "final.png")
         save_convergence_png(record, tmp / "convergence.png")

@@ -21,9 +21,8 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
-from swarm_ros.core.arbitration import resolve_kernel
-from swarm_ros.core.arbitration import vacate
 from swarm_ros.core import metrics
+from swarm_ros.core.arbitration import resolve_kernel, vacate
 from swarm_ros.core.metrics import (
     END_EXTRAS,
     METRIC_COLUMNS,

@@ -111,7 +111,8 @@ def check_tick(prev: SwarmState, sim: Simulation) -> None:
     ids, claim, outcome = sim.last_joins()
     _require(bool(np.all(np.isin(prev.state[ids], _MOVING))), t, "a non-moving robot decided")
     valid = {int(o) for o in JoinOutcome}
-    _require(set(np.unique(outcome).tolist()) <= valid, t, "join outcome outside {success, already complete, incomplete}")
+    _require(set(np.unique(outcome).tolist()) <= valid, t,
+             "join outcome outside {success, already complete, incomplete}")
     won = outcome == JoinOutcome.SUCCESS
     kept = won & ~removed[ids]  # a robot may join and then fail at the end of the same tick
     _require(int(kept.sum()) == after - before, t, "successful joins differ from new localized robots")

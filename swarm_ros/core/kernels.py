@@ -51,10 +51,10 @@ def compile_kernels() -> None:
     """Compile every kernel into numba's cache: two ticks of the graph's code path and a few of the
     in-process engine's, on the star, with the default parameters (the kernels' types do not depend on them)."""
     from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.grid import World
     from swarm_ros.core.params import RunParams
     from swarm_ros.core.shapes import Shape
     from swarm_ros.core.warmup import warm_up
-    from swarm_ros.core.grid import World
 
     shape = Shape.load("star", World())
     params = RunParams(robots=shape.patches)

@@ -18,7 +18,6 @@ import numpy as np
 
 from swarm_ros.core.params import RUN_PARAMETERS
 
-
 SEEDS = 4
 
 

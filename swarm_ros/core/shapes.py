@@ -32,8 +32,9 @@ import cc3d
 import numpy as np
 
 from swarm_ros.core.errors import ShapeError
-from swarm_ros.core.resources import data_dir
 from swarm_ros.core.grid import World
+from swarm_ros.core.resources import data_dir
+
 
 def regions(mask: np.ndarray, connectivity: int) -> tuple[np.ndarray, int]:
     """The connected regions of a 2-D bool grid: labels (0 where unset, 1..n) and n.

@@ -16,7 +16,6 @@ and records only that in the bag.
 from __future__ import annotations
 
 import importlib
-import math
 import threading
 import time
 from pathlib import Path
@@ -27,12 +26,6 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, tick_metrics
-from swarm_ros.core.replica import Replica
-from swarm_ros.core.state import STATE_COUNT, RobotState
-from swarm_ros.core.warmup import warm_up
-from swarm_ros.core.run_result import ROS2, RunRecord, summarize
-from swarm_ros.protocol.rows import DECISION_ROW
 from swarm_ros.artifacts.run_dir import (
     check_leftovers,
     check_out_dir,
@@ -41,21 +34,20 @@ from swarm_ros.artifacts.run_dir import (
     partial_recording,
     write_run,
 )
+from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, tick_metrics
+from swarm_ros.core.replica import Replica
+from swarm_ros.core.run_result import ROS2, RunRecord, summarize
+from swarm_ros.core.state import STATE_COUNT, RobotState
+from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks as guard
+from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
+from swarm_ros.protocol.rows import DECISION_ROW
+from swarm_ros.protocol.status import RunFailed, WorldReport
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
-from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.ros.bag_writer import TOPICS, BagRecorder, reader_qos
 from swarm_ros.ros.node_params import make_node, read_parameters
-from swarm_ros.ros.runtime import (
-    EXIT_INTERRUPTED,
-    EXIT_ORPHANED,
-    RunFailed,
-    apply_robots,
-    checked_robots,
-    handle_missed,
-    run_node,
-)
+from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED, handle_missed, run_node
 
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
 _MATCH_POLL = 0.005  # seconds between looks at the readers' matches, before the liveliness writer appears
@@ -80,17 +72,14 @@ class MonitorNode:
         self.losses: list[tuple[int, int]] = []  # (tick, robots removed), seen as rows turning 'removed'
         self.rows: list[tuple[int, ...]] = []
         self.outcome = None
-        self.world_outcome: str | None = None
+        self.world = WorldReport()  # what the world's status said: restarts, its clock, its drops, the outcome
         self.world_end: tuple[float, int] | None = None  # (time.monotonic(), tick) when the world's outcome came
         self.ended_at: float | None = None
         self.started_at: float | None = None
         self.finished = False
         self.written: Path | None = None
-        self.restarts: list[tuple[int, str]] = []  # (tick, batch) from the world's status
-        self.world_times: dict[str, float] = {}  # wall_seconds, startup_seconds from the world's status
         self.decided_rows: dict[int, int] = {}  # tick -> decision rows seen (with the bag on)
         self.rejections = Rejections(node.get_logger())
-        self.world_rejected = 0  # messages the world dropped, from its status
 
         self.signer, self.gate = open_auth(node, "monitor", self.rejections)
         self.pub_metrics = self.signer.publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
@@ -196,34 +185,19 @@ class MonitorNode:
         return int((self.replica.state.state == RobotState.REMOVED).sum())
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        values = msgs.status_values(msg)
-        restarts = msgs.restarts_of(values.get("restarts", ""))
-        for tick, node in restarts[len(self.restarts):]:  # the list only grows
+        for tick, node in self.world.update(msgs.status_values(msg)):
             self.node.get_logger().warn(f"{node} was restarted at tick {tick}")
             if self.recorder is not None and not self.recorder.closed:
                 self.recorder.event(tick, f"{node} restarted at tick {tick}: a new process took over its robots")
-        self.restarts = max(self.restarts, restarts, key=len)
-        for key in ("wall_seconds", "startup_seconds"):  # the world's clock: tick 0 to its outcome
-            try:
-                seconds = float(values[key])
-            except (KeyError, ValueError):
-                continue
-            if math.isfinite(seconds) and seconds >= 0:
-                self.world_times[key] = seconds
-        if values.get("rejected_messages", "").isdigit():
-            self.world_rejected = max(self.world_rejected, int(values["rejected_messages"]))
-        outcome = values.get("outcome")
-        if outcome not in (None, "starting", "running"):
-            self.world_outcome = outcome
-            if self.world_end is None:
-                self.world_end = (time.monotonic(), msgs.tick_of(msg.header))
+        if self.world.outcome is not None and self.world_end is None:
+            self.world_end = (time.monotonic(), msgs.tick_of(msg.header))
 
     def poll(self) -> None:
         self.gate.expire()
         if self.outcome is None:
             self._check_world_end()
             return
-        if self.world_outcome is None and time.monotonic() - self.ended_at < _STATUS_WAIT:
+        if self.world.outcome is None and time.monotonic() - self.ended_at < _STATUS_WAIT:
             return
         if self.bag is not None and not self._bag_complete() and time.monotonic() - self.ended_at < _BAG_WAIT:
             return
@@ -232,8 +206,8 @@ class MonitorNode:
         if missed:
             self.node.get_logger().warn(f"{missed} messages were still in the readers, not handed over by the "
                                         f"executor; handled before writing the run")
-        if self.world_outcome is not None and self.world_outcome != self.outcome.value:
-            raise RunFailed(f"the world reports '{self.world_outcome}', the monitor counted "
+        if self.world.outcome is not None and self.world.outcome != self.outcome.value:
+            raise RunFailed(f"the world reports '{self.world.outcome}', the monitor counted "
                             f"'{self.outcome.value}' at tick {self.replica.tick}")
         if self.recorder is not None:  # closed only now: the world's last status may add restart events
             self.recorder.outcome(self.outcome.value, TickMetrics(*self.rows[-1]))
@@ -249,7 +223,7 @@ class MonitorNode:
             return
         handle_missed(self.node)
         if self.outcome is None:
-            raise RunFailed(f"the world ended the run ('{self.world_outcome}') at tick {self.world_end[1]}, but the "
+            raise RunFailed(f"the world ended the run ('{self.world.outcome}') at tick {self.world_end[1]}, but the "
                             f"robots' messages reached the monitor only up to tick {self.replica.tick} within "
                             f"{_STATUS_WAIT:g} s")
 
@@ -259,11 +233,11 @@ class MonitorNode:
         final = tick_metrics(self.replica.tick, np.bincount(self.replica.state.state, minlength=STATE_COUNT),
                              self.shape.patches)
         summary = summarize(shape=self.shape, params=self.params, state=self.replica.state, final=final,
-                            outcome=outcome, engine=ROS2, wall_seconds=self.world_times.get("wall_seconds", self.wall),
-                            losses=self.losses, restarts=self.restarts,
-                            overhead={"startup_seconds": self.world_times.get("startup_seconds"),
+                            outcome=outcome, engine=ROS2, wall_seconds=self.world.times.get("wall_seconds", self.wall),
+                            losses=self.losses, restarts=self.world.restarts,
+                            overhead={"startup_seconds": self.world.times.get("startup_seconds"),
                                       "shutdown_seconds": None},  # swarm-ros run fills it in at the end
-                            rejected={"world": self.world_rejected, "monitor": self.rejections.total})
+                            rejected={"world": self.world.rejected, "monitor": self.rejections.total})
         record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
                            outcome=outcome, summary=summary)
         self.written = write_run(self.out, record, overwrite=self.overwrite,

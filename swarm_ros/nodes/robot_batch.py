@@ -31,18 +31,18 @@ from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.warmup import warm_up
-from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, batch_label, decision_rows, format_ranges, parse_ranges
 from swarm_ros.protocol import checks as guard
+from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
+from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, batch_label, decision_rows, format_ranges, parse_ranges
+from swarm_ros.protocol.status import RunFailed, has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
-from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.ros.node_params import make_node, read_parameters
-from swarm_ros.ros.runtime import RunFailed, apply_robots, checked_robots, run_node
+from swarm_ros.ros.runtime import run_node
 
 _LINGER = 2.0  # seconds, at most, for the last decisions to be acknowledged before exiting
 _NO_WAIT = Duration(seconds=0)
 
-RUNNING_STATES = ("starting", "running")
 
 
 class RobotBatchNode:
@@ -155,7 +155,7 @@ class RobotBatchNode:
             self.pub_decisions.publish(msgs.make_cloud(decision_rows(decisions), tick))
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        if self.ended_at is None and msgs.status_values(msg).get("outcome", "running") not in RUNNING_STATES:
+        if self.ended_at is None and has_ended(msgs.status_values(msg).get("outcome")):
             self.ended_at = time.monotonic()
             self.gate.settle()  # its log says what it dropped
 

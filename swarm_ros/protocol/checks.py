@@ -15,7 +15,9 @@ from collections import Counter
 
 import numpy as np
 
+from swarm_ros.core.replica import Replica
 from swarm_ros.protocol.rows import PATCH_METRES, ROBOT_ROW, TICK_SECONDS, check_fields, parse_batch_label
+from swarm_ros.protocol.status import RunFailed
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
 _NODE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")  # a ROS node name, as batch names are
@@ -142,3 +144,30 @@ def metrics_tick(msg, labels: tuple[str, ...], newest: int) -> int:
     if not 0 <= tick <= newest:
         raise Rejected("future tick", f"metrics of tick {tick}; the world published up to {newest}")
     return tick
+
+
+def checked_robots(replica: Replica, msg, radius: int) -> tuple[int, np.ndarray]:
+    """(tick, rows) of a /swarm/robots message, checked as a message (:func:`robot_rows`).
+
+    Raises:
+        Rejected: malformed, out of range or outside the world.
+    """
+    tick = tick_stamp(msg.header)
+    return tick, robot_rows(msg, replica.state.robots, radius)
+
+
+def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
+    """Apply checked rows of ``tick`` (:func:`checked_robots`) to ``replica``.
+
+    Raises:
+        Rejected: they cannot be the world's next rows (:meth:`Replica.inconsistent`); the
+            replica is unchanged.
+    """
+    x, y = rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES
+    why = replica.inconsistent(tick, rows["id"], rows["state"], x, y)
+    if why is not None:
+        raise Rejected("inconsistent rows", why)
+    try:
+        replica.update(tick, rows["id"], rows["state"], x, y, rows["heading"])
+    except ValueError as exc:  # checked above: a gap in those checks
+        raise RunFailed(str(exc)) from None

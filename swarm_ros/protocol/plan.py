@@ -1,4 +1,5 @@
-"""The graph's processes: which nodes a run starts, in which order, and what each is told beyond the run.
+"""The graph's processes and topics: which nodes a run starts, in which order, what each is told beyond the
+run, and the topics they talk on (their types and QoS: ``swarm_ros.ros.graph``; docs/ros_graph.md).
 
 ``swarm-ros run`` (``swarm_ros.app.launcher``) and ``launch/swarm.launch.py`` both start
 exactly this graph: a monitor first (so that it reads from tick 0), ``processes`` robot
@@ -20,3 +21,33 @@ def graph_plan(processes: int) -> list[tuple[str, str, dict[str, int]]]:
     return [(MONITOR, MONITOR, {}),
             *[(batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes}) for k in range(processes)],
             (WORLD, WORLD, {})]
+
+
+# -- topics -----------------------------------------------------------------------
+ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
+DECISIONS = "/swarm/decisions"  # world -> all: the decisions it applied in the tick (PointCloud2)
+BATCH_DECISIONS = "/swarm/decisions"  # /swarm/decisions/<batch>: one batch -> world: its robots' decisions
+BATCHES = "/swarm/batches"  # robot batches -> world: the ids each batch hosts (Int64MultiArray)
+SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
+OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
+STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
+METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
+CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
+SNAPSHOT = "/swarm/snapshot"  # /swarm/snapshot/<batch>: world -> one batch: every robot's row at a tick (PointCloud2)
+ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
+#: What the monitor reads, bag or no bag: its bag records these and its own METRICS. The world starts
+#: tick 0 once it has discovered the monitor's reader of each (so the bag misses none of their messages).
+MONITOR_READS = (ROBOTS, DECISIONS, OCCUPANCY, SHAPE, STATUS, CLOCK)
+
+
+def alive_topic(node_name: str) -> str:
+    return f"{ALIVE}/{node_name}"
+
+
+def snapshot_topic(node_name: str) -> str:
+    return f"{SNAPSHOT}/{node_name}"
+
+
+def decisions_topic(node_name: str) -> str:
+    """A batch's own decisions topic: the world takes a robot's decisions only from its batch's topic."""
+    return f"{BATCH_DECISIONS}/{node_name}"

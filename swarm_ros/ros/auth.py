@@ -41,9 +41,9 @@ from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 
-from swarm_ros.ros import graph as msgs
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
+from swarm_ros.ros import graph as msgs
 
 AUTH = "/swarm/auth"
 #: The vouchers a late reader needs: the world's rows keep ROBOTS_DEPTH ticks of history, one voucher a tick.

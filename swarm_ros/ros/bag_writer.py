@@ -18,19 +18,18 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
-
 from typing import TYPE_CHECKING
-
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import OccupancyGrid
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.artifacts.run_dir import BAG_DIR
 from swarm_ros.ros import graph as msgs
+
 #: The recorded topics: name -> (message class, QoS its publisher offers).
 TOPICS: dict[str, tuple[type, QoSProfile]] = {
     msgs.ROBOTS: (PointCloud2, msgs.ROBOTS_QOS),

@@ -24,24 +24,26 @@ from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.shapes import Shape
 from swarm_ros.protocol.checks import cloud
+from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
+    ALIVE,
+    BATCH_DECISIONS,
+    BATCHES,
+    CLOCK,
+    DECISIONS,
+    METRICS,
+    MONITOR_READS,
+    OCCUPANCY,
+    ROBOTS,
+    SHAPE,
+    SNAPSHOT,
+    STATUS,
+    alive_topic,
+    decisions_topic,
+    snapshot_topic,
+)
 from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS, point_fields
 
-# -- topics -----------------------------------------------------------------------
-ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
-DECISIONS = "/swarm/decisions"  # world -> all: the decisions it applied in the tick (PointCloud2)
-BATCH_DECISIONS = "/swarm/decisions"  # /swarm/decisions/<batch>: one batch -> world: its robots' decisions
-BATCHES = "/swarm/batches"  # robot batches -> world: the ids each batch hosts (Int64MultiArray)
-SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
-OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
-STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
-METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
-CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
-SNAPSHOT = "/swarm/snapshot"  # /swarm/snapshot/<batch>: world -> one batch: every robot's row at a tick (PointCloud2)
-ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
-#: What the monitor reads, bag or no bag: its bag records these and its own METRICS. The world starts
-#: tick 0 once it has discovered the monitor's reader of each (so the bag misses none of their messages).
-MONITOR_READS = (ROBOTS, DECISIONS, OCCUPANCY, SHAPE, STATUS, CLOCK)
-
+# -- topics: swarm_ros.protocol.plan names them (a contract between processes) -------------------
 # -- QoS ----------------------------------------------------------------------------
 #: Lockstep traffic: nothing may be lost, and a reader that matches late (a monitor
 #: started after the world) still gets the ticks it missed, up to the depth.
@@ -67,19 +69,6 @@ LIVELINESS_LEASE_S = 1.0
 ALIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE, liveliness=LivelinessPolicy.AUTOMATIC,
                        liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE_S))
-
-
-def alive_topic(node_name: str) -> str:
-    return f"{ALIVE}/{node_name}"
-
-
-def snapshot_topic(node_name: str) -> str:
-    return f"{SNAPSHOT}/{node_name}"
-
-
-def decisions_topic(node_name: str) -> str:
-    """A batch's own decisions topic: the world takes a robot's decisions only from its batch's topic."""
-    return f"{BATCH_DECISIONS}/{node_name}"
 
 
 # OccupancyGrid cell values
@@ -176,21 +165,6 @@ def status_message(tick: int, outcome: str, message: str, level: bytes = Diagnos
 
 def status_values(msg: DiagnosticArray) -> dict[str, str]:
     return {kv.key: kv.value for s in msg.status for kv in s.values}
-
-
-def restarts_text(restarts: list[tuple[int, str]]) -> str:
-    """The ``restarts`` value of /swarm/status: ``tick:node`` items joined by ``;``, oldest first."""
-    return ";".join(f"{tick}:{node}" for tick, node in restarts)
-
-
-def restarts_of(text: str) -> list[tuple[int, str]]:
-    """The inverse of :func:`restarts_text`; malformed items are skipped."""
-    out = []
-    for item in text.split(";"):
-        tick, sep, node = item.partition(":")
-        if sep and tick.isdigit() and node:
-            out.append((int(tick), node))
-    return out
 
 
 def clock_message(tick: int) -> Clock:

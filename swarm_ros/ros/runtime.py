@@ -14,27 +14,19 @@ import time
 from collections.abc import Callable
 from typing import Protocol
 
-import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import get_default_context
-from sensor_msgs.msg import PointCloud2
 
 from swarm_ros.core.errors import SwarmError
-from swarm_ros.core.replica import Replica
 from swarm_ros.core.signals import PARENT_ENV, StopFlag, process_age
-from swarm_ros.protocol.rows import PATCH_METRES
-from swarm_ros.protocol import checks as guard
+from swarm_ros.protocol.status import RunFailed
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_ORPHANED = 0, 1, 2, 130, 129
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
-
-
-class RunFailed(Exception):
-    """The run cannot go on (not bad input: something the graph did)."""
 
 
 class SwarmNode(Protocol):
@@ -50,33 +42,6 @@ class SwarmNode(Protocol):
 
     def close(self, code: int) -> None:
         """Called once on the way out with the exit code (release files, mark a stopped run)."""
-
-
-def checked_robots(replica: Replica, msg: PointCloud2, radius: int) -> tuple[int, np.ndarray]:
-    """(tick, rows) of a /swarm/robots message, checked as a message (:func:`guard.robot_rows`).
-
-    Raises:
-        Rejected: malformed, out of range or outside the world.
-    """
-    tick = guard.tick_stamp(msg.header)
-    return tick, guard.robot_rows(msg, replica.state.robots, radius)
-
-
-def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
-    """Apply checked rows of ``tick`` (:func:`checked_robots`) to ``replica``.
-
-    Raises:
-        Rejected: they cannot be the world's next rows (:meth:`Replica.inconsistent`); the
-            replica is unchanged.
-    """
-    x, y = rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES
-    why = replica.inconsistent(tick, rows["id"], rows["state"], x, y)
-    if why is not None:
-        raise guard.Rejected("inconsistent rows", why)
-    try:
-        replica.update(tick, rows["id"], rows["state"], x, y, rows["heading"])
-    except ValueError as exc:  # checked above: a gap in those checks
-        raise RunFailed(str(exc)) from None
 
 
 _PR_SET_PDEATHSIG = 1

@@ -6,18 +6,18 @@ import sys
 import time
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
-from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Int64MultiArray
 
+from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.status import STARTING, has_ended, has_started
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import Gate
-from swarm_ros.protocol.checks import Rejections
 from swarm_ros.ros.dds import apply_dds_defaults
-
 
 _MAX_BATCH = 10_000  # messages handled per spin() at most
 
@@ -44,16 +44,16 @@ class Progress:
         self.executor.add_node(self.node)
         self.bar = tqdm(total=patches, unit="patch", desc="localized", disable=True if quiet else None,
                         file=sys.stderr, dynamic_ncols=True)
-        self.bar.set_postfix(tick="starting", refresh=False)
+        self.bar.set_postfix(tick=STARTING, refresh=False)
         self.tick = -1  #: the last tick the monitor reported; -1 before tick 0
         self.started = False  #: the world has sent tick 0 (its status says 'running', or a tick was counted)
         self.ended_at: float | None = None  #: time.monotonic() when the world's outcome arrived
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         outcome = msgs.status_values(msg).get("outcome")
-        if outcome not in (None, "starting"):
+        if has_started(outcome):
             self.started = True
-        if self.ended_at is None and outcome not in (None, "starting", "running"):
+        if self.ended_at is None and has_ended(outcome):
             self.ended_at = time.monotonic()
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:

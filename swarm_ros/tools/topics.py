@@ -185,7 +185,7 @@ def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: 
     del got[: max(0, len(got) - count)]
     printed = 0
     while printed < count and time.monotonic() < deadline:
-        inspector.spin_for(0.1, until=lambda: len(got) > printed)
+        inspector.spin_for(0.1, until=lambda shown=printed: len(got) > shown)
         while got and printed < count:
             msg = got.pop(0)
             print(to_yaml(msg, full))

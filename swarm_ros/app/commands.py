@@ -1,0 +1,322 @@
+"""What each ``swarm-ros`` command does, given its parsed arguments (:mod:`swarm_ros.app.cli` parses them).
+
+Bad input raises :class:`~swarm_ros.core.errors.SwarmError` (the command line prints it in one line and exits 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from swarm_ros.app.param_file import read_params_file
+from swarm_ros.artifacts.recording_options import RecordingOptions
+from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.grid import World
+from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETERS, RunParams, Settings, node_defaults
+from swarm_ros.core.resources import check_world_memory
+from swarm_ros.core.shapes import Shape, builtin_shapes
+from swarm_ros.core.signals import StopFlag
+
+if TYPE_CHECKING:
+    from swarm_ros.artifacts.rerun_recording import Recorder
+    from swarm_ros.core.engine import Simulation
+
+PROG = "swarm-ros"
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+_PROGRESS_TICKS = 200  # ticks between progress-bar updates
+MAX_DOMAIN_ID = 232  # Fast DDS's ports overflow above this (on Linux, 101 with ephemeral ports in use)
+LIST_SECONDS, ECHO_SECONDS = 2.0, 10.0  # topics: listening time, and --echo's wait
+EXIT_AT_ONCE = False  # set by a finished 'run': see swarm_ros.app.cli.entry()
+
+
+def cmd_shapes(args: argparse.Namespace) -> int:
+    check_world_memory(args.world_radius)
+    world = World(args.world_radius)
+    print(f"{'shape':<10} {'patches':>7} {'holes':>5}  bounding box (xmin, ymin)-(xmax, ymax)  file")
+    misfits = 0
+    for name, path in builtin_shapes().items():
+        try:
+            shape = Shape.load(name, world)
+        except SwarmError as exc:  # e.g. larger than this world: say so and list the others
+            misfits += 1
+            reason = str(exc).split(": ", 1)[-1].split(" at patch")[0]  # e.g. reaches beyond the walls
+            print(f"{name:<10} {'-':>7} {'-':>5}  does not fit: {reason}  {path}")
+            continue
+        x0, y0, x1, y1 = shape.bbox
+        print(f"{name:<10} {shape.patches:>7} {shape.holes:>5}  ({x0:>3}, {y0:>3})-({x1:>3}, {y1:>3})"
+              f"{'':18}{path}")
+    print(f"world: {world.size} x {world.size} patches, walls on the border ring"
+          + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
+    return 0
+
+
+def _settings(args: argparse.Namespace) -> tuple[Settings, dict[str, dict[str, object]]]:
+    """The run settings (parameter file, then flags) and the node parameters the file sets."""
+    settings, nodes = Settings(), {kind: {} for kind in NODE_PARAMETERS}
+    if args.params_file is not None:
+        settings, nodes = read_params_file(args.params_file, settings)
+    flags = {p.name: getattr(args, p.name) for p in RUN_PARAMETERS if p.flag != ""}
+    if args.fail_robots:
+        flags["fail_fraction"], flags["fail_tick"] = args.fail_robots
+    return settings.updated(**flags), nodes
+
+
+def _flag(value: object, section: dict[str, object], key: str) -> object:
+    """A flag's value if given, else the parameter file's /monitor value, else the monitor's default."""
+    return value if value is not None else section.get(key, node_defaults("monitor")[key])
+
+
+def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions, dict]:
+    """Settings, shape, parameters, a usable output directory, the recording options and the node
+    parameters of the parameter file, or a SwarmError before anything runs."""
+    from swarm_ros.artifacts.run_dir import check_leftovers, check_out_dir, claim_out_dir, default_run_dir
+
+    settings, nodes = _settings(args)
+    shape, params = settings.resolve()
+    monitor = nodes["monitor"]
+    recording = RecordingOptions(enabled=bool(_flag(args.record, monitor, "record")),
+                                 every=int(_flag(args.record_every, monitor, "record_every")), spawn=args.spawn,
+                                 connect=args.connect or str(monitor.get("viewer_url", "")) or None)
+    out = args.out or (Path(str(monitor["out_dir"])) if monitor.get("out_dir") else
+                       default_run_dir(shape.name, params.robots, params.vision_radius, params.seed))
+    args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
+    check_out_dir(out, args.overwrite)
+    claim_out_dir(out)  # a second command for the same directory is refused now, not after its run
+    check_leftovers(out)
+    return settings, shape, params, out, recording.reachable(), nodes
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from swarm_ros.artifacts.run_dir import partial_recording, write_run
+    from swarm_ros.core.run_result import RunRecord
+
+    _, shape, params, out, options, _ = _prepare(args)
+
+    from swarm_ros.core.engine import Simulation  # here: numba is not needed by the other commands' start
+    from swarm_ros.core.metrics import Outcome
+
+    note_compiling(args.quiet)
+    start = time.perf_counter()
+    stopped = recorder = None
+    # Ctrl-C or SIGTERM, from here on: the run so far (tick 0 at least) becomes an 'interrupted' run directory
+    with StopFlag() as stop:
+        sim = Simulation(shape, params)
+        rrd = partial_recording(out)
+        recorder = options.open(rrd, shape, params)
+        try:
+            _run_with_progress(sim, check=args.check, quiet=args.quiet, recorder=recorder, stop=stop)
+        except BaseException:
+            if recorder is not None:
+                recorder.outcome("failed", sim.metrics)
+                recorder.close()
+                _note_partial(rrd, options)
+            raise
+        if stop.signum and not sim.done:
+            stopped = Outcome.INTERRUPTED
+    record = RunRecord.of(sim, wall_seconds=time.perf_counter() - start, stopped=stopped)
+    if recorder is not None:
+        recorder.outcome(record.outcome.value, record.final)
+        recorder.close()
+    out = write_run(out, record, overwrite=args.overwrite, recording=rrd if options.enabled else None)
+    if stopped is not None:
+        print(f"{PROG}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    if not args.quiet:
+        _print_summary(record.summary, out)
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    import json
+
+    from swarm_ros.app.launcher import ENCLAVE_PREFIX, Launch, interrupted_run, plural
+    from swarm_ros.artifacts.run_dir import partial_recording
+
+    settings, shape, params, out, options, nodes = _prepare(args)
+    changed = {k: v for k, v in nodes["robot_batch"].items() if v != node_defaults("robot_batch")[k]}
+    if changed:
+        raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
+                         f"assigns each of its --processes its robots itself (use ros2 run for your own split)")
+    world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {})}
+    check_world_memory(shape.world.radius, copies=args.processes + 2)  # the world, the monitor, each batch
+    if args.processes > params.robots - 4:
+        raise SwarmError(f"{params.robots} robots leave {params.robots - 4} non-seed robots for {args.processes} "
+                         f"robot-batch processes (--processes, default 2); each process needs at least one")
+    domain = _domain_id(args.domain_id)
+    if args.enclaves is not None and not ENCLAVE_PREFIX.fullmatch(args.enclaves):
+        raise SwarmError(f"--enclaves must be an enclave path like /swarm_ros (names of letters, digits and _ "
+                         f"after each /), got {args.enclaves!r}")
+    launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
+                    overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
+                    world=world, bag=bool(_flag(args.bag, nodes["monitor"], "bag")), enclaves=args.enclaves)
+    _interrupt_on_sigterm()
+    try:
+        out = launch.run()
+    except KeyboardInterrupt:
+        stopped = interrupted_run(out.absolute())
+        if stopped is not None:
+            print(f"{PROG}: interrupted at tick {stopped['convergence_tick']}; the run so far is in {out}",
+                  file=sys.stderr)
+        elif not launch.started:  # the launcher removed what the run had made (launcher.discard_unstarted)
+            print(f"{PROG}: interrupted before tick 0; nothing was written", file=sys.stderr)
+        else:
+            print(f"{PROG}: interrupted, but the monitor wrote no run directory (logs: {launch.logs_kept})",
+                  file=sys.stderr)
+            _note_partial(partial_recording(out), options)
+        return EXIT_INTERRUPTED
+    except BaseException:
+        _note_partial(partial_recording(out), options)
+        raise
+    if not args.quiet:
+        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+        _print_summary(summary, out)
+        print(f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
+              f"logs in {out / 'logs'}")
+    global EXIT_AT_ONCE
+    EXIT_AT_ONCE = True
+    return 0
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    from swarm_ros.app.executors import default_jobs
+    from swarm_ros.app.experiment import run_experiment
+
+    if args.scheduler and args.executor != "dask":
+        raise SwarmError("--scheduler needs --executor dask")
+    _interrupt_on_sigterm()
+    start = time.perf_counter()
+    jobs = args.jobs or (1 if args.engine == "ros2" else default_jobs())
+    out = run_experiment(args.config, args.out, jobs=jobs, engine=args.engine, processes=args.processes,
+                         quiet=args.quiet, executor=args.executor, scheduler=args.scheduler)
+    if not args.quiet:
+        where = f"Dask at {args.scheduler}" if args.scheduler else f"{jobs} jobs" + \
+            (" on a Dask LocalCluster" if args.executor == "dask" else "")
+        print(f"experiment done in {time.perf_counter() - start:.1f} s ({where}, engine {args.engine})")
+        print(f"results  {out / 'results.csv'}\nstats    {out / 'stats.csv'}, {out / 'stats.md'}\n"
+              f"figures  {out / 'figures'}")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from swarm_ros.app.report import build_report
+
+    for path in build_report(args.dir):
+        print(path)
+    return 0
+
+
+def note_compiling(quiet: bool) -> None:
+    """Say in one line (unless ``quiet``) that the numba kernels must be compiled first, if they must."""
+    from swarm_ros.core.kernels import COMPILING, kernels_cached
+
+    if not quiet and not kernels_cached():
+        print(f"{PROG}: {COMPILING}", file=sys.stderr, flush=True)
+
+
+def _note_partial(rrd: Path, options: RecordingOptions) -> None:
+    """Tell where the recording of a run that stopped early is."""
+    if options.enabled and rrd.exists():
+        print(f"{PROG}: the recording so far is in {rrd}", file=sys.stderr)
+
+
+def _interrupt_on_sigterm() -> None:
+    """SIGTERM ends the command like Ctrl-C does, so its child processes are stopped, not orphaned."""
+    import signal
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
+
+
+def _domain_id(flag: int | None) -> int | None:
+    """The ROS domain id of ``--domain-id``, else of $ROS_DOMAIN_ID, else None; checked against [0, 232]."""
+    domain = flag
+    if domain is None and os.environ.get("ROS_DOMAIN_ID", "").strip():
+        try:
+            domain = int(os.environ["ROS_DOMAIN_ID"])
+        except ValueError:
+            raise SwarmError(f"ROS_DOMAIN_ID must be an integer, got {os.environ['ROS_DOMAIN_ID']!r}") from None
+    if domain is not None and not 0 <= domain <= MAX_DOMAIN_ID:
+        raise SwarmError(f"ROS domain id must be in [0, {MAX_DOMAIN_ID}], got {domain}")
+    return domain
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from swarm_ros.tools.replay import replay
+
+    bag = args.bag / "bag" if (args.bag / "bag" / "metadata.yaml").is_file() else args.bag
+    domain = _domain_id(args.domain_id)
+    code = replay(bag, 0 if domain is None else domain, rate=args.rate, delay=args.delay, quiet=args.quiet)
+    if code == EXIT_INTERRUPTED:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+    return code
+
+
+def cmd_topics(args: argparse.Namespace) -> int:
+    from swarm_ros.tools.topics import run_topics
+
+    domain = _domain_id(args.domain_id)
+    seconds = args.seconds or (ECHO_SECONDS if args.echo else LIST_SECONDS)
+    return run_topics(0 if domain is None else domain, echo=args.echo, count=args.count, seconds=seconds,
+                      full=args.full)
+
+
+def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Recorder | None = None,
+                       stop: StopFlag | None = None) -> None:
+    """Run ``sim`` to its end (or until ``stop`` is set) with a progress bar, checking invariants and
+    recording if asked."""
+    from tqdm import tqdm
+
+    if check:
+        from swarm_ros.core.invariants import check_state, check_tick
+
+        check_state(sim)
+    if recorder is not None:
+        recorder.metrics(sim.history)
+        recorder.robots(sim.state)
+    with tqdm(total=sim.shape.patches, initial=sim.metrics.localized, unit="patch", desc="localized",
+              disable=True if quiet else None, file=sys.stderr, dynamic_ncols=True) as bar:
+        while not sim.done and not (stop and stop.signum):
+            before = sim.tick
+            if check:
+                prev = sim.state.copy()
+                sim.step()
+                check_tick(prev, sim)
+            elif recorder is not None:  # stop on every tick whose robots are logged
+                sim.run(max_ticks=min(_PROGRESS_TICKS, recorder.every - before % recorder.every))
+            else:
+                sim.run(max_ticks=_PROGRESS_TICKS)
+            if recorder is not None:
+                recorder.metrics(sim.history[before + 1:])
+                recorder.robots(sim.state, force=sim.done)
+            m = sim.metrics
+            bar.update(m.localized - bar.n)
+            bar.set_postfix(tick=str(m.tick), moving=str(m.moving), refresh=False)
+
+
+def _print_summary(s: dict, out: Path) -> None:
+    rate = s["convergence_tick"] / s["wall_seconds"] if s["wall_seconds"] > 0 else float("inf")
+    rows = [
+        ("shape", f"{s['shape']} ({s['shape_patches']} patches)"),
+        ("robots", f"{s['robots']}  (vision {s['vision_radius']:g}, seed {s['seed']}, engine {s['engine']})"),
+        ("rules", f"{s['rules']}  (join {s['join']}, crowding {s['crowding']}, steps {s['steps']})"),
+        ("outcome", s["outcome"]),
+        ("convergence tick", f"{s['convergence_tick']}"),
+        ("localized", f"{s['localized']} / {s['shape_patches']} patches"),
+        ("unlocalized", f"{s['unlocalized']}  (separated {s['separated']})"),
+        ("empty patches", f"{s['empty_patches']}"),
+        *([("lost robots", f"{s['lost_robots']}  (" + ", ".join(f"{x['robots']} at tick {x['tick']}"
+                                                           for x in s["losses"]) + ")")]
+          if s.get("lost_robots") else []),
+        ("convergence rate", f"{s['convergence_rate']:.4f} robots/tick"),
+        ("wall time", f"{s['wall_seconds']:.2f} s  ({rate:,.0f} ticks/s)"),
+        ("output", str(out)),
+    ]
+    for key, value in rows:
+        print(f"{key:<17} {value}")

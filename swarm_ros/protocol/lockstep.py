@@ -1,0 +1,502 @@
+"""The world's coordination of the graph, as a plain class: no rclpy, an injectable clock.
+
+:class:`Lockstep` owns the run's state (a :class:`~swarm_ros.core.engine.Simulation`) and
+decides everything the world node does: which robot batches are admitted, when tick 0
+starts, when a tick's decisions are all in and the tick is applied, how far it may run
+ahead of the monitor, and what happens when a batch or the monitor is lost. The node feeds
+it checked messages and liveliness changes by method calls and lets :meth:`Lockstep.poll`
+look at the clock; the lockstep answers through a :class:`WorldPort` (publish a tick, send
+a snapshot, publish the status). Unit tests drive it with a fake port and a fake clock.
+
+A tick: the world has published the rows of tick t; every batch decides for its moving
+robots; once the decisions of every moving robot that is not being removed are in, the
+world applies them with the in-process engine's own code (``Simulation.apply``) and
+publishes what it applied and the rows of tick t + 1.
+
+A batch whose process is lost (liveliness lapses, or its robots stop deciding) is waited
+for under ``on_batch_loss: restart`` (the default): its new process announces the same
+robots with a higher incarnation and gets a snapshot of the current tick; nothing is lost,
+since a decision is a pure function of the state, the seed, the robot and the tick. After
+``max_restarts`` restarts, or ``restart_timeout`` seconds without one, or always under
+``remove``, the lost batch's robots are removed at the end of the next tick. Before tick 0
+a lost batch is always waited for: none of its robots has moved yet.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from swarm_ros.core.engine import Simulation
+from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
+from swarm_ros.core.rules import Decisions
+from swarm_ros.core.state import MOVING_STATES, RobotState
+from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.plan import BATCHES, MONITOR
+from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows
+from swarm_ros.protocol.status import RUNNING, STARTING, RunFailed, Status, restarts_text
+
+STALL_S = 5.0  #: seconds without progress after which a silent batch or monitor counts as lost
+FIRST_STALL_S = 30.0  #: the same before its first decisions or report (discovery may be slow)
+FINAL_WAIT = 30.0  #: seconds to wait, after the end, for the monitor to catch up
+LINGER = 1.0  #: at most this many seconds for the last messages to reach their readers before exiting
+STATUS_PERIOD = 1.0  #: seconds of wall time between two status messages while nothing changes
+
+
+@dataclass(frozen=True)
+class Policy:
+    """The world's own parameters (``swarm_ros.core.params.NODE_PARAMETERS["world"]``)."""
+
+    monitor_window: int = 128
+    start_timeout: float = 60.0
+    on_batch_loss: str = "restart"
+    max_restarts: int = 3
+    restart_timeout: float = 30.0
+
+
+class WorldPort(Protocol):
+    """What the lockstep asks of the node around it."""
+
+    def watch_batch(self, k: int, name: str) -> None:
+        """Batch ``k`` (node ``name``) was admitted: take its decisions and watch its liveliness."""
+
+    def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None:
+        """Send batch ``k`` every robot's row (``rows``) at ``tick``, to start from."""
+
+    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None:
+        """Publish a tick: the decisions applied in it (None for tick 0), the rows of the robots that changed,
+        the occupancy if ``joined`` (a robot joined or was removed), and the clock."""
+
+    def publish_status(self, status: Status) -> None:
+        """Publish the run's state (and the occupancy, for readers that joined late)."""
+
+    def monitor_reads_all(self) -> bool:
+        """Whether the monitor's readers of every topic it records are matched (so that it misses nothing)."""
+
+    def delivered(self) -> bool:
+        """Whether every reader acknowledged the last status and rows."""
+
+    def settle(self) -> None:
+        """Before the last status: take in what is still waiting (so its counts are final)."""
+
+    def startup_seconds(self) -> float:
+        """Seconds from the start of the run's command (or this process) to now."""
+
+
+class Lockstep:
+    """Admission, ticks, the monitor window and the loss policy of one run (see the module's docstring)."""
+
+    def __init__(self, sim: Simulation, policy: Policy, port: WorldPort, logger, rejections: Rejections,
+                 clock: Callable[[], float] = time.monotonic, created: float | None = None) -> None:
+        self.sim, self.policy, self.port, self.log, self.rejections, self.clock = \
+            sim, policy, port, logger, rejections, clock
+        n = sim.params.robots
+        self.window = policy.monitor_window  # 0 while there is no monitor to wait for
+        self.host = np.full(n, -1, dtype=np.int64)  # batch number hosting each robot
+        self.batch_names: list[str] = []
+        self.restart_counts: list[int] = []  # per batch
+        self.incarnations: list[int] = []  # per batch: the newest process's incarnation heard of
+        self.down_since: dict[int, float] = {}  # batches lost and waited for: since when
+        self.removed_batches: set[int] = set()
+        self.respawned: dict[int, np.ndarray] = {}  # batch -> robots: re-announced with no higher incarnation
+        self.lapsed: set[int] = set()  # batches whose liveliness lapsed since their last accepted announcement
+        self.restarts: list[tuple[int, str]] = []  # (tick, batch) of every restart
+        self.lost: list[str] = []  # batches (and the monitor) lost for good
+        self.started = False
+        self.created = clock() if created is None else created  # start_timeout counts from here
+        self.parts: list[np.ndarray] = []  # decision rows received for the coming tick
+        self.received = 0
+        self.decided = np.zeros(n, dtype=bool)  # robots whose decision for the coming tick is in
+        self.pending = np.empty(0, dtype=np.int64)  # robots of lost batches, removed at the end of the next tick
+        self.queued: deque = deque()  # (tick, rows, joined, applied) held while the monitor is behind
+        self.monitor_tick = -1
+        self.monitor_alive = False
+        self.published_tick = -1
+        self.progress_at = clock()  # the last tick published or metrics received
+        self.status_at = -1.0
+        self.start_time: float | None = None
+        self.startup_seconds = float("nan")
+        self.ended_at: float | None = None
+        self.finished = False  # the end is out and delivered (or given up on): the node may exit
+
+    # -- admission ------------------------------------------------------------------
+    def announce(self, name: str, incarnation: int, ids: np.ndarray) -> None:
+        """A batch's announcement (checked as a message): admit it, or take it as a restarted process.
+
+        Raises:
+            Rejected: robots another batch hosts, other robots than before, or a new batch after tick 0.
+        """
+        if name in self.batch_names:
+            self._reannounced(self.batch_names.index(name), ids, incarnation)
+            return
+        if self.started:
+            raise Rejected("new batch after tick 0", f"'{name}'")
+        taken = ids[self.host[ids] >= 0]
+        if taken.size:
+            raise Rejected("robots of another batch", f"'{name}' names robot {taken[0]}, hosted by "
+                                                      f"{self.batch_names[self.host[taken[0]]]}")
+        k = len(self.batch_names)
+        self.host[ids] = k
+        self.batch_names.append(name)
+        self.restart_counts.append(0)
+        self.incarnations.append(0)
+        self.port.watch_batch(k, name)
+        covered = self.covered()
+        self.log.info(f"{name} hosts {ids.size} robots; {covered}/{self.sim.params.robots - 4} covered")
+        if incarnation:  # restarted before the world heard from the processes before it
+            self._reannounced(k, ids, incarnation)
+        if covered == self.sim.params.robots - 4:
+            self.maybe_start()
+
+    def covered(self) -> int:
+        """Robots (seeds aside) that admitted batches host."""
+        return int((self.host[4:] >= 0).sum())
+
+    def _reannounced(self, k: int, ids: np.ndarray, incarnation: int, respawn: bool = False) -> None:
+        """A batch announced again: its process was restarted. Send it the current tick to start from."""
+        name = self.batch_names[k]
+        if incarnation <= self.incarnations[k]:
+            # The same process again, an older one's announcement, or a new process that a launcher
+            # without restart counting (ros2 launch's respawn) started: that one is taken once the
+            # batch is known to be lost, now or when its liveliness lapses.
+            if respawn or (self.started and (k in self.down_since or k in self.lapsed)):
+                incarnation = self.incarnations[k] + 1
+            else:
+                self.respawned[k] = ids
+                return
+        if not np.array_equal(ids, np.flatnonzero(self.host == k)):
+            raise Rejected("robots of another batch", f"'{name}' announced other robots than before")
+        if k in self.removed_batches or self.sim.done:
+            self.log.warn(f"ignored a new announcement of {name}: its robots are removed or the run is over")
+            return
+        tick = self.sim.tick if self.started else 0
+        self.respawned.pop(k, None)
+        self.lapsed.discard(k)
+        self.restart_counts[k] += incarnation - self.incarnations[k]
+        self.restarts += [(tick, name)] * (incarnation - self.incarnations[k])
+        self.incarnations[k] = incarnation
+        self.down_since.pop(k, None)
+        self.log.warn(f"{name} is back (restart {self.restart_counts[k]}) at tick {tick}"
+                      + ("; sending it a snapshot" if self.started else ""))
+        if self.started:
+            self._send_snapshot(k)
+        self.publish_status()
+
+    def _respawn(self, k: int) -> None:
+        """Take batch ``k``'s process that announced itself without a higher incarnation as its restart."""
+        try:
+            self._reannounced(k, self.respawned[k], self.incarnations[k], respawn=True)
+        except Rejected as fault:
+            self.rejections.drop(BATCHES, fault)
+
+    def _send_snapshot(self, k: int) -> None:
+        s = self.sim.state
+        self.port.send_snapshot(k, self.sim.tick, robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading))
+
+    def maybe_start(self) -> None:
+        """Tick 0 once batches host every robot and the monitor is there (so the run never stalls for it).
+
+        Without a monitor to wait for (``monitor_window: 0``), or one that did not appear
+        within ``FIRST_STALL_S``, the swarm starts without it.
+        """
+        if self.started or self.covered() < self.sim.params.robots - 4:
+            return
+        if self.window and not (self.monitor_alive and self.port.monitor_reads_all()) and MONITOR not in self.lost:
+            if self.clock() - self.created < FIRST_STALL_S:
+                return
+            self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s")
+        self.started = True
+        self.start_time = self.clock()
+        self.startup_seconds = self.port.startup_seconds()
+        waited = " and the monitor" if self.window else ""
+        self.log.info(f"all robots hosted by {len(self.batch_names)} batches{waited}: tick 0")
+        for k in range(len(self.batch_names)):
+            self._send_snapshot(k)
+        s = self.sim.state
+        self._emit(0, robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading), False, None)
+
+    # -- ticks ----------------------------------------------------------------------
+    def check_decisions(self, k: int, tick: int, rows: np.ndarray) -> None:
+        """Whether batch ``k`` may send these decision rows (well formed, ids in range) for ``tick`` now.
+
+        Raises:
+            Rejected: before tick 0, a tick other than the one being decided, a robot not hosted
+                by batch ``k``, not moving or decided already this tick, or a decision out of the
+                rules' bounds (``swarm_ros.core.legality``).
+        """
+        from swarm_ros.core.legality import illegal
+
+        if not self.started:
+            raise Rejected("before tick 0")
+        now = self.sim.tick
+        if tick <= now:
+            raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {now + 1}")
+        if tick > now + 1:
+            raise Rejected("future tick", f"tick {tick}; the world is deciding tick {now + 1}")
+        ids = rows["id"].astype(np.int64)
+        if (self.host[ids] != k).any():
+            i = int(ids[self.host[ids] != k][0])
+            raise Rejected("not the batch's robot", f"robot {i} is not hosted by {self.batch_names[k]}")
+        s = self.sim.state
+        moving = np.isin(s.state[ids], MOVING_STATES)
+        if not moving.all():
+            raise Rejected("robot not moving", f"robot {int(ids[~moving][0])}")
+        if self.decided[ids].any():
+            raise Rejected("decided already", f"robot {int(ids[self.decided[ids]][0])} at tick {tick}")
+        bad = illegal(self.sim.params, self.sim.shape.world.radius, s.frontier, s.x[ids], s.y[ids],
+                      rows["claim"].astype(np.int64), rows["x"], rows["y"], rows["heading"])
+        if bad.any():
+            row = rows[int(np.flatnonzero(bad)[0])]
+            raise Rejected("illegal decision", f"robot {int(row['id'])}: claim {int(row['claim'])}, pose "
+                                               f"({row['x']!r}, {row['y']!r}, {row['heading']!r})")
+
+    @property
+    def over(self) -> bool:
+        """Whether the run has ended (decisions still arriving answer the tick after the last)."""
+        return self.started and self.sim.done
+
+    def decisions(self, k: int, tick: int, rows: np.ndarray) -> None:
+        """Batch ``k``'s decisions for ``tick``: taken whole once checked (:meth:`check_decisions`).
+
+        Raises:
+            Rejected: the check failed; nothing was taken.
+            RunFailed: more decisions than moving robots (a gap in the checks).
+        """
+        if self.over:
+            return  # answers to the tick after the last: the run is over
+        self.check_decisions(k, tick, rows)
+        if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
+            rows = rows[~np.isin(rows["id"], self.pending)]
+            if not rows.size:
+                return
+        self.decided[rows["id"]] = True
+        if self.down_since:  # a batch deciding is not lost
+            for b in np.unique(self.host[rows["id"]]).tolist():
+                self.down_since.pop(b, None)
+        self.parts.append(rows)
+        self.received += rows.size
+        self._maybe_advance(tick)
+
+    def _maybe_advance(self, tick: int) -> None:
+        """Apply the tick once every moving robot that is not being removed has decided."""
+        expected = self.sim.metrics.moving - len(self._standing())
+        if self.received > expected:
+            raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
+        if self.received == expected:
+            self._advance(tick)
+
+    def _standing(self) -> np.ndarray:
+        """Moving robots of lost batches: they stand still in their last tick, then are removed."""
+        return self.pending[np.isin(self.sim.state.state[self.pending], MOVING_STATES)]
+
+    def _advance(self, tick: int) -> None:
+        parts = [decisions_of(tick, r) for r in self.parts]
+        standing = self._standing()
+        s = self.sim.state
+        if standing.size:
+            parts.append(Decisions(tick=tick, ids=standing, claim=np.full(standing.size, -1, dtype=np.int64),
+                                   x=s.x[standing].copy(), y=s.y[standing].copy(),
+                                   heading=s.heading[standing].copy()))
+        decisions = Decisions.concatenate(parts)
+        applied = decision_rows(decisions)
+        self.parts, self.received = [], 0
+        self.decided[:] = False
+        localized_before = self.sim.metrics.localized
+        try:
+            self.sim.apply(decisions)
+        except ValueError as exc:
+            raise RunFailed(f"tick {tick}: {exc}") from None
+        if self.pending.size:
+            removed = self.sim.remove(self.pending)
+            self.log.warn(f"tick {tick}: removed the {removed} robots of lost batches")
+            self.pending = np.empty(0, dtype=np.int64)
+        s = self.sim.state
+        ids = np.union1d(self.sim.last_joins()[0], self.sim.last_removed)  # deciders and failed robots changed
+        joined = self.sim.metrics.localized != localized_before or self.sim.last_removed.size > 0
+        self._emit(tick, robot_rows(ids, s.state, s.x, s.y, s.heading), joined, applied)
+
+    def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None:
+        """Publish a tick now, or queue it while the monitor is more than ``window`` ticks behind."""
+        self.queued.append((tick, rows, joined, applied))
+        self._flush()
+
+    def _flush(self) -> None:
+        while self.queued and (self.window == 0 or self.queued[0][0] - self.monitor_tick <= self.window):
+            tick, rows, joined, applied = self.queued.popleft()
+            self.port.publish_tick(tick, rows, joined, applied)
+            self.progress_at = self.clock()
+            self.published_tick = tick
+            if tick == self.sim.tick and self.sim.done:
+                self._announce_end()
+            elif tick == 0:
+                self.publish_status()
+
+    def _announce_end(self) -> None:
+        m = self.sim.metrics
+        self.ended_at = self.clock()
+        self.port.settle()  # the last status has the run's counts
+        self.publish_status()
+        self.log.info(f"run ended: {self.sim.outcome.value} at tick {m.tick}, {m.localized} localized")
+
+    def metrics(self, tick: int) -> None:
+        """The monitor's report of ``tick`` (checked: a tick this world published)."""
+        if tick > self.monitor_tick:
+            self.monitor_tick = tick
+            self.progress_at = self.clock()
+            self._flush()
+
+    # -- status -----------------------------------------------------------------------
+    def status(self, note: str = "") -> Status:
+        """The run's state now: outcome, the last published tick and its counts, restarts and lost processes."""
+        tick = max(self.published_tick, 0)
+        sim, warn = self.sim, bool(note or self.lost or self.down_since)
+        if not self.started:
+            outcome, message = STARTING, "waiting for robot batches"
+        elif self.ended_at is not None:
+            outcome = sim.outcome.value
+            message = f"{outcome} at tick {tick}"
+            warn = warn or sim.outcome not in (Outcome.COMPLETE, Outcome.COMPLETE_WITH_EXTRAS)
+        else:
+            outcome, message = RUNNING, note or RUNNING
+        values: dict[str, object] = {"rules": sim.params.ruleset.label, "robots": sim.params.robots}
+        if self.started:
+            m = sim.history[min(tick, sim.tick)]
+            values.update({key: int(m[METRIC_COLUMNS.index(key)]) for key in ("localized", "moving", "walking")})
+            values["startup_seconds"] = f"{self.startup_seconds:.3f}"
+        if self.ended_at is not None:
+            values["separated"] = int((sim.state.state == RobotState.SEPARATED).sum())
+            values["wall_seconds"] = f"{self.ended_at - self.start_time:.3f}"
+        values["restarts"] = restarts_text(self.restarts)
+        values["rejected_messages"] = self.rejections.total
+        values["rejected"] = self.rejections.text()
+        values["lost"] = ",".join(self.lost)
+        values["waiting_for"] = ",".join(self.batch_names[k] for k in sorted(self.down_since))
+        return Status(tick=tick, outcome=outcome, message=message, warn=warn, values=values)
+
+    def publish_status(self, note: str = "") -> None:
+        self.status_at = self.clock()
+        self.port.publish_status(self.status(note))
+
+    # -- lost processes ---------------------------------------------------------------
+    def batch_liveliness(self, k: int, alive: int, not_alive: int) -> None:
+        """Batch ``k``'s liveliness changed: ``alive`` writers alive, ``not_alive`` lapsed."""
+        if alive == 0 and not_alive > 0:
+            self.lapsed.add(k)
+            self.lose_batch(k, "liveliness lapsed")
+        elif alive > 0 and k in self.respawned and self.started:  # a respawned process is up
+            self._respawn(k)
+        elif alive > 0 and k in self.down_since:  # a process of this batch is alive (again)
+            self.down_since.pop(k)
+
+    def lose_batch(self, k: int, why: str) -> None:
+        """Batch ``k``'s process is gone (or stalled). Wait for it to come back, or remove its robots."""
+        name = self.batch_names[k]
+        if k in self.removed_batches or k in self.down_since or self.sim.done:
+            return
+        p = self.policy
+        if not self.started or (p.on_batch_loss == "restart" and self.restart_counts[k] < p.max_restarts):
+            self.down_since[k] = self.clock()
+            self.log.warn(f"{name} lost ({why}) at tick {self.sim.tick}: waiting up to {p.restart_timeout:g} s for "
+                          f"it to restart (restarts so far: {self.restart_counts[k]} of {p.max_restarts})")
+            self.publish_status(f"waiting for {name}")
+            if k in self.respawned and self.started:  # its new process announced itself already
+                self._respawn(k)
+            return
+        self._remove_batch(k, why)
+
+    def _remove_batch(self, k: int, why: str) -> None:
+        """Remove batch ``k``'s robots at the end of the next tick (robots lost for good)."""
+        name = self.batch_names[k]
+        self.down_since.pop(k, None)
+        self.removed_batches.add(k)
+        ids = np.flatnonzero(self.host == k)
+        ids = ids[self.sim.state.state[ids] != RobotState.REMOVED]
+        self.lost.append(name)
+        self.pending = np.union1d(self.pending, ids)
+        # decisions it sent for this tick before it was lost no longer count either
+        self.parts = [r[~np.isin(r["id"], self.pending)] for r in self.parts]
+        self.received = sum(r.size for r in self.parts)
+        tick = self.sim.tick
+        self.log.warn(f"{name} lost ({why}) at tick {tick}: its {ids.size} robots are removed at the end of tick "
+                      f"{tick + 1}")
+        self.publish_status(f"lost {name}")
+        self._maybe_advance(tick + 1)  # the lost robots' decisions are no longer awaited
+
+    def monitor_liveliness(self, alive: int, not_alive: int) -> None:
+        self.monitor_alive = alive > 0
+        if self.monitor_alive:
+            self.maybe_start()
+        if alive == 0 and not_alive > 0:
+            self._lose_monitor("liveliness lapsed")
+        elif alive > 0 and MONITOR in self.lost:  # it was only starved of CPU for a moment
+            self.lost.remove(MONITOR)
+            self.window = self.policy.monitor_window
+            self.log.warn(f"the monitor is back at tick {self.sim.tick}")
+            self.publish_status()
+
+    def _lose_monitor(self, why: str) -> None:
+        if MONITOR in self.lost:
+            return
+        self.lost.append(MONITOR)
+        self.window = 0  # nobody to wait for: run on
+        self.log.warn(f"the monitor was lost ({why}) at tick {self.sim.tick}; the swarm goes on without it")
+        self.publish_status("lost the monitor")
+        self._flush()
+
+    # -- the clock --------------------------------------------------------------------
+    def _check_stalls(self, now: float) -> None:
+        """The fallback to liveliness (a process lost before DDS matched its liveliness topic): a batch
+        whose robots have not decided, or a monitor that has not reported, for ``STALL_S`` is lost.
+        Before the first decisions or report, while discovery may still be going on, the limit is
+        ``FIRST_STALL_S``."""
+        if not self.started or self.sim.done:
+            return
+        if self.queued:
+            limit = STALL_S if self.monitor_tick >= 0 else FIRST_STALL_S
+            if self.window and now - self.progress_at >= limit:
+                self._lose_monitor(f"no metrics for {limit:g} s")
+            return
+        limit = STALL_S if self.sim.tick > 0 else FIRST_STALL_S
+        if now - self.progress_at < limit:
+            return
+        moving = self.sim.moving_ids()
+        missing = np.setdiff1d(moving[~self.decided[moving]], self.pending)
+        for k in np.unique(self.host[missing]).tolist():
+            self.lose_batch(k, f"no decisions for {limit:g} s")
+        self.progress_at = now
+
+    def poll(self) -> None:
+        """Between messages: timeouts, stalls, the periodic status, and whether the node may exit.
+
+        Raises:
+            RunFailed: batches did not cover the robots within ``start_timeout``, or a batch lost
+                before tick 0 did not come back within ``restart_timeout``.
+        """
+        now, p = self.clock(), self.policy
+        self._check_stalls(now)
+        for k, since in list(self.down_since.items()):
+            if now - since > p.restart_timeout:
+                if not self.started:
+                    raise RunFailed(f"{self.batch_names[k]} was lost before the run started and did not come back "
+                                    f"within {p.restart_timeout:g} s (restart_timeout)")
+                self._remove_batch(k, f"not back within {p.restart_timeout:g} s")
+        if not self.sim.done and now - self.status_at >= STATUS_PERIOD:
+            self.publish_status()
+        if not self.started and now - self.created > p.start_timeout:
+            dropped = f"; dropped: {self.rejections.text()}" if self.rejections.total else ""
+            raise RunFailed(f"robot batches cover {self.covered()} of {self.sim.params.robots - 4} robots after "
+                            f"{p.start_timeout:g} s (start_timeout){dropped}")
+        if not self.started:
+            self.maybe_start()
+        if self.ended_at is not None:
+            caught_up = self.window == 0 or self.monitor_tick >= self.sim.tick
+            # the end is out once every reader acknowledged the last status and rows; a reader that died
+            # never does, so wait at most LINGER for that
+            if (caught_up and (self.port.delivered() or now - self.ended_at > LINGER)) \
+                    or now - self.ended_at > FINAL_WAIT:
+                self.finished = True

@@ -1,0 +1,87 @@
+"""The run's state as the world announces it on /swarm/status: data every process acts on, never log text.
+
+The ``outcome`` value is :data:`STARTING` until tick 0 goes out, :data:`RUNNING` until the run
+ends, then the run's outcome (``swarm_ros.core.metrics.Outcome``). The launcher learns that
+tick 0 started, and the batches and the monitor that the run ended, from it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+STARTING = "starting"  #: waiting for robot batches (and the monitor) before tick 0
+RUNNING = "running"  #: tick 0 went out; no outcome yet
+NOT_ENDED = (STARTING, RUNNING)
+
+
+def has_started(outcome: str | None) -> bool:
+    """Whether a status with this ``outcome`` says tick 0 went out."""
+    return outcome is not None and outcome != STARTING
+
+
+def has_ended(outcome: str | None) -> bool:
+    """Whether a status with this ``outcome`` says the run is over."""
+    return outcome is not None and outcome not in NOT_ENDED
+
+
+class RunFailed(Exception):
+    """The run cannot go on (not bad input: something the graph did)."""
+
+
+@dataclass
+class Status:
+    """One /swarm/status message's content: the tick it speaks for, the outcome (or run state), a line
+    for people, whether something needs attention, and named values (``docs/ros_graph.md`` lists them)."""
+
+    tick: int
+    outcome: str
+    message: str
+    warn: bool = False
+    values: dict[str, object] = field(default_factory=dict)
+
+
+def restarts_text(restarts: list[tuple[int, str]]) -> str:
+    """The ``restarts`` value of /swarm/status: ``tick:node`` items joined by ``;``, oldest first."""
+    return ";".join(f"{tick}:{node}" for tick, node in restarts)
+
+
+def restarts_of(text: str) -> list[tuple[int, str]]:
+    """The inverse of :func:`restarts_text`; malformed items are skipped."""
+    out = []
+    for item in text.split(";"):
+        tick, sep, node = item.partition(":")
+        if sep and tick.isdigit() and node:
+            out.append((int(tick), node))
+    return out
+
+
+class WorldReport:
+    """What a reader keeps of the world's status messages: restarts, the world's clock, its drops, its outcome.
+
+    Status messages are latched and may arrive again or out of order; each kept value only grows.
+    """
+
+    def __init__(self) -> None:
+        self.restarts: list[tuple[int, str]] = []  #: (tick, batch) of every restart
+        self.times: dict[str, float] = {}  #: wall_seconds (tick 0 to the outcome) and startup_seconds
+        self.rejected = 0  #: messages the world dropped
+        self.outcome: str | None = None  #: the run's outcome, once it ended
+
+    def update(self, values: dict[str, str]) -> list[tuple[int, str]]:
+        """Take in one status message's values; return the restarts it adds."""
+        restarts = restarts_of(values.get("restarts", ""))
+        new = restarts[len(self.restarts):]  # the list only grows
+        self.restarts = max(self.restarts, restarts, key=len)
+        for key in ("wall_seconds", "startup_seconds"):
+            try:
+                seconds = float(values[key])
+            except (KeyError, ValueError):
+                continue
+            if math.isfinite(seconds) and seconds >= 0:
+                self.times[key] = seconds
+        if values.get("rejected_messages", "").isdigit():
+            self.rejected = max(self.rejected, int(values["rejected_messages"]))
+        if has_ended(values.get("outcome")):
+            self.outcome = values["outcome"]
+        return new

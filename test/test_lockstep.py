@@ -1,0 +1,291 @@
+"""The world's coordination (swarm_ros.protocol.lockstep) driven by method calls, a fake port and a fake clock:
+the cases the process tests cover (a batch lost before tick 0, mid-run, twice, past the restart bound; a stalled
+batch that resumes; the monitor lost), in milliseconds each and with no rclpy.
+
+The batches' decisions are what a robot-batch process computes (``Decider`` over the world's state), so a run
+driven here must match the in-process engine tick for tick.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.rules import Decider
+from swarm_ros.core.state import MOVING_STATES, RobotState
+from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.lockstep import FIRST_STALL_S, STALL_S, Lockstep, Policy
+from swarm_ros.protocol.plan import MONITOR, batch_name
+from swarm_ros.protocol.rows import batch_ids, decision_rows
+from swarm_ros.protocol.status import RunFailed
+
+pytestmark = pytest.mark.unit
+
+ROBOTS, MAX_TICKS = 60, 400
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class Log:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def info(self, text: str) -> None:
+        self.lines.append(text)
+
+    warn = info
+
+
+class Port:
+    """Records what the lockstep publishes."""
+
+    def __init__(self) -> None:
+        self.watched: list[str] = []
+        self.snapshots: list[tuple[int, int]] = []  # (batch, tick)
+        self.ticks: list[int] = []
+        self.statuses: list = []
+        self.monitor_ready = True
+
+    def watch_batch(self, k, name):
+        self.watched.append(name)
+
+    def send_snapshot(self, k, tick, rows):
+        assert rows.size == ROBOTS
+        self.snapshots.append((k, tick))
+
+    def publish_tick(self, tick, rows, joined, applied):
+        assert (applied is None) == (tick == 0)
+        self.ticks.append(tick)
+
+    def publish_status(self, status):
+        self.statuses.append(status)
+
+    def monitor_reads_all(self):
+        return self.monitor_ready
+
+    def delivered(self):
+        return True
+
+    def settle(self):
+        pass
+
+    def startup_seconds(self):
+        return 0.5
+
+
+class Run:
+    """A lockstep, its port and clock, and batches that decide as robot-batch processes do."""
+
+    def __init__(self, batches: int = 2, **policy) -> None:
+        self.shape = Shape.load("star")
+        self.params = RunParams(robots=ROBOTS, seed=7, max_ticks=MAX_TICKS)
+        self.clock, self.port, self.log = Clock(), Port(), Log()
+        self.rejections = Rejections(self.log)
+        self.ls = Lockstep(Simulation(self.shape, self.params), Policy(**{"monitor_window": 0, **policy}), self.port,
+                           self.log, self.rejections, clock=self.clock)
+        self.batches = batches
+        self.decider = Decider(self.shape, self.params)
+
+    def announce(self, k: int, incarnation: int = 0) -> None:
+        self.ls.announce(batch_name(k), incarnation, batch_ids(ROBOTS, k, self.batches))
+
+    def start(self) -> None:
+        """Every batch announces itself (tick 0 follows, unless the monitor is awaited)."""
+        for k in range(self.batches):
+            self.announce(k)
+        assert self.ls.started or self.ls.window
+
+    def decide(self, k: int) -> np.ndarray:
+        """Batch ``k``'s decision rows for the coming tick (its moving robots not decided yet)."""
+        s = self.ls.sim.state
+        own = batch_ids(ROBOTS, k, self.batches)
+        own = own[np.isin(s.state[own], MOVING_STATES) & ~self.ls.decided[own]]
+        return decision_rows(self.decider.decide(s, own, self.ls.sim.tick + 1))
+
+    def tick(self, silent: tuple[int, ...] = ()) -> None:
+        """One tick: every batch but ``silent`` sends its decisions."""
+        for k in range(self.batches):
+            rows = self.decide(k)
+            if k not in silent and rows.size:
+                self.ls.decisions(k, self.ls.sim.tick + 1, rows)
+
+    def run(self, ticks: int | None = None) -> None:
+        end = MAX_TICKS if ticks is None else self.ls.sim.tick + ticks
+        while not self.ls.sim.done and self.ls.sim.tick < end:
+            self.tick()
+
+    def engine(self) -> Simulation:
+        sim = Simulation(self.shape, self.params)
+        sim.run()
+        return sim
+
+
+def test_a_run_through_the_lockstep_is_the_engines_run_tick_for_tick():
+    r = Run(batches=3)
+    r.start()
+    r.run()
+    assert r.ls.sim.done and r.port.ticks == list(range(r.ls.sim.tick + 1))
+    ref = r.engine()
+    assert np.array_equal(r.ls.sim.history, ref.history) and r.ls.sim.outcome == ref.outcome
+    assert r.port.statuses[-1].outcome == ref.outcome.value and r.port.statuses[-1].values["restarts"] == ""
+    r.ls.poll()
+    assert r.ls.finished
+
+
+def test_admission_refuses_taken_robots_new_batches_after_tick_0_and_changed_robots():
+    r = Run()
+    r.announce(0)
+    with pytest.raises(Rejected, match="robots of another batch"):
+        r.ls.announce("intruder", 0, batch_ids(ROBOTS, 0, 2)[:3])
+    assert not r.ls.started and r.ls.status().outcome == "starting"
+    r.announce(1)
+    assert r.ls.started and r.port.ticks == [0] and r.port.snapshots == [(0, 0), (1, 0)]
+    with pytest.raises(Rejected, match="new batch after tick 0"):
+        r.ls.announce("late", 0, np.array([5]))
+    with pytest.raises(Rejected, match="other robots than before"):
+        r.ls.announce(batch_name(0), 1, batch_ids(ROBOTS, 1, 2))
+
+
+def test_decisions_are_checked_before_they_count():
+    r = Run()
+    r.start()
+    rows = r.decide(0)
+    with pytest.raises(Rejected, match="future tick"):
+        r.ls.decisions(0, 2, rows)
+    with pytest.raises(Rejected, match="stale tick"):
+        r.ls.decisions(0, 0, rows)
+    with pytest.raises(Rejected, match="not the batch's robot"):
+        r.ls.decisions(1, 1, rows)
+    r.ls.decisions(0, 1, rows[:1])
+    with pytest.raises(Rejected, match="decided already"):
+        r.ls.decisions(0, 1, rows[:1])
+    bad = rows[1:2].copy()
+    bad["x"] += 5.0  # five patches in one tick
+    with pytest.raises(Rejected, match="illegal decision"):
+        r.ls.decisions(0, 1, bad)
+    assert r.ls.sim.tick == 0 and r.ls.received == 1
+
+
+def test_a_batch_lost_before_tick_0_is_waited_for_then_fails_the_run_if_it_does_not_come_back():
+    r = Run(restart_timeout=30.0)
+    r.announce(0)
+    r.ls.batch_liveliness(0, 0, 1)
+    assert 0 in r.ls.down_since and r.port.statuses[-1].values["waiting_for"] == batch_name(0)
+    r.clock.now += 31
+    with pytest.raises(RunFailed, match="lost before the run started and did not come back within 30 s"):
+        r.ls.poll()
+
+
+def test_a_batch_lost_before_tick_0_that_comes_back_starts_the_run():
+    r = Run()
+    r.announce(0)
+    r.ls.batch_liveliness(0, 0, 1)
+    r.announce(0, incarnation=1)
+    r.announce(1)
+    assert r.ls.started and r.ls.restarts == [(0, batch_name(0))] and not r.ls.down_since
+    r.run()
+    assert np.array_equal(r.ls.sim.history, r.engine().history)
+
+
+@pytest.mark.parametrize("losses", [1, 2])
+def test_a_batch_lost_mid_run_restarts_from_a_snapshot_and_the_run_is_unchanged(losses):
+    r = Run(max_restarts=3)
+    r.start()
+    for i in range(losses):  # lost twice in a row: at the same tick, before it decided again
+        r.run(ticks=20 if i == 0 else 0)
+        tick = r.ls.sim.tick
+        r.ls.batch_liveliness(1, 0, 1)
+        assert 1 in r.ls.down_since
+        r.tick(silent=(1,))
+        assert r.ls.sim.tick == tick, "the tick waits for the lost batch"
+        r.announce(1, incarnation=i + 1)
+        assert r.port.snapshots[-1] == (1, tick) and not r.ls.down_since
+    r.run()
+    assert r.ls.restarts == [(20, batch_name(1))] * losses
+    assert np.array_equal(r.ls.sim.history, r.engine().history)
+    assert r.port.statuses[-1].values["restarts"].count(batch_name(1)) == losses
+
+
+def test_past_the_restart_bound_a_lost_batch_has_its_robots_removed_at_the_end_of_the_next_tick():
+    r = Run(max_restarts=1)
+    r.start()
+    r.run(ticks=10)
+    r.ls.batch_liveliness(1, 0, 1)
+    r.announce(1, incarnation=1)
+    r.run(ticks=5)
+    r.ls.batch_liveliness(1, 0, 1)  # lost again: no restarts left
+    own = batch_ids(ROBOTS, 1, 2)
+    assert r.ls.lost == [batch_name(1)] and r.ls.pending.size == own.size
+    tick = r.ls.sim.tick
+    r.tick(silent=(1,))  # its robots stand still in this tick, then go
+    assert r.ls.sim.tick == tick + 1
+    assert (r.ls.sim.state.state[own] == RobotState.REMOVED).all()
+    assert r.port.statuses[-1].values["lost"] == batch_name(1)
+    r.run()
+    assert r.ls.sim.done
+
+
+def test_under_remove_a_lost_batch_is_not_waited_for():
+    r = Run(on_batch_loss="remove")
+    r.start()
+    r.run(ticks=5)
+    r.ls.batch_liveliness(0, 0, 1)
+    assert not r.ls.down_since and r.ls.lost == [batch_name(0)]
+    r.announce(0, incarnation=1)  # a process that comes back anyway is not taken
+    assert r.ls.restarts == []
+
+
+def test_a_stalled_batch_is_waited_for_and_counts_as_back_when_it_decides_again():
+    r = Run()
+    r.start()
+    r.run(ticks=3)
+    r.tick(silent=(0,))
+    r.clock.now += STALL_S + 0.1
+    r.ls.poll()
+    assert 0 in r.ls.down_since and r.port.statuses[-1].values["waiting_for"] == batch_name(0)
+    tick = r.ls.sim.tick
+    r.tick()  # it resumes
+    assert r.ls.sim.tick == tick + 1 and not r.ls.down_since and r.ls.restarts == []
+    r.run()
+    assert np.array_equal(r.ls.sim.history, r.engine().history)
+
+
+def test_the_world_waits_for_the_monitor_within_its_window_and_runs_on_without_a_lost_one():
+    r = Run(monitor_window=2)
+    r.start()
+    assert not r.ls.started, "no tick 0 before the monitor is there"
+    r.ls.monitor_liveliness(1, 0)
+    assert r.ls.started
+    r.run(ticks=6)
+    assert r.port.ticks == [0, 1] and r.ls.sim.tick == 6, "published up to the window, the rest queued"
+    r.ls.metrics(1)
+    assert r.port.ticks == [0, 1, 2, 3]
+    r.clock.now += STALL_S + 0.1  # no metrics since: the monitor is lost, the queue goes out
+    r.ls.poll()
+    assert r.ls.lost == [MONITOR] and r.ls.window == 0 and r.port.ticks == list(range(7))
+    r.ls.monitor_liveliness(1, 0)  # it was only slow
+    assert r.ls.lost == [] and r.ls.window == 2
+
+
+def test_a_monitor_never_seen_is_given_up_on_and_the_swarm_starts_without_it():
+    r = Run(monitor_window=4)
+    r.port.monitor_ready = False
+    r.start()
+    r.clock.now += FIRST_STALL_S + 0.1
+    r.ls.poll()
+    assert r.ls.started and r.ls.lost == [MONITOR] and r.ls.window == 0
+
+
+def test_batches_that_never_cover_the_robots_fail_the_run_at_the_start_timeout():
+    r = Run(start_timeout=5.0)
+    r.announce(0)
+    r.clock.now += 5.1
+    with pytest.raises(RunFailed, match=f"robot batches cover .* of {ROBOTS - 4} robots after 5 s"):
+        r.ls.poll()
