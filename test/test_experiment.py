@@ -19,7 +19,7 @@ import yaml
 from swarm_ros.app import cli
 from swarm_ros.app.experiment_file import load_experiment, run_seed
 from swarm_ros.app.published import ReferenceError, load_reference
-from swarm_ros.app.report import group_stats
+from swarm_ros.app.report_stats import group_stats
 from swarm_ros.app.results_file import RESULT_COLUMNS, ExperimentError, read_results
 
 pytestmark = pytest.mark.process

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from swarm_ros.app import launcher
+from swarm_ros.app import launcher, processes
 from swarm_ros.app.launcher import Launch
 from swarm_ros.core import Shape
 from swarm_ros.core.params import Settings
@@ -143,7 +143,7 @@ def test_the_launch_file_starts_the_graph_swarm_ros_run_starts(monkeypatch, tmp_
         values = _effective(node.kwargs["parameters"], name)
         assert {k: values[k] for k in expected} == expected, name
         assert {k: values[k] for k in extra} == extra, name
-    # the environment swarm-ros run gives its nodes (launcher.node_env), with a new run key
+    # the environment swarm-ros run gives its nodes (processes.node_env), with a new run key
     key = env.pop(KEY_ENV)
     assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
                    "FASTRTPS_DEFAULT_PROFILES_FILE": str(ROOT / "config" / "fastdds.xml")}
@@ -167,7 +167,7 @@ def test_the_launch_file_passes_sros2_enclaves_as_swarm_ros_run_does(monkeypatch
     run = Settings()
     shape, params = run.resolve()
     launch = Launch(settings=run, shape=shape, params=params, processes=2, out=tmp_path / "run", enclaves="/swarm_ros")
-    commands = {name: launcher.node_command(exe, tmp_path / "p.yaml", name, extra, launch.enclaves)
+    commands = {name: processes.node_command(exe, tmp_path / "p.yaml", name, extra, launch.enclaves)
                 for name, exe, extra in launch.plan()}
     for node in nodes:
         name = node.kwargs["name"]

@@ -66,3 +66,12 @@ def test_no_two_modules_share_a_file_name_or_shadow_the_standard_library():
             names.setdefault(leaf, []).append(module)
     assert {k: v for k, v in names.items() if len(v) > 1} == {}
     assert sorted(set(names) & set(sys.stdlib_module_names)) == []
+
+
+def test_node_files_stay_thin_and_modules_small():
+    """A node file routes callbacks into plain classes (at most 300 lines); no module passes 450."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "swarm_ros"
+    sizes = {str(p.relative_to(root)): len(p.read_text().splitlines()) for p in root.rglob("*.py")}
+    assert {p: n for p, n in sizes.items() if n > (300 if p.startswith("nodes/") else 450)} == {}

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from swarm_ros.app.launcher import DomainLock, node_command, node_env
+from swarm_ros.app.processes import DomainLock, node_command, node_env
 from swarm_ros.core.params import Settings
 from swarm_ros.protocol.runkey import KEY_ENV
 from swarm_ros.ros.node_params import params_yaml

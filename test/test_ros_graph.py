@@ -20,7 +20,7 @@ from bagcheck import assert_bag_holds_run
 from helpers import Recording, rrd_verify
 
 from swarm_ros.app.cli import main as cli_main
-from swarm_ros.app.launcher import Child, stop
+from swarm_ros.app.processes import Child, stop
 
 pytestmark = pytest.mark.process
 

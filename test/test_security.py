@@ -23,7 +23,7 @@ import pytest
 from helpers import host_env
 
 from swarm_ros.app import cli
-from swarm_ros.app.launcher import DomainLock, node_command, node_env
+from swarm_ros.app.processes import DomainLock, node_command, node_env
 from swarm_ros.core.params import Settings
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_ids, batch_label, decision_rows

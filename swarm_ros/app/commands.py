@@ -134,7 +134,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     import json
 
-    from swarm_ros.app.launcher import ENCLAVE_PREFIX, Launch, interrupted_run, plural
+    from swarm_ros.app.launcher import Launch, interrupted_run, plural
+    from swarm_ros.app.processes import ENCLAVE_PREFIX
     from swarm_ros.artifacts.run_dir import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args)

@@ -99,15 +99,12 @@ class RobotBatchNode:
     def _on_snapshot(self, msg: PointCloud2) -> None:
         """Every robot's row at some tick: start (again) from it if it is newer than what we hold."""
         try:
-            tick = guard.tick_stamp(msg.header)
-            if tick <= self.replica.tick:
-                return  # an older snapshot (latched from an earlier restart of this batch)
-            rows = guard.robot_rows(msg, self.params.robots, self.radius)
-            if rows.size != self.params.robots:
-                raise Rejected("incomplete snapshot", f"{rows.size} rows for {self.params.robots} robots")
+            tick, rows = guard.snapshot(msg, self.params.robots, self.radius)
         except Rejected as fault:
             self.rejections.drop(msgs.snapshot_topic(self.node.get_name()), fault)
             return
+        if tick <= self.replica.tick:
+            return  # an older snapshot (latched from an earlier restart of this batch)
         try:
             self.replica.load(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES,
                               rows["heading"])

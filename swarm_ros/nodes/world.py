@@ -30,7 +30,6 @@ from swarm_ros.protocol import checks
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.lockstep import Lockstep, Policy
 from swarm_ros.protocol.plan import MONITOR
-from swarm_ros.protocol.rows import DECISION_ROW
 from swarm_ros.protocol.status import Status
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import auth_topic, open_auth
@@ -94,9 +93,7 @@ class WorldNode:
         if self.lockstep.over:
             return
         try:
-            tick = checks.tick_stamp(msg.header)
-            rows = checks.cloud(msg, DECISION_ROW, self.params.robots)
-            checks.ids_in_range(rows["id"].astype(np.int64), 0, self.params.robots)
+            tick, rows = checks.decision_message(msg, self.params.robots)
             self.lockstep.decisions(k, tick, rows)
         except Rejected as fault:
             self.rejections.drop(topic, fault)

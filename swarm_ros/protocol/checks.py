@@ -12,11 +12,16 @@ import math
 import re
 import time
 from collections import Counter
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarm_ros.core.replica import Replica
-from swarm_ros.protocol.rows import PATCH_METRES, ROBOT_ROW, TICK_SECONDS, check_fields, parse_batch_label
+if TYPE_CHECKING:
+    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.replica import Replica
+
+from swarm_ros.core.legality import illegal
+from swarm_ros.protocol.rows import DECISION_ROW, PATCH_METRES, ROBOT_ROW, TICK_SECONDS, check_fields, parse_batch_label
 from swarm_ros.protocol.status import RunFailed
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
@@ -171,3 +176,53 @@ def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
         replica.update(tick, rows["id"], rows["state"], x, y, rows["heading"])
     except ValueError as exc:  # checked above: a gap in those checks
         raise RunFailed(str(exc)) from None
+
+
+def decision_message(msg, robots: int) -> tuple[int, np.ndarray]:
+    """(tick, rows) of a batch's decisions message, checked as a message: stamp, layout, ids in range."""
+    tick = tick_stamp(msg.header)
+    rows = cloud(msg, DECISION_ROW, robots)
+    ids_in_range(rows["id"].astype(np.int64), 0, robots)
+    return tick, rows
+
+
+def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, host: np.ndarray, batch: int,
+                      decided: np.ndarray, name: str) -> None:
+    """Whether batch ``batch`` (node ``name``) may send these decision rows for ``tick`` now.
+
+    Raises:
+        Rejected: a tick other than the one being decided, a robot not hosted by the batch
+            (``host``), not moving or decided already this tick (``decided``), or a decision out
+            of the rules' bounds (:mod:`swarm_ros.core.legality`).
+    """
+    from swarm_ros.core.state import MOVING_STATES
+
+    now = sim.tick
+    if tick <= now:
+        raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {now + 1}")
+    if tick > now + 1:
+        raise Rejected("future tick", f"tick {tick}; the world is deciding tick {now + 1}")
+    ids = rows["id"].astype(np.int64)
+    if (host[ids] != batch).any():
+        raise Rejected("not the batch's robot", f"robot {int(ids[host[ids] != batch][0])} is not hosted by {name}")
+    s = sim.state
+    moving = np.isin(s.state[ids], MOVING_STATES)
+    if not moving.all():
+        raise Rejected("robot not moving", f"robot {int(ids[~moving][0])}")
+    if decided[ids].any():
+        raise Rejected("decided already", f"robot {int(ids[decided[ids]][0])} at tick {tick}")
+    bad = illegal(sim.params, sim.shape.world.radius, s.frontier, s.x[ids], s.y[ids],
+                  rows["claim"].astype(np.int64), rows["x"], rows["y"], rows["heading"])
+    if bad.any():
+        row = rows[int(np.flatnonzero(bad)[0])]
+        raise Rejected("illegal decision", f"robot {int(row['id'])}: claim {int(row['claim'])}, pose "
+                                           f"({row['x']!r}, {row['y']!r}, {row['heading']!r})")
+
+
+def snapshot(msg, robots: int, radius: int) -> tuple[int, np.ndarray]:
+    """(tick, rows) of a snapshot for a batch, checked: a /swarm/robots message with every robot's row."""
+    tick = tick_stamp(msg.header)
+    rows = robot_rows(msg, robots, radius)
+    if rows.size != robots:
+        raise Rejected("incomplete snapshot", f"{rows.size} rows for {robots} robots")
+    return tick, rows

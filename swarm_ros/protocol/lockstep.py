@@ -1,25 +1,12 @@
 """The world's coordination of the graph, as a plain class: no rclpy, an injectable clock.
 
-:class:`Lockstep` owns the run's state (a :class:`~swarm_ros.core.engine.Simulation`) and
-decides everything the world node does: which robot batches are admitted, when tick 0
-starts, when a tick's decisions are all in and the tick is applied, how far it may run
-ahead of the monitor, and what happens when a batch or the monitor is lost. The node feeds
-it checked messages and liveliness changes by method calls and lets :meth:`Lockstep.poll`
-look at the clock; the lockstep answers through a :class:`WorldPort` (publish a tick, send
-a snapshot, publish the status). Unit tests drive it with a fake port and a fake clock.
-
-A tick: the world has published the rows of tick t; every batch decides for its moving
-robots; once the decisions of every moving robot that is not being removed are in, the
-world applies them with the in-process engine's own code (``Simulation.apply``) and
-publishes what it applied and the rows of tick t + 1.
-
-A batch whose process is lost (liveliness lapses, or its robots stop deciding) is waited
-for under ``on_batch_loss: restart`` (the default): its new process announces the same
-robots with a higher incarnation and gets a snapshot of the current tick; nothing is lost,
-since a decision is a pure function of the state, the seed, the robot and the tick. After
-``max_restarts`` restarts, or ``restart_timeout`` seconds without one, or always under
-``remove``, the lost batch's robots are removed at the end of the next tick. Before tick 0
-a lost batch is always waited for: none of its robots has moved yet.
+:class:`Lockstep` owns the run's state (a ``Simulation``) and decides everything the world node
+does: which robot batches are admitted, when tick 0 starts, when a tick's decisions are all in
+and the tick is applied (with the in-process engine's own ``Simulation.apply``), how far it may
+run ahead of the monitor, and what happens when a batch or the monitor is lost. The node feeds
+it checked messages and liveliness changes; it answers through a :class:`WorldPort`. Unit tests
+drive it with a fake port and clock (test/test_lockstep.py); docs/ros_graph.md describes the
+protocol and its fault policy.
 """
 
 from __future__ import annotations
@@ -36,7 +23,7 @@ from swarm_ros.core.engine import Simulation
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.state import MOVING_STATES, RobotState
-from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows
 from swarm_ros.protocol.status import RUNNING, STARTING, RunFailed, Status, restarts_text
@@ -62,30 +49,15 @@ class Policy:
 class WorldPort(Protocol):
     """What the lockstep asks of the node around it."""
 
-    def watch_batch(self, k: int, name: str) -> None:
-        """Batch ``k`` (node ``name``) was admitted: take its decisions and watch its liveliness."""
-
-    def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None:
-        """Send batch ``k`` every robot's row (``rows``) at ``tick``, to start from."""
-
-    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None:
-        """Publish a tick: the decisions applied in it (None for tick 0), the rows of the robots that changed,
-        the occupancy if ``joined`` (a robot joined or was removed), and the clock."""
-
-    def publish_status(self, status: Status) -> None:
-        """Publish the run's state (and the occupancy, for readers that joined late)."""
-
-    def monitor_reads_all(self) -> bool:
-        """Whether the monitor's readers of every topic it records are matched (so that it misses nothing)."""
-
-    def delivered(self) -> bool:
-        """Whether every reader acknowledged the last status and rows."""
-
-    def settle(self) -> None:
-        """Before the last status: take in what is still waiting (so its counts are final)."""
-
-    def startup_seconds(self) -> float:
-        """Seconds from the start of the run's command (or this process) to now."""
+    def watch_batch(self, k: int, name: str) -> None: ...  # batch k admitted: take its decisions, watch it
+    def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None: ...  # every robot's row, to start from
+    # a tick: the decisions applied in it (None for tick 0), the changed robots' rows, the occupancy if `joined`
+    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None: ...
+    def publish_status(self, status: Status) -> None: ...  # the run's state (and the occupancy, for late readers)
+    def monitor_reads_all(self) -> bool: ...  # the monitor's reader of every topic it records is matched
+    def delivered(self) -> bool: ...  # every reader acknowledged the last status and rows
+    def settle(self) -> None: ...  # before the last status: take in what still waits, so its counts are final
+    def startup_seconds(self) -> float: ...  # from the start of the run's command (or this process) to now
 
 
 class Lockstep:
@@ -221,47 +193,14 @@ class Lockstep:
         self._emit(0, robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading), False, None)
 
     # -- ticks ----------------------------------------------------------------------
-    def check_decisions(self, k: int, tick: int, rows: np.ndarray) -> None:
-        """Whether batch ``k`` may send these decision rows (well formed, ids in range) for ``tick`` now.
-
-        Raises:
-            Rejected: before tick 0, a tick other than the one being decided, a robot not hosted
-                by batch ``k``, not moving or decided already this tick, or a decision out of the
-                rules' bounds (``swarm_ros.core.legality``).
-        """
-        from swarm_ros.core.legality import illegal
-
-        if not self.started:
-            raise Rejected("before tick 0")
-        now = self.sim.tick
-        if tick <= now:
-            raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {now + 1}")
-        if tick > now + 1:
-            raise Rejected("future tick", f"tick {tick}; the world is deciding tick {now + 1}")
-        ids = rows["id"].astype(np.int64)
-        if (self.host[ids] != k).any():
-            i = int(ids[self.host[ids] != k][0])
-            raise Rejected("not the batch's robot", f"robot {i} is not hosted by {self.batch_names[k]}")
-        s = self.sim.state
-        moving = np.isin(s.state[ids], MOVING_STATES)
-        if not moving.all():
-            raise Rejected("robot not moving", f"robot {int(ids[~moving][0])}")
-        if self.decided[ids].any():
-            raise Rejected("decided already", f"robot {int(ids[self.decided[ids]][0])} at tick {tick}")
-        bad = illegal(self.sim.params, self.sim.shape.world.radius, s.frontier, s.x[ids], s.y[ids],
-                      rows["claim"].astype(np.int64), rows["x"], rows["y"], rows["heading"])
-        if bad.any():
-            row = rows[int(np.flatnonzero(bad)[0])]
-            raise Rejected("illegal decision", f"robot {int(row['id'])}: claim {int(row['claim'])}, pose "
-                                               f"({row['x']!r}, {row['y']!r}, {row['heading']!r})")
-
     @property
     def over(self) -> bool:
         """Whether the run has ended (decisions still arriving answer the tick after the last)."""
         return self.started and self.sim.done
 
     def decisions(self, k: int, tick: int, rows: np.ndarray) -> None:
-        """Batch ``k``'s decisions for ``tick``: taken whole once checked (:meth:`check_decisions`).
+        """Batch ``k``'s decisions for ``tick``: taken whole once checked
+        (:func:`swarm_ros.protocol.checks.decisions_allowed`).
 
         Raises:
             Rejected: the check failed; nothing was taken.
@@ -269,7 +208,9 @@ class Lockstep:
         """
         if self.over:
             return  # answers to the tick after the last: the run is over
-        self.check_decisions(k, tick, rows)
+        if not self.started:
+            raise Rejected("before tick 0")
+        decisions_allowed(rows, tick, self.sim, self.host, k, self.decided, self.batch_names[k])
         if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
             rows = rows[~np.isin(rows["id"], self.pending)]
             if not rows.size:

@@ -1,0 +1,147 @@
+"""The graph's OS processes: a node's command and environment, its exit in words, stopping them all, and the
+ROS domain id a run holds on its host (``swarm-ros run``, :mod:`swarm_ros.app.launcher`)."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import random
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.signals import PARENT_ENV
+from swarm_ros.protocol.runkey import with_run_key
+from swarm_ros.ros.dds import apply_dds_defaults
+from swarm_ros.ros.shm import shm_locks
+
+DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
+# SIGTERM first, not SIGINT: a process started from a background job inherits SIGINT *ignored*, and a node
+# ignores it until its own handler is in (after rclpy.init); SIGTERM ends it at once before that, and after it
+# means what SIGINT means (stop between callbacks, write what there is to write).
+_STOP_STEPS = ((signal.SIGTERM, 5.0), (signal.SIGKILL, 2.0))
+
+
+class LaunchError(SwarmError):
+    """The graph could not run to the end; the message says which process and where its log is."""
+
+
+@dataclass
+class Child:
+    name: str
+    proc: subprocess.Popen
+    log: Path
+    log_file: IO = field(repr=False)
+    command: list[str] = field(default_factory=list)
+    incarnation: int = 0
+    shm: set[str] = field(default_factory=set)  #: Fast DDS shared-memory lock files it was seen holding open
+    exit_noted: bool = False
+
+    def scan_shm(self) -> None:
+        """Remember the Fast DDS shared-memory files this process has open (while it runs)."""
+        self.shm |= shm_locks(self.proc.pid)
+
+    def last_error(self) -> str:
+        """The last line of the process's log that reports an error, or "" if none does."""
+        try:
+            lines = [ln.strip() for ln in self.log.read_text(errors="replace").splitlines() if ln.strip()]
+        except OSError:
+            return ""
+        errors = [ln for ln in lines if "error" in ln.lower()]
+        return errors[-1] if errors else ""
+
+    def death(self) -> str:
+        """How the process ended, for a message: 'was killed by SIGKILL', or 'exited with status 1 (<its last
+        error line>)'; a log line is quoted only when it reports an error."""
+        code = self.proc.returncode
+        if code is not None and code < 0:
+            try:
+                return f"was killed by {signal.Signals(-code).name}"
+            except ValueError:
+                return f"was killed by signal {-code}"
+        why = self.last_error()
+        return f"exited with status {code}" + (f" ({why})" if why else "")
+
+
+class DomainLock:
+    """A ROS domain id reserved for this run through an exclusive lock file (released by close())."""
+
+    def __init__(self, fixed: int | None = None) -> None:
+        self.file: IO | None = None
+        if fixed is not None:
+            self.domain_id = fixed
+            return
+        lock_dir = Path(tempfile.gettempdir()) / "swarm_ros-domains"
+        lock_dir.mkdir(exist_ok=True)
+        ids = list(DOMAIN_IDS)
+        start = random.randrange(len(ids))
+        for d in ids[start:] + ids[:start]:
+            f = open(lock_dir / f"{d}.lock", "w")  # noqa: SIM115 - held for the run
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                f.close()
+                continue
+            self.file, self.domain_id = f, d
+            return
+        raise LaunchError(f"every ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is in use by "
+                          f"other swarm-ros runs; set ROS_DOMAIN_ID to choose one")
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+
+
+#: An SROS2 enclave path prefix: ``/name`` parts of letters, digits and underscores.
+ENCLAVE_PREFIX = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+
+
+def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env[PARENT_ENV] = str(os.getpid())
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    apply_dds_defaults(env)
+    env["ROS_LOG_DIR"] = str(log_dir / "ros")
+    env.setdefault("HOME", str(log_dir))
+    env["PYTHONUNBUFFERED"] = "1"
+    env["RCUTILS_COLORIZED_OUTPUT"] = "0"
+    return with_run_key(env)
+
+
+def node_command(module: str, params_file: Path, name: str, extra: dict[str, object] | None = None,
+                 enclaves: str | None = None) -> list[str]:
+    """The command of a node process; with ``enclaves`` (SROS2), its enclave is ``<enclaves>/<name>``."""
+    cmd = [sys.executable, "-m", f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params_file),
+           "-r", f"__node:={name}"]
+    if enclaves:
+        cmd += ["--enclave", f"{enclaves}/{name}"]
+    for key, value in (extra or {}).items():
+        cmd += ["-p", f"{key}:={value}"]
+    return cmd
+
+
+def stop(children: list[Child]) -> None:
+    """End every child still running: SIGTERM, then SIGKILL, to its process group, waiting between."""
+    for sig, wait in _STOP_STEPS:
+        alive = [c for c in children if c.proc.poll() is None]
+        if not alive:
+            break
+        for c in alive:
+            try:
+                os.killpg(c.proc.pid, sig)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + wait
+        while time.monotonic() < deadline and any(c.proc.poll() is None for c in alive):
+            time.sleep(0.02)
+    for c in children:
+        c.proc.wait()
+        c.log_file.close()
