@@ -248,7 +248,7 @@ def test_connect_streams_the_same_data_to_a_running_viewer(recording, tmp_path):
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--record-every", "0"], "must be a positive integer"),
+    (["--record-every", "0"], "record_every must be an integer >= 1, got 0"),
     (["--connect", "http://localhost:9876"], "viewer URL must start with one of rerun://"),
 ])
 def test_bad_recording_options_get_one_line_and_write_nothing(tmp_path, capsys, args, message):

@@ -20,6 +20,7 @@ from swarm_ros.core.grid import World
 from swarm_ros.core.params import (
     BATCH_LOSS_POLICIES,
     MAX_RESTARTS,
+    NODE_PARAMETERS,
     RUN_PARAMETERS,
     Param,
 )
@@ -29,34 +30,16 @@ if TYPE_CHECKING:
 
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid integer {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid number {text!r}") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return value
-
-
-def _non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid number {text!r}") from None
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text}")
-    return value
+#: The command line's own numbers (not run parameters), declared and checked the same way.
+_OWN = {p.name: p for p in (
+    Param("processes", 2, "robot-batch processes K", low=1),
+    Param("jobs", 1, "worker processes", low=1),
+    Param("rate", 1.0, "replay speed", low=0.0, low_open=True),
+    Param("delay", 1.0, "seconds before replaying", low=0.0),
+    Param("count", 1, "messages to print", low=1),
+    Param("seconds", 1.0, "seconds to listen", low=0.0, low_open=True),
+)}
+_RECORD_EVERY = next(p for p in NODE_PARAMETERS["monitor"] if p.name == "record_every")
 
 
 def _checked(param: Param):
@@ -114,7 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Run one simulation as a ROS 2 graph: a world, K robot-batch processes "
                                      "and a monitor, each its own process. Same results as 'simulate'.")
     _add_run_options(run)
-    run.add_argument("--processes", type=_positive_int, default=2, help="robot-batch processes K (default: 2)")
+    run.add_argument("--processes", type=_checked(_OWN["processes"]), default=2,
+                     help="robot-batch processes K (default: 2)")
     run.add_argument("--domain-id", type=int, help="ROS domain id (default: $ROS_DOMAIN_ID, else a free one)")
     run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES,
                      help="a robot-batch process that dies: restart it, nothing lost (default; up to "
@@ -132,9 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
                                         "with its type and QoS, paced as recorded.")
     replay.add_argument("bag", type=Path, metavar="BAG", help="a run's bag directory (or the run directory)")
     replay.add_argument("--domain-id", type=int, help="ROS domain id to publish on (default: $ROS_DOMAIN_ID or 0)")
-    replay.add_argument("--rate", type=_positive_float, default=1.0,
+    replay.add_argument("--rate", type=_checked(_OWN["rate"]), default=1.0,
                         help="speed factor against the recorded pace (default: 1)")
-    replay.add_argument("--delay", type=_non_negative_float, default=1.0,
+    replay.add_argument("--delay", type=_checked(_OWN["delay"]), default=1.0,
                         help="seconds between creating the publishers and the first message (default: 1), "
                              "for subscribers to be matched")
     replay.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -145,8 +129,9 @@ def build_parser() -> argparse.ArgumentParser:
                                         "or print the messages of one (--echo).")
     topics.add_argument("--domain-id", type=int, help="ROS domain id of the run (default: $ROS_DOMAIN_ID or 0)")
     topics.add_argument("--echo", metavar="TOPIC", help="print this topic's messages instead of the list")
-    topics.add_argument("--count", type=_positive_int, default=1, help="with --echo: messages to print (default: 1)")
-    topics.add_argument("--seconds", type=_positive_float,
+    topics.add_argument("--count", type=_checked(_OWN["count"]), default=1,
+                        help="with --echo: messages to print (default: 1)")
+    topics.add_argument("--seconds", type=_checked(_OWN["seconds"]),
                         help="listen this long to measure rates (default: 2), or with --echo wait at most this "
                              "long in all for the topic and its messages (default: 10)")
     topics.add_argument("--full", action="store_true", help="with --echo: print whole arrays, not the first items")
@@ -159,10 +144,10 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("config", type=Path, metavar="CONFIG.yaml", help="experiment file, e.g. "
                                                                         "config/experiments/paper.yaml")
     exp.add_argument("--out", type=Path, help="experiment directory (default: experiments/<name>)")
-    exp.add_argument("--jobs", type=_positive_int, help="worker processes (default: the machine's cores)")
+    exp.add_argument("--jobs", type=_checked(_OWN["jobs"]), help="worker processes (default: the machine's cores)")
     exp.add_argument("--engine", choices=("inprocess", "ros2"), default="inprocess",
                      help="engine of each run (default: inprocess; ros2 gives the same results, slower)")
-    exp.add_argument("--processes", type=_positive_int, default=2,
+    exp.add_argument("--processes", type=_checked(_OWN["processes"]), default=2,
                      help="with --engine ros2: robot-batch processes per run (default: 2)")
     exp.add_argument("--executor", choices=("local", "dask"), default="local",
                      help="where the runs go: local worker processes (default), or a Dask cluster")
@@ -188,7 +173,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     for param in RUN_PARAMETERS:  # one flag per run parameter, from its declaration
         if param.flag == "":
             continue  # fail_fraction and fail_tick: together, as --fail-robots
-        default = param.blank if param.blank else param.default
+        default = param.blank or ("none" if param.default == "" else param.default)
         kwargs = {"choices": param.choices} if param.choices else {"type": _checked(param)}
         p.add_argument(param.cli_flag, dest=param.name, help=f"{param.help} (default: {default})", **kwargs)
     p.add_argument("--fail-robots", type=_failure, metavar="P@T",
@@ -202,7 +187,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
                                             "output directory; open it with 'rerun <run>/recording.rrd'.")
     rec.add_argument("--no-recording", action="store_false", dest="record", default=None,
                      help="do not write recording.rrd")
-    rec.add_argument("--record-every", type=_positive_int, metavar="K",
+    rec.add_argument("--record-every", type=_checked(_RECORD_EVERY), metavar="K",
                      help="log the robots every K-th tick only, for very large runs (default: 1, every tick)")
     rec.add_argument("--spawn", action="store_true", help="also stream live to a new Rerun viewer (needs a display)")
     rec.add_argument("--connect", metavar="URL",

@@ -169,3 +169,15 @@ def status_values(msg: DiagnosticArray) -> dict[str, str]:
 
 def clock_message(tick: int) -> Clock:
     return Clock(clock=stamp(tick))
+
+
+def message_class(type_name: str) -> type | None:
+    """The rclpy message class of a type name like ``sensor_msgs/msg/PointCloud2`` (also ``sensor_msgs/PointCloud2``),
+    or None if that type is not installed here."""
+    import importlib
+
+    package, _, name = type_name.replace("/msg/", "/").partition("/")
+    try:
+        return getattr(importlib.import_module(f"{package}.msg"), name)
+    except (ImportError, AttributeError, ValueError):
+        return None

@@ -10,12 +10,12 @@ subscribers started beforehand are matched before the first message.
 
 from __future__ import annotations
 
-import importlib
 import sys
 import time
 from pathlib import Path
 
 from swarm_ros.core.errors import SwarmError
+from swarm_ros.ros.graph import message_class
 
 _ACK_WAIT_S = 2.0  # seconds to let readers acknowledge the last messages before exiting
 
@@ -24,14 +24,11 @@ class ReplayError(SwarmError):
     """The bag cannot be replayed (not a bag, unreadable, or a message type that is not installed)."""
 
 
-def message_class(msgtype: str):
-    """The rclpy message class of a type name like ``sensor_msgs/msg/PointCloud2``."""
-    package, _, name = msgtype.replace("/msg/", "/").partition("/")
-    try:
-        return getattr(importlib.import_module(f"{package}.msg"), name)
-    except (ImportError, AttributeError, ValueError):
-        raise ReplayError(f"message type {msgtype} is not installed here, so its topic cannot be published") \
-            from None
+def _message_class(msgtype: str) -> type:
+    found = message_class(msgtype)
+    if found is None:
+        raise ReplayError(f"message type {msgtype} is not installed here, so its topic cannot be published")
+    return found
 
 
 def open_bag(bag: Path):
@@ -56,7 +53,7 @@ def replay(bag: Path, domain_id: int, rate: float = 1.0, delay: float = 1.0, qui
     """Publish the bag's messages on ``domain_id``; return an exit code (0, or 130 if interrupted)."""
     reader = open_bag(bag)
     try:
-        classes = {c.id: message_class(c.msgtype) for c in reader.connections}
+        classes = {c.id: _message_class(c.msgtype) for c in reader.connections}
         if reader.message_count == 0:
             raise ReplayError(f"{bag}: the bag holds no messages")
         return _publish(reader, classes, domain_id, rate, delay, quiet)

@@ -8,7 +8,6 @@ unless asked, and the robot rows of a PointCloud2 decoded into a small table.
 from __future__ import annotations
 
 import array
-import importlib
 import sys
 import time
 
@@ -22,18 +21,17 @@ from rclpy.signals import SignalHandlerOptions
 
 from swarm_ros.core.errors import SwarmError
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, check_fields
+from swarm_ros.ros.graph import message_class
 
 _SHOWN_ITEMS = 8  # array items printed without --full
 _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
 
 
-def message_class(type_name: str) -> type:
-    """The Python class of a ROS type name like ``sensor_msgs/msg/PointCloud2``."""
-    package, kind, name = type_name.split("/")
-    try:
-        return getattr(importlib.import_module(f"{package}.{kind}"), name)
-    except (ImportError, AttributeError):
-        raise SwarmError(f"message type {type_name} is not installed here") from None
+def _message_class(type_name: str) -> type:
+    found = message_class(type_name)
+    if found is None:
+        raise SwarmError(f"message type {type_name} is not installed here")
+    return found
 
 
 def to_yaml(msg: object, full: bool = False, indent: int = 0) -> str:
@@ -153,7 +151,7 @@ def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
     for name, type_name in topics.items():
         def bump(_msg: bytes, name: str = name) -> None:
             counts[name] += 1
-        inspector.node.create_subscription(message_class(type_name), name, bump, best_effort, raw=True)
+        inspector.node.create_subscription(_message_class(type_name), name, bump, best_effort, raw=True)
     start = time.monotonic()
     inspector.spin_for(seconds)
     elapsed = time.monotonic() - start
@@ -178,7 +176,7 @@ def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: 
         raise SwarmError(f"no publisher of {topic} on this domain within {wait:g} s "
                          f"(topics seen: {', '.join(sorted(topics)) or 'none'})")
     got: list[object] = []
-    inspector.node.create_subscription(message_class(topics[topic]), topic, got.append,
+    inspector.node.create_subscription(_message_class(topics[topic]), topic, got.append,
                                        inspector.publisher_qos(topic))
     # A latched stream replays its history first; of that burst only the newest messages matter.
     inspector.spin_for(min(0.3, max(0.0, deadline - time.monotonic())))
