@@ -1,24 +1,7 @@
 """``swarm-ros experiment``: run (or resume) an experiment's grid into its directory, then build its report.
 
 The file format is :mod:`swarm_ros.app.experiment_file`'s; where runs go, :mod:`swarm_ros.app.executors`'.
-An experiment file is YAML::
-
-    name: paper                 # names the default output directory, experiments/<name>
-    seed: 2026                  # experiment seed; each run's seed derives from it and the run's coordinates
-    repetitions: 10
-    vision_radius: [1]          # one number or a list
-    rules: [paper, local]       # optional: one rule set or a list (default: paper)
-    crowding: disc              # optional: override a switch (join, crowding, steps) for every rule set
-    reference: study_reference.csv  # optional: published numbers to set beside ours (relative to this file)
-    max_ticks: 100000           # optional, as for one run
-    wiggle_deg: 45              # optional
-    world_radius: 32            # optional
-    fail_fraction: 0.1          # optional: this fraction of the robots fails at the end of tick fail_tick
-    fail_tick: 500
-    shapes:                     # built-in name or shape file (relative to this file) -> group sizes
-      star: [1025, 1030, 1035, 1040, 1045, patches]   # 'patches' = the shape's exact patch count
-
-Runs go to J worker processes. Each finished run is appended at once, as one line, to
+Each finished run is appended at once, as one line, to
 ``results.csv`` in the output directory, so an interrupted experiment loses only the
 runs in flight, and running the same command again skips the runs already there. A
 run's seed depends only on the experiment seed and its coordinates (shape, group size,

@@ -39,9 +39,8 @@ from swarm_ros.core.replica import Replica
 from swarm_ros.core.run_result import ROS2, RunRecord, summarize
 from swarm_ros.core.state import STATE_COUNT, RobotState
 from swarm_ros.core.warmup import warm_up
-from swarm_ros.protocol import checks as guard
+from swarm_ros.protocol import checks
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
-from swarm_ros.protocol.rows import DECISION_ROW
 from swarm_ros.protocol.status import RunFailed, WorldReport
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
@@ -166,8 +165,7 @@ class MonitorNode:
     def _on_decisions(self, msg: PointCloud2) -> None:
         """Count the decision rows of each tick (for the bag: see :meth:`_bag_complete`)."""
         try:
-            tick = guard.tick_stamp(msg.header)
-            rows = guard.cloud(msg, DECISION_ROW, self.params.robots)
+            tick, rows = checks.decision_message(msg, self.params.robots)
         except Rejected as fault:
             self.rejections.drop(msgs.DECISIONS, fault)
             return

@@ -31,7 +31,7 @@ from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.warmup import warm_up
-from swarm_ros.protocol import checks as guard
+from swarm_ros.protocol import checks
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
 from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, batch_label, decision_rows, format_ranges, parse_ranges
 from swarm_ros.protocol.status import RunFailed, has_ended
@@ -99,7 +99,7 @@ class RobotBatchNode:
     def _on_snapshot(self, msg: PointCloud2) -> None:
         """Every robot's row at some tick: start (again) from it if it is newer than what we hold."""
         try:
-            tick, rows = guard.snapshot(msg, self.params.robots, self.radius)
+            tick, rows = checks.snapshot(msg, self.params.robots, self.radius)
         except Rejected as fault:
             self.rejections.drop(msgs.snapshot_topic(self.node.get_name()), fault)
             return
