@@ -8,7 +8,10 @@ the cache (``python -m swarm_ros.core.kernels``), so the first run does not pay 
 ``swarm-ros simulate`` and ``swarm-ros run`` say so in one line when they have to, and
 ``run`` compiles once, before its node processes start, rather than in each of them.
 
-:func:`kernels_cached` loads neither numba nor the kernels: it only looks at files.
+:func:`kernels_cached` loads neither numba nor the kernels: it only looks at files. A kernel
+that is only ever inlined into others (``inline="always"``) is not saved again when its module
+changes, so its index can stay older than its source for good: :func:`compile_kernels` leaves a
+stamp file, and a stamp newer than every kernel module says the cache is filled.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from pathlib import Path
 _CORE = Path(__file__).resolve().parent
 _CACHE = _CORE / "__pycache__"
 _MARK = "cache=True"  # a module with a cached kernel says so in its source
+_STAMP = "swarm_ros-kernels.compiled"  # in _CACHE: compile_kernels() ran after the last change to a kernel module
 #: What the commands say before they compile (one line, on stderr).
 COMPILING = ("compiling the numba kernels first (once after an install or a change to the core, about 15 s; "
              "scripts/setup.sh does it too)")
@@ -29,7 +33,8 @@ def _kernel_modules() -> list[Path]:
 
 
 def kernels_cached() -> bool:
-    """Whether every core module with a cached kernel has an index in numba's cache newer than its source.
+    """Whether the cache is filled: :func:`compile_kernels`' stamp is newer than every core module with a
+    cached kernel, or each such module has an index in numba's cache newer than its source.
 
     Answers True when the cache is somewhere this function does not look
     (``NUMBA_CACHE_DIR`` set): it never claims work it cannot see.
@@ -37,8 +42,12 @@ def kernels_cached() -> bool:
     if os.environ.get("NUMBA_CACHE_DIR"):
         return True
     try:
+        sources = _kernel_modules()
+        stamp = _CACHE / _STAMP
+        if stamp.exists() and stamp.stat().st_mtime >= max(p.stat().st_mtime for p in sources):
+            return True
         indexes = {p.name: p.stat().st_mtime for p in _CACHE.glob("*.nbi")}
-        for source in _kernel_modules():
+        for source in sources:
             changed = source.stat().st_mtime
             if not any(name.startswith(f"{source.stem}.") and at >= changed for name, at in indexes.items()):
                 return False
@@ -60,6 +69,10 @@ def compile_kernels() -> None:
     params = RunParams(robots=shape.patches)
     warm_up(shape, params)
     Simulation(shape, params).run(max_ticks=5)
+    try:
+        (_CACHE / _STAMP).touch()
+    except OSError:
+        pass  # a read-only install: the indexes alone answer kernels_cached()
 
 
 def main() -> int:

@@ -1,0 +1,55 @@
+"""Whether numba's cache of the core's kernels is filled, judged from files only (swarm_ros.core.kernels)."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from swarm_ros.core import kernels
+
+pytestmark = pytest.mark.unit
+
+
+@pytest.fixture
+def core(tmp_path, monkeypatch):
+    """A fake core: one module whose kernels are all inlined, one with a kernel of its own."""
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    (tmp_path / "rng.py").write_text('@numba.njit(cache=True, inline="always")\n')
+    (tmp_path / "engine.py").write_text("@numba.njit(cache=True)\n")
+    (tmp_path / "plain.py").write_text("x = 1\n")
+    monkeypatch.setattr(kernels, "_CORE", tmp_path)
+    monkeypatch.setattr(kernels, "_CACHE", cache)
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    return tmp_path
+
+
+def _at(path, seconds):
+    os.utime(path, (seconds, seconds))
+
+
+def test_indexes_newer_than_their_sources_mean_filled(core):
+    for name in ("rng.draw-1.py311.nbi", "engine.tick-2.py311.nbi"):
+        (core / "__pycache__" / name).touch()
+        _at(core / "__pycache__" / name, 2000)
+    _at(core / "rng.py", 1000)
+    _at(core / "engine.py", 1000)
+    assert kernels.kernels_cached()
+    _at(core / "rng.py", 3000)  # edited: its inlined kernels' index is never written again
+    assert not kernels.kernels_cached()
+
+
+def test_a_stamp_newer_than_every_kernel_module_means_filled(core):
+    stamp = core / "__pycache__" / kernels._STAMP
+    stamp.touch()
+    _at(stamp, 4000)
+    _at(core / "rng.py", 3000)
+    _at(core / "engine.py", 3000)
+    assert kernels.kernels_cached(), "compile_kernels ran after the last change"
+    _at(core / "engine.py", 5000)
+    assert not kernels.kernels_cached(), "a kernel module changed since"
+
+
+def test_no_cache_at_all_is_not_filled(core):
+    assert not kernels.kernels_cached()
