@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts.recording_options import RecordingOptions
@@ -40,6 +39,7 @@ from swarm_ros.core.run_result import ROS2, RunRecord, summarize
 from swarm_ros.core.state import STATE_COUNT, RobotState
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
+from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
 from swarm_ros.protocol.status import RunFailed, WorldReport
 from swarm_ros.ros import graph as msgs
@@ -131,7 +131,7 @@ class MonitorNode:
                 self.bag.write(topic, data)
         return write
 
-    def _on_robots(self, msg: PointCloud2) -> None:
+    def _on_robots(self, msg: Cloud) -> None:
         if self.outcome is not None:
             return
         removed_before = self.removed
@@ -162,7 +162,7 @@ class MonitorNode:
             self.ended_at = time.monotonic()
             self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
 
-    def _on_decisions(self, msg: PointCloud2) -> None:
+    def _on_decisions(self, msg: Cloud) -> None:
         """Count the decision rows of each tick (for the bag: see :meth:`_bag_complete`)."""
         try:
             tick, rows = checks.decision_message(msg, self.params.robots)

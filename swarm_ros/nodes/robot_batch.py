@@ -32,6 +32,7 @@ from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
+from swarm_ros.protocol.cdr import Cloud, encode_cloud
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
 from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, batch_label, decision_rows, format_ranges, parse_ranges
 from swarm_ros.protocol.status import RunFailed, has_ended
@@ -96,7 +97,7 @@ class RobotBatchNode:
                                  f"got {format_ranges(ids)}")
         return ids
 
-    def _on_snapshot(self, msg: PointCloud2) -> None:
+    def _on_snapshot(self, msg: Cloud) -> None:
         """Every robot's row at some tick: start (again) from it if it is newer than what we hold."""
         try:
             tick, rows = checks.snapshot(msg, self.params.robots, self.radius)
@@ -115,7 +116,7 @@ class RobotBatchNode:
         self.early.clear()
         self._decide()
 
-    def _on_robots(self, msg: PointCloud2) -> None:
+    def _on_robots(self, msg: Cloud) -> None:
         try:
             tick, rows = checked_robots(self.replica, msg, self.radius)
         except Rejected as fault:
@@ -149,7 +150,7 @@ class RobotBatchNode:
         if own.size:
             tick = self.replica.tick + 1
             decisions = self.decider.decide(self.replica.state, own, tick, moving)
-            self.pub_decisions.publish(msgs.make_cloud(decision_rows(decisions), tick))
+            self.pub_decisions.publish(encode_cloud(decision_rows(decisions), tick))
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         if self.ended_at is None and has_ended(msgs.status_values(msg).get("outcome")):

@@ -27,6 +27,7 @@ from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.signals import PARENT_ENV, process_age
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
+from swarm_ros.protocol.cdr import Cloud, encode_cloud
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.lockstep import Lockstep, Policy
 from swarm_ros.protocol.plan import MONITOR
@@ -88,7 +89,7 @@ class WorldNode:
         except Rejected as fault:
             self.rejections.drop(msgs.BATCHES, fault)
 
-    def _on_decisions(self, k: int, topic: str, msg: PointCloud2) -> None:
+    def _on_decisions(self, k: int, topic: str, msg: Cloud) -> None:
         """Batch ``k``'s decisions (on ``topic``, its own): used whole once checked, or dropped and counted."""
         if self.lockstep.over:
             return
@@ -125,13 +126,13 @@ class WorldNode:
         self._watch(msgs.alive_topic(name), lambda info, k=k: self._on_batch_liveliness(k, info))
 
     def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None:
-        self.snapshot_pubs[k].publish(msgs.make_cloud(rows, tick))
+        self.snapshot_pubs[k].publish(encode_cloud(rows, tick))
 
     def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None:
         with self.signer.batch():  # one voucher for the tick's messages
             if applied is not None:
-                self.pub_decisions.publish(msgs.make_cloud(applied, tick))
-            self.pub_robots.publish(msgs.make_cloud(rows, tick))
+                self.pub_decisions.publish(encode_cloud(applied, tick))
+            self.pub_robots.publish(encode_cloud(rows, tick))
             if joined:
                 self._publish_occupancy()
             self.pub_clock.publish(msgs.clock_message(tick))

@@ -40,7 +40,9 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import PointCloud2
 
+from swarm_ros.protocol.cdr import decode_cloud
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros import graph as msgs
@@ -171,8 +173,8 @@ class SignedPublisher:
         self.signer, self.pub, self.topic = signer, pub, topic
 
     def publish(self, msg) -> bytes:
-        """Publish ``msg`` (vouched for); returns its serialized bytes."""
-        data = aligned(serialize_message(msg))
+        """Publish ``msg``, a message or its serialized bytes (vouched for); returns the serialized bytes."""
+        data = aligned(msg if isinstance(msg, bytes) else serialize_message(msg))
         self.signer._publish(self.pub, self.topic, data)
         return data
 
@@ -202,7 +204,8 @@ class Gate:
     def subscribe(self, msg_type, topic: str, handler: Callable[[object], None] | None, qos,
                   raw_handler: Callable[[bytes], None] | None = None):
         """A serialized subscription to ``topic``: vouched messages go to ``raw_handler(data)`` (if given),
-        then ``handler(message)``. Returns the subscription."""
+        then ``handler(message)``. A PointCloud2 reaches ``handler`` read in place
+        (:func:`swarm_ros.protocol.cdr.decode_cloud`), not as a message object. Returns the subscription."""
         role = role_of(topic)
         if role not in self.auth_readers:
             topic_ = auth_topic(role)
@@ -279,8 +282,17 @@ class Gate:
         msg_type, handler, raw_handler = self.handlers[topic]
         if raw_handler is not None:
             raw_handler(data)
-        if handler is not None:
-            handler(deserialize_message(data, msg_type))
+        if handler is None:
+            return
+        if msg_type is PointCloud2:
+            try:
+                msg = decode_cloud(data)
+            except Rejected as fault:
+                self.rejections.drop(topic, fault)
+                return
+        else:
+            msg = deserialize_message(data, msg_type)
+        handler(msg)
 
     def expire(self, now: float | None = None, hold: float = HOLD_SECONDS) -> None:
         """Drop (and count) what has waited for a voucher longer than ``hold`` seconds."""

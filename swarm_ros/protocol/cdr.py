@@ -1,0 +1,209 @@
+"""``sensor_msgs/PointCloud2`` in its serialized form (CDR, little-endian), written and read with numpy alone.
+
+The graph's hot path publishes and takes clouds as serialized bytes: building a PointCloud2
+message object costs a copy of its data through a Python ``array('B')`` and another through
+rclpy's serializer, per message and per reader. Here a cloud is one ``bytes`` (its rows copied
+in once), and a received one is read as a view whose ``data`` is a slice of the buffer.
+
+The bytes are what ``rclpy.serialization.serialize_message`` gives for the same message, but
+for the alignment padding, which is zeros here and whatever was in memory there; each reads
+the other's (test/test_cdr.py), so the topics stay standard PointCloud2 for every other
+reader: ``swarm-ros topics``, the bag, rosbags, RViz.
+
+:func:`decode_cloud` takes bytes from anybody: every length and offset is checked against
+the buffer before use, and what does not parse raises ``Rejected("malformed CDR")``.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarm_ros.protocol.checks import Rejected
+from swarm_ros.protocol.rows import FRAME_ID, TICK_SECONDS, point_fields
+
+ENCAPSULATION = b"\x00\x01\x00\x00"  #: CDR, little-endian (the only encoding read here)
+MAX_FIELDS = 16  #: a cloud with more point fields is not one of the graph's
+MAX_STRING = 256  #: nor one with a longer frame id or field name
+
+_U32 = struct.Struct("<I")
+_STAMP = struct.Struct("<iI")
+
+
+def _string(text: str) -> bytes:
+    raw = text.encode() + b"\x00"
+    return _U32.pack(len(raw)) + raw
+
+
+def _pad(n: int) -> bytes:
+    return b"\x00" * (-n % 4)
+
+
+_PREFIXES: dict[tuple[str, np.dtype], tuple[bytes, int]] = {}
+
+
+def _fields_block(frame_id: str, dtype: np.dtype) -> tuple[bytes, int]:
+    """The bytes from the frame id to the point step (they depend on the layout only), and their end offset."""
+    key = (frame_id, dtype)
+    if key not in _PREFIXES:
+        out = bytearray(_string(frame_id))
+        out += _pad(8 + len(out))  # the stamp's 8 bytes come first
+        height_at = len(out)
+        out += b"\x00" * 8  # height and width: filled per message
+        fields = point_fields(dtype)
+        out += _U32.pack(len(fields))
+        for name, offset, datatype, count in fields:
+            out += _string(name)
+            out += _pad(8 + len(out))
+            out += _U32.pack(offset) + bytes([datatype])
+            out += _pad(8 + len(out))
+            out += _U32.pack(count)
+        out += b"\x00"  # is_bigendian
+        out += _pad(8 + len(out))
+        _PREFIXES[key] = (bytes(out), height_at)
+    return _PREFIXES[key]
+
+
+def encode_cloud(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID) -> bytes:
+    """A serialized PointCloud2 of ``rows`` (a record array of a :mod:`swarm_ros.protocol.rows` type), stamped
+    with ``tick``: one row of ``rows.size`` points, little-endian, dense."""
+    block, height_at = _fields_block(frame_id, rows.dtype)
+    step = rows.dtype.itemsize
+    block = block[:height_at] + struct.pack("<II", 1, rows.size) + block[height_at + 8:]
+    data = np.ascontiguousarray(rows).tobytes()
+    return b"".join((ENCAPSULATION, _STAMP.pack(int(tick) * TICK_SECONDS, 0), block,
+                     struct.pack("<III", step, step * rows.size, len(data)), data, b"\x01"))
+
+
+@dataclass(frozen=True)
+class Stamp:
+    sec: int
+    nanosec: int
+
+
+@dataclass(frozen=True)
+class Header:
+    stamp: Stamp
+    frame_id: str
+
+
+@dataclass(frozen=True)
+class Field:
+    name: str
+    offset: int
+    datatype: int
+    count: int
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """A received PointCloud2, read in place: the attributes of the message, ``data`` a view of the buffer."""
+
+    header: Header
+    height: int
+    width: int
+    fields: tuple[Field, ...]
+    is_bigendian: bool
+    point_step: int
+    row_step: int
+    data: memoryview
+    is_dense: bool
+
+
+class _Reader:
+    def __init__(self, buf: bytes) -> None:
+        self.buf, self.at = memoryview(buf), 4  # after the encapsulation header
+
+    def need(self, n: int) -> None:
+        if n < 0 or self.at + n > len(self.buf):
+            raise Rejected("malformed CDR", f"{n} bytes wanted at {self.at - 4} of {len(self.buf) - 4}")
+
+    def align(self, k: int) -> None:
+        self.at += -(self.at - 4) % k
+
+    def u32(self) -> int:
+        self.align(4)
+        self.need(4)
+        value = _U32.unpack_from(self.buf, self.at)[0]
+        self.at += 4
+        return value
+
+    def u8(self) -> int:
+        self.need(1)
+        value = self.buf[self.at]
+        self.at += 1
+        return value
+
+    def string(self) -> str:
+        n = self.u32()
+        if not 1 <= n <= MAX_STRING:
+            raise Rejected("malformed CDR", f"a string of {n} bytes")
+        self.need(n)
+        raw = bytes(self.buf[self.at:self.at + n])
+        self.at += n
+        if raw[-1] != 0:
+            raise Rejected("malformed CDR", "a string without its terminating zero")
+        try:
+            return raw[:-1].decode()
+        except UnicodeDecodeError:
+            raise Rejected("malformed CDR", "a string that is not UTF-8") from None
+
+
+def decode_cloud(buf: bytes) -> Cloud:
+    """The PointCloud2 serialized in ``buf`` (as a reader takes it: DDS may pad it to a multiple of 4).
+
+    Raises:
+        Rejected: not little-endian CDR, or a length or offset that does not fit the buffer.
+    """
+    if len(buf) < 4 or bytes(buf[:4]) != ENCAPSULATION:
+        raise Rejected("malformed CDR", "not little-endian CDR")
+    r = _Reader(buf)
+    r.need(8)
+    sec, nanosec = _STAMP.unpack_from(r.buf, r.at)
+    r.at += 8
+    frame_id = r.string()
+    height, width = r.u32(), r.u32()
+    fields, bigendian = _known_layout(r) if frame_id == FRAME_ID else (None, 0)
+    if fields is None:
+        n = r.u32()
+        if n > MAX_FIELDS:
+            raise Rejected("malformed CDR", f"{n} point fields")
+        fields = []
+        for _ in range(n):
+            name = r.string()
+            offset = r.u32()
+            datatype = r.u8()
+            fields.append(Field(name, offset, datatype, r.u32()))
+        fields = tuple(fields)
+        bigendian = r.u8()
+    point_step, row_step, size = r.u32(), r.u32(), r.u32()
+    r.need(size)
+    data = r.buf[r.at:r.at + size]
+    r.at += size
+    dense = r.u8()
+    if bigendian > 1 or dense > 1 or any(b for b in bytes(r.buf[r.at:])):
+        raise Rejected("malformed CDR", "a bool out of range or bytes after the message")
+    return Cloud(Header(Stamp(sec, nanosec), frame_id), height, width, fields, bool(bigendian), point_step,
+                 row_step, data, bool(dense))
+
+
+_LAYOUTS: list[tuple[bytes, tuple[Field, ...]]] = []
+
+
+def _known_layout(r: _Reader) -> tuple[tuple[Field, ...] | None, int]:
+    """The fields of one of the graph's own row layouts, if the bytes at ``r`` are exactly what
+    :func:`encode_cloud` writes for it (then ``r`` moves past them, and past is_bigendian = 0)."""
+    if not _LAYOUTS:
+        from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+
+        for dtype in (ROBOT_ROW, DECISION_ROW):
+            block, height_at = _fields_block(FRAME_ID, dtype)
+            fields = tuple(Field(*f) for f in point_fields(dtype))
+            _LAYOUTS.append((block[height_at + 8:], fields))
+    for block, fields in _LAYOUTS:
+        if r.buf[r.at:r.at + len(block)] == block:
+            r.at += len(block)
+            return fields, 0
+    return None, 0
