@@ -16,13 +16,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from swarm_ros.core.engine import Simulation
-    from swarm_ros.core.replica import Replica
-
 from swarm_ros.core.legality import illegal
 from swarm_ros.protocol.rows import DECISION_ROW, PATCH_METRES, ROBOT_ROW, TICK_SECONDS, check_fields, parse_batch_label
 from swarm_ros.protocol.status import RunFailed
+
+if TYPE_CHECKING:
+    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.replica import Replica
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
 _NODE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")  # a ROS node name, as batch names are
