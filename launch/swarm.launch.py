@@ -114,7 +114,7 @@ def generate_launch_description() -> LaunchDescription:
         SetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE",
                                os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE",
                                               os.path.join(share, "config", "fastdds.xml"))),
-        # the run's key, which its nodes vouch for their messages with (docs/security.md): a new one
+        # the run's key, which its nodes tag their messages with (docs/security.md): a new one
         # for each launch unless SWARM_ROS_RUN_KEY is set
         SetEnvironmentVariable(KEY_ENV, os.environ.get(KEY_ENV) or secrets.token_hex(32)),
         OpaqueFunction(function=graph),

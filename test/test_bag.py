@@ -88,7 +88,6 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
     from std_msgs.msg import Int64MultiArray
 
     from swarm_ros.ros import graph as msgs
-    from swarm_ros.ros.bag_writer import reader_qos
     from swarm_ros.ros.dds import dds_defaults
 
     domain = 180 + os.getpid() % 40
@@ -102,8 +101,8 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
     try:
         node = Node("replay_listener", context=context, start_parameter_services=False)
         robots, metrics = [], []
-        node.create_subscription(PointCloud2, msgs.ROBOTS, robots.append, reader_qos(msgs.ROBOTS_QOS))
-        node.create_subscription(Int64MultiArray, msgs.METRICS, metrics.append, reader_qos(msgs.METRICS_QOS))
+        node.create_subscription(PointCloud2, msgs.ROBOTS, robots.append, msgs.reader_qos(msgs.ROBOTS_QOS))
+        node.create_subscription(Int64MultiArray, msgs.METRICS, metrics.append, msgs.reader_qos(msgs.METRICS_QOS))
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         replay = subprocess.Popen([PY, "-m", "swarm_ros", "replay", str(ring_run), "--domain-id", str(domain),

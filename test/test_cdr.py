@@ -16,7 +16,7 @@ from swarm_ros.protocol import checks  # noqa: E402
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud  # noqa: E402
 from swarm_ros.protocol.checks import Rejected  # noqa: E402
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW  # noqa: E402
-from swarm_ros.ros.auth import aligned  # noqa: E402
+from swarm_ros.protocol.tag import aligned  # noqa: E402
 from swarm_ros.ros.graph import make_cloud  # noqa: E402
 
 pytestmark = pytest.mark.unit

@@ -2,8 +2,8 @@
 
 The world and the monitor run as processes; this test process plays the two robot
 batches, deciding honestly with the core's own rule, and before its honest decisions of
-a tick sends bad messages of two sorts: malformed or illegal ones vouched for with the
-run's key (a buggy node of the run), and well-formed ones nobody vouched for (an outsider
+a tick sends bad messages of two sorts: malformed or illegal ones tagged with the
+run's key (a buggy node of the run), and well-formed ones with no valid tag (an outsider
 on the domain). Every bad message must be dropped and counted, and the run must equal
 ``simulate``'s, byte for byte.
 """
@@ -43,7 +43,7 @@ class _Batches:
     """Two robot batches in this process, honest but for the bad messages ``attack`` sends."""
 
     def __init__(self, node, shape, params, key: bytes) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+        from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import PointCloud2
         from std_msgs.msg import Empty
 
@@ -51,32 +51,33 @@ class _Batches:
         from swarm_ros.core.rules import Decider
         from swarm_ros.protocol.checks import Rejections
         from swarm_ros.ros import graph as msgs
-        from swarm_ros.ros.auth import AUTH_QOS, Gate, Signer, auth_topic
+        from swarm_ros.ros.auth import Gate, Signer
 
         self.msgs, self.node, self.params, self.shape = msgs, node, params, shape
         self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
         self.radius = shape.world.radius
         self.names = ["robot_batch_0", "robot_batch_1"]
         self.ids = [batch_ids(params.robots, k, 2) for k in range(2)]
-        # vouched for with the run's key, as the run's own nodes do
-        signer = Signer(node, key, "batches")
-        self.pubs = [signer.publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS) for n in self.names]
+        # tagged with the run's key, as the run's own nodes do
+        signers = [Signer(node, key, n) for n in self.names]
+        self.pubs = [signers[k].publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS)
+                     for k, n in enumerate(self.names)]
         self.alive = [node.create_publisher(Empty, msgs.alive_topic(n), msgs.ALIVE_QOS) for n in self.names]
-        self.announce = signer.publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
+        self.announce = [signer.publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS) for signer in signers]
+        self.intruder = Signer(node, key, "intruder").publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
         self.robots_pub = Signer(node, key, "world").publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
         self.metrics_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.METRICS,
                                                                   msgs.METRICS_QOS)
-        # an outsider's: well-formed messages without a voucher
+        # an outsider's: well-formed messages without a valid tag
         self.forged = {topic: node.create_publisher(kind, topic, qos) for topic, kind, qos in (
             (msgs.decisions_topic(self.names[0]), PointCloud2, msgs.DECISIONS_QOS),
             (msgs.BATCHES, msgs.Int64MultiArray, msgs.BATCHES_QOS),
             (msgs.METRICS, msgs.Int64MultiArray, msgs.METRICS_QOS),
             (msgs.STATUS, DiagnosticArray, msgs.LATCHED_QOS),
-            (msgs.ROBOTS, PointCloud2, msgs.ROBOTS_QOS),
-            (auth_topic("world"), DiagnosticStatus, AUTH_QOS))}
-        self.world_vouchers: list = []  # the world's, as an outsider records them (to replay one)
-        node.create_subscription(DiagnosticStatus, auth_topic("world"), self.world_vouchers.append, AUTH_QOS)
-        # these batches take only what the world vouched for, as the run's own do
+            (msgs.ROBOTS, PointCloud2, msgs.ROBOTS_QOS))}
+        self.world_rows: list = []  # the world's, serialized, as an outsider records them (to replay one)
+        node.create_subscription(PointCloud2, msgs.ROBOTS, self.world_rows.append, msgs.ROBOTS_QOS, raw=True)
+        # these batches take only what the world's tag proves, as the run's own do
         gate = Gate(node, key, Rejections(node.get_logger()))
         gate.subscribe(PointCloud2, msgs.snapshot_topic(self.names[0]), self._on_snapshot, msgs.LATCHED_QOS)
         gate.subscribe(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
@@ -86,14 +87,14 @@ class _Batches:
         forged = msgs.ids_message(self.ids[1])
         forged.layout.dim[0].label = "impostor/0"
         self.forged[msgs.BATCHES].publish(forged)
-        self.sent["world: unvouched announcement"] = 1
+        self.sent["world: untagged announcement"] = 1
         for k, name in enumerate(self.names):
             hello = msgs.ids_message(self.ids[k])
             hello.layout.dim[0].label = batch_label(name, 0)
-            self.announce.publish(hello)
+            self.announce[k].publish(hello)
         hello = msgs.ids_message(self.ids[1][:3])  # before tick 0: another batch's robots
         hello.layout.dim[0].label = "intruder/0"
-        self.announce.publish(hello)
+        self.intruder.publish(hello)
         self.sent["world: robots of another batch"] = 1
         self.localized_sent = False
 
@@ -120,7 +121,7 @@ class _Batches:
         if tick == 5:  # an outsider's copy of the world's rows, restamped as the next tick's, before them
             copy = self.msgs.make_cloud(rows.copy(), tick + 1)
             self.forged[self.msgs.ROBOTS].publish(copy)
-            self.sent["monitor: unvouched rows"] = 1
+            self.sent["monitor: untagged rows"] = 1
         self._decide()
 
     def _cloud(self, rows: np.ndarray, tick: int):
@@ -193,7 +194,7 @@ class _Batches:
         elif tick == 13:  # a new batch claiming robots, after tick 0
             hello = self.msgs.ids_message(self.ids[0][:5])
             hello.layout.dim[0].label = "intruder/0"
-            self.announce.publish(hello)
+            self.intruder.publish(hello)
             self.sent["world: announcement"] = 1
         elif tick == 14:  # metrics of a tick the world has not reached
             self.metrics_pub.publish(self.msgs.metrics_message([10 ** 6] + [0] * 6))
@@ -218,21 +219,21 @@ class _Batches:
         self.forge(tick, honest)
 
     def forge(self, tick: int, honest: list) -> None:
-        """An outsider's messages: well-formed, legal, consistent, but not vouched for."""
+        """An outsider's messages: well-formed, legal, consistent, but without a valid tag."""
         if tick == 2 and honest[0] is not None:  # batch 0's decisions, turned, before its own
             rows = honest[0].copy()
             rows["heading"] = (rows["heading"] + 1.0) % (2 * np.pi)
             self.forged[self.msgs.decisions_topic(self.names[0])].publish(self._cloud(rows, tick))
-            self.sent["world: unvouched decisions"] = 1
+            self.sent["world: untagged decisions"] = 1
         elif tick == 3:  # the monitor's metrics of a tick the world published
             self.forged[self.msgs.METRICS].publish(self.msgs.metrics_message([tick - 1] + [0] * 6))
-            self.sent["world: unvouched metrics"] = 1
+            self.sent["world: untagged metrics"] = 1
         elif tick == 4:  # the world's status, with an outcome
             self.forged[self.msgs.STATUS].publish(self.msgs.status_message(tick, "complete", "complete"))
-            self.sent["monitor: unvouched status"] = 1
-        elif tick == 6 and self.world_vouchers:  # one of the world's vouchers, again
-            self.forged["/swarm/auth/world"].publish(self.world_vouchers[-1])
-            self.sent["monitor: replayed voucher"] = 1
+            self.sent["monitor: untagged status"] = 1
+        elif tick == 6 and self.world_rows:  # the world's rows of an earlier tick, tag and all, again
+            self.forged[self.msgs.ROBOTS].publish(self.world_rows[-2])
+            self.sent["monitor: replayed rows"] = 1
 
 
 def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_path, monkeypatch):
@@ -287,7 +288,7 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
     assert "dropped a message on /swarm/robots" in logs["monitor"]
     assert "dropped a message on /swarm/decisions/robot_batch_0 (unauthenticated" in logs["world"]
     assert "dropped a message on /swarm/status (unauthenticated" in logs["monitor"]
-    assert "dropped a message on /swarm/auth/world (replayed voucher" in logs["monitor"]
+    assert "dropped a message on /swarm/robots (replayed" in logs["monitor"]
 
 
 
@@ -360,7 +361,7 @@ def test_a_one_host_run_is_not_discovered_from_another_network_namespace(two_hos
 
 def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(tmp_path, monkeypatch):
     """swarm-ros run as a user starts it (a new key for the run), and a stranger on its domain that
-    reads the run's messages and sends, without vouchers: malformed rows; every tick's rows again,
+    reads the run's messages and sends, without a valid tag: malformed rows; every tick's rows again,
     restamped as the next tick's (consistent, and before the world's); a batch's snapshot restamped
     later; a status with an outcome. Each would change the run if taken. Every node drops them, and
     the run equals simulate's."""

@@ -7,8 +7,8 @@ publishes each tick's metrics on /swarm/metrics, records the run with the in-pro
 engine's own :class:`~swarm_ros.artifacts.rerun_recording.Recorder` (streamed to ``<out_dir>.partial.rrd``
 while the run goes on), and when the run ends writes the run directory exactly as
 ``swarm-ros simulate`` does, with ``engine: ros2``. It checks its outcome against the
-world's /swarm/status. It takes only what the world vouched for (:mod:`swarm_ros.ros.auth`),
-and records only that in the bag.
+world's /swarm/status. It takes only what a tag under the run's key proves (:mod:`swarm_ros.ros.auth`),
+and records only that in the bag, with the shape, occupancy and clock it derives from it.
 
     ros2 run swarm_ros monitor --ros-args --params-file config/swarm_ros.yaml -p out_dir:=runs/star
 """
@@ -44,7 +44,7 @@ from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checke
 from swarm_ros.protocol.status import RunFailed, WorldReport
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
-from swarm_ros.ros.bag_writer import TOPICS, BagRecorder, reader_qos
+from swarm_ros.ros.bag_writer import TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED, handle_missed, run_node
 
@@ -80,15 +80,14 @@ class MonitorNode:
         self.decided_rows: dict[int, int] = {}  # tick -> decision rows seen (with the bag on)
         self.rejections = Rejections(node.get_logger())
 
-        self.signer, self.gate = open_auth(node, "monitor", self.rejections)
+        self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_metrics = self.signer.publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
-        # Serialized subscriptions to every recorded topic but the metrics (sent from here), bag or no bag
-        # (messages.MONITOR_READS). Each message, once vouched for (auth.Gate), goes into the bag as it
-        # came, then to its handler.
+        # Serialized subscriptions to the tagged topics it records (plan.MONITOR_READS), bag or no bag. Each
+        # message, once its tag proves it (auth.Gate), goes into the bag as it came, then to its handler.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
         handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status, msgs.DECISIONS: self._on_decisions}
         self.readers = {topic: self.gate.subscribe(TOPICS[topic][0], topic, handlers.get(topic),
-                                                   reader_qos(TOPICS[topic][1]), raw_handler=self._bagger(topic))
+                                                   TOPICS[topic][1], raw_handler=self._bagger(topic))
                         for topic in msgs.MONITOR_READS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
         # readers have matched their writers (a thread watches, while the heavy part below loads): a reader
@@ -115,7 +114,7 @@ class MonitorNode:
             matched = reader.get_publisher_count()
             if matched < 1 or (topic == msgs.DECISIONS and matched < self.node.count_publishers(topic)):
                 return False
-        return self.gate.readers_matched()
+        return True
 
     def _announce_when_matched(self) -> None:
         while not self.closing.wait(_MATCH_POLL):
@@ -125,7 +124,7 @@ class MonitorNode:
                 return
 
     def _bagger(self, topic: str):
-        """What writes a vouched message of ``topic``, as it came, into the bag (if there is one)."""
+        """What writes a proven message of ``topic``, as it came, into the bag (if there is one)."""
         def write(data: bytes) -> None:
             if self.bag is not None:
                 self.bag.write(topic, data)
@@ -151,6 +150,10 @@ class MonitorNode:
         data = self.pub_metrics.publish(msgs.metrics_message(metrics))
         if self.bag is not None:
             self.bag.write(msgs.METRICS, data)
+            joined = len(self.rows) < 2 or self.rows[-1][METRIC_COLUMNS.index("localized")] != \
+                self.rows[-2][METRIC_COLUMNS.index("localized")]
+            self.bag.write_world(self.shape, self.replica.state.occupancy, tick, len(self.rows) == 1,
+                                 joined or self.removed > removed_before)
         if self.removed > removed_before:
             self.losses.append((tick, self.removed - removed_before))
         p = self.params
@@ -191,7 +194,6 @@ class MonitorNode:
             self.world_end = (time.monotonic(), msgs.tick_of(msg.header))
 
     def poll(self) -> None:
-        self.gate.expire()
         if self.outcome is None:
             self._check_world_end()
             return
@@ -200,7 +202,6 @@ class MonitorNode:
         if self.bag is not None and not self._bag_complete() and time.monotonic() - self.ended_at < _BAG_WAIT:
             return
         missed = handle_missed(self.node)  # what the executor may not have handed over (runner.handle_missed)
-        self.gate.settle()  # the run's counts, for its summary
         if missed:
             self.node.get_logger().warn(f"{missed} messages were still in the readers, not handed over by the "
                                         f"executor; handled before writing the run")

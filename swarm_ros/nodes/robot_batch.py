@@ -6,7 +6,7 @@ process that was restarted in the middle of a run); the batch builds its copy of
 swarm's state from it (:class:`swarm_ros.core.replica.Replica`), follows the world's
 rows on /swarm/robots from there, and after each tick publishes, on its own
 /swarm/decisions/<batch>, what each of its moving robots decided for the next one.
-It takes only messages the world vouched for (:mod:`swarm_ros.ros.auth`), and vouches for its own.
+It takes only messages whose tag proves them the world's (:mod:`swarm_ros.ros.auth`), and tags its own.
 Every message it takes is checked first (:mod:`swarm_ros.protocol.checks`, and
 :meth:`Replica.inconsistent` for rows); one that fails is dropped, counted and logged. A decision is a pure function
 of the state, the seed, the robot and the tick, so a restarted batch decides exactly
@@ -32,7 +32,7 @@ from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
-from swarm_ros.protocol.cdr import Cloud, encode_cloud
+from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
 from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, batch_label, decision_rows, format_ranges, parse_ranges
 from swarm_ros.protocol.status import RunFailed, has_ended
@@ -64,7 +64,7 @@ class RobotBatchNode:
         self.radius = self.shape.world.radius
         self.rejections = Rejections(node.get_logger())
 
-        self.signer, self.gate = open_auth(node, "batches", self.rejections)
+        self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_decisions = self.signer.publisher(PointCloud2, msgs.decisions_topic(node.get_name()),
                                                    msgs.DECISIONS_QOS)
         self.gate.subscribe(PointCloud2, msgs.snapshot_topic(node.get_name()), self._on_snapshot, msgs.LATCHED_QOS)
@@ -150,18 +150,16 @@ class RobotBatchNode:
         if own.size:
             tick = self.replica.tick + 1
             decisions = self.decider.decide(self.replica.state, own, tick, moving)
-            self.pub_decisions.publish(encode_cloud(decision_rows(decisions), tick))
+            self.pub_decisions.publish_rows(decision_rows(decisions), tick)
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         if self.ended_at is None and has_ended(msgs.status_values(msg).get("outcome")):
             self.ended_at = time.monotonic()
-            self.gate.settle()  # its log says what it dropped
 
     def close(self, code: int) -> None:
         """Nothing to release."""
 
     def poll(self) -> None:
-        self.gate.expire()
         # After the outcome, exit once every reader has acknowledged this batch's decisions: the world
         # has them all, but the monitor, which records them in the bag, may be far behind. A reader
         # that died never acknowledges, so wait at most _LINGER.

@@ -3,7 +3,7 @@
 A thin shell: every decision about the run (admission of batches, tick 0, applying a tick,
 the monitor window, lost processes) is :class:`swarm_ros.protocol.lockstep.Lockstep`'s.
 This node turns its messages and liveliness events into calls on it, and what it decides
-into messages. Every message is taken only once a voucher under the run's key lists it
+into messages. Every message is taken only once its tag under the run's key proves it
 (:mod:`swarm_ros.ros.auth`) and it passes its checks (:mod:`swarm_ros.protocol.checks`);
 one that fails is dropped whole and counted (``rejected_messages`` on /swarm/status).
 
@@ -27,13 +27,14 @@ from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.signals import PARENT_ENV, process_age
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
-from swarm_ros.protocol.cdr import Cloud, encode_cloud
+from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejected, Rejections
-from swarm_ros.protocol.lockstep import Lockstep, Policy
+from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.status import Status
+from swarm_ros.protocol.world_port import Policy
 from swarm_ros.ros import graph as msgs
-from swarm_ros.ros.auth import auth_topic, open_auth
+from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import run_node
 
@@ -50,14 +51,15 @@ class WorldNode:
         self.shape, self.params = run.resolve()
         self.policy = Policy(**own)
         self.rejections = Rejections(node.get_logger())
-        self.signer, self.gate = open_auth(node, "world", self.rejections)
+        self.signer, self.gate = open_auth(node, self.rejections)
         signed = self.signer.publisher
         self.pub_robots = signed(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
-        self.pub_shape = signed(msgs.OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
-        self.pub_occupancy = signed(msgs.OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
         self.pub_status = signed(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
-        self.pub_clock = signed(msgs.Clock, msgs.CLOCK, msgs.CLOCK_QOS)
         self.pub_decisions = signed(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
+        # for viewers only: these types have no field for a tag, and no node of the run reads them (auth)
+        self.pub_shape = node.create_publisher(msgs.OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
+        self.pub_occupancy = node.create_publisher(msgs.OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
+        self.pub_clock = node.create_publisher(msgs.Clock, msgs.CLOCK, msgs.CLOCK_QOS)
         self.snapshot_pubs: list = []  # per batch: /swarm/snapshot/<batch>
         self.lockstep: Lockstep | None = None  # made in load(), before the first callback can run
         self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
@@ -126,24 +128,20 @@ class WorldNode:
         self._watch(msgs.alive_topic(name), lambda info, k=k: self._on_batch_liveliness(k, info))
 
     def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None:
-        self.snapshot_pubs[k].publish(encode_cloud(rows, tick))
+        self.snapshot_pubs[k].publish_rows(rows, tick)
 
     def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None:
-        with self.signer.batch():  # one voucher for the tick's messages
-            if applied is not None:
-                self.pub_decisions.publish(encode_cloud(applied, tick))
-            self.pub_robots.publish(encode_cloud(rows, tick))
-            if joined:
-                self._publish_occupancy()
-            self.pub_clock.publish(msgs.clock_message(tick))
+        if applied is not None:
+            self.pub_decisions.publish_rows(applied, tick)
+        self.pub_robots.publish_rows(rows, tick)
+        if joined:
+            self._publish_occupancy()
+        self.pub_clock.publish(msgs.clock_message(tick))
 
     def publish_status(self, status: Status) -> None:
         level = DiagnosticStatus.WARN if status.warn else DiagnosticStatus.OK
-        with self.signer.batch():
-            self.pub_status.publish(msgs.status_message(status.tick, status.outcome, status.message, level,
-                                                        status.values))
-            if self.lockstep is not None and self.lockstep.started:
-                self._publish_occupancy()
+        self.pub_status.publish(msgs.status_message(status.tick, status.outcome, status.message, level,
+                                                    status.values))
 
     def _publish_occupancy(self) -> None:
         """The occupancy now, stamped with the world's tick (it may be ahead of the last published rows)."""
@@ -153,23 +151,19 @@ class WorldNode:
         self.pub_occupancy.publish(msgs.grid_message(self.shape, cells, sim.tick))
 
     def monitor_reads_all(self) -> bool:
-        """Whether this node has discovered the monitor's reader of every topic the run's bag records.
+        """Whether this node has discovered the monitor's reader of every topic it takes from the network.
 
         Discovery of a reader is when this node's writers match it; the batches, on the same
         discovery traffic, match its reader of decisions at about the same time (and their
         history, TRANSIENT_LOCAL, covers a late match). Waiting for these, not only for the
         monitor's liveliness, keeps the bag whole from tick 0: a reader that matched after a
-        topic's first messages would miss them (``/clock``, volatile) or keep only the last
-        (``/swarm/occupancy``).
+        topic's first messages would keep only the last of a latched one (``/swarm/status``).
         """
         return all(any(info.node_name == MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
-                   for topic in (*msgs.MONITOR_READS, auth_topic("world")))
+                   for topic in msgs.MONITOR_READS)
 
     def delivered(self) -> bool:
         return all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots))
-
-    def settle(self) -> None:
-        self.gate.settle()
 
     def startup_seconds(self) -> float:
         """Seconds from the start of ``swarm-ros run`` (its process, if it is this process's parent),
@@ -183,7 +177,6 @@ class WorldNode:
 
     # -- the node runtime's hooks ----------------------------------------------------------
     def poll(self) -> None:
-        self.gate.expire()
         self.lockstep.poll()
 
     def close(self, code: int) -> None:

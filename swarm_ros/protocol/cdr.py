@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarm_ros.protocol.checks import Rejected
-from swarm_ros.protocol.rows import FRAME_ID, TICK_SECONDS, point_fields
+from swarm_ros.protocol.rows import FRAME_ID, TICK_SECONDS, is_tag, point_fields
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  #: CDR, little-endian (the only encoding read here)
 MAX_FIELDS = 16  #: a cloud with more point fields is not one of the graph's
@@ -41,37 +41,48 @@ def _pad(n: int) -> bytes:
     return b"\x00" * (-n % 4)
 
 
-_PREFIXES: dict[tuple[str, np.dtype], tuple[bytes, int]] = {}
+_PREFIXES: dict[tuple[str, np.dtype, bool], tuple[bytes, int]] = {}
+TAG_DATATYPE = 2  #: the tag's point field: UINT8, count 0 (it holds no bytes of any point)
 
 
-def _fields_block(frame_id: str, dtype: np.dtype) -> tuple[bytes, int]:
-    """The bytes from the frame id to the point step (they depend on the layout only), and their end offset."""
-    key = (frame_id, dtype)
+def _field(name: str, offset: int, datatype: int, count: int, at: int) -> bytes:
+    """A PointField's bytes, written at ``at`` bytes after the stamp's start (for its alignment)."""
+    out = bytearray(_string(name))
+    out += _pad(at + len(out))
+    out += _U32.pack(offset) + bytes([datatype])
+    out += _pad(at + len(out))
+    out += _U32.pack(count)
+    return bytes(out)
+
+
+def _fields_block(frame_id: str, dtype: np.dtype, tagged: bool) -> tuple[bytes, int]:
+    """The bytes from the frame id to the layout's last point field (they depend on the layout only), and
+    where height and width go in them. A tagged cloud counts one more field: the tag, after these."""
+    key = (frame_id, dtype, tagged)
     if key not in _PREFIXES:
         out = bytearray(_string(frame_id))
         out += _pad(8 + len(out))  # the stamp's 8 bytes come first
         height_at = len(out)
         out += b"\x00" * 8  # height and width: filled per message
         fields = point_fields(dtype)
-        out += _U32.pack(len(fields))
+        out += _U32.pack(len(fields) + tagged)
         for name, offset, datatype, count in fields:
-            out += _string(name)
-            out += _pad(8 + len(out))
-            out += _U32.pack(offset) + bytes([datatype])
-            out += _pad(8 + len(out))
-            out += _U32.pack(count)
-        out += b"\x00"  # is_bigendian
-        out += _pad(8 + len(out))
+            out += _field(name, offset, datatype, count, 8 + len(out))
         _PREFIXES[key] = (bytes(out), height_at)
     return _PREFIXES[key]
 
 
-def encode_cloud(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID) -> bytes:
+def encode_cloud(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str = "") -> bytes:
     """A serialized PointCloud2 of ``rows`` (a record array of a :mod:`swarm_ros.protocol.rows` type), stamped
-    with ``tick``: one row of ``rows.size`` points, little-endian, dense."""
-    block, height_at = _fields_block(frame_id, rows.dtype)
-    step = rows.dtype.itemsize
+    with ``tick``: one row of ``rows.size`` points, little-endian, dense. With a ``tag``, one more point
+    field after the layout's, named by the tag, holding nothing (:mod:`swarm_ros.protocol.tag`)."""
+    block, height_at = _fields_block(frame_id, rows.dtype, bool(tag))
     block = block[:height_at] + struct.pack("<II", 1, rows.size) + block[height_at + 8:]
+    if tag:
+        block += _field(tag, 0, TAG_DATATYPE, 0, 8 + len(block))
+    block += b"\x00"  # is_bigendian
+    block += _pad(8 + len(block))
+    step = rows.dtype.itemsize
     data = np.ascontiguousarray(rows).tobytes()
     return b"".join((ENCAPSULATION, _STAMP.pack(int(tick) * TICK_SECONDS, 0), block,
                      struct.pack("<III", step, step * rows.size, len(data)), data, b"\x01"))
@@ -110,6 +121,7 @@ class Cloud:
     row_step: int
     data: memoryview
     is_dense: bool
+    tag: str = ""  #: the tag's text, if the last point field was one (it is not in ``fields``)
 
 
 class _Reader:
@@ -165,19 +177,19 @@ def decode_cloud(buf: bytes) -> Cloud:
     r.at += 8
     frame_id = r.string()
     height, width = r.u32(), r.u32()
-    fields, bigendian = _known_layout(r) if frame_id == FRAME_ID else (None, 0)
-    if fields is None:
-        n = r.u32()
-        if n > MAX_FIELDS:
-            raise Rejected("malformed CDR", f"{n} point fields")
-        fields = []
-        for _ in range(n):
-            name = r.string()
-            offset = r.u32()
-            datatype = r.u8()
-            fields.append(Field(name, offset, datatype, r.u32()))
-        fields = tuple(fields)
-        bigendian = r.u8()
+    known, more = _known_layout(r) if frame_id == FRAME_ID else ((), None)
+    if more is None:
+        more = r.u32()
+        if more > MAX_FIELDS:
+            raise Rejected("malformed CDR", f"{more} point fields")
+    fields = list(known)
+    for _ in range(more):
+        name = r.string()
+        offset = r.u32()
+        datatype = r.u8()
+        fields.append(Field(name, offset, datatype, r.u32()))
+    tag = fields.pop().name if fields and is_tag(fields[-1].name) else ""
+    bigendian = r.u8()
     point_step, row_step, size = r.u32(), r.u32(), r.u32()
     r.need(size)
     data = r.buf[r.at:r.at + size]
@@ -185,25 +197,26 @@ def decode_cloud(buf: bytes) -> Cloud:
     dense = r.u8()
     if bigendian > 1 or dense > 1 or any(b for b in bytes(r.buf[r.at:])):
         raise Rejected("malformed CDR", "a bool out of range or bytes after the message")
-    return Cloud(Header(Stamp(sec, nanosec), frame_id), height, width, fields, bool(bigendian), point_step,
-                 row_step, data, bool(dense))
+    return Cloud(Header(Stamp(sec, nanosec), frame_id), height, width, tuple(fields), bool(bigendian), point_step,
+                 row_step, data, bool(dense), tag)
 
 
-_LAYOUTS: list[tuple[bytes, tuple[Field, ...]]] = []
+_LAYOUTS: list[tuple[bytes, tuple[Field, ...], int]] = []
 
 
-def _known_layout(r: _Reader) -> tuple[tuple[Field, ...] | None, int]:
-    """The fields of one of the graph's own row layouts, if the bytes at ``r`` are exactly what
-    :func:`encode_cloud` writes for it (then ``r`` moves past them, and past is_bigendian = 0)."""
+def _known_layout(r: _Reader) -> tuple[tuple[Field, ...], int | None]:
+    """(fields, how many more to read) if the bytes at ``r`` are the field count and fields that
+    :func:`encode_cloud` writes for one of the graph's own row layouts (then ``r`` moves past them);
+    else ((), None), and ``r`` stays."""
     if not _LAYOUTS:
         from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
 
         for dtype in (ROBOT_ROW, DECISION_ROW):
-            block, height_at = _fields_block(FRAME_ID, dtype)
-            fields = tuple(Field(*f) for f in point_fields(dtype))
-            _LAYOUTS.append((block[height_at + 8:], fields))
-    for block, fields in _LAYOUTS:
+            for tagged in (True, False):
+                block, height_at = _fields_block(FRAME_ID, dtype, tagged)
+                _LAYOUTS.append((block[height_at + 8:], tuple(Field(*f) for f in point_fields(dtype)), int(tagged)))
+    for block, fields, more in _LAYOUTS:
         if r.buf[r.at:r.at + len(block)] == block:
             r.at += len(block)
-            return fields, 0
-    return None, 0
+            return fields, more
+    return (), None

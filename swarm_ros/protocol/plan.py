@@ -35,9 +35,10 @@ METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labe
 CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
 SNAPSHOT = "/swarm/snapshot"  # /swarm/snapshot/<batch>: world -> one batch: every robot's row at a tick (PointCloud2)
 ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
-#: What the monitor reads, bag or no bag: its bag records these and its own METRICS. The world starts
+#: What the monitor reads, bag or no bag: its bag records these, its own METRICS, and SHAPE, OCCUPANCY and
+#: CLOCK as it derives them from the rows (these types carry no tag: swarm_ros.ros.auth). The world starts
 #: tick 0 once it has discovered the monitor's reader of each (so the bag misses none of their messages).
-MONITOR_READS = (ROBOTS, DECISIONS, OCCUPANCY, SHAPE, STATUS, CLOCK)
+MONITOR_READS = (ROBOTS, DECISIONS, STATUS)
 
 
 def alive_topic(node_name: str) -> str:

@@ -50,9 +50,21 @@ def point_fields(dtype: np.dtype) -> list[tuple[str, int, int, int]]:
     return out
 
 
+TAG_PREFIX = "swarm_ros.tag"  #: a message's tag starts so (swarm_ros.protocol.tag); in a cloud, a last field's name
+
+
+def is_tag(text: str) -> bool:
+    """Whether ``text`` claims to be a tag (it may still be malformed): a reader of rows skips such a field."""
+    return text.startswith(TAG_PREFIX + ":")
+
+
 def check_fields(fields: list[tuple[str, int, int, int]], point_step: int, dtype: np.dtype) -> None:
-    """Raise ValueError unless a message's fields and point step are exactly those of ``dtype``."""
-    if point_step != dtype.itemsize or list(fields) != point_fields(dtype):
+    """Raise ValueError unless a message's fields and point step are exactly those of ``dtype``, and a
+    last field that holds nothing (count 0) and is named by a tag, which is skipped."""
+    fields = list(fields)
+    if fields and fields[-1][3] == 0 and is_tag(fields[-1][0]):
+        fields.pop()
+    if point_step != dtype.itemsize or fields != point_fields(dtype):
         raise ValueError(f"unexpected point layout {fields} (step {point_step}); "
                          f"expected {point_fields(dtype)} (step {dtype.itemsize})")
 

@@ -1,4 +1,4 @@
-"""The run's secret key, which its nodes vouch for their messages with (:mod:`swarm_ros.ros.auth`).
+"""The run's secret key, which its nodes tag their messages with (:mod:`swarm_ros.ros.auth`).
 
 It reaches the nodes in their environment (``SWARM_ROS_RUN_KEY``), never over the network:
 ``swarm-ros run`` and the launch file make a new one for each run unless the variable is
@@ -16,7 +16,7 @@ from swarm_ros.core.errors import ConfigError
 KEY_ENV = "SWARM_ROS_RUN_KEY"
 MIN_KEY_CHARS = 16
 #: The key of nodes started without SWARM_ROS_RUN_KEY (``ros2 run`` by hand): it is public, so
-#: anything on the domain can vouch for its own messages. The nodes say so when they start.
+#: anything on the domain can tag its own messages. The nodes say so when they start.
 PUBLIC_KEY = b"swarm_ros: no run key given, anybody can vouch"
 
 

@@ -1,11 +1,13 @@
-"""The run's rosbag2: every message of the swarm's topics, as the monitor received them, in MCAP storage.
+"""The run's rosbag2: every message of the swarm's topics, in MCAP storage.
 
-The monitor subscribes to the topics in serialized form (CDR bytes, as they travel) and
-hands each message to :class:`BagRecorder`, which stores it unchanged with the
+The monitor subscribes to the tagged topics in serialized form (CDR bytes, as they travel)
+and hands each message its tag proved to :class:`BagRecorder`, which stores it unchanged with the
 ``rosbags`` library: ``bag/metadata.yaml`` and ``bag/bag_0.mcap``, the layout of
 ``ros2 bag record -s mcap``, with each topic's type, QoS and full message definition,
 so Foxglove, PlotJuggler, ``ros2 bag play`` or any MCAP reader open it with no ROS
-install. Timestamps are the monitor's receive times (wall clock, ns), as rosbag2's.
+install. Timestamps are the monitor's receive times (wall clock, ns), as rosbag2's. The
+untagged topics (shape, occupancy, clock) are encoded from the verified rows
+(:meth:`BagRecorder.write_world`).
 
 While the run goes on the bag is written beside the run directory (a hidden
 ``.<run>.bag-XXXX/bag``); the run directory gets it as ``bag/`` when it is written. A
@@ -44,18 +46,6 @@ STORE = "ros2_jazzy"  #: the rosbags type store of the message definitions (rosb
 
 if TYPE_CHECKING:  # rosbags loads when a bag is opened: off the start of the nodes
     from rosbags.interfaces import Qos, QosTime
-
-
-#: Messages a recording reader keeps before its node takes them: the monitor may be busy (starting,
-#: catching up) for the 128 ticks the world runs ahead, and a reader that keeps too few drops the oldest.
-READER_DEPTH = 4096
-
-
-def reader_qos(offered: QoSProfile) -> QoSProfile:
-    """The QoS to read a topic with: its writers' (so the two match), with a deep history."""
-    return QoSProfile(history=offered.history, depth=max(offered.depth, READER_DEPTH), reliability=offered.reliability,
-                      durability=offered.durability, liveliness=offered.liveliness,
-                      liveliness_lease_duration=offered.liveliness_lease_duration)
 
 
 def type_name(kind: type) -> str:
@@ -138,6 +128,7 @@ class BagRecorder:
         self.path = self.holder / BAG_DIR
         self.writer = Writer(self.path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
+        self._cells = None  # the shape's cells (write_world)
         store = get_typestore(Stores(STORE))
         self.connections = {topic: self.writer.add_connection(topic, type_name(kind), typestore=store,
                                                               offered_qos_profiles=[bag_qos(qos)])
@@ -148,6 +139,22 @@ class BagRecorder:
         """Store one message of ``topic`` (CDR bytes), stamped now."""
         if not self.closed:
             self.writer.write(self.connections[topic], time.time_ns(), data)
+
+    def write_world(self, shape, occupancy, tick: int, first: bool, changed: bool) -> None:
+        """/swarm/shape once (``first``), /swarm/occupancy first and when it ``changed``, /clock every tick: the
+        world's messages on them, encoded here from the verified rows as the world encodes them. These
+        types carry no tag (:mod:`swarm_ros.ros.auth`), so the monitor takes none of them from the network."""
+        from rclpy.serialization import serialize_message
+
+        if self._cells is None:
+            self._cells = msgs.shape_cells(shape)
+        if first:
+            self.write(msgs.SHAPE, serialize_message(msgs.grid_message(shape, self._cells, tick)))
+        if changed:
+            cells = self._cells.copy()
+            cells[occupancy >= 0] = msgs.CELL_FULL
+            self.write(msgs.OCCUPANCY, serialize_message(msgs.grid_message(shape, cells, tick)))
+        self.write(msgs.CLOCK, serialize_message(msgs.clock_message(tick)))
 
     def close(self) -> Path:
         """Finish the bag (the MCAP summary and metadata.yaml); return its directory. Safe to call again."""

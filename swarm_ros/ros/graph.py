@@ -71,6 +71,15 @@ ALIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=Rel
                        liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE_S))
 
 
+def reader_qos(offered: QoSProfile) -> QoSProfile:
+    """How the run's nodes read a topic whose writers offer ``offered``: the same reliability, durability and
+    liveliness (so the two match), and a KEEP_ALL history. A reader's history is shared by every writer of
+    the topic: kept to the last N, a stranger's flood could push a genuine message out before the node
+    takes it. Kept whole, a full reader refuses new samples, and a reliable writer sends them again."""
+    return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=offered.reliability, durability=offered.durability,
+                      liveliness=offered.liveliness, liveliness_lease_duration=offered.liveliness_lease_duration)
+
+
 # OccupancyGrid cell values
 CELL_OFF_SHAPE = -1  # wall or floor outside the shape ("unknown" to map tools)
 CELL_EMPTY = 0  # shape patch without a localized robot

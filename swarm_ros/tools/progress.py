@@ -36,7 +36,7 @@ class Progress:
         rclpy.init(args=args, context=self.context, domain_id=domain_id,
                    signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node("swarm_ros_launcher", context=self.context, start_parameter_services=False)
-        # only what the run's nodes vouched for (auth.Gate): a stranger's status cannot end the run here
+        # only what the run's nodes tagged (auth.Gate): a stranger's status cannot end the run here
         self.gate = Gate(self.node, key, Rejections(self.node.get_logger()))
         self.gate.subscribe(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
         self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
