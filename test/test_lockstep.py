@@ -15,10 +15,11 @@ from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.state import MOVING_STATES, RobotState
 from swarm_ros.protocol.checks import Rejected, Rejections
-from swarm_ros.protocol.lockstep import FIRST_STALL_S, STALL_S, Lockstep, Policy
+from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR, batch_name
 from swarm_ros.protocol.rows import batch_ids, decision_rows
 from swarm_ros.protocol.status import RunFailed
+from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, Policy
 
 pytestmark = pytest.mark.unit
 
@@ -72,9 +73,6 @@ class Port:
 
     def delivered(self):
         return True
-
-    def settle(self):
-        pass
 
     def startup_seconds(self):
         return 0.5
@@ -267,11 +265,54 @@ def test_the_world_waits_for_the_monitor_within_its_window_and_runs_on_without_a
     assert r.port.ticks == [0, 1] and r.ls.sim.tick == 6, "published up to the window, the rest queued"
     r.ls.metrics(1)
     assert r.port.ticks == [0, 1, 2, 3]
-    r.clock.now += STALL_S + 0.1  # no metrics since: the monitor is lost, the queue goes out
+    r.clock.now += STALL_S + 0.1  # no metrics since, but alive: waited for (a flood may drown its metrics)
     r.ls.poll()
+    assert r.ls.lost == [] and r.port.ticks == [0, 1, 2, 3]
+    r.ls.monitor_liveliness(0, 1)  # its liveliness lapsed: lost, the queue goes out
     assert r.ls.lost == [MONITOR] and r.ls.window == 0 and r.port.ticks == list(range(7))
     r.ls.monitor_liveliness(1, 0)  # it was only slow
     assert r.ls.lost == [] and r.ls.window == 2
+
+
+def test_a_live_monitor_that_never_reports_fails_the_run_after_drowned_s():
+    r = Run(monitor_window=2)
+    r.start()
+    r.ls.monitor_liveliness(1, 0)
+    r.run(ticks=6)
+    r.clock.now += DROWNED_S - 1
+    r.ls.poll()
+    assert r.ls.lost == [] and r.port.ticks == [0, 1]
+    r.clock.now += 1.1
+    with pytest.raises(RunFailed, match="the monitor's metrics did not arrive for 60 s at tick 6, though the process"):
+        r.ls.poll()
+
+
+def test_a_live_batch_whose_decisions_do_not_come_is_never_removed_and_the_run_fails_loudly():
+    r = Run(on_batch_loss="remove")
+    r.start()
+    r.ls.batch_liveliness(0, 1, 0)
+    r.run(ticks=3)
+    r.tick(silent=(0,))
+    for _ in range(int(DROWNED_S) - 1):  # a poll every second, as the node's timer does
+        r.clock.now += 1.0
+        r.ls.poll()
+    assert not r.ls.down_since and r.ls.lost == [] and not r.ls.pending.size
+    r.clock.now += 1.5
+    with pytest.raises(RunFailed, match="of robot_batch_0 did not arrive for 60 s at tick 3, though the process"):
+        r.ls.poll()
+
+
+def test_a_drowned_batch_whose_decisions_get_through_at_last_goes_on_unchanged():
+    r = Run(on_batch_loss="remove")
+    r.start()
+    r.ls.batch_liveliness(0, 1, 0)
+    r.tick(silent=(0,))
+    r.clock.now += DROWNED_S - 5
+    r.ls.poll()
+    r.tick()  # its decisions arrive
+    r.run()
+    assert r.ls.lost == [] and r.ls.restarts == []
+    assert np.array_equal(r.ls.sim.history, r.engine().history)
 
 
 def test_a_monitor_never_seen_is_given_up_on_and_the_swarm_starts_without_it():

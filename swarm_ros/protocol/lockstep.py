@@ -14,8 +14,6 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
@@ -27,37 +25,16 @@ from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows
 from swarm_ros.protocol.status import RUNNING, STARTING, RunFailed, Status, restarts_text
-
-STALL_S = 5.0  #: seconds without progress after which a silent batch or monitor counts as lost
-FIRST_STALL_S = 30.0  #: the same before its first decisions or report (discovery may be slow)
-FINAL_WAIT = 30.0  #: seconds to wait, after the end, for the monitor to catch up
-LINGER = 1.0  #: at most this many seconds for the last messages to reach their readers before exiting
-STATUS_PERIOD = 1.0  #: seconds of wall time between two status messages while nothing changes
-
-
-@dataclass(frozen=True)
-class Policy:
-    """The world's own parameters (``swarm_ros.core.params.NODE_PARAMETERS["world"]``)."""
-
-    monitor_window: int = 128
-    start_timeout: float = 60.0
-    on_batch_loss: str = "restart"
-    max_restarts: int = 3
-    restart_timeout: float = 30.0
-
-
-class WorldPort(Protocol):
-    """What the lockstep asks of the node around it."""
-
-    def watch_batch(self, k: int, name: str) -> None: ...  # batch k admitted: take its decisions, watch it
-    def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None: ...  # every robot's row, to start from
-    # a tick: the decisions applied in it (None for tick 0), the changed robots' rows, the occupancy if `joined`
-    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None: ...
-    def publish_status(self, status: Status) -> None: ...  # the run's state (and the occupancy, for late readers)
-    def monitor_reads_all(self) -> bool: ...  # the monitor's reader of every topic it records is matched
-    def delivered(self) -> bool: ...  # every reader acknowledged the last status and rows
-    def settle(self) -> None: ...  # before the last status: take in what still waits, so its counts are final
-    def startup_seconds(self) -> float: ...  # from the start of the run's command (or this process) to now
+from swarm_ros.protocol.world_port import (
+    DROWNED_S,
+    FINAL_WAIT,
+    FIRST_STALL_S,
+    LINGER,
+    STALL_S,
+    STATUS_PERIOD,
+    Policy,
+    WorldPort,
+)
 
 
 class Lockstep:
@@ -77,6 +54,7 @@ class Lockstep:
         self.removed_batches: set[int] = set()
         self.respawned: dict[int, np.ndarray] = {}  # batch -> robots: re-announced with no higher incarnation
         self.lapsed: set[int] = set()  # batches whose liveliness lapsed since their last accepted announcement
+        self.live: set[int] = set()  # batches whose liveliness holds (DDS reports a writer of theirs alive)
         self.restarts: list[tuple[int, str]] = []  # (tick, batch) of every restart
         self.lost: list[str] = []  # batches (and the monitor) lost for good
         self.started = False
@@ -280,7 +258,6 @@ class Lockstep:
     def _announce_end(self) -> None:
         m = self.sim.metrics
         self.ended_at = self.clock()
-        self.port.settle()  # the last status has the run's counts
         self.publish_status()
         self.log.info(f"run ended: {self.sim.outcome.value} at tick {m.tick}, {m.localized} localized")
 
@@ -326,6 +303,10 @@ class Lockstep:
     # -- lost processes ---------------------------------------------------------------
     def batch_liveliness(self, k: int, alive: int, not_alive: int) -> None:
         """Batch ``k``'s liveliness changed: ``alive`` writers alive, ``not_alive`` lapsed."""
+        if alive > 0:
+            self.live.add(k)
+        else:
+            self.live.discard(k)
         if alive == 0 and not_alive > 0:
             self.lapsed.add(k)
             self.lose_batch(k, "liveliness lapsed")
@@ -394,22 +375,41 @@ class Lockstep:
         """The fallback to liveliness (a process lost before DDS matched its liveliness topic): a batch
         whose robots have not decided, or a monitor that has not reported, for ``STALL_S`` is lost.
         Before the first decisions or report, while discovery may still be going on, the limit is
-        ``FIRST_STALL_S``."""
+        ``FIRST_STALL_S``. One whose liveliness holds is not lost for its silence (its messages may be
+        drowned by a flood): it is waited for, and after ``DROWNED_S`` the run fails.
+
+        Raises:
+            RunFailed: a batch or the monitor alive but silent for ``DROWNED_S``.
+        """
         if not self.started or self.sim.done:
             return
         if self.queued:
             limit = STALL_S if self.monitor_tick >= 0 else FIRST_STALL_S
             if self.window and now - self.progress_at >= limit:
-                self._lose_monitor(f"no metrics for {limit:g} s")
+                if not self.monitor_alive:
+                    self._lose_monitor(f"no metrics for {limit:g} s")
+                elif now - self.progress_at >= DROWNED_S:
+                    self._drowned("the monitor's metrics")
             return
         limit = STALL_S if self.sim.tick > 0 else FIRST_STALL_S
         if now - self.progress_at < limit:
             return
         moving = self.sim.moving_ids()
         missing = np.setdiff1d(moving[~self.decided[moving]], self.pending)
-        for k in np.unique(self.host[missing]).tolist():
-            self.lose_batch(k, f"no decisions for {limit:g} s")
-        self.progress_at = now
+        silent = np.unique(self.host[missing]).tolist()
+        for k in silent:
+            if k not in self.live:
+                self.lose_batch(k, f"no decisions for {limit:g} s")
+        alive = [self.batch_names[k] for k in silent if k in self.live]
+        if not alive:
+            self.progress_at = now
+        elif now - self.progress_at >= DROWNED_S:
+            self._drowned(f"the decisions of {', '.join(alive)}")
+
+    def _drowned(self, what: str) -> None:
+        dropped = self.rejections.text() or "nothing"
+        raise RunFailed(f"{what} did not arrive for {DROWNED_S:g} s at tick {self.sim.tick}, though the process is "
+                        f"alive: its messages do not get through, or it hangs (messages dropped: {dropped})")
 
     def poll(self) -> None:
         """Between messages: timeouts, stalls, the periodic status, and whether the node may exit.

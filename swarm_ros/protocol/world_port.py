@@ -1,0 +1,45 @@
+"""What the world's :class:`~swarm_ros.protocol.lockstep.Lockstep` is configured by and talks to: its policy,
+its timing, and the port the node around it implements (docs/ros_graph.md, "Faults")."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from swarm_ros.protocol.status import Status
+
+STALL_S = 5.0  #: seconds without progress after which a silent batch or monitor counts as lost
+FIRST_STALL_S = 30.0  #: the same before its first decisions or report (discovery may be slow)
+#: seconds without progress after which the run fails, when what it waits for is alive (its liveliness
+#: holds) but silent: its messages do not get through (a flood), or it hangs. Never removed for that.
+DROWNED_S = 60.0
+FINAL_WAIT = 30.0  #: seconds to wait, after the end, for the monitor to catch up
+LINGER = 1.0  #: at most this many seconds for the last messages to reach their readers before exiting
+STATUS_PERIOD = 1.0  #: seconds of wall time between two status messages while nothing changes
+
+
+@dataclass(frozen=True)
+class Policy:
+    """The world's own parameters (``swarm_ros.core.params.NODE_PARAMETERS["world"]``)."""
+
+    monitor_window: int = 128
+    start_timeout: float = 60.0
+    on_batch_loss: str = "restart"
+    max_restarts: int = 3
+    restart_timeout: float = 30.0
+
+
+class WorldPort(Protocol):
+    """What the lockstep asks of the node around it."""
+
+    def watch_batch(self, k: int, name: str) -> None: ...  # batch k admitted: take its decisions, watch it
+    def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None: ...  # every robot's row, to start from
+    # a tick: the decisions applied in it (None for tick 0), the changed robots' rows, the occupancy if `joined`
+    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None: ...
+    def publish_status(self, status: Status) -> None: ...  # the run's state
+    def monitor_reads_all(self) -> bool: ...  # the monitor's reader of every topic it records is matched
+    def delivered(self) -> bool: ...  # every reader acknowledged the last status and rows
+    def startup_seconds(self) -> float: ...  # from the start of the run's command (or this process) to now
