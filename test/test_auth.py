@@ -10,7 +10,7 @@ pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from nav_msgs.msg import OccupancyGrid  # noqa: E402
-from rclpy.serialization import deserialize_message  # noqa: E402
+from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 from std_msgs.msg import Int64MultiArray  # noqa: E402
 
@@ -235,3 +235,17 @@ def test_the_run_key_comes_from_the_environment():
         run_key({KEY_ENV: "short"})
     env = with_run_key({})
     assert len(env[KEY_ENV]) == 64 and with_run_key(dict(env)) == env
+
+
+def test_only_a_key_holders_bytes_reach_a_parser_and_they_must_parse_with_the_tag_in_its_place():
+    rx, gate, got = _gate({msgs.STATUS: DiagnosticArray, msgs.ROBOTS: PointCloud2})
+    sealer = tags.Sealer(KEY, "world")
+    for topic in (msgs.STATUS, msgs.ROBOTS):  # sealed garbage: proven, then refused by the parser
+        blank = sealer.blank()
+        rx.callbacks[topic](sealer.seal(topic, b"\x00\x01\x00\x00" + blank.encode() + b"\xff" * 40, blank))
+    status = msgs.status_message(1, "running", "x")
+    blank = sealer.blank()
+    status.status[0].message = blank  # the tag in another field than its own
+    rx.callbacks[msgs.STATUS](sealer.seal(msgs.STATUS, serialize_message(status), blank))
+    assert got == [] and gate.rejections.counts == {
+        f"{msgs.STATUS}: malformed CDR": 1, f"{msgs.ROBOTS}: malformed CDR": 1, f"{msgs.STATUS}: unauthenticated": 1}

@@ -34,6 +34,7 @@ PREFIX = TAG_PREFIX
 MAC_CHARS = 32  #: hex digits of the MAC (128 bits)
 BLANK = "0" * MAC_CHARS
 _TAG = re.compile(r"swarm_ros\.tag:([A-Za-z_][A-Za-z0-9_]{0,63}):([0-9a-f]{16}):([1-9][0-9]{0,18}):([0-9a-f]{32})")
+_TAG_BYTES = re.compile(_TAG.pattern.encode())
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,20 @@ def parse_tag(text: str) -> Tag:
     if m is None:
         raise Rejected("unauthenticated", "no tag" if not text else f"malformed tag {text[:40]!r}")
     return Tag(m[1], m[2], int(m[3]), m[4])
+
+
+def find_tag(data: bytes) -> tuple[str, int]:
+    """(text, offset) of the first tag in a serialized message, found without parsing the message: an
+    untagged one is refused before any parser reads it. Where a tag belongs in each type is checked once
+    the tag proved the bytes (:mod:`swarm_ros.ros.auth`).
+
+    Raises:
+        Rejected: ("unauthenticated") no tag in the bytes.
+    """
+    m = _TAG_BYTES.search(data)
+    if m is None:
+        raise Rejected("unauthenticated", "no tag")
+    return m.group().decode(), m.start()
 
 
 def aligned(data: bytes) -> bytes:
@@ -122,17 +137,15 @@ class Verifier:
         self.key = key
         self.last: dict[tuple[str, str], int] = {}  # (topic, nonce) -> highest seq taken; genuine senders only
 
-    def verify(self, topic: str, data: bytes | memoryview, text: str) -> Tag:
-        """The tag ``text`` found in ``data`` (as received), if it proves the message.
+    def verify(self, topic: str, data: bytes) -> Tag:
+        """The tag in ``data`` (a serialized message as received, :func:`find_tag`), if it proves the message.
 
         Raises:
             Rejected: no or a malformed tag, a wrong MAC, a sender that does not publish on
                 ``topic`` ("unauthenticated"); a sequence number taken already ("replayed").
         """
+        text, at = find_tag(data)
         tag = parse_tag(text)
-        at = bytes(data).rfind(text.encode()) if not isinstance(data, bytes) else data.rfind(text.encode())
-        if at < 0:
-            raise Rejected("unauthenticated", "the tag is not in the message's bytes")
         if not hmac.compare_digest(mac_of(self.key, topic, data, at + len(text) - MAC_CHARS), tag.mac):
             raise Rejected("unauthenticated", f"a tag with a wrong MAC (sender {tag.sender!r})")
         if not may_send(tag.sender, topic):

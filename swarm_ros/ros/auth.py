@@ -142,21 +142,25 @@ class Gate:
         return self.node.create_subscription(msg_type, topic, on_message, qos and reader_qos(qos), raw=True)
 
     def open(self, msg_type, topic: str, data: bytes):
-        """The message serialized in ``data``, once its tag proves it (tag taken out).
+        """The message serialized in ``data``, once its tag proves it (tag taken out). The tag is found and
+        checked on the bytes first: what no key holder sealed never reaches a parser.
 
         Raises:
-            Rejected: it does not parse, or its tag does not prove it.
+            Rejected: its tag does not prove it, it does not parse, or its tag is not where it belongs.
         """
+        tag = self.verifier.verify(topic, data)  # before any parser reads the bytes: only a key holder's are read
         if msg_type is PointCloud2:
             msg = decode_cloud(data)
-            tag = msg.tag
+            text = msg.tag
         else:
             try:
                 msg = deserialize_message(data, msg_type)
-            except Exception:  # rclpy raises a bare RuntimeError or worse on bytes that are not the type
+            except Exception:  # rclpy raises a bare RuntimeError on bytes that are not the type
                 raise Rejected("malformed CDR", f"not a {msg_type.__name__}") from None
-            tag = take_tag(msg)
-        sender = self.verifier.verify(topic, data, tag).sender
+            text = take_tag(msg)
+        if text != tag.text:
+            raise Rejected("unauthenticated", "a tag out of its place in the message")
+        sender = tag.sender
         if topic == BATCHES:
             label = msg.layout.dim[0].label if msg.layout.dim else ""
             if parse_batch_label(label)[0] != sender:

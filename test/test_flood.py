@@ -1,0 +1,65 @@
+"""A flood on every topic of a run, for the whole run: the run is slower, and its result is unchanged.
+
+``scripts/flood.py`` publishes, on each of the run's topics with that topic's own QoS, bytes that
+do not parse, well-formed messages without a tag, and messages with a tag under another key.
+The run (``swarm-ros run`` as a user starts it) must end with exit 0 and write metrics.csv and
+final_state.csv byte-identical to ``simulate``'s, with every stranger's message dropped and
+counted. ``scripts/bench_ros.py --only flood`` measures the same at higher rates (docs/security.md).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from swarm_ros.app import cli
+from swarm_ros.app.processes import DomainLock
+
+pytest.importorskip("rclpy")
+
+pytestmark = pytest.mark.process
+
+PY = sys.executable
+FLOOD = Path(__file__).resolve().parents[1] / "scripts" / "flood.py"
+RATE = 2000  #: messages per second on each topic, about 30,000 in all (the bench goes higher)
+FLAGS = ["--shape", "rectangle", "--robots", "200", "--seed", "4", "--rules", "local"]
+
+
+def test_a_flood_on_every_topic_slows_the_run_and_leaves_its_result_unchanged(tmp_path):
+    ref, out = tmp_path / "ref", tmp_path / "run"
+    assert cli.main(["simulate", *FLAGS, "--out", str(ref), "--quiet", "--no-recording"]) == 0
+    lock = DomainLock()
+    flood = subprocess.Popen([PY, str(FLOOD), "--domain-id", str(lock.domain_id), "--rate", str(RATE)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(1.0)  # the flood's participant is up: it takes the run's topics as they appear
+        run = subprocess.run([PY, "-m", "swarm_ros", "run", *FLAGS, "--processes", "2", "--domain-id",
+                              str(lock.domain_id), "--out", str(out), "--quiet", "--no-recording"],
+                             capture_output=True, text=True, timeout=600)
+    finally:
+        flood.send_signal(signal.SIGINT)
+        report, flood_err = flood.communicate(timeout=60)
+        lock.close()
+    assert run.returncode == 0, run.stderr[-3000:]
+    sent = json.loads(report.strip().splitlines()[-1])
+    # every topic of the run flooded, at the asked rate, while the run went on
+    for topic in ("/swarm/robots", "/swarm/status", "/swarm/batches", "/swarm/metrics", "/swarm/decisions",
+                  "/swarm/decisions/robot_batch_0", "/swarm/decisions/robot_batch_1", "/swarm/snapshot/robot_batch_0",
+                  "/swarm/alive/robot_batch_0", "/swarm/occupancy", "/clock"):
+        assert sent["rate_per_topic"].get(topic, 0) >= RATE * 0.8, (topic, sent, flood_err[-2000:])
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (ref / name).read_bytes() == (out / name).read_bytes(), name
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == json.loads((ref / "summary.json").read_text())["outcome"]
+    assert summary["restarts"] == [] and summary["lost_robots"] == 0
+    # the world reads four flooded topics, the monitor three: each dropped thousands
+    assert summary["rejected_messages"]["world"] > 1000 and summary["rejected_messages"]["monitor"] > 1000, summary
+    world_log = (out / "logs" / "world.log").read_text()
+    assert "dropped a message on /swarm/decisions/robot_batch_0 (unauthenticated: no tag" in world_log
+    assert "a tag with a wrong MAC" in world_log and " lost " not in world_log
