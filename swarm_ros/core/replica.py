@@ -16,7 +16,7 @@ import numpy as np
 from swarm_ros.core.arbitration import occupy, vacate
 from swarm_ros.core.rules import patch_index
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import MOVING_STATES, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
+from swarm_ros.core.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of, has_repeats
 
 _SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
 _REMOVED = np.int8(RobotState.REMOVED)
@@ -147,7 +147,7 @@ class Replica:
                 return f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows"
             return None
         before, after = s.state[ids], np.asarray(state, dtype=np.int8)
-        moving = np.isin(before, MOVING_STATES)
+        moving = IS_MOVING[before]
         if (~moving & ((after != _REMOVED) | (before == _REMOVED))).any():
             return "a robot that was not moving changed"
         joins = moving & ((after == _LOCALIZED) | (after == _SEED))
@@ -157,7 +157,7 @@ class Replica:
             if px.min() < 0 or py.min() < 0 or px.max() >= self._size or py.max() >= self._size:
                 return "a robot localizes outside the world"
             p = py * self._size + px
-            if not s.frontier[p].all() or np.unique(p).size != p.size:
+            if not s.frontier[p].all() or has_repeats(p):
                 return "a robot localizes off the frontier, or two on one patch"
         return None
 

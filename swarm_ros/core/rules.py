@@ -46,7 +46,7 @@ from swarm_ros.core.rng import (
 )
 from swarm_ros.core.rulesets import CROWD_AHEAD, JOIN_LOCAL, JOIN_WALK, STEPS_ONE
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import FRONTIER_BLOCK, MOVING_STATES, RobotState, SwarmState
+from swarm_ros.core.state import FRONTIER_BLOCK, IS_MOVING, RobotState, SwarmState
 
 TWO_PI = 2.0 * math.pi
 _WALKING = np.int8(RobotState.WALKING)
@@ -362,7 +362,7 @@ class Decider:
             raise ValueError(f"the view has {view.robots} robots, the run {self.params.robots}")
         if ids.size and (ids.min() < 0 or ids.max() >= view.robots):
             raise ValueError(f"robot ids must be in [0, {view.robots}), got {ids.min()}..{ids.max()}")
-        if not np.all(np.isin(view.state[ids], MOVING_STATES)):
+        if not IS_MOVING[view.state[ids]].all():
             raise ValueError("decide() takes moving robots only")
         if moving is None:
             moving = view.moving_ids()

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarm_ros.core.legality import illegal
+from swarm_ros.core.state import has_repeats
 from swarm_ros.protocol.rows import DECISION_ROW, PATCH_METRES, ROBOT_ROW, TICK_SECONDS, check_fields, parse_batch_label
 from swarm_ros.protocol.status import RunFailed
 
@@ -90,7 +91,7 @@ def ids_in_range(ids: np.ndarray, low: int, robots: int) -> None:
     if ids.min() < low or ids.max() >= robots:
         raise Rejected("robot id out of range", f"ids {int(ids.min())}..{int(ids.max())}, "
                                                 f"the run has {low}..{robots - 1}")
-    if np.unique(ids).size != ids.size:
+    if has_repeats(ids):
         raise Rejected("repeated robot id")
 
 
@@ -195,7 +196,7 @@ def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, host: np.nda
             (``host``), not moving or decided already this tick (``decided``), or a decision out
             of the rules' bounds (:mod:`swarm_ros.core.legality`).
     """
-    from swarm_ros.core.state import MOVING_STATES
+    from swarm_ros.core.state import IS_MOVING
 
     now = sim.tick
     if tick <= now:
@@ -206,7 +207,7 @@ def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, host: np.nda
     if (host[ids] != batch).any():
         raise Rejected("not the batch's robot", f"robot {int(ids[host[ids] != batch][0])} is not hosted by {name}")
     s = sim.state
-    moving = np.isin(s.state[ids], MOVING_STATES)
+    moving = IS_MOVING[s.state[ids]]
     if not moving.all():
         raise Rejected("robot not moving", f"robot {int(ids[~moving][0])}")
     if decided[ids].any():

@@ -20,7 +20,7 @@ import numpy as np
 from swarm_ros.core.engine import Simulation
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
 from swarm_ros.core.rules import Decisions
-from swarm_ros.core.state import MOVING_STATES, RobotState
+from swarm_ros.core.state import IS_MOVING, RobotState
 from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows
@@ -211,7 +211,7 @@ class Lockstep:
 
     def _standing(self) -> np.ndarray:
         """Moving robots of lost batches: they stand still in their last tick, then are removed."""
-        return self.pending[np.isin(self.sim.state.state[self.pending], MOVING_STATES)]
+        return self.pending[IS_MOVING[self.sim.state.state[self.pending]]]
 
     def _advance(self, tick: int) -> None:
         parts = [decisions_of(tick, r) for r in self.parts]
