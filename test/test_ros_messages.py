@@ -7,6 +7,7 @@ import re
 import numpy as np
 import pytest
 import rclpy
+from nav_msgs.msg import OccupancyGrid
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -48,7 +49,7 @@ def test_metrics_message_is_labelled_and_exact():
 
 def test_occupancy_grid_places_patch_centres_on_cells():
     shape = Shape.load("tyre")
-    grid = msgs.grid_message(shape, msgs.shape_cells(shape), 3)
+    grid = deserialize_message(msgs.grid_message(shape, msgs.shape_cells(shape), 3), OccupancyGrid)
     w = shape.world.size
     assert (grid.info.width, grid.info.height, grid.info.resolution) == (w, w, 1.0)
     assert grid.info.origin.position.x == -(shape.world.radius + 0.5)

@@ -17,8 +17,10 @@ import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import OccupancyGrid
 from rclpy.duration import Duration
 from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
@@ -57,9 +59,9 @@ class WorldNode:
         self.pub_status = signed(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
         self.pub_decisions = signed(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
         # for viewers only: these types have no field for a tag, and no node of the run reads them (auth)
-        self.pub_shape = node.create_publisher(msgs.OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
-        self.pub_occupancy = node.create_publisher(msgs.OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
-        self.pub_clock = node.create_publisher(msgs.Clock, msgs.CLOCK, msgs.CLOCK_QOS)
+        self.pub_shape = node.create_publisher(OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
+        self.pub_occupancy = node.create_publisher(OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
+        self.pub_clock = node.create_publisher(Clock, msgs.CLOCK, msgs.CLOCK_QOS)
         self.snapshot_pubs: list = []  # per batch: /swarm/snapshot/<batch>
         self.lockstep: Lockstep | None = None  # made in load(), before the first callback can run
         self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)

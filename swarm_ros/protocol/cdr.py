@@ -1,4 +1,5 @@
-"""``sensor_msgs/PointCloud2`` in its serialized form (CDR, little-endian), written and read with numpy alone.
+"""``sensor_msgs/PointCloud2`` in its serialized form (CDR, little-endian), written and read with numpy alone;
+``nav_msgs/OccupancyGrid`` and ``rosgraph_msgs/Clock``, the world's other per-tick messages, written.
 
 The graph's hot path publishes and takes clouds as serialized bytes: building a PointCloud2
 message object costs a copy of its data through a Python ``array('B')`` and another through
@@ -86,6 +87,26 @@ def encode_cloud(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str
     data = np.ascontiguousarray(rows).tobytes()
     return b"".join((ENCAPSULATION, _STAMP.pack(int(tick) * TICK_SECONDS, 0), block,
                      struct.pack("<III", step, step * rows.size, len(data)), data, b"\x01"))
+
+
+def encode_clock(tick: int) -> bytes:
+    """A serialized ``rosgraph_msgs/Clock`` at ``tick``."""
+    return ENCAPSULATION + _STAMP.pack(int(tick) * TICK_SECONDS, 0)
+
+
+def encode_grid(cells: np.ndarray, size: int, resolution: float, origin: float, tick: int,
+                frame_id: str = FRAME_ID) -> bytes:
+    """A serialized ``nav_msgs/OccupancyGrid`` of ``size`` x ``size`` ``cells`` (int8, row-major), stamped and
+    loaded at ``tick``, its cell (0, 0)'s corner at (``origin``, ``origin``), unrotated."""
+    stamp = _STAMP.pack(int(tick) * TICK_SECONDS, 0)
+    out = bytearray(stamp + _string(frame_id))
+    out += _pad(len(out))
+    out += stamp + struct.pack("<fII", resolution, size, size)
+    out += bytes(-len(out) % 8)  # the origin's float64s
+    out += struct.pack("<7d", origin, origin, 0.0, 0.0, 0.0, 0.0, 1.0)
+    data = np.ascontiguousarray(cells, dtype=np.int8).tobytes()
+    out += _U32.pack(len(data))
+    return ENCAPSULATION + bytes(out) + data
 
 
 @dataclass(frozen=True)

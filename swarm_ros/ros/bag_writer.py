@@ -144,17 +144,15 @@ class BagRecorder:
         """/swarm/shape once (``first``), /swarm/occupancy first and when it ``changed``, /clock every tick: the
         world's messages on them, encoded here from the verified rows as the world encodes them. These
         types carry no tag (:mod:`swarm_ros.ros.auth`), so the monitor takes none of them from the network."""
-        from rclpy.serialization import serialize_message
-
         if self._cells is None:
             self._cells = msgs.shape_cells(shape)
         if first:
-            self.write(msgs.SHAPE, serialize_message(msgs.grid_message(shape, self._cells, tick)))
+            self.write(msgs.SHAPE, msgs.grid_message(shape, self._cells, tick))
         if changed:
             cells = self._cells.copy()
             cells[occupancy >= 0] = msgs.CELL_FULL
-            self.write(msgs.OCCUPANCY, serialize_message(msgs.grid_message(shape, cells, tick)))
-        self.write(msgs.CLOCK, serialize_message(msgs.clock_message(tick)))
+            self.write(msgs.OCCUPANCY, msgs.grid_message(shape, cells, tick))
+        self.write(msgs.CLOCK, msgs.clock_message(tick))
 
     def close(self) -> Path:
         """Finish the bag (the MCAP summary and metadata.yaml); return its directory. Safe to call again."""

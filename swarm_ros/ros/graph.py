@@ -14,15 +14,14 @@ import sys
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from nav_msgs.msg import OccupancyGrid
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.shapes import Shape
+from swarm_ros.protocol.cdr import encode_clock, encode_grid
 from swarm_ros.protocol.checks import cloud
 from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
     ALIVE,
@@ -143,20 +142,11 @@ def metrics_of(msg: Int64MultiArray) -> dict[str, int]:
     return dict(zip(labels, (int(v) for v in msg.data)))
 
 
-def grid_message(shape: Shape, cells: np.ndarray, tick: int) -> OccupancyGrid:
-    """An OccupancyGrid over the whole world (walls included), one cell per patch, origin at the corner."""
+def grid_message(shape: Shape, cells: np.ndarray, tick: int) -> bytes:
+    """An OccupancyGrid over the whole world (walls included), one cell per patch, origin at the corner;
+    serialized, as it is published (:func:`swarm_ros.protocol.cdr.encode_grid`)."""
     world = shape.world
-    msg = OccupancyGrid()
-    msg.header = Header(stamp=stamp(tick), frame_id=FRAME_ID)
-    msg.info.map_load_time = stamp(tick)
-    msg.info.resolution = float(PATCH_METRES)
-    msg.info.width = msg.info.height = world.size
-    msg.info.origin.position.x = msg.info.origin.position.y = -(world.radius + 0.5) * PATCH_METRES
-    msg.info.origin.orientation.w = 1.0
-    data = array.array("b")
-    data.frombytes(np.ascontiguousarray(cells, dtype=np.int8).tobytes())
-    msg.data = data
-    return msg
+    return encode_grid(cells, world.size, PATCH_METRES, -(world.radius + 0.5) * PATCH_METRES, tick)
 
 
 def shape_cells(shape: Shape) -> np.ndarray:
@@ -176,8 +166,9 @@ def status_values(msg: DiagnosticArray) -> dict[str, str]:
     return {kv.key: kv.value for s in msg.status for kv in s.values}
 
 
-def clock_message(tick: int) -> Clock:
-    return Clock(clock=stamp(tick))
+def clock_message(tick: int) -> bytes:
+    """The /clock message of ``tick``, serialized, as it is published."""
+    return encode_clock(tick)
 
 
 def message_class(type_name: str) -> type | None:
