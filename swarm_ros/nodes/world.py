@@ -144,6 +144,8 @@ class WorldNode:
         level = DiagnosticStatus.WARN if status.warn else DiagnosticStatus.OK
         self.pub_status.publish(msgs.status_message(status.tick, status.outcome, status.message, level,
                                                     status.values))
+        if self.lockstep is not None and self.lockstep.started:  # for a viewer that reads it volatile
+            self._publish_occupancy()
 
     def _publish_occupancy(self) -> None:
         """The occupancy now, stamped with the world's tick (it may be ahead of the last published rows)."""

@@ -128,6 +128,8 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         if missed:
             swarm.node.get_logger().warn(f"the executor missed {missed} messages; each was handled at the next "
                                          f"idle moment ({_SPIN_TIMEOUT * 1000:g} ms without events)")
+        swarm.node.get_logger().info(f"done, {process_age():.2f} s after the process started "
+                                     f"({time.process_time():.2f} s of CPU)")
         code = EXIT_OK if swarm.finished or not stop.signum else \
             EXIT_ORPHANED if stop.signum == signal.SIGHUP else EXIT_INTERRUPTED
     except SwarmError as exc:
