@@ -90,22 +90,25 @@ class MonitorNode:
                                                    TOPICS[topic][1], raw_handler=self._bagger(topic))
                         for topic in msgs.MONITOR_READS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
-        # readers have matched their writers (a thread watches, while the heavy part below loads): a reader
-        # that matches after a topic's first messages would miss them, or keep only the last.
+        # readers have matched their writers (a thread watches, while the heavy part below loads) and the
+        # heavy part is loaded: a reader that matches after a topic's first messages would miss them, or
+        # keep only the last, and a monitor still loading would take the CPU the first ticks need.
         self.alive = None
+        self.loaded = threading.Event()
         self.closing = threading.Event()
         threading.Thread(target=self._announce_when_matched, name="monitor-ready", daemon=True).start()
         self.bag_on = bool(own["bag"])
 
     def load(self) -> None:
         """The heavy part, once the endpoints exist: discovery goes on meanwhile in the DDS threads, and
-        once the world sees this node it starts; the first ticks wait for the monitor in their history."""
+        once this is loaded and the world sees this node, it starts."""
         node, p = self.node, self.params
         self.recorder = self.recording.open(self.rrd, self.shape, p)
         self.bag = BagRecorder(self.out) if self.bag_on else None
         self.replica = Replica(self.shape, p.robots)
         warm_up(self.shape, p)
         importlib.import_module("swarm_ros.artifacts.plots")  # matplotlib: now, not at the end, when the run is written
+        self.loaded.set()
         node.get_logger().info(f"monitor: writing to {self.out}")
 
     def _readers_matched(self) -> bool:
@@ -118,7 +121,7 @@ class MonitorNode:
 
     def _announce_when_matched(self) -> None:
         while not self.closing.wait(_MATCH_POLL):
-            if self._readers_matched():
+            if self.loaded.is_set() and self._readers_matched():
                 self.alive = self.node.create_publisher(Empty, msgs.alive_topic(self.node.get_name()),
                                                         msgs.ALIVE_QOS)
                 return
