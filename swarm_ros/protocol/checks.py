@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarm_ros.core.legality import illegal
-from swarm_ros.core.state import has_repeats
 from swarm_ros.protocol.rows import DECISION_ROW, PATCH_METRES, ROBOT_ROW, TICK_SECONDS, check_fields, parse_batch_label
 from swarm_ros.protocol.status import RunFailed
 
@@ -88,6 +87,8 @@ def cloud(msg, dtype: np.dtype, max_rows: int, min_rows: int = 1) -> np.ndarray:
 
 def ids_in_range(ids: np.ndarray, low: int, robots: int) -> None:
     """Raises Rejected unless every id is in ``low``..``robots - 1`` and none repeats."""
+    from swarm_ros.core.state import has_repeats  # here: core.state loads numba, which the launcher must not
+
     if ids.min() < low or ids.max() >= robots:
         raise Rejected("robot id out of range", f"ids {int(ids.min())}..{int(ids.max())}, "
                                                 f"the run has {low}..{robots - 1}")
