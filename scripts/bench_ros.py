@@ -195,6 +195,7 @@ def speed(seed: int, repeats: int, processes: list[int]) -> None:
     """Print the graph's ticks/s (recording and bag on, as a user runs it) against the in-process engine and
     against a bare rclpy lockstep of the same message sizes (scripts/bench_bare.py), alternated in this session."""
     import bench_bare
+    from bench_scale import node_cpu
 
     ticks, fast, stepped = in_process(seed, repeats)
     fast_rate, step_rate = ticks / fast, ticks / stepped
@@ -207,13 +208,14 @@ def speed(seed: int, repeats: int, processes: list[int]) -> None:
     medians, shares = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for k in processes:
-            graph, bare, wholes = [], [], []
+            graph, bare, wholes, cpus = [], [], [], []
             for r in range(repeats):
                 got = over_graph(seed, k, Path(tmp) / f"k{k}-{r}", True)
                 if got[0] != ticks:
                     sys.exit(f"bench_ros: the graph ran {got[0]} ticks, the in-process engine {ticks}")
                 graph.append(ticks / got[1])
                 wholes.append(got[2])
+                cpus.append(node_cpu(Path(tmp) / f"k{k}-{r}" / "logs", ticks))
                 bare_ticks, secs = bench_bare.bare(seed, k, 95 + k)
                 bare.append(bare_ticks / secs)
             medians[k], shares[k] = statistics.median(graph), statistics.median(graph) / statistics.median(bare)
@@ -221,6 +223,10 @@ def speed(seed: int, repeats: int, processes: list[int]) -> None:
                   f"{shares[k]:>7.0%} {spread(wholes, '{:.2f}'):>18}")
             bare_rate = statistics.median(bare)
             print(f"{f'bare rclpy lockstep, K = {k}':<34} {spread(bare):>22} {bare_rate / fast_rate:>8.4f}x")
+            per_node = {n: statistics.median(c[n] for c in cpus) for n in cpus[0]}
+            print(f"{'':<6}a tick: {1000 / medians[k]:.2f} ms of the graph, {1000 / bare_rate:.2f} ms of the bare "
+                  f"lockstep; CPU per tick (ms, from 'ready' to 'done', the end included): "
+                  + ", ".join(f"{n} {ms:.2f}" for n, ms in per_node.items()))
             if k == 2:
                 whole2 = statistics.median(wholes)
     if 2 in medians:
