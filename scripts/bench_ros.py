@@ -26,7 +26,15 @@ Then the cost of the Rerun recording (issue 4): ``swarm-ros run`` with K = 2 and
 ``swarm-ros simulate``, each with and without ``--no-recording``, alternately, best of
 ``--repeats``. Target: the recording slows ``swarm-ros run`` by at most 25%.
 
-    .venv/bin/python scripts/bench_ros.py [--seed 1] [--repeats 2] [--processes 1 2 4]
+Then (issue 23) a flood on every topic of a run (scripts/bench_flood.py, ``--flood-rates``):
+the run must end with exit 0 and files byte-identical to ``simulate``'s; its slowdown is
+printed. With ``--only scale``, disc shapes of ``--scale-robots`` robots at the star's density,
+K = 1, 2, 4 against the in-process engine, with each node's CPU per tick
+(scripts/bench_scale.py). The speed part runs, alternately with the graph, a bare rclpy
+lockstep of the same message sizes (scripts/bench_bare.py), the transport's floor: target,
+the graph at >= 40% of its ticks/s with K = 2.
+
+    .venv/bin/python scripts/bench_ros.py [--seed 1] [--repeats 2] [--processes 1 2 4] [--only ...]
 """
 
 from __future__ import annotations
@@ -199,7 +207,7 @@ def speed(seed: int, repeats: int, processes: list[int]) -> None:
 
     ticks, fast, stepped = in_process(seed, repeats)
     fast_rate, step_rate = ticks / fast, ticks / stepped
-    print(f"star, 1036 robots, seed {seed}, rules {' '.join(f'{k} {v}' for k, v in RULES.items())}: "
+    print(f"star, 1036 robots, seed {seed}, {' '.join(f'{k} {v}' for k, v in RULES.items())}: "
           f"{ticks} ticks; the graph with recording and bag on; median (min-max) of {repeats}")
     print(f"{'engine':<34} {'ticks/s':>22} {'vs run()':>9} {'vs bare':>8} {'command s':>18}")
     print(f"{'in-process, run()':<34} {fast_rate:>22,.0f} {1:>8.1f}x")
