@@ -63,6 +63,7 @@ class WorldNode:
         self.pub_occupancy = node.create_publisher(OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
         self.pub_clock = node.create_publisher(Clock, msgs.CLOCK, msgs.CLOCK_QOS)
         self.snapshot_pubs: list = []  # per batch: /swarm/snapshot/<batch>
+        self.occupancy_at = 0.0  # time.monotonic() of the last /swarm/occupancy
         self.lockstep: Lockstep | None = None  # made in load(), before the first callback can run
         self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.gate.subscribe(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
@@ -144,14 +145,16 @@ class WorldNode:
         level = DiagnosticStatus.WARN if status.warn else DiagnosticStatus.OK
         self.pub_status.publish(msgs.status_message(status.tick, status.outcome, status.message, level,
                                                     status.values))
-        if self.lockstep is not None and self.lockstep.started:  # for a viewer that reads it volatile
-            self._publish_occupancy()
+        now = time.monotonic()
+        if self.lockstep is not None and self.lockstep.started and now - self.occupancy_at >= 1.0:
+            self._publish_occupancy()  # once a second at least, for a viewer that reads it volatile
 
     def _publish_occupancy(self) -> None:
         """The occupancy now, stamped with the world's tick (it may be ahead of the last published rows)."""
         sim = self.lockstep.sim
         cells = self.shape_cells.copy()
         cells[sim.state.occupancy >= 0] = msgs.CELL_FULL
+        self.occupancy_at = time.monotonic()
         self.pub_occupancy.publish(msgs.grid_message(self.shape, cells, sim.tick))
 
     def monitor_reads_all(self) -> bool:

@@ -18,7 +18,9 @@ FIRST_STALL_S = 30.0  #: the same before its first decisions or report (discover
 DROWNED_S = 60.0
 FINAL_WAIT = 30.0  #: seconds to wait, after the end, for the monitor to catch up
 LINGER = 1.0  #: at most this many seconds for the last messages to reach their readers before exiting
-STATUS_PERIOD = 1.0  #: seconds of wall time between two status messages while nothing changes
+#: seconds of wall time between two status messages while nothing else changes: ten a second, so that a
+#: progress display can follow the run on them alone (it need not take the monitor's metrics of every tick)
+STATUS_PERIOD = 0.1
 
 
 @dataclass(frozen=True)

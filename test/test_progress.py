@@ -1,0 +1,42 @@
+"""The launcher's progress display follows the world's /swarm/status alone (swarm_ros.tools.progress)."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+
+pytest.importorskip("rclpy")
+
+from tqdm import tqdm  # noqa: E402
+
+from swarm_ros.ros import graph as msgs  # noqa: E402
+from swarm_ros.tools.progress import Progress  # noqa: E402
+
+pytestmark = pytest.mark.unit
+
+
+def _progress() -> Progress:
+    """A Progress without its ROS side: what _on_status updates."""
+    p = Progress.__new__(Progress)
+    p.bar = tqdm(total=1036, file=io.StringIO())  # enabled (a disabled bar counts nothing), written nowhere
+    p.tick, p.started, p.ended_at = -1, False, None
+    return p
+
+
+def test_the_bar_follows_the_status_from_tick_0_to_the_outcome():
+    p = _progress()
+    p._on_status(msgs.status_message(0, "starting", "waiting for robot batches"))
+    assert not p.started and p.tick == -1 and p.bar.n == 0
+    p._on_status(msgs.status_message(40, "running", "running", extra={"localized": 300, "moving": 700}))
+    assert p.started and p.tick == 40 and p.bar.n == 300 and p.ended_at is None
+    p._on_status(msgs.status_message(30, "running", "running", extra={"localized": 250}))  # an older one, late
+    assert p.tick == 40
+    p._on_status(msgs.status_message(405, "complete", "complete at tick 405", extra={"localized": 1036}))
+    assert p.tick == 405 and p.bar.n == 1036 and p.ended_at is not None
+
+
+def test_values_that_are_not_counts_do_not_break_the_bar():
+    p = _progress()
+    p._on_status(msgs.status_message(3, "running", "running", extra={"localized": "x", "moving": -2}))
+    assert p.started and p.tick == 3 and p.bar.n == 0
