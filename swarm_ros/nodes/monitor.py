@@ -85,35 +85,40 @@ class MonitorNode:
         # Serialized subscriptions to the tagged topics it records (plan.MONITOR_READS), bag or no bag. Each
         # message, once its tag proves it (auth.Gate), goes into the bag as it came, then to its handler.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
-        handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status, msgs.DECISIONS: self._on_decisions}
-        self.readers = {topic: self.gate.subscribe(TOPICS[topic][0], topic, handlers.get(topic),
-                                                   TOPICS[topic][1], raw_handler=self._bagger(topic))
-                        for topic in msgs.MONITOR_READS}
+        self.handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status,
+                         msgs.DECISIONS: self._on_decisions}
+        self.readers = {topic: self._subscribe(topic) for topic in msgs.MONITOR_READS if topic != msgs.STATUS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
-        # readers have matched their writers (a thread watches, while the heavy part below loads) and the
-        # heavy part is loaded: a reader that matches after a topic's first messages would miss them, or
-        # keep only the last, and a monitor still loading would take the CPU the first ticks need.
+        # readers have matched their writers (a thread watches, while the heavy part below loads), and its
+        # reader of /swarm/status, made once the heavy part is loaded: a reader that matches after a
+        # topic's first messages would miss them, or keep only the last, and a monitor still loading would
+        # take the CPU the first ticks need. (The liveliness writer is made early: DDS takes a few tenths
+        # of a second to report a new writer alive, a new reader is discovered in milliseconds.)
         self.alive = None
-        self.loaded = threading.Event()
         self.closing = threading.Event()
         threading.Thread(target=self._announce_when_matched, name="monitor-ready", daemon=True).start()
         self.bag_on = bool(own["bag"])
 
     def load(self) -> None:
-        """The heavy part, once the endpoints exist: discovery goes on meanwhile in the DDS threads, and
-        once this is loaded and the world sees this node, it starts."""
+        """The heavy part, once the first endpoints exist: discovery goes on meanwhile in the DDS threads, and
+        once this is loaded the world can see this node's last reader, and it starts."""
         node, p = self.node, self.params
         self.recorder = self.recording.open(self.rrd, self.shape, p)
         self.bag = BagRecorder(self.out) if self.bag_on else None
         self.replica = Replica(self.shape, p.robots)
         warm_up(self.shape, p)
         importlib.import_module("swarm_ros.artifacts.plots")  # matplotlib: now, not at the end, when the run is written
-        self.loaded.set()
+        self.readers[msgs.STATUS] = self._subscribe(msgs.STATUS)  # loaded: the world may start (latched)
         node.get_logger().info(f"monitor: writing to {self.out}")
+
+    def _subscribe(self, topic: str):
+        """A reader of ``topic``: each message its tag proves goes into the bag as it came, then to its handler."""
+        return self.gate.subscribe(TOPICS[topic][0], topic, self.handlers.get(topic), TOPICS[topic][1],
+                                   raw_handler=self._bagger(topic))
 
     def _readers_matched(self) -> bool:
         """Every reader has matched a writer; the decisions reader, every batch's the graph shows."""
-        for topic, reader in self.readers.items():
+        for topic, reader in list(self.readers.items()):  # load() adds one meanwhile
             matched = reader.get_publisher_count()
             if matched < 1 or (topic == msgs.DECISIONS and matched < self.node.count_publishers(topic)):
                 return False
@@ -121,7 +126,7 @@ class MonitorNode:
 
     def _announce_when_matched(self) -> None:
         while not self.closing.wait(_MATCH_POLL):
-            if self.loaded.is_set() and self._readers_matched():
+            if self._readers_matched():
                 self.alive = self.node.create_publisher(Empty, msgs.alive_topic(self.node.get_name()),
                                                         msgs.ALIVE_QOS)
                 return
