@@ -63,6 +63,16 @@ def _node(role: str, domain: int):
     return node, executor
 
 
+def _spin(node, executor) -> bool:
+    """Handle the next event, or what waits in the readers after 50 ms without one (as the product's nodes do:
+    rclpy's EventsExecutor sometimes loses a new-message event, swarm_ros.ros.runtime.handle_missed)."""
+    from swarm_ros.ros.runtime import handle_missed
+
+    began = time.monotonic()
+    executor.spin_once(timeout_sec=0.05)
+    return time.monotonic() - began < 0.05 or handle_missed(node) > 0
+
+
 def _cloud(dtype, n: int, tick: int) -> bytes:
     from swarm_ros.protocol.cdr import encode_cloud
 
@@ -95,7 +105,7 @@ def world(domain: int, k: int, sizes: Path, out: Path) -> None:
     for t, data in enumerate(messages):
         pub.publish(data)
         while answered.get(t, 0) < k:
-            executor.spin_once(timeout_sec=1.0)
+            _spin(node, executor)
     seconds = time.perf_counter() - start
     pub.publish(_cloud(ROBOT_ROW, 0, -1))  # the end
     pub.wait_for_all_acked(__import__("rclpy").duration.Duration(seconds=2))
@@ -122,8 +132,10 @@ def batch(domain: int, b: int, k: int, sizes: Path) -> None:
         pub.publish(_cloud(DECISION_ROW, share[tick], tick))
 
     node.create_subscription(PointCloud2, "/bare/robots", on_robots, msgs.reader_qos(msgs.ROBOTS_QOS), raw=True)
-    while not done:
-        executor.spin_once(timeout_sec=1.0)
+    last = time.monotonic()
+    while not done and time.monotonic() - last < 30:  # the world gone without its last message: stop too
+        if _spin(node, executor):
+            last = time.monotonic()
 
 
 def bare(seed: int, k: int, domain: int) -> tuple[int, float]:
