@@ -19,7 +19,7 @@ from swarm_ros.core.metrics import METRIC_COLUMNS  # noqa: E402
 from swarm_ros.protocol import tag as tags  # noqa: E402
 from swarm_ros.protocol.cdr import encode_cloud  # noqa: E402
 from swarm_ros.protocol.checks import Rejected, Rejections  # noqa: E402
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_label, is_tag  # noqa: E402
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, TAG_PREFIX, batch_label, is_tag  # noqa: E402
 from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key  # noqa: E402
 from swarm_ros.ros import auth  # noqa: E402
 from swarm_ros.ros import graph as msgs  # noqa: E402
@@ -117,7 +117,7 @@ def test_outside_readers_see_the_standard_type_with_one_more_field():
     assert is_tag(last.name) and (last.offset, last.count) == (0, 0)
     assert np.array_equal(msgs.cloud_rows(cloud, ROBOT_ROW)["id"], [4, 5])  # a reader of rows skips it
     status = deserialize_message(node.sent[1][1], DiagnosticArray)
-    assert status.status[0].values[-1].key == tags.PREFIX and is_tag(status.status[0].values[-1].value)
+    assert status.status[0].values[-1].key == TAG_PREFIX and is_tag(status.status[0].values[-1].value)
 
 
 def _one_cloud(sender: str = "world", topic: str = msgs.ROBOTS, key: bytes = KEY) -> bytes:

@@ -15,7 +15,7 @@ covers content, topic, tick and sender. A receiver verifies a message alone, on 
 the MAC, that the sender may publish on that topic, and that the sequence number is higher
 than any it took from that process on that topic (a replay is refused). Nothing is held.
 
-No rclpy here: the tag is computed over bytes, so unit tests and the CDR encoder use it too.
+No rclpy here: the tag is computed over bytes, so unit tests and the benches use it without ROS.
 """
 
 from __future__ import annotations
@@ -30,10 +30,11 @@ from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.plan import BATCH_DECISIONS, BATCHES, METRICS, MONITOR, WORLD
 from swarm_ros.protocol.rows import TAG_PREFIX
 
-PREFIX = TAG_PREFIX
 MAC_CHARS = 32  #: hex digits of the MAC (128 bits)
 BLANK = "0" * MAC_CHARS
-_TAG = re.compile(r"swarm_ros\.tag:([A-Za-z_][A-Za-z0-9_]{0,63}):([0-9a-f]{16}):([1-9][0-9]{0,18}):([0-9a-f]{32})")
+#: sender (a node name), nonce, sequence number (from 1), MAC
+_TAG = re.compile(re.escape(TAG_PREFIX) + r":([A-Za-z_][A-Za-z0-9_]{0,63}):([0-9a-f]{16}):([1-9][0-9]{0,18}):"
+                  r"([0-9a-f]{32})")
 _TAG_BYTES = re.compile(_TAG.pattern.encode())
 
 
@@ -46,7 +47,7 @@ class Tag:
 
     @property
     def text(self) -> str:
-        return f"{PREFIX}:{self.sender}:{self.nonce}:{self.seq}:{self.mac}"
+        return f"{TAG_PREFIX}:{self.sender}:{self.nonce}:{self.seq}:{self.mac}"
 
 
 def parse_tag(text: str) -> Tag:

@@ -34,9 +34,9 @@ from std_msgs.msg import Int64MultiArray, MultiArrayDimension
 from swarm_ros.protocol.cdr import TAG_DATATYPE, decode_cloud, encode_cloud
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.plan import BATCHES
-from swarm_ros.protocol.rows import is_tag, parse_batch_label
+from swarm_ros.protocol.rows import TAG_PREFIX, is_tag, parse_batch_label
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
-from swarm_ros.protocol.tag import PREFIX, Sealer, Verifier
+from swarm_ros.protocol.tag import Sealer, Verifier
 from swarm_ros.ros.graph import reader_qos
 
 TAGGED_TYPES = (PointCloud2, DiagnosticArray, Int64MultiArray)  #: the types that carry a tag
@@ -47,7 +47,7 @@ def put_tag(msg, tag: str) -> None:
     if isinstance(msg, PointCloud2):
         msg.fields.append(PointField(name=tag, offset=0, datatype=TAG_DATATYPE, count=0))
     elif isinstance(msg, DiagnosticArray):
-        msg.status[-1].values.append(KeyValue(key=PREFIX, value=tag))
+        msg.status[-1].values.append(KeyValue(key=TAG_PREFIX, value=tag))
     elif isinstance(msg, Int64MultiArray):
         msg.layout.dim.append(MultiArrayDimension(label=tag, size=1, stride=1))
     else:
@@ -58,7 +58,7 @@ def take_tag(msg) -> str:
     """The tag in ``msg`` (a received message), taken out of it; "" if it has none."""
     if isinstance(msg, DiagnosticArray):
         values = msg.status[-1].values if msg.status else []
-        if values and values[-1].key == PREFIX:
+        if values and values[-1].key == TAG_PREFIX:
             return values.pop().value
     elif isinstance(msg, Int64MultiArray):
         dims = msg.layout.dim
