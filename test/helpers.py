@@ -176,3 +176,26 @@ def module_graph() -> dict[str, set[str]]:
         modules[name] = (path, package)
     return {name: {m for m in _imports_of(path, name, package) if m in modules and m != name}
             for name, (path, package) in modules.items()}
+
+
+def make_cloud(rows: np.ndarray, tick: int):
+    """A PointCloud2 message object holding ``rows``, built field by field as an outside ROS tool builds one:
+    the reference the graph's own CDR writer is compared with, and what tests reshape into bad messages."""
+    import array
+
+    from sensor_msgs.msg import PointCloud2, PointField
+    from std_msgs.msg import Header
+
+    from swarm_ros.protocol.rows import FRAME_ID, point_fields
+    from swarm_ros.ros.graph import stamp
+
+    msg = PointCloud2()
+    msg.header = Header(stamp=stamp(tick), frame_id=FRAME_ID)
+    msg.height, msg.width = 1, int(rows.size)
+    msg.fields = [PointField(name=n, offset=o, datatype=d, count=c) for n, o, d, c in point_fields(rows.dtype)]
+    msg.is_bigendian = False
+    msg.point_step = rows.dtype.itemsize
+    msg.row_step = rows.dtype.itemsize * int(rows.size)
+    msg.data = array.array("B", rows.tobytes())
+    msg.is_dense = True
+    return msg

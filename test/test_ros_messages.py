@@ -7,6 +7,7 @@ import re
 import numpy as np
 import pytest
 import rclpy
+from helpers import make_cloud
 from nav_msgs.msg import OccupancyGrid
 from rclpy.context import Context
 from rclpy.node import Node
@@ -31,7 +32,7 @@ def test_robot_rows_survive_serialization_exactly_and_carry_the_tick():
     sim.run(max_ticks=40)
     s = sim.state
     sent = robot_rows(np.arange(1036), s.state, s.x, s.y, s.heading)
-    wire = serialize_message(msgs.make_cloud(sent, 40))
+    wire = serialize_message(make_cloud(sent, 40))
     msg = deserialize_message(wire, PointCloud2)
     assert msgs.tick_of(msg.header) == 40 and msg.header.frame_id == "world"
     assert (msg.width, msg.point_step, msg.row_step) == (1036, 40, 1036 * 40)

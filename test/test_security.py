@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import host_env
+from helpers import host_env, make_cloud
 
 from swarm_ros.app import cli
 from swarm_ros.app.processes import DomainLock, node_command, node_env
@@ -119,13 +119,13 @@ class _Batches:
         except Rejected:
             return  # the garbage this test sends on /swarm/robots itself
         if tick == 5:  # an outsider's copy of the world's rows, restamped as the next tick's, before them
-            copy = self.msgs.make_cloud(rows.copy(), tick + 1)
+            copy = make_cloud(rows.copy(), tick + 1)
             self.forged[self.msgs.ROBOTS].publish(copy)
             self.sent["monitor: untagged rows"] = 1
         self._decide()
 
     def _cloud(self, rows: np.ndarray, tick: int):
-        return self.msgs.make_cloud(rows, tick)
+        return make_cloud(rows, tick)
 
     def _send(self, kind: str, k: int, msg) -> None:
         self.pubs[k].publish(msg)
@@ -404,7 +404,7 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
             if rows.size and rows["z"][0] == 0.0 and rows["id"][0] != 7:  # not ours (they come back here)
                 copy = rows.copy()
                 copy["z"] = 0.5
-                pub.publish(msgs.make_cloud(copy, msgs.tick_of(msg.header) + 1))
+                pub.publish(make_cloud(copy, msgs.tick_of(msg.header) + 1))
                 count("rows of the next tick")
 
         def on_snapshot(msg) -> None:  # the world's snapshot for robot_batch_0, as a later tick's
@@ -418,12 +418,12 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         while run.poll() is None:
-            bad = msgs.make_cloud(np.zeros(3, dtype=ROBOT_ROW), 10 ** 6)
+            bad = make_cloud(np.zeros(3, dtype=ROBOT_ROW), 10 ** 6)
             bad.point_step = 13  # another layout
             pub.publish(bad)
             rows = np.zeros(2, dtype=ROBOT_ROW)
             rows["id"], rows["x"] = [7, 7], [np.nan, 1e300]  # a repeated robot, off the world
-            pub.publish(msgs.make_cloud(rows, 1))
+            pub.publish(make_cloud(rows, 1))
             status_pub.publish(msgs.status_message(1, "complete", "complete at tick 1"))
             count("garbage and status")
             end = time.monotonic() + 0.05

@@ -1,9 +1,9 @@
 """Topics, QoS and message builders of the swarm's ROS 2 graph (docs/ros_graph.md documents them).
 
 Standard message types only. The per-tick robot rows ride in ``sensor_msgs/PointCloud2``
-(see :mod:`swarm_ros.protocol.rows`): one numpy record per robot, copied in and out of the
-message's byte array in one go, which keeps a tick's messages at tens of microseconds
-where a ``PoseArray`` of message objects would cost milliseconds.
+(see :mod:`swarm_ros.protocol.rows`): one numpy record per robot, written and read as CDR
+bytes (:mod:`swarm_ros.protocol.cdr`), which keeps a tick's messages at microseconds where a
+``PoseArray`` of message objects would cost milliseconds.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import PointCloud2, PointField
+from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.metrics import METRIC_COLUMNS
@@ -40,7 +40,7 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     decisions_topic,
     snapshot_topic,
 )
-from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS, point_fields
+from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS
 
 # -- topics: swarm_ros.protocol.plan names them (a contract between processes) -------------------
 # -- QoS ----------------------------------------------------------------------------
@@ -91,23 +91,6 @@ def stamp(tick: int) -> Time:
 
 def tick_of(header: Header) -> int:
     return int(header.stamp.sec) // TICK_SECONDS
-
-
-def make_cloud(rows: np.ndarray, tick: int) -> PointCloud2:
-    """A PointCloud2 holding ``rows`` (a numpy record array of a :mod:`swarm_ros.protocol.rows` row type)."""
-    msg = PointCloud2()
-    msg.header = Header(stamp=stamp(tick), frame_id=FRAME_ID)
-    msg.height = 1
-    msg.width = int(rows.size)
-    msg.fields = [PointField(name=n, offset=o, datatype=d, count=c) for n, o, d, c in point_fields(rows.dtype)]
-    msg.is_bigendian = False
-    msg.point_step = rows.dtype.itemsize
-    msg.row_step = rows.dtype.itemsize * int(rows.size)
-    data = array.array("B")
-    data.frombytes(rows.tobytes())
-    msg.data = data
-    msg.is_dense = True
-    return msg
 
 
 def cloud_rows(msg: PointCloud2, dtype: np.dtype) -> np.ndarray:
