@@ -53,6 +53,8 @@ class Port:
         self.ticks: list[int] = []
         self.statuses: list = []
         self.monitor_ready = True
+        self.saver = None  # a Checkpoint, to restart from (test_world_restart.py)
+        self.books: list[dict] = []
 
     def watch_batch(self, k, name):
         self.watched.append(name)
@@ -67,6 +69,15 @@ class Port:
 
     def publish_status(self, status):
         self.statuses.append(status)
+
+    def checkpoint(self, tick, rows, applied, metrics):
+        if self.saver is not None:
+            self.saver.write(tick, rows, applied, metrics)
+
+    def save_book(self, book):
+        self.books.append(book)
+        if self.saver is not None:
+            self.saver.save_book(book)
 
     def monitor_reads_all(self):
         return self.monitor_ready
@@ -255,7 +266,7 @@ def test_a_stalled_batch_is_waited_for_and_counts_as_back_when_it_decides_again(
     assert np.array_equal(r.ls.sim.history, r.engine().history)
 
 
-def test_the_world_waits_for_the_monitor_within_its_window_and_runs_on_without_a_lost_one():
+def test_the_world_waits_for_the_monitor_within_its_window_and_for_a_lost_one_up_to_restart_timeout():
     r = Run(monitor_window=2)
     r.start()
     assert not r.ls.started, "no tick 0 before the monitor is there"
@@ -268,7 +279,13 @@ def test_the_world_waits_for_the_monitor_within_its_window_and_runs_on_without_a
     r.clock.now += STALL_S + 0.1  # no metrics since, but alive: waited for (a flood may drown its metrics)
     r.ls.poll()
     assert r.ls.lost == [] and r.port.ticks == [0, 1, 2, 3]
-    r.ls.monitor_liveliness(0, 1)  # its liveliness lapsed: lost, the queue goes out
+    r.ls.monitor_liveliness(0, 1)  # its liveliness lapsed: waited for, up to restart_timeout, the queue held
+    assert r.ls.lost == [] and r.ls.status().values["waiting_for"] == MONITOR and r.port.ticks == [0, 1, 2, 3]
+    r.ls.monitor_liveliness(1, 0)  # a new process (or it was only slow): waited for no longer
+    assert r.ls.monitor_down_since is None and r.ls.status().values["waiting_for"] == ""
+    r.ls.monitor_liveliness(0, 1)
+    r.clock.now += r.ls.policy.restart_timeout + 0.1
+    r.ls.poll()  # not back in time: lost, the queue goes out
     assert r.ls.lost == [MONITOR] and r.ls.window == 0 and r.port.ticks == list(range(7))
     r.ls.monitor_liveliness(1, 0)  # it was only slow
     assert r.ls.lost == [] and r.ls.window == 2

@@ -47,6 +47,7 @@ from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.ros.shm import clean_shm, shm_locks
 
+CHECKPOINT = "world.checkpoint"  #: the world's checkpoint file in the run's logs (removed at the end)
 _GRACE = 10.0  # seconds the world and batches get to end by themselves after the monitor is done
 
 
@@ -58,6 +59,15 @@ def plural(n: int, noun: str) -> str:
 def _bag_holders(out: Path) -> set[Path]:
     """The hidden folders a monitor streams the bag of ``out`` into while it runs (``.<run>.bag-XXXX``)."""
     return set(out.parent.glob(f".{out.name}.bag-*"))
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """(device, inode) of ``path``, or None if there is nothing there."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
 
 
 def discard_unstarted(logs: Path, out: Path, holders_before: set[Path], made: list[Path]) -> None:
@@ -140,6 +150,7 @@ class Launch:
         (logs / "ros").mkdir()
         self._note("command started", at=time.time() - process_age())
         holders = _bag_holders(out)
+        self.out_before = _identity(out)
         lock = DomainLock(self.domain_id)
         ok = interrupted = False
         try:
@@ -159,6 +170,8 @@ class Launch:
                 fill_summary(out, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
             lock.close()
             self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
+            for f in logs.glob(CHECKPOINT + "*"):  # the world's, large and of no use once the run is over
+                f.unlink(missing_ok=True)
             kept = ok or (interrupted and interrupted_run(out) is not None)
             if interrupted and not kept and not self.started:
                 discard_unstarted(logs, out, holders, made)
@@ -197,7 +210,8 @@ class Launch:
             viewer = spawn_viewer()
         params_file = logs / "params.yaml"
         params_file.write_text(params_yaml(run, {"world": {
-            **self.world, "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts}, "monitor": {
+            **self.world, "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts,
+            "checkpoint": str(logs / CHECKPOINT)}, "monitor": {
             "out_dir": str(out), "overwrite": self.overwrite, "record": self.recording.enabled,
             "record_every": self.recording.every, "viewer_url": viewer, "bag": self.bag}}), encoding="utf-8")
         self.env = node_env(domain_id, logs)
@@ -250,9 +264,8 @@ class Launch:
         """
         from swarm_ros.tools.progress import Progress
 
-        monitor = next(c for c in self.children if c.name == "monitor")
-        world = next(c for c in self.children if c.name == "world")
         reported: set[str] = set()
+        monitor_done = False
         world_done_at = None
         scanned_at = 0.0
         # Ctrl-C and SIGTERM are taken as a flag and acted on between spins: a KeyboardInterrupt raised
@@ -278,13 +291,19 @@ class Launch:
                 self._note_exits()
                 for c in list(self.children):
                     code = c.proc.poll()
-                    if code in (None, 0) or c is world or c.name in reported:
+                    if code in (None, 0) or c.name in reported:
                         continue
-                    batch = c is not monitor
+                    if c.name in ("world", "monitor"):
+                        if c.name == "monitor" and self._written():
+                            monitor_done = True  # killed after it wrote the run directory: the run is whole
+                            break
+                        self._restart_core(c, progress)
+                        world_done_at = None if c.name == "monitor" else world_done_at
+                        continue
                     # the world's own word that tick 0 went out (its status, or the monitor's metrics): under
                     # 'remove', a batch lost before tick 0 is restarted (none of its robots has moved yet)
                     started = progress.started
-                    if batch and world_done_at is None and (self.on_batch_loss == "restart" or not started):
+                    if world_done_at is None and (self.on_batch_loss == "restart" or not started):
                         if c.incarnation < self.max_restarts:
                             death = c.death()
                             new = self._restart(c)
@@ -295,29 +314,51 @@ class Launch:
                             raise LaunchError(f"{c.name} {c.death()} before the run started, "
                                               f"{self.max_restarts + 1} times")
                     reported.add(c.name)
-                    if not batch:
-                        then = "the swarm goes on without it, but nothing will write the run directory"
-                    elif self.on_batch_loss == "remove":
+                    if self.on_batch_loss == "remove":
                         then = "the world removes its robots (--on-batch-loss remove) and the run goes on"
                     else:
                         then = (f"it was restarted {self.max_restarts} times already: the world removes its robots "
                                 f"and the run goes on")
                     self._warn(progress, f"{c.name} {c.death()}; {then}")
-                if world.proc.returncode not in (None, 0):
-                    raise LaunchError(f"world {world.death()}")
-                if monitor.proc.returncode == 0:
+                world, monitor = self._child("world"), self._child("monitor")
+                if monitor_done or monitor.proc.returncode == 0:
                     break
                 if world.proc.returncode == 0 and world_done_at is None:
                     world_done_at = time.monotonic()
-                if world_done_at is not None and monitor.proc.returncode is not None:
-                    raise LaunchError(f"the monitor {monitor.death()}; the swarm ran to its end without it, but no "
-                                      f"run directory was written")
                 if world_done_at is not None and time.monotonic() - world_done_at > 3 * _GRACE:
                     raise LaunchError(f"the run ended but the monitor did not write it within {3 * _GRACE:g} s")
         deadline = time.monotonic() + _GRACE
         while time.monotonic() < deadline and any(c.proc.poll() is None for c in self.children):
             self._note_exits()
             time.sleep(0.01)
+
+    def _child(self, name: str) -> Child:
+        return next(c for c in self.children if c.name == name)
+
+    def _written(self) -> bool:
+        """Whether the monitor wrote the run directory: ``out`` is there now, and is not what was there before
+        the run (the monitor writes it whole under another name, then renames it: it is complete)."""
+        now = _identity(self.out.absolute())
+        return now is not None and now != self.out_before and (self.out.absolute() / "summary.json").is_file()
+
+    def _restart_core(self, c: Child, progress) -> None:
+        """The world or the monitor died. Killed by a signal: start it again, up to ``max_restarts`` times; it
+        goes on from its checkpoint (the world) or its bag (the monitor). Exited with an error status: the
+        run failed there (a restart would fail the same way).
+
+        Raises:
+            LaunchError: it may not be restarted.
+        """
+        death = c.death()
+        if c.proc.returncode > 0:
+            if c.name == "monitor" and progress.ended_at is not None:
+                raise LaunchError(f"the monitor {death}; the swarm ran to its end, but no run directory was written")
+            raise LaunchError(f"{c.name} {death}")
+        if c.incarnation >= self.max_restarts:
+            raise LaunchError(f"{c.name} {death}; it was restarted {self.max_restarts} times already "
+                              f"(--max-restarts): the run cannot go on")
+        new = self._restart(c)
+        self._warn(progress, f"{c.name} {death}; restarted ({new.incarnation} of {self.max_restarts})")
 
     def _note_exits(self) -> None:
         for c in self.children:

@@ -309,6 +309,42 @@ class Simulation:
         self.outcome = OUTCOME_OF_CODE[code]
         return int(ids.size)
 
+    def restore(self, tick: int, x: np.ndarray, y: np.ndarray, heading: np.ndarray, state: np.ndarray,
+                history: np.ndarray, losses: list[tuple[int, int]], outcome: Outcome | None) -> None:
+        """Continue from a saved tick (the world node's checkpoint, :mod:`swarm_ros.protocol.checkpoint`): every
+        robot's pose and state at the end of ``tick``, the metrics of ticks 0..``tick``, the losses so far
+        and the outcome. The occupancy and frontier are rebuilt from the robots, as a replica's are, so
+        the run goes on exactly as the one that saved them would have.
+
+        Raises:
+            ValueError: the rows do not make a consistent swarm (a checkpoint that is not this run's).
+        """
+        from swarm_ros.core.replica import Replica
+
+        n = self.params.robots
+        if history.shape != (tick + 1, len(METRIC_COLUMNS)) or int(history[-1, 0]) != tick:
+            raise ValueError(f"a checkpoint's metrics do not end at its tick {tick}")
+        replica = Replica(self.shape, n)
+        replica.load(tick, np.arange(n), state, x, y, heading)
+        s, r = self.state, replica.state
+        for name in ("x", "y", "heading", "state", "occupancy", "frontier", "frontier_blocks"):
+            getattr(s, name)[...] = getattr(r, name)  # in place: the compiled kernels hold these arrays
+        s.tick = tick
+        moving = s.moving_ids()
+        self._m = int(moving.size)
+        self._moving[: self._m] = moving
+        counts = s.counts()
+        self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
+        self._set_kernel_args(n - int(counts[RobotState.REMOVED]))
+        self._nrows = 0
+        self._reserve(tick + 1)
+        self._rows[: tick + 1] = history
+        self._nrows = tick + 1
+        self._decided = 0
+        self.losses = list(losses)
+        self.last_removed = np.empty(0, dtype=np.int64)
+        self.outcome = outcome
+
     @property
     def removed(self) -> int:
         """Robots removed so far."""

@@ -154,10 +154,13 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
         Param("start_timeout", 60.0, "seconds to wait for robot batches to cover every robot", low=0, low_open=True),
         Param("on_batch_loss", "restart", "restart: wait for a lost batch process to come back; remove: remove "
               "its robots", choices=BATCH_LOSS_POLICIES),
-        Param("max_restarts", MAX_RESTARTS, "restarts per batch waited for; a batch lost once more has its "
-              "robots removed", low=0),
-        Param("restart_timeout", 30.0, "seconds to wait for a lost batch to come back before removing its robots",
-              low=0, low_open=True),
+        Param("max_restarts", MAX_RESTARTS, "restarts per node process (each batch, the world, the monitor); a "
+              "batch lost once more has its robots removed, a world or monitor lost once more ends the run", low=0),
+        Param("restart_timeout", 30.0, "seconds to wait for a lost batch or monitor to come back before going on "
+              "without it", low=0, low_open=True),
+        Param("checkpoint", "", "file the world saves each tick into, from which a restarted world goes on",
+              blank="none: a lost world ends the run"),
+        Param("incarnation", 0, "0 for the world's first process; the launcher counts restarts up from 1", low=0),
     ),
     "robot_batch": (
         Param("batch", 0, "this process hosts batch `batch` of `batches` (contiguous ids) ...", low=0),
@@ -172,6 +175,7 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
         Param("record_every", 1, "log the robots every k-th tick (metrics: every tick)", low=1),
         Param("bag", True, "write bag/, a rosbag2 (MCAP) of every message on the swarm's topics"),
         Param("viewer_url", "", "also stream live to this Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy"),
+        Param("incarnation", 0, "0 for the monitor's first process; a restarted one goes on from its bag", low=0),
     ),
 }
 

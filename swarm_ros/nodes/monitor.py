@@ -24,26 +24,19 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Empty, Int64MultiArray
 
+from swarm_ros.artifacts import run_dir
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.artifacts.run_dir import (
-    check_leftovers,
-    check_out_dir,
-    default_run_dir,
-    partial_bag,
-    partial_recording,
-    write_run,
-)
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, tick_metrics
 from swarm_ros.core.replica import Replica
-from swarm_ros.core.run_result import ROS2, RunRecord, summarize
 from swarm_ros.core.state import STATE_COUNT, RobotState
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
-from swarm_ros.protocol.status import RunFailed, WorldReport
+from swarm_ros.protocol.status import RunFailed, WorldReport, restart_event
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
+from swarm_ros.ros.bag_resume import resume
 from swarm_ros.ros.bag_writer import TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED, handle_missed, run_node
@@ -60,14 +53,16 @@ class MonitorNode:
         self.shape, self.params = run.resolve()
         p = self.params
         self.out = Path(own["out_dir"]) if own["out_dir"] else \
-            default_run_dir(self.shape.name, p.robots, p.vision_radius, p.seed)
+            run_dir.default_run_dir(self.shape.name, p.robots, p.vision_radius, p.seed)
         self.overwrite = bool(own["overwrite"])
-        check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
-        check_leftovers(self.out)
+        self.incarnation = int(own["incarnation"])
+        run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
+        if not self.incarnation:  # a restarted process goes on from what its process before left
+            run_dir.check_leftovers(self.out)
         self.world_radius = run.world_radius
         self.recording = RecordingOptions(enabled=bool(own["record"]), every=int(own["record_every"]),
                                           connect=str(own["viewer_url"]) or None).reachable()
-        self.rrd = partial_recording(self.out)
+        self.rrd = run_dir.partial_recording(self.out)
         self.losses: list[tuple[int, int]] = []  # (tick, robots removed), seen as rows turning 'removed'
         self.rows: list[tuple[int, ...]] = []
         self.outcome = None
@@ -87,6 +82,8 @@ class MonitorNode:
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
         self.handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status,
                          msgs.DECISIONS: self._on_decisions}
+        self.raw = b""  # the message being handled, as it came (recorded once its handler takes it)
+        self.replaying = False  # going through the bag of the process before this one
         self.readers = {topic: self._subscribe(topic) for topic in msgs.MONITOR_READS if topic != msgs.STATUS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
         # readers have matched their writers (a thread watches, while the heavy part below loads), and its
@@ -103,10 +100,14 @@ class MonitorNode:
         """The heavy part, once the first endpoints exist: discovery goes on meanwhile in the DDS threads, and
         once this is loaded the world can see this node's last reader, and it starts."""
         node, p = self.node, self.params
+        if self.incarnation:
+            self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (resume, below)
         self.recorder = self.recording.open(self.rrd, self.shape, p)
         self.bag = BagRecorder(self.out) if self.bag_on else None
         self.replica = Replica(self.shape, p.robots)
         warm_up(self.shape, p)
+        if self.incarnation:
+            resume(self)
         importlib.import_module("swarm_ros.artifacts.plots")  # matplotlib: now, not at the end, when the run is written
         self.readers[msgs.STATUS] = self._subscribe(msgs.STATUS)  # loaded: the world may start (latched)
         node.get_logger().info(f"monitor: writing to {self.out}")
@@ -132,9 +133,13 @@ class MonitorNode:
                 return
 
     def _bagger(self, topic: str):
-        """What writes a proven message of ``topic``, as it came, into the bag (if there is one)."""
+        """What writes a proven message of ``topic``, as it came, into the bag (if there is one). Rows and
+        decisions wait for their handler: only a tick not recorded yet goes in (a restarted world sends the
+        last ticks again)."""
         def write(data: bytes) -> None:
-            if self.bag is not None:
+            if topic in (msgs.ROBOTS, msgs.DECISIONS):
+                self.raw = data
+            elif self.bag is not None:
                 self.bag.write(topic, data)
         return write
 
@@ -155,13 +160,17 @@ class MonitorNode:
         counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
         metrics = tick_metrics(tick, counts, self.shape.patches)
         self.rows.append(tuple(metrics))
-        data = self.pub_metrics.publish(msgs.metrics_message(metrics))
-        if self.bag is not None:
-            self.bag.write(msgs.METRICS, data)
-            joined = len(self.rows) < 2 or self.rows[-1][METRIC_COLUMNS.index("localized")] != \
-                self.rows[-2][METRIC_COLUMNS.index("localized")]
-            self.bag.write_world(self.shape, self.replica.state.occupancy, tick, len(self.rows) == 1,
-                                 joined or self.removed > removed_before)
+        if not self.replaying:
+            data = self.pub_metrics.seal(msgs.metrics_message(metrics))
+            if self.bag is not None:  # the tick's messages are durable before the world hears of it
+                self.bag.write(msgs.ROBOTS, self.raw)
+                self.bag.write(msgs.METRICS, data)
+                joined = len(self.rows) < 2 or self.rows[-1][METRIC_COLUMNS.index("localized")] != \
+                    self.rows[-2][METRIC_COLUMNS.index("localized")]
+                self.bag.write_world(self.shape, self.replica.state.occupancy, tick, len(self.rows) == 1,
+                                     joined or self.removed > removed_before)
+                self.bag.durable()
+            self.pub_metrics.send(data)
         if self.removed > removed_before:
             self.losses.append((tick, self.removed - removed_before))
         p = self.params
@@ -180,7 +189,11 @@ class MonitorNode:
         except Rejected as fault:
             self.rejections.drop(msgs.DECISIONS, fault)
             return
+        if tick in self.decided_rows and not self.replaying:
+            return  # recorded already (a restarted world sends the last ticks again)
         self.decided_rows[tick] = self.decided_rows.get(tick, 0) + rows.size
+        if self.bag is not None and not self.replaying:
+            self.bag.write(msgs.DECISIONS, self.raw)
 
     def _bag_complete(self) -> bool:
         """Whether the last tick's decisions are in the bag: they may arrive after the world's last rows."""
@@ -197,7 +210,7 @@ class MonitorNode:
         for tick, node in self.world.update(msgs.status_values(msg)):
             self.node.get_logger().warn(f"{node} was restarted at tick {tick}")
             if self.recorder is not None and not self.recorder.closed:
-                self.recorder.event(tick, f"{node} restarted at tick {tick}: a new process took over its robots")
+                self.recorder.event(tick, restart_event(tick, node))
         if self.world.outcome is not None and self.world_end is None:
             self.world_end = (time.monotonic(), msgs.tick_of(msg.header))
 
@@ -235,19 +248,9 @@ class MonitorNode:
                             f"{_STATUS_WAIT:g} s")
 
     def _write(self, outcome: Outcome | None = None) -> None:
-        outcome = outcome or self.outcome
-        history = np.array(self.rows, dtype=np.int64)
-        final = tick_metrics(self.replica.tick, np.bincount(self.replica.state.state, minlength=STATE_COUNT),
-                             self.shape.patches)
-        summary = summarize(shape=self.shape, params=self.params, state=self.replica.state, final=final,
-                            outcome=outcome, engine=ROS2, wall_seconds=self.world.times.get("wall_seconds", self.wall),
-                            losses=self.losses, restarts=self.world.restarts,
-                            overhead={"startup_seconds": self.world.times.get("startup_seconds"),
-                                      "shutdown_seconds": None},  # swarm-ros run fills it in at the end
-                            rejected={"world": self.world.rejected, "monitor": self.rejections.total})
-        record = RunRecord(shape=self.shape, params=self.params, state=self.replica.state, history=history,
-                           outcome=outcome, summary=summary)
-        self.written = write_run(self.out, record, overwrite=self.overwrite,
+        record = self.world.record(self.shape, self.params, self.replica.state, self.rows, outcome or self.outcome,
+                                   self.wall, self.losses, self.rejections.total)
+        self.written = run_dir.write_run(self.out, record, overwrite=self.overwrite,
                                  recording=self.rrd if self.recording.enabled else None,
                                  bag=self.bag.close() if self.bag is not None else None)
         if self.bag is not None:
@@ -272,7 +275,7 @@ class MonitorNode:
             except RunFailed as exc:
                 self.node.get_logger().error(f"while taking the ticks already sent: {exc}")
         if self.bag is not None and not (code == EXIT_INTERRUPTED and self.rows and self.outcome is None):
-            self.bag.move_to(partial_bag(self.out))  # closed and kept beside the run (an interrupted run takes it)
+            self.bag.move_to(run_dir.partial_bag(self.out))  # closed, kept beside the run (an interrupted run takes it)
         if self.outcome is not None:  # ended, but stopped before the world confirmed it: keep the recording
             if self.recorder is not None:
                 self.recorder.outcome("interrupted", TickMetrics(*self.rows[-1]))

@@ -69,7 +69,7 @@ class RobotBatchNode:
                                                    msgs.DECISIONS_QOS)
         self.gate.subscribe(PointCloud2, msgs.snapshot_topic(node.get_name()), self._on_snapshot, msgs.LATCHED_QOS)
         self.gate.subscribe(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
-        self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
+        self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.STATUS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         announce = self.signer.publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
         hello = msgs.ids_message(self.ids)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -30,10 +31,11 @@ from swarm_ros.core.signals import PARENT_ENV, process_age
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.checkpoint import Checkpoint, Saved
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR
-from swarm_ros.protocol.status import Status
+from swarm_ros.protocol.status import RunFailed, Status
 from swarm_ros.protocol.world_port import Policy
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
@@ -51,12 +53,15 @@ class WorldNode:
         run, own = read_parameters(node, "world")
         self.created = time.monotonic()
         self.shape, self.params = run.resolve()
+        self.checkpoint_path = str(own.pop("checkpoint"))
+        self.incarnation = int(own.pop("incarnation"))
+        self.saver: Checkpoint | None = None
         self.policy = Policy(**own)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
         signed = self.signer.publisher
         self.pub_robots = signed(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
-        self.pub_status = signed(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
+        self.pub_status = signed(DiagnosticArray, msgs.STATUS, msgs.STATUS_QOS)
         self.pub_decisions = signed(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
         # for viewers only: these types have no field for a tag, and no node of the run reads them (auth)
         self.pub_shape = node.create_publisher(OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
@@ -81,10 +86,29 @@ class WorldNode:
         self.pub_shape.publish(msgs.grid_message(self.shape, self.shape_cells, 0))
         self.lockstep = Lockstep(sim, self.policy, self, self.node.get_logger(), self.rejections,
                                  created=self.created)
+        saved = self._open_checkpoint()
+        if saved is not None:
+            self.lockstep.restore(saved)
         self._publish_occupancy()
         self.lockstep.publish_status()
-        self.node.get_logger().info(f"world: {self.shape.name} ({self.shape.patches} patches), "
-                                    f"{self.params.robots} robots, waiting for robot batches")
+        if saved is None:
+            self.node.get_logger().info(f"world: {self.shape.name} ({self.shape.patches} patches), "
+                                        f"{self.params.robots} robots, waiting for robot batches")
+
+    def _open_checkpoint(self) -> Saved | None:
+        """The checkpoint to write (``checkpoint``); for a restarted world, what the one before saved in it."""
+        if not self.checkpoint_path:
+            return None
+        path, n, cols = Path(self.checkpoint_path), self.params.robots, len(METRIC_COLUMNS)
+        try:
+            if self.incarnation and path.exists():
+                self.saver = Checkpoint.open(path, n, self.params.max_ticks, cols)
+                return self.saver.saved()
+            self.saver = Checkpoint(path, n, self.params.max_ticks, cols, self.policy.monitor_window + 2)
+            self.saver.create()
+        except (OSError, ValueError) as exc:
+            raise RunFailed(f"checkpoint {path}: {exc}") from None
+        return None
 
     # -- inbound ----------------------------------------------------------------------
     def _on_batch(self, msg: Int64MultiArray) -> None:
@@ -110,7 +134,9 @@ class WorldNode:
         except Rejected as fault:
             self.rejections.drop(msgs.METRICS, fault)
             return
-        self.lockstep.metrics(tick)
+        self.lockstep.metrics(tick, self.gate.last_tag.nonce)
+        if self.saver is not None:
+            self.saver.monitor_reported(self.lockstep.monitor_tick)
 
     def _watch(self, topic: str, on_change) -> None:
         self.node.create_subscription(Empty, topic, lambda msg: None, msgs.ALIVE_QOS,
@@ -140,6 +166,14 @@ class WorldNode:
         if joined:
             self._publish_occupancy()
         self.pub_clock.publish(msgs.clock_message(tick))
+
+    def checkpoint(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None:
+        if self.saver is not None:
+            self.saver.write(tick, rows, applied, metrics)
+
+    def save_book(self, book: dict) -> None:
+        if self.saver is not None:
+            self.saver.save_book(book)
 
     def publish_status(self, status: Status) -> None:
         level = DiagnosticStatus.WARN if status.warn else DiagnosticStatus.OK

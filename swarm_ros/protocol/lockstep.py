@@ -18,23 +18,22 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
-from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.state import IS_MOVING, RobotState
 from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows
-from swarm_ros.protocol.status import RUNNING, STARTING, RunFailed, Status, restarts_text
+from swarm_ros.protocol.status import RunFailed, Status
 from swarm_ros.protocol.world_port import (
-    DROWNED_S,
     FINAL_WAIT,
     FIRST_STALL_S,
     LINGER,
-    STALL_S,
     STATUS_PERIOD,
     Policy,
     WorldPort,
 )
+from swarm_ros.protocol.world_restore import Saved, book_of, restore
+from swarm_ros.protocol.world_status import check_stalls, status_of
 
 
 class Lockstep:
@@ -55,7 +54,12 @@ class Lockstep:
         self.respawned: dict[int, np.ndarray] = {}  # batch -> robots: re-announced with no higher incarnation
         self.lapsed: set[int] = set()  # batches whose liveliness lapsed since their last accepted announcement
         self.live: set[int] = set()  # batches whose liveliness holds (DDS reports a writer of theirs alive)
-        self.restarts: list[tuple[int, str]] = []  # (tick, batch) of every restart
+        self.restarts: list[tuple[int, str]] = []  # (tick, node) of every restart: batches, the world, the monitor
+        self.known: dict[int, int] = {}  # restored: batch -> incarnation of the process the world before knew
+        self.restored = False  # this world went on from a checkpoint (a process before it was lost)
+        self.monitor_nonce = ""  # the tag nonce of the monitor process whose metrics came last
+        self.monitor_down_since: float | None = None  # the monitor lost and waited for: since when
+        self.started_wall = 0.0  # time.time() at tick 0 (a restored world's wall_seconds count from it)
         self.lost: list[str] = []  # batches (and the monitor) lost for good
         self.started = False
         self.created = clock() if created is None else created  # start_timeout counts from here
@@ -110,6 +114,9 @@ class Lockstep:
     def _reannounced(self, k: int, ids: np.ndarray, incarnation: int, respawn: bool = False) -> None:
         """A batch announced again: its process was restarted. Send it the current tick to start from."""
         name = self.batch_names[k]
+        if self.known.get(k) == incarnation:  # the process the world before this one knew: nothing new
+            del self.known[k]
+            return
         if incarnation <= self.incarnations[k]:
             # The same process again, an older one's announcement, or a new process that a launcher
             # without restart counting (ros2 launch's respawn) started: that one is taken once the
@@ -135,6 +142,7 @@ class Lockstep:
                       + ("; sending it a snapshot" if self.started else ""))
         if self.started:
             self._send_snapshot(k)
+            self.save_book()
         self.publish_status()
 
     def _respawn(self, k: int) -> None:
@@ -162,13 +170,17 @@ class Lockstep:
             self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s")
         self.started = True
         self.start_time = self.clock()
+        self.started_wall = time.time()
         self.startup_seconds = self.port.startup_seconds()
         waited = " and the monitor" if self.window else ""
         self.log.info(f"all robots hosted by {len(self.batch_names)} batches{waited}: tick 0")
+        s = self.sim.state
+        rows = robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading)
+        self.port.checkpoint(0, rows, None, self.sim.history[0])  # before the snapshots: they tell of tick 0
+        self.save_book()
         for k in range(len(self.batch_names)):
             self._send_snapshot(k)
-        s = self.sim.state
-        self._emit(0, robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading), False, None)
+        self._emit(0, rows, False, None, save=False)
 
     # -- ticks ----------------------------------------------------------------------
     @property
@@ -188,6 +200,8 @@ class Lockstep:
             return  # answers to the tick after the last: the run is over
         if not self.started:
             raise Rejected("before tick 0")
+        if self.restored and tick <= self.sim.tick:
+            return  # sent to the world before this one: the batches' histories hand them over again
         decisions_allowed(rows, tick, self.sim, self.host, k, self.decided, self.batch_names[k])
         if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
             rows = rows[~np.isin(rows["id"], self.pending)]
@@ -225,7 +239,7 @@ class Lockstep:
         applied = decision_rows(decisions)
         self.parts, self.received = [], 0
         self.decided[:] = False
-        localized_before = self.sim.metrics.localized
+        localized_before, losses_before = self.sim.metrics.localized, len(self.sim.losses)
         try:
             self.sim.apply(decisions)
         except ValueError as exc:
@@ -234,13 +248,18 @@ class Lockstep:
             removed = self.sim.remove(self.pending)
             self.log.warn(f"tick {tick}: removed the {removed} robots of lost batches")
             self.pending = np.empty(0, dtype=np.int64)
+        if len(self.sim.losses) != losses_before:  # scheduled failures, or a lost batch's robots
+            self.save_book()
         s = self.sim.state
         ids = np.union1d(self.sim.last_joins()[0], self.sim.last_removed)  # deciders and failed robots changed
         joined = self.sim.metrics.localized != localized_before or self.sim.last_removed.size > 0
         self._emit(tick, robot_rows(ids, s.state, s.x, s.y, s.heading), joined, applied)
 
-    def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None:
-        """Publish a tick now, or queue it while the monitor is more than ``window`` ticks behind."""
+    def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None, save: bool = True) -> None:
+        """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than
+        ``window`` ticks behind."""
+        if save:
+            self.port.checkpoint(tick, rows, applied, self.sim.history[tick])
         self.queued.append((tick, rows, joined, applied))
         self._flush()
 
@@ -261,40 +280,34 @@ class Lockstep:
         self.publish_status()
         self.log.info(f"run ended: {self.sim.outcome.value} at tick {m.tick}, {m.localized} localized")
 
-    def metrics(self, tick: int) -> None:
-        """The monitor's report of ``tick`` (checked: a tick this world published)."""
+    def metrics(self, tick: int, nonce: str = "") -> None:
+        """The monitor's report of ``tick`` (checked: a tick this world published), from the monitor process
+        whose tags carry ``nonce``: a new one after another is a restarted monitor."""
+        if nonce != self.monitor_nonce:
+            if self.monitor_nonce and self.started:
+                self.restarts.append((self.sim.tick, MONITOR))
+                self.log.warn(f"the monitor is back (a new process) at tick {self.sim.tick}")
+            self.monitor_nonce = nonce
+            self.save_book()
+            self.publish_status()
         if tick > self.monitor_tick:
             self.monitor_tick = tick
             self.progress_at = self.clock()
             self._flush()
 
+    def save_book(self) -> None:
+        """The bookkeeping a restarted world needs besides the ticks (:mod:`swarm_ros.protocol.world_restore`)."""
+        if self.started:
+            self.port.save_book(book_of(self))
+
+    def restore(self, saved: Saved) -> None:
+        """Go on from the checkpoint a world process before this one wrote (see :func:`restore`)."""
+        restore(self, saved)
+
     # -- status -----------------------------------------------------------------------
     def status(self, note: str = "") -> Status:
-        """The run's state now: outcome, the last published tick and its counts, restarts and lost processes."""
-        tick = max(self.published_tick, 0)
-        sim, warn = self.sim, bool(note or self.lost or self.down_since)
-        if not self.started:
-            outcome, message = STARTING, "waiting for robot batches"
-        elif self.ended_at is not None:
-            outcome = sim.outcome.value
-            message = f"{outcome} at tick {tick}"
-            warn = warn or sim.outcome not in (Outcome.COMPLETE, Outcome.COMPLETE_WITH_EXTRAS)
-        else:
-            outcome, message = RUNNING, note or RUNNING
-        values: dict[str, object] = {"rules": sim.params.ruleset.label, "robots": sim.params.robots}
-        if self.started:
-            m = sim.history[min(tick, sim.tick)]
-            values.update({key: int(m[METRIC_COLUMNS.index(key)]) for key in ("localized", "moving", "walking")})
-            values["startup_seconds"] = f"{self.startup_seconds:.3f}"
-        if self.ended_at is not None:
-            values["separated"] = int((sim.state.state == RobotState.SEPARATED).sum())
-            values["wall_seconds"] = f"{self.ended_at - self.start_time:.3f}"
-        values["restarts"] = restarts_text(self.restarts)
-        values["rejected_messages"] = self.rejections.total
-        values["rejected"] = self.rejections.text()
-        values["lost"] = ",".join(self.lost)
-        values["waiting_for"] = ",".join(self.batch_names[k] for k in sorted(self.down_since))
-        return Status(tick=tick, outcome=outcome, message=message, warn=warn, values=values)
+        """The run's state now (:func:`swarm_ros.protocol.world_status.status_of`)."""
+        return status_of(self, note)
 
     def publish_status(self, note: str = "") -> None:
         self.status_at = self.clock()
@@ -339,6 +352,7 @@ class Lockstep:
         ids = np.flatnonzero(self.host == k)
         ids = ids[self.sim.state.state[ids] != RobotState.REMOVED]
         self.lost.append(name)
+        self.save_book()
         self.pending = np.union1d(self.pending, ids)
         # decisions it sent for this tick before it was lost no longer count either
         self.parts = [r[~np.isin(r["id"], self.pending)] for r in self.parts]
@@ -352,65 +366,37 @@ class Lockstep:
     def monitor_liveliness(self, alive: int, not_alive: int) -> None:
         self.monitor_alive = alive > 0
         if self.monitor_alive:
+            self.monitor_down_since = None
             self.maybe_start()
         if alive == 0 and not_alive > 0:
-            self._lose_monitor("liveliness lapsed")
+            self.monitor_down("liveliness lapsed")
         elif alive > 0 and MONITOR in self.lost:  # it was only starved of CPU for a moment
             self.lost.remove(MONITOR)
             self.window = self.policy.monitor_window
             self.log.warn(f"the monitor is back at tick {self.sim.tick}")
             self.publish_status()
 
+    def monitor_down(self, why: str) -> None:
+        """The monitor's process is gone: wait up to ``restart_timeout`` for a new one, holding the ticks
+        back as while it is behind (they stay in the topics' histories for it), then go on without it."""
+        if MONITOR in self.lost or self.monitor_down_since is not None:
+            return
+        self.monitor_down_since = self.clock()
+        self.log.warn(f"the monitor was lost ({why}) at tick {self.sim.tick}: waiting up to "
+                      f"{self.policy.restart_timeout:g} s for it to restart")
+        self.publish_status("waiting for the monitor")
+
     def _lose_monitor(self, why: str) -> None:
         if MONITOR in self.lost:
             return
         self.lost.append(MONITOR)
+        self.save_book()
         self.window = 0  # nobody to wait for: run on
         self.log.warn(f"the monitor was lost ({why}) at tick {self.sim.tick}; the swarm goes on without it")
         self.publish_status("lost the monitor")
         self._flush()
 
     # -- the clock --------------------------------------------------------------------
-    def _check_stalls(self, now: float) -> None:
-        """The fallback to liveliness (a process lost before DDS matched its liveliness topic): a batch
-        whose robots have not decided, or a monitor that has not reported, for ``STALL_S`` is lost.
-        Before the first decisions or report, while discovery may still be going on, the limit is
-        ``FIRST_STALL_S``. One whose liveliness holds is not lost for its silence (its messages may be
-        drowned by a flood): it is waited for, and after ``DROWNED_S`` the run fails.
-
-        Raises:
-            RunFailed: a batch or the monitor alive but silent for ``DROWNED_S``.
-        """
-        if not self.started or self.sim.done:
-            return
-        if self.queued:
-            limit = STALL_S if self.monitor_tick >= 0 else FIRST_STALL_S
-            if self.window and now - self.progress_at >= limit:
-                if not self.monitor_alive:
-                    self._lose_monitor(f"no metrics for {limit:g} s")
-                elif now - self.progress_at >= DROWNED_S:
-                    self._drowned("the monitor's metrics")
-            return
-        limit = STALL_S if self.sim.tick > 0 else FIRST_STALL_S
-        if now - self.progress_at < limit:
-            return
-        moving = self.sim.moving_ids()
-        missing = np.setdiff1d(moving[~self.decided[moving]], self.pending)
-        silent = np.unique(self.host[missing]).tolist()
-        for k in silent:
-            if k not in self.live:
-                self.lose_batch(k, f"no decisions for {limit:g} s")
-        alive = [self.batch_names[k] for k in silent if k in self.live]
-        if not alive:
-            self.progress_at = now
-        elif now - self.progress_at >= DROWNED_S:
-            self._drowned(f"the decisions of {', '.join(alive)}")
-
-    def _drowned(self, what: str) -> None:
-        dropped = self.rejections.text() or "nothing"
-        raise RunFailed(f"{what} did not arrive for {DROWNED_S:g} s at tick {self.sim.tick}, though the process is "
-                        f"alive: its messages do not get through, or it hangs (messages dropped: {dropped})")
-
     def poll(self) -> None:
         """Between messages: timeouts, stalls, the periodic status, and whether the node may exit.
 
@@ -419,7 +405,10 @@ class Lockstep:
                 before tick 0 did not come back within ``restart_timeout``.
         """
         now, p = self.clock(), self.policy
-        self._check_stalls(now)
+        check_stalls(self, now)
+        if self.monitor_down_since is not None and now - self.monitor_down_since > p.restart_timeout:
+            self.monitor_down_since = None
+            self._lose_monitor(f"not back within {p.restart_timeout:g} s")
         for k, since in list(self.down_since.items()):
             if now - since > p.restart_timeout:
                 if not self.started:

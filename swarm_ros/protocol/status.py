@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from swarm_ros.core.run_result import RunRecord
 
 STARTING = "starting"  #: waiting for robot batches (and the monitor) before tick 0
 RUNNING = "running"  #: tick 0 went out; no outcome yet
@@ -44,6 +48,13 @@ class Status:
 def restarts_text(restarts: list[tuple[int, str]]) -> str:
     """The ``restarts`` value of /swarm/status: ``tick:node`` items joined by ``;``, oldest first."""
     return ";".join(f"{tick}:{node}" for tick, node in restarts)
+
+
+def restart_event(tick: int, node: str) -> str:
+    """The recording's line for a restart of ``node`` at ``tick``."""
+    what = {"world": "a new world process went on from its checkpoint",
+            "monitor": "a new monitor process went on from its bag"}.get(node, "a new process took over its robots")
+    return f"{node} restarted at tick {tick}: {what}"
 
 
 def restarts_of(text: str) -> list[tuple[int, str]]:
@@ -85,3 +96,22 @@ class WorldReport:
         if has_ended(values.get("outcome")):
             self.outcome = values["outcome"]
         return new
+
+    def record(self, shape, params, state, rows: list[tuple[int, ...]], outcome, wall: float,
+               losses: list[tuple[int, int]], rejected: int) -> RunRecord:
+        """The record of a run over the graph: the monitor's ``rows`` (metrics of every tick) and final
+        ``state``, with what the world reported (its clock, restarts, drops); ``rejected``: the monitor's drops."""
+        import numpy as np  # the engine's modules (numba) load only where a run is written
+
+        from swarm_ros.core.metrics import tick_metrics
+        from swarm_ros.core.run_result import ROS2, RunRecord, summarize
+        from swarm_ros.core.state import STATE_COUNT
+
+        history = np.array(rows, dtype=np.int64)
+        final = tick_metrics(state.tick, np.bincount(state.state, minlength=STATE_COUNT), shape.patches)
+        summary = summarize(shape=shape, params=params, state=state, final=final, outcome=outcome, engine=ROS2,
+                            wall_seconds=self.times.get("wall_seconds", wall), losses=losses, restarts=self.restarts,
+                            overhead={"startup_seconds": self.times.get("startup_seconds"),
+                                      "shutdown_seconds": None},  # swarm-ros run fills it in at the end
+                            rejected={"world": self.rejected, "monitor": rejected})
+        return RunRecord(shape=shape, params=params, state=state, history=history, outcome=outcome, summary=summary)

@@ -131,12 +131,24 @@ class Sealer:
         return data[:at] + mac_of(self.key, topic, data, at).encode() + data[at + MAC_CHARS:]
 
 
+class Known(Rejected):
+    """A message this node's process before this one took already (:meth:`Verifier.taken_before`): not an
+    attack."""
+
+
 class Verifier:
     """The receiving side of one process: checks each message's tag, remembering each sender's last number."""
 
     def __init__(self, key: bytes) -> None:
         self.key = key
         self.last: dict[tuple[str, str], int] = {}  # (topic, nonce) -> highest seq taken; genuine senders only
+        self.taken: dict[tuple[str, str], int] = {}  # the same, taken by a process before this one
+
+    def taken_before(self) -> None:
+        """Count every message taken so far as taken by this node's process before this one: the same
+        message again is refused as :class:`Known`, not as a replay. A restarted monitor reads back what it
+        had recorded (through :meth:`verify`), then the writers' histories hand it the same messages again."""
+        self.taken = dict(self.last)
 
     def verify(self, topic: str, data: bytes) -> Tag:
         """The tag in ``data`` (a serialized message as received, :func:`find_tag`), if it proves the message.
@@ -152,6 +164,8 @@ class Verifier:
         if not may_send(tag.sender, topic):
             raise Rejected("unauthenticated", f"{tag.sender!r} does not publish on {topic}")
         key = (topic, tag.nonce)
+        if tag.seq <= self.taken.get(key, 0):
+            raise Known("recorded already", f"{tag.sender}'s message {tag.seq}")
         if tag.seq <= self.last.get(key, 0):
             raise Rejected("replayed", f"{tag.sender}'s message {tag.seq} again (after {self.last[key]})")
         self.last[key] = tag.seq

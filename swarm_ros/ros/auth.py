@@ -36,7 +36,7 @@ from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.plan import BATCHES
 from swarm_ros.protocol.rows import TAG_PREFIX, is_tag, parse_batch_label
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
-from swarm_ros.protocol.tag import Sealer, Verifier
+from swarm_ros.protocol.tag import Known, Sealer, Verifier
 from swarm_ros.ros.graph import reader_qos
 
 TAGGED_TYPES = (PointCloud2, DiagnosticArray, Int64MultiArray)  #: the types that carry a tag
@@ -90,9 +90,19 @@ class SignedPublisher:
     def publish(self, msg) -> bytes:
         """Publish ``msg`` (it gets the tag: :func:`put_tag`) sealed; returns its bytes. Clouds of rows go
         faster through :meth:`publish_rows`."""
+        data = self.seal(msg)
+        self.pub.publish(data)
+        return data
+
+    def seal(self, msg) -> bytes:
+        """``msg`` tagged and sealed, not sent (yet: :meth:`send`)."""
         blank = self.sealer.blank()
         put_tag(msg, blank)
-        return self._send(serialize_message(msg), blank)
+        return self.sealer.seal(self.topic, serialize_message(msg), blank)
+
+    def send(self, data: bytes) -> None:
+        """Publish bytes :meth:`seal` made."""
+        self.pub.publish(data)
 
     def publish_rows(self, rows: np.ndarray, tick: int) -> bytes:
         """Publish ``rows`` as a PointCloud2 stamped with ``tick`` (:func:`encode_cloud`), sealed; returns its bytes."""
@@ -116,6 +126,8 @@ class Gate:
     def __init__(self, node, key: bytes, rejections: Rejections) -> None:
         self.node, self.verifier, self.rejections = node, Verifier(key), rejections
         self.received = 0  # messages arrived so far, taken or not
+        self.last_tag = None  # the tag of the message being handled (sender, nonce, seq)
+        self.known = 0  # messages dropped as taken already by a process before this one (Verifier.known)
 
     def subscribe(self, msg_type, topic: str, handler: Callable[[object], None] | None, qos,
                   raw_handler: Callable[[bytes], None] | None = None):
@@ -131,6 +143,9 @@ class Gate:
             self.received += 1
             try:
                 msg = self.open(msg_type, topic, data)
+            except Known:
+                self.known += 1  # recorded already by this node's process before (a restarted monitor's bag)
+                return
             except Rejected as fault:
                 self.rejections.drop(topic, fault)
                 return
@@ -149,6 +164,7 @@ class Gate:
             Rejected: its tag does not prove it, it does not parse, or its tag is not where it belongs.
         """
         tag = self.verifier.verify(topic, data)  # before any parser reads the bytes: only a key holder's are read
+        self.last_tag = tag
         if msg_type is PointCloud2:
             msg = decode_cloud(data)
             text = msg.tag

@@ -17,6 +17,7 @@ failed run leaves it, closed and readable, as ``<run>.partial-bag`` (:func:`swar
 from __future__ import annotations
 
 import shutil
+import struct
 import tempfile
 import time
 from pathlib import Path
@@ -38,7 +39,7 @@ TOPICS: dict[str, tuple[type, QoSProfile]] = {
     msgs.DECISIONS: (PointCloud2, msgs.DECISIONS_QOS),
     msgs.OCCUPANCY: (OccupancyGrid, msgs.LATCHED_QOS),
     msgs.SHAPE: (OccupancyGrid, msgs.LATCHED_QOS),
-    msgs.STATUS: (DiagnosticArray, msgs.LATCHED_QOS),
+    msgs.STATUS: (DiagnosticArray, msgs.STATUS_QOS),
     msgs.METRICS: (Int64MultiArray, msgs.METRICS_QOS),
     msgs.CLOCK: (Clock, msgs.CLOCK_QOS),
 }
@@ -95,6 +96,29 @@ def ros_qos(qos: Qos) -> QoSProfile:
                       liveliness_lease_duration=duration(qos.liveliness_lease_duration))
 
 
+def unfinished_messages(holder: Path) -> list[tuple[str, int, bytes]]:
+    """(topic, log time in ns, CDR bytes) of every message a monitor killed while writing its bag in
+    ``holder`` had made durable (:meth:`BagRecorder.durable`), in the order written. The file has no
+    summary (the writer never closed it); its records are read in order until the first that is cut off."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+
+    out: list[tuple[str, int, bytes]] = []
+    for path in sorted((holder / BAG_DIR).glob("*.mcap")):
+        topics: dict[int, str] = {}
+        with open(path, "rb") as f:
+            try:
+                for record in StreamReader(f, skip_magic=False).records:
+                    if isinstance(record, Channel):
+                        topics[record.id] = record.topic
+                    elif isinstance(record, Message) and record.channel_id in topics:
+                        out.append((topics[record.channel_id], record.log_time, bytes(record.data)))
+            except (McapError, ValueError, EOFError, struct.error):
+                pass  # cut off here: the rest was never made durable
+    return out
+
+
 def _name_first_file(bag: Path) -> None:
     """Rename the storage file ``bag.mcap`` to ``bag_0.mcap``, as rosbag2 names a bag's first file
     (rosbags names it after the directory alone), and say so in metadata.yaml."""
@@ -135,10 +159,19 @@ class BagRecorder:
                             for topic, (kind, qos) in TOPICS.items()}
         self.closed = False
 
-    def write(self, topic: str, data: bytes) -> None:
-        """Store one message of ``topic`` (CDR bytes), stamped now."""
+    def write(self, topic: str, data: bytes, at: int | None = None) -> None:
+        """Store one message of ``topic`` (CDR bytes), stamped ``at`` (ns), or now."""
         if not self.closed:
-            self.writer.write(self.connections[topic], time.time_ns(), data)
+            self.writer.write(self.connections[topic], time.time_ns() if at is None else at, data)
+
+    def durable(self) -> None:
+        """Hand everything written so far to the operating system: a SIGKILL of this process from now on loses
+        none of it (a restarted monitor reads it back, :func:`unfinished_messages`). The MCAP writer keeps its
+        current chunk in memory until it is closed; here it is closed (one chunk per tick)."""
+        storage = self.writer.storage  # rosbags' MCAP storage: pinned (requirements.txt); no public flush
+        if not self.closed and storage is not None and storage.chunk.bio.tell():
+            storage.close_chunk()
+            storage.bio.flush()
 
     def write_world(self, shape, occupancy, tick: int, first: bool, changed: bool) -> None:
         """/swarm/shape once (``first``), /swarm/occupancy first and when it ``changed``, /clock every tick: the

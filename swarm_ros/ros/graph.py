@@ -58,8 +58,13 @@ BATCHES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability
 #: State that a late joiner needs once: the latest message is kept for it ("latched").
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: Kept for late readers: a restarted world takes the monitor's last report from it.
 METRICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=64, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.VOLATILE)
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: The run's state, ten a second and on every event; the last 256 (25 s) are kept for a late reader: a
+#: restarted monitor records in the bag those sent while it was down.
+STATUS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)
 #: Liveliness only: nothing is published. DDS asserts an AUTOMATIC writer alive while its process

@@ -42,7 +42,7 @@ class Progress:
         self.node = Node("swarm_ros_launcher", context=self.context, start_parameter_services=False)
         # only what the run's nodes tagged (auth.Gate): a stranger's status cannot end the run here
         self.gate = Gate(self.node, key, Rejections(self.node.get_logger()))
-        self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.LATCHED_QOS)
+        self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.STATUS_QOS)
         self.executor = EventsExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.bar = tqdm(total=patches, unit="patch", desc="localized", disable=True if quiet else None,

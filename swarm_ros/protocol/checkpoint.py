@@ -1,0 +1,175 @@
+"""The world's checkpoint: what a restarted world process needs to go on from the last tick it sent.
+
+The world writes it itself, into one file mapped into its memory (``numpy.memmap``), before
+anything about a tick leaves the process: a SIGKILL loses nothing written to a shared file
+mapping (the pages belong to the kernel's page cache, not the process), so the file holds
+every tick up to the one being written. A host that loses power loses it; the graph's fault
+model is a process lost, not a machine (docs/ros_graph.md, "Faults").
+
+Layout: a header of int64s, every robot's row (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`,
+indexed by id), the metrics of every tick, and a ring of the last ``slots`` ticks' published
+rows (the robots that changed, and the decisions applied), so the new world can send again
+the ticks a reader may have lost with the old one (the monitor may be up to ``monitor_window``
+ticks behind). A tick is written in an order that a kill at any instruction leaves
+recoverable: the header's ``writing``, the tick's ring slot, the header's ``ready``, the rows
+into the robots, the header's ``done``. A restore takes ``done``; if it finds ``ready`` ahead,
+it copies that slot's rows into the robots again (the same values) and takes ``ready``.
+
+The rest of the world's bookkeeping (batches, restarts, losses, times) changes seldom and
+goes into ``<file>.json``, written whole to a temporary name and renamed.
+
+The file holds no key and is not signed: it is the world's own, in the run's log directory,
+which only the user who runs it can write (the same trust as the parameter file it starts from).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+
+MAGIC = 0x5357524D434B5031  # "SWRMCKP1"
+_H_MAGIC, _H_ROBOTS, _H_SLOTS, _H_TICKS, _H_COLS, _H_WRITING, _H_READY, _H_DONE, _H_MONITOR = range(9)
+_HEADER = 16  # int64s
+_SLOT_HEAD = 3  # int64s per ring slot: tick, robot rows, applied rows
+
+
+@dataclass
+class Saved:
+    """A checkpoint as read back: the last tick it holds, every robot's row then, the metrics of ticks 0..tick,
+    the newest tick the monitor had reported, the ring's ticks (tick -> (robot rows, applied rows or None)),
+    and the bookkeeping."""
+
+    tick: int
+    robots: np.ndarray
+    history: np.ndarray
+    monitor_tick: int
+    ring: dict[int, tuple[np.ndarray, np.ndarray | None]]
+    book: dict
+
+
+class Checkpoint:
+    """One run's world checkpoint at ``path`` (created empty, or opened to restore from)."""
+
+    def __init__(self, path: Path, robots: int, max_ticks: int, columns: int, slots: int) -> None:
+        self.path = Path(path)
+        self.robots, self.ticks, self.columns, self.slots = robots, max_ticks + 1, columns, max(slots, 2)
+        self.slot_bytes = _SLOT_HEAD * 8 + robots * (ROBOT_ROW.itemsize + DECISION_ROW.itemsize)
+        self._offsets()
+        self.map: np.memmap | None = None
+
+    def _offsets(self) -> None:
+        self.robots_at = _HEADER * 8
+        self.history_at = self.robots_at + self.robots * ROBOT_ROW.itemsize
+        self.ring_at = self.history_at + self.ticks * self.columns * 8
+        self.size = self.ring_at + self.slots * self.slot_bytes
+
+    # -- writing ----------------------------------------------------------------------
+    def create(self) -> None:
+        """Make the file (sparse: only what is written takes space) and map it; it holds no tick yet."""
+        with open(self.path, "xb") as f:  # never over an existing file
+            f.truncate(self.size)
+        self._map("r+")
+        h = self.header
+        h[_H_MAGIC], h[_H_ROBOTS], h[_H_SLOTS], h[_H_TICKS], h[_H_COLS] = \
+            MAGIC, self.robots, self.slots, self.ticks, self.columns
+        h[_H_WRITING] = h[_H_READY] = h[_H_DONE] = h[_H_MONITOR] = -1
+
+    def _map(self, mode: str) -> None:
+        self.map = np.memmap(self.path, dtype=np.uint8, mode=mode, shape=(self.size,))
+        self.header = self.map[: _HEADER * 8].view(np.int64)
+        self.rows = self.map[self.robots_at: self.history_at].view(ROBOT_ROW)
+        self.history = self.map[self.history_at: self.ring_at].view(np.int64).reshape(self.ticks, self.columns)
+
+    def _slot(self, tick: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        at = self.ring_at + (tick % self.slots) * self.slot_bytes
+        head = self.map[at: at + _SLOT_HEAD * 8].view(np.int64)
+        at += _SLOT_HEAD * 8
+        robots = self.map[at: at + self.robots * ROBOT_ROW.itemsize].view(ROBOT_ROW)
+        at += self.robots * ROBOT_ROW.itemsize
+        applied = self.map[at: at + self.robots * DECISION_ROW.itemsize].view(DECISION_ROW)
+        return head, robots, applied
+
+    def write(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None:
+        """Save tick ``tick``: the rows it publishes (robots that changed; at tick 0 all), the decisions it
+        applied (None at tick 0) and its metrics row. Call before anything about the tick is sent."""
+        h = self.header
+        h[_H_WRITING] = tick
+        head, robots, done = self._slot(tick)
+        head[0] = -1  # the slot is being rewritten
+        robots[: rows.size] = rows
+        n_applied = -1 if applied is None else applied.size
+        if applied is not None:
+            done[: applied.size] = applied
+        head[1], head[2] = rows.size, n_applied
+        self.history[tick] = metrics
+        head[0] = tick
+        h[_H_READY] = tick
+        self.rows[rows["id"]] = rows
+        h[_H_DONE] = tick
+
+    def monitor_reported(self, tick: int) -> None:
+        """The newest tick whose metrics the monitor reported (where a restarted world resends from)."""
+        if self.map is not None and tick > self.header[_H_MONITOR]:
+            self.header[_H_MONITOR] = tick
+
+    def save_book(self, book: dict) -> None:
+        """Write the bookkeeping whole: to a temporary name, then renamed over the last one."""
+        target = self.path.with_name(self.path.name + ".json")
+        tmp = target.with_name(target.name + ".tmp")
+        tmp.write_text(json.dumps(book, sort_keys=True), encoding="utf-8")
+        os.replace(tmp, target)
+
+    # -- reading ----------------------------------------------------------------------
+    @classmethod
+    def open(cls, path: Path, robots: int, max_ticks: int, columns: int) -> Checkpoint:
+        """Map the checkpoint a world before this process wrote at ``path``, to restore from and go on writing.
+
+        Raises:
+            ValueError: the file is not a checkpoint of a run of this size.
+        """
+        path = Path(path)
+        raw = np.fromfile(path, dtype=np.int64, count=_HEADER)
+        if raw.size < _HEADER or raw[_H_MAGIC] != MAGIC:
+            raise ValueError(f"{path} is not a world checkpoint")
+        if (int(raw[_H_ROBOTS]), int(raw[_H_TICKS]), int(raw[_H_COLS])) != (robots, max_ticks + 1, columns):
+            raise ValueError(f"{path} is the checkpoint of another run ({int(raw[_H_ROBOTS])} robots)")
+        ck = cls(path, robots, max_ticks, columns, int(raw[_H_SLOTS]))
+        if path.stat().st_size != ck.size:
+            raise ValueError(f"{path} is not a whole world checkpoint")
+        ck._map("r+")
+        return ck
+
+    def saved(self) -> Saved | None:
+        """What the checkpoint holds, or None if no tick yet (the world before died before tick 0)."""
+        h = self.header
+        tick = int(h[_H_DONE])
+        if h[_H_READY] > tick:  # killed while copying the ready slot's rows into the robots: copy them again
+            tick = int(h[_H_READY])
+            head, rows, _ = self._slot(tick)
+            self.rows[rows[: head[1]]["id"]] = rows[: head[1]]
+            h[_H_DONE] = tick
+        h[_H_WRITING] = tick
+        if tick < 0:
+            return None
+        ring = {}
+        for t in range(max(0, tick - self.slots + 1), tick + 1):
+            head, rows, applied = self._slot(t)
+            if head[0] == t:
+                ring[t] = (rows[: head[1]].copy(), None if head[2] < 0 else applied[: head[2]].copy())
+        try:
+            book = json.loads(self.path.with_name(self.path.name + ".json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            book = {}
+        return Saved(tick=tick, robots=np.array(self.rows), history=np.array(self.history[: tick + 1]),
+                     monitor_tick=int(h[_H_MONITOR]), ring=ring, book=book)
+
+    def close(self) -> None:
+        if self.map is not None:
+            self.map.flush()
+            self.map = None

@@ -1,0 +1,106 @@
+"""Where a restarted monitor process goes on from: the bag its process before wrote.
+
+The monitor makes each tick's messages durable before it publishes the tick's metrics
+(:meth:`swarm_ros.ros.bag_writer.BagRecorder.durable`), and the world runs at most
+``monitor_window`` ticks past the last metrics it received. So the bag a killed monitor leaves
+holds every tick up to the last it reported, and the topics' histories (``ROBOTS_DEPTH`` ticks
+of rows, :data:`~swarm_ros.ros.graph.STATUS_QOS`'s statuses) hold the rest for the new process.
+
+A killed monitor's bag is in its hidden holder (``.<run>.bag-XXXX/bag``), or, if it was killed
+while writing the run directory, in that directory's temporary one (``.<run>.tmp-XXXX/bag``).
+The new process takes the longest of them up to the end of its last whole tick, copies that into a
+bag of its own, and replays it through its handlers: the replica, the metrics rows and the
+recording come out as they were (:meth:`swarm_ros.nodes.monitor.MonitorNode.load`).
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from swarm_ros.artifacts.run_dir import BAG_DIR
+from swarm_ros.protocol.checks import Rejected
+from swarm_ros.protocol.status import RunFailed
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.bag_writer import TOPICS, unfinished_messages
+
+
+@dataclass
+class Resumed:
+    """What a monitor process before this one left: its recorded messages up to its last metrics, in order,
+    and the folders they were found in (removed once the new bag holds them)."""
+
+    messages: list[tuple[str, int, bytes]] = field(default_factory=list)
+    leftovers: list[Path] = field(default_factory=list)
+
+    @property
+    def ticks(self) -> int:
+        return sum(topic == msgs.CLOCK for topic, _, _ in self.messages)
+
+    def remove(self) -> None:
+        for folder in self.leftovers:
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def left_by_earlier_process(out: Path, own_holder: Path) -> Resumed:
+    """The messages a killed monitor of the run into ``out`` recorded (the longest bag it left), cut after the
+    last /clock message: the last tick whose messages are all there."""
+    best = Resumed()
+    folders = [h for h in out.parent.glob(f".{out.name}.bag-*") if h != own_holder]
+    folders += list(out.parent.glob(f".{out.name}.tmp-*"))
+    for folder in sorted(folders):
+        best.leftovers.append(folder)
+        if not (folder / BAG_DIR).is_dir():
+            continue
+        found = unfinished_messages(folder)
+        # a tick's messages end with its /clock (BagRecorder.write_world), and are made durable then
+        last = max((i for i, (topic, _, _) in enumerate(found) if topic == msgs.CLOCK), default=-1)
+        found = found[: last + 1]
+        if sum(topic == msgs.CLOCK for topic, _, _ in found) > best.ticks:
+            best.messages = found
+    return best
+
+
+def resume(monitor) -> None:
+    """Make a restarted monitor go on from what its process before left (the module's doc).
+
+    Raises:
+        RunFailed: the run has no bag to go on from, or it does not read back as the run.
+    """
+    if monitor.bag is None:
+        raise RunFailed("a restarted monitor goes on from the bag its process before wrote, and this run has none "
+                        "(bag: false)")
+    resumed = left_by_earlier_process(monitor.out, monitor.bag.holder)
+    replay(monitor, resumed.messages)
+    resumed.remove()
+
+
+def replay(monitor, recorded: list[tuple[str, int, bytes]]) -> None:
+    """Go on from what the monitor process before this one recorded (:mod:`swarm_ros.ros.bag_resume`):
+    copy it into this process's bag, then take it through the handlers (the replica, the metrics rows,
+    the recording), checking that the metrics come out as recorded. The same messages again from the
+    topics' histories are then dropped as known (:meth:`swarm_ros.protocol.tag.Verifier.taken_before`)."""
+    if not recorded:
+        return
+    for topic, at, data in recorded:
+        monitor.bag.write(topic, data, at)
+    monitor.bag.durable()
+    monitor.replaying, metrics = True, []
+    try:
+        for topic, _, data in recorded:
+            if topic in monitor.handlers or topic == msgs.METRICS:
+                msg = monitor.gate.open(TOPICS[topic][0], topic, data)
+                if topic == msgs.METRICS:
+                    metrics.append(tuple(msg.data))
+                else:
+                    monitor.handlers[topic](msg)
+    except Rejected as fault:
+        raise RunFailed(f"the bag of the monitor before this one does not read back: {fault}") from None
+    finally:
+        monitor.replaying = False
+    monitor.gate.verifier.taken_before()
+    if [tuple(r) for r in monitor.rows] != metrics:
+        raise RunFailed("the bag of the monitor before this one holds other metrics than its rows give")
+    monitor.node.get_logger().warn(f"monitor restarted (incarnation {monitor.incarnation}): went on from "
+                                   f"tick {monitor.replica.tick} of the bag its process before wrote")

@@ -1,0 +1,164 @@
+"""A world process lost at any tick goes on from its checkpoint (swarm_ros.protocol.checkpoint, world_restore),
+driven through the lockstep with a fake port and clock, as test_lockstep.py does: the run after a restore is the
+in-process engine's, tick for tick, whatever tick the world was lost at and however far the write had got."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_lockstep import MAX_TICKS, ROBOTS, Run
+
+from swarm_ros.core import Simulation
+from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.protocol.checkpoint import Checkpoint
+from swarm_ros.protocol.lockstep import Lockstep
+from swarm_ros.protocol.plan import MONITOR, batch_name
+from swarm_ros.protocol.rows import batch_ids
+from swarm_ros.protocol.world_port import Policy
+
+pytestmark = pytest.mark.unit
+
+
+def _with_checkpoint(r: Run, path) -> Checkpoint:
+    ck = Checkpoint(path, ROBOTS, MAX_TICKS, len(METRIC_COLUMNS), r.ls.policy.monitor_window + 2)
+    ck.create()
+    r.port.saver = ck
+    return ck
+
+
+def _restarted(r: Run, path) -> Lockstep:
+    """A new world process: a fresh lockstep restored from the checkpoint at ``path``; replaces ``r``'s."""
+    ck = Checkpoint.open(path, ROBOTS, MAX_TICKS, len(METRIC_COLUMNS))
+    saved = ck.saved()
+    r.port.saver = ck
+    r.port.ticks.clear()
+    r.port.snapshots.clear()
+    r.ls = Lockstep(Simulation(r.shape, r.params), r.ls.policy, r.port, r.log, r.rejections, clock=r.clock)
+    r.ls.restore(saved)
+    return r.ls
+
+
+@pytest.mark.parametrize("lost_at", [0, 1, 57, "end"])
+def test_a_world_restored_from_its_checkpoint_runs_on_as_the_engine(tmp_path, lost_at):
+    r = Run(batches=2)
+    _with_checkpoint(r, tmp_path / "ck")
+    r.start()
+    ref = r.engine()
+    if lost_at == "end":
+        r.run()
+        lost_at = r.ls.sim.tick
+    else:
+        r.run(ticks=lost_at)
+    assert r.ls.sim.tick == lost_at
+    ls = _restarted(r, tmp_path / "ck")
+    assert ls.sim.tick == lost_at and ls.restarts == [(lost_at, "world")]
+    assert r.port.snapshots == [(0, lost_at), (1, lost_at)], "every batch gets the saved tick"
+    # the ring's ticks go out again (two with no monitor: a batch may have missed the last)
+    assert r.port.ticks == list(range(max(0, lost_at - 1), lost_at + 1))
+    r.run()
+    assert np.array_equal(ls.sim.history, ref.history) and ls.sim.outcome == ref.outcome
+    assert np.array_equal(ls.sim.state.x, ref.state.x) and np.array_equal(ls.sim.state.state, ref.state.state)
+    assert ls.status().values["restarts"] == f"{lost_at}:world"
+    ls.poll()
+    assert ls.finished
+
+
+def test_a_write_cut_off_at_any_step_restores_a_whole_tick(tmp_path):
+    """The header's steps: killed before ``ready`` the tick before is restored; after it, the tick itself."""
+    r = Run(batches=1)
+    ck = _with_checkpoint(r, tmp_path / "ck")
+    r.start()
+    r.run(ticks=5)
+    ref_state = r.ls.sim.state.state.copy()
+    head = ck.header
+    # killed after 'ready' of tick 5, before the rows went into the robots: the slot's rows are copied again
+    ck.rows["x"] = -1.0
+    head[6] = 5  # ready
+    head[7] = 4  # done
+    again = Checkpoint.open(tmp_path / "ck", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS)).saved()
+    assert again.tick == 5 and (again.robots["x"][r.ls.sim.last_joins()[0]] != -1.0).all()
+    # killed while writing tick 6's slot ('writing' 6, 'ready' 5): tick 5 is what there is
+    head[5], head[6], head[7] = 6, 5, 5
+    saved = Checkpoint.open(tmp_path / "ck", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS)).saved()
+    assert saved.tick == 5 and saved.history.shape == (6, len(METRIC_COLUMNS))
+    assert sorted(saved.ring) == [4, 5]
+    assert np.array_equal(saved.history, r.ls.sim.history)
+    del ref_state
+
+
+def test_a_checkpoint_with_no_tick_restores_nothing_and_another_runs_is_refused(tmp_path):
+    r = Run(batches=1)
+    _with_checkpoint(r, tmp_path / "ck")
+    assert Checkpoint.open(tmp_path / "ck", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS)).saved() is None
+    with pytest.raises(ValueError, match="another run"):
+        Checkpoint.open(tmp_path / "ck", ROBOTS + 1, MAX_TICKS, len(METRIC_COLUMNS))
+    (tmp_path / "junk").write_bytes(b"not a checkpoint at all, longer than the header" * 4)
+    with pytest.raises(ValueError, match="not a world checkpoint"):
+        Checkpoint.open(tmp_path / "junk", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS))
+    with pytest.raises(FileExistsError):
+        Checkpoint(tmp_path / "ck", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS), 2).create()
+
+
+def test_after_a_restore_old_decisions_and_known_processes_change_nothing(tmp_path):
+    """The batches' histories hand the new world decisions it had already, and their announcements: neither is
+    a rejection or a restart. A batch restarted while the world was down (a higher incarnation) is one."""
+    r = Run(batches=2)
+    _with_checkpoint(r, tmp_path / "ck")
+    r.start()
+    r.run(ticks=10)
+    old = r.decide(0)  # decided for tick 11 already
+    ls = _restarted(r, tmp_path / "ck")
+    ls.decisions(0, 10, old)  # a tick the world before had: ignored
+    r.announce(0)
+    r.announce(1)
+    assert ls.restarts == [(10, "world")] and r.rejections.total == 0
+    ls.batch_liveliness(0, 1, 0)
+    ls.batch_liveliness(1, 1, 0)
+    assert ls.restarts == [(10, "world")] and ls.respawned == {}
+    r.announce(1, incarnation=1)  # restarted while the world was down
+    assert ls.restarts == [(10, "world"), (10, batch_name(1))] and (1, 10) in r.port.snapshots
+    r.run()
+    assert np.array_equal(ls.sim.history, r.engine().history)
+
+
+def test_a_restored_world_sends_the_ticks_the_monitor_may_lack_again(tmp_path):
+    r = Run(batches=1, monitor_window=4)
+    _with_checkpoint(r, tmp_path / "ck")
+    r.start()
+    r.ls.monitor_liveliness(1, 0)
+    r.ls.metrics(0, "m1")
+    for _ in range(3):
+        r.tick()
+    assert r.port.ticks == [0, 1, 2, 3]
+    r.ls.metrics(1, "m1")
+    r.port.saver.monitor_reported(1)
+    ls = _restarted(r, tmp_path / "ck")
+    assert r.port.ticks == [2, 3], "from the monitor's last report on"
+    assert ls.monitor_tick == 1 and ls.monitor_nonce == "m1"
+    ls.monitor_liveliness(1, 0)
+    ls.metrics(3, "m1")  # the same monitor: no restart
+    assert ls.restarts == [(3, "world")]
+    ls.metrics(3, "m2")  # a new monitor process
+    assert ls.restarts == [(3, "world"), (3, MONITOR)]
+    assert ls.status().values["restarts"] == "3:world;3:monitor"
+    r.run()
+    assert np.array_equal(ls.sim.history, r.engine().history)
+
+
+def test_the_bookkeeping_holds_batches_losses_and_times(tmp_path):
+    r = Run(batches=2, on_batch_loss="remove")
+    _with_checkpoint(r, tmp_path / "ck")
+    r.start()
+    r.run(ticks=3)
+    r.ls.batch_liveliness(1, 0, 1)  # lost for good under 'remove'
+    r.tick()
+    assert r.ls.lost == [batch_name(1)]
+    tick = r.ls.sim.tick
+    ls = _restarted(r, tmp_path / "ck")
+    assert ls.lost == [batch_name(1)] and ls.removed_batches == {1}
+    assert ls.sim.losses == [(tick, batch_ids(ROBOTS, 1, 2).size)] and ls.sim.removed == batch_ids(ROBOTS, 1, 2).size
+    assert r.port.snapshots == [(0, tick)], "no snapshot for a removed batch"
+    assert ls.startup_seconds == 0.5 and ls.started_wall > 0
+    r.run()
+    assert ls.sim.done
+    assert Policy().max_restarts == 3
