@@ -34,7 +34,7 @@ def _restarted(r: Run, path) -> Lockstep:
     r.port.ticks.clear()
     r.port.snapshots.clear()
     r.ls = Lockstep(Simulation(r.shape, r.params), r.ls.policy, r.port, r.log, r.rejections, clock=r.clock)
-    r.ls.restore(saved)
+    r.ls.restore(saved, 1)
     return r.ls
 
 

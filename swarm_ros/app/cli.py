@@ -40,6 +40,7 @@ _OWN = {p.name: p for p in (
     Param("seconds", 1.0, "seconds to listen", low=0.0, low_open=True),
 )}
 _RECORD_EVERY = next(p for p in NODE_PARAMETERS["monitor"] if p.name == "record_every")
+_MAX_RESTARTS = next(p for p in NODE_PARAMETERS["world"] if p.name == "max_restarts")
 
 
 def _checked(param: Param):
@@ -103,6 +104,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES,
                      help="a robot-batch process that dies: restart it, nothing lost (default; up to "
                           f"{MAX_RESTARTS} times per batch), or remove its robots, as robots lost for good")
+    run.add_argument("--max-restarts", type=_checked(_MAX_RESTARTS), metavar="N",
+                     help=f"restarts of each node process, at most: each robot batch, the world, the monitor (default: "
+                          f"{MAX_RESTARTS}); the world goes on from its checkpoint, the monitor from its bag")
     run.add_argument("--no-bag", action="store_false", dest="bag", default=None,
                      help="do not write bag/, the rosbag2 (MCAP) of every message on the swarm's topics")
     run.add_argument("--enclaves", metavar="PREFIX",

@@ -143,7 +143,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if changed:
         raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
                          f"assigns each of its --processes its robots itself (use ros2 run for your own split)")
-    world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {})}
+    world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
+             **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {})}
     check_world_memory(shape.world.radius, copies=args.processes + 2)  # the world, the monitor, each batch
     if args.processes > params.robots - 4:
         raise SwarmError(f"{params.robots} robots leave {params.robots - 4} non-seed robots for {args.processes} "

@@ -167,7 +167,7 @@ class Launch:
             self._note_exits()
             self._note("all node processes gone")
             if ok and self.ended_at is not None:
-                fill_summary(out, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
+                fill_summary(out, self.restarts, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
             lock.close()
             self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
             for f in logs.glob(CHECKPOINT + "*"):  # the world's, large and of no use once the run is over

@@ -155,13 +155,19 @@ def summary_json(summary: dict) -> str:
     return json.dumps(summary, indent=2) + "\n"
 
 
-def fill_summary(out: Path, **values: object) -> bool:
+def fill_summary(out: Path, restarted: list[str] = (), **values: object) -> bool:
     """Set fields of the run's ``summary.json`` that it holds as null (e.g. ``shutdown_seconds``, known only
-    after the run directory was written); written to a fresh name and renamed over. Return whether it was."""
+    after the run directory was written), and add to its ``restarts`` those of the node processes
+    ``restarted`` (a name per restart) it lacks: the processes restarted after the run's result was
+    whole, listed at its last tick. Written to a fresh name and renamed over. Return whether it was."""
     path = out / "summary.json"
     try:
         summary = json.loads(path.read_text(encoding="utf-8"))
         fields = {key: value for key, value in values.items() if key in summary and summary[key] is None}
+        listed = [r["node"] for r in summary.get("restarts", [])]
+        late = [name for name in dict.fromkeys(restarted) for _ in range(restarted.count(name) - listed.count(name))]
+        if late:
+            fields["restarts"] = summary["restarts"] + [{"tick": summary["convergence_tick"], "node": n} for n in late]
         if not fields:
             return False
         summary.update(fields)

@@ -77,13 +77,12 @@ class MonitorNode:
 
         self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_metrics = self.signer.publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
-        # Serialized subscriptions to the tagged topics it records (plan.MONITOR_READS), bag or no bag. Each
-        # message, once its tag proves it (auth.Gate), goes into the bag as it came, then to its handler.
+        # Serialized subscriptions to the tagged topics it records (plan.MONITOR_READS): see _bagger.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
         self.handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status,
                          msgs.DECISIONS: self._on_decisions}
         self.raw = b""  # the message being handled, as it came (recorded once its handler takes it)
-        self.replaying = False  # going through the bag of the process before this one
+        self.replaying, self.resumed_at = False, 0  # replaying its process before's bag; the tick it went on from
         self.readers = {topic: self._subscribe(topic) for topic in msgs.MONITOR_READS if topic != msgs.STATUS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
         # readers have matched their writers (a thread watches, while the heavy part below loads), and its
@@ -249,7 +248,8 @@ class MonitorNode:
 
     def _write(self, outcome: Outcome | None = None) -> None:
         record = self.world.record(self.shape, self.params, self.replica.state, self.rows, outcome or self.outcome,
-                                   self.wall, self.losses, self.rejections.total)
+                                   self.wall, self.losses, self.rejections.total,
+                                   monitor=(self.incarnation, self.resumed_at))
         self.written = run_dir.write_run(self.out, record, overwrite=self.overwrite,
                                  recording=self.rrd if self.recording.enabled else None,
                                  bag=self.bag.close() if self.bag is not None else None)

@@ -88,7 +88,9 @@ class WorldNode:
                                  created=self.created)
         saved = self._open_checkpoint()
         if saved is not None:
-            self.lockstep.restore(saved)
+            self.lockstep.restore(saved, self.incarnation)
+        else:  # none before this one got as far as tick 0
+            self.lockstep.restarts += [(0, "world")] * self.incarnation
         self._publish_occupancy()
         self.lockstep.publish_status()
         if saved is None:

@@ -76,9 +76,9 @@ class Checkpoint:
             f.truncate(self.size)
         self._map("r+")
         h = self.header
-        h[_H_MAGIC], h[_H_ROBOTS], h[_H_SLOTS], h[_H_TICKS], h[_H_COLS] = \
-            MAGIC, self.robots, self.slots, self.ticks, self.columns
+        h[_H_ROBOTS], h[_H_SLOTS], h[_H_TICKS], h[_H_COLS] = self.robots, self.slots, self.ticks, self.columns
         h[_H_WRITING] = h[_H_READY] = h[_H_DONE] = h[_H_MONITOR] = -1
+        h[_H_MAGIC] = MAGIC  # last: a header without it was cut off
 
     def _map(self, mode: str) -> None:
         self.map = np.memmap(self.path, dtype=np.uint8, mode=mode, shape=(self.size,))
@@ -128,13 +128,19 @@ class Checkpoint:
     # -- reading ----------------------------------------------------------------------
     @classmethod
     def open(cls, path: Path, robots: int, max_ticks: int, columns: int) -> Checkpoint:
-        """Map the checkpoint a world before this process wrote at ``path``, to restore from and go on writing.
+        """Map the checkpoint a world before this process wrote at ``path``, to restore from and go on writing
+        (made again, empty, if that world was killed while making it).
 
         Raises:
             ValueError: the file is not a checkpoint of a run of this size.
         """
         path = Path(path)
         raw = np.fromfile(path, dtype=np.int64, count=_HEADER)
+        if raw.size == _HEADER and not raw.any():  # killed in create(), before the header: it holds nothing
+            path.unlink()
+            ck = cls(path, robots, max_ticks, columns, 2)
+            ck.create()
+            return ck
         if raw.size < _HEADER or raw[_H_MAGIC] != MAGIC:
             raise ValueError(f"{path} is not a world checkpoint")
         if (int(raw[_H_ROBOTS]), int(raw[_H_TICKS]), int(raw[_H_COLS])) != (robots, max_ticks + 1, columns):

@@ -300,9 +300,9 @@ class Lockstep:
         if self.started:
             self.port.save_book(book_of(self))
 
-    def restore(self, saved: Saved) -> None:
+    def restore(self, saved: Saved, incarnation: int) -> None:
         """Go on from the checkpoint a world process before this one wrote (see :func:`restore`)."""
-        restore(self, saved)
+        restore(self, saved, incarnation)
 
     # -- status -----------------------------------------------------------------------
     def status(self, note: str = "") -> Status:

@@ -98,9 +98,11 @@ class WorldReport:
         return new
 
     def record(self, shape, params, state, rows: list[tuple[int, ...]], outcome, wall: float,
-               losses: list[tuple[int, int]], rejected: int) -> RunRecord:
+               losses: list[tuple[int, int]], rejected: int, monitor: tuple[int, int] = (0, 0)) -> RunRecord:
         """The record of a run over the graph: the monitor's ``rows`` (metrics of every tick) and final
-        ``state``, with what the world reported (its clock, restarts, drops); ``rejected``: the monitor's drops."""
+        ``state``, with what the world reported (its clock, restarts, drops); ``rejected``: the monitor's drops.
+        ``monitor``: (the writing monitor's incarnation, the tick it went on from). The world sees a new monitor
+        process when its first metrics come; one killed before that is a restart too, listed at that tick."""
         import numpy as np  # the engine's modules (numba) load only where a run is written
 
         from swarm_ros.core.metrics import tick_metrics
@@ -109,8 +111,11 @@ class WorldReport:
 
         history = np.array(rows, dtype=np.int64)
         final = tick_metrics(state.tick, np.bincount(state.state, minlength=STATE_COUNT), shape.patches)
+        restarts = list(self.restarts)
+        unseen = monitor[0] - sum(node == "monitor" for _, node in restarts)
+        restarts = sorted(restarts + [(monitor[1], "monitor")] * unseen, key=lambda r: r[0])
         summary = summarize(shape=shape, params=params, state=state, final=final, outcome=outcome, engine=ROS2,
-                            wall_seconds=self.times.get("wall_seconds", wall), losses=losses, restarts=self.restarts,
+                            wall_seconds=self.times.get("wall_seconds", wall), losses=losses, restarts=restarts,
                             overhead={"startup_seconds": self.times.get("startup_seconds"),
                                       "shutdown_seconds": None},  # swarm-ros run fills it in at the end
                             rejected={"world": self.rejected, "monitor": rejected})

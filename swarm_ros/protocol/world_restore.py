@@ -57,8 +57,10 @@ def _outcome(ls: Lockstep, history: np.ndarray, robots: np.ndarray) -> Outcome |
     return outcome_of(m, ls.sim.shape.patches, alive, ls.sim.params.max_ticks)
 
 
-def restore(ls: Lockstep, saved: Saved) -> None:
+def restore(ls: Lockstep, saved: Saved, incarnation: int) -> None:
     """Put ``saved`` into ``ls`` (fresh, not started) and send again what readers may lack (module doc).
+    ``incarnation`` counts the world's processes before this one: one killed before it wrote anything is a
+    restart too, at the same tick.
 
     Raises:
         ValueError: the checkpoint does not make a consistent swarm, or its bookkeeping is missing.
@@ -74,7 +76,8 @@ def restore(ls: Lockstep, saved: Saved) -> None:
         ls.host[np.asarray(ids, dtype=np.int64)] = k
     ls.restart_counts, ls.incarnations = list(b["restart_counts"]), list(b["incarnations"])
     ls.known = dict(enumerate(ls.incarnations))
-    ls.restarts = [(int(t), str(n)) for t, n in b["restarts"]] + [(tick, WORLD)]
+    ls.restarts = [(int(t), str(n)) for t, n in b["restarts"]]
+    ls.restarts += [(tick, WORLD)] * max(1, incarnation - sum(n == WORLD for _, n in ls.restarts))
     ls.lost, ls.removed_batches = list(b["lost"]), set(b["removed_batches"])
     ls.monitor_nonce = str(b["monitor_nonce"])
     ls.started, ls.restored = True, True

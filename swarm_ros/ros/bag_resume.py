@@ -33,6 +33,7 @@ class Resumed:
 
     messages: list[tuple[str, int, bytes]] = field(default_factory=list)
     leftovers: list[Path] = field(default_factory=list)
+    trash: list[Path] = field(default_factory=list)  #: write_run's folders for a replaced run: removed if empty
 
     @property
     def ticks(self) -> int:
@@ -41,6 +42,11 @@ class Resumed:
     def remove(self) -> None:
         for folder in self.leftovers:
             shutil.rmtree(folder, ignore_errors=True)
+        for folder in self.trash:  # one that holds a run directory it was replacing is left to the user
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
 
 
 def left_by_earlier_process(out: Path, own_holder: Path) -> Resumed:
@@ -49,6 +55,7 @@ def left_by_earlier_process(out: Path, own_holder: Path) -> Resumed:
     best = Resumed()
     folders = [h for h in out.parent.glob(f".{out.name}.bag-*") if h != own_holder]
     folders += list(out.parent.glob(f".{out.name}.tmp-*"))
+    best.trash = list(out.parent.glob(f".{out.name}.old-*"))
     for folder in sorted(folders):
         best.leftovers.append(folder)
         if not (folder / BAG_DIR).is_dir():
@@ -74,6 +81,7 @@ def resume(monitor) -> None:
     resumed = left_by_earlier_process(monitor.out, monitor.bag.holder)
     replay(monitor, resumed.messages)
     resumed.remove()
+    monitor.resumed_at = max(monitor.replica.tick, 0)
 
 
 def replay(monitor, recorded: list[tuple[str, int, bytes]]) -> None:

@@ -1,0 +1,212 @@
+"""The world and the monitor SIGKILLed at any moment come back, and the run directory is byte-identical to the
+unfaulted run's: metrics.csv, final_state.csv and the outcome; the bag holds every tick (bagcheck) and the
+recording every tick's metrics and robots. The moments: before tick 0, at tick 0, in the middle, on the last
+tick, while the monitor writes the run directory, and during a restart (killed again). Past the restart bound
+the command fails (the run so far is written, as interrupted).
+
+A kill is timed on what the run writes: the world's checkpoint (its header holds the last tick saved, read
+here as the restarted world reads it), the monitor's recording, the temporary run directory.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from bagcheck import assert_bag_holds_run
+from helpers import Recording
+from test_restarts import RUN, _assert_identical, _launch, _node_pid, _ticks_recorded
+from test_ros_graph import _processes_mentioning
+
+from swarm_ros.app import cli
+from swarm_ros.protocol.checkpoint import MAGIC
+
+pytestmark = pytest.mark.process
+
+_DONE = 7  # the checkpoint header's int64 holding the last tick saved (swarm_ros.protocol.checkpoint)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("node-restart-ref") / "ref"
+    assert cli.main(["simulate", *RUN, "--out", str(out), "--quiet", "--no-recording"]) == 0
+    return out
+
+
+def _logs(out: Path, timeout: float = 60) -> Path:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = list(out.parent.glob(f".{out.name}.logs-*"))
+        if found:
+            return found[0]
+        time.sleep(0.01)
+    raise AssertionError("no logs")
+
+
+def _saved_tick(logs: Path) -> int:
+    try:
+        head = np.fromfile(logs / "world.checkpoint", dtype=np.int64, count=8)
+    except (OSError, ValueError):
+        return -1
+    return int(head[_DONE]) if head.size == 8 and head[0] == MAGIC else -1
+
+
+def _wait_saved(logs: Path, tick: int, timeout: float = 180) -> int:
+    """Wait (polling fast) until the world has saved ``tick``; return the tick saved when seen."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        t = _saved_tick(logs)
+        if t >= tick:
+            return t
+        time.sleep(0.0005)
+    raise AssertionError(f"tick {tick} never came")
+
+
+def _kill(out: Path, node: str, not_pid: int | None = None) -> int:
+    pid = _node_pid(out, node, not_pid=not_pid)
+    os.kill(pid, signal.SIGKILL)
+    return pid
+
+
+def _finish(launcher, reference: Path, out: Path, restarts: list[str]) -> dict:
+    _, err = launcher.communicate(timeout=300)
+    assert launcher.returncode == 0, err
+    summary = _assert_identical(reference, out)
+    assert [r["node"] for r in summary["restarts"]] == restarts, summary["restarts"]
+    assert_bag_holds_run(out)
+    assert not list(out.parent.glob(f".{out.name}.*")), "nothing of the run left beside it"
+    assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint is removed with the run"
+    assert not _processes_mentioning(str(out)), "a process outlived the run"
+    return summary
+
+
+def _recording_whole(out: Path, summary: dict) -> Recording:
+    rec = Recording(out / "recording.rrd")
+    ticks = list(range(summary["convergence_tick"] + 1))
+    assert sorted(rec.series["localized"]) == ticks and sorted(rec.robots) == ticks
+    return rec
+
+
+def _final_tick(reference: Path) -> int:
+    return json.loads((reference / "summary.json").read_text())["convergence_tick"]
+
+
+# -- the world ------------------------------------------------------------------------------------------
+def test_a_world_killed_before_tick_0_starts_again_and_the_run_is_identical(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording")
+    _kill(out, "world")  # seen as soon as it exists: still importing
+    summary = _finish(launcher, reference, out, ["world"])
+    assert summary["restarts"][0]["tick"] == 0
+
+
+def test_a_world_killed_at_tick_0_goes_on_from_it_and_the_run_is_identical(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording")
+    _wait_saved(_logs(out), 0)
+    _kill(out, "world")
+    summary = _finish(launcher, reference, out, ["world"])
+    assert summary["restarts"][0]["tick"] < 20
+
+
+def test_a_world_killed_mid_run_goes_on_from_its_checkpoint_and_the_run_is_identical(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    _ticks_recorded(out, 400_000)
+    _kill(out, "world")
+    summary = _finish(launcher, reference, out, ["world"])
+    tick = summary["restarts"][0]["tick"]
+    assert 0 < tick < _final_tick(reference)
+    rec = _recording_whole(out, summary)
+    assert (tick, f"world restarted at tick {tick}: a new world process went on from its checkpoint") in rec.events
+    log = (out / "logs" / "world.log").read_text()
+    assert f"world restarted: going on from tick {tick} of its checkpoint" in log
+
+
+def test_a_world_killed_on_the_last_tick_ends_the_run_as_it_would_have(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording")
+    last = _final_tick(reference)
+    _wait_saved(_logs(out), last - 1)
+    _kill(out, "world")
+    summary = _finish(launcher, reference, out, ["world"])
+    assert summary["restarts"][0]["tick"] >= last - 1
+
+
+def test_a_world_killed_again_while_it_restarts_comes_back_twice(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording")
+    _wait_saved(_logs(out), 500)
+    first = _kill(out, "world")
+    second = _node_pid(out, "world", not_pid=first)
+    time.sleep(0.5)  # the new process is still starting up, or restoring
+    os.kill(second, signal.SIGKILL)
+    _finish(launcher, reference, out, ["world", "world"])
+
+
+def test_a_world_killed_more_often_than_the_bound_fails_the_run_and_claims_no_outcome(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording", "--max-restarts", "0")
+    _wait_saved(_logs(out), 100)
+    _kill(out, "world")
+    _, err = launcher.communicate(timeout=120)
+    assert launcher.returncode != 0
+    assert "world was killed by SIGKILL; it was restarted 0 times already (--max-restarts)" in err
+    assert "Traceback" not in err
+    # the monitor, stopped, writes the run so far, and says so: nothing claims an outcome the run did not reach
+    assert json.loads((out / "summary.json").read_text())["outcome"] == "interrupted"
+    assert not _processes_mentioning(str(out)), "a process outlived the run"
+
+
+# -- the monitor ----------------------------------------------------------------------------------------
+def test_a_monitor_killed_before_tick_0_starts_again_and_the_run_is_identical(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    _kill(out, "monitor")
+    summary = _finish(launcher, reference, out, ["monitor"])
+    assert summary["restarts"][0]["tick"] == 0
+    _recording_whole(out, summary)
+
+
+def test_a_monitor_killed_mid_run_goes_on_from_its_bag_and_the_run_is_whole(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    _ticks_recorded(out, 400_000)
+    _kill(out, "monitor")
+    summary = _finish(launcher, reference, out, ["monitor"])
+    tick = summary["restarts"][0]["tick"]
+    rec = _recording_whole(out, summary)
+    assert (tick, f"monitor restarted at tick {tick}: a new monitor process went on from its bag") in rec.events
+    assert "went on from tick" in (out / "logs" / "monitor.log").read_text()
+
+
+def test_a_monitor_killed_while_it_writes_the_run_directory_writes_it_again(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    deadline = time.monotonic() + 180
+    while not list(tmp_path.glob(".run.tmp-*")):  # write_run's temporary directory: the writing has begun
+        assert time.monotonic() < deadline, "the run directory was never written"
+        time.sleep(0.001)
+    _kill(out, "monitor")
+    _, err = launcher.communicate(timeout=300)
+    assert launcher.returncode == 0, err
+    summary = _assert_identical(reference, out)
+    assert_bag_holds_run(out)
+    _recording_whole(out, summary)
+    assert not list(tmp_path.glob(".run.*")), "nothing of the run left beside it"
+
+
+def test_a_monitor_killed_again_while_it_restarts_comes_back_twice(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, "--no-recording")
+    _wait_saved(_logs(out), 500)
+    first = _kill(out, "monitor")
+    second = _node_pid(out, "monitor", not_pid=first)
+    time.sleep(1.0)  # the new process is loading, or replaying its bag
+    os.kill(second, signal.SIGKILL)
+    _finish(launcher, reference, out, ["monitor", "monitor"])
