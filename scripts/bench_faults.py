@@ -1,16 +1,20 @@
-"""How fast the graph recovers from process faults: restart-to-resume after a SIGKILLed robot batch,
-and node exit after a SIGKILLed launcher.
+"""How fast the graph recovers from a SIGKILL of each kind of node process, and what the fault costs the run.
 
-    .venv/bin/python scripts/bench_faults.py [--trials 3]
+    .venv/bin/python scripts/bench_faults.py [--trials 3] [--at 1000]
 
-Each trial starts ``swarm-ros run`` on the star (rules local, ~3600 ticks, K = 3) and
-either kills robot_batch_1 once ticks flow, or kills the launcher itself. Reported:
+Each trial runs ``swarm-ros run`` on the star (rules local, seed 5, 3,604 ticks, K = 3, recording and bag on,
+the README's defaults) once without a fault, then once for each node kind with that process SIGKILLed once the
+world has saved tick ``--at``. Reported per kind, as median (min-max) over the trials:
 
-- kill -> back: from the SIGKILL to the world's log line saying the batch's new process
-  announced itself (``is back``), when the world sends it the snapshot from which it
-  decides the awaited tick (the lockstep resumes with that one message);
-- launcher kill -> nodes gone: from the launcher's SIGKILL until none of its five node
-  processes is alive (they get SIGTERM from the kernel through PR_SET_PDEATHSIG).
+- kill -> moving: from the SIGKILL until the run moves again. For a robot batch and the world: the world saves
+  a tick past the one it was at (read from its checkpoint's header, as a restarted world reads it). For the
+  monitor: the world hears a metrics report past the last one before the kill (the same header). The
+  world runs on up to ``monitor_window`` ticks without the monitor; then it waits for it.
+- slowdown: the faulted command's wall time over the unfaulted one's, in the same trial.
+- same: metrics.csv and final_state.csv byte-identical to the unfaulted run's.
+
+Then, as before, the launcher itself is killed: the time until none of its node processes is alive (they get
+SIGHUP from the kernel through PR_SET_PDEATHSIG).
 """
 
 from __future__ import annotations
@@ -26,7 +30,11 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 RUN = ["--shape", "star", "--seed", "5", "--rules", "local", "--processes", "3", "--quiet"]
+KINDS = ("robot_batch_1", "world", "monitor")
+_MAGIC, _DONE, _MONITOR = 0, 7, 8  # the checkpoint header's int64s (swarm_ros.protocol.checkpoint)
 
 
 def _nodes(out: Path) -> dict[str, int]:
@@ -46,39 +54,55 @@ def _nodes(out: Path) -> dict[str, int]:
     return found
 
 
-def _wait_ticks(out: Path, size: int = 400_000, timeout: float = 120) -> None:
-    partial = out.parent / f"{out.name}.partial.rrd"
+def _header(out: Path) -> np.ndarray | None:
+    for logs in out.parent.glob(f".{out.name}.logs-*"):
+        try:
+            head = np.fromfile(logs / "world.checkpoint", dtype=np.int64, count=9)
+        except (OSError, ValueError):
+            return None
+        if head.size == 9 and head[_MAGIC] != 0:
+            return head
+    return None
+
+
+def _wait(out: Path, column: int, above: int, timeout: float = 180) -> float:
+    """Poll the checkpoint header until ``column`` exceeds ``above``; return time.monotonic() then."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if partial.exists() and partial.stat().st_size > size:
-            return
-        time.sleep(0.02)
-    raise SystemExit("the run never got going")
+        head = _header(out)
+        if head is not None and head[column] > above:
+            return time.monotonic()
+        time.sleep(0.001)
+    raise SystemExit(f"the run never passed {above} (header column {column})")
 
 
-def restart_trial(base: Path) -> float:
-    out = base / "restart"
+def one_run(base: Path, name: str, victim: str | None, at: int) -> tuple[float, float | None, Path]:
+    """(command seconds, kill -> moving seconds or None, run directory)."""
+    out = base / name
+    began = time.monotonic()
     launcher = subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    _wait_ticks(out)
-    victim = _nodes(out)["robot_batch_1"]
-    os.kill(victim, signal.SIGKILL)
-    killed = time.time()
-    _, err = launcher.communicate(timeout=300)
+    moving = None
+    if victim is not None:
+        _wait(out, _DONE, at - 1)
+        column = _MONITOR if victim == "monitor" else _DONE
+        head = _header(out)
+        before = int(head[column])
+        os.kill(_nodes(out)[victim], signal.SIGKILL)
+        killed = time.monotonic()
+        # a batch's robots may have decided the next tick already: moving again is the tick after that
+        moving = _wait(out, column, before + (1 if victim.startswith("robot_batch") else 0)) - killed
+    _, err = launcher.communicate(timeout=600)
     if launcher.returncode != 0:
-        raise SystemExit(f"run failed: {err}")
-    log = (out / "logs" / "world.log").read_text()
-    back = re.search(r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_1 is back", log)
-    if not back:
-        raise SystemExit("the world never saw the batch come back")
-    return float(back.group(1)) - killed
+        raise SystemExit(f"{name}: run failed: {err.strip()}")
+    return time.monotonic() - began, moving, out
 
 
 def launcher_trial(base: Path) -> float:
     out = base / "launcher"
     launcher = subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _wait_ticks(out, 200_000)
+    _wait(out, _DONE, 300)
     pids = list(_nodes(out).values())
     launcher.kill()
     killed = time.monotonic()
@@ -93,21 +117,44 @@ def launcher_trial(base: Path) -> float:
     return took
 
 
+def _same(a: Path, b: Path) -> bool:
+    return all((a / f).read_bytes() == (b / f).read_bytes() for f in ("metrics.csv", "final_state.csv"))
+
+
+def _spread(values: list[float], fmt: str = "{:.2f}") -> str:
+    return f"{fmt.format(statistics.median(values))} ({fmt.format(min(values))}-{fmt.format(max(values))})"
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=3)
+    parser.add_argument("--at", type=int, default=1000, help="kill once the world has saved this tick")
     args = parser.parse_args()
-    backs, exits = [], []
-    for k in range(args.trials):
+    back: dict[str, list[float]] = {k: [] for k in KINDS}
+    slow: dict[str, list[float]] = {k: [] for k in KINDS}
+    same: dict[str, list[bool]] = {k: [] for k in KINDS}
+    plain, exits = [], []
+    for trial in range(args.trials):
         with tempfile.TemporaryDirectory(prefix="swarm_ros-bench-faults-") as tmp:
-            backs.append(restart_trial(Path(tmp)))
-            exits.append(launcher_trial(Path(tmp)))
-        print(f"trial {k + 1}: kill -> batch back in the lockstep {backs[-1]:.2f} s; "
-              f"launcher SIGKILL -> all nodes gone {exits[-1]:.2f} s", flush=True)
-    print(f"restart to resume (SIGKILL of a robot batch -> its new process back, snapshot sent): "
-          f"median {statistics.median(backs):.2f} s, max {max(backs):.2f} s")
-    print(f"node exit after the launcher's SIGKILL: median {statistics.median(exits):.2f} s, "
-          f"max {max(exits):.2f} s (target < 2 s: {'MET' if max(exits) < 2 else 'NOT MET'})")
+            base = Path(tmp)
+            seconds, _, ref = one_run(base, "plain", None, args.at)
+            plain.append(seconds)
+            for kind in KINDS:
+                took, moving, out = one_run(base, kind, kind, args.at)
+                back[kind].append(moving)
+                slow[kind].append(took / seconds)
+                same[kind].append(_same(ref, out))
+            exits.append(launcher_trial(base))
+        print(f"trial {trial + 1}: plain {seconds:.2f} s; " + "; ".join(
+            f"{k} back in {back[k][-1]:.2f} s, x{slow[k][-1]:.2f}" for k in KINDS), flush=True)
+    print(f"\nstar, rules local, seed 5, K = 3, recording and bag on; kill once tick {args.at} is saved; "
+          f"{args.trials} trials; unfaulted command {_spread(plain)} s")
+    print(f"{'killed':>14} {'kill -> moving s':>22} {'slowdown':>22} {'same':>6}")
+    for k in KINDS:
+        print(f"{k:>14} {_spread(back[k]):>22} {_spread(slow[k], '{:.2f}x'):>22} "
+              f"{'yes' if all(same[k]) else 'NO':>6}")
+    print(f"node exit after the launcher's SIGKILL: {_spread(exits)} s (target < 2 s: "
+          f"{'MET' if max(exits) < 2 else 'NOT MET'})")
     return 0
 
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -20,8 +22,8 @@ import numpy as np
 import pytest
 from bagcheck import assert_bag_holds_run
 from helpers import Recording
-from test_restarts import RUN, _assert_identical, _launch, _node_pid, _ticks_recorded
-from test_ros_graph import _processes_mentioning
+from test_restarts import RUN, _assert_identical, _node_pid, _ticks_recorded
+from test_ros_graph import _env, _processes_mentioning
 
 from swarm_ros.app import cli
 from swarm_ros.protocol.checkpoint import MAGIC
@@ -29,12 +31,20 @@ from swarm_ros.protocol.checkpoint import MAGIC
 pytestmark = pytest.mark.process
 
 _DONE = 7  # the checkpoint header's int64 holding the last tick saved (swarm_ros.protocol.checkpoint)
+# The star under the local rule, cut at 1,500 ticks (outcome timeout): a few seconds of run, long enough to kill in
+SHORT = [*RUN, "--max-ticks", "1500"]
+
+
+def _launch(out: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *SHORT, "--processes", "2", "--out",
+                             str(out), "--quiet", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=_env())
 
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("node-restart-ref") / "ref"
-    assert cli.main(["simulate", *RUN, "--out", str(out), "--quiet", "--no-recording"]) == 0
+    assert cli.main(["simulate", *SHORT, "--out", str(out), "--quiet", "--no-recording"]) == 0
     return out
 
 
@@ -85,15 +95,16 @@ def _finish(launcher, reference: Path, out: Path, restarts: list[str]) -> dict:
     return summary
 
 
-def _recording_whole(out: Path, summary: dict) -> Recording:
+def _recording_whole(out: Path) -> Recording:
+    """The recording has every tick's metrics and robots (metrics.csv: a header, then a line per tick)."""
     rec = Recording(out / "recording.rrd")
-    ticks = list(range(summary["convergence_tick"] + 1))
+    ticks = list(range((out / "metrics.csv").read_text().count("\n") - 1))
     assert sorted(rec.series["localized"]) == ticks and sorted(rec.robots) == ticks
     return rec
 
 
 def _final_tick(reference: Path) -> int:
-    return json.loads((reference / "summary.json").read_text())["convergence_tick"]
+    return (reference / "metrics.csv").read_text().count("\n") - 2  # a header, then one line per tick from 0
 
 
 # -- the world ------------------------------------------------------------------------------------------
@@ -122,7 +133,7 @@ def test_a_world_killed_mid_run_goes_on_from_its_checkpoint_and_the_run_is_ident
     summary = _finish(launcher, reference, out, ["world"])
     tick = summary["restarts"][0]["tick"]
     assert 0 < tick < _final_tick(reference)
-    rec = _recording_whole(out, summary)
+    rec = _recording_whole(out)
     assert (tick, f"world restarted at tick {tick}: a new world process went on from its checkpoint") in rec.events
     log = (out / "logs" / "world.log").read_text()
     assert f"world restarted: going on from tick {tick} of its checkpoint" in log
@@ -170,7 +181,27 @@ def test_a_monitor_killed_before_tick_0_starts_again_and_the_run_is_identical(re
     _kill(out, "monitor")
     summary = _finish(launcher, reference, out, ["monitor"])
     assert summary["restarts"][0]["tick"] == 0
-    _recording_whole(out, summary)
+    _recording_whole(out)
+
+
+def test_a_monitor_killed_at_tick_0_goes_on_and_the_run_is_whole(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    _wait_saved(_logs(out), 0)
+    _kill(out, "monitor")
+    summary = _finish(launcher, reference, out, ["monitor"])
+    assert summary["restarts"][0]["tick"] < 200
+    _recording_whole(out)
+
+
+def test_a_monitor_killed_on_the_last_tick_goes_on_and_the_run_is_whole(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out)
+    _wait_saved(_logs(out), _final_tick(reference))
+    _kill(out, "monitor")
+    summary = _finish(launcher, reference, out, ["monitor"])
+    assert summary["restarts"][0]["tick"] >= _final_tick(reference) - 130  # the world runs its window ahead
+    _recording_whole(out)
 
 
 def test_a_monitor_killed_mid_run_goes_on_from_its_bag_and_the_run_is_whole(reference, tmp_path):
@@ -180,7 +211,7 @@ def test_a_monitor_killed_mid_run_goes_on_from_its_bag_and_the_run_is_whole(refe
     _kill(out, "monitor")
     summary = _finish(launcher, reference, out, ["monitor"])
     tick = summary["restarts"][0]["tick"]
-    rec = _recording_whole(out, summary)
+    rec = _recording_whole(out)
     assert (tick, f"monitor restarted at tick {tick}: a new monitor process went on from its bag") in rec.events
     assert "went on from tick" in (out / "logs" / "monitor.log").read_text()
 
@@ -195,9 +226,9 @@ def test_a_monitor_killed_while_it_writes_the_run_directory_writes_it_again(refe
     _kill(out, "monitor")
     _, err = launcher.communicate(timeout=300)
     assert launcher.returncode == 0, err
-    summary = _assert_identical(reference, out)
+    _assert_identical(reference, out)
     assert_bag_holds_run(out)
-    _recording_whole(out, summary)
+    _recording_whole(out)
     assert not list(tmp_path.glob(".run.*")), "nothing of the run left beside it"
 
 

@@ -79,7 +79,7 @@ def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
     assert run == Settings(robots=500, vision_radius=2.0)
     assert isinstance(run.vision_radius, float)
     assert own == {"monitor_window": 0, "start_timeout": 60.0, "on_batch_loss": "restart", "max_restarts": 3,
-                   "restart_timeout": 30.0}
+                   "restart_timeout": 30.0, "checkpoint": "", "incarnation": 0}
     node.destroy_node()
 
 

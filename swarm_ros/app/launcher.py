@@ -11,9 +11,12 @@ A robot-batch process that dies is started again (``on_batch_loss="restart"``, u
 number; the world sends it the current tick and the run goes on as if nothing had
 happened. Under ``"remove"`` a batch lost after tick 0 is not restarted and the world
 removes its robots; one lost before tick 0 is restarted under both policies, since
-none of its robots has moved yet. Every node ends by itself within moments of the
-launcher's death (SIGHUP from the kernel: ``PR_SET_PDEATHSIG``, set by the node at
-start-up, see :func:`swarm_ros.ros.runtime.follow_parent`). After the run, the
+none of its robots has moved yet. A world or monitor killed by a signal is started again
+too (up to ``max_restarts`` times each, under both policies): the world goes on from its
+checkpoint (``<logs>/world.checkpoint``), the monitor from the bag its process before
+wrote (docs/ros_graph.md, "Faults"); one that exits with an error fails the run.
+Every node ends by itself within moments of the launcher's death (SIGHUP from the kernel:
+``PR_SET_PDEATHSIG``, set by the node at start-up, see :func:`swarm_ros.ros.runtime.follow_parent`). After the run, the
 shared-memory files of Fast DDS that its dead processes left in /dev/shm are removed
 (only files those processes had open, and only if no live process holds them).
 
@@ -257,10 +260,10 @@ class Launch:
 
         A robot-batch process that dies is restarted (see the module's doc); one that may
         not be restarted is the world's business: it notices (liveliness), removes that
-        batch's robots and goes on; the launcher reports the exit. A monitor that dies is
-        reported too, and the swarm runs to its end without it; the command then fails, as
-        nothing wrote the run directory (the recording so far stays in
-        ``<run>.partial.rrd``). The world failing fails the run at once.
+        batch's robots and goes on; the launcher reports the exit. A world or monitor killed
+        by a signal is restarted (:meth:`_restart_core`); one that exits with an error, or
+        dies once more than the bound, fails the run at once. A monitor killed after it
+        wrote the run directory leaves the run whole (:meth:`_written`).
         """
         from swarm_ros.tools.progress import Progress
 

@@ -176,8 +176,8 @@ class Lockstep:
         self.log.info(f"all robots hosted by {len(self.batch_names)} batches{waited}: tick 0")
         s = self.sim.state
         rows = robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading)
+        self.save_book()  # first: a checkpoint that holds a tick has the bookkeeping beside it
         self.port.checkpoint(0, rows, None, self.sim.history[0])  # before the snapshots: they tell of tick 0
-        self.save_book()
         for k in range(len(self.batch_names)):
             self._send_snapshot(k)
         self._emit(0, rows, False, None, save=False)

@@ -13,7 +13,6 @@ goes on as if nothing had happened: a tick's decisions are a pure function of th
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,15 +21,12 @@ from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.checkpoint import Saved
 from swarm_ros.protocol.rows import PATCH_METRES
 
-if TYPE_CHECKING:
-    from swarm_ros.protocol.lockstep import Lockstep
-
 WORLD = "world"
 
 __all__ = ["Saved", "book_of", "restore"]
 
 
-def book_of(ls: Lockstep) -> dict:
+def book_of(ls) -> dict:
     """The lockstep's bookkeeping, as JSON data."""
     return {
         "batches": ls.batch_names,
@@ -47,7 +43,7 @@ def book_of(ls: Lockstep) -> dict:
     }
 
 
-def _outcome(ls: Lockstep, history: np.ndarray, robots: np.ndarray) -> Outcome | None:
+def _outcome(ls, history: np.ndarray, robots: np.ndarray) -> Outcome | None:
     """The outcome after the saved tick, from its metrics (separated robots mean the shape completed with
     extras: the end check of a swarm whose left-overs are separated reads as complete)."""
     m = TickMetrics(*history[-1].tolist())
@@ -57,7 +53,7 @@ def _outcome(ls: Lockstep, history: np.ndarray, robots: np.ndarray) -> Outcome |
     return outcome_of(m, ls.sim.shape.patches, alive, ls.sim.params.max_ticks)
 
 
-def restore(ls: Lockstep, saved: Saved, incarnation: int) -> None:
+def restore(ls, saved: Saved, incarnation: int) -> None:
     """Put ``saved`` into ``ls`` (fresh, not started) and send again what readers may lack (module doc).
     ``incarnation`` counts the world's processes before this one: one killed before it wrote anything is a
     restart too, at the same tick.

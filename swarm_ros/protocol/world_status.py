@@ -4,8 +4,6 @@ state machine itself."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
@@ -14,11 +12,8 @@ from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.status import RUNNING, STARTING, RunFailed, Status, restarts_text
 from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S
 
-if TYPE_CHECKING:
-    from swarm_ros.protocol.lockstep import Lockstep
 
-
-def status_of(ls: Lockstep, note: str = "") -> Status:
+def status_of(ls, note: str = "") -> Status:
     """The run's state now: outcome, the last published tick and its counts, restarts and lost processes."""
     tick = max(ls.published_tick, 0)
     sim, warn = ls.sim, bool(note or ls.lost or ls.down_since or ls.monitor_down_since is not None)
@@ -47,7 +42,7 @@ def status_of(ls: Lockstep, note: str = "") -> Status:
     return Status(tick=tick, outcome=outcome, message=message, warn=warn, values=values)
 
 
-def check_stalls(ls: Lockstep, now: float) -> None:
+def check_stalls(ls, now: float) -> None:
     """The fallback to liveliness (a process lost before DDS matched its liveliness topic): a batch
     whose robots have not decided, or a monitor that has not reported, for ``STALL_S`` is lost.
     Before the first decisions or report, while discovery may still be going on, the limit is
@@ -83,7 +78,7 @@ def check_stalls(ls: Lockstep, now: float) -> None:
         _drowned(ls, f"the decisions of {', '.join(alive)}")
 
 
-def _drowned(ls: Lockstep, what: str) -> None:
+def _drowned(ls, what: str) -> None:
     dropped = ls.rejections.text() or "nothing"
     raise RunFailed(f"{what} did not arrive for {DROWNED_S:g} s at tick {ls.sim.tick}, though the process is "
                     f"alive: its messages do not get through, or it hangs (messages dropped: {dropped})")
