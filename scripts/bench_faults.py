@@ -7,9 +7,9 @@ the README's defaults) once without a fault, then once for each node kind with t
 world has saved tick ``--at``. Reported per kind, as median (min-max) over the trials:
 
 - kill -> moving: from the SIGKILL until the run moves again. For a robot batch and the world: the world saves
-  a tick past the one it was at (read from its checkpoint's header, as a restarted world reads it). For the
-  monitor: the world hears a metrics report past the last one before the kill (the same header). The
-  world runs on up to ``monitor_window`` ticks without the monitor; then it waits for it.
+  a tick past the one it had stopped at 50 ms after the kill (read from its checkpoint's header, as a
+  restarted world reads it). For the monitor: the world hears a metrics report past the last one it had then
+  (the same header); the world runs on up to ``monitor_window`` ticks without the monitor, then waits.
 - slowdown: the faulted command's wall time over the unfaulted one's, in the same trial.
 - same: metrics.csv and final_state.csv byte-identical to the unfaulted run's.
 
@@ -85,13 +85,15 @@ def one_run(base: Path, name: str, victim: str | None, at: int) -> tuple[float, 
     moving = None
     if victim is not None:
         _wait(out, _DONE, at - 1)
+        pid = _nodes(out)[victim]
         column = _MONITOR if victim == "monitor" else _DONE
-        head = _header(out)
-        before = int(head[column])
-        os.kill(_nodes(out)[victim], signal.SIGKILL)
+        os.kill(pid, signal.SIGKILL)
         killed = time.monotonic()
-        # a batch's robots may have decided the next tick already: moving again is the tick after that
-        moving = _wait(out, column, before + (1 if victim.startswith("robot_batch") else 0)) - killed
+        # where the run stops: what was under way when the process died lands within moments (the world
+        # applies a tick whose decisions were in, a report in flight arrives); a restart takes over a second
+        time.sleep(0.05)
+        before = int(_header(out)[column])
+        moving = _wait(out, column, before) - killed
     _, err = launcher.communicate(timeout=600)
     if launcher.returncode != 0:
         raise SystemExit(f"{name}: run failed: {err.strip()}")
