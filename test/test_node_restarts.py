@@ -125,18 +125,23 @@ def test_a_world_killed_at_tick_0_goes_on_from_it_and_the_run_is_identical(refer
     assert summary["restarts"][0]["tick"] < 20
 
 
-def test_a_world_killed_mid_run_goes_on_from_its_checkpoint_and_the_run_is_identical(reference, tmp_path):
+@pytest.mark.parametrize(("node", "went_on", "logged"), [
+    ("world", "a new world process went on from its checkpoint", "world restarted: going on from tick {tick}"),
+    ("monitor", "a new monitor process went on from its bag", "went on from tick"),
+])
+def test_a_node_killed_mid_run_goes_on_and_the_run_is_identical_and_whole(reference, tmp_path, node, went_on,
+                                                                         logged):
+    """The world from its checkpoint, the monitor from its bag; the recording shows the restart at its tick."""
     out = tmp_path / "run"
     launcher = _launch(out)
     _ticks_recorded(out, 400_000)
-    _kill(out, "world")
-    summary = _finish(launcher, reference, out, ["world"])
+    _kill(out, node)
+    summary = _finish(launcher, reference, out, [node])
     tick = summary["restarts"][0]["tick"]
     assert 0 < tick < _final_tick(reference)
     rec = _recording_whole(out)
-    assert (tick, f"world restarted at tick {tick}: a new world process went on from its checkpoint") in rec.events
-    log = (out / "logs" / "world.log").read_text()
-    assert f"world restarted: going on from tick {tick} of its checkpoint" in log
+    assert (tick, f"{node} restarted at tick {tick}: {went_on}") in rec.events
+    assert logged.format(tick=tick) in (out / "logs" / f"{node}.log").read_text()
 
 
 def test_a_world_killed_on_the_last_tick_ends_the_run_as_it_would_have(reference, tmp_path):
@@ -147,17 +152,6 @@ def test_a_world_killed_on_the_last_tick_ends_the_run_as_it_would_have(reference
     _kill(out, "world")
     summary = _finish(launcher, reference, out, ["world"])
     assert summary["restarts"][0]["tick"] >= last - 1
-
-
-def test_a_world_killed_again_while_it_restarts_comes_back_twice(reference, tmp_path):
-    out = tmp_path / "run"
-    launcher = _launch(out, "--no-recording")
-    _wait_saved(_logs(out), 500)
-    first = _kill(out, "world")
-    second = _node_pid(out, "world", not_pid=first)
-    time.sleep(0.5)  # the new process is still starting up, or restoring
-    os.kill(second, signal.SIGKILL)
-    _finish(launcher, reference, out, ["world", "world"])
 
 
 def test_a_world_killed_more_often_than_the_bound_fails_the_run_and_claims_no_outcome(reference, tmp_path):
@@ -204,18 +198,6 @@ def test_a_monitor_killed_on_the_last_tick_goes_on_and_the_run_is_whole(referenc
     _recording_whole(out)
 
 
-def test_a_monitor_killed_mid_run_goes_on_from_its_bag_and_the_run_is_whole(reference, tmp_path):
-    out = tmp_path / "run"
-    launcher = _launch(out)
-    _ticks_recorded(out, 400_000)
-    _kill(out, "monitor")
-    summary = _finish(launcher, reference, out, ["monitor"])
-    tick = summary["restarts"][0]["tick"]
-    rec = _recording_whole(out)
-    assert (tick, f"monitor restarted at tick {tick}: a new monitor process went on from its bag") in rec.events
-    assert "went on from tick" in (out / "logs" / "monitor.log").read_text()
-
-
 def test_a_monitor_killed_while_it_writes_the_run_directory_writes_it_again(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
@@ -232,12 +214,13 @@ def test_a_monitor_killed_while_it_writes_the_run_directory_writes_it_again(refe
     assert not list(tmp_path.glob(".run.*")), "nothing of the run left beside it"
 
 
-def test_a_monitor_killed_again_while_it_restarts_comes_back_twice(reference, tmp_path):
+@pytest.mark.parametrize(("node", "busy"), [("world", 0.5), ("monitor", 1.0)])
+def test_a_node_killed_again_while_it_restarts_comes_back_twice(reference, tmp_path, node, busy):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
     _wait_saved(_logs(out), 500)
-    first = _kill(out, "monitor")
-    second = _node_pid(out, "monitor", not_pid=first)
-    time.sleep(1.0)  # the new process is loading, or replaying its bag
+    first = _kill(out, node)
+    second = _node_pid(out, node, not_pid=first)
+    time.sleep(busy)  # the new process is starting up, or restoring (the monitor: replaying its bag)
     os.kill(second, signal.SIGKILL)
-    _finish(launcher, reference, out, ["monitor", "monitor"])
+    _finish(launcher, reference, out, [node, node])
