@@ -203,7 +203,11 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
     """Neither its own segments nor the ports of the processes it talked to, which they keep while it counts
     as their user (every process of the run is watched: the launcher, each node, the restarted batch)."""
     out = tmp_path / "run"
-    launcher = _launch(out, "--no-recording")
+    os.environ["FASTDDS_BUILTIN_TRANSPORTS"] = "DEFAULT"  # shared memory, as a user may choose (ros/dds.py)
+    try:
+        launcher = _launch(out, "--no-recording")
+    finally:
+        del os.environ["FASTDDS_BUILTIN_TRANSPORTS"]
     victim = _node_pid(out, "robot_batch_1")
     held: set[str] = set()
 
