@@ -19,7 +19,7 @@ from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR, batch_name
 from swarm_ros.protocol.rows import batch_ids, decision_rows
 from swarm_ros.protocol.status import RunFailed
-from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, Policy
+from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S, Policy
 
 pytestmark = pytest.mark.unit
 
@@ -315,6 +315,30 @@ def test_a_live_process_whose_messages_do_not_come_is_never_lost_and_the_run_fai
     assert r.port.ticks == ([0, 1] if who == "monitor" else [0, 1, 2, 3])
     r.clock.now += 1.5
     with pytest.raises(RunFailed, match=f"{what}, though the process is alive"):
+        r.ls.poll()
+
+
+def test_a_run_that_does_not_move_fails_whatever_the_liveliness_says():
+    """Every batch's liveliness comes and goes (a transport that has stopped delivering: their decisions never
+    come): each lapse is a loss waited for, each return ends the wait, so the rules above never fire; after
+    STILL_S without a tick the run fails all the same."""
+    r = Run()
+    r.start()
+    r.ls.batch_liveliness(0, 1, 0)
+    r.ls.batch_liveliness(1, 1, 0)
+    r.run(ticks=3)
+    seconds = 0.0
+    while seconds < STILL_S - 1:
+        for k in (0, 1):  # lapsed at this poll, back before the next
+            r.ls.batch_liveliness(k, 0, 1)
+        r.clock.now += 1.0
+        seconds += 1.0
+        r.ls.poll()
+        for k in (0, 1):
+            r.ls.batch_liveliness(k, 1, 0)
+    assert r.ls.sim.tick == 3 and r.ls.lost == []
+    r.clock.now += 1.5
+    with pytest.raises(RunFailed, match=f"the run has not moved for {STILL_S:g} s at tick 3"):
         r.ls.poll()
 
 

@@ -71,7 +71,8 @@ class Lockstep:
         self.monitor_tick = -1
         self.monitor_alive = False
         self.published_tick = -1
-        self.progress_at = clock()  # the last tick published or metrics received
+        self.progress_at = clock()  # the last tick published or metrics received (or a stall dealt with)
+        self.moved_at = self.progress_at  # the last tick published or metrics received
         self.status_at = -1.0
         self.start_time: float | None = None
         self.startup_seconds = float("nan")
@@ -267,7 +268,7 @@ class Lockstep:
         while self.queued and (self.window == 0 or self.queued[0][0] - self.monitor_tick <= self.window):
             tick, rows, joined, applied = self.queued.popleft()
             self.port.publish_tick(tick, rows, joined, applied)
-            self.progress_at = self.clock()
+            self.progress_at = self.moved_at = self.clock()
             self.published_tick = tick
             if tick == self.sim.tick and self.sim.done:
                 self._announce_end()
@@ -292,7 +293,7 @@ class Lockstep:
             self.publish_status()
         if tick > self.monitor_tick:
             self.monitor_tick = tick
-            self.progress_at = self.clock()
+            self.progress_at = self.moved_at = self.clock()
             self._flush()
 
     def save_book(self) -> None:

@@ -16,6 +16,9 @@ FIRST_STALL_S = 30.0  #: the same before its first decisions or report (discover
 #: seconds without progress after which the run fails, when what it waits for is alive (its liveliness
 #: holds) but silent: its messages do not get through (a flood), or it hangs. Never removed for that.
 DROWNED_S = 60.0
+#: seconds without a tick published or a report received after which the run fails, whatever the liveliness
+#: of its processes says (longer than any wait for a restart: ``restart_timeout`` is 30 s by default)
+STILL_S = 120.0
 FINAL_WAIT = 30.0  #: seconds to wait, after the end, for the monitor to catch up
 LINGER = 1.0  #: at most this many seconds for the last messages to reach their readers before exiting
 #: seconds of wall time between two status messages while nothing else changes: ten a second, so that a

@@ -10,7 +10,7 @@ from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.status import RUNNING, STARTING, RunFailed, Status, restarts_text
-from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S
+from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S
 
 
 def status_of(ls, note: str = "") -> Status:
@@ -49,11 +49,19 @@ def check_stalls(ls, now: float) -> None:
     ``FIRST_STALL_S``. One whose liveliness holds is not lost for its silence (its messages may be
     drowned by a flood): it is waited for, and after ``DROWNED_S`` the run fails.
 
+    Whatever the liveliness says, a run that has not moved (no tick published, no report) for
+    ``STILL_S`` fails: liveliness that comes and goes (a transport that has stopped delivering)
+    would otherwise keep the rules above from ever firing.
+
     Raises:
-        RunFailed: a batch or the monitor alive but silent for ``DROWNED_S``.
+        RunFailed: a batch or the monitor alive but silent for ``DROWNED_S``; the run still for ``STILL_S``.
     """
     if not ls.started or ls.sim.done:
         return
+    if now - ls.moved_at >= STILL_S:
+        waiting = ", ".join(ls.batch_names[k] for k in sorted(ls.down_since)) or "no lost process"
+        raise RunFailed(f"the run has not moved for {STILL_S:g} s at tick {ls.sim.tick} (waiting for: {waiting}; "
+                        f"messages dropped: {ls.rejections.text() or 'nothing'}): its messages do not get through")
     if ls.queued:
         limit = STALL_S if ls.monitor_tick >= 0 else FIRST_STALL_S
         if ls.window and now - ls.progress_at >= limit:
