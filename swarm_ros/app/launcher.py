@@ -45,7 +45,7 @@ from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recor
 from swarm_ros.core.params import RunParams, Settings, node_defaults
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.signals import StopFlag, process_age
-from swarm_ros.protocol.plan import graph_plan
+from swarm_ros.protocol.plan import MONITOR, WORLD, graph_plan
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.ros.shm import clean_shm, shm_locks
@@ -296,12 +296,12 @@ class Launch:
                     code = c.proc.poll()
                     if code in (None, 0) or c.name in reported:
                         continue
-                    if c.name in ("world", "monitor"):
-                        if c.name == "monitor" and self._written():
+                    if c.name in (WORLD, MONITOR):
+                        if c.name == MONITOR and self._written():
                             monitor_done = True  # killed after it wrote the run directory: the run is whole
                             break
                         self._restart_core(c, progress)
-                        world_done_at = None if c.name == "monitor" else world_done_at
+                        world_done_at = None if c.name == MONITOR else world_done_at
                         continue
                     # the world's own word that tick 0 went out (its status, or the monitor's metrics): under
                     # 'remove', a batch lost before tick 0 is restarted (none of its robots has moved yet)
@@ -323,7 +323,7 @@ class Launch:
                         then = (f"it was restarted {self.max_restarts} times already: the world removes its robots "
                                 f"and the run goes on")
                     self._warn(progress, f"{c.name} {c.death()}; {then}")
-                world, monitor = self._child("world"), self._child("monitor")
+                world, monitor = self._child(WORLD), self._child(MONITOR)
                 if monitor_done or monitor.proc.returncode == 0:
                     break
                 if world.proc.returncode == 0 and world_done_at is None:

@@ -34,7 +34,7 @@ from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checkpoint import Checkpoint, Saved
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.lockstep import Lockstep
-from swarm_ros.protocol.plan import MONITOR
+from swarm_ros.protocol.plan import MONITOR, WORLD
 from swarm_ros.protocol.status import RunFailed, Status
 from swarm_ros.protocol.world_port import Policy
 from swarm_ros.ros import graph as msgs
@@ -90,7 +90,7 @@ class WorldNode:
         if saved is not None:
             self.lockstep.restore(saved, self.incarnation)
         else:  # none before this one got as far as tick 0
-            self.lockstep.restarts += [(0, "world")] * self.incarnation
+            self.lockstep.restarts += [(0, WORLD)] * self.incarnation
         self._publish_occupancy()
         self.lockstep.publish_status()
         if saved is None:

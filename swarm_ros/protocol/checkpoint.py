@@ -91,10 +91,13 @@ class Checkpoint:
         self._records = self.rows.view(_RECORD)
         self.history = self.map[self.history_at: self.ring_at].view(np.int64).reshape(self.ticks, self.columns)
 
-    def _slot(self, tick: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _slot_head(self, tick: int) -> tuple[np.ndarray, int]:
+        """The ring slot of ``tick``: its head (tick, robot rows, applied rows), and where its rows start."""
         at = self.ring_at + (tick % self.slots) * self.slot_bytes
-        head = self.map[at: at + _SLOT_HEAD * 8].view(np.int64)
-        at += _SLOT_HEAD * 8
+        return self.map[at: at + _SLOT_HEAD * 8].view(np.int64), at + _SLOT_HEAD * 8
+
+    def _slot(self, tick: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        head, at = self._slot_head(tick)
         robots = self.map[at: at + self.robots * ROBOT_ROW.itemsize].view(ROBOT_ROW)
         at += self.robots * ROBOT_ROW.itemsize
         applied = self.map[at: at + self.robots * DECISION_ROW.itemsize].view(DECISION_ROW)
@@ -105,10 +108,8 @@ class Checkpoint:
         applied (None at tick 0) and its metrics row. Call before anything about the tick is sent."""
         h = self.header
         h[_H_WRITING] = tick
-        at = self.ring_at + (tick % self.slots) * self.slot_bytes
-        head = self.map[at: at + _SLOT_HEAD * 8].view(np.int64)
+        head, at = self._slot_head(tick)
         head[0] = -1  # the slot is being rewritten
-        at += _SLOT_HEAD * 8
         raw = np.ascontiguousarray(rows).view(np.uint8)  # bytes, not records: copied ten times faster
         self.map[at: at + raw.size] = raw
         if applied is not None:

@@ -302,8 +302,16 @@ class Lockstep:
             self.port.save_book(book_of(self))
 
     def restore(self, saved: Saved, incarnation: int) -> None:
-        """Go on from the checkpoint a world process before this one wrote (see :func:`restore`)."""
+        """Go on from the checkpoint a world process before this one wrote (:func:`restore`), then send every
+        batch a snapshot of the saved tick, and the ticks after the monitor's last report again."""
         restore(self, saved, incarnation)
+        for k in range(len(self.batch_names)):
+            if k not in self.removed_batches:
+                self._send_snapshot(k)
+        for t in sorted(t for t in saved.ring if t > saved.monitor_tick or t == saved.tick):
+            rows, applied = saved.ring[t]
+            self._emit(t, rows, t == saved.tick, applied, save=False)
+        self.publish_status()
 
     # -- status -----------------------------------------------------------------------
     def status(self, note: str = "") -> Status:

@@ -11,6 +11,8 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from swarm_ros.protocol.plan import MONITOR, WORLD
+
 if TYPE_CHECKING:
     from swarm_ros.core.run_result import RunRecord
 
@@ -52,8 +54,8 @@ def restarts_text(restarts: list[tuple[int, str]]) -> str:
 
 def restart_event(tick: int, node: str) -> str:
     """The recording's line for a restart of ``node`` at ``tick``."""
-    what = {"world": "a new world process went on from its checkpoint",
-            "monitor": "a new monitor process went on from its bag"}.get(node, "a new process took over its robots")
+    what = {WORLD: "a new world process went on from its checkpoint",
+            MONITOR: "a new monitor process went on from its bag"}.get(node, "a new process took over its robots")
     return f"{node} restarted at tick {tick}: {what}"
 
 
@@ -112,8 +114,8 @@ class WorldReport:
         history = np.array(rows, dtype=np.int64)
         final = tick_metrics(state.tick, np.bincount(state.state, minlength=STATE_COUNT), shape.patches)
         restarts = list(self.restarts)
-        unseen = monitor[0] - sum(node == "monitor" for _, node in restarts)
-        restarts = sorted(restarts + [(monitor[1], "monitor")] * unseen, key=lambda r: r[0])
+        unseen = monitor[0] - sum(node == MONITOR for _, node in restarts)
+        restarts = sorted(restarts + [(monitor[1], MONITOR)] * unseen, key=lambda r: r[0])
         summary = summarize(shape=shape, params=params, state=state, final=final, outcome=outcome, engine=ROS2,
                             wall_seconds=self.times.get("wall_seconds", wall), losses=losses, restarts=restarts,
                             overhead={"startup_seconds": self.times.get("startup_seconds"),

@@ -1,7 +1,7 @@
 """A restarted world process goes on from its checkpoint (:mod:`swarm_ros.protocol.checkpoint`).
 
 :func:`book_of` is what the lockstep writes beside the ticks when its bookkeeping changes;
-:func:`restore` puts a saved tick and that bookkeeping back into a fresh :class:`Lockstep` and
+:func:`restore` puts a saved tick and that bookkeeping back into a fresh :class:`Lockstep`, which then
 sends what a reader may have lost with the world before: to every batch a snapshot of the
 saved tick (a batch that had it ignores it), and the ticks from the one after the monitor's
 last report up to the saved one, again (a reader that had them ignores them). The batches'
@@ -19,9 +19,8 @@ import numpy as np
 from swarm_ros.core.metrics import Outcome, TickMetrics, outcome_of
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.checkpoint import Saved
+from swarm_ros.protocol.plan import MONITOR, WORLD
 from swarm_ros.protocol.rows import PATCH_METRES
-
-WORLD = "world"
 
 __all__ = ["Saved", "book_of", "restore"]
 
@@ -54,7 +53,8 @@ def _outcome(ls, history: np.ndarray, robots: np.ndarray) -> Outcome | None:
 
 
 def restore(ls, saved: Saved, incarnation: int) -> None:
-    """Put ``saved`` into ``ls`` (fresh, not started) and send again what readers may lack (module doc).
+    """Put ``saved`` into ``ls`` (fresh, not started): its state and bookkeeping. The lockstep then sends
+    again what readers may lack (module doc, :meth:`~swarm_ros.protocol.lockstep.Lockstep.restore`).
     ``incarnation`` counts the world's processes before this one: one killed before it wrote anything is a
     restart too, at the same tick.
 
@@ -81,18 +81,11 @@ def restore(ls, saved: Saved, incarnation: int) -> None:
     ls.start_time = ls.clock() - max(0.0, time.time() - ls.started_wall)
     ls.startup_seconds = float(b["startup_seconds"])
     ls.monitor_tick = saved.monitor_tick
-    if "monitor" in ls.lost:
+    if MONITOR in ls.lost:
         ls.window = 0
     for k, name in enumerate(ls.batch_names):
         ls.port.watch_batch(k, name)
     ls.save_book()
     ls.log.warn(f"world restarted: going on from tick {tick} of its checkpoint "
                 f"({len(ls.batch_names)} batches, restarts so far {len(ls.restarts) - 1})")
-    for k in range(len(ls.batch_names)):
-        if k not in ls.removed_batches:
-            ls._send_snapshot(k)  # noqa: SLF001 - the lockstep's own step, shared with a restarted batch
-    for t in sorted(t for t in saved.ring if t > saved.monitor_tick or t == tick):
-        robot_rows, applied = saved.ring[t]
-        ls._emit(t, robot_rows, t == tick, applied, save=False)  # noqa: SLF001
-    ls.publish_status()
 
