@@ -28,7 +28,7 @@ import numba
 import numpy as np
 
 from swarm_ros.core.rng import STREAM_PRIORITY, draw_bits
-from swarm_ros.core.rules import patch_index
+from swarm_ros.core.rules import cell_index
 from swarm_ros.core.rulesets import JOIN_WALK
 from swarm_ros.core.state import FRONTIER_BLOCK, RobotState
 
@@ -59,57 +59,66 @@ def _wins(a, b, ids, seed, tick) -> bool:
 
 @numba.njit(cache=True, inline="always")
 def _mark(q, on, frontier, blocks, size):
-    """Set patch ``q``'s frontier flag to ``on``, keeping its block's count and the total in step."""
+    """Set patch ``q``'s frontier flag to ``on``, keeping its block's count and the total in step.
+
+    The block of a flat index in a 2D world (the 3D world's bottom layer) or a 3D one:
+    blocks are numbered in flat order, ``(bz * nb + by) * nb + bx``.
+    """
     if frontier[q] != on:
         frontier[q] = on
         nb = (size + FRONTIER_BLOCK - 1) // FRONTIER_BLOCK
-        b = ((q // size) // FRONTIER_BLOCK) * nb + (q % size) // FRONTIER_BLOCK
+        bz = (q // (size * size)) // FRONTIER_BLOCK
+        by = ((q // size) % size) // FRONTIER_BLOCK
+        b = (bz * nb + by) * nb + (q % size) // FRONTIER_BLOCK
         d = 1 if on else -1
         blocks[b] += d
         blocks[blocks.size - 1] += d
 
 
 @numba.njit(cache=True)
-def occupy(p, i, occupancy, frontier, blocks, shape, size):
-    """Robot ``i`` localizes on patch ``p``: occupy it and move the frontier around it."""
+def occupy(p, i, occupancy, frontier, blocks, shape, nbrs, size):
+    """Robot ``i`` localizes on patch ``p``: occupy it and move the frontier around it.
+
+    ``nbrs``: the flat offsets of a patch's neighbours (8 in 2D, 26 in 3D; ``World.neighbour_offsets``).
+    """
     occupancy[p] = i
     _mark(p, False, frontier, blocks, size)
-    for dy in (-size, 0, size):
-        for dx in (-1, 0, 1):
-            q = p + dy + dx
-            if shape[q] and occupancy[q] < 0:
-                _mark(q, True, frontier, blocks, size)
+    for d in nbrs:
+        q = p + d
+        if shape[q] and occupancy[q] < 0:
+            _mark(q, True, frontier, blocks, size)
 
 
 @numba.njit(cache=True)
-def vacate(p, occupancy, frontier, blocks, shape, size):
+def vacate(p, occupancy, frontier, blocks, shape, nbrs, size):
     """The robot on patch ``p`` is removed: empty it and recompute the frontier around it (``occupy``'s inverse)."""
     occupancy[p] = -1
-    for dy in (-size, 0, size):
-        for dx in (-1, 0, 1):
-            q = p + dy + dx
-            if not shape[q] or occupancy[q] >= 0:
-                continue
-            near = False
-            for ey in (-size, 0, size):
-                for ex in (-1, 0, 1):
-                    r = q + ey + ex
-                    if r != q and occupancy[r] >= 0:
-                        near = True
-            _mark(q, near, frontier, blocks, size)
+    for k in range(nbrs.size + 1):  # p itself, then its neighbours
+        q = p + nbrs[k - 1] if k else p
+        if not shape[q] or occupancy[q] >= 0:
+            continue
+        near = False
+        for e in nbrs:
+            if occupancy[q + e] >= 0:
+                near = True
+        _mark(q, near, frontier, blocks, size)
 
 
 @numba.njit(cache=True)
-def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, blocks,
-                   shape, radius, size, seed, tick, best, localized, shape_patches, join, outcome):
+def resolve_kernel(ids, claim, new_x, new_y, new_z, new_heading, new_pitch, x, y, z, heading, pitch, state,
+                   occupancy, frontier, blocks, shape, nbrs, radius, size, seed, tick, best, localized, shape_patches,
+                   join, outcome):
     """Apply the decisions of robots ``ids`` to the state arrays in place.
 
-    ``best`` is a W*W int array of -1 (scratch; left as found). ``localized`` is the number of
+    In a 2D world ``new_z``, ``new_pitch``, ``z`` and ``pitch`` are empty and not read: the
+    world's dimension is ``3`` exactly when ``z`` has an entry per robot. ``best`` is a
+    W^d int array of -1 (scratch; left as found). ``localized`` is the number of
     localized robots (seeds included) before the tick; ``join`` the rule set's join code.
     Writes each robot's :class:`JoinOutcome` to ``outcome[k]``. Returns (joined, moving
     inside, moving outside, walking) counted over ``ids`` after the tick.
     """
     n = ids.size
+    solid = z.size > 0  # a 3D world
     walk = join == JOIN_WALK and blocks[blocks.size - 1] > 0  # the frontier the robots saw was not empty
     for k in range(n):
         p = claim[k]
@@ -129,10 +138,14 @@ def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, 
         if p >= 0:
             if best[p] == k and localized < shape_patches and (
                     st == _MOVING_INSIDE or st == _MOVING_OUTSIDE or st == _WALKING):
-                occupy(p, i, occupancy, frontier, blocks, shape, size)
+                occupy(p, i, occupancy, frontier, blocks, shape, nbrs, size)
                 state[i] = _LOCALIZED
                 x[i] = float(p % size - radius)
-                y[i] = float(p // size - radius)
+                if solid:
+                    y[i] = float((p // size) % size - radius)
+                    z[i] = float(p // (size * size) - radius)
+                else:
+                    y[i] = float(p // size - radius)
                 localized += 1
                 joined += 1
                 outcome[k] = 0
@@ -143,10 +156,15 @@ def resolve_kernel(ids, claim, new_x, new_y, new_heading, x, y, heading, state, 
         x[i] = new_x[k]
         y[i] = new_y[k]
         heading[i] = new_heading[k]
+        zi = 0.0
+        if solid:
+            zi = new_z[k]
+            z[i] = zi
+            pitch[i] = new_pitch[k]
         if walk and (st == _WALKING or (st == _MOVING_INSIDE and p < 0)):
             state[i] = _WALKING
             walking += 1
-        elif shape[patch_index(x[i], y[i], radius, size)]:
+        elif shape[cell_index(x[i], y[i], zi, solid, radius, size)]:
             state[i] = _MOVING_INSIDE
             inside += 1
         else:

@@ -33,7 +33,8 @@ from swarm_ros.core.metrics import (
 )
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
-from swarm_ros.core.rules import Decisions, decide_kernel, index_build, index_clear, patch_index
+from swarm_ros.core.rules import Decisions, cell_index, decide_kernel, index_build, index_clear
+from swarm_ros.core.rules3d import decide_kernel3, index_build3, index_clear3
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import RobotState, SwarmState, initial_state
 
@@ -88,28 +89,38 @@ def _close_tick(moving, m, state, tick, localized, inside, outside, walking, sha
 
 
 @numba.njit(cache=True)
-def _run_kernel(moving, x, y, heading, state, shape, wall, frontier, blocks, occupancy, radius, size, vision, wiggle,
-                seed, join, crowd, steps, head, nxt, best, claim, new_x, new_y, new_heading, outcome, last_ids,
-                shape_patches, robots, max_ticks, rows, m, tick, localized, limit):
+def _run_kernel(moving, x, y, z, heading, pitch, state, shape, wall, frontier, blocks, occupancy, nbrs, radius, size,
+                vision, wiggle, seed, join, crowd, steps, head, nxt, best, claim, new_x, new_y, new_z, new_heading,
+                new_pitch, outcome, last_ids, shape_patches, robots, max_ticks, rows, m, tick, localized, limit):
     """Up to ``limit`` whole ticks for the robots ``moving[:m]``, stopping when the run ends.
 
     Row r of ``rows`` gets the metrics of the r-th tick run. Returns (ticks run, still
-    moving, localized, robots that decided in the last tick, end code).
+    moving, localized, robots that decided in the last tick, end code). ``z``, ``pitch``,
+    ``new_z`` and ``new_pitch`` are empty in a 2D world; in a 3D one the robots decide by
+    the 3D kernels, and everything else is the same code.
     """
     n = 0
     code = RUNNING
     decided = 0
+    solid = z.size > 0
     while n < limit and code == RUNNING:
         tick += 1
         ids = moving[:m]
         last_ids[:m] = ids
-        index_build(ids, x, y, radius, size, head, nxt)
-        decide_kernel(ids, x, y, heading, state, shape, wall, frontier, blocks, radius, size, vision, wiggle,
-                      seed, tick, join, crowd, steps, head, nxt, claim, new_x, new_y, new_heading)
-        index_clear(ids, x, y, radius, size, head)
+        if solid:
+            index_build3(ids, x, y, z, radius, size, head, nxt)
+            decide_kernel3(ids, x, y, z, heading, pitch, state, shape, wall, frontier, blocks, radius, size, vision,
+                           wiggle, seed, tick, join, crowd, steps, head, nxt, claim, new_x, new_y, new_z,
+                           new_heading, new_pitch)
+            index_clear3(ids, x, y, z, radius, size, head)
+        else:
+            index_build(ids, x, y, radius, size, head, nxt)
+            decide_kernel(ids, x, y, heading, state, shape, wall, frontier, blocks, radius, size, vision, wiggle,
+                          seed, tick, join, crowd, steps, head, nxt, claim, new_x, new_y, new_heading)
+            index_clear(ids, x, y, radius, size, head)
         joined, inside, outside, walking = resolve_kernel(
-            ids, claim, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, blocks, shape, radius,
-            size, seed, tick, best, localized, shape_patches, join, outcome)
+            ids, claim, new_x, new_y, new_z, new_heading, new_pitch, x, y, z, heading, pitch, state, occupancy,
+            frontier, blocks, shape, nbrs, radius, size, seed, tick, best, localized, shape_patches, join, outcome)
         localized += joined
         decided = m
         m = _compact_moving(moving, m, state)
@@ -141,12 +152,16 @@ class Simulation:
         self._radius, self._size = world.radius, world.size
         self._shape = shape.mask.ravel().copy()
         self._wall = world.wall_mask().ravel()
+        self._nbrs = world.neighbour_offsets()
+        self._solid = world.dims == 3
         n, cells = params.robots, world.patch_count
         self._head = np.full(cells, -1, dtype=np.int32)
         self._best = np.full(cells, -1, dtype=np.int64)
         self._nxt = np.empty(n, dtype=np.int32)
         self._claim = np.empty(n, dtype=np.int64)
         self._new_x, self._new_y, self._new_heading = np.empty(n), np.empty(n), np.empty(n)
+        extra = n if self._solid else 0  # the 3D arrays are empty in 2D
+        self._new_z, self._new_pitch = np.empty(extra), np.empty(extra)
         self._outcome = np.empty(n, dtype=np.int8)
         self._codes = params.ruleset.codes()
         self._last_ids = np.empty(n, dtype=np.int64)
@@ -171,11 +186,18 @@ class Simulation:
     def _set_kernel_args(self, alive: int) -> None:
         s, params = self.state, self.params
         self._alive = alive
+        z, pitch = self._z_pitch()
         self._kernel_args = (
-            self._moving, s.x, s.y, s.heading, s.state, self._shape, self._wall, s.frontier, s.frontier_blocks,
-            s.occupancy, self._radius, self._size, params.vision_radius, params.wiggle_rad, params.seed,
-            *self._codes, self._head, self._nxt, self._best, self._claim, self._new_x, self._new_y,
-            self._new_heading, self._outcome, self._last_ids, self.shape.patches, alive, params.max_ticks)
+            self._moving, s.x, s.y, z, s.heading, pitch, s.state, self._shape, self._wall, s.frontier,
+            s.frontier_blocks, s.occupancy, self._nbrs, self._radius, self._size, params.vision_radius,
+            params.wiggle_rad, params.seed, *self._codes, self._head, self._nxt, self._best, self._claim, self._new_x,
+            self._new_y, self._new_z, self._new_heading, self._new_pitch, self._outcome, self._last_ids,
+            self.shape.patches, alive, params.max_ticks)
+
+    def _z_pitch(self) -> tuple[np.ndarray, np.ndarray]:
+        """The state's z and pitch, or (2D) the empty arrays that stand for them in the kernels."""
+        s = self.state
+        return (s.z, s.pitch) if self._solid else (self._new_z, self._new_pitch)
 
     # -- reading ----------------------------------------------------------------
     @property
@@ -210,8 +232,10 @@ class Simulation:
     def last_decisions(self) -> Decisions:
         """The decisions applied in the last tick (ids in the order applied): claims and the poses decided."""
         n = self._decided
+        solid = {"z": self._new_z[:n].copy(), "pitch": self._new_pitch[:n].copy()} if self._solid else {}
         return Decisions(tick=self.tick, ids=self._last_ids[:n].copy(), claim=self._claim[:n].copy(),
-                         x=self._new_x[:n].copy(), y=self._new_y[:n].copy(), heading=self._new_heading[:n].copy())
+                         x=self._new_x[:n].copy(), y=self._new_y[:n].copy(), heading=self._new_heading[:n].copy(),
+                         **solid)
 
     # -- advancing --------------------------------------------------------------
     def step(self) -> TickMetrics:
@@ -256,12 +280,17 @@ class Simulation:
         self._last_ids[:m] = decisions.ids
         self._claim[:m] = decisions.claim
         self._new_x[:m], self._new_y[:m], self._new_heading[:m] = decisions.x, decisions.y, decisions.heading
+        if self._solid:
+            if decisions.z is None or decisions.pitch is None:
+                raise ValueError("decisions in a 3D world need z and pitch")
+            self._new_z[:m], self._new_pitch[:m] = decisions.z, decisions.pitch
         s = self.state
+        z, pitch = self._z_pitch()
         joined, inside, outside, walking = resolve_kernel(
-            self._last_ids[:m], self._claim, self._new_x, self._new_y, self._new_heading, s.x, s.y, s.heading,
-            s.state, s.occupancy, s.frontier, s.frontier_blocks, self._shape, self._radius, self._size,
-            self.params.seed, decisions.tick, self._best, self._localized, self.shape.patches, self._codes[0],
-            self._outcome)
+            self._last_ids[:m], self._claim, self._new_x, self._new_y, self._new_z, self._new_heading,
+            self._new_pitch, s.x, s.y, z, s.heading, pitch, s.state, s.occupancy, s.frontier, s.frontier_blocks,
+            self._shape, self._nbrs, self._radius, self._size, self.params.seed, decisions.tick, self._best,
+            self._localized, self.shape.patches, self._codes[0], self._outcome)
         self._localized += joined
         self._decided = m
         self._m = _compact_moving(self._moving, m, self.state.state)
@@ -292,8 +321,9 @@ class Simulation:
         ids = ids[s.state[ids] != RobotState.REMOVED]
         for i in ids.tolist():
             if s.state[i] in _STATIONARY_LOCALIZED:
-                vacate(patch_index(s.x[i], s.y[i], self._radius, self._size), s.occupancy, s.frontier,
-                       s.frontier_blocks, self._shape, self._size)
+                z = s.z[i] if self._solid else 0.0
+                vacate(cell_index(s.x[i], s.y[i], z, self._solid, self._radius, self._size), s.occupancy, s.frontier,
+                       s.frontier_blocks, self._shape, self._nbrs, self._size)
         s.state[ids] = RobotState.REMOVED
         self.last_removed = ids
         if ids.size:

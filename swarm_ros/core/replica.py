@@ -1,7 +1,8 @@
 """A copy of the world's state rebuilt from what the world broadcasts, for robot batches and the monitor.
 
 The distributed engine's world publishes, after each tick, one row per robot whose
-row changed in that tick (at tick 0, every robot): id, state, x, y, heading. Only
+row changed in that tick (at tick 0, every robot): id, state, x, y, heading (3D: and z,
+pitch). Only
 moving robots change, so those rows are exactly the robots that decided in the tick.
 A :class:`Replica` applies the rows in tick order and keeps the occupancy and frontier
 grids in step, so after tick t it holds the same :class:`~swarm_ros.core.state.SwarmState`
@@ -14,7 +15,7 @@ import numba
 import numpy as np
 
 from swarm_ros.core.arbitration import occupy, vacate
-from swarm_ros.core.rules import patch_index
+from swarm_ros.core.rules import cell_index
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of, has_repeats
 
@@ -24,15 +25,17 @@ UNKNOWN = np.int8(-1)  #: state of a robot before the tick-0 rows arrive
 
 
 @numba.njit(cache=True)
-def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state, occupancy, frontier, blocks,
-                shape, radius, size):
+def _apply_rows(ids, new_state, new_x, new_y, new_z, new_heading, new_pitch, x, y, z, heading, pitch, state,
+                occupancy, frontier, blocks, shape, nbrs, radius, size):
     """Write the rows into the state arrays; occupy the patch of every robot that became stationary-localized,
-    free the patch of every localized robot that was removed.
+    free the patch of every localized robot that was removed. ``z`` and ``pitch`` (and the rows'
+    ``new_z``, ``new_pitch``) are empty in a 2D world.
 
     Returns the number of rows that were rejected (-1 per row whose id is out of range
     or whose localized patch is not an empty shape patch), else 0.
     """
     n = state.size
+    solid = z.size > 0
     for k in range(ids.size):
         i = ids[k]
         if i < 0 or i >= n:
@@ -42,16 +45,22 @@ def _apply_rows(ids, new_state, new_x, new_y, new_heading, x, y, heading, state,
         if was == _REMOVED and st != _REMOVED:
             return k + 1  # removed robots never come back
         if st == _REMOVED and (was == _SEED or was == _LOCALIZED):
-            vacate(patch_index(x[i], y[i], radius, size), occupancy, frontier, blocks, shape, size)
+            vacate(cell_index(x[i], y[i], z[i] if solid else 0.0, solid, radius, size), occupancy, frontier, blocks,
+                   shape, nbrs, size)
         x[i] = new_x[k]
         y[i] = new_y[k]
         heading[i] = new_heading[k]
+        zi = 0.0
+        if solid:
+            zi = new_z[k]
+            z[i] = zi
+            pitch[i] = new_pitch[k]
         state[i] = st
         if (st == _SEED or st == _LOCALIZED) and was != _SEED and was != _LOCALIZED:
-            p = patch_index(x[i], y[i], radius, size)
+            p = cell_index(x[i], y[i], zi, solid, radius, size)
             if not shape[p] or occupancy[p] >= 0:
                 return k + 1
-            occupy(p, i, occupancy, frontier, blocks, shape, size)
+            occupy(p, i, occupancy, frontier, blocks, shape, nbrs, size)
     return 0
 
 
@@ -67,19 +76,24 @@ class Replica:
         self.shape = shape
         self._radius, self._size = world.radius, world.size
         self._shape = shape.mask.ravel().copy()
+        self._nbrs = world.neighbour_offsets()
+        self._solid = world.dims == 3
+        self._none = np.empty(0)  # z and pitch in a 2D world
         self.state = self._empty(robots)
 
     def _empty(self, robots: int) -> SwarmState:
         world = self.shape.world
         frontier = np.zeros(world.patch_count, dtype=bool)
+        solid = {"z": np.zeros(robots), "pitch": np.zeros(robots)} if self._solid else {}
         return SwarmState(
             x=np.zeros(robots), y=np.zeros(robots), heading=np.zeros(robots),
             state=np.full(robots, UNKNOWN, dtype=np.int8),
             occupancy=np.full(world.patch_count, NO_ROBOT, dtype=np.int32),
-            frontier=frontier, frontier_blocks=frontier_blocks_of(frontier, world.size), tick=-1)
+            frontier=frontier, frontier_blocks=frontier_blocks_of(frontier, world.size, world.dims), tick=-1,
+            **solid)
 
     def load(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-             heading: np.ndarray) -> None:
+             heading: np.ndarray, z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> None:
         """Start again from a snapshot: every robot's row at ``tick`` (how a restarted robot batch catches up).
 
         The occupancy and frontier are rebuilt from the rows, so the replica equals one
@@ -92,7 +106,7 @@ class Replica:
             raise ValueError(f"a snapshot of tick {tick}")
         self.state = self._empty(self.state.robots)
         self.state.tick = -1
-        self._apply(0, ids, state, x, y, heading)  # the checks of a tick-0 message: every robot once
+        self._apply(0, ids, state, x, y, heading, z, pitch)  # the checks of a tick-0 message: every robot once
         self.state.tick = tick
 
     @property
@@ -100,7 +114,7 @@ class Replica:
         return self.state.tick
 
     def update(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-               heading: np.ndarray) -> None:
+               heading: np.ndarray, z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> None:
         """Apply the rows of ``tick``, which must be the tick after the last one applied.
 
         Raises:
@@ -110,26 +124,33 @@ class Replica:
         """
         if tick != self.state.tick + 1:
             raise ValueError(f"rows for tick {tick} arrived after tick {self.state.tick}")
-        self._apply(tick, ids, state, x, y, heading)
+        self._apply(tick, ids, state, x, y, heading, z, pitch)
 
     def _apply(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-               heading: np.ndarray) -> None:
+               heading: np.ndarray, z: np.ndarray | None, pitch: np.ndarray | None) -> None:
         s = self.state
+        if self._solid != (z is not None and pitch is not None):
+            raise ValueError("rows of a 3D world need z and pitch; rows of a 2D world have none")
         ids = np.asarray(ids, dtype=np.int64)
         state = np.asarray(state, dtype=np.int8)
         if tick == 0 and (ids.size != s.robots or not np.array_equal(np.sort(ids), np.arange(s.robots))):
             raise ValueError(f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows")
         if state.size and (state.min() < 0 or state.max() > max(RobotState)):
             raise ValueError(f"unknown robot state code in the rows of tick {tick}")
-        bad = _apply_rows(ids, state, np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64),
-                          np.asarray(heading, dtype=np.float64), s.x, s.y, s.heading, s.state, s.occupancy,
-                          s.frontier, s.frontier_blocks, self._shape, self._radius, self._size)
+        f64 = np.float64
+        new_z, new_pitch = (np.asarray(z, f64), np.asarray(pitch, f64)) if self._solid else (self._none, self._none)
+        z_now, pitch_now = (s.z, s.pitch) if self._solid else (self._none, self._none)
+        bad = _apply_rows(ids, state, np.asarray(x, dtype=f64), np.asarray(y, dtype=f64), new_z,
+                          np.asarray(heading, dtype=f64), new_pitch, s.x, s.y, z_now, s.heading, pitch_now, s.state,
+                          s.occupancy, s.frontier, s.frontier_blocks, self._shape, self._nbrs, self._radius,
+                          self._size)
         if bad:
             raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
                              f"localizes on a patch that is not an empty shape patch, or returns after removal")
         s.tick = tick
 
-    def inconsistent(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray) -> str | None:
+    def inconsistent(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
+                     z: np.ndarray | None = None) -> str | None:
         """Why the rows of ``tick`` cannot be the world's next ones (None if they can), changing nothing.
 
         Checks what :meth:`update` would otherwise find half-way through, leaving the replica
@@ -152,11 +173,15 @@ class Replica:
             return "a robot that was not moving changed"
         joins = moving & ((after == _LOCALIZED) | (after == _SEED))
         if joins.any():
-            px = np.floor(np.asarray(x)[joins] + 0.5).astype(np.int64) + self._radius
-            py = np.floor(np.asarray(y)[joins] + 0.5).astype(np.int64) + self._radius
-            if px.min() < 0 or py.min() < 0 or px.max() >= self._size or py.max() >= self._size:
+            axes = (x, y) if not self._solid else (x, y, z)
+            if any(a is None for a in axes):
+                return "rows of a 3D world without z"
+            cells = [np.floor(np.asarray(a)[joins] + 0.5).astype(np.int64) + self._radius for a in axes]
+            if min(c.min() for c in cells) < 0 or max(c.max() for c in cells) >= self._size:
                 return "a robot localizes outside the world"
-            p = py * self._size + px
+            p = cells[-1]
+            for c in reversed(cells[:-1]):
+                p = p * self._size + c
             if not s.frontier[p].all() or has_repeats(p):
                 return "a robot localizes off the frontier, or two on one patch"
         return None

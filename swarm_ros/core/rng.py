@@ -26,6 +26,12 @@ STREAM_FAIL = 6  #: which robots fail at the failure tick (``RunParams.fail_frac
 STREAM_WIGGLE_2 = 7  #: second wiggle of a tick
 STREAM_WIGGLE_3 = 8  #: third wiggle of a tick
 STREAM_TURN_2 = 9  #: second random turn of a tick
+# 3D only: a place's z, and a heading's second angle.
+STREAM_PLACE_Z = 10  #: z offset within the start voxel (tick 0)
+STREAM_PLACE_PITCH = 11  #: start heading's elevation (tick 0)
+#: A 3D heading change draws two numbers: the angle from the old heading, from the stream the 2D rule
+#: uses, and the direction it turns towards, from that stream + SPIN (so 3D draws never reuse 2D ones).
+SPIN = 16
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)

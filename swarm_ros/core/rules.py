@@ -44,6 +44,7 @@ from swarm_ros.core.rng import (
     STREAM_WIGGLE_3,
     draw_uniform,
 )
+from swarm_ros.core.rules3d import decide_kernel3, index_build3, index_clear3
 from swarm_ros.core.rulesets import CROWD_AHEAD, JOIN_LOCAL, JOIN_WALK, STEPS_ONE
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import FRONTIER_BLOCK, IS_MOVING, RobotState, SwarmState
@@ -56,6 +57,15 @@ _WALKING = np.int8(RobotState.WALKING)
 def patch_index(x: float, y: float, radius: int, size: int) -> int:
     """Flat index of the patch whose centre is nearest to (x, y)."""
     return (int(math.floor(y + 0.5)) + radius) * size + int(math.floor(x + 0.5)) + radius
+
+
+@numba.njit(cache=True, inline="always")
+def cell_index(x: float, y: float, z: float, solid: bool, radius: int, size: int) -> int:
+    """Flat index of the patch nearest to (x, y), or (``solid``, a 3D world) of the voxel nearest to (x, y, z)."""
+    c = patch_index(x, y, radius, size)
+    if solid:
+        c += (int(math.floor(z + 0.5)) + radius) * size * size
+    return c
 
 
 @numba.njit(cache=True)
@@ -306,6 +316,7 @@ class Decisions:
         claim: flat patch index each robot claims to join, or -1 (int64).
         x, y: position in patches if the robot does not join (float64).
         heading: heading in radians if the robot does not join (float64).
+        z, pitch: (3D only; None in 2D) z position and heading elevation if the robot does not join.
     """
 
     tick: int
@@ -314,6 +325,8 @@ class Decisions:
     x: np.ndarray
     y: np.ndarray
     heading: np.ndarray
+    z: np.ndarray | None = None
+    pitch: np.ndarray | None = None
 
     @staticmethod
     def concatenate(parts: list[Decisions]) -> Decisions:
@@ -321,6 +334,9 @@ class Decisions:
         ticks = {p.tick for p in parts}
         if len(ticks) != 1:
             raise ValueError(f"decisions from different ticks: {sorted(ticks)}")
+        if len({p.z is None for p in parts}) != 1:
+            raise ValueError("decisions from a 2D and a 3D world")
+        solid = parts[0].z is not None
         return Decisions(
             tick=ticks.pop(),
             ids=np.concatenate([p.ids for p in parts]),
@@ -328,6 +344,8 @@ class Decisions:
             x=np.concatenate([p.x for p in parts]),
             y=np.concatenate([p.y for p in parts]),
             heading=np.concatenate([p.heading for p in parts]),
+            z=np.concatenate([p.z for p in parts]) if solid else None,
+            pitch=np.concatenate([p.pitch for p in parts]) if solid else None,
         )
 
 
@@ -370,6 +388,17 @@ class Decider:
         claim = np.empty(n, dtype=np.int64)
         x, y, heading = np.empty(n), np.empty(n), np.empty(n)
         r, w = self._radius, self._size
+        if self.shape.dims == 3:
+            z, pitch = np.empty(n), np.empty(n)
+            index_build3(moving, view.x, view.y, view.z, r, w, self._head, self._nxt)
+            try:
+                decide_kernel3(ids, view.x, view.y, view.z, view.heading, view.pitch, view.state, self._shape,
+                               self._wall, view.frontier, view.frontier_blocks, r, w, self.params.vision_radius,
+                               self.params.wiggle_rad, self.params.seed, tick, *self._codes, self._head, self._nxt,
+                               claim, x, y, z, heading, pitch)
+            finally:
+                index_clear3(moving, view.x, view.y, view.z, r, w, self._head)
+            return Decisions(tick=tick, ids=ids, claim=claim, x=x, y=y, heading=heading, z=z, pitch=pitch)
         index_build(moving, view.x, view.y, r, w, self._head, self._nxt)
         try:
             decide_kernel(ids, view.x, view.y, view.heading, view.state, self._shape, self._wall, view.frontier,

@@ -21,6 +21,13 @@ A shape must be non-empty, lie inside the world with at least one free patch bet
 it and the wall ring (so robots can go round it), be one 8-connected component (growth
 spreads to the 8 neighbours of localized robots, so a second component could never be
 reached), and hold a 2 x 2 block for the four seed robots.
+
+Three dimensions
+----------------
+A layered text grid or a triangle mesh (:mod:`swarm_ros.core.voxels`) is a 3D shape: it
+is placed in a cubic world of the same radius, by the same centring rule along z (layer
+``l`` of ``d`` goes to ``z = (d - 1 - l) - (d - 1) // 2``), must be one 26-connected
+component and hold a seed corner: a voxel and its +x, +y and +z neighbours.
 """
 
 from __future__ import annotations
@@ -34,13 +41,25 @@ import numpy as np
 from swarm_ros.core.errors import ShapeError
 from swarm_ros.core.grid import World
 from swarm_ros.core.resources import data_dir
+from swarm_ros.core.voxels import (
+    LAYER_SEPARATOR,
+    MESH_SUFFIXES,
+    euler_characteristic,
+    is_separator,
+    read_mesh,
+    split_layers,
+    stack_layers,
+)
+
+#: Growth's and the empty space's connectivity in a grid of each dimension: (shape, empty).
+CONNECTIVITY = {2: (8, 4), 3: (26, 6)}
 
 
 def regions(mask: np.ndarray, connectivity: int) -> tuple[np.ndarray, int]:
-    """The connected regions of a 2-D bool grid: labels (0 where unset, 1..n) and n.
+    """The connected regions of a 2-D or 3-D bool grid: labels (0 where unset, 1..n) and n.
 
-    ``connectivity`` is 4 (edge neighbours) or 8 (and corners). Computed by ``cc3d``, which
-    imports in milliseconds where ``scipy.ndimage`` costs every node process 0.3 s of CPU.
+    ``connectivity`` is 4 (edge neighbours) or 8 (and corners); in 3D 6, 18 or 26. Computed by
+    ``cc3d``, which imports in milliseconds where ``scipy.ndimage`` costs every node process 0.3 s of CPU.
     """
     # a uint8 copy: cc3d refuses read-only buffers, and 4.1.1 mislabels bool grids with connectivity 8
     writable = np.array(mask, dtype=np.uint8, order="C")
@@ -54,12 +73,18 @@ COMMENT_CHAR = ";"
 
 
 def builtin_shapes() -> dict[str, Path]:
-    """Built-in shape names mapped to their text files, sorted by name."""
+    """Built-in 2D shape names mapped to their text files, sorted by name."""
     return {p.stem: p for p in sorted(data_dir("shapes").glob("*.txt"))}
 
 
+def builtin_shapes_3d() -> dict[str, Path]:
+    """Built-in 3D shape names mapped to their layered text files (``shapes/3d``), sorted by name."""
+    return {p.stem: p for p in sorted((data_dir("shapes") / "3d").glob("*.txt"))}
+
+
 def read_text_grid(path: Path) -> np.ndarray:
-    """Read a text grid into a boolean ``(rows, cols)`` array, top row first.
+    """Read a text grid into a boolean ``(rows, cols)`` array, top row first; a layered text grid
+    (:mod:`swarm_ros.core.voxels`) into ``(layers, rows, cols)``, top layer first.
 
     Raises:
         ShapeError: unreadable file, stray characters, ragged or missing rows.
@@ -76,6 +101,14 @@ def read_text_grid(path: Path) -> np.ndarray:
         if line.startswith(COMMENT_CHAR):
             continue
         rows.append((number, line))
+    if any(is_separator(line) for _, line in rows):
+        return stack_layers(path, [_grid_rows(path, layer) for layer in split_layers(rows)])
+    return _grid_rows(path, rows)
+
+
+def _grid_rows(path: Path, rows: list[tuple[int, str]]) -> np.ndarray:
+    """One grid from its numbered lines (comments removed): ``(rows, cols)``, top row first."""
+    rows = list(rows)
     while rows and not rows[0][1]:
         rows.pop(0)
     while rows and not rows[-1][1]:
@@ -117,20 +150,29 @@ def read_png_grid(path: Path) -> np.ndarray:
 
 
 def write_text_grid(grid: np.ndarray, path: Path, comments: list[str] | tuple[str, ...] = ()) -> None:
-    """Write a boolean ``(rows, cols)`` grid (top row first) as a text shape file."""
+    """Write a boolean ``(rows, cols)`` grid (top row first) as a text shape file, or a
+    ``(layers, rows, cols)`` one (top layer first) as a layered text grid."""
     lines = [f"{COMMENT_CHAR} {c}" for c in comments]
-    lines += ["".join(SHAPE_CHAR if v else EMPTY_CHAR for v in row) for row in grid]
+    layers = grid if grid.ndim == 3 else [grid]
+    for k, layer in enumerate(layers):
+        if k:
+            lines.append(LAYER_SEPARATOR * 3)
+        lines += ["".join(SHAPE_CHAR if v else EMPTY_CHAR for v in row) for row in layer]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
-def read_grid(path: Path) -> np.ndarray:
-    """Read a shape file by its extension: ``.png`` as an image, anything else as a text grid."""
+def read_grid(path: Path, mesh_scale: float = 1.0) -> np.ndarray:
+    """Read a shape file by its extension: ``.png`` as an image, ``.stl``, ``.obj`` and ``.ply`` as
+    a mesh voxelized at ``mesh_scale`` voxels per mesh unit, anything else as a text grid."""
     if path.is_dir():
-        raise ShapeError(f"{path}: is a directory, not a shape file (a .txt grid or a .png image)")
+        raise ShapeError(f"{path}: is a directory, not a shape file (a .txt grid, a .png image or a mesh)")
     if not path.is_file():
         raise ShapeError(f"{path}: no such shape file")
-    if path.suffix.lower() == ".png":
+    suffix = path.suffix.lower()
+    if suffix == ".png":
         return read_png_grid(path)
+    if suffix in MESH_SUFFIXES:
+        return read_mesh(path, mesh_scale)
     return read_text_grid(path)
 
 
@@ -140,7 +182,8 @@ class Shape:
 
     Attributes:
         name: short name (built-in name or the file's stem).
-        mask: boolean ``(W, W)`` world grid, ``mask[iy, ix]``; True on shape patches.
+        mask: boolean ``(W, W)`` world grid, ``mask[iy, ix]`` (3D: ``(W, W, W)``, ``mask[iz, iy, ix]``);
+            True on shape patches.
         world: the world the shape is placed in.
         source: where it came from (a file path, or a description).
     """
@@ -153,9 +196,8 @@ class Shape:
 
     def __post_init__(self) -> None:
         mask = np.asarray(self.mask, dtype=bool)
-        size = self.world.size
-        if mask.shape != (size, size):
-            raise ShapeError(f"{self.source}: mask is {mask.shape}, the world needs {(size, size)}")
+        if mask.shape != self.world.grid_shape:
+            raise ShapeError(f"{self.source}: mask is {mask.shape}, the world needs {self.world.grid_shape}")
         mask = mask.copy()
         mask.setflags(write=False)
         object.__setattr__(self, "mask", mask)
@@ -165,38 +207,52 @@ class Shape:
     # -- construction -----------------------------------------------------------
     @classmethod
     def from_grid(cls, grid: np.ndarray, world: World, name: str, source: str) -> Shape:
-        """Place a file grid (top row first) in ``world`` by the centring rule and validate it."""
+        """Place a file grid (top row first; a 3D grid top layer first) in a world of ``world``'s radius
+        and the grid's dimensions, by the centring rule, and validate it."""
         grid = np.asarray(grid, dtype=bool)
-        if grid.ndim != 2 or grid.size == 0 or not grid.any():
+        if grid.ndim not in (2, 3) or grid.size == 0 or not grid.any():
             raise ShapeError(f"{source}: empty shape (no shape patches)")
-        h, w = grid.shape
-        rows, cols = np.nonzero(grid)
-        xs = cols - (w - 1) // 2
-        ys = (h - 1 - rows) - (h - 1) // 2
+        world = World(world.radius, grid.ndim)
         r = world.radius
-        beyond = (np.abs(xs) > r) | (np.abs(ys) > r)
+        index = np.nonzero(grid)  # (rows, cols) or (layers, rows, cols)
+        coords = [index[-1] - (grid.shape[-1] - 1) // 2]  # x from the column
+        for axis in range(grid.ndim - 2, -1, -1):  # y from the row, z from the layer: the first one is the top
+            n = grid.shape[axis]
+            coords.append((n - 1 - index[axis]) - (n - 1) // 2)
+        beyond = np.zeros(coords[0].size, dtype=bool)
+        for c in coords:
+            beyond |= np.abs(c) > r
         if beyond.any():
             k = int(np.argmax(beyond))
+            at = ", ".join(str(c[k]) for c in coords)
+            size = " x ".join(str(n) for n in reversed(grid.shape))
             raise ShapeError(
-                f"{source}: shape reaches beyond the walls of the {world.size} x {world.size} world "
-                f"at patch ({xs[k]}, {ys[k]}); the grid is {w} x {h}"
+                f"{source}: shape reaches beyond the walls of the {world.describe()} world "
+                f"at patch ({at}); the grid is {size}"
             )
-        mask = np.zeros((world.size, world.size), dtype=bool)
-        mask[ys + r, xs + r] = True
+        mask = np.zeros(world.grid_shape, dtype=bool)
+        mask[tuple(c + r for c in reversed(coords))] = True
         return cls(name=name, mask=mask, world=world, source=source)
 
     @classmethod
-    def load(cls, name_or_path: str | Path, world: World | None = None) -> Shape:
-        """Load a built-in shape by name, or a shape file (text grid or PNG) by path.
+    def load(cls, name_or_path: str | Path, world: World | None = None, mesh_scale: float = 1.0) -> Shape:
+        """Load a built-in shape by name, or a shape file (text grid, PNG, layered text grid or mesh) by path.
+
+        ``world`` gives the radius; a 3D shape goes into a cubic world of that radius.
+        ``mesh_scale`` (voxels per mesh unit) applies to meshes only.
 
         Raises:
             ShapeError: unknown name, unreadable file or invalid shape; the message names the file.
         """
         world = world or World()
         text = str(name_or_path)
-        builtins = builtin_shapes()
+        builtins = {**builtin_shapes(), **builtin_shapes_3d()}
         if not text.strip():
-            raise ShapeError(f"the shape name is empty (built-in: {', '.join(builtins)}; or a .txt / .png file)")
+            raise ShapeError(f"the shape name is empty (built-in: {', '.join(builtins)}; or a .txt / .png file "
+                             f"or a mesh)")
+        if mesh_scale != 1.0 and Path(text).suffix.lower() not in MESH_SUFFIXES:
+            raise ShapeError(f"{text}: mesh_scale applies to mesh shapes (.stl, .obj, .ply) only, got "
+                             f"{mesh_scale:g}")
         if text in builtins:
             path = builtins[text]
             name = text
@@ -207,7 +263,7 @@ class Shape:
                 raise ShapeError(
                     f"{text}: no such shape file or built-in shape (built-in: {', '.join(builtins)})"
                 )
-        return cls.from_grid(read_grid(path), world, name=name, source=str(path))
+        return cls.from_grid(read_grid(path, mesh_scale), world, name=name, source=str(path))
 
     # -- properties -------------------------------------------------------------
     @property
@@ -216,23 +272,43 @@ class Shape:
         return int(np.count_nonzero(self.mask))
 
     @property
-    def bbox(self) -> tuple[int, int, int, int]:
-        """Bounding box ``(xmin, ymin, xmax, ymax)`` in patch coordinates."""
-        iy, ix = np.nonzero(self.mask)
-        r = self.world.radius
-        return int(ix.min() - r), int(iy.min() - r), int(ix.max() - r), int(iy.max() - r)
+    def dims(self) -> int:
+        return self.world.dims
+
+    @property
+    def bbox(self) -> tuple[int, ...]:
+        """Bounding box ``(xmin, ymin, xmax, ymax)`` in patch coordinates
+        (3D: ``(xmin, ymin, zmin, xmax, ymax, zmax)``)."""
+        coords = self.world.patch_coords(np.flatnonzero(self.mask))
+        return (*(int(c.min()) for c in coords), *(int(c.max()) for c in coords))
+
+    @property
+    def cavities(self) -> int:
+        """Regions of non-shape patches enclosed by the shape (4-connected; 3D: 6-connected): a 2D
+        shape's holes, a 3D shape's closed cavities."""
+        labels, count = regions(~self.mask, connectivity=CONNECTIVITY[self.dims][1])
+        border = np.unique(np.concatenate([np.moveaxis(labels, axis, 0)[end].ravel()
+                                           for axis in range(labels.ndim) for end in (0, -1)]))
+        return int(count - np.count_nonzero(border))
+
+    @property
+    def tunnels(self) -> int:
+        """Tunnels through a 3D shape (a torus has 1): the shape's first Betti number, from its Euler
+        characteristic, ``1 + cavities - chi`` (one component). A 2D shape's holes are its cavities: 0."""
+        if self.dims == 2:
+            return 0
+        return 1 + self.cavities - euler_characteristic(self.mask)
 
     @property
     def holes(self) -> int:
-        """Number of holes: 4-connected regions of non-shape patches enclosed by the shape."""
-        labels, count = regions(~self.mask, connectivity=4)
-        border = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-        return int(count - np.count_nonzero(border))
+        """Number of holes: 4-connected regions of non-shape patches enclosed by the shape; in 3D,
+        tunnels plus cavities."""
+        return self.cavities + self.tunnels
 
     @property
     def free_patches(self) -> int:
         """Patches a robot may stand on at the start: every non-wall patch."""
-        return (self.world.size - 2) ** 2
+        return (self.world.size - 2) ** self.dims
 
     # -- validation -------------------------------------------------------------
     def _validate(self) -> None:
@@ -240,23 +316,26 @@ class Shape:
         if not mask.any():
             raise ShapeError(f"{src}: empty shape (no shape patches)")
         inner = np.zeros_like(mask)
-        inner[2:-2, 2:-2] = True
+        inner[(slice(2, -2),) * world.dims] = True
         touching = mask & ~inner
         if touching.any():
-            iy, ix = np.argwhere(touching)[0]
-            r = world.radius
+            at = world.patch_coords(int(np.flatnonzero(touching)[0]))
+            axes = ", ".join(f"|{a}|" for a in "xyz"[:world.dims])
             raise ShapeError(
-                f"{src}: shape touches the wall of the {world.size} x {world.size} world at patch "
-                f"({ix - r}, {iy - r}); keep shape patches within |x|, |y| <= {r - 2}"
+                f"{src}: shape touches the wall of the {world.describe()} world at patch "
+                f"({', '.join(str(int(c)) for c in at)}); keep shape patches within {axes} <= {world.radius - 2}"
             )
-        count = regions(mask, connectivity=8)[1]
+        connectivity = CONNECTIVITY[world.dims][0]
+        count = regions(mask, connectivity=connectivity)[1]
         if count > 1:
             raise ShapeError(
-                f"{src}: shape has {count} separate parts (8-connected); growth from the seeds "
+                f"{src}: shape has {count} separate parts ({connectivity}-connected); growth from the seeds "
                 "can only fill one connected part"
             )
 
     def _find_seed_block(self) -> np.ndarray:
+        if self.dims == 3:
+            return self._find_seed_corner()
         m = self.mask
         block = m[:-1, :-1] & m[:-1, 1:] & m[1:, :-1] & m[1:, 1:]
         iy, ix = np.nonzero(block)
@@ -269,3 +348,20 @@ class Shape:
         k = np.lexsort((px, py, d2))[0]
         x0, y0 = int(px[k]), int(py[k])
         return np.array([[x0, y0], [x0 + 1, y0], [x0, y0 + 1], [x0 + 1, y0 + 1]], dtype=np.int64)
+
+    def _find_seed_corner(self) -> np.ndarray:
+        """3D seeds: a voxel and its +x, +y and +z neighbours, the four points that fix a 3D frame (an origin
+        and three axes; a flat 2 x 2 block would not), with the corner's centroid nearest the origin,
+        ties to lower z, then y, then x."""
+        m = self.mask
+        corner = m[:-1, :-1, :-1] & m[:-1, :-1, 1:] & m[:-1, 1:, :-1] & m[1:, :-1, :-1]
+        iz, iy, ix = np.nonzero(corner)
+        if iz.size == 0:
+            raise ShapeError(f"{self.source}: shape has no corner of four voxels (a voxel and its +x, +y and +z "
+                             "neighbours) for the four seed robots")
+        r = self.world.radius
+        px, py, pz = ix - r, iy - r, iz - r
+        d2 = (4 * px + 1) ** 2 + (4 * py + 1) ** 2 + (4 * pz + 1) ** 2  # centroid (p + 1/4) in quarters
+        k = np.lexsort((px, py, pz, d2))[0]
+        x0, y0, z0 = int(px[k]), int(py[k]), int(pz[k])
+        return np.array([[x0, y0, z0], [x0 + 1, y0, z0], [x0, y0 + 1, z0], [x0, y0, z0 + 1]], dtype=np.int64)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, fields
 from enum import IntEnum
@@ -9,7 +10,14 @@ from enum import IntEnum
 import numpy as np
 
 from swarm_ros.core.errors import ParameterError
-from swarm_ros.core.rng import STREAM_PLACE_HEADING, STREAM_PLACE_X, STREAM_PLACE_Y, uniform_array
+from swarm_ros.core.rng import (
+    STREAM_PLACE_HEADING,
+    STREAM_PLACE_PITCH,
+    STREAM_PLACE_X,
+    STREAM_PLACE_Y,
+    STREAM_PLACE_Z,
+    uniform_array,
+)
 from swarm_ros.core.shapes import Shape
 
 NO_ROBOT = -1  #: occupancy value of a patch without a localized robot
@@ -62,6 +70,9 @@ class SwarmState:
         frontier_blocks: frontier patches per block of ``FRONTIER_BLOCK`` x ``FRONTIER_BLOCK``
             patches (int32, (B*B + 1,), blocks row by row from the world's bottom-left corner),
             the last entry the total; kept in step with ``frontier`` (:func:`frontier_blocks_of`).
+        z, pitch: (3D worlds only; None in 2D) the z position in patches, and the heading's
+            elevation in radians, in [-pi/2, pi/2]: a robot faces
+            ``(cos pitch cos heading, cos pitch sin heading, sin pitch)``.
         tick: the tick this state is the end of (0 = initial placement).
     """
 
@@ -72,6 +83,8 @@ class SwarmState:
     occupancy: np.ndarray
     frontier: np.ndarray
     frontier_blocks: np.ndarray
+    z: np.ndarray | None = None
+    pitch: np.ndarray | None = None
     tick: int = 0
 
     @property
@@ -79,8 +92,12 @@ class SwarmState:
         return int(self.x.size)
 
     def copy(self) -> SwarmState:
-        return SwarmState(**{f.name: (getattr(self, f.name).copy() if f.name != "tick" else self.tick)
-                             for f in fields(self)})
+        return SwarmState(**{f.name: (getattr(self, f.name).copy() if isinstance(getattr(self, f.name), np.ndarray)
+                                      else getattr(self, f.name)) for f in fields(self)})
+
+    @property
+    def dims(self) -> int:
+        return 2 if self.z is None else 3
 
     def counts(self) -> np.ndarray:
         """Robots per :class:`RobotState` code (int64, (STATE_COUNT,))."""
@@ -93,43 +110,43 @@ class SwarmState:
 
 def frontier_of(shape: Shape, occupancy: np.ndarray) -> np.ndarray:
     """Recompute the frontier grid (flat bool) from scratch: empty shape patches next to a localized robot."""
-    w = shape.world.size
-    occupied = (occupancy >= 0).reshape(w, w)
+    occupied = (occupancy >= 0).reshape(shape.mask.shape)
     return (shape.mask & ~occupied & near_any(occupied)).ravel()
 
 
 def near_any(grid: np.ndarray) -> np.ndarray:
-    """Cells of a 2-D bool grid that are set or have a set 8-neighbour (a 3 x 3 binary dilation).
+    """Cells of a 2-D (3-D) bool grid that are set or have a set 8-neighbour (26-neighbour): a
+    3 x 3 (x 3) binary dilation.
 
-    Nine slices of the zero-padded grid, ORed: the same as ``scipy.ndimage.binary_dilation``
-    with a 3 x 3 structure (a test checks it), without the 0.3 s of CPU it takes every node
+    Nine (27) slices of the zero-padded grid, ORed: the same as ``scipy.ndimage.binary_dilation``
+    with a full 3 x 3 structure (a test checks it), without the 0.3 s of CPU it takes every node
     process to import ``scipy.ndimage``.
     """
-    h, w = grid.shape
     padded = np.pad(grid, 1)
     near = np.zeros_like(grid)
-    for dy in range(3):
-        for dx in range(3):
-            near |= padded[dy:dy + h, dx:dx + w]
+    for shift in itertools.product(range(3), repeat=grid.ndim):
+        near |= padded[tuple(slice(d, d + n) for d, n in zip(shift, grid.shape))]
     return near
 
 
-def frontier_blocks_of(frontier: np.ndarray, size: int) -> np.ndarray:
-    """Frontier patches per ``FRONTIER_BLOCK``-sided block of a ``size`` x ``size`` flat grid, then the total."""
+def frontier_blocks_of(frontier: np.ndarray, size: int, dims: int = 2) -> np.ndarray:
+    """Frontier patches per ``FRONTIER_BLOCK``-sided block (cube in 3D) of a flat grid ``size`` patches
+    a side, blocks in flat order from the world's low corner, then the total."""
     b = FRONTIER_BLOCK
     nb = -(-size // b)
-    grid = np.zeros((nb * b, nb * b), dtype=np.int32)
-    grid[:size, :size] = frontier.reshape(size, size)
-    counts = grid.reshape(nb, b, nb, b).sum(axis=(1, 3)).ravel()
+    grid = np.zeros((nb * b,) * dims, dtype=np.int32)
+    grid[(slice(0, size),) * dims] = frontier.reshape((size,) * dims)
+    counts = grid.reshape((nb, b) * dims).sum(axis=tuple(range(1, 2 * dims, 2))).ravel()
     return np.append(counts, counts.sum()).astype(np.int32)
 
 
 def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
-    """Tick 0: seeds on their 2 x 2 block (ids 0-3), everyone else on distinct random free patches.
+    """Tick 0: seeds on their 2 x 2 block (3D: their corner of four voxels; ids 0-3), everyone else on
+    distinct random free patches.
 
     Robots 4..N-1 each get a different non-wall, non-seed patch drawn without
     replacement from the run seed, a uniform offset within that patch and a uniform
-    heading, both from the robot's own stream at tick 0.
+    heading (3D: a direction uniform on the sphere), both from the robot's own stream at tick 0.
 
     Raises:
         ParameterError: fewer than 4 robots, or more robots than free patches.
@@ -140,34 +157,41 @@ def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
     if robots > shape.free_patches:
         raise ParameterError(
             f"{shape.source}: {robots} robots do not fit on the {shape.free_patches} free patches "
-            f"of the {world.size} x {world.size} world"
+            f"of the {world.describe()} world"
         )
-    w = world.size
     seeds = shape.seed_patches
-    seed_flat = world.flat_index(seeds[:, 0], seeds[:, 1])
+    seed_flat = world.flat_of(*seeds.T)
     free = ~world.wall_mask().ravel()
     free[seed_flat] = False
     candidates = np.flatnonzero(free)
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, 0x5EED])))
     chosen = rng.choice(candidates, size=robots - 4, replace=False)
-    px, py = world.patch_xy(chosen)
+    coords = world.patch_coords(chosen)
 
     ids = np.arange(4, robots, dtype=np.int64)
-    x = np.empty(robots)
-    y = np.empty(robots)
+    position = []
+    for axis, stream in enumerate((STREAM_PLACE_X, STREAM_PLACE_Y, STREAM_PLACE_Z)[:world.dims]):
+        c = np.empty(robots)
+        c[:4] = seeds[:, axis]
+        c[4:] = coords[axis] + (uniform_array(seed, ids, 0, stream) - 0.5)
+        position.append(c)
     heading = np.empty(robots)
-    x[:4], y[:4], heading[:4] = seeds[:, 0], seeds[:, 1], 0.0
-    x[4:] = px + (uniform_array(seed, ids, 0, STREAM_PLACE_X) - 0.5)
-    y[4:] = py + (uniform_array(seed, ids, 0, STREAM_PLACE_Y) - 0.5)
+    heading[:4] = 0.0
     heading[4:] = 2.0 * math.pi * uniform_array(seed, ids, 0, STREAM_PLACE_HEADING)
+    extra = {}
+    if world.dims == 3:  # a direction uniform on the sphere: sin(pitch) uniform in [-1, 1)
+        pitch = np.zeros(robots)
+        pitch[4:] = np.arcsin(2.0 * uniform_array(seed, ids, 0, STREAM_PLACE_PITCH) - 1.0)
+        extra = {"z": position[2], "pitch": pitch}
 
     state = np.empty(robots, dtype=np.int8)
     state[:4] = RobotState.SEED
     on_shape = shape.mask.ravel()[chosen]
     state[4:] = np.where(on_shape, RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE)
 
-    occupancy = np.full(w * w, -1, dtype=np.int32)
+    occupancy = np.full(world.patch_count, -1, dtype=np.int32)
     occupancy[seed_flat] = np.arange(4, dtype=np.int32)
     frontier = frontier_of(shape, occupancy)
-    return SwarmState(x=x, y=y, heading=heading, state=state, occupancy=occupancy, frontier=frontier,
-                      frontier_blocks=frontier_blocks_of(frontier, w), tick=0)
+    return SwarmState(x=position[0], y=position[1], heading=heading, state=state, occupancy=occupancy,
+                      frontier=frontier, frontier_blocks=frontier_blocks_of(frontier, world.size, world.dims),
+                      tick=0, **extra)
