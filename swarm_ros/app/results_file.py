@@ -21,7 +21,7 @@ REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied 
 _AFTER = {"shape": ("shape_file",), "steps": ("repetition",), "seed": ("shape_patches",)}
 #: One row of results.csv: the run's coordinates (every run parameter, in its declaration's order), then the
 #: summary.json fields of its outcome.
-RESULT_COLUMNS = (*(c for p in RUN_PARAMETERS for c in (p.name, *_AFTER.get(p.name, ()))),
+RESULT_COLUMNS = (*(c for p in RUN_PARAMETERS if p.recorded for c in (p.name, *_AFTER.get(p.name, ()))),
                   "engine", "outcome", "convergence_tick", "localized", "unlocalized", "separated", "empty_patches",
                   "lost_robots", "convergence_rate", "wall_seconds")
 _INT_COLUMNS = {"repetition", "shape_patches", "convergence_tick", "localized", "unlocalized", "separated",

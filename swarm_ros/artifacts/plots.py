@@ -29,7 +29,11 @@ _SEPARATED_COLOUR = "#cc79a7"
 
 
 def save_final_png(run: RunRecord, path: Path) -> None:
-    """The formed shape: walls, shape patches, localized robots, seeds and left-over robots."""
+    """The formed shape: walls, shape patches, localized robots, seeds and left-over robots (a 3D run:
+    :func:`save_final_png_3d`)."""
+    if run.shape.dims == 3:
+        save_final_png_3d(run, path)
+        return
     world, s = run.shape.world, run.state
     r = world.radius
     grid = np.zeros((world.size, world.size), dtype=np.int8)
@@ -59,6 +63,60 @@ def save_final_png(run: RunRecord, path: Path) -> None:
     ax.set_aspect("equal")
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, fontsize=8, frameon=False)
     fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+# The three views of a 3D run's final.png: (title, axis projected away, horizontal and vertical axes).
+_VIEWS_3D = (("from above (along z)", 0, "x", "y"), ("from the front (along y)", 1, "x", "z"),
+             ("from the side (along x)", 2, "y", "z"))
+
+
+def save_final_png_3d(run: RunRecord, path: Path) -> None:
+    """A 3D run's formed shape as three projections, from above, the front and the side.
+
+    Each cell of a view is a line of voxels through the world: white if the line meets no
+    shape voxel, else coloured by the fraction of its shape voxels that are filled (a
+    localized robot or a seed on them), so an empty voxel anywhere along a line shows. The
+    left-over robots are drawn where they stand, projected. The views are zoomed to the shape
+    and 3 voxels round it: the legend counts every robot, including any beyond the view.
+    """
+    world, s, shape = run.shape.world, run.state, run.shape
+    r = world.radius
+    filled = (s.occupancy >= 0).reshape(world.grid_shape)  # [iz, iy, ix]
+    position = {"x": s.x, "y": s.y, "z": s.z}
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, 5.0), dpi=110, layout="constrained")
+    image = None
+    for ax, (title, axis, across, up) in zip(axes, _VIEWS_3D):
+        total = shape.mask.sum(axis=axis)
+        done = filled.sum(axis=axis)
+        fraction = np.where(total > 0, done / np.maximum(total, 1), np.nan)
+        image = ax.imshow(fraction, origin="lower", cmap="cividis", vmin=0.0, vmax=1.0, interpolation="nearest",
+                          extent=(-r - 0.5, r + 0.5, -r - 0.5, r + 0.5))
+        lo, hi = shape.bbox[:3], shape.bbox[3:]  # zoomed to the shape, 3 voxels round it
+        a, u = "xyz".index(across), "xyz".index(up)
+        ax.set_xlim(lo[a] - 3.5, hi[a] + 3.5)
+        ax.set_ylim(lo[u] - 3.5, hi[u] + 3.5)
+        for state, colour in ((RobotState.MOVING_INSIDE, _MOVING_COLOUR), (RobotState.MOVING_OUTSIDE, _MOVING_COLOUR),
+                              (RobotState.WALKING, _WALKING_COLOUR), (RobotState.SEPARATED, _SEPARATED_COLOUR)):
+            mask = s.state == state
+            if mask.any():
+                ax.scatter(position[across][mask], position[up][mask], s=6, c=colour, linewidths=0, zorder=3)
+        ax.set_title(title, fontsize=10)
+        ax.set_xlabel(f"{across} (voxels)")
+        ax.set_ylabel(f"{up} (voxels)")
+        ax.set_aspect("equal")
+    fig.colorbar(image, ax=list(axes), shrink=0.8, label="filled fraction of the shape voxels along the line")
+    handles = [Patch(facecolor=c, label=f"{label} ({int(np.isin(s.state, states).sum())})")
+               for label, c, states in (("wandering robot", _MOVING_COLOUR,
+                                         (RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE)),
+                                        ("walking robot", _WALKING_COLOUR, (RobotState.WALKING,)),
+                                        ("separated robot", _SEPARATED_COLOUR, (RobotState.SEPARATED,)))]
+    m, p = run.final, run.params
+    fig.suptitle(f"{shape.name} (3D): {run.outcome} at tick {m.tick}; {p.robots} robots, rules {p.ruleset.label}, "
+                 f"vision {p.vision_radius:g}, seed {p.seed}; {m.localized}/{shape.patches} voxels filled",
+                 fontsize=11)
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.savefig(path)
     plt.close(fig)
 

@@ -14,6 +14,10 @@ the same data. What is logged, on one timeline ``tick`` (sequence):
 ``events``                    :class:`rerun.TextLog`: the outcome, at the final tick; restarts
 ``run`` (static)              :class:`rerun.TextDocument`: the run's parameters, rule set included
 
+A 3D run logs the same entities in 3D, shown in a 3D view: ``world/map`` is a static
+:class:`rerun.Boxes3D` of the shape's voxels (and one box for the walls' inside), ``world/occupancy``
+Boxes3D of the filled voxels, ``world/robots`` :class:`rerun.Points3D`.
+
 One :class:`rerun.AnnotationContext` on ``world`` names and colours the robot states
 and the patch classes. Robots (and occupancy) can be logged every k-th tick only
 (``every``) for very large runs; the final tick and the metrics are always logged.
@@ -76,11 +80,12 @@ _SERIES_COLOURS = {
 _ROBOT_RADIUS = 0.35  # patches
 
 
-def blueprint() -> rrb.Blueprint:
-    """The default layout: the world beside the convergence plot, the outcome below it."""
+def blueprint(dims: int = 2) -> rrb.Blueprint:
+    """The default layout: the world (a 2D or 3D view) beside the convergence plot, the outcome below it."""
+    view = rrb.Spatial2DView if dims == 2 else rrb.Spatial3DView
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial2DView(name="world", origin="/", contents=[f"{WORLD}/**"]),
+            view(name="world", origin="/", contents=[f"{WORLD}/**"]),
             rrb.Vertical(
                 rrb.TimeSeriesView(name="convergence", origin=METRICS),
                 rrb.TextLogView(name="events", origin=EVENTS),
@@ -119,6 +124,7 @@ class Recorder:
             raise ValueError(f"every must be >= 1, got {every}")
         self.path, self.every = path, every
         self._world = shape.world
+        self._solid = shape.world.dims == 3
         self._robot_ticks: list[int] = []
         self._positions: list[np.ndarray] = []
         self._classes: list[np.ndarray] = []
@@ -139,7 +145,7 @@ class Recorder:
             connect = connect or spawn_viewer()
         if connect:
             sinks.append(rr.GrpcSink(connect))
-        self.rec.set_sinks(*sinks, default_blueprint=blueprint())
+        self.rec.set_sinks(*sinks, default_blueprint=blueprint(shape.world.dims))
         self._log_static(shape, params)
 
     # -- logging ----------------------------------------------------------------
@@ -154,15 +160,21 @@ class Recorder:
             return
         self._last_robot_tick = tick
         self._robot_ticks.append(tick)
-        xy = np.empty((state.x.size, 2), dtype=np.float32)
-        xy[:, 0], xy[:, 1] = state.x, state.y
+        axes = (state.x, state.y, state.z) if self._solid else (state.x, state.y)
+        xy = np.empty((state.x.size, len(axes)), dtype=np.float32)
+        for k, a in enumerate(axes):
+            xy[:, k] = a
         self._positions.append(xy)
         self._classes.append(state.state.astype(np.uint16))
         filled = state.occupancy >= 0
         if self._filled is None or not np.array_equal(filled, self._filled):
             self._filled = filled
             self._image_ticks.append(tick)
-            self._images.append(np.where(filled, FILLED, FREE).astype(np.uint8))
+            if self._solid:  # the filled voxels' centres
+                self._images.append(np.stack(self._world.patch_coords(np.flatnonzero(filled)), axis=1)
+                                    .astype(np.float32))
+            else:
+                self._images.append(np.where(filled, FILLED, FREE).astype(np.uint8))
         if len(self._robot_ticks) >= BATCH_TICKS:
             self._send_robot_columns()
 
@@ -220,6 +232,34 @@ class Recorder:
         classes = [rr.AnnotationInfo(id=int(k), label=label, color=colour)
                    for k, (label, colour) in {**_ROBOT_CLASSES, **_PATCH_CLASSES}.items()]
         rec.log(WORLD, rr.AnnotationContext(classes), static=True)
+        if self._solid:
+            self._log_static_3d(shape)
+        else:
+            self._log_static_2d(shape)
+        for name in SERIES:
+            rec.log(f"{METRICS}/{name}", rr.SeriesLines(names=name, colors=_SERIES_COLOURS[name], widths=1.5),
+                    static=True)
+        lines = [f"# {shape.name}", "", "| parameter | value |", "|---|---|",
+                 f"| shape patches | {shape.patches} |", f"| world | {world.describe()} patches |"]
+        lines += [f"| {key} | {value} |" for key, value in params.as_dict().items()]
+        lines += [f"| rule set in force | {params.ruleset.label} |"]
+        lines += [f"| robots logged | every {self.every} tick(s) |"]
+        rec.log(RUN_INFO, rr.TextDocument("\n".join(lines) + "\n", media_type=rr.MediaType.MARKDOWN), static=True)
+
+    def _log_static_3d(self, shape: Shape) -> None:
+        """The shape's voxels as wire boxes, the walls' inside as one box; filled voxels and robots on top."""
+        rec, world = self.rec, self._world
+        centres = np.stack(world.patch_coords(np.flatnonzero(shape.mask)), axis=1).astype(np.float32)
+        rec.log(MAP, rr.Boxes3D(centers=centres, half_sizes=[0.5, 0.5, 0.5], class_ids=SHAPE_PATCH,
+                                fill_mode="majorwireframe"), static=True)
+        rec.log(f"{MAP}/walls", rr.Boxes3D(centers=[0, 0, 0], half_sizes=[world.radius - 0.5] * 3, class_ids=WALL),
+                static=True)
+        rec.log(OCCUPANCY, rr.Boxes3D.from_fields(half_sizes=[0.45, 0.45, 0.45], class_ids=FILLED, fill_mode="solid"),
+                static=True)
+        rec.log(ROBOTS, rr.Points3D.from_fields(radii=_ROBOT_RADIUS), static=True)
+
+    def _log_static_2d(self, shape: Shape) -> None:
+        rec, world = self.rec, self._world
         # Shown with +y up: the 2D view's y axis points down.
         rec.log(WORLD, rr.Transform3D(mat3x3=[[1, 0, 0], [0, -1, 0], [0, 0, 1]]), static=True)
         # Pixel (ix, iy) of a grid[iy, ix] image covers [ix, ix+1] x [iy, iy+1]; move its centre onto patch (px, py).
@@ -234,28 +274,25 @@ class Recorder:
             format=rr.components.ImageFormat(width=world.size, height=world.size, channel_datatype="U8"),
             draw_order=1.0), static=True)
         rec.log(ROBOTS, rr.Points2D.from_fields(radii=_ROBOT_RADIUS, draw_order=2.0), static=True)
-        for name in SERIES:
-            rec.log(f"{METRICS}/{name}", rr.SeriesLines(names=name, colors=_SERIES_COLOURS[name], widths=1.5),
-                    static=True)
-        lines = [f"# {shape.name}", "", "| parameter | value |", "|---|---|",
-                 f"| shape patches | {shape.patches} |", f"| world | {world.size} x {world.size} patches |"]
-        lines += [f"| {key} | {value} |" for key, value in params.as_dict().items()]
-        lines += [f"| rule set in force | {params.ruleset.label} |"]
-        lines += [f"| robots logged | every {self.every} tick(s) |"]
-        rec.log(RUN_INFO, rr.TextDocument("\n".join(lines) + "\n", media_type=rr.MediaType.MARKDOWN), static=True)
 
     def _send_robot_columns(self) -> None:
         if not self._robot_ticks:
             return
         lengths = [p.shape[0] for p in self._positions]
-        columns = rr.Points2D.columns(positions=np.concatenate(self._positions),
-                                      class_ids=np.concatenate(self._classes)).partition(lengths)
+        points = rr.Points3D if self._solid else rr.Points2D
+        columns = points.columns(positions=np.concatenate(self._positions),
+                                 class_ids=np.concatenate(self._classes)).partition(lengths)
         self.rec.send_columns(ROBOTS, indexes=[rr.TimeColumn(TIMELINE, sequence=self._robot_ticks)],
                               columns=columns)
         self._robot_ticks, self._positions, self._classes = [], [], []
         if self._image_ticks:
+            if self._solid:
+                boxes = rr.Boxes3D.columns(centers=np.concatenate(self._images)).partition(
+                    [len(c) for c in self._images])
+            else:
+                boxes = rr.SegmentationImage.columns(buffer=self._images)
             self.rec.send_columns(OCCUPANCY, indexes=[rr.TimeColumn(TIMELINE, sequence=self._image_ticks)],
-                                  columns=rr.SegmentationImage.columns(buffer=self._images))
+                                  columns=boxes)
             self._image_ticks, self._images = [], []
 
     def _send_metric_columns(self) -> None:

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
 
 RUNS_DIR = Path("runs")
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
+FINAL_STATE_COLUMNS_3D = ("id", "x", "y", "z", "heading", "pitch", "state")  #: a 3D run's
 RECORDING_FILE = "recording.rrd"
 
 
@@ -126,6 +127,12 @@ def final_state_csv(s: SwarmState) -> str:
     from swarm_ros.core.state import RobotState
 
     labels = [st.label for st in RobotState]
+    if s.z is not None:
+        lines = [",".join(FINAL_STATE_COLUMNS_3D)]
+        for i, (x, y, z, h, p, st) in enumerate(zip(s.x.tolist(), s.y.tolist(), s.z.tolist(), s.heading.tolist(),
+                                                    s.pitch.tolist(), s.state.tolist())):
+            lines.append(f"{i},{x!r},{y!r},{z!r},{h!r},{p!r},{labels[st]}")
+        return "\n".join(lines) + "\n"
     lines = [",".join(FINAL_STATE_COLUMNS)]
     for i, (x, y, h, st) in enumerate(zip(s.x.tolist(), s.y.tolist(), s.heading.tolist(), s.state.tolist())):
         lines.append(f"{i},{x!r},{y!r},{h!r},{labels[st]}")

@@ -34,6 +34,15 @@ def _require(ok: bool, tick: int, rule: str) -> None:
         raise InvariantError(f"tick {tick}: {rule}")
 
 
+def coords(s: SwarmState) -> list[np.ndarray]:
+    """The robots' positions, one array per axis: [x, y], or [x, y, z] in 3D."""
+    return [s.x, s.y] if s.z is None else [s.x, s.y, s.z]
+
+
+def _distance(a: list[np.ndarray], b: list) -> np.ndarray:
+    return np.sqrt(sum((u - v) ** 2 for u, v in zip(a, b)))
+
+
 def shape_status(localized_on_shape: int, shape_patches: int) -> int:
     """0 empty, 1 partial, 2 complete."""
     return 0 if localized_on_shape == 0 else (2 if localized_on_shape == shape_patches else 1)
@@ -51,22 +60,23 @@ def check_state(sim: Simulation) -> None:
              and int(np.sum(s.state == RobotState.SEED)) == int(np.sum(seeds == RobotState.SEED)), t,
              "robots 0-3, and only they, are seeds (or removed)")
     # at most one localized robot per patch, only on shape patches
-    px, py = world.patch_of(s.x, s.y)
-    _require(bool(np.all((np.abs(px) < world.radius) & (np.abs(py) < world.radius))), t, "a robot is on a wall")
-    flat = world.flat_index(px, py)
+    position = coords(s)
+    cells = [np.floor(c + 0.5).astype(np.int64) for c in position]
+    _require(bool(np.all(np.max(np.abs(cells), axis=0) < world.radius)), t, "a robot is on a wall")
+    flat = world.flat_of(*cells)
     loc_ids = np.flatnonzero(localized)
     _require(np.unique(flat[loc_ids]).size == loc_ids.size, t, "two localized robots on one patch")
     _require(bool(np.all(shape.mask.ravel()[flat[loc_ids]])), t, "a localized robot is off the shape")
     occupied = np.flatnonzero(s.occupancy >= 0)
     _require(occupied.size == loc_ids.size, t, "occupancy count differs from localized robots")
     _require(bool(np.array_equal(s.occupancy[flat[loc_ids]], loc_ids)), t, "occupancy names the wrong robot")
-    _require(bool(np.all((s.x[loc_ids] == px[loc_ids]) & (s.y[loc_ids] == py[loc_ids]))), t,
+    _require(all(bool(np.all(c[loc_ids] == p[loc_ids])) for c, p in zip(position, cells)), t,
              "a localized robot is off its patch centre")
     alive = n - int(np.sum(s.state == RobotState.REMOVED))
     _require(alive == n - sim.removed, t, "removed robots miscounted")
     _require(loc_ids.size <= min(alive, patches), t, "#localized > min(N, shape patches)")
     _require(bool(np.array_equal(s.frontier, frontier_of(shape, s.occupancy))), t, "frontier out of date")
-    _require(bool(np.array_equal(s.frontier_blocks, frontier_blocks_of(s.frontier, world.size))), t,
+    _require(bool(np.array_equal(s.frontier_blocks, frontier_blocks_of(s.frontier, world.size, world.dims))), t,
              "frontier block counts out of date")
     _require(sim.params.join == "walk" or not np.any(s.state == RobotState.WALKING), t,
              "a robot walks, yet the rule set's join is not 'walk'")
@@ -101,7 +111,7 @@ def check_tick(prev: SwarmState, sim: Simulation) -> None:
     was_loc = np.isin(prev.state, _STATIONARY) & ~removed
     now_loc = np.isin(s.state, _STATIONARY)
     _require(bool(np.all(now_loc[was_loc])), t, "a localized robot became unlocalized")
-    _require(bool(np.all((s.x[was_loc] == prev.x[was_loc]) & (s.y[was_loc] == prev.y[was_loc]))), t,
+    _require(all(bool(np.all(a[was_loc] == b[was_loc])) for a, b in zip(coords(s), coords(prev))), t,
              "a localized robot moved")
     before, after = int(was_loc.sum()), int(now_loc.sum())
     if not removed.any():
@@ -127,14 +137,12 @@ def check_tick(prev: SwarmState, sim: Simulation) -> None:
     _check_moves(prev, sim, removed)
 
 
-def nearest_frontier_patch(frontier: np.ndarray, x: float, y: float, world) -> int:
-    """The nearest frontier patch to (x, y) by brute force (ties to the lowest flat index), or -1."""
+def nearest_frontier_patch(frontier: np.ndarray, x: float, y: float, world, z: float = 0.0) -> int:
+    """The nearest frontier patch to (x, y) (3D: (x, y, z)) by brute force (ties to the lowest flat index), or -1."""
     cells = np.flatnonzero(frontier)
     if cells.size == 0:
         return -1
-    px, py = world.patch_xy(cells)
-    dx, dy = px - x, py - y
-    d2 = dx * dx + dy * dy
+    d2 = sum((c - v) * (c - v) for c, v in zip(world.patch_coords(cells), (x, y, z)))
     return int(cells[np.lexsort((cells, d2))[0]])
 
 
@@ -150,27 +158,33 @@ def _check_moves(prev: SwarmState, sim: Simulation, removed: np.ndarray) -> None
     keep = ~removed[ids]
     # a robot that did not win takes exactly the pose it decided
     lost = ~won & keep
-    _require(bool(np.all((s.x[ids[lost]] == d.x[lost]) & (s.y[ids[lost]] == d.y[lost])
-                         & (s.heading[ids[lost]] == d.heading[lost]))), t, "a robot is not at the pose it decided")
-    px, py = world.patch_of(prev.x[ids], prev.y[ids])
-    was_inside = shape.mask.ravel()[world.flat_index(px, py)]
+    solid = world.dims == 3
+    pose_now = [s.x, s.y, s.heading] + ([s.z, s.pitch] if solid else [])
+    pose_decided = [d.x, d.y, d.heading] + ([d.z, d.pitch] if solid else [])
+    _require(all(bool(np.all(a[ids[lost]] == b[lost])) for a, b in zip(pose_now, pose_decided)), t,
+             "a robot is not at the pose it decided")
+    before = [c[ids] for c in coords(prev)]
+    decided = [d.x, d.y] + ([d.z] if solid else [])
+    was_inside = shape.mask.ravel()[world.flat_of(*(np.floor(c + 0.5).astype(np.int64) for c in before))]
     prev_state = prev.state[ids]
-    step = np.hypot(d.x - prev.x[ids], d.y - prev.y[ids])
+    step = _distance(decided, before)
     tried = d.claim >= 0
-    cx, cy = world.patch_xy(np.where(tried, d.claim, 0))
-    reach = np.hypot(cx - d.x, cy - d.y)
+    reach = _distance(decided, world.patch_coords(np.where(tried, d.claim, 0)))
     walk = p.join == "walk" and bool(prev.frontier.any())
     walkers = ((prev_state == RobotState.WALKING) | was_inside) if walk else np.zeros(ids.size, dtype=bool)
     for k in np.flatnonzero(walkers):
-        target = nearest_frontier_patch(prev.frontier, prev.x[ids[k]], prev.y[ids[k]], world)
-        tx, ty = world.patch_xy(target)
-        dx, dy = tx - prev.x[ids[k]], ty - prev.y[ids[k]]
-        d2 = dx * dx + dy * dy  # "within 1 patch" is d2 <= 1 with d2 computed so, as the rule states it
+        here = [float(c[k]) for c in before]
+        target = nearest_frontier_patch(prev.frontier, *here[:2], world, *here[2:])
+        delta = [float(c) - h for c, h in zip(world.patch_coords(target), here)]
+        d2 = 0.0
+        for v in delta:  # "within 1 patch" is d2 <= 1 with d2 computed so, as the rule states it
+            d2 += v * v
         if tried[k]:
             _require(int(d.claim[k]) == target and d2 <= 1.0 and step[k] == 0.0, t,
                      f"robot {ids[k]} claimed other than the nearest frontier patch within 1 patch")
         else:
-            toward = np.hypot(tx - d.x[k], ty - d.y[k])
+            toward = math.sqrt(sum((float(c) - float(e[k])) ** 2
+                                   for c, e in zip(world.patch_coords(target), decided)))
             _require(d2 > 1.0 and abs(step[k] - 1.0) < _EPS and abs(toward - (math.sqrt(d2) - 1.0)) < _EPS, t,
                      f"robot {ids[k]} did not step 1 patch towards the nearest frontier patch")
     wander = ~walkers

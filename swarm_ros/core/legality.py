@@ -12,6 +12,9 @@ hostile message) usually breaks:
   robot could reach: within its longest move plus its joining distance (one patch under
   ``join: walk``, the vision radius under ``local``), plus half a patch's diagonal.
 
+In a 3D world the same bounds hold in 3D (a voxel's diagonal is sqrt 3), and the
+heading's elevation must be in [-pi/2, pi/2].
+
 A decision inside these bounds but other than the one the rules would make is accepted:
 docs/security.md says what that means.
 """
@@ -34,14 +37,16 @@ def max_step(params: RunParams) -> float:
     return MAX_STEP[params.ruleset.steps]
 
 
-def reach(params: RunParams) -> float:
+def reach(params: RunParams, dims: int = 2) -> float:
     """How far (patch centres, in patches) from where a robot stood it may claim a patch."""
     joining = 1.0 if params.ruleset.join == JOIN_VALUES[0] else float(params.vision_radius)
-    return max_step(params) + max(joining, math.sqrt(2.0)) + math.sqrt(2.0) / 2
+    diagonal = math.sqrt(float(dims))
+    return max_step(params) + max(joining, diagonal) + diagonal / 2
 
 
 def illegal(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray, y0: np.ndarray,
-            claim: np.ndarray, x: np.ndarray, y: np.ndarray, heading: np.ndarray) -> np.ndarray:
+            claim: np.ndarray, x: np.ndarray, y: np.ndarray, heading: np.ndarray, z0: np.ndarray | None = None,
+            z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> np.ndarray:
     """A bool mask of the decisions the rules could not have produced.
 
     Args:
@@ -50,20 +55,28 @@ def illegal(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray
         frontier: the flat frontier grid at the start of the tick (W*W bools).
         x0, y0: where each deciding robot stood at the start of the tick (patches).
         claim, x, y, heading: the decisions, aligned with ``x0``/``y0``.
+        z0, z, pitch: in a 3D world (all three given), the z before, and the decided z and elevation.
     """
     size = 2 * radius + 1
     limit = radius + 0.5
     step = max_step(params) + _SLACK
+    solid = z0 is not None
+    before = [x0, y0, z0] if solid else [x0, y0]
+    after = [x, y, z] if solid else [x, y]
     bad = ~(np.isfinite(x) & np.isfinite(y) & (heading >= 0) & (heading <= 2 * math.pi))
-    bad |= (np.abs(np.nan_to_num(x, nan=np.inf)) > limit) | (np.abs(np.nan_to_num(y, nan=np.inf)) > limit)
+    if solid:
+        bad |= ~(np.isfinite(z) & (np.abs(np.nan_to_num(pitch, nan=np.inf)) <= math.pi / 2))
+    for a in after:
+        bad |= np.abs(np.nan_to_num(a, nan=np.inf)) > limit
     with np.errstate(invalid="ignore", over="ignore"):
-        bad |= ~(np.hypot(x - x0, y - y0) <= step)
+        bad |= ~(np.sqrt(sum((a - b) ** 2 for a, b in zip(after, before))) <= step)
     claims = claim >= 0
-    bad |= (claim < -1) | (claim >= size * size)
+    bad |= (claim < -1) | (claim >= size ** len(before))
     ok_claim = claims & ~bad
     p = claim[ok_claim]
-    px, py = p % size - radius, p // size - radius
-    far = np.hypot(px - x0[ok_claim], py - y0[ok_claim]) > reach(params) + _SLACK
+    cells = [p % size - radius, (p // size) % size - radius, p // (size * size) - radius] if solid else \
+        [p % size - radius, p // size - radius]
+    far = np.sqrt(sum((c - b[ok_claim]) ** 2 for c, b in zip(cells, before))) > reach(params, len(before)) + _SLACK
     bad[np.flatnonzero(ok_claim)[far | ~frontier[p]]] = True
     return bad
 

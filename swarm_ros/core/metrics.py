@@ -97,7 +97,8 @@ def convergence_rate(final: TickMetrics) -> float:
 def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, outcome: Outcome,
                 final: TickMetrics, separated: int, world_radius: int, wall_seconds: float,
                 losses: Sequence[tuple[int, int]] = (), restarts: Sequence[tuple[int, str]] = (),
-                overhead: dict[str, float | None] | None = None, rejected: dict[str, int] | None = None) -> dict:
+                overhead: dict[str, float | None] | None = None, rejected: dict[str, int] | None = None,
+                mesh_scale: float = 1.0) -> dict:
     """The per-run record written to ``summary.json`` (and one row of an experiment).
 
     ``losses`` are (tick, robots) of robot removals (failures, lost processes);
@@ -105,15 +106,17 @@ def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, ou
     ``unlocalized`` counts the robots still in the world that did not localize;
     ``overhead`` (ROS graph only) adds ``startup_seconds`` and ``shutdown_seconds``, placed
     after ``wall_seconds``; ``rejected`` (ROS graph only) the messages the world and the
-    monitor dropped as malformed or illegal, as ``rejected_messages``.
+    monitor dropped as malformed or illegal, as ``rejected_messages``; ``mesh_scale`` is a field
+    only where it is not 1 (a mesh shape at another scale), so that 2D summaries keep their fields.
     """
     robots = params["robots"]
     lost = sum(k for _, k in losses)
     return {
         "shape": shape,
         "shape_patches": shape_patches,
+        **({"mesh_scale": mesh_scale} if mesh_scale != 1.0 else {}),
         **{p.name: robots if p.name == "robots" else world_radius if p.name == "world_radius" else params[p.name]
-           for p in RUN_PARAMETERS if p.name != "shape"},  # every run parameter, as declared
+           for p in RUN_PARAMETERS if p.name != "shape" and p.recorded},  # every run parameter, as declared
         "engine": engine,
         "outcome": outcome.value,
         "convergence_tick": final.tick,

@@ -48,6 +48,8 @@ class Param:
         experiment: ``"axis"`` (an experiment file may list several values), ``"fixed"``
             (one value for the whole experiment), or ``""`` (not an experiment file key).
         model: whether it is a field of :class:`RunParams` (the shape and the world are not).
+        recorded: whether summary.json and results.csv have it as a field or column (``mesh_scale``
+            is recorded only where it applies, :func:`swarm_ros.core.metrics.run_summary`).
     """
 
     name: str
@@ -61,6 +63,7 @@ class Param:
     flag: str | None = None
     experiment: str = "fixed"
     model: bool = True
+    recorded: bool = True
 
     @property
     def kind(self) -> type:
@@ -122,7 +125,10 @@ def _number(x: float) -> str:
 
 #: The run's parameters, in the order of results.csv's columns. A new one goes here, and only here.
 RUN_PARAMETERS: tuple[Param, ...] = (
-    Param("shape", "star", "built-in shape name or a .txt/.png shape file", experiment="", model=False),
+    Param("shape", "star", "built-in shape name (2D or 3D), or a shape file: a .txt grid (layers separated by --- "
+          "for 3D), a .png image, or an .stl/.obj/.ply mesh", experiment="", model=False),
+    Param("mesh_scale", 1.0, "voxels per mesh unit, for a mesh shape", low=0.0, low_open=True, high=1000.0,
+          experiment="", model=False, recorded=False),
     Param("robots", 0, "robots N, seeds included", low=MIN_ROBOTS, blank="the shape's patch count", experiment=""),
     Param("vision_radius", DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision",
           experiment="axis"),
@@ -220,13 +226,13 @@ class _SettingsMethods:
 
         RUN_PARAMETER["world_radius"].check(self.world_radius)
         check_world_memory(self.world_radius)
-        shape = Shape.load(self.shape, World(self.world_radius))
+        shape = Shape.load(self.shape, World(self.world_radius), mesh_scale=self.mesh_scale)
+        check_world_memory(self.world_radius, dims=shape.dims)
         params = self.run_params(self.robots or shape.patches)
         params.check_vision(shape.world.radius)
         if params.robots > shape.free_patches:
-            w = shape.world.size
             raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "
-                                 f"{shape.free_patches} free patches of the {w} x {w} world")
+                                 f"{shape.free_patches} free patches of the {shape.world.describe()} world")
         return shape, params
 
 

@@ -23,7 +23,7 @@ def summarize(*, shape: Shape, params: RunParams, state: SwarmState, final: Tick
     return run_summary(shape=shape.name, shape_patches=shape.patches, params=params.as_dict(), engine=engine,
                        outcome=outcome, final=final, separated=int((state.state == RobotState.SEPARATED).sum()),
                        world_radius=shape.world.radius, wall_seconds=wall_seconds, losses=losses,
-                       restarts=restarts, overhead=overhead, rejected=rejected)
+                       restarts=restarts, overhead=overhead, rejected=rejected, mesh_scale=shape.mesh_scale)
 
 
 def summary_of(sim: Simulation, wall_seconds: float = 0.0, stopped: Outcome | None = None) -> dict:

@@ -186,12 +186,14 @@ class Shape:
             True on shape patches.
         world: the world the shape is placed in.
         source: where it came from (a file path, or a description).
+        mesh_scale: voxels per mesh unit it was voxelized at (1 for every shape not read from a mesh).
     """
 
     name: str
     mask: np.ndarray
     world: World
     source: str
+    mesh_scale: float = 1.0
     seed_patches: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -206,7 +208,7 @@ class Shape:
 
     # -- construction -----------------------------------------------------------
     @classmethod
-    def from_grid(cls, grid: np.ndarray, world: World, name: str, source: str) -> Shape:
+    def from_grid(cls, grid: np.ndarray, world: World, name: str, source: str, mesh_scale: float = 1.0) -> Shape:
         """Place a file grid (top row first; a 3D grid top layer first) in a world of ``world``'s radius
         and the grid's dimensions, by the centring rule, and validate it."""
         grid = np.asarray(grid, dtype=bool)
@@ -232,7 +234,7 @@ class Shape:
             )
         mask = np.zeros(world.grid_shape, dtype=bool)
         mask[tuple(c + r for c in reversed(coords))] = True
-        return cls(name=name, mask=mask, world=world, source=source)
+        return cls(name=name, mask=mask, world=world, source=source, mesh_scale=mesh_scale)
 
     @classmethod
     def load(cls, name_or_path: str | Path, world: World | None = None, mesh_scale: float = 1.0) -> Shape:
@@ -263,7 +265,7 @@ class Shape:
                 raise ShapeError(
                     f"{text}: no such shape file or built-in shape (built-in: {', '.join(builtins)})"
                 )
-        return cls.from_grid(read_grid(path, mesh_scale), world, name=name, source=str(path))
+        return cls.from_grid(read_grid(path, mesh_scale), world, name=name, source=str(path), mesh_scale=mesh_scale)
 
     # -- properties -------------------------------------------------------------
     @property
