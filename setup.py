@@ -17,6 +17,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/shapes", sorted(glob("shapes/*.txt"))),
+        (f"share/{PACKAGE}/shapes/3d", sorted(glob("shapes/3d/*.txt"))),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.xml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),
         (f"share/{PACKAGE}/rviz", sorted(glob("rviz/*.rviz"))),

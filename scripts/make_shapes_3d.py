@@ -33,7 +33,7 @@ Z, Y, X = np.meshgrid(_C, _C, _C, indexing="ij")  # [iz, iy, ix], low corner fir
 
 
 def _k_letter() -> np.ndarray:
-    """The letter K, 17 rows by 13 columns, strokes 3 voxels thick, 4 voxels deep."""
+    """The letter K, 19 voxels high and 14 wide, strokes about 3 voxels thick, 4 voxels deep."""
     x, y = X.astype(float), Y.astype(float)
     stem = (x >= -6) & (x <= -4) & (np.abs(y) <= 8)
     # two diagonal arms from the stem's middle out to the corners (6, 8) and (6, -8)
@@ -55,7 +55,7 @@ SHAPES = {
               (np.hypot(X, Y) - 8.0) ** 2 + Z ** 2 <= 3.0 ** 2),
     "shell": ("a hollow sphere: outer radius 8.5, inner radius 6, one closed cavity",
               (X ** 2 + Y ** 2 + Z ** 2 <= 8.5 ** 2) & (X ** 2 + Y ** 2 + Z ** 2 > 6.0 ** 2)),
-    "k-block": ("the letter K extruded: 17 rows, 13 columns, 4 layers", _k_letter()),
+    "k-block": ("the letter K extruded: 19 voxels high, 14 wide, 4 deep", _k_letter()),
     "jack": ("a branching jack: a 4-voxel cube with six arms 8 voxels long along +-x, +-y, +-z",
              ((np.abs(X + 0.5) <= 2) & (np.abs(Y + 0.5) <= 2) & (np.abs(Z + 0.5) <= 10))
              | ((np.abs(X + 0.5) <= 2) & (np.abs(Y + 0.5) <= 10) & (np.abs(Z + 0.5) <= 2))

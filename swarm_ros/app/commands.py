@@ -18,7 +18,7 @@ from swarm_ros.core.errors import SwarmError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETERS, RunParams, Settings, node_defaults
 from swarm_ros.core.resources import check_world_memory
-from swarm_ros.core.shapes import Shape, builtin_shapes
+from swarm_ros.core.shapes import Shape, builtin_shapes, builtin_shapes_3d
 from swarm_ros.core.signals import StopFlag
 
 if TYPE_CHECKING:
@@ -38,8 +38,22 @@ def cmd_shapes(args: argparse.Namespace) -> int:
     check_world_memory(args.world_radius)
     world = World(args.world_radius)
     print(f"{'shape':<10} {'patches':>7} {'holes':>5}  bounding box (xmin, ymin)-(xmax, ymax)  file")
+    misfits = _list_shapes(builtin_shapes(), world)
+    print(f"world: {world.size} x {world.size} patches, walls on the border ring"
+          + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
+    print()
+    print(f"{'3D shape':<10} {'voxels':>7} {'tunnels':>7} {'cavities':>8}  bounding box "
+          "(xmin, ymin, zmin)-(xmax, ymax, zmax)  file")
+    misfits = _list_shapes(builtin_shapes_3d(), world)
+    print(f"world: {World(args.world_radius, 3).describe()} voxels, walls on the outer shell"
+          + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
+    return 0
+
+
+def _list_shapes(shapes: dict[str, Path], world: World) -> int:
+    """Print a line per shape (2D or 3D, by the file); return how many do not fit in ``world``."""
     misfits = 0
-    for name, path in builtin_shapes().items():
+    for name, path in shapes.items():
         try:
             shape = Shape.load(name, world)
         except SwarmError as exc:  # e.g. larger than this world: say so and list the others
@@ -47,12 +61,15 @@ def cmd_shapes(args: argparse.Namespace) -> int:
             reason = str(exc).split(": ", 1)[-1].split(" at patch")[0]  # e.g. reaches beyond the walls
             print(f"{name:<10} {'-':>7} {'-':>5}  does not fit: {reason}  {path}")
             continue
+        if shape.dims == 3:
+            lo, hi = shape.bbox[:3], shape.bbox[3:]
+            box = f"({lo[0]:>3}, {lo[1]:>3}, {lo[2]:>3})-({hi[0]:>3}, {hi[1]:>3}, {hi[2]:>3})"
+            print(f"{name:<10} {shape.patches:>7} {shape.tunnels:>7} {shape.cavities:>8}  {box}{'':9}{path}")
+            continue
         x0, y0, x1, y1 = shape.bbox
         print(f"{name:<10} {shape.patches:>7} {shape.holes:>5}  ({x0:>3}, {y0:>3})-({x1:>3}, {y1:>3})"
               f"{'':18}{path}")
-    print(f"world: {world.size} x {world.size} patches, walls on the border ring"
-          + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
-    return 0
+    return misfits
 
 
 def _settings(args: argparse.Namespace) -> tuple[Settings, dict[str, dict[str, object]]]:

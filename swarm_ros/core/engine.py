@@ -340,10 +340,12 @@ class Simulation:
         return int(ids.size)
 
     def restore(self, tick: int, x: np.ndarray, y: np.ndarray, heading: np.ndarray, state: np.ndarray,
-                history: np.ndarray, losses: list[tuple[int, int]], outcome: Outcome | None) -> None:
+                history: np.ndarray, losses: list[tuple[int, int]], outcome: Outcome | None,
+                z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> None:
         """Continue from a saved tick (the world node's checkpoint, :mod:`swarm_ros.protocol.checkpoint`): every
         robot's pose and state at the end of ``tick``, the metrics of ticks 0..``tick``, the losses so far
-        and the outcome. The occupancy and frontier are rebuilt from the robots, as a replica's are, so
+        and the outcome (3D: ``z`` and ``pitch`` too). The occupancy and frontier are rebuilt from the robots,
+        as a replica's are, so
         the run goes on exactly as the one that saved them would have.
 
         Raises:
@@ -355,9 +357,10 @@ class Simulation:
         if history.shape != (tick + 1, len(METRIC_COLUMNS)) or int(history[-1, 0]) != tick:
             raise ValueError(f"a checkpoint's metrics do not end at its tick {tick}")
         replica = Replica(self.shape, n)
-        replica.load(tick, np.arange(n), state, x, y, heading)
+        replica.load(tick, np.arange(n), state, x, y, heading, z, pitch)
         s, r = self.state, replica.state
-        for name in ("x", "y", "heading", "state", "occupancy", "frontier", "frontier_blocks"):
+        solid = ("z", "pitch") if self._solid else ()
+        for name in ("x", "y", "heading", "state", "occupancy", "frontier", "frontier_blocks", *solid):
             getattr(s, name)[...] = getattr(r, name)  # in place: the compiled kernels hold these arrays
         s.tick = tick
         moving = s.moving_ids()

@@ -30,12 +30,13 @@ def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
     replica = Replica(shape, params.robots)
     s = sim.state
     everyone = np.arange(s.robots)
-    replica.load(0, everyone, s.state, s.x, s.y, s.heading)
+    replica.load(0, everyone, s.state, s.x, s.y, s.heading, s.z, s.pitch)
     for _ in range(ticks):
         if sim.done:
             break
         moving = sim.moving_ids()
         sim.apply(decider.decide(sim.state, moving, sim.tick + 1, moving))
         changed = sim.last_joins()[0]  # the deciders: the rows the world would publish
-        replica.update(sim.tick, changed, s.state[changed], s.x[changed], s.y[changed], s.heading[changed])
+        solid = (s.z[changed], s.pitch[changed]) if s.z is not None else (None, None)
+        replica.update(sim.tick, changed, s.state[changed], s.x[changed], s.y[changed], s.heading[changed], *solid)
         tick_metrics(sim.tick, np.bincount(replica.state.state, minlength=STATE_COUNT), shape.patches)

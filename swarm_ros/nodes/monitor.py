@@ -102,7 +102,7 @@ class MonitorNode:
         if self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (resume, below)
         self.recorder = self.recording.open(self.rrd, self.shape, p)
-        self.bag = BagRecorder(self.out) if self.bag_on else None
+        self.bag = BagRecorder(self.out, self.shape.dims) if self.bag_on else None
         self.replica = Replica(self.shape, p.robots)
         warm_up(self.shape, p)
         if self.incarnation:
@@ -184,7 +184,7 @@ class MonitorNode:
     def _on_decisions(self, msg: Cloud) -> None:
         """Count the decision rows of each tick (for the bag: see :meth:`_bag_complete`)."""
         try:
-            tick, rows = checks.decision_message(msg, self.params.robots)
+            tick, rows = checks.decision_message(msg, self.params.robots, self.shape.dims)
         except Rejected as fault:
             self.rejections.drop(msgs.DECISIONS, fault)
             return

@@ -34,7 +34,7 @@ from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
-from swarm_ros.protocol.rows import PATCH_METRES, batch_ids, batch_label, decision_rows, format_ranges, parse_ranges
+from swarm_ros.protocol.rows import batch_ids, batch_label, decision_rows, format_ranges, parse_ranges, pose_of
 from swarm_ros.protocol.status import RunFailed, has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
@@ -100,15 +100,14 @@ class RobotBatchNode:
     def _on_snapshot(self, msg: Cloud) -> None:
         """Every robot's row at some tick: start (again) from it if it is newer than what we hold."""
         try:
-            tick, rows = checks.snapshot(msg, self.params.robots, self.radius)
+            tick, rows = checks.snapshot(msg, self.params.robots, self.radius, self.shape.dims)
         except Rejected as fault:
             self.rejections.drop(msgs.snapshot_topic(self.node.get_name()), fault)
             return
         if tick <= self.replica.tick:
             return  # an older snapshot (latched from an earlier restart of this batch)
         try:
-            self.replica.load(tick, rows["id"], rows["state"], rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES,
-                              rows["heading"])
+            self.replica.load(tick, rows["id"], rows["state"], **pose_of(rows))
         except ValueError as exc:
             raise RunFailed(f"snapshot of tick {tick}: {exc}") from None
         while self.replica.tick + 1 in self.early:  # rows published after the snapshot was taken

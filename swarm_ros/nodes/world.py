@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from nav_msgs.msg import OccupancyGrid
 from rclpy.duration import Duration
 from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
 from rosgraph_msgs.msg import Clock
@@ -64,8 +63,9 @@ class WorldNode:
         self.pub_status = signed(DiagnosticArray, msgs.STATUS, msgs.STATUS_QOS)
         self.pub_decisions = signed(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
         # for viewers only: these types have no field for a tag, and no node of the run reads them (auth)
-        self.pub_shape = node.create_publisher(OccupancyGrid, msgs.SHAPE, msgs.LATCHED_QOS)
-        self.pub_occupancy = node.create_publisher(OccupancyGrid, msgs.OCCUPANCY, msgs.LATCHED_QOS)
+        self.maps = msgs.WorldMaps(self.shape)  # OccupancyGrids in 2D, voxel clouds in 3D
+        self.pub_shape = node.create_publisher(self.maps.kind, msgs.SHAPE, msgs.LATCHED_QOS)
+        self.pub_occupancy = node.create_publisher(self.maps.kind, msgs.OCCUPANCY, msgs.LATCHED_QOS)
         self.pub_clock = node.create_publisher(Clock, msgs.CLOCK, msgs.CLOCK_QOS)
         self.snapshot_pubs: list = []  # per batch: /swarm/snapshot/<batch>
         self.occupancy_at = 0.0  # time.monotonic() of the last /swarm/occupancy
@@ -82,8 +82,7 @@ class WorldNode:
         """The heavy part, once the endpoints exist: discovery of the peers goes on meanwhile."""
         sim = Simulation(self.shape, self.params)
         warm_up(self.shape, self.params)
-        self.shape_cells = msgs.shape_cells(self.shape)
-        self.pub_shape.publish(msgs.grid_message(self.shape, self.shape_cells, 0))
+        self.pub_shape.publish(self.maps.shape_message(0))
         self.lockstep = Lockstep(sim, self.policy, self, self.node.get_logger(), self.rejections,
                                  created=self.created)
         saved = self._open_checkpoint()
@@ -104,9 +103,10 @@ class WorldNode:
         path, n, cols = Path(self.checkpoint_path), self.params.robots, len(METRIC_COLUMNS)
         try:
             if self.incarnation and path.exists():
-                self.saver = Checkpoint.open(path, n, self.params.max_ticks, cols)
+                self.saver = Checkpoint.open(path, n, self.params.max_ticks, cols, self.shape.dims)
                 return self.saver.saved()
-            self.saver = Checkpoint(path, n, self.params.max_ticks, cols, self.policy.monitor_window + 2)
+            self.saver = Checkpoint(path, n, self.params.max_ticks, cols, self.policy.monitor_window + 2,
+                                    self.shape.dims)
             self.saver.create()
         except (OSError, ValueError) as exc:
             raise RunFailed(f"checkpoint {path}: {exc}") from None
@@ -125,7 +125,7 @@ class WorldNode:
         if self.lockstep.over:
             return
         try:
-            tick, rows = checks.decision_message(msg, self.params.robots)
+            tick, rows = checks.decision_message(msg, self.params.robots, self.shape.dims)
             self.lockstep.decisions(k, tick, rows)
         except Rejected as fault:
             self.rejections.drop(topic, fault)
@@ -188,10 +188,8 @@ class WorldNode:
     def _publish_occupancy(self) -> None:
         """The occupancy now, stamped with the world's tick (it may be ahead of the last published rows)."""
         sim = self.lockstep.sim
-        cells = self.shape_cells.copy()
-        cells[sim.state.occupancy >= 0] = msgs.CELL_FULL
         self.occupancy_at = time.monotonic()
-        self.pub_occupancy.publish(msgs.grid_message(self.shape, cells, sim.tick))
+        self.pub_occupancy.publish(self.maps.occupancy_message(sim.state.occupancy, sim.tick))
 
     def monitor_reads_all(self) -> bool:
         """Whether this node has discovered the monitor's reader of every topic it takes from the network.

@@ -6,7 +6,7 @@ mapping (the pages belong to the kernel's page cache, not the process), so the f
 every tick up to the one being written. A host that loses power loses it; the graph's fault
 model is a process lost, not a machine (docs/ros_graph.md, "Faults").
 
-Layout: a header of int64s, every robot's row (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`,
+Layout: a header of int64s, every robot's row (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`, or the 3D one,
 indexed by id), the metrics of every tick, and a ring of the last ``slots`` ticks' published
 rows (the robots that changed, and the decisions applied), so the new world can send again
 the ticks a reader may have lost with the old one (the monitor may be up to ``monitor_window``
@@ -32,13 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+from swarm_ros.protocol.rows import decision_row, robot_row
 
 MAGIC = 0x5357524D434B5031  # "SWRMCKP1"
 _H_MAGIC, _H_ROBOTS, _H_SLOTS, _H_TICKS, _H_COLS, _H_WRITING, _H_READY, _H_DONE, _H_MONITOR = range(9)
 _HEADER = 16  # int64s
 _SLOT_HEAD = 3  # int64s per ring slot: tick, robot rows, applied rows
-_RECORD = np.dtype((np.void, ROBOT_ROW.itemsize))  # a robot's row as opaque bytes (fast to copy by index)
 
 
 @dataclass
@@ -58,16 +57,18 @@ class Saved:
 class Checkpoint:
     """One run's world checkpoint at ``path`` (created empty, or opened to restore from)."""
 
-    def __init__(self, path: Path, robots: int, max_ticks: int, columns: int, slots: int) -> None:
+    def __init__(self, path: Path, robots: int, max_ticks: int, columns: int, slots: int, dims: int = 2) -> None:
         self.path = Path(path)
+        self.row, self.decision = robot_row(dims), decision_row(dims)  # the rows of a world of ``dims`` dimensions
+        self.record = np.dtype((np.void, self.row.itemsize))  # a robot's row as opaque bytes (fast to copy by index)
         self.robots, self.ticks, self.columns, self.slots = robots, max_ticks + 1, columns, max(slots, 2)
-        self.slot_bytes = _SLOT_HEAD * 8 + robots * (ROBOT_ROW.itemsize + DECISION_ROW.itemsize)
+        self.slot_bytes = _SLOT_HEAD * 8 + robots * (self.row.itemsize + self.decision.itemsize)
         self._offsets()
         self.map: np.ndarray | None = None
 
     def _offsets(self) -> None:
         self.robots_at = _HEADER * 8
-        self.history_at = self.robots_at + self.robots * ROBOT_ROW.itemsize
+        self.history_at = self.robots_at + self.robots * self.row.itemsize
         self.ring_at = self.history_at + self.ticks * self.columns * 8
         self.size = self.ring_at + self.slots * self.slot_bytes
 
@@ -87,8 +88,8 @@ class Checkpoint:
             self._mmap = mmap.mmap(f.fileno(), self.size)
         self.map = np.frombuffer(self._mmap, dtype=np.uint8)  # a plain array: slicing a np.memmap costs more
         self.header = self.map[: _HEADER * 8].view(np.int64)
-        self.rows = self.map[self.robots_at: self.history_at].view(ROBOT_ROW)
-        self._records = self.rows.view(_RECORD)
+        self.rows = self.map[self.robots_at: self.history_at].view(self.row)
+        self._records = self.rows.view(self.record)
         self.history = self.map[self.history_at: self.ring_at].view(np.int64).reshape(self.ticks, self.columns)
 
     def _slot_head(self, tick: int) -> tuple[np.ndarray, int]:
@@ -98,9 +99,9 @@ class Checkpoint:
 
     def _slot(self, tick: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         head, at = self._slot_head(tick)
-        robots = self.map[at: at + self.robots * ROBOT_ROW.itemsize].view(ROBOT_ROW)
-        at += self.robots * ROBOT_ROW.itemsize
-        applied = self.map[at: at + self.robots * DECISION_ROW.itemsize].view(DECISION_ROW)
+        robots = self.map[at: at + self.robots * self.row.itemsize].view(self.row)
+        at += self.robots * self.row.itemsize
+        applied = self.map[at: at + self.robots * self.decision.itemsize].view(self.decision)
         return head, robots, applied
 
     def write(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None:
@@ -113,14 +114,14 @@ class Checkpoint:
         raw = np.ascontiguousarray(rows).view(np.uint8)  # bytes, not records: copied ten times faster
         self.map[at: at + raw.size] = raw
         if applied is not None:
-            at += self.robots * ROBOT_ROW.itemsize
+            at += self.robots * self.row.itemsize
             raw = np.ascontiguousarray(applied).view(np.uint8)
             self.map[at: at + raw.size] = raw
         head[1], head[2] = rows.size, -1 if applied is None else applied.size
         self.history[tick] = metrics
         head[0] = tick
         h[_H_READY] = tick
-        self._records[rows["id"]] = np.ascontiguousarray(rows).view(_RECORD)
+        self._records[rows["id"]] = np.ascontiguousarray(rows).view(self.record)
         h[_H_DONE] = tick
 
     def monitor_reported(self, tick: int) -> None:
@@ -137,7 +138,7 @@ class Checkpoint:
 
     # -- reading ----------------------------------------------------------------------
     @classmethod
-    def open(cls, path: Path, robots: int, max_ticks: int, columns: int) -> Checkpoint:
+    def open(cls, path: Path, robots: int, max_ticks: int, columns: int, dims: int = 2) -> Checkpoint:
         """Map the checkpoint a world before this process wrote at ``path``, to restore from and go on writing
         (made again, empty, if that world was killed while making it).
 
@@ -148,14 +149,14 @@ class Checkpoint:
         raw = np.fromfile(path, dtype=np.int64, count=_HEADER)
         if raw.size == _HEADER and not raw.any():  # killed in create(), before the header: it holds nothing
             path.unlink()
-            ck = cls(path, robots, max_ticks, columns, 2)
+            ck = cls(path, robots, max_ticks, columns, 2, dims)
             ck.create()
             return ck
         if raw.size < _HEADER or raw[_H_MAGIC] != MAGIC:
             raise ValueError(f"{path} is not a world checkpoint")
         if (int(raw[_H_ROBOTS]), int(raw[_H_TICKS]), int(raw[_H_COLS])) != (robots, max_ticks + 1, columns):
             raise ValueError(f"{path} is the checkpoint of another run ({int(raw[_H_ROBOTS])} robots)")
-        ck = cls(path, robots, max_ticks, columns, int(raw[_H_SLOTS]))
+        ck = cls(path, robots, max_ticks, columns, int(raw[_H_SLOTS]), dims)
         if path.stat().st_size != ck.size:
             raise ValueError(f"{path} is not a whole world checkpoint")
         ck._map()

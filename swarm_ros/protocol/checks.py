@@ -17,7 +17,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarm_ros.core.legality import illegal
-from swarm_ros.protocol.rows import DECISION_ROW, PATCH_METRES, ROBOT_ROW, TICK_SECONDS, check_fields, parse_batch_label
+from swarm_ros.protocol.rows import (
+    PATCH_METRES,
+    TICK_SECONDS,
+    check_fields,
+    decision_row,
+    parse_batch_label,
+    pose_of,
+    robot_row,
+)
 from swarm_ros.protocol.status import RunFailed
 
 if TYPE_CHECKING:
@@ -96,25 +104,31 @@ def ids_in_range(ids: np.ndarray, low: int, robots: int) -> None:
         raise Rejected("repeated robot id")
 
 
-def inside_world(x: np.ndarray, y: np.ndarray, heading: np.ndarray, radius: int) -> None:
-    """Raises Rejected unless every pose is finite, inside the world and headed in [0, 2 pi]."""
+def inside_world(rows: np.ndarray, radius: int) -> None:
+    """Raises Rejected unless every row's pose is finite, inside the world and headed in [0, 2 pi]
+    (3D rows: with z inside the world too and an elevation in [-pi/2, pi/2])."""
     limit = (radius + 0.5) * PATCH_METRES
+    x, y, heading = rows["x"], rows["y"], rows["heading"]
+    solid = "pitch" in rows.dtype.names
     with np.errstate(invalid="ignore"):
         ok = (np.abs(x) <= limit) & (np.abs(y) <= limit) & (heading >= 0) & (heading <= 2 * math.pi)
+        if solid:
+            ok &= (np.abs(rows["z"]) <= limit) & (np.abs(rows["pitch"]) <= math.pi / 2)
     if not ok.all():
         i = int(np.flatnonzero(~ok)[0])
-        raise Rejected("pose outside the world", f"({x[i]!r}, {y[i]!r}, heading {heading[i]!r})")
+        z = f", z {rows['z'][i]!r}, pitch {rows['pitch'][i]!r}" if solid else ""
+        raise Rejected("pose outside the world", f"({x[i]!r}, {y[i]!r}, heading {heading[i]!r}{z})")
 
 
-def robot_rows(msg, robots: int, radius: int) -> np.ndarray:
+def robot_rows(msg, robots: int, radius: int, dims: int = 2) -> np.ndarray:
     """The rows of a /swarm/robots or snapshot message, checked: layout, ids, states, poses."""
     from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
 
-    rows = cloud(msg, ROBOT_ROW, robots)
+    rows = cloud(msg, robot_row(dims), robots)
     ids_in_range(rows["id"].astype(np.int64), 0, robots)
     if rows["state"].max() >= STATE_COUNT:
         raise Rejected("robot state out of range", f"state {int(rows['state'].max())}")
-    inside_world(rows["x"], rows["y"], rows["heading"], radius)
+    inside_world(rows, radius)
     return rows
 
 
@@ -160,7 +174,7 @@ def checked_robots(replica: Replica, msg, radius: int) -> tuple[int, np.ndarray]
         Rejected: malformed, out of range or outside the world.
     """
     tick = tick_stamp(msg.header)
-    return tick, robot_rows(msg, replica.state.robots, radius)
+    return tick, robot_rows(msg, replica.state.robots, radius, replica.shape.dims)
 
 
 def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
@@ -170,20 +184,20 @@ def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
         Rejected: they cannot be the world's next rows (:meth:`Replica.inconsistent`); the
             replica is unchanged.
     """
-    x, y = rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES
-    why = replica.inconsistent(tick, rows["id"], rows["state"], x, y)
+    pose = pose_of(rows)
+    why = replica.inconsistent(tick, rows["id"], rows["state"], pose["x"], pose["y"], pose.get("z"))
     if why is not None:
         raise Rejected("inconsistent rows", why)
     try:
-        replica.update(tick, rows["id"], rows["state"], x, y, rows["heading"])
+        replica.update(tick, rows["id"], rows["state"], **pose)
     except ValueError as exc:  # checked above: a gap in those checks
         raise RunFailed(str(exc)) from None
 
 
-def decision_message(msg, robots: int) -> tuple[int, np.ndarray]:
+def decision_message(msg, robots: int, dims: int = 2) -> tuple[int, np.ndarray]:
     """(tick, rows) of a batch's decisions message, checked as a message: stamp, layout, ids in range."""
     tick = tick_stamp(msg.header)
-    rows = cloud(msg, DECISION_ROW, robots)
+    rows = cloud(msg, decision_row(dims), robots)
     ids_in_range(rows["id"].astype(np.int64), 0, robots)
     return tick, rows
 
@@ -213,18 +227,19 @@ def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, host: np.nda
         raise Rejected("robot not moving", f"robot {int(ids[~moving][0])}")
     if decided[ids].any():
         raise Rejected("decided already", f"robot {int(ids[decided[ids]][0])} at tick {tick}")
+    solid = {"z0": s.z[ids], "z": rows["z"], "pitch": rows["pitch"]} if s.z is not None else {}
     bad = illegal(sim.params, sim.shape.world.radius, s.frontier, s.x[ids], s.y[ids],
-                  rows["claim"].astype(np.int64), rows["x"], rows["y"], rows["heading"])
+                  rows["claim"].astype(np.int64), rows["x"], rows["y"], rows["heading"], **solid)
     if bad.any():
         row = rows[int(np.flatnonzero(bad)[0])]
         raise Rejected("illegal decision", f"robot {int(row['id'])}: claim {int(row['claim'])}, pose "
                                            f"({row['x']!r}, {row['y']!r}, {row['heading']!r})")
 
 
-def snapshot(msg, robots: int, radius: int) -> tuple[int, np.ndarray]:
+def snapshot(msg, robots: int, radius: int, dims: int = 2) -> tuple[int, np.ndarray]:
     """(tick, rows) of a snapshot for a batch, checked: a /swarm/robots message with every robot's row."""
     tick = tick_stamp(msg.header)
-    rows = robot_rows(msg, robots, radius)
+    rows = robot_rows(msg, robots, radius, dims)
     if rows.size != robots:
         raise Rejected("incomplete snapshot", f"{rows.size} rows for {robots} robots")
     return tick, rows

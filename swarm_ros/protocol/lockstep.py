@@ -22,7 +22,7 @@ from swarm_ros.core.rules import Decisions
 from swarm_ros.core.state import IS_MOVING, RobotState
 from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
 from swarm_ros.protocol.plan import BATCHES, MONITOR
-from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows
+from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
 from swarm_ros.protocol.status import RunFailed, Status
 from swarm_ros.protocol.world_port import (
     FINAL_WAIT,
@@ -155,7 +155,7 @@ class Lockstep:
 
     def _send_snapshot(self, k: int) -> None:
         s = self.sim.state
-        self.port.send_snapshot(k, self.sim.tick, robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading))
+        self.port.send_snapshot(k, self.sim.tick, state_rows(np.arange(s.robots), s))
 
     def maybe_start(self) -> None:
         """Tick 0 once batches host every robot and the monitor is there (so the run never stalls for it).
@@ -176,7 +176,7 @@ class Lockstep:
         waited = " and the monitor" if self.window else ""
         self.log.info(f"all robots hosted by {len(self.batch_names)} batches{waited}: tick 0")
         s = self.sim.state
-        rows = robot_rows(np.arange(s.robots), s.state, s.x, s.y, s.heading)
+        rows = state_rows(np.arange(s.robots), s)
         self.save_book()  # first: a checkpoint that holds a tick has the bookkeeping beside it
         self.port.checkpoint(0, rows, None, self.sim.history[0])  # before the snapshots: they tell of tick 0
         for k in range(len(self.batch_names)):
@@ -233,9 +233,10 @@ class Lockstep:
         standing = self._standing()
         s = self.sim.state
         if standing.size:
+            solid = {"z": s.z[standing].copy(), "pitch": s.pitch[standing].copy()} if s.z is not None else {}
             parts.append(Decisions(tick=tick, ids=standing, claim=np.full(standing.size, -1, dtype=np.int64),
                                    x=s.x[standing].copy(), y=s.y[standing].copy(),
-                                   heading=s.heading[standing].copy()))
+                                   heading=s.heading[standing].copy(), **solid))
         decisions = Decisions.concatenate(parts)
         applied = decision_rows(decisions)
         self.parts, self.received = [], 0
@@ -254,7 +255,7 @@ class Lockstep:
         s = self.sim.state
         ids = np.union1d(self.sim.last_joins()[0], self.sim.last_removed)  # deciders and failed robots changed
         joined = self.sim.metrics.localized != localized_before or self.sim.last_removed.size > 0
-        self._emit(tick, robot_rows(ids, s.state, s.x, s.y, s.heading), joined, applied)
+        self._emit(tick, state_rows(ids, s), joined, applied)
 
     def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None, save: bool = True) -> None:
         """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than

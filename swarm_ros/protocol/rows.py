@@ -41,6 +41,32 @@ DECISION_ROW = np.dtype({"names": ["x", "y", "z", "heading", "id", "claim"],
                          "offsets": [0, 8, 16, 24, 32, 36], "itemsize": 40})
 
 
+#: The rows of a 3D world: the same fields and ``pitch``, the heading's elevation (radians, [-pi/2, pi/2]),
+#: after ``heading`` (2D rows keep their layout: their z is 0).
+ROBOT_ROW_3D = np.dtype({"names": ["x", "y", "z", "heading", "pitch", "id", "state"],
+                         "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
+                         "offsets": [0, 8, 16, 24, 32, 40, 44], "itemsize": 48})
+#: ``claim`` is the flat index ((pz + R) * W + py + R) * W + px + R of the voxel claimed, or -1.
+DECISION_ROW_3D = np.dtype({"names": ["x", "y", "z", "heading", "pitch", "id", "claim"],
+                            "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<i4"],
+                            "offsets": [0, 8, 16, 24, 32, 40, 44], "itemsize": 48})
+ROW_TYPES = (ROBOT_ROW, DECISION_ROW, ROBOT_ROW_3D, DECISION_ROW_3D)  #: every row layout, for readers of any
+#: World -> viewers, in a 3D world: a voxel's centre, metres (/swarm/shape: every shape voxel; /swarm/occupancy:
+#: the filled ones). A 2D world sends nav_msgs/OccupancyGrid on those topics instead.
+VOXEL_ROW = np.dtype({"names": ["x", "y", "z"], "formats": ["<f4", "<f4", "<f4"], "offsets": [0, 4, 8],
+                      "itemsize": 12})
+
+
+def robot_row(dims: int) -> np.dtype:
+    """The robot row layout of a world of ``dims`` dimensions."""
+    return ROBOT_ROW if dims == 2 else ROBOT_ROW_3D
+
+
+def decision_row(dims: int) -> np.dtype:
+    """The decision row layout of a world of ``dims`` dimensions."""
+    return DECISION_ROW if dims == 2 else DECISION_ROW_3D
+
+
 def point_fields(dtype: np.dtype) -> list[tuple[str, int, int, int]]:
     """(name, offset, PointField datatype, count) of each field of a row type."""
     out = []
@@ -70,33 +96,54 @@ def check_fields(fields: list[tuple[str, int, int, int]], point_step: int, dtype
 
 
 def robot_rows(ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-               heading: np.ndarray) -> np.ndarray:
-    """Rows of the robots ``ids`` from whole-swarm state arrays."""
-    rows = np.zeros(ids.size, dtype=ROBOT_ROW)
+               heading: np.ndarray, z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> np.ndarray:
+    """Rows of the robots ``ids`` from whole-swarm state arrays (3D rows when ``z`` and ``pitch`` are given)."""
+    rows = np.zeros(ids.size, dtype=ROBOT_ROW if z is None else ROBOT_ROW_3D)
     rows["id"] = ids
     rows["state"] = state[ids]
     rows["x"] = x[ids] * PATCH_METRES
     rows["y"] = y[ids] * PATCH_METRES
     rows["heading"] = heading[ids]
+    if z is not None:
+        rows["z"] = z[ids] * PATCH_METRES
+        rows["pitch"] = pitch[ids]
     return rows
 
 
+def state_rows(ids: np.ndarray, s) -> np.ndarray:
+    """Rows of the robots ``ids`` of a :class:`~swarm_ros.core.state.SwarmState` (2D or 3D)."""
+    return robot_rows(ids, s.state, s.x, s.y, s.heading, s.z, s.pitch)
+
+
+def pose_of(rows: np.ndarray) -> dict[str, np.ndarray]:
+    """The pose a message's robot rows carry, in patches: x, y, heading and (3D rows) z, pitch, as keyword
+    arguments of :meth:`~swarm_ros.core.replica.Replica.update`."""
+    pose = {"x": rows["x"] / PATCH_METRES, "y": rows["y"] / PATCH_METRES,
+            "heading": rows["heading"].astype(np.float64)}
+    if "pitch" in rows.dtype.names:
+        pose["z"] = rows["z"] / PATCH_METRES
+        pose["pitch"] = rows["pitch"].astype(np.float64)
+    return pose
+
+
 def decision_rows(decisions: Decisions) -> np.ndarray:
-    rows = np.zeros(decisions.ids.size, dtype=DECISION_ROW)
+    rows = np.zeros(decisions.ids.size, dtype=DECISION_ROW if decisions.z is None else DECISION_ROW_3D)
     rows["id"] = decisions.ids
     rows["claim"] = decisions.claim
     rows["x"] = decisions.x * PATCH_METRES
     rows["y"] = decisions.y * PATCH_METRES
     rows["heading"] = decisions.heading
+    if decisions.z is not None:
+        rows["z"] = decisions.z * PATCH_METRES
+        rows["pitch"] = decisions.pitch
     return rows
 
 
 def decisions_of(tick: int, rows: np.ndarray) -> Decisions:
-    """The :class:`Decisions` a message of DECISION_ROW rows carries."""
+    """The :class:`Decisions` a message of DECISION_ROW (or DECISION_ROW_3D) rows carries."""
     from swarm_ros.core.rules import Decisions
     return Decisions(tick=tick, ids=rows["id"].astype(np.int64), claim=rows["claim"].astype(np.int64),
-                     x=rows["x"] / PATCH_METRES, y=rows["y"] / PATCH_METRES,
-                     heading=rows["heading"].astype(np.float64))
+                     **pose_of(rows))
 
 
 def parse_ranges(text: str) -> np.ndarray:

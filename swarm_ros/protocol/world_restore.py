@@ -20,7 +20,7 @@ from swarm_ros.core.metrics import Outcome, TickMetrics, outcome_of
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.checkpoint import Saved
 from swarm_ros.protocol.plan import MONITOR, WORLD
-from swarm_ros.protocol.rows import PATCH_METRES
+from swarm_ros.protocol.rows import pose_of
 
 __all__ = ["Saved", "book_of", "restore"]
 
@@ -65,8 +65,9 @@ def restore(ls, saved: Saved, incarnation: int) -> None:
     if "batches" not in b:
         raise ValueError("the checkpoint's bookkeeping is missing")
     tick = saved.tick
-    ls.sim.restore(tick, rows["x"] / PATCH_METRES, rows["y"] / PATCH_METRES, rows["heading"], rows["state"],
-                   saved.history, [tuple(x) for x in b["losses"]], _outcome(ls, saved.history, rows))
+    pose = pose_of(rows)
+    ls.sim.restore(tick, pose["x"], pose["y"], pose["heading"], rows["state"], saved.history,
+                   [tuple(x) for x in b["losses"]], _outcome(ls, saved.history, rows), pose.get("z"), pose.get("pitch"))
     ls.batch_names = list(b["batches"])
     for k, ids in enumerate(b["host"]):
         ls.host[np.asarray(ids, dtype=np.int64)] = k

@@ -33,7 +33,7 @@ from std_msgs.msg import Int64MultiArray
 from swarm_ros.artifacts.run_dir import BAG_DIR
 from swarm_ros.ros import graph as msgs
 
-#: The recorded topics: name -> (message class, QoS its publisher offers).
+#: The recorded topics of a 2D run: name -> (message class, QoS its publisher offers); :func:`topics` for either.
 TOPICS: dict[str, tuple[type, QoSProfile]] = {
     msgs.ROBOTS: (PointCloud2, msgs.ROBOTS_QOS),
     msgs.DECISIONS: (PointCloud2, msgs.DECISIONS_QOS),
@@ -43,6 +43,17 @@ TOPICS: dict[str, tuple[type, QoSProfile]] = {
     msgs.METRICS: (Int64MultiArray, msgs.METRICS_QOS),
     msgs.CLOCK: (Clock, msgs.CLOCK_QOS),
 }
+
+
+def topics(dims: int) -> dict[str, tuple[type, QoSProfile]]:
+    """The recorded topics of a run in a world of ``dims`` dimensions: a 3D world's shape and occupancy are
+    PointCloud2s of voxels (:class:`swarm_ros.ros.graph.WorldMaps`)."""
+    if dims == 2:
+        return TOPICS
+    kind = msgs.map_type(dims)
+    return {**TOPICS, msgs.OCCUPANCY: (kind, msgs.LATCHED_QOS), msgs.SHAPE: (kind, msgs.LATCHED_QOS)}
+
+
 STORE = "ros2_jazzy"  #: the rosbags type store of the message definitions (rosbags.typesys.Stores)
 
 if TYPE_CHECKING:  # rosbags loads when a bag is opened: off the start of the nodes
@@ -142,8 +153,9 @@ def _name_first_file(bag: Path) -> None:
 class BagRecorder:
     """Writes the recorded topics' serialized messages into a new rosbag2 (MCAP storage)."""
 
-    def __init__(self, out: Path) -> None:
-        """Open a bag for the run directory ``out`` (in a fresh hidden place beside it)."""
+    def __init__(self, out: Path, dims: int = 2) -> None:
+        """Open a bag for the run directory ``out`` (in a fresh hidden place beside it), of a run in a world of
+        ``dims`` dimensions."""
         from rosbags.rosbag2 import StoragePlugin, Writer
         from rosbags.typesys import Stores, get_typestore
 
@@ -152,11 +164,11 @@ class BagRecorder:
         self.path = self.holder / BAG_DIR
         self.writer = Writer(self.path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
-        self._cells = None  # the shape's cells (write_world)
+        self._maps = None  # the world's map messages (write_world)
         store = get_typestore(Stores(STORE))
         self.connections = {topic: self.writer.add_connection(topic, type_name(kind), typestore=store,
                                                               offered_qos_profiles=[bag_qos(qos)])
-                            for topic, (kind, qos) in TOPICS.items()}
+                            for topic, (kind, qos) in topics(dims).items()}
         self.closed = False
 
     def write(self, topic: str, data: bytes, at: int | None = None) -> None:
@@ -177,14 +189,12 @@ class BagRecorder:
         """/swarm/shape once (``first``), /swarm/occupancy first and when it ``changed``, /clock every tick: the
         world's messages on them, encoded here from the verified rows as the world encodes them. These
         types carry no tag (:mod:`swarm_ros.ros.auth`), so the monitor takes none of them from the network."""
-        if self._cells is None:
-            self._cells = msgs.shape_cells(shape)
+        if self._maps is None:
+            self._maps = msgs.WorldMaps(shape)
         if first:
-            self.write(msgs.SHAPE, msgs.grid_message(shape, self._cells, tick))
+            self.write(msgs.SHAPE, self._maps.shape_message(tick))
         if changed:
-            cells = self._cells.copy()
-            cells[occupancy >= 0] = msgs.CELL_FULL
-            self.write(msgs.OCCUPANCY, msgs.grid_message(shape, cells, tick))
+            self.write(msgs.OCCUPANCY, self._maps.occupancy_message(occupancy, tick))
         self.write(msgs.CLOCK, msgs.clock_message(tick))
 
     def close(self) -> Path:

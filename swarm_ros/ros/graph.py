@@ -14,6 +14,7 @@ import sys
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from nav_msgs.msg import OccupancyGrid
 from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
@@ -21,7 +22,7 @@ from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.shapes import Shape
-from swarm_ros.protocol.cdr import encode_clock, encode_grid
+from swarm_ros.protocol.cdr import encode_clock, encode_cloud, encode_grid
 from swarm_ros.protocol.checks import cloud
 from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
     ALIVE,
@@ -139,6 +140,48 @@ def grid_message(shape: Shape, cells: np.ndarray, tick: int) -> bytes:
 
 def shape_cells(shape: Shape) -> np.ndarray:
     return np.where(shape.mask.ravel(), CELL_EMPTY, CELL_OFF_SHAPE).astype(np.int8)
+
+
+def map_type(dims: int) -> type:
+    """The message type of /swarm/shape and /swarm/occupancy in a world of ``dims`` dimensions."""
+    return OccupancyGrid if dims == 2 else PointCloud2
+
+
+class WorldMaps:
+    """The world's /swarm/shape and /swarm/occupancy messages, serialized as published.
+
+    2D: ``nav_msgs/OccupancyGrid`` over the whole world (shape patches 0, filled ones 100,
+    the rest -1). 3D: ``sensor_msgs/PointCloud2`` of voxel centres (:data:`~swarm_ros.protocol.rows.VOXEL_ROW`):
+    every shape voxel on /swarm/shape, the filled ones on /swarm/occupancy; RViz shows either
+    as boxes, one voxel wide (PointCloud2, style Boxes, size 1).
+    """
+
+    def __init__(self, shape: Shape) -> None:
+        self.shape = shape
+        self.solid = shape.dims == 3
+        self.kind = map_type(shape.dims)
+        self.cells = None if self.solid else shape_cells(shape)
+
+    def _voxels(self, flags: np.ndarray, tick: int) -> bytes:
+        from swarm_ros.protocol.rows import VOXEL_ROW
+
+        coords = self.shape.world.patch_coords(np.flatnonzero(flags))
+        rows = np.zeros(coords[0].size, dtype=VOXEL_ROW)
+        for name, c in zip("xyz", coords):
+            rows[name] = c * PATCH_METRES
+        return encode_cloud(rows, tick)
+
+    def shape_message(self, tick: int) -> bytes:
+        if self.solid:
+            return self._voxels(self.shape.mask.ravel(), tick)
+        return grid_message(self.shape, self.cells, tick)
+
+    def occupancy_message(self, occupancy: np.ndarray, tick: int) -> bytes:
+        if self.solid:
+            return self._voxels(occupancy >= 0, tick)
+        cells = self.cells.copy()
+        cells[occupancy >= 0] = CELL_FULL
+        return grid_message(self.shape, cells, tick)
 
 
 def status_message(tick: int, outcome: str, message: str, level: bytes = DiagnosticStatus.OK,
