@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from swarm_ros.core.state import MOVING_STATES, RobotState
-from swarm_ros.protocol.rows import DECISION_ROW, PATCH_METRES, ROBOT_ROW
+from swarm_ros.protocol.rows import PATCH_METRES, VOXEL_ROW, decision_row, robot_row
 
 TYPES = {
     "/swarm/robots": "sensor_msgs/msg/PointCloud2", "/swarm/decisions": "sensor_msgs/msg/PointCloud2",
@@ -24,15 +24,17 @@ TYPES = {
     "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray", "/swarm/metrics": "std_msgs/msg/Int64MultiArray",
     "/clock": "rosgraph_msgs/msg/Clock",
 }
+#: A 3D run's topics: its shape and occupancy are PointCloud2s of voxel centres.
+TYPES_3D = {**TYPES, "/swarm/occupancy": "sensor_msgs/msg/PointCloud2", "/swarm/shape": "sensor_msgs/msg/PointCloud2"}
 
 
-def bag_metadata(bag: Path) -> dict:
+def bag_metadata(bag: Path, dims: int = 2) -> dict:
     """metadata.yaml, checked against what rosbag2 (version 9) requires of it."""
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["version"] == 9 and info["storage_identifier"] == "mcap"
     assert info["relative_file_paths"] == ["bag_0.mcap"] and [f["path"] for f in info["files"]] == ["bag_0.mcap"]
     topics = {t["topic_metadata"]["name"]: t for t in info["topics_with_message_count"]}
-    assert {name: t["topic_metadata"]["type"] for name, t in topics.items()} == TYPES
+    assert {name: t["topic_metadata"]["type"] for name, t in topics.items()} == (TYPES if dims == 2 else TYPES_3D)
     for t in topics.values():
         meta = t["topic_metadata"]
         assert meta["serialization_format"] == "cdr" and meta["type_description_hash"].startswith("RIHS01_")
@@ -43,9 +45,9 @@ def bag_metadata(bag: Path) -> dict:
     return info
 
 
-def read_bag(bag: Path) -> tuple[dict, dict[str, list]]:
+def read_bag(bag: Path, dims: int = 2) -> tuple[dict, dict[str, list]]:
     """(metadata.yaml, {topic: decoded messages in log order}); counts and times checked against the MCAP file."""
-    info = bag_metadata(bag)
+    info = bag_metadata(bag, dims)
     with open(bag / "bag_0.mcap", "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
@@ -64,23 +66,30 @@ def read_bag(bag: Path) -> tuple[dict, dict[str, list]]:
 def assert_bag_holds_run(run: Path) -> None:
     """Every tick's robot rows in the bag rebuild final_state.csv; its metrics equal metrics.csv; every
     tick's decisions are in it, one per robot moving after the tick before; shape, status, occupancy too."""
-    _, messages = read_bag(run / "bag")
+    final_state = (run / "final_state.csv").read_text()
+    dims = 3 if final_state.startswith("id,x,y,z,") else 2
+    _, messages = read_bag(run / "bag", dims)
     robots = messages["/swarm/robots"]
     ticks = [m.header.stamp.sec for m in robots]
     assert ticks == list(range(len(robots))), "one robots message per tick, in order"
-    first = np.frombuffer(robots[0].data, dtype=ROBOT_ROW)
-    n = first.size
-    x, y, heading, state = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n, dtype=np.int64)
+    row_type = robot_row(dims)
+    n = np.frombuffer(robots[0].data, dtype=row_type).size
+    columns = ("x", "y", "z", "heading", "pitch") if dims == 3 else ("x", "y", "heading")
+    pose = {name: np.zeros(n) for name in columns}
+    state = np.zeros(n, dtype=np.int64)
     moving_after: list[set[int]] = []
     for m in robots:
-        rows = np.frombuffer(m.data, dtype=ROBOT_ROW)
+        rows = np.frombuffer(m.data, dtype=row_type)
         ids = rows["id"].astype(np.int64)
-        x[ids], y[ids], heading[ids], state[ids] = rows["x"], rows["y"], rows["heading"], rows["state"]
+        state[ids] = rows["state"]
+        for name in columns:
+            pose[name][ids] = rows[name] / (PATCH_METRES if name in "xyz" else 1.0)
         moving_after.append(set(np.flatnonzero(np.isin(state, MOVING_STATES)).tolist()))
     labels = [s.label for s in RobotState]
-    xs, ys, hs = (x / PATCH_METRES).tolist(), (y / PATCH_METRES).tolist(), heading.tolist()
-    rebuilt = ["id,x,y,heading,state"] + [f"{i},{xs[i]!r},{ys[i]!r},{hs[i]!r},{labels[state[i]]}" for i in range(n)]
-    assert "\n".join(rebuilt) + "\n" == (run / "final_state.csv").read_text()
+    values = [pose[name].tolist() for name in columns]
+    rebuilt = [",".join(("id", *columns, "state"))]
+    rebuilt += [",".join([str(i), *(repr(v[i]) for v in values), labels[state[i]]]) for i in range(n)]
+    assert "\n".join(rebuilt) + "\n" == final_state
 
     with open(run / "metrics.csv", newline="") as f:
         table = list(csv.reader(f))
@@ -93,7 +102,8 @@ def assert_bag_holds_run(run: Path) -> None:
     # last, before it hears the outcome).
     decided: dict[int, list[int]] = {}
     for m in messages["/swarm/decisions"]:
-        decided.setdefault(m.header.stamp.sec, []).extend(np.frombuffer(m.data, dtype=DECISION_ROW)["id"].tolist())
+        rows = np.frombuffer(m.data, dtype=decision_row(dims))
+        decided.setdefault(m.header.stamp.sec, []).extend(rows["id"].tolist())
     last = len(robots) - 1
     for tick in range(1, last + 1):
         assert sorted(decided.get(tick, [])) == sorted(moving_after[tick - 1]), f"decisions of tick {tick}"
@@ -101,12 +111,20 @@ def assert_bag_holds_run(run: Path) -> None:
     counts = {topic: len(got) for topic, got in messages.items()}
     assert counts["/swarm/shape"] == 1 and counts["/swarm/status"] >= 1 and counts["/swarm/occupancy"] >= 1, counts
     for m in messages["/swarm/occupancy"] + messages["/swarm/shape"]:
-        assert len(m.data) == m.info.width * m.info.height and m.header.frame_id == "world"
+        cells = m.width * m.height * VOXEL_ROW.itemsize if dims == 3 else m.info.width * m.info.height
+        assert len(m.data) == cells and m.header.frame_id == "world"
     # the monitor writes /clock and the occupancy itself, from the rows it verified: every tick's clock, and
     # the occupancy at tick 0 and after every tick in which the localized robots changed, ending at the final one
     clock = [m.clock.sec for m in messages["/clock"]]
     assert clock == list(range(len(robots))), (clock[:5], len(clock), len(robots))
-    final = np.asarray(messages["/swarm/occupancy"][-1].data, dtype=np.int8)
     on_patches = np.isin(state, [RobotState.SEED, RobotState.LOCALIZED]).sum()
-    assert (final == 100).sum() == on_patches, "the last occupancy is the final state's"
+    if dims == 3:  # the filled voxels' centres: where the localized robots stand
+        final = np.frombuffer(messages["/swarm/occupancy"][-1].data, dtype=VOXEL_ROW)
+        standing = np.isin(state, [RobotState.SEED, RobotState.LOCALIZED])
+        centres = {(float(a), float(b), float(c)) for a, b, c in zip(pose["x"][standing], pose["y"][standing],
+                                                                       pose["z"][standing])}
+        assert {(float(r["x"]), float(r["y"]), float(r["z"])) for r in final} == centres
+    else:
+        final = np.asarray(messages["/swarm/occupancy"][-1].data, dtype=np.int8)
+        assert (final == 100).sum() == on_patches, "the last occupancy is the final state's"
     assert messages["/swarm/occupancy"][0].header.stamp.sec == 0

@@ -47,8 +47,8 @@ class Recording:
 
     Attributes:
         series: metric name -> {tick: value} (entities ``metrics/<name>``).
-        robots: tick -> (positions (n, 2) float32, class ids (n,)) of ``world/robots``.
-        occupancy: tick -> flat uint8 class image of ``world/occupancy``.
+        robots: tick -> (positions (n, 2) float32, class ids (n,)) of ``world/robots`` ((n, 3) in 3D).
+        occupancy: tick -> flat uint8 class image of ``world/occupancy`` (3D: the filled voxels' centres, flat).
         events: (tick, text) of ``events``, in tick order.
         static: entity paths that hold static data.
         blueprints: how many blueprints the file holds.
@@ -79,15 +79,20 @@ class Recording:
             if "Scalars:scalars" in names:
                 values = batch.column("Scalars:scalars").flatten().to_numpy()
                 self.series.setdefault(entity.rsplit("/", 1)[1], {}).update(zip(ticks, values.tolist()))
-            if "Points2D:positions" in names:
-                pos, cls = batch.column("Points2D:positions"), batch.column("Points2D:class_ids")
-                for k, tick in enumerate(ticks):
-                    p = pos[k].values.flatten().to_numpy(zero_copy_only=False).reshape(-1, 2)
-                    self.robots[tick] = (p, cls[k].values.to_numpy(zero_copy_only=False))
+            for kind, dims in (("Points2D", 2), ("Points3D", 3)):  # a 3D run's robots are Points3D
+                if f"{kind}:positions" in names:
+                    pos, cls = batch.column(f"{kind}:positions"), batch.column(f"{kind}:class_ids")
+                    for k, tick in enumerate(ticks):
+                        p = pos[k].values.flatten().to_numpy(zero_copy_only=False).reshape(-1, dims)
+                        self.robots[tick] = (p, cls[k].values.to_numpy(zero_copy_only=False))
             if "SegmentationImage:buffer" in names:
                 buf = batch.column("SegmentationImage:buffer")
                 for k, tick in enumerate(ticks):
                     self.occupancy[tick] = buf[k].values[0].values.to_numpy(zero_copy_only=False)
+            if "Boxes3D:centers" in names:  # a 3D run's filled voxels: their centres, (n, 3) flattened
+                centres = batch.column("Boxes3D:centers")
+                for k, tick in enumerate(ticks):
+                    self.occupancy[tick] = centres[k].values.flatten().to_numpy(zero_copy_only=False)
             if "TextLog:text" in names:
                 texts = batch.column("TextLog:text").flatten().to_pylist()
                 self.events += list(zip(ticks, texts))

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from PIL import Image
 
@@ -59,6 +60,20 @@ def make_fixtures(d: Path) -> None:
     (d / "brokenbag" / "metadata.yaml").write_text("rosbag2_bagfile_information: [\n")
     (d / "oldbag").mkdir()
     (d / "oldbag" / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: 99\n")
+    _make_3d_fixtures(d)
+
+
+def _make_3d_fixtures(d: Path) -> None:
+    """The 3D shape files of docs/bad_input.md: meshes and layered text grids."""
+    import trimesh
+
+    trimesh.creation.torus(major_radius=8, minor_radius=3).export(d / "ring.stl")
+    open_box = trimesh.creation.box(extents=(10, 8, 6))
+    open_box.update_faces(np.arange(1, len(open_box.faces)))  # one triangle removed: a hole
+    open_box.export(d / "open.stl")
+    (d / "junk.stl").write_text("not a mesh\n")
+    (d / "layers.txt").write_text("###\n###\n---\n##\n##\n")
+    (d / "flat3d.txt").write_text("##\n##\n---\n##\n#.\n")
 
 
 def listing(d: Path) -> dict[str, int]:

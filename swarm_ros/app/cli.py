@@ -169,6 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     shapes = sub.add_parser("shapes", help="list the built-in shapes", description="List the built-in shapes.")
     shapes.add_argument("--world-radius", type=int, default=World().radius, help="world spans [-R, R] (default: 32)")
+    shapes.add_argument("--3d", dest="solid", action="store_true", help="list the built-in 3D shapes instead")
     shapes.set_defaults(func=commands.cmd_shapes)
     return parser
 

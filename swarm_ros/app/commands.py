@@ -35,18 +35,19 @@ EXIT_AT_ONCE = False  # set by a finished 'run': see swarm_ros.app.cli.entry()
 
 
 def cmd_shapes(args: argparse.Namespace) -> int:
-    check_world_memory(args.world_radius)
+    check_world_memory(args.world_radius, dims=3 if args.solid else 2)
     world = World(args.world_radius)
+    if args.solid:
+        print(f"{'shape':<10} {'voxels':>7} {'tunnels':>7} {'cavities':>8}  bounding box "
+              "(xmin, ymin, zmin)-(xmax, ymax, zmax)  file")
+        misfits = _list_shapes(builtin_shapes_3d(), world)
+        print(f"world: {World(args.world_radius, 3).describe()} voxels, walls on the outer shell"
+              + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
+        return 0
     print(f"{'shape':<10} {'patches':>7} {'holes':>5}  bounding box (xmin, ymin)-(xmax, ymax)  file")
     misfits = _list_shapes(builtin_shapes(), world)
     print(f"world: {world.size} x {world.size} patches, walls on the border ring"
-          + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
-    print()
-    print(f"{'3D shape':<10} {'voxels':>7} {'tunnels':>7} {'cavities':>8}  bounding box "
-          "(xmin, ymin, zmin)-(xmax, ymax, zmax)  file")
-    misfits = _list_shapes(builtin_shapes_3d(), world)
-    print(f"world: {World(args.world_radius, 3).describe()} voxels, walls on the outer shell"
-          + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
+          + (f"; {misfits} shape(s) do not fit in it" if misfits else "") + "; 3D shapes: swarm-ros shapes --3d")
     return 0
 
 

@@ -251,11 +251,11 @@ class Recorder:
         rec, world = self.rec, self._world
         centres = np.stack(world.patch_coords(np.flatnonzero(shape.mask)), axis=1).astype(np.float32)
         rec.log(MAP, rr.Boxes3D(centers=centres, half_sizes=[0.5, 0.5, 0.5], class_ids=SHAPE_PATCH,
-                                fill_mode="majorwireframe"), static=True)
-        rec.log(f"{MAP}/walls", rr.Boxes3D(centers=[0, 0, 0], half_sizes=[world.radius - 0.5] * 3, class_ids=WALL),
-                static=True)
-        rec.log(OCCUPANCY, rr.Boxes3D.from_fields(half_sizes=[0.45, 0.45, 0.45], class_ids=FILLED, fill_mode="solid"),
-                static=True)
+                                fill_mode="majorwireframe", show_labels=False), static=True)
+        rec.log(f"{MAP}/walls", rr.Boxes3D(centers=[0, 0, 0], half_sizes=[world.radius - 0.5] * 3, class_ids=WALL,
+                                           show_labels=False), static=True)
+        rec.log(OCCUPANCY, rr.Boxes3D.from_fields(half_sizes=[0.45, 0.45, 0.45], class_ids=FILLED, fill_mode="solid",
+                                                  show_labels=False), static=True)
         rec.log(ROBOTS, rr.Points3D.from_fields(radii=_ROBOT_RADIUS), static=True)
 
     def _log_static_2d(self, shape: Shape) -> None:

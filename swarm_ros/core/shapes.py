@@ -40,7 +40,7 @@ import numpy as np
 
 from swarm_ros.core.errors import ShapeError
 from swarm_ros.core.grid import World
-from swarm_ros.core.resources import data_dir
+from swarm_ros.core.resources import check_world_memory, data_dir
 from swarm_ros.core.voxels import (
     LAYER_SEPARATOR,
     MESH_SUFFIXES,
@@ -165,7 +165,8 @@ def read_grid(path: Path, mesh_scale: float = 1.0) -> np.ndarray:
     """Read a shape file by its extension: ``.png`` as an image, ``.stl``, ``.obj`` and ``.ply`` as
     a mesh voxelized at ``mesh_scale`` voxels per mesh unit, anything else as a text grid."""
     if path.is_dir():
-        raise ShapeError(f"{path}: is a directory, not a shape file (a .txt grid, a .png image or a mesh)")
+        raise ShapeError(f"{path}: is a directory, not a shape file (a .txt grid or a .png image) nor a mesh "
+                         "(.stl, .obj, .ply)")
     if not path.is_file():
         raise ShapeError(f"{path}: no such shape file")
     suffix = path.suffix.lower()
@@ -215,6 +216,8 @@ class Shape:
         if grid.ndim not in (2, 3) or grid.size == 0 or not grid.any():
             raise ShapeError(f"{source}: empty shape (no shape patches)")
         world = World(world.radius, grid.ndim)
+        if world.dims == 3:  # the cube may not fit in memory where the square did (checked before this)
+            check_world_memory(world.radius, dims=3)
         r = world.radius
         index = np.nonzero(grid)  # (rows, cols) or (layers, rows, cols)
         coords = [index[-1] - (grid.shape[-1] - 1) // 2]  # x from the column
@@ -248,13 +251,14 @@ class Shape:
         """
         world = world or World()
         text = str(name_or_path)
-        builtins = {**builtin_shapes(), **builtin_shapes_3d()}
+        flat, solid = builtin_shapes(), builtin_shapes_3d()
+        known = f"built-in: {', '.join(flat)}) or built-in 3D shape ({', '.join(solid)}"
         if not text.strip():
-            raise ShapeError(f"the shape name is empty (built-in: {', '.join(builtins)}; or a .txt / .png file "
-                             f"or a mesh)")
+            raise ShapeError(f"the shape name is empty ({known}; or a .txt / .png file or a mesh)")
         if mesh_scale != 1.0 and Path(text).suffix.lower() not in MESH_SUFFIXES:
             raise ShapeError(f"{text}: mesh_scale applies to mesh shapes (.stl, .obj, .ply) only, got "
                              f"{mesh_scale:g}")
+        builtins = {**flat, **solid}
         if text in builtins:
             path = builtins[text]
             name = text
@@ -262,9 +266,7 @@ class Shape:
             path = Path(text)
             name = path.stem
             if not path.exists():
-                raise ShapeError(
-                    f"{text}: no such shape file or built-in shape (built-in: {', '.join(builtins)})"
-                )
+                raise ShapeError(f"{text}: no such shape file or built-in shape ({known})")
         return cls.from_grid(read_grid(path, mesh_scale), world, name=name, source=str(path), mesh_scale=mesh_scale)
 
     # -- properties -------------------------------------------------------------

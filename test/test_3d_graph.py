@@ -1,0 +1,74 @@
+"""A 3D run over the ROS 2 graph equals the in-process engine's, for 1, 2 and 4 robot-batch processes, with the
+bag and the recording in 3D; and a 3D run's command-line paths (docs/model.md, "Three dimensions")."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from bagcheck import assert_bag_holds_run
+from helpers import Recording
+
+pytestmark = pytest.mark.process
+
+PY = sys.executable
+# k-block (540 voxels) in a small world: complete in about 1,050 ticks, a few seconds in process
+RUN = ["--shape", "k-block", "--world-radius", "14", "--seed", "4", "--max-ticks", "1500", "--quiet"]
+
+
+def swarm_ros(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
+    env = {**os.environ, "HOME": os.environ.get("HOME", "/tmp")}
+    env.pop("ROS_DOMAIN_ID", None)
+    return subprocess.run([PY, "-m", "swarm_ros", *args], capture_output=True, text=True, timeout=timeout, env=env)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ref3d") / "run"
+    done = swarm_ros("simulate", *RUN, "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def test_a_3d_simulate_writes_3d_files(reference):
+    summary = json.loads((reference / "summary.json").read_text())
+    assert summary["outcome"] == "complete" and summary["shape_patches"] == 540
+    header, first = (reference / "final_state.csv").read_text().splitlines()[:2]
+    assert header == "id,x,y,z,heading,pitch,state" and first.endswith(",seed")
+    rec = Recording(reference / "recording.rrd")
+    positions, classes = rec.robots[max(rec.robots)]
+    assert positions.shape == (540, 3) and (classes == 3).sum() == 536  # localized, besides the 4 seeds
+    filled = rec.occupancy[max(rec.occupancy)].reshape(-1, 3)
+    assert filled.shape == (540, 3)
+    assert {"/world/map", "/world/map/walls", "/world/occupancy", "/world/robots"} <= rec.static
+
+
+@pytest.mark.parametrize("processes", [1, 2, 4])
+def test_a_3d_ros_graph_run_equals_the_in_process_engine(reference, tmp_path, processes):
+    out = tmp_path / "run"
+    done = swarm_ros("run", *RUN, "--processes", str(processes), "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    assert (reference / "metrics.csv").read_bytes() == (out / "metrics.csv").read_bytes()
+    assert (reference / "final_state.csv").read_bytes() == (out / "final_state.csv").read_bytes()
+    a, b = (json.loads((d / "summary.json").read_text()) for d in (reference, out))
+    for key in ("engine", "wall_seconds", "startup_seconds", "shutdown_seconds"):
+        a.pop(key, None), b.pop(key, None)
+    assert b.pop("rejected_messages") == {"world": 0, "monitor": 0}
+    assert a == b
+    assert Recording(out / "recording.rrd").same_data(Recording(reference / "recording.rrd"))
+    if processes == 2:  # the bag, read with another library: 3D rows, and voxel clouds for shape and occupancy
+        assert_bag_holds_run(out)
+
+
+def test_a_3d_run_without_a_recording_or_bag_still_equals(reference, tmp_path):
+    out = tmp_path / "run"
+    done = swarm_ros("run", *RUN, "--processes", "2", "--no-recording", "--no-bag", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    assert (reference / "final_state.csv").read_bytes() == (out / "final_state.csv").read_bytes()
+    assert not (out / "bag").exists() and not (out / "recording.rrd").exists()
+    assert np.loadtxt(out / "metrics.csv", delimiter=",", skiprows=1)[-1, 2] == 540
