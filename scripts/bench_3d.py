@@ -109,7 +109,10 @@ def compare_2d(before: Path, rounds: int, seeds: int) -> None:
             done = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_3d.py"), "--measure-2d",
                                    "--seeds", str(seeds)], cwd=tree, env=env, capture_output=True, text=True,
                                   check=True)
-            rates[name].append(json.loads(done.stdout.splitlines()[-1]))
+            source, result = done.stdout.splitlines()[-2:]
+            if not Path(source).resolve().is_relative_to(tree):
+                raise SystemExit(f"bench_3d: the {name} measurement imported {source}, not the tree {tree}")
+            rates[name].append(json.loads(result))
     print(f"\n2D against {before} ({rounds} rounds, alternating; M robot-steps/s, median of rounds):")
     print(f"  {'case':<28} {'this tree':>10} {'before':>10} {'ratio':>7}  range")
     for case in rates["this tree"][0]:
@@ -129,6 +132,9 @@ def main() -> int:
     args = ap.parse_args()
     pinned = _pin()
     if args.measure_2d:
+        import swarm_ros
+
+        print(swarm_ros.__file__)  # the tree measured: the parent checks it
         print(json.dumps(measure_2d(args.seeds)))
         return 0
     print(f"swarm_ros 3D engine benchmark ({pinned}; median of {args.seeds} seeds)")

@@ -20,7 +20,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
 from swarm_ros.core.errors import SwarmError
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, check_fields
+from swarm_ros.protocol.rows import ROW_TYPES, VOXEL_ROW, check_fields
 from swarm_ros.ros.graph import message_class
 
 _SHOWN_ITEMS = 8  # array items printed without --full
@@ -67,13 +67,13 @@ def decoded_rows(msg: object, full: bool = False) -> str:
     if type(msg).__name__ != "PointCloud2":
         return ""
     fields = [(f.name, f.offset, f.datatype, f.count) for f in msg.fields]
-    for dtype in (ROBOT_ROW, DECISION_ROW):
+    for dtype in (*ROW_TYPES, VOXEL_ROW):  # a 2D or 3D run's rows, or a 3D world's voxels
         try:
             check_fields(fields, msg.point_step, dtype)
         except ValueError:
             continue
         rows = np.frombuffer(msg.data, dtype=dtype)
-        names = [n for n in dtype.names if n != "z"]
+        names = [n for n in dtype.names if n != "z" or "pitch" in dtype.names or dtype is VOXEL_ROW]
         out = [f"# {rows.size} rows decoded: " + "  ".join(f"{n:>10}" for n in names)]
         for r in rows if full else rows[:_SHOWN_ROWS]:
             out.append("#" + " " * 19 + "  ".join(f"{r[n]:>10.4f}" if r.dtype[n].kind == "f" else f"{r[n]:>10}"

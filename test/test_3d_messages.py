@@ -1,0 +1,75 @@
+"""A 3D run's messages: its rows through rclpy's serializer, its voxel clouds as standard PointCloud2s, and
+``swarm-ros topics``' table of either."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import make_cloud
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import PointCloud2
+
+from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.protocol import checks
+from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
+from swarm_ros.protocol.checks import Rejected
+from swarm_ros.protocol.rows import ROBOT_ROW, ROBOT_ROW_3D, VOXEL_ROW, decision_rows, state_rows
+from swarm_ros.ros import graph as msgs
+from swarm_ros.tools.topics import decoded_rows
+
+pytestmark = pytest.mark.process  # rclpy's serializer loads the ROS message libraries
+
+
+@pytest.fixture(scope="module")
+def torus_run():
+    sim = Simulation(Shape.load("torus"), RunParams(robots=1348, seed=9))
+    sim.run(max_ticks=40)
+    return sim
+
+
+def test_3d_robot_rows_survive_serialization_exactly_and_carry_z_and_pitch(torus_run):
+    s = torus_run.state
+    sent = state_rows(np.arange(s.robots), s)
+    assert sent.dtype == ROBOT_ROW_3D and np.any(sent["z"] != 0) and np.any(sent["pitch"] != 0)
+    msg = deserialize_message(serialize_message(make_cloud(sent, 40)), PointCloud2)
+    assert (msg.point_step, msg.width) == (48, s.robots)
+    assert msgs.cloud_rows(msg, ROBOT_ROW_3D).tobytes() == sent.tobytes()
+    assert checks.robot_rows(msg, s.robots, 32, dims=3).tobytes() == sent.tobytes()
+    with pytest.raises(Rejected, match="point layout"):  # a 2D reader drops a 3D cloud, and the other way round
+        checks.robot_rows(msg, s.robots, 32, dims=2)
+    own = decode_cloud(encode_cloud(sent, 40))  # the graph's own writer and reader agree with rclpy's
+    assert bytes(own.data) == sent.tobytes()
+
+
+def test_a_3d_pose_out_of_range_is_rejected(torus_run):
+    s = torus_run.state
+    rows = state_rows(np.arange(s.robots), s).copy()
+    rows["pitch"][7] = 2.0
+    with pytest.raises(Rejected, match="pose outside the world"):
+        checks.robot_rows(make_cloud(rows, 40), s.robots, 32, dims=3)
+    rows["pitch"][7], rows["z"][9] = 0.0, 40.0
+    with pytest.raises(Rejected, match="pose outside the world"):
+        checks.robot_rows(make_cloud(rows, 40), s.robots, 32, dims=3)
+
+
+def test_a_3d_worlds_maps_are_voxel_clouds(torus_run):
+    shape, s = torus_run.shape, torus_run.state
+    maps = msgs.WorldMaps(shape)
+    assert maps.kind is PointCloud2
+    whole = deserialize_message(maps.shape_message(0), PointCloud2)
+    voxels = msgs.cloud_rows(whole, VOXEL_ROW)
+    assert voxels.size == shape.patches and whole.header.frame_id == "world"
+    flat = shape.world.flat_of(*(voxels[a].astype(np.int64) for a in "xyz"))
+    assert shape.mask.ravel()[flat].all()
+    filled = msgs.cloud_rows(deserialize_message(maps.occupancy_message(s.occupancy, 40), PointCloud2), VOXEL_ROW)
+    assert filled.size == int((s.occupancy >= 0).sum()) > 4
+    assert msgs.WorldMaps(Shape.load("star")).kind.__name__ == "OccupancyGrid"
+
+
+def test_topics_prints_3d_rows_with_z_and_pitch(torus_run):
+    s = torus_run.state
+    text = decoded_rows(make_cloud(state_rows(np.arange(s.robots), s), 40))
+    assert text.splitlines()[0].split()[4:] == ["x", "y", "z", "heading", "pitch", "id", "state"]
+    decisions = decoded_rows(make_cloud(decision_rows(torus_run.last_decisions()), 40))
+    assert "pitch" in decisions.splitlines()[0] and "claim" in decisions.splitlines()[0]
+    assert "z" not in decoded_rows(make_cloud(np.zeros(3, dtype=ROBOT_ROW), 1)).split()  # 2D: as before
