@@ -72,3 +72,21 @@ def test_a_3d_run_without_a_recording_or_bag_still_equals(reference, tmp_path):
     assert (reference / "final_state.csv").read_bytes() == (out / "final_state.csv").read_bytes()
     assert not (out / "bag").exists() and not (out / "recording.rrd").exists()
     assert np.loadtxt(out / "metrics.csv", delimiter=",", skiprows=1)[-1, 2] == 540
+
+
+def test_simulate_check_runs_the_z_spec_checker_in_3d(tmp_path):
+    done = swarm_ros("simulate", "--shape", "torus", "--world-radius", "16", "--max-ticks", "300", "--check",
+                     "--no-recording", "--out", str(tmp_path / "run"))
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["outcome"] == "timeout"
+
+
+def test_shapes_lists_the_3d_shapes_apart():
+    done = swarm_ros("shapes", "--3d")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0].split()[:4] == ["shape", "voxels", "tunnels", "cavities"]
+    rows = {ln.split()[0]: ln.split()[1:4] for ln in lines[1:-1]}
+    assert rows["torus"] == ["1348", "1", "0"] and rows["shell"] == ["1628", "0", "1"]
+    assert lines[-1] == "world: 65 x 65 x 65 voxels, walls on the outer shell"
+    assert "3D shapes: swarm-ros shapes --3d" in swarm_ros("shapes").stdout.splitlines()[-1]
