@@ -10,8 +10,9 @@ import pytest
 from helpers import run_checked
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_engine import run_in_batches
 
-from swarm_ros.core import Decisions, RunParams, Shape, ShapeError, Simulation, World, decide
+from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.invariants import nearest_frontier_patch
 from swarm_ros.core.legality import illegal
@@ -284,13 +285,7 @@ def test_batched_decide_and_apply_equal_the_fused_engine_in_3d(batches, rules):
     p = RunParams(robots=shape.patches + 20, seed=7, vision_radius=1.5, rules=rules, max_ticks=1500)
     fused = Simulation(shape, p)
     fused.run()
-    sim = Simulation(shape, p)
-    owner = np.random.default_rng(batches).integers(0, batches, p.robots)
-    while not sim.done:
-        ids = sim.moving_ids()
-        parts = [decide(sim.state, ids[owner[ids] == b], shape, p, sim.tick + 1) for b in range(batches)]
-        sim.apply(Decisions.concatenate(parts[::-1]))
-    assert _final(sim) == _final(fused)
+    assert _final(run_in_batches(shape, p, batches, seed=batches)) == _final(fused)
 
 
 def test_a_replica_fed_the_changed_rows_equals_the_world_in_3d():
