@@ -9,10 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 from bagcheck import assert_bag_holds_run
 from helpers import Recording
+from test_node_restarts import _finish, _kill, _logs, _wait_saved
 
 pytestmark = pytest.mark.process
 
@@ -65,15 +65,6 @@ def test_a_3d_ros_graph_run_equals_the_in_process_engine(reference, tmp_path, pr
         assert_bag_holds_run(out)
 
 
-def test_a_3d_run_without_a_recording_or_bag_still_equals(reference, tmp_path):
-    out = tmp_path / "run"
-    done = swarm_ros("run", *RUN, "--processes", "2", "--no-recording", "--no-bag", "--out", str(out))
-    assert done.returncode == 0, done.stderr
-    assert (reference / "final_state.csv").read_bytes() == (out / "final_state.csv").read_bytes()
-    assert not (out / "bag").exists() and not (out / "recording.rrd").exists()
-    assert np.loadtxt(out / "metrics.csv", delimiter=",", skiprows=1)[-1, 2] == 540
-
-
 def test_simulate_check_runs_the_z_spec_checker_in_3d(tmp_path):
     done = swarm_ros("simulate", "--shape", "torus", "--world-radius", "16", "--max-ticks", "300", "--check",
                      "--no-recording", "--out", str(tmp_path / "run"))
@@ -90,3 +81,17 @@ def test_shapes_lists_the_3d_shapes_apart():
     assert rows["torus"] == ["1348", "1", "0"] and rows["shell"] == ["1628", "0", "1"]
     assert lines[-1] == "world: 65 x 65 x 65 voxels, walls on the outer shell"
     assert "3D shapes: swarm-ros shapes --3d" in swarm_ros("shapes").stdout.splitlines()[-1]
+
+
+@pytest.mark.parametrize("node", ["world", "monitor"])
+def test_a_3d_run_whose_node_is_killed_mid_run_goes_on_and_is_identical(reference, tmp_path, node):
+    """The world from its checkpoint of 3D rows, the monitor from its bag of them (a batch takes a 3D snapshot
+    at tick 0 in every run, and again when it is restarted: the same message)."""
+    out = tmp_path / "run"
+    launcher = subprocess.Popen([PY, "-m", "swarm_ros", "run", *RUN, "--processes", "2", "--out", str(out)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env={k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"})
+    _wait_saved(_logs(out), 300)
+    _kill(out, node)
+    summary = _finish(launcher, reference, out, [node])
+    assert 300 <= summary["restarts"][0]["tick"] < 1052
