@@ -58,17 +58,19 @@ def kernels_cached() -> bool:
 
 def compile_kernels() -> None:
     """Compile every kernel into numba's cache: two ticks of the graph's code path and a few of the
-    in-process engine's, on the star, with the default parameters (the kernels' types do not depend on them)."""
+    in-process engine's, on the star and on the 3D k-block, with the default parameters (the kernels'
+    types do not depend on them)."""
     from swarm_ros.core.engine import Simulation
     from swarm_ros.core.grid import World
     from swarm_ros.core.params import RunParams
     from swarm_ros.core.shapes import Shape
     from swarm_ros.core.warmup import warm_up
 
-    shape = Shape.load("star", World())
-    params = RunParams(robots=shape.patches)
-    warm_up(shape, params)
-    Simulation(shape, params).run(max_ticks=5)
+    for name in ("star", "k-block"):  # a 2D and a 3D shape: the 3D kernels are compiled apart
+        shape = Shape.load(name, World())
+        params = RunParams(robots=shape.patches)
+        warm_up(shape, params)
+        Simulation(shape, params).run(max_ticks=5)
     try:
         (_CACHE / _STAMP).touch()
     except OSError:
