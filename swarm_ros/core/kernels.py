@@ -2,7 +2,7 @@
 
 The core's hot loops are numba functions compiled with ``cache=True``: the first
 process that calls one after an install (or after a change to the core) compiles it,
-about 13 s for all of them on a 2-core machine, and writes it into ``__pycache__``
+about 17 s for all of them (2D and 3D) on a 2-core machine, and writes it into ``__pycache__``
 beside the source; later processes load it in milliseconds. ``scripts/setup.sh`` fills
 the cache (``python -m swarm_ros.core.kernels``), so the first run does not pay for it;
 ``swarm-ros simulate`` and ``swarm-ros run`` say so in one line when they have to, and
@@ -24,7 +24,7 @@ _CACHE = _CORE / "__pycache__"
 _MARK = "cache=True"  # a module with a cached kernel says so in its source
 _STAMP = "swarm_ros-kernels.compiled"  # in _CACHE: compile_kernels() ran after the last change to a kernel module
 #: What the commands say before they compile (one line, on stderr).
-COMPILING = ("compiling the numba kernels first (once after an install or a change to the core, about 15 s; "
+COMPILING = ("compiling the numba kernels first (once after an install or a change to the core, about 17 s; "
              "scripts/setup.sh does it too)")
 
 
