@@ -95,10 +95,6 @@ class SwarmState:
         return SwarmState(**{f.name: (getattr(self, f.name).copy() if isinstance(getattr(self, f.name), np.ndarray)
                                       else getattr(self, f.name)) for f in fields(self)})
 
-    @property
-    def dims(self) -> int:
-        return 2 if self.z is None else 3
-
     def counts(self) -> np.ndarray:
         """Robots per :class:`RobotState` code (int64, (STATE_COUNT,))."""
         return np.bincount(self.state, minlength=STATE_COUNT)
