@@ -181,7 +181,7 @@ def test_mesh_scale_scales_the_voxelization(meshes):
 @pytest.mark.parametrize("name,scale,error", [
     ("open.stl", 1.0, r"the mesh does not close \(\d+ edges belong to one triangle only\)"),
     ("junk.stl", 1.0, "the mesh has no triangles|cannot read the mesh"),
-    ("ring.stl", 5.0, "reaches beyond the walls of the 65 x 65 x 65 world"),
+    ("ring.stl", 5.0, r"reaches beyond the walls of the 65 x 65 x 65 world .*\(at mesh_scale 5; --mesh-scale sets "),
     ("ring.stl", 10000.0, "lower mesh_scale"),
 ])
 def test_bad_meshes_say_what_is_wrong_in_one_line(meshes, name, scale, error):

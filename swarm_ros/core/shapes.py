@@ -267,7 +267,14 @@ class Shape:
             name = path.stem
             if not path.exists():
                 raise ShapeError(f"{text}: no such shape file or built-in shape ({known})")
-        return cls.from_grid(read_grid(path, mesh_scale), world, name=name, source=str(path), mesh_scale=mesh_scale)
+        grid = read_grid(path, mesh_scale)
+        try:
+            return cls.from_grid(grid, world, name=name, source=str(path), mesh_scale=mesh_scale)
+        except ShapeError as exc:
+            if path.suffix.lower() not in MESH_SUFFIXES:
+                raise
+            # a mesh's voxels depend on its scale: say which one, since another may fix it
+            raise ShapeError(f"{exc} (at mesh_scale {mesh_scale:g}; --mesh-scale sets another)") from None
 
     # -- properties -------------------------------------------------------------
     @property
