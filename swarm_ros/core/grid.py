@@ -89,13 +89,13 @@ class World:
         return flat
 
     def flat_index(self, px: np.ndarray | int, py: np.ndarray | int) -> np.ndarray | int:
-        """Flat patch index of patch coordinates (no bounds check)."""
-        return (py + self.radius) * self.size + (px + self.radius)
+        """Flat patch index of 2D patch coordinates (no bounds check): :meth:`flat_of` with two axes."""
+        return self.flat_of(px, py)
 
     def patch_xy(self, flat: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
-        """Patch coordinates ``(px, py)`` of flat patch indices."""
-        iy, ix = np.divmod(flat, self.size)
-        return ix - self.radius, iy - self.radius
+        """Patch coordinates ``(px, py)`` of a 2D world's flat patch indices: :meth:`patch_coords`."""
+        px, py = self.patch_coords(flat)
+        return px, py
 
     def patch_of(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Patch coordinates of continuous positions (nearest patch centre)."""
