@@ -10,13 +10,13 @@ import argparse
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from swarm_ros import __version__
 from swarm_ros.app import commands
 from swarm_ros.app.commands import EXIT_INTERRUPTED, EXIT_USAGE, PROG
 from swarm_ros.core.errors import ParameterError, SwarmError
 from swarm_ros.core.grid import World
+from swarm_ros.core.inputs import path_too_long, shown
 from swarm_ros.core.params import (
     BATCH_LOSS_POLICIES,
     MAX_RESTARTS,
@@ -24,11 +24,6 @@ from swarm_ros.core.params import (
     RUN_PARAMETERS,
     Param,
 )
-
-if TYPE_CHECKING:
-    pass
-
-
 
 #: The command line's own numbers (not run parameters), declared and checked the same way.
 _OWN = {p.name: p for p in (
@@ -56,6 +51,14 @@ def _checked(param: Param):
         except ParameterError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
     return convert
+
+
+def _path(text: str) -> Path:
+    """An argparse type for a path argument: refused in one line if Linux cannot take it."""
+    why = path_too_long(text)
+    if why:
+        raise argparse.ArgumentTypeError(f"{shown(text)}: {why}")
+    return Path(text)
 
 
 def _failure(text: str) -> tuple[float, int]:
@@ -118,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     replay = sub.add_parser("replay", help="publish a run's bag again, so ROS tools can watch a past run",
                             description="Publish every message of a run's rosbag2 (<run>/bag) again on its topic, "
                                         "with its type and QoS, paced as recorded.")
-    replay.add_argument("bag", type=Path, metavar="BAG", help="a run's bag directory (or the run directory)")
+    replay.add_argument("bag", type=_path, metavar="BAG", help="a run's bag directory (or the run directory)")
     replay.add_argument("--domain-id", type=int, help="ROS domain id to publish on (default: $ROS_DOMAIN_ID or 0)")
     replay.add_argument("--rate", type=_checked(_OWN["rate"]), default=1.0,
                         help="speed factor against the recorded pace (default: 1)")
@@ -145,9 +148,9 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Run an experiment file's grid of runs in parallel, append each finished run "
                                      "to DIR/results.csv, then write statistics, tables and figures. Running the "
                                      "same command again resumes an interrupted experiment.")
-    exp.add_argument("config", type=Path, metavar="CONFIG.yaml", help="experiment file, e.g. "
+    exp.add_argument("config", type=_path, metavar="CONFIG.yaml", help="experiment file, e.g. "
                                                                         "config/experiments/paper.yaml")
-    exp.add_argument("--out", type=Path, help="experiment directory (default: experiments/<name>)")
+    exp.add_argument("--out", type=_path, help="experiment directory (default: experiments/<name>)")
     exp.add_argument("--jobs", type=_checked(_OWN["jobs"]), help="worker processes (default: the machine's cores)")
     exp.add_argument("--engine", choices=("inprocess", "ros2"), default="inprocess",
                      help="engine of each run (default: inprocess; ros2 gives the same results, slower)")
@@ -164,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="(re)build an experiment's statistics, tables and figures",
                          description="Rebuild stats.csv, stats.md and figures/ of an experiment directory "
                                      "from its results.csv alone.")
-    rep.add_argument("dir", type=Path, metavar="DIR", help="experiment directory holding results.csv")
+    rep.add_argument("dir", type=_path, metavar="DIR", help="experiment directory holding results.csv")
     rep.set_defaults(func=commands.cmd_report)
 
     shapes = sub.add_parser("shapes", help="list the built-in shapes", description="List the built-in shapes.")
@@ -183,8 +186,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         p.add_argument(param.cli_flag, dest=param.name, help=f"{param.help} (default: {default})", **kwargs)
     p.add_argument("--fail-robots", type=_failure, metavar="P@T",
                    help="a fraction P of the robots fails at the end of tick T and is removed, e.g. 0.1@500")
-    p.add_argument("--params-file", type=Path, help="ROS 2 style YAML parameter file; flags override it")
-    p.add_argument("--out", type=Path, help="output directory (default: runs/<time>_<shape>_n<N>_v<R>_s<seed>)")
+    p.add_argument("--params-file", type=_path, help="ROS 2 style YAML parameter file; flags override it")
+    p.add_argument("--out", type=_path, help="output directory (default: runs/<time>_<shape>_n<N>_v<R>_s<seed>)")
     p.add_argument("--overwrite", action="store_true", default=None,
                    help="replace an existing run directory (only one this tool wrote)")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no summary")

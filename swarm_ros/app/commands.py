@@ -157,6 +157,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarm_ros.artifacts.run_dir import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args)
+    source = Path(shape.source)
+    if source.exists() and not source.is_file():  # a pipe, /dev/null: read once here, but each node reads it too
+        raise SwarmError(f"{settings.shape}: not a regular file; each node of the graph reads the shape file "
+                         f"itself, so 'run' needs a file ('simulate' reads a pipe once)")
     changed = {k: v for k, v in nodes["robot_batch"].items() if v != node_defaults("robot_batch")[k]}
     if changed:
         raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "

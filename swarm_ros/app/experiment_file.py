@@ -27,6 +27,7 @@ rule sets of one experiment start from the same placements (common random number
 from __future__ import annotations
 
 import itertools
+import math
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +43,9 @@ from swarm_ros.core.params import EXPERIMENT_AXES, MAX_SEED, RUN_PARAMETER, RUN_
 from swarm_ros.core.resources import check_world_memory
 from swarm_ros.core.shapes import Shape
 
+#: The most runs an experiment may hold: its runs are listed (and results.csv holds a line each) before the
+#: first starts. The study's protocol is 360 runs; a million take days on a cluster.
+MAX_RUNS = 1_000_000
 PATCHES = "patches"  #: a group size written as this word is the shape's exact patch count
 AXES = EXPERIMENT_AXES  #: run parameters that may list several values
 FIXED = tuple(p.name for p in RUN_PARAMETERS if p.experiment == "fixed")  #: one value for every run
@@ -49,7 +53,7 @@ FIXED = tuple(p.name for p in RUN_PARAMETERS if p.experiment == "fixed")  #: one
 _OWN = {p.name: p for p in (
     Param("name", "", "the experiment's name"),
     Param("seed", 0, "experiment seed", low=0, high=MAX_SEED),
-    Param("repetitions", 1, "runs per grid point", low=1),
+    Param("repetitions", 1, "runs per grid point", low=1, high=MAX_RUNS),
     Param("reference", "", "a reference file, relative to the experiment file"),
 )}
 _GROUP = Param("robots", 5, "a group size", low=5)  # the four seeds and at least one robot to join
@@ -193,6 +197,10 @@ def load_experiment(path: str | Path) -> Experiment:
         except SwarmError as exc:
             raise _fail(path, f"vision_radius[{i}]", str(exc)) from None
     shapes = _load_shapes(path, data["shapes"], World(fixed.world_radius))
+    runs = own["repetitions"] * sum(len(sizes) for *_, sizes in shapes) * math.prod(len(v) for v in axes.values())
+    if runs > MAX_RUNS:
+        raise _fail(path, "repetitions", f"the grid holds {runs:,} runs, more than the {MAX_RUNS:,} an experiment "
+                                         f"may hold; split it into several experiments")
     exp = Experiment(name=name.strip(), seed=own["seed"], repetitions=own["repetitions"], shapes=shapes, axes=axes,
                      fixed=fixed, reference=reference)
     for spec in exp.runs()[:: exp.repetitions]:  # the parameters of every grid point

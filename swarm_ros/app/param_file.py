@@ -23,22 +23,42 @@ its robots itself; ``simulate`` has no graph, and checks and ignores ``/world`` 
 
 from __future__ import annotations
 
+from collections.abc import Hashable
 from pathlib import Path
 
 import yaml
 
 from swarm_ros.core.errors import ConfigError, ParameterError, SwarmError
+from swarm_ros.core.inputs import YAML_LIMIT, read_bounded
 from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETER, Settings
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader, refusing a key given twice in one mapping (plain YAML keeps the last, silently)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: set = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if not isinstance(key, Hashable):
+                continue  # the base loader refuses it, with its own message
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"the key {key!r} is given twice (line {key_node.start_mark.line + 1})")
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
 def read_yaml(path: Path, what: str, error: type[SwarmError]) -> object:
-    """The YAML document in ``path``, or ``error`` with one line naming the file (unreadable, bad YAML)."""
+    """The YAML document in ``path`` (at most :data:`~swarm_ros.core.inputs.YAML_LIMIT` bytes), or ``error`` with
+    one line naming the file (unreadable, too large, bad YAML, a key given twice)."""
+    data = read_bounded(path, YAML_LIMIT, what, error)
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise error(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+        return yaml.load(data.decode("utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if isinstance(exc, yaml.constructor.ConstructorError) and "given twice" in str(exc.problem):
+            first = exc.problem
         raise error(f"{path}: not valid YAML ({first})") from None
 
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.inputs import YAML_LIMIT, read_bounded
 
 COLUMNS = ("shape", "study_robots", "mean_ticks", "ci95_low", "ci95_high", "group_sizes", "sizes_mean_min",
            "sizes_mean_max")
@@ -57,10 +58,9 @@ def load_reference(path: Path) -> dict[str, Reference]:
             its mean, or a shape listed twice.
     """
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ReferenceError(f"{path}: cannot read the reference file ({getattr(exc, 'strerror', None) or exc})") \
-            from None
+        text = read_bounded(path, YAML_LIMIT, "reference file", ReferenceError).decode("utf-8")
+    except UnicodeDecodeError:
+        raise ReferenceError(f"{path}: cannot read the reference file (not UTF-8 text)") from None
     lines = [(n, ln) for n, ln in enumerate(text.splitlines(), start=1) if ln.strip() and not ln.startswith("#")]
     if not lines or next(csv.reader([lines[0][1]])) != list(COLUMNS):
         raise ReferenceError(f"{path}: expected the columns {','.join(COLUMNS)}")

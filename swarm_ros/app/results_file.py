@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.inputs import RESULTS_LIMIT, read_bounded
 from swarm_ros.core.params import EXPERIMENT_AXES, RUN_PARAMETERS
 
 RESULTS_FILE = "results.csv"
@@ -46,9 +47,9 @@ def read_results(path: Path) -> list[dict]:
         ExperimentError: the file is not a results file of this version.
     """
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ExperimentError(f"{path}: cannot read results ({exc.strerror or exc})") from None
+        text = read_bounded(path, RESULTS_LIMIT, "results file", ExperimentError).decode("utf-8")
+    except UnicodeDecodeError:
+        raise ExperimentError(f"{path}: not a swarm-ros results file (not UTF-8 text)") from None
     text = text[: text.rfind("\n") + 1]  # drop a last line cut short
     if text.split("\n", 1)[0] != ",".join(RESULT_COLUMNS):
         raise ExperimentError(f"{path}: not a swarm-ros results file (expected the columns "

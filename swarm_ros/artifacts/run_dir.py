@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import shutil
 import tempfile
 from datetime import datetime
@@ -20,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.inputs import path_too_long, shown
 
 if TYPE_CHECKING:
     from swarm_ros.core.run_result import RunRecord
@@ -84,6 +86,7 @@ def check_out_dir(out: Path, overwrite: bool) -> None:
             or with it but is not a run directory; is a file; or its nearest existing
             ancestor is not a writable directory.
     """
+    check_name_length(out)
     if out.exists():
         if not out.is_dir():
             raise OutputError(f"{out}: exists and is not a directory")
@@ -102,6 +105,23 @@ def check_out_dir(out: Path, overwrite: bool) -> None:
         raise OutputError(f"{base}: is not a directory, so {out} cannot be created")
     if not writable_dir(base):
         raise OutputError(f"{base}: directory is not writable, so {out} cannot be created")
+
+
+#: Bytes a run adds to its directory's name for the names it makes beside it (``.<name>.logs-XXXXXXXX``), and
+#: to its path for the files in it (``logs/world.checkpoint.json.XXXXXXXX``).
+NAME_MARGIN = 20
+PATH_MARGIN = 64
+
+
+def check_name_length(out: Path) -> None:
+    """Refuse an output directory whose name, with what a run adds to it, is longer than Linux takes.
+
+    Raises:
+        OutputError: the last name, a name on the way, or the whole path is too long.
+    """
+    why = path_too_long(out, NAME_MARGIN) or path_too_long(out / ("x" * PATH_MARGIN))
+    if why:
+        raise OutputError(f"{shown(out)}: cannot be the output directory ({why})")
 
 
 def writable_dir(path: Path) -> bool:
@@ -226,7 +246,6 @@ def claim_out_dir(out: Path) -> None:
     """
     import fcntl
     import hashlib
-    import os
     import sys
 
     resolved = str(Path(os.path.abspath(out)).resolve())

@@ -30,7 +30,11 @@ DEFAULT_SEED = 1
 DEFAULT_VISION = 1.0
 DEFAULT_WIGGLE_DEG = 45.0
 DEFAULT_MAX_TICKS = 100_000
-MAX_SEED = 2**63 - 1
+INT64_MAX = 2**63 - 1  #: every integer parameter fits in 64 bits: a ROS parameter's and the kernels' integers
+MAX_SEED = INT64_MAX
+#: The largest tick limit: far beyond any run (the study's is 100,000; 10^9 ticks take days at the fastest),
+#: and the graph's world keeps a row of metrics per tick in its checkpoint, a sparse file this many rows long.
+MAX_TICKS = 10**9
 MIN_ROBOTS = 4  # the four seeds
 
 _KIND_WORDS = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
@@ -110,6 +114,9 @@ class Param:
             elif kind in (int, float):
                 ok = (self.low is None or (value > self.low if self.low_open else value >= self.low)) \
                     and (self.high is None or value <= self.high)
+        if ok and kind is int and value > INT64_MAX and (self.high is None or self.high > INT64_MAX):
+            raise ParameterError(f"{self.name} must be {self.describe()} and <= {INT64_MAX} (a 64-bit integer), "
+                                 f"got {value}")
         if not ok:
             shown = _number(value) if isinstance(value, float) and math.isfinite(value) else repr(value)
             raise ParameterError(f"{self.name} must be {self.describe()}, got {shown}")
@@ -139,7 +146,7 @@ RUN_PARAMETERS: tuple[Param, ...] = (
           blank="the rule set's own"),
     Param("steps", "", "override the rule set's steps switch", choices=STEPS_VALUES, blank="the rule set's own"),
     Param("seed", DEFAULT_SEED, "run seed", low=0, high=MAX_SEED, experiment=""),
-    Param("max_ticks", DEFAULT_MAX_TICKS, "tick limit", low=1),
+    Param("max_ticks", DEFAULT_MAX_TICKS, "tick limit", low=1, high=MAX_TICKS),
     Param("wiggle_deg", DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle"),
     Param("world_radius", DEFAULT_RADIUS, "the world spans [-R, R] patches", low=MIN_RADIUS, model=False),
     Param("fail_fraction", 0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0, high=1.0,

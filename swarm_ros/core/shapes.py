@@ -40,6 +40,7 @@ import numpy as np
 
 from swarm_ros.core.errors import ShapeError
 from swarm_ros.core.grid import World
+from swarm_ros.core.inputs import SHAPE_LIMIT, read_bounded, shown
 from swarm_ros.core.resources import check_world_memory, data_dir
 from swarm_ros.core.voxels import (
     LAYER_SEPARATOR,
@@ -53,6 +54,9 @@ from swarm_ros.core.voxels import (
 
 #: Growth's and the empty space's connectivity in a grid of each dimension: (shape, empty).
 CONNECTIVITY = {2: (8, 4), 3: (26, 6)}
+#: The most pixels a shape image may have: Pillow's own bound against decompression bombs (it warns above it,
+#: and refuses twice it), so that an image is refused in our words before Pillow says anything.
+MAX_IMAGE_PIXELS = 89_478_485
 
 
 def regions(mask: np.ndarray, connectivity: int) -> tuple[np.ndarray, int]:
@@ -89,10 +93,9 @@ def read_text_grid(path: Path) -> np.ndarray:
     Raises:
         ShapeError: unreadable file, stray characters, ragged or missing rows.
     """
+    data = read_bounded(path, SHAPE_LIMIT, "shape file", ShapeError)
     try:
-        text = path.read_bytes().decode("utf-8-sig")  # a byte-order mark (as some Windows editors write) is fine
-    except OSError as exc:
-        raise ShapeError(f"{path}: cannot read shape file ({exc.strerror or exc})") from None
+        text = data.decode("utf-8-sig")  # a byte-order mark (as some Windows editors write) is fine
     except UnicodeDecodeError:
         raise ShapeError(f"{path}: not a text shape grid (not UTF-8 text)") from None
     rows: list[tuple[int, str]] = []
@@ -137,12 +140,26 @@ def read_png_grid(path: Path) -> np.ndarray:
     Raises:
         ShapeError: the file is missing or not a readable image.
     """
+    import io
+    import warnings
+
     from PIL import Image, UnidentifiedImageError
 
+    data = read_bounded(path, SHAPE_LIMIT, "shape file", ShapeError)
+    too_large = f"{path}: the image has more than {MAX_IMAGE_PIXELS:,} pixels{{}}, the most a shape image may " \
+                f"have (Pillow's bound against decompression bombs)"
     try:
-        with Image.open(path) as image:
+        with warnings.catch_warnings():  # Pillow warns of a large image in its own words; it is refused below
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            image = Image.open(io.BytesIO(data))  # reads the header only
+        with image:
+            width, height = image.size
+            if width * height > MAX_IMAGE_PIXELS:
+                raise ShapeError(too_large.format(f" ({width} x {height})"))
             image.load()
             la = np.asarray(image.convert("LA"))
+    except Image.DecompressionBombError:  # Pillow refuses twice its bound at open
+        raise ShapeError(too_large.format("")) from None
     except OSError as exc:
         reason = "not a readable image" if isinstance(exc, UnidentifiedImageError) else (exc.strerror or str(exc))
         raise ShapeError(f"{path}: cannot read shape image ({reason})") from None
@@ -167,8 +184,6 @@ def read_grid(path: Path, mesh_scale: float = 1.0) -> np.ndarray:
     if path.is_dir():
         raise ShapeError(f"{path}: is a directory, not a shape file (a .txt grid or a .png image) nor a mesh "
                          "(.stl, .obj, .ply)")
-    if not path.is_file():
-        raise ShapeError(f"{path}: no such shape file")
     suffix = path.suffix.lower()
     if suffix == ".png":
         return read_png_grid(path)
@@ -265,8 +280,12 @@ class Shape:
         else:
             path = Path(text)
             name = path.stem
-            if not path.exists():
-                raise ShapeError(f"{text}: no such shape file or built-in shape ({known})")
+            try:
+                path.stat()
+            except FileNotFoundError:
+                raise ShapeError(f"{text}: no such shape file or built-in shape ({known})") from None
+            except OSError as exc:  # a name too long, a folder on the way not readable, ...
+                raise ShapeError(f"{shown(text)}: cannot read shape file ({exc.strerror or exc})") from None
         grid = read_grid(path, mesh_scale)
         try:
             return cls.from_grid(grid, world, name=name, source=str(path), mesh_scale=mesh_scale)

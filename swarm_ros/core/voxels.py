@@ -15,12 +15,14 @@ Grids here are ``(layers, rows, cols)`` arrays, top layer and top row first.
 
 from __future__ import annotations
 
+import io
 import itertools
 from pathlib import Path
 
 import numpy as np
 
 from swarm_ros.core.errors import ShapeError
+from swarm_ros.core.inputs import MESH_LIMIT, read_bounded
 
 LAYER_SEPARATOR = "-"  #: a line of these (at least three) ends one z layer of a layered text grid
 MESH_SUFFIXES = (".stl", ".obj", ".ply")
@@ -66,8 +68,9 @@ def read_mesh(path: Path, scale: float) -> np.ndarray:
     """
     import trimesh  # only a mesh needs it
 
+    data = read_bounded(path, MESH_LIMIT, "mesh", ShapeError)
     try:
-        mesh = trimesh.load(path, force="mesh", process=True)
+        mesh = trimesh.load(io.BytesIO(data), file_type=path.suffix.lower().lstrip("."), force="mesh", process=True)
     except Exception as exc:  # trimesh raises many kinds on a corrupt file  # noqa: BLE001
         raise ShapeError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})".splitlines()[0]) from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
