@@ -40,7 +40,7 @@ setup(
     extras_require={"test": ["pytest>=8", "hypothesis>=6.100", "mcap>=1.6", "mcap-ros2-support>=0.6"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
     entry_points={"console_scripts": [
-        "swarm-ros = swarm_ros.app.cli:entry",
+        "swarm-ros = swarm_ros.app.main:entry",
         "world = swarm_ros.nodes.world:main",
         "robot_batch = swarm_ros.nodes.robot_batch:main",
         "monitor = swarm_ros.nodes.monitor:main",

@@ -1,5 +1,5 @@
 """``python -m swarm_ros``: the ``swarm-ros`` command line."""
 
-from swarm_ros.app.cli import entry
+from swarm_ros.app.main import entry
 
 entry()

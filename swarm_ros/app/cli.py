@@ -14,6 +14,7 @@ from pathlib import Path
 from swarm_ros import __version__
 from swarm_ros.app import commands
 from swarm_ros.app.commands import EXIT_INTERRUPTED, EXIT_USAGE, PROG
+from swarm_ros.app.main import InterruptSaid
 from swarm_ros.core.errors import ParameterError, SwarmError
 from swarm_ros.core.grid import World
 from swarm_ros.core.inputs import path_too_long, shown
@@ -211,8 +212,9 @@ def main(argv: list[str] | None = None) -> int:
     except SwarmError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        if not isinstance(exc, InterruptSaid):
+            print(f"{PROG}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

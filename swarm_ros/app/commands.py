@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from swarm_ros.app.main import EXIT_INTERRUPTED
 from swarm_ros.app.param_file import read_params_file
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import SwarmError
@@ -27,7 +28,6 @@ if TYPE_CHECKING:
 
 PROG = "swarm-ros"
 EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
 _PROGRESS_TICKS = 200  # ticks between progress-bar updates
 MAX_DOMAIN_ID = 232  # Fast DDS's ports overflow above this (on Linux, 101 with ephemeral ports in use)
 LIST_SECONDS, ECHO_SECONDS = 2.0, 10.0  # topics: listening time, and --echo's wait

@@ -174,8 +174,9 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
                 raise ExperimentError(f"cannot reach the Dask scheduler at {scheduler}: "
                                       f"{text.splitlines()[0] if text else type(exc).__name__}") from None
         else:
-            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                   silence_logs=logging.ERROR)
+            with _workers_ignore_sigint():  # a Ctrl-C is this process's to act on: it stops the workers
+                cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                       silence_logs=logging.ERROR)
             client = Client(cluster)
         if not quiet:
             where = scheduler or f"a LocalCluster of {jobs} workers"
@@ -188,6 +189,28 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
             client.close()
         if cluster is not None:
             cluster.close()
+
+
+@contextmanager
+def _workers_ignore_sigint() -> Iterator[None]:
+    """Ignore SIGINT in this process while the block starts worker processes, which keep ignoring it for good.
+
+    A terminal's Ctrl-C reaches every process of its group: a LocalCluster's workers would each print a
+    traceback of their own. Only an ignored signal stays ignored across the exec that starts a worker (a
+    handler, or a blocked mask, does not), so the workers are started while this process ignores it too; this
+    process then stops them on the way out. A Ctrl-C in that second (the cluster's start) is not seen.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 def run_specs(specs: list[RunSpec], engine: str, processes: int) -> list[dict]:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from swarm_ros.app.executors import dask_client, execute, execute_dask
 from swarm_ros.app.experiment_file import Experiment, load_experiment
+from swarm_ros.app.main import InterruptSaid
 from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, ResultsFile
 
 EXPERIMENTS_DIR = Path("experiments")
@@ -119,7 +120,7 @@ def _run_grid(exp: Experiment, config: Path, out: Path | None, client, jobs: int
         left = len(runs) - len(results.done() & {s.key for s in runs})
         print(f"swarm-ros: interrupted with {left} of {len(runs)} runs to go; the finished ones are in "
               f"{out / RESULTS_FILE}; run the same command again to resume", file=sys.stderr)
-        raise
+        raise InterruptSaid from None
     finally:
         results.close()
     return out

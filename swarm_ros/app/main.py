@@ -1,0 +1,27 @@
+"""The ``swarm-ros`` console script: Ctrl-C is answered in one line from the first instant.
+
+Importing the command line takes a few tenths of a second (numpy, argparse, the package);
+a Ctrl-C in that time would otherwise end in a traceback of whatever was being imported.
+This module imports nothing of its own before it can catch it.
+"""
+
+from __future__ import annotations
+
+import sys
+
+EXIT_INTERRUPTED = 130
+
+
+class InterruptSaid(KeyboardInterrupt):
+    """A Ctrl-C that a command has already told the user about (what was kept, how to resume)."""
+
+
+def entry() -> None:
+    """Import the command line and run it (:func:`swarm_ros.app.cli.entry`); a Ctrl-C while importing it ends
+    with ``swarm-ros: interrupted`` and exit status 130, as one during a command does."""
+    try:
+        from swarm_ros.app.cli import entry as run
+    except KeyboardInterrupt:
+        print("swarm-ros: interrupted", file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED)
+    run()
