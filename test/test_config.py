@@ -52,7 +52,7 @@ def test_bad_parameter_files_name_the_file_and_the_key(tmp_path, text, message):
 
 
 def test_missing_parameter_file(tmp_path):
-    with pytest.raises(ConfigError, match="cannot read parameter file"):
+    with pytest.raises(ConfigError, match="no such parameter file"):
         load_params_file(tmp_path / "nope.yaml")
 
 
@@ -61,9 +61,14 @@ def test_node_sections_of_the_shipped_file_hold_every_node_default():
 
     from swarm_ros.core.params import NODE_PARAMETERS, node_defaults
 
-    data = yaml.safe_load((data_dir("config") / "swarm_ros.yaml").read_text())
+    text = (data_dir("config") / "swarm_ros.yaml").read_text()
+    # the node sections are commented out (a node's own section outranks -p): uncommented, they are the defaults
+    sections = text[text.index("# /world:"):]
+    uncommented = "\n".join(line[2:] for line in sections.splitlines())
+    data = yaml.safe_load(uncommented)
     for node in NODE_PARAMETERS:
         assert data[f"/{node}"]["ros__parameters"] == node_defaults(node)
+    assert set(yaml.safe_load(text)) == {"/**"}, "a node section in force would shadow a node's -p arguments"
 
 
 @pytest.mark.parametrize("text,message", [

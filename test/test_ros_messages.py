@@ -112,3 +112,28 @@ def test_node_parameters_out_of_range_are_refused(ros_context, kind, values, mes
     with pytest.raises(ConfigError, match=re.escape(f"node '{kind}': {message}")):
         read_parameters(node, kind)
     node.destroy_node()
+
+
+@pytest.mark.parametrize("kind", ["world", "robot_batch", "monitor"])
+def test_a_p_argument_wins_over_the_shipped_parameter_file(kind):
+    """rcl's own precedence: the shipped file sets no node section that would shadow ``-p`` (as the docs'
+    hand-started monitor, ``--params-file config/swarm_ros.yaml -p out_dir:=...``, relies on)."""
+    from swarm_ros.core.params import NODE_PARAMETERS
+    from swarm_ros.core.resources import data_dir
+
+    given = {p.name: (not p.default if p.kind is bool else p.default + 1 if p.kind in (int, float) else "x")
+             for p in NODE_PARAMETERS[kind] if not p.choices}
+    args = ["--ros-args", "--params-file", str(data_dir("config") / "swarm_ros.yaml"), "-p", "seed:=7"]
+    for name, value in given.items():
+        args += ["-p", f"{name}:={str(value).lower() if isinstance(value, bool) else value}"]
+    context = Context()
+    rclpy.init(args=args, context=context)
+    try:
+        node = Node(kind, context=context, allow_undeclared_parameters=True,
+                    automatically_declare_parameters_from_overrides=True)
+        run, own = read_parameters(node, kind)
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert run.seed == 7
+    assert {name: own[name] for name in given} == given
