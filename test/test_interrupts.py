@@ -125,3 +125,63 @@ def test_sigterm_to_run_as_tick_0_goes_out_keeps_the_ticks_the_world_sent(tmp_pa
     assert summary["outcome"] == "interrupted"
     assert f"interrupted at tick {summary['convergence_tick']}; the run so far is in {out}" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_ctrl_c_as_run_shuts_down_says_the_run_ended_and_keeps_it_whole(tmp_path):
+    """A Ctrl-C once the monitor has written the run directory (the nodes are still stopping): the run is
+    whole, with its logs and shutdown time, and the message says so (not 'no run directory')."""
+    import shutil
+
+    out = tmp_path / "run"
+    for _ in range(3):  # the nodes take ~0.3 s to stop: the Ctrl-C nearly always lands in that time
+        proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out), "--quiet"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 180
+        while not (out / "summary.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.005)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        if proc.returncode != 0:
+            break
+        shutil.rmtree(out)  # the command had ended before the Ctrl-C reached it: again
+    assert proc.returncode == 130, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert f"interrupted after the run had ended (complete at tick {summary['convergence_tick']}); it is whole " \
+           f"in {out}" in err and "Traceback" not in err, err
+    assert summary["outcome"] == "complete" and summary["shutdown_seconds"] is not None
+    assert (out / "logs" / "launcher.log").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+@pytest.mark.parametrize("command", [["shapes"], ["simulate", "--shape", "star", "--quiet"]])
+def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, command):
+    """Ctrl-C while the command imports its modules (the first few tenths of a second): one line, exit 130."""
+    script = Path(sys.executable).parent / "swarm-ros"
+    for delay in (0.08, 0.15):
+        proc = subprocess.Popen([str(script), *command], cwd=tmp_path, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        assert "Traceback" not in err, err
+        if proc.returncode != 0:
+            assert proc.returncode == 130 and err.strip().endswith("interrupted"), err
+
+
+def test_a_terminal_ctrl_c_to_a_dask_experiment_leaves_no_worker_traceback(tmp_path):
+    """A terminal's Ctrl-C reaches the whole process group, Dask's workers included: they ignore it, and the
+    command stops them; one message, exit 130."""
+    import os
+
+    config = small_config(tmp_path, repetitions=200)
+    out = tmp_path / "exp"
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(out), "--jobs", "2",
+                             "--executor", "dask"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    results = out / "results.csv"
+    _wait_for(lambda: results.exists() and len(results.read_text().splitlines()) > 4)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.count("interrupted") == 1, err
+    assert "run the same command again to resume" in err

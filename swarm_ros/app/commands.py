@@ -152,7 +152,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     import json
 
-    from swarm_ros.app.launcher import Launch, interrupted_run, plural
+    from swarm_ros.app.launcher import Launch, plural
     from swarm_ros.app.processes import ENCLAVE_PREFIX
     from swarm_ros.artifacts.run_dir import partial_recording
 
@@ -182,10 +182,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         out = launch.run()
     except KeyboardInterrupt:
-        stopped = interrupted_run(out.absolute())
-        if stopped is not None:
+        stopped = launch.result()
+        if stopped is not None and stopped["outcome"] == "interrupted":
             print(f"{PROG}: interrupted at tick {stopped['convergence_tick']}; the run so far is in {out}",
                   file=sys.stderr)
+        elif stopped is not None:  # the Ctrl-C came while the nodes were shutting down
+            print(f"{PROG}: interrupted after the run had ended ({stopped['outcome']} at tick "
+                  f"{stopped['convergence_tick']}); it is whole in {out}", file=sys.stderr)
         elif not launch.started:  # the launcher removed what the run had made (launcher.discard_unstarted)
             print(f"{PROG}: interrupted before tick 0; nothing was written", file=sys.stderr)
         else:

@@ -17,7 +17,7 @@ import json
 import os
 import sys
 import threading
-from contextlib import ExitStack
+from contextlib import ExitStack, closing
 from pathlib import Path
 
 from swarm_ros.app.executors import dask_client, execute, execute_dask
@@ -113,9 +113,10 @@ def _run_grid(exp: Experiment, config: Path, out: Path | None, client, jobs: int
                   disable=True if quiet else None, dynamic_ncols=True) as bar:
             rows = execute_dask(client, todo, engine, processes) if client is not None else \
                 execute(todo, jobs, engine, processes)
-            for row in rows:
-                results.append(row)
-                bar.update(1)
+            with closing(rows):  # closed here, on Ctrl-C too: its tasks are cancelled while the client is open
+                for row in rows:
+                    results.append(row)
+                    bar.update(1)
     except KeyboardInterrupt:
         left = len(runs) - len(results.done() & {s.key for s in runs})
         print(f"swarm-ros: interrupted with {left} of {len(runs)} runs to go; the finished ones are in "

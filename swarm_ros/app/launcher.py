@@ -95,17 +95,6 @@ def discard_unstarted(logs: Path, out: Path, holders_before: set[Path], made: li
             break
 
 
-def interrupted_run(out: Path) -> dict | None:
-    """The summary in ``out`` if it is the run directory of an interrupted run, else None."""
-    import json
-
-    try:
-        summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return summary if summary.get("outcome") == "interrupted" else None
-
-
 @dataclass
 class Launch:
     """One ``swarm-ros run``. Call :meth:`run`; it returns the run directory."""
@@ -166,21 +155,24 @@ class Launch:
             interrupted = True
             raise
         finally:
-            stop(self.children)  # an interrupted monitor writes the run so far before it exits
-            self._note_exits()
-            self._note("all node processes gone")
-            if ok and self.ended_at is not None:
-                fill_summary(out, self.restarts, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
-            lock.close()
-            self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
-            for f in logs.glob(CHECKPOINT + "*"):  # the world's, large and of no use once the run is over
-                f.unlink(missing_ok=True)
-            kept = ok or (interrupted and interrupted_run(out) is not None)
-            if interrupted and not kept and not self.started:
-                discard_unstarted(logs, out, holders, made)
-            else:
-                self._write_timeline(logs / "launcher.log")
-                self._keep_logs(logs, out, kept)
+            with StopFlag() as late:  # a Ctrl-C from here on waits until what the run made is in its place
+                stop(self.children)  # an interrupted monitor writes the run so far before it exits
+                self._note_exits()
+                self._note("all node processes gone")
+                kept = ok or (interrupted and self.result() is not None)  # Ctrl-C'd after the run was written
+                if kept and self.ended_at is not None:
+                    fill_summary(out, self.restarts, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
+                lock.close()
+                self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
+                for f in logs.glob(CHECKPOINT + "*"):  # the world's, large and of no use once the run is over
+                    f.unlink(missing_ok=True)
+                if interrupted and not kept and not self.started:
+                    discard_unstarted(logs, out, holders, made)
+                else:
+                    self._write_timeline(logs / "launcher.log")
+                    self._keep_logs(logs, out, kept)
+            if late.signum and ok:  # the run is whole; the command still ends as interrupted
+                raise KeyboardInterrupt
         return out
 
     def _compile_kernels(self) -> None:
@@ -337,6 +329,17 @@ class Launch:
 
     def _child(self, name: str) -> Child:
         return next(c for c in self.children if c.name == name)
+
+    def result(self) -> dict | None:
+        """The summary of the run directory this run's monitor wrote (whole, whatever its outcome), or None."""
+        import json
+
+        if not self._written():
+            return None
+        try:
+            return json.loads((self.out.absolute() / "summary.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
 
     def _written(self) -> bool:
         """Whether the monitor wrote the run directory: ``out`` is there now, and is not what was there before

@@ -274,6 +274,9 @@ class MonitorNode:
                 handle_missed(self.node)
             except RunFailed as exc:
                 self.node.get_logger().error(f"while taking the ticks already sent: {exc}")
+        if code == EXIT_INTERRUPTED and not self.rows and not self.incarnation:
+            self._discard()  # stopped before tick 0: it holds nothing of a run, and would block the next one
+            return
         if self.bag is not None and not (code == EXIT_INTERRUPTED and self.rows and self.outcome is None):
             self.bag.move_to(run_dir.partial_bag(self.out))  # closed, kept beside the run (an interrupted run takes it)
         if self.outcome is not None:  # ended, but stopped before the world confirmed it: keep the recording
@@ -290,6 +293,16 @@ class MonitorNode:
         if interrupted:
             self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
             self._write(Outcome.INTERRUPTED)
+
+
+    def _discard(self) -> None:
+        """Remove the recording and the bag this process opened (``<out_dir>.partial.rrd``, a hidden bag folder)."""
+        if getattr(self, "recorder", None) is not None:
+            self.recorder.close()
+            self.rrd.unlink(missing_ok=True)
+        if self.bag is not None:
+            self.bag.close()
+            self.bag.discard()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -210,6 +210,11 @@ class BagRecorder:
         if not self.path.exists():
             shutil.rmtree(self.holder, ignore_errors=True)
 
+    def discard(self) -> None:
+        """Remove the bag and the hidden folder it was written in (a run that never started holds nothing)."""
+        self.close()
+        shutil.rmtree(self.holder, ignore_errors=True)
+
     def move_to(self, target: Path) -> Path | None:
         """Close, then move the bag directory to ``target`` (which must not exist); return where it is."""
         self.close()
