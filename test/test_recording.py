@@ -256,3 +256,41 @@ def test_bad_recording_options_get_one_line_and_write_nothing(tmp_path, capsys, 
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert list(tmp_path.iterdir()) == []
+
+
+def _fake_viewer(tmp_path: Path, body: str) -> str:
+    exe = tmp_path / "rerun"
+    exe.write_text(f"#!{sys.executable}\n{body}\n")
+    exe.chmod(0o755)
+    return str(exe)
+
+
+def test_spawn_returns_the_url_of_a_viewer_that_answers_and_stays_up(tmp_path, capsys):
+    from swarm_ros.artifacts.rerun_recording import spawn_viewer
+
+    port = _free_port()
+    exe = _fake_viewer(tmp_path, "import socket, sys, time\nport = int(sys.argv[1].split('=')[1])\n"
+                                 "s = socket.create_server(('127.0.0.1', port))\ntime.sleep(30)")
+    assert spawn_viewer(port, exe=exe) == f"rerun+http://127.0.0.1:{port}/proxy"
+    assert capsys.readouterr().err == ""
+
+
+def test_spawn_without_a_display_says_so_in_one_line_and_goes_on(tmp_path, capsys):
+    """The real viewer, with no display, binds its port and exits: no URL, one warning, no viewer's errors."""
+    from swarm_ros.artifacts.rerun_recording import spawn_viewer
+
+    exe = _fake_viewer(tmp_path, "import socket, sys, time\nport = int(sys.argv[1].split('=')[1])\n"
+                                 "s = socket.create_server(('127.0.0.1', port))\n"
+                                 "print('Error: neither WAYLAND_DISPLAY nor DISPLAY is set', file=sys.stderr)\n"
+                                 "sys.exit(1)")
+    start = time.monotonic()
+    assert spawn_viewer(_free_port(), exe=exe) is None
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the Rerun viewer exited at once (status 1; no display?)" in err, err
+    assert time.monotonic() - start < 5
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

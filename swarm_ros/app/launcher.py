@@ -202,7 +202,7 @@ class Launch:
         if self.recording.spawn:
             from swarm_ros.artifacts.rerun_recording import spawn_viewer
 
-            viewer = spawn_viewer()
+            viewer = spawn_viewer() or ""
         params_file = logs / "params.yaml"
         params_file.write_text(params_yaml(run, {"world": {
             **self.world, "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts,

@@ -306,9 +306,44 @@ class Recorder:
                                   columns=rr.Scalars.columns(scalars=rows[:, k].astype(np.float64)))
 
 
-def spawn_viewer(port: int = 9876) -> str:
-    """Start a Rerun viewer (the ``rerun`` beside this Python, else on PATH); return its URL."""
+#: Seconds a spawned viewer has to answer on its port, and to stay up after it does (without a display it binds
+#: its port, then exits).
+SPAWN_WAIT, SPAWN_SETTLE = 10.0, 1.0
+
+
+def spawn_viewer(port: int = 9876, exe: str | None = None) -> str | None:
+    """Start a Rerun viewer (the ``rerun`` beside this Python, else on PATH), detached, its output discarded, and
+    return its URL once it answers; None, said in one line on stderr, if it exits (e.g. with no display) or
+    does not answer within :data:`SPAWN_WAIT` seconds."""
+    import socket
+    import subprocess
+    import time
+
     beside = Path(sys.executable).with_name("rerun")
-    exe = str(beside) if beside.exists() else shutil.which("rerun")
-    rr.spawn(port=port, connect=False, executable_path=exe)
-    return f"rerun+http://127.0.0.1:{port}/proxy"
+    exe = exe or (str(beside) if beside.exists() else shutil.which("rerun"))
+    warning = "swarm-ros: warning: the Rerun viewer {}; going on without it (open the recording afterwards: " \
+              "rerun <run>/recording.rrd)"
+    if exe is None:
+        print(warning.format("is not installed (no 'rerun' beside Python or on PATH)"), file=sys.stderr, flush=True)
+        return None
+    viewer = subprocess.Popen([exe, f"--port={port}", "--memory-limit=75%", "--expect-data-soon"],
+                              stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)  # detached: it outlives the run, and a Ctrl-C of it
+    deadline, answered = time.monotonic() + SPAWN_WAIT, None
+    while viewer.poll() is None and time.monotonic() < deadline:
+        if answered is None:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+                answered = time.monotonic()
+            except OSError:
+                pass
+        elif time.monotonic() - answered > SPAWN_SETTLE:
+            return f"rerun+http://127.0.0.1:{port}/proxy"
+        time.sleep(0.05)
+    if viewer.poll() is None:
+        viewer.kill()
+        print(warning.format(f"did not answer on port {port} within {SPAWN_WAIT:g} s"), file=sys.stderr, flush=True)
+    else:
+        print(warning.format(f"exited at once (status {viewer.returncode}; no display?)"), file=sys.stderr,
+              flush=True)
+    return None
