@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -206,6 +207,11 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 def main(argv: list[str] | None = None) -> int:
     from swarm_ros.artifacts.run_dir import release_out_dirs
 
+    argv = list(sys.argv[1:] if argv is None else argv)
+    for i, word in enumerate(argv[:-1]):  # "--fail-robots -0.1@10": argparse takes -0.1@10 for a flag
+        if word == "--fail-robots" and re.match(r"-[\d.]", argv[i + 1]):
+            argv[i: i + 2] = [f"--fail-robots={argv[i + 1]}"]
+            break
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)

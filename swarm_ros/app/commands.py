@@ -145,7 +145,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print(f"{PROG}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
         return EXIT_INTERRUPTED
     if not args.quiet:
-        _print_summary(record.summary, out)
+        _print_summary(record.summary, out, shape.dims)
     return 0
 
 
@@ -201,7 +201,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-        _print_summary(summary, out)
+        _print_summary(summary, out, shape.dims)
         print(f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
               f"logs in {out / 'logs'}")
     global EXIT_AT_ONCE
@@ -327,17 +327,18 @@ def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Reco
             bar.set_postfix(tick=str(m.tick), moving=str(m.moving), refresh=False)
 
 
-def _print_summary(s: dict, out: Path) -> None:
+def _print_summary(s: dict, out: Path, dims: int) -> None:
+    cells = "voxels" if dims == 3 else "patches"
     rate = s["convergence_tick"] / s["wall_seconds"] if s["wall_seconds"] > 0 else float("inf")
     rows = [
-        ("shape", f"{s['shape']} ({s['shape_patches']} patches)"),
+        ("shape", f"{s['shape']} ({s['shape_patches']} {cells})"),
         ("robots", f"{s['robots']}  (vision {s['vision_radius']:g}, seed {s['seed']}, engine {s['engine']})"),
         ("rules", f"{s['rules']}  (join {s['join']}, crowding {s['crowding']}, steps {s['steps']})"),
         ("outcome", s["outcome"]),
         ("convergence tick", f"{s['convergence_tick']}"),
-        ("localized", f"{s['localized']} / {s['shape_patches']} patches"),
+        ("localized", f"{s['localized']} / {s['shape_patches']} {cells}"),
         ("unlocalized", f"{s['unlocalized']}  (separated {s['separated']})"),
-        ("empty patches", f"{s['empty_patches']}"),
+        (f"empty {cells}", f"{s['empty_patches']}"),
         *([("lost robots", f"{s['lost_robots']}  (" + ", ".join(f"{x['robots']} at tick {x['tick']}"
                                                            for x in s["losses"]) + ")")]
           if s.get("lost_robots") else []),

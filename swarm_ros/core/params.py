@@ -118,7 +118,8 @@ class Param:
             raise ParameterError(f"{self.name} must be {self.describe()} and <= {INT64_MAX} (a 64-bit integer), "
                                  f"got {value}")
         if not ok:
-            shown = _number(value) if isinstance(value, float) and math.isfinite(value) else repr(value)
+            shown = _number(value) if isinstance(value, float) and math.isfinite(value) and kind is float \
+                else repr(value)  # an integer's 442.0 stays 442.0: the '.0' is what is wrong
             raise ParameterError(f"{self.name} must be {self.describe()}, got {shown}")
         return kind(value)
 

@@ -156,12 +156,14 @@ def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
     inspector.spin_for(seconds)
     elapsed = time.monotonic() - start
     node = inspector.node
-    print(f"{'topic':<22} {'type':<34} {'pubs':>4} {'subs':>4} {'rate (Hz)':>10}  qos")
+    wide = max(22, *(len(name) for name in topics))  # columns as wide as the longest name
+    kinds = max(34, *(len(type_name) for type_name in topics.values()))
+    print(f"{'topic':<{wide}} {'type':<{kinds}} {'pubs':>4} {'subs':>4} {'rate (Hz)':>10}  qos")
     for name, type_name in sorted(topics.items()):
         infos = node.get_publishers_info_by_topic(name)
         qos = infos[0].qos_profile if infos else None
         kind = "" if qos is None else f"{qos.reliability.name.lower()}, {qos.durability.name.lower()}"
-        print(f"{name:<22} {type_name:<34} {len(infos):>4} {node.count_subscribers(name) - 1:>4} "
+        print(f"{name:<{wide}} {type_name:<{kinds}} {len(infos):>4} {node.count_subscribers(name) - 1:>4} "
               f"{counts[name] / elapsed:>10.1f}  {kind}")
     return 0
 
