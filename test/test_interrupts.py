@@ -185,3 +185,23 @@ def test_a_terminal_ctrl_c_to_a_dask_experiment_leaves_no_worker_traceback(tmp_p
     assert proc.returncode == 130, err
     assert "Traceback" not in err and err.count("interrupted") == 1, err
     assert "run the same command again to resume" in err
+
+
+def test_sigterm_to_topics_closes_its_participant_and_leaves_no_log_file(tmp_path):
+    """topics (and replay, the same way) stopped by SIGTERM: one line, exit 130, nothing left in /dev/shm,
+    and no empty rcl log file in ~/.ros/log."""
+    import os
+
+    home = tmp_path / "home"
+    before = set(os.listdir("/dev/shm"))
+    env = {**os.environ, "HOME": str(home), "ROS_DOMAIN_ID": "229"}
+    env.pop("ROS_LOG_DIR", None)
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "topics", "--seconds", "20"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(2)  # listening
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and err.strip() == "swarm-ros: interrupted", err
+    left = {f for f in set(os.listdir("/dev/shm")) - before if str(proc.pid) in f or f.startswith("fastrtps_")}
+    assert not left, left
+    assert not list(home.rglob("*.log")), list(home.rglob("*"))

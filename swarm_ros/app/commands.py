@@ -279,6 +279,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     bag = args.bag / "bag" if (args.bag / "bag" / "metadata.yaml").is_file() else args.bag
     domain = _domain_id(args.domain_id)
+    _interrupt_on_sigterm()  # its ROS participant is then closed (no Fast DDS files left in /dev/shm)
     code = replay(bag, 0 if domain is None else domain, rate=args.rate, delay=args.delay, quiet=args.quiet)
     if code == EXIT_INTERRUPTED:
         print(f"{PROG}: interrupted", file=sys.stderr)
@@ -289,6 +290,7 @@ def cmd_topics(args: argparse.Namespace) -> int:
     from swarm_ros.tools.topics import run_topics
 
     domain = _domain_id(args.domain_id)
+    _interrupt_on_sigterm()
     seconds = args.seconds or (ECHO_SECONDS if args.echo else LIST_SECONDS)
     return run_topics(0 if domain is None else domain, echo=args.echo, count=args.count, seconds=seconds,
                       full=args.full)

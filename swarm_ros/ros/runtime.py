@@ -26,6 +26,9 @@ from swarm_ros.core.signals import PARENT_ENV, StopFlag, process_age
 from swarm_ros.protocol.status import RunFailed
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_ORPHANED = 0, 1, 2, 130, 129
+#: The ROS arguments of the command line's own short-lived nodes (the launcher's progress bar, topics, replay):
+#: rcl's log file off, which would otherwise leave an empty ~/.ros/log/python_<pid>_<time>.log per command.
+TOOL_ROS_ARGS = ("--ros-args", "--disable-external-lib-logs")
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
 
 

@@ -22,6 +22,7 @@ from swarm_ros.protocol.status import STARTING, has_ended, has_started
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import Gate
 from swarm_ros.ros.dds import apply_dds_defaults
+from swarm_ros.ros.runtime import TOOL_ROS_ARGS
 
 _MAX_BATCH = 10_000  # messages handled per spin() at most
 
@@ -36,7 +37,7 @@ class Progress:
         apply_dds_defaults()  # as the nodes have them (launcher.node_env)
         self.context = Context()
         # Ctrl-C stays a KeyboardInterrupt for the launcher, which then stops its children.
-        args = ["--ros-args", "--enclave", f"{enclaves}/swarm_ros_launcher"] if enclaves else []
+        args = [*TOOL_ROS_ARGS, *(["--enclave", f"{enclaves}/swarm_ros_launcher"] if enclaves else [])]
         rclpy.init(args=args, context=self.context, domain_id=domain_id,
                    signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node("swarm_ros_launcher", context=self.context, start_parameter_services=False)

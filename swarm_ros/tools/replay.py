@@ -16,6 +16,7 @@ from pathlib import Path
 
 from swarm_ros.core.errors import SwarmError
 from swarm_ros.ros.graph import message_class
+from swarm_ros.ros.runtime import TOOL_ROS_ARGS
 
 _ACK_WAIT_S = 2.0  # seconds to let readers acknowledge the last messages before exiting
 
@@ -74,7 +75,8 @@ def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, q
 
     apply_dds_defaults()  # on this host, as a run's nodes (set ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET to share it)
     context = Context()
-    rclpy.init(args=[], context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(args=list(TOOL_ROS_ARGS), context=context, domain_id=domain_id,
+               signal_handler_options=SignalHandlerOptions.NO)
     node = Node("swarm_ros_replay", context=context, start_parameter_services=False)
     try:
         pubs = {}

@@ -22,6 +22,7 @@ from rclpy.signals import SignalHandlerOptions
 from swarm_ros.core.errors import SwarmError
 from swarm_ros.protocol.rows import ROW_TYPES, VOXEL_ROW, check_fields
 from swarm_ros.ros.graph import message_class
+from swarm_ros.ros.runtime import TOOL_ROS_ARGS
 
 _SHOWN_ITEMS = 8  # array items printed without --full
 _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
@@ -87,7 +88,8 @@ def decoded_rows(msg: object, full: bool = False) -> str:
 class _Inspector:
     def __init__(self, domain_id: int) -> None:
         self.context = Context()
-        rclpy.init(args=[], context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(args=list(TOOL_ROS_ARGS), context=self.context, domain_id=domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node("swarm_ros_topics", context=self.context, start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
