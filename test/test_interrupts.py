@@ -196,9 +196,9 @@ def test_sigterm_to_topics_closes_its_participant_and_leaves_no_log_file(tmp_pat
     before = set(os.listdir("/dev/shm"))
     env = {**os.environ, "HOME": str(home), "ROS_DOMAIN_ID": "229"}
     env.pop("ROS_LOG_DIR", None)
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "topics", "--seconds", "20"], env=env,
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "topics", "--echo", "/swarm/metrics", "--seconds", "20"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(2)  # listening
+    time.sleep(2)  # waiting for the topic
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and err.strip() == "swarm-ros: interrupted", err
