@@ -4,6 +4,7 @@ the whole model."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 from pathlib import Path
 
@@ -85,3 +86,24 @@ def test_the_readme_synopses_name_every_flag_of_simulate_and_run():
                  if f.startswith("--") and f != "--help"}
         missing = sorted(f for f in flags if f not in synopsis)
         assert not missing, f"the README's synopsis of {command} omits {missing}"
+
+
+_LINK = re.compile(r"\]\(([^)\s#]+)(?:#[^)]*)?\)")  # a markdown link's target, without its anchor
+#: a repository path in backticks: a file with its extension, or a folder with its slash (`swarm_ros/world`, a
+#: status name, is neither)
+_NAMED = re.compile(r"`((?:config|scripts|shapes|docs|launch|test|swarm_ros|rviz)/[\w./-]*(?:\.\w+|/))`")
+
+
+def _docs() -> list[Path]:
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+@pytest.mark.parametrize("page", _docs(), ids=lambda p: p.name)
+def test_every_file_a_page_links_to_or_names_exists(page):
+    """A relative link resolves from the page; a repository path in backticks (``config/experiments/x.yaml``)
+    exists in the repository (a path with a placeholder, ``<run>``, is not one)."""
+    text = page.read_text(encoding="utf-8")
+    missing = [t for t in _LINK.findall(text) if "://" not in t and not t.startswith("mailto:")
+               and not (page.parent / t).exists()]
+    missing += [t for t in _NAMED.findall(text) if not (ROOT / t.rstrip(".")).exists()]
+    assert not missing, f"{page.name} names what does not exist: {missing}"

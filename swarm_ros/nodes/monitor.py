@@ -258,13 +258,9 @@ class MonitorNode:
         self.node.get_logger().info(f"run written to {self.written}")
 
     def close(self, code: int) -> None:
-        """On the way out of a run stopped before its end.
-
-        Interrupted (SIGINT/SIGTERM) after tick 0: the run so far becomes the run
-        directory, with outcome ``interrupted``. Failed, or stopped because the launcher
-        died (nobody is left to report to, and the node must be gone at once): the
-        recording so far is kept, closed and marked, as ``<out_dir>.partial.rrd``.
-        """
+        """On the way out of a run stopped before its end. Interrupted after tick 0: the run so far becomes the run
+        directory (outcome ``interrupted``); before tick 0, nothing is kept. Failed, or orphaned (the launcher died):
+        the recording so far is kept, closed and marked, as ``<out_dir>.partial.rrd``."""
         self.closing.set()
         if self.written is not None:
             return
@@ -274,11 +270,10 @@ class MonitorNode:
                 handle_missed(self.node)
             except RunFailed as exc:
                 self.node.get_logger().error(f"while taking the ticks already sent: {exc}")
-        if code == EXIT_INTERRUPTED and not self.rows and not self.incarnation:
-            self._discard()  # stopped before tick 0: it holds nothing of a run, and would block the next one
-            return
+        unstarted = code == EXIT_INTERRUPTED and not self.rows and not self.incarnation  # holds nothing of a run
         if self.bag is not None and not (code == EXIT_INTERRUPTED and self.rows and self.outcome is None):
-            self.bag.move_to(run_dir.partial_bag(self.out))  # closed, kept beside the run (an interrupted run takes it)
+            # closed, kept beside the run (an interrupted run takes it); before tick 0 removed, not to block the next
+            self.bag.discard() if unstarted else self.bag.move_to(run_dir.partial_bag(self.out))
         if self.outcome is not None:  # ended, but stopped before the world confirmed it: keep the recording
             if self.recorder is not None:
                 self.recorder.outcome("interrupted", TickMetrics(*self.rows[-1]))
@@ -290,19 +285,11 @@ class MonitorNode:
                 stopped = code in (EXIT_INTERRUPTED, EXIT_ORPHANED)
                 self.recorder.outcome("interrupted" if stopped else "failed", TickMetrics(*self.rows[-1]))
             self.recorder.close()
+        if unstarted:  # its own: a first process refuses to start beside an earlier run's
+            self.rrd.unlink(missing_ok=True)
         if interrupted:
             self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
             self._write(Outcome.INTERRUPTED)
-
-
-    def _discard(self) -> None:
-        """Remove the recording and the bag this process opened (``<out_dir>.partial.rrd``, a hidden bag folder)."""
-        if getattr(self, "recorder", None) is not None:
-            self.recorder.close()
-            self.rrd.unlink(missing_ok=True)
-        if self.bag is not None:
-            self.bag.close()
-            self.bag.discard()
 
 
 def main(argv: list[str] | None = None) -> int:
