@@ -50,8 +50,20 @@ def make_fixtures(d: Path) -> None:
         "okexp.yaml": EXPERIMENT.format(shape="star", sizes="1036"),
         "farexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("vision_radius: 1", "vision_radius: 40"),
     }
+    files.update({
+        "hugeexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "max_ticks: 100000000000000000000\n",
+        "manyexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("repetitions: 2",
+                                                                             "repetitions: 1000000000000"),
+        "gridexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("repetitions: 2", "repetitions: 100000")
+        .replace("vision_radius: 1", "vision_radius: [1, 2, 3, 4]") + "rules: [paper, local, literal]\n",
+        "floatexp.yaml": EXPERIMENT.format(shape="star", sizes="442.0"),
+        "twice.yaml": "/**:\n  ros__parameters:\n    robots: 500\n    robots: 600\n",
+    })
     for name, text in files.items():
         (d / name).write_text(text)
+    (d / "bomb.png").write_bytes(_png_header(10000, 10000))
+    (d / "noise").mkdir()
+    (d / "noise" / "results.csv").write_bytes(np.random.default_rng(3).bytes(3000))
     Image.new("L", (9, 9), 255).save(d / "white.png")
     (d / "taken").mkdir()
     (d / "taken" / "summary.json").write_text("{}")
@@ -61,6 +73,18 @@ def make_fixtures(d: Path) -> None:
     (d / "oldbag").mkdir()
     (d / "oldbag" / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: 99\n")
     _make_3d_fixtures(d)
+
+
+def _png_header(width: int, height: int) -> bytes:
+    """The first bytes of a 1-bit greyscale PNG of this size: all an image's size is read from."""
+    import struct
+    import zlib
+
+    ihdr = b"IHDR" + struct.pack(">IIBBBBB", width, height, 1, 0, 0, 0, 0)
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr[4:]) + chunk(b"IDAT", b"") + chunk(b"IEND", b"")
 
 
 def _make_3d_fixtures(d: Path) -> None:

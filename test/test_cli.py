@@ -185,7 +185,7 @@ BAD = [
     (["--robots", "3"], "robots must be an integer >= 4"),
     (["--vision", "0"], "vision_radius must be a number >= 1 and <= 100, got 0"),
     (["--vision", "nan"], "vision_radius must be a number >= 1 and <= 100, got nan"),
-    (["--max-ticks", "0"], "max_ticks must be an integer >= 1, got 0"),
+    (["--max-ticks", "0"], "max_ticks must be an integer >= 1 and <= 1000000000, got 0"),
     (["--seed", "-1"], "seed must be an integer >= 0 and <= 9223372036854775807, got -1"),
     (["--world-radius", "27"], "touches the wall"),
     (["--world-radius", "20"], "reaches beyond the walls"),
@@ -288,3 +288,20 @@ def test_counts_of_processes_read_as_english():
     assert plural(1, "robot-batch process") == "1 robot-batch process"
     assert plural(2, "robot-batch process") == "2 robot-batch processes"
     assert plural(3, "robot") == "3 robots"
+
+
+def test_run_refuses_a_pipe_as_its_shape_in_one_line(tmp_path, monkeypatch, capsys):
+    """simulate reads a pipe (a shell's <(...)) once; each node of the graph would read it again: refused."""
+    import os
+
+    read, write = os.pipe()
+    os.write(write, b".....\n.###.\n.###.\n.###.\n.....\n")
+    os.close(write)
+    monkeypatch.chdir(tmp_path)
+    try:
+        assert cli.main(["run", "--shape", f"/dev/fd/{read}", "--out", "r"]) == 2
+    finally:
+        os.close(read)
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"/dev/fd/{read}: not a regular file; each node of the graph reads" in err, err
+    assert list(tmp_path.iterdir()) == []
