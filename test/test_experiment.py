@@ -329,7 +329,7 @@ BAD = [
     ({"vision_radius": [1, 0.5]}, "vision_radius[1]: vision_radius must be a number >= 1 and <= 100, got 0.5"),
     ({"vision_radius": 40}, "vision_radius[0]: vision_radius must be <= the world radius 10"),
     ({"fail_fraction": 0.1, "fail_tick": 500, "max_ticks": 400}, "fail_tick must be before max_ticks (400)"),
-    ({"repetitions": 0}, "repetitions: repetitions must be an integer >= 1, got 0"),
+    ({"repetitions": 0}, "repetitions: repetitions must be an integer >= 1 and <= 1000000, got 0"),
     ({"max_ticks": "many"}, "max_ticks: max_ticks must be an integer >= 1 and <= 1000000000, got 'many'"),
     ({"shapes": {"disc.txt": [500]}}, "shapes.disc.txt[0]: 500 robots do not fit on the 361 free patches"),
     ({"seed": None}, "seed: seed must be an integer >= 0 and <= 9223372036854775807, got None"),
@@ -359,7 +359,7 @@ def test_missing_keys_unreadable_files_and_foreign_directories_are_refused(tmp_p
     (tmp_path / "broken.yaml").write_text("shapes: [\n")
     for path, message in ((tmp_path / "missing.yaml", "repetitions: missing"),
                           (tmp_path / "broken.yaml", "not valid YAML"),
-                          (tmp_path / "absent.yaml", "cannot read experiment file")):
+                          (tmp_path / "absent.yaml", "no such experiment file")):
         assert experiment(path, tmp_path / "out") == 2
         assert message in capsys.readouterr().err
     (tmp_path / "foreign" / "sub").mkdir(parents=True)

@@ -15,7 +15,6 @@ from pathlib import Path
 from swarm_ros import __version__
 from swarm_ros.app import commands
 from swarm_ros.app.commands import EXIT_INTERRUPTED, EXIT_USAGE, PROG
-from swarm_ros.app.main import InterruptSaid
 from swarm_ros.core.errors import ParameterError, SwarmError
 from swarm_ros.core.grid import World
 from swarm_ros.core.inputs import path_too_long, shown
@@ -26,6 +25,7 @@ from swarm_ros.core.params import (
     RUN_PARAMETERS,
     Param,
 )
+from swarm_ros.core.signals import InterruptSaid
 
 #: The command line's own numbers (not run parameters), declared and checked the same way.
 _OWN = {p.name: p for p in (

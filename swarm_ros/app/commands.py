@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from swarm_ros.app.main import EXIT_INTERRUPTED
 from swarm_ros.app.param_file import read_params_file
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import SwarmError
@@ -20,7 +19,7 @@ from swarm_ros.core.grid import World
 from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETERS, RunParams, Settings, node_defaults
 from swarm_ros.core.resources import check_world_memory
 from swarm_ros.core.shapes import Shape, builtin_shapes, builtin_shapes_3d
-from swarm_ros.core.signals import StopFlag
+from swarm_ros.core.signals import EXIT_INTERRUPTED, StopFlag
 
 if TYPE_CHECKING:
     from swarm_ros.artifacts.rerun_recording import Recorder

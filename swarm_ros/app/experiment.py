@@ -22,8 +22,8 @@ from pathlib import Path
 
 from swarm_ros.app.executors import dask_client, execute, execute_dask
 from swarm_ros.app.experiment_file import Experiment, load_experiment
-from swarm_ros.app.main import InterruptSaid
 from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, ResultsFile
+from swarm_ros.core.signals import InterruptSaid
 
 EXPERIMENTS_DIR = Path("experiments")
 EXPERIMENT_FILE = "experiment.json"

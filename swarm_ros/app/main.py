@@ -9,11 +9,7 @@ from __future__ import annotations
 
 import sys
 
-EXIT_INTERRUPTED = 130
-
-
-class InterruptSaid(KeyboardInterrupt):
-    """A Ctrl-C that a command has already told the user about (what was kept, how to resume)."""
+from swarm_ros.core.signals import EXIT_INTERRUPTED  # standard library only
 
 
 def entry() -> None:

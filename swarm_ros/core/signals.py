@@ -13,6 +13,12 @@ import os
 import signal
 import time
 
+EXIT_INTERRUPTED = 130  #: the exit status of a command or node stopped by Ctrl-C or SIGTERM (128 + SIGINT)
+
+
+class InterruptSaid(KeyboardInterrupt):
+    """A Ctrl-C that a command has already told the user about (what was kept, how to resume)."""
+
 
 class StopFlag:
     """Records SIGINT or SIGTERM instead of raising; ``signum`` is 0 until one arrives.
@@ -23,8 +29,12 @@ class StopFlag:
     SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # SIGHUP: the terminal, or the launcher, is gone
 
     def __init__(self) -> None:
+        import threading
+
         self.signum = 0
-        self._previous = {sig: signal.signal(sig, self._set) for sig in self.SIGNALS}
+        # Python runs signal handlers in the main thread only: elsewhere (a Dask worker's task) the flag stays 0
+        main = threading.current_thread() is threading.main_thread()
+        self._previous = {sig: signal.signal(sig, self._set) for sig in self.SIGNALS} if main else {}
 
     def _set(self, signum: int, frame: object) -> None:
         self.signum = signum
