@@ -2,7 +2,7 @@
 
 Importing the command line takes a few tenths of a second (numpy, argparse, the package);
 a Ctrl-C in that time would otherwise end in a traceback of whatever was being imported.
-This module imports nothing of its own before it can catch it.
+This module imports only a constant (from a standard-library-only module) before it can catch it.
 """
 
 from __future__ import annotations

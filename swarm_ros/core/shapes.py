@@ -54,9 +54,6 @@ from swarm_ros.core.voxels import (
 
 #: Growth's and the empty space's connectivity in a grid of each dimension: (shape, empty).
 CONNECTIVITY = {2: (8, 4), 3: (26, 6)}
-#: The most pixels a shape image may have: Pillow's own bound against decompression bombs (it warns above it,
-#: and refuses twice it), so that an image is refused in our words before Pillow says anything.
-MAX_IMAGE_PIXELS = 89_478_485
 
 
 def regions(mask: np.ndarray, connectivity: int) -> tuple[np.ndarray, int]:
@@ -146,7 +143,10 @@ def read_png_grid(path: Path) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
     data = read_bounded(path, SHAPE_LIMIT, "shape file", ShapeError)
-    too_large = f"{path}: the image has more than {MAX_IMAGE_PIXELS:,} pixels{{}}, the most a shape image may " \
+    # Pillow's own bound against decompression bombs (it warns above it, refuses twice it): refused here in our
+    # words, before Pillow says anything
+    most = Image.MAX_IMAGE_PIXELS
+    too_large = f"{path}: the image has more than {most:,} pixels{{}}, the most a shape image may " \
                 f"have (Pillow's bound against decompression bombs)"
     try:
         with warnings.catch_warnings():  # Pillow warns of a large image in its own words; it is refused below
@@ -154,7 +154,7 @@ def read_png_grid(path: Path) -> np.ndarray:
             image = Image.open(io.BytesIO(data))  # reads the header only
         with image:
             width, height = image.size
-            if width * height > MAX_IMAGE_PIXELS:
+            if width * height > most:
                 raise ShapeError(too_large.format(f" ({width} x {height})"))
             image.load()
             la = np.asarray(image.convert("LA"))

@@ -22,10 +22,10 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import get_default_context
 
 from swarm_ros.core.errors import SwarmError
-from swarm_ros.core.signals import PARENT_ENV, StopFlag, process_age
+from swarm_ros.core.signals import EXIT_INTERRUPTED, PARENT_ENV, StopFlag, process_age
 from swarm_ros.protocol.status import RunFailed
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_ORPHANED = 0, 1, 2, 130, 129
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ORPHANED = 0, 1, 2, 129  # and EXIT_INTERRUPTED, 130 (core.signals)
 #: The ROS arguments of the command line's own short-lived nodes (the launcher's progress bar, topics, replay):
 #: rcl's log file off, which would otherwise leave an empty ~/.ros/log/python_<pid>_<time>.log per command.
 TOOL_ROS_ARGS = ("--ros-args", "--disable-external-lib-logs")
