@@ -61,5 +61,8 @@ def test_a_flood_on_every_topic_slows_the_run_and_leaves_its_result_unchanged(tm
     # the world reads four flooded topics, the monitor three: each dropped thousands
     assert summary["rejected_messages"]["world"] > 1000 and summary["rejected_messages"]["monitor"] > 1000, summary
     world_log = (out / "logs" / "world.log").read_text()
-    assert "dropped a message on /swarm/decisions/robot_batch_0 (unauthenticated: no tag" in world_log
-    assert "a tag with a wrong MAC" in world_log and " lost " not in world_log
+    # one log line per topic and kind of fault each 5 s: which forgery (no tag, or a tag under another key) comes
+    # first depends on where the flood's cycle stands when the world's reader matches (both are checked one by
+    # one in test_auth.py)
+    assert "dropped a message on /swarm/decisions/robot_batch_0 (unauthenticated: " in world_log
+    assert " lost " not in world_log
