@@ -205,3 +205,37 @@ def test_sigterm_to_topics_closes_its_participant_and_leaves_no_log_file(tmp_pat
     left = {f for f in set(os.listdir("/dev/shm")) - before if str(proc.pid) in f or f.startswith("fastrtps_")}
     assert not left, left
     assert not list(home.rglob("*.log")), list(home.rglob("*"))
+
+
+def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
+    """SIGKILL the launcher mid-run: its hidden logs folder, Fast DDS files and lock file stay. The next 'run' of
+    the same directory names where the logs went, removes the run's files from /dev/shm that nobody uses, and
+    still refuses to write beside the partial recording and bag (the user's to keep or delete)."""
+    import os
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--rules", "local", "--out", str(out),
+                             "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def listed() -> list[str]:
+        return [f for logs in tmp_path.glob(".run.logs-*") if (logs / "shm-files").exists()
+                for f in (logs / "shm-files").read_text().split()]
+
+    _wait_for(lambda: len(listed()) >= 4, timeout=120)  # every node is up and its files listed
+    proc.kill()
+    proc.communicate(timeout=30)
+    from test_ros_graph import _processes_mentioning
+
+    _wait_for(lambda: not _processes_mentioning(".run.logs-"), timeout=30)  # the nodes die with it
+    left = [f for f in listed() if os.path.exists(f)]
+    assert left, "a SIGKILLed launcher left no shared-memory file: nothing to test"
+    hidden = list(tmp_path.glob(".run.logs-*"))
+    assert len(hidden) == 1
+    again = subprocess.run([PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out), "--quiet"],
+                           capture_output=True, text=True, timeout=120)
+    assert again.returncode == 2
+    assert f"an earlier run of {out} was killed; its logs are now in {tmp_path / 'run.logs'}" in again.stderr
+    assert "run.partial.rrd: left by an earlier run" in again.stderr
+    assert not list(tmp_path.glob(".run.logs-*")) and (tmp_path / "run.logs" / "world.log").is_file()
+    assert not list((tmp_path / "run.logs").glob("world.checkpoint*"))
+    assert [f for f in left if os.path.exists(f)] == []

@@ -88,7 +88,8 @@ def _flag(value: object, section: dict[str, object], key: str) -> object:
     return value if value is not None else section.get(key, node_defaults("monitor")[key])
 
 
-def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions, dict]:
+def _prepare(args: argparse.Namespace, graph: bool = False) -> tuple[Settings, Shape, RunParams, Path,
+                                                                    RecordingOptions, dict]:
     """Settings, shape, parameters, a usable output directory, the recording options and the node
     parameters of the parameter file, or a SwarmError before anything runs."""
     from swarm_ros.artifacts.run_dir import check_leftovers, check_out_dir, claim_out_dir, default_run_dir
@@ -104,6 +105,10 @@ def _prepare(args: argparse.Namespace) -> tuple[Settings, Shape, RunParams, Path
     args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
     check_out_dir(out, args.overwrite)
     claim_out_dir(out)  # a second command for the same directory is refused now, not after its run
+    if graph:  # what a SIGKILLed 'run' of the same directory left (no live command holds it: claimed just now)
+        from swarm_ros.app.processes import recover_killed
+
+        recover_killed(out)
     check_leftovers(out)
     return settings, shape, params, out, recording.reachable(), nodes
 
@@ -130,15 +135,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         except BaseException:
             if recorder is not None:
                 recorder.outcome("failed", sim.metrics)
-                recorder.close()
-                _note_partial(rrd, options)
+                if _closed_whole(recorder):
+                    _note_partial(rrd, options)
             raise
         if stop.signum and not sim.done:
             stopped = Outcome.INTERRUPTED
     record = RunRecord.of(sim, wall_seconds=time.perf_counter() - start, stopped=stopped)
     if recorder is not None:
         recorder.outcome(record.outcome.value, record.final)
-        recorder.close()
+        recorder.close()  # a recording that could not be written whole (a full disk) fails the command here
     out = write_run(out, record, overwrite=args.overwrite, recording=rrd if options.enabled else None)
     if stopped is not None:
         print(f"{PROG}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
@@ -155,7 +160,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarm_ros.app.processes import ENCLAVE_PREFIX
     from swarm_ros.artifacts.run_dir import partial_recording
 
-    settings, shape, params, out, options, nodes = _prepare(args)
+    settings, shape, params, out, options, nodes = _prepare(args, graph=True)
     source = Path(shape.source)
     if source.exists() and not source.is_file():  # a pipe, /dev/null: read once here, but each node reads it too
         raise SwarmError(f"{settings.shape}: not a regular file; each node of the graph reads the shape file "
@@ -242,6 +247,17 @@ def note_compiling(quiet: bool) -> None:
 
     if not quiet and not kernels_cached():
         print(f"{PROG}: {COMPILING}", file=sys.stderr, flush=True)
+
+
+def _closed_whole(recorder: Recorder) -> bool:
+    """Close the recording of a run that failed; False if it could not be written whole (it is then removed)."""
+    from swarm_ros.artifacts.rerun_recording import RecordingError
+
+    try:
+        recorder.close()
+    except RecordingError:
+        return False
+    return True
 
 
 def _note_partial(rrd: Path, options: RecordingOptions) -> None:

@@ -39,7 +39,17 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from swarm_ros.app.processes import Child, DomainLock, LaunchError, node_command, node_env, stop
+from swarm_ros.app.processes import (
+    CHECKPOINT,
+    SHM_LIST,
+    Child,
+    DomainLock,
+    LaunchError,
+    logs_target,
+    node_command,
+    node_env,
+    stop,
+)
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
 from swarm_ros.core.params import RunParams, Settings, node_defaults
@@ -50,7 +60,6 @@ from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.ros.shm import clean_shm, shm_locks
 
-CHECKPOINT = "world.checkpoint"  #: the world's checkpoint file in the run's logs (removed at the end)
 _GRACE = 10.0  # seconds the world and batches get to end by themselves after the monitor is done
 
 
@@ -120,6 +129,7 @@ class Launch:
     ended_at: float | None = None  #: time.monotonic() when the world's outcome arrived
     started: bool = False  #: the world has sent tick 0 (as far as this process has heard)
     logs_kept: Path | None = None  #: where the processes' logs went at the end
+    _shm_listed: int = 0  #: how many shared-memory lock files SHM_LIST holds
 
     def _note(self, event: str, at: float | None = None) -> None:
         self.timeline.append((time.time() if at is None else at, event))
@@ -150,7 +160,11 @@ class Launch:
             self._follow()
             ok = True
         except LaunchError as exc:
-            raise LaunchError(f"{exc} (logs: {self._logs_target(out, False)})") from None
+            raise LaunchError(f"{exc} (logs: {logs_target(out, False)})") from None
+        except OSError as exc:  # the file system refused (a full disk): before a node started, nothing to keep
+            unwritable = not self.children
+            raise LaunchError(f"{exc.filename or out}: {exc.strerror or exc}"
+                              + ("" if unwritable else f" (logs: {logs_target(out, False)})")) from None
         except KeyboardInterrupt:
             interrupted = True
             raise
@@ -166,10 +180,13 @@ class Launch:
                 self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
                 for f in logs.glob(CHECKPOINT + "*"):  # the world's, large and of no use once the run is over
                     f.unlink(missing_ok=True)
-                if interrupted and not kept and not self.started:
+                if (interrupted or not self.children) and not kept and not self.started:
                     discard_unstarted(logs, out, holders, made)
                 else:
-                    self._write_timeline(logs / "launcher.log")
+                    try:
+                        self._write_timeline(logs / "launcher.log")
+                    except OSError:  # a full disk: the logs are kept without the launcher's timeline
+                        pass
                     self._keep_logs(logs, out, kept)
             if late.signum and ok:  # the run is whole; the command still ends as interrupted
                 raise KeyboardInterrupt
@@ -283,6 +300,7 @@ class Launch:
                     for c in self.children:
                         c.scan_shm()
                     self.own_shm |= shm_locks(os.getpid())  # this process's node (the progress bar's)
+                    self._list_shm()
                 self._note_exits()
                 for c in list(self.children):
                     code = c.proc.poll()
@@ -326,6 +344,17 @@ class Launch:
         while time.monotonic() < deadline and any(c.proc.poll() is None for c in self.children):
             self._note_exits()
             time.sleep(0.01)
+
+    def _list_shm(self) -> None:
+        """Write the shared-memory lock files seen so far into the logs (:data:`SHM_LIST`), when there are new ones."""
+        seen = set().union(self.own_shm, *(c.shm for c in self.children))
+        if len(seen) != self._shm_listed:
+            self._shm_listed = len(seen)
+            try:
+                (self.params_file.parent / SHM_LIST).write_text("".join(f"{f}\n" for f in sorted(seen)),
+                                                                encoding="utf-8")
+            except OSError:
+                pass  # a full disk: only the clean-up after a SIGKILL misses them
 
     def _child(self, name: str) -> Child:
         return next(c for c in self.children if c.name == name)
@@ -383,20 +412,8 @@ class Launch:
         self.warnings.append(text)
         progress.bar.write(f"swarm-ros: warning: {text}", file=sys.stderr)
 
-    @staticmethod
-    def _logs_target(out: Path, ok: bool) -> Path:
-        """Where the logs go: ``<run>/logs``, or for a failed run ``<run>.logs`` (``<run>.logs.2``, ... if taken:
-        an existing directory is never replaced)."""
-        if ok and out.is_dir():
-            return out / "logs"
-        target, n = out.parent / f"{out.name}.logs", 1
-        while target.exists():
-            n += 1
-            target = out.parent / f"{out.name}.logs.{n}"
-        return target
-
     def _keep_logs(self, logs: Path, out: Path, ok: bool) -> None:
-        target = self._logs_target(out, ok)
+        target = logs_target(out, ok)
         try:
             if target.exists():
                 raise FileExistsError(target)  # an existing directory is never replaced

@@ -20,7 +20,7 @@ from swarm_ros.core.errors import SwarmError
 from swarm_ros.core.signals import PARENT_ENV
 from swarm_ros.protocol.runkey import with_run_key
 from swarm_ros.ros.dds import apply_dds_defaults
-from swarm_ros.ros.shm import shm_locks
+from swarm_ros.ros.shm import clean_shm, shm_locks
 
 DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
 # SIGTERM first, not SIGINT: a process started from a background job inherits SIGINT *ignored*, and a node
@@ -145,3 +145,52 @@ def stop(children: list[Child]) -> None:
     for c in children:
         c.proc.wait()
         c.log_file.close()
+
+
+CHECKPOINT = "world.checkpoint"  #: the world's checkpoint file in the run's logs (removed at the end)
+#: In the run's logs while it goes on: the Fast DDS lock files its processes hold in /dev/shm, a line each, for
+#: the next 'run' of the same directory to remove (recover_killed) if this launcher is SIGKILLed before it does.
+SHM_LIST = "shm-files"
+
+
+def logs_target(out: Path, ok: bool) -> Path:
+    """Where a run's logs go: ``<run>/logs``, or for a failed run ``<run>.logs`` (``<run>.logs.2``, ... if taken:
+    an existing directory is never replaced)."""
+    if ok and out.is_dir():
+        return out / "logs"
+    target, n = out.parent / f"{out.name}.logs", 1
+    while target.exists():
+        n += 1
+        target = out.parent / f"{out.name}.logs.{n}"
+    return target
+
+
+def recover_killed(out: Path) -> list[Path]:
+    """Tidy what an earlier ``run`` of ``out`` that was SIGKILLed left beside it; return where its logs went.
+
+    Its hidden logs folder (``.<out>.logs-XXXXXXXX``) becomes ``<out>.logs`` (``.2``, ... if taken), said in one
+    line; its world checkpoint is removed; the Fast DDS files of its processes (listed in :data:`SHM_LIST`) that
+    no live process uses are removed from /dev/shm. Call it while holding ``out``
+    (:func:`~swarm_ros.artifacts.run_dir.claim_out_dir`): no live command then owns such a folder.
+    """
+    out = out.absolute()
+    kept = []
+    for hidden in sorted(out.parent.glob(f".{out.name}.logs-*")):
+        if not hidden.is_dir() or hidden.is_symlink():
+            continue
+        try:
+            listed = (hidden / SHM_LIST).read_text(encoding="utf-8", errors="replace").split()
+        except OSError:
+            listed = []
+        clean_shm({f for f in listed if f.startswith("/dev/shm/fastrtps_") and f.endswith("_el") and "/" not in
+                   f.removeprefix("/dev/shm/")})
+        for f in hidden.glob(CHECKPOINT + "*"):
+            f.unlink(missing_ok=True)
+        target = logs_target(out, False)
+        try:
+            hidden.rename(target)
+        except OSError:
+            continue
+        kept.append(target)
+        print(f"swarm-ros: an earlier run of {out} was killed; its logs are now in {target}", file=sys.stderr)
+    return kept

@@ -31,15 +31,22 @@ and Ctrl-C) sends the rest and writes the file's footer.
 
 from __future__ import annotations
 
+import os
 import shutil
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import rerun as rr
-import rerun.blueprint as rrb
 
+# Rerun's file writer reports a failed write (a full disk) on stderr in its own words, several lines a time, from
+# a thread; the Recorder finds the failure itself (close() raises RecordingError) and says it in one line. Set
+# before rerun is imported, which reads it once; a RUST_LOG the user sets wins.
+os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd=off,re_sdk::recording_stream=off,re_sdk::log_sink=off")
+import rerun as rr  # noqa: E402
+import rerun.blueprint as rrb  # noqa: E402
+
+from swarm_ros.artifacts.run_dir import OutputError
 from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
@@ -97,6 +104,25 @@ def blueprint(dims: int = 2) -> rrb.Blueprint:
     )
 
 
+DISK_FULL = "no space left on device"
+_FLUSH_WAIT = 30.0  #: seconds close() waits for the file writer (once it hung after a write failed: a full disk)
+
+
+class RecordingError(OutputError):
+    """The recording file could not be written (a full disk, say); what is on disk of it is not whole."""
+
+
+def write_failure(path: Path | None, exc: BaseException) -> str:
+    """Why rerun could not write ``path``, in words: the disk is full, if it is (rerun's own error does not say)."""
+    try:
+        if path is not None and os.statvfs(path.parent).f_bavail == 0:
+            return DISK_FULL
+    except OSError:
+        pass
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 class Recorder:
     """Writes one run to ``path`` (and optionally to a live viewer).
 
@@ -145,7 +171,13 @@ class Recorder:
             connect = connect or spawn_viewer()
         if connect:
             sinks.append(rr.GrpcSink(connect))
-        self.rec.set_sinks(*sinks, default_blueprint=blueprint(shape.world.dims))
+        try:
+            self.rec.set_sinks(*sinks, default_blueprint=blueprint(shape.world.dims))
+        except RuntimeError as exc:  # the file could not be written at all (a full disk)
+            self.rec.disconnect()
+            if path is not None:
+                path.unlink(missing_ok=True)  # made just now by the file sink, and empty
+            raise RecordingError(f"{path}: cannot write the recording ({write_failure(path, exc)})") from None
         self._log_static(shape, params)
 
     # -- logging ----------------------------------------------------------------
@@ -211,14 +243,49 @@ class Recorder:
         return self._closed
 
     def close(self) -> None:
-        """Send what is buffered, write the file's footer and disconnect; safe to call twice."""
+        """Send what is buffered, write the file's footer and disconnect; safe to call twice.
+
+        Raises:
+            RecordingError: the file could not be written whole (a full disk); it is removed (kept as it is if its
+                writer hangs on a disk that is not full).
+        """
         if self._closed:
             return
         self._closed = True
-        try:
-            self.flush()
-        finally:
+        self.flush()
+        failed = self._wait_for_file()
+        if failed is None:
             self.rec.disconnect()
+            return
+        why = write_failure(self.path, failed)
+        if isinstance(failed, TimeoutError):  # stuck (seen after its writes had failed): not disconnected
+            if why != DISK_FULL:  # left as it is
+                raise RecordingError(f"{self.path}: the recording's writer did not finish within {_FLUSH_WAIT:g} s; "
+                                     f"it may not be whole")
+        else:
+            self.rec.disconnect()
+        if self.path is not None:
+            self.path.unlink(missing_ok=True)  # no reader could trust it, and it would block the next run
+        raise RecordingError(f"{self.path}: the recording could not be written whole ({why}); it is removed")
+
+    def _wait_for_file(self) -> BaseException | None:
+        """Wait for the file writer to have written everything: None, or why it could not (a full disk stops it:
+        RuntimeError; once it hung instead, ignoring flush's own timeout: TimeoutError after :data:`_FLUSH_WAIT`)."""
+        import threading
+
+        outcome: list[BaseException | None] = []
+
+        def flush() -> None:
+            try:
+                self.rec.flush()
+                outcome.append(None)
+            except RuntimeError as exc:
+                outcome.append(exc)
+
+        waiter = threading.Thread(target=flush, name="rerun-flush", daemon=True)
+        waiter.start()
+        waiter.join(_FLUSH_WAIT)
+        return outcome[0] if outcome else TimeoutError("no answer")
 
     def __enter__(self) -> Recorder:
         return self

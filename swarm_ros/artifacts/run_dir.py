@@ -73,7 +73,13 @@ def foreign_content(out: Path) -> str | None:
     return None
 
 
-def check_out_dir(out: Path, overwrite: bool) -> None:
+MIB = 1024**2
+#: Free space a run needs on its output's disk to start: its files take more (the star's run directory 2 MB, with
+#: its bag 4 MB), and Rerun's file writer hangs, instead of failing, when a disk is full as it starts.
+MIN_FREE = 8 * MIB
+
+
+def check_out_dir(out: Path, overwrite: bool, free: int = MIN_FREE) -> None:
     """Fail early, before a run, if ``out`` cannot be written, or may not be replaced.
 
     ``overwrite`` replaces only a run directory this tool wrote (:func:`foreign_content`);
@@ -83,8 +89,8 @@ def check_out_dir(out: Path, overwrite: bool) -> None:
 
     Raises:
         OutputError: ``out`` exists (and is not an empty directory) without ``overwrite``,
-            or with it but is not a run directory; is a file; or its nearest existing
-            ancestor is not a writable directory.
+            or with it but is not a run directory; is a file; its nearest existing
+            ancestor is not a writable directory; or its disk has less than ``free`` bytes free.
     """
     check_name_length(out)
     if out.exists():
@@ -105,6 +111,14 @@ def check_out_dir(out: Path, overwrite: bool) -> None:
         raise OutputError(f"{base}: is not a directory, so {out} cannot be created")
     if not writable_dir(base):
         raise OutputError(f"{base}: directory is not writable, so {out} cannot be created")
+    try:
+        disk = os.statvfs(base)
+        left = disk.f_bavail * disk.f_frsize
+    except OSError:
+        return
+    if left < free:
+        raise OutputError(f"{base}: {left / MIB:.1f} MiB free on its disk; a run needs at least {free // MIB} MiB "
+                          f"to start (its recording, bag and logs take more)")
 
 
 #: Bytes a run adds to its directory's name for the names it makes beside it (``.<name>.logs-XXXXXXXX``), and
@@ -277,6 +291,24 @@ def claim_out_dir(out: Path) -> None:
     f.write(f"pid {os.getpid()}: {' '.join(['swarm-ros', *sys.argv[1:]])}\n")
     f.flush()
     _CLAIMS.append((f, path))
+    _sweep_stale_locks(lock_dir, path)
+
+
+def _sweep_stale_locks(lock_dir: Path, own: Path) -> None:
+    """Remove the lock files of commands that ended without removing theirs (SIGKILLed): any that no process
+    holds locked. A command about to lock one that goes meanwhile retries with a new file (claim_out_dir)."""
+    import fcntl
+
+    for path in lock_dir.glob("*.lock"):
+        if path == own:
+            continue
+        try:
+            with open(path, "a+", encoding="utf-8") as f:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                if os.stat(path).st_ino == os.fstat(f.fileno()).st_ino:
+                    path.unlink()  # while locked: as release_out_dirs does
+        except OSError:
+            continue  # held by a live command, or gone meanwhile
 
 
 def release_out_dirs() -> None:
@@ -309,7 +341,7 @@ def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: 
     Raises:
         OutputError: the directory cannot be written.
     """
-    check_out_dir(out, overwrite)
+    check_out_dir(out, overwrite, free=0)  # the run is over: what it writes now either fits or fails whole
     out = out.absolute()
     try:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -109,7 +109,7 @@ class WorldNode:
                                     self.shape.dims)
             self.saver.create()
         except (OSError, ValueError) as exc:
-            raise RunFailed(f"checkpoint {path}: {exc}") from None
+            raise RunFailed(f"checkpoint {path}: {getattr(exc, 'strerror', None) or exc}") from None
         return None
 
     # -- inbound ----------------------------------------------------------------------

@@ -78,14 +78,29 @@ class Checkpoint:
         with open(self.path, "xb") as f:  # never over an existing file
             f.truncate(self.size)
         self._map()
+        self._reserve(0, self.history_at)  # the header and the robots; the rest, tick by tick, in write()
         h = self.header
         h[_H_ROBOTS], h[_H_SLOTS], h[_H_TICKS], h[_H_COLS] = self.robots, self.slots, self.ticks, self.columns
         h[_H_WRITING] = h[_H_READY] = h[_H_DONE] = h[_H_MONITOR] = -1
         h[_H_MAGIC] = MAGIC  # last: a header without it was cut off
 
+    def _reserve(self, offset: int, length: int) -> None:
+        """Reserve the disk blocks of ``length`` bytes at ``offset``: a write through the mapping into a block the
+        file system cannot supply (a full disk) would kill the process with SIGBUS; this raises OSError instead.
+
+        Raises:
+            OSError: ENOSPC, naming the file.
+        """
+        if length <= 0:
+            return
+        try:
+            os.posix_fallocate(self._fd, offset, length)  # a few microseconds where the blocks exist already
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, str(self.path)) from None
+
     def _map(self) -> None:
-        with open(self.path, "r+b") as f:  # the mapping outlives the file object
-            self._mmap = mmap.mmap(f.fileno(), self.size)
+        self._fd = os.open(self.path, os.O_RDWR)  # kept for _reserve; closed with the process
+        self._mmap = mmap.mmap(self._fd, self.size)
         self.map = np.frombuffer(self._mmap, dtype=np.uint8)  # a plain array: slicing a np.memmap costs more
         self.header = self.map[: _HEADER * 8].view(np.int64)
         self.rows = self.map[self.robots_at: self.history_at].view(self.row)
@@ -108,8 +123,13 @@ class Checkpoint:
         """Save tick ``tick``: the rows it publishes (robots that changed; at tick 0 all), the decisions it
         applied (None at tick 0) and its metrics row. Call before anything about the tick is sent."""
         h = self.header
-        h[_H_WRITING] = tick
         head, at = self._slot_head(tick)
+        # the blocks of what this tick writes (its slot, its metrics row), before anything of it is written
+        self._reserve(at - _SLOT_HEAD * 8, _SLOT_HEAD * 8 + rows.size * self.row.itemsize)
+        if applied is not None:
+            self._reserve(at + self.robots * self.row.itemsize, applied.size * self.decision.itemsize)
+        self._reserve(self.history_at + tick * self.columns * 8, self.columns * 8)
+        h[_H_WRITING] = tick
         head[0] = -1  # the slot is being rewritten
         raw = np.ascontiguousarray(rows).view(np.uint8)  # bytes, not records: copied ten times faster
         self.map[at: at + raw.size] = raw

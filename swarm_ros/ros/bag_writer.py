@@ -216,8 +216,14 @@ class BagRecorder:
         shutil.rmtree(self.holder, ignore_errors=True)
 
     def move_to(self, target: Path) -> Path | None:
-        """Close, then move the bag directory to ``target`` (which must not exist); return where it is."""
-        self.close()
+        """Close, then move the bag directory to ``target`` (which must not exist); return where it is, or None:
+        ``target`` exists, or the bag could not be closed (a full disk) and is removed, since no reader could
+        open it."""
+        try:
+            self.close()
+        except OSError:
+            shutil.rmtree(self.holder, ignore_errors=True)
+            return None
         if target.exists():
             return None
         self.path.rename(target)

@@ -139,13 +139,22 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         code = _fail(name, str(exc), EXIT_USAGE)
     except RunFailed as exc:
         code = _fail(name, str(exc), EXIT_FAILED)
+    except OSError as exc:  # the file system refused (a full disk): said in one line, as the launcher reports it
+        code = _fail(name, f"{exc.filename}: {exc.strerror}" if exc.filename else str(exc.strerror or exc),
+                     EXIT_FAILED)
     except (KeyboardInterrupt, ExternalShutdownException):
         code = EXIT_INTERRUPTED
     finally:
         if executor is not None:
             executor.shutdown()
         if swarm is not None:
-            swarm.close(code)
+            try:
+                swarm.close(code)
+            except (SwarmError, OSError) as exc:  # closing its files failed (a full disk)
+                if code == EXIT_OK:
+                    code = _fail(name, f"while closing: {exc}", EXIT_FAILED)
+                else:  # the error already said is the one the launcher reports; this one goes to the log
+                    swarm.node.get_logger().warn(f"while closing: {exc}")
             swarm.node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
