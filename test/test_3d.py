@@ -326,3 +326,34 @@ def test_the_legality_bounds_hold_for_3d_decisions_and_catch_a_jump_in_z():
     assert illegal(*args, z0=before.z[ids], z=jumped, pitch=d.pitch).all()
     tilted = np.full(ids.size, 2.0)
     assert illegal(*args, z0=before.z[ids], z=d.z, pitch=tilted).all()
+
+
+@pytest.mark.parametrize("name", ["box", "k-block"])
+def test_the_3d_final_png_legend_sits_below_every_view_and_no_label_is_cut(tmp_path, monkeypatch, name):
+    import matplotlib.figure
+
+    from swarm_ros.artifacts.plots import save_final_png
+    from swarm_ros.core.run_result import RunRecord
+
+    shape = Shape.load(name)
+    sim = Simulation(shape, RunParams(robots=shape.patches, max_ticks=300))  # robots left all round the shape
+    sim.run()
+    saved = []
+    real = matplotlib.figure.Figure.savefig
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
+                        lambda fig, *a, **k: (saved.append(fig), real(fig, *a, **k))[1])
+    save_final_png(RunRecord.of(sim, wall_seconds=0.0), tmp_path / "final.png")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = saved[0]
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()  # the constrained layout, as the saved file has it
+    renderer = canvas.get_renderer()
+    legend = fig.legends[0].get_window_extent(renderer)
+    whole = fig.bbox
+    for ax in fig.axes:
+        box = ax.get_tightbbox(renderer)  # the axes with its ticks, labels and title
+        assert legend.y1 <= box.y0, f"{ax.get_title() or ax.get_ylabel()}: the legend has no row of its own"
+        assert not box.overlaps(fig._suptitle.get_window_extent(renderer)), ax.get_title() or ax.get_ylabel()
+        assert whole.x0 <= box.x0 and box.x1 <= whole.x1 and whole.y0 <= box.y0 and box.y1 <= whole.y1, \
+            f"{ax.get_title() or ax.get_ylabel()} is cut"

@@ -116,7 +116,7 @@ def save_final_png_3d(run: RunRecord, path: Path) -> None:
     fig.suptitle(f"{shape.name} (3D): {run.outcome} at tick {m.tick}; {p.robots} robots, rules {p.ruleset.label}, "
                  f"vision {p.vision_radius:g}, seed {p.seed}; {m.localized}/{shape.patches} voxels filled",
                  fontsize=11)
-    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8, frameon=False)  # room made for it
     fig.savefig(path)
     plt.close(fig)
 
