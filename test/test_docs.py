@@ -107,3 +107,16 @@ def test_every_file_a_page_links_to_or_names_exists(page):
                and not (page.parent / t).exists()]
     missing += [t for t in _NAMED.findall(text) if not (ROOT / t.rstrip(".")).exists()]
     assert not missing, f"{page.name} names what does not exist: {missing}"
+
+
+def test_every_error_line_the_docs_quote_is_a_row_the_bad_input_test_runs():
+    """An error line quoted in a page (``swarm-ros: error: ...``, ``swarm_ros <node>: error: ...``) holds the
+    message of a row of docs/bad_input.md, which test_bad_input.py runs: a quoted text that drifted fails here."""
+    rows = [m.group(1) for m in re.finditer(r"^\| \d+ \| .+? \| `.+?` \| `(.+?)` \|$",
+                                            (ROOT / "docs" / "bad_input.md").read_text(), re.M)]
+    quoted = [(page.name, line.strip()) for page in _docs() if page.name != "bad_input.md"
+              for line in page.read_text(encoding="utf-8").splitlines()
+              if re.match(r"\s*swarm[-_]ros( \w+)?: error: ", line)]
+    assert quoted, "no quoted error line found: the pattern is stale"
+    stray = [(name, line) for name, line in quoted if not any(row in line for row in rows)]
+    assert not stray, stray
