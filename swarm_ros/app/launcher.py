@@ -154,7 +154,7 @@ class Launch:
         holders = _bag_holders(out)
         self.out_before = _identity(out)
         lock = DomainLock(self.domain_id)
-        ok = interrupted = False
+        ok = interrupted = unwritten = False
         try:
             self._start(logs, lock.domain_id, out)
             self._follow()
@@ -162,9 +162,9 @@ class Launch:
         except LaunchError as exc:
             raise LaunchError(f"{exc} (logs: {logs_target(out, False)})") from None
         except OSError as exc:  # the file system refused (a full disk): before a node started, nothing to keep
-            unwritable = not self.children
+            unwritten = not self.children
             raise LaunchError(f"{exc.filename or out}: {exc.strerror or exc}"
-                              + ("" if unwritable else f" (logs: {logs_target(out, False)})")) from None
+                              + ("" if unwritten else f" (logs: {logs_target(out, False)})")) from None
         except KeyboardInterrupt:
             interrupted = True
             raise
@@ -178,9 +178,9 @@ class Launch:
                     fill_summary(out, self.restarts, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
                 lock.close()
                 self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
-                for f in logs.glob(CHECKPOINT + "*"):  # the world's, large and of no use once the run is over
+                for f in [*logs.glob(CHECKPOINT + "*"), logs / SHM_LIST]:  # of no use once the run is over
                     f.unlink(missing_ok=True)
-                if (interrupted or not self.children) and not kept and not self.started:
+                if (interrupted or unwritten) and not kept and not self.started:
                     discard_unstarted(logs, out, holders, made)
                 else:
                     try:

@@ -20,7 +20,7 @@ from swarm_ros.core.errors import SwarmError
 from swarm_ros.core.signals import PARENT_ENV
 from swarm_ros.protocol.runkey import with_run_key
 from swarm_ros.ros.dds import apply_dds_defaults
-from swarm_ros.ros.shm import clean_shm, shm_locks
+from swarm_ros.ros.shm import SHM_DIR, clean_shm, shm_locks
 
 DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
 # SIGTERM first, not SIGINT: a process started from a background job inherits SIGINT *ignored*, and a node
@@ -182,8 +182,8 @@ def recover_killed(out: Path) -> list[Path]:
             listed = (hidden / SHM_LIST).read_text(encoding="utf-8", errors="replace").split()
         except OSError:
             listed = []
-        clean_shm({f for f in listed if f.startswith("/dev/shm/fastrtps_") and f.endswith("_el") and "/" not in
-                   f.removeprefix("/dev/shm/")})
+        clean_shm({f for f in listed if Path(f).parent == SHM_DIR and Path(f).name.startswith("fastrtps_")
+                   and f.endswith("_el")})  # its own file, but checked: only Fast DDS lock files in /dev/shm
         for f in hidden.glob(CHECKPOINT + "*"):
             f.unlink(missing_ok=True)
         target = logs_target(out, False)

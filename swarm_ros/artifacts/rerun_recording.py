@@ -105,22 +105,36 @@ def blueprint(dims: int = 2) -> rrb.Blueprint:
 
 
 DISK_FULL = "no space left on device"
-_FLUSH_WAIT = 30.0  #: seconds close() waits for the file writer (once it hung after a write failed: a full disk)
 
 
 class RecordingError(OutputError):
     """The recording file could not be written (a full disk, say); what is on disk of it is not whole."""
 
 
-def write_failure(path: Path | None, exc: BaseException) -> str:
+def write_failure(path: Path | None, exc: BaseException | None = None) -> str:
     """Why rerun could not write ``path``, in words: the disk is full, if it is (rerun's own error does not say)."""
     try:
         if path is not None and os.statvfs(path.parent).f_bavail == 0:
             return DISK_FULL
     except OSError:
         pass
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
+    text = str(exc or "").strip()
+    return text.splitlines()[0] if text else "a write failed; was the disk full?"
+
+
+#: How an RRD file ends once it was closed whole: its footer's magic, then a 4-byte version.
+_RRD_FOOTER_MAGIC = b"RRF2FOOT"
+
+
+def _ends_whole(path: Path) -> bool:
+    """Whether the RRD file at ``path`` ends with its footer (``rerun rrd verify`` refuses one without). The footer is
+    written last, by the time ``disconnect()`` returns."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(max(f.seek(0, os.SEEK_END) - 12, 0))
+            return f.read(12)[:8] == _RRD_FOOTER_MAGIC
+    except OSError:
+        return False
 
 
 class Recorder:
@@ -246,46 +260,19 @@ class Recorder:
         """Send what is buffered, write the file's footer and disconnect; safe to call twice.
 
         Raises:
-            RecordingError: the file could not be written whole (a full disk); it is removed (kept as it is if its
-                writer hangs on a disk that is not full).
+            RecordingError: the file could not be written whole (a full disk): it ends without its footer; it is
+                removed.
         """
         if self._closed:
             return
         self._closed = True
         self.flush()
-        failed = self._wait_for_file()
-        if failed is None:
-            self.rec.disconnect()
+        self.rec.disconnect()  # writes the file's footer, last, and closes it
+        if self.path is None or _ends_whole(self.path):
             return
-        why = write_failure(self.path, failed)
-        if isinstance(failed, TimeoutError):  # stuck (seen after its writes had failed): not disconnected
-            if why != DISK_FULL:  # left as it is
-                raise RecordingError(f"{self.path}: the recording's writer did not finish within {_FLUSH_WAIT:g} s; "
-                                     f"it may not be whole")
-        else:
-            self.rec.disconnect()
-        if self.path is not None:
-            self.path.unlink(missing_ok=True)  # no reader could trust it, and it would block the next run
+        why = write_failure(self.path)
+        self.path.unlink(missing_ok=True)  # no reader could trust it, and it would block the next run
         raise RecordingError(f"{self.path}: the recording could not be written whole ({why}); it is removed")
-
-    def _wait_for_file(self) -> BaseException | None:
-        """Wait for the file writer to have written everything: None, or why it could not (a full disk stops it:
-        RuntimeError; once it hung instead, ignoring flush's own timeout: TimeoutError after :data:`_FLUSH_WAIT`)."""
-        import threading
-
-        outcome: list[BaseException | None] = []
-
-        def flush() -> None:
-            try:
-                self.rec.flush()
-                outcome.append(None)
-            except RuntimeError as exc:
-                outcome.append(exc)
-
-        waiter = threading.Thread(target=flush, name="rerun-flush", daemon=True)
-        waiter.start()
-        waiter.join(_FLUSH_WAIT)
-        return outcome[0] if outcome else TimeoutError("no answer")
 
     def __enter__(self) -> Recorder:
         return self
