@@ -6,9 +6,8 @@ counts it with the in-process engine's own functions
 publishes each tick's metrics on /swarm/metrics, records the run with the in-process
 engine's own :class:`~swarm_ros.artifacts.rerun_recording.Recorder` (streamed to ``<out_dir>.partial.rrd``
 while the run goes on), and when the run ends writes the run directory exactly as
-``swarm-ros simulate`` does, with ``engine: ros2``. It checks its outcome against the
-world's /swarm/status. It takes only what a tag under the run's key proves (:mod:`swarm_ros.ros.auth`),
-and records only that in the bag, with the shape, occupancy and clock it derives from it.
+``swarm-ros simulate`` does, with ``engine: ros2``. It checks its outcome against the world's /swarm/status.
+It takes and records in the bag only what a tag under the run's key proves (:mod:`swarm_ros.ros.auth`).
 
     ros2 run swarm_ros monitor --ros-args --params-file config/swarm_ros.yaml -p out_dir:=runs/star
 """
@@ -39,7 +38,7 @@ from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.bag_resume import resume
 from swarm_ros.ros.bag_writer import TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
-from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED, handle_missed, run_node
+from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED, handle_missed, run_node, take_waiting
 
 _STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
 _MATCH_POLL = 0.005  # seconds between looks at the readers' matches, before the liveliness writer appears
@@ -168,6 +167,7 @@ class MonitorNode:
                     self.rows[-2][METRIC_COLUMNS.index("localized")]
                 self.bag.write_world(self.shape, self.replica.state.occupancy, tick, len(self.rows) == 1,
                                      joined or self.removed > removed_before)
+                take_waiting(self.readers[msgs.DECISIONS])  # one the executor lost the event of: in, now
                 self.bag.durable()
             self.pub_metrics.send(data)
         if self.removed > removed_before:

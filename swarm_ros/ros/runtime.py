@@ -80,16 +80,21 @@ def handle_missed(node: Node) -> int:
     spin's timeout, and the monitor before it writes the run. (An event of the executor's for
     a message taken here finds nothing to take, and does nothing.)
     """
+    return sum(take_waiting(sub) for sub in list(node.subscriptions))
+
+
+def take_waiting(sub) -> int:
+    """Hand every message waiting in the reader of subscription ``sub`` to its callback, oldest first; return
+    how many (see :func:`handle_missed`). For a node that must not go on before a topic's message is handled,
+    though nothing else waits for it (the monitor's decisions, which it records)."""
     count = 0
-    for sub in list(node.subscriptions):
-        while True:
-            with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            if taken is None:
-                break
-            count += 1
-            sub.callback(taken[0])
-    return count
+    while True:
+        with sub.handle:
+            taken = sub.handle.take_message(sub.msg_type, sub.raw)
+        if taken is None:
+            return count
+        count += 1
+        sub.callback(taken[0])
 
 
 def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None = None) -> int:
