@@ -41,9 +41,9 @@ setup(
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
     entry_points={"console_scripts": [
         "swarm-ros = swarm_ros.app.main:entry",
-        "world = swarm_ros.nodes.world:main",
-        "robot_batch = swarm_ros.nodes.robot_batch:main",
-        "monitor = swarm_ros.nodes.monitor:main",
+        "world = swarm_ros.app.main:world",
+        "robot_batch = swarm_ros.app.main:robot_batch",
+        "monitor = swarm_ros.app.main:monitor",
     ]},
     zip_safe=False,
 )

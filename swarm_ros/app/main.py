@@ -1,4 +1,5 @@
-"""The ``swarm-ros`` console script: Ctrl-C is answered in one line from the first instant.
+"""The console scripts (``swarm-ros`` and the nodes' ``world``, ``robot_batch``, ``monitor``, which ``ros2 run``
+and ``ros2 launch`` start): Ctrl-C is answered in one line from the first instant.
 
 Importing the command line takes a few tenths of a second (numpy, argparse, the package);
 a Ctrl-C in that time would otherwise end in a traceback of whatever was being imported.
@@ -7,6 +8,7 @@ This module imports only a constant (from a standard-library-only module) before
 
 from __future__ import annotations
 
+import importlib
 import sys
 
 from swarm_ros.core.signals import EXIT_INTERRUPTED  # standard library only
@@ -21,3 +23,26 @@ def entry() -> None:
         print("swarm-ros: interrupted", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
     run()
+
+
+def _node(module: str) -> None:
+    """Import the node ``module`` and run it; a Ctrl-C before its own handling is in place (while Python
+    imports it, or while ROS 2 starts) ends with one line and exit status 130, as one later does."""
+    try:
+        code = importlib.import_module(f"swarm_ros.nodes.{module}").main()
+    except KeyboardInterrupt:
+        print(f"{module}: interrupted while starting", file=sys.stderr)
+        code = EXIT_INTERRUPTED
+    sys.exit(code)
+
+
+def world() -> None:
+    _node("world")
+
+
+def robot_batch() -> None:
+    _node("robot_batch")
+
+
+def monitor() -> None:
+    _node("monitor")
