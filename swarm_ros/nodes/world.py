@@ -39,7 +39,7 @@ from swarm_ros.protocol.world_port import Policy
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.node_params import make_node, read_parameters
-from swarm_ros.ros.runtime import run_node
+from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_OK, run_node
 
 _NO_WAIT = Duration(seconds=0)
 
@@ -221,7 +221,10 @@ class WorldNode:
         self.lockstep.poll()
 
     def close(self, code: int) -> None:
-        """Nothing to release."""
+        """The checkpoint is removed once the run has ended or was stopped (Ctrl-C): no process of this run
+        will restart from it. A failed or orphaned world leaves it."""
+        if self.saver is not None and code in (EXIT_OK, EXIT_INTERRUPTED):
+            self.saver.remove()
 
 
 def main(argv: list[str] | None = None) -> int:

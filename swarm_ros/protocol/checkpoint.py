@@ -156,6 +156,12 @@ class Checkpoint:
         tmp.write_text(json.dumps(book, sort_keys=True), encoding="utf-8")
         os.replace(tmp, target)
 
+    def remove(self) -> None:
+        """Remove the checkpoint's files (the run is over, or stopped: nothing will restart from them)."""
+        for path in (self.path, self.path.with_name(self.path.name + ".json"),
+                     self.path.with_name(self.path.name + ".json.tmp")):
+            path.unlink(missing_ok=True)
+
     # -- reading ----------------------------------------------------------------------
     @classmethod
     def open(cls, path: Path, robots: int, max_ticks: int, columns: int, dims: int = 2) -> Checkpoint:
