@@ -1,0 +1,324 @@
+"""The package as a ROS 2 user drives it, with ROS 2 Jazzy's own tools (test/ros2_tools.py): a colcon build,
+then ``ros2 launch`` with its defaults, with a parameter file, an output directory and every run argument,
+stopped with Ctrl-C at start-up and mid-run, with a batch, the world and the monitor SIGKILLed; the three
+terminals of ``ros2 run`` that docs/ros_graph.md shows; ``ros2 topic``, ``ros2 node``, ``ros2 param`` and
+``ros2 pkg`` on a live run; and ``swarm-ros replay`` watched with ``ros2 topic echo``.
+
+Each checks what the user would: the run directory where they asked for it, equal to ``simulate``'s,
+exit status 0, and no ``[ERROR]`` line and no traceback in a clean run. The launches share one workspace,
+built once, whose numba cache starts empty: the first launch (the first test) compiles the kernels.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from bagcheck import assert_bag_holds_run
+from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools, wait_for
+from test_ros_graph import _assert_same_run, _processes_mentioning
+
+from swarm_ros.app import cli
+from swarm_ros.core.params import RUN_PARAMETERS
+from swarm_ros.protocol.checkpoint import MAGIC
+
+pytestmark = pytest.mark.process
+
+LAUNCH = "ros2 launch swarm_ros swarm.launch.py"
+#: The star under the local rule, cut at 1,500 ticks: a few seconds of run, long enough to kill in
+SHORT = {"shape": "star", "seed": "5", "rules": "local", "max_ticks": "1500"}
+_DONE = 7  # the checkpoint header's int64 holding the last tick saved (swarm_ros.protocol.checkpoint)
+
+
+@pytest.fixture(scope="module")
+def ros(tmp_path_factory):
+    install_ros2_tools()
+    install = build_workspace(tmp_path_factory.mktemp("ws"))
+    shell = Ros2(install, tmp_path_factory.mktemp("user"), 200 + os.getpid() % 30)
+    yield shell
+    shell.run("ros2 daemon stop", timeout=30)
+
+
+def _arguments(values: dict[str, str]) -> str:
+    return " ".join(f"{k}:={v}" for k, v in values.items())
+
+
+def _clean(output: str) -> None:
+    """What a user reads after a run that succeeded: no error line, no traceback."""
+    assert "[ERROR]" not in output and "Traceback" not in output, output[-4000:]
+
+
+def _simulate(out: Path, *flags: str) -> Path:
+    assert cli.main(["simulate", *flags, "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def _saved_tick(checkpoint: Path) -> int:
+    try:
+        head = np.fromfile(checkpoint, dtype=np.int64, count=8)
+    except (OSError, ValueError):
+        return -1
+    return int(head[_DONE]) if head.size == 8 and head[0] == MAGIC else -1
+
+
+def _launch_dir(ros: Ros2, before: list[Path]) -> Path:
+    """The log directory of the launch started after ``before`` was listed."""
+    return wait_for(lambda: next((p.parent for p in ros.launch_logs() if p not in before), None), 60,
+                    "the launch's params.yaml")
+
+
+def _node_pid(launch_dir: Path, name: str) -> int:
+    """The pid of node ``name`` of the launch whose logs are in ``launch_dir`` (its params file names it)."""
+    def find():
+        for pid in _processes_mentioning(f"__node:={name}"):
+            try:
+                args = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace").split("\0")
+            except OSError:
+                continue
+            if f"__node:={name}" in args and "python" in args[0] and any(str(launch_dir) in a for a in args):
+                return pid
+        return None
+    return wait_for(find, 60, f"the process of {name}")
+
+
+def _summary(run: Path) -> dict:
+    return json.loads((run / "summary.json").read_text())
+
+
+def test_ros2_pkg_lists_the_node_executables(ros):
+    done = ros.run("ros2 pkg executables swarm_ros")
+    assert done.returncode == 0, done.stderr
+    assert sorted(done.stdout.split("\n")[:-1]) == ["swarm_ros monitor", "swarm_ros robot_batch",
+                                                    "swarm_ros swarm-ros", "swarm_ros world"]
+
+
+def test_ros2_launch_with_its_defaults_compiles_once_and_writes_the_run_simulate_writes(ros, tmp_path):
+    """The first launch of a fresh install: the kernels are compiled once, before the nodes start (none of
+    them spends the seconds of CPU a compilation takes); the run goes to runs/<time>_star_n1036_v1_s1 under
+    the launch's directory, equal to simulate's; the launch ends by itself, cleanly, with exit status 0."""
+    before = ros.launch_logs()
+    done = ros.run(LAUNCH, cwd=tmp_path, timeout=300)
+    output = done.stdout + done.stderr
+    assert done.returncode == 0, output[-4000:]
+    _clean(output)
+    assert "compiling the numba kernels first" in output
+    cpu = [float(s) for s in re.findall(r"ready, [\d.]+ s after the process started \(([\d.]+) s of CPU\)", output)]
+    assert len(cpu) == 4 and max(cpu) < 3.0, cpu  # a node that compiled spent 5-8 s
+    (run,) = (tmp_path / "runs").iterdir()
+    assert re.fullmatch(r"\d{8}-\d{6}_star_n1036_v1_s1", run.name)
+    _assert_same_run(_simulate(tmp_path / "ref"), run, launched=False)
+    logs = _launch_dir(ros, before)
+    assert not list(logs.glob("world.checkpoint*")), "the world's checkpoint goes with the run"
+    assert "compiling" not in ros.run(f"{LAUNCH} out_dir:={tmp_path / 'again'}", cwd=tmp_path, timeout=120).stdout
+
+
+def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_argument(ros, tmp_path):
+    """Each run argument wins over the parameter file, the file's /monitor section is applied, out_dir is where
+    the run goes; the run equals simulate's with the same values."""
+    params = tmp_path / "mine.yaml"
+    params.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"shape": "tyre", "seed": 4, "rules": "paper"}},
+                                      "/monitor": {"ros__parameters": {"record": False}}}))
+    values = {"shape": "rectangle", "mesh_scale": "1.0", "robots": "300", "vision_radius": "1.5", "rules": "local",
+              "join": "local", "crowding": "disc", "steps": "literal", "seed": "7", "max_ticks": "300",
+              "wiggle_deg": "30.0", "fail_fraction": "0.05", "fail_tick": "100", "world_radius": "20"}
+    assert set(values) == {p.name for p in RUN_PARAMETERS}, "every run argument is given"
+    out = tmp_path / "deep" / "run"
+    before = ros.launch_logs()
+    done = ros.run(f"{LAUNCH} params_file:={params} out_dir:={out} processes:=3 {_arguments(values)}", timeout=240)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
+    _clean(done.stdout + done.stderr)
+    typed = {k: yaml.safe_load(v) if k not in ("shape", "join", "crowding", "steps", "rules") else v
+             for k, v in values.items()}
+    written = yaml.safe_load((_launch_dir(ros, before) / "params.yaml").read_text())
+    assert written["/**"]["ros__parameters"] == typed, "what every node reads"
+    assert len(re.findall(r"\[robot_batch_\d\]: robot_batch_\d: robots", done.stdout + done.stderr)) == 3
+    ref_params = tmp_path / "ref.yaml"
+    ref_params.write_text(yaml.safe_dump({"/**": {"ros__parameters": typed}}))
+    ref = _simulate(tmp_path / "ref", "--params-file", str(ref_params), "--no-recording")
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    got, want = _summary(out), _summary(ref)
+    for key in ("engine", "wall_seconds", "startup_seconds", "shutdown_seconds", "rejected_messages"):
+        got.pop(key, None), want.pop(key, None)
+    assert got == want and got["lost_robots"] > 0, got
+    assert not (out / "recording.rrd").exists(), "the file's /monitor record: false"
+    assert_bag_holds_run(out)
+
+
+def test_bad_launch_arguments_fail_in_one_line_before_any_node_starts(ros, tmp_path):
+    for line, said in ((f"{LAUNCH} seed:=abc", "launch argument seed:=abc: seed must be an integer"),
+                       (f"{LAUNCH} processes:=0", "launch argument processes:=0: processes must be an integer >= 1"),
+                       (f"{LAUNCH} shape:=nope", "nope"),
+                       (f"{LAUNCH} mesh_scale:=2.0", "mesh_scale applies to mesh shapes"),
+                       (f"{LAUNCH} processes:=1033", "1036 robots leave 1032 non-seed robots for 1033"),
+                       (f"{LAUNCH} params_file:={tmp_path / 'missing.yaml'}", "missing.yaml")):
+        done = ros.run(line, cwd=tmp_path, timeout=120)
+        output = done.stdout + done.stderr
+        assert done.returncode == 1, output
+        assert "Traceback" not in output and "process started" not in output, output
+        (error,) = [ln for ln in output.splitlines() if "[ERROR]" in ln]
+        assert "Caught exception in launch" in error and said in error, error
+    assert not (tmp_path / "runs").exists()
+
+
+def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros, tmp_path):
+    runs = tmp_path / "runs"
+    out = runs / "early"
+    log = tmp_path / "early.log"
+    proc = ros.start(f"{LAUNCH} out_dir:={out}", log=log)
+    # while the nodes load, before tick 0 (a Ctrl-C in the first tenth of a second of a Python process, while
+    # the interpreter itself starts, ends in its own traceback: docs/ros_graph.md, "With ROS 2's own tools")
+    wait_for(lambda: "robot_batch_1: robots" in log.read_text(), 60, "the nodes' start")
+    ctrl_c(proc)
+    assert "tick 0" not in log.read_text()
+    proc.wait(timeout=60)
+    assert "Traceback" not in log.read_text(), log.read_text()[-3000:]
+    assert not runs.exists() or not list(runs.iterdir()), "nothing of a run before tick 0"
+    assert not _processes_mentioning(str(out))
+
+    out = runs / "late"
+    before = ros.launch_logs()
+    proc = ros.start(f"{LAUNCH} out_dir:={out} world_radius:=120 max_ticks:=20000", log=tmp_path / "late.log")
+    checkpoint = _launch_dir(ros, before) / "world.checkpoint"
+    wait_for(lambda: _saved_tick(checkpoint) >= 200, 120, "tick 200")
+    ctrl_c(proc)
+    proc.wait(timeout=60)
+    text = (tmp_path / "late.log").read_text()
+    assert "Traceback" not in text and "restarted" not in text, text[-3000:]
+    summary = _summary(out)
+    assert summary["outcome"] == "interrupted" and summary["convergence_tick"] >= 200
+    assert len((out / "metrics.csv").read_text().splitlines()) == summary["convergence_tick"] + 2
+    assert list(runs.iterdir()) == [out], "nothing beside the run"
+    assert not _processes_mentioning(str(out)) and not list(checkpoint.parent.glob("world.checkpoint*"))
+
+
+def test_a_batch_the_world_and_the_monitor_sigkilled_under_ros2_launch_come_back_and_the_run_is_identical(
+        ros, tmp_path):
+    ref = _simulate(tmp_path / "ref", "--shape", "star", "--seed", "5", "--rules", "local", "--max-ticks", "1500")
+    out = tmp_path / "run"
+    before = ros.launch_logs()
+    log = tmp_path / "launch.log"
+    proc = ros.start(f"{LAUNCH} out_dir:={out} {_arguments(SHORT)}", log=log)
+    logs = _launch_dir(ros, before)
+    checkpoint = logs / "world.checkpoint"
+    for tick, node in ((150, "robot_batch_1"), (450, "world"), (800, "monitor")):
+        wait_for(lambda t=tick: _saved_tick(checkpoint) >= t, 120, f"tick {tick}", poll=0.001)
+        os.kill(_node_pid(logs, node), signal.SIGKILL)
+    assert proc.wait(timeout=240) == 0, log.read_text()[-4000:]
+    text = log.read_text()
+    for node in ("robot_batch_1", "world", "monitor"):
+        assert f"swarm_ros: {node} was killed by SIGKILL; restarted (1 of 3)" in text, text[-4000:]
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    summary = _summary(out)
+    assert summary["outcome"] == _summary(ref)["outcome"] and summary["lost_robots"] == 0
+    assert {"world", "monitor"} <= {r["node"] for r in summary["restarts"]}, summary["restarts"]
+    assert_bag_holds_run(out)
+    assert not _processes_mentioning(str(out)) and not list(logs.glob("world.checkpoint*"))
+
+
+def test_the_three_terminals_of_ros2_run_the_docs_show(ros, tmp_path):
+    """docs/ros_graph.md's commands, each node in its own process as in its own terminal, after the exports it
+    shows; the run equals simulate's."""
+    out = tmp_path / "star"
+    exports = ('export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST '
+               'FASTRTPS_DEFAULT_PROFILES_FILE=$(ros2 pkg prefix swarm_ros)/share/swarm_ros/config/fastdds.xml '
+               'SWARM_ROS_RUN_KEY=0123456789abcdef0123456789abcdef && ')
+    config = "$(ros2 pkg prefix swarm_ros)/share/swarm_ros/config/swarm_ros.yaml"
+    lines = [f"ros2 run swarm_ros monitor --ros-args --params-file {config} -p out_dir:={out}",
+             *[f"ros2 run swarm_ros robot_batch --ros-args --params-file {config} -r __node:=robot_batch_{k} "
+               f"-p batch:={k} -p batches:=2" for k in (0, 1)],
+             f"ros2 run swarm_ros world --ros-args --params-file {config}"]
+    terminals = [subprocess.Popen(["bash", "-c", ros.prelude + exports + "exec " + line], cwd=ros.home, env=ros.env,
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+                 for line in lines]
+    try:
+        outputs = [p.communicate(timeout=180)[0] for p in terminals]
+    finally:
+        for p in terminals:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+    assert [p.returncode for p in terminals] == [0, 0, 0, 0], outputs
+    for text in outputs:
+        _clean(text)
+    _assert_same_run(_simulate(tmp_path / "ref"), out, launched=False)
+
+
+def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
+    out = tmp_path / "live"
+    before = ros.launch_logs()
+    proc = ros.start(f"{LAUNCH} out_dir:={out} world_radius:=120 max_ticks:=100000", log=tmp_path / "live.log")
+    try:
+        logs = _launch_dir(ros, before)
+        wait_for(lambda: _saved_tick(logs / "world.checkpoint") >= 50, 120, "tick 50")
+
+        def listed():
+            done = ros.run("ros2 node list")
+            return done.returncode == 0 and tuple(done.stdout.split()) == NODES
+        wait_for(listed, 30, "all four nodes in ros2 node list", poll=0.5)
+        info = ros.run("ros2 node info /world").stdout
+        assert "/swarm/robots: sensor_msgs/msg/PointCloud2" in info.split("Publishers:")[1].split("Service")[0]
+        assert "/swarm/decisions/robot_batch_0: sensor_msgs/msg/PointCloud2" in info.split("Subscribers:")[1]
+
+        topics = ros.run("ros2 topic list -t").stdout
+        for line in ("/swarm/robots [sensor_msgs/msg/PointCloud2]", "/swarm/metrics [std_msgs/msg/Int64MultiArray]",
+                     "/swarm/shape [nav_msgs/msg/OccupancyGrid]", "/clock [rosgraph_msgs/msg/Clock]",
+                     "/swarm/status [diagnostic_msgs/msg/DiagnosticArray]"):
+            assert line in topics.splitlines(), topics
+        verbose = ros.run("ros2 topic info -v /swarm/robots").stdout
+        assert "Publisher count: 1" in verbose and "Node name: world" in verbose
+        assert "Reliability: RELIABLE" in verbose and "Durability: TRANSIENT_LOCAL" in verbose
+
+        echo = ros.run("ros2 topic echo --once --no-lost-messages /swarm/metrics").stdout
+        metrics = yaml.safe_load(echo.split("---")[0])
+        assert metrics["layout"]["dim"][0]["label"] == "tick,stationary,localized,inside,moving,empty_patches,walking"
+        assert len(metrics["data"]) == 7 and metrics["data"][0] >= 50
+        clock = yaml.safe_load(ros.run("ros2 topic echo --once --no-lost-messages /clock").stdout.split("---")[0])
+        assert clock["clock"]["sec"] >= 50
+        hz = ros.run("timeout -s INT 8 ros2 topic hz /swarm/robots", timeout=30).stdout
+        rates = [float(r) for r in re.findall(r"average rate: ([\d.]+)", hz)]
+        assert rates and min(rates) > 10, hz
+
+        written = yaml.safe_load((logs / "params.yaml").read_text())
+        for node in NODES:
+            names = ros.run(f"ros2 param list {node}").stdout.split()
+            assert {p.name for p in RUN_PARAMETERS} <= set(names), (node, names)
+            dumped = yaml.safe_load(ros.run(f"ros2 param dump {node}").stdout)[node]["ros__parameters"]
+            assert {k: dumped[k] for k in written["/**"]["ros__parameters"]} == written["/**"]["ros__parameters"]
+        assert ros.run("ros2 param get /world max_restarts").stdout.strip() == "Integer value is: 3"
+        assert ros.run("ros2 param get /monitor out_dir").stdout.strip() == f"String value is: {out}"
+        assert ros.run("ros2 param get /robot_batch_1 batch").stdout.strip() == "Integer value is: 1"
+    finally:
+        ctrl_c(proc)
+        proc.wait(timeout=60)
+    assert _summary(out)["outcome"] == "interrupted"
+
+
+def test_swarm_ros_replay_is_watched_with_ros2_topic_echo(ros, tmp_path):
+    """A run's bag replayed from an offset, looping, at a rate: ``ros2 topic echo`` sees its metrics."""
+    graph = tmp_path / "graph"
+    done = ros.run(f"{LAUNCH} out_dir:={graph} shape:=rectangle seed:=6", timeout=240)
+    assert done.returncode == 0, done.stdout[-3000:]
+    domain = int(ros.env["ROS_DOMAIN_ID"])
+    replay = ros.start(f"swarm-ros replay {graph} --domain-id {domain} --loop --start-offset 0.5 --rate 2 "
+                       f"--delay 0.5 --quiet", log=tmp_path / "replay.log")
+    try:
+        echo = ros.run("ros2 topic echo --once --no-lost-messages /swarm/metrics std_msgs/msg/Int64MultiArray",
+                       timeout=60)  # with its type, echo waits for the replay's publisher
+        metrics = yaml.safe_load(echo.stdout.split("---")[0])
+        assert isinstance(metrics, dict) and "data" in metrics, echo.stdout + echo.stderr
+        assert metrics["data"][0] > 0, "from the offset on, not the first tick"
+        time.sleep(0.5)
+        assert replay.poll() is None, "--loop goes on until stopped"
+    finally:
+        ctrl_c(replay)
+        replay.wait(timeout=30)
+    assert replay.returncode == 130 and "Traceback" not in (tmp_path / "replay.log").read_text()
