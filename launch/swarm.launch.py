@@ -5,94 +5,131 @@
 
 Launch arguments: the run parameters (each overrides the parameter file when given), the
 number of robot-batch processes, the parameter file and the monitor's output directory.
-Robot batches are respawned when they die: the world sends the new process a snapshot
-of the current tick and the run goes on unchanged (docs/ros_graph.md, Faults).
+The arguments are resolved as ``swarm-ros run`` resolves its flags, into one parameter file
+in the launch's log directory that every node reads (``swarm_ros.app.supervision.launch_setup``).
+The numba kernels are compiled once, before the nodes start, when their cache is empty. A node
+process that dies is started again as ``swarm-ros run`` starts it again (``swarm_ros.app.supervision``):
+a batch with its robots, the world from its checkpoint, the monitor from its bag. The launch
+ends with the run: exit 0 once the monitor has written it, 1 when the run failed.
 """
 
 from __future__ import annotations
 
 import os
 import secrets
+import sys
+from pathlib import Path
 
 from ament_index_python.packages import get_package_share_directory
 from launch.actions import (
     DeclareLaunchArgument,
     EmitEvent,
+    ExecuteProcess,
+    LogInfo,
     OpaqueFunction,
     RegisterEventHandler,
     SetEnvironmentVariable,
     TimerAction,
 )
-from launch.event_handlers import OnProcessExit
+from launch.event_handlers import OnProcessExit, OnProcessStart, OnShutdown
 from launch.events import Shutdown
+from launch.logging import launch_config
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
+from swarm_ros.app.supervision import END_GRACE, MONITOR_GRACE, RunEnded, launch_processes, launch_setup
+from swarm_ros.core.kernels import COMPILING, kernels_cached
 from swarm_ros.core.params import RUN_PARAMETERS
-from swarm_ros.protocol.plan import MONITOR, ROBOT_BATCH, graph_plan
+from swarm_ros.protocol.plan import graph_plan
+from swarm_ros.protocol.runkey import KEY_ENV
 
 PACKAGE = "swarm_ros"
-#: run parameters a launch argument may set ("" = leave it to the parameter file / the default): all of them
-RUN_ARGUMENTS = {p.name: p for p in RUN_PARAMETERS}
-KEY_ENV = "SWARM_ROS_RUN_KEY"  # as swarm_ros.protocol.runkey.KEY_ENV
-MONITOR_GRACE = 30.0  # seconds the monitor has to write the run after the world's end (as swarm-ros run)
-
-
-def _value(name: str, text: str) -> object:
-    """A launch argument's text as the parameter's type (ROS parameters are typed)."""
-    kind = RUN_ARGUMENTS[name].kind
-    return kind(text) if kind in (int, float) else text
 
 
 def graph(context) -> list:
-    """The nodes, from the launch arguments' values."""
+    """The nodes (after the kernels' compilation, if their cache is empty) and their supervision."""
     share = get_package_share_directory(PACKAGE)
     arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
-    params_file = arg("params_file") or os.path.join(share, "config", "swarm_ros.yaml")
-    run = {name: _value(name, arg(name)) for name in RUN_ARGUMENTS if arg(name)}
-    processes = int(arg("processes"))
-    monitor = {"out_dir": arg("out_dir")} if arg("out_dir") else {}
+    processes = launch_processes(arg("processes"))
     enclaves = arg("enclaves")
-    # SROS2: each node in its enclave <enclaves>/<node> (as swarm-ros run --enclaves)
-    sros = lambda name: {"ros_arguments": ["--enclave", f"{enclaves}/{name}"]} if enclaves else {}  # noqa: E731
-    nodes = []
-    for name, executable, own in graph_plan(processes):  # the graph swarm-ros run starts, in its order
-        batch = executable == ROBOT_BATCH  # respawned when it dies, as swarm-ros run restarts it
-        params = [params_file, run, monitor if executable == MONITOR else {}, own]
-        nodes.append(Node(package=PACKAGE, executable=executable, name=name, output="screen",
-                          parameters=[p for p in params if p != {}], **({"respawn": True, "respawn_delay": 0.0}
-                                                                         if batch else {}), **sros(name)))
-    return nodes + end_of_run(world=nodes[-1], monitor=nodes[0])
+    setup = launch_setup(arg("params_file") or os.path.join(share, "config", "swarm_ros.yaml"),
+                         {p.name: arg(p.name) for p in RUN_PARAMETERS}, arg("out_dir"), Path(launch_config.log_dir),
+                         processes, enclaves)
+    supervisor = setup.supervisor
+    plan = {name: (executable, own) for name, executable, own in graph_plan(processes)}
+    names: dict[object, str] = {}  # each Node action started -> its node name
+    running: set[object] = set()
+    timers: list[TimerAction] = []
 
+    def node(name: str) -> Node:
+        executable, own = plan[name]
+        incarnation = supervisor.incarnation(name)
+        extra = [own] if own else []
+        action = Node(package=PACKAGE, executable=executable, name=name, output="screen",
+                      parameters=[str(setup.params), *extra, *([{"incarnation": incarnation}] if incarnation else [])],
+                      # SROS2: each node in its enclave <enclaves>/<node> (as swarm-ros run --enclaves)
+                      **({"ros_arguments": ["--enclave", f"{enclaves}/{name}"]} if enclaves else {}))
+        names[action] = name
+        return action
 
-def end_of_run(world, monitor) -> list:
-    """Event handlers that end the launch with the run, as ``swarm-ros run`` ends.
+    def later(period: float, why: str, failed: bool) -> TimerAction:
+        def fire(context):
+            if failed:
+                raise RunEnded(why)
+            return [EmitEvent(event=Shutdown(reason=why))]
+        for timer in timers:
+            timer.cancel()
+        timers[:] = [TimerAction(period=period, actions=[OpaqueFunction(function=fire)])]
+        return timers[0]
 
-    Without them ``ros2 launch`` would never return: it respawns a robot batch whatever its
-    exit status, so the batches that leave after the outcome would come back and wait for a
-    world that is gone. The run is over when the monitor has written it (exit 0), when the
-    world fails (non-zero), or once both have exited (a monitor that died mid-run does not
-    stop the swarm: the world runs on without it, as under ``swarm-ros run``). A monitor
-    that has not written the run ``MONITOR_GRACE`` seconds after the world's end is given up on.
-    """
-    exited: dict[str, int] = {}
+    def on_start(event, context):
+        running.add(event.action)
 
-    def on_exit(name: str):
-        def handle(event, context):
-            exited[name] = event.returncode
-            why = ", ".join(f"{node} exited with status {code}" for node, code in exited.items())
-            if (name == "monitor" and event.returncode == 0) or (name == "world" and event.returncode != 0) \
-                    or len(exited) == 2:
-                return [EmitEvent(event=Shutdown(reason=f"the run is over: {why}"))]
-            if name == "world":
-                return [TimerAction(period=MONITOR_GRACE, actions=[EmitEvent(event=Shutdown(
-                    reason=f"{why}, but the monitor did not write the run within {MONITOR_GRACE:g} s"))])]
+    def on_exit(event, context):
+        name = names.get(event.action)
+        if name is None or context.is_shutdown:
             return None
-        return handle
+        running.discard(event.action)
+        verdict = supervisor.exited(name, event.returncode)
+        actions = [LogInfo(msg=f"swarm_ros: {verdict.note}")] if verdict.note else []
+        if verdict.end:
+            raise RunEnded(verdict.end)  # ros2 launch: "Caught exception in launch ...", every node stopped, exit 1
+        if verdict.stop:
+            return [*actions, EmitEvent(event=Shutdown(reason=verdict.stop))]
+        if verdict.restart:
+            actions.append(node(name))
+        elif verdict.wait_for_monitor:
+            actions.append(later(MONITOR_GRACE, f"the run ended, but the monitor did not write it within "
+                                                f"{MONITOR_GRACE:g} s", failed=True))
+        if supervisor.monitor_done:
+            if running:
+                actions.append(later(END_GRACE, "the monitor has written the run; stopping what is left", False))
+            else:
+                for timer in timers:
+                    timer.cancel()
+        return actions
 
-    return [RegisterEventHandler(OnProcessExit(target_action=world, on_exit=on_exit("world"))),
-            RegisterEventHandler(OnProcessExit(target_action=monitor, on_exit=on_exit("monitor")))]
+    def remove_checkpoint(event, context):  # a failed world's (the world removes its own when the run ends)
+        for path in setup.checkpoint.parent.glob(setup.checkpoint.name + "*"):
+            path.unlink(missing_ok=True)
+
+    nodes = [node(name) for name in plan]  # the graph swarm-ros run starts, in its order
+    handlers = [RegisterEventHandler(OnProcessStart(on_start=on_start)),
+                RegisterEventHandler(OnProcessExit(on_exit=on_exit)),
+                RegisterEventHandler(OnShutdown(on_shutdown=remove_checkpoint))]
+    if kernels_cached():
+        return handlers + nodes
+    # fill numba's cache once, here: every node would otherwise compile the same kernels at the same time
+    compiling = ExecuteProcess(cmd=[sys.executable, "-m", "swarm_ros.core.kernels"], name="compile_kernels",
+                               output="screen")
+
+    def compiled(event, context):
+        if event.returncode != 0:
+            raise RunEnded(f"compiling the numba kernels failed (exit status {event.returncode})")
+        return nodes
+    return [*handlers, LogInfo(msg=f"swarm_ros: {COMPILING}"), compiling,
+            RegisterEventHandler(OnProcessExit(target_action=compiling, on_exit=compiled))]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -106,8 +143,8 @@ def generate_launch_description() -> LaunchDescription:
                                           "untested here, docs/security.md)"),
         DeclareLaunchArgument("out_dir", default_value="",
                               description="the monitor's run directory (default: runs/<time>_<shape>_...)"),
-        *[DeclareLaunchArgument(name, default_value="", description=f"run parameter {name} (default: the "
-                                f"parameter file's, else the model's)") for name in RUN_ARGUMENTS],
+        *[DeclareLaunchArgument(p.name, default_value="", description=f"run parameter {p.name} (default: the "
+                                f"parameter file's, else the model's)") for p in RUN_PARAMETERS],
         # discovery on this host, and Fast DDS's announcements as swarm-ros run sets them (config/fastdds.xml)
         SetEnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE",
                                os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")),

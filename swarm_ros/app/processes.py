@@ -104,6 +104,30 @@ class DomainLock:
 ENCLAVE_PREFIX = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
 
 
+def check_graph(shape, robots: int, processes: int, enclaves: str | None,
+                flags: tuple[str, str] = ("--processes", "--enclaves")) -> None:
+    """Refuse a graph that cannot run, before any node starts (``swarm-ros run`` and the launch file).
+
+    Raises:
+        SwarmError: a shape source the nodes cannot each read, too little memory, fewer non-seed robots than
+            batches, a bad enclave path; in one line (``flags``: how the user named the batch count and the
+            enclaves).
+    """
+    from swarm_ros.core.resources import check_world_memory
+
+    source = Path(shape.source)
+    if source.exists() and not source.is_file():  # a pipe, /dev/null: read once here, but each node reads it too
+        raise SwarmError(f"{shape.source}: not a regular file; each node of the graph reads the shape file "
+                         f"itself, so the graph needs a file ('simulate' reads a pipe once)")
+    check_world_memory(shape.world.radius, copies=processes + 2)  # the world, the monitor, each batch
+    if processes > robots - 4:
+        raise SwarmError(f"{robots} robots leave {robots - 4} non-seed robots for {processes} "
+                         f"robot-batch processes ({flags[0]}, default 2); each process needs at least one")
+    if enclaves is not None and not ENCLAVE_PREFIX.fullmatch(enclaves):
+        raise SwarmError(f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
+                         f"after each /), got {enclaves!r}")
+
+
 def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
     env = dict(os.environ)
     env[PARENT_ENV] = str(os.getpid())

@@ -1,0 +1,205 @@
+"""What ``ros2 launch swarm_ros swarm.launch.py`` does when one of the run's node processes ends: the rules
+``swarm-ros run`` follows (:mod:`swarm_ros.app.launcher`), as plain decisions the launch file turns into
+launch actions.
+
+- The monitor exits 0: it has written the run; the launch ends once the others have exited too.
+- The world exits 0: the run has ended; the monitor has :data:`MONITOR_GRACE` seconds to write it.
+- The world or the monitor killed by a signal: started again, with the next incarnation, up to
+  ``max_restarts`` times (the world goes on from its checkpoint, the monitor from its bag); once more,
+  the launch ends: the run cannot go on.
+- The world or the monitor exits with an error status: the run failed there (a restart would fail the
+  same way); the launch ends.
+- A process stopped by the user (Ctrl-C in the launch's terminal signals every process; exit status 130,
+  or killed by SIGINT, SIGTERM or SIGHUP): the launch stops, nothing is started again; the monitor, if it
+  was stopped after tick 0, has written the run so far (outcome ``interrupted``).
+- A robot batch exits non-zero before the world's end: under ``on_batch_loss: restart`` started again
+  (same robots, next incarnation) up to ``max_restarts`` times; otherwise the world removes its robots and
+  the run goes on. A batch that exits 0 has seen the run's end.
+
+Unlike ``respawn`` (which starts a process again whatever its exit status, with the same arguments),
+a batch that ends with the run is not started again, and a restarted process is told its incarnation.
+"""
+
+from __future__ import annotations
+
+import signal
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from swarm_ros.app.param_file import read_params_file
+from swarm_ros.app.processes import CHECKPOINT, check_graph
+from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
+from swarm_ros.core.errors import ConfigError, ParameterError, SwarmError
+from swarm_ros.core.params import RUN_PARAMETER, Param, node_defaults
+from swarm_ros.core.signals import EXIT_INTERRUPTED
+from swarm_ros.protocol.plan import MONITOR, WORLD
+from swarm_ros.ros.node_params import params_yaml
+
+
+class RunEnded(SwarmError):
+    """The launch ends because the run failed: ``ros2 launch`` prints it in one line, stops every node, exits 1."""
+
+
+#: Exit statuses of a process the user stopped: 130 (a node's Ctrl-C or SIGTERM), 129 (its launcher died),
+#: killed by SIGINT, SIGTERM or SIGHUP before its handlers were in place.
+STOPPED = frozenset({EXIT_INTERRUPTED, EXIT_INTERRUPTED - 1, -signal.SIGINT, -signal.SIGTERM, -signal.SIGHUP})
+MONITOR_GRACE = 30.0  #: seconds the monitor has to write the run after the world's end (as ``swarm-ros run``)
+END_GRACE = 10.0  #: seconds the others get to end by themselves once the monitor has written the run
+
+
+def death(code: int) -> str:
+    """How a process ended, for a message: 'was killed by SIGKILL', 'exited with status 1'."""
+    if code < 0:
+        try:
+            return f"was killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"was killed by signal {-code}"
+    return f"exited with status {code}"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What to do about a process that ended: start it again (``restart``), end the launch as failed
+    (``end``, the reason), stop it as the user asked (``stop``, the reason), and what to say (``note``).
+    ``wait_for_monitor``: the run is over, the monitor is writing it."""
+
+    restart: bool = False
+    end: str | None = None
+    stop: str | None = None
+    note: str | None = None
+    wait_for_monitor: bool = False
+
+
+@dataclass
+class Supervisor:
+    """The rules above, for one launch. ``exited`` is told each process's end; it counts restarts per node."""
+
+    max_restarts: int
+    on_batch_loss: str = "restart"
+    restarts: dict[str, int] = field(default_factory=dict)
+    world_ended: bool = False
+    monitor_done: bool = False
+    stopped: bool = False
+
+    def exited(self, name: str, code: int) -> Verdict:
+        how = f"{name} {death(code)}"
+        done = self.restarts.get(name, 0)
+        if self.stopped:
+            return Verdict()
+        if code in STOPPED:  # Ctrl-C (the terminal signals every process of the launch) or a user's kill
+            self.stopped = True
+            return Verdict(stop=f"{name} was stopped ({death(code)}): the launch stops")
+        if name in (WORLD, MONITOR):
+            if code == 0:
+                if name == MONITOR:
+                    self.monitor_done = True
+                    return Verdict(note="the monitor has written the run")
+                self.world_ended = True
+                return Verdict(wait_for_monitor=not self.monitor_done)
+            if code > 0:
+                if name == MONITOR and self.world_ended:
+                    return Verdict(end=f"the monitor {death(code)}; the swarm ran to its end, but no run "
+                                       f"directory was written")
+                return Verdict(end=f"the run failed: {how}")
+            if done >= self.max_restarts:
+                return Verdict(end=f"{how}; it was restarted {self.max_restarts} times already (max_restarts): "
+                                   f"the run cannot go on")
+            return self._restart(name, how)
+        if code == 0 or self.world_ended or self.monitor_done:
+            return Verdict()
+        if self.on_batch_loss == "restart" and done < self.max_restarts:
+            return self._restart(name, how)
+        then = "the world removes its robots (on_batch_loss: remove)" if self.on_batch_loss != "restart" else \
+            f"it was restarted {self.max_restarts} times already: the world removes its robots"
+        return Verdict(note=f"{how}; {then} and the run goes on")
+
+    def _restart(self, name: str, how: str) -> Verdict:
+        self.restarts[name] = self.restarts.get(name, 0) + 1
+        return Verdict(restart=True, note=f"{how}; restarted ({self.restarts[name]} of {self.max_restarts})")
+
+    def incarnation(self, name: str) -> int:
+        """The incarnation of ``name``'s current process: 0 for its first, then one more per restart."""
+        return self.restarts.get(name, 0)
+
+
+@dataclass(frozen=True)
+class LaunchSetup:
+    """What the launch file starts the graph with: the parameter file every node reads (``params``, the run
+    and each node's own section, as ``swarm-ros run`` writes it), the run directory, and the supervisor."""
+
+    params: Path
+    out: Path
+    checkpoint: Path
+    supervisor: Supervisor
+
+
+#: The launch file's own number, checked as ``swarm-ros run --processes`` is.
+PROCESSES = Param("processes", 2, "robot-batch processes K", low=1)
+
+
+def _yaml_value(text: str) -> object:
+    """``text`` read as ROS 2 reads ``-p name:=text`` (YAML), or the text itself if it is not YAML."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def launch_processes(text: str) -> int:
+    """The ``processes`` launch argument as a number.
+
+    Raises:
+        ConfigError: not an integer >= 1, in one line.
+    """
+    try:
+        return PROCESSES.check(_yaml_value(text))
+    except ParameterError as exc:
+        raise ConfigError(f"launch argument processes:={text}: {exc}") from None
+
+
+def argument_value(name: str, text: str) -> object:
+    """A launch argument's text as the run parameter ``name``'s type, as ``-p name:=text`` reads it (YAML).
+
+    Raises:
+        ConfigError: not a value of that parameter, in one line.
+    """
+    param = RUN_PARAMETER[name]
+    try:
+        return param.check(text if param.kind is str else _yaml_value(text))
+    except ParameterError as exc:
+        raise ConfigError(f"launch argument {name}:={text}: {exc}") from None
+
+
+def launch_setup(params_file: str, arguments: dict[str, str], out_dir: str, log_dir: Path, processes: int,
+                 enclaves: str = "") -> LaunchSetup:
+    """Resolve a launch's arguments as ``swarm-ros run`` resolves its flags, and write the nodes' parameter
+    file into ``log_dir``. A launch argument wins over the parameter file (run parameters and ``out_dir``);
+    the world's checkpoint is ``<log_dir>/world.checkpoint``; an empty ``out_dir`` is named here
+    (``runs/<time>_<shape>_...``), once, so that a restarted monitor writes to the same place.
+
+    Raises:
+        SwarmError: a bad parameter file, argument, shape or output directory, in one line.
+    """
+    settings, nodes = read_params_file(params_file)
+    settings = settings.updated(**{name: argument_value(name, text) for name, text in arguments.items() if text})
+    shape, params = settings.resolve()
+    check_graph(shape, params.robots, processes, enclaves or None, flags=("processes", "enclaves"))
+    if Path(settings.shape).suffix.lower() in (".txt", ".png"):
+        settings = settings.updated(shape=str(Path(settings.shape).absolute()))
+    settings = settings.updated(robots=params.robots)
+    out = Path(out_dir or nodes["monitor"].get("out_dir") or
+               default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)).absolute()
+    check_out_dir(out, bool(nodes["monitor"].get("overwrite", False)))
+    world = {**node_defaults(WORLD), **nodes["world"], "checkpoint": str(log_dir / CHECKPOINT)}
+    sections = {WORLD: world, MONITOR: {**nodes["monitor"], "out_dir": str(out)}}
+    for section in sections.values():
+        section.pop("incarnation", None)  # the supervisor's to set
+    path = log_dir / "params.yaml"
+    log_dir.mkdir(parents=True, exist_ok=True)
+    part = path.with_name(path.name + ".part")
+    part.write_text(params_yaml(settings, sections), encoding="utf-8")
+    part.replace(path)
+    return LaunchSetup(path, out, log_dir / CHECKPOINT,
+                       Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"])))
