@@ -33,6 +33,7 @@ _OWN = {p.name: p for p in (
     Param("jobs", 1, "worker processes", low=1),
     Param("rate", 1.0, "replay speed", low=0.0, low_open=True),
     Param("delay", 1.0, "seconds before replaying", low=0.0),
+    Param("start_offset", 0.0, "seconds into the bag", low=0.0),
     Param("count", 1, "messages to print", low=1),
     Param("seconds", 1.0, "seconds to listen", low=0.0, low_open=True),
 )}
@@ -130,6 +131,10 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument("--delay", type=_checked(_OWN["delay"]), default=1.0,
                         help="seconds between creating the publishers and the first message (default: 1), "
                              "for subscribers to be matched")
+    replay.add_argument("--start-offset", type=_checked(_OWN["start_offset"]), default=0.0, metavar="S",
+                        help="start S seconds into the bag (as ros2 bag play); the latched topics' last messages "
+                             "before it are published first")
+    replay.add_argument("--loop", action="store_true", help="play the bag again and again, until Ctrl-C")
     replay.add_argument("--quiet", action="store_true", help="no progress bar")
     replay.set_defaults(func=commands.cmd_replay)
 

@@ -157,28 +157,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     import json
 
     from swarm_ros.app.launcher import Launch, plural
-    from swarm_ros.app.processes import ENCLAVE_PREFIX
+    from swarm_ros.app.processes import check_graph
     from swarm_ros.artifacts.run_dir import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args, graph=True)
-    source = Path(shape.source)
-    if source.exists() and not source.is_file():  # a pipe, /dev/null: read once here, but each node reads it too
-        raise SwarmError(f"{settings.shape}: not a regular file; each node of the graph reads the shape file "
-                         f"itself, so 'run' needs a file ('simulate' reads a pipe once)")
     changed = {k: v for k, v in nodes["robot_batch"].items() if v != node_defaults("robot_batch")[k]}
     if changed:
         raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
                          f"assigns each of its --processes its robots itself (use ros2 run for your own split)")
     world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
              **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {})}
-    check_world_memory(shape.world.radius, copies=args.processes + 2)  # the world, the monitor, each batch
-    if args.processes > params.robots - 4:
-        raise SwarmError(f"{params.robots} robots leave {params.robots - 4} non-seed robots for {args.processes} "
-                         f"robot-batch processes (--processes, default 2); each process needs at least one")
+    check_graph(shape, params.robots, args.processes, args.enclaves)
     domain = _domain_id(args.domain_id)
-    if args.enclaves is not None and not ENCLAVE_PREFIX.fullmatch(args.enclaves):
-        raise SwarmError(f"--enclaves must be an enclave path like /swarm_ros (names of letters, digits and _ "
-                         f"after each /), got {args.enclaves!r}")
     launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
                     overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
                     world=world, bag=bool(_flag(args.bag, nodes["monitor"], "bag")), enclaves=args.enclaves)
@@ -295,7 +285,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     bag = args.bag / "bag" if (args.bag / "bag" / "metadata.yaml").is_file() else args.bag
     domain = _domain_id(args.domain_id)
     _interrupt_on_sigterm()  # its ROS participant is then closed (no Fast DDS files left in /dev/shm)
-    code = replay(bag, 0 if domain is None else domain, rate=args.rate, delay=args.delay, quiet=args.quiet)
+    code = replay(bag, 0 if domain is None else domain, rate=args.rate, delay=args.delay, quiet=args.quiet,
+                  start_offset=args.start_offset, loop=args.loop)
     if code == EXIT_INTERRUPTED:
         print(f"{PROG}: interrupted", file=sys.stderr)
     return code

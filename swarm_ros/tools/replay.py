@@ -5,7 +5,10 @@ its topic, with the message type and the QoS its publisher offered (from metadat
 paced by the recorded receive times divided by ``rate``. RViz, Foxglove, ``ros2 topic``
 or ``swarm-ros topics`` on the same ROS domain then see the past run as if it were live.
 Like ``ros2 bag play``, it waits ``delay`` seconds after creating the publishers, so that
-subscribers started beforehand are matched before the first message.
+subscribers started beforehand are matched before the first message, starts ``start_offset``
+seconds into the bag, and with ``loop`` plays it again and again until Ctrl-C. From an offset,
+the last message before it of each latched topic (transient local, depth 1: the shape and the
+occupancy) is published first, as a reader that joined a live run then would have it.
 """
 
 from __future__ import annotations
@@ -50,23 +53,32 @@ def open_bag(bag: Path):
     return reader
 
 
-def replay(bag: Path, domain_id: int, rate: float = 1.0, delay: float = 1.0, quiet: bool = False) -> int:
-    """Publish the bag's messages on ``domain_id``; return an exit code (0, or 130 if interrupted)."""
+def replay(bag: Path, domain_id: int, rate: float = 1.0, delay: float = 1.0, quiet: bool = False,
+           start_offset: float = 0.0, loop: bool = False) -> int:
+    """Publish the bag's messages on ``domain_id``; return an exit code (0, or 130 if interrupted).
+
+    Raises:
+        ReplayError: not a bag, unreadable, empty, a type that is not installed, or an offset past its end.
+    """
     reader = open_bag(bag)
     try:
         classes = {c.id: _message_class(c.msgtype) for c in reader.connections}
         if reader.message_count == 0:
             raise ReplayError(f"{bag}: the bag holds no messages")
-        return _publish(reader, classes, domain_id, rate, delay, quiet)
+        length = (reader.end_time - reader.start_time) / 1e9
+        if start_offset > length:
+            raise ReplayError(f"--start-offset {start_offset:g} is past the bag's end (it lasts {length:.3f} s)")
+        return _publish(reader, classes, domain_id, rate, delay, quiet, int(start_offset * 1e9), loop)
     finally:
         reader.close()
 
 
-def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, quiet: bool) -> int:
+def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, quiet: bool, offset: int,
+             loop: bool) -> int:
     import rclpy
     from rclpy.context import Context
     from rclpy.node import Node
-    from rclpy.qos import QoSProfile
+    from rclpy.qos import DurabilityPolicy, QoSProfile
     from rclpy.signals import SignalHandlerOptions
     from tqdm import tqdm
 
@@ -79,25 +91,25 @@ def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, q
                signal_handler_options=SignalHandlerOptions.NO)
     node = Node("swarm_ros_replay", context=context, start_parameter_services=False)
     try:
-        pubs = {}
+        pubs, latched = {}, set()
         for c in reader.connections:
             offered = c.ext.offered_qos_profiles
             qos = ros_qos(offered[0]) if offered else QoSProfile(depth=10)
             pubs[c.id] = node.create_publisher(classes[c.id], c.topic, qos)
+            if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL and qos.depth == 1:
+                latched.add(c.id)  # ROS's "latched": a late reader gets the last message
         if not quiet:
             print(f"swarm-ros: replaying {reader.message_count} messages on {len(pubs)} topics, ROS domain "
                   f"{domain_id}, at {rate:g}x", file=sys.stderr, flush=True)
         time.sleep(delay)
-        start, first = time.monotonic(), reader.start_time
-        with tqdm(total=reader.message_count, unit="msg", desc="replayed", disable=True if quiet else None,
-                  file=sys.stderr, dynamic_ncols=True) as bar:
+        first = reader.start_time + offset
+        with tqdm(total=None if loop else reader.message_count, unit="msg", desc="replayed", file=sys.stderr,
+                  disable=True if quiet else None, dynamic_ncols=True) as bar:
             try:
-                for connection, stamp, data in reader.messages():
-                    wait = start + (stamp - first) / 1e9 / rate - time.monotonic()
-                    if wait > 0:
-                        time.sleep(wait)
-                    pubs[connection.id].publish(bytes(data))
-                    bar.update()
+                while True:
+                    _play(reader, pubs, first, rate, latched, bar)
+                    if not loop:
+                        break
             except KeyboardInterrupt:
                 return 130
         from rclpy.duration import Duration
@@ -109,3 +121,25 @@ def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, q
     finally:
         node.destroy_node()
         rclpy.shutdown(context=context)
+
+
+def _play(reader, pubs: dict, first: int, rate: float, latched: set, bar) -> None:
+    """One pass over the bag from the time ``first`` (ns): before it, only the newest message of each latched
+    connection, published when the pass starts."""
+    held: dict[int, bytes] = {}
+    start = None
+    for connection, stamp, data in reader.messages():
+        if stamp < first:
+            if connection.id in latched:
+                held[connection.id] = bytes(data)
+            bar.update()
+            continue
+        if start is None:
+            start = time.monotonic()
+            for cid, message in held.items():
+                pubs[cid].publish(message)
+        wait = start + (stamp - first) / 1e9 / rate - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        pubs[connection.id].publish(bytes(data))
+        bar.update()
