@@ -2,8 +2,8 @@
 command-line tools (``ros2 launch``, ``run``, ``topic``, ``node``, ``param``, ``pkg``).
 
 No PyPI wheel ships those tools; their jazzy sources come with this project's test machines, beside the
-checkout (``../shared/ros2-jazzy-cli``, or the directory ``SWARM_ROS_ROS2_CLI`` names), with an
-``install.sh VENV``. :func:`ros2_tools` installs them into ``.venv`` once (about 15 s), or skips the test
+checkout (``shared/ros2-jazzy-cli`` in its parent directory, or the directory ``SWARM_ROS_ROS2_CLI`` names),
+with an ``install.sh VENV``. :func:`ros2_tools` installs them into ``.venv`` once (about 15 s), or skips the test
 with the reason when they are not there. Commands run as a user runs them: ``. install/setup.sh`` first,
 then the venv's prefix on ``AMENT_PREFIX_PATH`` (the message packages' ament index lives there) and its
 ``bin`` on ``PATH`` (the node scripts start with ``/usr/bin/env python3``: setup.cfg).

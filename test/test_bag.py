@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -128,3 +129,11 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
     assert [m.header.stamp.sec for m in robots] == list(range(len(table)))
     first = np.frombuffer(bytes(robots[0].data), dtype=ROBOT_ROW)
     assert first.size == len(np.frombuffer(bagged["/swarm/robots"][0].data, dtype=ROBOT_ROW))
+
+
+def test_replay_refuses_a_start_offset_past_the_bags_end_in_one_line(ring_run):
+    done = subprocess.run([PY, "-m", "swarm_ros", "replay", str(ring_run), "--start-offset", "100000", "--quiet"],
+                          capture_output=True, text=True, env=_env(), timeout=60)
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert re.fullmatch(r"swarm-ros: error: --start-offset 100000 is past the bag's end \(it lasts [\d.]+ s\)\n",
+                        done.stderr), done.stderr
