@@ -121,7 +121,7 @@ KILLED = -signal.SIGKILL
       Verdict(end="world was killed by SIGKILL; it was restarted 2 times already (max_restarts): the run cannot "
                   "go on")]),
     # an error status is the run's failure: a restart would fail the same way
-    ([("world", 1)], [Verdict(end="the run failed: world exited with status 1")]),
+    ([("world", 1)], [Verdict(end="world exited with status 1")]),
     ([("world", 0), ("monitor", 1)],
      [Verdict(wait_for_monitor=True),
       Verdict(end="the monitor exited with status 1; the swarm ran to its end, but no run directory was written")]),
@@ -129,7 +129,7 @@ KILLED = -signal.SIGKILL
     ([("world", 0), ("robot_batch_0", KILLED)], [Verdict(wait_for_monitor=True), Verdict()]),
     # Ctrl-C: the terminal signals every process; the first to go stops the launch, nothing comes back
     ([("robot_batch_0", 130), ("world", 130), ("monitor", -signal.SIGINT)],
-     [Verdict(stop="robot_batch_0 was stopped (exited with status 130): the launch stops"), Verdict(), Verdict()]),
+     [Verdict(stop="robot_batch_0 was stopped (exited with status 130): the run stops"), Verdict(), Verdict()]),
 ])
 def test_a_process_that_ends_is_handled_as_swarm_ros_run_handles_it(exits, verdicts):
     supervisor = Supervisor(max_restarts=2)
@@ -150,3 +150,14 @@ def test_stopped_statuses_are_the_nodes_interrupt_statuses():
     from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED
 
     assert {EXIT_INTERRUPTED, EXIT_ORPHANED, -signal.SIGINT, -signal.SIGTERM, -signal.SIGHUP} == STOPPED
+
+
+def test_before_tick_0_a_lost_batch_is_started_again_under_remove_too_and_its_last_error_is_said():
+    supervisor = Supervisor(max_restarts=1, on_batch_loss="remove", said=("--on-batch-loss remove", "--max-restarts"))
+    assert supervisor.exited("robot_batch_0", 1, why="boom", started=False) == Verdict(
+        restart=True, note="robot_batch_0 exited with status 1 (boom); restarted (1 of 1)")
+    assert supervisor.exited("robot_batch_0", KILLED, started=False) == Verdict(
+        end="robot_batch_0 was killed by SIGKILL before the run started, 2 times")
+    assert supervisor.exited("world", KILLED) == Verdict(restart=True, note="world was killed by SIGKILL; restarted "
+                                                                             "(1 of 1)")
+    assert "(--max-restarts)" in supervisor.exited("world", KILLED).end

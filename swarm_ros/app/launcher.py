@@ -14,7 +14,8 @@ removes its robots; one lost before tick 0 is restarted under both policies, sin
 none of its robots has moved yet. A world or monitor killed by a signal is started again
 too (up to ``max_restarts`` times each, under both policies): the world goes on from its
 checkpoint (``<logs>/world.checkpoint``), the monitor from the bag its process before
-wrote (docs/ros_graph.md, "Faults"); one that exits with an error fails the run.
+wrote (docs/ros_graph.md, "Faults"); one that exits with an error fails the run. These rules are
+:class:`swarm_ros.app.supervision.Supervisor`'s, which the launch file follows too.
 Every node ends by itself within moments of the launcher's death (SIGHUP from the kernel:
 ``PR_SET_PDEATHSIG``, set by the node at start-up, see :func:`swarm_ros.ros.runtime.follow_parent`). After the run, the
 shared-memory files of Fast DDS that its dead processes left in /dev/shm are removed
@@ -37,6 +38,7 @@ import threading
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 from swarm_ros.app.processes import (
@@ -50,6 +52,7 @@ from swarm_ros.app.processes import (
     node_env,
     stop,
 )
+from swarm_ros.app.supervision import Supervisor
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
 from swarm_ros.core.params import RunParams, Settings, node_defaults
@@ -141,6 +144,11 @@ class Launch:
     @property
     def max_restarts(self) -> int:
         return int(self.world.get("max_restarts", node_defaults("world")["max_restarts"]))
+
+    @cached_property
+    def supervisor(self) -> Supervisor:
+        """What is done when a node process ends: the rules the launch file follows too."""
+        return Supervisor(self.max_restarts, self.on_batch_loss, said=("--on-batch-loss remove", "--max-restarts"))
 
     def run(self) -> Path:
         run_key()  # a SWARM_ROS_RUN_KEY that is set but unusable fails here, before anything is made
@@ -306,33 +314,22 @@ class Launch:
                     code = c.proc.poll()
                     if code in (None, 0) or c.name in reported:
                         continue
-                    if c.name in (WORLD, MONITOR):
-                        if c.name == MONITOR and self._written():
-                            monitor_done = True  # killed after it wrote the run directory: the run is whole
-                            break
-                        self._restart_core(c, progress)
+                    if c.name == MONITOR and self._written():
+                        monitor_done = True  # killed after it wrote the run directory: the run is whole
+                        break
+                    # the run has ended: the world exited, or its outcome is out (its status); the world's own
+                    # word that tick 0 went out decides whether a batch lost under 'remove' is started again
+                    self.supervisor.world_ended = world_done_at is not None or progress.ended_at is not None
+                    verdict = self.supervisor.exited(c.name, code, why=c.last_error() or "", started=progress.started)
+                    if verdict.end or verdict.stop:
+                        raise LaunchError(verdict.end or verdict.stop)
+                    if verdict.restart:
+                        self._restart(c)
                         world_done_at = None if c.name == MONITOR else world_done_at
-                        continue
-                    # the world's own word that tick 0 went out (its status, or the monitor's metrics): under
-                    # 'remove', a batch lost before tick 0 is restarted (none of its robots has moved yet)
-                    started = progress.started
-                    if world_done_at is None and (self.on_batch_loss == "restart" or not started):
-                        if c.incarnation < self.max_restarts:
-                            death = c.death()
-                            new = self._restart(c)
-                            self._warn(progress, f"{c.name} {death}; restarted ({new.incarnation} of "
-                                                 f"{self.max_restarts})")
-                            continue
-                        if not started:
-                            raise LaunchError(f"{c.name} {c.death()} before the run started, "
-                                              f"{self.max_restarts + 1} times")
-                    reported.add(c.name)
-                    if self.on_batch_loss == "remove":
-                        then = "the world removes its robots (--on-batch-loss remove) and the run goes on"
                     else:
-                        then = (f"it was restarted {self.max_restarts} times already: the world removes its robots "
-                                f"and the run goes on")
-                    self._warn(progress, f"{c.name} {c.death()}; {then}")
+                        reported.add(c.name)
+                    if verdict.note:
+                        self._warn(progress, verdict.note)
                 world, monitor = self._child(WORLD), self._child(MONITOR)
                 if monitor_done or monitor.proc.returncode == 0:
                     break
@@ -375,25 +372,6 @@ class Launch:
         the run (the monitor writes it whole under another name, then renames it: it is complete)."""
         now = _identity(self.out.absolute())
         return now is not None and now != self.out_before and (self.out.absolute() / "summary.json").is_file()
-
-    def _restart_core(self, c: Child, progress) -> None:
-        """The world or the monitor died. Killed by a signal: start it again, up to ``max_restarts`` times; it
-        goes on from its checkpoint (the world) or its bag (the monitor). Exited with an error status: the
-        run failed there (a restart would fail the same way).
-
-        Raises:
-            LaunchError: it may not be restarted.
-        """
-        death = c.death()
-        if c.proc.returncode > 0:
-            if c.name == "monitor" and progress.ended_at is not None:
-                raise LaunchError(f"the monitor {death}; the swarm ran to its end, but no run directory was written")
-            raise LaunchError(f"{c.name} {death}")
-        if c.incarnation >= self.max_restarts:
-            raise LaunchError(f"{c.name} {death}; it was restarted {self.max_restarts} times already "
-                              f"(--max-restarts): the run cannot go on")
-        new = self._restart(c)
-        self._warn(progress, f"{c.name} {death}; restarted ({new.incarnation} of {self.max_restarts})")
 
     def _note_exits(self) -> None:
         for c in self.children:

@@ -1,6 +1,7 @@
-"""What ``ros2 launch swarm_ros swarm.launch.py`` does when one of the run's node processes ends: the rules
-``swarm-ros run`` follows (:mod:`swarm_ros.app.launcher`), as plain decisions the launch file turns into
-launch actions.
+"""What is done when one of a run's node processes ends, as plain decisions: ``swarm-ros run``
+(:mod:`swarm_ros.app.launcher`) and ``ros2 launch swarm_ros swarm.launch.py`` both follow them, each
+turning a verdict into its own actions (a process started again, the run ended). And what the launch
+file starts the graph with (:func:`launch_setup`).
 
 - The monitor exits 0: it has written the run; the launch ends once the others have exited too.
 - The world exits 0: the run has ended; the monitor has :data:`MONITOR_GRACE` seconds to write it.
@@ -8,13 +9,13 @@ launch actions.
   ``max_restarts`` times (the world goes on from its checkpoint, the monitor from its bag); once more,
   the launch ends: the run cannot go on.
 - The world or the monitor exits with an error status: the run failed there (a restart would fail the
-  same way); the launch ends.
+  same way); the launch ends. So does a batch lost more than ``max_restarts`` times before tick 0.
 - A process stopped by the user (Ctrl-C in the launch's terminal signals every process; exit status 130,
   or killed by SIGINT, SIGTERM or SIGHUP): the launch stops, nothing is started again; the monitor, if it
   was stopped after tick 0, has written the run so far (outcome ``interrupted``).
-- A robot batch exits non-zero before the world's end: under ``on_batch_loss: restart`` started again
-  (same robots, next incarnation) up to ``max_restarts`` times; otherwise the world removes its robots and
-  the run goes on. A batch that exits 0 has seen the run's end.
+- A robot batch exits non-zero before the world's end: under ``on_batch_loss: restart`` (or before tick 0)
+  started again (same robots, next incarnation) up to ``max_restarts`` times; otherwise the world removes
+  its robots and the run goes on. A batch that exits 0 has seen the run's end.
 
 Unlike ``respawn`` (which starts a process again whatever its exit status, with the same arguments),
 a batch that ends with the run is not started again, and a restarted process is told its incarnation.
@@ -74,23 +75,30 @@ class Verdict:
 
 @dataclass
 class Supervisor:
-    """The rules above, for one launch. ``exited`` is told each process's end; it counts restarts per node."""
+    """The rules above, for one launch (the launch file's, or ``swarm-ros run``'s: :mod:`swarm_ros.app.launcher`).
+    ``exited`` is told each process's end; it counts restarts per node. ``said``: how the user set the batch
+    policy and the restart bound, for the messages (``--on-batch-loss remove``, ``--max-restarts`` for the
+    command line)."""
 
     max_restarts: int
     on_batch_loss: str = "restart"
+    said: tuple[str, str] = ("on_batch_loss: remove", "max_restarts")
     restarts: dict[str, int] = field(default_factory=dict)
     world_ended: bool = False
     monitor_done: bool = False
     stopped: bool = False
 
-    def exited(self, name: str, code: int) -> Verdict:
-        how = f"{name} {death(code)}"
+    def exited(self, name: str, code: int, why: str = "", started: bool = True) -> Verdict:
+        """What to do now that node ``name``'s process ended with ``code`` (negative: killed by that signal).
+        ``why``: its last error line, if known; ``started``: whether tick 0 went out (under ``remove``, a batch
+        lost before it is started again: none of its robots has moved yet)."""
+        how = f"{name} {death(code)}" + (f" ({why})" if why and code > 0 else "")
         done = self.restarts.get(name, 0)
         if self.stopped:
             return Verdict()
         if code in STOPPED:  # Ctrl-C (the terminal signals every process of the launch) or a user's kill
             self.stopped = True
-            return Verdict(stop=f"{name} was stopped ({death(code)}): the launch stops")
+            return Verdict(stop=f"{name} was stopped ({death(code)}): the run stops")
         if name in (WORLD, MONITOR):
             if code == 0:
                 if name == MONITOR:
@@ -102,16 +110,19 @@ class Supervisor:
                 if name == MONITOR and self.world_ended:
                     return Verdict(end=f"the monitor {death(code)}; the swarm ran to its end, but no run "
                                        f"directory was written")
-                return Verdict(end=f"the run failed: {how}")
+                return Verdict(end=how)
             if done >= self.max_restarts:
-                return Verdict(end=f"{how}; it was restarted {self.max_restarts} times already (max_restarts): "
+                return Verdict(end=f"{how}; it was restarted {self.max_restarts} times already ({self.said[1]}): "
                                    f"the run cannot go on")
             return self._restart(name, how)
         if code == 0 or self.world_ended or self.monitor_done:
             return Verdict()
-        if self.on_batch_loss == "restart" and done < self.max_restarts:
-            return self._restart(name, how)
-        then = "the world removes its robots (on_batch_loss: remove)" if self.on_batch_loss != "restart" else \
+        if self.on_batch_loss == "restart" or not started:
+            if done < self.max_restarts:
+                return self._restart(name, how)
+            if not started:
+                return Verdict(end=f"{how} before the run started, {self.max_restarts + 1} times")
+        then = f"the world removes its robots ({self.said[0]})" if self.on_batch_loss != "restart" else \
             f"it was restarted {self.max_restarts} times already: the world removes its robots"
         return Verdict(note=f"{how}; {then} and the run goes on")
 
