@@ -84,7 +84,8 @@ def graph(context) -> list:
         return timers[0]
 
     def on_start(event, context):
-        running.add(event.action)
+        if event.action in names:  # a node (not the kernels' compilation)
+            running.add(event.action)
 
     def on_exit(event, context):
         name = names.get(event.action)

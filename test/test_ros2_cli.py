@@ -52,8 +52,10 @@ def _arguments(values: dict[str, str]) -> str:
 
 
 def _clean(output: str) -> None:
-    """What a user reads after a run that succeeded: no error line, no traceback."""
+    """What a user reads after a run that succeeded: no error line, no traceback, and no process that had to be
+    stopped (each ends by itself with the run)."""
     assert "[ERROR]" not in output and "Traceback" not in output, output[-4000:]
+    assert "sending signal" not in output and "stopping what is left" not in output, output[-4000:]
 
 
 def _simulate(out: Path, *flags: str) -> Path:

@@ -52,7 +52,7 @@ from swarm_ros.app.processes import (
     node_env,
     stop,
 )
-from swarm_ros.app.supervision import Supervisor
+from swarm_ros.app.supervision import END_GRACE, MONITOR_GRACE, Supervisor
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
 from swarm_ros.core.params import RunParams, Settings, node_defaults
@@ -62,8 +62,6 @@ from swarm_ros.protocol.plan import MONITOR, WORLD, graph_plan
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.ros.shm import clean_shm, shm_locks
-
-_GRACE = 10.0  # seconds the world and batches get to end by themselves after the monitor is done
 
 
 def plural(n: int, noun: str) -> str:
@@ -335,9 +333,9 @@ class Launch:
                     break
                 if world.proc.returncode == 0 and world_done_at is None:
                     world_done_at = time.monotonic()
-                if world_done_at is not None and time.monotonic() - world_done_at > 3 * _GRACE:
-                    raise LaunchError(f"the run ended but the monitor did not write it within {3 * _GRACE:g} s")
-        deadline = time.monotonic() + _GRACE
+                if world_done_at is not None and time.monotonic() - world_done_at > MONITOR_GRACE:
+                    raise LaunchError(f"the run ended but the monitor did not write it within {MONITOR_GRACE:g} s")
+        deadline = time.monotonic() + END_GRACE
         while time.monotonic() < deadline and any(c.proc.poll() is None for c in self.children):
             self._note_exits()
             time.sleep(0.01)
