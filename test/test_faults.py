@@ -39,14 +39,16 @@ def _launch(out: Path, processes: int = 3, *extra: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
 
 
-def _wait_until_running(out: Path, timeout: float = 120) -> Path:
-    """The run's staged log directory, once ticks flow: the monitor has recorded a few batches of ticks
-    (so every process has been discovered, liveliness topics included)."""
+def _wait_until_running(out: Path, batches: int = 3, timeout: float = 120) -> Path:
+    """The run's staged log directory, once ticks flow (the monitor has recorded a few batches of ticks) and the
+    world has seen every batch's liveliness: a batch killed before that is noticed by the 5 s fallback, as
+    designed (a CI run once killed one 0.2 s after tick 0, before its liveliness had matched)."""
     partial = out.parent / f"{out.name}.partial.rrd"
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         logs = list(out.parent.glob(f".{out.name}.logs-*"))
-        if logs and partial.exists() and partial.stat().st_size > 300_000:
+        if logs and partial.exists() and partial.stat().st_size > 300_000 and (logs[0] / "world.log").exists() \
+                and (logs[0] / "world.log").read_text().count(" is alive (liveliness)") >= batches:
             return logs[0]
         time.sleep(0.05)
     raise AssertionError("the run never got going")
@@ -131,7 +133,7 @@ def test_a_monitor_killed_past_the_restart_bound_fails_the_command_and_its_recor
     run directory. (Restarts: test_node_restarts.py.) What it had recorded reads back."""
     out = tmp_path / "run"
     launcher = _launch(out, 2, "--max-restarts", "0")
-    logs = _wait_until_running(out)
+    logs = _wait_until_running(out, batches=2)
     partial = tmp_path / "run.partial.rrd"
     os.kill(_pid_of("monitor", logs), signal.SIGKILL)
     start = time.monotonic()

@@ -326,6 +326,8 @@ class Lockstep:
     # -- lost processes ---------------------------------------------------------------
     def batch_liveliness(self, k: int, alive: int, not_alive: int) -> None:
         """Batch ``k``'s liveliness changed: ``alive`` writers alive, ``not_alive`` lapsed."""
+        if alive > 0 and k not in self.live:  # from now on a loss is noticed by liveliness, not the fallback
+            self.log.info(f"{self.batch_names[k]} is alive (liveliness)")
         if alive > 0:
             self.live.add(k)
         else:
