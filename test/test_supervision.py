@@ -161,3 +161,10 @@ def test_before_tick_0_a_lost_batch_is_started_again_under_remove_too_and_its_la
     assert supervisor.exited("world", KILLED) == Verdict(restart=True, note="world was killed by SIGKILL; restarted "
                                                                              "(1 of 1)")
     assert "(--max-restarts)" in supervisor.exited("world", KILLED).end
+
+
+def test_under_swarm_ros_run_a_nodes_signal_is_a_fault_not_a_stop():
+    """Its nodes have process groups of their own: Ctrl-C reaches the command only, which stops them itself."""
+    supervisor = Supervisor(max_restarts=3, stops=frozenset())
+    assert supervisor.exited("robot_batch_0", -signal.SIGTERM).restart
+    assert supervisor.exited("world", 130) == Verdict(end="world exited with status 130")

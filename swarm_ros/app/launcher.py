@@ -146,7 +146,8 @@ class Launch:
     @cached_property
     def supervisor(self) -> Supervisor:
         """What is done when a node process ends: the rules the launch file follows too."""
-        return Supervisor(self.max_restarts, self.on_batch_loss, said=("--on-batch-loss remove", "--max-restarts"))
+        return Supervisor(self.max_restarts, self.on_batch_loss, said=("--on-batch-loss remove", "--max-restarts"),
+                          stops=frozenset())  # Ctrl-C reaches this process only: a node's signal is a fault
 
     def run(self) -> Path:
         run_key()  # a SWARM_ROS_RUN_KEY that is set but unusable fails here, before anything is made

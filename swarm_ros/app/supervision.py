@@ -83,6 +83,9 @@ class Supervisor:
     max_restarts: int
     on_batch_loss: str = "restart"
     said: tuple[str, str] = ("on_batch_loss: remove", "max_restarts")
+    #: exit statuses that mean the user stopped the run: under ``ros2 launch`` a terminal's Ctrl-C signals every
+    #: node; ``swarm-ros run`` gives each node a process group of its own, so there a signal is a fault
+    stops: frozenset[int] = STOPPED
     restarts: dict[str, int] = field(default_factory=dict)
     world_ended: bool = False
     monitor_done: bool = False
@@ -96,7 +99,7 @@ class Supervisor:
         done = self.restarts.get(name, 0)
         if self.stopped:
             return Verdict()
-        if code in STOPPED:  # Ctrl-C (the terminal signals every process of the launch) or a user's kill
+        if code in self.stops:  # Ctrl-C (the terminal signals every process of the launch) or a user's kill
             self.stopped = True
             return Verdict(stop=f"{name} was stopped ({death(code)}): the run stops")
         if name in (WORLD, MONITOR):
