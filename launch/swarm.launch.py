@@ -41,7 +41,7 @@ from launch import LaunchDescription
 from swarm_ros.app.supervision import END_GRACE, MONITOR_GRACE, RunEnded, launch_processes, launch_setup
 from swarm_ros.core.kernels import COMPILING, kernels_cached
 from swarm_ros.core.params import RUN_PARAMETERS
-from swarm_ros.protocol.plan import graph_plan
+from swarm_ros.protocol.plan import PROCESSES, graph_plan
 from swarm_ros.protocol.runkey import KEY_ENV
 
 PACKAGE = "swarm_ros"
@@ -136,7 +136,7 @@ def graph(context) -> list:
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory(PACKAGE)
     return LaunchDescription([
-        DeclareLaunchArgument("processes", default_value="2", description="robot-batch processes K"),
+        DeclareLaunchArgument("processes", default_value=str(PROCESSES.default), description=PROCESSES.help),
         DeclareLaunchArgument("params_file", default_value="",
                               description="parameter file (default: the package's config/swarm_ros.yaml)"),
         DeclareLaunchArgument("enclaves", default_value="",

@@ -26,10 +26,11 @@ from swarm_ros.core.params import (
     Param,
 )
 from swarm_ros.core.signals import InterruptSaid
+from swarm_ros.protocol.plan import PROCESSES
 
 #: The command line's own numbers (not run parameters), declared and checked the same way.
 _OWN = {p.name: p for p in (
-    Param("processes", 2, "robot-batch processes K", low=1),
+    PROCESSES,
     Param("jobs", 1, "worker processes", low=1),
     Param("rate", 1.0, "replay speed", low=0.0, low_open=True),
     Param("delay", 1.0, "seconds before replaying", low=0.0),
@@ -104,8 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Run one simulation as a ROS 2 graph: a world, K robot-batch processes "
                                      "and a monitor, each its own process. Same results as 'simulate'.")
     _add_run_options(run)
-    run.add_argument("--processes", type=_checked(_OWN["processes"]), default=2,
-                     help="robot-batch processes K (default: 2)")
+    run.add_argument("--processes", type=_checked(_OWN["processes"]), default=PROCESSES.default,
+                     help=f"robot-batch processes K (default: {PROCESSES.default})")
     run.add_argument("--domain-id", type=int, help="ROS domain id (default: $ROS_DOMAIN_ID, else a free one)")
     run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES,
                      help="a robot-batch process that dies: restart it, nothing lost (default; up to "
@@ -161,8 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("--jobs", type=_checked(_OWN["jobs"]), help="worker processes (default: the machine's cores)")
     exp.add_argument("--engine", choices=("inprocess", "ros2"), default="inprocess",
                      help="engine of each run (default: inprocess; ros2 gives the same results, slower)")
-    exp.add_argument("--processes", type=_checked(_OWN["processes"]), default=2,
-                     help="with --engine ros2: robot-batch processes per run (default: 2)")
+    exp.add_argument("--processes", type=_checked(_OWN["processes"]), default=PROCESSES.default,
+                     help=f"with --engine ros2: robot-batch processes per run (default: {PROCESSES.default})")
     exp.add_argument("--executor", choices=("local", "dask"), default="local",
                      help="where the runs go: local worker processes (default), or a Dask cluster")
     exp.add_argument("--scheduler", metavar="ADDRESS",

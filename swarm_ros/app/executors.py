@@ -22,6 +22,7 @@ from swarm_ros.app.experiment_file import RunSpec
 from swarm_ros.app.results_file import ExperimentError, result_row
 from swarm_ros.core.grid import World
 from swarm_ros.core.shapes import Shape
+from swarm_ros.protocol.plan import PROCESSES
 
 EXECUTORS = ("local", "dask")  #: where the runs go: worker processes here, or a Dask cluster
 _CONNECT_TIMEOUT = "5s"  # to reach a Dask scheduler given by address
@@ -52,7 +53,7 @@ def run_inprocess(spec: RunSpec) -> dict:
     return result_row(spec, summary_of(sim, wall_seconds=time.perf_counter() - start))
 
 
-def run_ros2(spec: RunSpec, processes: int = 2) -> dict:
+def run_ros2(spec: RunSpec, processes: int = PROCESSES.default) -> dict:
     """Run ``spec`` over the ROS 2 graph (``swarm-ros run``, no recording) in a scratch directory."""
     import shutil
 
@@ -102,7 +103,8 @@ def _work(job: tuple[RunSpec, str, int]) -> dict:
         _IN_RUN = False
 
 
-def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes: int = 2) -> Iterator[dict]:
+def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess",
+            processes: int = PROCESSES.default) -> Iterator[dict]:
     """Yield the row of each run as it finishes, over ``jobs`` worker processes (spawned).
 
     Closing the generator (or an exception in the caller, e.g. Ctrl-C) terminates the workers.

@@ -33,9 +33,9 @@ from swarm_ros.app.param_file import read_params_file
 from swarm_ros.app.processes import CHECKPOINT, check_graph
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, ParameterError, SwarmError
-from swarm_ros.core.params import RUN_PARAMETER, Param, node_defaults
+from swarm_ros.core.params import RUN_PARAMETER, node_defaults
 from swarm_ros.core.signals import EXIT_INTERRUPTED
-from swarm_ros.protocol.plan import MONITOR, WORLD
+from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD
 from swarm_ros.ros.node_params import params_yaml
 
 
@@ -147,10 +147,6 @@ class LaunchSetup:
     out: Path
     checkpoint: Path
     supervisor: Supervisor
-
-
-#: The launch file's own number, checked as ``swarm-ros run --processes`` is.
-PROCESSES = Param("processes", 2, "robot-batch processes K", low=1)
 
 
 def _yaml_value(text: str) -> object:

@@ -8,7 +8,11 @@ batches, then the world, which starts tick 0 once the batches cover every robot.
 
 from __future__ import annotations
 
+from swarm_ros.core.params import Param
+
 MONITOR, ROBOT_BATCH, WORLD = "monitor", "robot_batch", "world"  #: the node executables (and kinds)
+#: How many robot-batch processes a run starts (``swarm-ros run --processes``, the launch file's ``processes``).
+PROCESSES = Param("processes", 2, "robot-batch processes K", low=1)
 
 
 def batch_name(k: int) -> str:
