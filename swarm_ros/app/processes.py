@@ -57,18 +57,6 @@ class Child:
         errors = [ln for ln in lines if "error" in ln.lower()]
         return errors[-1] if errors else ""
 
-    def death(self) -> str:
-        """How the process ended, for a message: 'was killed by SIGKILL', or 'exited with status 1 (<its last
-        error line>)'; a log line is quoted only when it reports an error."""
-        code = self.proc.returncode
-        if code is not None and code < 0:
-            try:
-                return f"was killed by {signal.Signals(-code).name}"
-            except ValueError:
-                return f"was killed by signal {-code}"
-        why = self.last_error()
-        return f"exited with status {code}" + (f" ({why})" if why else "")
-
 
 class DomainLock:
     """A ROS domain id reserved for this run through an exclusive lock file (released by close())."""
@@ -102,6 +90,16 @@ class DomainLock:
 
 #: An SROS2 enclave path prefix: ``/name`` parts of letters, digits and underscores.
 ENCLAVE_PREFIX = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+
+
+def death(code: int) -> str:
+    """How a process ended, for a message: 'was killed by SIGKILL', 'exited with status 1'."""
+    if code < 0:
+        try:
+            return f"was killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"was killed by signal {-code}"
+    return f"exited with status {code}"
 
 
 def check_graph(shape, robots: int, processes: int, enclaves: str | None,

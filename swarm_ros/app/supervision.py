@@ -30,7 +30,7 @@ from pathlib import Path
 import yaml
 
 from swarm_ros.app.param_file import read_params_file
-from swarm_ros.app.processes import CHECKPOINT, check_graph
+from swarm_ros.app.processes import CHECKPOINT, check_graph, death
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, ParameterError, SwarmError
 from swarm_ros.core.params import RUN_PARAMETER, node_defaults
@@ -48,16 +48,6 @@ class RunEnded(SwarmError):
 STOPPED = frozenset({EXIT_INTERRUPTED, EXIT_INTERRUPTED - 1, -signal.SIGINT, -signal.SIGTERM, -signal.SIGHUP})
 MONITOR_GRACE = 30.0  #: seconds the monitor has to write the run after the world's end (as ``swarm-ros run``)
 END_GRACE = 10.0  #: seconds the others get to end by themselves once the monitor has written the run
-
-
-def death(code: int) -> str:
-    """How a process ended, for a message: 'was killed by SIGKILL', 'exited with status 1'."""
-    if code < 0:
-        try:
-            return f"was killed by {signal.Signals(-code).name}"
-        except ValueError:
-            return f"was killed by signal {-code}"
-    return f"exited with status {code}"
 
 
 @dataclass(frozen=True)
