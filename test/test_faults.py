@@ -25,7 +25,9 @@ import pytest
 from helpers import Recording, rrd_verify
 from test_ros_graph import _env, _processes_mentioning
 
-from swarm_ros.protocol.rows import batch_ids
+from swarm_ros.core import RunParams, Shape
+from swarm_ros.core.regions import balanced_cuts, columns, strip
+from swarm_ros.core.state import initial_state
 
 pytestmark = pytest.mark.process
 
@@ -69,13 +71,27 @@ def _lost_at(world_log: str, name: str) -> tuple[float, int]:
     return float(m.group(1)), int(m.group(2))
 
 
-def _check_consistent_run(out: Path, lost_ids: np.ndarray) -> dict:
+def _strip(batch: int, batches: int = 3) -> tuple[int, int]:
+    """The columns robot_batch_<batch> of ``batches`` hosts in these runs (the default cuts)."""
+    shape, params = Shape.load("star"), RunParams(robots=ROBOTS)
+    radius = shape.world.radius
+    cuts = balanced_cuts(initial_state(shape, ROBOTS, params.seed).x[4:], radius, batches)
+    return strip(batch, batches, cuts, radius)
+
+
+def _check_consistent_run(out: Path, batch: int) -> dict:
+    """The lost batch's robots, the moving robots in its strip when it was lost, were removed (where they stood
+    still in their last tick), and nothing else changed in the counts."""
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["lost_robots"] == lost_ids.size and len(summary["losses"]) == 1
+    assert len(summary["losses"]) == 1
     loss_tick = summary["losses"][0]["tick"]
     final = list(csv.DictReader((out / "final_state.csv").open()))
-    removed = np.array([int(r["id"]) for r in final if r["state"] == "removed"])
-    assert np.array_equal(removed, lost_ids)
+    removed = [r for r in final if r["state"] == "removed"]
+    lost_ids = np.array([int(r["id"]) for r in removed])
+    assert summary["lost_robots"] == lost_ids.size > 0
+    first, last = _strip(batch)
+    cols = columns(np.array([float(r["x"]) for r in removed]), Shape.load("star").world.radius)
+    assert ((cols >= first) & (cols <= last)).all(), "a removed robot was not in the lost batch's strip"
     rows = np.array(list(csv.reader((out / "metrics.csv").open()))[1:], dtype=np.int64)
     tick, stationary, moving = rows[:, 0], rows[:, 1], rows[:, 4]
     before = tick < loss_tick
@@ -103,7 +119,7 @@ def test_a_killed_robot_batch_is_noticed_within_2_s_and_the_swarm_repairs_the_sh
     assert "restarted" not in err and "[INFO]" not in err  # no restart under 'remove', and no unrelated log line
     detected, tick = _lost_at((out / "logs" / "world.log").read_text(), "robot_batch_1")
     assert detected - killed_at < 2.0, f"noticed {detected - killed_at:.2f} s after the kill"
-    summary = _check_consistent_run(out, batch_ids(ROBOTS, 1, 3))
+    summary = _check_consistent_run(out, 1)
     assert summary["restarts"] == []
     assert (out / "logs" / "launcher.log").read_text().count("started robot_batch_1 ") == 1
     assert summary["losses"][0]["tick"] == tick + 1  # removed at the end of the tick after the notice
@@ -124,7 +140,7 @@ def test_a_stalled_robot_batch_is_dropped_and_cannot_corrupt_the_world_when_it_r
         os.kill(victim, signal.SIGCONT)  # back, with decisions for ticks long gone and robots it no longer has
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
-    _check_consistent_run(out, batch_ids(ROBOTS, 2, 3))
+    _check_consistent_run(out, 2)
     assert not _processes_mentioning(str(out)), "a process outlived the run"
 
 

@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 
 from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.regions import balanced_cuts, columns, strip
 from swarm_ros.core.rules import Decider
-from swarm_ros.core.state import MOVING_STATES, RobotState
+from swarm_ros.core.state import RobotState, initial_state
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR, batch_name
-from swarm_ros.protocol.rows import batch_ids, decision_rows
+from swarm_ros.protocol.rows import decision_rows
 from swarm_ros.protocol.status import RunFailed
 from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S, Policy
 
@@ -55,17 +56,19 @@ class Port:
         self.monitor_ready = True
         self.saver = None  # a Checkpoint, to restart from (test_world_restart.py)
         self.books: list[dict] = []
+        self.regions: list[tuple[int, int, np.ndarray]] = []  # (tick, batch, rows): snapshots and region rows
 
     def watch_batch(self, k, name):
         self.watched.append(name)
 
     def send_snapshot(self, k, tick, rows):
-        assert rows.size == ROBOTS
         self.snapshots.append((k, tick))
+        self.regions.append((tick, k, rows))
 
-    def publish_tick(self, tick, rows, joined, applied):
+    def publish_tick(self, tick, rows, joined, applied, regional):
         assert (applied is None) == (tick == 0)
         self.ticks.append(tick)
+        self.regions += [(tick, k, part) for k, part in enumerate(regional or ())]
 
     def publish_status(self, status):
         self.statuses.append(status)
@@ -92,9 +95,13 @@ class Port:
 class Run:
     """A lockstep, its port and clock, and batches that decide as robot-batch processes do."""
 
-    def __init__(self, batches: int = 2, **policy) -> None:
-        self.shape = Shape.load("star")
+    def __init__(self, batches: int = 2, cuts: list[int] | None = None, shape: str = "star", **policy) -> None:
+        self.shape = Shape.load(shape)
         self.params = RunParams(robots=ROBOTS, seed=7, max_ticks=MAX_TICKS)
+        radius = self.shape.world.radius
+        start = initial_state(self.shape, ROBOTS, self.params.seed)
+        cuts = balanced_cuts(start.x[4:], radius, batches) if cuts is None else np.asarray(cuts)
+        self.strips = [strip(k, batches, cuts, radius) for k in range(batches)]
         self.clock, self.port, self.log = Clock(), Port(), Log()
         self.rejections = Rejections(self.log)
         self.ls = Lockstep(Simulation(self.shape, self.params), Policy(**{"monitor_window": 0, **policy}), self.port,
@@ -103,7 +110,7 @@ class Run:
         self.decider = Decider(self.shape, self.params)
 
     def announce(self, k: int, incarnation: int = 0) -> None:
-        self.ls.announce(batch_name(k), incarnation, batch_ids(ROBOTS, k, self.batches))
+        self.ls.announce(batch_name(k), incarnation, self.strips[k])
 
     def start(self) -> None:
         """Every batch announces itself (tick 0 follows, unless the monitor is awaited)."""
@@ -112,15 +119,24 @@ class Run:
         assert self.ls.started or self.ls.window
 
     def decide(self, k: int) -> np.ndarray:
-        """Batch ``k``'s decision rows for the coming tick (its moving robots not decided yet)."""
+        """Batch ``k``'s decision rows for the coming tick (its strip's moving robots not decided yet)."""
         s = self.ls.sim.state
-        own = batch_ids(ROBOTS, k, self.batches)
-        own = own[np.isin(s.state[own], MOVING_STATES) & ~self.ls.decided[own]]
+        own = self.own(k)
+        own = own[~self.ls.decided[own]]
         return decision_rows(self.decider.decide(s, own, self.ls.sim.tick + 1))
 
+    def own(self, k: int) -> np.ndarray:
+        """The moving robots in batch ``k``'s strip now."""
+        s = self.ls.sim.state
+        moving = s.moving_ids()
+        cols = columns(s.x[moving], self.shape.world.radius)
+        return moving[(cols >= self.strips[k][0]) & (cols <= self.strips[k][1])]
+
     def tick(self, silent: tuple[int, ...] = ()) -> None:
-        """One tick: every batch but ``silent`` sends its decisions."""
+        """One tick: every batch but ``silent`` (and those removed for good) sends its decisions."""
         for k in range(self.batches):
+            if k in self.ls.removed_batches:
+                continue
             rows = self.decide(k)
             if k not in silent and rows.size:
                 self.ls.decisions(k, self.ls.sim.tick + 1, rows)
@@ -148,18 +164,18 @@ def test_a_run_through_the_lockstep_is_the_engines_run_tick_for_tick():
     assert r.ls.finished
 
 
-def test_admission_refuses_taken_robots_new_batches_after_tick_0_and_changed_robots():
+def test_admission_refuses_taken_columns_new_batches_after_tick_0_and_changed_strips():
     r = Run()
     r.announce(0)
-    with pytest.raises(Rejected, match="robots of another batch"):
-        r.ls.announce("intruder", 0, batch_ids(ROBOTS, 0, 2)[:3])
+    with pytest.raises(Rejected, match="columns of another batch"):
+        r.ls.announce("intruder", 0, (r.strips[0][1], r.strips[1][0]))
     assert not r.ls.started and r.ls.status().outcome == "starting"
     r.announce(1)
     assert r.ls.started and r.port.ticks == [0] and r.port.snapshots == [(0, 0), (1, 0)]
     with pytest.raises(Rejected, match="new batch after tick 0"):
-        r.ls.announce("late", 0, np.array([5]))
-    with pytest.raises(Rejected, match="other robots than before"):
-        r.ls.announce(batch_name(0), 1, batch_ids(ROBOTS, 1, 2))
+        r.ls.announce("late", 0, (0, 0))
+    with pytest.raises(Rejected, match="another strip than before"):
+        r.ls.announce(batch_name(0), 1, r.strips[1])
 
 
 def test_decisions_are_checked_before_they_count():
@@ -229,16 +245,16 @@ def test_past_the_restart_bound_a_lost_batch_has_its_robots_removed_at_the_end_o
     r.ls.batch_liveliness(1, 0, 1)
     r.announce(1, incarnation=1)
     r.run(ticks=5)
+    own = r.own(1)
     r.ls.batch_liveliness(1, 0, 1)  # lost again: no restarts left
-    own = batch_ids(ROBOTS, 1, 2)
-    assert r.ls.lost == [batch_name(1)] and r.ls.pending.size == own.size
+    assert r.ls.lost == [batch_name(1)] and np.array_equal(r.ls.pending, own)
     tick = r.ls.sim.tick
     r.tick(silent=(1,))  # its robots stand still in this tick, then go
     assert r.ls.sim.tick == tick + 1
     assert (r.ls.sim.state.state[own] == RobotState.REMOVED).all()
     assert r.port.statuses[-1].values["lost"] == batch_name(1)
-    r.run()
-    assert r.ls.sim.done
+    r.run()  # the world decides for the robots that move into the lost batch's strip
+    assert r.ls.sim.done and r.ls.sim.metrics.localized == ROBOTS - own.size
 
 
 def test_under_remove_a_lost_batch_is_not_waited_for():
@@ -368,5 +384,72 @@ def test_batches_that_never_cover_the_robots_fail_the_run_at_the_start_timeout()
     r = Run(start_timeout=5.0)
     r.announce(0)
     r.clock.now += 5.1
-    with pytest.raises(RunFailed, match=f"robot batches cover .* of {ROBOTS - 4} robots after 5 s"):
+    with pytest.raises(RunFailed, match=f"robot batches cover .* of {r.ls.hosting.width} columns after 5 s"):
         r.ls.poll()
+
+
+class RegionCheck:
+    """Follows each batch's snapshot and region rows into a regional replica, as a batch process does, and
+    checks after every tick that it holds exactly the world's moving robots in its area, and every stationary
+    robot, with the world's poses and the world's frontier."""
+
+    def __init__(self, run: Run) -> None:
+        from swarm_ros.core.regions import halo
+        from swarm_ros.core.replica import Replica
+        from swarm_ros.protocol.hosting import area
+
+        self.run, self.seen = run, 0
+        world = run.shape.world
+        self.areas = [area(s, halo(run.params.vision_radius), world.size) for s in run.strips]
+        self.replicas = [Replica(run.shape, ROBOTS, a) for a in self.areas]
+        self.handovers = 0
+        self.owner = None
+
+    def follow(self) -> None:
+        from swarm_ros.protocol.checks import apply_robots
+
+        for tick, k, rows in self.run.port.regions[self.seen:]:
+            rep = self.replicas[k]
+            if rep.tick < 0:
+                from swarm_ros.protocol.rows import pose_of
+                rep.load(tick, rows["id"], rows["state"], **pose_of(rows))
+            elif tick == rep.tick + 1:
+                apply_robots(rep, tick, rows)
+        self.seen = len(self.run.port.regions)
+        self._check()
+
+    def _check(self) -> None:
+        s = self.run.ls.sim.state
+        moving = s.moving_ids()
+        cols = columns(s.x[moving], self.run.shape.world.radius)
+        owner = np.searchsorted([first for first, _ in self.run.strips], cols, side="right") - 1
+        if self.owner is not None:
+            was = self.owner[moving]
+            self.handovers += int(((was >= 0) & (was != owner)).sum())
+        self.owner = np.full(s.robots, -1)
+        self.owner[moving] = owner
+        for rep, (first, last) in zip(self.replicas, self.areas):
+            assert rep.tick == s.tick
+            inside = moving[(cols >= first) & (cols <= last)]
+            assert np.array_equal(rep.moving_ids(), inside)
+            for name in ("x", "y", "heading", "state"):
+                assert np.array_equal(getattr(rep.state, name)[inside], getattr(s, name)[inside])
+            assert np.array_equal(rep.state.occupancy, s.occupancy)
+            assert np.array_equal(rep.state.frontier, s.frontier)
+
+
+@pytest.mark.parametrize(("batches", "cuts", "shape"), [(1, None, "star"), (2, None, "star"), (4, None, "star"),
+                                                        (8, None, "star"), (3, [-20, -19], "star"),
+                                                        (2, [9], "star"), (3, None, "box")])
+def test_any_partition_into_strips_gives_the_engines_run_and_each_batch_sees_exactly_its_region(batches, cuts, shape):
+    """Equality for several partitions (balanced, lopsided, a one-column strip, 3D), and the routing: each
+    batch's regional replica, fed only its snapshot and region rows, equals the world where it must."""
+    r = Run(batches=batches, cuts=cuts, shape=shape)
+    check = RegionCheck(r)
+    r.start()
+    while not r.ls.sim.done:
+        r.tick()
+        check.follow()
+    assert np.array_equal(r.ls.sim.history, r.engine().history)
+    if batches > 1:
+        assert check.handovers > 0, "no robot crossed a cut: the test would not test handovers"

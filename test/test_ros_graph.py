@@ -284,7 +284,7 @@ def test_stop_escalates_to_sigkill_for_a_process_that_ignores_int_and_term(tmp_p
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--processes", "2000"], "1036 robots leave 1032 non-seed robots for 2000 robot-batch processes"),
+    (["--processes", "2000"], "a world of 65 columns cannot be cut into 2000 strips"),
     (["--domain-id", "500"], "ROS domain id must be in [0, 232], got 500"),
     (["--shape", "nope"], "nope: no such shape file or built-in shape"),
     (["--robots", "99999"], "do not fit"),
@@ -300,7 +300,7 @@ def test_run_refuses_bad_input_in_one_line_before_starting_anything(tmp_path, ar
     ("world", ["-p", "bogus:=1"], "swarm_ros world: error: node 'world': unknown parameter 'bogus'"),
     ("robot_batch", ["-p", "robots:=abc"], "robots must be an integer >= 4 (0 = the shape's patch count), got 'abc'"),
     ("monitor", ["--params-file", "/nonexistent.yaml"], "swarm_ros monitor: error: cannot start ROS 2"),
-    ("robot_batch", ["-p", "robot_ids:=0-9"], "robot_ids must be within 4..1035"),
+    ("robot_batch", ["-p", "batches:=2", "-p", "region_cuts:=-40"], "leave a strip with no column"),
     ("world", ["-p", "shape:=nope"], "nope: no such shape file or built-in shape"),
     ("monitor", ["-p", "record_every:=0"], "record_every must be an integer >= 1, got 0"),
     ("monitor", ["-p", "viewer_url:=localhost:9876"], "viewer URL must start with one of rerun://"),

@@ -25,8 +25,9 @@ from helpers import host_env, make_cloud
 from swarm_ros.app import cli
 from swarm_ros.app.processes import DomainLock, node_command, node_env
 from swarm_ros.core.params import Settings
-from swarm_ros.core.state import RobotState
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_ids, batch_label, decision_rows
+from swarm_ros.core.regions import balanced_cuts, columns, strip
+from swarm_ros.core.state import RobotState, initial_state
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_label, decision_rows
 from swarm_ros.protocol.runkey import KEY_ENV
 from swarm_ros.ros.node_params import params_yaml
 
@@ -57,7 +58,8 @@ class _Batches:
         self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
         self.radius = shape.world.radius
         self.names = ["robot_batch_0", "robot_batch_1"]
-        self.ids = [batch_ids(params.robots, k, 2) for k in range(2)]
+        cuts = balanced_cuts(initial_state(shape, params.robots, params.seed).x[4:], self.radius, 2)
+        self.strips = [strip(k, 2, cuts, self.radius) for k in range(2)]
         # tagged with the run's key, as the run's own nodes do
         signers = [Signer(node, key, n) for n in self.names]
         self.pubs = [signers[k].publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS)
@@ -79,39 +81,28 @@ class _Batches:
         node.create_subscription(PointCloud2, msgs.ROBOTS, self.world_rows.append, msgs.ROBOTS_QOS, raw=True)
         # these batches take only what the world's tag proves, as the run's own do
         gate = Gate(node, key, Rejections(node.get_logger()))
-        gate.subscribe(PointCloud2, msgs.snapshot_topic(self.names[0]), self._on_snapshot, msgs.LATCHED_QOS)
         gate.subscribe(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
         self.gate = gate
         self.sent: dict[str, int] = {}  # kind of bad message -> how many were sent to the world / the monitor
         # before the batches' own: an outsider's announcement of batch 1's robots under another name
-        forged = msgs.ids_message(self.ids[1])
+        forged = msgs.ids_message(np.array(self.strips[1]))
         forged.layout.dim[0].label = "impostor/0"
         self.forged[msgs.BATCHES].publish(forged)
         self.sent["world: untagged announcement"] = 1
         for k, name in enumerate(self.names):
-            hello = msgs.ids_message(self.ids[k])
+            hello = msgs.ids_message(np.array(self.strips[k]))
             hello.layout.dim[0].label = batch_label(name, 0)
             self.announce[k].publish(hello)
-        hello = msgs.ids_message(self.ids[1][:3])  # before tick 0: another batch's robots
+        hello = msgs.ids_message(np.array([self.strips[1][0]] * 2))  # before tick 0: another batch's column
         hello.layout.dim[0].label = "intruder/0"
         self.intruder.publish(hello)
-        self.sent["world: robots of another batch"] = 1
+        self.sent["world: columns of another batch"] = 1
         self.localized_sent = False
-
-    def _on_snapshot(self, msg) -> None:
-        if self.replica.tick >= 0:
-            return
-        rows = self.msgs.cloud_rows(msg, ROBOT_ROW)
-        self.replica.load(self.msgs.tick_of(msg.header), rows["id"], rows["state"], rows["x"], rows["y"],
-                          rows["heading"])
-        self._decide()
 
     def _on_robots(self, msg) -> None:
         from swarm_ros.protocol.checks import Rejected, apply_robots, checked_robots
 
-        if self.replica.tick < 0:
-            return
-        try:
+        try:  # the whole swarm's rows from tick 0 (these batches keep a whole replica, not regional ones)
             tick, rows = checked_robots(self.replica, msg, self.radius)
             if tick != self.replica.tick + 1:
                 return
@@ -136,8 +127,9 @@ class _Batches:
         moving = self.replica.moving_ids()
         tick = self.replica.tick + 1
         honest = []
+        cols = columns(s.x[moving], self.radius)
         for k in range(2):
-            own = moving[np.isin(moving, self.ids[k])]
+            own = moving[(cols >= self.strips[k][0]) & (cols <= self.strips[k][1])]
             honest.append(decision_rows(self.decider.decide(s, own, tick, moving)) if own.size else None)
         self.attack(tick, honest)
         for k in range(2):
@@ -174,7 +166,7 @@ class _Batches:
         elif tick == 7:  # well-formed rows for robots 100-104 at (5, 5): not where they are
             rows = np.zeros(5, dtype=DECISION_ROW)
             rows["id"], rows["claim"], rows["x"], rows["y"], rows["heading"] = np.arange(100, 105), -1, 5.0, 5.0, 0.0
-            self._send("robots 100-104 jump", int(100 >= self.ids[1][0]), self._cloud(rows, tick))
+            self._send("robots 100-104 jump", 0, self._cloud(rows, tick))
         elif tick == 8:  # batch 1's robots on batch 0's topic
             self._send("wrong batch", 0, self._cloud(honest[1], tick))
         elif tick == 9:  # a move of 5 patches
@@ -192,7 +184,7 @@ class _Batches:
             rows["id"] = 0
             self._send("a seed", 0, self._cloud(rows, tick))
         elif tick == 13:  # a new batch claiming robots, after tick 0
-            hello = self.msgs.ids_message(self.ids[0][:5])
+            hello = self.msgs.ids_message(np.array(self.strips[0]))
             hello.layout.dim[0].label = "intruder/0"
             self.intruder.publish(hello)
             self.sent["world: announcement"] = 1
@@ -201,7 +193,7 @@ class _Batches:
             self.sent["world: metrics"] = 1
         elif tick >= 16 and not self.localized_sent:  # a localized robot of the batch, once there is one
             s = self.replica.state
-            localized = self.ids[0][s.state[self.ids[0]] == RobotState.LOCALIZED]
+            localized = np.flatnonzero(s.state == RobotState.LOCALIZED)
             if localized.size:
                 rows = np.zeros(1, dtype=DECISION_ROW)
                 rows["id"], rows["claim"] = localized[0], -1

@@ -78,8 +78,8 @@ def test_an_argument_is_read_as_ros_2_reads_a_parameter_value(name, text, value)
     (lambda p: argument_value("rules", "fast"), "rules must be one of paper, local, literal, got 'fast'"),
     (lambda p: argument_value("robots", "[1, 2"), "robots must be an integer"),
     (lambda p: launch_processes("0"), "launch argument processes:=0: processes must be an integer >= 1"),
-    (lambda p: _setup(p, processes=1033), "1036 robots leave 1032 non-seed robots for 1033 robot-batch processes "
-                                          "(processes, default 2)"),
+    (lambda p: _setup(p, processes=1033), "a world of 65 columns cannot be cut into 1033 strips, one per "
+                                          "robot-batch process (processes, default 2)"),
     (lambda p: _setup(p, p / "missing.yaml"), "missing.yaml"),
     (lambda p: _setup(p, shape="nope"), "nope"),
     (lambda p: launch_setup(str(CONFIG), BLANK, "", p / "log", 2, "swarm"), "enclaves must be an enclave path"),

@@ -1,11 +1,9 @@
-"""Hot-path row layouts and robot-id lists (no ROS needed)."""
+"""Hot-path row layouts (no ROS needed)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
 
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.protocol.rows import (
@@ -14,12 +12,9 @@ from swarm_ros.protocol.rows import (
     ROBOT_ROW,
     UINT8,
     UINT32,
-    batch_ids,
     check_fields,
     decision_rows,
     decisions_of,
-    format_ranges,
-    parse_ranges,
     point_fields,
     robot_rows,
 )
@@ -51,21 +46,3 @@ def test_rows_carry_state_and_decisions_bit_for_bit():
     np.testing.assert_array_equal(rows["state"], s.state)
 
 
-@given(st.sets(st.integers(0, 5000), max_size=200))
-def test_id_ranges_round_trip(ids):
-    arr = np.array(sorted(ids), dtype=np.int64)
-    np.testing.assert_array_equal(parse_ranges(format_ranges(arr)), arr)
-
-
-@pytest.mark.parametrize("text", ["4-x", "a", "9-4", "-3", "1--2"])
-def test_bad_id_lists_are_refused(text):
-    with pytest.raises(ValueError):
-        parse_ranges(text)
-
-
-@pytest.mark.parametrize("robots,batches", [(5, 1), (1036, 2), (1036, 3), (100, 7), (12, 8)])
-def test_batches_split_the_non_seed_robots_exactly_once(robots, batches):
-    parts = [batch_ids(robots, k, batches) for k in range(batches)]
-    np.testing.assert_array_equal(np.concatenate(parts), np.arange(4, robots))
-    sizes = [p.size for p in parts]
-    assert max(sizes) - min(sizes) <= 1

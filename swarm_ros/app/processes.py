@@ -107,7 +107,7 @@ def check_graph(shape, robots: int, processes: int, enclaves: str | None,
     """Refuse a graph that cannot run, before any node starts (``swarm-ros run`` and the launch file).
 
     Raises:
-        SwarmError: a shape source the nodes cannot each read, too little memory, fewer non-seed robots than
+        SwarmError: a shape source the nodes cannot each read, too little memory, fewer columns than
             batches, a bad enclave path; in one line (``flags``: how the user named the batch count and the
             enclaves).
     """
@@ -118,9 +118,9 @@ def check_graph(shape, robots: int, processes: int, enclaves: str | None,
         raise SwarmError(f"{shape.source}: not a regular file; each node of the graph reads the shape file "
                          f"itself, so the graph needs a file ('simulate' reads a pipe once)")
     check_world_memory(shape.world.radius, copies=processes + 2)  # the world, the monitor, each batch
-    if processes > robots - 4:
-        raise SwarmError(f"{robots} robots leave {robots - 4} non-seed robots for {processes} "
-                         f"robot-batch processes ({flags[0]}, default 2); each process needs at least one")
+    if processes > shape.world.size:
+        raise SwarmError(f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
+                         f"robot-batch process ({flags[0]}, default 2); each strip needs at least one column")
     if enclaves is not None and not ENCLAVE_PREFIX.fullmatch(enclaves):
         raise SwarmError(f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
                          f"after each /), got {enclaves!r}")

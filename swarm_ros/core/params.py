@@ -177,9 +177,10 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
         Param("incarnation", 0, "0 for the world's first process; the launcher counts restarts up from 1", low=0),
     ),
     "robot_batch": (
-        Param("batch", 0, "this process hosts batch `batch` of `batches` (contiguous ids) ...", low=0),
-        Param("batches", 1, "... of this many", low=1),
-        Param("robot_ids", "", "... unless this lists its robots, e.g. 4-99,150"),
+        Param("batch", 0, "this process decides for the robots in strip `batch` of `batches` ...", low=0),
+        Param("batches", 1, "... of this many strips of the world along x", low=1),
+        Param("region_cuts", "", "x positions (patches) where strips 1.. start, e.g. -20,0,20; every batch of a run "
+              "needs the same", blank="cut so that each strip starts with as many robots"),
         Param("incarnation", 0, "0 for a batch's first process; the launcher counts restarts up from 1", low=0),
     ),
     "monitor": (

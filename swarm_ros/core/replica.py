@@ -6,10 +6,19 @@ pitch). Only
 moving robots change, so those rows are exactly the robots that decided in the tick.
 A :class:`Replica` applies the rows in tick order and keeps the occupancy and frontier
 grids in step, so after tick t it holds the same :class:`~swarm_ros.core.state.SwarmState`
-as the world: a robot batch decides from it, the monitor counts it.
+as the world: the monitor counts it.
+
+A robot batch keeps a *regional* replica (``area``: the columns of its strip and halo,
+:mod:`swarm_ros.core.regions`): it receives the rows of the robots in that area, the
+rows of robots that left it, and every robot's change to a stationary state. It holds
+every stationary robot (so the occupancy and frontier are whole) and the moving robots
+in its area; a moving robot whose row takes it out of the area is forgotten (state
+:data:`UNKNOWN`) until a row brings it back.
 """
 
 from __future__ import annotations
+
+import math
 
 import numba
 import numpy as np
@@ -20,15 +29,16 @@ from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of, has_repeats
 
 _SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
-_REMOVED = np.int8(RobotState.REMOVED)
-UNKNOWN = np.int8(-1)  #: state of a robot before the tick-0 rows arrive
+_REMOVED, _SEPARATED = np.int8(RobotState.REMOVED), np.int8(RobotState.SEPARATED)
+UNKNOWN = np.int8(-1)  #: state of a robot before the tick-0 rows arrive, or (regional) outside the area
 
 
 @numba.njit(cache=True)
 def _apply_rows(ids, new_state, new_x, new_y, new_z, new_heading, new_pitch, x, y, z, heading, pitch, state,
-                occupancy, frontier, blocks, shape, nbrs, radius, size):
+                occupancy, frontier, blocks, shape, nbrs, radius, size, first, last):
     """Write the rows into the state arrays; occupy the patch of every robot that became stationary-localized,
-    free the patch of every localized robot that was removed. ``z`` and ``pitch`` (and the rows'
+    free the patch of every localized robot that was removed; forget (:data:`UNKNOWN`) a moving robot whose
+    column is outside ``first``..``last``. ``z`` and ``pitch`` (and the rows'
     ``new_z``, ``new_pitch``) are empty in a 2D world.
 
     Returns the number of rows that were rejected (-1 per row whose id is out of range
@@ -61,6 +71,10 @@ def _apply_rows(ids, new_state, new_x, new_y, new_z, new_heading, new_pitch, x, 
             if not shape[p] or occupancy[p] >= 0:
                 return k + 1
             occupy(p, i, occupancy, frontier, blocks, shape, nbrs, size)
+        elif st != _SEED and st != _LOCALIZED and st != _SEPARATED and st != _REMOVED:
+            column = int(math.floor(x[i] + 0.5)) + radius
+            if column < first or column > last:
+                state[i] = UNKNOWN  # moved out of the area this replica follows
     return 0
 
 
@@ -69,11 +83,14 @@ class Replica:
 
     Attributes:
         state: the rebuilt :class:`SwarmState`; ``state.tick`` is -1 until tick 0 arrives.
+        area: (first, last) column this replica follows moving robots in (regional), or None: every robot.
     """
 
-    def __init__(self, shape: Shape, robots: int) -> None:
+    def __init__(self, shape: Shape, robots: int, area: tuple[int, int] | None = None) -> None:
         world = shape.world
         self.shape = shape
+        self.area = area
+        self._first, self._last = area if area is not None else (0, world.size - 1)
         self._radius, self._size = world.radius, world.size
         self._shape = shape.mask.ravel().copy()
         self._nbrs = world.neighbour_offsets()
@@ -94,7 +111,8 @@ class Replica:
 
     def load(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
              heading: np.ndarray, z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> None:
-        """Start again from a snapshot: every robot's row at ``tick`` (how a restarted robot batch catches up).
+        """Start again from a snapshot: every robot's row at ``tick`` (how a restarted robot batch catches up);
+        for a regional replica, the rows of the stationary robots and of the moving ones in its area.
 
         The occupancy and frontier are rebuilt from the rows, so the replica equals one
         that applied every tick's rows from tick 0 to ``tick``.
@@ -133,7 +151,8 @@ class Replica:
             raise ValueError("rows of a 3D world need z and pitch; rows of a 2D world have none")
         ids = np.asarray(ids, dtype=np.int64)
         state = np.asarray(state, dtype=np.int8)
-        if tick == 0 and (ids.size != s.robots or not np.array_equal(np.sort(ids), np.arange(s.robots))):
+        if tick == 0 and self.area is None and (ids.size != s.robots
+                                                 or not np.array_equal(np.sort(ids), np.arange(s.robots))):
             raise ValueError(f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows")
         if state.size and (state.min() < 0 or state.max() > max(RobotState)):
             raise ValueError(f"unknown robot state code in the rows of tick {tick}")
@@ -143,7 +162,7 @@ class Replica:
         bad = _apply_rows(ids, state, np.asarray(x, dtype=f64), np.asarray(y, dtype=f64), new_z,
                           np.asarray(heading, dtype=f64), new_pitch, s.x, s.y, z_now, s.heading, pitch_now, s.state,
                           s.occupancy, s.frontier, s.frontier_blocks, self._shape, self._nbrs, self._radius,
-                          self._size)
+                          self._size, self._first, self._last)
         if bad:
             raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
                              f"localizes on a patch that is not an empty shape patch, or returns after removal")
@@ -156,19 +175,23 @@ class Replica:
         Checks what :meth:`update` would otherwise find half-way through, leaving the replica
         unusable: the tick follows the last one; tick 0 holds every robot once; after tick 0,
         only robots that were moving change, except that any robot may be removed, once; a
-        robot that localizes does so on a frontier patch, one robot per patch. Ids and state
+        robot that localizes does so on a frontier patch, one robot per patch. A regional replica
+        also takes any row of a robot it does not follow (one entering its area), and cannot check
+        that tick 0 holds every robot. Ids and state
         codes must be in range (:mod:`swarm_ros.protocol.checks` checks them first).
         """
         s = self.state
         if tick != s.tick + 1:
             return f"rows for tick {tick} after tick {s.tick}"
         ids = np.asarray(ids, dtype=np.int64)
-        if tick == 0:
+        if tick == 0 and self.area is None:
             if ids.size != s.robots or not np.array_equal(np.sort(ids), np.arange(s.robots)):
                 return f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows"
             return None
         before, after = s.state[ids], np.asarray(state, dtype=np.int8)
-        moving = IS_MOVING[before]
+        moving = IS_MOVING[before] & (before != UNKNOWN)
+        if self.area is not None or tick == 0:
+            moving |= before == UNKNOWN  # entering the area (or, at tick 0, every robot)
         if (~moving & ((after != _REMOVED) | (before == _REMOVED))).any():
             return "a robot that was not moving changed"
         joins = moving & ((after == _LOCALIZED) | (after == _SEED))
@@ -187,5 +210,6 @@ class Replica:
         return None
 
     def moving_ids(self) -> np.ndarray:
-        """Ids of the moving robots, ascending."""
-        return self.state.moving_ids()
+        """Ids of the moving robots (a regional replica: those in its area), ascending."""
+        state = self.state.state
+        return np.flatnonzero(IS_MOVING[state] & (state != UNKNOWN))

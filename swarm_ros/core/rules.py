@@ -329,6 +329,13 @@ class Decisions:
     pitch: np.ndarray | None = None
 
     @staticmethod
+    def standing(view: SwarmState, ids: np.ndarray, tick: int) -> Decisions:
+        """Decisions of robots ``ids`` to stand still, as they are in ``view``: no claim, the same pose."""
+        solid = {"z": view.z[ids].copy(), "pitch": view.pitch[ids].copy()} if view.z is not None else {}
+        return Decisions(tick=tick, ids=ids, claim=np.full(ids.size, -1, dtype=np.int64), x=view.x[ids].copy(),
+                         y=view.y[ids].copy(), heading=view.heading[ids].copy(), **solid)
+
+    @staticmethod
     def concatenate(parts: list[Decisions]) -> Decisions:
         """Join the decisions of several batches of one tick (any order)."""
         ticks = {p.tick for p in parts}

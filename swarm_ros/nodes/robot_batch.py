@@ -1,11 +1,15 @@
-"""A robot-batch node: hosts a set of robots and runs the core's robot rule for them every tick.
+"""A robot-batch node: hosts a strip of the world and runs the core's robot rule for the robots in it every tick.
 
-It announces its robot ids on /swarm/batches. The world answers with a snapshot of
-every robot on /swarm/snapshot/<batch> (at tick 0, or at the current tick for a batch
-process that was restarted in the middle of a run); the batch builds its copy of the
-swarm's state from it (:class:`swarm_ros.core.replica.Replica`), follows the world's
-rows on /swarm/robots from there, and after each tick publishes, on its own
-/swarm/decisions/<batch>, what each of its moving robots decided for the next one.
+It announces its strip of columns (:mod:`swarm_ros.core.regions`) on /swarm/batches. The
+world answers with a snapshot of its region (the strip and a halo: the robots its
+robots can sense, and every stationary robot) on /swarm/snapshot/<batch> (at tick 0, or
+at the current tick for a batch process that was restarted in the middle of a run); the
+batch builds its regional copy of the swarm's state from it
+(:class:`swarm_ros.core.replica.Replica`), follows the world's rows for its region on
+/swarm/region/<batch> from there (:mod:`swarm_ros.protocol.hosting`), and after each
+tick publishes, on its own /swarm/decisions/<batch>, what each moving robot in its
+strip decided for the next one. A robot that crosses into another strip is that
+batch's from the next tick on: the world's row of it is the handover.
 It takes only messages whose tag proves them the world's (:mod:`swarm_ros.ros.auth`), and tags its own.
 Every message it takes is checked first (:mod:`swarm_ros.protocol.checks`, and
 :meth:`Replica.inconsistent` for rows); one that fails is dropped, counted and logged. A decision is a pure function
@@ -27,14 +31,16 @@ from rclpy.duration import Duration
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.core.errors import ParameterError
+from swarm_ros.core import regions
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
+from swarm_ros.core.state import initial_state
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
-from swarm_ros.protocol.rows import batch_ids, batch_label, decision_rows, format_ranges, parse_ranges, pose_of
+from swarm_ros.protocol.hosting import area
+from swarm_ros.protocol.rows import batch_label, decision_rows, pose_of
 from swarm_ros.protocol.status import RunFailed, has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
@@ -51,11 +57,9 @@ class RobotBatchNode:
         self.node = node = make_node("robot_batch")
         run, own = read_parameters(node, "robot_batch")
         self.shape, self.params = run.resolve()
-        n = self.params.robots
-        self.ids = self._hosted(n, own)
-        self.mine = np.zeros(n, dtype=bool)
-        self.mine[self.ids] = True
-        self.replica = Replica(self.shape, n)
+        n, world = self.params.robots, self.shape.world
+        self.strip = self._strip(own)
+        self.replica = Replica(self.shape, n, area(self.strip, regions.halo(self.params.vision_radius), world.size))
         self.decider = Decider(self.shape, self.params)
         self.finished = False
         self.ended_at: float | None = None  # time.monotonic() when the world's outcome arrived
@@ -68,34 +72,30 @@ class RobotBatchNode:
         self.pub_decisions = self.signer.publisher(PointCloud2, msgs.decisions_topic(node.get_name()),
                                                    msgs.DECISIONS_QOS)
         self.gate.subscribe(PointCloud2, msgs.snapshot_topic(node.get_name()), self._on_snapshot, msgs.LATCHED_QOS)
-        self.gate.subscribe(PointCloud2, msgs.ROBOTS, self._on_robots, msgs.ROBOTS_QOS)
+        self.region = msgs.region_topic(node.get_name())
+        self.gate.subscribe(PointCloud2, self.region, self._on_robots, msgs.ROBOTS_QOS)
         self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.STATUS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(node.get_name()), msgs.ALIVE_QOS)
         announce = self.signer.publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
-        hello = msgs.ids_message(self.ids)
+        hello = msgs.ids_message(np.asarray(self.strip, dtype=np.int64))
         hello.layout.dim[0].label = batch_label(node.get_name(), int(own["incarnation"]))
         announce.publish(hello)
-        node.get_logger().info(f"{node.get_name()}: robots {format_ranges(self.ids)}")
+        node.get_logger().info(f"{node.get_name()}: strip {regions.format_strip(*self.strip, world.radius)}")
 
     def load(self) -> None:
         """The heavy part, once the endpoints exist: the world and the other batches are discovered meanwhile."""
         warm_up(self.shape, self.params)
 
-    @staticmethod
-    def _hosted(n: int, own: dict) -> np.ndarray:
-        try:
-            if own["robot_ids"]:
-                ids = parse_ranges(own["robot_ids"])
-            else:
-                ids = batch_ids(n, own["batch"], own["batches"])
-        except ValueError as exc:
-            raise ParameterError(str(exc)) from None
-        if ids.size == 0:
-            raise ParameterError("this batch hosts no robots (robot_ids, or batches > robots - 4)")
-        if ids[0] < 4 or ids[-1] >= n:
-            raise ParameterError(f"robot_ids must be within 4..{n - 1} (0-3 are the seeds), "
-                                 f"got {format_ranges(ids)}")
-        return ids
+    def _strip(self, own: dict) -> tuple[int, int]:
+        """The columns this batch hosts: strip ``batch`` of ``batches``, cut at ``region_cuts`` or where each strip
+        starts with as many robots (their places at tick 0 follow from the seed)."""
+        radius = self.shape.world.radius
+        if own["region_cuts"]:
+            cuts = regions.parse_cuts(own["region_cuts"])
+        else:
+            start = initial_state(self.shape, self.params.robots, self.params.seed)
+            cuts = regions.balanced_cuts(start.x[4:], radius, own["batches"])
+        return regions.strip(own["batch"], own["batches"], cuts, radius)
 
     def _on_snapshot(self, msg: Cloud) -> None:
         """Every robot's row at some tick: start (again) from it if it is newer than what we hold."""
@@ -119,7 +119,7 @@ class RobotBatchNode:
         try:
             tick, rows = checked_robots(self.replica, msg, self.radius)
         except Rejected as fault:
-            self.rejections.drop(msgs.ROBOTS, fault)
+            self.rejections.drop(self.region, fault)
             return
         if tick <= self.replica.tick:
             return  # history from before the snapshot
@@ -138,14 +138,15 @@ class RobotBatchNode:
         try:
             apply_robots(self.replica, tick, rows)
         except Rejected as fault:
-            self.rejections.drop(msgs.ROBOTS, fault)
+            self.rejections.drop(self.region, fault)
             return False
         return True
 
     def _decide(self) -> None:
-        """Publish the decisions of this batch's moving robots for the tick after the replica's."""
+        """Publish the decisions of the moving robots in this batch's strip for the tick after the replica's."""
         moving = self.replica.moving_ids()
-        own = moving[self.mine[moving]]
+        cols = regions.columns(self.replica.state.x[moving], self.radius)
+        own = moving[(cols >= self.strip[0]) & (cols <= self.strip[1])]
         if own.size:
             tick = self.replica.tick + 1
             decisions = self.decider.decide(self.replica.state, own, tick, moving)

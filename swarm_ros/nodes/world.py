@@ -68,6 +68,7 @@ class WorldNode:
         self.pub_occupancy = node.create_publisher(self.maps.kind, msgs.OCCUPANCY, msgs.LATCHED_QOS)
         self.pub_clock = node.create_publisher(Clock, msgs.CLOCK, msgs.CLOCK_QOS)
         self.snapshot_pubs: list = []  # per batch: /swarm/snapshot/<batch>
+        self.region_pubs: list = []  # per batch: /swarm/region/<batch>
         self.occupancy_at = 0.0  # time.monotonic() of the last /swarm/occupancy
         self.lockstep: Lockstep | None = None  # made in load(), before the first callback can run
         self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
@@ -115,8 +116,8 @@ class WorldNode:
     # -- inbound ----------------------------------------------------------------------
     def _on_batch(self, msg: Int64MultiArray) -> None:
         try:
-            name, incarnation, ids = checks.announcement(msg, self.params.robots)
-            self.lockstep.announce(name, incarnation, ids)
+            name, incarnation, strip = checks.announcement(msg, self.shape.world.size)
+            self.lockstep.announce(name, incarnation, strip)
         except Rejected as fault:
             self.rejections.drop(msgs.BATCHES, fault)
 
@@ -153,6 +154,7 @@ class WorldNode:
     # -- the lockstep's port ---------------------------------------------------------------
     def watch_batch(self, k: int, name: str) -> None:
         self.snapshot_pubs.append(self.signer.publisher(PointCloud2, msgs.snapshot_topic(name), msgs.LATCHED_QOS))
+        self.region_pubs.append(self.signer.publisher(PointCloud2, msgs.region_topic(name), msgs.ROBOTS_QOS))
         topic = msgs.decisions_topic(name)
         self.gate.subscribe(PointCloud2, topic, lambda m, k=k, t=topic: self._on_decisions(k, t, m),
                             msgs.DECISIONS_QOS)
@@ -161,7 +163,10 @@ class WorldNode:
     def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None:
         self.snapshot_pubs[k].publish_rows(rows, tick)
 
-    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None:
+    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
+                     regional: list[np.ndarray] | None) -> None:
+        for pub, part in zip(self.region_pubs, regional or ()):
+            pub.publish_rows(part, tick)  # first: the batches decide the next tick from these
         if applied is not None:
             self.pub_decisions.publish_rows(applied, tick)
         self.pub_robots.publish_rows(rows, tick)

@@ -12,6 +12,7 @@ import math
 import re
 import time
 from collections import Counter
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -24,6 +25,7 @@ from swarm_ros.protocol.rows import (
     decision_row,
     parse_batch_label,
     pose_of,
+    region_row,
     robot_row,
 )
 from swarm_ros.protocol.status import RunFailed
@@ -120,11 +122,15 @@ def inside_world(rows: np.ndarray, radius: int) -> None:
         raise Rejected("pose outside the world", f"({x[i]!r}, {y[i]!r}, heading {heading[i]!r}{z})")
 
 
-def robot_rows(msg, robots: int, radius: int, dims: int = 2) -> np.ndarray:
-    """The rows of a /swarm/robots or snapshot message, checked: layout, ids, states, poses."""
+def robot_rows(msg, robots: int, radius: int, dims: int = 2, regional: bool = False) -> np.ndarray:
+    """The rows of a /swarm/robots message (``regional``: a /swarm/region/<batch> or snapshot message, compact
+    rows), checked: layout, ids, states, poses."""
     from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
 
-    rows = cloud(msg, robot_row(dims), robots)
+    # a region may have no rows in a tick (the tick still comes); the whole swarm always has some
+    rows = cloud(msg, region_row(dims) if regional else robot_row(dims), robots, min_rows=0 if regional else 1)
+    if not rows.size:
+        return rows
     ids_in_range(rows["id"].astype(np.int64), 0, robots)
     if rows["state"].max() >= STATE_COUNT:
         raise Rejected("robot state out of range", f"state {int(rows['state'].max())}")
@@ -132,17 +138,19 @@ def robot_rows(msg, robots: int, radius: int, dims: int = 2) -> np.ndarray:
     return rows
 
 
-def announcement(msg, robots: int) -> tuple[str, int, np.ndarray]:
-    """(batch name, incarnation, robot ids) of a /swarm/batches message, checked."""
+def announcement(msg, width: int) -> tuple[str, int, tuple[int, int]]:
+    """(batch name, incarnation, (first, last) column of its strip) of a /swarm/batches message, checked
+    against the world's ``width`` columns."""
     label = msg.layout.dim[0].label if msg.layout.dim else ""
     name, incarnation = parse_batch_label(label)
     if not _NODE_NAME.fullmatch(name):
         raise Rejected("batch name", f"{label[:80]!r} is not a node name")
-    if len(msg.data) == 0 or len(msg.data) > robots:
-        raise Rejected("robot ids", f"{len(msg.data)} ids, the run has {robots} robots")
-    ids = np.asarray(msg.data, dtype=np.int64)
-    ids_in_range(ids, 4, robots)
-    return name, incarnation, np.sort(ids)
+    if len(msg.data) != 2:
+        raise Rejected("strip", f"{len(msg.data)} values, expected its first and last column")
+    first, last = int(msg.data[0]), int(msg.data[1])
+    if not 0 <= first <= last < width:
+        raise Rejected("strip", f"columns {first}..{last}, the world has 0..{width - 1}")
+    return name, incarnation, (first, last)
 
 
 def tick_stamp(header) -> int:
@@ -168,13 +176,14 @@ def metrics_tick(msg, labels: tuple[str, ...], newest: int) -> int:
 
 
 def checked_robots(replica: Replica, msg, radius: int) -> tuple[int, np.ndarray]:
-    """(tick, rows) of a /swarm/robots message, checked as a message (:func:`robot_rows`).
+    """(tick, rows) of a /swarm/robots message (a regional ``replica``: of a /swarm/region/<batch> message),
+    checked as a message (:func:`robot_rows`).
 
     Raises:
         Rejected: malformed, out of range or outside the world.
     """
     tick = tick_stamp(msg.header)
-    return tick, robot_rows(msg, replica.state.robots, radius, replica.shape.dims)
+    return tick, robot_rows(msg, replica.state.robots, radius, replica.shape.dims, replica.area is not None)
 
 
 def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
@@ -202,14 +211,14 @@ def decision_message(msg, robots: int, dims: int = 2) -> tuple[int, np.ndarray]:
     return tick, rows
 
 
-def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, host: np.ndarray, batch: int,
-                      decided: np.ndarray, name: str) -> None:
+def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, hosts: Callable[[np.ndarray], np.ndarray],
+                      batch: int, decided: np.ndarray, name: str) -> None:
     """Whether batch ``batch`` (node ``name``) may send these decision rows for ``tick`` now.
 
     Raises:
         Rejected: a tick other than the one being decided, a robot not hosted by the batch
-            (``host``), not moving or decided already this tick (``decided``), or a decision out
-            of the rules' bounds (:mod:`swarm_ros.core.legality`).
+            (``hosts``: the batch hosting each of some robots now), not moving or decided already this
+            tick (``decided``), or a decision out of the rules' bounds (:mod:`swarm_ros.core.legality`).
     """
     from swarm_ros.core.state import IS_MOVING
 
@@ -219,12 +228,13 @@ def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, host: np.nda
     if tick > now + 1:
         raise Rejected("future tick", f"tick {tick}; the world is deciding tick {now + 1}")
     ids = rows["id"].astype(np.int64)
-    if (host[ids] != batch).any():
-        raise Rejected("not the batch's robot", f"robot {int(ids[host[ids] != batch][0])} is not hosted by {name}")
     s = sim.state
     moving = IS_MOVING[s.state[ids]]
     if not moving.all():
         raise Rejected("robot not moving", f"robot {int(ids[~moving][0])}")
+    other = hosts(ids) != batch
+    if other.any():
+        raise Rejected("not the batch's robot", f"robot {int(ids[other][0])} is not in the strip of {name}")
     if decided[ids].any():
         raise Rejected("decided already", f"robot {int(ids[decided[ids]][0])} at tick {tick}")
     solid = {"z0": s.z[ids], "z": rows["z"], "pitch": rows["pitch"]} if s.z is not None else {}
@@ -237,9 +247,7 @@ def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, host: np.nda
 
 
 def snapshot(msg, robots: int, radius: int, dims: int = 2) -> tuple[int, np.ndarray]:
-    """(tick, rows) of a snapshot for a batch, checked: a /swarm/robots message with every robot's row."""
+    """(tick, rows) of a snapshot for a batch, checked as a message of compact rows (its region's robots:
+    :mod:`swarm_ros.protocol.hosting`)."""
     tick = tick_stamp(msg.header)
-    rows = robot_rows(msg, robots, radius, dims)
-    if rows.size != robots:
-        raise Rejected("incomplete snapshot", f"{rows.size} rows for {robots} robots")
-    return tick, rows
+    return tick, robot_rows(msg, robots, radius, dims, regional=True)

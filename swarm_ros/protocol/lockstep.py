@@ -18,9 +18,10 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
-from swarm_ros.core.rules import Decisions
-from swarm_ros.core.state import IS_MOVING, RobotState
+from swarm_ros.core.rules import Decider, Decisions
+from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
+from swarm_ros.protocol.hosting import Hosting, snapshot
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
 from swarm_ros.protocol.status import RunFailed, Status
@@ -45,13 +46,14 @@ class Lockstep:
             sim, policy, port, logger, rejections, clock
         n = sim.params.robots
         self.window = policy.monitor_window  # 0 while there is no monitor to wait for
-        self.host = np.full(n, -1, dtype=np.int64)  # batch number hosting each robot
+        self.hosting = Hosting(sim.shape.world.radius, sim.params.vision_radius)  # which batch hosts which strip
+        self.decider = Decider(sim.shape, sim.params)  # the world's own, for the strips of batches removed for good
         self.batch_names: list[str] = []
         self.restart_counts: list[int] = []  # per batch
         self.incarnations: list[int] = []  # per batch: the newest process's incarnation heard of
         self.down_since: dict[int, float] = {}  # batches lost and waited for: since when
         self.removed_batches: set[int] = set()
-        self.respawned: dict[int, np.ndarray] = {}  # batch -> robots: re-announced with no higher incarnation
+        self.respawned: dict[int, tuple[int, int]] = {}  # batch -> strip: re-announced with no higher incarnation
         self.lapsed: set[int] = set()  # batches whose liveliness lapsed since their last accepted announcement
         self.live: set[int] = set()  # batches whose liveliness holds (DDS reports a writer of theirs alive)
         self.restarts: list[tuple[int, str]] = []  # (tick, node) of every restart: batches, the world, the monitor
@@ -80,39 +82,33 @@ class Lockstep:
         self.finished = False  # the end is out and delivered (or given up on): the node may exit
 
     # -- admission ------------------------------------------------------------------
-    def announce(self, name: str, incarnation: int, ids: np.ndarray) -> None:
-        """A batch's announcement (checked as a message): admit it, or take it as a restarted process.
+    def announce(self, name: str, incarnation: int, strip: tuple[int, int]) -> None:
+        """A batch's announcement of its strip (checked as a message): admit it, or take it as a restarted process.
 
         Raises:
-            Rejected: robots another batch hosts, other robots than before, or a new batch after tick 0.
+            Rejected: columns another batch hosts, another strip than before, or a new batch after tick 0.
         """
         if name in self.batch_names:
-            self._reannounced(self.batch_names.index(name), ids, incarnation)
+            self._reannounced(self.batch_names.index(name), strip, incarnation)
             return
         if self.started:
             raise Rejected("new batch after tick 0", f"'{name}'")
-        taken = ids[self.host[ids] >= 0]
-        if taken.size:
-            raise Rejected("robots of another batch", f"'{name}' names robot {taken[0]}, hosted by "
-                                                      f"{self.batch_names[self.host[taken[0]]]}")
-        k = len(self.batch_names)
-        self.host[ids] = k
+        k = self.hosting.admit(name, strip, self.batch_names)
         self.batch_names.append(name)
         self.restart_counts.append(0)
         self.incarnations.append(0)
         self.port.watch_batch(k, name)
-        covered = self.covered()
-        self.log.info(f"{name} hosts {ids.size} robots; {covered}/{self.sim.params.robots - 4} covered")
+        covered = self.hosting.covered()
+        self.log.info(f"{name} hosts {self.hosting.text(strip)}; {covered}/{self.hosting.width} columns covered")
         if incarnation:  # restarted before the world heard from the processes before it
-            self._reannounced(k, ids, incarnation)
-        if covered == self.sim.params.robots - 4:
+            self._reannounced(k, strip, incarnation)
+        if covered == self.hosting.width:
             self.maybe_start()
 
-    def covered(self) -> int:
-        """Robots (seeds aside) that admitted batches host."""
-        return int((self.host[4:] >= 0).sum())
+    def hosts(self, ids: np.ndarray) -> np.ndarray:
+        return self.hosting.hosts(self.sim.state.x[ids])  # the batch hosting each robot now (its strip's)
 
-    def _reannounced(self, k: int, ids: np.ndarray, incarnation: int, respawn: bool = False) -> None:
+    def _reannounced(self, k: int, strip: tuple[int, int], incarnation: int, respawn: bool = False) -> None:
         """A batch announced again: its process was restarted. Send it the current tick to start from."""
         name = self.batch_names[k]
         if self.known.get(k) == incarnation:  # the process the world before this one knew: nothing new
@@ -125,10 +121,10 @@ class Lockstep:
             if respawn or (self.started and (k in self.down_since or k in self.lapsed)):
                 incarnation = self.incarnations[k] + 1
             else:
-                self.respawned[k] = ids
+                self.respawned[k] = strip
                 return
-        if not np.array_equal(ids, np.flatnonzero(self.host == k)):
-            raise Rejected("robots of another batch", f"'{name}' announced other robots than before")
+        if tuple(strip) != self.hosting.strips[k]:
+            raise Rejected("columns of another batch", f"'{name}' announced another strip than before")
         if k in self.removed_batches or self.sim.done:
             self.log.warn(f"ignored a new announcement of {name}: its robots are removed or the run is over")
             return
@@ -153,9 +149,10 @@ class Lockstep:
         except Rejected as fault:
             self.rejections.drop(BATCHES, fault)
 
-    def _send_snapshot(self, k: int) -> None:
-        s = self.sim.state
-        self.port.send_snapshot(k, self.sim.tick, state_rows(np.arange(s.robots), s))
+    def _send_snapshot(self, k: int, rows: np.ndarray | None = None) -> None:
+        """Batch ``k``'s region at the current tick (``rows``: every robot's, if at hand)."""
+        rows = state_rows(np.arange(self.sim.state.robots), self.sim.state) if rows is None else rows
+        self.port.send_snapshot(k, self.sim.tick, snapshot(rows, self.hosting.area(k), self.hosting.radius))
 
     def maybe_start(self) -> None:
         """Tick 0 once batches host every robot and the monitor is there (so the run never stalls for it).
@@ -163,7 +160,7 @@ class Lockstep:
         Without a monitor to wait for (``monitor_window: 0``), or one that did not appear
         within ``FIRST_STALL_S``, the swarm starts without it.
         """
-        if self.started or self.covered() < self.sim.params.robots - 4:
+        if self.started or self.hosting.covered() < self.hosting.width:
             return
         if self.window and not (self.monitor_alive and self.port.monitor_reads_all()) and MONITOR not in self.lost:
             if self.clock() - self.created < FIRST_STALL_S:
@@ -180,7 +177,7 @@ class Lockstep:
         self.save_book()  # first: a checkpoint that holds a tick has the bookkeeping beside it
         self.port.checkpoint(0, rows, None, self.sim.history[0])  # before the snapshots: they tell of tick 0
         for k in range(len(self.batch_names)):
-            self._send_snapshot(k)
+            self._send_snapshot(k, rows)
         self._emit(0, rows, False, None, save=False)
 
     # -- ticks ----------------------------------------------------------------------
@@ -203,22 +200,22 @@ class Lockstep:
             raise Rejected("before tick 0")
         if self.restored and tick <= self.sim.tick:
             return  # sent to the world before this one: the batches' histories hand them over again
-        decisions_allowed(rows, tick, self.sim, self.host, k, self.decided, self.batch_names[k])
+        if k in self.removed_batches:
+            raise Rejected("removed batch", f"{self.batch_names[k]}'s robots were removed; the world decides its strip")
+        decisions_allowed(rows, tick, self.sim, self.hosts, k, self.decided, self.batch_names[k])
         if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
             rows = rows[~np.isin(rows["id"], self.pending)]
             if not rows.size:
                 return
         self.decided[rows["id"]] = True
-        if self.down_since:  # a batch deciding is not lost
-            for b in np.unique(self.host[rows["id"]]).tolist():
-                self.down_since.pop(b, None)
+        self.down_since.pop(k, None)  # a batch deciding is not lost
         self.parts.append(rows)
         self.received += rows.size
         self._maybe_advance(tick)
 
     def _maybe_advance(self, tick: int) -> None:
-        """Apply the tick once every moving robot that is not being removed has decided."""
-        expected = self.sim.metrics.moving - len(self._standing())
+        """Apply the tick once every moving robot that is not being removed or decided by the world has decided."""
+        expected = self.sim.metrics.moving - len(self._standing()) - len(self._orphans())
         if self.received > expected:
             raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
         if self.received == expected:
@@ -228,17 +225,22 @@ class Lockstep:
         """Moving robots of lost batches: they stand still in their last tick, then are removed."""
         return self.pending[IS_MOVING[self.sim.state.state[self.pending]]]
 
+    def _orphans(self) -> np.ndarray:
+        """Moving robots (not being removed) in the strips of batches removed for good: the world decides them."""
+        return self.hosting.orphans(self.sim.state.x, self.sim.moving_ids(), self.removed_batches, self.pending)
+
     def _advance(self, tick: int) -> None:
         parts = [decisions_of(tick, r) for r in self.parts]
         standing = self._standing()
         s = self.sim.state
         if standing.size:
-            solid = {"z": s.z[standing].copy(), "pitch": s.pitch[standing].copy()} if s.z is not None else {}
-            parts.append(Decisions(tick=tick, ids=standing, claim=np.full(standing.size, -1, dtype=np.int64),
-                                   x=s.x[standing].copy(), y=s.y[standing].copy(),
-                                   heading=s.heading[standing].copy(), **solid))
+            parts.append(Decisions.standing(s, standing, tick))
+        orphans = self._orphans()
+        if orphans.size:
+            parts.append(self.decider.decide(s, orphans, tick))
         decisions = Decisions.concatenate(parts)
         applied = decision_rows(decisions)
+        x_before = s.x[decisions.ids]  # for the rows' routes to the batches
         self.parts, self.received = [], 0
         self.decided[:] = False
         localized_before, losses_before = self.sim.metrics.localized, len(self.sim.losses)
@@ -255,20 +257,23 @@ class Lockstep:
         s = self.sim.state
         ids = np.union1d(self.sim.last_joins()[0], self.sim.last_removed)  # deciders and failed robots changed
         joined = self.sim.metrics.localized != localized_before or self.sim.last_removed.size > 0
-        self._emit(tick, state_rows(ids, s), joined, applied)
+        self._emit(tick, state_rows(ids, s), joined, applied, (decisions.ids, x_before))
 
-    def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None, save: bool = True) -> None:
+    def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
+              moved: tuple | None = (None, None), save: bool = True) -> None:
         """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than
-        ``window`` ticks behind."""
+        ``window`` ticks behind. ``moved``: (ids, x before the tick) of the robots that moved, for the batches'
+        region rows; None: no region rows (a restored world sends snapshots instead)."""
         if save:
             self.port.checkpoint(tick, rows, applied, self.sim.history[tick])
-        self.queued.append((tick, rows, joined, applied))
+        parts = self.hosting.route(rows, *moved) if moved is not None else None
+        self.queued.append((tick, rows, joined, applied, parts))
         self._flush()
 
     def _flush(self) -> None:
         while self.queued and (self.window == 0 or self.queued[0][0] - self.monitor_tick <= self.window):
-            tick, rows, joined, applied = self.queued.popleft()
-            self.port.publish_tick(tick, rows, joined, applied)
+            tick, rows, joined, applied, parts = self.queued.popleft()
+            self.port.publish_tick(tick, rows, joined, applied, parts)
             self.progress_at = self.moved_at = self.clock()
             self.published_tick = tick
             if tick == self.sim.tick and self.sim.done:
@@ -311,7 +316,7 @@ class Lockstep:
                 self._send_snapshot(k)
         for t in sorted(t for t in saved.ring if t > saved.monitor_tick or t == saved.tick):
             rows, applied = saved.ring[t]
-            self._emit(t, rows, t == saved.tick, applied, save=False)
+            self._emit(t, rows, t == saved.tick, applied, None, save=False)
         self.publish_status()
 
     # -- status -----------------------------------------------------------------------
@@ -357,12 +362,12 @@ class Lockstep:
         self._remove_batch(k, why)
 
     def _remove_batch(self, k: int, why: str) -> None:
-        """Remove batch ``k``'s robots at the end of the next tick (robots lost for good)."""
+        """Remove batch ``k``'s robots, the moving robots in its strip, at the end of the next tick (robots lost
+        for good); from then on the world decides for the robots that move into the strip."""
         name = self.batch_names[k]
         self.down_since.pop(k, None)
+        ids = self.hosting.orphans(self.sim.state.x, self.sim.moving_ids(), {k}, self.pending)
         self.removed_batches.add(k)
-        ids = np.flatnonzero(self.host == k)
-        ids = ids[self.sim.state.state[ids] != RobotState.REMOVED]
         self.lost.append(name)
         self.save_book()
         self.pending = np.union1d(self.pending, ids)
@@ -431,7 +436,7 @@ class Lockstep:
             self.publish_status()
         if not self.started and now - self.created > p.start_timeout:
             dropped = f"; dropped: {self.rejections.text()}" if self.rejections.total else ""
-            raise RunFailed(f"robot batches cover {self.covered()} of {self.sim.params.robots - 4} robots after "
+            raise RunFailed(f"robot batches cover {self.hosting.covered()} of {self.hosting.width} columns after "
                             f"{p.start_timeout:g} s (start_timeout){dropped}")
         if not self.started:
             self.maybe_start()

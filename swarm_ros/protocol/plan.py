@@ -31,13 +31,16 @@ def graph_plan(processes: int) -> list[tuple[str, str, dict[str, int]]]:
 ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
 DECISIONS = "/swarm/decisions"  # world -> all: the decisions it applied in the tick (PointCloud2)
 BATCH_DECISIONS = "/swarm/decisions"  # /swarm/decisions/<batch>: one batch -> world: its robots' decisions
-BATCHES = "/swarm/batches"  # robot batches -> world: the ids each batch hosts (Int64MultiArray)
+BATCHES = "/swarm/batches"  # robot batches -> world: the columns (strip) each batch hosts (Int64MultiArray)
+#: /swarm/region/<batch>: world -> one batch, after each tick: the rows its strip and halo need (PointCloud2,
+#: compact rows)
+REGION = "/swarm/region"
 SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
 OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
 STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
 METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
 CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
-SNAPSHOT = "/swarm/snapshot"  # /swarm/snapshot/<batch>: world -> one batch: every robot's row at a tick (PointCloud2)
+SNAPSHOT = "/swarm/snapshot"  # /swarm/snapshot/<batch>: world -> one batch: its region's rows at a tick (PointCloud2)
 ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
 #: What the monitor reads, bag or no bag: its bag records these, its own METRICS, and SHAPE, OCCUPANCY and
 #: CLOCK as it derives them from the rows (these types carry no tag: swarm_ros.ros.auth). The world starts
@@ -47,6 +50,10 @@ MONITOR_READS = (ROBOTS, DECISIONS, STATUS)
 
 def alive_topic(node_name: str) -> str:
     return f"{ALIVE}/{node_name}"
+
+
+def region_topic(node_name: str) -> str:
+    return f"{REGION}/{node_name}"
 
 
 def snapshot_topic(node_name: str) -> str:

@@ -41,9 +41,11 @@ class WorldPort(Protocol):
     """What the lockstep asks of the node around it."""
 
     def watch_batch(self, k: int, name: str) -> None: ...  # batch k admitted: take its decisions, watch it
-    def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None: ...  # every robot's row, to start from
-    # a tick: the decisions applied in it (None for tick 0), the changed robots' rows, the occupancy if `joined`
-    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None) -> None: ...
+    def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None: ...  # batch k's region, to start from
+    # a tick: the decisions applied in it (None for tick 0), the changed robots' rows, the occupancy if `joined`,
+    # and each batch's region's rows (None: none, a restored world's replay)
+    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
+                     regional: list[np.ndarray] | None) -> None: ...
     def publish_status(self, status: Status) -> None: ...  # the run's state
     def monitor_reads_all(self) -> bool: ...  # the monitor's reader of every topic it records is matched
     def delivered(self) -> bool: ...  # every reader acknowledged the last status and rows

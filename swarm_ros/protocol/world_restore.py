@@ -29,7 +29,7 @@ def book_of(ls) -> dict:
     """The lockstep's bookkeeping, as JSON data."""
     return {
         "batches": ls.batch_names,
-        "host": [np.flatnonzero(ls.host == k).tolist() for k in range(len(ls.batch_names))],
+        "strips": [list(strip) for strip in ls.hosting.strips],
         "restart_counts": ls.restart_counts,
         "incarnations": ls.incarnations,
         "restarts": [[t, n] for t, n in ls.restarts],
@@ -69,8 +69,7 @@ def restore(ls, saved: Saved, incarnation: int) -> None:
     ls.sim.restore(tick, pose["x"], pose["y"], pose["heading"], rows["state"], saved.history,
                    [tuple(x) for x in b["losses"]], _outcome(ls, saved.history, rows), pose.get("z"), pose.get("pitch"))
     ls.batch_names = list(b["batches"])
-    for k, ids in enumerate(b["host"]):
-        ls.host[np.asarray(ids, dtype=np.int64)] = k
+    ls.hosting.restore(b["strips"])
     ls.restart_counts, ls.incarnations = list(b["restart_counts"]), list(b["incarnations"])
     ls.known = dict(enumerate(ls.incarnations))
     ls.restarts = [(int(t), str(n)) for t, n in b["restarts"]]

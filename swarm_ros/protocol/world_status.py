@@ -75,7 +75,7 @@ def check_stalls(ls, now: float) -> None:
         return
     moving = ls.sim.moving_ids()
     missing = np.setdiff1d(moving[~ls.decided[moving]], ls.pending)
-    silent = np.unique(ls.host[missing]).tolist()
+    silent = np.unique(ls.hosts(missing)).tolist()
     for k in silent:
         if k not in ls.live:
             ls.lose_batch(k, f"no decisions for {limit:g} s")

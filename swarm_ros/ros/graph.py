@@ -33,12 +33,14 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     METRICS,
     MONITOR_READS,
     OCCUPANCY,
+    REGION,
     ROBOTS,
     SHAPE,
     SNAPSHOT,
     STATUS,
     alive_topic,
     decisions_topic,
+    region_topic,
     snapshot_topic,
 )
 from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS

@@ -1,0 +1,104 @@
+"""Strips, halos and routing (swarm_ros.core.regions, swarm_ros.protocol.hosting): no ROS needed.
+
+The lockstep tests (test_lockstep.py) run whole swarms through several partitions and check each
+batch's regional replica against the world tick by tick; these check the parts on their own.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from swarm_ros.core import Shape
+from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.regions import balanced_cuts, columns, halo, parse_cuts, strip
+from swarm_ros.core.state import RobotState, initial_state
+from swarm_ros.protocol import hosting
+from swarm_ros.protocol.rows import REGION_ROW, REGION_ROW_3D, ROBOT_ROW, compact, point_fields, robot_rows
+
+pytestmark = pytest.mark.unit
+
+
+@given(radius=st.integers(2, 60), batches=st.integers(1, 9), data=st.data())
+def test_strips_tile_the_columns_exactly_once_for_any_cuts(radius, batches, data):
+    width = 2 * radius + 1
+    if batches > width:
+        return
+    inner = data.draw(st.lists(st.integers(1, width - 1), min_size=batches - 1, max_size=batches - 1, unique=True))
+    cuts = np.sort(np.asarray(inner, dtype=np.int64)) - radius
+    spans = [strip(k, batches, cuts, radius) for k in range(batches)]
+    covered = np.concatenate([np.arange(first, last + 1) for first, last in spans])
+    assert np.array_equal(covered, np.arange(width))
+
+
+@given(seed=st.integers(0, 10 ** 6), batches=st.integers(1, 12))
+def test_balanced_cuts_give_each_strip_about_as_many_robots(seed, batches):
+    shape = Shape.load("star")
+    radius = shape.world.radius
+    x = initial_state(shape, 1036, seed).x[4:]
+    cuts = balanced_cuts(x, radius, batches)
+    counts = np.bincount(np.searchsorted(cuts + radius, columns(x, radius), side="right"), minlength=batches)
+    assert counts.sum() == x.size
+    # a column holds at most 2R + 1 robots, so no strip is more than a column off its share
+    assert np.abs(counts - x.size / batches).max() <= 2 * radius + 1
+
+
+def test_balanced_cuts_leave_every_strip_a_column_even_when_the_robots_crowd_one():
+    cuts = balanced_cuts(np.zeros(100), 3, 7)  # every robot in the middle column of 7
+    assert [strip(k, 7, cuts, 3) for k in range(7)] == [(k, k) for k in range(7)]
+
+
+@pytest.mark.parametrize(("text", "why"), [("a,b", "whole x positions"), ("3,1", "strictly ascending"),
+                                           ("1.5", "whole x positions")])
+def test_bad_cuts_are_refused_in_one_line(text, why):
+    with pytest.raises(ParameterError, match=why):
+        parse_cuts(text)
+
+
+@pytest.mark.parametrize(("cuts", "batches", "why"), [([0], 3, "gives 1 cuts; 3 batches need 2"),
+                                                      ([-40], 2, "leave a strip with no column"),
+                                                      ([0, 0], 3, "leave a strip with no column")])
+def test_cuts_that_do_not_fit_the_batches_are_refused(cuts, batches, why):
+    with pytest.raises(ParameterError, match=why):
+        strip(0, batches, np.asarray(cuts), 32)
+
+
+def test_the_halo_covers_what_a_decision_reads():
+    # three literal moves, the crowding test's centre one patch ahead, its vision radius, a patch of rounding
+    assert halo(1.0) == 6 and halo(2.5) == 8
+
+
+def _rows(x, states):
+    n = len(x)
+    s = np.asarray(states, dtype=np.int8)
+    return robot_rows(np.arange(n), s, np.asarray(x, float), np.zeros(n), np.zeros(n))
+
+
+def test_routing_sends_movers_where_they_were_or_are_and_stationary_robots_everywhere():
+    radius = 10
+    moving, localized = RobotState.MOVING_OUTSIDE, RobotState.LOCALIZED
+    rows = _rows([-8.0, -2.0, 3.0, 9.0, 0.0], [moving, moving, moving, moving, localized])
+    before = np.array([2, 10, 12, 19, 10])  # robot 1 moved from column 10 (x 0) to 8; the others stayed
+    west, east = (0, 9), (11, 20)
+    parts = hosting.route(rows, before, [west, east], radius)
+    assert parts[0]["id"].tolist() == [0, 1, 4]  # robot 1 moved west: it stays known to the west
+    assert parts[1]["id"].tolist() == [2, 3, 4]
+    assert all(p.dtype == REGION_ROW for p in parts)
+    snap = hosting.snapshot(rows, west, radius)
+    assert snap["id"].tolist() == [0, 1, 4]
+
+
+def test_compact_rows_hold_the_exact_pose_in_fewer_bytes():
+    rng = np.random.default_rng(3)
+    rows = np.zeros(50, dtype=ROBOT_ROW)
+    for name in ("x", "y", "heading"):
+        rows[name] = rng.uniform(-30, 30, 50)
+    rows["id"], rows["state"] = np.arange(50), 1
+    back = np.frombuffer(compact(rows).tobytes(), dtype=REGION_ROW)
+    for name in REGION_ROW.names:
+        assert np.array_equal(back[name], rows[name])
+    assert REGION_ROW.itemsize == 29 and REGION_ROW_3D.itemsize == 45
+    assert [f[0] for f in point_fields(REGION_ROW)] == ["x", "y", "heading", "id", "state"]
+
