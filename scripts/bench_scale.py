@@ -4,12 +4,13 @@ the in-process engine.
 
 A disc of N patches (N robots) in a world whose area holds N robots at the star's density
 (1,036 robots in a 65 x 65 world): radius 100 for 10,000. Each run stops after ``--ticks``
-ticks. Printed per run: seconds of the run (tick 0 to its end) and of the whole command, and
-each node's CPU per tick (its CPU from "ready" to "done" in its log, over the ticks); then
-what each batch receives per tick (the world's rows of the robots that changed, 40 bytes
-each, from the in-process run of the same seed). docs/ros_graph.md discusses the numbers.
+ticks. Printed per engine: seconds of the run (tick 0 to its end) and of the whole command,
+median and range over ``--repeats``, and each node's CPU per tick (its CPU from "ready" to
+"done" in its log, over the ticks); then the bytes of rows each batch took from its region
+topic per tick (its log's last line), and K against the smallest K as ratios.
+``--bare`` turns the recording and the bag off. docs/ros_graph.md discusses the numbers.
 
-    .venv/bin/python scripts/bench_scale.py [--robots 10000 50000] [--processes 1 2 4] [--ticks 300]
+    .venv/bin/python scripts/bench_scale.py [--robots 10000 50000] [--processes 1 2 4] [--ticks 300] [--bare]
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import numpy as np
 
 STAR_DENSITY = 1036 / 65 ** 2  #: robots per patch of the star's world
 _CPU = re.compile(r"\[(\w+)\]: (ready|done), .* \((\d+\.\d+) s of CPU\)")
+_RECEIVED = re.compile(r"received (\d+) bytes of rows on ")
 
 
 def disc_file(robots: int, folder: Path) -> tuple[Path, int]:
@@ -61,40 +63,57 @@ def node_cpu(logs: Path, ticks: int) -> dict[str, float]:
             if "ready" in c and "done" in c}
 
 
-def received_per_tick(shape_file: Path, radius: int, ticks: int, seed: int) -> float:
-    """Mean bytes of /swarm/robots per tick (every batch receives all of it)."""
-    from swarm_ros.core import RunParams, Shape, Simulation
-    from swarm_ros.core.grid import World
+def received(logs: Path, ticks: int) -> dict[str, float]:
+    """Bytes of rows each batch took from its region topic per tick (the 'received ...' line of its log)."""
+    out = {}
+    for log in sorted(logs.glob("robot_batch_*.log")):
+        m = _RECEIVED.search(log.read_text(errors="replace"))
+        if m:
+            out[log.stem] = int(m[1]) / ticks
+    return out
 
-    shape = Shape.load(shape_file, World(radius))
-    sim = Simulation(shape, RunParams(robots=shape.patches, seed=seed, max_ticks=ticks))
-    rows = []
-    while not sim.done:
-        sim.step()
-        rows.append(np.union1d(sim.last_joins()[0], sim.last_removed).size)
-    return 40 * float(np.mean(rows)) + 300
+
+def _spread(values: list[float]) -> str:
+    return f"{statistics.median(values):.2f} ({min(values):.2f}-{max(values):.2f})"
 
 
 def scale(sizes: list[int], processes: list[int], tmp: Path, ticks: int = 300, seed: int = 1,
-          repeats: int = 1) -> None:
+          repeats: int = 1, bare: bool = False) -> None:
+    extra = ["--no-recording", "--no-bag"] if bare else []
     for robots in sizes:
         shape, radius = disc_file(robots, tmp)
         common = ["--shape", str(shape), "--world-radius", str(radius), "--seed", str(seed), "--max-ticks",
-                  str(ticks)]
-        print(f"\n{robots:,} robots (disc, world radius {radius}), {ticks} ticks, seed {seed}, recording and bag on")
-        print(f"{'engine':<22} {'run s':>8} {'command s':>10} {'vs in-process':>14}   CPU per tick of each node (ms)")
-        runs = [_swarm(["simulate", *common, "--out", str(tmp / f"sim{robots}")]) for _ in range(repeats)]
-        sim_run = json.loads((tmp / f"sim{robots}" / "summary.json").read_text())["wall_seconds"]
-        print(f"{'in-process':<22} {sim_run:>8.2f} {statistics.median(runs):>10.2f} {1:>13.1f}x")
+                  str(ticks), *extra]
+        print(f"\n{robots:,} robots (disc, world radius {radius}), {ticks} ticks, seed {seed}, "
+              f"{'no recording, no bag' if bare else 'recording and bag on'}, median (min-max) of {repeats}")
+        print(f"{'engine':<22} {'run s':>18} {'command s':>18} {'vs in-process':>14}   CPU per tick of each node (ms)")
+        sim_runs, sim_whole = [], []
+        for _ in range(repeats):
+            sim_whole.append(_swarm(["simulate", *common, "--out", str(tmp / f"sim{robots}")]))
+            sim_runs.append(json.loads((tmp / f"sim{robots}" / "summary.json").read_text())["wall_seconds"])
+        sim_run = statistics.median(sim_runs)
+        print(f"{'in-process':<22} {_spread(sim_runs):>18} {_spread(sim_whole):>18} {1:>13.1f}x")
+        medians, traffic = {}, {}
         for k in processes:
             out = tmp / f"run{robots}-{k}"
-            whole = statistics.median(_swarm(["run", *common, "--processes", str(k), "--out", str(out)])
-                                      for _ in range(repeats))
-            run = json.loads((out / "summary.json").read_text())["wall_seconds"]
+            runs, whole = [], []
+            for _ in range(repeats):
+                whole.append(_swarm(["run", *common, "--processes", str(k), "--out", str(out)]))
+                runs.append(json.loads((out / "summary.json").read_text())["wall_seconds"])
+            medians[k] = statistics.median(runs)
             cpu = ", ".join(f"{node} {ms:.1f}" for node, ms in node_cpu(out / "logs", ticks).items())
-            print(f"{f'ROS 2 graph, K = {k}':<22} {run:>8.2f} {whole:>10.2f} {run / sim_run:>13.1f}x   {cpu}")
-        print(f"each batch receives {received_per_tick(shape, radius, ticks, seed) / 1e3:,.1f} kB per tick of "
-              f"/swarm/robots (and sends its share of the decisions, 48 bytes a moving robot)")
+            print(f"{f'ROS 2 graph, K = {k}':<22} {_spread(runs):>18} {_spread(whole):>18} "
+                  f"{medians[k] / sim_run:>13.1f}x   {cpu}")
+            traffic[k] = received(out / "logs", ticks)
+        print("bytes of rows each batch received per tick (its region topic, the last run):")
+        for k, per in traffic.items():
+            print(f"  K = {k}: " + ", ".join(f"{name} {b / 1e3:,.1f} kB" for name, b in per.items())
+                  + (f"; largest {max(per.values()) / 1e3:,.1f} kB" if per else ""))
+        first = processes[0]
+        for k in processes[1:]:
+            ratio = max(traffic[k].values()) / max(traffic[first].values()) if traffic[k] and traffic[first] else 0
+            print(f"K = {k} against K = {first}: run time {medians[k] / medians[first]:.2f}x, "
+                  f"largest bytes received per batch {ratio:.2f}x")
 
 
 def main() -> None:
@@ -103,9 +122,10 @@ def main() -> None:
     parser.add_argument("--processes", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--ticks", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--bare", action="store_true", help="--no-recording --no-bag on every run")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        scale(args.robots, args.processes, Path(tmp), args.ticks, repeats=args.repeats)
+        scale(args.robots, args.processes, Path(tmp), args.ticks, repeats=args.repeats, bare=args.bare)
 
 
 if __name__ == "__main__":

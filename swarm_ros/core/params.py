@@ -68,6 +68,7 @@ class Param:
     experiment: str = "fixed"
     model: bool = True
     recorded: bool = True
+    list_text: bool = False  #: a comma-separated list: one whole number (ROS 2 reads ``-p p:=5`` so) is its text
 
     @property
     def kind(self) -> type:
@@ -100,6 +101,8 @@ class Param:
             ParameterError: ``<name> must be <describe()>, got <value>``, in one line.
         """
         kind = self.kind
+        if self.list_text and isinstance(value, numbers.Integral) and not isinstance(value, bool):
+            value = str(value)
         if kind is bool:
             ok = isinstance(value, bool)
         elif kind is str:
@@ -180,7 +183,7 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
         Param("batch", 0, "this process decides for the robots in strip `batch` of `batches` ...", low=0),
         Param("batches", 1, "... of this many strips of the world along x", low=1),
         Param("region_cuts", "", "x positions (patches) where strips 1.. start, e.g. -20,0,20; every batch of a run "
-              "needs the same", blank="cut so that each strip starts with as many robots"),
+              "needs the same", blank="cut so that each strip starts with as many robots", list_text=True),
         Param("incarnation", 0, "0 for a batch's first process; the launcher counts restarts up from 1", low=0),
     ),
     "monitor": (

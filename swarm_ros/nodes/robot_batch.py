@@ -65,6 +65,7 @@ class RobotBatchNode:
         self.ended_at: float | None = None  # time.monotonic() when the world's outcome arrived
 
         self.early: dict[int, np.ndarray] = {}  # checked rows that arrived before the snapshot, by tick
+        self.received = 0  # bytes of rows taken from the region topic (scripts/bench_scale.py reports them)
         self.radius = self.shape.world.radius
         self.rejections = Rejections(node.get_logger())
 
@@ -116,6 +117,7 @@ class RobotBatchNode:
         self._decide()
 
     def _on_robots(self, msg: Cloud) -> None:
+        self.received += len(msg.data)
         try:
             tick, rows = checked_robots(self.replica, msg, self.radius)
         except Rejected as fault:
@@ -157,7 +159,9 @@ class RobotBatchNode:
             self.ended_at = time.monotonic()
 
     def close(self, code: int) -> None:
-        """Nothing to release."""
+        """Nothing to release; say how much this batch received."""
+        self.node.get_logger().info(f"received {self.received} bytes of rows on {self.region} up to tick "
+                                    f"{self.replica.tick}")
 
     def poll(self) -> None:
         # After the outcome, exit once every reader has acknowledged this batch's decisions: the world
