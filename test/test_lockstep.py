@@ -453,3 +453,20 @@ def test_any_partition_into_strips_gives_the_engines_run_and_each_batch_sees_exa
     assert np.array_equal(r.ls.sim.history, r.engine().history)
     if batches > 1:
         assert check.handovers > 0, "no robot crossed a cut: the test would not test handovers"
+
+
+def test_a_strip_whose_batch_is_removed_is_decided_by_the_world_even_when_only_its_robots_move():
+    """No batch sends anything when every moving robot is in a removed batch's strip: the world's own ticks
+    follow one another without a message to wake it (the run once stalled there)."""
+    r = Run(batches=3, on_batch_loss="remove")
+    check = RegionCheck(r)
+    r.start()
+    r.run(ticks=40)
+    check.follow()
+    r.ls.batch_liveliness(1, 0, 1)
+    while not r.ls.sim.done:
+        tick = r.ls.sim.tick
+        r.tick()
+        check.follow()
+        assert r.ls.sim.tick > tick, "stalled"
+    assert r.ls.sim.outcome.value == "incomplete" and r.ls.sim.metrics.moving == 0

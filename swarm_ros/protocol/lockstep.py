@@ -155,25 +155,19 @@ class Lockstep:
         self.port.send_snapshot(k, self.sim.tick, snapshot(rows, self.hosting.area(k), self.hosting.radius))
 
     def maybe_start(self) -> None:
-        """Tick 0 once batches host every robot and the monitor is there (so the run never stalls for it).
-
-        Without a monitor to wait for (``monitor_window: 0``), or one that did not appear
-        within ``FIRST_STALL_S``, the swarm starts without it.
-        """
+        """Tick 0 once batches host every column and the monitor is there (so the run never stalls for it);
+        without a monitor to wait for (``monitor_window: 0``), or one not seen within ``FIRST_STALL_S``, at once."""
         if self.started or self.hosting.covered() < self.hosting.width:
             return
         if self.window and not (self.monitor_alive and self.port.monitor_reads_all()) and MONITOR not in self.lost:
             if self.clock() - self.created < FIRST_STALL_S:
                 return
             self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s")
-        self.started = True
-        self.start_time = self.clock()
-        self.started_wall = time.time()
+        self.started, self.start_time, self.started_wall = True, self.clock(), time.time()
         self.startup_seconds = self.port.startup_seconds()
-        waited = " and the monitor" if self.window else ""
-        self.log.info(f"all robots hosted by {len(self.batch_names)} batches{waited}: tick 0")
-        s = self.sim.state
-        rows = state_rows(np.arange(s.robots), s)
+        self.log.info(f"all robots hosted by {len(self.batch_names)} batches{' and the monitor' * bool(self.window)}"
+                      f": tick 0")
+        rows = state_rows(np.arange(self.sim.state.robots), self.sim.state)
         self.save_book()  # first: a checkpoint that holds a tick has the bookkeeping beside it
         self.port.checkpoint(0, rows, None, self.sim.history[0])  # before the snapshots: they tell of tick 0
         for k in range(len(self.batch_names)):
@@ -214,19 +208,24 @@ class Lockstep:
         self._maybe_advance(tick)
 
     def _maybe_advance(self, tick: int) -> None:
-        """Apply the tick once every moving robot that is not being removed or decided by the world has decided."""
-        expected = self.sim.metrics.moving - len(self._standing()) - len(self._orphans())
-        if self.received > expected:
-            raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
-        if self.received == expected:
+        """Apply the tick once every moving robot that is not being removed or decided by the world has decided;
+        then the ticks that await no batch (only the world's own robots move), while nothing is queued."""
+        while not self.sim.done:
+            expected = self.sim.metrics.moving - len(self._standing()) - len(self._orphans())
+            if self.received > expected:
+                raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
+            if self.received < expected:
+                return
             self._advance(tick)
+            if self.queued:
+                return  # the monitor is behind: poll() goes on once it has caught up
+            tick += 1
 
     def _standing(self) -> np.ndarray:
         """Moving robots of lost batches: they stand still in their last tick, then are removed."""
         return self.pending[IS_MOVING[self.sim.state.state[self.pending]]]
 
-    def _orphans(self) -> np.ndarray:
-        """Moving robots (not being removed) in the strips of batches removed for good: the world decides them."""
+    def _orphans(self) -> np.ndarray:  # moving robots in the strips of batches removed for good: the world's
         return self.hosting.orphans(self.sim.state.x, self.sim.moving_ids(), self.removed_batches, self.pending)
 
     def _advance(self, tick: int) -> None:
@@ -440,6 +439,8 @@ class Lockstep:
                             f"{p.start_timeout:g} s (start_timeout){dropped}")
         if not self.started:
             self.maybe_start()
+        elif self.removed_batches and not self.queued and not self.received and not self.sim.done:
+            self._maybe_advance(self.sim.tick + 1)  # a tick only the world's own robots decide in
         if self.ended_at is not None:
             caught_up = self.window == 0 or self.monitor_tick >= self.sim.tick
             # the end is out once every reader acknowledged the last status and rows; a reader that died
