@@ -40,7 +40,7 @@ from launch_ros.actions import Node
 from launch import LaunchDescription
 from swarm_ros.app.supervision import END_GRACE, MONITOR_GRACE, RunEnded, launch_processes, launch_setup
 from swarm_ros.core.kernels import COMPILING, kernels_cached
-from swarm_ros.core.params import RUN_PARAMETERS
+from swarm_ros.core.params import RUN_PARAMETERS, node_parameter
 from swarm_ros.protocol.plan import PROCESSES, graph_plan
 from swarm_ros.protocol.runkey import KEY_ENV
 
@@ -55,9 +55,9 @@ def graph(context) -> list:
     enclaves = arg("enclaves")
     setup = launch_setup(arg("params_file") or os.path.join(share, "config", "swarm_ros.yaml"),
                          {p.name: arg(p.name) for p in RUN_PARAMETERS}, arg("out_dir"), Path(launch_config.log_dir),
-                         processes, enclaves)
+                         processes, enclaves, arg("region_cuts"))
     supervisor = setup.supervisor
-    plan = {name: (executable, own) for name, executable, own in graph_plan(processes)}
+    plan = {name: (executable, own) for name, executable, own in graph_plan(processes, setup.region_cuts)}
     names: dict[object, str] = {}  # each Node action started -> its node name
     running: set[object] = set()
     timers: list[TimerAction] = []
@@ -137,6 +137,8 @@ def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory(PACKAGE)
     return LaunchDescription([
         DeclareLaunchArgument("processes", default_value=str(PROCESSES.default), description=PROCESSES.help),
+        DeclareLaunchArgument("region_cuts", default_value="",
+                              description=node_parameter("robot_batch", "region_cuts").help),
         DeclareLaunchArgument("params_file", default_value="",
                               description="parameter file (default: the package's config/swarm_ros.yaml)"),
         DeclareLaunchArgument("enclaves", default_value="",

@@ -141,7 +141,7 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
              for k, v in values.items()}
     written = yaml.safe_load((_launch_dir(ros, before) / "params.yaml").read_text())
     assert written["/**"]["ros__parameters"] == typed, "what every node reads"
-    assert len(re.findall(r"\[robot_batch_\d\]: robot_batch_\d: robots", done.stdout + done.stderr)) == 3
+    assert len(re.findall(r"\[robot_batch_\d\]: robot_batch_\d: strip x ", done.stdout + done.stderr)) == 3
     ref_params = tmp_path / "ref.yaml"
     ref_params.write_text(yaml.safe_dump({"/**": {"ros__parameters": typed}}))
     ref = _simulate(tmp_path / "ref", "--params-file", str(ref_params), "--no-recording")
@@ -178,7 +178,7 @@ def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros,
     proc = ros.start(f"{LAUNCH} out_dir:={out}", log=log)
     # while the nodes load, before tick 0 (a Ctrl-C in the first tenth of a second of a Python process, while
     # the interpreter itself starts, ends in its own traceback: docs/ros_graph.md, "With ROS 2's own tools")
-    wait_for(lambda: "robot_batch_1: robots" in log.read_text(), 60, "the nodes' start")
+    wait_for(lambda: "robot_batch_1: strip" in log.read_text(), 60, "the nodes' start")
     ctrl_c(proc)
     assert "tick 0" not in log.read_text()
     proc.wait(timeout=60)

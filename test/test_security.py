@@ -27,7 +27,7 @@ from swarm_ros.app.processes import DomainLock, node_command, node_env
 from swarm_ros.core.params import Settings
 from swarm_ros.core.regions import balanced_cuts, columns, strip
 from swarm_ros.core.state import RobotState, initial_state
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_label, decision_rows
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_label, compact, decision_rows
 from swarm_ros.protocol.runkey import KEY_ENV
 from swarm_ros.ros.node_params import params_yaml
 
@@ -382,6 +382,9 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
     try:
         node = Node("stranger", context=context, start_parameter_services=False)
         pub = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
+        # the batches take rows only from their region topics: the same forgeries go there
+        region_pubs = [node.create_publisher(PointCloud2, msgs.region_topic(f"robot_batch_{k}"), msgs.ROBOTS_QOS)
+                       for k in range(2)]
         snapshot_pub = node.create_publisher(PointCloud2, msgs.snapshot_topic("robot_batch_0"), msgs.LATCHED_QOS)
         status_pub = node.create_publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
 
@@ -397,6 +400,8 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
                 copy = rows.copy()
                 copy["z"] = 0.5
                 pub.publish(make_cloud(copy, msgs.tick_of(msg.header) + 1))
+                for region in region_pubs:
+                    region.publish(make_cloud(compact(rows), msgs.tick_of(msg.header) + 1))
                 count("rows of the next tick")
 
         def on_snapshot(msg) -> None:  # the world's snapshot for robot_batch_0, as a later tick's
@@ -416,6 +421,9 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
             rows = np.zeros(2, dtype=ROBOT_ROW)
             rows["id"], rows["x"] = [7, 7], [np.nan, 1e300]  # a repeated robot, off the world
             pub.publish(make_cloud(rows, 1))
+            for region in region_pubs:
+                region.publish(bad)
+                region.publish(make_cloud(compact(rows), 1))
             status_pub.publish(msgs.status_message(1, "complete", "complete at tick 1"))
             count("garbage and status")
             end = time.monotonic() + 0.05
@@ -436,7 +444,8 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
     assert json.loads((out / "summary.json").read_text())["rejected_messages"]["monitor"] >= 20
     for node_name in ("robot_batch_0", "robot_batch_1", "monitor"):
         log = (out / "logs" / f"{node_name}.log").read_text()
-        for topic in (msgs.ROBOTS, msgs.STATUS):
+        rows = msgs.ROBOTS if node_name == "monitor" else msgs.region_topic(node_name)
+        for topic in (rows, msgs.STATUS):
             assert f"dropped a message on {topic} (unauthenticated" in log, (node_name, topic)
     assert "dropped a message on /swarm/snapshot/robot_batch_0 (unauthenticated" in \
         (out / "logs" / "robot_batch_0.log").read_text()

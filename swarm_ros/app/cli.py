@@ -21,9 +21,9 @@ from swarm_ros.core.inputs import path_too_long, shown
 from swarm_ros.core.params import (
     BATCH_LOSS_POLICIES,
     MAX_RESTARTS,
-    NODE_PARAMETERS,
     RUN_PARAMETERS,
     Param,
+    node_parameter,
 )
 from swarm_ros.core.signals import InterruptSaid
 from swarm_ros.protocol.plan import PROCESSES
@@ -38,8 +38,9 @@ _OWN = {p.name: p for p in (
     Param("count", 1, "messages to print", low=1),
     Param("seconds", 1.0, "seconds to listen", low=0.0, low_open=True),
 )}
-_RECORD_EVERY = next(p for p in NODE_PARAMETERS["monitor"] if p.name == "record_every")
-_MAX_RESTARTS = next(p for p in NODE_PARAMETERS["world"] if p.name == "max_restarts")
+_RECORD_EVERY = node_parameter("monitor", "record_every")
+_MAX_RESTARTS = node_parameter("world", "max_restarts")
+_REGION_CUTS = node_parameter("robot_batch", "region_cuts")
 
 
 def _checked(param: Param):
@@ -107,6 +108,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_options(run)
     run.add_argument("--processes", type=_checked(_OWN["processes"]), default=PROCESSES.default,
                      help=f"robot-batch processes K (default: {PROCESSES.default})")
+    run.add_argument("--region-cuts", type=_checked(_REGION_CUTS), metavar="X,...",
+                     help="x positions (patches) where the batches' strips 1..K-1 start, e.g. --region-cuts=-10,10 "
+                          "for K = 3 (default: the parameter file's /robot_batch region_cuts, else cuts that give "
+                          "each strip as many robots at tick 0); docs/ros_graph.md, Regions")
     run.add_argument("--domain-id", type=int, help="ROS domain id (default: $ROS_DOMAIN_ID, else a free one)")
     run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES,
                      help="a robot-batch process that dies: restart it, nothing lost (default; up to "

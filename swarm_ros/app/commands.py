@@ -161,15 +161,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarm_ros.artifacts.run_dir import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args, graph=True)
-    changed = {k: v for k, v in nodes["robot_batch"].items() if v != node_defaults("robot_batch")[k]}
+    changed = {k: v for k, v in nodes["robot_batch"].items()
+               if v != node_defaults("robot_batch")[k] and k != "region_cuts"}
     if changed:
         raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
-                         f"assigns each of its --processes its robots itself (use ros2 run for your own split)")
+                         f"assigns each of its --processes its strip itself (use ros2 run for your own split)")
+    cuts = args.region_cuts if args.region_cuts is not None else str(nodes["robot_batch"].get("region_cuts", ""))
     world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
              **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {})}
-    check_graph(shape, params.robots, args.processes, args.enclaves)
+    check_graph(shape, params.robots, args.processes, args.enclaves, region_cuts=cuts)
     domain = _domain_id(args.domain_id)
-    launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, out=out,
+    launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, region_cuts=cuts, out=out,
                     overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
                     world=world, bag=bool(_flag(args.bag, nodes["monitor"], "bag")), enclaves=args.enclaves)
     _interrupt_on_sigterm()

@@ -114,6 +114,7 @@ class Launch:
     params: RunParams
     processes: int
     out: Path
+    region_cuts: str = ""  #: where the batches' strips start (x positions), or "": balanced at tick 0
     overwrite: bool = False
     quiet: bool = False
     domain_id: int | None = None
@@ -249,7 +250,7 @@ class Launch:
 
         ``launch/swarm.launch.py`` starts the same graph (:func:`swarm_ros.protocol.plan.graph_plan`).
         """
-        return graph_plan(self.processes)
+        return graph_plan(self.processes, self.region_cuts)
 
     def _spawn(self, name: str, command: list[str], log: Path, incarnation: int) -> Child:
         f = open(log, "ab")  # noqa: SIM115 - closed in stop()

@@ -17,8 +17,8 @@ is refused, since nodes that read different values would not run the same swarm.
 applies them where they mean something: ``/monitor`` (recording and output directory)
 in ``simulate`` and ``run``, ``/world`` in ``run``; flags override them. ``run`` refuses
 ``/robot_batch`` values other than the defaults, since it assigns each of its processes
-its robots itself; ``simulate`` has no graph, and checks and ignores ``/world`` and
-``/robot_batch``.
+its strip itself, but takes ``region_cuts`` (where the strips start); ``simulate`` has no
+graph, and checks and ignores ``/world`` and ``/robot_batch``.
 """
 
 from __future__ import annotations

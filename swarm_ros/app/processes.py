@@ -103,13 +103,13 @@ def death(code: int) -> str:
 
 
 def check_graph(shape, robots: int, processes: int, enclaves: str | None,
-                flags: tuple[str, str] = ("--processes", "--enclaves")) -> None:
+                flags: tuple[str, str] = ("--processes", "--enclaves"), region_cuts: str = "") -> None:
     """Refuse a graph that cannot run, before any node starts (``swarm-ros run`` and the launch file).
 
     Raises:
         SwarmError: a shape source the nodes cannot each read, too little memory, fewer columns than
-            batches, a bad enclave path; in one line (``flags``: how the user named the batch count and the
-            enclaves).
+            batches, region cuts that do not cut the world into ``processes`` strips, a bad enclave path;
+            in one line (``flags``: how the user named the batch count and the enclaves).
     """
     from swarm_ros.core.resources import check_world_memory
 
@@ -121,6 +121,10 @@ def check_graph(shape, robots: int, processes: int, enclaves: str | None,
     if processes > shape.world.size:
         raise SwarmError(f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
                          f"robot-batch process ({flags[0]}, default 2); each strip needs at least one column")
+    if region_cuts:
+        from swarm_ros.core.regions import parse_cuts, strip
+
+        strip(0, processes, parse_cuts(region_cuts), shape.world.radius)
     if enclaves is not None and not ENCLAVE_PREFIX.fullmatch(enclaves):
         raise SwarmError(f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
                          f"after each /), got {enclaves!r}")

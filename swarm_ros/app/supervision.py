@@ -137,6 +137,7 @@ class LaunchSetup:
     out: Path
     checkpoint: Path
     supervisor: Supervisor
+    region_cuts: str = ""  #: where the batches' strips start (the launch argument, else the file's /robot_batch)
 
 
 def _yaml_value(text: str) -> object:
@@ -173,7 +174,7 @@ def argument_value(name: str, text: str) -> object:
 
 
 def launch_setup(params_file: str, arguments: dict[str, str], out_dir: str, log_dir: Path, processes: int,
-                 enclaves: str = "") -> LaunchSetup:
+                 enclaves: str = "", region_cuts: str = "") -> LaunchSetup:
     """Resolve a launch's arguments as ``swarm-ros run`` resolves its flags, and write the nodes' parameter
     file into ``log_dir``. A launch argument wins over the parameter file (run parameters and ``out_dir``);
     the world's checkpoint is ``<log_dir>/world.checkpoint``; an empty ``out_dir`` is named here
@@ -185,7 +186,9 @@ def launch_setup(params_file: str, arguments: dict[str, str], out_dir: str, log_
     settings, nodes = read_params_file(params_file)
     settings = settings.updated(**{name: argument_value(name, text) for name, text in arguments.items() if text})
     shape, params = settings.resolve()
-    check_graph(shape, params.robots, processes, enclaves or None, flags=("processes", "enclaves"))
+    region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))
+    check_graph(shape, params.robots, processes, enclaves or None, flags=("processes", "enclaves"),
+                region_cuts=region_cuts)
     if Path(settings.shape).suffix.lower() in (".txt", ".png"):
         settings = settings.updated(shape=str(Path(settings.shape).absolute()))
     settings = settings.updated(robots=params.robots)
@@ -202,4 +205,4 @@ def launch_setup(params_file: str, arguments: dict[str, str], out_dir: str, log_
     part.write_text(params_yaml(settings, sections), encoding="utf-8")
     part.replace(path)
     return LaunchSetup(path, out, log_dir / CHECKPOINT,
-                       Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"])))
+                       Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"])), region_cuts)

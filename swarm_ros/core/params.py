@@ -198,6 +198,11 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
 }
 
 
+def node_parameter(kind: str, name: str) -> Param:
+    """The declaration of node ``kind``'s own parameter ``name``."""
+    return next(p for p in NODE_PARAMETERS[kind] if p.name == name)
+
+
 def node_defaults(kind: str) -> dict[str, object]:
     """A node's own parameters and their defaults."""
     return {p.name: p.default for p in NODE_PARAMETERS[kind]}
