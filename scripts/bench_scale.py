@@ -79,7 +79,8 @@ def _spread(values: list[float]) -> str:
 
 def scale(sizes: list[int], processes: list[int], tmp: Path, ticks: int = 300, seed: int = 1,
           repeats: int = 1, bare: bool = False) -> None:
-    extra = ["--no-recording", "--no-bag"] if bare else []
+    extra = ["--no-recording"] if bare else []  # simulate writes no bag
+    graph_extra = ["--no-bag"] if bare else []
     for robots in sizes:
         shape, radius = disc_file(robots, tmp)
         common = ["--shape", str(shape), "--world-radius", str(radius), "--seed", str(seed), "--max-ticks",
@@ -98,7 +99,7 @@ def scale(sizes: list[int], processes: list[int], tmp: Path, ticks: int = 300, s
             out = tmp / f"run{robots}-{k}"
             runs, whole = [], []
             for _ in range(repeats):
-                whole.append(_swarm(["run", *common, "--processes", str(k), "--out", str(out)]))
+                whole.append(_swarm(["run", *common, *graph_extra, "--processes", str(k), "--out", str(out)]))
                 runs.append(json.loads((out / "summary.json").read_text())["wall_seconds"])
             medians[k] = statistics.median(runs)
             cpu = ", ".join(f"{node} {ms:.1f}" for node, ms in node_cpu(out / "logs", ticks).items())

@@ -6,10 +6,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from swarm_ros.core import Shape
 from swarm_ros.core.engine import Simulation
-from swarm_ros.core.legality import illegal, max_step, reach
+from swarm_ros.core.legality import SLACK, illegal, max_step, reach
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rules import Decider, Decisions
 
@@ -93,3 +95,66 @@ def test_the_bounds_follow_the_rule_set():
     assert max_step(RunParams(robots=10, rules="paper")) == 1.0
     assert max_step(RunParams(robots=10, rules="literal")) == 3.0
     assert reach(RunParams(robots=10, rules="local", vision_radius=4.0)) > reach(RunParams(robots=10, rules="paper"))
+
+
+# The bounds as numpy statements (the implementation before it was compiled): the reference the kernel must equal.
+def _reference(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray, y0: np.ndarray,
+            claim: np.ndarray, x: np.ndarray, y: np.ndarray, heading: np.ndarray, z0: np.ndarray | None = None,
+            z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> np.ndarray:
+    """A bool mask of the decisions the rules could not have produced.
+
+    Args:
+        params: the run's parameters (rule set, vision radius).
+        radius: the world's radius R (patch coordinates run from -R to R).
+        frontier: the flat frontier grid at the start of the tick (W*W bools).
+        x0, y0: where each deciding robot stood at the start of the tick (patches).
+        claim, x, y, heading: the decisions, aligned with ``x0``/``y0``.
+        z0, z, pitch: in a 3D world (all three given), the z before, and the decided z and elevation.
+    """
+    size = 2 * radius + 1
+    limit = radius + 0.5
+    step = max_step(params) + SLACK
+    solid = z0 is not None
+    before = [x0, y0, z0] if solid else [x0, y0]
+    after = [x, y, z] if solid else [x, y]
+    bad = ~(np.isfinite(x) & np.isfinite(y) & (heading >= 0) & (heading <= 2 * math.pi))
+    if solid:
+        bad |= ~(np.isfinite(z) & (np.abs(np.nan_to_num(pitch, nan=np.inf)) <= math.pi / 2))
+    for a in after:
+        bad |= np.abs(np.nan_to_num(a, nan=np.inf)) > limit
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad |= ~(np.sqrt(sum((a - b) ** 2 for a, b in zip(after, before))) <= step)
+    claims = claim >= 0
+    bad |= (claim < -1) | (claim >= size ** len(before))
+    ok_claim = claims & ~bad
+    p = claim[ok_claim]
+    cells = [p % size - radius, (p // size) % size - radius, p // (size * size) - radius] if solid else \
+        [p % size - radius, p // size - radius]
+    far = np.sqrt(sum((c - b[ok_claim]) ** 2 for c, b in zip(cells, before))) > reach(params, len(before)) + SLACK
+    bad[np.flatnonzero(ok_claim)[far | ~frontier[p]]] = True
+    return bad
+
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), solid=st.booleans(), rules=st.sampled_from(["paper", "local", "literal"]))
+def test_the_compiled_check_equals_the_bounds_stated_in_numpy(seed, solid, rules):
+    rng = np.random.default_rng(seed)
+    radius = int(rng.integers(3, 12))
+    size, n = 2 * radius + 1, int(rng.integers(0, 30))
+    params = RunParams(robots=100, rules=rules, vision_radius=float(rng.choice([1.0, 2.0, 3.5])))
+    frontier = rng.random(size ** (3 if solid else 2)) < 0.3
+    x0, y0 = rng.uniform(-radius, radius, n), rng.uniform(-radius, radius, n)
+    x, y = x0 + rng.normal(0, 1.5, n), y0 + rng.normal(0, 1.5, n)
+    x[rng.random(n) < 0.1] = rng.choice([np.nan, np.inf, -np.inf, radius + 3.0])
+    heading = rng.uniform(-0.5, 7, n)
+    heading[rng.random(n) < 0.05] = np.nan
+    claim = np.where(rng.random(n) < 0.5, -1, rng.integers(-3, size ** (3 if solid else 2) + 3, n)).astype(np.int64)
+    extra = {}
+    if solid:
+        z0 = rng.uniform(-radius, radius, n)
+        pitch = rng.uniform(-2, 2, n)
+        pitch[rng.random(n) < 0.05] = np.nan
+        extra = {"z0": z0, "z": z0 + rng.normal(0, 1.5, n), "pitch": pitch}
+    assert np.array_equal(illegal(params, radius, frontier, x0, y0, claim, x, y, heading, **extra),
+                          _reference(params, radius, frontier, x0, y0, claim, x, y, heading, **extra))

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from swarm_ros.core.params import RunParams
@@ -30,7 +31,7 @@ from swarm_ros.core.rulesets import JOIN_VALUES
 
 #: Longest move of a tick, in patches, by ``steps`` value.
 MAX_STEP = {"one": 1.0, "literal": 3.0}
-_SLACK = 1e-9  # rounding in the robots' own arithmetic
+SLACK = 1e-9  # rounding in the robots' own arithmetic
 
 
 def max_step(params: RunParams) -> float:
@@ -42,6 +43,32 @@ def reach(params: RunParams, dims: int = 2) -> float:
     joining = 1.0 if params.ruleset.join == JOIN_VALUES[0] else float(params.vision_radius)
     diagonal = math.sqrt(float(dims))
     return max_step(params) + max(joining, diagonal) + diagonal / 2
+
+
+@numba.njit(cache=True)
+def _illegal(radius, frontier, x0, y0, z0, claim, x, y, z, heading, pitch, step, reach_, solid, bad):
+    """:func:`illegal`'s loop, compiled: one pass over the decisions, no temporary arrays."""
+    size = 2 * radius + 1
+    limit = radius + 0.5
+    cells = size * size * size if solid else size * size
+    for k in range(x.size):
+        h = heading[k]
+        wrong = not (math.isfinite(x[k]) and math.isfinite(y[k]) and 0.0 <= h <= 2.0 * math.pi)
+        if solid:
+            wrong = wrong or not (math.isfinite(z[k]) and abs(pitch[k]) <= math.pi / 2)
+        wrong = wrong or abs(x[k]) > limit or abs(y[k]) > limit or (solid and abs(z[k]) > limit)
+        d2 = (x[k] - x0[k]) ** 2 + (y[k] - y0[k]) ** 2
+        if solid:
+            d2 += (z[k] - z0[k]) ** 2
+        wrong = wrong or not math.sqrt(d2) <= step
+        c = claim[k]
+        wrong = wrong or c < -1 or c >= cells
+        if c >= 0 and not wrong:
+            e2 = (c % size - radius - x0[k]) ** 2 + ((c // size) % size - radius - y0[k]) ** 2
+            if solid:
+                e2 += (c // (size * size) - radius - z0[k]) ** 2
+            wrong = math.sqrt(e2) > reach_ or not frontier[c]
+        bad[k] = wrong
 
 
 def illegal(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray, y0: np.ndarray,
@@ -57,26 +84,11 @@ def illegal(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray
         claim, x, y, heading: the decisions, aligned with ``x0``/``y0``.
         z0, z, pitch: in a 3D world (all three given), the z before, and the decided z and elevation.
     """
-    size = 2 * radius + 1
-    limit = radius + 0.5
-    step = max_step(params) + _SLACK
     solid = z0 is not None
-    before = [x0, y0, z0] if solid else [x0, y0]
-    after = [x, y, z] if solid else [x, y]
-    bad = ~(np.isfinite(x) & np.isfinite(y) & (heading >= 0) & (heading <= 2 * math.pi))
-    if solid:
-        bad |= ~(np.isfinite(z) & (np.abs(np.nan_to_num(pitch, nan=np.inf)) <= math.pi / 2))
-    for a in after:
-        bad |= np.abs(np.nan_to_num(a, nan=np.inf)) > limit
-    with np.errstate(invalid="ignore", over="ignore"):
-        bad |= ~(np.sqrt(sum((a - b) ** 2 for a, b in zip(after, before))) <= step)
-    claims = claim >= 0
-    bad |= (claim < -1) | (claim >= size ** len(before))
-    ok_claim = claims & ~bad
-    p = claim[ok_claim]
-    cells = [p % size - radius, (p // size) % size - radius, p // (size * size) - radius] if solid else \
-        [p % size - radius, p // size - radius]
-    far = np.sqrt(sum((c - b[ok_claim]) ** 2 for c, b in zip(cells, before))) > reach(params, len(before)) + _SLACK
-    bad[np.flatnonzero(ok_claim)[far | ~frontier[p]]] = True
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 - message fields are strided views
+    none = np.empty(0)
+    bad = np.empty(len(x), dtype=np.bool_)
+    _illegal(radius, frontier, f64(x0), f64(y0), f64(z0) if solid else none, np.ascontiguousarray(claim, np.int64),
+             f64(x), f64(y), f64(z) if solid else none, f64(heading), f64(pitch) if solid else none,
+             max_step(params) + SLACK, reach(params, 3 if solid else 2) + SLACK, solid, bad)
     return bad
-

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.legality import illegal
 from swarm_ros.core.metrics import tick_metrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.replica import Replica
@@ -23,8 +24,8 @@ from swarm_ros.core.state import STATE_COUNT
 
 def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
     """Run ``ticks`` ticks of the graph's code path in this process and throw the result away:
-    a robot batch's decisions, the world's :meth:`Simulation.apply`, a replica's rows and the
-    monitor's metrics. Nothing is shared with the caller's own objects."""
+    a robot batch's decisions, the world's check of them and :meth:`Simulation.apply`, a replica's rows
+    and the monitor's metrics. Nothing is shared with the caller's own objects."""
     sim = Simulation(shape, params)
     decider = Decider(shape, params)
     replica = Replica(shape, params.robots)
@@ -35,7 +36,11 @@ def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
         if sim.done:
             break
         moving = sim.moving_ids()
-        sim.apply(decider.decide(sim.state, moving, sim.tick + 1, moving))
+        d = decider.decide(sim.state, moving, sim.tick + 1, moving)
+        before = {"z0": s.z[d.ids], "z": d.z, "pitch": d.pitch} if s.z is not None else {}
+        illegal(params, shape.world.radius, s.frontier, s.x[d.ids], s.y[d.ids], d.claim, d.x, d.y, d.heading,
+                **before)  # the world's check of a batch's decisions
+        sim.apply(d)
         changed = sim.last_joins()[0]  # the deciders: the rows the world would publish
         solid = (s.z[changed], s.pitch[changed]) if s.z is not None else (None, None)
         replica.update(sim.tick, changed, s.state[changed], s.x[changed], s.y[changed], s.heading[changed], *solid)

@@ -18,17 +18,14 @@ robots and every stationary robot. Rows travel in the compact layout
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from swarm_ros.core.regions import columns, format_strip, halo
+from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.rows import PATCH_METRES, compact
-
-
-def _stationary(states: np.ndarray) -> np.ndarray:
-    from swarm_ros.core.state import IS_MOVING  # here: core.state loads numba, which readers of rows do without
-
-    return ~IS_MOVING[states]
 
 
 def area(strip: tuple[int, int], halo: int, width: int) -> tuple[int, int]:
@@ -50,14 +47,17 @@ def route(rows: np.ndarray, before: np.ndarray | None, areas: list[tuple[int, in
     """
     after = row_columns(rows, radius)
     low, high = (after, after) if before is None else (np.minimum(before, after), np.maximum(before, after))
-    everyone = _stationary(rows["state"])
-    return [compact(rows[everyone | ((high >= first) & (low <= last))]) for first, last in areas]
+    everyone = ~IS_MOVING[rows["state"]]
+    rows = compact(rows)
+    width = 2 * radius + 1
+    return [rows if first == 0 and last == width - 1 else rows[everyone | ((high >= first) & (low <= last))]
+            for first, last in areas]
 
 
 def snapshot(rows: np.ndarray, where: tuple[int, int], radius: int) -> np.ndarray:
     """Of every robot's rows (a tick's whole state), those a batch following ``where`` keeps, compact."""
     cols = row_columns(rows, radius)
-    keep = _stationary(rows["state"]) | ((cols >= where[0]) & (cols <= where[1]))
+    keep = ~IS_MOVING[rows["state"]] | ((cols >= where[0]) & (cols <= where[1]))
     return compact(rows[keep])
 
 
@@ -103,23 +103,22 @@ class Hosting:
         return area(self.strips[k], self.halo, self.width)
 
     def route(self, rows: np.ndarray, moved: np.ndarray | None = None,
-              x_before: np.ndarray | None = None) -> list[np.ndarray]:
-        """A tick's rows (sorted by id) split by batch (:func:`route`); robots ``moved`` stood at ``x_before``
-        before the tick (the others did not move)."""
-        before = None
-        if moved is not None:
-            before = row_columns(rows, self.radius)
+              before: np.ndarray | None = None) -> list[np.ndarray]:
+        """A tick's rows (sorted by id) split by batch (:func:`route`); robots ``moved`` (sorted) stood in
+        columns ``before`` before the tick (the others did not move)."""
+        if moved is not None and moved.size != rows.size:  # rows of robots that did not move too (removed)
             at = np.searchsorted(rows["id"], moved)
-            found = at < rows.size
-            found[found] = rows["id"][at[found]] == moved[found]
-            before[at[found]] = columns(x_before[found], self.radius)
+            before, moved_before = row_columns(rows, self.radius), before
+            before[at] = moved_before
         return route(rows, before, [self.area(k) for k in range(len(self.strips))], self.radius)
 
-    def orphans(self, x: np.ndarray, moving: np.ndarray, removed: set[int], pending: np.ndarray) -> np.ndarray:
-        """Of the ``moving`` robots (positions ``x``), those not ``pending`` removal in the strips of ``removed``
-        batches: the world decides for them itself."""
+    def orphans(self, x: np.ndarray, moving_ids: Callable[[], np.ndarray], removed: set[int],
+                pending: np.ndarray) -> np.ndarray:
+        """Of the moving robots (``moving_ids()``, at ``x``), those not ``pending`` removal in the strips of
+        ``removed`` batches: the world decides for them itself."""
         if not removed:
             return np.empty(0, dtype=np.int64)
+        moving = moving_ids()
         return moving[np.isin(self.hosts(x[moving]), sorted(removed)) & ~np.isin(moving, pending)]
 
     def text(self, strip: tuple[int, int]) -> str:

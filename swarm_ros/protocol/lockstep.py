@@ -18,6 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.regions import columns
 from swarm_ros.core.rules import Decider, Decisions
 from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
@@ -198,8 +199,7 @@ class Lockstep:
             raise Rejected("removed batch", f"{self.batch_names[k]}'s robots were removed; the world decides its strip")
         decisions_allowed(rows, tick, self.sim, self.hosts, k, self.decided, self.batch_names[k])
         if self.pending.size:  # a lost batch's last words (or a stalled one's, resumed) do not count
-            rows = rows[~np.isin(rows["id"], self.pending)]
-            if not rows.size:
+            if not (rows := rows[~np.isin(rows["id"], self.pending)]).size:
                 return
         self.decided[rows["id"]] = True
         self.down_since.pop(k, None)  # a batch deciding is not lost
@@ -221,12 +221,11 @@ class Lockstep:
                 return  # the monitor is behind: poll() goes on once it has caught up
             tick += 1
 
-    def _standing(self) -> np.ndarray:
-        """Moving robots of lost batches: they stand still in their last tick, then are removed."""
+    def _standing(self) -> np.ndarray:  # moving robots of lost batches: they stand still one tick, then go
         return self.pending[IS_MOVING[self.sim.state.state[self.pending]]]
 
     def _orphans(self) -> np.ndarray:  # moving robots in the strips of batches removed for good: the world's
-        return self.hosting.orphans(self.sim.state.x, self.sim.moving_ids(), self.removed_batches, self.pending)
+        return self.hosting.orphans(self.sim.state.x, self.sim.moving_ids, self.removed_batches, self.pending)
 
     def _advance(self, tick: int) -> None:
         parts = [decisions_of(tick, r) for r in self.parts]
@@ -239,9 +238,10 @@ class Lockstep:
             parts.append(self.decider.decide(s, orphans, tick))
         decisions = Decisions.concatenate(parts)
         applied = decision_rows(decisions)
-        x_before = s.x[decisions.ids]  # for the rows' routes to the batches
+        deciders = np.sort(decisions.ids)
+        before = columns(s.x[deciders], self.hosting.radius)  # where they stood: for the rows' routes
         self.parts, self.received = [], 0
-        self.decided[:] = False
+        self.decided[deciders] = False
         localized_before, losses_before = self.sim.metrics.localized, len(self.sim.losses)
         try:
             self.sim.apply(decisions)
@@ -254,15 +254,15 @@ class Lockstep:
         if len(self.sim.losses) != losses_before:  # scheduled failures, or a lost batch's robots
             self.save_book()
         s = self.sim.state
-        ids = np.union1d(self.sim.last_joins()[0], self.sim.last_removed)  # deciders and failed robots changed
-        joined = self.sim.metrics.localized != localized_before or self.sim.last_removed.size > 0
-        self._emit(tick, state_rows(ids, s), joined, applied, (decisions.ids, x_before))
+        removed = self.sim.last_removed  # the deciders changed, and failed robots
+        ids = np.union1d(deciders, removed) if removed.size else deciders
+        joined = self.sim.metrics.localized != localized_before or removed.size > 0
+        self._emit(tick, state_rows(ids, s), joined, applied, (deciders, before))
 
     def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
               moved: tuple | None = (None, None), save: bool = True) -> None:
-        """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than
-        ``window`` ticks behind. ``moved``: (ids, x before the tick) of the robots that moved, for the batches'
-        region rows; None: no region rows (a restored world sends snapshots instead)."""
+        """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than ``window``
+        ticks behind; ``moved``: (ids, columns before the tick) for the region rows, None: none (a restored world)."""
         if save:
             self.port.checkpoint(tick, rows, applied, self.sim.history[tick])
         parts = self.hosting.route(rows, *moved) if moved is not None else None
@@ -365,7 +365,7 @@ class Lockstep:
         for good); from then on the world decides for the robots that move into the strip."""
         name = self.batch_names[k]
         self.down_since.pop(k, None)
-        ids = self.hosting.orphans(self.sim.state.x, self.sim.moving_ids(), {k}, self.pending)
+        ids = self.hosting.orphans(self.sim.state.x, self.sim.moving_ids, {k}, self.pending)
         self.removed_batches.add(k)
         self.lost.append(name)
         self.save_book()
