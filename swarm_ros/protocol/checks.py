@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarm_ros.core.legality import illegal
 from swarm_ros.protocol.rows import (
     PATCH_METRES,
     TICK_SECONDS,
@@ -220,6 +219,7 @@ def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, hosts: Calla
             (``hosts``: the batch hosting each of some robots now), not moving or decided already this
             tick (``decided``), or a decision out of the rules' bounds (:mod:`swarm_ros.core.legality`).
     """
+    from swarm_ros.core.legality import illegal  # here: compiled (numba), which readers of rows do without
     from swarm_ros.core.state import IS_MOVING
 
     now = sim.tick
