@@ -61,6 +61,9 @@ def snapshot(rows: np.ndarray, where: tuple[int, int], radius: int) -> np.ndarra
     return compact(rows[keep])
 
 
+_POSE = ("state", "x", "y", "heading", "z", "pitch")  #: what a robot row carries (z, pitch: 3D only)
+
+
 class Hosting:
     """The world's map of strips to batches (batch k: the k-th admitted), and the areas it routes rows to."""
 
@@ -102,15 +105,30 @@ class Hosting:
         """The columns batch ``k`` follows: its strip and the halo."""
         return area(self.strips[k], self.halo, self.width)
 
-    def route(self, rows: np.ndarray, moved: np.ndarray | None = None,
-              before: np.ndarray | None = None) -> list[np.ndarray]:
-        """A tick's rows (sorted by id) split by batch (:func:`route`); robots ``moved`` (sorted) stood in
-        columns ``before`` before the tick (the others did not move)."""
-        if moved is not None and moved.size != rows.size:  # rows of robots that did not move too (removed)
-            at = np.searchsorted(rows["id"], moved)
-            before, moved_before = row_columns(rows, self.radius), before
-            before[at] = moved_before
-        return route(rows, before, [self.area(k) for k in range(len(self.strips))], self.radius)
+    def before(self, state, ids: np.ndarray) -> tuple[np.ndarray, ...]:
+        """What :meth:`route` needs of robots ``ids`` (the deciders) before the tick: their columns and rows."""
+        pose = tuple(getattr(state, name)[ids] for name in _POSE if getattr(state, name) is not None)
+        return (columns(state.x[ids], self.radius), *pose)
+
+    def route(self, rows: np.ndarray, moved: np.ndarray | None = None, before: tuple | None = None,
+              state=None) -> list[np.ndarray]:
+        """A tick's rows (sorted by id) split by batch (:func:`route`). Robots ``moved`` (sorted) were
+        :meth:`before` the tick as ``before`` and are as ``state`` now; one whose row did not change is
+        sent to no batch (it decided to stand as it was: a walker that lost its claim)."""
+        cols = None
+        if moved is not None:
+            cols, *pose = before
+            same = np.ones(moved.size, dtype=bool)
+            for name, was in zip((n for n in _POSE if getattr(state, n) is not None), pose):
+                same &= getattr(state, name)[moved] == was
+            if same.any():
+                rows = rows[~np.isin(rows["id"], moved[same])]
+                moved, cols = moved[~same], cols[~same]
+            if moved.size != rows.size:  # rows of robots that did not decide too (removed)
+                at = np.searchsorted(rows["id"], moved)
+                cols, moved_cols = row_columns(rows, self.radius), cols
+                cols[at] = moved_cols
+        return route(rows, cols, [self.area(k) for k in range(len(self.strips))], self.radius)
 
     def orphans(self, x: np.ndarray, moving_ids: Callable[[], np.ndarray], removed: set[int],
                 pending: np.ndarray) -> np.ndarray:

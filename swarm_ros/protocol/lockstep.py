@@ -18,7 +18,6 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
-from swarm_ros.core.regions import columns
 from swarm_ros.core.rules import Decider, Decisions
 from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
@@ -239,7 +238,7 @@ class Lockstep:
         decisions = Decisions.concatenate(parts)
         applied = decision_rows(decisions)
         deciders = np.sort(decisions.ids)
-        before = columns(s.x[deciders], self.hosting.radius)  # where they stood: for the rows' routes
+        before = self.hosting.before(s, deciders)  # their rows before the tick: for the region rows
         self.parts, self.received = [], 0
         self.decided[deciders] = False
         localized_before, losses_before = self.sim.metrics.localized, len(self.sim.losses)
@@ -262,10 +261,10 @@ class Lockstep:
     def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
               moved: tuple | None = (None, None), save: bool = True) -> None:
         """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than ``window``
-        ticks behind; ``moved``: (ids, columns before the tick) for the region rows, None: none (a restored world)."""
+        ticks behind; ``moved``: (ids, their rows before) for the region rows, None: none (a restored world)."""
         if save:
             self.port.checkpoint(tick, rows, applied, self.sim.history[tick])
-        parts = self.hosting.route(rows, *moved) if moved is not None else None
+        parts = self.hosting.route(rows, *moved, self.sim.state) if moved is not None else None
         self.queued.append((tick, rows, joined, applied, parts))
         self._flush()
 

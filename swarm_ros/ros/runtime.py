@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from typing import Protocol
@@ -30,6 +31,7 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ORPHANED = 0, 1, 2, 129  # and EXIT_INTER
 #: rcl's log file off, which would otherwise leave an empty ~/.ros/log/python_<pid>_<time>.log per command.
 TOOL_ROS_ARGS = ("--ros-args", "--disable-external-lib-logs")
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
+_TEARDOWN_S = 5.0  # seconds rclpy's and DDS's teardown may take once the node is closed
 
 
 class SwarmNode(Protocol):
@@ -150,8 +152,6 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
     except (KeyboardInterrupt, ExternalShutdownException):
         code = EXIT_INTERRUPTED
     finally:
-        if executor is not None:
-            executor.shutdown()
         if swarm is not None:
             try:
                 swarm.close(code)
@@ -160,6 +160,14 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
                     code = _fail(name, f"while closing: {exc}", EXIT_FAILED)
                 else:  # the error already said is the one the launcher reports; this one goes to the log
                     swarm.node.get_logger().warn(f"while closing: {exc}")
+        # Everything is saved: rclpy's and DDS's teardown may not hold the exit up (a monitor that had
+        # written its run once hung in it until the launcher killed it, failing a finished run).
+        watchdog = threading.Timer(_TEARDOWN_S, _hung_teardown, (name, code))
+        watchdog.daemon = True
+        watchdog.start()
+        if executor is not None:
+            executor.shutdown()
+        if swarm is not None:
             swarm.node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
@@ -168,6 +176,12 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         get_default_context().destroy()
         sys.stdout.flush()
         sys.stderr.flush()
+    os._exit(code)
+
+
+def _hung_teardown(name: str, code: int) -> None:
+    print(f"swarm_ros {name}: rclpy's shutdown took over {_TEARDOWN_S:g} s; exiting without it", file=sys.stderr,
+          flush=True)
     os._exit(code)
 
 
