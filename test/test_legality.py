@@ -98,19 +98,8 @@ def test_the_bounds_follow_the_rule_set():
 
 
 # The bounds as numpy statements (the implementation before it was compiled): the reference the kernel must equal.
-def _reference(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray, y0: np.ndarray,
-            claim: np.ndarray, x: np.ndarray, y: np.ndarray, heading: np.ndarray, z0: np.ndarray | None = None,
-            z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> np.ndarray:
-    """A bool mask of the decisions the rules could not have produced.
-
-    Args:
-        params: the run's parameters (rule set, vision radius).
-        radius: the world's radius R (patch coordinates run from -R to R).
-        frontier: the flat frontier grid at the start of the tick (W*W bools).
-        x0, y0: where each deciding robot stood at the start of the tick (patches).
-        claim, x, y, heading: the decisions, aligned with ``x0``/``y0``.
-        z0, z, pitch: in a 3D world (all three given), the z before, and the decided z and elevation.
-    """
+def _reference(params, radius, frontier, x0, y0, claim, x, y, heading, z0=None, z=None, pitch=None) -> np.ndarray:
+    """``illegal``'s mask, one numpy statement per bound (arguments as ``illegal``'s)."""
     size = 2 * radius + 1
     limit = radius + 0.5
     step = max_step(params) + SLACK

@@ -99,7 +99,8 @@ class RobotBatchNode:
         return regions.strip(own["batch"], own["batches"], cuts, radius)
 
     def _on_snapshot(self, msg: Cloud) -> None:
-        """Every robot's row at some tick: start (again) from it if it is newer than what we hold."""
+        """This batch's region at some tick (its area's moving robots, every stationary one): start (again) from
+        it if it is newer than what we hold."""
         try:
             tick, rows = checks.snapshot(msg, self.params.robots, self.radius, self.shape.dims)
         except Rejected as fault:
