@@ -26,8 +26,7 @@ from helpers import Recording, rrd_verify
 from test_ros_graph import _env, _processes_mentioning
 
 from swarm_ros.core import RunParams, Shape
-from swarm_ros.core.regions import balanced_cuts, columns, strip
-from swarm_ros.core.state import initial_state
+from swarm_ros.core.regions import batch_strip, columns
 
 pytestmark = pytest.mark.process
 
@@ -73,10 +72,7 @@ def _lost_at(world_log: str, name: str) -> tuple[float, int]:
 
 def _strip(batch: int, batches: int = 3) -> tuple[int, int]:
     """The columns robot_batch_<batch> of ``batches`` hosts in these runs (the default cuts)."""
-    shape, params = Shape.load("star"), RunParams(robots=ROBOTS)
-    radius = shape.world.radius
-    cuts = balanced_cuts(initial_state(shape, ROBOTS, params.seed).x[4:], radius, batches)
-    return strip(batch, batches, cuts, radius)
+    return batch_strip(Shape.load("star"), RunParams(robots=ROBOTS), batch, batches)
 
 
 def _check_consistent_run(out: Path, batch: int) -> dict:

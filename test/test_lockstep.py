@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from swarm_ros.core import RunParams, Shape, Simulation
-from swarm_ros.core.regions import balanced_cuts, columns, strip
+from swarm_ros.core.regions import batch_strip, columns
 from swarm_ros.core.rules import Decider
-from swarm_ros.core.state import RobotState, initial_state
+from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR, batch_name
@@ -98,10 +98,8 @@ class Run:
     def __init__(self, batches: int = 2, cuts: list[int] | None = None, shape: str = "star", **policy) -> None:
         self.shape = Shape.load(shape)
         self.params = RunParams(robots=ROBOTS, seed=7, max_ticks=MAX_TICKS)
-        radius = self.shape.world.radius
-        start = initial_state(self.shape, ROBOTS, self.params.seed)
-        cuts = balanced_cuts(start.x[4:], radius, batches) if cuts is None else np.asarray(cuts)
-        self.strips = [strip(k, batches, cuts, radius) for k in range(batches)]
+        text = ",".join(map(str, cuts or []))
+        self.strips = [batch_strip(self.shape, self.params, k, batches, text) for k in range(batches)]
         self.clock, self.port, self.log = Clock(), Port(), Log()
         self.rejections = Rejections(self.log)
         self.ls = Lockstep(Simulation(self.shape, self.params), Policy(**{"monitor_window": 0, **policy}), self.port,
@@ -394,9 +392,8 @@ class RegionCheck:
     robot, with the world's poses and the world's frontier."""
 
     def __init__(self, run: Run) -> None:
-        from swarm_ros.core.regions import halo
+        from swarm_ros.core.regions import area, halo
         from swarm_ros.core.replica import Replica
-        from swarm_ros.protocol.hosting import area
 
         self.run, self.seen = run, 0
         world = run.shape.world

@@ -100,13 +100,11 @@ def _handovers(batch: int, ticks: range) -> int:
     """Robots that crossed into or out of ``batch``'s strip (of 3, the default cuts) in ``ticks``, in the
     in-process run of RUN: the handovers a batch killed then had to get right."""
     from swarm_ros.core import Simulation
-    from swarm_ros.core.regions import balanced_cuts, columns, strip
-    from swarm_ros.core.state import initial_state
+    from swarm_ros.core.regions import batch_strip, columns
 
     shape, params = Settings(shape="star", seed=5, rules="local").resolve()
     radius = shape.world.radius
-    first, last = strip(batch, 3, balanced_cuts(initial_state(shape, params.robots, params.seed).x[4:], radius, 3),
-                        radius)
+    first, last = batch_strip(shape, params, batch, 3)
     sim, crossed = Simulation(shape, params), 0
     while sim.tick < ticks.stop and not sim.done:
         inside = (columns(sim.state.x, radius) >= first) & (columns(sim.state.x, radius) <= last)

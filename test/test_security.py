@@ -25,8 +25,8 @@ from helpers import host_env, make_cloud
 from swarm_ros.app import cli
 from swarm_ros.app.processes import DomainLock, node_command, node_env
 from swarm_ros.core.params import Settings
-from swarm_ros.core.regions import balanced_cuts, columns, strip
-from swarm_ros.core.state import RobotState, initial_state
+from swarm_ros.core.regions import batch_strip, columns
+from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_label, compact, decision_rows
 from swarm_ros.protocol.runkey import KEY_ENV
 from swarm_ros.ros.node_params import params_yaml
@@ -58,8 +58,7 @@ class _Batches:
         self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
         self.radius = shape.world.radius
         self.names = ["robot_batch_0", "robot_batch_1"]
-        cuts = balanced_cuts(initial_state(shape, params.robots, params.seed).x[4:], self.radius, 2)
-        self.strips = [strip(k, 2, cuts, self.radius) for k in range(2)]
+        self.strips = [batch_strip(shape, params, k, 2) for k in range(2)]
         # tagged with the run's key, as the run's own nodes do
         signers = [Signer(node, key, n) for n in self.names]
         self.pubs = [signers[k].publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS)

@@ -90,6 +90,29 @@ def strip(batch: int, batches: int, cuts: np.ndarray, radius: int) -> tuple[int,
     return int(edges[batch]), int(edges[batch + 1]) - 1
 
 
+def batch_strip(shape, params, batch: int, batches: int, region_cuts: str = "") -> tuple[int, int]:
+    """The strip batch ``batch`` of ``batches`` hosts in a run of ``shape`` and ``params``: cut at ``region_cuts``,
+    or (empty) where each strip starts with as many robots; their places at tick 0 follow from the seed, so every
+    process finds the same cuts alone.
+
+    Raises:
+        ParameterError: as :func:`parse_cuts` and :func:`strip`.
+    """
+    from swarm_ros.core.state import initial_state  # here: it loads numba, which the launcher's checks do without
+
+    radius = shape.world.radius
+    if region_cuts:
+        cuts = parse_cuts(region_cuts)
+    else:
+        cuts = balanced_cuts(initial_state(shape, params.robots, params.seed).x[4:], radius, batches)
+    return strip(batch, batches, cuts, radius)
+
+
+def area(strip: tuple[int, int], halo_columns: int, width: int) -> tuple[int, int]:
+    """(first, last) column a batch with ``strip`` follows: the strip and ``halo_columns`` each side, in the world."""
+    return max(strip[0] - halo_columns, 0), min(strip[1] + halo_columns, width - 1)
+
+
 def format_strip(first: int, last: int, radius: int) -> str:
     """A strip as a user reads it: the x range of its columns."""
     return f"x {first - radius}..{last - radius}"

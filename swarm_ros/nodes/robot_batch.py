@@ -34,12 +34,10 @@ from std_msgs.msg import Empty, Int64MultiArray
 from swarm_ros.core import regions
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
-from swarm_ros.core.state import initial_state
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
-from swarm_ros.protocol.hosting import area
 from swarm_ros.protocol.rows import batch_label, decision_rows, pose_of
 from swarm_ros.protocol.status import RunFailed, has_ended
 from swarm_ros.ros import graph as msgs
@@ -58,8 +56,9 @@ class RobotBatchNode:
         run, own = read_parameters(node, "robot_batch")
         self.shape, self.params = run.resolve()
         n, world = self.params.robots, self.shape.world
-        self.strip = self._strip(own)
-        self.replica = Replica(self.shape, n, area(self.strip, regions.halo(self.params.vision_radius), world.size))
+        self.strip = regions.batch_strip(self.shape, self.params, own["batch"], own["batches"], own["region_cuts"])
+        self.replica = Replica(self.shape, n, regions.area(self.strip, regions.halo(self.params.vision_radius),
+                                                           world.size))
         self.decider = Decider(self.shape, self.params)
         self.finished = False
         self.ended_at: float | None = None  # time.monotonic() when the world's outcome arrived
@@ -86,17 +85,6 @@ class RobotBatchNode:
     def load(self) -> None:
         """The heavy part, once the endpoints exist: the world and the other batches are discovered meanwhile."""
         warm_up(self.shape, self.params)
-
-    def _strip(self, own: dict) -> tuple[int, int]:
-        """The columns this batch hosts: strip ``batch`` of ``batches``, cut at ``region_cuts`` or where each strip
-        starts with as many robots (their places at tick 0 follow from the seed)."""
-        radius = self.shape.world.radius
-        if own["region_cuts"]:
-            cuts = regions.parse_cuts(own["region_cuts"])
-        else:
-            start = initial_state(self.shape, self.params.robots, self.params.seed)
-            cuts = regions.balanced_cuts(start.x[4:], radius, own["batches"])
-        return regions.strip(own["batch"], own["batches"], cuts, radius)
 
     def _on_snapshot(self, msg: Cloud) -> None:
         """This batch's region at some tick (its area's moving robots, every stationary one): start (again) from

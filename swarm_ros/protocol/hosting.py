@@ -22,20 +22,15 @@ from collections.abc import Callable
 
 import numpy as np
 
-from swarm_ros.core.regions import columns, format_strip, halo
+from swarm_ros.core.regions import area, columns, format_strip, halo
 from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.rows import PATCH_METRES, compact
 
 
-def area(strip: tuple[int, int], halo: int, width: int) -> tuple[int, int]:
-    """(first, last) column a batch with ``strip`` follows: the strip and ``halo`` columns each side, in the world."""
-    return max(strip[0] - halo, 0), min(strip[1] + halo, width - 1)
-
-
 def row_columns(rows: np.ndarray, radius: int) -> np.ndarray:
     """The column of each robot row's pose."""
-    return np.floor(rows["x"] / PATCH_METRES + 0.5).astype(np.int64) + radius
+    return columns(rows["x"] / PATCH_METRES, radius)
 
 
 def route(rows: np.ndarray, before: np.ndarray | None, areas: list[tuple[int, int]],
