@@ -164,7 +164,9 @@ def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, command):
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
         assert "Traceback" not in err, err
-        if proc.returncode != 0:
+        if proc.returncode == -signal.SIGINT:  # reached before the interpreter had set its handler (a loaded
+            assert not err  # machine): killed by the signal as any program, silent; a shell says 130
+        elif proc.returncode != 0:
             assert proc.returncode == 130 and err.strip().endswith("interrupted"), err
 
 
