@@ -73,9 +73,12 @@ def run_ros2(spec: RunSpec, processes: int = PROCESSES.default) -> dict:
 
 
 _IN_RUN = False  # in a worker: whether it is running a run now (else it waits for one, with nothing to stop)
+_STOPPED = False  # in a worker: the parent's SIGTERM came
 
 
 def _interrupt(signum: int, frame: object) -> None:
+    global _STOPPED
+    _STOPPED = True
     if not _IN_RUN:
         os._exit(130)  # idle: nothing to unwind (a KeyboardInterrupt there is a traceback from the pool's loop)
     raise KeyboardInterrupt
@@ -101,6 +104,8 @@ def _work(job: tuple[RunSpec, str, int]) -> dict:
         os._exit(130)
     finally:
         _IN_RUN = False
+        if _STOPPED:  # the signal landed where the run took it as its own end (its shutdown): stop anyway, or
+            os._exit(130)  # this worker would wait for a next run while the parent waits for it to exit
 
 
 def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess",
