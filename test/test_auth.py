@@ -17,7 +17,7 @@ from std_msgs.msg import Int64MultiArray  # noqa: E402
 from swarm_ros.core.errors import ConfigError  # noqa: E402
 from swarm_ros.core.metrics import METRIC_COLUMNS  # noqa: E402
 from swarm_ros.protocol import tag as tags  # noqa: E402
-from swarm_ros.protocol.cdr import encode_cloud  # noqa: E402
+from swarm_ros.protocol.cdr import cloud_parts, encode_cloud  # noqa: E402
 from swarm_ros.protocol.checks import Rejected, Rejections  # noqa: E402
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, TAG_PREFIX, batch_label, is_tag  # noqa: E402
 from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key  # noqa: E402
@@ -226,6 +226,22 @@ def test_messages_are_aligned_to_four_bytes_as_dds_delivers_them():
     node = _Node("world")
     auth.Signer(node, KEY).publisher(DiagnosticArray, msgs.STATUS, None).publish(msgs.status_message(1, "r", "x"))
     assert len(node.sent[0][1]) % 4 == 0
+
+
+@pytest.mark.parametrize("n", [0, 1, 3, 1000])
+def test_a_cloud_sealed_in_parts_is_the_cloud_sealed_whole(n):
+    """The publishers seal a cloud's parts (the rows not copied); the bytes are those of sealing it whole, and a
+    verifier takes them."""
+    rows = _rows(ROBOT_ROW, n)
+    parts_sealer, whole_sealer = tags.Sealer(KEY, "world"), tags.Sealer(KEY, "world")
+    whole_sealer.nonce = parts_sealer.nonce
+    blank, same_blank = parts_sealer.blank(), whole_sealer.blank()
+    sealed = parts_sealer.seal(msgs.ROBOTS, cloud_parts(rows, 7, tag=blank), blank)
+    assert sealed == whole_sealer.seal(msgs.ROBOTS, encode_cloud(rows, 7, tag=same_blank), same_blank)
+    assert len(sealed) % 4 == 0
+    assert tags.Verifier(KEY).verify(msgs.ROBOTS, sealed).sender == "world"
+    with pytest.raises(ValueError, match="blank tag"):  # a blank among the rows is not where a tag belongs
+        parts_sealer.seal(msgs.ROBOTS, (b"head", memoryview(blank.encode())), blank)
 
 
 def test_the_run_key_comes_from_the_environment():

@@ -77,6 +77,14 @@ def encode_cloud(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str
     """A serialized PointCloud2 of ``rows`` (a record array of a :mod:`swarm_ros.protocol.rows` type), stamped
     with ``tick``: one row of ``rows.size`` points, little-endian, dense. With a ``tag``, one more point
     field after the layout's, named by the tag, holding nothing (:mod:`swarm_ros.protocol.tag`)."""
+    return b"".join(cloud_parts(rows, tick, frame_id, tag))
+
+
+def cloud_parts(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str = "") -> tuple[bytes, memoryview,
+                                                                                                bytes]:
+    """:func:`encode_cloud`'s bytes in three parts, not joined: everything before the points (the tag
+    included), the points as a view of ``rows`` (not copied), and the last byte (is_dense). A sealer takes its
+    MAC over the parts and joins them once (:meth:`swarm_ros.protocol.tag.Sealer.seal`)."""
     block, height_at = _fields_block(frame_id, rows.dtype, bool(tag))
     block = block[:height_at] + struct.pack("<II", 1, rows.size) + block[height_at + 8:]
     if tag:
@@ -84,9 +92,10 @@ def encode_cloud(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str
     block += b"\x00"  # is_bigendian
     block += _pad(8 + len(block))
     step = rows.dtype.itemsize
-    data = np.ascontiguousarray(rows).tobytes()
-    return b"".join((ENCAPSULATION, _STAMP.pack(int(tick) * TICK_SECONDS, 0), block,
-                     struct.pack("<III", step, step * rows.size, len(data)), data, b"\x01"))
+    data = memoryview(np.ascontiguousarray(rows).view(np.uint8)).cast("B")
+    head = b"".join((ENCAPSULATION, _STAMP.pack(int(tick) * TICK_SECONDS, 0), block,
+                     struct.pack("<III", step, step * rows.size, data.nbytes)))
+    return head, data, b"\x01"
 
 
 def encode_clock(tick: int) -> bytes:

@@ -31,7 +31,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Int64MultiArray, MultiArrayDimension
 
-from swarm_ros.protocol.cdr import TAG_DATATYPE, decode_cloud, encode_cloud
+from swarm_ros.protocol.cdr import TAG_DATATYPE, cloud_parts, decode_cloud
 from swarm_ros.protocol.checks import Rejected, Rejections
 from swarm_ros.protocol.plan import BATCHES
 from swarm_ros.protocol.rows import TAG_PREFIX, is_tag, parse_batch_label
@@ -107,9 +107,9 @@ class SignedPublisher:
     def publish_rows(self, rows: np.ndarray, tick: int) -> bytes:
         """Publish ``rows`` as a PointCloud2 stamped with ``tick`` (:func:`encode_cloud`), sealed; returns its bytes."""
         blank = self.sealer.blank()
-        return self._send(encode_cloud(rows, tick, tag=blank), blank)
+        return self._send(cloud_parts(rows, tick, tag=blank), blank)
 
-    def _send(self, data: bytes, blank: str) -> bytes:
+    def _send(self, data: tuple, blank: str) -> bytes:
         data = self.sealer.seal(self.topic, data, blank)
         self.pub.publish(data)
         return data
