@@ -8,7 +8,7 @@ from hypothesis.extra.numpy import arrays
 from scipy import ndimage
 
 from swarm_ros.core import ParameterError, RobotState, Shape
-from swarm_ros.core.state import frontier_of, initial_state, near_any
+from swarm_ros.core.state import frontier_of, has_repeats, initial_state, near_any
 
 pytestmark = pytest.mark.unit
 
@@ -70,3 +70,11 @@ def test_too_many_or_too_few_robots_are_rejected(star):
 @given(arrays(bool, st.tuples(st.integers(1, 20), st.integers(1, 20))))
 def test_near_any_is_a_3x3_binary_dilation(grid):
     assert np.array_equal(near_any(grid), ndimage.binary_dilation(grid, structure=np.ones((3, 3), bool)))
+
+
+@settings(max_examples=200, deadline=None)
+@given(arrays(np.int64, st.integers(0, 40), elements=st.integers(-5, 30)), st.booleans())
+def test_has_repeats_says_whether_a_value_occurs_twice(values, ordered):
+    """Increasing input takes a shortcut (the graph's rows come sorted by id); anything else is sorted first."""
+    values = np.sort(values) if ordered else values
+    assert has_repeats(values) == (len(set(values.tolist())) < values.size)
