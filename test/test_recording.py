@@ -104,20 +104,26 @@ def test_recording_holds_the_static_world_blueprint_and_occupancy(recording, run
     assert counts == sorted(set(counts)), "an image is logged only when the filled patches changed"
 
 
-def test_the_run_table_names_the_rule_set_and_its_switches(run_dir):
+def run_table(rrd: Path) -> str:
+    """The recording's static run table (the run's parameters, markdown)."""
     import warnings
 
     from rerun.chunk import RrdReader
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        chunks = RrdReader(str(run_dir / "recording.rrd")).stream().to_chunks()
+        chunks = RrdReader(str(rrd)).stream().to_chunks()
     texts = [c.to_record_batch().column("TextDocument:text").flatten().to_pylist()[0]
              for c in chunks if c.entity_path == f"/{RUN_INFO}" and c.is_static]
     assert len(texts) == 1
+    return texts[0]
+
+
+def test_the_run_table_names_the_rule_set_and_its_switches(run_dir):
+    table = run_table(run_dir / "recording.rrd")
     for row in ("| rules | paper |", "| join | walk |", "| crowding | ahead |", "| steps | one |",
-                "| rule set in force | paper |"):
-        assert row in texts[0], row
+                "| rule set in force | paper |", "| robots logged | every 1 tick(s) |"):
+        assert row in table, row
 
 
 def test_rerun_rrd_verify_passes(run_dir):
@@ -129,6 +135,23 @@ def test_every_kth_tick_logs_fewer_robots_and_every_metric(tmp_path):
     out = tmp_path / "every"
     assert simulate(out, "--record-every", "50") == 0
     assert_matches_run(Recording(out / "recording.rrd"), out, every=50)
+
+
+def test_a_large_swarm_is_logged_every_kth_tick_chosen_from_its_size_and_says_so(tmp_path, monkeypatch, capsys):
+    """With no --record-every, a swarm of more robots than POSES_PER_TICK is logged every ceil(N / it)-th tick
+    (lowered here so that the 460 robots stand for a large swarm); the run table and the command say so."""
+    from swarm_ros.artifacts import recording_options
+
+    monkeypatch.setattr(recording_options, "POSES_PER_TICK", 200)
+    out = tmp_path / "auto"
+    assert cli.main(["simulate", *[f for f in FLAGS if f != "--quiet"], "--out", str(out)]) == 0
+    assert_matches_run(Recording(out / "recording.rrd"), out, every=3)
+    assert "the recording logs the robots every 3 ticks (460 robots; --record-every 1 logs every tick)" \
+        in capsys.readouterr().err
+    assert "| robots logged | every 3 tick(s) |" in run_table(out / "recording.rrd")
+    monkeypatch.setattr(recording_options, "POSES_PER_TICK", 460)  # as many as the swarm: every tick
+    assert recording_options.RecordingOptions().every_for(460) == 1
+    assert recording_options.RecordingOptions(every=7).every_for(10 ** 6) == 7  # chosen by the user: kept
 
 
 def test_same_seed_gives_a_recording_with_the_same_data(recording, tmp_path):
@@ -248,7 +271,7 @@ def test_connect_streams_the_same_data_to_a_running_viewer(recording, tmp_path):
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--record-every", "0"], "record_every must be an integer >= 1, got 0"),
+    (["--record-every=-1"], "record_every must be an integer >= 1 (0 = chosen from the swarm's size), got -1"),
     (["--connect", "http://localhost:9876"], "viewer URL must start with one of rerun://"),
 ])
 def test_bad_recording_options_get_one_line_and_write_nothing(tmp_path, capsys, args, message):

@@ -105,7 +105,8 @@ def test_unknown_or_ill_typed_parameters_are_refused(ros_context, kind, values, 
     ("world", {"max_restarts": -1}, "max_restarts must be an integer >= 0, got -1"),
     ("world", {"restart_timeout": -2.0}, "restart_timeout must be a number > 0, got -2"),
     ("robot_batch", {"incarnation": -1}, "incarnation must be an integer >= 0, got -1"),
-    ("monitor", {"record_every": 0}, "record_every must be an integer >= 1, got 0"),
+    ("monitor", {"record_every": -1},
+     "record_every must be an integer >= 1 (0 = chosen from the swarm's size), got -1"),
 ])
 def test_node_parameters_out_of_range_are_refused(ros_context, kind, values, message):
     node = _node(ros_context, kind, **values)

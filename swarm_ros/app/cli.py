@@ -209,7 +209,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     rec.add_argument("--no-recording", action="store_false", dest="record", default=None,
                      help="do not write recording.rrd")
     rec.add_argument("--record-every", type=_checked(_RECORD_EVERY), metavar="K",
-                     help="log the robots every K-th tick only, for very large runs (default: 1, every tick)")
+                     help="log the robots every K-th tick only (default: from the swarm's size: every tick up to "
+                          "10,000 robots, then every ceil(N/10,000)-th; the metrics every tick)")
     rec.add_argument("--spawn", action="store_true", help="also stream live to a new Rerun viewer (needs a display)")
     rec.add_argument("--connect", metavar="URL",
                      help="also stream live to a running Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")

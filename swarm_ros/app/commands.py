@@ -110,6 +110,9 @@ def _prepare(args: argparse.Namespace, graph: bool = False) -> tuple[Settings, S
 
         recover_killed(out)
     check_leftovers(out)
+    if recording.active and not recording.every and recording.every_for(params.robots) > 1 and not args.quiet:
+        print(f"{PROG}: the recording logs the robots every {recording.every_for(params.robots)} ticks "
+              f"({params.robots:,} robots; --record-every 1 logs every tick)", file=sys.stderr)
     return settings, shape, params, out, recording.reachable(), nodes
 
 

@@ -1,8 +1,7 @@
 """The monitor node: per-tick metrics from what the world publishes, and the run's output directory.
 
-It rebuilds the swarm's state from /swarm/robots (:class:`swarm_ros.core.replica.Replica`),
-counts it with the in-process engine's own functions
-(:func:`swarm_ros.core.metrics.tick_metrics`, :func:`~swarm_ros.core.metrics.outcome_of`),
+It rebuilds the swarm's state from /swarm/robots (:class:`swarm_ros.core.replica.Replica`), counts it
+with the in-process engine's own functions (:func:`swarm_ros.core.metrics.tick_metrics`, :func:`~.outcome_of`),
 publishes each tick's metrics on /swarm/metrics, records the run with the in-process
 engine's own :class:`~swarm_ros.artifacts.rerun_recording.Recorder` (streamed to ``<out_dir>.partial.rrd``
 while the run goes on), and when the run ends writes the run directory exactly as
@@ -108,7 +107,8 @@ class MonitorNode:
             resume(self)
         importlib.import_module("swarm_ros.artifacts.plots")  # matplotlib: now, not at the end, when the run is written
         self.readers[msgs.STATUS] = self._subscribe(msgs.STATUS)  # loaded: the world may start (latched)
-        node.get_logger().info(f"monitor: writing to {self.out}")
+        every = self.recorder.every if self.recorder is not None else 1
+        node.get_logger().info(f"monitor: writing to {self.out}" + f" (robots every {every} ticks)" * (every > 1))
 
     def _subscribe(self, topic: str):
         """A reader of ``topic``: each message its tag proves goes into the bag as it came, then to its handler."""
