@@ -139,11 +139,25 @@ def batch(domain: int, b: int, k: int, sizes: Path) -> None:
 
 
 def bare(seed: int, k: int, domain: int) -> tuple[int, float]:
-    """(ticks, seconds) of one bare lockstep with ``k`` batches."""
+    """(ticks, seconds) of one bare lockstep with ``k`` batches, the star's message sizes."""
+    return _lockstep(np.stack(star_rows(seed)), k, domain)
+
+
+def bare_fixed(k: int, rows: int, decisions: int, ticks: int, domain: int) -> float:
+    """Seconds per tick of a bare lockstep with ``k`` batches where every tick the world sends ``rows`` robot
+    rows (one message every batch takes) and each batch answers with ``decisions`` decision rows: the
+    transport's part of a tick at a given size (scripts/bench_scale.py's projection)."""
+    sizes = np.stack([np.full(ticks, rows), np.full(ticks, decisions * k)])
+    done, seconds = _lockstep(sizes, k, domain)
+    return seconds / done
+
+
+def _lockstep(sizes_per_tick: np.ndarray, k: int, domain: int) -> tuple[int, float]:
+    """(ticks, seconds) of one bare lockstep with ``k`` batches: row (rows sent, moving robots) per tick."""
     with tempfile.TemporaryDirectory() as tmp:
         sizes, out = Path(tmp) / "sizes.npy", Path(tmp) / "out.json"
         with open(sizes, "wb") as f:
-            np.save(f, np.stack(star_rows(seed)))
+            np.save(f, sizes_per_tick)
         me = [sys.executable, __file__, "--domain-id", str(domain), "--sizes", str(sizes)]
         procs = [subprocess.Popen([*me, "--role", f"batch:{b}:{k}"]) for b in range(k)]
         procs.append(subprocess.Popen([*me, "--role", f"world:{k}", "--out", str(out)]))

@@ -10,7 +10,18 @@ median and range over ``--repeats``, and each node's CPU per tick (its CPU from 
 topic per tick (its log's last line), and K against the smallest K as ratios.
 ``--bare`` turns the recording and the bag off. docs/ros_graph.md discusses the numbers.
 
+``--projection`` also prints, for each size and K, the tick time the graph would take on K hosts with one
+core per process: the world's CPU per tick plus the slowest batch's plus the transport's part of a tick,
+or the monitor's CPU per tick if that is longer (the monitor runs beside the lockstep, up to
+``monitor_window`` ticks behind). CPU per tick is each node's as measured in the runs above (median over
+``--repeats``); the transport's part is measured here too, by a bare rclpy lockstep
+(scripts/bench_bare.py) of K batches exchanging messages of the measured sizes (the largest batch's
+region rows a tick, its share of the moving robots' decisions) and doing nothing else. On this 2-core
+machine every process of a K = 8 graph shares two cores, so each one's CPU per tick is measured under
+contention: the projection says what the code's per-process work allows, not what this machine shows.
+
     .venv/bin/python scripts/bench_scale.py [--robots 10000 50000] [--processes 1 2 4] [--ticks 300] [--bare]
+        [--repeats 3] [--projection]
 """
 
 from __future__ import annotations
@@ -73,14 +84,46 @@ def received(logs: Path, ticks: int) -> dict[str, float]:
     return out
 
 
+def moving_per_tick(run: Path) -> float:
+    """Moving robots per tick of a run (metrics.csv, the ticks before the last): the decisions a tick takes."""
+    with (run / "metrics.csv").open() as f:
+        header = f.readline().strip().split(",")
+        col = header.index("moving")
+        moving = [int(line.split(",")[col]) for line in f]
+    return statistics.fmean(moving[:-1] or moving)
+
+
+def project(robots: int, measured: dict, sim_tick_ms: float, ticks: int) -> list[str]:
+    """The projection's rows for one size (see the module's docstring); ``measured``: K -> (CPU per tick of
+    each node, largest bytes of rows a batch took per tick, moving robots per tick)."""
+    import bench_bare
+
+    lines = []
+    for k, (cpu, largest, moving) in measured.items():
+        batches = [ms for node, ms in cpu.items() if node.startswith("robot_batch")]
+        world, batch, monitor = cpu.get("world", 0.0), max(batches, default=0.0), cpu.get("monitor", 0.0)
+        transport = 1000 * bench_bare.bare_fixed(k, max(1, round(largest / ROBOT_ROW_BYTES)),
+                                                 max(1, round(moving / k)), min(ticks, 100), 90 + k)
+        tick = max(world + batch + transport, monitor)
+        lines.append(f"{robots:>9,} {k:>3} {world:>8.1f} {batch:>8.1f} {monitor:>8.1f} {transport:>10.1f} "
+                     f"{tick:>10.1f} {sim_tick_ms:>11.1f} {tick / sim_tick_ms:>7.1f}x")
+    return lines
+
+
+PROJECTION_HEAD = (f"{'robots':>9} {'K':>3} {'world':>8} {'batch':>8} {'monitor':>8} {'transport':>10} "
+                   f"{'projected':>10} {'in-process':>11} {'ratio':>8}")
+ROBOT_ROW_BYTES = 40  #: bytes of a /swarm/robots row, the bare lockstep's row (a region row is 29)
+
+
 def _spread(values: list[float]) -> str:
     return f"{statistics.median(values):.2f} ({min(values):.2f}-{max(values):.2f})"
 
 
 def scale(sizes: list[int], processes: list[int], tmp: Path, ticks: int = 300, seed: int = 1,
-          repeats: int = 1, bare: bool = False) -> None:
+          repeats: int = 1, bare: bool = False, projection: bool = False) -> None:
     extra = ["--no-recording"] if bare else []  # simulate writes no bag
     graph_extra = ["--no-bag"] if bare else []
+    projected: list[str] = []
     for robots in sizes:
         shape, radius = disc_file(robots, tmp)
         common = ["--shape", str(shape), "--world-radius", str(radius), "--seed", str(seed), "--max-ticks",
@@ -94,18 +137,21 @@ def scale(sizes: list[int], processes: list[int], tmp: Path, ticks: int = 300, s
             sim_runs.append(json.loads((tmp / f"sim{robots}" / "summary.json").read_text())["wall_seconds"])
         sim_run = statistics.median(sim_runs)
         print(f"{'in-process':<22} {_spread(sim_runs):>18} {_spread(sim_whole):>18} {1:>13.1f}x")
-        medians, traffic = {}, {}
+        medians, traffic, measured = {}, {}, {}
         for k in processes:
             out = tmp / f"run{robots}-{k}"
-            runs, whole = [], []
+            runs, whole, cpus = [], [], []
             for _ in range(repeats):
                 whole.append(_swarm(["run", *common, *graph_extra, "--processes", str(k), "--out", str(out)]))
                 runs.append(json.loads((out / "summary.json").read_text())["wall_seconds"])
+                cpus.append(node_cpu(out / "logs", ticks))
             medians[k] = statistics.median(runs)
-            cpu = ", ".join(f"{node} {ms:.1f}" for node, ms in node_cpu(out / "logs", ticks).items())
+            cpu_ms = {node: statistics.median(c[node] for c in cpus if node in c) for node in cpus[-1]}
+            cpu = ", ".join(f"{node} {ms:.1f}" for node, ms in cpu_ms.items())
             print(f"{f'ROS 2 graph, K = {k}':<22} {_spread(runs):>18} {_spread(whole):>18} "
                   f"{medians[k] / sim_run:>13.1f}x   {cpu}")
             traffic[k] = received(out / "logs", ticks)
+            measured[k] = (cpu_ms, max(traffic[k].values(), default=0.0), moving_per_tick(out))
         print("bytes of rows each batch received per tick (its region topic, the last run):")
         for k, per in traffic.items():
             print(f"  K = {k}: " + ", ".join(f"{name} {b / 1e3:,.1f} kB" for name, b in per.items())
@@ -113,8 +159,17 @@ def scale(sizes: list[int], processes: list[int], tmp: Path, ticks: int = 300, s
         first = processes[0]
         for k in processes[1:]:
             ratio = max(traffic[k].values()) / max(traffic[first].values()) if traffic[k] and traffic[first] else 0
+            largest = [max(measured[j][0].values()) for j in (first, k)]
             print(f"K = {k} against K = {first}: run time {medians[k] / medians[first]:.2f}x, "
-                  f"largest bytes received per batch {ratio:.2f}x")
+                  f"largest bytes received per batch {ratio:.2f}x, largest CPU per tick of a process "
+                  f"{largest[1] / largest[0]:.2f}x")
+        if projection:
+            projected += project(robots, measured, 1000 * sim_run / ticks, ticks)
+    if projection:
+        print("\nprojected tick on K hosts, one core per process (ms): world + slowest batch + transport, or the "
+              "monitor if longer")
+        print(PROJECTION_HEAD)
+        print("\n".join(projected))
 
 
 def main() -> None:
@@ -124,9 +179,13 @@ def main() -> None:
     parser.add_argument("--ticks", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--bare", action="store_true", help="--no-recording --no-bag on every run")
+    parser.add_argument("--projection", action="store_true",
+                        help="also project the tick on K hosts from each process's CPU and the transport's part")
     args = parser.parse_args()
+    sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_bare
     with tempfile.TemporaryDirectory() as tmp:
-        scale(args.robots, args.processes, Path(tmp), args.ticks, repeats=args.repeats, bare=args.bare)
+        scale(args.robots, args.processes, Path(tmp), args.ticks, repeats=args.repeats, bare=args.bare,
+              projection=args.projection)
 
 
 if __name__ == "__main__":
