@@ -3,6 +3,7 @@ says which kind it is: ``pytestmark = pytest.mark.unit`` or ``pytest.mark.proces
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 
@@ -40,32 +41,52 @@ def small_ring(small_world: World) -> Shape:
 
 @pytest.fixture
 def two_hosts():
-    """(namespace of host A, namespace of host B, host A's end of the veth); removed afterwards."""
+    """(namespace of host A, namespace of host B, host A's end of its veth); removed afterwards."""
+    with lan(2) as (hosts, links):
+        yield hosts[0], hosts[1], links[0]
+
+
+@pytest.fixture
+def four_hosts():
+    """([namespaces of hosts 0..3], [each host's end of its veth]) on one switch; removed afterwards."""
+    with lan(4) as made:
+        yield made
+
+
+@contextlib.contextmanager
+def lan(count: int):
+    """``count`` hosts, each a network namespace with one veth (address 10.231.<net>.<i + 1>) whose other end is a
+    port of a bridge in a namespace of its own (the switch). Skips where namespaces cannot be made. Only this
+    test's own namespaces are touched (named after its process id); all are removed at the end."""
     if shutil.which("ip") is None:
         pytest.skip("iproute2's 'ip' is not installed: cannot make network namespaces")
     if os.geteuid() != 0:
         pytest.skip("making network namespaces needs root")
     tag = os.getpid() % 10000
-    a, b = f"swarm_ros_a{tag}", f"swarm_ros_b{tag}"
-    made = ip_in("netns", "add", a)
+    hosts = [f"swarm_ros_{chr(ord('a') + i)}{tag}" for i in range(count)]
+    switch = f"swarm_ros_s{tag}"
+    links = [f"swr{chr(ord('a') + i)}{tag}" for i in range(count)]
+    made = ip_in("netns", "add", switch)
     if made.returncode != 0:
         pytest.skip(f"cannot make a network namespace here: {made.stderr.strip()}")
     try:
         net = tag % 250
-        steps = [("netns", "add", b),
-                 ("link", "add", f"swra{tag}", "netns", a, "type", "veth", "peer", "name", f"swrb{tag}", "netns", b),
-                 ("-n", a, "addr", "add", SUBNET.format(net, 1) + "/24", "dev", f"swra{tag}"),
-                 ("-n", b, "addr", "add", SUBNET.format(net, 2) + "/24", "dev", f"swrb{tag}"),
-                 ("-n", a, "link", "set", f"swra{tag}", "up"), ("-n", b, "link", "set", f"swrb{tag}", "up"),
-                 ("-n", a, "link", "set", "lo", "up"), ("-n", b, "link", "set", "lo", "up")]
+        steps = [("-n", switch, "link", "add", "br0", "type", "bridge"), ("-n", switch, "link", "set", "br0", "up")]
+        for i, (ns, dev) in enumerate(zip(hosts, links)):
+            port = f"sws{chr(ord('a') + i)}{tag}"
+            steps += [("netns", "add", ns),
+                      ("link", "add", dev, "netns", ns, "type", "veth", "peer", "name", port, "netns", switch),
+                      ("-n", switch, "link", "set", port, "master", "br0"), ("-n", switch, "link", "set", port, "up"),
+                      ("-n", ns, "addr", "add", SUBNET.format(net, i + 1) + "/24", "dev", dev),
+                      ("-n", ns, "link", "set", dev, "up"), ("-n", ns, "link", "set", "lo", "up")]
         for step in steps:
             done = ip_in(*step)
             if done.returncode != 0:
                 pytest.skip(f"cannot set up the namespaces ({' '.join(step)}): {done.stderr.strip()}")
-        _wait_until_up((a, f"swra{tag}"), (b, f"swrb{tag}"))
-        yield a, b, f"swra{tag}"
+        _wait_until_up(*zip(hosts, links))
+        yield hosts, links
     finally:
-        for ns in (a, b):
+        for ns in (*hosts, switch):
             ip_in("netns", "del", ns)
 
 
