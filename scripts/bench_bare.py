@@ -160,9 +160,14 @@ def _lockstep(sizes_per_tick: np.ndarray, k: int, domain: int) -> tuple[int, flo
             np.save(f, sizes_per_tick)
         me = [sys.executable, __file__, "--domain-id", str(domain), "--sizes", str(sizes)]
         procs = [subprocess.Popen([*me, "--role", f"batch:{b}:{k}"]) for b in range(k)]
-        procs.append(subprocess.Popen([*me, "--role", f"world:{k}", "--out", str(out)]))
-        for p in procs:
-            p.wait(timeout=300)
+        world = subprocess.Popen([*me, "--role", f"world:{k}", "--out", str(out)])
+        world.wait(timeout=300)
+        for p in procs:  # a batch that missed the world's last message would wait for it: the world is done
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
         got = json.loads(out.read_text())
         return got["ticks"], got["seconds"]
 

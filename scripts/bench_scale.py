@@ -6,8 +6,9 @@ A disc of N patches (N robots) in a world whose area holds N robots at the star'
 (1,036 robots in a 65 x 65 world): radius 100 for 10,000. Each run stops after ``--ticks``
 ticks. Printed per engine: seconds of the run (tick 0 to its end) and of the whole command,
 median and range over ``--repeats``, and each node's CPU per tick (its CPU from "ready" to
-"done" in its log, over the ticks); then the bytes of rows each batch took from its region
-topic per tick (its log's last line), and K against the smallest K as ratios.
+"done" in its log, the monitor's to its "last tick" line, over the ticks); then the bytes of rows
+each batch took from its region topic per tick (its log's last line), and K against the smallest K
+as ratios.
 ``--bare`` turns the recording and the bag off. docs/ros_graph.md discusses the numbers.
 
 ``--projection`` also prints, for each size and K, the tick time the graph would take on K hosts with one
@@ -40,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 STAR_DENSITY = 1036 / 65 ** 2  #: robots per patch of the star's world
-_CPU = re.compile(r"\[(\w+)\]: (ready|done), .* \((\d+\.\d+) s of CPU\)")
+_CPU = re.compile(r"\[(\w+)\]: (ready|last tick|done), .* \((\d+\.\d+) s of CPU\)")
 _RECEIVED = re.compile(r"received (\d+) bytes of rows on ")
 
 
@@ -65,13 +66,14 @@ def _swarm(args: list[str]) -> float:
 
 
 def node_cpu(logs: Path, ticks: int) -> dict[str, float]:
-    """Milliseconds of CPU per tick of each node, between its 'ready' and 'done' lines."""
+    """Milliseconds of CPU per tick of each node, between its 'ready' line and its 'last tick' line (the
+    monitor's, before it writes the run directory) or else its 'done' line."""
     cpu: dict[str, dict[str, float]] = {}
     for log in logs.glob("*.log"):
         for m in _CPU.finditer(log.read_text(errors="replace")):
             cpu.setdefault(m[1], {})[m[2]] = float(m[3])
-    return {node: 1000 * (c["done"] - c["ready"]) / ticks for node, c in sorted(cpu.items())
-            if "ready" in c and "done" in c}
+    return {node: 1000 * (c.get("last tick", c.get("done", 0.0)) - c["ready"]) / ticks
+            for node, c in sorted(cpu.items()) if "ready" in c and "done" in c}
 
 
 def received(logs: Path, ticks: int) -> dict[str, float]:

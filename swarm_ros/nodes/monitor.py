@@ -177,9 +177,9 @@ class MonitorNode:
         if self.recorder is not None:
             self.recorder.metrics([metrics])
             self.recorder.robots(self.replica.state, force=self.outcome is not None)
-        if self.outcome is not None:
-            self.ended_at = time.monotonic()
-            self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
+        if self.outcome is not None:  # its CPU so far: per tick, without writing the run (scripts/bench_scale.py)
+            self.ended_at, self.wall = time.monotonic(), time.perf_counter() - (self.started_at or time.perf_counter())
+            self.node.get_logger().info(f"last tick, {tick}: {self.outcome.value} ({time.process_time():.2f} s of CPU)")
 
     def _on_decisions(self, msg: Cloud) -> None:
         """Count the decision rows of each tick (for the bag: see :meth:`_bag_complete`)."""
