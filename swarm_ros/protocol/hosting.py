@@ -45,8 +45,9 @@ def route(rows: np.ndarray, before: np.ndarray | None, areas: list[tuple[int, in
     everyone = ~IS_MOVING[rows["state"]]
     rows = compact(rows)
     width = 2 * radius + 1
-    return [rows if first == 0 and last == width - 1 else rows[everyone | ((high >= first) & (low <= last))]
-            for first, last in areas]
+    # take() of the kept rows' indices: a boolean mask over records copies them several times slower
+    return [rows if first == 0 and last == width - 1 else
+            rows.take(np.flatnonzero(everyone | ((high >= first) & (low <= last)))) for first, last in areas]
 
 
 def snapshot(rows: np.ndarray, where: tuple[int, int], radius: int) -> np.ndarray:
