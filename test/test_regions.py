@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from swarm_ros.core import Shape
@@ -33,6 +33,7 @@ def test_strips_tile_the_columns_exactly_once_for_any_cuts(radius, batches, data
     assert np.array_equal(covered, np.arange(width))
 
 
+@settings(deadline=None)  # the first example loads numba's cached kernels (0.3 s) when this module runs alone
 @given(seed=st.integers(0, 10 ** 6), batches=st.integers(1, 12))
 def test_balanced_cuts_give_each_strip_about_as_many_robots(seed, batches):
     shape = Shape.load("star")
