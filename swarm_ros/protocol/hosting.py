@@ -117,8 +117,10 @@ class Hosting:
             same = np.ones(moved.size, dtype=bool)
             for name, was in zip((n for n in _POSE if getattr(state, n) is not None), pose):
                 same &= getattr(state, name)[moved] == was
-            if same.any():
-                rows = rows[~np.isin(rows["id"], moved[same])]
+            if same.any():  # rows and moved are sorted by id, and every moved robot has a row
+                keep = np.ones(rows.size, dtype=bool)
+                keep[np.searchsorted(rows["id"], moved[same])] = False
+                rows = rows.take(np.flatnonzero(keep))
                 moved, cols = moved[~same], cols[~same]
             if moved.size != rows.size:  # rows of robots that did not decide too (removed)
                 at = np.searchsorted(rows["id"], moved)
