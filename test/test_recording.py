@@ -181,6 +181,37 @@ def _stop_at_tick_120(monkeypatch, error):
     monkeypatch.setattr(Simulation, "run", run)
 
 
+def test_a_close_stuck_on_a_full_disk_gives_up_and_removes_the_file_one_that_ends_is_kept(tmp_path, monkeypatch):
+    """Rerun's disconnect() can hang for good after the disk filled (a monitor was killed in it in CI, leaving a
+    recording without its footer): on a full disk, a file that stops growing for STUCK_S is given up on and
+    removed; with free space the close waits for a slow disconnect, however long, and keeps a whole file."""
+    import threading
+
+    from swarm_ros.artifacts import rerun_recording
+    from swarm_ros.artifacts.rerun_recording import Recorder, RecordingError
+    from swarm_ros.core import RunParams, Shape
+
+    shape = Shape.load("rectangle")
+    params = RunParams(robots=460, seed=3)
+    stuck = Recorder(tmp_path / "stuck.rrd", shape, params)
+    never = threading.Event()
+    monkeypatch.setattr(stuck.rec, "disconnect", lambda: never.wait(60))  # rerun stuck on the full disk
+    monkeypatch.setattr(rerun_recording, "_disk_full", lambda path: True)
+    began = time.monotonic()
+    with pytest.raises(RecordingError, match="could not be written whole .no space left on device.; it is removed"):
+        stuck.close()
+    assert time.monotonic() - began < rerun_recording.STUCK_S + 5  # given up on, not waited out
+    assert not (tmp_path / "stuck.rrd").exists()
+    never.set()
+
+    monkeypatch.setattr(rerun_recording, "_disk_full", lambda path: False)
+    slow = Recorder(tmp_path / "slow.rrd", shape, params)
+    disconnect = slow.rec.disconnect
+    monkeypatch.setattr(slow.rec, "disconnect", lambda: (time.sleep(rerun_recording.STUCK_S + 0.5), disconnect()))
+    slow.close()
+    assert rrd_verify(tmp_path / "slow.rrd").returncode == 0
+
+
 def test_a_crashed_run_keeps_a_readable_recording_up_to_that_tick(tmp_path, monkeypatch, capsys):
     _stop_at_tick_120(monkeypatch, RuntimeError)
     out = tmp_path / "run"

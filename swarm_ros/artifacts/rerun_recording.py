@@ -34,6 +34,8 @@ from __future__ import annotations
 import os
 import shutil
 import sys
+import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -113,14 +115,23 @@ class RecordingError(OutputError):
 
 def write_failure(path: Path | None, exc: BaseException | None = None) -> str:
     """Why rerun could not write ``path``, in words: the disk is full, if it is (rerun's own error does not say)."""
-    try:
-        if path is not None and os.statvfs(path.parent).f_bavail == 0:
-            return DISK_FULL
-    except OSError:
-        pass
+    if path is not None and _disk_full(path):
+        return DISK_FULL
     text = str(exc or "").strip()
     return text.splitlines()[0] if text else "a write failed; was the disk full?"
 
+
+def _disk_full(path: Path) -> bool:
+    """Whether the disk ``path`` is written on has no free block left."""
+    try:
+        return os.statvfs(path.parent).f_bavail == 0
+    except OSError:
+        return False
+
+
+#: seconds a recording's file may stay the same size on a full disk, while rerun closes it, before the close is
+#: taken as stuck (:meth:`Recorder.close`)
+STUCK_S = 1.0
 
 #: How an RRD file ends once it was closed whole: its footer's magic, then a 4-byte version.
 _RRD_FOOTER_MAGIC = b"RRF2FOOT"
@@ -267,12 +278,37 @@ class Recorder:
             return
         self._closed = True
         self.flush()
-        self.rec.disconnect()  # writes the file's footer, last, and closes it
-        if self.path is None or _ends_whole(self.path):
+        stuck = not self._disconnect()
+        if self.path is None or (not stuck and _ends_whole(self.path)):
             return
         why = write_failure(self.path)
         self.path.unlink(missing_ok=True)  # no reader could trust it, and it would block the next run
         raise RecordingError(f"{self.path}: the recording could not be written whole ({why}); it is removed")
+
+    def _disconnect(self) -> bool:
+        """Disconnect: rerun writes what is queued and the file's footer, last, and closes it. False if it is stuck.
+
+        Once the disk filled under rerun's file writer, ``disconnect()`` sometimes never returns (seen in CI: the
+        monitor was killed in it, and left a recording without its footer). It runs in a thread of its own here;
+        a file that stays the same size for :data:`STUCK_S` on a disk with no free block will not be finished.
+        """
+        done = threading.Event()
+
+        def disconnect() -> None:
+            self.rec.disconnect()
+            done.set()
+
+        threading.Thread(target=disconnect, name="rerun-disconnect", daemon=True).start()
+        size, since = -1, time.monotonic()
+        while not done.wait(0.05):
+            if self.path is None:
+                continue  # a viewer only: nothing on this disk to give up on
+            now = self.path.stat().st_size if self.path.exists() else -1
+            if now != size:
+                size, since = now, time.monotonic()
+            elif time.monotonic() - since > STUCK_S and _disk_full(self.path):
+                return False
+        return True
 
     def __enter__(self) -> Recorder:
         return self
