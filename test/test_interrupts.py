@@ -170,6 +170,32 @@ def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, command):
             assert proc.returncode == 130 and err.strip().endswith("interrupted"), err
 
 
+def test_ctrl_c_while_the_command_imports_its_run_directory_module_is_one_line(monkeypatch, capsys):
+    """The moment a CI run's Ctrl-C landed (the launcher's start, loaded machine): the command line has loaded,
+    its main() imports the run directory's module. One line, exit 130, no traceback."""
+    import importlib.abc
+
+    from swarm_ros.app import cli
+
+    class Interrupting(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path, target=None):
+            if name == "swarm_ros.artifacts.run_dir":
+                raise KeyboardInterrupt
+            return None
+
+    import swarm_ros.artifacts
+    import swarm_ros.artifacts.run_dir  # noqa: F401 - loaded, to be taken away (and put back afterwards)
+
+    monkeypatch.delitem(sys.modules, "swarm_ros.artifacts.run_dir")
+    monkeypatch.delattr(swarm_ros.artifacts, "run_dir")
+    monkeypatch.setattr(sys, "meta_path", [Interrupting(), *sys.meta_path])
+    try:
+        code = cli.main(["shapes"])
+    except KeyboardInterrupt:  # caught here: one escaping would end pytest's whole session
+        pytest.fail("a Ctrl-C while main() imports the run directory's module escaped it: a traceback")
+    assert code == 130 and capsys.readouterr().err == "swarm-ros: interrupted\n"
+
+
 def test_a_terminal_ctrl_c_to_a_dask_experiment_leaves_no_worker_traceback(tmp_path):
     """A terminal's Ctrl-C reaches the whole process group, Dask's workers included: they ignore it, and the
     command stops them; one message, exit 130."""

@@ -217,14 +217,14 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from swarm_ros.artifacts.run_dir import release_out_dirs
+    try:  # from the first line: a Ctrl-C while the command still loads (run_dir, below) is one line too
+        from swarm_ros.artifacts import run_dir  # noqa: F401 - released in the finally
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    for i, word in enumerate(argv[:-1]):  # "--fail-robots -0.1@10": argparse takes -0.1@10 for a flag
-        if word == "--fail-robots" and re.match(r"-[\d.]", argv[i + 1]):
-            argv[i: i + 2] = [f"--fail-robots={argv[i + 1]}"]
-            break
-    try:
+        argv = list(sys.argv[1:] if argv is None else argv)
+        for i, word in enumerate(argv[:-1]):  # "--fail-robots -0.1@10": argparse takes -0.1@10 for a flag
+            if word == "--fail-robots" and re.match(r"-[\d.]", argv[i + 1]):
+                argv[i: i + 2] = [f"--fail-robots={argv[i + 1]}"]
+                break
         args = build_parser().parse_args(argv)
         return args.func(args)
     except SwarmError as exc:
@@ -242,7 +242,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{PROG}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     finally:
-        release_out_dirs()
+        run_dir = sys.modules.get("swarm_ros.artifacts.run_dir")  # not there if its import was interrupted
+        if run_dir is not None:
+            run_dir.release_out_dirs()
 
 
 def entry() -> None:

@@ -22,7 +22,7 @@ def entry() -> None:
     except KeyboardInterrupt:
         print("swarm-ros: interrupted", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
-    run()
+    run()  # its own handling of Ctrl-C starts at its first line (swarm_ros.app.cli.main)
 
 
 def _node(module: str) -> None:
