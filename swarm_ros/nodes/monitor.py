@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import importlib
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -24,14 +23,12 @@ from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, tick_metrics
-from swarm_ros.core.replica import Replica
-from swarm_ros.core.state import STATE_COUNT, RobotState
+from swarm_ros.core.metrics import Outcome, TickMetrics
 from swarm_ros.core.warmup import warm_up
-from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
-from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
-from swarm_ros.protocol.status import RunFailed, WorldReport, restart_event
+from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.monitoring import MonitorCore
+from swarm_ros.protocol.status import RunFailed
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.bag_resume import resume
@@ -39,12 +36,13 @@ from swarm_ros.ros.bag_writer import TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED, handle_missed, run_node, take_waiting
 
-_STATUS_WAIT = 5.0  # seconds to wait for the world's outcome after the monitor saw the end
 _MATCH_POLL = 0.005  # seconds between looks at the readers' matches, before the liveliness writer appears
-_BAG_WAIT = 1.0  # seconds to wait, after the end, for the last tick's decisions to reach the bag
 
 
 class MonitorNode:
+    """The monitor's endpoints around a :class:`MonitorCore`, and its port
+    (:class:`~swarm_ros.protocol.monitoring.MonitorPort`)."""
+
     def __init__(self) -> None:
         self.node = node = make_node("monitor")
         run, own = read_parameters(node, "monitor")
@@ -61,16 +59,9 @@ class MonitorNode:
         self.recording = RecordingOptions(enabled=bool(own["record"]), every=int(own["record_every"]),
                                           connect=str(own["viewer_url"]) or None).reachable()
         self.rrd = run_dir.partial_recording(self.out)
-        self.losses: list[tuple[int, int]] = []  # (tick, robots removed), seen as rows turning 'removed'
-        self.rows: list[tuple[int, ...]] = []
-        self.outcome = None
-        self.world = WorldReport()  # what the world's status said: restarts, its clock, its drops, the outcome
-        self.world_end: tuple[float, int] | None = None  # (time.monotonic(), tick) when the world's outcome came
-        self.ended_at: float | None = None
-        self.started_at: float | None = None
+        self.core: MonitorCore | None = None  # made in load(), before the readers can hand it anything
         self.finished = False
         self.written: Path | None = None
-        self.decided_rows: dict[int, int] = {}  # tick -> decision rows seen (with the bag on)
         self.rejections = Rejections(node.get_logger())
 
         self.signer, self.gate = open_auth(node, self.rejections)
@@ -80,7 +71,6 @@ class MonitorNode:
         self.handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status,
                          msgs.DECISIONS: self._on_decisions}
         self.raw = b""  # the message being handled, as it came (recorded once its handler takes it)
-        self.replaying, self.resumed_at = False, 0  # replaying its process before's bag; the tick it went on from
         self.readers = {topic: self._subscribe(topic) for topic in msgs.MONITOR_READS if topic != msgs.STATUS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
         # readers have matched their writers (a thread watches, while the heavy part below loads), and its
@@ -98,17 +88,38 @@ class MonitorNode:
         once this is loaded the world can see this node's last reader, and it starts."""
         node, p = self.node, self.params
         if self.incarnation:
-            self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (resume, below)
-        self.recorder = self.recording.open(self.rrd, self.shape, p)
+            self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
+        recorder = self.recording.open(self.rrd, self.shape, p)
+        self.core = MonitorCore(self.shape, p, self.world_radius, self, recorder, node.get_logger(),
+                                self.incarnation)
         self.bag = BagRecorder(self.out, self.shape.dims) if self.bag_on else None
-        self.replica = Replica(self.shape, p.robots)
         warm_up(self.shape, p)
         if self.incarnation:
-            resume(self)
+            self._resume()
         importlib.import_module("swarm_ros.artifacts.plots")  # matplotlib: now, not at the end, when the run is written
         self.readers[msgs.STATUS] = self._subscribe(msgs.STATUS)  # loaded: the world may start (latched)
-        every = self.recorder.every if self.recorder is not None else 1
+        every = recorder.every if recorder is not None else 1
         node.get_logger().info(f"monitor: writing to {self.out}" + f" (robots every {every} ticks)" * (every > 1))
+
+    def _resume(self) -> None:
+        """Go on from the bag the process before this one wrote: its messages through the handlers, inside the
+        core's replay (:mod:`swarm_ros.ros.bag_resume`)."""
+        metrics: list[tuple[int, ...]] = []
+
+        def take(topic: str, data: bytes) -> None:  # the world's maps and /clock: in the bag only, untagged
+            if topic == msgs.METRICS:
+                metrics.append(tuple(self.gate.open(TOPICS[topic][0], topic, data).data))
+            elif topic in self.handlers:
+                self.handlers[topic](self.gate.open(TOPICS[topic][0], topic, data))
+
+        with self.core.replay():
+            replayed = resume(self.bag, self.out, take)
+        if replayed:
+            self.gate.verifier.taken_before()  # the same messages again from the topics' histories: known
+        self.core.replayed(metrics)
+        if replayed:
+            self.node.get_logger().warn(f"monitor restarted (incarnation {self.incarnation}): went on from tick "
+                                        f"{self.core.resumed_at} of the bag its process before wrote")
 
     def _subscribe(self, topic: str):
         """A reader of ``topic``: each message its tag proves goes into the bag as it came, then to its handler."""
@@ -141,118 +152,52 @@ class MonitorNode:
                 self.bag.write(topic, data)
         return write
 
+    # -- inbound ----------------------------------------------------------------------
     def _on_robots(self, msg: Cloud) -> None:
-        if self.outcome is not None:
-            return
-        removed_before = self.removed
         try:
-            tick, rows = checked_robots(self.replica, msg, self.world_radius)
-            if tick <= self.replica.tick:
-                return  # again (a late-matched reader's history)
-            apply_robots(self.replica, tick, rows)
+            self.core.robots(msg)
         except Rejected as fault:
             self.rejections.drop(msgs.ROBOTS, fault)
-            return
-        if self.started_at is None:
-            self.started_at = time.perf_counter()
-        counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
-        metrics = tick_metrics(tick, counts, self.shape.patches)
-        self.rows.append(tuple(metrics))
-        if not self.replaying:
-            data = self.pub_metrics.seal(msgs.metrics_message(metrics))
-            if self.bag is not None:  # the tick's messages are durable before the world hears of it
-                self.bag.write(msgs.ROBOTS, self.raw)
-                self.bag.write(msgs.METRICS, data)
-                joined = len(self.rows) < 2 or self.rows[-1][METRIC_COLUMNS.index("localized")] != \
-                    self.rows[-2][METRIC_COLUMNS.index("localized")]
-                self.bag.write_world(self.shape, self.replica.state.occupancy, tick, len(self.rows) == 1,
-                                     joined or self.removed > removed_before)
-                take_waiting(self.readers[msgs.DECISIONS])  # one the executor lost the event of: in, now
-                self.bag.durable()
-            self.pub_metrics.send(data)
-        if self.removed > removed_before:
-            self.losses.append((tick, self.removed - removed_before))
-        p = self.params
-        self.outcome = outcome_of(metrics, self.shape.patches, p.robots - self.removed, p.max_ticks)
-        if self.recorder is not None:
-            self.recorder.metrics([metrics])
-            self.recorder.robots(self.replica.state, force=self.outcome is not None)
-        if self.outcome is not None:  # its CPU so far: per tick, without writing the run (scripts/bench_scale.py)
-            self.ended_at, self.wall = time.monotonic(), time.perf_counter() - (self.started_at or time.perf_counter())
-            self.node.get_logger().info(f"last tick, {tick}: {self.outcome.value} ({time.process_time():.2f} s of CPU)")
 
     def _on_decisions(self, msg: Cloud) -> None:
-        """Count the decision rows of each tick (for the bag: see :meth:`_bag_complete`)."""
         try:
-            tick, rows = checks.decision_message(msg, self.params.robots, self.shape.dims)
+            self.core.decisions(msg)
         except Rejected as fault:
             self.rejections.drop(msgs.DECISIONS, fault)
-            return
-        if tick in self.decided_rows and not self.replaying:
-            return  # recorded already (a restarted world sends the last ticks again)
-        self.decided_rows[tick] = self.decided_rows.get(tick, 0) + rows.size
-        if self.bag is not None and not self.replaying:
-            self.bag.write(msgs.DECISIONS, self.raw)
-
-    def _bag_complete(self) -> bool:
-        """Whether the last tick's decisions are in the bag: they may arrive after the world's last rows."""
-        last = self.replica.tick
-        if last <= 0 or len(self.rows) < last:
-            return True
-        return self.decided_rows.get(last, 0) >= self.rows[last - 1][METRIC_COLUMNS.index("moving")]
-
-    @property
-    def removed(self) -> int:
-        return int((self.replica.state.state == RobotState.REMOVED).sum())
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        for tick, node in self.world.update(msgs.status_values(msg)):
-            self.node.get_logger().warn(f"{node} was restarted at tick {tick}")
-            if self.recorder is not None and not self.recorder.closed:
-                self.recorder.event(tick, restart_event(tick, node))
-        if self.world.outcome is not None and self.world_end is None:
-            self.world_end = (time.monotonic(), msgs.tick_of(msg.header))
+        self.core.status(msgs.status_values(msg), msgs.tick_of(msg.header))
 
+    # -- the core's port ---------------------------------------------------------------
+    def tick_counted(self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool,
+                     changed: bool) -> None:
+        data = self.pub_metrics.seal(msgs.metrics_message(metrics))
+        if self.bag is not None:  # the tick's messages are durable before the world hears of it
+            self.bag.write(msgs.ROBOTS, self.raw)
+            self.bag.write(msgs.METRICS, data)
+            self.bag.write_world(self.shape, occupancy, tick, first, changed)
+            take_waiting(self.readers[msgs.DECISIONS])  # one the executor lost the event of: in, now
+            self.bag.durable()
+        self.pub_metrics.send(data)
+
+    def decisions_taken(self, tick: int) -> None:
+        if self.bag is not None:
+            self.bag.write(msgs.DECISIONS, self.raw)
+
+    def take_missed(self) -> int:
+        return handle_missed(self.node)  # what the executor may not have handed over (runtime.handle_missed)
+
+    # -- the node runtime's hooks ----------------------------------------------------------
     def poll(self) -> None:
-        if self.outcome is None:
-            self._check_world_end()
-            return
-        if self.world.outcome is None and time.monotonic() - self.ended_at < _STATUS_WAIT:
-            return
-        if self.bag is not None and not self._bag_complete() and time.monotonic() - self.ended_at < _BAG_WAIT:
-            return
-        missed = handle_missed(self.node)  # what the executor may not have handed over (runner.handle_missed)
-        if missed:
-            self.node.get_logger().warn(f"{missed} messages were still in the readers, not handed over by the "
-                                        f"executor; handled before writing the run")
-        if self.world.outcome is not None and self.world.outcome != self.outcome.value:
-            raise RunFailed(f"the world reports '{self.world.outcome}', the monitor counted "
-                            f"'{self.outcome.value}' at tick {self.replica.tick}")
-        if self.recorder is not None:  # closed only now: the world's last status may add restart events
-            self.recorder.outcome(self.outcome.value, TickMetrics(*self.rows[-1]))
-            self.recorder.close()
-        self._write()
-        self.finished = True
-
-    def _check_world_end(self) -> None:
-        """Fail, rather than wait forever, when the world has ended the run but this node's count has not:
-        the robots' last messages never came (a process that is not under ``swarm-ros run`` or ``ros2
-        launch`` has nobody else to stop it)."""
-        if self.world_end is None or time.monotonic() - self.world_end[0] < _STATUS_WAIT:
-            return
-        handle_missed(self.node)
-        if self.outcome is None:
-            raise RunFailed(f"the world ended the run ('{self.world.outcome}') at tick {self.world_end[1]}, but the "
-                            f"robots' messages reached the monitor only up to tick {self.replica.tick} within "
-                            f"{_STATUS_WAIT:g} s")
+        if self.core.due(self.bag is not None):
+            self._write()
+            self.finished = True
 
     def _write(self, outcome: Outcome | None = None) -> None:
-        record = self.world.record(self.shape, self.params, self.replica.state, self.rows, outcome or self.outcome,
-                                   self.wall, self.losses, self.rejections.total,
-                                   monitor=(self.incarnation, self.resumed_at))
-        self.written = run_dir.write_run(self.out, record, overwrite=self.overwrite,
-                                 recording=self.rrd if self.recording.enabled else None,
-                                 bag=self.bag.close() if self.bag is not None else None)
+        self.written = run_dir.write_run(self.out, self.core.record(self.rejections.total, outcome),
+                                         overwrite=self.overwrite,
+                                         recording=self.rrd if self.recording.enabled else None,
+                                         bag=self.bag.close() if self.bag is not None else None)
         if self.bag is not None:
             self.bag.discard_holder()
         self.node.get_logger().info(f"run written to {self.written}")
@@ -262,33 +207,24 @@ class MonitorNode:
         directory (outcome ``interrupted``); before tick 0, nothing is kept. Failed, or orphaned (the launcher died):
         the recording so far is kept, closed and marked, as ``<out_dir>.partial.rrd``."""
         self.closing.set()
-        if self.written is not None:
+        core = self.core
+        if self.written is not None or core is None:
             return
-        if code == EXIT_INTERRUPTED and self.outcome is None and hasattr(self, "replica"):
+        if code == EXIT_INTERRUPTED and core.outcome is None:
             # stopped while loading or behind: what the world sent is the run so far (it waits in the readers)
             try:
                 handle_missed(self.node)
             except RunFailed as exc:
                 self.node.get_logger().error(f"while taking the ticks already sent: {exc}")
-        unstarted = code == EXIT_INTERRUPTED and not self.rows and not self.incarnation  # holds nothing of a run
-        if self.bag is not None and not (code == EXIT_INTERRUPTED and self.rows and self.outcome is None):
+        unstarted = code == EXIT_INTERRUPTED and not core.rows and not self.incarnation  # holds nothing of a run
+        interrupted = code == EXIT_INTERRUPTED and bool(core.rows) and core.outcome is None
+        if self.bag is not None and not interrupted:
             # closed, kept beside the run (an interrupted run takes it); before tick 0 removed, not to block the next
             self.bag.discard() if unstarted else self.bag.move_to(run_dir.partial_bag(self.out))
-        if self.outcome is not None:  # ended, but stopped before the world confirmed it: keep the recording
-            if self.recorder is not None:
-                self.recorder.outcome("interrupted", TickMetrics(*self.rows[-1]))
-                self.recorder.close()
-            return
-        interrupted = code == EXIT_INTERRUPTED and bool(self.rows)
-        if self.recorder is not None:
-            if self.rows:
-                stopped = code in (EXIT_INTERRUPTED, EXIT_ORPHANED)
-                self.recorder.outcome("interrupted" if stopped else "failed", TickMetrics(*self.rows[-1]))
-            self.recorder.close()
+        core.close_recording(stopped=code in (EXIT_INTERRUPTED, EXIT_ORPHANED))
         if unstarted:  # its own: a first process refuses to start beside an earlier run's
             self.rrd.unlink(missing_ok=True)
         if interrupted:
-            self.wall = time.perf_counter() - (self.started_at or time.perf_counter())
             self._write(Outcome.INTERRUPTED)
 
 

@@ -10,12 +10,13 @@ A killed monitor's bag is in its hidden holder (``.<run>.bag-XXXX/bag``), or, if
 while writing the run directory, in that directory's temporary one (``.<run>.tmp-XXXX/bag``).
 The new process takes the longest of them up to the end of its last whole tick, copies that into a
 bag of its own, and replays it through its handlers: the replica, the metrics rows and the
-recording come out as they were (:meth:`swarm_ros.nodes.monitor.MonitorNode.load`).
+recording come out as they were (:meth:`swarm_ros.protocol.monitoring.MonitorCore.replay`).
 """
 
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from swarm_ros.artifacts.run_dir import BAG_DIR
 from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.status import RunFailed
 from swarm_ros.ros import graph as msgs
-from swarm_ros.ros.bag_writer import TOPICS, unfinished_messages
+from swarm_ros.ros.bag_writer import BagRecorder, unfinished_messages
 
 
 @dataclass
@@ -69,46 +70,25 @@ def left_by_earlier_process(out: Path, own_holder: Path) -> Resumed:
     return best
 
 
-def resume(monitor) -> None:
-    """Make a restarted monitor go on from what its process before left (the module's doc).
+def resume(bag: BagRecorder | None, out: Path, take: Callable[[str, bytes], None]) -> int:
+    """Go on from what the monitor process before this one left (the module's doc): copy its messages into
+    ``bag``, this process's, make them durable, then hand each to ``take`` (topic, the message as recorded),
+    in order. Returns how many there were.
 
     Raises:
         RunFailed: the run has no bag to go on from, or it does not read back as the run.
     """
-    if monitor.bag is None:
+    if bag is None:
         raise RunFailed("a restarted monitor goes on from the bag its process before wrote, and this run has none "
                         "(bag: false)")
-    resumed = left_by_earlier_process(monitor.out, monitor.bag.holder)
-    replay(monitor, resumed.messages)
-    resumed.remove()
-    monitor.resumed_at = max(monitor.replica.tick, 0)
-
-
-def replay(monitor, recorded: list[tuple[str, int, bytes]]) -> None:
-    """Go on from what the monitor process before this one recorded (:mod:`swarm_ros.ros.bag_resume`):
-    copy it into this process's bag, then take it through the handlers (the replica, the metrics rows,
-    the recording), checking that the metrics come out as recorded. The same messages again from the
-    topics' histories are then dropped as known (:meth:`swarm_ros.protocol.tag.Verifier.taken_before`)."""
-    if not recorded:
-        return
-    for topic, at, data in recorded:
-        monitor.bag.write(topic, data, at)
-    monitor.bag.durable()
-    monitor.replaying, metrics = True, []
+    resumed = left_by_earlier_process(out, bag.holder)
+    for topic, at, data in resumed.messages:
+        bag.write(topic, data, at)
+    bag.durable()
     try:
-        for topic, _, data in recorded:
-            if topic in monitor.handlers or topic == msgs.METRICS:
-                msg = monitor.gate.open(TOPICS[topic][0], topic, data)
-                if topic == msgs.METRICS:
-                    metrics.append(tuple(msg.data))
-                else:
-                    monitor.handlers[topic](msg)
+        for topic, _, data in resumed.messages:
+            take(topic, data)
     except Rejected as fault:
         raise RunFailed(f"the bag of the monitor before this one does not read back: {fault}") from None
-    finally:
-        monitor.replaying = False
-    monitor.gate.verifier.taken_before()
-    if [tuple(r) for r in monitor.rows] != metrics:
-        raise RunFailed("the bag of the monitor before this one holds other metrics than its rows give")
-    monitor.node.get_logger().warn(f"monitor restarted (incarnation {monitor.incarnation}): went on from "
-                                   f"tick {monitor.replica.tick} of the bag its process before wrote")
+    resumed.remove()
+    return len(resumed.messages)

@@ -1,0 +1,299 @@
+"""The monitor's side of a run (swarm_ros.protocol.monitoring) driven by method calls, a fake port and a fake
+clock, with no rclpy: what the process tests of the monitor cover (its count, its wait for the world's outcome,
+its refusals, a restarted monitor's replay), in milliseconds.
+
+The world's rows are what a world process publishes after each tick of the in-process engine (every robot at
+tick 0, then the rows of the robots that decided or were removed), serialized and read back as the monitor
+reads them, so the count must be the engine's tick for tick.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import disc_shape
+
+from swarm_ros.core import RunParams, Simulation, World
+from swarm_ros.core.metrics import Outcome, TickMetrics
+from swarm_ros.core.rules import Decider
+from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
+from swarm_ros.protocol.checks import Rejected
+from swarm_ros.protocol.monitoring import BAG_WAIT, STATUS_WAIT, MonitorCore
+from swarm_ros.protocol.plan import MONITOR
+from swarm_ros.protocol.rows import decision_rows, state_rows
+from swarm_ros.protocol.status import RunFailed, restarts_text
+
+pytestmark = pytest.mark.unit
+
+WORLD = World(radius=12)
+SHAPE = disc_shape(WORLD, 5.0)
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class Log:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def info(self, text: str) -> None:
+        self.lines.append(text)
+
+    warn = info
+
+
+class Port:
+    """Records what the core asks of its node."""
+
+    def __init__(self) -> None:
+        self.counted: list[tuple[int, bool, bool]] = []  # (tick, first, changed)
+        self.decisions: list[int] = []
+        self.missed = 0  # how many take_missed() hands over (once)
+        self.on_missed = None  # called by take_missed(): a message the executor had not handed over
+
+    def tick_counted(self, tick, metrics, occupancy, first, changed) -> None:
+        assert isinstance(metrics, TickMetrics) and metrics.tick == tick
+        self.counted.append((tick, first, changed))
+
+    def decisions_taken(self, tick: int) -> None:
+        self.decisions.append(tick)
+
+    def take_missed(self) -> int:
+        if self.on_missed is not None:
+            self.on_missed()
+            self.on_missed = None
+        missed, self.missed = self.missed, 0
+        return missed
+
+
+class Recorder:
+    """Records what the core hands the recording."""
+
+    def __init__(self) -> None:
+        self.closed, self.every = False, 1
+        self.ticks: list[int] = []
+        self.forced: list[bool] = []
+        self.events: list[tuple[int, str]] = []
+        self.ended: tuple[str, int] | None = None
+
+    def metrics(self, rows: list) -> None:
+        self.ticks += [r.tick for r in rows]
+
+    def robots(self, state, force: bool = False) -> None:
+        self.forced.append(force)
+
+    def event(self, tick: int, text: str) -> None:
+        self.events.append((tick, text))
+
+    def outcome(self, outcome: str, final: TickMetrics) -> None:
+        assert not self.closed
+        self.ended = (outcome, final.tick)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def world_messages(params: RunParams) -> tuple[Simulation, list[tuple[bytes, bytes | None]]]:
+    """The engine's run, and per tick what a world process publishes: its rows and its applied decisions
+    (None at tick 0), serialized."""
+    sim, decider = Simulation(SHAPE, params), Decider(SHAPE, params)
+    out = [(encode_cloud(state_rows(np.arange(params.robots), sim.state), 0), None)]
+    while not sim.done:
+        decisions = decider.decide(sim.state, sim.moving_ids(), sim.tick + 1)
+        sim.apply(decisions)
+        ids = np.union1d(np.sort(decisions.ids), sim.last_removed)
+        out.append((encode_cloud(state_rows(ids, sim.state), sim.tick),
+                    encode_cloud(decision_rows(decisions), sim.tick)))
+    return sim, out
+
+
+def make(params: RunParams, recorder: Recorder | None = None, **kw) -> tuple[MonitorCore, Port, Clock, Log]:
+    port, clock, log = Port(), Clock(), Log()
+    core = MonitorCore(SHAPE, params, WORLD.radius, port, recorder, log, clock=clock, **kw)
+    return core, port, clock, log
+
+
+def feed(core: MonitorCore, messages, upto: int | None = None) -> None:
+    for rows, decided in messages[:upto]:
+        core.robots(decode_cloud(rows))
+        if decided is not None:
+            core.decisions(decode_cloud(decided))
+
+
+@pytest.mark.parametrize("params", [
+    RunParams(robots=60, seed=3, max_ticks=400),
+    RunParams(robots=90, seed=5, rules="local", vision_radius=3.0, max_ticks=400),
+    RunParams(robots=60, seed=7, max_ticks=300, fail_fraction=0.2, fail_tick=20),
+    RunParams(robots=60, seed=1, max_ticks=300, fail_fraction=0.2, fail_tick=3),  # no robot joins at tick 3
+])
+def test_the_core_counts_the_worlds_rows_as_the_engine_does(params):
+    sim, messages = world_messages(params)
+    recorder = Recorder()
+    core, port, clock, log = make(params, recorder)
+    feed(core, messages)
+    assert [tuple(r) for r in core.rows] == [tuple(r) for r in sim.history]
+    assert core.outcome == sim.outcome and core.losses == sim.losses
+    assert [t for t, _, _ in port.counted] == list(range(sim.tick + 1))
+    assert [first for _, first, _ in port.counted] == [True] + [False] * sim.tick
+    # the occupancy is reported changed at tick 0 and when a robot joined or was removed, only then
+    changed = [c for _, _, c in port.counted]
+    localized = sim.history[:, 2]
+    assert changed[1:] == [bool(localized[t] != localized[t - 1]) or any(at == t for at, _ in sim.losses)
+                           for t in range(1, sim.tick + 1)]
+    assert port.decisions == list(range(1, sim.tick + 1))
+    assert recorder.ticks == list(range(sim.tick + 1)) and recorder.forced == [False] * sim.tick + [True]
+    assert core.bag_complete()
+    assert any(line.startswith(f"last tick, {sim.tick}: {sim.outcome.value}") for line in log.lines)
+    record = core.record(rejected=0)
+    assert np.array_equal(record.history, sim.history) and record.outcome == sim.outcome
+    for name in ("state", "x", "y", "heading", "occupancy"):
+        assert np.array_equal(getattr(record.state, name), getattr(sim.state, name)), name
+
+
+def test_rows_again_and_rows_that_cannot_be_the_next_change_nothing():
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    _, messages = world_messages(params)
+    core, port, _, _ = make(params)
+    feed(core, messages, 3)
+    before = [tuple(r) for r in core.rows]
+    core.robots(decode_cloud(messages[1][0]))  # again: a late-matched reader's history
+    with pytest.raises(Rejected, match="inconsistent rows"):
+        core.robots(decode_cloud(messages[4][0]))  # tick 4 after tick 2
+    bad = state_rows(np.arange(3), core.replica.state)
+    bad["id"][0] = params.robots  # out of range
+    with pytest.raises(Rejected):
+        core.robots(decode_cloud(encode_cloud(bad, 3)))
+    assert [tuple(r) for r in core.rows] == before and len(port.counted) == 3 and core.replica.tick == 2
+    core.robots(decode_cloud(messages[3][0]))  # the true next rows are still taken
+    assert core.replica.tick == 3
+    core.decisions(decode_cloud(messages[3][1]))
+    core.decisions(decode_cloud(messages[3][1]))  # again: a restarted world's: counted and bagged once
+    assert port.decisions == [1, 2, 3]
+
+
+def _ended(params=RunParams(robots=60, seed=3, max_ticks=400), recorder=None):
+    sim, messages = world_messages(params)
+    core, port, clock, log = make(params, recorder)
+    feed(core, messages)
+    return sim, core, port, clock, log
+
+
+def _status(core: MonitorCore, outcome: str, tick: int, restarts: str = "") -> None:
+    core.status({"tick": str(tick), "outcome": outcome, "restarts": restarts}, tick)
+
+
+def test_the_run_is_due_once_the_world_agrees_and_the_recording_is_closed_with_the_outcome():
+    recorder = Recorder()
+    sim, core, port, clock, log = _ended(recorder=recorder)
+    assert not core.due(bag=True)  # the world's outcome has not come
+    _status(core, sim.outcome.value, sim.tick, restarts_text([(5, "robot_batch_0")]))
+    assert recorder.events and recorder.events[0][0] == 5 and "robot_batch_0 was restarted at tick 5" in log.lines
+    port.missed = 2
+    assert core.due(bag=True) and recorder.closed and recorder.ended == (sim.outcome.value, sim.tick)
+    assert any("2 messages were still in the readers" in line for line in log.lines)
+
+
+def test_an_outcome_the_world_does_not_confirm_waits_then_the_run_is_written_with_the_count():
+    sim, core, _, clock, _ = _ended()
+    clock.now += STATUS_WAIT - 0.1
+    assert not core.due(bag=False)
+    clock.now += 0.2
+    assert core.due(bag=False) and core.record(rejected=0).outcome == sim.outcome
+
+
+def test_a_world_that_reports_another_outcome_fails_the_run():
+    sim, core, _, _, _ = _ended()
+    other = next(o for o in Outcome if o not in (sim.outcome, Outcome.INTERRUPTED))
+    _status(core, other.value, sim.tick)
+    with pytest.raises(RunFailed, match=f"the world reports '{other.value}', the monitor counted"):
+        core.due(bag=False)
+
+
+def test_the_last_ticks_decisions_are_waited_for_a_moment():
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    sim, messages = world_messages(params)
+    core, port, clock, _ = make(params)
+    for rows, decided in messages[:-1]:
+        core.robots(decode_cloud(rows))
+        if decided is not None:
+            core.decisions(decode_cloud(decided))
+    core.robots(decode_cloud(messages[-1][0]))  # the last rows came; their tick's decisions not yet
+    _status(core, sim.outcome.value, sim.tick)
+    assert not core.bag_complete() and not core.due(bag=True)
+    assert core.due(bag=False)  # without a bag nothing waits for them
+    core2, _, clock2, _ = make(params)
+    feed(core2, messages[:-1])
+    core2.robots(decode_cloud(messages[-1][0]))
+    _status(core2, sim.outcome.value, sim.tick)
+    clock2.now += BAG_WAIT + 0.1
+    assert core2.due(bag=True)  # given up on: the run is written without them
+
+
+def test_a_world_that_ended_while_the_rows_never_came_fails_the_run_after_a_wait():
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    sim, messages = world_messages(params)
+    core, port, clock, _ = make(params)
+    feed(core, messages, 10)
+    _status(core, sim.outcome.value, sim.tick)
+    assert not core.due(bag=False)
+    clock.now += STATUS_WAIT + 0.1
+    with pytest.raises(RunFailed, match=f"reached the monitor only up to tick 9 within {STATUS_WAIT:g} s"):
+        core.due(bag=False)
+    # rows the executor had not handed over are taken first: then the run is not failed
+    core, port, clock, _ = make(params)
+    feed(core, messages, 10)
+    _status(core, sim.outcome.value, sim.tick)
+    clock.now += STATUS_WAIT + 0.1
+    port.on_missed = lambda: feed(core, messages[10:])
+    assert not core.due(bag=False) and core.outcome == sim.outcome
+
+
+def test_a_replayed_bag_is_counted_and_recorded_but_never_reported_again():
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    sim, messages = world_messages(params)
+    first, _, _, _ = make(params)
+    feed(first, messages, 12)
+    recorder = Recorder()
+    core, port, _, _ = make(params, recorder, incarnation=1)
+    with core.replay():
+        feed(core, messages, 12)
+    assert port.counted == [] and port.decisions == [] and recorder.ticks == list(range(12))
+    core.replayed([tuple(r) for r in first.rows])
+    assert core.resumed_at == 11
+    feed(core, messages[12:])  # then the topics' histories and the live ticks
+    assert [t for t, _, _ in port.counted] == list(range(12, sim.tick + 1))
+    assert [tuple(r) for r in core.rows] == [tuple(r) for r in sim.history]
+    record = core.record(rejected=0)
+    assert record.summary["restarts"] == [{"tick": 11, "node": MONITOR}]  # a restart the world never saw
+
+
+def test_a_bag_whose_metrics_are_not_its_rows_fails_the_restart():
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    _, messages = world_messages(params)
+    core, _, _, _ = make(params, incarnation=1)
+    with core.replay():
+        feed(core, messages, 5)
+    wrong = [tuple(r) for r in core.rows]
+    wrong[2] = (2, *(v + 1 for v in wrong[2][1:]))
+    with pytest.raises(RunFailed, match="holds other metrics than its rows give"):
+        core.replayed(wrong)
+
+
+@pytest.mark.parametrize("stopped,ended,expected", [(True, False, "interrupted"), (False, False, "failed"),
+                                                    (False, True, "interrupted")])
+def test_a_run_stopped_before_it_was_written_closes_its_recording_marked(stopped, ended, expected):
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    sim, messages = world_messages(params)
+    recorder = Recorder()
+    core, _, _, _ = make(params, recorder)
+    feed(core, messages if ended else messages[:7])
+    core.close_recording(stopped=stopped)
+    assert recorder.closed and recorder.ended == (expected, sim.tick if ended else 6)
+    core.close_recording(stopped=stopped)  # once only
+    interrupted = core.record(rejected=4, outcome=Outcome.INTERRUPTED)
+    assert interrupted.outcome == (Outcome.INTERRUPTED) and interrupted.summary["rejected_messages"]["monitor"] == 4
