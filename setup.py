@@ -29,15 +29,18 @@ setup(
         "numba>=0.61",
         "scipy>=1.13",
         "connected-components-3d>=3.12",
+        "trimesh>=4.0",  # 3D shapes from meshes (core/voxels.py)
         "matplotlib>=3.8",
         "pillow>=10",
         "PyYAML>=6",
         "tqdm>=4.66",
         "rerun-sdk>=0.41,<0.42",
         "rosbags>=0.11,<0.12",
+        "mcap>=1.6",  # reading a killed monitor's unfinished bag (ros/bag_writer.py)
+        "ruamel.yaml>=0.18",  # the bag's metadata.yaml, as rosbags writes it
         "dask[distributed]>=2024.1",
     ],
-    extras_require={"test": ["pytest>=8", "hypothesis>=6.100", "mcap>=1.6", "mcap-ros2-support>=0.6"]},
+    extras_require={"test": ["pytest>=8", "hypothesis>=6.100", "mcap-ros2-support>=0.6"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
     entry_points={"console_scripts": [
         "swarm-ros = swarm_ros.app.main:entry",
