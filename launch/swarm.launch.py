@@ -50,7 +50,7 @@ PACKAGE = "swarm_ros"
 def graph(context) -> list:
     """The nodes (after the kernels' compilation, if their cache is empty) and their supervision."""
     share = get_package_share_directory(PACKAGE)
-    arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
+    arg = lambda name: LaunchConfiguration(name).perform(context)
     processes = launch_processes(arg("processes"))
     enclaves = arg("enclaves")
     setup = launch_setup(arg("params_file") or os.path.join(share, "config", "swarm_ros.yaml"),

@@ -29,10 +29,10 @@ import time
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from swarm_ros.core import RunParams, Shape, Simulation, World  # noqa: E402
-from swarm_ros.core.rulesets import RULE_SETS  # noqa: E402
+from swarm_ros.core import RunParams, Shape, Simulation, World
+from swarm_ros.core.rulesets import RULE_SETS
 
 STAR_DENSITY = 1036 / 63**2  # robots per free patch in the default star run
 

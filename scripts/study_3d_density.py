@@ -18,7 +18,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from swarm_ros.core import RunParams, Shape, Simulation, World  # noqa: E402
+from swarm_ros.core import RunParams, Shape, Simulation, World
 
 CASES = (("torus", (13, 20, 32)), ("box", (10, 20, 32)))
 

@@ -86,7 +86,7 @@ class Ros2:
     def start(self, line: str, cwd: Path | None = None, log: Path | None = None) -> subprocess.Popen:
         """Start one command line in a session of its own (a terminal's process group: see :func:`ctrl_c`),
         its output (stdout and stderr) into ``log``."""
-        out = open(log, "w") if log else subprocess.DEVNULL  # noqa: SIM115 - the process keeps it
+        out = open(log, "w") if log else subprocess.DEVNULL
         return subprocess.Popen(self.command(line), cwd=cwd or self.home, env=self.env, stdout=out,
                                 stderr=subprocess.STDOUT, start_new_session=True, text=True)
 

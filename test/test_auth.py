@@ -8,21 +8,21 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from nav_msgs.msg import OccupancyGrid  # noqa: E402
-from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
-from sensor_msgs.msg import PointCloud2  # noqa: E402
-from std_msgs.msg import Int64MultiArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import OccupancyGrid
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
 
-from swarm_ros.core.errors import ConfigError  # noqa: E402
-from swarm_ros.core.metrics import METRIC_COLUMNS  # noqa: E402
-from swarm_ros.protocol import tag as tags  # noqa: E402
-from swarm_ros.protocol.cdr import cloud_parts, encode_cloud  # noqa: E402
-from swarm_ros.protocol.checks import Rejected, Rejections  # noqa: E402
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, TAG_PREFIX, batch_label, is_tag  # noqa: E402
-from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key  # noqa: E402
-from swarm_ros.ros import auth  # noqa: E402
-from swarm_ros.ros import graph as msgs  # noqa: E402
+from swarm_ros.core.errors import ConfigError
+from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.protocol import tag as tags
+from swarm_ros.protocol.cdr import cloud_parts, encode_cloud
+from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, TAG_PREFIX, batch_label, is_tag
+from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key
+from swarm_ros.ros import auth
+from swarm_ros.ros import graph as msgs
 
 pytestmark = pytest.mark.unit
 

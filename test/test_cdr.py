@@ -9,15 +9,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 pytest.importorskip("rclpy")
-from helpers import make_cloud  # noqa: E402
-from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
-from sensor_msgs.msg import PointCloud2  # noqa: E402
+from helpers import make_cloud
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import PointCloud2
 
-from swarm_ros.protocol import checks  # noqa: E402
-from swarm_ros.protocol.cdr import decode_cloud, encode_cloud  # noqa: E402
-from swarm_ros.protocol.checks import Rejected  # noqa: E402
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW  # noqa: E402
-from swarm_ros.protocol.tag import aligned  # noqa: E402
+from swarm_ros.protocol import checks
+from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
+from swarm_ros.protocol.checks import Rejected
+from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+from swarm_ros.protocol.tag import aligned
 
 pytestmark = pytest.mark.unit
 

@@ -191,7 +191,7 @@ def test_short_runs_share_dask_tasks_and_each_run_comes_back_once(tmp_path, sche
     tasks = [t for t in stream.data if t["key"].startswith("swarm_ros-runs-")]
     assert len(rows) == len(todo) == 45  # 3 (shape, group size) pairs x 15
     assert len(tasks) < len(todo), "the short runs were sent one per task"
-    without_time = lambda row: {k: v for k, v in row.items() if k != "wall_seconds"}  # noqa: E731
+    without_time = lambda row: {k: v for k, v in row.items() if k != "wall_seconds"}
     assert sorted(map(str, map(without_time, rows))) == sorted(str(without_time(run_inprocess(s))) for s in todo)
 
 
@@ -206,7 +206,7 @@ def test_the_ros2_engine_runs_on_dask_workers_and_equals_the_in_process_engine(t
     assert _cli(str(config), "--out", str(ref), "--jobs", "1", "--quiet").returncode == 0
     (ros,), (inprocess,) = read_results(out / "results.csv"), read_results(ref / "results.csv")
     assert (ros["engine"], inprocess["engine"]) == ("ros2", "inprocess")
-    same = lambda row: {k: v for k, v in row.items() if k not in ("engine", "wall_seconds")}  # noqa: E731
+    same = lambda row: {k: v for k, v in row.items() if k not in ("engine", "wall_seconds")}
     assert same(ros) == same(inprocess)
 
 

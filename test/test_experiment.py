@@ -18,7 +18,7 @@ import yaml
 
 from swarm_ros.app import cli
 from swarm_ros.app.experiment_file import load_experiment, run_seed
-from swarm_ros.app.published import ReferenceError, load_reference
+from swarm_ros.app.published import ReferenceFileError, load_reference
 from swarm_ros.app.report_stats import group_stats
 from swarm_ros.app.results_file import RESULT_COLUMNS, ExperimentError, read_results
 
@@ -288,7 +288,7 @@ BAD_REFERENCES = [
 @pytest.mark.parametrize("text,message", BAD_REFERENCES, ids=[m for _, m in BAD_REFERENCES])
 def test_bad_reference_files_are_refused_with_the_line(tmp_path, capsys, text, message):
     (tmp_path / "ref.csv").write_text(text)
-    with pytest.raises(ReferenceError, match=message):
+    with pytest.raises(ReferenceFileError, match=message):
         load_reference(tmp_path / "ref.csv")
     config = small_config(tmp_path, reference="ref.csv")
     assert experiment(config, tmp_path / "out") == 2

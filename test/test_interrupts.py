@@ -184,7 +184,7 @@ def test_ctrl_c_while_the_command_imports_its_run_directory_module_is_one_line(m
             return None
 
     import swarm_ros.artifacts
-    import swarm_ros.artifacts.run_dir  # noqa: F401 - loaded, to be taken away (and put back afterwards)
+    import swarm_ros.artifacts.run_dir
 
     monkeypatch.delitem(sys.modules, "swarm_ros.artifacts.run_dir")
     monkeypatch.delattr(swarm_ros.artifacts, "run_dir")

@@ -51,7 +51,7 @@ def _monitor(tmp_path: Path, settings: Settings):
     params = tmp_path / "params.yaml"
     params.write_text(params_yaml(settings, {"monitor": {"out_dir": str(out), "record": False}}))
     lock = DomainLock()
-    log = open(tmp_path / "monitor.log", "w")  # noqa: SIM115 - closed below
+    log = open(tmp_path / "monitor.log", "w")
     env = node_env(lock.domain_id, tmp_path)
     proc = subprocess.Popen(node_command("monitor", params, "monitor"), env=env, stdout=log, stderr=subprocess.STDOUT)
     try:

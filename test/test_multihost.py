@@ -70,7 +70,7 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
     procs = {}
     try:
         for host, name, module, extra in plan:
-            log = open(tmp_path / f"{name}.log", "w")  # noqa: SIM115 - closed with the process
+            log = open(tmp_path / f"{name}.log", "w")
             procs[name] = (subprocess.Popen(["ip", "netns", "exec", hosts[host], PY, "-m",
                                              f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params),
                                              "-r", f"__node:={name}", *extra],

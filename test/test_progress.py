@@ -8,10 +8,10 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from tqdm import tqdm  # noqa: E402
+from tqdm import tqdm
 
-from swarm_ros.ros import graph as msgs  # noqa: E402
-from swarm_ros.tools.progress import Progress  # noqa: E402
+from swarm_ros.ros import graph as msgs
+from swarm_ros.tools.progress import Progress
 
 pytestmark = pytest.mark.unit
 

@@ -184,7 +184,7 @@ def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference
     def run() -> None:
         try:
             launch.run()
-        except BaseException as exc:  # noqa: BLE001 - reported below
+        except BaseException as exc:
             errors.append(exc)
 
     thread = threading.Thread(target=run)
@@ -305,7 +305,7 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
            "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"}
 
     def start(name: str, module: str, *extra: str) -> subprocess.Popen:
-        log = open(tmp_path / f"{name}.log", "a")  # noqa: SIM115 - the process holds it
+        log = open(tmp_path / f"{name}.log", "a")
         return subprocess.Popen([PY, "-m", f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params),
                                  "-r", f"__node:={name}", *extra], env=env, stdout=log, stderr=subprocess.STDOUT)
 

@@ -253,7 +253,7 @@ class Launch:
         return graph_plan(self.processes, self.region_cuts)
 
     def _spawn(self, name: str, command: list[str], log: Path, incarnation: int) -> Child:
-        f = open(log, "ab")  # noqa: SIM115 - closed in stop()
+        f = open(log, "ab")
         if incarnation:
             f.write(f"--- swarm-ros: restarted, incarnation {incarnation} ---\n".encode())
             f.flush()

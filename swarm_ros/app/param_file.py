@@ -54,7 +54,7 @@ def read_yaml(path: Path, what: str, error: type[SwarmError]) -> object:
     one line naming the file (unreadable, too large, bad YAML, a key given twice)."""
     data = read_bounded(path, YAML_LIMIT, what, error)
     try:
-        return yaml.load(data.decode("utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
+        return yaml.load(data.decode("utf-8"), Loader=_UniqueKeyLoader)
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if isinstance(exc, yaml.constructor.ConstructorError) and "given twice" in str(exc.problem):

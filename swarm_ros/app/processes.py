@@ -71,7 +71,7 @@ class DomainLock:
         ids = list(DOMAIN_IDS)
         start = random.randrange(len(ids))
         for d in ids[start:] + ids[:start]:
-            f = open(lock_dir / f"{d}.lock", "w")  # noqa: SIM115 - held for the run
+            f = open(lock_dir / f"{d}.lock", "w")
             try:
                 fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:

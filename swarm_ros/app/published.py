@@ -28,7 +28,7 @@ COLUMNS = ("shape", "study_robots", "mean_ticks", "ci95_low", "ci95_high", "grou
            "sizes_mean_max")
 
 
-class ReferenceError(SwarmError):
+class ReferenceFileError(SwarmError):
     """A reference file cannot be read or is malformed; the message names the file and the line."""
 
 
@@ -54,21 +54,21 @@ def load_reference(path: Path) -> dict[str, Reference]:
     """The rows of a reference file by shape name.
 
     Raises:
-        ReferenceError: unreadable, wrong columns, a bad number, a CI that does not hold
+        ReferenceFileError: unreadable, wrong columns, a bad number, a CI that does not hold
             its mean, or a shape listed twice.
     """
     try:
-        text = read_bounded(path, YAML_LIMIT, "reference file", ReferenceError).decode("utf-8")
+        text = read_bounded(path, YAML_LIMIT, "reference file", ReferenceFileError).decode("utf-8")
     except UnicodeDecodeError:
-        raise ReferenceError(f"{path}: cannot read the reference file (not UTF-8 text)") from None
+        raise ReferenceFileError(f"{path}: cannot read the reference file (not UTF-8 text)") from None
     lines = [(n, ln) for n, ln in enumerate(text.splitlines(), start=1) if ln.strip() and not ln.startswith("#")]
     if not lines or next(csv.reader([lines[0][1]])) != list(COLUMNS):
-        raise ReferenceError(f"{path}: expected the columns {','.join(COLUMNS)}")
+        raise ReferenceFileError(f"{path}: expected the columns {','.join(COLUMNS)}")
     out: dict[str, Reference] = {}
     for n, line in lines[1:]:
         values = next(csv.reader(io.StringIO(line)))
         if len(values) != len(COLUMNS):
-            raise ReferenceError(f"{path}:{n}: expected {len(COLUMNS)} values, got {len(values)}")
+            raise ReferenceFileError(f"{path}:{n}: expected {len(COLUMNS)} values, got {len(values)}")
         row = dict(zip(COLUMNS, values))
         try:
             ref = Reference(shape=row["shape"].strip(), study_robots=int(row["study_robots"]),
@@ -76,13 +76,13 @@ def load_reference(path: Path) -> dict[str, Reference]:
                             ci95_high=float(row["ci95_high"]), group_sizes=row["group_sizes"].strip(),
                             sizes_mean_min=float(row["sizes_mean_min"]), sizes_mean_max=float(row["sizes_mean_max"]))
         except ValueError:
-            raise ReferenceError(f"{path}:{n}: a value is not a number") from None
+            raise ReferenceFileError(f"{path}:{n}: a value is not a number") from None
         numbers = (ref.mean, ref.ci95_low, ref.ci95_high, ref.sizes_mean_min, ref.sizes_mean_max)
         if not ref.shape or not all(math.isfinite(v) for v in numbers) or ref.study_robots < 1:
-            raise ReferenceError(f"{path}:{n}: needs a shape name, finite numbers and study_robots >= 1")
+            raise ReferenceFileError(f"{path}:{n}: needs a shape name, finite numbers and study_robots >= 1")
         if not ref.ci95_low <= ref.mean <= ref.ci95_high or ref.sizes_mean_min > ref.sizes_mean_max:
-            raise ReferenceError(f"{path}:{n}: the CI must hold the mean, and sizes_mean_min <= sizes_mean_max")
+            raise ReferenceFileError(f"{path}:{n}: the CI must hold the mean, and sizes_mean_min <= sizes_mean_max")
         if ref.shape in out:
-            raise ReferenceError(f"{path}:{n}: shape '{ref.shape}' listed twice")
+            raise ReferenceFileError(f"{path}:{n}: shape '{ref.shape}' listed twice")
         out[ref.shape] = ref
     return out

@@ -36,14 +36,14 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 from swarm_ros.app.published import (
-    Reference,  # noqa: E402
-    load_reference,  # noqa: E402
+    Reference,
+    load_reference,
 )
-from swarm_ros.app.report_stats import (  # noqa: E402
+from swarm_ros.app.report_stats import (
     _COLOURS,
     FIGURES,
     STATS_CSV,
@@ -55,14 +55,14 @@ from swarm_ros.app.report_stats import (  # noqa: E402
     stats_csv,
     stats_markdown,
 )
-from swarm_ros.app.results_file import (  # noqa: E402
+from swarm_ros.app.results_file import (
     REFERENCE_FILE,
     RESULTS_FILE,
-    ExperimentError,  # noqa: E402
+    ExperimentError,
     read_results,
 )
-from swarm_ros.artifacts.run_dir import public_mode  # noqa: E402
-from swarm_ros.core.metrics import METRIC_COLUMNS  # noqa: E402
+from swarm_ros.artifacts.run_dir import public_mode
+from swarm_ros.core.metrics import METRIC_COLUMNS
 
 
 def _save(fig: plt.Figure, path: Path) -> None:
@@ -305,7 +305,7 @@ def build_report(out: Path) -> list[Path]:
 
     Raises:
         ExperimentError: no results file, or it holds no runs.
-        ReferenceError: a reference file that is malformed.
+        ReferenceFileError: a reference file that is malformed.
     """
     results = out / RESULTS_FILE
     if not results.is_file():

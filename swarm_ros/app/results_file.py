@@ -79,7 +79,7 @@ class ResultsFile:
             part.write_text(",".join(RESULT_COLUMNS) + "\n", encoding="utf-8")
             part.replace(path)
             self.rows = []
-        self._file = open(path, "a", encoding="utf-8")  # noqa: SIM115 - closed in close()
+        self._file = open(path, "a", encoding="utf-8")
 
     def done(self) -> set[tuple]:
         """The coordinates of the runs in the file, as :attr:`~swarm_ros.app.experiment_file.RunSpec.key`."""

@@ -7,13 +7,13 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.colors import ListedColormap
+from matplotlib.patches import Patch
 
-from swarm_ros.core.run_result import RunRecord  # noqa: E402
-from swarm_ros.core.state import RobotState  # noqa: E402
+from swarm_ros.core.run_result import RunRecord
+from swarm_ros.core.state import RobotState
 
 # Patch classes of the picture and their colours (colour-blind safe, Okabe-Ito based).
 _CLASSES = (

@@ -45,8 +45,8 @@ import numpy as np
 # a thread; the Recorder finds the failure itself (close() raises RecordingError) and says it in one line. Set
 # before rerun is imported, which reads it once; a RUST_LOG the user sets wins.
 os.environ.setdefault("RUST_LOG", "warn,re_log_encoding::rrd=off,re_sdk::recording_stream=off,re_sdk::log_sink=off")
-import rerun as rr  # noqa: E402
-import rerun.blueprint as rrb  # noqa: E402
+import rerun as rr
+import rerun.blueprint as rrb
 
 from swarm_ros.artifacts.run_dir import OutputError
 from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics

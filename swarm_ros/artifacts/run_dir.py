@@ -268,7 +268,7 @@ def claim_out_dir(out: Path) -> None:
     while True:
         try:
             lock_dir.mkdir(exist_ok=True)
-            f = open(path, "a+", encoding="utf-8")  # noqa: SIM115 - held until released
+            f = open(path, "a+", encoding="utf-8")
         except OSError as exc:
             raise OutputError(f"{lock_dir}: cannot reserve {out} ({exc.strerror or exc})") from None
         try:

@@ -85,7 +85,7 @@ def illegal(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray
         z0, z, pitch: in a 3D world (all three given), the z before, and the decided z and elevation.
     """
     solid = z0 is not None
-    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731 - message fields are strided views
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)
     none = np.empty(0)
     bad = np.empty(len(x), dtype=np.bool_)
     _illegal(radius, frontier, f64(x0), f64(y0), f64(z0) if solid else none, np.ascontiguousarray(claim, np.int64),

@@ -71,7 +71,7 @@ def read_mesh(path: Path, scale: float) -> np.ndarray:
     data = read_bounded(path, MESH_LIMIT, "mesh", ShapeError)
     try:
         mesh = trimesh.load(io.BytesIO(data), file_type=path.suffix.lower().lstrip("."), force="mesh", process=True)
-    except Exception as exc:  # trimesh raises many kinds on a corrupt file  # noqa: BLE001
+    except Exception as exc:  # trimesh raises many kinds on a corrupt file
         raise ShapeError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})".splitlines()[0]) from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise ShapeError(f"{path}: the mesh has no triangles")
