@@ -31,8 +31,9 @@ def graph_plan(processes: int, region_cuts: str = "") -> list[tuple[str, str, di
 
 # -- topics -----------------------------------------------------------------------
 ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
-DECISIONS = "/swarm/decisions"  # world -> all: the decisions it applied in the tick (PointCloud2)
-BATCH_DECISIONS = "/swarm/decisions"  # /swarm/decisions/<batch>: one batch -> world: its robots' decisions
+#: world -> all: the decisions it applied in the tick (PointCloud2); under it, /swarm/decisions/<batch>:
+#: one batch -> world: its robots' decisions (decisions_topic)
+DECISIONS = "/swarm/decisions"
 BATCHES = "/swarm/batches"  # robot batches -> world: the columns (strip) each batch hosts (Int64MultiArray)
 #: /swarm/region/<batch>: world -> one batch, after each tick: the rows its strip and halo need (PointCloud2,
 #: compact rows)
@@ -64,4 +65,4 @@ def snapshot_topic(node_name: str) -> str:
 
 def decisions_topic(node_name: str) -> str:
     """A batch's own decisions topic: the world takes a robot's decisions only from its batch's topic."""
-    return f"{BATCH_DECISIONS}/{node_name}"
+    return f"{DECISIONS}/{node_name}"

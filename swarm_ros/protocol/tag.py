@@ -28,7 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from swarm_ros.protocol.checks import Rejected
-from swarm_ros.protocol.plan import BATCH_DECISIONS, BATCHES, METRICS, MONITOR, WORLD
+from swarm_ros.protocol.plan import BATCHES, DECISIONS, METRICS, MONITOR, WORLD
 from swarm_ros.protocol.rows import TAG_PREFIX
 
 MAC_CHARS = 32  #: hex digits of the MAC (128 bits)
@@ -113,8 +113,8 @@ def may_send(sender: str, topic: str) -> bool:
         return sender == MONITOR
     if topic == BATCHES:
         return sender not in (WORLD, MONITOR)
-    if topic.startswith(BATCH_DECISIONS + "/"):
-        return topic == f"{BATCH_DECISIONS}/{sender}"
+    if topic.startswith(DECISIONS + "/"):
+        return topic == f"{DECISIONS}/{sender}"
     return sender == WORLD
 
 

@@ -26,7 +26,6 @@ from swarm_ros.protocol.cdr import encode_clock, encode_cloud, encode_grid
 from swarm_ros.protocol.checks import cloud
 from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
     ALIVE,
-    BATCH_DECISIONS,
     BATCHES,
     CLOCK,
     DECISIONS,
