@@ -24,7 +24,7 @@ from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
 from swarm_ros.protocol.hosting import Hosting, snapshot
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
-from swarm_ros.protocol.status import RunFailed, Status
+from swarm_ros.protocol.status import RunFailed
 from swarm_ros.protocol.world_port import (
     FINAL_WAIT,
     FIRST_STALL_S,
@@ -33,12 +33,13 @@ from swarm_ros.protocol.world_port import (
     Policy,
     WorldPort,
 )
-from swarm_ros.protocol.world_restore import Saved, book_of, restore
-from swarm_ros.protocol.world_status import check_stalls, status_of
+from swarm_ros.protocol.world_restore import Saved, WorldRestore
+from swarm_ros.protocol.world_status import WorldStatus
 
 
-class Lockstep:
-    """Admission, ticks, the monitor window and the loss policy of one run (see the module's docstring)."""
+class Lockstep(WorldStatus, WorldRestore):
+    """Admission, ticks, the monitor window and the loss policy of one run (see the module's docstring); its
+    status and stall checks (:class:`WorldStatus`), its bookkeeping and restore (:class:`WorldRestore`)."""
 
     def __init__(self, sim: Simulation, policy: Policy, port: WorldPort, logger, rejections: Rejections,
                  clock: Callable[[], float] = time.monotonic, created: float | None = None) -> None:
@@ -303,12 +304,12 @@ class Lockstep:
     def save_book(self) -> None:
         """The bookkeeping a restarted world needs besides the ticks (:mod:`swarm_ros.protocol.world_restore`)."""
         if self.started:
-            self.port.save_book(book_of(self))
+            self.port.save_book(self.book())
 
     def restore(self, saved: Saved, incarnation: int) -> None:
         """Go on from the checkpoint a world process before this one wrote (:func:`restore`), then send every
         batch a snapshot of the saved tick, and the ticks after the monitor's last report again."""
-        restore(self, saved, incarnation)
+        self.restore_saved(saved, incarnation)
         for k in range(len(self.batch_names)):
             if k not in self.removed_batches:
                 self._send_snapshot(k)
@@ -318,10 +319,6 @@ class Lockstep:
         self.publish_status()
 
     # -- status -----------------------------------------------------------------------
-    def status(self, note: str = "") -> Status:
-        """The run's state now (:func:`swarm_ros.protocol.world_status.status_of`)."""
-        return status_of(self, note)
-
     def publish_status(self, note: str = "") -> None:
         self.status_at = self.clock()
         self.port.publish_status(self.status(note))
@@ -420,7 +417,7 @@ class Lockstep:
                 before tick 0 did not come back within ``restart_timeout``.
         """
         now, p = self.clock(), self.policy
-        check_stalls(self, now)
+        self.check_stalls(now)
         if self.monitor_down_since is not None and now - self.monitor_down_since > p.restart_timeout:
             self.monitor_down_since = None
             self._lose_monitor(f"not back within {p.restart_timeout:g} s")
