@@ -1,19 +1,34 @@
 """What several test modules share: small shapes, checked runs, recordings read back, network namespaces,
-and the package's import graph. (Fixtures are in conftest.py; modules import these by name.)"""
+the package's import graph, runs of the graph and their processes, killed nodes and their restarts,
+experiment files, the lockstep driven with a fake port and clock. (Fixtures are in conftest.py; modules
+import these by name; a test module imports nothing from another test module.)"""
 
 from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
+from bagcheck import assert_bag_holds_run
 
-from swarm_ros.core import RunParams, Shape, Simulation, World
+from swarm_ros.core import RunParams, Shape, Simulation, World, decide
 from swarm_ros.core.invariants import check_state, check_tick
+from swarm_ros.core.regions import batch_strip, columns
+from swarm_ros.core.rules import Decider, Decisions
+from swarm_ros.protocol.checkpoint import MAGIC
+from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.lockstep import Lockstep
+from swarm_ros.protocol.plan import batch_name
+from swarm_ros.protocol.rows import decision_rows
+from swarm_ros.protocol.world_port import Policy
+
+_DONE = 7  # the checkpoint header's int64 holding the last tick saved (swarm_ros.protocol.checkpoint)
 
 # Robot counts that complete each built-in shape in the original study (docs/model.md, "Shapes").
 STUDY_PATCHES = {"star": 1036, "wrench": 566, "k-letter": 1352, "rectangle": 438, "tyre": 1282, "spinner": 1040}
@@ -204,3 +219,332 @@ def make_cloud(rows: np.ndarray, tick: int):
     msg.data = array.array("B", rows.tobytes())
     msg.is_dense = True
     return msg
+
+
+# -- from test_ros_graph.py --------------------------------------------------------------------------------------
+
+
+def run_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("ROS_DOMAIN_ID", None)  # every run picks a free domain of its own
+    env.setdefault("HOME", "/tmp")
+    return env
+
+
+def shape_file(path: Path, outer: float, hole: float = 0.0, cross: bool = False, half: int = 16) -> Path:
+    c = np.arange(-half, half + 1)
+    x, y = np.meshgrid(c, c)
+    d = np.hypot(x, y)
+    mask = (d <= outer) & (d >= hole)
+    if cross:
+        mask = ((np.abs(x) <= 2) & (np.abs(y) <= outer)) | ((np.abs(y) <= 2) & (np.abs(x) <= outer))
+    rows = ["".join("#" if v else "." for v in row) for row in mask[::-1]]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def processes_mentioning(text: str) -> list[int]:
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                if text in (proc / "cmdline").read_bytes().decode(errors="replace"):
+                    found.append(int(proc.name))
+            except OSError:
+                pass
+    return found
+
+
+def assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
+    """``got`` (a ROS run; ``launched``: by ``swarm-ros run``) equals ``ref`` (``simulate``) but for timings."""
+    assert (ref / "metrics.csv").read_bytes() == (got / "metrics.csv").read_bytes()
+    assert (ref / "final_state.csv").read_bytes() == (got / "final_state.csv").read_bytes()
+    a = json.loads((ref / "summary.json").read_text())
+    b = json.loads((got / "summary.json").read_text())
+    assert (a.pop("engine"), b.pop("engine")) == ("inprocess", "ros2")
+    a.pop("wall_seconds"), b.pop("wall_seconds")
+    # a ROS run's overheads: from the command's start to tick 0, and from the outcome to the last process gone
+    # (only the launcher knows the latter, from the world's status: its progress listener heard the graph)
+    startup, shutdown = b.pop("startup_seconds"), b.pop("shutdown_seconds")
+    assert isinstance(startup, float) and 0 < startup < 120
+    assert (isinstance(shutdown, float) and 0 < shutdown < 60) if launched else shutdown is None
+    assert b.pop("rejected_messages") == {"world": 0, "monitor": 0}  # an honest run: nothing dropped
+    assert a == b
+    assert (got / "final.png").stat().st_size > 0 and (got / "convergence.png").stat().st_size > 0
+    assert_bag_holds_run(got)  # the rosbag2 of the run, read with another library than the one that wrote it
+    # the monitor records with the same module: the same data (ids, timestamps and chunking may differ)
+    assert Recording(got / "recording.rrd").same_data(Recording(ref / "recording.rrd"))
+
+
+# -- from test_restarts.py ---------------------------------------------------------------------------------------
+
+
+# The star under the local join rule: ~3600 ticks, several seconds over the graph, long enough to kill in
+STAR_LOCAL = ["--shape", "star", "--seed", "5", "--rules", "local"]
+
+
+def node_pid(out: Path, node: str, timeout: float = 60, not_pid: int | None = None) -> int:
+    """The pid of the process running ``node`` for the run into ``out`` (a new one if ``not_pid`` is given)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for pid in processes_mentioning(f".{out.name}.logs-"):
+            try:
+                cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+            except OSError:
+                continue
+            if f"__node:={node}\0" in cmdline + "\0" and str(out.parent) in cmdline and pid != not_pid:
+                return pid
+        time.sleep(0.02)
+    raise AssertionError(f"no process for {node}")
+
+
+def wait_ticks_recorded(out: Path, size: int, timeout: float = 120) -> None:
+    """Wait until the run's partial recording holds ``size`` bytes: ticks are flowing."""
+    partial = out.parent / f"{out.name}.partial.rrd"
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if partial.exists() and partial.stat().st_size > size:
+            return
+        time.sleep(0.02)
+    raise AssertionError("the run never got going")
+
+
+def assert_identical_run(reference: Path, out: Path) -> dict:
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (reference / name).read_bytes(), name
+    got, ref = (json.loads((d / "summary.json").read_text()) for d in (out, reference))
+    assert got["outcome"] == ref["outcome"] and got["lost_robots"] == 0 and got["losses"] == []
+    return got
+
+
+# -- from test_node_restarts.py ----------------------------------------------------------------------------------
+
+
+def staged_logs(out: Path, timeout: float = 60) -> Path:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = list(out.parent.glob(f".{out.name}.logs-*"))
+        if found:
+            return found[0]
+        time.sleep(0.01)
+    raise AssertionError("no logs")
+
+
+def saved_tick(logs: Path) -> int:
+    try:
+        head = np.fromfile(logs / "world.checkpoint", dtype=np.int64, count=8)
+    except (OSError, ValueError):
+        return -1
+    return int(head[_DONE]) if head.size == 8 and head[0] == MAGIC else -1
+
+
+def wait_saved(logs: Path, tick: int, timeout: float = 180) -> int:
+    """Wait (polling fast) until the world has saved ``tick``; return the tick saved when seen."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        t = saved_tick(logs)
+        if t >= tick:
+            return t
+        time.sleep(0.0005)
+    raise AssertionError(f"tick {tick} never came")
+
+
+def kill_node(out: Path, node: str, not_pid: int | None = None) -> int:
+    pid = node_pid(out, node, not_pid=not_pid)
+    os.kill(pid, signal.SIGKILL)
+    return pid
+
+
+def finish_restarted_run(launcher, reference: Path, out: Path, restarts: list[str]) -> dict:
+    _, err = launcher.communicate(timeout=300)
+    assert launcher.returncode == 0, err
+    summary = assert_identical_run(reference, out)
+    assert [r["node"] for r in summary["restarts"]] == restarts, summary["restarts"]
+    assert_bag_holds_run(out)
+    assert not list(out.parent.glob(f".{out.name}.*")), "nothing of the run left beside it"
+    assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint is removed with the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
+    return summary
+
+
+# -- from test_experiment.py -------------------------------------------------------------------------------------
+
+
+def disc_file(path: Path, radius: float = 4.5, half: int = 6) -> Path:
+    c = np.arange(-half, half + 1)
+    x, y = np.meshgrid(c, c)
+    rows = ["".join("#" if v else "." for v in row) for row in (np.hypot(x, y) <= radius)[::-1]]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def small_config(tmp_path: Path, **over) -> Path:
+    """A small grid in a 21 x 21 world: one disc shape (69 patches), three sizes, two radii."""
+    disc_file(tmp_path / "disc.txt")
+    data = {"name": "small", "seed": 11, "repetitions": 3, "vision_radius": [1, 1.5], "max_ticks": 4000,
+            "world_radius": 10, "shapes": {"disc.txt": [50, "patches", 80]}, **over}
+    path = tmp_path / "small.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def children_of(pid: int) -> list[int]:
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(proc.name))
+    return found
+
+
+# -- from test_engine.py -----------------------------------------------------------------------------------------
+
+
+def final_of(sim):
+    return (sim.outcome, sim.history.tolist(), sim.state.x.tobytes(), sim.state.y.tobytes(),
+            sim.state.heading.tobytes(), sim.state.state.tobytes())
+
+
+def run_in_batches(shape: Shape, p, batches: int, seed: int) -> Simulation:
+    """The distributed data flow in one process: robots split over ``batches`` by a random
+    owner map, each batch decides from the shared view, the world applies the union."""
+    sim = Simulation(shape, p)
+    owner = np.random.default_rng(seed).integers(0, batches, p.robots)
+    while not sim.done:
+        ids = sim.moving_ids()
+        parts = [decide(sim.state, ids[owner[ids] == b], shape, p, sim.tick + 1) for b in range(batches)]
+        sim.apply(Decisions.concatenate(parts[::-1]))
+    return sim
+
+
+# -- from test_lockstep.py ---------------------------------------------------------------------------------------
+
+
+ROBOTS, MAX_TICKS = 60, 400
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class Log:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def info(self, text: str) -> None:
+        self.lines.append(text)
+
+    warn = info
+
+
+class LockstepPort:
+    """Records what the lockstep publishes."""
+
+    def __init__(self) -> None:
+        self.watched: list[str] = []
+        self.snapshots: list[tuple[int, int]] = []  # (batch, tick)
+        self.ticks: list[int] = []
+        self.statuses: list = []
+        self.monitor_ready = True
+        self.saver = None  # a Checkpoint, to restart from (test_world_restart.py)
+        self.books: list[dict] = []
+        self.regions: list[tuple[int, int, np.ndarray]] = []  # (tick, batch, rows): snapshots and region rows
+
+    def watch_batch(self, k, name):
+        self.watched.append(name)
+
+    def send_snapshot(self, k, tick, rows):
+        self.snapshots.append((k, tick))
+        self.regions.append((tick, k, rows))
+
+    def publish_tick(self, tick, rows, joined, applied, regional):
+        assert (applied is None) == (tick == 0)
+        self.ticks.append(tick)
+        self.regions += [(tick, k, part) for k, part in enumerate(regional or ())]
+
+    def publish_status(self, status):
+        self.statuses.append(status)
+
+    def checkpoint(self, tick, rows, applied, metrics):
+        if self.saver is not None:
+            self.saver.write(tick, rows, applied, metrics)
+
+    def save_book(self, book):
+        self.books.append(book)
+        if self.saver is not None:
+            self.saver.save_book(book)
+
+    def monitor_reads_all(self):
+        return self.monitor_ready
+
+    def delivered(self):
+        return True
+
+    def startup_seconds(self):
+        return 0.5
+
+
+class LockstepRun:
+    """A lockstep, its port and clock, and batches that decide as robot-batch processes do."""
+
+    def __init__(self, batches: int = 2, cuts: list[int] | None = None, shape: str = "star", **policy) -> None:
+        self.shape = Shape.load(shape)
+        self.params = RunParams(robots=ROBOTS, seed=7, max_ticks=MAX_TICKS)
+        text = ",".join(map(str, cuts or []))
+        self.strips = [batch_strip(self.shape, self.params, k, batches, text) for k in range(batches)]
+        self.clock, self.port, self.log = Clock(), LockstepPort(), Log()
+        self.rejections = Rejections(self.log)
+        self.ls = Lockstep(Simulation(self.shape, self.params), Policy(**{"monitor_window": 0, **policy}), self.port,
+                           self.log, self.rejections, clock=self.clock)
+        self.batches = batches
+        self.decider = Decider(self.shape, self.params)
+
+    def announce(self, k: int, incarnation: int = 0) -> None:
+        self.ls.announce(batch_name(k), incarnation, self.strips[k])
+
+    def start(self) -> None:
+        """Every batch announces itself (tick 0 follows, unless the monitor is awaited)."""
+        for k in range(self.batches):
+            self.announce(k)
+        assert self.ls.started or self.ls.window
+
+    def decide(self, k: int) -> np.ndarray:
+        """Batch ``k``'s decision rows for the coming tick (its strip's moving robots not decided yet)."""
+        s = self.ls.sim.state
+        own = self.own(k)
+        own = own[~self.ls.decided[own]]
+        return decision_rows(self.decider.decide(s, own, self.ls.sim.tick + 1))
+
+    def own(self, k: int) -> np.ndarray:
+        """The moving robots in batch ``k``'s strip now."""
+        s = self.ls.sim.state
+        moving = s.moving_ids()
+        cols = columns(s.x[moving], self.shape.world.radius)
+        return moving[(cols >= self.strips[k][0]) & (cols <= self.strips[k][1])]
+
+    def tick(self, silent: tuple[int, ...] = ()) -> None:
+        """One tick: every batch but ``silent`` (and those removed for good) sends its decisions."""
+        for k in range(self.batches):
+            if k in self.ls.removed_batches:
+                continue
+            rows = self.decide(k)
+            if k not in silent and rows.size:
+                self.ls.decisions(k, self.ls.sim.tick + 1, rows)
+
+    def run(self, ticks: int | None = None) -> None:
+        end = MAX_TICKS if ticks is None else self.ls.sim.tick + ticks
+        while not self.ls.sim.done and self.ls.sim.tick < end:
+            self.tick()
+
+    def engine(self) -> Simulation:
+        sim = Simulation(self.shape, self.params)
+        sim.run()
+        return sim

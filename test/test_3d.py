@@ -7,10 +7,9 @@ import math
 
 import numpy as np
 import pytest
-from helpers import run_checked
+from helpers import run_checked, run_in_batches
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_engine import run_in_batches
 
 from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
 from swarm_ros.core.errors import ParameterError
@@ -272,7 +271,7 @@ def test_the_paper_rules_complete_every_builtin_3d_shape():
         assert str(sim.run()) == "complete", name
 
 
-def _final(sim: Simulation) -> tuple:
+def final_of(sim: Simulation) -> tuple:
     s = sim.state
     return (sim.tick, str(sim.outcome), s.x.tobytes(), s.y.tobytes(), s.z.tobytes(), s.heading.tobytes(),
             s.pitch.tobytes(), s.state.tobytes(), s.occupancy.tobytes(), sim.history.tobytes())
@@ -285,7 +284,7 @@ def test_batched_decide_and_apply_equal_the_fused_engine_in_3d(batches, rules):
     p = RunParams(robots=shape.patches + 20, seed=7, vision_radius=1.5, rules=rules, max_ticks=1500)
     fused = Simulation(shape, p)
     fused.run()
-    assert _final(run_in_batches(shape, p, batches, seed=batches)) == _final(fused)
+    assert final_of(run_in_batches(shape, p, batches, seed=batches)) == final_of(fused)
 
 
 def test_a_replica_fed_the_changed_rows_equals_the_world_in_3d():

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bagcheck import read_bag
-from test_ros_graph import _env, _shape_file
+from helpers import run_env, shape_file
 
 from swarm_ros.protocol.rows import ROBOT_ROW
 
@@ -29,13 +29,13 @@ PY = sys.executable
 
 def _run(out: Path, *extra: str) -> subprocess.CompletedProcess:
     return subprocess.run([PY, "-m", "swarm_ros", "run", "--processes", "1", "--out", str(out), "--quiet",
-                           "--no-recording", *extra], capture_output=True, text=True, timeout=240, env=_env())
+                           "--no-recording", *extra], capture_output=True, text=True, timeout=240, env=run_env())
 
 
 @pytest.fixture(scope="module")
 def ring_run(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("bagrun")
-    shape = _shape_file(d / "ring.txt", outer=12.5, hole=5)
+    shape = shape_file(d / "ring.txt", outer=12.5, hole=5)
     out = d / "run"
     done = _run(out, "--shape", str(shape), "--world-radius", "16", "--seed", "2")
     assert done.returncode == 0, done.stderr
@@ -43,7 +43,7 @@ def ring_run(tmp_path_factory) -> Path:
 
 
 def test_no_bag_writes_none_and_leaves_nothing_beside_the_run(tmp_path):
-    shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
+    shape = shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
     out = tmp_path / "run"
     done = _run(out, "--shape", str(shape), "--world-radius", "16", "--no-bag")
     assert done.returncode == 0, done.stderr
@@ -56,7 +56,7 @@ def test_an_interrupted_run_keeps_a_readable_bag_of_its_ticks(tmp_path):
     # the star under the local join rule: thousands of ticks, time to interrupt
     proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--seed", "5", "--rules", "local",
                              "--processes", "2", "--out", str(out), "--quiet", "--no-recording"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=run_env())
     def logged(node: str, text: str) -> bool:
         return any(text in (logs / f"{node}.log").read_text(errors="replace")
                    for logs in tmp_path.glob(".run.logs-*") if (logs / f"{node}.log").exists())
@@ -92,7 +92,7 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
     from swarm_ros.ros.dds import dds_defaults
 
     domain = 180 + os.getpid() % 40
-    env = {**_env(), **dds_defaults()}
+    env = {**run_env(), **dds_defaults()}
     saved = {k: os.environ.get(k) for k in env if k in dds_defaults()}
     os.environ.update(dds_defaults())  # this process's participant discovers as the replay's does
     # (if this process made a participant before, Fast DDS kept its first profile: announcing every 3 s,
@@ -133,7 +133,7 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
 
 def test_replay_refuses_a_start_offset_past_the_bags_end_in_one_line(ring_run):
     done = subprocess.run([PY, "-m", "swarm_ros", "replay", str(ring_run), "--start-offset", "100000", "--quiet"],
-                          capture_output=True, text=True, env=_env(), timeout=60)
+                          capture_output=True, text=True, env=run_env(), timeout=60)
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
     assert re.fullmatch(r"swarm-ros: error: --start-offset 100000 is past the bag's end \(it lasts [\d.]+ s\)\n",
                         done.stderr), done.stderr

@@ -1,12 +1,10 @@
 """Whole runs: every outcome, every built-in shape with all invariants checked, determinism,
 and equality between the fused in-process step and the batched decide/apply data flow."""
 
-import numpy as np
 import pytest
-from helpers import disc_shape, params, run_checked
+from helpers import disc_shape, final_of, params, run_checked, run_in_batches
 
-from swarm_ros.core import METRIC_COLUMNS, Outcome, RobotState, Shape, Simulation, World, decide
-from swarm_ros.core.rules import Decisions
+from swarm_ros.core import METRIC_COLUMNS, Outcome, RobotState, Shape, Simulation, World
 from swarm_ros.core.run_result import summary_of
 
 pytestmark = pytest.mark.unit
@@ -85,9 +83,6 @@ def test_history_has_one_row_per_tick_and_matches_the_final_state():
         sim.step()
 
 
-def _final(sim):
-    return (sim.outcome, sim.history.tolist(), sim.state.x.tobytes(), sim.state.y.tobytes(),
-            sim.state.heading.tobytes(), sim.state.state.tobytes())
 
 
 def test_same_seed_same_run_different_seed_different_run():
@@ -97,20 +92,10 @@ def test_same_seed_same_run_different_seed_different_run():
     c = Simulation(shape, params(566, seed=22))
     for s in (a, b, c):
         s.run()
-    assert _final(a) == _final(b)
-    assert _final(a) != _final(c)
+    assert final_of(a) == final_of(b)
+    assert final_of(a) != final_of(c)
 
 
-def run_in_batches(shape: Shape, p, batches: int, seed: int) -> Simulation:
-    """The distributed data flow in one process: robots split over ``batches`` by a random
-    owner map, each batch decides from the shared view, the world applies the union."""
-    sim = Simulation(shape, p)
-    owner = np.random.default_rng(seed).integers(0, batches, p.robots)
-    while not sim.done:
-        ids = sim.moving_ids()
-        parts = [decide(sim.state, ids[owner[ids] == b], shape, p, sim.tick + 1) for b in range(batches)]
-        sim.apply(Decisions.concatenate(parts[::-1]))
-    return sim
 
 
 @pytest.mark.parametrize("rules", RULES)
@@ -121,7 +106,7 @@ def test_batched_decide_and_apply_equal_the_fused_engine(name, robots, vision, b
     p = params(robots, seed=5, vision_radius=vision, max_ticks=4000, rules=rules)
     fused = Simulation(shape, p)
     fused.run()
-    assert _final(run_in_batches(shape, p, batches, seed=batches)) == _final(fused)
+    assert final_of(run_in_batches(shape, p, batches, seed=batches)) == final_of(fused)
 
 
 @pytest.mark.parametrize("rules", RULES)
@@ -129,7 +114,7 @@ def test_batched_equals_fused_with_wider_vision_on_a_small_ring(small_ring, rule
     p = params(90, seed=3, vision_radius=2.0, max_ticks=3000, rules=rules)
     fused = Simulation(small_ring, p)
     fused.run()
-    assert _final(run_in_batches(small_ring, p, 3, seed=1)) == _final(fused)
+    assert final_of(run_in_batches(small_ring, p, 3, seed=1)) == final_of(fused)
 
 
 @pytest.mark.parametrize("rules", RULES)
@@ -142,5 +127,5 @@ def test_running_in_chunks_equals_stepping_tick_by_tick(rules):
     chunked = Simulation(shape, p)
     while chunked.run(max_ticks=7) is None:
         assert chunked.tick % 7 == 0
-    assert _final(chunked) == _final(stepped)
+    assert final_of(chunked) == final_of(stepped)
     assert chunked.history.shape == (chunked.tick + 1, len(METRIC_COLUMNS))

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers import children_of, small_config
 
 from swarm_ros.app import cli
 from swarm_ros.app.experiment_file import load_experiment, run_seed
@@ -28,22 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
 
 
-def disc_file(path: Path, radius: float = 4.5, half: int = 6) -> Path:
-    c = np.arange(-half, half + 1)
-    x, y = np.meshgrid(c, c)
-    rows = ["".join("#" if v else "." for v in row) for row in (np.hypot(x, y) <= radius)[::-1]]
-    path.write_text("\n".join(rows) + "\n")
-    return path
 
 
-def small_config(tmp_path: Path, **over) -> Path:
-    """A small grid in a 21 x 21 world: one disc shape (69 patches), three sizes, two radii."""
-    disc_file(tmp_path / "disc.txt")
-    data = {"name": "small", "seed": 11, "repetitions": 3, "vision_radius": [1, 1.5], "max_ticks": 4000,
-            "world_radius": 10, "shapes": {"disc.txt": [50, "patches", 80]}, **over}
-    path = tmp_path / "small.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
 
 
 def experiment(config: Path, out: Path, *extra: str) -> int:
@@ -210,7 +197,7 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(small, tmp_path
     assert "run the same command again to resume" in err and "Traceback" not in err
     kept = read_results(results)
     assert 3 <= len(kept) < 240
-    assert not _children_of(proc.pid), "a worker outlived the interrupted experiment"
+    assert not children_of(proc.pid), "a worker outlived the interrupted experiment"
     done = subprocess.run(cmd + ["--quiet"], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     full = read_results(results)
@@ -224,17 +211,6 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(small, tmp_path
     assert head == small_rows
 
 
-def _children_of(pid: int) -> list[int]:
-    found = []
-    for proc in Path("/proc").iterdir():
-        if proc.name.isdigit():
-            try:
-                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[1]) == pid:
-                found.append(int(proc.name))
-    return found
 
 
 # -- rule sets and the published numbers -------------------------------------------

@@ -22,8 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import Recording, rrd_verify
-from test_ros_graph import _env, _processes_mentioning
+from helpers import Recording, processes_mentioning, rrd_verify, run_env
 
 from swarm_ros.core import RunParams, Shape
 from swarm_ros.core.regions import batch_strip, columns
@@ -37,7 +36,7 @@ ROBOTS = 1036  # the star, ~2700 ticks: a few seconds over the graph
 def _launch(out: Path, processes: int = 3, *extra: str) -> subprocess.Popen:
     return subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--processes", str(processes),
                              "--out", str(out), "--quiet", "--on-batch-loss", "remove", *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=run_env())
 
 
 def _wait_until_running(out: Path, batches: int = 3, timeout: float = 120) -> Path:
@@ -56,7 +55,7 @@ def _wait_until_running(out: Path, batches: int = 3, timeout: float = 120) -> Pa
 
 
 def _pid_of(node: str, logs: Path) -> int:
-    for pid in _processes_mentioning(str(logs)):
+    for pid in processes_mentioning(str(logs)):
         cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
         if f"__node:={node}\0" in cmdline + "\0":
             return pid
@@ -119,7 +118,7 @@ def test_a_killed_robot_batch_is_noticed_within_2_s_and_the_swarm_repairs_the_sh
     assert summary["restarts"] == []
     assert (out / "logs" / "launcher.log").read_text().count("started robot_batch_1 ") == 1
     assert summary["losses"][0]["tick"] == tick + 1  # removed at the end of the tick after the notice
-    assert not _processes_mentioning(str(out)), "a process outlived the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
 def test_a_stalled_robot_batch_is_dropped_and_cannot_corrupt_the_world_when_it_resumes(tmp_path):
@@ -137,7 +136,7 @@ def test_a_stalled_robot_batch_is_dropped_and_cannot_corrupt_the_world_when_it_r
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
     _check_consistent_run(out, 2)
-    assert not _processes_mentioning(str(out)), "a process outlived the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
 def test_a_monitor_killed_past_the_restart_bound_fails_the_command_and_its_recording_stays_readable(tmp_path):
@@ -158,4 +157,4 @@ def test_a_monitor_killed_past_the_restart_bound_fails_the_command_and_its_recor
     assert len(ticks) >= 64 and ticks == list(range(len(ticks))) and rec.events == []
     assert len(rec.robots) >= 64 and sorted(rec.robots) == list(range(len(rec.robots)))
     assert time.monotonic() - start < 60
-    assert not _processes_mentioning(str(out)), "a process outlived the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"

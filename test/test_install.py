@@ -15,8 +15,8 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import assert_same_run, shape_file
 from ros2_tools import build_workspace
-from test_ros_graph import _assert_same_run, _shape_file
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import Settings
@@ -58,7 +58,7 @@ def test_node_scripts_and_data_land_where_ros2_run_and_the_ament_index_look(pref
 
 
 def test_installed_nodes_run_a_swarm_to_its_end_from_the_install_space(prefix, tmp_path):
-    shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
+    shape = shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
     flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "3", "--robots", "430"]
     ref = tmp_path / "ref"
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
@@ -85,7 +85,7 @@ def test_installed_nodes_run_a_swarm_to_its_end_from_the_install_space(prefix, t
                 p.wait()
     assert {name: p.returncode for name, p in procs.items()} == dict.fromkeys(procs, 0), outputs
     assert "run ended: complete" in outputs["world"]
-    _assert_same_run(ref, run, launched=False)
+    assert_same_run(ref, run, launched=False)
 
 
 def test_installed_copy_finds_its_shapes_and_config_through_the_ament_prefix(prefix, tmp_path):

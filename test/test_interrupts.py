@@ -14,8 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import Recording, rrd_verify
-from test_experiment import _children_of, small_config
+from helpers import Recording, children_of, processes_mentioning, rrd_verify, small_config
 
 from swarm_ros.app.results_file import read_results
 
@@ -68,25 +67,24 @@ def test_sigterm_to_an_experiment_stops_its_workers_and_keeps_finished_runs(tmp_
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
     assert time.monotonic() - start < 5
-    assert not _children_of(proc.pid), "a worker outlived the experiment"
+    assert not children_of(proc.pid), "a worker outlived the experiment"
     assert "run the same command again to resume" in err
     assert 3 <= len(read_results(results)) < 240
     assert not Path(out / "stats.csv").exists()  # the report is built at the end only
 
 
 def test_sigterm_to_a_ros2_experiment_stops_the_graphs_of_its_workers(tmp_path):
-    from test_ros_graph import _processes_mentioning
 
     config = small_config(tmp_path, repetitions=3, vision_radius=[1], shapes={"disc.txt": [60]})
     proc = subprocess.Popen([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(tmp_path / "exp"),
                              "--engine", "ros2", "--jobs", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    _wait_for(lambda: bool(_processes_mentioning("swarm_ros-exp-")))  # a worker's graph is up
+    _wait_for(lambda: bool(processes_mentioning("swarm_ros-exp-")))  # a worker's graph is up
     start = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
-    _wait_for(lambda: not _processes_mentioning("swarm_ros-exp-"), timeout=5)
+    _wait_for(lambda: not processes_mentioning("swarm_ros-exp-"), timeout=5)
     assert time.monotonic() - start < 5
     assert "Traceback" not in err
 
@@ -252,9 +250,8 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
     _wait_for(lambda: len(listed()) >= 4, timeout=120)  # every node is up and its files listed
     proc.kill()
     proc.communicate(timeout=30)
-    from test_ros_graph import _processes_mentioning
 
-    _wait_for(lambda: not _processes_mentioning(".run.logs-"), timeout=30)  # the nodes die with it
+    _wait_for(lambda: not processes_mentioning(".run.logs-"), timeout=30)  # the nodes die with it
     left = [f for f in listed() if os.path.exists(f)]
     assert left, "a SIGKILLed launcher left no shared-memory file: nothing to test"
     hidden = list(tmp_path.glob(".run.logs-*"))

@@ -75,3 +75,18 @@ def test_node_files_stay_thin_and_modules_small():
     root = Path(__file__).resolve().parents[1] / "swarm_ros"
     sizes = {str(p.relative_to(root)): len(p.read_text().splitlines()) for p in root.rglob("*.py")}
     assert {p: n for p, n in sizes.items() if n > (300 if p.startswith("nodes/") else 450)} == {}
+
+
+def test_a_test_module_imports_nothing_from_another_test_module():
+    """What tests share is in helpers.py (and bagcheck.py, ros2_tools.py): a test module's private helper
+    imported elsewhere breaks when that module changes, and loads its tests' fixtures twice."""
+    import ast
+    from pathlib import Path
+
+    found = []
+    for path in sorted(Path(__file__).parent.glob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            found += [f"{path.name}: {name}" for name in names if name.split(".")[0].startswith("test_")]
+    assert not found, found

@@ -10,148 +10,29 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import ROBOTS, LockstepRun
 
-from swarm_ros.core import RunParams, Shape, Simulation
-from swarm_ros.core.regions import batch_strip, columns
-from swarm_ros.core.rules import Decider
+from swarm_ros.core.regions import columns
 from swarm_ros.core.state import RobotState
-from swarm_ros.protocol.checks import Rejected, Rejections
-from swarm_ros.protocol.lockstep import Lockstep
+from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.plan import MONITOR, batch_name
-from swarm_ros.protocol.rows import decision_rows
 from swarm_ros.protocol.status import RunFailed
-from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S, Policy
+from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S
 
 pytestmark = pytest.mark.unit
 
-ROBOTS, MAX_TICKS = 60, 400
 
 
-class Clock:
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
-class Log:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def info(self, text: str) -> None:
-        self.lines.append(text)
-
-    warn = info
 
 
-class Port:
-    """Records what the lockstep publishes."""
-
-    def __init__(self) -> None:
-        self.watched: list[str] = []
-        self.snapshots: list[tuple[int, int]] = []  # (batch, tick)
-        self.ticks: list[int] = []
-        self.statuses: list = []
-        self.monitor_ready = True
-        self.saver = None  # a Checkpoint, to restart from (test_world_restart.py)
-        self.books: list[dict] = []
-        self.regions: list[tuple[int, int, np.ndarray]] = []  # (tick, batch, rows): snapshots and region rows
-
-    def watch_batch(self, k, name):
-        self.watched.append(name)
-
-    def send_snapshot(self, k, tick, rows):
-        self.snapshots.append((k, tick))
-        self.regions.append((tick, k, rows))
-
-    def publish_tick(self, tick, rows, joined, applied, regional):
-        assert (applied is None) == (tick == 0)
-        self.ticks.append(tick)
-        self.regions += [(tick, k, part) for k, part in enumerate(regional or ())]
-
-    def publish_status(self, status):
-        self.statuses.append(status)
-
-    def checkpoint(self, tick, rows, applied, metrics):
-        if self.saver is not None:
-            self.saver.write(tick, rows, applied, metrics)
-
-    def save_book(self, book):
-        self.books.append(book)
-        if self.saver is not None:
-            self.saver.save_book(book)
-
-    def monitor_reads_all(self):
-        return self.monitor_ready
-
-    def delivered(self):
-        return True
-
-    def startup_seconds(self):
-        return 0.5
 
 
-class Run:
-    """A lockstep, its port and clock, and batches that decide as robot-batch processes do."""
-
-    def __init__(self, batches: int = 2, cuts: list[int] | None = None, shape: str = "star", **policy) -> None:
-        self.shape = Shape.load(shape)
-        self.params = RunParams(robots=ROBOTS, seed=7, max_ticks=MAX_TICKS)
-        text = ",".join(map(str, cuts or []))
-        self.strips = [batch_strip(self.shape, self.params, k, batches, text) for k in range(batches)]
-        self.clock, self.port, self.log = Clock(), Port(), Log()
-        self.rejections = Rejections(self.log)
-        self.ls = Lockstep(Simulation(self.shape, self.params), Policy(**{"monitor_window": 0, **policy}), self.port,
-                           self.log, self.rejections, clock=self.clock)
-        self.batches = batches
-        self.decider = Decider(self.shape, self.params)
-
-    def announce(self, k: int, incarnation: int = 0) -> None:
-        self.ls.announce(batch_name(k), incarnation, self.strips[k])
-
-    def start(self) -> None:
-        """Every batch announces itself (tick 0 follows, unless the monitor is awaited)."""
-        for k in range(self.batches):
-            self.announce(k)
-        assert self.ls.started or self.ls.window
-
-    def decide(self, k: int) -> np.ndarray:
-        """Batch ``k``'s decision rows for the coming tick (its strip's moving robots not decided yet)."""
-        s = self.ls.sim.state
-        own = self.own(k)
-        own = own[~self.ls.decided[own]]
-        return decision_rows(self.decider.decide(s, own, self.ls.sim.tick + 1))
-
-    def own(self, k: int) -> np.ndarray:
-        """The moving robots in batch ``k``'s strip now."""
-        s = self.ls.sim.state
-        moving = s.moving_ids()
-        cols = columns(s.x[moving], self.shape.world.radius)
-        return moving[(cols >= self.strips[k][0]) & (cols <= self.strips[k][1])]
-
-    def tick(self, silent: tuple[int, ...] = ()) -> None:
-        """One tick: every batch but ``silent`` (and those removed for good) sends its decisions."""
-        for k in range(self.batches):
-            if k in self.ls.removed_batches:
-                continue
-            rows = self.decide(k)
-            if k not in silent and rows.size:
-                self.ls.decisions(k, self.ls.sim.tick + 1, rows)
-
-    def run(self, ticks: int | None = None) -> None:
-        end = MAX_TICKS if ticks is None else self.ls.sim.tick + ticks
-        while not self.ls.sim.done and self.ls.sim.tick < end:
-            self.tick()
-
-    def engine(self) -> Simulation:
-        sim = Simulation(self.shape, self.params)
-        sim.run()
-        return sim
 
 
 def test_a_run_through_the_lockstep_is_the_engines_run_tick_for_tick():
-    r = Run(batches=3)
+    r = LockstepRun(batches=3)
     r.start()
     r.run()
     assert r.ls.sim.done and r.port.ticks == list(range(r.ls.sim.tick + 1))
@@ -163,7 +44,7 @@ def test_a_run_through_the_lockstep_is_the_engines_run_tick_for_tick():
 
 
 def test_admission_refuses_taken_columns_new_batches_after_tick_0_and_changed_strips():
-    r = Run()
+    r = LockstepRun()
     r.announce(0)
     with pytest.raises(Rejected, match="columns of another batch"):
         r.ls.announce("intruder", 0, (r.strips[0][1], r.strips[1][0]))
@@ -177,7 +58,7 @@ def test_admission_refuses_taken_columns_new_batches_after_tick_0_and_changed_st
 
 
 def test_decisions_are_checked_before_they_count():
-    r = Run()
+    r = LockstepRun()
     r.start()
     rows = r.decide(0)
     with pytest.raises(Rejected, match="future tick"):
@@ -197,7 +78,7 @@ def test_decisions_are_checked_before_they_count():
 
 
 def test_a_batch_lost_before_tick_0_is_waited_for_then_fails_the_run_if_it_does_not_come_back():
-    r = Run(restart_timeout=30.0)
+    r = LockstepRun(restart_timeout=30.0)
     r.announce(0)
     r.ls.batch_liveliness(0, 0, 1)
     assert 0 in r.ls.down_since and r.port.statuses[-1].values["waiting_for"] == batch_name(0)
@@ -207,7 +88,7 @@ def test_a_batch_lost_before_tick_0_is_waited_for_then_fails_the_run_if_it_does_
 
 
 def test_a_batch_lost_before_tick_0_that_comes_back_starts_the_run():
-    r = Run()
+    r = LockstepRun()
     r.announce(0)
     r.ls.batch_liveliness(0, 0, 1)
     r.announce(0, incarnation=1)
@@ -219,7 +100,7 @@ def test_a_batch_lost_before_tick_0_that_comes_back_starts_the_run():
 
 @pytest.mark.parametrize("losses", [1, 2])
 def test_a_batch_lost_mid_run_restarts_from_a_snapshot_and_the_run_is_unchanged(losses):
-    r = Run(max_restarts=3)
+    r = LockstepRun(max_restarts=3)
     r.start()
     for i in range(losses):  # lost twice in a row: at the same tick, before it decided again
         r.run(ticks=20 if i == 0 else 0)
@@ -237,7 +118,7 @@ def test_a_batch_lost_mid_run_restarts_from_a_snapshot_and_the_run_is_unchanged(
 
 
 def test_past_the_restart_bound_a_lost_batch_has_its_robots_removed_at_the_end_of_the_next_tick():
-    r = Run(max_restarts=1)
+    r = LockstepRun(max_restarts=1)
     r.start()
     r.run(ticks=10)
     r.ls.batch_liveliness(1, 0, 1)
@@ -256,7 +137,7 @@ def test_past_the_restart_bound_a_lost_batch_has_its_robots_removed_at_the_end_o
 
 
 def test_under_remove_a_lost_batch_is_not_waited_for():
-    r = Run(on_batch_loss="remove")
+    r = LockstepRun(on_batch_loss="remove")
     r.start()
     r.run(ticks=5)
     r.ls.batch_liveliness(0, 0, 1)
@@ -266,7 +147,7 @@ def test_under_remove_a_lost_batch_is_not_waited_for():
 
 
 def test_a_stalled_batch_is_waited_for_and_counts_as_back_when_it_decides_again():
-    r = Run()
+    r = LockstepRun()
     r.start()
     r.run(ticks=3)
     r.tick(silent=(0,))
@@ -281,7 +162,7 @@ def test_a_stalled_batch_is_waited_for_and_counts_as_back_when_it_decides_again(
 
 
 def test_the_world_waits_for_the_monitor_within_its_window_and_for_a_lost_one_up_to_restart_timeout():
-    r = Run(monitor_window=2)
+    r = LockstepRun(monitor_window=2)
     r.start()
     assert not r.ls.started, "no tick 0 before the monitor is there"
     r.ls.monitor_liveliness(1, 0)
@@ -310,13 +191,13 @@ def test_a_live_process_whose_messages_do_not_come_is_never_lost_and_the_run_fai
     """Its liveliness holds, its messages do not arrive (drowned by a flood, or it hangs): waited for, never
     lost or removed, and after DROWNED_S the run fails."""
     if who == "monitor":
-        r = Run(monitor_window=2)
+        r = LockstepRun(monitor_window=2)
         r.start()
         r.ls.monitor_liveliness(1, 0)
         r.run(ticks=6)  # the world waits for the monitor after tick 1
         what = "the monitor's metrics did not arrive for 60 s at tick 6"
     else:
-        r = Run(on_batch_loss="remove")
+        r = LockstepRun(on_batch_loss="remove")
         r.start()
         r.ls.batch_liveliness(0, 1, 0)
         r.run(ticks=3)
@@ -336,7 +217,7 @@ def test_a_run_that_does_not_move_fails_whatever_the_liveliness_says():
     """Every batch's liveliness comes and goes (a transport that has stopped delivering: their decisions never
     come): each lapse is a loss waited for, each return ends the wait, so the rules above never fire; after
     STILL_S without a tick the run fails all the same."""
-    r = Run()
+    r = LockstepRun()
     r.start()
     r.ls.batch_liveliness(0, 1, 0)
     r.ls.batch_liveliness(1, 1, 0)
@@ -357,7 +238,7 @@ def test_a_run_that_does_not_move_fails_whatever_the_liveliness_says():
 
 
 def test_a_drowned_batch_whose_decisions_get_through_at_last_goes_on_unchanged():
-    r = Run(on_batch_loss="remove")
+    r = LockstepRun(on_batch_loss="remove")
     r.start()
     r.ls.batch_liveliness(0, 1, 0)
     r.tick(silent=(0,))
@@ -370,7 +251,7 @@ def test_a_drowned_batch_whose_decisions_get_through_at_last_goes_on_unchanged()
 
 
 def test_a_monitor_never_seen_is_given_up_on_and_the_swarm_starts_without_it():
-    r = Run(monitor_window=4)
+    r = LockstepRun(monitor_window=4)
     r.port.monitor_ready = False
     r.start()
     r.clock.now += FIRST_STALL_S + 0.1
@@ -379,7 +260,7 @@ def test_a_monitor_never_seen_is_given_up_on_and_the_swarm_starts_without_it():
 
 
 def test_batches_that_never_cover_the_robots_fail_the_run_at_the_start_timeout():
-    r = Run(start_timeout=5.0)
+    r = LockstepRun(start_timeout=5.0)
     r.announce(0)
     r.clock.now += 5.1
     with pytest.raises(RunFailed, match=f"robot batches cover .* of {r.ls.hosting.width} columns after 5 s"):
@@ -391,7 +272,7 @@ class RegionCheck:
     checks after every tick that it holds exactly the world's moving robots in its area, and every stationary
     robot, with the world's poses and the world's frontier."""
 
-    def __init__(self, run: Run) -> None:
+    def __init__(self, run: LockstepRun) -> None:
         from swarm_ros.core.regions import area, halo
         from swarm_ros.core.replica import Replica
 
@@ -441,7 +322,7 @@ class RegionCheck:
 def test_any_partition_into_strips_gives_the_engines_run_and_each_batch_sees_exactly_its_region(batches, cuts, shape):
     """Equality for several partitions (balanced, lopsided, a one-column strip, 3D), and the routing: each
     batch's regional replica, fed only its snapshot and region rows, equals the world where it must."""
-    r = Run(batches=batches, cuts=cuts, shape=shape)
+    r = LockstepRun(batches=batches, cuts=cuts, shape=shape)
     check = RegionCheck(r)
     r.start()
     while not r.ls.sim.done:
@@ -455,7 +336,7 @@ def test_any_partition_into_strips_gives_the_engines_run_and_each_batch_sees_exa
 def test_a_strip_whose_batch_is_removed_is_decided_by_the_world_even_when_only_its_robots_move():
     """No batch sends anything when every moving robot is in a removed batch's strip: the world's own ticks
     follow one another without a message to wake it (the run once stalled there)."""
-    r = Run(batches=3, on_batch_loss="remove")
+    r = LockstepRun(batches=3, on_batch_loss="remove")
     check = RegionCheck(r)
     r.start()
     r.run(ticks=40)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import disc_shape
+from helpers import Clock, Log, disc_shape
 
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.metrics import Outcome, TickMetrics
@@ -27,24 +27,6 @@ pytestmark = pytest.mark.unit
 
 WORLD = World(radius=12)
 SHAPE = disc_shape(WORLD, 5.0)
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
-class Log:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def info(self, text: str) -> None:
-        self.lines.append(text)
-
-    warn = info
 
 
 class Port:

@@ -22,8 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import SUBNET, host_env, ip_in
-from test_ros_graph import _assert_same_run, _shape_file
+from helpers import SUBNET, assert_same_run, host_env, ip_in, shape_file
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import Settings
@@ -37,7 +36,7 @@ PY = sys.executable
 LAN_ROBOTS = int(os.environ.get("SWARM_ROS_LAN_ROBOTS", "0"))  #: 0: the small ring
 
 
-def _logs(tmp_path, procs, hosts: list[str], links: list[str]) -> str:
+def staged_logs(tmp_path, procs, hosts: list[str], links: list[str]) -> str:
     """Each node's exit status (None: still running) and the end of its log, and the links' counters,
     for a failure's message."""
     logs = [f"--- {name} (exit {proc.poll()}):\n{(tmp_path / f'{name}.log').read_text()[-1500:]}"
@@ -80,7 +79,7 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
         while monitor.poll() is None and time.monotonic() < deadline and \
                 not any(p.poll() not in (None, 0) for p, _ in procs.values()):
             time.sleep(0.1)
-        assert monitor.poll() == 0, _logs(tmp_path, procs, hosts, links)
+        assert monitor.poll() == 0, staged_logs(tmp_path, procs, hosts, links)
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and any(p.poll() is None for p, _ in procs.values()):
             time.sleep(0.1)
@@ -91,7 +90,7 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
             proc.wait()
             log.close()
     codes = {name: p.returncode for name, (p, _) in procs.items()}
-    assert codes == dict.fromkeys(procs, 0), _logs(tmp_path, procs, hosts, links)
+    assert codes == dict.fromkeys(procs, 0), staged_logs(tmp_path, procs, hosts, links)
     assert not any("public key" in (tmp_path / f"{name}.log").read_text() for name in procs)  # the run's key
     return run
 
@@ -109,7 +108,7 @@ def _moving(ref: Path) -> list[int]:
 
 def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two_hosts, tmp_path):
     a, b, link = two_hosts
-    shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
+    shape = shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
     # rules 'local': a run of a few hundred ticks, so that most of a megabyte crosses the link
     flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "7", "--robots", "440", "--rules", "local"]
     ref = tmp_path / "ref"
@@ -119,7 +118,7 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
     run = _run_on_hosts(tmp_path, [a, b], [link, "swrb" + link.removeprefix("swra")], settings, plan, 120)
     world_log = (tmp_path / "world.log").read_text()
     assert "robot_batch_0 hosts" in world_log and "robot_batch_1 hosts" in world_log
-    _assert_same_run(ref, run, launched=False)
+    assert_same_run(ref, run, launched=False)
     # and the traffic really crossed the link between the hosts. Lower bounds that must hold:
     # host A received every decision row (one per moving robot per tick) from host B, and sent
     # each batch its start snapshot of every robot.
@@ -141,7 +140,7 @@ def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts,
         flags = ["--shape", str(shape), "--world-radius", str(radius), "--seed", "1", "--max-ticks", "50"]
         timeout = 60 + LAN_ROBOTS / 500
     else:
-        shape = _shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
+        shape = shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
         settings = Settings(shape=str(shape), robots=440, seed=7, world_radius=16, rules="local")
         flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "7", "--robots", "440", "--rules", "local"]
         timeout = 120
@@ -158,7 +157,7 @@ def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts,
           f"(run {json.loads((run / 'summary.json').read_text())['wall_seconds']:.2f} s)")
     world_log = (tmp_path / "world.log").read_text()
     assert all(f"robot_batch_{b} hosts" in world_log for b in range(4))
-    _assert_same_run(ref, run, launched=False)
+    assert_same_run(ref, run, launched=False)
     # every other host took rows from host 0 and sent it decisions: each sent at least its robots' decisions
     # for the ticks where a quarter of the swarm moved in its strip, and received more than its snapshot's rows
     robots = json.loads((ref / "summary.json").read_text())["robots"]

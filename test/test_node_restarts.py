@@ -18,27 +18,34 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 from bagcheck import assert_bag_holds_run
-from helpers import Recording
-from test_restarts import RUN, _assert_identical, _node_pid, _ticks_recorded
-from test_ros_graph import _env, _processes_mentioning
+from helpers import (
+    STAR_LOCAL,
+    Recording,
+    assert_identical_run,
+    finish_restarted_run,
+    kill_node,
+    node_pid,
+    processes_mentioning,
+    run_env,
+    staged_logs,
+    wait_saved,
+    wait_ticks_recorded,
+)
 
 from swarm_ros.app import cli
-from swarm_ros.protocol.checkpoint import MAGIC
 
 pytestmark = pytest.mark.process
 
-_DONE = 7  # the checkpoint header's int64 holding the last tick saved (swarm_ros.protocol.checkpoint)
 # The star under the local rule, cut at 1,500 ticks (outcome timeout): a few seconds of run, long enough to kill in
-SHORT = [*RUN, "--max-ticks", "1500"]
+SHORT = [*STAR_LOCAL, "--max-ticks", "1500"]
 
 
 def _launch(out: Path, *extra: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *SHORT, "--processes", "2", "--out",
                              str(out), "--quiet", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=_env())
+                            text=True, env=run_env())
 
 
 @pytest.fixture(scope="module")
@@ -48,51 +55,14 @@ def reference(tmp_path_factory) -> Path:
     return out
 
 
-def _logs(out: Path, timeout: float = 60) -> Path:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        found = list(out.parent.glob(f".{out.name}.logs-*"))
-        if found:
-            return found[0]
-        time.sleep(0.01)
-    raise AssertionError("no logs")
 
 
-def _saved_tick(logs: Path) -> int:
-    try:
-        head = np.fromfile(logs / "world.checkpoint", dtype=np.int64, count=8)
-    except (OSError, ValueError):
-        return -1
-    return int(head[_DONE]) if head.size == 8 and head[0] == MAGIC else -1
 
 
-def _wait_saved(logs: Path, tick: int, timeout: float = 180) -> int:
-    """Wait (polling fast) until the world has saved ``tick``; return the tick saved when seen."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        t = _saved_tick(logs)
-        if t >= tick:
-            return t
-        time.sleep(0.0005)
-    raise AssertionError(f"tick {tick} never came")
 
 
-def _kill(out: Path, node: str, not_pid: int | None = None) -> int:
-    pid = _node_pid(out, node, not_pid=not_pid)
-    os.kill(pid, signal.SIGKILL)
-    return pid
 
 
-def _finish(launcher, reference: Path, out: Path, restarts: list[str]) -> dict:
-    _, err = launcher.communicate(timeout=300)
-    assert launcher.returncode == 0, err
-    summary = _assert_identical(reference, out)
-    assert [r["node"] for r in summary["restarts"]] == restarts, summary["restarts"]
-    assert_bag_holds_run(out)
-    assert not list(out.parent.glob(f".{out.name}.*")), "nothing of the run left beside it"
-    assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint is removed with the run"
-    assert not _processes_mentioning(str(out)), "a process outlived the run"
-    return summary
 
 
 def _recording_whole(out: Path) -> Recording:
@@ -111,17 +81,17 @@ def _final_tick(reference: Path) -> int:
 def test_a_world_killed_before_tick_0_starts_again_and_the_run_is_identical(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
-    _kill(out, "world")  # seen as soon as it exists: still importing
-    summary = _finish(launcher, reference, out, ["world"])
+    kill_node(out, "world")  # seen as soon as it exists: still importing
+    summary = finish_restarted_run(launcher, reference, out, ["world"])
     assert summary["restarts"][0]["tick"] == 0
 
 
 def test_a_world_killed_at_tick_0_goes_on_from_it_and_the_run_is_identical(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
-    _wait_saved(_logs(out), 0)
-    _kill(out, "world")
-    summary = _finish(launcher, reference, out, ["world"])
+    wait_saved(staged_logs(out), 0)
+    kill_node(out, "world")
+    summary = finish_restarted_run(launcher, reference, out, ["world"])
     assert summary["restarts"][0]["tick"] < 20
 
 
@@ -134,9 +104,9 @@ def test_a_node_killed_mid_run_goes_on_and_the_run_is_identical_and_whole(refere
     """The world from its checkpoint, the monitor from its bag; the recording shows the restart at its tick."""
     out = tmp_path / "run"
     launcher = _launch(out)
-    _ticks_recorded(out, 400_000)
-    _kill(out, node)
-    summary = _finish(launcher, reference, out, [node])
+    wait_ticks_recorded(out, 400_000)
+    kill_node(out, node)
+    summary = finish_restarted_run(launcher, reference, out, [node])
     tick = summary["restarts"][0]["tick"]
     assert 0 < tick < _final_tick(reference)
     rec = _recording_whole(out)
@@ -148,32 +118,32 @@ def test_a_world_killed_on_the_last_tick_ends_the_run_as_it_would_have(reference
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
     last = _final_tick(reference)
-    _wait_saved(_logs(out), last - 1)
-    _kill(out, "world")
-    summary = _finish(launcher, reference, out, ["world"])
+    wait_saved(staged_logs(out), last - 1)
+    kill_node(out, "world")
+    summary = finish_restarted_run(launcher, reference, out, ["world"])
     assert summary["restarts"][0]["tick"] >= last - 1
 
 
 def test_a_world_killed_more_often_than_the_bound_fails_the_run_and_claims_no_outcome(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording", "--max-restarts", "0")
-    _wait_saved(_logs(out), 100)
-    _kill(out, "world")
+    wait_saved(staged_logs(out), 100)
+    kill_node(out, "world")
     _, err = launcher.communicate(timeout=120)
     assert launcher.returncode != 0
     assert "world was killed by SIGKILL; it was restarted 0 times already (--max-restarts)" in err
     assert "Traceback" not in err
     # the monitor, stopped, writes the run so far, and says so: nothing claims an outcome the run did not reach
     assert json.loads((out / "summary.json").read_text())["outcome"] == "interrupted"
-    assert not _processes_mentioning(str(out)), "a process outlived the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
 # -- the monitor ----------------------------------------------------------------------------------------
 def test_a_monitor_killed_before_tick_0_starts_again_and_the_run_is_identical(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
-    _kill(out, "monitor")
-    summary = _finish(launcher, reference, out, ["monitor"])
+    kill_node(out, "monitor")
+    summary = finish_restarted_run(launcher, reference, out, ["monitor"])
     assert summary["restarts"][0]["tick"] == 0
     _recording_whole(out)
 
@@ -181,9 +151,9 @@ def test_a_monitor_killed_before_tick_0_starts_again_and_the_run_is_identical(re
 def test_a_monitor_killed_at_tick_0_goes_on_and_the_run_is_whole(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
-    _wait_saved(_logs(out), 0)
-    _kill(out, "monitor")
-    summary = _finish(launcher, reference, out, ["monitor"])
+    wait_saved(staged_logs(out), 0)
+    kill_node(out, "monitor")
+    summary = finish_restarted_run(launcher, reference, out, ["monitor"])
     assert summary["restarts"][0]["tick"] < 200
     _recording_whole(out)
 
@@ -191,9 +161,9 @@ def test_a_monitor_killed_at_tick_0_goes_on_and_the_run_is_whole(reference, tmp_
 def test_a_monitor_killed_on_the_last_tick_goes_on_and_the_run_is_whole(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
-    _wait_saved(_logs(out), _final_tick(reference))
-    _kill(out, "monitor")
-    summary = _finish(launcher, reference, out, ["monitor"])
+    wait_saved(staged_logs(out), _final_tick(reference))
+    kill_node(out, "monitor")
+    summary = finish_restarted_run(launcher, reference, out, ["monitor"])
     assert summary["restarts"][0]["tick"] >= _final_tick(reference) - 130  # the world runs its window ahead
     _recording_whole(out)
 
@@ -205,10 +175,10 @@ def test_a_monitor_killed_while_it_writes_the_run_directory_writes_it_again(refe
     while not list(tmp_path.glob(".run.tmp-*")):  # write_run's temporary directory: the writing has begun
         assert time.monotonic() < deadline, "the run directory was never written"
         time.sleep(0.001)
-    _kill(out, "monitor")
+    kill_node(out, "monitor")
     _, err = launcher.communicate(timeout=300)
     assert launcher.returncode == 0, err
-    _assert_identical(reference, out)
+    assert_identical_run(reference, out)
     assert_bag_holds_run(out)
     _recording_whole(out)
     assert not list(tmp_path.glob(".run.*")), "nothing of the run left beside it"
@@ -218,9 +188,9 @@ def test_a_monitor_killed_while_it_writes_the_run_directory_writes_it_again(refe
 def test_a_node_killed_again_while_it_restarts_comes_back_twice(reference, tmp_path, node, busy):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
-    _wait_saved(_logs(out), 500)
-    first = _kill(out, node)
-    second = _node_pid(out, node, not_pid=first)
+    wait_saved(staged_logs(out), 500)
+    first = kill_node(out, node)
+    second = node_pid(out, node, not_pid=first)
     time.sleep(busy)  # the new process is starting up, or restoring (the monitor: replaying its bag)
     os.kill(second, signal.SIGKILL)
-    _finish(launcher, reference, out, [node, node])
+    finish_restarted_run(launcher, reference, out, [node, node])

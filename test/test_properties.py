@@ -6,10 +6,9 @@ reproducible and independent of how robots are split into batches.
 
 import numpy as np
 import pytest
-from helpers import run_checked
+from helpers import final_of, run_checked, run_in_batches
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
-from test_engine import _final, run_in_batches
 
 from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
 
@@ -74,8 +73,8 @@ def test_runs_are_reproducible_and_independent_of_batching(run, batches, split_s
     a.run()
     b = Simulation(shape, p)
     b.run()
-    assert _final(a) == _final(b)
-    assert _final(run_in_batches(shape, p, batches, split_seed)) == _final(a)
+    assert final_of(a) == final_of(b)
+    assert final_of(run_in_batches(shape, p, batches, split_seed)) == final_of(a)
 
 
 @settings(max_examples=200, deadline=None)

@@ -21,8 +21,16 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import Recording, rrd_verify
-from test_ros_graph import _env, _processes_mentioning
+from helpers import (
+    STAR_LOCAL,
+    Recording,
+    assert_identical_run,
+    node_pid,
+    processes_mentioning,
+    rrd_verify,
+    run_env,
+    wait_ticks_recorded,
+)
 
 from swarm_ros.app import cli
 from swarm_ros.app.launcher import Launch
@@ -33,47 +41,23 @@ from swarm_ros.ros.shm import shm_locks
 pytestmark = pytest.mark.process
 
 PY = sys.executable
-# The star under the local join rule: ~3600 ticks, several seconds over the graph, long enough to kill in
-RUN = ["--shape", "star", "--seed", "5", "--rules", "local"]
 
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("restart-ref") / "ref"
-    assert cli.main(["simulate", *RUN, "--out", str(out), "--quiet", "--no-recording"]) == 0
+    assert cli.main(["simulate", *STAR_LOCAL, "--out", str(out), "--quiet", "--no-recording"]) == 0
     return out
 
 
 def _launch(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([PY, "-m", "swarm_ros", "run", *RUN, "--processes", "3", "--out", str(out),
+    return subprocess.Popen([PY, "-m", "swarm_ros", "run", *STAR_LOCAL, "--processes", "3", "--out", str(out),
                              "--quiet", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=_env())
+                            env=run_env())
 
 
-def _node_pid(out: Path, node: str, timeout: float = 60, not_pid: int | None = None) -> int:
-    """The pid of the process running ``node`` for the run into ``out`` (a new one if ``not_pid`` is given)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        for pid in _processes_mentioning(f".{out.name}.logs-"):
-            try:
-                cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
-            except OSError:
-                continue
-            if f"__node:={node}\0" in cmdline + "\0" and str(out.parent) in cmdline and pid != not_pid:
-                return pid
-        time.sleep(0.02)
-    raise AssertionError(f"no process for {node}")
 
 
-def _ticks_recorded(out: Path, size: int, timeout: float = 120) -> None:
-    """Wait until the run's partial recording holds ``size`` bytes: ticks are flowing."""
-    partial = out.parent / f"{out.name}.partial.rrd"
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if partial.exists() and partial.stat().st_size > size:
-            return
-        time.sleep(0.02)
-    raise AssertionError("the run never got going")
 
 
 def _wait_for_tick_0(out: Path, timeout: float = 120) -> Path:
@@ -88,17 +72,11 @@ def _wait_for_tick_0(out: Path, timeout: float = 120) -> Path:
     raise AssertionError("tick 0 never came")
 
 
-def _assert_identical(reference: Path, out: Path) -> dict:
-    for name in ("metrics.csv", "final_state.csv"):
-        assert (out / name).read_bytes() == (reference / name).read_bytes(), name
-    got, ref = (json.loads((d / "summary.json").read_text()) for d in (out, reference))
-    assert got["outcome"] == ref["outcome"] and got["lost_robots"] == 0 and got["losses"] == []
-    return got
 
 
 def _handovers(batch: int, ticks: range) -> int:
     """Robots that crossed into or out of ``batch``'s strip (of 3, the default cuts) in ``ticks``, in the
-    in-process run of RUN: the handovers a batch killed then had to get right."""
+    in-process run of STAR_LOCAL: the handovers a batch killed then had to get right."""
     from swarm_ros.core import Simulation
     from swarm_ros.core.regions import batch_strip, columns
 
@@ -122,26 +100,26 @@ def _world_log(out: Path) -> str:
 def test_a_batch_killed_before_tick_0_is_restarted_and_the_run_is_identical(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
-    victim = _node_pid(out, "robot_batch_1")  # seen as soon as it exists: still importing, long before tick 0
+    victim = node_pid(out, "robot_batch_1")  # seen as soon as it exists: still importing, long before tick 0
     os.kill(victim, signal.SIGKILL)
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
     assert "robot_batch_1 was killed by SIGKILL; restarted (1 of 3)" in err and "[INFO]" not in err
-    summary = _assert_identical(reference, out)
+    summary = assert_identical_run(reference, out)
     assert summary["restarts"] == [{"tick": 0, "node": "robot_batch_1"}]
     assert "robot_batch_1 is back (restart 1) at tick 0" in _world_log(out)
-    assert not _processes_mentioning(str(out)), "a process outlived the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
 def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_identical(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
-    _ticks_recorded(out, 400_000)
-    os.kill(_node_pid(out, "robot_batch_2"), signal.SIGKILL)
+    wait_ticks_recorded(out, 400_000)
+    os.kill(node_pid(out, "robot_batch_2"), signal.SIGKILL)
     killed = time.time()
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
-    summary = _assert_identical(reference, out)
+    summary = assert_identical_run(reference, out)
     [restart] = summary["restarts"]
     assert restart["node"] == "robot_batch_2" and 0 < restart["tick"] < summary["convergence_tick"]
     back = re.search(r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_2 is back \(restart 1\) at tick (\d+); "
@@ -160,15 +138,15 @@ def test_a_batch_killed_twice_in_a_row_is_restarted_twice_and_the_run_is_identic
     launcher = _launch(out, "--no-recording")
     _wait_for_tick_0(out)
     time.sleep(1.0)
-    first = _node_pid(out, "robot_batch_0")
+    first = node_pid(out, "robot_batch_0")
     os.kill(first, signal.SIGKILL)
-    second = _node_pid(out, "robot_batch_0", not_pid=first)
+    second = node_pid(out, "robot_batch_0", not_pid=first)
     time.sleep(0.3)  # the new process is still starting up
     os.kill(second, signal.SIGKILL)
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
     assert "restarted (1 of 3)" in err and "restarted (2 of 3)" in err
-    summary = _assert_identical(reference, out)
+    summary = assert_identical_run(reference, out)
     assert [r["node"] for r in summary["restarts"]] == ["robot_batch_0", "robot_batch_0"]
 
 
@@ -189,11 +167,11 @@ def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference
 
     thread = threading.Thread(target=run)
     thread.start()
-    pid = _node_pid(out, "robot_batch_1", timeout=60)
+    pid = node_pid(out, "robot_batch_1", timeout=60)
     logs = _wait_for_tick_0(out)
     time.sleep(0.5)
     os.kill(pid, signal.SIGKILL)
-    again = _node_pid(out, "robot_batch_1", not_pid=pid)
+    again = node_pid(out, "robot_batch_1", not_pid=pid)
     deadline = time.monotonic() + 60
     while "sending it a snapshot" not in (logs / "world.log").read_text() and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -211,8 +189,8 @@ def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference
 def test_on_batch_loss_remove_removes_instead_of_restarting(tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--on-batch-loss", "remove")
-    _ticks_recorded(out, 400_000)
-    os.kill(_node_pid(out, "robot_batch_1"), signal.SIGKILL)
+    wait_ticks_recorded(out, 400_000)
+    os.kill(node_pid(out, "robot_batch_1"), signal.SIGKILL)
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
     assert "the world removes its robots" in err and "restarted" not in err
@@ -229,11 +207,11 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
         launcher = _launch(out, "--no-recording")
     finally:
         del os.environ["FASTDDS_BUILTIN_TRANSPORTS"]
-    victim = _node_pid(out, "robot_batch_1")
+    victim = node_pid(out, "robot_batch_1")
     held: set[str] = set()
 
     def look() -> None:
-        for pid in [launcher.pid, *_processes_mentioning(f".{out.name}.logs-")]:
+        for pid in [launcher.pid, *processes_mentioning(f".{out.name}.logs-")]:
             held.update(shm_locks(pid))
 
     deadline = time.monotonic() + 60
@@ -261,8 +239,8 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
 def test_every_node_ends_within_2_s_of_a_sigkilled_launcher(tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
-    _ticks_recorded(out, 200_000)
-    nodes = _processes_mentioning(f".{out.name}.logs-")
+    wait_ticks_recorded(out, 200_000)
+    nodes = processes_mentioning(f".{out.name}.logs-")
     assert len(nodes) == 5
     launcher.kill()
     killed = time.monotonic()
@@ -301,7 +279,7 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
     params = tmp_path / "params.yaml"
     params.write_text(params_yaml(Settings(shape="star", seed=5, rules="local"),
                                   {"monitor": {"out_dir": str(out), "record": False, "bag": False}}))
-    env = {**_env(), **dds_defaults(), "ROS_DOMAIN_ID": str(200 + os.getpid() % 30), "HOME": str(tmp_path),
+    env = {**run_env(), **dds_defaults(), "ROS_DOMAIN_ID": str(200 + os.getpid() % 30), "HOME": str(tmp_path),
            "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"}
 
     def start(name: str, module: str, *extra: str) -> subprocess.Popen:
@@ -330,6 +308,6 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
                 p.kill()
                 p.wait()
     assert {name: p.returncode for name, p in procs.items()} == dict.fromkeys(procs, 0)
-    got = _assert_identical(reference, out)
+    got = assert_identical_run(reference, out)
     assert [r["node"] for r in got["restarts"]] == ["robot_batch_1"]
     assert "robot_batch_1 is back (restart 1)" in (tmp_path / "world.log").read_text()

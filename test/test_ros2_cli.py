@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 import yaml
 from bagcheck import assert_bag_holds_run
+from helpers import assert_same_run, processes_mentioning
 from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools, wait_for
-from test_ros_graph import _assert_same_run, _processes_mentioning
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import RUN_PARAMETERS
@@ -63,7 +63,7 @@ def _simulate(out: Path, *flags: str) -> Path:
     return out
 
 
-def _saved_tick(checkpoint: Path) -> int:
+def saved_tick(checkpoint: Path) -> int:
     try:
         head = np.fromfile(checkpoint, dtype=np.int64, count=8)
     except (OSError, ValueError):
@@ -77,10 +77,10 @@ def _launch_dir(ros: Ros2, before: list[Path]) -> Path:
                     "the launch's params.yaml")
 
 
-def _node_pid(launch_dir: Path, name: str) -> int:
+def node_pid(launch_dir: Path, name: str) -> int:
     """The pid of node ``name`` of the launch whose logs are in ``launch_dir`` (its params file names it)."""
     def find():
-        for pid in _processes_mentioning(f"__node:={name}"):
+        for pid in processes_mentioning(f"__node:={name}"):
             try:
                 args = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace").split("\0")
             except OSError:
@@ -116,7 +116,7 @@ def test_ros2_launch_with_its_defaults_compiles_once_and_writes_the_run_simulate
     assert len(cpu) == 4 and max(cpu) < 3.0, cpu  # a node that compiled spent 5-8 s
     (run,) = (tmp_path / "runs").iterdir()
     assert re.fullmatch(r"\d{8}-\d{6}_star_n1036_v1_s1", run.name)
-    _assert_same_run(_simulate(tmp_path / "ref"), run, launched=False)
+    assert_same_run(_simulate(tmp_path / "ref"), run, launched=False)
     logs = _launch_dir(ros, before)
     assert not list(logs.glob("world.checkpoint*")), "the world's checkpoint goes with the run"
     assert "compiling" not in ros.run(f"{LAUNCH} out_dir:={tmp_path / 'again'}", cwd=tmp_path, timeout=120).stdout
@@ -184,13 +184,13 @@ def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros,
     proc.wait(timeout=60)
     assert "Traceback" not in log.read_text(), log.read_text()[-3000:]
     assert not runs.exists() or not list(runs.iterdir()), "nothing of a run before tick 0"
-    assert not _processes_mentioning(str(out))
+    assert not processes_mentioning(str(out))
 
     out = runs / "late"
     before = ros.launch_logs()
     proc = ros.start(f"{LAUNCH} out_dir:={out} world_radius:=120 max_ticks:=20000", log=tmp_path / "late.log")
     checkpoint = _launch_dir(ros, before) / "world.checkpoint"
-    wait_for(lambda: _saved_tick(checkpoint) >= 200, 120, "tick 200")
+    wait_for(lambda: saved_tick(checkpoint) >= 200, 120, "tick 200")
     ctrl_c(proc)
     proc.wait(timeout=60)
     text = (tmp_path / "late.log").read_text()
@@ -199,7 +199,7 @@ def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros,
     assert summary["outcome"] == "interrupted" and summary["convergence_tick"] >= 200
     assert len((out / "metrics.csv").read_text().splitlines()) == summary["convergence_tick"] + 2
     assert list(runs.iterdir()) == [out], "nothing beside the run"
-    assert not _processes_mentioning(str(out)) and not list(checkpoint.parent.glob("world.checkpoint*"))
+    assert not processes_mentioning(str(out)) and not list(checkpoint.parent.glob("world.checkpoint*"))
 
 
 def test_a_batch_the_world_and_the_monitor_sigkilled_under_ros2_launch_come_back_and_the_run_is_identical(
@@ -212,8 +212,8 @@ def test_a_batch_the_world_and_the_monitor_sigkilled_under_ros2_launch_come_back
     logs = _launch_dir(ros, before)
     checkpoint = logs / "world.checkpoint"
     for tick, node in ((150, "robot_batch_1"), (450, "world"), (800, "monitor")):
-        wait_for(lambda t=tick: _saved_tick(checkpoint) >= t, 120, f"tick {tick}", poll=0.001)
-        os.kill(_node_pid(logs, node), signal.SIGKILL)
+        wait_for(lambda t=tick: saved_tick(checkpoint) >= t, 120, f"tick {tick}", poll=0.001)
+        os.kill(node_pid(logs, node), signal.SIGKILL)
     assert proc.wait(timeout=240) == 0, log.read_text()[-4000:]
     text = log.read_text()
     for node in ("robot_batch_1", "world", "monitor"):
@@ -224,7 +224,7 @@ def test_a_batch_the_world_and_the_monitor_sigkilled_under_ros2_launch_come_back
     assert summary["outcome"] == _summary(ref)["outcome"] and summary["lost_robots"] == 0
     assert {"world", "monitor"} <= {r["node"] for r in summary["restarts"]}, summary["restarts"]
     assert_bag_holds_run(out)
-    assert not _processes_mentioning(str(out)) and not list(logs.glob("world.checkpoint*"))
+    assert not processes_mentioning(str(out)) and not list(logs.glob("world.checkpoint*"))
 
 
 def test_the_three_terminals_of_ros2_run_the_docs_show(ros, tmp_path):
@@ -251,7 +251,7 @@ def test_the_three_terminals_of_ros2_run_the_docs_show(ros, tmp_path):
     assert [p.returncode for p in terminals] == [0, 0, 0, 0], outputs
     for text in outputs:
         _clean(text)
-    _assert_same_run(_simulate(tmp_path / "ref"), out, launched=False)
+    assert_same_run(_simulate(tmp_path / "ref"), out, launched=False)
 
 
 def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
@@ -260,7 +260,7 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
     proc = ros.start(f"{LAUNCH} out_dir:={out} world_radius:=120 max_ticks:=100000", log=tmp_path / "live.log")
     try:
         logs = _launch_dir(ros, before)
-        wait_for(lambda: _saved_tick(logs / "world.checkpoint") >= 50, 120, "tick 50")
+        wait_for(lambda: saved_tick(logs / "world.checkpoint") >= 50, 120, "tick 50")
 
         def listed():
             done = ros.run("ros2 node list")

@@ -14,10 +14,8 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
-from bagcheck import assert_bag_holds_run
-from helpers import Recording, rrd_verify
+from helpers import Recording, assert_same_run, processes_mentioning, rrd_verify, run_env, shape_file
 
 from swarm_ros.app.cli import main as cli_main
 from swarm_ros.app.processes import Child, stop
@@ -28,61 +26,17 @@ PY = sys.executable
 TIMEOUT = 240
 
 
-def _env() -> dict[str, str]:
-    env = dict(os.environ)
-    env.pop("ROS_DOMAIN_ID", None)  # every run picks a free domain of its own
-    env.setdefault("HOME", "/tmp")
-    return env
 
 
 def swarm_ros(*args: str, timeout: float = TIMEOUT, **kw) -> subprocess.CompletedProcess:
     return subprocess.run([PY, "-m", "swarm_ros", *args], capture_output=True, text=True, timeout=timeout,
-                          env=_env(), **kw)
+                          env=run_env(), **kw)
 
 
-def _shape_file(path: Path, outer: float, hole: float = 0.0, cross: bool = False, half: int = 16) -> Path:
-    c = np.arange(-half, half + 1)
-    x, y = np.meshgrid(c, c)
-    d = np.hypot(x, y)
-    mask = (d <= outer) & (d >= hole)
-    if cross:
-        mask = ((np.abs(x) <= 2) & (np.abs(y) <= outer)) | ((np.abs(y) <= 2) & (np.abs(x) <= outer))
-    rows = ["".join("#" if v else "." for v in row) for row in mask[::-1]]
-    path.write_text("\n".join(rows) + "\n")
-    return path
 
 
-def _processes_mentioning(text: str) -> list[int]:
-    found = []
-    for proc in Path("/proc").iterdir():
-        if proc.name.isdigit():
-            try:
-                if text in (proc / "cmdline").read_bytes().decode(errors="replace"):
-                    found.append(int(proc.name))
-            except OSError:
-                pass
-    return found
 
 
-def _assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
-    """``got`` (a ROS run; ``launched``: by ``swarm-ros run``) equals ``ref`` (``simulate``) but for timings."""
-    assert (ref / "metrics.csv").read_bytes() == (got / "metrics.csv").read_bytes()
-    assert (ref / "final_state.csv").read_bytes() == (got / "final_state.csv").read_bytes()
-    a = json.loads((ref / "summary.json").read_text())
-    b = json.loads((got / "summary.json").read_text())
-    assert (a.pop("engine"), b.pop("engine")) == ("inprocess", "ros2")
-    a.pop("wall_seconds"), b.pop("wall_seconds")
-    # a ROS run's overheads: from the command's start to tick 0, and from the outcome to the last process gone
-    # (only the launcher knows the latter, from the world's status: its progress listener heard the graph)
-    startup, shutdown = b.pop("startup_seconds"), b.pop("shutdown_seconds")
-    assert isinstance(startup, float) and 0 < startup < 120
-    assert (isinstance(shutdown, float) and 0 < shutdown < 60) if launched else shutdown is None
-    assert b.pop("rejected_messages") == {"world": 0, "monitor": 0}  # an honest run: nothing dropped
-    assert a == b
-    assert (got / "final.png").stat().st_size > 0 and (got / "convergence.png").stat().st_size > 0
-    assert_bag_holds_run(got)  # the rosbag2 of the run, read with another library than the one that wrote it
-    # the monitor records with the same module: the same data (ids, timestamps and chunking may differ)
-    assert Recording(got / "recording.rrd").same_data(Recording(ref / "recording.rrd"))
 
 
 CASES = {
@@ -101,7 +55,7 @@ CASES = {
 
 def _resolve(tmp_path: Path, case: str) -> tuple[list[str], str]:
     builder, flags = CASES[case]
-    shape = _shape_file(tmp_path / f"{case}.txt", **builder)
+    shape = shape_file(tmp_path / f"{case}.txt", **builder)
     from swarm_ros.core import Shape, World
 
     patches = Shape.load(str(shape), World(16)).patches
@@ -132,11 +86,11 @@ def test_ros_graph_equals_in_process_engine(references, tmp_path, case, processe
     out = tmp_path / "run"
     done = swarm_ros("run", *flags, "--processes", str(processes), "--out", str(out), "--quiet")
     assert done.returncode == 0, done.stderr
-    _assert_same_run(ref, out)
+    assert_same_run(ref, out)
     assert sorted(p.name for p in (out / "logs").iterdir()) == sorted(
         ["launcher.log", "monitor.log", "world.log", "params.yaml", "ros"]
         + [f"robot_batch_{k}.log" for k in range(processes)])
-    assert not _processes_mentioning(str(out)), "a node process outlived the run"
+    assert not processes_mentioning(str(out)), "a node process outlived the run"
 
 
 def test_ros_graph_equals_in_process_engine_at_a_timeout_recording_every_7th_tick(references, tmp_path):
@@ -146,7 +100,7 @@ def test_ros_graph_equals_in_process_engine_at_a_timeout_recording_every_7th_tic
     done = swarm_ros("run", *flags, "--record-every", "7", "--processes", "2", "--out", str(out), "--quiet")
     assert done.returncode == 0, done.stderr
     assert json.loads((out / "summary.json").read_text())["outcome"] == "timeout"
-    _assert_same_run(ref, out)
+    assert_same_run(ref, out)
     assert sorted(Recording(out / "recording.rrd").robots) == list(range(0, 1500, 7)) + [1500]
 
 
@@ -175,14 +129,14 @@ def test_full_size_star_over_the_graph_equals_in_process_engine(tmp_path):
     assert cli_main(["simulate", "--shape", "star", "--out", str(ref), "--quiet"]) == 0
     done = swarm_ros("run", "--shape", "star", "--processes", "2", "--out", str(out))
     assert done.returncode == 0, done.stderr
-    _assert_same_run(ref, out)
+    assert_same_run(ref, out)
     assert "engine ros2" in done.stdout and "domain" in done.stdout
 
 
 def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_path):
     out = tmp_path / "live"
     domain = str(150 + os.getpid() % 80)
-    env = {**_env(), "ROS_DOMAIN_ID": domain}
+    env = {**run_env(), "ROS_DOMAIN_ID": domain}
     # the reading before rule sets gridlocks at vision 2: a run that lasts until it is stopped
     launcher = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--vision", "2", "--rules",
                                  "local", "--crowding", "disc", "--out", str(out)], env=env,
@@ -222,7 +176,7 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
     assert launcher.returncode == 130, err
     assert f"swarm-ros: ROS domain {domain}, 2 robot-batch processes, logs in {tmp_path}/.live.logs-" in err
     assert time.monotonic() - start < 5, "the launcher and its children took 5 s or more to stop"
-    assert not _processes_mentioning(str(out)), "a node process outlived the interrupted run"
+    assert not processes_mentioning(str(out)), "a node process outlived the interrupted run"
     # the monitor wrote the run so far: summary 'interrupted', metrics, final state, recording, logs
     summary = json.loads((out / "summary.json").read_text())
     last = summary["convergence_tick"]
@@ -264,7 +218,7 @@ while time.monotonic() < end:
         break
 print(json.dumps(heard))
 """
-    done = subprocess.run([PY, "-c", code], capture_output=True, text=True, timeout=60, env=_env())
+    done = subprocess.run([PY, "-c", code], capture_output=True, text=True, timeout=60, env=run_env())
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -310,7 +264,7 @@ def test_run_refuses_bad_input_in_one_line_before_starting_anything(tmp_path, ar
 ])
 def test_nodes_refuse_bad_parameters_in_one_line(node, ros_args, message):
     done = subprocess.run([PY, "-m", f"swarm_ros.nodes.{node}", "--ros-args", *ros_args], capture_output=True,
-                          text=True, timeout=60, env={**_env(), "ROS_DOMAIN_ID": "231"})
+                          text=True, timeout=60, env={**run_env(), "ROS_DOMAIN_ID": "231"})
     assert done.returncode == 2
     errors = [ln for ln in done.stderr.splitlines() if "error" in ln]
     assert len(errors) == 1 and message in errors[0], done.stderr
@@ -324,12 +278,12 @@ def test_two_runs_started_together_do_not_see_each_other(references, tmp_path):
         out = tmp_path / case
         procs[case] = (out, subprocess.Popen([PY, "-m", "swarm_ros", "run", *flags, "--processes", "2",
                                               "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                             text=True, env=_env()))
+                                             text=True, env=run_env()))
     domains = []
     for case, (out, proc) in procs.items():
         stdout, stderr = proc.communicate(timeout=TIMEOUT)
         assert proc.returncode == 0, stderr
-        _assert_same_run(references[case][1], out)
+        assert_same_run(references[case][1], out)
         domains += [ln.split()[3].rstrip(",") for ln in stdout.splitlines() if ln.startswith("ROS graph")]
     assert len(domains) == 2 and domains[0] != domains[1], domains
 
@@ -342,7 +296,7 @@ def test_ros_graph_equals_in_process_engine_with_failing_robots(references, tmp_
     assert done.returncode == 0, done.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["lost_robots"] == 66 and summary["losses"] == [{"tick": 40, "robots": 66}]
-    _assert_same_run(ref, out)
+    assert_same_run(ref, out)
 
 
 def test_topics_echo_gives_up_after_the_seconds_it_was_given(tmp_path):

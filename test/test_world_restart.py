@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_lockstep import MAX_TICKS, ROBOTS, Run
+from helpers import MAX_TICKS, ROBOTS, LockstepRun
 
 from swarm_ros.core import Simulation
 from swarm_ros.core.metrics import METRIC_COLUMNS
@@ -18,14 +18,14 @@ from swarm_ros.protocol.world_port import Policy
 pytestmark = pytest.mark.unit
 
 
-def _with_checkpoint(r: Run, path) -> Checkpoint:
+def _with_checkpoint(r: LockstepRun, path) -> Checkpoint:
     ck = Checkpoint(path, ROBOTS, MAX_TICKS, len(METRIC_COLUMNS), r.ls.policy.monitor_window + 2)
     ck.create()
     r.port.saver = ck
     return ck
 
 
-def _restarted(r: Run, path) -> Lockstep:
+def _restarted(r: LockstepRun, path) -> Lockstep:
     """A new world process: a fresh lockstep restored from the checkpoint at ``path``; replaces ``r``'s."""
     ck = Checkpoint.open(path, ROBOTS, MAX_TICKS, len(METRIC_COLUMNS))
     saved = ck.saved()
@@ -39,7 +39,7 @@ def _restarted(r: Run, path) -> Lockstep:
 
 @pytest.mark.parametrize("lost_at", [0, 1, 57, "end"])
 def test_a_world_restored_from_its_checkpoint_runs_on_as_the_engine(tmp_path, lost_at):
-    r = Run(batches=2)
+    r = LockstepRun(batches=2)
     _with_checkpoint(r, tmp_path / "ck")
     r.start()
     ref = r.engine()
@@ -64,7 +64,7 @@ def test_a_world_restored_from_its_checkpoint_runs_on_as_the_engine(tmp_path, lo
 
 def test_a_write_cut_off_at_any_step_restores_a_whole_tick(tmp_path):
     """The header's steps: killed before ``ready`` the tick before is restored; after it, the tick itself."""
-    r = Run(batches=1)
+    r = LockstepRun(batches=1)
     ck = _with_checkpoint(r, tmp_path / "ck")
     r.start()
     r.run(ticks=5)
@@ -86,7 +86,7 @@ def test_a_write_cut_off_at_any_step_restores_a_whole_tick(tmp_path):
 
 
 def test_a_checkpoint_with_no_tick_restores_nothing_and_another_runs_is_refused(tmp_path):
-    r = Run(batches=1)
+    r = LockstepRun(batches=1)
     _with_checkpoint(r, tmp_path / "ck")
     assert Checkpoint.open(tmp_path / "ck", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS)).saved() is None
     with pytest.raises(ValueError, match="another run"):
@@ -101,7 +101,7 @@ def test_a_checkpoint_with_no_tick_restores_nothing_and_another_runs_is_refused(
 def test_after_a_restore_old_decisions_and_known_processes_change_nothing(tmp_path):
     """The batches' histories hand the new world decisions it had already, and their announcements: neither is
     a rejection or a restart. A batch restarted while the world was down (a higher incarnation) is one."""
-    r = Run(batches=2)
+    r = LockstepRun(batches=2)
     _with_checkpoint(r, tmp_path / "ck")
     r.start()
     r.run(ticks=10)
@@ -121,7 +121,7 @@ def test_after_a_restore_old_decisions_and_known_processes_change_nothing(tmp_pa
 
 
 def test_a_restored_world_sends_the_ticks_the_monitor_may_lack_again(tmp_path):
-    r = Run(batches=1, monitor_window=4)
+    r = LockstepRun(batches=1, monitor_window=4)
     _with_checkpoint(r, tmp_path / "ck")
     r.start()
     r.ls.monitor_liveliness(1, 0)
@@ -145,7 +145,7 @@ def test_a_restored_world_sends_the_ticks_the_monitor_may_lack_again(tmp_path):
 
 
 def test_the_bookkeeping_holds_batches_losses_and_times(tmp_path):
-    r = Run(batches=2, on_batch_loss="remove")
+    r = LockstepRun(batches=2, on_batch_loss="remove")
     _with_checkpoint(r, tmp_path / "ck")
     r.start()
     r.run(ticks=3)
