@@ -13,6 +13,7 @@ import pytest
 pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
+USAGE = ROOT / "docs" / "usage.md"  # the reference of every command
 # Built from pieces so that this file does not match itself.
 FORBIDDEN = ("../" + "shared", "ROS2" + "_NOTES", "MODEL" + ".md", "STYLE" + ".md")
 
@@ -50,8 +51,8 @@ def test_the_model_page_states_the_whole_model():
         assert word in text, word
 
 
-def test_the_readme_lists_every_summary_field():
-    """The README's summary.json row names each field a run writes (losses and restarts included)."""
+def test_the_usage_page_lists_every_summary_field():
+    """The usage page's summary.json row names each field a run writes (losses and restarts included)."""
     import re
 
     from swarm_ros.core import RunParams, Shape, Simulation, World
@@ -60,7 +61,7 @@ def test_the_readme_lists_every_summary_field():
     sim = Simulation(Shape.load("rectangle", World()), RunParams(robots=442, max_ticks=3))
     sim.run()
     fields = set(summary_of(sim, wall_seconds=0.0))
-    row = next(ln for ln in (ROOT / "README.md").read_text().splitlines() if ln.startswith("| `summary.json` |"))
+    row = next(ln for ln in USAGE.read_text().splitlines() if ln.startswith("| `summary.json` |"))
     listed = set(re.findall(r"\b[a-z][a-z0-9]*(?:_[a-z0-9]+)+\b|\b[a-z]+\b", row.split("|")[2]))
     assert fields <= listed, sorted(fields - listed)
     assert "restarts" in fields and "losses" in fields
@@ -71,12 +72,12 @@ def test_generated_output_directories_are_ignored_by_git():
     assert "runs/" in ignored and "experiments/" in ignored
 
 
-def test_the_readme_synopses_name_every_flag_of_simulate_and_run():
+def test_the_usage_synopses_name_every_flag_of_simulate_and_run():
     import re
 
     from swarm_ros.app.cli import build_parser
 
-    readme = (ROOT / "README.md").read_text()
+    readme = USAGE.read_text()
     subparsers = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
     for command in ("simulate", "run"):
         synopsis = re.search(rf"```\nswarm-ros {command} (.*?)```", readme, re.S).group(1)
@@ -85,7 +86,7 @@ def test_the_readme_synopses_name_every_flag_of_simulate_and_run():
         flags = {f for a in subparsers.choices[command]._actions for f in a.option_strings
                  if f.startswith("--") and f != "--help"}
         missing = sorted(f for f in flags if f not in synopsis)
-        assert not missing, f"the README's synopsis of {command} omits {missing}"
+        assert not missing, f"the usage page's synopsis of {command} omits {missing}"
 
 
 _LINK = re.compile(r"\]\(([^)\s#]+)(?:#[^)]*)?\)")  # a markdown link's target, without its anchor
