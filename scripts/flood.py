@@ -110,6 +110,7 @@ class Flood:
             signal.signal(sig, lambda *_: stop.append(1))
         start = self.start = time.monotonic()
         looked = -DISCOVER_EVERY
+        print("flood: ready", file=sys.stderr, flush=True)  # its participant is up (what a caller may wait for)
         while not stop and time.monotonic() - start < seconds:
             now = time.monotonic()
             if now - looked >= DISCOVER_EVERY:

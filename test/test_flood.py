@@ -13,7 +13,6 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -38,7 +37,8 @@ def test_a_flood_on_every_topic_slows_the_run_and_leaves_its_result_unchanged(tm
     flood = subprocess.Popen([PY, str(FLOOD), "--domain-id", str(lock.domain_id), "--rate", str(RATE)],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        time.sleep(1.0)  # the flood's participant is up: it takes the run's topics as they appear
+        # the flood's participant is up before the run starts: it takes the run's topics as they appear
+        assert flood.stderr.readline().strip() == "flood: ready", flood.stderr.read()
         run = subprocess.run([PY, "-m", "swarm_ros", "run", *FLAGS, "--processes", "2", "--domain-id",
                               str(lock.domain_id), "--out", str(out), "--quiet", "--no-recording"],
                              capture_output=True, text=True, timeout=600)

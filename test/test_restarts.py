@@ -29,11 +29,14 @@ from helpers import (
     processes_mentioning,
     rrd_verify,
     run_env,
+    saved_tick,
+    wait_saved,
     wait_ticks_recorded,
 )
 
 from swarm_ros.app import cli
 from swarm_ros.app.launcher import Launch
+from swarm_ros.app.processes import SHM_LIST
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.params import Settings
 from swarm_ros.ros.shm import shm_locks
@@ -136,13 +139,11 @@ def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_iden
 def test_a_batch_killed_twice_in_a_row_is_restarted_twice_and_the_run_is_identical(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
-    _wait_for_tick_0(out)
-    time.sleep(1.0)
+    wait_saved(_wait_for_tick_0(out), 100)  # mid-run
     first = node_pid(out, "robot_batch_0")
     os.kill(first, signal.SIGKILL)
     second = node_pid(out, "robot_batch_0", not_pid=first)
-    time.sleep(0.3)  # the new process is still starting up
-    os.kill(second, signal.SIGKILL)
+    os.kill(second, signal.SIGKILL)  # the new process is still starting up: seen, not yet announced
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
     assert "restarted (1 of 3)" in err and "restarted (2 of 3)" in err
@@ -169,13 +170,13 @@ def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference
     thread.start()
     pid = node_pid(out, "robot_batch_1", timeout=60)
     logs = _wait_for_tick_0(out)
-    time.sleep(0.5)
+    wait_saved(logs, 50)  # mid-run
     os.kill(pid, signal.SIGKILL)
     again = node_pid(out, "robot_batch_1", not_pid=pid)
     deadline = time.monotonic() + 60
     while "sending it a snapshot" not in (logs / "world.log").read_text() and time.monotonic() < deadline:
         time.sleep(0.05)
-    time.sleep(0.5)
+    wait_saved(logs, saved_tick(logs) + 20)  # the new process decides: the run has gone on with it
     os.kill(again, signal.SIGKILL)
     thread.join(240)
     assert not errors, errors
@@ -214,11 +215,18 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
         for pid in [launcher.pid, *processes_mentioning(f".{out.name}.logs-")]:
             held.update(shm_locks(pid))
 
+    def listed() -> set[str]:  # what the launcher has seen of its processes' shared memory (its list, in the logs)
+        found = list(out.parent.glob(f".{out.name}.logs-*/{SHM_LIST}"))
+        return set(found[0].read_text().split()) if found else set()
+
+    wait_saved(_wait_for_tick_0(out), 20)  # mid-run
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and not shm_locks(victim):
+    # every node process (world, monitor, 3 batches) has its participant's segments, and the launcher lists them
+    while time.monotonic() < deadline and not (
+            len(nodes := processes_mentioning(f".{out.name}.logs-")) == 5
+            and all(locks := [shm_locks(p) for p in nodes]) and set().union(*locks) <= listed()):
         look()
         time.sleep(0.1)
-    time.sleep(1.0)  # every process has its participant by now; let the launcher see them too
     look()
     os.kill(victim, signal.SIGKILL)
     while launcher.poll() is None:
@@ -278,7 +286,8 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
     out = tmp_path / "run"
     params = tmp_path / "params.yaml"
     params.write_text(params_yaml(Settings(shape="star", seed=5, rules="local"),
-                                  {"monitor": {"out_dir": str(out), "record": False, "bag": False}}))
+                                  {"monitor": {"out_dir": str(out), "record": False, "bag": False},
+                                   "world": {"checkpoint": str(tmp_path / "world.checkpoint")}}))
     env = {**run_env(), **dds_defaults(), "ROS_DOMAIN_ID": str(200 + os.getpid() % 30), "HOME": str(tmp_path),
            "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"}
 
@@ -292,10 +301,7 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
              "robot_batch_0": start("robot_batch_0", "robot_batch", "-p", "batch:=0", "-p", "batches:=2"),
              "robot_batch_1": start("robot_batch_1", "robot_batch", *batch)}
     try:
-        deadline = time.monotonic() + 120
-        while "tick 0" not in (tmp_path / "world.log").read_text() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(1.0)  # mid-run
+        wait_saved(tmp_path, 100)  # mid-run: the world's checkpoint holds tick 100
         procs["robot_batch_1"].kill()
         procs["robot_batch_1"].wait()
         procs["robot_batch_1"] = start("robot_batch_1", "robot_batch", *batch)  # the same command again
