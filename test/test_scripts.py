@@ -1,4 +1,5 @@
-"""The benchmark scripts that issue targets are measured with still run and print what their docs quote."""
+"""The scripts still run and print what their docs quote: the bench that issue targets are measured with, the
+shape generators' check mode, the study's bounds."""
 
 from __future__ import annotations
 
@@ -36,3 +37,38 @@ def test_bench_scale_prints_each_engine_and_the_projection_on_k_hosts():
         # the printed figures are rounded to 0.1 ms
         assert float(tick) >= max(float(world) + float(batch) + float(transport), float(monitor)) - 0.2
         assert abs(float(ratio) - float(tick) / float(sim_tick)) <= 0.05 * float(ratio) + 0.1
+
+
+def _tree(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.parametrize("script,dims", [("make_shapes.py", 2), ("make_shapes_3d.py", 3)])
+def test_the_shape_generators_check_mode_reports_the_built_in_shapes_and_writes_nothing(script, dims):
+    """``--check`` regenerates every built-in shape in memory: its counts are the shipped files'."""
+    from swarm_ros.core import Shape
+
+    shapes = SCRIPTS.parent / "shapes"
+    before = _tree(shapes)
+    done = subprocess.run([sys.executable, str(SCRIPTS / script), "--check"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert _tree(shapes) == before, "--check wrote to shapes/"
+    counts = dict(re.findall(r"^(\S+)\s+(?:scale\s+[\d.]+\s+patches\s+)?(\d+)", done.stdout, re.M))
+    files = sorted((shapes / "3d" if dims == 3 else shapes).glob("*.txt"))
+    assert sorted(counts) == sorted(f.stem for f in files), done.stdout
+    for f in files:
+        assert int(counts[f.stem]) == Shape.load(str(f)).patches, f.stem
+
+
+def test_study_bounds_writes_its_table_of_every_shape(tmp_path):
+    out = tmp_path / "bounds.md"
+    done = subprocess.run([sys.executable, str(SCRIPTS / "study_bounds.py"), "--out", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = [ln for ln in out.read_text().splitlines() if re.match(r"\| [a-z-]+ \| [\d.]+ \(", ln)]
+    assert [r.split("|")[1].strip() for r in rows] == ["star", "wrench", "k-letter", "rectangle", "tyre", "spinner"]
+    for row in rows:  # no run of ours completes faster than the shape can grow (the growth bound, in ticks)
+        bound, ours = int(row.split("|")[3]), float(row.split("|")[5].split()[0])
+        assert 0 < bound <= ours, row
+    assert out.read_text() in done.stdout  # what it writes is what it prints
