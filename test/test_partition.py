@@ -19,6 +19,7 @@ from helpers import disc_shape
 
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.arbitration import occupy, resolve_kernel
+from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
 from swarm_ros.core.regions import columns, halo
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.state import IS_MOVING, STATE_COUNT, RobotState
@@ -38,11 +39,11 @@ def _shard_apply(sim: Simulation, decisions, mine: np.ndarray) -> tuple:
     take = np.flatnonzero(mine | outside)
     s = sim.state.copy()
     world, empty = SHAPE.world, np.empty(0)
-    resolve_kernel(decisions.ids[take], claims[take].astype(np.int64), decisions.x[take], decisions.y[take], empty,
-                   decisions.heading[take], empty, s.x, s.y, empty, s.heading, empty, s.state, s.occupancy,
-                   s.frontier, s.frontier_blocks, SHAPE.mask.ravel().copy(), world.neighbour_offsets(), world.radius,
-                   world.size, sim.params.seed, decisions.tick, np.full(world.patch_count, -1, dtype=np.int64),
-                   sim.metrics.localized, SHAPE.patches, sim.params.ruleset.codes()[0],
+    moves = Moves(claims[take].astype(np.int64), decisions.x[take], decisions.y[take], empty, decisions.heading[take],
+                  empty)
+    grid = grid_of(SHAPE, s, SHAPE.mask.ravel().copy(), world.wall_mask().ravel(), world.neighbour_offsets())
+    resolve_kernel(decisions.ids[take], moves, robots_of(s), grid, rules_of(sim.params), decisions.tick,
+                   np.full(world.patch_count, -1, dtype=np.int64), sim.metrics.localized, SHAPE.patches,
                    np.empty(take.size, dtype=np.int8))
     return s, decisions.ids[outside]
 

@@ -105,20 +105,23 @@ def vacate(p, occupancy, frontier, blocks, shape, nbrs, size):
 
 
 @numba.njit(cache=True)
-def resolve_kernel(ids, claim, new_x, new_y, new_z, new_heading, new_pitch, x, y, z, heading, pitch, state,
-                   occupancy, frontier, blocks, shape, nbrs, radius, size, seed, tick, best, localized, shape_patches,
-                   join, outcome):
-    """Apply the decisions of robots ``ids`` to the state arrays in place.
+def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape_patches, outcome):
+    """Apply the ``moves`` of robots ``ids`` (position k: robot ``ids[k]``'s) to ``robots`` and ``grid`` in place:
+    the lottery of each claimed patch, then each robot's new pose and state
+    (:mod:`swarm_ros.core.kernel_state`).
 
-    In a 2D world ``new_z``, ``new_pitch``, ``z`` and ``pitch`` are empty and not read: the
-    world's dimension is ``3`` exactly when ``z`` has an entry per robot. ``best`` is a
-    W^d int array of -1 (scratch; left as found). ``localized`` is the number of
-    localized robots (seeds included) before the tick; ``join`` the rule set's join code.
-    Writes each robot's :class:`JoinOutcome` to ``outcome[k]``. Returns (joined, moving
-    inside, moving outside, walking) counted over ``ids`` after the tick.
+    ``best`` is a W^d int array of -1 (scratch; left as found). ``localized`` is the number of
+    localized robots (seeds included) before the tick. Writes each robot's :class:`JoinOutcome`
+    to ``outcome[k]``. Returns (joined, moving inside, moving outside, walking) counted over
+    ``ids`` after the tick.
     """
+    claim, new_x, new_y, new_z, new_heading, new_pitch = moves.claim, moves.x, moves.y, moves.z, moves.heading, \
+        moves.pitch
+    x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
+    occupancy, frontier, blocks, shape, nbrs, radius, size, solid = grid.occupancy, grid.frontier, grid.blocks, \
+        grid.shape, grid.nbrs, grid.radius, grid.size, grid.solid
+    seed, join = rules.seed, rules.join
     n = ids.size
-    solid = z.size > 0  # a 3D world
     walk = join == JOIN_WALK and blocks[blocks.size - 1] > 0  # the frontier the robots saw was not empty
     for k in range(n):
         p = claim[k]

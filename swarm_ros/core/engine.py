@@ -17,12 +17,14 @@ running counts.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from swarm_ros.core import metrics
 from swarm_ros.core.arbitration import resolve_kernel, vacate
+from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.metrics import (
     END_EXTRAS,
     METRIC_COLUMNS,
@@ -33,8 +35,7 @@ from swarm_ros.core.metrics import (
 )
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
-from swarm_ros.core.rules import Decisions, cell_index, decide_kernel, index_build, index_clear
-from swarm_ros.core.rules3d import decide_kernel3, index_build3, index_clear3
+from swarm_ros.core.rules import Decisions, cell_index, decide_robots
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import RobotState, SwarmState, initial_state
 
@@ -88,44 +89,49 @@ def _close_tick(moving, m, state, tick, localized, inside, outside, walking, sha
     return code, m
 
 
+class Scratch(NamedTuple):
+    """The engine's work arrays: the cell list (``head``, all -1 between ticks; ``nxt``), the lottery's
+    ``best`` (all -1 between ticks), and per robot that decided in the last tick its :class:`JoinOutcome`
+    and id."""
+
+    head: np.ndarray
+    nxt: np.ndarray
+    best: np.ndarray
+    outcome: np.ndarray
+    last_ids: np.ndarray
+
+
+class End(NamedTuple):
+    """What the end check of a tick compares with (:func:`swarm_ros.core.metrics.end_code`)."""
+
+    shape_patches: int
+    robots: int  #: robots not removed
+    max_ticks: int
+
+
 @numba.njit(cache=True)
-def _run_kernel(moving, x, y, z, heading, pitch, state, shape, wall, frontier, blocks, occupancy, nbrs, radius, size,
-                vision, wiggle, seed, join, crowd, steps, head, nxt, best, claim, new_x, new_y, new_z, new_heading,
-                new_pitch, outcome, last_ids, shape_patches, robots, max_ticks, rows, m, tick, localized, limit):
+def _run_kernel(moving, robots, grid, rules, scratch, moves, end, rows, m, tick, localized, limit):
     """Up to ``limit`` whole ticks for the robots ``moving[:m]``, stopping when the run ends.
 
     Row r of ``rows`` gets the metrics of the r-th tick run. Returns (ticks run, still
-    moving, localized, robots that decided in the last tick, end code). ``z``, ``pitch``,
-    ``new_z`` and ``new_pitch`` are empty in a 2D world; in a 3D one the robots decide by
-    the 3D kernels, and everything else is the same code.
+    moving, localized, robots that decided in the last tick, end code). The robots decide by
+    the kernels of the world's dimension (``grid.solid``); everything else is the same code.
     """
     n = 0
     code = RUNNING
     decided = 0
-    solid = z.size > 0
     while n < limit and code == RUNNING:
         tick += 1
         ids = moving[:m]
-        last_ids[:m] = ids
-        if solid:
-            index_build3(ids, x, y, z, radius, size, head, nxt)
-            decide_kernel3(ids, x, y, z, heading, pitch, state, shape, wall, frontier, blocks, radius, size, vision,
-                           wiggle, seed, tick, join, crowd, steps, head, nxt, claim, new_x, new_y, new_z,
-                           new_heading, new_pitch)
-            index_clear3(ids, x, y, z, radius, size, head)
-        else:
-            index_build(ids, x, y, radius, size, head, nxt)
-            decide_kernel(ids, x, y, heading, state, shape, wall, frontier, blocks, radius, size, vision, wiggle,
-                          seed, tick, join, crowd, steps, head, nxt, claim, new_x, new_y, new_heading)
-            index_clear(ids, x, y, radius, size, head)
-        joined, inside, outside, walking = resolve_kernel(
-            ids, claim, new_x, new_y, new_z, new_heading, new_pitch, x, y, z, heading, pitch, state, occupancy,
-            frontier, blocks, shape, nbrs, radius, size, seed, tick, best, localized, shape_patches, join, outcome)
+        scratch.last_ids[:m] = ids
+        decide_robots(ids, ids, robots, grid, rules, tick, scratch.head, scratch.nxt, moves)
+        joined, inside, outside, walking = resolve_kernel(ids, moves, robots, grid, rules, tick, scratch.best,
+                                                          localized, end.shape_patches, scratch.outcome)
         localized += joined
         decided = m
-        m = _compact_moving(moving, m, state)
-        code, m = _close_tick(moving, m, state, tick, localized, inside, outside, walking, shape_patches, robots,
-                              max_ticks, rows[n])
+        m = _compact_moving(moving, m, robots.state)
+        code, m = _close_tick(moving, m, robots.state, tick, localized, inside, outside, walking, end.shape_patches,
+                              end.robots, end.max_ticks, rows[n])
         n += 1
     return n, m, localized, decided, code
 
@@ -155,16 +161,11 @@ class Simulation:
         self._nbrs = world.neighbour_offsets()
         self._solid = world.dims == 3
         n, cells = params.robots, world.patch_count
-        self._head = np.full(cells, -1, dtype=np.int32)
-        self._best = np.full(cells, -1, dtype=np.int64)
-        self._nxt = np.empty(n, dtype=np.int32)
-        self._claim = np.empty(n, dtype=np.int64)
-        self._new_x, self._new_y, self._new_heading = np.empty(n), np.empty(n), np.empty(n)
-        extra = n if self._solid else 0  # the 3D arrays are empty in 2D
-        self._new_z, self._new_pitch = np.empty(extra), np.empty(extra)
-        self._outcome = np.empty(n, dtype=np.int8)
-        self._codes = params.ruleset.codes()
-        self._last_ids = np.empty(n, dtype=np.int64)
+        self._scratch = Scratch(head=np.full(cells, -1, dtype=np.int32), nxt=np.empty(n, dtype=np.int32),
+                                best=np.full(cells, -1, dtype=np.int64), outcome=np.empty(n, dtype=np.int8),
+                                last_ids=np.empty(n, dtype=np.int64))
+        self._moves = moves_for(n, self._solid)  # the decisions of the last tick, by position
+        self._rules = rules_of(params)
         self._moving = self.state.moving_ids()
         self._m = int(self._moving.size)
         self._decided = 0
@@ -184,20 +185,11 @@ class Simulation:
         self._record(0, 1, code)
 
     def _set_kernel_args(self, alive: int) -> None:
-        s, params = self.state, self.params
+        """What the kernels take, by name (:mod:`swarm_ros.core.kernel_state`), with ``alive`` robots not removed."""
         self._alive = alive
-        z, pitch = self._z_pitch()
-        self._kernel_args = (
-            self._moving, s.x, s.y, z, s.heading, pitch, s.state, self._shape, self._wall, s.frontier,
-            s.frontier_blocks, s.occupancy, self._nbrs, self._radius, self._size, params.vision_radius,
-            params.wiggle_rad, params.seed, *self._codes, self._head, self._nxt, self._best, self._claim, self._new_x,
-            self._new_y, self._new_z, self._new_heading, self._new_pitch, self._outcome, self._last_ids,
-            self.shape.patches, alive, params.max_ticks)
-
-    def _z_pitch(self) -> tuple[np.ndarray, np.ndarray]:
-        """The state's z and pitch, or (2D) the empty arrays that stand for them in the kernels."""
-        s = self.state
-        return (s.z, s.pitch) if self._solid else (self._new_z, self._new_pitch)
+        self._robots = robots_of(self.state)
+        self._grid = grid_of(self.shape, self.state, self._shape, self._wall, self._nbrs)
+        self._end = End(int(self.shape.patches), int(alive), int(self.params.max_ticks))
 
     # -- reading ----------------------------------------------------------------
     @property
@@ -226,16 +218,15 @@ class Simulation:
 
     def last_joins(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(robot ids, claimed patch or -1, :class:`JoinOutcome`) of the robots that decided last tick."""
-        n = self._decided
-        return self._last_ids[:n].copy(), self._claim[:n].copy(), self._outcome[:n].copy()
+        n, sc = self._decided, self._scratch
+        return sc.last_ids[:n].copy(), self._moves.claim[:n].copy(), sc.outcome[:n].copy()
 
     def last_decisions(self) -> Decisions:
         """The decisions applied in the last tick (ids in the order applied): claims and the poses decided."""
-        n = self._decided
-        solid = {"z": self._new_z[:n].copy(), "pitch": self._new_pitch[:n].copy()} if self._solid else {}
-        return Decisions(tick=self.tick, ids=self._last_ids[:n].copy(), claim=self._claim[:n].copy(),
-                         x=self._new_x[:n].copy(), y=self._new_y[:n].copy(), heading=self._new_heading[:n].copy(),
-                         **solid)
+        n, mv = self._decided, self._moves
+        solid = {"z": mv.z[:n].copy(), "pitch": mv.pitch[:n].copy()} if self._solid else {}
+        return Decisions(tick=self.tick, ids=self._scratch.last_ids[:n].copy(), claim=mv.claim[:n].copy(),
+                         x=mv.x[:n].copy(), y=mv.y[:n].copy(), heading=mv.heading[:n].copy(), **solid)
 
     # -- advancing --------------------------------------------------------------
     def step(self) -> TickMetrics:
@@ -277,20 +268,17 @@ class Simulation:
         m = self._m
         if decisions.ids.size != m or not np.array_equal(np.sort(decisions.ids), self._moving[:m]):
             raise ValueError("decisions must cover every moving robot exactly once")
-        self._last_ids[:m] = decisions.ids
-        self._claim[:m] = decisions.claim
-        self._new_x[:m], self._new_y[:m], self._new_heading[:m] = decisions.x, decisions.y, decisions.heading
+        mv, sc = self._moves, self._scratch
+        if self._solid and (decisions.z is None or decisions.pitch is None):
+            raise ValueError("decisions in a 3D world need z and pitch")
+        sc.last_ids[:m] = decisions.ids
+        mv.claim[:m] = decisions.claim
+        mv.x[:m], mv.y[:m], mv.heading[:m] = decisions.x, decisions.y, decisions.heading
         if self._solid:
-            if decisions.z is None or decisions.pitch is None:
-                raise ValueError("decisions in a 3D world need z and pitch")
-            self._new_z[:m], self._new_pitch[:m] = decisions.z, decisions.pitch
-        s = self.state
-        z, pitch = self._z_pitch()
-        joined, inside, outside, walking = resolve_kernel(
-            self._last_ids[:m], self._claim, self._new_x, self._new_y, self._new_z, self._new_heading,
-            self._new_pitch, s.x, s.y, z, s.heading, pitch, s.state, s.occupancy, s.frontier, s.frontier_blocks,
-            self._shape, self._nbrs, self._radius, self._size, self.params.seed, decisions.tick, self._best,
-            self._localized, self.shape.patches, self._codes[0], self._outcome)
+            mv.z[:m], mv.pitch[:m] = decisions.z, decisions.pitch
+        joined, inside, outside, walking = resolve_kernel(sc.last_ids[:m], mv, self._robots, self._grid, self._rules,
+                                                          decisions.tick, sc.best, self._localized,
+                                                          self.shape.patches, sc.outcome)
         self._localized += joined
         self._decided = m
         self._m = _compact_moving(self._moving, m, self.state.state)
@@ -408,7 +396,8 @@ class Simulation:
         self._check_running()
         self._reserve(limit)
         n, self._m, self._localized, self._decided, code = _run_kernel(
-            *self._kernel_args, self._rows[self._nrows:], self._m, self.tick, self._localized, limit)
+            self._moving, self._robots, self._grid, self._rules, self._scratch, self._moves, self._end,
+            self._rows[self._nrows:], self._m, self.tick, self._localized, limit)
         self._record(n, n, code)
         self._after_tick()
         return n

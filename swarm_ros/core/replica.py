@@ -24,6 +24,7 @@ import numba
 import numpy as np
 
 from swarm_ros.core.arbitration import occupy, vacate
+from swarm_ros.core.kernel_state import Robots, grid_of, robots_of
 from swarm_ros.core.rules import cell_index
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of, has_repeats
@@ -34,18 +35,21 @@ UNKNOWN = np.int8(-1)  #: state of a robot before the tick-0 rows arrive, or (re
 
 
 @numba.njit(cache=True)
-def _apply_rows(ids, new_state, new_x, new_y, new_z, new_heading, new_pitch, x, y, z, heading, pitch, state,
-                occupancy, frontier, blocks, shape, nbrs, radius, size, first, last):
-    """Write the rows into the state arrays; occupy the patch of every robot that became stationary-localized,
+def _apply_rows(ids, rows, robots, grid, first, last):
+    """Write ``rows`` (a :class:`~swarm_ros.core.kernel_state.Robots` of the rows' poses and states, row k robot
+    ``ids[k]``'s) into ``robots``; occupy in ``grid`` the patch of every robot that became stationary-localized,
     free the patch of every localized robot that was removed; forget (:data:`UNKNOWN`) a moving robot whose
-    column is outside ``first``..``last``. ``z`` and ``pitch`` (and the rows'
-    ``new_z``, ``new_pitch``) are empty in a 2D world.
+    column is outside ``first``..``last``.
 
     Returns the number of rows that were rejected (-1 per row whose id is out of range
     or whose localized patch is not an empty shape patch), else 0.
     """
+    new_state, new_x, new_y, new_z, new_heading, new_pitch = rows.state, rows.x, rows.y, rows.z, rows.heading, \
+        rows.pitch
+    x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
+    occupancy, frontier, blocks, shape, nbrs, radius, size, solid = grid.occupancy, grid.frontier, grid.blocks, \
+        grid.shape, grid.nbrs, grid.radius, grid.size, grid.solid
     n = state.size
-    solid = z.size > 0
     for k in range(ids.size):
         i = ids[k]
         if i < 0 or i >= n:
@@ -94,6 +98,7 @@ class Replica:
         self._radius, self._size = world.radius, world.size
         self._shape = shape.mask.ravel().copy()
         self._nbrs = world.neighbour_offsets()
+        self._wall = world.wall_mask().ravel()
         self._solid = world.dims == 3
         self._none = np.empty(0)  # z and pitch in a 2D world
         self.state = self._empty(robots)
@@ -158,11 +163,10 @@ class Replica:
             raise ValueError(f"unknown robot state code in the rows of tick {tick}")
         f64 = np.float64
         new_z, new_pitch = (np.asarray(z, f64), np.asarray(pitch, f64)) if self._solid else (self._none, self._none)
-        z_now, pitch_now = (s.z, s.pitch) if self._solid else (self._none, self._none)
-        bad = _apply_rows(ids, state, np.asarray(x, dtype=f64), np.asarray(y, dtype=f64), new_z,
-                          np.asarray(heading, dtype=f64), new_pitch, s.x, s.y, z_now, s.heading, pitch_now, s.state,
-                          s.occupancy, s.frontier, s.frontier_blocks, self._shape, self._nbrs, self._radius,
-                          self._size, self._first, self._last)
+        rows = Robots(np.asarray(x, dtype=f64), np.asarray(y, dtype=f64), new_z, np.asarray(heading, dtype=f64),
+                      new_pitch, state)
+        grid = grid_of(self.shape, s, self._shape, self._wall, self._nbrs)
+        bad = _apply_rows(ids, rows, robots_of(s), grid, self._first, self._last)
         if bad:
             raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
                              f"localizes on a patch that is not an empty shape patch, or returns after removal")

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import (
     STREAM_TURN,
@@ -236,15 +237,20 @@ def _move(xi, yi, h, wiggle, u, wall, radius, size):
 
 
 @numba.njit(cache=True)
-def decide_kernel(ids, x, y, heading, state, shape, wall, frontier, blocks, radius, size, vision, wiggle, seed,
-                  tick, join, crowd, steps, head, nxt, out_claim, out_x, out_y, out_heading):
-    """Decide for robots ``ids`` (moving, all inserted in the cell list) at ``tick`` under the rule set
-    (``join``, ``crowd``, ``steps``: :mod:`swarm_ros.core.rulesets` codes).
+def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out):
+    """Decide for robots ``ids`` (moving, all inserted in the cell list ``head``, ``nxt``) at ``tick`` under
+    ``rules`` (:class:`~swarm_ros.core.kernel_state.Rules`), in a 2D world.
 
-    Writes, per position k of ``ids``: the claimed patch (flat index, or -1) and the
-    position and heading the robot takes if it does not win a claim. Reads only the
-    previous tick's arrays; writes only the ``out_*`` arrays.
+    Writes ``out`` (:class:`~swarm_ros.core.kernel_state.Moves`), per position k of ``ids``: the claimed
+    patch (flat index, or -1) and the position and heading the robot takes if it does not win a claim.
+    Reads only the previous tick's ``robots`` and ``grid``; writes only ``out``.
     """
+    x, y, heading, state = robots.x, robots.y, robots.heading, robots.state
+    shape, wall, frontier, blocks, radius, size = grid.shape, grid.wall, grid.frontier, grid.blocks, grid.radius, \
+        grid.size
+    vision, wiggle, seed, join, crowd, steps = rules.vision, rules.wiggle, rules.seed, rules.join, rules.crowd, \
+        rules.steps
+    out_claim, out_x, out_y, out_heading = out.claim, out.x, out.y, out.heading
     for k in range(ids.size):
         i = ids[k]
         xi = x[i]
@@ -306,6 +312,21 @@ def decide_kernel(ids, x, y, heading, state, shape, wall, frontier, blocks, radi
         out_heading[k] = hi
 
 
+@numba.njit(cache=True)
+def decide_robots(moving, ids, robots, grid, rules, tick, head, nxt, out):
+    """Decide for robots ``ids`` (a subset of ``moving``, the moving robots they sense) at ``tick``, in either
+    dimension: ``moving`` go into the cell list (``head``: all -1, left so), then each of ``ids`` decides
+    (:func:`decide_kernel`, :func:`~swarm_ros.core.rules3d.decide_kernel3`) into ``out``."""
+    if grid.solid:
+        index_build3(moving, robots.x, robots.y, robots.z, grid.radius, grid.size, head, nxt)
+        decide_kernel3(ids, robots, grid, rules, tick, head, nxt, out)
+        index_clear3(moving, robots.x, robots.y, robots.z, grid.radius, grid.size, head)
+    else:
+        index_build(moving, robots.x, robots.y, grid.radius, grid.size, head, nxt)
+        decide_kernel(ids, robots, grid, rules, tick, head, nxt, out)
+        index_clear(moving, robots.x, robots.y, grid.radius, grid.size, head)
+
+
 @dataclass(frozen=True)
 class Decisions:
     """What a batch of robots decided at one tick; arrays are aligned with ``ids``.
@@ -365,12 +386,12 @@ class Decider:
     def __init__(self, shape: Shape, params: RunParams) -> None:
         world = shape.world
         self.shape, self.params = shape, params
-        self._radius, self._size = world.radius, world.size
         self._shape = shape.mask.ravel().copy()
         self._wall = world.wall_mask().ravel()
+        self._nbrs = world.neighbour_offsets()
         self._head = np.full(world.patch_count, -1, dtype=np.int32)
         self._nxt = np.empty(params.robots, dtype=np.int32)
-        self._codes = params.ruleset.codes()
+        self._rules = rules_of(params)
 
     def decide(self, view: SwarmState, ids: np.ndarray, tick: int, moving: np.ndarray | None = None) -> Decisions:
         """Decisions of the moving robots ``ids`` at ``tick`` from ``view``, the state at tick - 1.
@@ -392,28 +413,15 @@ class Decider:
         if moving is None:
             moving = view.moving_ids()
         n = ids.size
-        claim = np.empty(n, dtype=np.int64)
-        x, y, heading = np.empty(n), np.empty(n), np.empty(n)
-        r, w = self._radius, self._size
-        if self.shape.dims == 3:
-            z, pitch = np.empty(n), np.empty(n)
-            index_build3(moving, view.x, view.y, view.z, r, w, self._head, self._nxt)
-            try:
-                decide_kernel3(ids, view.x, view.y, view.z, view.heading, view.pitch, view.state, self._shape,
-                               self._wall, view.frontier, view.frontier_blocks, r, w, self.params.vision_radius,
-                               self.params.wiggle_rad, self.params.seed, tick, *self._codes, self._head, self._nxt,
-                               claim, x, y, z, heading, pitch)
-            finally:
-                index_clear3(moving, view.x, view.y, view.z, r, w, self._head)
-            return Decisions(tick=tick, ids=ids, claim=claim, x=x, y=y, heading=heading, z=z, pitch=pitch)
-        index_build(moving, view.x, view.y, r, w, self._head, self._nxt)
+        out = moves_for(n, self.shape.dims == 3)
         try:
-            decide_kernel(ids, view.x, view.y, view.heading, view.state, self._shape, self._wall, view.frontier,
-                          view.frontier_blocks, r, w, self.params.vision_radius, self.params.wiggle_rad,
-                          self.params.seed, tick, *self._codes, self._head, self._nxt, claim, x, y, heading)
-        finally:
-            index_clear(moving, view.x, view.y, r, w, self._head)
-        return Decisions(tick=tick, ids=ids, claim=claim, x=x, y=y, heading=heading)
+            decide_robots(moving, ids, robots_of(view), grid_of(self.shape, view, self._shape, self._wall, self._nbrs),
+                          self._rules, tick, self._head, self._nxt, out)
+        except BaseException:
+            self._head.fill(-1)  # the cell list is left as found, whatever happened half-way
+            raise
+        solid = {"z": out.z, "pitch": out.pitch} if self.shape.dims == 3 else {}
+        return Decisions(tick=tick, ids=ids, claim=out.claim, x=out.x, y=out.y, heading=out.heading, **solid)
 
 
 def decide(view: SwarmState, ids: np.ndarray, shape: Shape, params: RunParams, tick: int) -> Decisions:

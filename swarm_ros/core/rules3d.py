@@ -236,10 +236,14 @@ def _draws(seed, i, tick, stream):
 
 
 @numba.njit(cache=True)
-def decide_kernel3(ids, x, y, z, heading, pitch, state, shape, wall, frontier, blocks, radius, size, vision, wiggle,
-                   seed, tick, join, crowd, steps, head, nxt, out_claim, out_x, out_y, out_z, out_heading,
-                   out_pitch):
+def decide_kernel3(ids, robots, grid, rules, tick, head, nxt, out):
     """:func:`swarm_ros.core.rules.decide_kernel` in a 3D world (the robots ``ids`` are in the voxel cell list)."""
+    x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
+    shape, wall, frontier, blocks, radius, size = grid.shape, grid.wall, grid.frontier, grid.blocks, grid.radius, \
+        grid.size
+    vision, wiggle, seed, join, crowd, steps = rules.vision, rules.wiggle, rules.seed, rules.join, rules.crowd, \
+        rules.steps
+    out_claim, out_x, out_y, out_z, out_heading, out_pitch = out.claim, out.x, out.y, out.z, out.heading, out.pitch
     for k in range(ids.size):
         i = ids[k]
         xi, yi, zi, hi, pi = x[i], y[i], z[i], heading[i], pitch[i]
