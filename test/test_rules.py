@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from swarm_ros.core import RobotState, Shape, Simulation, World, decide
 from swarm_ros.core.invariants import nearest_frontier_patch
-from swarm_ros.core.rules import Decisions, nearest_frontier
+from swarm_ros.core.rules import Decisions
+from swarm_ros.core.rules2d import nearest_frontier
 from swarm_ros.core.state import SwarmState, frontier_blocks_of, initial_state
 
 pytestmark = pytest.mark.unit

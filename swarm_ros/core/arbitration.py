@@ -28,7 +28,7 @@ import numba
 import numpy as np
 
 from swarm_ros.core.rng import STREAM_PRIORITY, draw_bits
-from swarm_ros.core.rules import cell_index
+from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.rulesets import JOIN_WALK
 from swarm_ros.core.state import FRONTIER_BLOCK, RobotState
 

@@ -35,7 +35,8 @@ from swarm_ros.core.metrics import (
 )
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
-from swarm_ros.core.rules import Decisions, cell_index, decide_robots
+from swarm_ros.core.rules import Decisions, decide_robots
+from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import RobotState, SwarmState, initial_state
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from swarm_ros.core.arbitration import occupy, vacate
 from swarm_ros.core.kernel_state import Robots, grid_of, robots_of
-from swarm_ros.core.rules import cell_index
+from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of, has_repeats
 

@@ -38,6 +38,7 @@ import numpy as np
 from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import (
+    SPIN,
     STREAM_TURN,
     STREAM_TURN_2,
     STREAM_WIGGLE,
@@ -45,281 +46,210 @@ from swarm_ros.core.rng import (
     STREAM_WIGGLE_3,
     draw_uniform,
 )
-from swarm_ros.core.rules3d import decide_kernel3, index_build3, index_clear3
-from swarm_ros.core.rulesets import CROWD_AHEAD, JOIN_LOCAL, JOIN_WALK, STEPS_ONE
+from swarm_ros.core.rules2d import (
+    cell_index,
+    crowded,
+    index_build,
+    index_clear,
+    join_target,
+    nearest_frontier,
+)
+from swarm_ros.core.rules3d import (
+    angles,
+    crowded3,
+    direction,
+    index_build3,
+    index_clear3,
+    join_target3,
+    nearest_frontier3,
+    random_direction,
+    wiggled,
+)
+from swarm_ros.core.rulesets import JOIN_LOCAL, JOIN_WALK, STEPS_ONE
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import FRONTIER_BLOCK, IS_MOVING, RobotState, SwarmState
+from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState
 
 TWO_PI = 2.0 * math.pi
 _WALKING = np.int8(RobotState.WALKING)
 
 
+# -- the robot rule, one control flow for 2D and 3D; the per-dimension parts below it ------------------------
 @numba.njit(cache=True, inline="always")
-def patch_index(x: float, y: float, radius: int, size: int) -> int:
-    """Flat index of the patch whose centre is nearest to (x, y)."""
-    return (int(math.floor(y + 0.5)) + radius) * size + int(math.floor(x + 0.5)) + radius
+def _draws(solid, seed, i, tick, stream):
+    """The uniform draws of one of a robot's streams at ``tick``: one in 2D, two in 3D (the second ``SPIN``
+    streams on)."""
+    u = draw_uniform(seed, i, tick, stream)
+    return u, draw_uniform(seed, i, tick, stream + SPIN) if solid else 0.0
 
 
 @numba.njit(cache=True, inline="always")
-def cell_index(x: float, y: float, z: float, solid: bool, radius: int, size: int) -> int:
-    """Flat index of the patch nearest to (x, y), or (``solid``, a 3D world) of the voxel nearest to (x, y, z)."""
-    c = patch_index(x, y, radius, size)
+def _normal(h, solid):
+    """A heading as the robot keeps it: in [0, 2 pi) in 2D; a 3D direction's azimuth is kept as it comes."""
+    return h if solid else h % TWO_PI
+
+
+@numba.njit(cache=True, inline="always")
+def _wiggled(h, p, solid, wiggle, u, v):
+    """The heading (and pitch) turned by a wiggle, and the unit step along it: (h, p, ex, ey, ez)."""
     if solid:
-        c += (int(math.floor(z + 0.5)) + radius) * size * size
-    return c
-
-
-@numba.njit(cache=True)
-def index_build(ids, x, y, radius, size, head, nxt):
-    """Insert robots ``ids`` into the cell list (one cell per patch).
-
-    ``head`` (W*W) holds the first robot of each cell or -1; ``nxt`` (N) links robots of a
-    cell. Only the cells of ``ids`` are touched, so :func:`index_clear` undoes it in O(len(ids)).
-    """
-    for k in range(ids.size):
-        i = ids[k]
-        c = patch_index(x[i], y[i], radius, size)
-        nxt[i] = head[c]
-        head[c] = i
-
-
-@numba.njit(cache=True)
-def index_clear(ids, x, y, radius, size, head):
-    """Empty the cells :func:`index_build` filled (positions must be unchanged since)."""
-    for k in range(ids.size):
-        i = ids[k]
-        head[patch_index(x[i], y[i], radius, size)] = -1
-
-
-@numba.njit(cache=True)
-def crowded_disc(ax, ay, me, vision, x, y, radius, size, head, nxt) -> bool:
-    """True if a robot in the cell list other than ``me`` is within ``vision`` of (ax, ay)."""
-    v2 = vision * vision
-    reach = int(math.floor(vision + 1.0))
-    cx = int(math.floor(ax + 0.5))
-    cy = int(math.floor(ay + 0.5))
-    for py in range(max(cy - reach, -radius), min(cy + reach, radius) + 1):
-        row = (py + radius) * size + radius
-        for px in range(max(cx - reach, -radius), min(cx + reach, radius) + 1):
-            j = head[row + px]
-            while j >= 0:
-                if j != me:
-                    dx = x[j] - ax
-                    dy = y[j] - ay
-                    if dx * dx + dy * dy <= v2:
-                        return True
-                j = nxt[j]
-    return False
-
-
-@numba.njit(cache=True)
-def crowded_ahead(xi, yi, h, me, vision, radius, size, head, nxt) -> bool:
-    """True if a robot in the cell list other than ``me`` is on the patch ``vision`` ahead of (xi, yi) along ``h``."""
-    px = int(math.floor(xi + vision * math.cos(h) + 0.5))
-    py = int(math.floor(yi + vision * math.sin(h) + 0.5))
-    if px < -radius or px > radius or py < -radius or py > radius:
-        return False  # beyond the walls: nobody there
-    j = head[(py + radius) * size + px + radius]
-    while j >= 0:
-        if j != me:
-            return True
-        j = nxt[j]
-    return False
-
-
-@numba.njit(cache=True, inline="always")
-def crowded(crowd, xi, yi, h, me, vision, x, y, radius, size, head, nxt) -> bool:
-    """The rule set's crowding test for a robot at (xi, yi) facing ``h``."""
-    if crowd == CROWD_AHEAD:
-        return crowded_ahead(xi, yi, h, me, vision, radius, size, head, nxt)
-    return crowded_disc(xi + math.cos(h), yi + math.sin(h), me, vision, x, y, radius, size, head, nxt)
-
-
-@numba.njit(cache=True)
-def join_target(xi, yi, vision, frontier, radius, size) -> int:
-    """Flat index of the nearest frontier patch within ``vision`` of (xi, yi), or -1 (``join: local``)."""
-    v2 = vision * vision
-    reach = int(math.floor(vision + 0.5))
-    cx = int(math.floor(xi + 0.5))
-    cy = int(math.floor(yi + 0.5))
-    best = -1
-    best_d2 = math.inf
-    for py in range(max(cy - reach, -radius), min(cy + reach, radius) + 1):
-        row = (py + radius) * size + radius
-        for px in range(max(cx - reach, -radius), min(cx + reach, radius) + 1):
-            q = row + px
-            if frontier[q]:
-                dx = px - xi
-                dy = py - yi
-                d2 = dx * dx + dy * dy
-                if d2 <= v2 and d2 < best_d2:
-                    best_d2 = d2
-                    best = q
-    return best
-
-
-@numba.njit(cache=True, inline="always")
-def _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2):
-    """Fold the frontier patches of block (ux, uy) into the nearest-so-far (best, best_d2)."""
-    if blocks[uy * nb + ux] == 0:
-        return best, best_d2
-    b = FRONTIER_BLOCK
-    x0 = ux * b - radius
-    x1 = min(ux * b + b - 1, size - 1) - radius
-    y0 = uy * b - radius
-    y1 = min(uy * b + b - 1, size - 1) - radius
-    gx = max(x0 - xi, 0.0, xi - x1)
-    gy = max(y0 - yi, 0.0, yi - y1)
-    if gx * gx + gy * gy > best_d2:
-        return best, best_d2
-    for py in range(y0, y1 + 1):
-        row = (py + radius) * size + radius
-        for px in range(x0, x1 + 1):
-            q = row + px
-            if frontier[q]:
-                dx = px - xi
-                dy = py - yi
-                d2 = dx * dx + dy * dy
-                if d2 < best_d2 or (d2 == best_d2 and q < best):
-                    best_d2 = d2
-                    best = q
-    return best, best_d2
-
-
-@numba.njit(cache=True)
-def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
-    """Flat index of the nearest frontier patch anywhere (``join: walk``), or -1 if there is none.
-
-    Distance is Euclidean from (xi, yi) to the patch centre; ties go to the lowest flat
-    index, i.e. the lowest (y, x). The search goes outward ring by ring over blocks of
-    ``FRONTIER_BLOCK`` patches, skips blocks without frontier patches (``blocks``) or
-    farther than the best so far, and stops once a whole ring is farther: it costs about
-    the blocks within the distance found, not the frontier's size.
-    """
-    if blocks[blocks.size - 1] == 0:
-        return -1
-    b = FRONTIER_BLOCK
-    nb = (size + b - 1) // b
-    bx = (int(math.floor(xi + 0.5)) + radius) // b
-    by = (int(math.floor(yi + 0.5)) + radius) // b
-    best = -1
-    best_d2 = math.inf
-    for k in range(max(bx, by, nb - 1 - bx, nb - 1 - by) + 1):
-        if k > 0:
-            # every patch centre in ring k is at least (k - 1) * b + 0.5 away along x or y
-            gap = (k - 1) * b + 0.5
-            if gap * gap > best_d2:
-                break
-        for uy in range(max(by - k, 0), min(by + k, nb - 1) + 1):
-            if uy == by - k or uy == by + k:  # the ring's bottom or top row: every block in it
-                for ux in range(max(bx - k, 0), min(bx + k, nb - 1) + 1):
-                    best, best_d2 = _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
-            else:  # the rows between: the ring's left and right blocks
-                if bx - k >= 0:
-                    best, best_d2 = _scan_block(bx - k, uy, xi, yi, frontier, blocks, radius, size, nb, best,
-                                                best_d2)
-                if bx + k < nb:
-                    best, best_d2 = _scan_block(bx + k, uy, xi, yi, frontier, blocks, radius, size, nb, best,
-                                                best_d2)
-    return best
-
-
-@numba.njit(cache=True, inline="always")
-def _move(xi, yi, h, wiggle, u, wall, radius, size):
-    """The pseudo-code's Move: turn by a wiggle (``u`` uniform in [0, 1)), then step 1 patch forward
-    unless that patch is a wall. Returns (x, y, heading)."""
+        h, p = wiggled(h, p, wiggle, u, v)
+        ex, ey, ez = direction(h, p)
+        return h, p, ex, ey, ez
     h = h + wiggle * (2.0 * u - 1.0)
-    ax = xi + math.cos(h)
-    ay = yi + math.sin(h)
-    if wall[patch_index(ax, ay, radius, size)]:
-        return xi, yi, h
-    return ax, ay, h
+    return h, p, math.cos(h), math.sin(h), 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _turned(solid, u, v):
+    """A direction uniform on the circle (2D) or the sphere (3D): (heading, pitch)."""
+    if solid:
+        return random_direction(u, v)
+    return TWO_PI * u, 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _step(h, p, solid):
+    """The unit step along heading ``h`` (and pitch ``p``)."""
+    if solid:
+        return direction(h, p)
+    return math.cos(h), math.sin(h), 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _move(xi, yi, zi, h, p, solid, wiggle, u, v, wall, radius, size):
+    """The pseudo-code's Move: turn by a wiggle, then step one patch (voxel) forward unless that patch is a wall.
+    Returns (x, y, z, heading, pitch)."""
+    h, p, ex, ey, ez = _wiggled(h, p, solid, wiggle, u, v)
+    if wall[cell_index(xi + ex, yi + ey, zi + ez, solid, radius, size)]:
+        return xi, yi, zi, h, p
+    return xi + ex, yi + ey, zi + ez, h, p
+
+
+@numba.njit(cache=True, inline="always")
+def _crowded(solid, crowd, xi, yi, zi, h, ex, ey, ez, me, vision, robots, radius, size, head, nxt) -> bool:
+    """The rule set's crowding test for a robot at (xi, yi, zi) facing ``h`` (the unit step (ex, ey, ez))."""
+    if solid:
+        return crowded3(crowd, xi, yi, zi, ex, ey, ez, me, vision, robots.x, robots.y, robots.z, radius, size, head,
+                        nxt)
+    return crowded(crowd, xi, yi, h, me, vision, robots.x, robots.y, radius, size, head, nxt)
+
+
+@numba.njit(cache=True, inline="always")
+def _nearest_frontier(xi, yi, zi, solid, frontier, blocks, radius, size) -> int:
+    if solid:
+        return nearest_frontier3(xi, yi, zi, frontier, blocks, radius, size)
+    return nearest_frontier(xi, yi, frontier, blocks, radius, size)
+
+
+@numba.njit(cache=True, inline="always")
+def _join_target(xi, yi, zi, solid, vision, frontier, radius, size) -> int:
+    if solid:
+        return join_target3(xi, yi, zi, vision, frontier, radius, size)
+    return join_target(xi, yi, vision, frontier, radius, size)
+
+
+@numba.njit(cache=True, inline="always")
+def _toward(q, xi, yi, zi, hi, pi, solid, radius, size):
+    """A walking robot and its nearest frontier patch ``q``: claim it if within one patch, standing; else face it
+    and step exactly one patch towards it. Returns (claim, x, y, z, heading, pitch)."""
+    dx = (q % size - radius) - xi
+    dz = 0.0
+    if solid:
+        dy = ((q // size) % size - radius) - yi
+        dz = (q // (size * size) - radius) - zi
+    else:
+        dy = (q // size - radius) - yi
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 <= 1.0:
+        return q, xi, yi, zi, hi, pi
+    d = math.sqrt(d2)
+    if solid:
+        hi, pi = angles(dx, dy, dz)
+        return -1, xi + dx / d, yi + dy / d, zi + dz / d, hi, pi
+    return -1, xi + dx / d, yi + dy / d, zi, math.atan2(dy, dx) % TWO_PI, pi
 
 
 @numba.njit(cache=True)
 def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out):
     """Decide for robots ``ids`` (moving, all inserted in the cell list ``head``, ``nxt``) at ``tick`` under
-    ``rules`` (:class:`~swarm_ros.core.kernel_state.Rules`), in a 2D world.
+    ``rules`` (:class:`~swarm_ros.core.kernel_state.Rules`), in a world of either dimension (``grid.solid``:
+    3D, where the robots' geometry is :mod:`swarm_ros.core.rules3d`'s; the rule is this one control flow).
 
     Writes ``out`` (:class:`~swarm_ros.core.kernel_state.Moves`), per position k of ``ids``: the claimed
-    patch (flat index, or -1) and the position and heading the robot takes if it does not win a claim.
-    Reads only the previous tick's ``robots`` and ``grid``; writes only ``out``.
+    patch (flat index, or -1) and the pose the robot takes if it does not win a claim. Reads only the
+    previous tick's ``robots`` and ``grid``; writes only ``out``.
     """
-    x, y, heading, state = robots.x, robots.y, robots.heading, robots.state
+    solid = grid.solid
+    x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
     shape, wall, frontier, blocks, radius, size = grid.shape, grid.wall, grid.frontier, grid.blocks, grid.radius, \
         grid.size
     vision, wiggle, seed, join, crowd, steps = rules.vision, rules.wiggle, rules.seed, rules.join, rules.crowd, \
         rules.steps
-    out_claim, out_x, out_y, out_heading = out.claim, out.x, out.y, out.heading
     for k in range(ids.size):
         i = ids[k]
-        xi = x[i]
-        yi = y[i]
-        hi = heading[i]
+        xi, yi, hi = x[i], y[i], heading[i]
+        zi = z[i] if solid else 0.0
+        pi = pitch[i] if solid else 0.0
         claim = -1
-        inside = shape[patch_index(xi, yi, radius, size)]
+        inside = shape[cell_index(xi, yi, zi, solid, radius, size)]
+        walked = False
         if join == JOIN_WALK and (state[i] == _WALKING or inside):
-            q = nearest_frontier(xi, yi, frontier, blocks, radius, size)
-            if q >= 0:
-                dx = (q % size - radius) - xi
-                dy = (q // size - radius) - yi
-                d2 = dx * dx + dy * dy
-                if d2 <= 1.0:
-                    claim = q  # within one patch: claim it, standing
-                else:  # face it and step exactly one patch towards it
-                    d = math.sqrt(d2)
-                    xi += dx / d
-                    yi += dy / d
-                    hi = math.atan2(dy, dx) % TWO_PI
-                out_claim[k] = claim
-                out_x[k] = xi
-                out_y[k] = yi
-                out_heading[k] = hi
-                continue
-            # an empty frontier: nothing to walk to, so the robot wanders
-        if steps == STEPS_ONE:
+            q = _nearest_frontier(xi, yi, zi, solid, frontier, blocks, radius, size)
+            if q >= 0:  # an empty frontier: nothing to walk to, so the robot wanders
+                claim, xi, yi, zi, hi, pi = _toward(q, xi, yi, zi, hi, pi, solid, radius, size)
+                walked = True
+        if walked:
+            pass
+        elif steps == STEPS_ONE:
             if join == JOIN_LOCAL and inside:
-                claim = join_target(xi, yi, vision, frontier, radius, size)
+                claim = _join_target(xi, yi, zi, solid, vision, frontier, radius, size)
             if claim < 0:
-                h = hi + wiggle * (2.0 * draw_uniform(seed, i, tick, STREAM_WIGGLE) - 1.0)
-                ax = xi + math.cos(h)
-                ay = yi + math.sin(h)
-                if wall[patch_index(ax, ay, radius, size)] or crowded(crowd, xi, yi, h, i, vision, x, y, radius,
-                                                                      size, head, nxt):
-                    hi = TWO_PI * draw_uniform(seed, i, tick, STREAM_TURN)
+                u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE)
+                h, p, ex, ey, ez = _wiggled(hi, pi, solid, wiggle, u, v)
+                if wall[cell_index(xi + ex, yi + ey, zi + ez, solid, radius, size)] or _crowded(
+                        solid, crowd, xi, yi, zi, h, ex, ey, ez, i, vision, robots, radius, size, head, nxt):
+                    u, v = _draws(solid, seed, i, tick, STREAM_TURN)
+                    hi, pi = _turned(solid, u, v)
                 else:
-                    xi, yi, hi = ax, ay, h % TWO_PI
+                    xi, yi, zi, hi, pi = xi + ex, yi + ey, zi + ez, _normal(h, solid), p
         else:  # the pseudo-code's Move calls, as written
-            xi, yi, hi = _move(xi, yi, hi, wiggle, draw_uniform(seed, i, tick, STREAM_WIGGLE), wall, radius, size)
+            u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE)
+            xi, yi, zi, hi, pi = _move(xi, yi, zi, hi, pi, solid, wiggle, u, v, wall, radius, size)
             if not inside:
-                if wall[patch_index(xi + math.cos(hi), yi + math.sin(hi), radius, size)]:
-                    hi = TWO_PI * draw_uniform(seed, i, tick, STREAM_TURN)
+                ex, ey, ez = _step(hi, pi, solid)
+                if wall[cell_index(xi + ex, yi + ey, zi + ez, solid, radius, size)]:
+                    u, v = _draws(solid, seed, i, tick, STREAM_TURN)
+                    hi, pi = _turned(solid, u, v)
                 else:
-                    xi, yi, hi = _move(xi, yi, hi, wiggle, draw_uniform(seed, i, tick, STREAM_WIGGLE_2), wall,
-                                       radius, size)
-            if crowded(crowd, xi, yi, hi, i, vision, x, y, radius, size, head, nxt):
-                hi = TWO_PI * draw_uniform(seed, i, tick, STREAM_TURN_2 if not inside else STREAM_TURN)
+                    u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE_2)
+                    xi, yi, zi, hi, pi = _move(xi, yi, zi, hi, pi, solid, wiggle, u, v, wall, radius, size)
+            ex, ey, ez = _step(hi, pi, solid)
+            if _crowded(solid, crowd, xi, yi, zi, hi, ex, ey, ez, i, vision, robots, radius, size, head, nxt):
+                u, v = _draws(solid, seed, i, tick, STREAM_TURN_2 if not inside else STREAM_TURN)
+                hi, pi = _turned(solid, u, v)
             else:
-                xi, yi, hi = _move(xi, yi, hi, wiggle,
-                                   draw_uniform(seed, i, tick, STREAM_WIGGLE_3 if not inside else STREAM_WIGGLE_2),
-                                   wall, radius, size)
-            hi = hi % TWO_PI
+                u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE_3 if not inside else STREAM_WIGGLE_2)
+                xi, yi, zi, hi, pi = _move(xi, yi, zi, hi, pi, solid, wiggle, u, v, wall, radius, size)
+            hi = _normal(hi, solid)
             if inside and join == JOIN_LOCAL:
-                claim = join_target(xi, yi, vision, frontier, radius, size)
-        out_claim[k] = claim
-        out_x[k] = xi
-        out_y[k] = yi
-        out_heading[k] = hi
+                claim = _join_target(xi, yi, zi, solid, vision, frontier, radius, size)
+        out.claim[k] = claim
+        out.x[k] = xi
+        out.y[k] = yi
+        out.heading[k] = hi
+        if solid:
+            out.z[k] = zi
+            out.pitch[k] = pi
 
 
 @numba.njit(cache=True)
 def decide_robots(moving, ids, robots, grid, rules, tick, head, nxt, out):
     """Decide for robots ``ids`` (a subset of ``moving``, the moving robots they sense) at ``tick``, in either
     dimension: ``moving`` go into the cell list (``head``: all -1, left so), then each of ``ids`` decides
-    (:func:`decide_kernel`, :func:`~swarm_ros.core.rules3d.decide_kernel3`) into ``out``."""
+    (:func:`decide_kernel`) into ``out``."""
     if grid.solid:
         index_build3(moving, robots.x, robots.y, robots.z, grid.radius, grid.size, head, nxt)
-        decide_kernel3(ids, robots, grid, rules, tick, head, nxt, out)
+        decide_kernel(ids, robots, grid, rules, tick, head, nxt, out)
         index_clear3(moving, robots.x, robots.y, robots.z, grid.radius, grid.size, head)
     else:
         index_build(moving, robots.x, robots.y, grid.radius, grid.size, head, nxt)

@@ -1,10 +1,11 @@
-"""The robot rule in a 3D world: :mod:`swarm_ros.core.rules` with a position (x, y, z) and a heading
-that is a direction, its kernels compiled with numba.
+"""The robot's geometry in a 3D world, compiled with numba: a position (x, y, z) and a heading that is a
+direction. The rule itself is one control flow for both dimensions,
+:func:`swarm_ros.core.rules.decide_kernel`, which calls these where a 3D world differs.
 
 The rule is the 2D rule read in 3D (docs/model.md, "Three dimensions"): a wiggle turns the
 heading to a direction uniform on the spherical cap of angular radius ``wiggle`` about it; a
 random turn picks a direction uniform on the sphere; a step is one patch (voxel) along the
-heading; walls and crowding are tested straight ahead; vision is a ball. The kernels differ
+heading; walls and crowding are tested straight ahead; vision is a ball. These functions differ
 from the 2D ones because a 3D heading is two angles and every scan has a third loop; the
 arbitration, the frontier, the metrics and the end of a tick are the 2D code's.
 
@@ -19,20 +20,10 @@ import math
 
 import numba
 
-from swarm_ros.core.rng import (
-    SPIN,
-    STREAM_TURN,
-    STREAM_TURN_2,
-    STREAM_WIGGLE,
-    STREAM_WIGGLE_2,
-    STREAM_WIGGLE_3,
-    draw_uniform,
-)
-from swarm_ros.core.rulesets import CROWD_AHEAD, JOIN_LOCAL, JOIN_WALK, STEPS_ONE
-from swarm_ros.core.state import FRONTIER_BLOCK, RobotState
+from swarm_ros.core.rulesets import CROWD_AHEAD
+from swarm_ros.core.state import FRONTIER_BLOCK
 
 TWO_PI = 2.0 * math.pi
-_WALKING = RobotState.WALKING.value
 
 
 @numba.njit(cache=True, inline="always")
@@ -77,7 +68,7 @@ def random_direction(u, v):
 
 @numba.njit(cache=True)
 def index_build3(ids, x, y, z, radius, size, head, nxt):
-    """Insert robots ``ids`` into the voxel cell list (:func:`swarm_ros.core.rules.index_build` in 3D)."""
+    """Insert robots ``ids`` into the voxel cell list (:func:`swarm_ros.core.rules2d.index_build` in 3D)."""
     for k in range(ids.size):
         i = ids[k]
         c = voxel_index(x[i], y[i], z[i], radius, size)
@@ -195,7 +186,7 @@ def _scan_cube(ux, uy, uz, xi, yi, zi, frontier, blocks, radius, size, nb, best,
 @numba.njit(cache=True)
 def nearest_frontier3(xi, yi, zi, frontier, blocks, radius, size) -> int:
     """Flat index of the nearest frontier voxel anywhere (``join: walk``), or -1 if there is none; ties to the
-    lowest flat index. Searches shells of blocks outward, as :func:`swarm_ros.core.rules.nearest_frontier`."""
+    lowest flat index. Searches shells of blocks outward, as :func:`swarm_ros.core.rules2d.nearest_frontier`."""
     if blocks[blocks.size - 1] == 0:
         return -1
     b = FRONTIER_BLOCK
@@ -218,93 +209,3 @@ def nearest_frontier3(xi, yi, zi, frontier, blocks, radius, size) -> int:
                         best, best_d2 = _scan_cube(ux, uy, uz, xi, yi, zi, frontier, blocks, radius, size, nb,
                                                    best, best_d2)
     return best
-
-
-@numba.njit(cache=True, inline="always")
-def _move3(xi, yi, zi, h, p, wiggle, u, v, wall, radius, size):
-    """The pseudo-code's Move in 3D: wiggle, then step one voxel forward unless that voxel is a wall."""
-    h, p = wiggled(h, p, wiggle, u, v)
-    ex, ey, ez = direction(h, p)
-    if wall[voxel_index(xi + ex, yi + ey, zi + ez, radius, size)]:
-        return xi, yi, zi, h, p
-    return xi + ex, yi + ey, zi + ez, h, p
-
-
-@numba.njit(cache=True, inline="always")
-def _draws(seed, i, tick, stream):
-    return draw_uniform(seed, i, tick, stream), draw_uniform(seed, i, tick, stream + SPIN)
-
-
-@numba.njit(cache=True)
-def decide_kernel3(ids, robots, grid, rules, tick, head, nxt, out):
-    """:func:`swarm_ros.core.rules.decide_kernel` in a 3D world (the robots ``ids`` are in the voxel cell list)."""
-    x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
-    shape, wall, frontier, blocks, radius, size = grid.shape, grid.wall, grid.frontier, grid.blocks, grid.radius, \
-        grid.size
-    vision, wiggle, seed, join, crowd, steps = rules.vision, rules.wiggle, rules.seed, rules.join, rules.crowd, \
-        rules.steps
-    out_claim, out_x, out_y, out_z, out_heading, out_pitch = out.claim, out.x, out.y, out.z, out.heading, out.pitch
-    for k in range(ids.size):
-        i = ids[k]
-        xi, yi, zi, hi, pi = x[i], y[i], z[i], heading[i], pitch[i]
-        claim = -1
-        inside = shape[voxel_index(xi, yi, zi, radius, size)]
-        walked = False
-        if join == JOIN_WALK and (state[i] == _WALKING or inside):
-            q = nearest_frontier3(xi, yi, zi, frontier, blocks, radius, size)
-            if q >= 0:
-                dx = (q % size - radius) - xi
-                dy = ((q // size) % size - radius) - yi
-                dz = (q // (size * size) - radius) - zi
-                d2 = dx * dx + dy * dy + dz * dz
-                if d2 <= 1.0:
-                    claim = q  # within one voxel: claim it, standing
-                else:  # face it and step exactly one voxel towards it
-                    d = math.sqrt(d2)
-                    xi += dx / d
-                    yi += dy / d
-                    zi += dz / d
-                    hi, pi = angles(dx, dy, dz)
-                walked = True
-            # an empty frontier: nothing to walk to, so the robot wanders
-        if walked:
-            pass
-        elif steps == STEPS_ONE:
-            if join == JOIN_LOCAL and inside:
-                claim = join_target3(xi, yi, zi, vision, frontier, radius, size)
-            if claim < 0:
-                u, v = _draws(seed, i, tick, STREAM_WIGGLE)
-                h, p = wiggled(hi, pi, wiggle, u, v)
-                ex, ey, ez = direction(h, p)
-                if wall[voxel_index(xi + ex, yi + ey, zi + ez, radius, size)] or crowded3(
-                        crowd, xi, yi, zi, ex, ey, ez, i, vision, x, y, z, radius, size, head, nxt):
-                    u, v = _draws(seed, i, tick, STREAM_TURN)
-                    hi, pi = random_direction(u, v)
-                else:
-                    xi, yi, zi, hi, pi = xi + ex, yi + ey, zi + ez, h, p
-        else:  # the pseudo-code's Move calls, as written
-            u, v = _draws(seed, i, tick, STREAM_WIGGLE)
-            xi, yi, zi, hi, pi = _move3(xi, yi, zi, hi, pi, wiggle, u, v, wall, radius, size)
-            if not inside:
-                ex, ey, ez = direction(hi, pi)
-                if wall[voxel_index(xi + ex, yi + ey, zi + ez, radius, size)]:
-                    u, v = _draws(seed, i, tick, STREAM_TURN)
-                    hi, pi = random_direction(u, v)
-                else:
-                    u, v = _draws(seed, i, tick, STREAM_WIGGLE_2)
-                    xi, yi, zi, hi, pi = _move3(xi, yi, zi, hi, pi, wiggle, u, v, wall, radius, size)
-            ex, ey, ez = direction(hi, pi)
-            if crowded3(crowd, xi, yi, zi, ex, ey, ez, i, vision, x, y, z, radius, size, head, nxt):
-                u, v = _draws(seed, i, tick, STREAM_TURN_2 if not inside else STREAM_TURN)
-                hi, pi = random_direction(u, v)
-            else:
-                u, v = _draws(seed, i, tick, STREAM_WIGGLE_3 if not inside else STREAM_WIGGLE_2)
-                xi, yi, zi, hi, pi = _move3(xi, yi, zi, hi, pi, wiggle, u, v, wall, radius, size)
-            if inside and join == JOIN_LOCAL:
-                claim = join_target3(xi, yi, zi, vision, frontier, radius, size)
-        out_claim[k] = claim
-        out_x[k] = xi
-        out_y[k] = yi
-        out_z[k] = zi
-        out_heading[k] = hi
-        out_pitch[k] = pi

@@ -1,0 +1,184 @@
+"""The robot's geometry in a 2D world, compiled with numba: patch indices, the cell list of moving robots,
+crowding, and the search for the nearest frontier patch within vision (``join: local``) or anywhere
+(``join: walk``). The rule itself is one control flow for both dimensions,
+:func:`swarm_ros.core.rules.decide_kernel`; :mod:`swarm_ros.core.rules3d` is the 3D geometry.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+
+from swarm_ros.core.rulesets import CROWD_AHEAD
+from swarm_ros.core.state import FRONTIER_BLOCK
+
+
+@numba.njit(cache=True, inline="always")
+def patch_index(x: float, y: float, radius: int, size: int) -> int:
+    """Flat index of the patch whose centre is nearest to (x, y)."""
+    return (int(math.floor(y + 0.5)) + radius) * size + int(math.floor(x + 0.5)) + radius
+
+
+@numba.njit(cache=True, inline="always")
+def cell_index(x: float, y: float, z: float, solid: bool, radius: int, size: int) -> int:
+    """Flat index of the patch nearest to (x, y), or (``solid``, a 3D world) of the voxel nearest to (x, y, z)."""
+    c = patch_index(x, y, radius, size)
+    if solid:
+        c += (int(math.floor(z + 0.5)) + radius) * size * size
+    return c
+
+
+@numba.njit(cache=True)
+def index_build(ids, x, y, radius, size, head, nxt):
+    """Insert robots ``ids`` into the cell list (one cell per patch).
+
+    ``head`` (W*W) holds the first robot of each cell or -1; ``nxt`` (N) links robots of a
+    cell. Only the cells of ``ids`` are touched, so :func:`index_clear` undoes it in O(len(ids)).
+    """
+    for k in range(ids.size):
+        i = ids[k]
+        c = patch_index(x[i], y[i], radius, size)
+        nxt[i] = head[c]
+        head[c] = i
+
+
+@numba.njit(cache=True)
+def index_clear(ids, x, y, radius, size, head):
+    """Empty the cells :func:`index_build` filled (positions must be unchanged since)."""
+    for k in range(ids.size):
+        i = ids[k]
+        head[patch_index(x[i], y[i], radius, size)] = -1
+
+
+@numba.njit(cache=True)
+def crowded_disc(ax, ay, me, vision, x, y, radius, size, head, nxt) -> bool:
+    """True if a robot in the cell list other than ``me`` is within ``vision`` of (ax, ay)."""
+    v2 = vision * vision
+    reach = int(math.floor(vision + 1.0))
+    cx = int(math.floor(ax + 0.5))
+    cy = int(math.floor(ay + 0.5))
+    for py in range(max(cy - reach, -radius), min(cy + reach, radius) + 1):
+        row = (py + radius) * size + radius
+        for px in range(max(cx - reach, -radius), min(cx + reach, radius) + 1):
+            j = head[row + px]
+            while j >= 0:
+                if j != me:
+                    dx = x[j] - ax
+                    dy = y[j] - ay
+                    if dx * dx + dy * dy <= v2:
+                        return True
+                j = nxt[j]
+    return False
+
+
+@numba.njit(cache=True)
+def crowded_ahead(xi, yi, h, me, vision, radius, size, head, nxt) -> bool:
+    """True if a robot in the cell list other than ``me`` is on the patch ``vision`` ahead of (xi, yi) along ``h``."""
+    px = int(math.floor(xi + vision * math.cos(h) + 0.5))
+    py = int(math.floor(yi + vision * math.sin(h) + 0.5))
+    if px < -radius or px > radius or py < -radius or py > radius:
+        return False  # beyond the walls: nobody there
+    j = head[(py + radius) * size + px + radius]
+    while j >= 0:
+        if j != me:
+            return True
+        j = nxt[j]
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def crowded(crowd, xi, yi, h, me, vision, x, y, radius, size, head, nxt) -> bool:
+    """The rule set's crowding test for a robot at (xi, yi) facing ``h``."""
+    if crowd == CROWD_AHEAD:
+        return crowded_ahead(xi, yi, h, me, vision, radius, size, head, nxt)
+    return crowded_disc(xi + math.cos(h), yi + math.sin(h), me, vision, x, y, radius, size, head, nxt)
+
+
+@numba.njit(cache=True)
+def join_target(xi, yi, vision, frontier, radius, size) -> int:
+    """Flat index of the nearest frontier patch within ``vision`` of (xi, yi), or -1 (``join: local``)."""
+    v2 = vision * vision
+    reach = int(math.floor(vision + 0.5))
+    cx = int(math.floor(xi + 0.5))
+    cy = int(math.floor(yi + 0.5))
+    best = -1
+    best_d2 = math.inf
+    for py in range(max(cy - reach, -radius), min(cy + reach, radius) + 1):
+        row = (py + radius) * size + radius
+        for px in range(max(cx - reach, -radius), min(cx + reach, radius) + 1):
+            q = row + px
+            if frontier[q]:
+                dx = px - xi
+                dy = py - yi
+                d2 = dx * dx + dy * dy
+                if d2 <= v2 and d2 < best_d2:
+                    best_d2 = d2
+                    best = q
+    return best
+
+
+@numba.njit(cache=True, inline="always")
+def _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2):
+    """Fold the frontier patches of block (ux, uy) into the nearest-so-far (best, best_d2)."""
+    if blocks[uy * nb + ux] == 0:
+        return best, best_d2
+    b = FRONTIER_BLOCK
+    x0 = ux * b - radius
+    x1 = min(ux * b + b - 1, size - 1) - radius
+    y0 = uy * b - radius
+    y1 = min(uy * b + b - 1, size - 1) - radius
+    gx = max(x0 - xi, 0.0, xi - x1)
+    gy = max(y0 - yi, 0.0, yi - y1)
+    if gx * gx + gy * gy > best_d2:
+        return best, best_d2
+    for py in range(y0, y1 + 1):
+        row = (py + radius) * size + radius
+        for px in range(x0, x1 + 1):
+            q = row + px
+            if frontier[q]:
+                dx = px - xi
+                dy = py - yi
+                d2 = dx * dx + dy * dy
+                if d2 < best_d2 or (d2 == best_d2 and q < best):
+                    best_d2 = d2
+                    best = q
+    return best, best_d2
+
+
+@numba.njit(cache=True)
+def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
+    """Flat index of the nearest frontier patch anywhere (``join: walk``), or -1 if there is none.
+
+    Distance is Euclidean from (xi, yi) to the patch centre; ties go to the lowest flat
+    index, i.e. the lowest (y, x). The search goes outward ring by ring over blocks of
+    ``FRONTIER_BLOCK`` patches, skips blocks without frontier patches (``blocks``) or
+    farther than the best so far, and stops once a whole ring is farther: it costs about
+    the blocks within the distance found, not the frontier's size.
+    """
+    if blocks[blocks.size - 1] == 0:
+        return -1
+    b = FRONTIER_BLOCK
+    nb = (size + b - 1) // b
+    bx = (int(math.floor(xi + 0.5)) + radius) // b
+    by = (int(math.floor(yi + 0.5)) + radius) // b
+    best = -1
+    best_d2 = math.inf
+    for k in range(max(bx, by, nb - 1 - bx, nb - 1 - by) + 1):
+        if k > 0:
+            # every patch centre in ring k is at least (k - 1) * b + 0.5 away along x or y
+            gap = (k - 1) * b + 0.5
+            if gap * gap > best_d2:
+                break
+        for uy in range(max(by - k, 0), min(by + k, nb - 1) + 1):
+            if uy == by - k or uy == by + k:  # the ring's bottom or top row: every block in it
+                for ux in range(max(bx - k, 0), min(bx + k, nb - 1) + 1):
+                    best, best_d2 = _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
+            else:  # the rows between: the ring's left and right blocks
+                if bx - k >= 0:
+                    best, best_d2 = _scan_block(bx - k, uy, xi, yi, frontier, blocks, radius, size, nb, best,
+                                                best_d2)
+                if bx + k < nb:
+                    best, best_d2 = _scan_block(bx + k, uy, xi, yi, frontier, blocks, radius, size, nb, best,
+                                                best_d2)
+    return best
