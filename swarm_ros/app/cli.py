@@ -111,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--region-cuts", type=_checked(_REGION_CUTS), metavar="X,...",
                      help="x positions (patches) where the batches' strips 1..K-1 start, e.g. --region-cuts=-10,10 "
                           "for K = 3 (default: the parameter file's /robot_batch region_cuts, else cuts that give "
-                          "each strip as many robots at tick 0); docs/ros_graph.md, Regions")
+                          "each strip as many robots at tick 0); docs/protocol.md, Regions")
     run.add_argument("--domain-id", type=int, help="ROS domain id (default: $ROS_DOMAIN_ID, else a free one)")
     run.add_argument("--on-batch-loss", choices=BATCH_LOSS_POLICIES,
                      help="a robot-batch process that dies: restart it, nothing lost (default; up to "

@@ -14,7 +14,7 @@ removes its robots; one lost before tick 0 is restarted under both policies, sin
 none of its robots has moved yet. A world or monitor killed by a signal is started again
 too (up to ``max_restarts`` times each, under both policies): the world goes on from its
 checkpoint (``<logs>/world.checkpoint``), the monitor from the bag its process before
-wrote (docs/ros_graph.md, "Faults"); one that exits with an error fails the run. These rules are
+wrote (docs/faults.md); one that exits with an error fails the run. These rules are
 :class:`swarm_ros.app.supervision.Supervisor`'s, which the launch file follows too.
 Every node ends by itself within moments of the launcher's death (SIGHUP from the kernel:
 ``PR_SET_PDEATHSIG``, set by the node at start-up, see :func:`swarm_ros.ros.runtime.follow_parent`). After the run, the

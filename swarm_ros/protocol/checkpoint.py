@@ -4,7 +4,7 @@ The world writes it itself, into one file mapped into its memory (:mod:`mmap`), 
 anything about a tick leaves the process: a SIGKILL loses nothing written to a shared file
 mapping (the pages belong to the kernel's page cache, not the process), so the file holds
 every tick up to the one being written. A host that loses power loses it; the graph's fault
-model is a process lost, not a machine (docs/ros_graph.md, "Faults").
+model is a process lost, not a machine (docs/faults.md).
 
 Layout: a header of int64s, every robot's row (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`, or the 3D one,
 indexed by id), the metrics of every tick, and a ring of the last ``slots`` ticks' published

@@ -5,7 +5,7 @@ does: which robot batches are admitted, when tick 0 starts, when a tick's decisi
 and the tick is applied (with the in-process engine's own ``Simulation.apply``), how far it may
 run ahead of the monitor, and what happens when a batch or the monitor is lost. The node feeds
 it checked messages and liveliness changes; it answers through a :class:`WorldPort`. Unit tests
-drive it with a fake port and clock (test/test_lockstep.py); docs/ros_graph.md describes the
+drive it with a fake port and clock (test/test_lockstep.py); docs/protocol.md and docs/faults.md describe the
 protocol and its fault policy.
 """
 

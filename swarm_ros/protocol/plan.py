@@ -1,5 +1,5 @@
 """The graph's processes and topics: which nodes a run starts, in which order, what each is told beyond the
-run, and the topics they talk on (their types and QoS: ``swarm_ros.ros.graph``; docs/ros_graph.md).
+run, and the topics they talk on (their types and QoS: ``swarm_ros.ros.graph``; docs/protocol.md).
 
 ``swarm-ros run`` (``swarm_ros.app.launcher``) and ``launch/swarm.launch.py`` both start
 exactly this graph: a monitor first (so that it reads from tick 0), ``processes`` robot

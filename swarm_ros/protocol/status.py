@@ -38,7 +38,7 @@ class RunFailed(Exception):
 @dataclass
 class Status:
     """One /swarm/status message's content: the tick it speaks for, the outcome (or run state), a line
-    for people, whether something needs attention, and named values (``docs/ros_graph.md`` lists them)."""
+    for people, whether something needs attention, and named values (``docs/protocol.md`` lists them)."""
 
     tick: int
     outcome: str

@@ -1,5 +1,5 @@
 """What the world's :class:`~swarm_ros.protocol.lockstep.Lockstep` is configured by and talks to: its policy,
-its timing, and the port the node around it implements (docs/ros_graph.md, "Faults")."""
+its timing, and the port the node around it implements (docs/faults.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Topics, QoS and message builders of the swarm's ROS 2 graph (docs/ros_graph.md documents them).
+"""Topics, QoS and message builders of the swarm's ROS 2 graph (docs/protocol.md documents them).
 
 Standard message types only. The per-tick robot rows ride in ``sensor_msgs/PointCloud2``
 (see :mod:`swarm_ros.protocol.rows`): one numpy record per robot, written and read as CDR
