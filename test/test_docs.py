@@ -121,3 +121,20 @@ def test_every_error_line_the_docs_quote_is_a_row_the_bad_input_test_runs():
     assert quoted, "no quoted error line found: the pattern is stale"
     stray = [(name, line) for name, line in quoted if not any(row in line for row in rows)]
     assert not stray, stray
+
+
+def test_the_docs_tables_of_parameters_are_the_declarations():
+    """Each table between ``<!-- table: NAME -->`` markers is what scripts/docs_tables.py writes from
+    swarm_ros.core.params, and every declared parameter is in one (run it to update them)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("docs_tables", ROOT / "scripts" / "docs_tables.py")
+    tables = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tables)
+    from swarm_ros.core.params import NODE_PARAMETERS
+
+    for page in tables.PAGES:
+        text = page.read_text()
+        assert tables.render(text) == text, f"{page.name}: a table is stale: run scripts/docs_tables.py"
+    names = set(re.findall(r"<!-- table: (\w+) -->", "".join(p.read_text() for p in tables.PAGES)))
+    assert names == {"run", *NODE_PARAMETERS}, names

@@ -109,3 +109,13 @@ def test_fail_robots_flag_reports_the_loss(tmp_path, capsys):
                      "0.1@300", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "lost robots       46  (46 at tick 300)" in text and "outcome           incomplete" in text
+
+
+@pytest.mark.parametrize("flag,taken", [("1@5", (1.0, 5)), ("0.25@7", (0.25, 7))])
+def test_the_fail_robots_flag_takes_what_the_parameters_take(flag, taken):
+    """--fail-robots P@T is fail_fraction and fail_tick, each checked by its declaration: a parameter file's
+    fail_fraction: 1.0 (every robot fails) is a flag's 1@T too."""
+    from swarm_ros.app.cli import build_parser
+
+    args = build_parser().parse_args(["simulate", "--fail-robots", flag])
+    assert args.fail_robots == taken

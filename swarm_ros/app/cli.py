@@ -21,6 +21,7 @@ from swarm_ros.core.inputs import path_too_long, shown
 from swarm_ros.core.params import (
     BATCH_LOSS_POLICIES,
     MAX_RESTARTS,
+    RUN_PARAMETER,
     RUN_PARAMETERS,
     Param,
     node_parameter,
@@ -67,15 +68,18 @@ def _path(text: str) -> Path:
 
 
 def _failure(text: str) -> tuple[float, int]:
-    """``P@T``: a fraction in (0, 1) and a tick >= 1."""
+    """``P@T``: ``fail_fraction`` P (above 0) and ``fail_tick`` T (1 or later), each checked by its declaration."""
     fraction, at, tick = text.partition("@")
     try:
         p, t = float(fraction), int(tick)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected P@T, e.g. 0.1@500, got {text!r}") from None
-    if not 0 < p < 1 or t < 1 or not at:
-        raise argparse.ArgumentTypeError(f"P must be in (0, 1) and T >= 1, got {text!r}")
-    return p, t
+    if not at or p == 0 or t == 0:
+        raise argparse.ArgumentTypeError(f"P must be above 0 and T at least 1, got {text!r}")
+    try:
+        return RUN_PARAMETER["fail_fraction"].check(p), RUN_PARAMETER["fail_tick"].check(t)
+    except ParameterError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (in {text!r})") from None
 
 
 class _Parser(argparse.ArgumentParser):

@@ -76,15 +76,11 @@ def _curve(row: dict) -> np.ndarray:
     """Per-tick metrics of the run in ``row``, re-run in process (checked against the row)."""
     from swarm_ros.core.engine import Simulation
     from swarm_ros.core.grid import World
-    from swarm_ros.core.params import RunParams
+    from swarm_ros.core.params import RUN_PARAMETERS, RunParams
     from swarm_ros.core.shapes import Shape
 
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
-    sim = Simulation(shape, RunParams(robots=row["robots"], vision_radius=row["vision_radius"], seed=row["seed"],
-                                      max_ticks=row["max_ticks"], wiggle_deg=row["wiggle_deg"],
-                                      fail_fraction=row["fail_fraction"], fail_tick=row["fail_tick"],
-                                      rules=row["rules"], join=row["join"], crowding=row["crowding"],
-                                      steps=row["steps"]))
+    sim = Simulation(shape, RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model}))
     sim.run()
     if sim.tick != row["convergence_tick"] or sim.outcome.value != row["outcome"]:
         raise ExperimentError(f"re-running {row['shape']} n={row['robots']} seed {row['seed']} gave "

@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+from swarm_ros.core.params import node_defaults
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -26,15 +28,18 @@ LINGER = 1.0  #: at most this many seconds for the last messages to reach their 
 STATUS_PERIOD = 0.1
 
 
+_DEFAULT = node_defaults("world")  # declared once, in swarm_ros.core.params
+
+
 @dataclass(frozen=True)
 class Policy:
     """The world's own parameters (``swarm_ros.core.params.NODE_PARAMETERS["world"]``)."""
 
-    monitor_window: int = 128
-    start_timeout: float = 60.0
-    on_batch_loss: str = "restart"
-    max_restarts: int = 3
-    restart_timeout: float = 30.0
+    monitor_window: int = _DEFAULT["monitor_window"]
+    start_timeout: float = _DEFAULT["start_timeout"]
+    on_batch_loss: str = _DEFAULT["on_batch_loss"]
+    max_restarts: int = _DEFAULT["max_restarts"]
+    restart_timeout: float = _DEFAULT["restart_timeout"]
 
 
 class WorldPort(Protocol):
