@@ -1,11 +1,12 @@
-"""A run's parameters, declared once: everything else is derived from :data:`RUN_PARAMETERS`.
+"""A run's parameters, declared once, as the fields of :class:`Settings`: everything else is derived from them.
 
-From this one table come the run settings (:class:`Settings`, what a parameter file or the
-command line sets), the model's resolved parameters (:class:`RunParams`), the command-line
-flags (``swarm_ros.app.cli``), the keys of a parameter file and of each node's ROS
-parameters, the keys of an experiment file (``swarm_ros.app.experiment_file``), the
-columns of ``results.csv`` and the launch file's arguments. Every value is checked by
-:meth:`Param.check`, so every input path says the same thing about a bad value:
+Each field carries its declaration (:class:`Param`: meaning, bounds or choices, command-line flag, role in
+an experiment file); :data:`RUN_PARAMETERS` is those declarations, in the fields' order. From them come the
+model's resolved parameters (:class:`RunParams`, a plain dataclass whose fields a test holds to the
+declarations), the command-line flags (``swarm_ros.app.cli``), the keys of a parameter file and of each
+node's ROS parameters, the keys of an experiment file (``swarm_ros.app.experiment_file``), the columns of
+``results.csv``, the launch file's arguments and the docs' tables of parameters (``scripts/docs_tables.py``).
+Every value is checked by :meth:`Param.check`, so every input path says the same thing about a bad value:
 ``<name> must be <what>, got <value>``.
 
 A node's own parameters (the world's restart policy, the monitor's output folder, ...) are
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import asdict, dataclass, field, make_dataclass, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from .errors import ParameterError
@@ -134,29 +135,75 @@ def _number(x: float) -> str:
     return str(int(x)) if float(x).is_integer() else f"{x:g}"
 
 
-#: The run's parameters, in the order of results.csv's columns. A new one goes here, and only here.
-RUN_PARAMETERS: tuple[Param, ...] = (
-    Param("shape", "star", "built-in shape name (2D or 3D), or a shape file: a .txt grid (layers separated by --- "
-          "for 3D), a .png image, or an .stl/.obj/.ply mesh", experiment="", model=False),
-    Param("mesh_scale", 1.0, "voxels per mesh unit, for a mesh shape", low=0.0, low_open=True, high=1000.0,
-          experiment="", model=False, recorded=False),
-    Param("robots", 0, "robots N, seeds included", low=MIN_ROBOTS, blank="the shape's patch count", experiment=""),
-    Param("vision_radius", DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision",
-          experiment="axis"),
-    Param("rules", DEFAULT_RULES, "rule set: paper (join walk, crowding ahead, steps one), local (join local), "
-          "literal (join local, steps literal); see docs/model.md", choices=tuple(RULE_SETS), experiment="axis"),
-    Param("join", "", "override the rule set's join switch", choices=JOIN_VALUES, blank="the rule set's own"),
-    Param("crowding", "", "override the rule set's crowding switch", choices=CROWDING_VALUES,
-          blank="the rule set's own"),
-    Param("steps", "", "override the rule set's steps switch", choices=STEPS_VALUES, blank="the rule set's own"),
-    Param("seed", DEFAULT_SEED, "run seed", low=0, high=MAX_SEED, experiment=""),
-    Param("max_ticks", DEFAULT_MAX_TICKS, "tick limit", low=1, high=MAX_TICKS),
-    Param("wiggle_deg", DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle"),
-    Param("world_radius", DEFAULT_RADIUS, "the world spans [-R, R] patches", low=MIN_RADIUS, model=False),
-    Param("fail_fraction", 0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0, high=1.0,
-          flag=""),
-    Param("fail_tick", 0, "the tick at whose end fail_fraction of the robots fail", low=0, flag=""),
-)
+def _param(default: Any, meaning: str, **declaration: Any) -> Any:
+    """A dataclass field with its default, carrying the parameter's declaration (:class:`Param`; its name is the
+    field's)."""
+    return field(default=default, metadata={"param": Param("", default, meaning, **declaration)})
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What a run needs before the shape is loaded: every run parameter with its default, declared here and only
+    here, in the order of results.csv's columns (:data:`RUN_PARAMETERS` is read from these fields).
+    ``robots = 0`` means the shape's patch count; ``join``, ``crowding`` and ``steps`` = "" the rule set's own."""
+
+    shape: str = _param("star", "built-in shape name (2D or 3D), or a shape file: a .txt grid (layers separated by "
+                        "--- for 3D), a .png image, or an .stl/.obj/.ply mesh", experiment="", model=False)
+    mesh_scale: float = _param(1.0, "voxels per mesh unit, for a mesh shape", low=0.0, low_open=True, high=1000.0,
+                               experiment="", model=False, recorded=False)
+    robots: int = _param(0, "robots N, seeds included", low=MIN_ROBOTS, blank="the shape's patch count",
+                         experiment="")
+    vision_radius: float = _param(DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision",
+                                  experiment="axis")
+    rules: str = _param(DEFAULT_RULES, "rule set: paper (join walk, crowding ahead, steps one), local (join local), "
+                        "literal (join local, steps literal); see docs/model.md", choices=tuple(RULE_SETS),
+                        experiment="axis")
+    join: str = _param("", "override the rule set's join switch", choices=JOIN_VALUES, blank="the rule set's own")
+    crowding: str = _param("", "override the rule set's crowding switch", choices=CROWDING_VALUES,
+                           blank="the rule set's own")
+    steps: str = _param("", "override the rule set's steps switch", choices=STEPS_VALUES, blank="the rule set's own")
+    seed: int = _param(DEFAULT_SEED, "run seed", low=0, high=MAX_SEED, experiment="")
+    max_ticks: int = _param(DEFAULT_MAX_TICKS, "tick limit", low=1, high=MAX_TICKS)
+    wiggle_deg: float = _param(DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0,
+                               flag="--wiggle")
+    world_radius: int = _param(DEFAULT_RADIUS, "the world spans [-R, R] patches", low=MIN_RADIUS, model=False)
+    fail_fraction: float = _param(0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0,
+                                  high=1.0, flag="")
+    fail_tick: int = _param(0, "the tick at whose end fail_fraction of the robots fail", low=0, flag="")
+
+    def updated(self, **values: object) -> Settings:
+        """A copy with the given non-None values."""
+        return replace(self, **{k: v for k, v in values.items() if v is not None})
+
+    def run_params(self, robots: int | None = None) -> RunParams:
+        """The model's parameters these settings stand for, ``robots`` resolved (0: the shape's count)."""
+        values = {p.name: getattr(self, p.name) for p in RUN_PARAMETERS if p.model}
+        values["robots"] = robots or self.robots
+        return RunParams(**values)
+
+    def resolve(self) -> tuple[Shape, RunParams]:
+        """The shape and run parameters these settings stand for (every engine and node derives them so).
+
+        Raises:
+            SwarmError: a bad shape, a bad value, or more robots than free patches.
+        """
+        from .resources import check_world_memory
+        from .shapes import Shape
+
+        RUN_PARAMETER["world_radius"].check(self.world_radius)
+        check_world_memory(self.world_radius)
+        shape = Shape.load(self.shape, World(self.world_radius), mesh_scale=self.mesh_scale)
+        check_world_memory(self.world_radius, dims=shape.dims)
+        params = self.run_params(self.robots or shape.patches)
+        params.check_vision(shape.world.radius)
+        if params.robots > shape.free_patches:
+            raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "
+                                 f"{shape.free_patches} free patches of the {shape.world.describe()} world")
+        return shape, params
+
+
+#: The run's parameters, in the order of results.csv's columns: :class:`Settings`' fields' declarations.
+RUN_PARAMETERS: tuple[Param, ...] = tuple(replace(f.metadata["param"], name=f.name) for f in fields(Settings))
 RUN_PARAMETER = {p.name: p for p in RUN_PARAMETERS}
 EXPERIMENT_AXES = tuple(p.name for p in RUN_PARAMETERS if p.experiment == "axis")  #: may list several values
 
@@ -232,46 +279,24 @@ def check_node_values(kind: str, values: dict[str, object], where: str = "") -> 
         raise ParameterError(f"{where}: {exc}" if where else str(exc)) from None
 
 
-class _SettingsMethods:
-    def updated(self, **values: object) -> Settings:
-        """A copy with the given non-None values."""
-        return replace(self, **{k: v for k, v in values.items() if v is not None})
+@dataclass(frozen=True)
+class RunParams:
+    """Everything that, with the shape, fixes a run: the model's run parameters (the :class:`Settings` fields
+    declared ``model``, in their order, with their defaults: test_params checks it), validated on construction,
+    ``robots`` resolved (>= 4) and the rule set's switches resolved ("" becomes the rule set's own value)."""
 
-    def run_params(self, robots: int | None = None) -> RunParams:
-        """The model's parameters these settings stand for, ``robots`` resolved (0: the shape's count)."""
-        values = {p.name: getattr(self, p.name) for p in RUN_PARAMETERS if p.model}
-        values["robots"] = robots or self.robots
-        return RunParams(**values)
+    robots: int
+    vision_radius: float = DEFAULT_VISION
+    rules: str = DEFAULT_RULES
+    join: str = ""
+    crowding: str = ""
+    steps: str = ""
+    seed: int = DEFAULT_SEED
+    max_ticks: int = DEFAULT_MAX_TICKS
+    wiggle_deg: float = DEFAULT_WIGGLE_DEG
+    fail_fraction: float = 0.0
+    fail_tick: int = 0
 
-    def resolve(self) -> tuple[Shape, RunParams]:
-        """The shape and run parameters these settings stand for (every engine and node derives them so).
-
-        Raises:
-            SwarmError: a bad shape, a bad value, or more robots than free patches.
-        """
-        from .resources import check_world_memory
-        from .shapes import Shape
-
-        RUN_PARAMETER["world_radius"].check(self.world_radius)
-        check_world_memory(self.world_radius)
-        shape = Shape.load(self.shape, World(self.world_radius), mesh_scale=self.mesh_scale)
-        check_world_memory(self.world_radius, dims=shape.dims)
-        params = self.run_params(self.robots or shape.patches)
-        params.check_vision(shape.world.radius)
-        if params.robots > shape.free_patches:
-            raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "
-                                 f"{shape.free_patches} free patches of the {shape.world.describe()} world")
-        return shape, params
-
-
-#: What a run needs before the shape is loaded: every run parameter, each with its default.
-#: ``robots = 0`` means the shape's patch count; ``join``, ``crowding`` and ``steps`` = "" the rule set's own.
-Settings = make_dataclass("Settings", [(p.name, p.kind, field(default=p.default)) for p in RUN_PARAMETERS],
-                          bases=(_SettingsMethods,), frozen=True)
-Settings.__module__ = __name__  # so that it pickles (to experiment workers) by name
-
-
-class _RunParamsMethods:
     def __post_init__(self) -> None:
         for p in RUN_PARAMETERS:
             if p.model and p.name not in ("join", "crowding", "steps", "rules"):
@@ -313,13 +338,3 @@ class _RunParamsMethods:
 
     def as_dict(self) -> dict:
         return asdict(self)
-
-
-#: Everything that, with the shape, fixes a run: the model's run parameters, validated on construction,
-#: ``robots`` resolved (>= 4) and the rule set's switches resolved ("" becomes the rule set's own value).
-RunParams = make_dataclass(
-    "RunParams",
-    [("robots", int)] + [(p.name, p.kind, field(default=p.default)) for p in RUN_PARAMETERS
-                         if p.model and p.name != "robots"],
-    bases=(_RunParamsMethods,), frozen=True)
-RunParams.__module__ = __name__
