@@ -51,7 +51,7 @@ _PENDING = -2
 
 
 @numba.njit(cache=True, inline="always")
-def _wins(a, b, ids, seed, tick) -> bool:
+def _wins(a, b, ids, seed, tick):
     ta = draw_bits(seed, ids[a], tick, STREAM_PRIORITY)
     tb = draw_bits(seed, ids[b], tick, STREAM_PRIORITY)
     return ta < tb or (ta == tb and ids[a] < ids[b])

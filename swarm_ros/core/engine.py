@@ -310,7 +310,7 @@ class Simulation:
         ids = ids[s.state[ids] != RobotState.REMOVED]
         for i in ids.tolist():
             if s.state[i] in _STATIONARY_LOCALIZED:
-                z = s.z[i] if self._solid else 0.0
+                z = s.z[i] if s.z is not None else 0.0
                 vacate(cell_index(s.x[i], s.y[i], z, self._solid, self._radius, self._size), s.occupancy, s.frontier,
                        s.frontier_blocks, self._shape, self._nbrs, self._size)
         s.state[ids] = RobotState.REMOVED

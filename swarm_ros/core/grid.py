@@ -83,7 +83,7 @@ class World:
 
     def flat_of(self, *coords: np.ndarray | int) -> np.ndarray | int:
         """Flat index of patch coordinates ``px, py[, pz]`` (no bounds check)."""
-        flat = 0
+        flat: np.ndarray | int = 0
         for c in reversed(coords):
             flat = flat * self.size + (c + self.radius)
         return flat

@@ -12,6 +12,7 @@ per tick: for tests and for ``swarm-ros simulate --check``, not for production r
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -39,7 +40,12 @@ def coords(s: SwarmState) -> list[np.ndarray]:
     return [s.x, s.y] if s.z is None else [s.x, s.y, s.z]
 
 
-def _distance(a: list[np.ndarray], b: list) -> np.ndarray:
+def _present(*arrays: np.ndarray | None) -> list[np.ndarray]:
+    """The arrays that are there: a 2D world's z and pitch (None) drop out."""
+    return [a for a in arrays if a is not None]
+
+
+def _distance(a: list[np.ndarray], b: Sequence[np.ndarray]) -> np.ndarray:
     return np.sqrt(sum((u - v) ** 2 for u, v in zip(a, b)))
 
 
@@ -63,7 +69,7 @@ def check_state(sim: Simulation) -> None:
     position = coords(s)
     cells = [np.floor(c + 0.5).astype(np.int64) for c in position]
     _require(bool(np.all(np.max(np.abs(cells), axis=0) < world.radius)), t, "a robot is on a wall")
-    flat = world.flat_of(*cells)
+    flat = np.asarray(world.flat_of(*cells))
     loc_ids = np.flatnonzero(localized)
     _require(np.unique(flat[loc_ids]).size == loc_ids.size, t, "two localized robots on one patch")
     _require(bool(np.all(shape.mask.ravel()[flat[loc_ids]])), t, "a localized robot is off the shape")
@@ -159,12 +165,12 @@ def _check_moves(prev: SwarmState, sim: Simulation, removed: np.ndarray) -> None
     # a robot that did not win takes exactly the pose it decided
     lost = ~won & keep
     solid = world.dims == 3
-    pose_now = [s.x, s.y, s.heading] + ([s.z, s.pitch] if solid else [])
-    pose_decided = [d.x, d.y, d.heading] + ([d.z, d.pitch] if solid else [])
+    pose_now = _present(s.x, s.y, s.heading, s.z, s.pitch)
+    pose_decided = _present(d.x, d.y, d.heading, d.z, d.pitch)
     _require(all(bool(np.all(a[ids[lost]] == b[lost])) for a, b in zip(pose_now, pose_decided)), t,
              "a robot is not at the pose it decided")
     before = [c[ids] for c in coords(prev)]
-    decided = [d.x, d.y] + ([d.z] if solid else [])
+    decided = _present(d.x, d.y, d.z)
     was_inside = shape.mask.ravel()[world.flat_of(*(np.floor(c + 0.5).astype(np.int64) for c in before))]
     prev_state = prev.state[ids]
     step = _distance(decided, before)
@@ -174,7 +180,7 @@ def _check_moves(prev: SwarmState, sim: Simulation, removed: np.ndarray) -> None
     walkers = ((prev_state == RobotState.WALKING) | was_inside) if walk else np.zeros(ids.size, dtype=bool)
     for k in np.flatnonzero(walkers):
         here = [float(c[k]) for c in before]
-        target = nearest_frontier_patch(prev.frontier, *here[:2], world, *here[2:])
+        target = nearest_frontier_patch(prev.frontier, here[0], here[1], world, here[2] if solid else 0.0)
         delta = [float(c) - h for c, h in zip(world.patch_coords(target), here)]
         d2 = 0.0
         for v in delta:  # "within 1 patch" is d2 <= 1 with d2 computed so, as the rule states it

@@ -75,9 +75,9 @@ class Moves(NamedTuple):
 
 def robots_of(state: SwarmState) -> Robots:
     """The robots' arrays of ``state`` (the same arrays, not copies)."""
-    solid = state.z is not None
-    return Robots(state.x, state.y, state.z if solid else _EMPTY, state.heading, state.pitch if solid else _EMPTY,
-                  state.state)
+    z = state.z if state.z is not None else _EMPTY
+    pitch = state.pitch if state.pitch is not None else _EMPTY
+    return Robots(state.x, state.y, z, state.heading, pitch, state.state)
 
 
 def grid_of(shape: Shape, state: SwarmState, shape_mask: np.ndarray, wall: np.ndarray,

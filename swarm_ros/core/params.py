@@ -95,7 +95,7 @@ class Param:
     def blank_value(self) -> object:
         return self.kind()
 
-    def check(self, value: object) -> Any:
+    def check(self, value: Any) -> Any:
         """``value`` as this parameter's type, if it is one this parameter takes.
 
         Raises:
@@ -171,7 +171,7 @@ class Settings:
                                   high=1.0, flag="")
     fail_tick: int = _param(0, "the tick at whose end fail_fraction of the robots fail", low=0, flag="")
 
-    def updated(self, **values: object) -> Settings:
+    def updated(self, **values: Any) -> Settings:
         """A copy with the given non-None values."""
         return replace(self, **{k: v for k, v in values.items() if v is not None})
 

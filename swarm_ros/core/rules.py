@@ -282,7 +282,8 @@ class Decisions:
     @staticmethod
     def standing(view: SwarmState, ids: np.ndarray, tick: int) -> Decisions:
         """Decisions of robots ``ids`` to stand still, as they are in ``view``: no claim, the same pose."""
-        solid = {"z": view.z[ids].copy(), "pitch": view.pitch[ids].copy()} if view.z is not None else {}
+        solid = {"z": view.z[ids].copy(), "pitch": view.pitch[ids].copy()} \
+            if view.z is not None and view.pitch is not None else {}
         return Decisions(tick=tick, ids=ids, claim=np.full(ids.size, -1, dtype=np.int64), x=view.x[ids].copy(),
                          y=view.y[ids].copy(), heading=view.heading[ids].copy(), **solid)
 

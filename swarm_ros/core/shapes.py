@@ -64,7 +64,8 @@ def regions(mask: np.ndarray, connectivity: int) -> tuple[np.ndarray, int]:
     """
     # a uint8 copy: cc3d refuses read-only buffers, and 4.1.1 mislabels bool grids with connectivity 8
     writable = np.array(mask, dtype=np.uint8, order="C")
-    labels, count = cc3d.connected_components(writable, connectivity=connectivity, return_N=True)
+    labels, count = cc3d.connected_components(writable, connectivity=connectivity,  # type: ignore[call-overload]
+                                              return_N=True)  # (cc3d's stubs know a bool grid only)
     return labels, int(count)
 
 
@@ -145,7 +146,7 @@ def read_png_grid(path: Path) -> np.ndarray:
     data = read_bounded(path, SHAPE_LIMIT, "shape file", ShapeError)
     # Pillow's own bound against decompression bombs (it warns above it, refuses twice it): refused here in our
     # words, before Pillow says anything
-    most = Image.MAX_IMAGE_PIXELS
+    most = Image.MAX_IMAGE_PIXELS or 0
     too_large = f"{path}: the image has more than {most:,} pixels{{}}, the most a shape image may " \
                 f"have (Pillow's bound against decompression bombs)"
     try:

@@ -42,6 +42,6 @@ def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
                 **before)  # the world's check of a batch's decisions
         sim.apply(d)
         changed = sim.last_joins()[0]  # the deciders: the rows the world would publish
-        solid = (s.z[changed], s.pitch[changed]) if s.z is not None else (None, None)
+        solid = (s.z[changed], s.pitch[changed]) if s.z is not None and s.pitch is not None else (None, None)
         replica.update(sim.tick, changed, s.state[changed], s.x[changed], s.y[changed], s.heading[changed], *solid)
         tick_metrics(sim.tick, np.bincount(replica.state.state, minlength=STATE_COUNT), shape.patches)
