@@ -271,7 +271,7 @@ def test_the_paper_rules_complete_every_builtin_3d_shape():
         assert str(sim.run()) == "complete", name
 
 
-def final_of(sim: Simulation) -> tuple:
+def _final(sim: Simulation) -> tuple:
     s = sim.state
     return (sim.tick, str(sim.outcome), s.x.tobytes(), s.y.tobytes(), s.z.tobytes(), s.heading.tobytes(),
             s.pitch.tobytes(), s.state.tobytes(), s.occupancy.tobytes(), sim.history.tobytes())
@@ -284,7 +284,7 @@ def test_batched_decide_and_apply_equal_the_fused_engine_in_3d(batches, rules):
     p = RunParams(robots=shape.patches + 20, seed=7, vision_radius=1.5, rules=rules, max_ticks=1500)
     fused = Simulation(shape, p)
     fused.run()
-    assert final_of(run_in_batches(shape, p, batches, seed=batches)) == final_of(fused)
+    assert _final(run_in_batches(shape, p, batches, seed=batches)) == _final(fused)
 
 
 def test_a_replica_fed_the_changed_rows_equals_the_world_in_3d():

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.process
 
 PY = sys.executable
 # k-block (540 voxels) in a small world: complete in about 1,050 ticks, a few seconds in process
-STAR_LOCAL = ["--shape", "k-block", "--world-radius", "14", "--seed", "4", "--max-ticks", "1500", "--quiet"]
+RUN = ["--shape", "k-block", "--world-radius", "14", "--seed", "4", "--max-ticks", "1500", "--quiet"]
 
 
 def swarm_ros(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
@@ -29,7 +29,7 @@ def swarm_ros(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("ref3d") / "run"
-    done = swarm_ros("simulate", *STAR_LOCAL, "--out", str(out))
+    done = swarm_ros("simulate", *RUN, "--out", str(out))
     assert done.returncode == 0, done.stderr
     return out
 
@@ -50,7 +50,7 @@ def test_a_3d_simulate_writes_3d_files(reference):
 @pytest.mark.parametrize("processes", [1, 2, 4])
 def test_a_3d_ros_graph_run_equals_the_in_process_engine(reference, tmp_path, processes):
     out = tmp_path / "run"
-    done = swarm_ros("run", *STAR_LOCAL, "--processes", str(processes), "--out", str(out))
+    done = swarm_ros("run", *RUN, "--processes", str(processes), "--out", str(out))
     assert done.returncode == 0, done.stderr
     assert (reference / "metrics.csv").read_bytes() == (out / "metrics.csv").read_bytes()
     assert (reference / "final_state.csv").read_bytes() == (out / "final_state.csv").read_bytes()
@@ -86,7 +86,7 @@ def test_a_3d_runs_world_and_monitor_killed_mid_run_go_on_and_the_run_is_identic
     """The world from its checkpoint of 3D rows, then the monitor from its bag of them, in one run (a batch
     takes a 3D snapshot at tick 0 in every run, and again when it is restarted: the same message)."""
     out = tmp_path / "run"
-    launcher = subprocess.Popen([PY, "-m", "swarm_ros", "run", *STAR_LOCAL, "--processes", "2", "--out", str(out)],
+    launcher = subprocess.Popen([PY, "-m", "swarm_ros", "run", *RUN, "--processes", "2", "--out", str(out)],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 env={k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"})
     logs = staged_logs(out)

@@ -36,7 +36,7 @@ PY = sys.executable
 LAN_ROBOTS = int(os.environ.get("SWARM_ROS_LAN_ROBOTS", "0"))  #: 0: the small ring
 
 
-def staged_logs(tmp_path, procs, hosts: list[str], links: list[str]) -> str:
+def _logs(tmp_path, procs, hosts: list[str], links: list[str]) -> str:
     """Each node's exit status (None: still running) and the end of its log, and the links' counters,
     for a failure's message."""
     logs = [f"--- {name} (exit {proc.poll()}):\n{(tmp_path / f'{name}.log').read_text()[-1500:]}"
@@ -79,7 +79,7 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
         while monitor.poll() is None and time.monotonic() < deadline and \
                 not any(p.poll() not in (None, 0) for p, _ in procs.values()):
             time.sleep(0.1)
-        assert monitor.poll() == 0, staged_logs(tmp_path, procs, hosts, links)
+        assert monitor.poll() == 0, _logs(tmp_path, procs, hosts, links)
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and any(p.poll() is None for p, _ in procs.values()):
             time.sleep(0.1)
@@ -90,7 +90,7 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
             proc.wait()
             log.close()
     codes = {name: p.returncode for name, (p, _) in procs.items()}
-    assert codes == dict.fromkeys(procs, 0), staged_logs(tmp_path, procs, hosts, links)
+    assert codes == dict.fromkeys(procs, 0), _logs(tmp_path, procs, hosts, links)
     assert not any("public key" in (tmp_path / f"{name}.log").read_text() for name in procs)  # the run's key
     return run
 

@@ -63,7 +63,7 @@ def _simulate(out: Path, *flags: str) -> Path:
     return out
 
 
-def saved_tick(checkpoint: Path) -> int:
+def _saved_tick(checkpoint: Path) -> int:
     try:
         head = np.fromfile(checkpoint, dtype=np.int64, count=8)
     except (OSError, ValueError):
@@ -77,7 +77,7 @@ def _launch_dir(ros: Ros2, before: list[Path]) -> Path:
                     "the launch's params.yaml")
 
 
-def node_pid(launch_dir: Path, name: str) -> int:
+def _node_pid(launch_dir: Path, name: str) -> int:
     """The pid of node ``name`` of the launch whose logs are in ``launch_dir`` (its params file names it)."""
     def find():
         for pid in processes_mentioning(f"__node:={name}"):
@@ -190,7 +190,7 @@ def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros,
     before = ros.launch_logs()
     proc = ros.start(f"{LAUNCH} out_dir:={out} world_radius:=120 max_ticks:=20000", log=tmp_path / "late.log")
     checkpoint = _launch_dir(ros, before) / "world.checkpoint"
-    wait_for(lambda: saved_tick(checkpoint) >= 200, 120, "tick 200")
+    wait_for(lambda: _saved_tick(checkpoint) >= 200, 120, "tick 200")
     ctrl_c(proc)
     proc.wait(timeout=60)
     text = (tmp_path / "late.log").read_text()
@@ -212,8 +212,8 @@ def test_a_batch_the_world_and_the_monitor_sigkilled_under_ros2_launch_come_back
     logs = _launch_dir(ros, before)
     checkpoint = logs / "world.checkpoint"
     for tick, node in ((150, "robot_batch_1"), (450, "world"), (800, "monitor")):
-        wait_for(lambda t=tick: saved_tick(checkpoint) >= t, 120, f"tick {tick}", poll=0.001)
-        os.kill(node_pid(logs, node), signal.SIGKILL)
+        wait_for(lambda t=tick: _saved_tick(checkpoint) >= t, 120, f"tick {tick}", poll=0.001)
+        os.kill(_node_pid(logs, node), signal.SIGKILL)
     assert proc.wait(timeout=240) == 0, log.read_text()[-4000:]
     text = log.read_text()
     for node in ("robot_batch_1", "world", "monitor"):
@@ -260,7 +260,7 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
     proc = ros.start(f"{LAUNCH} out_dir:={out} world_radius:=120 max_ticks:=100000", log=tmp_path / "live.log")
     try:
         logs = _launch_dir(ros, before)
-        wait_for(lambda: saved_tick(logs / "world.checkpoint") >= 50, 120, "tick 50")
+        wait_for(lambda: _saved_tick(logs / "world.checkpoint") >= 50, 120, "tick 50")
 
         def listed():
             done = ros.run("ros2 node list")
