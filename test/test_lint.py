@@ -38,9 +38,9 @@ def test_the_pre_commit_hooks_pass_on_the_whole_tree(tmp_path):
     assert done.stdout.count("Passed") == 4, done.stdout
 
 
-def test_mypy_finds_nothing_in_the_core():
-    """The type checker over swarm_ros/core (pyproject.toml's [tool.mypy]): the model's code as its annotations
-    say. Its cache goes to a temporary folder."""
+def test_mypy_finds_nothing_in_the_core_and_the_protocol():
+    """The type checker over swarm_ros/core and swarm_ros/protocol (pyproject.toml's [tool.mypy]): the model's
+    code and the contract between processes as their annotations say. No cache is written."""
     mypy = shutil.which("mypy", path=str(Path(sys.executable).parent))
     assert mypy, "mypy is not installed in this venv (requirements.txt pins it; scripts/setup.sh installs it)"
     done = subprocess.run([mypy, "--cache-dir", "/dev/null", "--python-executable", sys.executable], cwd=ROOT,

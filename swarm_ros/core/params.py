@@ -261,7 +261,7 @@ def node_parameter(kind: str, name: str) -> Param:
     return next(p for p in NODE_PARAMETERS[kind] if p.name == name)
 
 
-def node_defaults(kind: str) -> dict[str, object]:
+def node_defaults(kind: str) -> dict[str, Any]:
     """A node's own parameters and their defaults."""
     return {p.name: p.default for p in NODE_PARAMETERS[kind]}
 

@@ -92,7 +92,7 @@ def cloud_parts(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str 
     block += b"\x00"  # is_bigendian
     block += _pad(8 + len(block))
     step = rows.dtype.itemsize
-    data = memoryview(np.ascontiguousarray(rows).view(np.uint8)).cast("B")
+    data = np.ascontiguousarray(rows).view(np.uint8).data.cast("B")
     head = b"".join((ENCAPSULATION, _STAMP.pack(int(tick) * TICK_SECONDS, 0), block,
                      struct.pack("<III", step, step * rows.size, data.nbytes)))
     return head, data, b"\x01"

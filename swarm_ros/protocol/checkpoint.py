@@ -64,7 +64,7 @@ class Checkpoint:
         self.robots, self.ticks, self.columns, self.slots = robots, max_ticks + 1, columns, max(slots, 2)
         self.slot_bytes = _SLOT_HEAD * 8 + robots * (self.row.itemsize + self.decision.itemsize)
         self._offsets()
-        self.map: np.ndarray | None = None
+        self.map = np.empty(0, dtype=np.uint8)  # the file's bytes, once created or opened
 
     def _offsets(self) -> None:
         self.robots_at = _HEADER * 8
@@ -146,7 +146,7 @@ class Checkpoint:
 
     def monitor_reported(self, tick: int) -> None:
         """The newest tick whose metrics the monitor reported (where a restarted world resends from)."""
-        if self.map is not None and tick > self.header[_H_MONITOR]:
+        if self.map.size and tick > self.header[_H_MONITOR]:
             self.header[_H_MONITOR] = tick
 
     def save_book(self, book: dict) -> None:

@@ -110,7 +110,7 @@ def inside_world(rows: np.ndarray, radius: int) -> None:
     (3D rows: with z inside the world too and an elevation in [-pi/2, pi/2])."""
     limit = (radius + 0.5) * PATCH_METRES
     x, y, heading = rows["x"], rows["y"], rows["heading"]
-    solid = "pitch" in rows.dtype.names
+    solid = "pitch" in (rows.dtype.names or ())
     with np.errstate(invalid="ignore"):
         ok = (np.abs(x) <= limit) & (np.abs(y) <= limit) & (heading >= 0) & (heading <= 2 * math.pi)
         if solid:

@@ -113,6 +113,7 @@ class Hosting:
         sent to no batch (it decided to stand as it was: a walker that lost its claim)."""
         cols = None
         if moved is not None:
+            assert before is not None  # given with moved
             cols, *pose = before
             same = np.ones(moved.size, dtype=bool)
             for name, was in zip((n for n in _POSE if getattr(state, n) is not None), pose):

@@ -30,6 +30,7 @@ from swarm_ros.protocol.world_port import (
     FIRST_STALL_S,
     LINGER,
     STATUS_PERIOD,
+    Logger,
     Policy,
     WorldPort,
 )
@@ -41,7 +42,7 @@ class Lockstep(WorldStatus, WorldRestore):
     """Admission, ticks, the monitor window and the loss policy of one run (see the module's docstring); its
     status and stall checks (:class:`WorldStatus`), its bookkeeping and restore (:class:`WorldRestore`)."""
 
-    def __init__(self, sim: Simulation, policy: Policy, port: WorldPort, logger, rejections: Rejections,
+    def __init__(self, sim: Simulation, policy: Policy, port: WorldPort, logger: Logger, rejections: Rejections,
                  clock: Callable[[], float] = time.monotonic, created: float | None = None) -> None:
         self.sim, self.policy, self.port, self.log, self.rejections, self.clock = \
             sim, policy, port, logger, rejections, clock
@@ -248,8 +249,8 @@ class Lockstep(WorldStatus, WorldRestore):
         except ValueError as exc:
             raise RunFailed(f"tick {tick}: {exc}") from None
         if self.pending.size:
-            removed = self.sim.remove(self.pending)
-            self.log.warn(f"tick {tick}: removed the {removed} robots of lost batches")
+            count = self.sim.remove(self.pending)
+            self.log.warn(f"tick {tick}: removed the {count} robots of lost batches")
             self.pending = np.empty(0, dtype=np.int64)
         if len(self.sim.losses) != losses_before:  # scheduled failures, or a lost batch's robots
             self.save_book()
@@ -260,12 +261,12 @@ class Lockstep(WorldStatus, WorldRestore):
         self._emit(tick, state_rows(ids, s), joined, applied, (deciders, before))
 
     def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
-              moved: tuple | None = (None, None), save: bool = True) -> None:
+              moved: tuple[np.ndarray | None, tuple | None] | None = (None, None), save: bool = True) -> None:
         """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than ``window``
         ticks behind; ``moved``: (ids, their rows before) for the region rows, None: none (a restored world)."""
         if save:
             self.port.checkpoint(tick, rows, applied, self.sim.history[tick])
-        parts = self.hosting.route(rows, *moved, self.sim.state) if moved is not None else None
+        parts = self.hosting.route(rows, moved[0], moved[1], self.sim.state) if moved is not None else None
         self.queued.append((tick, rows, joined, applied, parts))
         self._flush()
 
@@ -284,6 +285,7 @@ class Lockstep(WorldStatus, WorldRestore):
         m = self.sim.metrics
         self.ended_at = self.clock()
         self.publish_status()
+        assert self.sim.outcome is not None  # called once the run has ended
         self.log.info(f"run ended: {self.sim.outcome.value} at tick {m.tick}, {m.localized} localized")
 
     def metrics(self, tick: int, nonce: str = "") -> None:

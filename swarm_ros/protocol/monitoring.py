@@ -162,6 +162,7 @@ class MonitorCore:
         if self.outcome is None:
             self._check_world_end(now)
             return False
+        assert self.ended_at is not None  # set with the outcome
         if self.world.outcome is None and now - self.ended_at < STATUS_WAIT:
             return False
         if bag and not self.bag_complete() and now - self.ended_at < BAG_WAIT:

@@ -78,8 +78,8 @@ def region_row(dims: int) -> np.dtype:
 
 def compact(rows: np.ndarray) -> np.ndarray:
     """Robot rows (:data:`ROBOT_ROW`, :data:`ROBOT_ROW_3D`) in the compact layout, field for field."""
-    out = np.empty(rows.size, dtype=REGION_ROW if "pitch" not in rows.dtype.names else REGION_ROW_3D)
-    for name in out.dtype.names:
+    out = np.empty(rows.size, dtype=REGION_ROW if "pitch" not in (rows.dtype.names or ()) else REGION_ROW_3D)
+    for name in out.dtype.names or ():
         out[name] = rows[name]
     return out
 
@@ -92,8 +92,10 @@ def decision_row(dims: int) -> np.dtype:
 def point_fields(dtype: np.dtype) -> list[tuple[str, int, int, int]]:
     """(name, offset, PointField datatype, count) of each field of a row type."""
     out = []
+    fields = dtype.fields
+    assert fields is not None and dtype.names is not None  # a row type is a structured dtype
     for name in dtype.names:
-        sub, offset = dtype.fields[name][:2]
+        sub, offset = fields[name][:2]
         out.append((name, offset, _CODE_OF[sub.str[1:]], 1))
     return out
 
@@ -126,7 +128,7 @@ def robot_rows(ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
     rows["x"] = x[ids] * PATCH_METRES
     rows["y"] = y[ids] * PATCH_METRES
     rows["heading"] = heading[ids]
-    if z is not None:
+    if z is not None and pitch is not None:
         rows["z"] = z[ids] * PATCH_METRES
         rows["pitch"] = pitch[ids]
     return rows
@@ -142,7 +144,7 @@ def pose_of(rows: np.ndarray) -> dict[str, np.ndarray]:
     arguments of :meth:`~swarm_ros.core.replica.Replica.update`."""
     pose = {"x": rows["x"] / PATCH_METRES, "y": rows["y"] / PATCH_METRES,
             "heading": rows["heading"].astype(np.float64)}
-    if "pitch" in rows.dtype.names:
+    if "pitch" in (rows.dtype.names or ()):
         pose["z"] = rows["z"] / PATCH_METRES
         pose["pitch"] = rows["pitch"].astype(np.float64)
     return pose

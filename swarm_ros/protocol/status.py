@@ -8,6 +8,7 @@ tick 0 started, and the batches and the monitor that the run ended, from it.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -99,7 +100,7 @@ class WorldReport:
             self.outcome = values["outcome"]
         return new
 
-    def record(self, shape, params, state, rows: list[tuple[int, ...]], outcome, wall: float,
+    def record(self, shape, params, state, rows: Sequence[tuple[int, ...]], outcome, wall: float,
                losses: list[tuple[int, int]], rejected: int, monitor: tuple[int, int] = (0, 0)) -> RunRecord:
         """The record of a run over the graph: the monitor's ``rows`` (metrics of every tick) and final
         ``state``, with what the world reported (its clock, restarts, drops); ``rejected``: the monitor's drops.

@@ -42,6 +42,13 @@ class Policy:
     restart_timeout: float = _DEFAULT["restart_timeout"]
 
 
+class Logger(Protocol):
+    """Where the lockstep's lines go: the node's logger (rclpy's), or a test's."""
+
+    def info(self, text: str) -> None: ...
+    def warn(self, text: str) -> None: ...
+
+
 class WorldPort(Protocol):
     """What the lockstep asks of the node around it."""
 
@@ -52,6 +59,9 @@ class WorldPort(Protocol):
     def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
                      regional: list[np.ndarray] | None) -> None: ...
     def publish_status(self, status: Status) -> None: ...  # the run's state
+    # a tick's rows, applied decisions and metrics into the checkpoint (a restarted world goes on from it)
+    def checkpoint(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None: ...
+    def save_book(self, book: dict) -> None: ...  # the bookkeeping beside the ticks (world_restore)
     def monitor_reads_all(self) -> bool: ...  # the monitor's reader of every topic it records is matched
     def delivered(self) -> bool: ...  # every reader acknowledged the last status and rows
     def startup_seconds(self) -> float: ...  # from the start of the run's command (or this process) to now

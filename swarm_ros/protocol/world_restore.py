@@ -25,7 +25,7 @@ from swarm_ros.protocol.checkpoint import Saved
 from swarm_ros.protocol.hosting import Hosting
 from swarm_ros.protocol.plan import MONITOR, WORLD
 from swarm_ros.protocol.rows import pose_of
-from swarm_ros.protocol.world_port import WorldPort
+from swarm_ros.protocol.world_port import Logger, WorldPort
 
 __all__ = ["Saved", "WorldRestore"]
 
@@ -36,7 +36,7 @@ class WorldRestore:
 
     sim: Simulation
     port: WorldPort
-    log: object
+    log: Logger
     clock: Callable[[], float]
     hosting: Hosting
     batch_names: list[str]
@@ -54,7 +54,9 @@ class WorldRestore:
     startup_seconds: float
     monitor_tick: int
     window: int
-    # and the lockstep's save_book()
+
+    def save_book(self) -> None:  # the lockstep's own (Lockstep defines it)
+        raise NotImplementedError
 
 
 

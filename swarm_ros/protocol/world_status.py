@@ -42,7 +42,16 @@ class WorldStatus:
     decided: np.ndarray
     pending: np.ndarray
     live: set[int]
-    # and the lockstep's hosts(), lose_batch(), monitor_down()
+
+    # the lockstep's own (Lockstep defines them; a WorldStatus alone is not a lockstep)
+    def hosts(self, ids: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def lose_batch(self, k: int, why: str) -> None:
+        raise NotImplementedError
+
+    def monitor_down(self, why: str) -> None:
+        raise NotImplementedError
 
 
     def status(self, note: str = "") -> Status:
@@ -52,6 +61,7 @@ class WorldStatus:
         if not self.started:
             outcome, message = STARTING, "waiting for robot batches"
         elif self.ended_at is not None:
+            assert sim.outcome is not None  # the run has ended
             outcome = sim.outcome.value
             message = f"{outcome} at tick {tick}"
             warn = warn or sim.outcome not in (Outcome.COMPLETE, Outcome.COMPLETE_WITH_EXTRAS)
@@ -64,6 +74,7 @@ class WorldStatus:
             values["startup_seconds"] = f"{self.startup_seconds:.3f}"
         if self.ended_at is not None:
             values["separated"] = int((sim.state.state == RobotState.SEPARATED).sum())
+            assert self.start_time is not None  # set at tick 0, before any end
             values["wall_seconds"] = f"{self.ended_at - self.start_time:.3f}"
         values["restarts"] = restarts_text(self.restarts)
         values["rejected_messages"] = self.rejections.total
