@@ -243,16 +243,23 @@ def shape_file(path: Path, outer: float, hole: float = 0.0, cross: bool = False,
     return path
 
 
-def processes_mentioning(text: str) -> list[int]:
+def _processes_where(read: str, holds) -> list[int]:
+    """Pids of the live processes whose /proc/<pid>/``read`` file's text ``holds`` (one that ended meanwhile: no)."""
     found = []
     for proc in Path("/proc").iterdir():
         if proc.name.isdigit():
             try:
-                if text in (proc / "cmdline").read_bytes().decode(errors="replace"):
-                    found.append(int(proc.name))
+                text = (proc / read).read_bytes().decode(errors="replace")
             except OSError:
-                pass
+                continue
+            if holds(text):
+                found.append(int(proc.name))
     return found
+
+
+def processes_mentioning(text: str) -> list[int]:
+    """Pids of the processes whose command line holds ``text``."""
+    return _processes_where("cmdline", lambda cmdline: text in cmdline)
 
 
 def assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
@@ -389,16 +396,8 @@ def small_config(tmp_path: Path, **over) -> Path:
 
 
 def children_of(pid: int) -> list[int]:
-    found = []
-    for proc in Path("/proc").iterdir():
-        if proc.name.isdigit():
-            try:
-                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[1]) == pid:
-                found.append(int(proc.name))
-    return found
+    """Pids of the processes whose parent is ``pid``."""
+    return _processes_where("stat", lambda stat: int(stat.rsplit(")", 1)[1].split()[1]) == pid)
 
 
 # -- from test_engine.py -----------------------------------------------------------------------------------------
