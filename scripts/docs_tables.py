@@ -16,11 +16,20 @@ import sys
 import tempfile
 from pathlib import Path
 
-from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETERS, markdown_table
+from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETERS, Param
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = [ROOT / "docs" / "protocol.md"]
 _BLOCK = re.compile(r"(<!-- table: (\w+) -->\n)(.*?)(<!-- end of table -->)", re.S)
+
+
+def markdown_table(params: tuple[Param, ...]) -> str:
+    """The parameters as a Markdown table: name, default, meaning, valid values."""
+    rows = ["| parameter | default | meaning | valid values |", "|---|---|---|---|"]
+    for p in params:
+        default = f'"{p.default}"' if p.kind is str else str(p.default).lower() if p.kind is bool else p.default
+        rows.append(f"| `{p.name}` | {default} | {p.help} | {p.describe()} |".replace("\n", " "))
+    return "\n".join(rows) + "\n"
 
 
 def table(name: str) -> str:

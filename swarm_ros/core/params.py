@@ -246,16 +246,6 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
 }
 
 
-def markdown_table(params: tuple[Param, ...]) -> str:
-    """The parameters as a Markdown table (name, default, meaning, valid values): the docs' tables of parameters
-    are these, written by ``scripts/docs_tables.py`` and checked by ``test/test_docs.py``."""
-    rows = ["| parameter | default | meaning | valid values |", "|---|---|---|---|"]
-    for p in params:
-        default = f'"{p.default}"' if p.kind is str else str(p.default).lower() if p.kind is bool else p.default
-        rows.append(f"| `{p.name}` | {default} | {p.help} | {p.describe()} |".replace("\n", " "))
-    return "\n".join(rows) + "\n"
-
-
 def node_parameter(kind: str, name: str) -> Param:
     """The declaration of node ``kind``'s own parameter ``name``."""
     return next(p for p in NODE_PARAMETERS[kind] if p.name == name)

@@ -89,14 +89,22 @@ def _normal(h, solid):
 
 
 @numba.njit(cache=True, inline="always")
+def _step(h, p, solid):
+    """The unit step along heading ``h`` (and pitch ``p``)."""
+    if solid:
+        return direction(h, p)
+    return math.cos(h), math.sin(h), 0.0
+
+
+@numba.njit(cache=True, inline="always")
 def _wiggled(h, p, solid, wiggle, u, v):
     """The heading (and pitch) turned by a wiggle, and the unit step along it: (h, p, ex, ey, ez)."""
     if solid:
         h, p = wiggled(h, p, wiggle, u, v)
-        ex, ey, ez = direction(h, p)
-        return h, p, ex, ey, ez
-    h = h + wiggle * (2.0 * u - 1.0)
-    return h, p, math.cos(h), math.sin(h), 0.0
+    else:
+        h = h + wiggle * (2.0 * u - 1.0)
+    ex, ey, ez = _step(h, p, solid)
+    return h, p, ex, ey, ez
 
 
 @numba.njit(cache=True, inline="always")
@@ -105,14 +113,6 @@ def _turned(solid, u, v):
     if solid:
         return random_direction(u, v)
     return TWO_PI * u, 0.0
-
-
-@numba.njit(cache=True, inline="always")
-def _step(h, p, solid):
-    """The unit step along heading ``h`` (and pitch ``p``)."""
-    if solid:
-        return direction(h, p)
-    return math.cos(h), math.sin(h), 0.0
 
 
 @numba.njit(cache=True, inline="always")
