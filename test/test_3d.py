@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
-from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.errors import ContractError, ParameterError
 from swarm_ros.core.invariants import nearest_frontier_patch
 from swarm_ros.core.legality import illegal
 from swarm_ros.core.replica import Replica
@@ -306,7 +306,7 @@ def test_a_replica_fed_the_changed_rows_equals_the_world_in_3d():
 def test_a_3d_replica_refuses_rows_without_z():
     shape = Shape.load("box", World(12))
     replica = Replica(shape, 10)
-    with pytest.raises(ValueError, match="need z and pitch"):
+    with pytest.raises(ContractError, match="need z and pitch"):
         replica.load(0, np.arange(10), np.zeros(10, dtype=np.int8), np.zeros(10), np.zeros(10), np.zeros(10))
 
 

@@ -10,9 +10,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2
 
 from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.errors import Rejected
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
-from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.rows import ROBOT_ROW, ROBOT_ROW_3D, VOXEL_ROW, decision_rows, state_rows
 from swarm_ros.ros import graph as msgs
 from swarm_ros.tools.topics import decoded_rows

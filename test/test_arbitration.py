@@ -5,6 +5,7 @@ import pytest
 from helpers import disc_shape, params
 
 from swarm_ros.core import JoinOutcome, Outcome, RobotState, Shape, Simulation, World
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.rng import STREAM_PRIORITY, draw_bits
 from swarm_ros.core.rules import Decisions
 
@@ -79,7 +80,7 @@ def test_refused_claim_on_a_completed_shape_is_already_complete():
 def test_apply_checks_tick_and_coverage(disc):
     sim = Simulation(disc, params(8, seed=1))
     d = claims(sim, {})
-    with pytest.raises(ValueError, match="tick"):
+    with pytest.raises(ContractError, match="tick"):
         sim.apply(Decisions(d.tick + 1, d.ids, d.claim, d.x, d.y, d.heading))
-    with pytest.raises(ValueError, match="every moving robot exactly once"):
+    with pytest.raises(ContractError, match="every moving robot exactly once"):
         sim.apply(reorder(d, np.arange(d.ids.size - 1)))

@@ -14,11 +14,11 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
-from swarm_ros.core.errors import ConfigError
+from swarm_ros.core.errors import ConfigError, ContractError, Rejected
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.protocol import tag as tags
 from swarm_ros.protocol.cdr import cloud_parts, encode_cloud
-from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, TAG_PREFIX, batch_label, is_tag
 from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key
 from swarm_ros.ros import auth
@@ -206,9 +206,9 @@ def test_bytes_that_are_not_the_type_are_dropped_as_malformed(data):
 
 def test_types_without_a_field_for_a_tag_are_neither_signed_nor_taken():
     node = _Node("world")
-    with pytest.raises(TypeError, match="carries no tag"):
+    with pytest.raises(ContractError, match="carries no tag"):
         auth.Signer(node, KEY).publisher(OccupancyGrid, msgs.OCCUPANCY, None)
-    with pytest.raises(TypeError, match="carries no tag"):
+    with pytest.raises(ContractError, match="carries no tag"):
         auth.Gate(node, KEY, Rejections(_Log())).subscribe(OccupancyGrid, msgs.OCCUPANCY, print, None)
 
 
@@ -240,7 +240,7 @@ def test_a_cloud_sealed_in_parts_is_the_cloud_sealed_whole(n):
     assert sealed == whole_sealer.seal(msgs.ROBOTS, encode_cloud(rows, 7, tag=same_blank), same_blank)
     assert len(sealed) % 4 == 0
     assert tags.Verifier(KEY).verify(msgs.ROBOTS, sealed).sender == "world"
-    with pytest.raises(ValueError, match="blank tag"):  # a blank among the rows is not where a tag belongs
+    with pytest.raises(ContractError, match="blank tag"):  # a blank among the rows is not where a tag belongs
         parts_sealer.seal(msgs.ROBOTS, (b"head", memoryview(blank.encode())), blank)
 
 

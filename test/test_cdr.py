@@ -13,9 +13,9 @@ from helpers import make_cloud
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2
 
+from swarm_ros.core.errors import Rejected
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
-from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
 from swarm_ros.protocol.tag import aligned
 

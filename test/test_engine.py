@@ -5,6 +5,7 @@ import pytest
 from helpers import disc_shape, final_of, params, run_checked, run_in_batches
 
 from swarm_ros.core import METRIC_COLUMNS, Outcome, RobotState, Shape, Simulation, World
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.run_result import summary_of
 
 pytestmark = pytest.mark.unit
@@ -79,7 +80,7 @@ def test_history_has_one_row_per_tick_and_matches_the_final_state():
     sim.run(on_tick=lambda s: seen.append(s.tick))
     assert sim.history[:, 0].tolist() == list(range(sim.tick + 1))
     assert seen == list(range(1, sim.tick + 1))
-    with pytest.raises(RuntimeError, match="has ended"):
+    with pytest.raises(ContractError, match="has ended"):
         sim.step()
 
 

@@ -11,7 +11,7 @@ from swarm_ros.app import cli
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.arbitration import JoinOutcome
 from swarm_ros.core.engine import failing_robots
-from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.errors import ContractError, ParameterError
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.run_result import summary_of
 from swarm_ros.core.state import RobotState, frontier_of
@@ -82,7 +82,7 @@ def test_replica_follows_removals_and_rejects_a_removed_robot_coming_back(disc):
         rep.update(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.heading[ids])
         assert np.array_equal(rep.state.occupancy, s.occupancy) and np.array_equal(rep.state.frontier, s.frontier)
     gone = int(np.flatnonzero(s.state == RobotState.REMOVED)[0])
-    with pytest.raises(ValueError, match="returns after removal"):
+    with pytest.raises(ContractError, match="returns after removal"):
         rep.update(sim.tick + 1, np.array([gone]), np.array([RobotState.MOVING_OUTSIDE]), s.x[[gone]], s.y[[gone]],
                    s.heading[[gone]])
 
@@ -91,7 +91,7 @@ def test_remove_is_idempotent_and_checks_ids(disc):
     sim = Simulation(disc, RunParams(robots=disc.patches, seed=1))
     sim.run(max_ticks=10)
     assert sim.remove(np.array([7, 8])) == 2 and sim.remove(np.array([8])) == 0
-    with pytest.raises(ValueError, match="robot ids must be in"):
+    with pytest.raises(ContractError, match="robot ids must be in"):
         sim.remove(np.array([disc.patches]))
 
 

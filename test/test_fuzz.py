@@ -1,6 +1,6 @@
 """Fuzzing (hypothesis) of what reads user files: shape images and bytes, parameter files, experiment files.
 
-Any input either loads or gets a SwarmError whose message is one line naming the file;
+Any input either loads or gets a InputError whose message is one line naming the file;
 never another exception. (Text shape grids are fuzzed in test_properties.py.)
 """
 
@@ -17,7 +17,7 @@ from PIL import Image
 
 from swarm_ros.app.experiment_file import Experiment, load_experiment
 from swarm_ros.app.param_file import load_params_file
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import Settings
 from swarm_ros.core.shapes import Shape
@@ -36,7 +36,7 @@ documents = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_si
                                                           st.dictionaries(keys, inner, max_size=5)), max_leaves=12)
 
 
-def _one_line_naming(exc: SwarmError, path) -> None:
+def _one_line_naming(exc: InputError, path) -> None:
     text = str(exc)
     assert "\n" not in text and str(path) in text, text
 
@@ -48,7 +48,7 @@ def test_png_loader_on_random_bytes(tmp_path_factory, data):
     path.write_bytes(data)
     try:
         Shape.load(path, World(radius=8))
-    except SwarmError as exc:
+    except InputError as exc:
         _one_line_naming(exc, path)
 
 
@@ -63,7 +63,7 @@ def test_png_loader_on_random_images(tmp_path_factory, w, h, seed, mode):
     image.convert(mode).save(path)
     try:
         shape = Shape.load(path, World(radius=8))
-    except SwarmError as exc:
+    except InputError as exc:
         _one_line_naming(exc, path)
     else:
         assert shape.patches >= 4
@@ -74,7 +74,7 @@ def _accepts_or_names(loader, tmp_path_factory, text: str, ok_type: type) -> Non
     path.write_text(text)
     try:
         result = loader(path)
-    except SwarmError as exc:
+    except InputError as exc:
         _one_line_naming(exc, path)
     else:
         assert isinstance(result, ok_type)

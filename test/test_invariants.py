@@ -6,7 +6,8 @@ from helpers import disc_shape, params
 
 from swarm_ros.core import RobotState, Shape, Simulation, World
 from swarm_ros.core.arbitration import JoinOutcome
-from swarm_ros.core.invariants import InvariantError, check_state, check_tick
+from swarm_ros.core.errors import InvariantError
+from swarm_ros.core.invariants import check_state, check_tick
 
 pytestmark = pytest.mark.unit
 

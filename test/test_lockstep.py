@@ -12,11 +12,10 @@ import numpy as np
 import pytest
 from helpers import ROBOTS, LockstepRun
 
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.regions import columns
 from swarm_ros.core.state import RobotState
-from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.plan import MONITOR, batch_name
-from swarm_ros.protocol.status import RunFailed
 from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S
 
 pytestmark = pytest.mark.unit

@@ -14,14 +14,14 @@ import pytest
 from helpers import Clock, Log, disc_shape
 
 from swarm_ros.core import RunParams, Simulation, World
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome, TickMetrics
 from swarm_ros.core.rules import Decider
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
-from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.monitoring import BAG_WAIT, STATUS_WAIT, MonitorCore
 from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.rows import decision_rows, state_rows
-from swarm_ros.protocol.status import RunFailed, restarts_text
+from swarm_ros.protocol.status import restarts_text
 
 pytestmark = pytest.mark.unit
 

@@ -7,6 +7,7 @@ import pytest
 from helpers import params
 
 from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider, Decisions, decide
 from swarm_ros.core.state import RobotState
@@ -73,18 +74,18 @@ def test_replica_rejects_skipped_ticks_partial_tick_zero_and_impossible_joins(sm
     sim = Simulation(small_disc, params(40, seed=2))
     s, all_ids = sim.state, np.arange(40)
     replica = Replica(small_disc, 40)
-    with pytest.raises(ValueError, match="tick 0 must hold every robot"):
+    with pytest.raises(ContractError, match="tick 0 must hold every robot"):
         replica.update(0, all_ids[:-1], s.state[:-1], s.x[:-1], s.y[:-1], s.heading[:-1])
     replica = Replica(small_disc, 40)
-    with pytest.raises(ValueError, match="arrived after tick -1"):
+    with pytest.raises(ContractError, match="arrived after tick -1"):
         replica.update(1, all_ids, s.state, s.x, s.y, s.heading)
     replica.update(0, all_ids, s.state, s.x, s.y, s.heading)
-    with pytest.raises(ValueError, match="unknown robot state"):
+    with pytest.raises(ContractError, match="unknown robot state"):
         replica.update(1, all_ids[4:5], np.array([9]), s.x[4:5], s.y[4:5], s.heading[4:5])
     replica = Replica(small_disc, 40)
     replica.update(0, all_ids, s.state, s.x, s.y, s.heading)
     # robot 4 "localizes" on a seed's patch: not an empty shape patch
-    with pytest.raises(ValueError, match="not an empty shape patch"):
+    with pytest.raises(ContractError, match="not an empty shape patch"):
         replica.update(1, np.array([4]), np.array([RobotState.LOCALIZED]), s.x[:1], s.y[:1], s.heading[:1])
 
 
@@ -117,7 +118,7 @@ def test_a_snapshot_must_hold_every_robot_once(small_disc):
     s = sim.state
     replica = Replica(small_disc, sim.params.robots)
     ids = np.arange(sim.params.robots)
-    with pytest.raises(ValueError, match="must hold every robot once"):
+    with pytest.raises(ContractError, match="must hold every robot once"):
         replica.load(5, ids[1:], s.state[1:], s.x[1:], s.y[1:], s.heading[1:])
-    with pytest.raises(ValueError, match="a snapshot of tick -1"):
+    with pytest.raises(ContractError, match="a snapshot of tick -1"):
         replica.load(-1, ids, s.state, s.x, s.y, s.heading)

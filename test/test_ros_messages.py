@@ -17,7 +17,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.core import RunParams, Shape, Simulation
-from swarm_ros.core.errors import ConfigError
+from swarm_ros.core.errors import ConfigError, ContractError
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.params import Settings
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, robot_rows
@@ -38,7 +38,7 @@ def test_robot_rows_survive_serialization_exactly_and_carry_the_tick():
     assert (msg.width, msg.point_step, msg.row_step) == (1036, 40, 1036 * 40)
     got = msgs.cloud_rows(msg, ROBOT_ROW)
     assert got.tobytes() == sent.tobytes()
-    with pytest.raises(ValueError, match="unexpected point layout"):
+    with pytest.raises(ContractError, match="unexpected point layout"):
         msgs.cloud_rows(msg, DECISION_ROW)
 
 

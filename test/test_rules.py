@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from swarm_ros.core import RobotState, Shape, Simulation, World, decide
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.invariants import nearest_frontier_patch
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.rules2d import nearest_frontier
@@ -309,5 +310,5 @@ def test_decide_reads_but_never_writes_the_view(mid_run_star):
 
 
 def test_decide_refuses_stationary_robots(mid_run_star):
-    with pytest.raises(ValueError, match="moving robots only"):
+    with pytest.raises(ContractError, match="moving robots only"):
         decide(mid_run_star.state, np.array([0]), mid_run_star.shape, mid_run_star.params, 1)

@@ -24,6 +24,7 @@ from helpers import host_env, make_cloud
 
 from swarm_ros.app import cli
 from swarm_ros.app.processes import DomainLock, node_command, node_env
+from swarm_ros.core.errors import Rejected
 from swarm_ros.core.params import Settings
 from swarm_ros.core.regions import batch_strip, columns
 from swarm_ros.core.state import RobotState
@@ -99,7 +100,7 @@ class _Batches:
         self.localized_sent = False
 
     def _on_robots(self, msg) -> None:
-        from swarm_ros.protocol.checks import Rejected, apply_robots, checked_robots
+        from swarm_ros.protocol.checks import apply_robots, checked_robots
 
         try:  # the whole swarm's rows from tick 0 (these batches keep a whole replica, not regional ones)
             tick, rows = checked_robots(self.replica, msg, self.radius)
@@ -393,7 +394,7 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
         def on_robots(msg) -> None:  # the world's rows of tick t, sent again as tick t + 1's
             try:
                 rows = msgs.cloud_rows(msg, ROBOT_ROW)
-            except ValueError:
+            except Rejected:
                 return  # this stranger's own garbage, back
             if rows.size and rows["z"][0] == 0.0 and rows["id"][0] != 7:  # not ours (they come back here)
                 copy = rows.copy()

@@ -12,7 +12,7 @@ import yaml
 
 from swarm_ros.app.processes import CHECKPOINT
 from swarm_ros.app.supervision import STOPPED, Supervisor, Verdict, argument_value, launch_processes, launch_setup
-from swarm_ros.core.errors import ConfigError, SwarmError
+from swarm_ros.core.errors import ConfigError, InputError
 from swarm_ros.core.params import RUN_PARAMETERS, Settings
 from swarm_ros.ros.node_params import params_yaml
 
@@ -85,7 +85,7 @@ def test_an_argument_is_read_as_ros_2_reads_a_parameter_value(name, text, value)
     (lambda p: launch_setup(str(CONFIG), BLANK, "", p / "log", 2, "swarm"), "enclaves must be an enclave path"),
 ])
 def test_bad_launch_arguments_are_refused_in_one_line(tmp_path, call, said):
-    with pytest.raises(SwarmError) as caught:
+    with pytest.raises(InputError) as caught:
         call(tmp_path)
     assert said in str(caught.value) and "\n" not in str(caught.value)
     assert not (tmp_path / "log" / "params.yaml").exists()

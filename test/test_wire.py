@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.errors import ContractError
 from swarm_ros.protocol.rows import (
     DECISION_ROW,
     FLOAT64,
@@ -27,7 +28,7 @@ def test_row_layouts_are_the_documented_point_fields():
                                        ("heading", 24, FLOAT64, 1), ("id", 32, UINT32, 1), ("state", 36, UINT8, 1)]
     assert ROBOT_ROW.itemsize == DECISION_ROW.itemsize == 40
     check_fields(point_fields(DECISION_ROW), 40, DECISION_ROW)
-    with pytest.raises(ValueError, match="unexpected point layout"):
+    with pytest.raises(ContractError, match="unexpected point layout"):
         check_fields(point_fields(DECISION_ROW), 40, ROBOT_ROW)
 
 

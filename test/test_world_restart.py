@@ -9,6 +9,7 @@ import pytest
 from helpers import MAX_TICKS, ROBOTS, LockstepRun
 
 from swarm_ros.core import Simulation
+from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.protocol.checkpoint import Checkpoint
 from swarm_ros.protocol.lockstep import Lockstep
@@ -89,10 +90,10 @@ def test_a_checkpoint_with_no_tick_restores_nothing_and_another_runs_is_refused(
     r = LockstepRun(batches=1)
     _with_checkpoint(r, tmp_path / "ck")
     assert Checkpoint.open(tmp_path / "ck", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS)).saved() is None
-    with pytest.raises(ValueError, match="another run"):
+    with pytest.raises(RunFailed, match="another run"):
         Checkpoint.open(tmp_path / "ck", ROBOTS + 1, MAX_TICKS, len(METRIC_COLUMNS))
     (tmp_path / "junk").write_bytes(b"not a checkpoint at all, longer than the header" * 4)
-    with pytest.raises(ValueError, match="not a world checkpoint"):
+    with pytest.raises(RunFailed, match="not a world checkpoint"):
         Checkpoint.open(tmp_path / "junk", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS))
     with pytest.raises(FileExistsError):
         Checkpoint(tmp_path / "ck", ROBOTS, MAX_TICKS, len(METRIC_COLUMNS), 2).create()

@@ -15,7 +15,7 @@ from pathlib import Path
 from swarm_ros import __version__
 from swarm_ros.app import commands
 from swarm_ros.app.commands import EXIT_INTERRUPTED, EXIT_USAGE, PROG
-from swarm_ros.core.errors import ParameterError, SwarmError
+from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.grid import World
 from swarm_ros.core.inputs import path_too_long, shown
 from swarm_ros.core.params import (
@@ -91,7 +91,7 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        raise SwarmError(message)
+        raise InputError(message)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
                 break
         args = build_parser().parse_args(argv)
         return args.func(args)
-    except SwarmError as exc:
+    except InputError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt as exc:

@@ -1,6 +1,6 @@
 """What each ``swarm-ros`` command does, given its parsed arguments (:mod:`swarm_ros.app.cli` parses them).
 
-Bad input raises :class:`~swarm_ros.core.errors.SwarmError` (the command line prints it in one line and exits 2).
+Bad input raises :class:`~swarm_ros.core.errors.InputError` (the command line prints it in one line and exits 2).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from swarm_ros.app.param_file import read_params_file
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETERS, RunParams, Settings, node_defaults
 from swarm_ros.core.resources import check_world_memory
@@ -56,7 +56,7 @@ def _list_shapes(shapes: dict[str, Path], world: World) -> int:
     for name, path in shapes.items():
         try:
             shape = Shape.load(name, world)
-        except SwarmError as exc:  # e.g. larger than this world: say so and list the others
+        except InputError as exc:  # e.g. larger than this world: say so and list the others
             misfits += 1
             reason = str(exc).split(": ", 1)[-1].split(" at patch")[0]  # e.g. reaches beyond the walls
             print(f"{name:<10} {'-':>7} {'-':>5}  does not fit: {reason}  {path}")
@@ -91,7 +91,7 @@ def _flag(value: object, section: dict[str, object], key: str) -> object:
 def _prepare(args: argparse.Namespace, graph: bool = False) -> tuple[Settings, Shape, RunParams, Path,
                                                                     RecordingOptions, dict]:
     """Settings, shape, parameters, a usable output directory, the recording options and the node
-    parameters of the parameter file, or a SwarmError before anything runs."""
+    parameters of the parameter file, or a InputError before anything runs."""
     from swarm_ros.artifacts.run_dir import check_leftovers, check_out_dir, claim_out_dir, default_run_dir
 
     settings, nodes = _settings(args)
@@ -167,7 +167,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     changed = {k: v for k, v in nodes["robot_batch"].items()
                if v != node_defaults("robot_batch")[k] and k != "region_cuts"}
     if changed:
-        raise SwarmError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
+        raise InputError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
                          f"assigns each of its --processes its strip itself (use ros2 run for your own split)")
     cuts = args.region_cuts if args.region_cuts is not None else str(nodes["robot_batch"].get("region_cuts", ""))
     world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
@@ -213,7 +213,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from swarm_ros.app.experiment import run_experiment
 
     if args.scheduler and args.executor != "dask":
-        raise SwarmError("--scheduler needs --executor dask")
+        raise InputError("--scheduler needs --executor dask")
     _interrupt_on_sigterm()
     start = time.perf_counter()
     jobs = args.jobs or (1 if args.engine == "ros2" else default_jobs())
@@ -278,9 +278,9 @@ def _domain_id(flag: int | None) -> int | None:
         try:
             domain = int(os.environ["ROS_DOMAIN_ID"])
         except ValueError:
-            raise SwarmError(f"ROS_DOMAIN_ID must be an integer, got {os.environ['ROS_DOMAIN_ID']!r}") from None
+            raise InputError(f"ROS_DOMAIN_ID must be an integer, got {os.environ['ROS_DOMAIN_ID']!r}") from None
     if domain is not None and not 0 <= domain <= MAX_DOMAIN_ID:
-        raise SwarmError(f"ROS domain id must be in [0, {MAX_DOMAIN_ID}], got {domain}")
+        raise InputError(f"ROS domain id must be in [0, {MAX_DOMAIN_ID}], got {domain}")
     return domain
 
 

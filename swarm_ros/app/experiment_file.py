@@ -37,7 +37,7 @@ import numpy as np
 from swarm_ros.app.param_file import read_yaml
 from swarm_ros.app.published import load_reference
 from swarm_ros.app.results_file import ExperimentError
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import EXPERIMENT_AXES, MAX_SEED, RUN_PARAMETER, RUN_PARAMETERS, Param, RunParams, Settings
 from swarm_ros.core.resources import check_world_memory
@@ -139,7 +139,7 @@ def _fail(path: Path, key: str, message: str) -> ExperimentError:
 def _checked(path: Path, key: str, param: Param, value: object) -> object:
     try:
         return param.check(value)
-    except SwarmError as exc:
+    except InputError as exc:
         raise _fail(path, key, str(exc)) from None
 
 
@@ -181,20 +181,20 @@ def load_experiment(path: str | Path) -> Experiment:
     if reference:
         try:
             load_reference(path.parent / reference)
-        except SwarmError as exc:
+        except InputError as exc:
             raise _fail(path, "reference", str(exc)) from None
     try:
         check_world_memory(fixed.world_radius)
-    except SwarmError as exc:
+    except InputError as exc:
         raise _fail(path, "world_radius", str(exc)) from None
     try:
         fixed.run_params(robots=5)
-    except SwarmError as exc:
+    except InputError as exc:
         raise _fail(path, "fail_fraction", str(exc)) from None
     for i, v in enumerate(axes["vision_radius"]):
         try:
             fixed.updated(vision_radius=v).run_params(robots=5).check_vision(fixed.world_radius)
-        except SwarmError as exc:
+        except InputError as exc:
             raise _fail(path, f"vision_radius[{i}]", str(exc)) from None
     shapes = _load_shapes(path, data["shapes"], World(fixed.world_radius))
     runs = own["repetitions"] * sum(len(sizes) for *_, sizes in shapes) * math.prod(len(v) for v in axes.values())
@@ -206,7 +206,7 @@ def load_experiment(path: str | Path) -> Experiment:
     for spec in exp.runs()[:: exp.repetitions]:  # the parameters of every grid point
         try:
             spec.params()
-        except SwarmError as exc:
+        except InputError as exc:
             raise _fail(path, f"shapes.{spec.shape}", str(exc)) from None
     return exp
 
@@ -222,7 +222,7 @@ def _load_shapes(path: Path, shapes: object, world: World) -> tuple[tuple[str, s
             source = str((path.parent / source).resolve())
         try:
             shape = Shape.load(source, world)
-        except SwarmError as exc:
+        except InputError as exc:
             raise _fail(path, where, str(exc)) from None
         if shape.name in names:
             raise _fail(path, where, f"a second shape named '{shape.name}'")

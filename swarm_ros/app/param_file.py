@@ -28,7 +28,7 @@ from pathlib import Path
 
 import yaml
 
-from swarm_ros.core.errors import ConfigError, ParameterError, SwarmError
+from swarm_ros.core.errors import ConfigError, InputError, ParameterError
 from swarm_ros.core.inputs import YAML_LIMIT, read_bounded
 from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETER, Settings
 
@@ -49,7 +49,7 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep)
 
 
-def read_yaml(path: Path, what: str, error: type[SwarmError]) -> object:
+def read_yaml(path: Path, what: str, error: type[InputError]) -> object:
     """The YAML document in ``path`` (at most :data:`~swarm_ros.core.inputs.YAML_LIMIT` bytes), or ``error`` with
     one line naming the file (unreadable, too large, bad YAML, a key given twice)."""
     data = read_bounded(path, YAML_LIMIT, what, error)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 from swarm_ros.core.signals import PARENT_ENV
 from swarm_ros.protocol.runkey import with_run_key
 from swarm_ros.ros.dds import apply_dds_defaults
@@ -29,7 +29,7 @@ DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash
 _STOP_STEPS = ((signal.SIGTERM, 5.0), (signal.SIGKILL, 2.0))
 
 
-class LaunchError(SwarmError):
+class LaunchError(InputError):
     """The graph could not run to the end; the message says which process and where its log is."""
 
 
@@ -107,7 +107,7 @@ def check_graph(shape, robots: int, processes: int, enclaves: str | None,
     """Refuse a graph that cannot run, before any node starts (``swarm-ros run`` and the launch file).
 
     Raises:
-        SwarmError: a shape source the nodes cannot each read, too little memory, fewer columns than
+        InputError: a shape source the nodes cannot each read, too little memory, fewer columns than
             batches, region cuts that do not cut the world into ``processes`` strips, a bad enclave path;
             in one line (``flags``: how the user named the batch count and the enclaves).
     """
@@ -115,18 +115,18 @@ def check_graph(shape, robots: int, processes: int, enclaves: str | None,
 
     source = Path(shape.source)
     if source.exists() and not source.is_file():  # a pipe, /dev/null: read once here, but each node reads it too
-        raise SwarmError(f"{shape.source}: not a regular file; each node of the graph reads the shape file "
+        raise InputError(f"{shape.source}: not a regular file; each node of the graph reads the shape file "
                          f"itself, so the graph needs a file ('simulate' reads a pipe once)")
     check_world_memory(shape.world.radius, copies=processes + 2)  # the world, the monitor, each batch
     if processes > shape.world.size:
-        raise SwarmError(f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
+        raise InputError(f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
                          f"robot-batch process ({flags[0]}, default 2); each strip needs at least one column")
     if region_cuts:
         from swarm_ros.core.regions import parse_cuts, strip
 
         strip(0, processes, parse_cuts(region_cuts), shape.world.radius)
     if enclaves is not None and not ENCLAVE_PREFIX.fullmatch(enclaves):
-        raise SwarmError(f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
+        raise InputError(f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
                          f"after each /), got {enclaves!r}")
 
 

@@ -21,14 +21,14 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 from swarm_ros.core.inputs import YAML_LIMIT, read_bounded
 
 COLUMNS = ("shape", "study_robots", "mean_ticks", "ci95_low", "ci95_high", "group_sizes", "sizes_mean_min",
            "sizes_mean_max")
 
 
-class ReferenceFileError(SwarmError):
+class ReferenceFileError(InputError):
     """A reference file cannot be read or is malformed; the message names the file and the line."""
 
 

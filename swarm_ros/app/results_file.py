@@ -11,7 +11,7 @@ import io
 import os
 from pathlib import Path
 
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 from swarm_ros.core.inputs import RESULTS_LIMIT, read_bounded
 from swarm_ros.core.params import EXPERIMENT_AXES, RUN_PARAMETERS
 
@@ -30,7 +30,7 @@ _INT_COLUMNS = {"repetition", "shape_patches", "convergence_tick", "localized", 
 _FLOAT_COLUMNS = {"convergence_rate", "wall_seconds", *(p.name for p in RUN_PARAMETERS if p.kind is float)}
 
 
-class ExperimentError(SwarmError):
+class ExperimentError(InputError):
     """A bad experiment file or output directory; the message names the file and the key."""
 
 

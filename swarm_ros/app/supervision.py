@@ -32,14 +32,14 @@ import yaml
 from swarm_ros.app.param_file import read_params_file
 from swarm_ros.app.processes import CHECKPOINT, check_graph, death
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
-from swarm_ros.core.errors import ConfigError, ParameterError, SwarmError
+from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
 from swarm_ros.core.params import RUN_PARAMETER, node_defaults
 from swarm_ros.core.signals import EXIT_INTERRUPTED
 from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD
 from swarm_ros.ros.node_params import params_yaml
 
 
-class RunEnded(SwarmError):
+class RunEnded(RunFailed):
     """The launch ends because the run failed: ``ros2 launch`` prints it in one line, stops every node, exits 1."""
 
 
@@ -181,7 +181,7 @@ def launch_setup(params_file: str, arguments: dict[str, str], out_dir: str, log_
     (``runs/<time>_<shape>_...``), once, so that a restarted monitor writes to the same place.
 
     Raises:
-        SwarmError: a bad parameter file, argument, shape or output directory, in one line.
+        InputError: a bad parameter file, argument, shape or output directory, in one line.
     """
     settings, nodes = read_params_file(params_file)
     settings = settings.updated(**{name: argument_value(name, text) for name, text in arguments.items() if text})

@@ -49,6 +49,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from swarm_ros.artifacts.run_dir import OutputError
+from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
@@ -172,7 +173,7 @@ class Recorder:
     def __init__(self, path: Path | None, shape: Shape, params: RunParams, *, every: int = 1,
                  spawn: bool = False, connect: str | None = None) -> None:
         if every < 1:
-            raise ValueError(f"every must be >= 1, got {every}")
+            raise ParameterError(f"every must be >= 1, got {every}")
         self.path, self.every = path, every
         self._world = shape.world
         self._solid = shape.world.dims == 3

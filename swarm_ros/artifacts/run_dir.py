@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 from swarm_ros.core.inputs import path_too_long, shown
 
 if TYPE_CHECKING:
@@ -33,7 +33,7 @@ FINAL_STATE_COLUMNS_3D = ("id", "x", "y", "z", "heading", "pitch", "state")  #: 
 RECORDING_FILE = "recording.rrd"
 
 
-class OutputError(SwarmError):
+class OutputError(InputError):
     """The output directory cannot be used."""
 
 

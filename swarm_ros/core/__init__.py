@@ -13,7 +13,8 @@ import importlib
 
 _HOME = {
     "JoinOutcome": "arbitration", "Simulation": "engine", "ParameterError": "errors", "ShapeError": "errors",
-    "SwarmError": "errors", "METRIC_COLUMNS": "metrics", "Outcome": "metrics", "TickMetrics": "metrics",
+    "SwarmError": "errors", "InputError": "errors", "ContractError": "errors",
+    "METRIC_COLUMNS": "metrics", "Outcome": "metrics", "TickMetrics": "metrics",
     "RunParams": "params", "Decisions": "rules", "decide": "rules", "Shape": "shapes", "builtin_shapes": "shapes",
     "RobotState": "state", "SwarmState": "state", "World": "grid",
 }

@@ -24,6 +24,7 @@ import numpy as np
 
 from swarm_ros.core import metrics
 from swarm_ros.core.arbitration import resolve_kernel, vacate
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.metrics import (
     END_EXTRAS,
@@ -261,17 +262,17 @@ class Simulation:
         next tick (in any order, e.g. concatenated from several batches).
 
         Raises:
-            ValueError: wrong tick, or the ids are not exactly the moving robots.
+            ContractError: wrong tick, or the ids are not exactly the moving robots.
         """
         self._check_running()
         if decisions.tick != self.tick + 1:
-            raise ValueError(f"decisions are for tick {decisions.tick}, the world is at tick {self.tick}")
+            raise ContractError(f"decisions are for tick {decisions.tick}, the world is at tick {self.tick}")
         m = self._m
         if decisions.ids.size != m or not np.array_equal(np.sort(decisions.ids), self._moving[:m]):
-            raise ValueError("decisions must cover every moving robot exactly once")
+            raise ContractError("decisions must cover every moving robot exactly once")
         mv, sc = self._moves, self._scratch
         if self._solid and (decisions.z is None or decisions.pitch is None):
-            raise ValueError("decisions in a 3D world need z and pitch")
+            raise ContractError("decisions in a 3D world need z and pitch")
         sc.last_ids[:m] = decisions.ids
         mv.claim[:m] = decisions.claim
         mv.x[:m], mv.y[:m], mv.heading[:m] = decisions.x, decisions.y, decisions.heading
@@ -306,7 +307,7 @@ class Simulation:
             self.last_removed = np.empty(0, dtype=np.int64)
             return 0
         if ids[0] < 0 or ids[-1] >= s.robots:
-            raise ValueError(f"robot ids must be in [0, {s.robots - 1}]")
+            raise ContractError(f"robot ids must be in [0, {s.robots - 1}]")
         ids = ids[s.state[ids] != RobotState.REMOVED]
         for i in ids.tolist():
             if s.state[i] in _STATIONARY_LOCALIZED:
@@ -338,13 +339,13 @@ class Simulation:
         the run goes on exactly as the one that saved them would have.
 
         Raises:
-            ValueError: the rows do not make a consistent swarm (a checkpoint that is not this run's).
+            ContractError: the rows do not make a consistent swarm (a checkpoint that is not this run's).
         """
         from swarm_ros.core.replica import Replica
 
         n = self.params.robots
         if history.shape != (tick + 1, len(METRIC_COLUMNS)) or int(history[-1, 0]) != tick:
-            raise ValueError(f"a checkpoint's metrics do not end at its tick {tick}")
+            raise ContractError(f"a checkpoint's metrics do not end at its tick {tick}")
         replica = Replica(self.shape, n)
         replica.load(tick, np.arange(n), state, x, y, heading, z, pitch)
         s, r = self.state, replica.state
@@ -384,7 +385,7 @@ class Simulation:
 
     def _check_running(self) -> None:
         if self.outcome is not None:
-            raise RuntimeError(f"the run has ended ({self.outcome}) at tick {self.tick}")
+            raise ContractError(f"the run has ended ({self.outcome}) at tick {self.tick}")
 
     def _reserve(self, rows: int) -> None:
         need = self._nrows + rows

@@ -12,7 +12,7 @@ import os
 import stat
 from pathlib import Path
 
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 
 KIB, MIB = 1024, 1024**2
 #: Bounds, far above any real input of each kind: the largest built-in shape file is 5 kB, the study's
@@ -28,7 +28,7 @@ def size_words(n: int) -> str:
     return f"{n // MIB} MiB" if n >= MIB and n % MIB == 0 else f"{n // KIB} KiB" if n % KIB == 0 else f"{n} bytes"
 
 
-def read_bounded(path: Path, limit: int, what: str, error: type[SwarmError]) -> bytes:
+def read_bounded(path: Path, limit: int, what: str, error: type[InputError]) -> bytes:
     """The bytes of ``path``, read once, or ``error`` in one line naming the file.
 
     Args:

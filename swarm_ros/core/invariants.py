@@ -18,16 +18,13 @@ import numpy as np
 
 from swarm_ros.core.arbitration import JoinOutcome
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import InvariantError
 from swarm_ros.core.metrics import Outcome, tick_metrics
 from swarm_ros.core.state import MOVING_STATES, RobotState, SwarmState, frontier_blocks_of, frontier_of
 
 _STATIONARY = (RobotState.SEED, RobotState.LOCALIZED)
 _MOVING = MOVING_STATES
 _EPS = 1e-9
-
-
-class InvariantError(AssertionError):
-    """A Z-schema invariant does not hold after a tick."""
 
 
 def _require(ok: bool, tick: int, rule: str) -> None:

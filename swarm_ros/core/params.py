@@ -185,7 +185,7 @@ class Settings:
         """The shape and run parameters these settings stand for (every engine and node derives them so).
 
         Raises:
-            SwarmError: a bad shape, a bad value, or more robots than free patches.
+            InputError: a bad shape, a bad value, or more robots than free patches.
         """
         from .resources import check_world_memory
         from .shapes import Shape

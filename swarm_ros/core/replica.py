@@ -24,6 +24,7 @@ import numba
 import numpy as np
 
 from swarm_ros.core.arbitration import occupy, vacate
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import Robots, grid_of, robots_of
 from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.shapes import Shape
@@ -123,10 +124,10 @@ class Replica:
         that applied every tick's rows from tick 0 to ``tick``.
 
         Raises:
-            ValueError: as :meth:`update` for tick 0; the replica is then unusable.
+            ContractError: as :meth:`update` for tick 0; the replica is then unusable.
         """
         if tick < 0:
-            raise ValueError(f"a snapshot of tick {tick}")
+            raise ContractError(f"a snapshot of tick {tick}")
         self.state = self._empty(self.state.robots)
         self.state.tick = -1
         self._apply(0, ids, state, x, y, heading, z, pitch)  # the checks of a tick-0 message: every robot once
@@ -141,26 +142,26 @@ class Replica:
         """Apply the rows of ``tick``, which must be the tick after the last one applied.
 
         Raises:
-            ValueError: a tick was skipped or repeated, tick 0 does not cover every robot,
+            ContractError: a tick was skipped or repeated, tick 0 does not cover every robot,
                 an id is out of range, a state code is unknown, or a robot localizes on a
                 patch that is not an empty shape patch. The replica is then unusable.
         """
         if tick != self.state.tick + 1:
-            raise ValueError(f"rows for tick {tick} arrived after tick {self.state.tick}")
+            raise ContractError(f"rows for tick {tick} arrived after tick {self.state.tick}")
         self._apply(tick, ids, state, x, y, heading, z, pitch)
 
     def _apply(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
                heading: np.ndarray, z: np.ndarray | None, pitch: np.ndarray | None) -> None:
         s = self.state
         if self._solid != (z is not None and pitch is not None):
-            raise ValueError("rows of a 3D world need z and pitch; rows of a 2D world have none")
+            raise ContractError("rows of a 3D world need z and pitch; rows of a 2D world have none")
         ids = np.asarray(ids, dtype=np.int64)
         state = np.asarray(state, dtype=np.int8)
         if tick == 0 and self.area is None and (ids.size != s.robots
                                                  or not np.array_equal(np.sort(ids), np.arange(s.robots))):
-            raise ValueError(f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows")
+            raise ContractError(f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows")
         if state.size and (state.min() < 0 or state.max() > max(RobotState)):
-            raise ValueError(f"unknown robot state code in the rows of tick {tick}")
+            raise ContractError(f"unknown robot state code in the rows of tick {tick}")
         f64 = np.float64
         new_z, new_pitch = (np.asarray(z, f64), np.asarray(pitch, f64)) if self._solid else (self._none, self._none)
         rows = Robots(np.asarray(x, dtype=f64), np.asarray(y, dtype=f64), new_z, np.asarray(heading, dtype=f64),
@@ -168,7 +169,7 @@ class Replica:
         grid = grid_of(self.shape, s, self._shape, self._wall, self._nbrs)
         bad = _apply_rows(ids, rows, robots_of(s), grid, self._first, self._last)
         if bad:
-            raise ValueError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
+            raise ContractError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
                              f"localizes on a patch that is not an empty shape patch, or returns after removal")
         s.tick = tick
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import (
@@ -292,9 +293,9 @@ class Decisions:
         """Join the decisions of several batches of one tick (any order)."""
         ticks = {p.tick for p in parts}
         if len(ticks) != 1:
-            raise ValueError(f"decisions from different ticks: {sorted(ticks)}")
+            raise ContractError(f"decisions from different ticks: {sorted(ticks)}")
         if len({p.z is None for p in parts}) != 1:
-            raise ValueError("decisions from a 2D and a 3D world")
+            raise ContractError("decisions from a 2D and a 3D world")
         solid = parts[0].z is not None
         return Decisions(
             tick=ticks.pop(),
@@ -332,15 +333,15 @@ class Decider:
         batches gives, concatenated, the same decisions as one batch.
 
         Raises:
-            ValueError: an id is out of range or not a moving robot in ``view``.
+            ContractError: an id is out of range or not a moving robot in ``view``.
         """
         ids = np.asarray(ids, dtype=np.int64)
         if view.robots != self.params.robots:
-            raise ValueError(f"the view has {view.robots} robots, the run {self.params.robots}")
+            raise ContractError(f"the view has {view.robots} robots, the run {self.params.robots}")
         if ids.size and (ids.min() < 0 or ids.max() >= view.robots):
-            raise ValueError(f"robot ids must be in [0, {view.robots}), got {ids.min()}..{ids.max()}")
+            raise ContractError(f"robot ids must be in [0, {view.robots}), got {ids.min()}..{ids.max()}")
         if not IS_MOVING[view.state[ids]].all():
-            raise ValueError("decide() takes moving robots only")
+            raise ContractError("decide() takes moving robots only")
         if moving is None:
             moving = view.moving_ids()
         n = ids.size
@@ -361,6 +362,6 @@ def decide(view: SwarmState, ids: np.ndarray, shape: Shape, params: RunParams, t
     This is what one robot batch runs (see :class:`Decider`); ``view`` is read, never written.
 
     Raises:
-        ValueError: an id is out of range or not a moving robot in ``view``.
+        ContractError: an id is out of range or not a moving robot in ``view``.
     """
     return Decider(shape, params).decide(view, ids, tick)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.metrics import Outcome, TickMetrics, run_summary
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
@@ -31,7 +32,7 @@ def summary_of(sim: Simulation, wall_seconds: float = 0.0, stopped: Outcome | No
     instead (``Outcome.INTERRUPTED``); its record describes the run up to the current tick."""
     outcome = sim.outcome or stopped
     if outcome is None:
-        raise RuntimeError("the run has not ended yet")
+        raise ContractError("the run has not ended yet")
     return summarize(shape=sim.shape, params=sim.params, state=sim.state, final=sim.metrics, outcome=outcome,
                      engine=INPROCESS, wall_seconds=wall_seconds, losses=sim.losses)
 

@@ -23,12 +23,12 @@ from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
 from swarm_ros.artifacts.recording_options import RecordingOptions
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome, TickMetrics
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol.cdr import Cloud
-from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.monitoring import MonitorCore
-from swarm_ros.protocol.status import RunFailed
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.bag_resume import resume

@@ -32,14 +32,15 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core import regions
+from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
-from swarm_ros.protocol.checks import Rejected, Rejections, apply_robots, checked_robots
+from swarm_ros.protocol.checks import Rejections, apply_robots, checked_robots
 from swarm_ros.protocol.rows import batch_label, decision_rows, pose_of
-from swarm_ros.protocol.status import RunFailed, has_ended
+from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.node_params import make_node, read_parameters
@@ -98,7 +99,7 @@ class RobotBatchNode:
             return  # an older snapshot (latched from an earlier restart of this batch)
         try:
             self.replica.load(tick, rows["id"], rows["state"], **pose_of(rows))
-        except ValueError as exc:
+        except ContractError as exc:
             raise RunFailed(f"snapshot of tick {tick}: {exc}") from None
         while self.replica.tick + 1 in self.early:  # rows published after the snapshot was taken
             self._apply(self.replica.tick + 1, self.early.pop(self.replica.tick + 1))

@@ -25,16 +25,17 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.signals import PARENT_ENV, process_age
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checkpoint import Checkpoint, Saved
-from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR, WORLD
-from swarm_ros.protocol.status import RunFailed, Status
+from swarm_ros.protocol.status import Status
 from swarm_ros.protocol.world_port import Policy
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
@@ -109,7 +110,7 @@ class WorldNode:
             self.saver = Checkpoint(path, n, self.params.max_ticks, cols, self.policy.monitor_window + 2,
                                     self.shape.dims)
             self.saver.create()
-        except (OSError, ValueError) as exc:
+        except OSError as exc:
             raise RunFailed(f"checkpoint {path}: {getattr(exc, 'strerror', None) or exc}") from None
         return None
 

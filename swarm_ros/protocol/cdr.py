@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarm_ros.protocol.checks import Rejected
+from swarm_ros.core.errors import Rejected
 from swarm_ros.protocol.rows import FRAME_ID, TICK_SECONDS, is_tag, point_fields
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  #: CDR, little-endian (the only encoding read here)

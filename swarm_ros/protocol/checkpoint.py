@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from swarm_ros.core.errors import RunFailed
 from swarm_ros.protocol.rows import decision_row, robot_row
 
 MAGIC = 0x5357524D434B5031  # "SWRMCKP1"
@@ -169,7 +170,7 @@ class Checkpoint:
         (made again, empty, if that world was killed while making it).
 
         Raises:
-            ValueError: the file is not a checkpoint of a run of this size.
+            RunFailed: the file is not a checkpoint of a run of this size.
         """
         path = Path(path)
         raw = np.fromfile(path, dtype=np.int64, count=_HEADER)
@@ -179,12 +180,12 @@ class Checkpoint:
             ck.create()
             return ck
         if raw.size < _HEADER or raw[_H_MAGIC] != MAGIC:
-            raise ValueError(f"{path} is not a world checkpoint")
+            raise RunFailed(f"{path} is not a world checkpoint")
         if (int(raw[_H_ROBOTS]), int(raw[_H_TICKS]), int(raw[_H_COLS])) != (robots, max_ticks + 1, columns):
-            raise ValueError(f"{path} is the checkpoint of another run ({int(raw[_H_ROBOTS])} robots)")
+            raise RunFailed(f"{path} is the checkpoint of another run ({int(raw[_H_ROBOTS])} robots)")
         ck = cls(path, robots, max_ticks, columns, int(raw[_H_SLOTS]), dims)
         if path.stat().st_size != ck.size:
-            raise ValueError(f"{path} is not a whole world checkpoint")
+            raise RunFailed(f"{path} is not a whole world checkpoint")
         ck._map()
         return ck
 

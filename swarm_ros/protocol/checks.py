@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 from swarm_ros.protocol.rows import (
     PATCH_METRES,
     TICK_SECONDS,
@@ -27,7 +28,6 @@ from swarm_ros.protocol.rows import (
     region_row,
     robot_row,
 )
-from swarm_ros.protocol.status import RunFailed
 
 if TYPE_CHECKING:
     from swarm_ros.core.engine import Simulation
@@ -35,14 +35,6 @@ if TYPE_CHECKING:
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
 _NODE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")  # a ROS node name, as batch names are
-
-
-class Rejected(ValueError):
-    """A message that must be dropped: ``kind`` names the fault (a key of the counts)."""
-
-    def __init__(self, kind: str, detail: str = "") -> None:
-        super().__init__(f"{kind}: {detail}" if detail else kind)
-        self.kind = kind
 
 
 class Rejections:
@@ -79,7 +71,7 @@ def cloud(msg, dtype: np.dtype, max_rows: int, min_rows: int = 1) -> np.ndarray:
     """
     try:
         check_fields([(f.name, f.offset, f.datatype, f.count) for f in msg.fields], msg.point_step, dtype)
-    except ValueError as exc:
+    except ContractError as exc:
         raise Rejected("point layout", str(exc)) from None
     rows = int(msg.width) * int(msg.height)
     if msg.is_bigendian:
@@ -198,7 +190,7 @@ def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
         raise Rejected("inconsistent rows", why)
     try:
         replica.update(tick, rows["id"], rows["state"], **pose)
-    except ValueError as exc:  # checked above: a gap in those checks
+    except ContractError as exc:  # checked above: a gap in those checks
         raise RunFailed(str(exc)) from None
 
 

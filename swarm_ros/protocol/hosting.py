@@ -22,9 +22,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from swarm_ros.core.errors import Rejected
 from swarm_ros.core.regions import area, columns, format_strip, halo
 from swarm_ros.core.state import IS_MOVING
-from swarm_ros.protocol.checks import Rejected
 from swarm_ros.protocol.rows import PATCH_METRES, compact
 
 

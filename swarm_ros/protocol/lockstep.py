@@ -18,13 +18,13 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 from swarm_ros.core.rules import Decider, Decisions
 from swarm_ros.core.state import IS_MOVING
-from swarm_ros.protocol.checks import Rejected, Rejections, decisions_allowed
+from swarm_ros.protocol.checks import Rejections, decisions_allowed
 from swarm_ros.protocol.hosting import Hosting, snapshot
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
-from swarm_ros.protocol.status import RunFailed
 from swarm_ros.protocol.world_port import (
     FINAL_WAIT,
     FIRST_STALL_S,
@@ -246,7 +246,7 @@ class Lockstep(WorldStatus, WorldRestore):
         localized_before, losses_before = self.sim.metrics.localized, len(self.sim.losses)
         try:
             self.sim.apply(decisions)
-        except ValueError as exc:
+        except ContractError as exc:
             raise RunFailed(f"tick {tick}: {exc}") from None
         if self.pending.size:
             count = self.sim.remove(self.pending)

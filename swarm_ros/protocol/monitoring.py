@@ -20,6 +20,7 @@ from typing import Protocol
 
 import numpy as np
 
+from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, tick_metrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.replica import Replica
@@ -29,7 +30,7 @@ from swarm_ros.core.state import STATE_COUNT, RobotState
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import apply_robots, checked_robots
-from swarm_ros.protocol.status import RunFailed, WorldReport, restart_event
+from swarm_ros.protocol.status import WorldReport, restart_event
 
 STATUS_WAIT = 5.0  #: seconds to wait for the world's outcome after the monitor saw the end (and the reverse)
 BAG_WAIT = 1.0  #: seconds to wait, after the end, for the last tick's decisions to reach the bag

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarm_ros.core.errors import ContractError
+
 if TYPE_CHECKING:  # the rules load numba: readers of rows (the launcher's progress) do without it
     from swarm_ros.core.rules import Decisions
 
@@ -109,13 +111,13 @@ def is_tag(text: str) -> bool:
 
 
 def check_fields(fields: list[tuple[str, int, int, int]], point_step: int, dtype: np.dtype) -> None:
-    """Raise ValueError unless a message's fields and point step are exactly those of ``dtype``, and a
+    """Raise ContractError unless a message's fields and point step are exactly those of ``dtype``, and a
     last field that holds nothing (count 0) and is named by a tag, which is skipped."""
     fields = list(fields)
     if fields and fields[-1][3] == 0 and is_tag(fields[-1][0]):
         fields.pop()
     if point_step != dtype.itemsize or fields != point_fields(dtype):
-        raise ValueError(f"unexpected point layout {fields} (step {point_step}); "
+        raise ContractError(f"unexpected point layout {fields} (step {point_step}); "
                          f"expected {point_fields(dtype)} (step {dtype.itemsize})")
 
 

@@ -32,10 +32,6 @@ def has_ended(outcome: str | None) -> bool:
     return outcome is not None and outcome not in NOT_ENDED
 
 
-class RunFailed(Exception):
-    """The run cannot go on (not bad input: something the graph did)."""
-
-
 @dataclass
 class Status:
     """One /swarm/status message's content: the tick it speaks for, the outcome (or run state), a line

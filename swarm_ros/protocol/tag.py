@@ -27,7 +27,7 @@ import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from swarm_ros.protocol.checks import Rejected
+from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.protocol.plan import BATCHES, DECISIONS, METRICS, MONITOR, WORLD
 from swarm_ros.protocol.rows import TAG_PREFIX
 
@@ -146,7 +146,7 @@ class Sealer:
         found = [(k, at) for k, part in enumerate(parts) if isinstance(part, bytes | bytearray)
                  and (at := part.find(mark)) >= 0]
         if not found:
-            raise ValueError("the message does not hold its blank tag")
+            raise ContractError("the message does not hold its blank tag")
         k, at = found[0]
         mac = _mac(self.key, topic, parts)  # the MAC's digits are zeros (BLANK) meanwhile, as mac_of reads them
         at += len(mark) - MAC_CHARS

@@ -19,6 +19,7 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import ContractError, RunFailed
 from swarm_ros.core.metrics import Outcome, TickMetrics, outcome_of
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.checkpoint import Saved
@@ -94,16 +95,19 @@ class WorldRestore:
         restart too, at the same tick.
 
         Raises:
-            ValueError: the checkpoint does not make a consistent swarm, or its bookkeeping is missing.
+            RunFailed: the checkpoint does not make a consistent swarm, or its bookkeeping is missing.
         """
         b, rows = saved.book, saved.robots
         if "batches" not in b:
-            raise ValueError("the checkpoint's bookkeeping is missing")
+            raise RunFailed("the checkpoint's bookkeeping is missing")
         tick = saved.tick
         pose = pose_of(rows)
-        self.sim.restore(tick, pose["x"], pose["y"], pose["heading"], rows["state"], saved.history,
-                         [tuple(x) for x in b["losses"]], self._saved_outcome(saved.history, rows), pose.get("z"),
-                         pose.get("pitch"))
+        try:
+            self.sim.restore(tick, pose["x"], pose["y"], pose["heading"], rows["state"], saved.history,
+                             [tuple(x) for x in b["losses"]], self._saved_outcome(saved.history, rows), pose.get("z"),
+                             pose.get("pitch"))
+        except ContractError as exc:
+            raise RunFailed(f"the checkpoint of tick {tick}: {exc}") from None
         self.batch_names = list(b["batches"])
         self.hosting.restore(b["strips"])
         self.restart_counts, self.incarnations = list(b["restart_counts"]), list(b["incarnations"])

@@ -9,11 +9,12 @@ from collections import deque
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.plan import MONITOR
-from swarm_ros.protocol.status import RUNNING, STARTING, RunFailed, Status, restarts_text
+from swarm_ros.protocol.status import RUNNING, STARTING, Status, restarts_text
 from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S
 
 

@@ -31,8 +31,9 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Int64MultiArray, MultiArrayDimension
 
+from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.protocol.cdr import TAG_DATATYPE, cloud_parts, decode_cloud
-from swarm_ros.protocol.checks import Rejected, Rejections
+from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.plan import BATCHES
 from swarm_ros.protocol.rows import TAG_PREFIX, is_tag, parse_batch_label
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
@@ -51,7 +52,7 @@ def put_tag(msg, tag: str) -> None:
     elif isinstance(msg, Int64MultiArray):
         msg.layout.dim.append(MultiArrayDimension(label=tag, size=1, stride=1))
     else:
-        raise TypeError(f"a {type(msg).__name__} carries no tag")
+        raise ContractError(f"a {type(msg).__name__} carries no tag")
 
 
 def take_tag(msg) -> str:
@@ -77,7 +78,7 @@ class Signer:
 
     def publisher(self, msg_type, topic: str, qos) -> SignedPublisher:
         if msg_type not in TAGGED_TYPES:
-            raise TypeError(f"a {msg_type.__name__} carries no tag: publish {topic} with a plain publisher")
+            raise ContractError(f"a {msg_type.__name__} carries no tag: publish {topic} with a plain publisher")
         return SignedPublisher(self.sealer, self.node.create_publisher(msg_type, topic, qos), topic)
 
 
@@ -137,7 +138,7 @@ class Gate:
         A PointCloud2 reaches ``handler`` read in place (:func:`swarm_ros.protocol.cdr.decode_cloud`), not as
         a message object. Returns the subscription."""
         if msg_type not in TAGGED_TYPES:
-            raise TypeError(f"a {msg_type.__name__} carries no tag: nothing on {topic} can be proven")
+            raise ContractError(f"a {msg_type.__name__} carries no tag: nothing on {topic} can be proven")
 
         def on_message(data: bytes) -> None:
             self.received += 1

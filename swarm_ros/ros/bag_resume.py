@@ -21,8 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarm_ros.artifacts.run_dir import BAG_DIR
-from swarm_ros.protocol.checks import Rejected
-from swarm_ros.protocol.status import RunFailed
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.bag_writer import BagRecorder, unfinished_messages
 

@@ -104,7 +104,7 @@ def cloud_rows(msg: PointCloud2, dtype: np.dtype) -> np.ndarray:
     """The records of a PointCloud2 of ``dtype`` rows, none or more (a read-only view of its bytes).
 
     Raises:
-        ValueError: (:class:`swarm_ros.protocol.checks.Rejected`) the message's layout is not ``dtype``'s.
+        Rejected: the message's layout is not ``dtype``'s.
     """
     return cloud(msg, dtype, max_rows=sys.maxsize, min_rows=0)
 

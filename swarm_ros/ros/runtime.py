@@ -22,9 +22,8 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import get_default_context
 
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError, RunFailed
 from swarm_ros.core.signals import EXIT_INTERRUPTED, PARENT_ENV, StopFlag, process_age
-from swarm_ros.protocol.status import RunFailed
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ORPHANED = 0, 1, 2, 129  # and EXIT_INTERRUPTED, 130 (core.signals)
 #: The ROS arguments of the command line's own short-lived nodes (the launcher's progress bar, topics, replay):
@@ -142,7 +141,7 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
                                      f"({time.process_time():.2f} s of CPU)")
         code = EXIT_OK if swarm.finished or not stop.signum else \
             EXIT_ORPHANED if stop.signum == signal.SIGHUP else EXIT_INTERRUPTED
-    except SwarmError as exc:
+    except InputError as exc:
         code = _fail(name, str(exc), EXIT_USAGE)
     except RunFailed as exc:
         code = _fail(name, str(exc), EXIT_FAILED)
@@ -155,7 +154,7 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         if swarm is not None:
             try:
                 swarm.close(code)
-            except (SwarmError, OSError) as exc:  # closing its files failed (a full disk)
+            except (InputError, OSError) as exc:  # closing its files failed (a full disk)
                 if code == EXIT_OK:
                     code = _fail(name, f"while closing: {exc}", EXIT_FAILED)
                 else:  # the error already said is the one the launcher reports; this one goes to the log

@@ -17,14 +17,14 @@ import sys
 import time
 from pathlib import Path
 
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import InputError
 from swarm_ros.ros.graph import message_class
 from swarm_ros.ros.runtime import TOOL_ROS_ARGS
 
 _ACK_WAIT_S = 2.0  # seconds to let readers acknowledge the last messages before exiting
 
 
-class ReplayError(SwarmError):
+class ReplayError(InputError):
     """The bag cannot be replayed (not a bag, unreadable, or a message type that is not installed)."""
 
 

@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from swarm_ros.core.errors import SwarmError
+from swarm_ros.core.errors import ContractError, InputError
 from swarm_ros.protocol.rows import ROW_TYPES, VOXEL_ROW, check_fields
 from swarm_ros.ros.graph import message_class
 from swarm_ros.ros.runtime import TOOL_ROS_ARGS
@@ -31,7 +31,7 @@ _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
 def _message_class(type_name: str) -> type:
     found = message_class(type_name)
     if found is None:
-        raise SwarmError(f"message type {type_name} is not installed here")
+        raise InputError(f"message type {type_name} is not installed here")
     return found
 
 
@@ -71,7 +71,7 @@ def decoded_rows(msg: object, full: bool = False) -> str:
     for dtype in (*ROW_TYPES, VOXEL_ROW):  # a 2D or 3D run's rows, or a 3D world's voxels
         try:
             check_fields(fields, msg.point_step, dtype)
-        except ValueError:
+        except ContractError:
             continue
         rows = np.frombuffer(msg.data, dtype=dtype)
         names = [n for n in dtype.names if n != "z" or "pitch" in dtype.names or dtype is VOXEL_ROW]
@@ -177,7 +177,7 @@ def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: 
                        until=lambda: inspector.node.count_publishers(topic) > 0 and topic in inspector.topics())
     topics = inspector.topics()
     if topic not in topics or inspector.node.count_publishers(topic) == 0:
-        raise SwarmError(f"no publisher of {topic} on this domain within {wait:g} s "
+        raise InputError(f"no publisher of {topic} on this domain within {wait:g} s "
                          f"(topics seen: {', '.join(sorted(topics)) or 'none'})")
     got: list[object] = []
     inspector.node.create_subscription(_message_class(topics[topic]), topic, got.append,
