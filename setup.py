@@ -40,7 +40,7 @@ setup(
         "ruamel.yaml>=0.18",  # the bag's metadata.yaml, as rosbags writes it
         "dask[distributed]>=2024.1",
     ],
-    extras_require={"test": ["pytest>=8", "hypothesis>=6.100", "mcap-ros2-support>=0.6"]},
+    extras_require={"test": ["pytest>=8", "pytest-xdist>=3.5", "hypothesis>=6.100", "mcap-ros2-support>=0.6"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
     entry_points={"console_scripts": [
         "swarm-ros = swarm_ros.app.main:entry",

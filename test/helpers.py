@@ -262,6 +262,12 @@ def processes_mentioning(text: str) -> list[int]:
     return _processes_where("cmdline", lambda cmdline: text in cmdline)
 
 
+def run_processes(out: Path) -> list[int]:
+    """Pids of the node processes of the run writing ``out`` (their parameter files are in its hidden logs
+    folder), and of no other run on the machine, a test running beside this one included."""
+    return processes_mentioning(f"{out.absolute().parent}/.{out.name}.logs-")
+
+
 def assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
     """``got`` (a ROS run; ``launched``: by ``swarm-ros run``) equals ``ref`` (``simulate``) but for timings."""
     assert (ref / "metrics.csv").read_bytes() == (got / "metrics.csv").read_bytes()
@@ -294,7 +300,7 @@ def node_pid(out: Path, node: str, timeout: float = 60, not_pid: int | None = No
     """The pid of the process running ``node`` for the run into ``out`` (a new one if ``not_pid`` is given)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        for pid in processes_mentioning(f".{out.name}.logs-"):
+        for pid in run_processes(out):
             try:
                 cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
             except OSError:
@@ -398,6 +404,24 @@ def small_config(tmp_path: Path, **over) -> Path:
 def children_of(pid: int) -> list[int]:
     """Pids of the processes whose parent is ``pid``."""
     return _processes_where("stat", lambda stat: int(stat.rsplit(")", 1)[1].split()[1]) == pid)
+
+
+def descendants_of(pid: int) -> list[int]:
+    """Pids of ``pid``'s children, their children, and so on."""
+    found, todo = [], [pid]
+    while todo:
+        kids = children_of(todo.pop())
+        found += kids
+        todo += kids
+    return found
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (not gone, not a zombie)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
 
 
 # -- from test_engine.py -----------------------------------------------------------------------------------------

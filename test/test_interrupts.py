@@ -14,9 +14,19 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import Recording, children_of, processes_mentioning, rrd_verify, small_config
+from helpers import (
+    Recording,
+    alive,
+    children_of,
+    descendants_of,
+    processes_mentioning,
+    rrd_verify,
+    run_processes,
+    small_config,
+)
 
 from swarm_ros.app.results_file import read_results
+from swarm_ros.ros.shm import shm_locks
 
 pytestmark = pytest.mark.process
 
@@ -79,12 +89,14 @@ def test_sigterm_to_a_ros2_experiment_stops_the_graphs_of_its_workers(tmp_path):
     proc = subprocess.Popen([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(tmp_path / "exp"),
                              "--engine", "ros2", "--jobs", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    _wait_for(lambda: bool(processes_mentioning("swarm_ros-exp-")))  # a worker's graph is up
+    mentioning = lambda: set(processes_mentioning("swarm_ros-exp-"))  # a worker's graph, of any experiment
+    _wait_for(lambda: mentioning() & set(descendants_of(proc.pid)))  # this one's graph is up
+    family = descendants_of(proc.pid)
     start = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
-    _wait_for(lambda: not processes_mentioning("swarm_ros-exp-"), timeout=5)
+    _wait_for(lambda: not any(alive(pid) for pid in family), timeout=5)
     assert time.monotonic() - start < 5
     assert "Traceback" not in err
 
@@ -224,11 +236,17 @@ def test_sigterm_to_topics_closes_its_participant_and_leaves_no_log_file(tmp_pat
     env.pop("ROS_LOG_DIR", None)
     proc = subprocess.Popen([PY, "-m", "swarm_ros", "topics", "--echo", "/swarm/metrics", "--seconds", "20"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(2)  # waiting for the topic
+    held: set[str] = set()  # the shared-memory files it uses (none with the UDP transport swarm_ros sets)
+    waiting = time.monotonic() + 2  # waiting for the topic
+    while time.monotonic() < waiting:
+        held |= shm_locks(proc.pid)
+        time.sleep(0.1)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and err.strip() == "swarm-ros: interrupted", err
-    left = {f for f in set(os.listdir("/dev/shm")) - before if str(proc.pid) in f or f.startswith("fastrtps_")}
+    # what it held, and any new file named after it (other tests' runs may make files meanwhile)
+    made = {f"/dev/shm/{f}" for f in set(os.listdir("/dev/shm")) - before if str(proc.pid) in f}
+    left = {f for f in made | held | {el.removesuffix("_el") for el in held} if os.path.exists(f)}
     assert not left, left
     assert not list(home.rglob("*.log")), list(home.rglob("*"))
 
@@ -251,7 +269,7 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
     proc.kill()
     proc.communicate(timeout=30)
 
-    _wait_for(lambda: not processes_mentioning(".run.logs-"), timeout=30)  # the nodes die with it
+    _wait_for(lambda: not run_processes(tmp_path / "run"), timeout=30)  # the nodes die with it
     left = [f for f in listed() if os.path.exists(f)]
     assert left, "a SIGKILLed launcher left no shared-memory file: nothing to test"
     hidden = list(tmp_path.glob(".run.logs-*"))

@@ -24,11 +24,13 @@ import pytest
 from helpers import (
     STAR_LOCAL,
     Recording,
+    alive,
     assert_identical_run,
     node_pid,
     processes_mentioning,
     rrd_verify,
     run_env,
+    run_processes,
     saved_tick,
     wait_saved,
     wait_ticks_recorded,
@@ -212,7 +214,7 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
     held: set[str] = set()
 
     def look() -> None:
-        for pid in [launcher.pid, *processes_mentioning(f".{out.name}.logs-")]:
+        for pid in [launcher.pid, *run_processes(out)]:
             held.update(shm_locks(pid))
 
     def listed() -> set[str]:  # what the launcher has seen of its processes' shared memory (its list, in the logs)
@@ -223,7 +225,7 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
     deadline = time.monotonic() + 60
     # every node process (world, monitor, 3 batches) has its participant's segments, and the launcher lists them
     while time.monotonic() < deadline and not (
-            len(nodes := processes_mentioning(f".{out.name}.logs-")) == 5
+            len(nodes := run_processes(out)) == 5
             and all(locks := [shm_locks(p) for p in nodes]) and set().union(*locks) <= listed()):
         look()
         time.sleep(0.1)
@@ -248,11 +250,11 @@ def test_every_node_ends_within_2_s_of_a_sigkilled_launcher(tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
     wait_ticks_recorded(out, 200_000)
-    nodes = processes_mentioning(f".{out.name}.logs-")
+    nodes = run_processes(out)
     assert len(nodes) == 5
     launcher.kill()
     killed = time.monotonic()
-    while any(Path(f"/proc/{pid}").exists() and _alive(pid) for pid in nodes) and time.monotonic() - killed < 10:
+    while any(Path(f"/proc/{pid}").exists() and alive(pid) for pid in nodes) and time.monotonic() - killed < 10:
         time.sleep(0.01)
     took = time.monotonic() - killed
     launcher.communicate()
@@ -268,13 +270,6 @@ def test_every_node_ends_within_2_s_of_a_sigkilled_launcher(tmp_path):
     with AnyReader([tmp_path / "run.partial-bag"]) as reader:
         robots = [c for c in reader.connections if c.topic == "/swarm/robots"]
         assert robots and sum(1 for _ in reader.messages(connections=robots)) >= 1
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_path):

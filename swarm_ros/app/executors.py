@@ -172,6 +172,10 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
     from dask.distributed import Client, LocalCluster
 
     cluster = client = None
+    quiet_after_interrupt = _QuietAfterInterrupt()
+    tornado_log = logging.getLogger("tornado.application")
+    tornado_log.addFilter(quiet_after_interrupt)
+    handlers = quiet_after_interrupt.watch()
     try:
         if scheduler:
             try:
@@ -192,10 +196,56 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
             _check_ros_workers(client)
         yield client
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        try:
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
+        finally:
+            tornado_log.removeFilter(quiet_after_interrupt)
+            quiet_after_interrupt.unwatch(handlers)
+
+
+class _QuietAfterInterrupt:
+    """Drops the error records of Dask's event loop once the user interrupted the experiment.
+
+    A Ctrl-C that lands while the client waits on its loop (``distributed.utils.sync``) makes the loop log a
+    traceback of its own (a ``NameError`` in the cancel callback of distributed 2026.8): noise, not a fault of
+    the run, printed after the command already said it was interrupted. Until then nothing is dropped.
+    """
+
+    def __init__(self) -> None:
+        self.interrupted = False
+
+    def filter(self, record: object) -> bool:
+        return not self.interrupted
+
+    def watch(self) -> dict:
+        """Note a SIGINT or SIGTERM before its handler raises (the loop logs as soon as the raise reaches the
+        wait); the handlers before, to give back to :meth:`unwatch`. Nothing in a thread other than the main."""
+        import signal
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return {}
+        before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+        before = {sig: handler for sig, handler in before.items() if callable(handler)}  # Python's, not the OS's
+
+        def noted(signum: int, frame: object) -> None:
+            self.interrupted = True
+            before[signum](signum, frame)
+
+        for sig in before:
+            signal.signal(sig, noted)
+        return before
+
+    @staticmethod
+    def unwatch(before: dict) -> None:
+        import signal
+
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
 
 
 @contextmanager
