@@ -406,6 +406,19 @@ def children_of(pid: int) -> list[int]:
     return _processes_where("stat", lambda stat: int(stat.rsplit(")", 1)[1].split()[1]) == pid)
 
 
+def shm_left(files) -> list[str]:
+    """Those of the Fast DDS shared-memory ``files`` that still exist and that no live process uses: left
+    behind. A port's files (``fastrtps_portN``) are shared by every participant on that port, so a run or test
+    beside this one may rightly still hold them."""
+    from swarm_ros.ros.shm import in_use
+
+    def group(path: str) -> set[str]:
+        segment = path.removesuffix("_el")
+        return {segment, f"{segment}_el", f"/dev/shm/sem.{Path(segment).name}_mutex"}
+
+    return sorted(f for f in files if os.path.exists(f) and not in_use(group(f)))
+
+
 def descendants_of(pid: int) -> list[int]:
     """Pids of ``pid``'s children, their children, and so on."""
     found, todo = [], [pid]

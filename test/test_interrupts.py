@@ -22,6 +22,7 @@ from helpers import (
     processes_mentioning,
     rrd_verify,
     run_processes,
+    shm_left,
     small_config,
 )
 
@@ -131,6 +132,7 @@ def test_sigterm_to_run_as_tick_0_goes_out_keeps_the_ticks_the_world_sent(tmp_pa
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
+    assert (out / "summary.json").exists(), err
     summary = json.loads((out / "summary.json").read_text())
     assert summary["outcome"] == "interrupted"
     assert f"interrupted at tick {summary['convergence_tick']}; the run so far is in {out}" in err
@@ -246,7 +248,7 @@ def test_sigterm_to_topics_closes_its_participant_and_leaves_no_log_file(tmp_pat
     assert proc.returncode == 130 and err.strip() == "swarm-ros: interrupted", err
     # what it held, and any new file named after it (other tests' runs may make files meanwhile)
     made = {f"/dev/shm/{f}" for f in set(os.listdir("/dev/shm")) - before if str(proc.pid) in f}
-    left = {f for f in made | held | {el.removesuffix("_el") for el in held} if os.path.exists(f)}
+    left = shm_left(made | held | {el.removesuffix("_el") for el in held})
     assert not left, left
     assert not list(home.rglob("*.log")), list(home.rglob("*"))
 
@@ -265,7 +267,8 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
         return [f for logs in tmp_path.glob(".run.logs-*") if (logs / "shm-files").exists()
                 for f in (logs / "shm-files").read_text().split()]
 
-    _wait_for(lambda: len(listed()) >= 4, timeout=120)  # every node is up and its files listed
+    # every node is up and its files listed, and the monitor has begun the recording (which must then stay)
+    _wait_for(lambda: len(listed()) >= 4 and (tmp_path / "run.partial.rrd").exists(), timeout=120)
     proc.kill()
     proc.communicate(timeout=30)
 
@@ -281,4 +284,4 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
     assert "run.partial.rrd: left by an earlier run" in again.stderr
     assert not list(tmp_path.glob(".run.logs-*")) and (tmp_path / "run.logs" / "world.log").is_file()
     assert not list((tmp_path / "run.logs").glob("world.checkpoint*"))
-    assert [f for f in left if os.path.exists(f)] == []
+    assert shm_left(left) == []

@@ -32,6 +32,7 @@ from helpers import (
     run_env,
     run_processes,
     saved_tick,
+    shm_left,
     wait_saved,
     wait_ticks_recorded,
 )
@@ -242,7 +243,7 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
     for el in held:
         segment = el.removesuffix("_el")
         files |= {el, segment, f"/dev/shm/sem.{Path(segment).name}_mutex"}
-    left = sorted(p for p in files if os.path.exists(p))
+    left = shm_left(files)
     assert left == [], f"left in /dev/shm: {left}"
 
 

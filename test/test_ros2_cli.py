@@ -298,6 +298,12 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
         assert ros.run("ros2 param get /world max_restarts").stdout.strip() == "Integer value is: 3"
         assert ros.run("ros2 param get /monitor out_dir").stdout.strip() == f"String value is: {out}"
         assert ros.run("ros2 param get /robot_batch_1 batch").stdout.strip() == "Integer value is: 1"
+        described = ros.run("ros2 param describe /world wiggle_deg").stdout
+        for line in ("Type: double", "Description: max turn per tick, degrees", "Read only: true",
+                     "Min value: 0.0", "Max value: 180.0", "Additional constraints: a number >= 0 and <= 180"):
+            assert line in described, described
+        refused = ros.run("ros2 param set /world seed 3").stderr
+        assert "Setting parameter failed: Trying to set a read-only parameter: seed." in refused, refused
     finally:
         ctrl_c(proc)
         proc.wait(timeout=60)

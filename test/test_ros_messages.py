@@ -17,9 +17,9 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.core import RunParams, Shape, Simulation
-from swarm_ros.core.errors import ConfigError, ContractError
+from swarm_ros.core.errors import ConfigError, Rejected
 from swarm_ros.core.metrics import METRIC_COLUMNS
-from swarm_ros.core.params import Settings
+from swarm_ros.core.params import RUN_PARAMETERS, Settings
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, robot_rows
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.node_params import read_parameters
@@ -38,7 +38,7 @@ def test_robot_rows_survive_serialization_exactly_and_carry_the_tick():
     assert (msg.width, msg.point_step, msg.row_step) == (1036, 40, 1036 * 40)
     got = msgs.cloud_rows(msg, ROBOT_ROW)
     assert got.tobytes() == sent.tobytes()
-    with pytest.raises(ContractError, match="unexpected point layout"):
+    with pytest.raises(Rejected, match="unexpected point layout"):
         msgs.cloud_rows(msg, DECISION_ROW)
 
 
@@ -138,3 +138,34 @@ def test_a_p_argument_wins_over_the_shipped_parameter_file(kind):
         rclpy.shutdown(context=context)
     assert run.seed == 7
     assert {name: own[name] for name in given} == given
+
+
+def test_every_parameter_is_declared_with_its_descriptor_read_only_with_its_range(ros_context):
+    """What `ros2 param describe` shows comes from the declaration: meaning, type, the values it takes in words,
+    the range of a bounded number, read-only; the node's values are the checked ones."""
+    from rcl_interfaces.msg import ParameterType
+
+    from swarm_ros.core.params import NODE_PARAMETERS
+
+    node = _node(ros_context, "world", robots=500, vision_radius=2, seed=9)
+    run, own = read_parameters(node, "world")
+    params = (*RUN_PARAMETERS, *NODE_PARAMETERS["world"])
+    described = dict(zip([p.name for p in params], node.describe_parameters([p.name for p in params])))
+    for p in params:
+        d = described[p.name]
+        assert (d.description, d.additional_constraints, d.read_only) == (p.help, p.describe(), True), p.name
+        ranges = list(d.integer_range) + list(d.floating_point_range)
+        if p.kind in (int, float) and not p.blank and (p.low is not None or p.high is not None):
+            (r,) = ranges
+            assert (p.low is None or r.from_value == p.low) and (p.high is None or r.to_value == p.high), p.name
+        else:
+            assert ranges == [], p.name
+    assert described["seed"].type == ParameterType.PARAMETER_INTEGER
+    assert described["vision_radius"].type == ParameterType.PARAMETER_DOUBLE
+    assert (described["wiggle_deg"].floating_point_range[0].from_value,
+            described["wiggle_deg"].floating_point_range[0].to_value) == (0.0, 180.0)
+    assert node.get_parameter("vision_radius").value == 2.0 and node.get_parameter("seed").value == 9
+    assert node.get_parameter("max_restarts").value == own["max_restarts"] == 3  # not overridden: the default
+    refused = node.set_parameters([Parameter("seed", value=3)])[0]
+    assert not refused.successful and "read-only" in refused.reason
+    node.destroy_node()

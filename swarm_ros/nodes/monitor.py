@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,7 @@ from swarm_ros.ros.bag_writer import TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED, handle_missed, run_node, take_waiting
 
+LATE_TICK_0_S = 1.0  # seconds an interrupted monitor with no tick yet waits for a world's latched ones
 _MATCH_POLL = 0.005  # seconds between looks at the readers' matches, before the liveliness writer appears
 
 
@@ -211,9 +213,14 @@ class MonitorNode:
         if self.written is not None or core is None:
             return
         if code == EXIT_INTERRUPTED and core.outcome is None:
-            # stopped while loading or behind: what the world sent is the run so far (it waits in the readers)
+            # stopped while loading or behind: what the world sent is the run so far (it waits in the readers). Just
+            # loaded, the world's latched tick 0 may still be on its way: waited for while a world is there
+            deadline = time.monotonic() + LATE_TICK_0_S
             try:
                 handle_missed(self.node)
+                while not core.rows and time.monotonic() < deadline and self.node.count_publishers(msgs.ROBOTS):
+                    time.sleep(0.02)
+                    handle_missed(self.node)
             except RunFailed as exc:
                 self.node.get_logger().error(f"while taking the ticks already sent: {exc}")
         unstarted = code == EXIT_INTERRUPTED and not core.rows and not self.incarnation  # holds nothing of a run

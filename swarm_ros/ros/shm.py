@@ -27,7 +27,7 @@ def shm_locks(pid: int | str) -> set[str]:
     return found
 
 
-def _in_use(paths: set[str]) -> set[str]:
+def in_use(paths: set[str]) -> set[str]:
     """Those of ``paths`` that a live process has mapped or open (every process's /proc maps and fds)."""
     used: set[str] = set()
     for proc in Path("/proc").iterdir():
@@ -73,7 +73,7 @@ def clean_shm(lock_files: set[str]) -> list[str]:
         except OSError:
             continue  # locked: a live process owns it
         groups.append((segment, el, str(SHM_DIR / f"sem.{Path(segment).name}_mutex")))
-    used = _in_use({path for group in groups for path in group}) if groups else set()
+    used = in_use({path for group in groups for path in group}) if groups else set()
     removed = []
     for group in groups:
         if used.intersection(group):
