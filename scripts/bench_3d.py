@@ -14,7 +14,7 @@ each in a fresh process pinned to one CPU. It reports each tree's median rate an
 ratio this tree / DIR (median and range over the rounds): the 3D model must leave 2D
 within 10% of its speed. Compare ratios within one run: the machines are shared and noisy.
 
-    .venv/bin/python scripts/bench_3d.py [--seeds 3] [--before /tmp/before --rounds 5]
+    .venv/bin/python scripts/bench_3d.py [--seeds 3] [--before /tmp/before --rounds 5] [--smoke]
 """
 
 from __future__ import annotations
@@ -81,18 +81,19 @@ def ball_world(robots: int, density: float):
     return Shape(name=f"ball{robots}", mask=mask.reshape(world.grid_shape), world=world, source="bench ball")
 
 
-def bench_3d(seeds: int) -> None:
+def bench_3d(seeds: int, smoke: bool = False) -> None:
     from swarm_ros.core import RunParams, Shape, Simulation
 
     torus = Shape.load("torus")
-    ball = ball_world(10_000, torus.patches / torus.free_patches)
-    for rules in RULES:
+    balls, ticks = (1_000, 20) if smoke else (10_000, 200)
+    ball = ball_world(balls, torus.patches / torus.free_patches)
+    cases = [("torus 1348, first 2000 ticks", torus, 1348, 2000), ("torus 1348, whole run", torus, 1348, None)]
+    cases = cases[:1] if smoke else cases
+    cases.append((f"ball {balls:,} (world {ball.world.size}^3), {ticks} ticks", ball, balls, ticks))
+    for rules in RULES[:1] if smoke else RULES:
         Simulation(torus, RunParams(robots=50, max_ticks=3, rules=rules)).run()
         print(f"\nrules {rules}:")
-        for label, shape, robots, ticks in (("torus 1348, first 2000 ticks", torus, 1348, 2000),
-                                            ("torus 1348, whole run", torus, 1348, None),
-                                            (f"ball 10,000 (world {ball.world.size}^3), 200 ticks", ball, 10_000,
-                                             200)):
+        for label, shape, robots, ticks in cases:
             runs = sorted((_timed(Simulation(shape, RunParams(robots, seed=s, rules=rules)), ticks)
                            for s in range(1, seeds + 1)), key=lambda r: r[2] / r[0])
             secs, n, steps = runs[len(runs) // 2]
@@ -129,7 +130,11 @@ def main() -> int:
     ap.add_argument("--before", type=Path, help="a checkout of the release before 3D: compare 2D speed with it")
     ap.add_argument("--rounds", type=int, default=5, help="alternating rounds of the 2D comparison")
     ap.add_argument("--measure-2d", action="store_true", help=argparse.SUPPRESS)  # a child of --before
+    ap.add_argument("--smoke", action="store_true",
+                    help="one seed, small cases: checks the script runs (test_scripts.py); its numbers mean nothing")
     args = ap.parse_args()
+    if args.smoke:
+        args.seeds = 1
     pinned = _pin()
     if args.measure_2d:
         import swarm_ros
@@ -137,8 +142,9 @@ def main() -> int:
         print(swarm_ros.__file__)  # the tree measured: the parent checks it
         print(json.dumps(measure_2d(args.seeds)))
         return 0
-    print(f"swarm_ros 3D engine benchmark ({pinned}; median of {args.seeds} seeds)")
-    bench_3d(args.seeds)
+    smoke = "; --smoke: small cases, numbers that mean nothing" if args.smoke else ""
+    print(f"swarm_ros 3D engine benchmark ({pinned}; median of {args.seeds} seeds{smoke})")
+    bench_3d(args.seeds, args.smoke)
     if args.before is not None:
         compare_2d(args.before, args.rounds, args.seeds)
     return 0

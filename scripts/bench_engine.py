@@ -17,7 +17,7 @@ tick-cost table, which times each ``step()``. Pinned to one CPU. Compare the num
 ratios within one run: the machines are shared and noisy. Target (issue 11): at least
 3 M robot-steps/s for ``paper`` on the star.
 
-    .venv/bin/python scripts/bench_engine.py [--seeds 3] [--rules paper,local,literal]
+    .venv/bin/python scripts/bench_engine.py [--seeds 3] [--rules paper,local,literal] [--smoke]
 """
 
 from __future__ import annotations
@@ -86,8 +86,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     ap.add_argument("--seeds", type=int, default=3, help="repetitions of each case (median reported)")
     ap.add_argument("--rules", default=",".join(RULE_SETS), help="rule sets to measure (default: all)")
+    ap.add_argument("--smoke", action="store_true",
+                    help="one seed, small cases: checks the script runs (test_scripts.py); its numbers mean nothing")
     args = ap.parse_args()
     rule_sets = [r for r in args.rules.split(",") if r]
+    sizes, first_ticks = ((2_000,), 20) if args.smoke else ((10_000, 100_000), 200)
+    if args.smoke:
+        args.seeds = 1
     try:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
         pinned = "pinned to 1 CPU"
@@ -96,26 +101,27 @@ def main() -> int:
     star = Shape.load("star")
     for rules in rule_sets:  # compile / load the kernels
         Simulation(star, RunParams(robots=50, max_ticks=3, rules=rules)).run()
-    print(f"swarm_ros engine benchmark ({pinned}; median of {args.seeds} seeds)")
+    smoke = "; --smoke: small cases, numbers that mean nothing" if args.smoke else ""
+    print(f"swarm_ros engine benchmark ({pinned}; median of {args.seeds} seeds{smoke})")
 
     def median_case(label, make, ticks):
         runs = sorted((timed_run(make(seed), ticks) for seed in range(1, args.seeds + 1)),
                       key=lambda r: r[2] / r[0])
         return report(label, *runs[len(runs) // 2])
 
-    discs = {n: disc_world(n) for n in (10_000, 100_000)}
+    discs = {n: disc_world(n) for n in sizes}
     results = {}
     for rules in rule_sets:
         print(f"\nrules {rules}:")
-        first = median_case("star 1036, first 200 ticks",
-                            lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)), 200)
+        first = median_case(f"star 1036, first {first_ticks} ticks",
+                            lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)), first_ticks)
         whole = median_case("star 1036, whole run",
                             lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)), None)
         per_size = {1036: first}
         for n, shape in discs.items():
-            label = f"disc {n:,} (world {shape.world.size}^2), 200 ticks"
+            label = f"disc {n:,} (world {shape.world.size}^2), {first_ticks} ticks"
             per_size[n] = median_case(label, lambda s, sh=shape, n=n, r=rules:
-                                      Simulation(sh, RunParams(n, seed=s, rules=r)), 200)
+                                      Simulation(sh, RunParams(n, seed=s, rules=r)), first_ticks)
         print("  cost per robot-step across swarm sizes (first 200 ticks; flat = linear in N):")
         for n, rate in per_size.items():
             print(f"    {n:>7,} robots: {1e9 / rate:7.1f} ns per robot-step  "

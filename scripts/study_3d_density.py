@@ -26,12 +26,17 @@ CASES = (("torus", (13, 20, 32)), ("box", (10, 20, 32)))
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10, help="runs per case (seeds 1..N)")
+    ap.add_argument("--smoke", action="store_true", help="two seeds of the smallest torus: checks the script runs "
+                    "(test/test_scripts.py); its numbers mean nothing")
     args = ap.parse_args()
+    cases = (("torus", (13,)),) if args.smoke else CASES
+    if args.smoke:
+        args.seeds = 2
     print(f"| shape | world | robots per free voxel | mean time (ticks), n = {args.seeds} | 95% half-width |")
     print("|---|---|---:|---:|---:|")
     from scipy import stats
 
-    for name, radii in CASES:
+    for name, radii in cases:
         for radius in radii:
             shape = Shape.load(name, World(radius))
             ticks = []

@@ -72,3 +72,38 @@ def test_study_bounds_writes_its_table_of_every_shape(tmp_path):
         bound, ours = int(row.split("|")[3]), float(row.split("|")[5].split()[0])
         assert 0 < bound <= ours, row
     assert out.read_text() in done.stdout  # what it writes is what it prints
+
+
+def _smoke(script: str) -> str:
+    done = subprocess.run([sys.executable, str(SCRIPTS / script), "--smoke"], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
+def _rates(out: str) -> list[float]:
+    """Every 'M robot-steps/s' figure the bench printed; each must be a measured, positive rate."""
+    return [float(r) for r in re.findall(r"robot-steps +[\d.]+ s +([\d.]+) M robot-steps/s", out)]
+
+
+def test_bench_engine_smoke_prints_each_rule_set_its_cases_and_the_tick_cost_fit():
+    out = _smoke("bench_engine.py")
+    assert [m for m in re.findall(r"^rules (\w+):", out, re.M)] == ["paper", "local", "literal"]
+    assert len(rates := _rates(out)) == 3 * 3 and min(rates) > 0, out  # star first ticks, star whole, a disc
+    assert re.search(r"least squares: cost = [\d.]+ us \+ [\d.]+ ns x moving", out), out
+    assert "numbers that mean nothing" in out
+
+
+def test_bench_3d_smoke_prints_the_torus_and_a_ball_world():
+    out = _smoke("bench_3d.py")
+    assert re.findall(r"^rules (\w+):", out, re.M) == ["paper"]
+    assert "torus 1348, first 2000 ticks" in out and "ball 1,000" in out
+    assert len(rates := _rates(out)) == 2 and min(rates) > 0, out
+
+
+def test_study_3d_density_smoke_prints_its_table_row():
+    out = _smoke("study_3d_density.py")
+    rows = [ln for ln in out.splitlines() if ln.startswith("| torus |")]
+    assert len(rows) == 1, out
+    mean = float(rows[0].split("|")[4])
+    assert mean > 0, rows[0]
