@@ -412,9 +412,11 @@ def shm_left(files) -> list[str]:
     beside this one may rightly still hold them."""
     from swarm_ros.ros.shm import in_use
 
-    def group(path: str) -> set[str]:
-        segment = path.removesuffix("_el")
-        return {segment, f"{segment}_el", f"/dev/shm/sem.{Path(segment).name}_mutex"}
+    def group(path: str) -> set[str]:  # a segment, its lock file and (a port's) its semaphore
+        name = Path(path).name.removesuffix("_el")
+        if name.startswith("sem.") and name.endswith("_mutex"):
+            name = name.removeprefix("sem.").removesuffix("_mutex")
+        return {f"/dev/shm/{name}", f"/dev/shm/{name}_el", f"/dev/shm/sem.{name}_mutex"}
 
     return sorted(f for f in files if os.path.exists(f) and not in_use(group(f)))
 

@@ -347,3 +347,20 @@ def test_a_strip_whose_batch_is_removed_is_decided_by_the_world_even_when_only_i
         check.follow()
         assert r.ls.sim.tick > tick, "stalled"
     assert r.ls.sim.outcome.value == "incomplete" and r.ls.sim.metrics.moving == 0
+
+
+def test_no_method_of_the_lockstep_is_a_base_class_stand_in():
+    """Its base classes declare the lockstep's methods they call as stand-ins that raise NotImplementedError;
+    the class each name resolves to must hold the real one, whatever the order of the bases."""
+    import ast
+    import inspect
+    import textwrap
+
+    from swarm_ros.protocol.lockstep import Lockstep
+
+    stand_ins = []
+    for name, member in inspect.getmembers(Lockstep, inspect.isfunction):
+        body = ast.parse(textwrap.dedent(inspect.getsource(member))).body[0].body
+        if len(body) == 1 and isinstance(body[0], ast.Raise) and "NotImplementedError" in ast.unparse(body[0]):
+            stand_ins.append(name)
+    assert stand_ins == []

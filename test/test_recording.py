@@ -21,7 +21,7 @@ import pytest
 from helpers import Recording, rrd_verify
 
 from swarm_ros.app import cli
-from swarm_ros.artifacts.rerun_recording import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
+from swarm_ros.artifacts.rerun_scene import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
 from swarm_ros.core.engine import Simulation
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.state import RobotState

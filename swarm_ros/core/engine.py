@@ -7,7 +7,7 @@ end of the run and, if the shape is complete with robots left over, separates th
 :meth:`Simulation.step` and :meth:`Simulation.run` do both halves in compiled code
 (``run`` many ticks per call); a distributed engine gathers its batches' decisions and
 calls :meth:`Simulation.apply`. All paths share every kernel and the end-of-tick
-bookkeeping (:func:`_close_tick`), so they give identical runs.
+bookkeeping (:func:`~swarm_ros.core.tick_kernel.close_tick`), so they give identical runs.
 
 Only moving robots cost anything per tick: the cell list, the claims and the list of
 moving robots are touched only where moving robots are, and the metrics are kept as
@@ -17,37 +17,27 @@ running counts.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
 
-import numba
 import numpy as np
 
-from swarm_ros.core import metrics
 from swarm_ros.core.arbitration import resolve_kernel, vacate
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.metrics import (
-    END_EXTRAS,
     METRIC_COLUMNS,
     OUTCOME_OF_CODE,
-    RUNNING,
     Outcome,
     TickMetrics,
 )
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
-from swarm_ros.core.rules import Decisions, decide_robots
+from swarm_ros.core.rules import Decisions
 from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import RobotState, SwarmState, initial_state
+from swarm_ros.core.tick_kernel import End, Scratch, close_tick, compact_moving, run_kernel
 
-_MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState.MOVING_INSIDE)
-_WALKING = int(RobotState.WALKING)
-_SEPARATED = int(RobotState.SEPARATED)
 _STATIONARY_LOCALIZED = (int(RobotState.SEED), int(RobotState.LOCALIZED))
-# The metrics' arithmetic, compiled for the kernels below: the same functions metrics.py runs in Python.
-end_code = numba.njit(cache=True)(metrics.end_code)
-metric_values = numba.njit(cache=True)(metrics.metric_values)
 
 
 def failing_robots(params: RunParams) -> np.ndarray:
@@ -56,86 +46,9 @@ def failing_robots(params: RunParams) -> np.ndarray:
     ids = np.arange(params.robots)
     draws = uniform_array(params.seed, ids, params.fail_tick, STREAM_FAIL)
     return np.sort(ids[np.argsort(draws, kind="stable")[: params.failures]])
+
+
 _CHUNK = 4096  # ticks per compiled call in run(): long enough to hide the call, short enough for progress
-
-
-@numba.njit(cache=True)
-def _compact_moving(moving, m, state):
-    """Keep the still-moving robots at the front of ``moving`` (order kept); return their count."""
-    j = 0
-    for k in range(m):
-        i = moving[k]
-        if state[i] == _MOVING_OUTSIDE or state[i] == _MOVING_INSIDE or state[i] == _WALKING:
-            moving[j] = i
-            j += 1
-    return j
-
-
-@numba.njit(cache=True)
-def _close_tick(moving, m, state, tick, localized, inside, outside, walking, shape_patches, robots, max_ticks, row):
-    """End of a tick, for every engine path: check for the end, separate the robots left over
-    if the shape is complete, write the tick's metrics into ``row``. Returns (end code, still moving)."""
-    code = end_code(localized, inside + outside + walking, tick, shape_patches, robots, max_ticks)
-    separated = 0
-    if code == END_EXTRAS:
-        for k in range(m):
-            state[moving[k]] = _SEPARATED
-        separated = m
-        m = 0
-        inside = 0
-        outside = 0
-        walking = 0
-    values = metric_values(tick, localized, inside, outside, walking, separated, shape_patches)
-    for c in range(len(values)):
-        row[c] = values[c]
-    return code, m
-
-
-class Scratch(NamedTuple):
-    """The engine's work arrays: the cell list (``head``, all -1 between ticks; ``nxt``), the lottery's
-    ``best`` (all -1 between ticks), and per robot that decided in the last tick its :class:`JoinOutcome`
-    and id."""
-
-    head: np.ndarray
-    nxt: np.ndarray
-    best: np.ndarray
-    outcome: np.ndarray
-    last_ids: np.ndarray
-
-
-class End(NamedTuple):
-    """What the end check of a tick compares with (:func:`swarm_ros.core.metrics.end_code`)."""
-
-    shape_patches: int
-    robots: int  #: robots not removed
-    max_ticks: int
-
-
-@numba.njit(cache=True)
-def _run_kernel(moving, robots, grid, rules, scratch, moves, end, rows, m, tick, localized, limit):
-    """Up to ``limit`` whole ticks for the robots ``moving[:m]``, stopping when the run ends.
-
-    Row r of ``rows`` gets the metrics of the r-th tick run. Returns (ticks run, still
-    moving, localized, robots that decided in the last tick, end code). The robots decide by
-    the kernels of the world's dimension (``grid.solid``); everything else is the same code.
-    """
-    n = 0
-    code = RUNNING
-    decided = 0
-    while n < limit and code == RUNNING:
-        tick += 1
-        ids = moving[:m]
-        scratch.last_ids[:m] = ids
-        decide_robots(ids, ids, robots, grid, rules, tick, scratch.head, scratch.nxt, moves)
-        joined, inside, outside, walking = resolve_kernel(ids, moves, robots, grid, rules, tick, scratch.best,
-                                                          localized, end.shape_patches, scratch.outcome)
-        localized += joined
-        decided = m
-        m = _compact_moving(moving, m, robots.state)
-        code, m = _close_tick(moving, m, robots.state, tick, localized, inside, outside, walking, end.shape_patches,
-                              end.robots, end.max_ticks, rows[n])
-        n += 1
-    return n, m, localized, decided, code
 
 
 class Simulation:
@@ -180,7 +93,7 @@ class Simulation:
         counts = s.counts()
         self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
         self.outcome: Outcome | None = None
-        code, self._m = _close_tick(self._moving, self._m, s.state, 0, self._localized,
+        code, self._m = close_tick(self._moving, self._m, s.state, 0, self._localized,
                                     int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
                                     int(counts[RobotState.WALKING]), shape.patches, params.robots, params.max_ticks,
                                     self._rows[0])
@@ -283,9 +196,9 @@ class Simulation:
                                                           self.shape.patches, sc.outcome)
         self._localized += joined
         self._decided = m
-        self._m = _compact_moving(self._moving, m, self.state.state)
+        self._m = compact_moving(self._moving, m, self.state.state)
         self._reserve(1)
-        code, self._m = _close_tick(self._moving, self._m, self.state.state, decisions.tick, self._localized,
+        code, self._m = close_tick(self._moving, self._m, self.state.state, decisions.tick, self._localized,
                                     inside, outside, walking, self.shape.patches, self._alive,
                                     self.params.max_ticks, self._rows[self._nrows])
         self._record(1, 1, code)
@@ -320,9 +233,9 @@ class Simulation:
             self.losses.append((self.tick, int(ids.size)))
         counts = s.counts()
         self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
-        self._m = _compact_moving(self._moving, self._m, s.state)
+        self._m = compact_moving(self._moving, self._m, s.state)
         self._set_kernel_args(self._alive - int(ids.size))
-        code, self._m = _close_tick(self._moving, self._m, s.state, self.tick, self._localized,
+        code, self._m = close_tick(self._moving, self._m, s.state, self.tick, self._localized,
                                     int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
                                     int(counts[RobotState.WALKING]), self.shape.patches, self._alive,
                                     self.params.max_ticks, self._rows[self._nrows - 1])
@@ -397,7 +310,7 @@ class Simulation:
     def _run_compiled(self, limit: int) -> int:
         self._check_running()
         self._reserve(limit)
-        n, self._m, self._localized, self._decided, code = _run_kernel(
+        n, self._m, self._localized, self._decided, code = run_kernel(
             self._moving, self._robots, self._grid, self._rules, self._scratch, self._moves, self._end,
             self._rows[self._nrows:], self._m, self.tick, self._localized, limit)
         self._record(n, n, code)

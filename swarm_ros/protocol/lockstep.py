@@ -25,6 +25,7 @@ from swarm_ros.protocol.checks import Rejections, decisions_allowed
 from swarm_ros.protocol.hosting import Hosting, snapshot
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
+from swarm_ros.protocol.world_losses import WorldLosses
 from swarm_ros.protocol.world_port import (
     FINAL_WAIT,
     FIRST_STALL_S,
@@ -38,9 +39,10 @@ from swarm_ros.protocol.world_restore import Saved, WorldRestore
 from swarm_ros.protocol.world_status import WorldStatus
 
 
-class Lockstep(WorldStatus, WorldRestore):
-    """Admission, ticks, the monitor window and the loss policy of one run (see the module's docstring); its
-    status and stall checks (:class:`WorldStatus`), its bookkeeping and restore (:class:`WorldRestore`)."""
+class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins for another's methods come after it
+    """Admission, ticks and the monitor window of one run (see the module's docstring); its status and stall
+    checks (:class:`WorldStatus`), its bookkeeping and restore (:class:`WorldRestore`), its loss policy
+    (:class:`WorldLosses`)."""
 
     def __init__(self, sim: Simulation, policy: Policy, port: WorldPort, logger: Logger, rejections: Rejections,
                  clock: Callable[[], float] = time.monotonic, created: float | None = None) -> None:
@@ -324,91 +326,6 @@ class Lockstep(WorldStatus, WorldRestore):
     def publish_status(self, note: str = "") -> None:
         self.status_at = self.clock()
         self.port.publish_status(self.status(note))
-
-    # -- lost processes ---------------------------------------------------------------
-    def batch_liveliness(self, k: int, alive: int, not_alive: int) -> None:
-        """Batch ``k``'s liveliness changed: ``alive`` writers alive, ``not_alive`` lapsed."""
-        if alive > 0 and k not in self.live:  # from now on a loss is noticed by liveliness, not the fallback
-            self.log.info(f"{self.batch_names[k]} is alive (liveliness)")
-        if alive > 0:
-            self.live.add(k)
-        else:
-            self.live.discard(k)
-        if alive == 0 and not_alive > 0:
-            self.lapsed.add(k)
-            self.lose_batch(k, "liveliness lapsed")
-        elif alive > 0 and k in self.respawned and self.started:  # a respawned process is up
-            self._respawn(k)
-        elif alive > 0 and k in self.down_since:  # a process of this batch is alive (again)
-            self.down_since.pop(k)
-
-    def lose_batch(self, k: int, why: str) -> None:
-        """Batch ``k``'s process is gone (or stalled). Wait for it to come back, or remove its robots."""
-        name = self.batch_names[k]
-        if k in self.removed_batches or k in self.down_since or self.sim.done:
-            return
-        p = self.policy
-        if not self.started or (p.on_batch_loss == "restart" and self.restart_counts[k] < p.max_restarts):
-            self.down_since[k] = self.clock()
-            self.log.warn(f"{name} lost ({why}) at tick {self.sim.tick}: waiting up to {p.restart_timeout:g} s for "
-                          f"it to restart (restarts so far: {self.restart_counts[k]} of {p.max_restarts})")
-            self.publish_status(f"waiting for {name}")
-            if k in self.respawned and self.started:  # its new process announced itself already
-                self._respawn(k)
-            return
-        self._remove_batch(k, why)
-
-    def _remove_batch(self, k: int, why: str) -> None:
-        """Remove batch ``k``'s robots, the moving robots in its strip, at the end of the next tick (robots lost
-        for good); from then on the world decides for the robots that move into the strip."""
-        name = self.batch_names[k]
-        self.down_since.pop(k, None)
-        ids = self.hosting.orphans(self.sim.state.x, self.sim.moving_ids, {k}, self.pending)
-        self.removed_batches.add(k)
-        self.lost.append(name)
-        self.save_book()
-        self.pending = np.union1d(self.pending, ids)
-        # decisions it sent for this tick before it was lost no longer count either
-        self.parts = [r[~np.isin(r["id"], self.pending)] for r in self.parts]
-        self.received = sum(r.size for r in self.parts)
-        tick = self.sim.tick
-        self.log.warn(f"{name} lost ({why}) at tick {tick}: its {ids.size} robots are removed at the end of tick "
-                      f"{tick + 1}")
-        self.publish_status(f"lost {name}")
-        self._maybe_advance(tick + 1)  # the lost robots' decisions are no longer awaited
-
-    def monitor_liveliness(self, alive: int, not_alive: int) -> None:
-        self.monitor_alive = alive > 0
-        if self.monitor_alive:
-            self.monitor_down_since = None
-            self.maybe_start()
-        if alive == 0 and not_alive > 0:
-            self.monitor_down("liveliness lapsed")
-        elif alive > 0 and MONITOR in self.lost:  # it was only starved of CPU for a moment
-            self.lost.remove(MONITOR)
-            self.window = self.policy.monitor_window
-            self.log.warn(f"the monitor is back at tick {self.sim.tick}")
-            self.publish_status()
-
-    def monitor_down(self, why: str) -> None:
-        """The monitor's process is gone: wait up to ``restart_timeout`` for a new one, holding the ticks
-        back as while it is behind (they stay in the topics' histories for it), then go on without it."""
-        if MONITOR in self.lost or self.monitor_down_since is not None:
-            return
-        self.monitor_down_since = self.clock()
-        self.log.warn(f"the monitor was lost ({why}) at tick {self.sim.tick}: waiting up to "
-                      f"{self.policy.restart_timeout:g} s for it to restart")
-        self.publish_status("waiting for the monitor")
-
-    def _lose_monitor(self, why: str) -> None:
-        if MONITOR in self.lost:
-            return
-        self.lost.append(MONITOR)
-        self.save_book()
-        self.window = 0  # nobody to wait for: run on
-        self.log.warn(f"the monitor was lost ({why}) at tick {self.sim.tick}; the swarm goes on without it")
-        self.publish_status("lost the monitor")
-        self._flush()
 
     # -- the clock --------------------------------------------------------------------
     def poll(self) -> None:
