@@ -21,8 +21,10 @@ setup(
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml") + glob("config/*.xml"))),
         (f"share/{PACKAGE}/launch", sorted(glob("launch/*.launch.py"))),
         (f"share/{PACKAGE}/rviz", sorted(glob("rviz/*.rviz"))),
-        (f"share/{PACKAGE}/config/experiments",
-         sorted(glob("config/experiments/*.yaml") + glob("config/experiments/*.csv"))),
+        (
+            f"share/{PACKAGE}/config/experiments",
+            sorted(glob("config/experiments/*.yaml") + glob("config/experiments/*.csv")),
+        ),
     ],
     install_requires=[
         "numpy>=2.0,<2.5",
@@ -42,11 +44,13 @@ setup(
     ],
     extras_require={"test": ["pytest>=8", "pytest-xdist>=3.5", "hypothesis>=6.100", "mcap-ros2-support>=0.6"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
-    entry_points={"console_scripts": [
-        "swarm-ros = swarm_ros.app.main:entry",
-        "world = swarm_ros.app.main:world",
-        "robot_batch = swarm_ros.app.main:robot_batch",
-        "monitor = swarm_ros.app.main:monitor",
-    ]},
+    entry_points={
+        "console_scripts": [
+            "swarm-ros = swarm_ros.app.main:entry",
+            "world = swarm_ros.app.main:world",
+            "robot_batch = swarm_ros.app.main:robot_batch",
+            "monitor = swarm_ros.app.main:monitor",
+        ]
+    },
     zip_safe=False,
 )

@@ -53,9 +53,15 @@ def graph(context) -> list:
     arg = lambda name: LaunchConfiguration(name).perform(context)
     processes = launch_processes(arg("processes"))
     enclaves = arg("enclaves")
-    setup = launch_setup(arg("params_file") or os.path.join(share, "config", "swarm_ros.yaml"),
-                         {p.name: arg(p.name) for p in RUN_PARAMETERS}, arg("out_dir"), Path(launch_config.log_dir),
-                         processes, enclaves, arg("region_cuts"))
+    setup = launch_setup(
+        arg("params_file") or os.path.join(share, "config", "swarm_ros.yaml"),
+        {p.name: arg(p.name) for p in RUN_PARAMETERS},
+        arg("out_dir"),
+        Path(launch_config.log_dir),
+        processes,
+        enclaves,
+        arg("region_cuts"),
+    )
     supervisor = setup.supervisor
     plan = {name: (executable, own) for name, executable, own in graph_plan(processes, setup.region_cuts)}
     names: dict[object, str] = {}  # each Node action started -> its node name
@@ -66,10 +72,15 @@ def graph(context) -> list:
         executable, own = plan[name]
         incarnation = supervisor.incarnation(name)
         extra = [own] if own else []
-        action = Node(package=PACKAGE, executable=executable, name=name, output="screen",
-                      parameters=[str(setup.params), *extra, *([{"incarnation": incarnation}] if incarnation else [])],
-                      # SROS2: each node in its enclave <enclaves>/<node> (as swarm-ros run --enclaves)
-                      **({"ros_arguments": ["--enclave", f"{enclaves}/{name}"]} if enclaves else {}))
+        action = Node(
+            package=PACKAGE,
+            executable=executable,
+            name=name,
+            output="screen",
+            parameters=[str(setup.params), *extra, *([{"incarnation": incarnation}] if incarnation else [])],
+            # SROS2: each node in its enclave <enclaves>/<node> (as swarm-ros run --enclaves)
+            **({"ros_arguments": ["--enclave", f"{enclaves}/{name}"]} if enclaves else {}),
+        )
         names[action] = name
         return action
 
@@ -78,6 +89,7 @@ def graph(context) -> list:
             if failed:
                 raise RunEnded(why)
             return [EmitEvent(event=Shutdown(reason=why))]
+
         for timer in timers:
             timer.cancel()
         timers[:] = [TimerAction(period=period, actions=[OpaqueFunction(function=fire)])]
@@ -101,8 +113,13 @@ def graph(context) -> list:
         if verdict.restart:
             actions.append(node(name))
         elif verdict.wait_for_monitor:
-            actions.append(later(MONITOR_GRACE, f"the run ended, but the monitor did not write it within "
-                                                f"{MONITOR_GRACE:g} s", failed=True))
+            actions.append(
+                later(
+                    MONITOR_GRACE,
+                    f"the run ended, but the monitor did not write it within {MONITOR_GRACE:g} s",
+                    failed=True,
+                )
+            )
         if supervisor.monitor_done:
             if running:
                 actions.append(later(END_GRACE, "the monitor has written the run; stopping what is left", False))
@@ -116,46 +133,74 @@ def graph(context) -> list:
             path.unlink(missing_ok=True)
 
     nodes = [node(name) for name in plan]  # the graph swarm-ros run starts, in its order
-    handlers = [RegisterEventHandler(OnProcessStart(on_start=on_start)),
-                RegisterEventHandler(OnProcessExit(on_exit=on_exit)),
-                RegisterEventHandler(OnShutdown(on_shutdown=remove_checkpoint))]
+    handlers = [
+        RegisterEventHandler(OnProcessStart(on_start=on_start)),
+        RegisterEventHandler(OnProcessExit(on_exit=on_exit)),
+        RegisterEventHandler(OnShutdown(on_shutdown=remove_checkpoint)),
+    ]
     if kernels_cached():
         return handlers + nodes
     # fill numba's cache once, here: every node would otherwise compile the same kernels at the same time
-    compiling = ExecuteProcess(cmd=[sys.executable, "-m", "swarm_ros.core.kernels"], name="compile_kernels",
-                               output="screen")
+    compiling = ExecuteProcess(
+        cmd=[sys.executable, "-m", "swarm_ros.core.kernels"], name="compile_kernels", output="screen"
+    )
 
     def compiled(event, context):
         if event.returncode != 0:
             raise RunEnded(f"compiling the numba kernels failed (exit status {event.returncode})")
         return nodes
-    return [*handlers, LogInfo(msg=f"swarm_ros: {COMPILING}"), compiling,
-            RegisterEventHandler(OnProcessExit(target_action=compiling, on_exit=compiled))]
+
+    return [
+        *handlers,
+        LogInfo(msg=f"swarm_ros: {COMPILING}"),
+        compiling,
+        RegisterEventHandler(OnProcessExit(target_action=compiling, on_exit=compiled)),
+    ]
 
 
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory(PACKAGE)
-    return LaunchDescription([
-        DeclareLaunchArgument("processes", default_value=str(PROCESSES.default), description=PROCESSES.help),
-        DeclareLaunchArgument("region_cuts", default_value="",
-                              description=node_parameter("robot_batch", "region_cuts").help),
-        DeclareLaunchArgument("params_file", default_value="",
-                              description="parameter file (default: the package's config/swarm_ros.yaml)"),
-        DeclareLaunchArgument("enclaves", default_value="",
-                              description="SROS2: run each node in the enclave <enclaves>/<node> (e.g. /swarm_ros; "
-                                          "untested here, docs/security.md)"),
-        DeclareLaunchArgument("out_dir", default_value="",
-                              description="the monitor's run directory (default: runs/<time>_<shape>_...)"),
-        *[DeclareLaunchArgument(p.name, default_value="", description=f"run parameter {p.name} (default: the "
-                                f"parameter file's, else the model's)") for p in RUN_PARAMETERS],
-        # discovery on this host, and Fast DDS's announcements as swarm-ros run sets them (config/fastdds.xml)
-        SetEnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE",
-                               os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")),
-        SetEnvironmentVariable("FASTRTPS_DEFAULT_PROFILES_FILE",
-                               os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE",
-                                              os.path.join(share, "config", "fastdds.xml"))),
-        # the run's key, which its nodes tag their messages with (docs/security.md): a new one
-        # for each launch unless SWARM_ROS_RUN_KEY is set
-        SetEnvironmentVariable(KEY_ENV, os.environ.get(KEY_ENV) or secrets.token_hex(32)),
-        OpaqueFunction(function=graph),
-    ])
+    return LaunchDescription(
+        [
+            DeclareLaunchArgument("processes", default_value=str(PROCESSES.default), description=PROCESSES.help),
+            DeclareLaunchArgument(
+                "region_cuts", default_value="", description=node_parameter("robot_batch", "region_cuts").help
+            ),
+            DeclareLaunchArgument(
+                "params_file",
+                default_value="",
+                description="parameter file (default: the package's config/swarm_ros.yaml)",
+            ),
+            DeclareLaunchArgument(
+                "enclaves",
+                default_value="",
+                description="SROS2: run each node in the enclave <enclaves>/<node> (e.g. /swarm_ros; "
+                "untested here, docs/security.md)",
+            ),
+            DeclareLaunchArgument(
+                "out_dir",
+                default_value="",
+                description="the monitor's run directory (default: runs/<time>_<shape>_...)",
+            ),
+            *[
+                DeclareLaunchArgument(
+                    p.name,
+                    default_value="",
+                    description=f"run parameter {p.name} (default: the parameter file's, else the model's)",
+                )
+                for p in RUN_PARAMETERS
+            ],
+            # discovery on this host, and Fast DDS's announcements as swarm-ros run sets them (config/fastdds.xml)
+            SetEnvironmentVariable(
+                "ROS_AUTOMATIC_DISCOVERY_RANGE", os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+            ),
+            SetEnvironmentVariable(
+                "FASTRTPS_DEFAULT_PROFILES_FILE",
+                os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE", os.path.join(share, "config", "fastdds.xml")),
+            ),
+            # the run's key, which its nodes tag their messages with (docs/security.md): a new one
+            # for each launch unless SWARM_ROS_RUN_KEY is set
+            SetEnvironmentVariable(KEY_ENV, os.environ.get(KEY_ENV) or secrets.token_hex(32)),
+            OpaqueFunction(function=graph),
+        ]
+    )

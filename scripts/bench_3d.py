@@ -60,9 +60,12 @@ def measure_2d(seeds: int) -> dict[str, float]:
     for rules in RULES:
         Simulation(star, RunParams(robots=50, max_ticks=3, rules=rules)).run()  # load the kernels
         for label, ticks in (("first 200", 200), ("whole run", None)):
-            rates = sorted(steps / secs for secs, _, steps in
-                           (_timed(Simulation(star, RunParams(1036, seed=s, rules=rules)), ticks)
-                            for s in range(1, seeds + 1)))
+            rates = sorted(
+                steps / secs
+                for secs, _, steps in (
+                    _timed(Simulation(star, RunParams(1036, seed=s, rules=rules)), ticks) for s in range(1, seeds + 1)
+                )
+            )
             out[f"{rules}, star {label}"] = rates[len(rates) // 2]
     return out
 
@@ -94,22 +97,31 @@ def bench_3d(seeds: int, smoke: bool = False) -> None:
         Simulation(torus, RunParams(robots=50, max_ticks=3, rules=rules)).run()
         print(f"\nrules {rules}:")
         for label, shape, robots, ticks in cases:
-            runs = sorted((_timed(Simulation(shape, RunParams(robots, seed=s, rules=rules)), ticks)
-                           for s in range(1, seeds + 1)), key=lambda r: r[2] / r[0])
+            runs = sorted(
+                (_timed(Simulation(shape, RunParams(robots, seed=s, rules=rules)), ticks) for s in range(1, seeds + 1)),
+                key=lambda r: r[2] / r[0],
+            )
             secs, n, steps = runs[len(runs) // 2]
-            print(f"  {label:<38} {n:>7} ticks {steps:>12,} robot-steps {secs:8.3f} s "
-                  f"{steps / secs / 1e6:7.2f} M robot-steps/s")
+            print(
+                f"  {label:<38} {n:>7} ticks {steps:>12,} robot-steps {secs:8.3f} s "
+                f"{steps / secs / 1e6:7.2f} M robot-steps/s"
+            )
 
 
 def compare_2d(before: Path, rounds: int, seeds: int) -> None:
     trees = {"this tree": ROOT, "before": before.resolve()}
     rates: dict[str, list[dict[str, float]]] = {name: [] for name in trees}
     for k in range(rounds):
-        for name, tree in (list(trees.items()) if k % 2 == 0 else list(trees.items())[::-1]):
+        for name, tree in list(trees.items()) if k % 2 == 0 else list(trees.items())[::-1]:
             env = {**os.environ, "PYTHONPATH": str(tree)}
-            done = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_3d.py"), "--measure-2d",
-                                   "--seeds", str(seeds)], cwd=tree, env=env, capture_output=True, text=True,
-                                  check=True)
+            done = subprocess.run(
+                [sys.executable, str(ROOT / "scripts" / "bench_3d.py"), "--measure-2d", "--seeds", str(seeds)],
+                cwd=tree,
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
             source, result = done.stdout.splitlines()[-2:]
             if not Path(source).resolve().is_relative_to(tree):
                 raise SystemExit(f"bench_3d: the {name} measurement imported {source}, not the tree {tree}")
@@ -120,8 +132,10 @@ def compare_2d(before: Path, rounds: int, seeds: int) -> None:
         new = [r[case] for r in rates["this tree"]]
         old = [r[case] for r in rates["before"]]
         ratio = sorted(a / b for a, b in zip(new, old))
-        print(f"  {case:<28} {np.median(new) / 1e6:10.2f} {np.median(old) / 1e6:10.2f} "
-              f"{np.median(ratio):7.3f}  {ratio[0]:.3f}-{ratio[-1]:.3f}")
+        print(
+            f"  {case:<28} {np.median(new) / 1e6:10.2f} {np.median(old) / 1e6:10.2f} "
+            f"{np.median(ratio):7.3f}  {ratio[0]:.3f}-{ratio[-1]:.3f}"
+        )
 
 
 def main() -> int:
@@ -130,8 +144,11 @@ def main() -> int:
     ap.add_argument("--before", type=Path, help="a checkout of the release before 3D: compare 2D speed with it")
     ap.add_argument("--rounds", type=int, default=5, help="alternating rounds of the 2D comparison")
     ap.add_argument("--measure-2d", action="store_true", help=argparse.SUPPRESS)  # a child of --before
-    ap.add_argument("--smoke", action="store_true",
-                    help="one seed, small cases: checks the script runs (test_scripts.py); its numbers mean nothing")
+    ap.add_argument(
+        "--smoke",
+        action="store_true",
+        help="one seed, small cases: checks the script runs (test_scripts.py); its numbers mean nothing",
+    )
     args = ap.parse_args()
     if args.smoke:
         args.seeds = 1

@@ -95,10 +95,12 @@ def world(domain: int, k: int, sizes: Path, out: Path) -> None:
         answered[tick] = answered.get(tick, 0) + 1
 
     for b in range(k):
-        node.create_subscription(PointCloud2, f"/bare/decisions/batch_{b}", on_reply,
-                                 msgs.reader_qos(msgs.DECISIONS_QOS), raw=True)
-    while pub.get_subscription_count() < k or any(node.count_publishers(f"/bare/decisions/batch_{b}") < 1
-                                                  for b in range(k)):
+        node.create_subscription(
+            PointCloud2, f"/bare/decisions/batch_{b}", on_reply, msgs.reader_qos(msgs.DECISIONS_QOS), raw=True
+        )
+    while pub.get_subscription_count() < k or any(
+        node.count_publishers(f"/bare/decisions/batch_{b}") < 1 for b in range(k)
+    ):
         executor.spin_once(timeout_sec=0.01)
     messages = [_cloud(ROBOT_ROW, int(n), t) for t, n in enumerate(sent)]
     start = time.perf_counter()
@@ -194,8 +196,10 @@ def main() -> None:
         for _ in range(args.repeats):
             ticks, seconds = bare(args.seed, k, args.domain_id)
             rates.append(ticks / seconds)
-        print(f"bare lockstep, star sizes, K = {k}: {ticks} ticks, ticks/s min {min(rates):,.0f} "
-              f"median {statistics.median(rates):,.0f} max {max(rates):,.0f}")
+        print(
+            f"bare lockstep, star sizes, K = {k}: {ticks} ticks, ticks/s min {min(rates):,.0f} "
+            f"median {statistics.median(rates):,.0f} max {max(rates):,.0f}"
+        )
 
 
 if __name__ == "__main__":

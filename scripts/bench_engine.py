@@ -48,8 +48,12 @@ def disc_world(robots: int) -> Shape:
     order = np.argsort(d2, kind="stable")[:robots]  # the `robots` patches nearest the origin
     mask = np.zeros(world.patch_count, dtype=bool)
     mask[order] = True
-    return Shape(name=f"disc{robots}", mask=mask.reshape(world.size, world.size), world=world,
-                 source=f"bench disc of {robots} patches")
+    return Shape(
+        name=f"disc{robots}",
+        mask=mask.reshape(world.size, world.size),
+        world=world,
+        source=f"bench disc of {robots} patches",
+    )
 
 
 def timed_run(sim: Simulation, ticks: int | None) -> tuple[float, int, int]:
@@ -77,8 +81,10 @@ def timed_steps(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
 
 def report(label: str, secs: float, ticks: int, steps: int) -> float:
     rate = steps / secs
-    print(f"{label:<34} {ticks:>7} ticks {steps:>12,} robot-steps {secs:8.3f} s "
-          f"{rate / 1e6:8.2f} M robot-steps/s {ticks / secs:10,.0f} ticks/s")
+    print(
+        f"{label:<34} {ticks:>7} ticks {steps:>12,} robot-steps {secs:8.3f} s "
+        f"{rate / 1e6:8.2f} M robot-steps/s {ticks / secs:10,.0f} ticks/s"
+    )
     return rate
 
 
@@ -86,8 +92,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     ap.add_argument("--seeds", type=int, default=3, help="repetitions of each case (median reported)")
     ap.add_argument("--rules", default=",".join(RULE_SETS), help="rule sets to measure (default: all)")
-    ap.add_argument("--smoke", action="store_true",
-                    help="one seed, small cases: checks the script runs (test_scripts.py); its numbers mean nothing")
+    ap.add_argument(
+        "--smoke",
+        action="store_true",
+        help="one seed, small cases: checks the script runs (test_scripts.py); its numbers mean nothing",
+    )
     args = ap.parse_args()
     rule_sets = [r for r in args.rules.split(",") if r]
     sizes, first_ticks = ((2_000,), 20) if args.smoke else ((10_000, 100_000), 200)
@@ -105,27 +114,32 @@ def main() -> int:
     print(f"swarm_ros engine benchmark ({pinned}; median of {args.seeds} seeds{smoke})")
 
     def median_case(label, make, ticks):
-        runs = sorted((timed_run(make(seed), ticks) for seed in range(1, args.seeds + 1)),
-                      key=lambda r: r[2] / r[0])
+        runs = sorted((timed_run(make(seed), ticks) for seed in range(1, args.seeds + 1)), key=lambda r: r[2] / r[0])
         return report(label, *runs[len(runs) // 2])
 
     discs = {n: disc_world(n) for n in sizes}
     results = {}
     for rules in rule_sets:
         print(f"\nrules {rules}:")
-        first = median_case(f"star 1036, first {first_ticks} ticks",
-                            lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)), first_ticks)
-        whole = median_case("star 1036, whole run",
-                            lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)), None)
+        first = median_case(
+            f"star 1036, first {first_ticks} ticks",
+            lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)),
+            first_ticks,
+        )
+        whole = median_case(
+            "star 1036, whole run", lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)), None
+        )
         per_size = {1036: first}
         for n, shape in discs.items():
             label = f"disc {n:,} (world {shape.world.size}^2), {first_ticks} ticks"
-            per_size[n] = median_case(label, lambda s, sh=shape, n=n, r=rules:
-                                      Simulation(sh, RunParams(n, seed=s, rules=r)), first_ticks)
+            per_size[n] = median_case(
+                label, lambda s, sh=shape, n=n, r=rules: Simulation(sh, RunParams(n, seed=s, rules=r)), first_ticks
+            )
         print("  cost per robot-step across swarm sizes (first 200 ticks; flat = linear in N):")
         for n, rate in per_size.items():
-            print(f"    {n:>7,} robots: {1e9 / rate:7.1f} ns per robot-step  "
-                  f"({per_size[1036] / rate:5.2f} x the star's)")
+            print(
+                f"    {n:>7,} robots: {1e9 / rate:7.1f} ns per robot-step  ({per_size[1036] / rate:5.2f} x the star's)"
+            )
         results[rules] = (first, whole)
 
     if "paper" in rule_sets:
@@ -137,8 +151,10 @@ def main() -> int:
         for lo, hi in zip(edges[:-1], edges[1:]):
             sel = (moving >= lo) & (moving < hi)
             if sel.any():
-                print(f"  {f'{lo}-{hi - 1}':>15} {sel.sum():>7} {1e6 * secs[sel].mean():9.1f} "
-                      f"{1e9 * secs[sel].sum() / max(moving[sel].sum(), 1):14.1f}")
+                print(
+                    f"  {f'{lo}-{hi - 1}':>15} {sel.sum():>7} {1e6 * secs[sel].mean():9.1f} "
+                    f"{1e9 * secs[sel].sum() / max(moving[sel].sum(), 1):14.1f}"
+                )
         b, a = np.polyfit(moving, secs, 1)
         pred = a + b * moving
         r2 = 1 - ((secs - pred) ** 2).sum() / ((secs - secs.mean()) ** 2).sum()
@@ -146,8 +162,10 @@ def main() -> int:
         target = 3e6
         print()
         for label, rate in zip(("first 200 ticks", "whole run"), results["paper"]):
-            print(f"Target >= 3 M robot-steps/s, rules paper, star {label}: "
-                  f"{'MET' if rate >= target else 'NOT MET'} ({rate / 1e6:.2f} M)")
+            print(
+                f"Target >= 3 M robot-steps/s, rules paper, star {label}: "
+                f"{'MET' if rate >= target else 'NOT MET'} ({rate / 1e6:.2f} M)"
+            )
     return 0
 
 

@@ -43,8 +43,18 @@ def main() -> int:
         for _ in range(args.repeats):
             with tempfile.TemporaryDirectory() as tmp:
                 out = Path(tmp) / "exp"
-                cmd = [sys.executable, "-m", "swarm_ros", "experiment", str(args.config), "--out", str(out),
-                       "--quiet", "--executor", executor]
+                cmd = [
+                    sys.executable,
+                    "-m",
+                    "swarm_ros",
+                    "experiment",
+                    str(args.config),
+                    "--out",
+                    str(out),
+                    "--quiet",
+                    "--executor",
+                    executor,
+                ]
                 if args.jobs:
                     cmd += ["--jobs", str(args.jobs)]
                 start = time.perf_counter()
@@ -57,18 +67,26 @@ def main() -> int:
                 in_runs = sum(r["wall_seconds"] for r in rows)
         wall = statistics.median(walls)
         rate[executor] = len(rows) / wall
-        print(f"{args.config.name}, executor {executor}: {len(rows)} runs ({len(exp.shapes)} shapes, "
-              f"{exp.repetitions} repetitions, vision {', '.join(f'{v:g}' for v in exp.vision_radius)}, "
-              f"rules {', '.join(exp.rules)}), {ticks:,} ticks in all")
-        print(f"  whole command (workers, results, statistics, figures), {len(walls)} runs: median {wall:.1f} s "
-              f"(min {min(walls):.1f}, max {max(walls):.1f}), {rate[executor]:.2f} runs/s")
+        print(
+            f"{args.config.name}, executor {executor}: {len(rows)} runs ({len(exp.shapes)} shapes, "
+            f"{exp.repetitions} repetitions, vision {', '.join(f'{v:g}' for v in exp.vision_radius)}, "
+            f"rules {', '.join(exp.rules)}), {ticks:,} ticks in all"
+        )
+        print(
+            f"  whole command (workers, results, statistics, figures), {len(walls)} runs: median {wall:.1f} s "
+            f"(min {min(walls):.1f}, max {max(walls):.1f}), {rate[executor]:.2f} runs/s"
+        )
         print(f"  time inside the runs, summed over workers (last run): {in_runs:.1f} s")
-        print(f"  Target: the paper protocol in under {TARGET_SECONDS:g} s: "
-              f"{'MET' if wall < TARGET_SECONDS else 'NOT MET'} ({wall:.1f} s)")
+        print(
+            f"  Target: the paper protocol in under {TARGET_SECONDS:g} s: "
+            f"{'MET' if wall < TARGET_SECONDS else 'NOT MET'} ({wall:.1f} s)"
+        )
     if {"local", "dask"} <= set(rate):
         ratio = rate["dask"] / rate["local"]
-        print(f"Target: the Dask executor at >= {DASK_SHARE:.0%} of the local executor's runs/s: "
-              f"{'MET' if ratio >= DASK_SHARE else 'NOT MET'} ({ratio:.0%})")
+        print(
+            f"Target: the Dask executor at >= {DASK_SHARE:.0%} of the local executor's runs/s: "
+            f"{'MET' if ratio >= DASK_SHARE else 'NOT MET'} ({ratio:.0%})"
+        )
     return 0
 
 

@@ -83,8 +83,12 @@ def one_run(base: Path, name: str, victim: str | None, at: int) -> tuple[float, 
     """(command seconds, kill -> moving seconds or None, run directory)."""
     out = base / name
     began = time.monotonic()
-    launcher = subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     moving = None
     if victim is not None:
         _wait(out, _DONE, at - 1)
@@ -105,15 +109,21 @@ def one_run(base: Path, name: str, victim: str | None, at: int) -> tuple[float, 
 
 def launcher_trial(base: Path) -> float:
     out = base / "launcher"
-    launcher = subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     _wait(out, _DONE, 300)
     pids = list(_nodes(out).values())
     launcher.kill()
     killed = time.monotonic()
     while time.monotonic() - killed < 20:
-        alive = [p for p in pids if Path(f"/proc/{p}").exists()
-                 and Path(f"/proc/{p}/stat").read_text().split(")")[-1].split()[0] != "Z"]
+        alive = [
+            p
+            for p in pids
+            if Path(f"/proc/{p}").exists() and Path(f"/proc/{p}/stat").read_text().split(")")[-1].split()[0] != "Z"
+        ]
         if not alive:
             break
         time.sleep(0.005)
@@ -173,8 +183,11 @@ def main() -> int:
     plain, exits = [], []
     with tempfile.TemporaryDirectory(prefix="swarm_ros-bench-faults-") as tmp:
         write, bag, durable = tick_costs(Path(tmp))
-    print(f"per tick: the world's checkpoint {write:.1f} us; the monitor's bag {bag:.1f} us, made durable "
-          f"{durable:.1f} us", flush=True)
+    print(
+        f"per tick: the world's checkpoint {write:.1f} us; the monitor's bag {bag:.1f} us, made durable "
+        f"{durable:.1f} us",
+        flush=True,
+    )
     for trial in range(args.trials):
         with tempfile.TemporaryDirectory(prefix="swarm_ros-bench-faults-") as tmp:
             base = Path(tmp)
@@ -186,16 +199,22 @@ def main() -> int:
                 slow[kind].append(took / seconds)
                 same[kind].append(_same(ref, out))
             exits.append(launcher_trial(base))
-        print(f"trial {trial + 1}: plain {seconds:.2f} s; " + "; ".join(
-            f"{k} back in {back[k][-1]:.2f} s, x{slow[k][-1]:.2f}" for k in KINDS), flush=True)
-    print(f"\nstar, rules local, seed 5, K = 3, recording and bag on; kill once tick {args.at} is saved; "
-          f"{args.trials} trials; unfaulted command {_spread(plain)} s")
+        print(
+            f"trial {trial + 1}: plain {seconds:.2f} s; "
+            + "; ".join(f"{k} back in {back[k][-1]:.2f} s, x{slow[k][-1]:.2f}" for k in KINDS),
+            flush=True,
+        )
+    print(
+        f"\nstar, rules local, seed 5, K = 3, recording and bag on; kill once tick {args.at} is saved; "
+        f"{args.trials} trials; unfaulted command {_spread(plain)} s"
+    )
     print(f"{'killed':>14} {'kill -> moving s':>22} {'slowdown':>22} {'same':>6}")
     for k in KINDS:
-        print(f"{k:>14} {_spread(back[k]):>22} {_spread(slow[k], '{:.2f}x'):>22} "
-              f"{'yes' if all(same[k]) else 'NO':>6}")
-    print(f"node exit after the launcher's SIGKILL: {_spread(exits)} s (target < 2 s: "
-          f"{'MET' if max(exits) < 2 else 'NOT MET'})")
+        print(f"{k:>14} {_spread(back[k]):>22} {_spread(slow[k], '{:.2f}x'):>22} {'yes' if all(same[k]) else 'NO':>6}")
+    print(
+        f"node exit after the launcher's SIGKILL: {_spread(exits)} s (target < 2 s: "
+        f"{'MET' if max(exits) < 2 else 'NOT MET'})"
+    )
     return 0
 
 

@@ -34,8 +34,24 @@ PER_PROCESS = 2500  #: messages per second on each topic, at most, from one floo
 
 def _run(out: Path, domain: int) -> tuple[int, float, str]:
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "swarm_ros", "run", *FLAGS, "--processes", "2", "--domain-id",
-                           str(domain), "--out", str(out), "--quiet"], capture_output=True, text=True)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "swarm_ros",
+            "run",
+            *FLAGS,
+            "--processes",
+            "2",
+            "--domain-id",
+            str(domain),
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+    )
     return done.returncode, time.perf_counter() - t0, done.stderr.strip().splitlines()[-1] if done.stderr else ""
 
 
@@ -43,9 +59,15 @@ def flooded(rate: int, out: Path) -> dict:
     """One run under a flood of ``rate`` messages/s on each topic (0: alone)."""
     lock = DomainLock()
     n = math.ceil(rate / PER_PROCESS) if rate else 0
-    floods = [subprocess.Popen([sys.executable, str(FLOOD), "--domain-id", str(lock.domain_id), "--rate",
-                                str(rate / n)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-              for _ in range(n)]
+    floods = [
+        subprocess.Popen(
+            [sys.executable, str(FLOOD), "--domain-id", str(lock.domain_id), "--rate", str(rate / n)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
+            text=True,
+        )
+        for _ in range(n)
+    ]
     try:
         if floods:
             time.sleep(1.5)
@@ -59,9 +81,15 @@ def flooded(rate: int, out: Path) -> dict:
     for report in reports:
         for topic, r in report["rate_per_topic"].items():
             reached[topic] = reached.get(topic, 0) + r
-    got = {"rate": rate, "code": code, "whole": whole, "error": err,
-           "reached": min(reached.values()) if reached else 0, "topics": len(reached),
-           "sent": sum(r["total"] for r in reports)}
+    got = {
+        "rate": rate,
+        "code": code,
+        "whole": whole,
+        "error": err,
+        "reached": min(reached.values()) if reached else 0,
+        "topics": len(reached),
+        "sent": sum(r["total"] for r in reports),
+    }
     if code == 0:
         summary = json.loads((out / "summary.json").read_text())
         got.update(run=summary["wall_seconds"], rejected=summary["rejected_messages"])
@@ -70,26 +98,45 @@ def flooded(rate: int, out: Path) -> dict:
 
 def flood(rates: list[int], tmp: Path) -> None:
     ref = tmp / "flood-ref"
-    subprocess.run([sys.executable, "-m", "swarm_ros", "simulate", *FLAGS, "--out", str(ref), "--quiet",
-                    "--no-recording", "--overwrite"], check=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "swarm_ros",
+            "simulate",
+            *FLAGS,
+            "--out",
+            str(ref),
+            "--quiet",
+            "--no-recording",
+            "--overwrite",
+        ],
+        check=True,
+    )
     print("\nA flood on every topic: rectangle, rules local, seed 4, K = 2, recording and bag on")
-    print(f"{'asked/s':>8} {'reached/s':>10} {'topics':>6} {'sent':>10} {'exit':>5} {'same':>5} {'run s':>7} "
-          f"{'command s':>10} {'dropped (world, monitor)':>26}")
+    print(
+        f"{'asked/s':>8} {'reached/s':>10} {'topics':>6} {'sent':>10} {'exit':>5} {'same':>5} {'run s':>7} "
+        f"{'command s':>10} {'dropped (world, monitor)':>26}"
+    )
     alone = None
     for rate in [0, *rates]:
         out = tmp / f"flood-{rate}"
         got = flooded(rate, out)
-        same = got["code"] == 0 and all((ref / f).read_bytes() == (out / f).read_bytes()
-                                        for f in ("metrics.csv", "final_state.csv"))
+        same = got["code"] == 0 and all(
+            (ref / f).read_bytes() == (out / f).read_bytes() for f in ("metrics.csv", "final_state.csv")
+        )
         if rate == 0:
             alone = got
         dropped = f"{got['rejected']['world']:,}, {got['rejected']['monitor']:,}" if "rejected" in got else got["error"]
-        print(f"{rate:>8,} {got['reached']:>10,.0f} {got['topics']:>6} {got['sent']:>10,} {got['code']:>5} "
-              f"{'yes' if same else 'NO':>5} {got.get('run', float('nan')):>7.2f} {got['whole']:>10.2f} "
-              f"{dropped:>26}")
+        print(
+            f"{rate:>8,} {got['reached']:>10,.0f} {got['topics']:>6} {got['sent']:>10,} {got['code']:>5} "
+            f"{'yes' if same else 'NO':>5} {got.get('run', float('nan')):>7.2f} {got['whole']:>10.2f} "
+            f"{dropped:>26}"
+        )
         if rate and got["code"] == 0 and alone and alone["code"] == 0:
-            print(f"{'':>8} slowdown: run {got['run'] / alone['run']:.1f}x, "
-                  f"command {got['whole'] / alone['whole']:.1f}x")
+            print(
+                f"{'':>8} slowdown: run {got['run'] / alone['run']:.1f}x, command {got['whole'] / alone['whole']:.1f}x"
+            )
         if got["code"] == 0 and not same:
             print("  A WRONG RESULT: exit 0 with files that differ from simulate's")
 

@@ -77,10 +77,26 @@ def in_process(seed: int, repeats: int) -> tuple[int, float, float]:
 def command(seed: int, out: Path, *args: str, record: bool = False) -> tuple[int, float, float]:
     """Run ``swarm-ros ARGS`` on the star: (ticks, run seconds from summary.json, whole command seconds)."""
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "swarm_ros", *args, "--shape", "star", "--seed", str(seed),
-                           *[a for k, v in RULES.items() for a in (f"--{k}", v)],
-                           "--out", str(out), "--overwrite", "--quiet", *([] if record else ["--no-recording"])],
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "swarm_ros",
+            *args,
+            "--shape",
+            "star",
+            "--seed",
+            str(seed),
+            *[a for k, v in RULES.items() for a in (f"--{k}", v)],
+            "--out",
+            str(out),
+            "--overwrite",
+            "--quiet",
+            *([] if record else ["--no-recording"]),
+        ],
+        capture_output=True,
+        text=True,
+    )
     whole = time.perf_counter() - t0
     command.started_at = time.time() - whole  # the epoch of the start, for milestones()
     if done.returncode != 0:
@@ -110,9 +126,12 @@ def milestones(out: Path, started_at: float, whole: float) -> list[float]:
     """Seconds from the command's start to each of :data:`MILESTONES` (the last of several lines), then the end."""
     got = []
     for _, pattern, text in MILESTONES:
-        stamps = [float(m[1]) for log in (out / "logs").glob(pattern)
-                  for line in log.read_text(errors="replace").splitlines()
-                  if text in line and (m := _STAMP.match(line))]
+        stamps = [
+            float(m[1])
+            for log in (out / "logs").glob(pattern)
+            for line in log.read_text(errors="replace").splitlines()
+            if text in line and (m := _STAMP.match(line))
+        ]
         if not stamps:
             sys.exit(f"bench_ros: no '{text}' in {out / 'logs' / pattern}")
         got.append(max(stamps) - started_at)
@@ -130,19 +149,25 @@ def breakdown(seed: int, processes: list[int], repeats: int, tmp: Path) -> dict[
             _, _, whole = over_graph(seed, k, out, True)
             runs.append(milestones(out, command.started_at, whole))
         medians[k] = [statistics.median(run[i] for run in runs) for i in range(len(names))]
-    print(f"\nWhere a command's time goes: the star, recording and bag on, seconds from the command's start "
-          f"(median of {repeats})")
+    print(
+        f"\nWhere a command's time goes: the star, recording and bag on, seconds from the command's start "
+        f"(median of {repeats})"
+    )
     print(f"{'milestone':<30}" + "".join(f"{f'K = {k}':>9}" for k in processes))
     for i, name in enumerate(names):
         print(f"{name:<30}" + "".join(f"{medians[k][i]:>9.2f}" for k in processes))
     for k in processes:  # the spread of what a user waits for
         wholes = sorted(run[-1] for run in all_runs[k])
-        print(f"command, K = {k}, over {len(wholes)} runs: min {wholes[0]:.2f} s, median "
-              f"{statistics.median(wholes):.2f} s, max {wholes[-1]:.2f} s")
+        print(
+            f"command, K = {k}, over {len(wholes)} runs: min {wholes[0]:.2f} s, median "
+            f"{statistics.median(wholes):.2f} s, max {wholes[-1]:.2f} s"
+        )
     if 2 in medians:
         whole = medians[2][-1]
-        print(f"Target: the star with K = 2, recording on, whole command under 4 s: "
-              f"{'MET' if whole < 4 else 'NOT MET'} ({whole:.2f} s)")
+        print(
+            f"Target: the star with K = 2, recording on, whole command under 4 s: "
+            f"{'MET' if whole < 4 else 'NOT MET'} ({whole:.2f} s)"
+        )
     return medians
 
 
@@ -150,12 +175,13 @@ def bag_cost(seed: int, repeats: int, tmp: Path) -> None:
     """Print run and command seconds with and without the bag (K = 2, recording on; alternating; median)."""
     cases: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
     for r in range(repeats):
-        for bag in ((False, True) if r % 2 == 0 else (True, False)):
+        for bag in (False, True) if r % 2 == 0 else (True, False):
             out = tmp / f"bag-{bag}-{r}"
             _, secs, whole = over_graph(seed, 2, out, True, *([] if bag else ["--no-bag"]))
             cases[bag].append((secs, whole))
-    med = {bag: (statistics.median(s for s, _ in got), statistics.median(w for _, w in got))
-           for bag, got in cases.items()}
+    med = {
+        bag: (statistics.median(s for s, _ in got), statistics.median(w for _, w in got)) for bag, got in cases.items()
+    }
     bag_dir = tmp / "bag-True-0" / "bag"
     size = sum(f.stat().st_size for f in bag_dir.iterdir())
     print(f"\nThe bag (bag/, rosbag2 MCAP), star, K = 2, median of {repeats}: {size / 1e6:.1f} MB")
@@ -164,21 +190,24 @@ def bag_cost(seed: int, repeats: int, tmp: Path) -> None:
         label = "swarm-ros run" + (" (bag)" if bag else " --no-bag")
         print(f"{label:<34} {med[bag][0]:>8.3f} {med[bag][1]:>10.2f}")
     (off, off_whole), (on, on_whole) = med[False], med[True]
-    print(f"bag slows swarm-ros run: run {100 * (on / off - 1):+.0f}%, "
-          f"command {100 * (on_whole / off_whole - 1):+.0f}%")
+    print(
+        f"bag slows swarm-ros run: run {100 * (on / off - 1):+.0f}%, command {100 * (on_whole / off_whole - 1):+.0f}%"
+    )
     # The command is what a user waits for. The bag's cost is a fixed ~0.2 s of the monitor's CPU (opening
     # rosbags' type store, closing the file), spent while the world runs: on a 1-second run the run time
     # swings by tens of percent either way with it (measured -23% and +28% on the same code).
     cost = on_whole / off_whole
-    print(f"Target: the bag slows the swarm-ros run command by <= 15%: {'MET' if cost <= 1.15 else 'NOT MET'} "
-          f"({100 * (cost - 1):+.0f}%)")
+    print(
+        f"Target: the bag slows the swarm-ros run command by <= 15%: {'MET' if cost <= 1.15 else 'NOT MET'} "
+        f"({100 * (cost - 1):+.0f}%)"
+    )
 
 
 def recording_cost(seed: int, repeats: int, tmp: Path) -> None:
     """Print run and command seconds with and without the recording (alternating; best of ``repeats``)."""
     cases = {("run", False): [], ("run", True): [], ("simulate", False): [], ("simulate", True): []}
     for r in range(repeats):
-        for record in ((False, True) if r % 2 == 0 else (True, False)):
+        for record in (False, True) if r % 2 == 0 else (True, False):
             cases[("run", record)].append(over_graph(seed, 2, tmp / f"rec-run-{r}", record=record))
             cases[("simulate", record)].append(command(seed, tmp / f"rec-sim-{r}", "simulate", record=record))
     best = {key: (min(g[1] for g in got), min(g[2] for g in got)) for key, got in cases.items()}
@@ -186,17 +215,24 @@ def recording_cost(seed: int, repeats: int, tmp: Path) -> None:
     print(f"\nRerun recording, star, best of {repeats} (recording.rrd {size / 1e6:.1f} MB)")
     print(f"{'command':<34} {'run s':>8} {'command s':>10}")
     for (what, record), (secs, whole) in best.items():
-        label = f"swarm-ros {what}" + (" (K = 2)" if what == "run" else "") + (", recording" if record else
-                                                                                ", --no-recording")
+        label = (
+            f"swarm-ros {what}"
+            + (" (K = 2)" if what == "run" else "")
+            + (", recording" if record else ", --no-recording")
+        )
         print(f"{label:<34} {secs:>8.3f} {whole:>10.2f}")
     for what in ("run", "simulate"):
         (off, off_whole), (on, on_whole) = best[(what, False)], best[(what, True)]
-        print(f"recording slows swarm-ros {what:<9}: run {100 * (on / off - 1):+.0f}%, "
-              f"command {100 * (on_whole / off_whole - 1):+.0f}%")
+        print(
+            f"recording slows swarm-ros {what:<9}: run {100 * (on / off - 1):+.0f}%, "
+            f"command {100 * (on_whole / off_whole - 1):+.0f}%"
+        )
     (off, off_whole), (on, on_whole) = best[("run", False)], best[("run", True)]
     worst = max(on / off, on_whole / off_whole)
-    print(f"Target: the recording slows swarm-ros run by <= 25%: {'MET' if worst <= 1.25 else 'NOT MET'} "
-          f"(worst of run and command time: {100 * (worst - 1):+.0f}%)")
+    print(
+        f"Target: the recording slows swarm-ros run by <= 25%: {'MET' if worst <= 1.25 else 'NOT MET'} "
+        f"(worst of run and command time: {100 * (worst - 1):+.0f}%)"
+    )
 
 
 def speed(seed: int, repeats: int, processes: list[int]) -> None:
@@ -207,8 +243,10 @@ def speed(seed: int, repeats: int, processes: list[int]) -> None:
 
     ticks, fast, stepped = in_process(seed, repeats)
     fast_rate, step_rate = ticks / fast, ticks / stepped
-    print(f"star, 1036 robots, seed {seed}, {' '.join(f'{k} {v}' for k, v in RULES.items())}: "
-          f"{ticks} ticks; the graph with recording and bag on; median (min-max) of {repeats}")
+    print(
+        f"star, 1036 robots, seed {seed}, {' '.join(f'{k} {v}' for k, v in RULES.items())}: "
+        f"{ticks} ticks; the graph with recording and bag on; median (min-max) of {repeats}"
+    )
     print(f"{'engine':<34} {'ticks/s':>22} {'vs run()':>9} {'vs bare':>8} {'command s':>18}")
     print(f"{'in-process, run()':<34} {fast_rate:>22,.0f} {1:>8.1f}x")
     print(f"{'in-process, step() per tick':<34} {step_rate:>22,.0f} {step_rate / fast_rate:>8.3f}x")
@@ -227,21 +265,27 @@ def speed(seed: int, repeats: int, processes: list[int]) -> None:
                 bare_ticks, secs = bench_bare.bare(seed, k, 95 + k)
                 bare.append(bare_ticks / secs)
             medians[k], shares[k] = statistics.median(graph), statistics.median(graph) / statistics.median(bare)
-            print(f"{f'ROS 2 graph, K = {k}':<34} {spread(graph):>22} {medians[k] / fast_rate:>8.4f}x "
-                  f"{shares[k]:>7.0%} {spread(wholes, '{:.2f}'):>18}")
+            print(
+                f"{f'ROS 2 graph, K = {k}':<34} {spread(graph):>22} {medians[k] / fast_rate:>8.4f}x "
+                f"{shares[k]:>7.0%} {spread(wholes, '{:.2f}'):>18}"
+            )
             bare_rate = statistics.median(bare)
             print(f"{f'bare rclpy lockstep, K = {k}':<34} {spread(bare):>22} {bare_rate / fast_rate:>8.4f}x")
             per_node = {n: statistics.median(c[n] for c in cpus) for n in cpus[0]}
-            print(f"{'':<6}a tick: {1000 / medians[k]:.2f} ms of the graph, {1000 / bare_rate:.2f} ms of the bare "
-                  f"lockstep; CPU per tick (ms, from 'ready' to 'done', the end included): "
-                  + ", ".join(f"{n} {ms:.2f}" for n, ms in per_node.items()))
+            print(
+                f"{'':<6}a tick: {1000 / medians[k]:.2f} ms of the graph, {1000 / bare_rate:.2f} ms of the bare "
+                f"lockstep; CPU per tick (ms, from 'ready' to 'done', the end included): "
+                + ", ".join(f"{n} {ms:.2f}" for n, ms in per_node.items())
+            )
             if k == 2:
                 whole2 = statistics.median(wholes)
     if 2 in medians:
         r2 = medians[2]
         print(f"Target >= 500 ticks/s with K = 2: {'MET' if r2 >= 500 else 'NOT MET'} ({r2:,.0f})")
-        print(f"Target >= 40% of the bare lockstep's ticks/s with K = 2: {'MET' if shares[2] >= 0.4 else 'NOT MET'} "
-              f"({shares[2]:.0%})")
+        print(
+            f"Target >= 40% of the bare lockstep's ticks/s with K = 2: {'MET' if shares[2] >= 0.4 else 'NOT MET'} "
+            f"({shares[2]:.0%})"
+        )
         print(f"Target: the whole command under 4 s with K = 2: {'MET' if whole2 < 4 else 'NOT MET'} ({whole2:.2f} s)")
 
 
@@ -251,14 +295,31 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2, help="runs per case; the best is kept")
     parser.add_argument("--processes", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--rules", default="paper", help="rule set of every run (default: paper)")
-    parser.add_argument("--only", choices=("speed", "breakdown", "bag", "recording", "flood", "scale"), nargs="+",
-                        help="run only these parts (default: all)")
-    parser.add_argument("--crowding", help="override the crowding switch (e.g. disc, for the reading before "
-                                           "rule sets: --rules local --crowding disc)")
-    parser.add_argument("--flood-rates", type=int, nargs="+", default=[1000, 2500, 5000],
-                        help="messages per second on each topic (flood part)")
-    parser.add_argument("--scale-robots", type=int, nargs="+", default=[10_000],
-                        help="robots of the disc shapes (scale part, not run by default)")
+    parser.add_argument(
+        "--only",
+        choices=("speed", "breakdown", "bag", "recording", "flood", "scale"),
+        nargs="+",
+        help="run only these parts (default: all)",
+    )
+    parser.add_argument(
+        "--crowding",
+        help="override the crowding switch (e.g. disc, for the reading before "
+        "rule sets: --rules local --crowding disc)",
+    )
+    parser.add_argument(
+        "--flood-rates",
+        type=int,
+        nargs="+",
+        default=[1000, 2500, 5000],
+        help="messages per second on each topic (flood part)",
+    )
+    parser.add_argument(
+        "--scale-robots",
+        type=int,
+        nargs="+",
+        default=[10_000],
+        help="robots of the disc shapes (scale part, not run by default)",
+    )
     args = parser.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_bare, bench_flood, bench_scale
     RULES["rules"] = args.rules

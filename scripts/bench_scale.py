@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-STAR_DENSITY = 1036 / 65 ** 2  #: robots per patch of the star's world
+STAR_DENSITY = 1036 / 65**2  #: robots per patch of the star's world
 _CPU = re.compile(r"\[(\w+)\]: (ready|last tick|done), .* \((\d+\.\d+) s of CPU\)")
 _RECEIVED = re.compile(r"received (\d+) bytes of rows on ")
 
@@ -49,8 +49,8 @@ def disc_file(robots: int, folder: Path) -> tuple[Path, int]:
     """A text shape file of a disc of about ``robots`` patches, and the world radius for it."""
     r = math.sqrt(robots / math.pi)
     half = math.ceil(r) + 1
-    yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
-    mask = xx ** 2 + yy ** 2 <= r * r
+    yy, xx = np.mgrid[-half : half + 1, -half : half + 1]
+    mask = xx**2 + yy**2 <= r * r
     path = folder / f"disc{robots}.txt"
     path.write_text("".join("".join("#" if v else "." for v in row) + "\n" for row in mask))
     return path, round(math.sqrt(robots / STAR_DENSITY) / 2)
@@ -58,8 +58,9 @@ def disc_file(robots: int, folder: Path) -> tuple[Path, int]:
 
 def _swarm(args: list[str]) -> float:
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "swarm_ros", *args, "--quiet", "--overwrite"],
-                          capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "swarm_ros", *args, "--quiet", "--overwrite"], capture_output=True, text=True
+    )
     if done.returncode != 0:
         sys.exit(f"bench_scale: swarm-ros {args[0]} failed: {done.stderr.strip()[-500:]}")
     return time.perf_counter() - t0
@@ -72,8 +73,11 @@ def node_cpu(logs: Path, ticks: int) -> dict[str, float]:
     for log in logs.glob("*.log"):
         for m in _CPU.finditer(log.read_text(errors="replace")):
             cpu.setdefault(m[1], {})[m[2]] = float(m[3])
-    return {node: 1000 * (c.get("last tick", c.get("done", 0.0)) - c["ready"]) / ticks
-            for node, c in sorted(cpu.items()) if "ready" in c and "done" in c}
+    return {
+        node: 1000 * (c.get("last tick", c.get("done", 0.0)) - c["ready"]) / ticks
+        for node, c in sorted(cpu.items())
+        if "ready" in c and "done" in c
+    }
 
 
 def received(logs: Path, ticks: int) -> dict[str, float]:
@@ -104,16 +108,21 @@ def project(robots: int, measured: dict, sim_tick_ms: float, ticks: int) -> list
     for k, (cpu, largest, moving) in measured.items():
         batches = [ms for node, ms in cpu.items() if node.startswith("robot_batch")]
         world, batch, monitor = cpu.get("world", 0.0), max(batches, default=0.0), cpu.get("monitor", 0.0)
-        transport = 1000 * bench_bare.bare_fixed(k, max(1, round(largest / ROBOT_ROW_BYTES)),
-                                                 max(1, round(moving / k)), min(ticks, 100), 90 + k)
+        transport = 1000 * bench_bare.bare_fixed(
+            k, max(1, round(largest / ROBOT_ROW_BYTES)), max(1, round(moving / k)), min(ticks, 100), 90 + k
+        )
         tick = max(world + batch + transport, monitor)
-        lines.append(f"{robots:>9,} {k:>3} {world:>8.1f} {batch:>8.1f} {monitor:>8.1f} {transport:>10.1f} "
-                     f"{tick:>10.1f} {sim_tick_ms:>11.1f} {tick / sim_tick_ms:>7.1f}x")
+        lines.append(
+            f"{robots:>9,} {k:>3} {world:>8.1f} {batch:>8.1f} {monitor:>8.1f} {transport:>10.1f} "
+            f"{tick:>10.1f} {sim_tick_ms:>11.1f} {tick / sim_tick_ms:>7.1f}x"
+        )
     return lines
 
 
-PROJECTION_HEAD = (f"{'robots':>9} {'K':>3} {'world':>8} {'batch':>8} {'monitor':>8} {'transport':>10} "
-                   f"{'projected':>10} {'in-process':>11} {'ratio':>8}")
+PROJECTION_HEAD = (
+    f"{'robots':>9} {'K':>3} {'world':>8} {'batch':>8} {'monitor':>8} {'transport':>10} "
+    f"{'projected':>10} {'in-process':>11} {'ratio':>8}"
+)
 ROBOT_ROW_BYTES = 40  #: bytes of a /swarm/robots row, the bare lockstep's row (a region row is 29)
 
 
@@ -121,17 +130,36 @@ def _spread(values: list[float]) -> str:
     return f"{statistics.median(values):.2f} ({min(values):.2f}-{max(values):.2f})"
 
 
-def scale(sizes: list[int], processes: list[int], tmp: Path, ticks: int = 300, seed: int = 1,
-          repeats: int = 1, bare: bool = False, projection: bool = False) -> None:
+def scale(
+    sizes: list[int],
+    processes: list[int],
+    tmp: Path,
+    ticks: int = 300,
+    seed: int = 1,
+    repeats: int = 1,
+    bare: bool = False,
+    projection: bool = False,
+) -> None:
     extra = ["--no-recording"] if bare else []  # simulate writes no bag
     graph_extra = ["--no-bag"] if bare else []
     projected: list[str] = []
     for robots in sizes:
         shape, radius = disc_file(robots, tmp)
-        common = ["--shape", str(shape), "--world-radius", str(radius), "--seed", str(seed), "--max-ticks",
-                  str(ticks), *extra]
-        print(f"\n{robots:,} robots (disc, world radius {radius}), {ticks} ticks, seed {seed}, "
-              f"{'no recording, no bag' if bare else 'recording and bag on'}, median (min-max) of {repeats}")
+        common = [
+            "--shape",
+            str(shape),
+            "--world-radius",
+            str(radius),
+            "--seed",
+            str(seed),
+            "--max-ticks",
+            str(ticks),
+            *extra,
+        ]
+        print(
+            f"\n{robots:,} robots (disc, world radius {radius}), {ticks} ticks, seed {seed}, "
+            f"{'no recording, no bag' if bare else 'recording and bag on'}, median (min-max) of {repeats}"
+        )
         print(f"{'engine':<22} {'run s':>18} {'command s':>18} {'vs in-process':>14}   CPU per tick of each node (ms)")
         sim_runs, sim_whole = [], []
         for _ in range(repeats):
@@ -150,26 +178,35 @@ def scale(sizes: list[int], processes: list[int], tmp: Path, ticks: int = 300, s
             medians[k] = statistics.median(runs)
             cpu_ms = {node: statistics.median(c[node] for c in cpus if node in c) for node in cpus[-1]}
             cpu = ", ".join(f"{node} {ms:.1f}" for node, ms in cpu_ms.items())
-            print(f"{f'ROS 2 graph, K = {k}':<22} {_spread(runs):>18} {_spread(whole):>18} "
-                  f"{medians[k] / sim_run:>13.1f}x   {cpu}")
+            print(
+                f"{f'ROS 2 graph, K = {k}':<22} {_spread(runs):>18} {_spread(whole):>18} "
+                f"{medians[k] / sim_run:>13.1f}x   {cpu}"
+            )
             traffic[k] = received(out / "logs", ticks)
             measured[k] = (cpu_ms, max(traffic[k].values(), default=0.0), moving_per_tick(out))
         print("bytes of rows each batch received per tick (its region topic, the last run):")
         for k, per in traffic.items():
-            print(f"  K = {k}: " + ", ".join(f"{name} {b / 1e3:,.1f} kB" for name, b in per.items())
-                  + (f"; largest {max(per.values()) / 1e3:,.1f} kB" if per else ""))
+            print(
+                f"  K = {k}: "
+                + ", ".join(f"{name} {b / 1e3:,.1f} kB" for name, b in per.items())
+                + (f"; largest {max(per.values()) / 1e3:,.1f} kB" if per else "")
+            )
         first = processes[0]
         for k in processes[1:]:
             ratio = max(traffic[k].values()) / max(traffic[first].values()) if traffic[k] and traffic[first] else 0
             largest = [max(measured[j][0].values()) for j in (first, k)]
-            print(f"K = {k} against K = {first}: run time {medians[k] / medians[first]:.2f}x, "
-                  f"largest bytes received per batch {ratio:.2f}x, largest CPU per tick of a process "
-                  f"{largest[1] / largest[0]:.2f}x")
+            print(
+                f"K = {k} against K = {first}: run time {medians[k] / medians[first]:.2f}x, "
+                f"largest bytes received per batch {ratio:.2f}x, largest CPU per tick of a process "
+                f"{largest[1] / largest[0]:.2f}x"
+            )
         if projection:
             projected += project(robots, measured, 1000 * sim_run / ticks, ticks)
     if projection:
-        print("\nprojected tick on K hosts, one core per process (ms): world + slowest batch + transport, or the "
-              "monitor if longer")
+        print(
+            "\nprojected tick on K hosts, one core per process (ms): world + slowest batch + transport, or the "
+            "monitor if longer"
+        )
         print(PROJECTION_HEAD)
         print("\n".join(projected))
 
@@ -181,13 +218,23 @@ def main() -> None:
     parser.add_argument("--ticks", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--bare", action="store_true", help="--no-recording --no-bag on every run")
-    parser.add_argument("--projection", action="store_true",
-                        help="also project the tick on K hosts from each process's CPU and the transport's part")
+    parser.add_argument(
+        "--projection",
+        action="store_true",
+        help="also project the tick on K hosts from each process's CPU and the transport's part",
+    )
     args = parser.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_bare
     with tempfile.TemporaryDirectory() as tmp:
-        scale(args.robots, args.processes, Path(tmp), args.ticks, repeats=args.repeats, bare=args.bare,
-              projection=args.projection)
+        scale(
+            args.robots,
+            args.processes,
+            Path(tmp),
+            args.ticks,
+            repeats=args.repeats,
+            bare=args.bare,
+            projection=args.projection,
+        )
 
 
 if __name__ == "__main__":

@@ -97,9 +97,14 @@ class Flood:
             if not writers or cls is None:
                 continue
             q = writers[0].qos_profile
-            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=64, reliability=q.reliability,
-                             durability=q.durability, liveliness=q.liveliness,
-                             liveliness_lease_duration=q.liveliness_lease_duration)
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST,
+                depth=64,
+                reliability=q.reliability,
+                durability=q.durability,
+                liveliness=q.liveliness,
+                liveliness_lease_duration=q.liveliness_lease_duration,
+            )
             self.pubs[topic] = (self.node.create_publisher(cls, topic, qos), _messages(types[0], topic))
             self.sent[topic] = 0
             self.since[topic] = time.monotonic()
@@ -148,8 +153,19 @@ def main(argv: list[str] | None = None) -> int:
         flood.close()
     busy = {t: n for t, n in flood.sent.items() if n}
     rates = {t: round(n / max(seconds - (flood.since[t] - flood.start), 1e-9)) for t, n in busy.items()}
-    print(json.dumps({"seconds": round(seconds, 2), "sent": busy, "total": sum(busy.values()),
-                      "rate_per_topic": rates, "refused": flood.failed, "errors": sorted(flood.errors)}), flush=True)
+    print(
+        json.dumps(
+            {
+                "seconds": round(seconds, 2),
+                "sent": busy,
+                "total": sum(busy.values()),
+                "rate_per_topic": rates,
+                "refused": flood.failed,
+                "errors": sorted(flood.errors),
+            }
+        ),
+        flush=True,
+    )
     return 0
 
 

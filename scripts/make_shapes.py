@@ -56,7 +56,7 @@ def wrench(x, y, s):
     head = np.hypot(u, v - 15.0) <= 7.0
     jaw = (np.abs(u) <= 2.8) & (v >= 14.0)
     ring = np.hypot(u, v + 21.0) <= 5.0
-    return (handle | (head & ~jaw) | ring)
+    return handle | (head & ~jaw) | ring
 
 
 def k_letter(x, y, s):
@@ -133,8 +133,10 @@ def main() -> int:
         s, grid = best_scale(pred, target, lo, hi)
         shape = Shape.from_grid(grid, world, name=name, source=f"generated {name}")
         err = 100.0 * (shape.patches - target) / target
-        print(f"{name:10s} scale {s:7.4f}  patches {shape.patches:5d}  target {target:5d}  "
-              f"({err:+.2f}%)  holes {shape.holes}  bbox {shape.bbox}")
+        print(
+            f"{name:10s} scale {s:7.4f}  patches {shape.patches:5d}  target {target:5d}  "
+            f"({err:+.2f}%)  holes {shape.holes}  bbox {shape.bbox}"
+        )
         if not args.check:
             write_text_grid(
                 grid,

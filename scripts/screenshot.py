@@ -36,11 +36,15 @@ def main() -> int:
 
     exe = Path(sys.executable).with_name("rerun")
     try:
-        viewer = ViewerClient.spawn(headless=True, port=args.port, hide_welcome_screen=True,
-                                    executable_path=str(exe) if exe.exists() else None)
+        viewer = ViewerClient.spawn(
+            headless=True, port=args.port, hide_welcome_screen=True, executable_path=str(exe) if exe.exists() else None
+        )
     except Exception as exc:  # no Vulkan adapter, no viewer binary
-        print(f"screenshot: error: cannot start a headless Rerun viewer ({exc}); "
-              f"try 'apt-get install mesa-vulkan-drivers'", file=sys.stderr)
+        print(
+            f"screenshot: error: cannot start a headless Rerun viewer ({exc}); "
+            f"try 'apt-get install mesa-vulkan-drivers'",
+            file=sys.stderr,
+        )
         return 1
     try:
         viewer.open(str(args.recording.absolute()))

@@ -26,8 +26,11 @@ CASES = (("torus", (13, 20, 32)), ("box", (10, 20, 32)))
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10, help="runs per case (seeds 1..N)")
-    ap.add_argument("--smoke", action="store_true", help="two seeds of the smallest torus: checks the script runs "
-                    "(test/test_scripts.py); its numbers mean nothing")
+    ap.add_argument(
+        "--smoke",
+        action="store_true",
+        help="two seeds of the smallest torus: checks the script runs (test/test_scripts.py); its numbers mean nothing",
+    )
     args = ap.parse_args()
     cases = (("torus", (13,)),) if args.smoke else CASES
     if args.smoke:
@@ -46,8 +49,10 @@ def main() -> int:
                 ticks.append(sim.tick)
             t = np.array(ticks, dtype=float)
             half = stats.t.ppf(0.975, t.size - 1) * t.std(ddof=1) / np.sqrt(t.size) if t.size > 1 else float("nan")
-            print(f"| {name} | {shape.world.describe()} | {shape.patches / shape.free_patches:.3f} | "
-                  f"{t.mean():.0f} | {half:.0f} |")
+            print(
+                f"| {name} | {shape.world.describe()} | {shape.patches / shape.free_patches:.3f} | "
+                f"{t.mean():.0f} | {half:.0f} |"
+            )
     return 0
 
 

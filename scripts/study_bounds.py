@@ -81,8 +81,12 @@ def travel_bound(shape, x: np.ndarray, y: np.ndarray) -> float:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     ap.add_argument("--reference", type=Path, default=ROOT / "config/experiments/study_reference.csv")
-    ap.add_argument("--results", type=Path, default=ROOT / "docs/results/paper",
-                    help="the paper experiment's directory (its seeds and our times)")
+    ap.add_argument(
+        "--results",
+        type=Path,
+        default=ROOT / "docs/results/paper",
+        help="the paper experiment's directory (its seeds and our times)",
+    )
     ap.add_argument("--out", type=Path, help="also write the table to this file (via a temporary name)")
     args = ap.parse_args()
     from swarm_ros.app.published import load_reference
@@ -92,9 +96,11 @@ def main() -> int:
 
     reference = load_reference(args.reference)
     rows = read_results(args.results / "results.csv")
-    lines = ["| shape | study's smallest mean (its range over 5 sizes) | growth bound | "
-             "travel bound at the largest size (mean, min-max over 10 starts) | our smallest mean (`paper`) |",
-             "|---|---|---:|---|---:|"]
+    lines = [
+        "| shape | study's smallest mean (its range over 5 sizes) | growth bound | "
+        "travel bound at the largest size (mean, min-max over 10 starts) | our smallest mean (`paper`) |",
+        "|---|---|---:|---|---:|",
+    ]
     for name, ref in reference.items():
         shape = Shape.load(name)
         growth = growth_bound(shape)
@@ -110,9 +116,11 @@ def main() -> int:
         for r in mine:
             by_size.setdefault(r["robots"], []).append(r["convergence_tick"])
         fastest_n, fastest = min(((n, float(np.mean(v))) for n, v in by_size.items()), key=lambda t: t[1])
-        lines.append(f"| {name} | {ref.sizes_mean_min:g} ({ref.sizes_mean_min:g}–{ref.sizes_mean_max:g}) | "
-                     f"{growth} | {np.mean(bounds):.1f} ({min(bounds):.1f}–{max(bounds):.1f}) at N = {largest} | "
-                     f"{fastest:.0f} at N = {fastest_n} |")
+        lines.append(
+            f"| {name} | {ref.sizes_mean_min:g} ({ref.sizes_mean_min:g}–{ref.sizes_mean_max:g}) | "
+            f"{growth} | {np.mean(bounds):.1f} ({min(bounds):.1f}–{max(bounds):.1f}) at N = {largest} | "
+            f"{fastest:.0f} at N = {fastest_n} |"
+        )
     text = "\n".join(lines) + "\n"
     print(text, end="")
     if args.out:

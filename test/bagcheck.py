@@ -19,9 +19,12 @@ from swarm_ros.core.state import MOVING_STATES, RobotState
 from swarm_ros.protocol.rows import PATCH_METRES, VOXEL_ROW, decision_row, robot_row
 
 TYPES = {
-    "/swarm/robots": "sensor_msgs/msg/PointCloud2", "/swarm/decisions": "sensor_msgs/msg/PointCloud2",
-    "/swarm/occupancy": "nav_msgs/msg/OccupancyGrid", "/swarm/shape": "nav_msgs/msg/OccupancyGrid",
-    "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray", "/swarm/metrics": "std_msgs/msg/Int64MultiArray",
+    "/swarm/robots": "sensor_msgs/msg/PointCloud2",
+    "/swarm/decisions": "sensor_msgs/msg/PointCloud2",
+    "/swarm/occupancy": "nav_msgs/msg/OccupancyGrid",
+    "/swarm/shape": "nav_msgs/msg/OccupancyGrid",
+    "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray",
+    "/swarm/metrics": "std_msgs/msg/Int64MultiArray",
     "/clock": "rosgraph_msgs/msg/Clock",
 }
 #: A 3D run's topics: its shape and occupancy are PointCloud2s of voxel centres.
@@ -121,8 +124,10 @@ def assert_bag_holds_run(run: Path) -> None:
     if dims == 3:  # the filled voxels' centres: where the localized robots stand
         final = np.frombuffer(messages["/swarm/occupancy"][-1].data, dtype=VOXEL_ROW)
         standing = np.isin(state, [RobotState.SEED, RobotState.LOCALIZED])
-        centres = {(float(a), float(b), float(c)) for a, b, c in zip(pose["x"][standing], pose["y"][standing],
-                                                                       pose["z"][standing])}
+        centres = {
+            (float(a), float(b), float(c))
+            for a, b, c in zip(pose["x"][standing], pose["y"][standing], pose["z"][standing])
+        }
         assert {(float(r["x"]), float(r["y"]), float(r["z"])) for r in final} == centres
     else:
         final = np.asarray(messages["/swarm/occupancy"][-1].data, dtype=np.int8)

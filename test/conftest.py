@@ -20,8 +20,10 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         kinds = [m.name for m in item.iter_markers() if m.name in KINDS]
         if len(set(kinds)) != 1:
-            raise pytest.UsageError(f"{item.nodeid}: mark the module with exactly one of {', '.join(KINDS)} "
-                                    f"(got {sorted(set(kinds)) or 'none'})")
+            raise pytest.UsageError(
+                f"{item.nodeid}: mark the module with exactly one of {', '.join(KINDS)} "
+                f"(got {sorted(set(kinds)) or 'none'})"
+            )
 
 
 @pytest.fixture(scope="session")
@@ -74,11 +76,15 @@ def lan(count: int):
         steps = [("-n", switch, "link", "add", "br0", "type", "bridge"), ("-n", switch, "link", "set", "br0", "up")]
         for i, (ns, dev) in enumerate(zip(hosts, links)):
             port = f"sws{chr(ord('a') + i)}{tag}"
-            steps += [("netns", "add", ns),
-                      ("link", "add", dev, "netns", ns, "type", "veth", "peer", "name", port, "netns", switch),
-                      ("-n", switch, "link", "set", port, "master", "br0"), ("-n", switch, "link", "set", port, "up"),
-                      ("-n", ns, "addr", "add", SUBNET.format(net, i + 1) + "/24", "dev", dev),
-                      ("-n", ns, "link", "set", dev, "up"), ("-n", ns, "link", "set", "lo", "up")]
+            steps += [
+                ("netns", "add", ns),
+                ("link", "add", dev, "netns", ns, "type", "veth", "peer", "name", port, "netns", switch),
+                ("-n", switch, "link", "set", port, "master", "br0"),
+                ("-n", switch, "link", "set", port, "up"),
+                ("-n", ns, "addr", "add", SUBNET.format(net, i + 1) + "/24", "dev", dev),
+                ("-n", ns, "link", "set", dev, "up"),
+                ("-n", ns, "link", "set", "lo", "up"),
+            ]
         for step in steps:
             done = ip_in(*step)
             if done.returncode != 0:

@@ -115,11 +115,15 @@ class Recording:
 
     def same_data(self, other: Recording) -> bool:
         """Whether two recordings hold the same logged data (not the same bytes: ids and times differ)."""
-        return (self.series == other.series and self.events == other.events and self.static == other.static
-                and self.robots.keys() == other.robots.keys()
-                and all(np.array_equal(a, b) for t in self.robots for a, b in zip(self.robots[t], other.robots[t]))
-                and self.occupancy.keys() == other.occupancy.keys()
-                and all(np.array_equal(self.occupancy[t], other.occupancy[t]) for t in self.occupancy))
+        return (
+            self.series == other.series
+            and self.events == other.events
+            and self.static == other.static
+            and self.robots.keys() == other.robots.keys()
+            and all(np.array_equal(a, b) for t in self.robots for a, b in zip(self.robots[t], other.robots[t]))
+            and self.occupancy.keys() == other.occupancy.keys()
+            and all(np.array_equal(self.occupancy[t], other.occupancy[t]) for t in self.occupancy)
+        )
 
 
 def rrd_verify(path) -> subprocess.CompletedProcess:
@@ -154,9 +158,10 @@ def _wait_until_up(*links: tuple[str, str], limit: float = 10.0) -> None:
     """
     deadline = time.monotonic() + limit
     while True:
-        states = {dev: json.loads(ip_in("-n", ns, "-j", "link", "show", "dev", dev).stdout
-                                  or "[{}]")[0].get("operstate")
-                  for ns, dev in links}
+        states = {
+            dev: json.loads(ip_in("-n", ns, "-j", "link", "show", "dev", dev).stdout or "[{}]")[0].get("operstate")
+            for ns, dev in links
+        }
         if all(state == "UP" for state in states.values()):
             return
         if time.monotonic() > deadline:
@@ -194,8 +199,10 @@ def module_graph() -> dict[str, set[str]]:
         package = ".".join(parts if parts[-1] == "__init__" else parts[:-1]).removesuffix(".__init__")
         name = ".".join(parts).removesuffix(".__init__")
         modules[name] = (path, package)
-    return {name: {m for m in _imports_of(path, name, package) if m in modules and m != name}
-            for name, (path, package) in modules.items()}
+    return {
+        name: {m for m in _imports_of(path, name, package) if m in modules and m != name}
+        for name, (path, package) in modules.items()
+    }
 
 
 def make_cloud(rows: np.ndarray, tick: int):
@@ -394,8 +401,16 @@ def disc_file(path: Path, radius: float = 4.5, half: int = 6) -> Path:
 def small_config(tmp_path: Path, **over) -> Path:
     """A small grid in a 21 x 21 world: one disc shape (69 patches), three sizes, two radii."""
     disc_file(tmp_path / "disc.txt")
-    data = {"name": "small", "seed": 11, "repetitions": 3, "vision_radius": [1, 1.5], "max_ticks": 4000,
-            "world_radius": 10, "shapes": {"disc.txt": [50, "patches", 80]}, **over}
+    data = {
+        "name": "small",
+        "seed": 11,
+        "repetitions": 3,
+        "vision_radius": [1, 1.5],
+        "max_ticks": 4000,
+        "world_radius": 10,
+        "shapes": {"disc.txt": [50, "patches", 80]},
+        **over,
+    }
     path = tmp_path / "small.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
@@ -443,8 +458,14 @@ def alive(pid: int) -> bool:
 
 
 def final_of(sim):
-    return (sim.outcome, sim.history.tolist(), sim.state.x.tobytes(), sim.state.y.tobytes(),
-            sim.state.heading.tobytes(), sim.state.state.tobytes())
+    return (
+        sim.outcome,
+        sim.history.tolist(),
+        sim.state.x.tobytes(),
+        sim.state.y.tobytes(),
+        sim.state.heading.tobytes(),
+        sim.state.state.tobytes(),
+    )
 
 
 def run_in_batches(shape: Shape, p, batches: int, seed: int) -> Simulation:
@@ -540,8 +561,14 @@ class LockstepRun:
         self.strips = [batch_strip(self.shape, self.params, k, batches, text) for k in range(batches)]
         self.clock, self.port, self.log = Clock(), LockstepPort(), Log()
         self.rejections = Rejections(self.log)
-        self.ls = Lockstep(Simulation(self.shape, self.params), Policy(**{"monitor_window": 0, **policy}), self.port,
-                           self.log, self.rejections, clock=self.clock)
+        self.ls = Lockstep(
+            Simulation(self.shape, self.params),
+            Policy(**{"monitor_window": 0, **policy}),
+            self.port,
+            self.log,
+            self.rejections,
+            clock=self.clock,
+        )
         self.batches = batches
         self.decider = Decider(self.shape, self.params)
 

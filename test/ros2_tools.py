@@ -24,8 +24,18 @@ ROOT = Path(__file__).resolve().parent.parent
 VENV = ROOT / ".venv"
 COLCON = ROOT / ".venv-colcon" / "bin" / "colcon"
 CLI_SOURCE = Path(os.environ.get("SWARM_ROS_ROS2_CLI", ROOT.parent / "shared" / "ros2-jazzy-cli"))
-SOURCES = ("setup.py", "setup.cfg", "package.xml", "pyproject.toml", "resource", "swarm_ros", "shapes", "config",
-           "launch", "rviz")
+SOURCES = (
+    "setup.py",
+    "setup.cfg",
+    "package.xml",
+    "pyproject.toml",
+    "resource",
+    "swarm_ros",
+    "shapes",
+    "config",
+    "launch",
+    "rviz",
+)
 NODES = ("/monitor", "/robot_batch_0", "/robot_batch_1", "/world")  # the default graph (processes:=2)
 
 
@@ -42,8 +52,14 @@ def build_workspace(ws: Path) -> Path:
         else:
             shutil.copy2(path, src / name)
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}
-    done = subprocess.run([str(COLCON), "--log-base", "log", "build", "--base-paths", "src"], cwd=ws, env=env,
-                          capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [str(COLCON), "--log-base", "log", "build", "--base-paths", "src"],
+        cwd=ws,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert "1 package finished" in done.stdout
     return ws / "install"
@@ -53,11 +69,14 @@ def install_ros2_tools() -> Path:
     """``.venv/bin/ros2``, installed from :data:`CLI_SOURCE` if it is not yet; skips the test without it."""
     ros2 = VENV / "bin" / "ros2"
     if not (CLI_SOURCE / "install.sh").is_file():
-        pytest.skip(f"ROS 2's command-line tools are not here ({CLI_SOURCE}; set SWARM_ROS_ROS2_CLI to their "
-                    f"directory with install.sh)")
+        pytest.skip(
+            f"ROS 2's command-line tools are not here ({CLI_SOURCE}; set SWARM_ROS_ROS2_CLI to their "
+            f"directory with install.sh)"
+        )
     if not ros2.exists():
-        done = subprocess.run(["bash", str(CLI_SOURCE / "install.sh"), str(VENV)], capture_output=True, text=True,
-                              timeout=600)
+        done = subprocess.run(
+            ["bash", str(CLI_SOURCE / "install.sh"), str(VENV)], capture_output=True, text=True, timeout=600
+        )
         assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     return ros2
 
@@ -67,12 +86,28 @@ class Ros2:
 
     def __init__(self, install: Path, home: Path, domain_id: int):
         self.install, self.home = install, home
-        base = {k: v for k, v in os.environ.items()
-                if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH", "ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
-                             "FASTRTPS_DEFAULT_PROFILES_FILE", "SWARM_ROS_RUN_KEY", "COLCON_PREFIX_PATH")}
-        self.env = {**base, "HOME": str(home), "ROS_LOG_DIR": str(home / "ros-log"),
-                    "ROS_DOMAIN_ID": str(domain_id), "PYTHONUNBUFFERED": "1",
-                    "PATH": f"{VENV / 'bin'}:{os.environ.get('PATH', '/usr/bin:/bin')}"}
+        base = {
+            k: v
+            for k, v in os.environ.items()
+            if k
+            not in (
+                "PYTHONPATH",
+                "AMENT_PREFIX_PATH",
+                "ROS_DOMAIN_ID",
+                "ROS_AUTOMATIC_DISCOVERY_RANGE",
+                "FASTRTPS_DEFAULT_PROFILES_FILE",
+                "SWARM_ROS_RUN_KEY",
+                "COLCON_PREFIX_PATH",
+            )
+        }
+        self.env = {
+            **base,
+            "HOME": str(home),
+            "ROS_LOG_DIR": str(home / "ros-log"),
+            "ROS_DOMAIN_ID": str(domain_id),
+            "PYTHONUNBUFFERED": "1",
+            "PATH": f"{VENV / 'bin'}:{os.environ.get('PATH', '/usr/bin:/bin')}",
+        }
         self.prelude = f'. "{install}/setup.sh" && export AMENT_PREFIX_PATH="$AMENT_PREFIX_PATH:{VENV}" && '
 
     def command(self, line: str) -> list[str]:
@@ -80,15 +115,23 @@ class Ros2:
 
     def run(self, line: str, timeout: float = 60, cwd: Path | None = None) -> subprocess.CompletedProcess:
         """Run one command line (``ros2 ...``) to its end."""
-        return subprocess.run(self.command(line), cwd=cwd or self.home, env=self.env, capture_output=True,
-                              text=True, timeout=timeout)
+        return subprocess.run(
+            self.command(line), cwd=cwd or self.home, env=self.env, capture_output=True, text=True, timeout=timeout
+        )
 
     def start(self, line: str, cwd: Path | None = None, log: Path | None = None) -> subprocess.Popen:
         """Start one command line in a session of its own (a terminal's process group: see :func:`ctrl_c`),
         its output (stdout and stderr) into ``log``."""
         out = open(log, "w") if log else subprocess.DEVNULL
-        return subprocess.Popen(self.command(line), cwd=cwd or self.home, env=self.env, stdout=out,
-                                stderr=subprocess.STDOUT, start_new_session=True, text=True)
+        return subprocess.Popen(
+            self.command(line),
+            cwd=cwd or self.home,
+            env=self.env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+            text=True,
+        )
 
     def launch_logs(self) -> list[Path]:
         """The log directories of the launches so far, oldest first (each holds params.yaml)."""

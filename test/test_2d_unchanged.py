@@ -44,8 +44,18 @@ BEFORE_3D = {
 def test_a_2d_run_is_byte_identical_to_the_release_before_3d(case):
     name, rules = case.split("/")
     shape = Shape.load(name)
-    sim = Simulation(shape, RunParams(robots=shape.patches + 20, seed=2, rules=rules, max_ticks=600, vision_radius=2.0,
-                                      fail_fraction=0.1, fail_tick=50))
+    sim = Simulation(
+        shape,
+        RunParams(
+            robots=shape.patches + 20,
+            seed=2,
+            rules=rules,
+            max_ticks=600,
+            vision_radius=2.0,
+            fail_fraction=0.1,
+            fail_tick=50,
+        ),
+    )
     sim.run()
     assert _digest(sim) == BEFORE_3D[case]
 
@@ -55,8 +65,15 @@ def test_a_2d_run_decided_and_applied_tick_by_tick_is_the_same_run(case):
     """The engine's other path, a :class:`Decider`'s decisions applied tick by tick (what the ROS graph does)."""
     name, rules = case.split("/")
     shape = Shape.load(name)
-    params = RunParams(robots=shape.patches + 20, seed=2, rules=rules, max_ticks=600, vision_radius=2.0,
-                       fail_fraction=0.1, fail_tick=50)
+    params = RunParams(
+        robots=shape.patches + 20,
+        seed=2,
+        rules=rules,
+        max_ticks=600,
+        vision_radius=2.0,
+        fail_fraction=0.1,
+        fail_tick=50,
+    )
     sim, decider = Simulation(shape, params), Decider(shape, params)
     while not sim.done:
         sim.apply(decider.decide(sim.state, sim.moving_ids(), sim.tick + 1))

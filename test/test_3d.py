@@ -39,7 +39,7 @@ def test_a_3d_world_is_a_cube_walled_on_its_outer_shell():
     w = World(4, 3)
     wall = w.wall_mask()
     assert wall.shape == (9, 9, 9) and w.patch_count == 729
-    assert wall.sum() == 9 ** 3 - 7 ** 3
+    assert wall.sum() == 9**3 - 7**3
     assert not wall[1:-1, 1:-1, 1:-1].any()
 
 
@@ -73,11 +73,11 @@ def test_the_3d_dilation_equals_scipys():
 
 def test_frontier_blocks_count_the_frontier_per_cube_of_voxels():
     size, b = 21, FRONTIER_BLOCK
-    frontier = np.random.default_rng(3).random(size ** 3) < 0.1
+    frontier = np.random.default_rng(3).random(size**3) < 0.1
     blocks = frontier_blocks_of(frontier, size, 3)
     nb = -(-size // b)
     z, y, x = np.unravel_index(np.flatnonzero(frontier), (size,) * 3)
-    expect = np.bincount(((z // b) * nb + y // b) * nb + x // b, minlength=nb ** 3)
+    expect = np.bincount(((z // b) * nb + y // b) * nb + x // b, minlength=nb**3)
     assert np.array_equal(blocks[:-1], expect) and blocks[-1] == frontier.sum()
 
 
@@ -121,11 +121,14 @@ def test_a_layered_text_grid_round_trips_and_places_the_top_layer_highest(tmp_pa
     assert shape.mask[1 + 6, 2 + 6, -2 + 6]  # [iz, iy, ix] of (x, y, z) = (-2, 2, 1)
 
 
-@pytest.mark.parametrize("text,error", [
-    ("###\n###\n---\n##\n##\n", "layer 2 is 2 x 2, the first layer is 3 x 2"),
-    ("#..\n...\n---\n...\n..#\n", r"separate parts \(26-connected\)"),
-    ("##\n##\n---\n##\n#.\n", "no corner of four voxels"),
-])
+@pytest.mark.parametrize(
+    "text,error",
+    [
+        ("###\n###\n---\n##\n##\n", "layer 2 is 2 x 2, the first layer is 3 x 2"),
+        ("#..\n...\n---\n...\n..#\n", r"separate parts \(26-connected\)"),
+        ("##\n##\n---\n##\n#.\n", "no corner of four voxels"),
+    ],
+)
 def test_bad_layered_grids_say_what_is_wrong_in_one_line(tmp_path, text, error):
     path = tmp_path / "bad.txt"
     path.write_text(text)
@@ -177,12 +180,19 @@ def test_mesh_scale_scales_the_voxelization(meshes):
     assert big.mesh_scale == 2.0
 
 
-@pytest.mark.parametrize("name,scale,error", [
-    ("open.stl", 1.0, r"the mesh does not close \(\d+ edges belong to one triangle only\)"),
-    ("junk.stl", 1.0, "the mesh has no triangles|cannot read the mesh"),
-    ("ring.stl", 5.0, r"reaches beyond the walls of the 65 x 65 x 65 world .*\(at mesh_scale 5; --mesh-scale sets "),
-    ("ring.stl", 10000.0, "lower mesh_scale"),
-])
+@pytest.mark.parametrize(
+    "name,scale,error",
+    [
+        ("open.stl", 1.0, r"the mesh does not close \(\d+ edges belong to one triangle only\)"),
+        ("junk.stl", 1.0, "the mesh has no triangles|cannot read the mesh"),
+        (
+            "ring.stl",
+            5.0,
+            r"reaches beyond the walls of the 65 x 65 x 65 world .*\(at mesh_scale 5; --mesh-scale sets ",
+        ),
+        ("ring.stl", 10000.0, "lower mesh_scale"),
+    ],
+)
 def test_bad_meshes_say_what_is_wrong_in_one_line(meshes, name, scale, error):
     with pytest.raises(ShapeError, match=error) as info:
         Shape.load(meshes / name, mesh_scale=scale)
@@ -208,8 +218,13 @@ def _angle(a, b) -> float:
 
 
 @settings(max_examples=300, deadline=None)
-@given(h=st.floats(0, 2 * math.pi, exclude_max=True), p=st.floats(-math.pi / 2, math.pi / 2), w=st.floats(0, math.pi),
-       u=st.floats(0, 1, exclude_max=True), v=st.floats(0, 1, exclude_max=True))
+@given(
+    h=st.floats(0, 2 * math.pi, exclude_max=True),
+    p=st.floats(-math.pi / 2, math.pi / 2),
+    w=st.floats(0, math.pi),
+    u=st.floats(0, 1, exclude_max=True),
+    v=st.floats(0, 1, exclude_max=True),
+)
 def test_a_wiggle_turns_the_heading_by_at_most_the_wiggle_angle(h, p, w, u, v):
     h2, p2 = wiggled(h, p, w, u, v)
     assert 0 <= h2 < 2 * math.pi and -math.pi / 2 <= p2 <= math.pi / 2
@@ -243,8 +258,9 @@ def test_the_block_search_finds_the_brute_force_nearest_frontier_voxel(seed, den
     frontier = rng.random(world.patch_count) < density
     blocks = frontier_blocks_of(frontier, world.size, 3)
     for x, y, z in rng.uniform(-11.4, 11.4, (20, 3)):
-        assert nearest_frontier3(x, y, z, frontier, blocks, world.radius, world.size) == \
-            nearest_frontier_patch(frontier, x, y, world, z)
+        assert nearest_frontier3(x, y, z, frontier, blocks, world.radius, world.size) == nearest_frontier_patch(
+            frontier, x, y, world, z
+        )
 
 
 # -- runs --------------------------------------------------------------------------------------------------
@@ -252,8 +268,20 @@ def test_the_block_search_finds_the_brute_force_nearest_frontier_voxel(seed, den
 @pytest.mark.parametrize("name", ["torus", "shell", "jack"])
 def test_every_invariant_holds_in_3d_under_every_rule_set(name, rules):
     shape = Shape.load(name, World(16))
-    sim = run_checked(Simulation(shape, RunParams(robots=shape.patches + 30, seed=5, rules=rules, max_ticks=250,
-                                                  vision_radius=2.0, fail_fraction=0.05, fail_tick=120)))
+    sim = run_checked(
+        Simulation(
+            shape,
+            RunParams(
+                robots=shape.patches + 30,
+                seed=5,
+                rules=rules,
+                max_ticks=250,
+                vision_radius=2.0,
+                fail_fraction=0.05,
+                fail_tick=120,
+            ),
+        )
+    )
     assert sim.removed > 0 and sim.metrics.localized > 4
 
 
@@ -273,8 +301,18 @@ def test_the_paper_rules_complete_every_builtin_3d_shape():
 
 def _final(sim: Simulation) -> tuple:
     s = sim.state
-    return (sim.tick, str(sim.outcome), s.x.tobytes(), s.y.tobytes(), s.z.tobytes(), s.heading.tobytes(),
-            s.pitch.tobytes(), s.state.tobytes(), s.occupancy.tobytes(), sim.history.tobytes())
+    return (
+        sim.tick,
+        str(sim.outcome),
+        s.x.tobytes(),
+        s.y.tobytes(),
+        s.z.tobytes(),
+        s.heading.tobytes(),
+        s.pitch.tobytes(),
+        s.state.tobytes(),
+        s.occupancy.tobytes(),
+        sim.history.tobytes(),
+    )
 
 
 @pytest.mark.parametrize("rules", RULES)
@@ -339,8 +377,9 @@ def test_the_3d_final_png_legend_sits_below_every_view_and_no_label_is_cut(tmp_p
     sim.run()
     saved = []
     real = matplotlib.figure.Figure.savefig
-    monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
-                        lambda fig, *a, **k: (saved.append(fig), real(fig, *a, **k))[1])
+    monkeypatch.setattr(
+        matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: (saved.append(fig), real(fig, *a, **k))[1]
+    )
     save_final_png(RunRecord.of(sim, wall_seconds=0.0), tmp_path / "final.png")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
@@ -354,5 +393,6 @@ def test_the_3d_final_png_legend_sits_below_every_view_and_no_label_is_cut(tmp_p
         box = ax.get_tightbbox(renderer)  # the axes with its ticks, labels and title
         assert legend.y1 <= box.y0, f"{ax.get_title() or ax.get_ylabel()}: the legend has no row of its own"
         assert not box.overlaps(fig._suptitle.get_window_extent(renderer)), ax.get_title() or ax.get_ylabel()
-        assert whole.x0 <= box.x0 and box.x1 <= whole.x1 and whole.y0 <= box.y0 and box.y1 <= whole.y1, \
+        assert whole.x0 <= box.x0 and box.x1 <= whole.x1 and whole.y0 <= box.y0 and box.y1 <= whole.y1, (
             f"{ax.get_title() or ax.get_ylabel()} is cut"
+        )

@@ -65,8 +65,19 @@ def test_a_3d_ros_graph_run_equals_the_in_process_engine(reference, tmp_path, pr
 
 
 def test_simulate_check_runs_the_z_spec_checker_in_3d(tmp_path):
-    done = swarm_ros("simulate", "--shape", "torus", "--world-radius", "16", "--max-ticks", "300", "--check",
-                     "--no-recording", "--out", str(tmp_path / "run"))
+    done = swarm_ros(
+        "simulate",
+        "--shape",
+        "torus",
+        "--world-radius",
+        "16",
+        "--max-ticks",
+        "300",
+        "--check",
+        "--no-recording",
+        "--out",
+        str(tmp_path / "run"),
+    )
     assert done.returncode == 0, done.stderr
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["outcome"] == "timeout"
 
@@ -86,9 +97,13 @@ def test_a_3d_runs_world_and_monitor_killed_mid_run_go_on_and_the_run_is_identic
     """The world from its checkpoint of 3D rows, then the monitor from its bag of them, in one run (a batch
     takes a 3D snapshot at tick 0 in every run, and again when it is restarted: the same message)."""
     out = tmp_path / "run"
-    launcher = subprocess.Popen([PY, "-m", "swarm_ros", "run", *RUN, "--processes", "2", "--out", str(out)],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                env={k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"})
+    launcher = subprocess.Popen(
+        [PY, "-m", "swarm_ros", "run", *RUN, "--processes", "2", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"},
+    )
     logs = staged_logs(out)
     wait_saved(logs, 300)
     kill_node(out, "world")

@@ -43,8 +43,15 @@ def _digest(sim: Simulation) -> str:
 def test_a_3d_run_is_byte_identical_to_the_code_before(case):
     name, rules = case.split("/")
     shape = Shape.load(name)
-    params = RunParams(robots=shape.patches + 20, seed=2, rules=rules, max_ticks=400, vision_radius=2.0,
-                       fail_fraction=0.1, fail_tick=50)
+    params = RunParams(
+        robots=shape.patches + 20,
+        seed=2,
+        rules=rules,
+        max_ticks=400,
+        vision_radius=2.0,
+        fail_fraction=0.1,
+        fail_tick=50,
+    )
     compiled = Simulation(shape, params)
     compiled.run()
     assert _digest(compiled) == BEFORE_NAMED_STATE[case]

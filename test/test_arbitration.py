@@ -17,8 +17,9 @@ def claims(sim: Simulation, patch_of_robot: dict[int, int]) -> Decisions:
     ids = sim.moving_ids()
     s = sim.state
     claim = np.array([patch_of_robot.get(int(i), -1) for i in ids], dtype=np.int64)
-    return Decisions(tick=sim.tick + 1, ids=ids, claim=claim, x=s.x[ids].copy(), y=s.y[ids].copy(),
-                     heading=s.heading[ids].copy())
+    return Decisions(
+        tick=sim.tick + 1, ids=ids, claim=claim, x=s.x[ids].copy(), y=s.y[ids].copy(), heading=s.heading[ids].copy()
+    )
 
 
 def reorder(d: Decisions, order: np.ndarray) -> Decisions:
@@ -71,8 +72,7 @@ def test_refused_claim_on_a_completed_shape_is_already_complete():
     ids = sim.moving_ids()
     sim.apply(claims(sim, {int(i): last for i in ids}))
     _, _, outcome = sim.last_joins()
-    assert sorted(outcome.tolist()) == [JoinOutcome.SUCCESS, JoinOutcome.ALREADY_COMPLETE,
-                                        JoinOutcome.ALREADY_COMPLETE]
+    assert sorted(outcome.tolist()) == [JoinOutcome.SUCCESS, JoinOutcome.ALREADY_COMPLETE, JoinOutcome.ALREADY_COMPLETE]
     assert sim.outcome is Outcome.COMPLETE_WITH_EXTRAS
     assert (sim.state.state == RobotState.SEPARATED).sum() == 2
 

@@ -87,14 +87,22 @@ def test_every_tagged_type_reaches_its_handler_whole_and_without_its_tag():
     world, batch, monitor = _Node("world"), _Node("robot_batch_0"), _Node("monitor")
     auth.Signer(world, KEY).publisher(PointCloud2, msgs.ROBOTS, None).publish_rows(_rows(ROBOT_ROW, 3), 7)
     auth.Signer(world, KEY).publisher(DiagnosticArray, msgs.STATUS, None).publish(
-        msgs.status_message(7, "running", "running", extra={"robots": 9}))
+        msgs.status_message(7, "running", "running", extra={"robots": 9})
+    )
     auth.Signer(monitor, KEY).publisher(Int64MultiArray, msgs.METRICS, None).publish(
-        msgs.metrics_message([7] + [1] * (len(METRIC_COLUMNS) - 1)))
+        msgs.metrics_message([7] + [1] * (len(METRIC_COLUMNS) - 1))
+    )
     hello = msgs.ids_message(np.array([4, 5, 6]))
     hello.layout.dim[0].label = batch_label("robot_batch_0", 2)
     auth.Signer(batch, KEY).publisher(Int64MultiArray, msgs.BATCHES, None).publish(hello)
-    rx, gate, got = _gate({msgs.ROBOTS: PointCloud2, msgs.STATUS: DiagnosticArray, msgs.METRICS: Int64MultiArray,
-                           msgs.BATCHES: Int64MultiArray})
+    rx, gate, got = _gate(
+        {
+            msgs.ROBOTS: PointCloud2,
+            msgs.STATUS: DiagnosticArray,
+            msgs.METRICS: Int64MultiArray,
+            msgs.BATCHES: Int64MultiArray,
+        }
+    )
     _deliver(rx, world.sent + monitor.sent + batch.sent)
     assert gate.rejections.total == 0 and [t for t, _ in got] == [msgs.ROBOTS, msgs.STATUS, msgs.METRICS, msgs.BATCHES]
     cloud, status, metrics, batches = (m for _, m in got)
@@ -137,9 +145,12 @@ def test_a_message_without_a_tag_or_with_another_keys_is_dropped_at_once():
 def test_a_changed_byte_anywhere_makes_the_tag_fail(where):
     data = bytearray(_one_cloud())
     text = data.decode("latin-1")
-    at = {"rows": len(data) - 10, "stamp": 5,
-          "tag's sender": text.index("swarm_ros.tag:world") + len("swarm_ros.tag:"),
-          "mac": text.index("swarm_ros.tag:world") + 60}[where]
+    at = {
+        "rows": len(data) - 10,
+        "stamp": 5,
+        "tag's sender": text.index("swarm_ros.tag:world") + len("swarm_ros.tag:"),
+        "mac": text.index("swarm_ros.tag:world") + 60,
+    }[where]
     data[at] = data[at] ^ 0x01 if where != "tag's sender" else ord("o")  # 'world' -> 'oorld'
     rx, gate, got = _gate({msgs.ROBOTS: PointCloud2})
     rx.callbacks[msgs.ROBOTS](bytes(data))
@@ -168,9 +179,15 @@ def test_a_replay_is_refused_and_a_restarted_sender_is_taken():
     assert gate.rejections.counts == {f"{msgs.ROBOTS}: replayed": 1}
 
 
-@pytest.mark.parametrize("sender, topic", [("robot_batch_0", msgs.ROBOTS),
-                                           ("robot_batch_1", "/swarm/decisions/robot_batch_0"),
-                                           ("world", msgs.METRICS), ("monitor", msgs.BATCHES)])
+@pytest.mark.parametrize(
+    "sender, topic",
+    [
+        ("robot_batch_0", msgs.ROBOTS),
+        ("robot_batch_1", "/swarm/decisions/robot_batch_0"),
+        ("world", msgs.METRICS),
+        ("monitor", msgs.BATCHES),
+    ],
+)
 def test_a_node_of_the_run_is_taken_only_on_its_own_topics(sender, topic):
     node = _Node(sender)
     kind = Int64MultiArray if topic in (msgs.METRICS, msgs.BATCHES) else PointCloud2
@@ -215,8 +232,14 @@ def test_types_without_a_field_for_a_tag_are_neither_signed_nor_taken():
 def test_parse_tag_refuses_what_is_not_a_tag():
     good = tags.Tag("world", "0123456789abcdef", 12, "a" * 32)
     assert tags.parse_tag(good.text) == good
-    for text in ("", good.text + "0", good.text.replace(":12:", ":012:"), good.text.replace("world", "wo rld"),
-                 good.text.upper(), "swarm_ros.tag:world:0123456789abcdef:0:" + "a" * 32):
+    for text in (
+        "",
+        good.text + "0",
+        good.text.replace(":12:", ":012:"),
+        good.text.replace("world", "wo rld"),
+        good.text.upper(),
+        "swarm_ros.tag:world:0123456789abcdef:0:" + "a" * 32,
+    ):
         with pytest.raises(Rejected, match="unauthenticated"):
             tags.parse_tag(text)
 
@@ -264,4 +287,7 @@ def test_only_a_key_holders_bytes_reach_a_parser_and_they_must_parse_with_the_ta
     status.status[0].message = blank  # the tag in another field than its own
     rx.callbacks[msgs.STATUS](sealer.seal(msgs.STATUS, serialize_message(status), blank))
     assert got == [] and gate.rejections.counts == {
-        f"{msgs.STATUS}: malformed CDR": 1, f"{msgs.ROBOTS}: malformed CDR": 1, f"{msgs.STATUS}: unauthenticated": 1}
+        f"{msgs.STATUS}: malformed CDR": 1,
+        f"{msgs.ROBOTS}: malformed CDR": 1,
+        f"{msgs.STATUS}: unauthenticated": 1,
+    }

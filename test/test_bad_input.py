@@ -30,12 +30,20 @@ def table() -> list[tuple[str, str, str]]:
 def make_fixtures(d: Path) -> None:
     """The files docs/bad_input.md names."""
     files = {
-        "empty.txt": "", "comments.txt": "; only a comment\n", "badchar.txt": "....\n.#x.\n....\n",
-        "ragged.txt": "....\n.##\n....\n", "garbage.png": "this is not a png", "empty.png": "",
-        "split.txt": "........\n.##..##.\n.##..##.\n........\n", "huge.txt": ("#" * 70 + "\n") * 70,
-        "thin.txt": ".....\n.###.\n.....\n", "bad.yaml": "/**:\n  ros__parameters:\n    robotz: 100\n",
-        "typed.yaml": "/**:\n  ros__parameters:\n    robots: many\n", "broken.yaml": "/**:\n  ros__parameters: [\n",
-        "notadir": "a file\n", "badexp.yaml": EXPERIMENT.format(shape="stra", sizes="100"),
+        "empty.txt": "",
+        "comments.txt": "; only a comment\n",
+        "badchar.txt": "....\n.#x.\n....\n",
+        "ragged.txt": "....\n.##\n....\n",
+        "garbage.png": "this is not a png",
+        "empty.png": "",
+        "split.txt": "........\n.##..##.\n.##..##.\n........\n",
+        "huge.txt": ("#" * 70 + "\n") * 70,
+        "thin.txt": ".....\n.###.\n.....\n",
+        "bad.yaml": "/**:\n  ros__parameters:\n    robotz: 100\n",
+        "typed.yaml": "/**:\n  ros__parameters:\n    robots: many\n",
+        "broken.yaml": "/**:\n  ros__parameters: [\n",
+        "notadir": "a file\n",
+        "badexp.yaml": EXPERIMENT.format(shape="stra", sizes="100"),
         "negexp.yaml": EXPERIMENT.format(shape="star", sizes="1030, -3"),
         "rules.yaml": "/**:\n  ros__parameters:\n    rules: fast\n",
         "rulesexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "rules: [paper, fast]\n",
@@ -50,15 +58,20 @@ def make_fixtures(d: Path) -> None:
         "okexp.yaml": EXPERIMENT.format(shape="star", sizes="1036"),
         "farexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("vision_radius: 1", "vision_radius: 40"),
     }
-    files.update({
-        "hugeexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "max_ticks: 100000000000000000000\n",
-        "manyexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("repetitions: 2",
-                                                                             "repetitions: 1000000000000"),
-        "gridexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace("repetitions: 2", "repetitions: 100000")
-        .replace("vision_radius: 1", "vision_radius: [1, 2, 3, 4]") + "rules: [paper, local, literal]\n",
-        "floatexp.yaml": EXPERIMENT.format(shape="star", sizes="442.0"),
-        "twice.yaml": "/**:\n  ros__parameters:\n    robots: 500\n    robots: 600\n",
-    })
+    files.update(
+        {
+            "hugeexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "max_ticks: 100000000000000000000\n",
+            "manyexp.yaml": EXPERIMENT.format(shape="star", sizes="1036").replace(
+                "repetitions: 2", "repetitions: 1000000000000"
+            ),
+            "gridexp.yaml": EXPERIMENT.format(shape="star", sizes="1036")
+            .replace("repetitions: 2", "repetitions: 100000")
+            .replace("vision_radius: 1", "vision_radius: [1, 2, 3, 4]")
+            + "rules: [paper, local, literal]\n",
+            "floatexp.yaml": EXPERIMENT.format(shape="star", sizes="442.0"),
+            "twice.yaml": "/**:\n  ros__parameters:\n    robots: 500\n    robots: 600\n",
+        }
+    )
     for name, text in files.items():
         (d / name).write_text(text)
     (d / "bomb.png").write_bytes(_png_header(10000, 10000))
@@ -81,6 +94,7 @@ def _png_header(width: int, height: int) -> bytes:
     import zlib
 
     ihdr = b"IHDR" + struct.pack(">IIBBBBB", width, height, 1, 0, 0, 0, 0)
+
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
@@ -111,8 +125,9 @@ def test_the_table_has_at_least_20_rows_numbered_in_order():
 
 
 def test_the_usage_page_counts_the_rows_of_the_table():
-    said = re.search(r"\[bad_input\.md\]\(bad_input\.md\)\s+lists\s+(\d+) bad inputs",
-                     (ROOT / "docs" / "usage.md").read_text())
+    said = re.search(
+        r"\[bad_input\.md\]\(bad_input\.md\)\s+lists\s+(\d+) bad inputs", (ROOT / "docs" / "usage.md").read_text()
+    )
     assert said and int(said.group(1)) == len(table())
 
 
@@ -127,10 +142,15 @@ def test_bad_input_row(tmp_path, monkeypatch, capsys, number, command, message):
         assigned[name] = value
     if words[:3] == ["ros2", "run", "swarm_ros"]:  # ros2cli is not installed: run the node's module
         home = tmp_path.parent / f"{tmp_path.name}-home"  # ROS and matplotlib caches go there, not in tmp_path
-        env = {**os.environ, "ROS_DOMAIN_ID": "231", "HOME": str(home), "ROS_LOG_DIR": str(home / "ros"),
-               **assigned}
-        done = subprocess.run([sys.executable, "-m", f"swarm_ros.nodes.{words[3]}", *words[4:]], cwd=tmp_path,
-                              capture_output=True, text=True, timeout=120, env=env)
+        env = {**os.environ, "ROS_DOMAIN_ID": "231", "HOME": str(home), "ROS_LOG_DIR": str(home / "ros"), **assigned}
+        done = subprocess.run(
+            [sys.executable, "-m", f"swarm_ros.nodes.{words[3]}", *words[4:]],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=env,
+        )
         code, err = done.returncode, done.stderr
         err = "\n".join(ln for ln in err.splitlines() if "error" in ln) + "\n"  # rclpy may log at start-up
         prefix = f"swarm_ros {words[3]}: error: "

@@ -28,8 +28,13 @@ PY = sys.executable
 
 
 def _run(out: Path, *extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([PY, "-m", "swarm_ros", "run", "--processes", "1", "--out", str(out), "--quiet",
-                           "--no-recording", *extra], capture_output=True, text=True, timeout=240, env=run_env())
+    return subprocess.run(
+        [PY, "-m", "swarm_ros", "run", "--processes", "1", "--out", str(out), "--quiet", "--no-recording", *extra],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        env=run_env(),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -54,12 +59,37 @@ def test_no_bag_writes_none_and_leaves_nothing_beside_the_run(tmp_path):
 def test_an_interrupted_run_keeps_a_readable_bag_of_its_ticks(tmp_path):
     out = tmp_path / "run"
     # the star under the local join rule: thousands of ticks, time to interrupt
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--seed", "5", "--rules", "local",
-                             "--processes", "2", "--out", str(out), "--quiet", "--no-recording"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=run_env())
+    proc = subprocess.Popen(
+        [
+            PY,
+            "-m",
+            "swarm_ros",
+            "run",
+            "--shape",
+            "star",
+            "--seed",
+            "5",
+            "--rules",
+            "local",
+            "--processes",
+            "2",
+            "--out",
+            str(out),
+            "--quiet",
+            "--no-recording",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=run_env(),
+    )
+
     def logged(node: str, text: str) -> bool:
-        return any(text in (logs / f"{node}.log").read_text(errors="replace")
-                   for logs in tmp_path.glob(".run.logs-*") if (logs / f"{node}.log").exists())
+        return any(
+            text in (logs / f"{node}.log").read_text(errors="replace")
+            for logs in tmp_path.glob(".run.logs-*")
+            if (logs / f"{node}.log").exists()
+        )
 
     try:  # what can be seen, not a delay: the world sent tick 0 and the monitor is ready to take it
         deadline = time.monotonic() + 120
@@ -106,9 +136,26 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
         node.create_subscription(Int64MultiArray, msgs.METRICS, metrics.append, msgs.reader_qos(msgs.METRICS_QOS))
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        replay = subprocess.Popen([PY, "-m", "swarm_ros", "replay", str(ring_run), "--domain-id", str(domain),
-                                   "--rate", "0.5", "--delay", "4", "--quiet"], stdout=subprocess.PIPE,
-                                  stderr=subprocess.PIPE, text=True, env=env)
+        replay = subprocess.Popen(
+            [
+                PY,
+                "-m",
+                "swarm_ros",
+                "replay",
+                str(ring_run),
+                "--domain-id",
+                str(domain),
+                "--rate",
+                "0.5",
+                "--delay",
+                "4",
+                "--quiet",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
         deadline = time.monotonic() + 60
         _, bagged = read_bag(ring_run / "bag")
         want = len(bagged["/swarm/metrics"])
@@ -132,8 +179,14 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
 
 
 def test_replay_refuses_a_start_offset_past_the_bags_end_in_one_line(ring_run):
-    done = subprocess.run([PY, "-m", "swarm_ros", "replay", str(ring_run), "--start-offset", "100000", "--quiet"],
-                          capture_output=True, text=True, env=run_env(), timeout=60)
+    done = subprocess.run(
+        [PY, "-m", "swarm_ros", "replay", str(ring_run), "--start-offset", "100000", "--quiet"],
+        capture_output=True,
+        text=True,
+        env=run_env(),
+        timeout=60,
+    )
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
-    assert re.fullmatch(r"swarm-ros: error: --start-offset 100000 is past the bag's end \(it lasts [\d.]+ s\)\n",
-                        done.stderr), done.stderr
+    assert re.fullmatch(
+        r"swarm-ros: error: --start-offset 100000 is past the bag's end \(it lasts [\d.]+ s\)\n", done.stderr
+    ), done.stderr

@@ -49,10 +49,17 @@ def test_a_cloud_reads_back_as_rclpy_reads_it(n):
     data = aligned(encode_cloud(rows, 12))  # as a reader takes it: padded to a multiple of 4
     cloud, msg = decode_cloud(data), deserialize_message(data, PointCloud2)
     assert cloud.header.stamp.sec == msg.header.stamp.sec == 12 and cloud.header.frame_id == msg.header.frame_id
-    assert [(f.name, f.offset, f.datatype, f.count) for f in cloud.fields] == \
-        [(f.name, f.offset, f.datatype, f.count) for f in msg.fields]
-    assert (cloud.height, cloud.width, cloud.point_step, cloud.row_step, cloud.is_dense, cloud.is_bigendian) == \
-        (msg.height, msg.width, msg.point_step, msg.row_step, msg.is_dense, msg.is_bigendian)
+    assert [(f.name, f.offset, f.datatype, f.count) for f in cloud.fields] == [
+        (f.name, f.offset, f.datatype, f.count) for f in msg.fields
+    ]
+    assert (cloud.height, cloud.width, cloud.point_step, cloud.row_step, cloud.is_dense, cloud.is_bigendian) == (
+        msg.height,
+        msg.width,
+        msg.point_step,
+        msg.row_step,
+        msg.is_dense,
+        msg.is_bigendian,
+    )
     assert np.array_equal(checks.cloud(cloud, ROBOT_ROW, 100), rows)
     assert checks.tick_stamp(cloud.header) == 12
 

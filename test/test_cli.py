@@ -14,13 +14,30 @@ from swarm_ros.core.metrics import METRIC_COLUMNS
 
 pytestmark = pytest.mark.process
 
-SUMMARY_KEYS = {"shape", "shape_patches", "robots", "vision_radius", "rules", "join", "crowding", "steps", "seed",
-                "engine", "outcome", "convergence_tick", "localized", "unlocalized", "empty_patches", "wall_seconds"}
+SUMMARY_KEYS = {
+    "shape",
+    "shape_patches",
+    "robots",
+    "vision_radius",
+    "rules",
+    "join",
+    "crowding",
+    "steps",
+    "seed",
+    "engine",
+    "outcome",
+    "convergence_tick",
+    "localized",
+    "unlocalized",
+    "empty_patches",
+    "wall_seconds",
+}
 
 
 def simulate(out: Path, *extra: str) -> int:
-    return cli.main(["simulate", "--shape", "rectangle", "--robots", "460", "--seed", "3", "--quiet",
-                     "--out", str(out), *extra])
+    return cli.main(
+        ["simulate", "--shape", "rectangle", "--robots", "460", "--seed", "3", "--quiet", "--out", str(out), *extra]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +48,14 @@ def run_dir(tmp_path_factory):
 
 
 def test_simulate_writes_the_run_directory(run_dir):
-    assert sorted(p.name for p in run_dir.iterdir()) == ["convergence.png", "final.png", "final_state.csv",
-                                                        "metrics.csv", "recording.rrd", "summary.json"]
+    assert sorted(p.name for p in run_dir.iterdir()) == [
+        "convergence.png",
+        "final.png",
+        "final_state.csv",
+        "metrics.csv",
+        "recording.rrd",
+        "summary.json",
+    ]
     summary = json.loads((run_dir / "summary.json").read_text())
     assert SUMMARY_KEYS <= set(summary)
     assert summary["engine"] == "inprocess" and summary["outcome"] == "complete_with_extras"
@@ -76,8 +99,10 @@ def test_summary_is_printed(tmp_path, capsys):
 def test_params_file_sets_values_and_flags_override_it(tmp_path):
     pf = tmp_path / "p.yaml"
     pf.write_text("/**:\n  ros__parameters:\n    shape: wrench\n    robots: 300\n    max_ticks: 7\n")
-    assert cli.main(["simulate", "--params-file", str(pf), "--robots", "200", "--quiet",
-                     "--out", str(tmp_path / "r")]) == 0
+    assert (
+        cli.main(["simulate", "--params-file", str(pf), "--robots", "200", "--quiet", "--out", str(tmp_path / "r")])
+        == 0
+    )
     s = json.loads((tmp_path / "r" / "summary.json").read_text())
     assert (s["shape"], s["robots"], s["max_ticks"]) == ("wrench", 200, 7)
 
@@ -102,12 +127,15 @@ def test_existing_output_is_refused_unless_overwrite_and_overwrite_replaces_only
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r"]  # no temporary or trash directory left
 
 
-@pytest.mark.parametrize("content,why", [
-    ({"important.txt": "x", "sub/notes.txt": "y"}, "holds no summary.json written by swarm-ros"),
-    ({"summary.json": "{}"}, "its summary.json was not written by swarm-ros"),
-    ({"summary.json": "[1, 2]"}, "its summary.json was not written by swarm-ros"),
-    ({"summary.json": "not json"}, "holds no summary.json written by swarm-ros"),
-])
+@pytest.mark.parametrize(
+    "content,why",
+    [
+        ({"important.txt": "x", "sub/notes.txt": "y"}, "holds no summary.json written by swarm-ros"),
+        ({"summary.json": "{}"}, "its summary.json was not written by swarm-ros"),
+        ({"summary.json": "[1, 2]"}, "its summary.json was not written by swarm-ros"),
+        ({"summary.json": "not json"}, "holds no summary.json written by swarm-ros"),
+    ],
+)
 def test_overwrite_refuses_a_directory_this_tool_did_not_write_and_touches_nothing(tmp_path, capsys, content, why):
     out = tmp_path / "mine"
     for name, text in content.items():
@@ -217,8 +245,13 @@ def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch, ca
 
 def test_installed_console_script_reports_errors_without_a_traceback(tmp_path):
     exe = Path(sys.executable).parent / "swarm-ros"
-    result = subprocess.run([str(exe), "simulate", "--shape", str(tmp_path / "missing.png")],
-                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    result = subprocess.run(
+        [str(exe), "simulate", "--shape", str(tmp_path / "missing.png")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
     assert result.returncode == 2
     assert result.stderr.startswith("swarm-ros: error: ") and "Traceback" not in result.stderr
     assert not (tmp_path / output.RUNS_DIR).exists()
@@ -236,22 +269,47 @@ def test_a_second_command_for_a_run_directory_in_use_is_refused_at_once(tmp_path
     import time
 
     out = tmp_path / "run"
-    first = subprocess.Popen([sys.executable, "-m", "swarm_ros", "simulate", "--shape", "star", "--vision", "3",
-                              "--rules", "local", "--crowding", "disc", "--no-recording", "--quiet", "--max-ticks",
-                              "60000", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "swarm_ros",
+            "simulate",
+            "--shape",
+            "star",
+            "--vision",
+            "3",
+            "--rules",
+            "local",
+            "--crowding",
+            "disc",
+            "--no-recording",
+            "--quiet",
+            "--max-ticks",
+            "60000",
+            "--out",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         lock_dir = Path(__import__("tempfile").gettempdir()) / "swarm_ros-runs"
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and not any(
-                f"pid {first.pid}:" in p.read_text() for p in lock_dir.glob("*.lock") if p.is_file()):
+            f"pid {first.pid}:" in p.read_text() for p in lock_dir.glob("*.lock") if p.is_file()
+        ):
             time.sleep(0.05)
         for command in ("simulate", "run"):
             started = time.monotonic()
             assert cli.main([command, "--out", str(out), "--quiet"]) == 2
             err = capsys.readouterr().err
             assert err.count("\n") == 1 and time.monotonic() - started < 5, err
-            assert f"{out}: another swarm-ros command is writing this run directory now (pid {first.pid}: " \
-                   f"swarm-ros simulate --shape star" in err
+            assert (
+                f"{out}: another swarm-ros command is writing this run directory now (pid {first.pid}: "
+                f"swarm-ros simulate --shape star" in err
+            )
         assert first.poll() is None  # the first goes on, untouched
     finally:
         first.send_signal(signal.SIGTERM)

@@ -9,8 +9,19 @@ from helpers import module_graph
 
 pytestmark = pytest.mark.process  # runs Python in subprocesses with modules blocked
 
-BLOCKED = ["rclpy", "rerun", "std_msgs", "geometry_msgs", "nav_msgs", "rosgraph_msgs", "diagnostic_msgs",
-           "sensor_msgs", "visualization_msgs", "builtin_interfaces", "rosidl_runtime_py"]
+BLOCKED = [
+    "rclpy",
+    "rerun",
+    "std_msgs",
+    "geometry_msgs",
+    "nav_msgs",
+    "rosgraph_msgs",
+    "diagnostic_msgs",
+    "sensor_msgs",
+    "visualization_msgs",
+    "builtin_interfaces",
+    "rosidl_runtime_py",
+]
 
 
 def test_core_runs_with_ros_and_rerun_blocked():
@@ -35,9 +46,11 @@ def test_core_runs_with_ros_and_rerun_blocked():
 
 
 def test_blocker_really_blocks():
-    code = ("import sys\nclass B:\n    def find_spec(self, n, p=None, t=None):\n"
-            "        if n == 'json': raise ImportError('blocked')\nsys.modules.pop('json', None)\n"
-            "sys.meta_path.insert(0, B())\nimport json\n")
+    code = (
+        "import sys\nclass B:\n    def find_spec(self, n, p=None, t=None):\n"
+        "        if n == 'json': raise ImportError('blocked')\nsys.modules.pop('json', None)\n"
+        "sys.meta_path.insert(0, B())\nimport json\n"
+    )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.returncode != 0 and "blocked" in result.stderr
 

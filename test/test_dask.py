@@ -37,8 +37,13 @@ def _experiment(tmp_path: Path, reps: int = 2) -> Path:
 
 
 def _cli(*args: str, env: dict | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "swarm_ros", "experiment", *args], capture_output=True,
-                          text=True, timeout=timeout, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "swarm_ros", "experiment", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+    )
 
 
 def _rows(results: Path) -> list[tuple]:
@@ -53,8 +58,9 @@ def scheduler():
 
     from dask.distributed import LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                      silence_logs=logging.ERROR) as cluster:
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.ERROR
+    ) as cluster:
         yield cluster.scheduler_address
 
 
@@ -90,9 +96,26 @@ def test_rerunning_resumes_only_the_missing_runs(tmp_path, scheduler, local_rows
 
 def _started(config: Path, out: Path, env: dict | None = None) -> subprocess.Popen:
     """An experiment on its own LocalCluster (2 workers), in the background."""
-    return subprocess.Popen([sys.executable, "-m", "swarm_ros", "experiment", str(config), "--out", str(out),
-                             "--executor", "dask", "--jobs", "2", "--quiet"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env)
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "swarm_ros",
+            "experiment",
+            str(config),
+            "--out",
+            str(out),
+            "--executor",
+            "dask",
+            "--jobs",
+            "2",
+            "--quiet",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
 
 
 def _wait_for_rows(results: Path, proc: subprocess.Popen, n: int = 1, limit: float = 60) -> None:
@@ -148,32 +171,57 @@ def test_ctrl_c_keeps_the_finished_rows_and_leaves_no_worker(tmp_path, local_row
 
 def test_the_ros2_engine_is_refused_where_runs_could_share_a_domain(tmp_path):
     env = {**os.environ, "ROS_DOMAIN_ID": "7"}
-    done = _cli(str(_experiment(tmp_path)), "--out", str(tmp_path / "exp"), "--engine", "ros2", "--executor", "dask",
-                "--jobs", "1", "--quiet", env=env)
+    done = _cli(
+        str(_experiment(tmp_path)),
+        "--out",
+        str(tmp_path / "exp"),
+        "--engine",
+        "ros2",
+        "--executor",
+        "dask",
+        "--jobs",
+        "1",
+        "--quiet",
+        env=env,
+    )
     assert done.returncode == 2
-    assert done.stderr.strip().splitlines() == [
-        done.stderr.strip()] and "--engine ros2 on Dask needs a ROS domain of its own for each run" in done.stderr
+    assert (
+        done.stderr.strip().splitlines() == [done.stderr.strip()]
+        and "--engine ros2 on Dask needs a ROS domain of its own for each run" in done.stderr
+    )
     assert "ROS_DOMAIN_ID=7" in done.stderr and not (tmp_path / "exp").exists()  # refused before writing
 
 
 def test_an_unreachable_scheduler_is_one_line(tmp_path):
-    done = _cli(str(_experiment(tmp_path)), "--out", str(tmp_path / "exp"), "--executor", "dask",
-                "--scheduler", "tcp://127.0.0.1:9", "--quiet")
+    done = _cli(
+        str(_experiment(tmp_path)),
+        "--out",
+        str(tmp_path / "exp"),
+        "--executor",
+        "dask",
+        "--scheduler",
+        "tcp://127.0.0.1:9",
+        "--quiet",
+    )
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in done.stderr
     assert not (tmp_path / "exp").exists()
 
 
-@pytest.mark.parametrize("run_seconds,remaining,workers,expected", [
-    (None, 360, 2, 1),  # no run finished yet: one per task
-    (3.0, 360, 2, 1),  # runs of seconds (a ROS 2 graph): one per task
-    (0.0125, 300, 2, 20),  # 12.5 ms paper-protocol runs: a quarter of a second of runs per task
-    (0.0125, 12, 2, 4),  # near the end: no less than 50 ms of runs...
-    (0.0125, 3, 2, 3),  # ...but no more than is left
-    (0.0125, 60, 4, 7),  # half a worker's share of what is left
-])
-def test_a_dask_task_holds_a_quarter_second_of_runs_but_the_workers_finish_together(run_seconds, remaining,
-                                                                                  workers, expected):
+@pytest.mark.parametrize(
+    "run_seconds,remaining,workers,expected",
+    [
+        (None, 360, 2, 1),  # no run finished yet: one per task
+        (3.0, 360, 2, 1),  # runs of seconds (a ROS 2 graph): one per task
+        (0.0125, 300, 2, 20),  # 12.5 ms paper-protocol runs: a quarter of a second of runs per task
+        (0.0125, 12, 2, 4),  # near the end: no less than 50 ms of runs...
+        (0.0125, 3, 2, 3),  # ...but no more than is left
+        (0.0125, 60, 4, 7),  # half a worker's share of what is left
+    ],
+)
+def test_a_dask_task_holds_a_quarter_second_of_runs_but_the_workers_finish_together(
+    run_seconds, remaining, workers, expected
+):
     from swarm_ros.app.executors import chunk_size
 
     assert chunk_size(run_seconds, remaining, workers) == expected
@@ -197,11 +245,15 @@ def test_short_runs_share_dask_tasks_and_each_run_comes_back_once(tmp_path, sche
 
 def test_the_ros2_engine_runs_on_dask_workers_and_equals_the_in_process_engine(tmp_path, scheduler):
     config = tmp_path / "tiny.yaml"
-    config.write_text("name: tiny\nseed: 5\nrepetitions: 1\nvision_radius: 1\nrules: paper\nmax_ticks: 20000\n"
-                      "shapes:\n  rectangle: [120]\n", encoding="utf-8")
+    config.write_text(
+        "name: tiny\nseed: 5\nrepetitions: 1\nvision_radius: 1\nrules: paper\nmax_ticks: 20000\n"
+        "shapes:\n  rectangle: [120]\n",
+        encoding="utf-8",
+    )
     out, ref = tmp_path / "exp", tmp_path / "ref"
-    done = _cli(str(config), "--out", str(out), "--executor", "dask", "--scheduler", scheduler, "--engine", "ros2",
-                "--quiet")
+    done = _cli(
+        str(config), "--out", str(out), "--executor", "dask", "--scheduler", scheduler, "--engine", "ros2", "--quiet"
+    )
     assert done.returncode == 0, done.stderr
     assert _cli(str(config), "--out", str(ref), "--jobs", "1", "--quiet").returncode == 0
     (ros,), (inprocess,) = read_results(out / "results.csv"), read_results(ref / "results.csv")

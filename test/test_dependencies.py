@@ -47,8 +47,13 @@ def _imported() -> dict[str, set[str]]:
     found: dict[str, set[str]] = {}
     for path in sorted((ROOT / "swarm_ros").rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
-                [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module else []
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module]
+                if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+                else []
+            )
             for name in names:
                 found.setdefault(name.split(".")[0], set()).add(str(path.relative_to(ROOT)))
     return found
@@ -83,7 +88,8 @@ def test_every_declared_distribution_is_pinned_in_the_lock():
 
 def test_the_check_finds_an_undeclared_import(tmp_path, monkeypatch):
     """The first test is not vacuous: a declaration list without numba fails it."""
-    monkeypatch.setattr(sys.modules[__name__], "_declared", lambda: {_name(r) for r in
-                                                                     _setup_keyword("install_requires")} - {"numba"})
+    monkeypatch.setattr(
+        sys.modules[__name__], "_declared", lambda: {_name(r) for r in _setup_keyword("install_requires")} - {"numba"}
+    )
     with pytest.raises(AssertionError, match="numba"):
         test_every_module_the_package_imports_is_declared()

@@ -20,8 +20,11 @@ FORBIDDEN = ("../" + "shared", "ROS2" + "_NOTES", "MODEL" + ".md", "STYLE" + ".m
 
 def tracked_text_files() -> list[Path]:
     try:
-        names = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True,
-                               timeout=60).stdout.decode().split("\0")
+        names = (
+            subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True, timeout=60)
+            .stdout.decode()
+            .split("\0")
+        )
         files = [ROOT / n for n in names if n]
     except (OSError, subprocess.CalledProcessError):  # not a git checkout: every file but the venv's
         files = [p for p in ROOT.rglob("*") if p.is_file() and ".venv" not in p.parts and ".git" not in p.parts]
@@ -36,16 +39,27 @@ def tracked_text_files() -> list[Path]:
 def test_no_file_links_to_or_cites_the_private_inputs():
     files = tracked_text_files()
     assert len(files) > 50  # the listing found the repository
-    hits = [f"{p.relative_to(ROOT)}:{n}: {line.strip()[:100]}"
-            for p in files for n, line in enumerate(p.read_text(errors="replace").splitlines(), start=1)
-            if any(word in line for word in FORBIDDEN)]
+    hits = [
+        f"{p.relative_to(ROOT)}:{n}: {line.strip()[:100]}"
+        for p in files
+        for n, line in enumerate(p.read_text(errors="replace").splitlines(), start=1)
+        if any(word in line for word in FORBIDDEN)
+    ]
     assert not hits, "\n".join(hits)
 
 
 def test_the_model_page_states_the_whole_model():
     text = (ROOT / "docs" / "model.md").read_text()
-    for heading in ("## World", "## Robots", "## Rule sets", "## Ticks and determinism", "## Termination",
-                    "## Metrics", "## Formal specification", "## Experiment protocol"):
+    for heading in (
+        "## World",
+        "## Robots",
+        "## Rule sets",
+        "## Ticks and determinism",
+        "## Termination",
+        "## Metrics",
+        "## Formal specification",
+        "## Experiment protocol",
+    ):
         assert f"\n{heading}" in text, heading
     for word in ("`paper`", "`local`", "`literal`", "`walk`", "`ahead`", "`disc`", "`one`"):
         assert word in text, word
@@ -83,8 +97,12 @@ def test_the_usage_synopses_name_every_flag_of_simulate_and_run():
         synopsis = re.search(rf"```\nswarm-ros {command} (.*?)```", readme, re.S).group(1)
         if command == "run":  # '... the same options as simulate, except --check'
             synopsis += re.search(r"```\nswarm-ros simulate (.*?)```", readme, re.S).group(1)
-        flags = {f for a in subparsers.choices[command]._actions for f in a.option_strings
-                 if f.startswith("--") and f != "--help"}
+        flags = {
+            f
+            for a in subparsers.choices[command]._actions
+            for f in a.option_strings
+            if f.startswith("--") and f != "--help"
+        }
         missing = sorted(f for f in flags if f not in synopsis)
         assert not missing, f"the usage page's synopsis of {command} omits {missing}"
 
@@ -104,8 +122,11 @@ def test_every_file_a_page_links_to_or_names_exists(page):
     """A relative link resolves from the page; a repository path in backticks (``config/experiments/x.yaml``)
     exists in the repository (a path with a placeholder, ``<run>``, is not one)."""
     text = page.read_text(encoding="utf-8")
-    missing = [t for t in _LINK.findall(text) if "://" not in t and not t.startswith("mailto:")
-               and not (page.parent / t).exists()]
+    missing = [
+        t
+        for t in _LINK.findall(text)
+        if "://" not in t and not t.startswith("mailto:") and not (page.parent / t).exists()
+    ]
     missing += [t for t in _NAMED.findall(text) if not (ROOT / t.rstrip(".")).exists()]
     assert not missing, f"{page.name} names what does not exist: {missing}"
 
@@ -113,11 +134,19 @@ def test_every_file_a_page_links_to_or_names_exists(page):
 def test_every_error_line_the_docs_quote_is_a_row_the_bad_input_test_runs():
     """An error line quoted in a page (``swarm-ros: error: ...``, ``swarm_ros <node>: error: ...``) holds the
     message of a row of docs/bad_input.md, which test_bad_input.py runs: a quoted text that drifted fails here."""
-    rows = [m.group(1) for m in re.finditer(r"^\| \d+ \| .+? \| `.+?` \| `(.+?)` \|$",
-                                            (ROOT / "docs" / "bad_input.md").read_text(), re.M)]
-    quoted = [(page.name, line.strip()) for page in _docs() if page.name != "bad_input.md"
-              for line in page.read_text(encoding="utf-8").splitlines()
-              if re.match(r"\s*swarm[-_]ros( \w+)?: error: ", line)]
+    rows = [
+        m.group(1)
+        for m in re.finditer(
+            r"^\| \d+ \| .+? \| `.+?` \| `(.+?)` \|$", (ROOT / "docs" / "bad_input.md").read_text(), re.M
+        )
+    ]
+    quoted = [
+        (page.name, line.strip())
+        for page in _docs()
+        if page.name != "bad_input.md"
+        for line in page.read_text(encoding="utf-8").splitlines()
+        if re.match(r"\s*swarm[-_]ros( \w+)?: error: ", line)
+    ]
     assert quoted, "no quoted error line found: the pattern is stale"
     stray = [(name, line) for name, line in quoted if not any(row in line for row in rows)]
     assert not stray, stray

@@ -39,8 +39,9 @@ def test_local_with_disc_crowding_is_the_reading_before_rule_sets():
     (the star with seed 1 completed at tick 2757, and at vision 2 it gridlocked)."""
     sim = Simulation(Shape.load("star"), params(1036, seed=1, rules="local", crowding="disc"))
     assert sim.run() is Outcome.COMPLETE and sim.tick == 2757
-    stuck = Simulation(Shape.load("star"), params(1036, seed=1, rules="local", crowding="disc",
-                                                  vision_radius=2.0, max_ticks=20000))
+    stuck = Simulation(
+        Shape.load("star"), params(1036, seed=1, rules="local", crowding="disc", vision_radius=2.0, max_ticks=20000)
+    )
     assert stuck.run() is Outcome.TIMEOUT
     fast = Simulation(Shape.load("star"), params(1036, seed=1, rules="local", vision_radius=2.0))
     assert fast.run() is Outcome.COMPLETE  # crowding 'ahead' does not freeze the swarm
@@ -84,8 +85,6 @@ def test_history_has_one_row_per_tick_and_matches_the_final_state():
         sim.step()
 
 
-
-
 def test_same_seed_same_run_different_seed_different_run():
     shape = Shape.load("wrench")
     a = Simulation(shape, params(566, seed=21))
@@ -95,8 +94,6 @@ def test_same_seed_same_run_different_seed_different_run():
         s.run()
     assert final_of(a) == final_of(b)
     assert final_of(a) != final_of(c)
-
-
 
 
 @pytest.mark.parametrize("rules", RULES)

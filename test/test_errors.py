@@ -21,8 +21,11 @@ PACKAGE = Path(swarm_ros.__file__).parent
 ALLOWED = {
     "AttributeError",  # a module's __getattr__ (PEP 562) must raise it
     "NotImplementedError",  # an abstract method
-    "SystemExit", "KeyboardInterrupt",  # a node's exit status; SIGTERM ending a command as Ctrl-C does
-    "OSError", "FileNotFoundError", "FileExistsError",  # the file system's answer, passed on
+    "SystemExit",
+    "KeyboardInterrupt",  # a node's exit status; SIGTERM ending a command as Ctrl-C does
+    "OSError",
+    "FileNotFoundError",
+    "FileExistsError",  # the file system's answer, passed on
 }
 BUILTIN = {name for name, obj in vars(builtins).items() if isinstance(obj, type) and issubclass(obj, BaseException)}
 #: Modules that need ROS (or a launch tree) to import; their classes are found by reading the source instead.

@@ -29,10 +29,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
 
 
-
-
-
-
 def experiment(config: Path, out: Path, *extra: str) -> int:
     return cli.main(["experiment", str(config), "--out", str(out), "--quiet", *extra])
 
@@ -72,8 +68,9 @@ def test_paper_protocol_file_is_the_studys_grid():
 def test_the_experiments_name_survives_a_list_of_rule_sets(tmp_path, monkeypatch):
     """The name (not the last rule set) names experiment.json and the default directory experiments/<name>."""
     assert load_experiment(ROOT / "config/experiments/rules.yaml").name == "rules"
-    config = small_config(tmp_path, name="tiny", rules=["paper", "literal"], vision_radius=1, repetitions=1,
-                          shapes={"disc.txt": [50]})
+    config = small_config(
+        tmp_path, name="tiny", rules=["paper", "literal"], vision_radius=1, repetitions=1, shapes={"disc.txt": [50]}
+    )
     assert load_experiment(config).name == "tiny"
     monkeypatch.chdir(tmp_path)
     assert cli.main(["experiment", str(config), "--quiet"]) == 0
@@ -135,8 +132,13 @@ def test_experiment_writes_results_stats_and_figures(small):
     assert md.count("| disc | 69 |") == 6 and "### Rules `paper`, vision radius 1.5" in md
     assert "Against the published numbers" not in md  # no reference file
     figures = sorted(p.name for p in (out / "figures").iterdir())
-    assert figures == ["all_shapes_paper_v1.5.png", "all_shapes_paper_v1.png", "disc_paper_v1.5.png",
-                       "disc_paper_v1.png", "vision.png"]
+    assert figures == [
+        "all_shapes_paper_v1.5.png",
+        "all_shapes_paper_v1.png",
+        "disc_paper_v1.5.png",
+        "disc_paper_v1.png",
+        "vision.png",
+    ]
     assert all((out / "figures" / f).read_bytes()[:4] == b"\x89PNG" for f in figures)
 
 
@@ -211,8 +213,6 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(small, tmp_path
     assert head == small_rows
 
 
-
-
 # -- rule sets and the published numbers -------------------------------------------
 
 
@@ -220,13 +220,16 @@ def test_one_experiment_compares_rule_sets_from_the_same_starts_against_a_refere
     (tmp_path / "ref.csv").write_text(
         "# a made-up published number for the small disc\n"
         "shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
-        "disc,70,150.0,100.0,200.0,50-80,20.5,300\n")
+        "disc,70,150.0,100.0,200.0,50-80,20.5,300\n"
+    )
     config = small_config(tmp_path, vision_radius=[1], rules=["paper", "literal"], reference="ref.csv")
     out = tmp_path / "out"
     assert experiment(config, out) == 0
     rows = read_results(out / "results.csv")
-    assert {(r["rules"], r["join"], r["steps"]) for r in rows} == {("paper", "walk", "one"),
-                                                                   ("literal", "local", "literal")}
+    assert {(r["rules"], r["join"], r["steps"]) for r in rows} == {
+        ("paper", "walk", "one"),
+        ("literal", "local", "literal"),
+    }
     by_rules = {}
     for r in rows:
         by_rules.setdefault(r["rules"], {})[(r["robots"], r["repetition"])] = r["seed"]
@@ -235,29 +238,43 @@ def test_one_experiment_compares_rule_sets_from_the_same_starts_against_a_refere
     stats = {(s["rules"], s["robots"]): s for s in group_stats(rows)}
     md = (out / "stats.md").read_text()
     assert "### Rules `paper`, vision radius 1" in md and "### Rules `literal`, vision radius 1" in md
-    section = md[md.index("## Against the published numbers"):]
+    section = md[md.index("## Against the published numbers") :]
     for rules in ("paper", "literal"):
         s = stats[(rules, 69)]
         others = [stats[(rules, n)]["mean_convergence_tick"] for n in (50, 80)]
-        line = next(ln for ln in section[section.index(f"Rules `{rules}`"):].splitlines() if ln.startswith("| disc"))
+        line = next(ln for ln in section[section.index(f"Rules `{rules}`") :].splitlines() if ln.startswith("| disc"))
         cells = [c.strip() for c in line.strip("|").split("|")]
         assert cells[0] == "disc (70)" and cells[1] == "150 [100, 200]" and cells[2] == "69"
         assert cells[4] == f"{s['mean_convergence_tick'] / 150:.2f}"
         assert cells[5] == ("yes" if 100 <= s["mean_convergence_tick"] <= 200 else "no")
         assert cells[6] == "20.5–300" and cells[7] == f"{min(others):.0f}–{max(others):.0f}"
     figures = sorted(p.name for p in (out / "figures").iterdir())
-    assert figures == ["all_shapes_literal_v1.png", "all_shapes_paper_v1.png", "disc_literal_v1.png",
-                       "disc_paper_v1.png", "study.png"]
+    assert figures == [
+        "all_shapes_literal_v1.png",
+        "all_shapes_paper_v1.png",
+        "disc_literal_v1.png",
+        "disc_paper_v1.png",
+        "study.png",
+    ]
 
 
 BAD_REFERENCES = [
     ("shape,mean\nstar,1\n", "expected the columns"),
-    ("shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
-     "star,1036,861.8,900,1124.49,x,1,2\n", "the CI must hold the mean"),
-    ("shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
-     "star,1036,lots,1,2,x,1,2\n", "not a number"),
-    ("shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
-     "star,1036,5,1,9,x,1,2\nstar,1036,5,1,9,x,1,2\n", "listed twice"),
+    (
+        "shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
+        "star,1036,861.8,900,1124.49,x,1,2\n",
+        "the CI must hold the mean",
+    ),
+    (
+        "shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
+        "star,1036,lots,1,2,x,1,2\n",
+        "not a number",
+    ),
+    (
+        "shape,study_robots,mean_ticks,ci95_low,ci95_high,group_sizes,sizes_mean_min,sizes_mean_max\n"
+        "star,1036,5,1,9,x,1,2\nstar,1036,5,1,9,x,1,2\n",
+        "listed twice",
+    ),
 ]
 
 
@@ -277,10 +294,27 @@ def test_bad_reference_files_are_refused_with_the_line(tmp_path, capsys, text, m
 
 
 def test_statistics_match_a_hand_computed_t_interval():
-    rows = [{"shape": "s", "shape_patches": 10, "robots": 10, "vision_radius": 1.0, "rules": "paper", "join": "walk",
-             "crowding": "ahead", "steps": "one", "convergence_tick": t,
-             "outcome": o, "localized": 10, "unlocalized": 0, "separated": 0, "empty_patches": 0, "lost_robots": 0,
-             "convergence_rate": 0.5} for t, o in ((10, "complete"), (12, "complete"), (14, "timeout"))]
+    rows = [
+        {
+            "shape": "s",
+            "shape_patches": 10,
+            "robots": 10,
+            "vision_radius": 1.0,
+            "rules": "paper",
+            "join": "walk",
+            "crowding": "ahead",
+            "steps": "one",
+            "convergence_tick": t,
+            "outcome": o,
+            "localized": 10,
+            "unlocalized": 0,
+            "separated": 0,
+            "empty_patches": 0,
+            "lost_robots": 0,
+            "convergence_rate": 0.5,
+        }
+        for t, o in ((10, "complete"), (12, "complete"), (14, "timeout"))
+    ]
     (s,) = group_stats(rows)
     # mean 12, sd 2, t(0.975, 2 d.f.) = 4.303 from a printed table: half width 4.303 * 2 / sqrt(3) = 4.969
     assert s["mean_convergence_tick"] == 12 and s["sd_convergence_tick"] == pytest.approx(2.0)
@@ -333,9 +367,11 @@ def test_missing_keys_unreadable_files_and_foreign_directories_are_refused(tmp_p
     del data["repetitions"]
     (tmp_path / "missing.yaml").write_text(yaml.safe_dump(data))
     (tmp_path / "broken.yaml").write_text("shapes: [\n")
-    for path, message in ((tmp_path / "missing.yaml", "repetitions: missing"),
-                          (tmp_path / "broken.yaml", "not valid YAML"),
-                          (tmp_path / "absent.yaml", "no such experiment file")):
+    for path, message in (
+        (tmp_path / "missing.yaml", "repetitions: missing"),
+        (tmp_path / "broken.yaml", "not valid YAML"),
+        (tmp_path / "absent.yaml", "no such experiment file"),
+    ):
         assert experiment(path, tmp_path / "out") == 2
         assert message in capsys.readouterr().err
     (tmp_path / "foreign" / "sub").mkdir(parents=True)
@@ -375,8 +411,13 @@ def test_ros2_engine_gives_the_in_process_results(small, tmp_path):
     ros, ref = tmp_path / "ros", tmp_path / "ref"
     env = {**os.environ}
     env.pop("ROS_DOMAIN_ID", None)
-    done = subprocess.run([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(ros), "--engine",
-                           "ros2", "--quiet"], capture_output=True, text=True, timeout=600, env=env)
+    done = subprocess.run(
+        [PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(ros), "--engine", "ros2", "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
     assert done.returncode == 0, done.stderr
     assert done.stderr == "", done.stderr  # no worker's traceback, no leaked semaphore on the way out
     assert experiment(config, ref) == 0
@@ -443,9 +484,20 @@ def test_a_report_interrupted_while_it_draws_keeps_the_figures_it_had(small, tmp
 def test_the_vision_figure_keeps_a_ci_reaching_below_zero_on_its_log_axis(monkeypatch, tmp_path):
     from swarm_ros.app import report
 
-    stats = [{"shape": "disc", "shape_patches": 69, "robots": 69, "vision_radius": v, "rules": "paper",
-              "mean_convergence_tick": m, "ci95_low": lo, "ci95_high": hi, "mean_localized": 69.0}
-             for v, m, lo, hi in ((1.0, 40.0, -25.0, 105.0), (2.0, 30.0, 20.0, 40.0))]
+    stats = [
+        {
+            "shape": "disc",
+            "shape_patches": 69,
+            "robots": 69,
+            "vision_radius": v,
+            "rules": "paper",
+            "mean_convergence_tick": m,
+            "ci95_low": lo,
+            "ci95_high": hi,
+            "mean_localized": 69.0,
+        }
+        for v, m, lo, hi in ((1.0, 40.0, -25.0, 105.0), (2.0, 30.0, 20.0, 40.0))
+    ]
     figs = []
     monkeypatch.setattr(report, "_save", lambda fig, path: figs.append(fig))
     report.vision_figure(stats, tmp_path / "vision.png")

@@ -24,8 +24,7 @@ def disc():
     return disc_shape(World(10), 5.0)
 
 
-@pytest.mark.parametrize("extra,fraction,tick", [(10, 0.2, 30), (0, 0.5, 5), (-5, 0.1, 60), (3, 0.05, 1),
-                                                (20, 0.3, 2)])
+@pytest.mark.parametrize("extra,fraction,tick", [(10, 0.2, 30), (0, 0.5, 5), (-5, 0.1, 60), (3, 0.05, 1), (20, 0.3, 2)])
 def test_failures_keep_every_invariant_and_the_swarm_repairs_the_shape(disc, extra, fraction, tick):
     n = disc.patches + extra
     sim = run_checked(Simulation(disc, RunParams(robots=n, seed=4, fail_fraction=fraction, fail_tick=tick)))
@@ -83,8 +82,14 @@ def test_replica_follows_removals_and_rejects_a_removed_robot_coming_back(disc):
         assert np.array_equal(rep.state.occupancy, s.occupancy) and np.array_equal(rep.state.frontier, s.frontier)
     gone = int(np.flatnonzero(s.state == RobotState.REMOVED)[0])
     with pytest.raises(ContractError, match="returns after removal"):
-        rep.update(sim.tick + 1, np.array([gone]), np.array([RobotState.MOVING_OUTSIDE]), s.x[[gone]], s.y[[gone]],
-                   s.heading[[gone]])
+        rep.update(
+            sim.tick + 1,
+            np.array([gone]),
+            np.array([RobotState.MOVING_OUTSIDE]),
+            s.x[[gone]],
+            s.y[[gone]],
+            s.heading[[gone]],
+        )
 
 
 def test_remove_is_idempotent_and_checks_ids(disc):
@@ -95,9 +100,14 @@ def test_remove_is_idempotent_and_checks_ids(disc):
         sim.remove(np.array([disc.patches]))
 
 
-@pytest.mark.parametrize("kw,message", [({"fail_fraction": 0.1}, "fail_tick must be >= 1"),
-                                        ({"fail_fraction": 1.5, "fail_tick": 3}, "fail_fraction must be"),
-                                        ({"fail_fraction": -0.1, "fail_tick": 3}, "fail_fraction must be")])
+@pytest.mark.parametrize(
+    "kw,message",
+    [
+        ({"fail_fraction": 0.1}, "fail_tick must be >= 1"),
+        ({"fail_fraction": 1.5, "fail_tick": 3}, "fail_fraction must be"),
+        ({"fail_fraction": -0.1, "fail_tick": 3}, "fail_fraction must be"),
+    ],
+)
 def test_bad_failure_parameters(kw, message):
     with pytest.raises(ParameterError, match=message):
         RunParams(robots=50, **kw)
@@ -105,8 +115,24 @@ def test_bad_failure_parameters(kw, message):
 
 def test_fail_robots_flag_reports_the_loss(tmp_path, capsys):
     out = tmp_path / "run"
-    assert cli.main(["simulate", "--shape", "rectangle", "--robots", "460", "--seed", "3", "--fail-robots",
-                     "0.1@300", "--out", str(out)]) == 0
+    assert (
+        cli.main(
+            [
+                "simulate",
+                "--shape",
+                "rectangle",
+                "--robots",
+                "460",
+                "--seed",
+                "3",
+                "--fail-robots",
+                "0.1@300",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "lost robots       46  (46 at tick 300)" in text and "outcome           incomplete" in text
 

@@ -34,9 +34,28 @@ ROBOTS = 1036  # the star, ~2700 ticks: a few seconds over the graph
 
 
 def _launch(out: Path, processes: int = 3, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--processes", str(processes),
-                             "--out", str(out), "--quiet", "--on-batch-loss", "remove", *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=run_env())
+    return subprocess.Popen(
+        [
+            PY,
+            "-m",
+            "swarm_ros",
+            "run",
+            "--shape",
+            "star",
+            "--processes",
+            str(processes),
+            "--out",
+            str(out),
+            "--quiet",
+            "--on-batch-loss",
+            "remove",
+            *extra,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=run_env(),
+    )
 
 
 def _wait_until_running(out: Path, batches: int = 3, timeout: float = 120) -> Path:
@@ -47,8 +66,13 @@ def _wait_until_running(out: Path, batches: int = 3, timeout: float = 120) -> Pa
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         logs = list(out.parent.glob(f".{out.name}.logs-*"))
-        if logs and partial.exists() and partial.stat().st_size > 300_000 and (logs[0] / "world.log").exists() \
-                and (logs[0] / "world.log").read_text().count(" is alive (liveliness)") >= batches:
+        if (
+            logs
+            and partial.exists()
+            and partial.stat().st_size > 300_000
+            and (logs[0] / "world.log").exists()
+            and (logs[0] / "world.log").read_text().count(" is alive (liveliness)") >= batches
+        ):
             return logs[0]
         time.sleep(0.05)
     raise AssertionError("the run never got going")

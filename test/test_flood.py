@@ -34,14 +34,35 @@ def test_a_flood_on_every_topic_slows_the_run_and_leaves_its_result_unchanged(tm
     ref, out = tmp_path / "ref", tmp_path / "run"
     assert cli.main(["simulate", *FLAGS, "--out", str(ref), "--quiet", "--no-recording"]) == 0
     lock = DomainLock()
-    flood = subprocess.Popen([PY, str(FLOOD), "--domain-id", str(lock.domain_id), "--rate", str(RATE)],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    flood = subprocess.Popen(
+        [PY, str(FLOOD), "--domain-id", str(lock.domain_id), "--rate", str(RATE)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         # the flood's participant is up before the run starts: it takes the run's topics as they appear
         assert flood.stderr.readline().strip() == "flood: ready", flood.stderr.read()
-        run = subprocess.run([PY, "-m", "swarm_ros", "run", *FLAGS, "--processes", "2", "--domain-id",
-                              str(lock.domain_id), "--out", str(out), "--quiet", "--no-recording"],
-                             capture_output=True, text=True, timeout=600)
+        run = subprocess.run(
+            [
+                PY,
+                "-m",
+                "swarm_ros",
+                "run",
+                *FLAGS,
+                "--processes",
+                "2",
+                "--domain-id",
+                str(lock.domain_id),
+                "--out",
+                str(out),
+                "--quiet",
+                "--no-recording",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
     finally:
         flood.send_signal(signal.SIGINT)
         report, flood_err = flood.communicate(timeout=60)
@@ -50,9 +71,19 @@ def test_a_flood_on_every_topic_slows_the_run_and_leaves_its_result_unchanged(tm
     sent = json.loads(report.strip().splitlines()[-1])
     # every topic of the run flooded while the run went on: at least half the asked rate (the flooder is one
     # Python process sharing 2 cores with the run and with the test running beside this one; it reaches 80-100%)
-    for topic in ("/swarm/robots", "/swarm/status", "/swarm/batches", "/swarm/metrics", "/swarm/decisions",
-                  "/swarm/decisions/robot_batch_0", "/swarm/decisions/robot_batch_1", "/swarm/snapshot/robot_batch_0",
-                  "/swarm/alive/robot_batch_0", "/swarm/occupancy", "/clock"):
+    for topic in (
+        "/swarm/robots",
+        "/swarm/status",
+        "/swarm/batches",
+        "/swarm/metrics",
+        "/swarm/decisions",
+        "/swarm/decisions/robot_batch_0",
+        "/swarm/decisions/robot_batch_1",
+        "/swarm/snapshot/robot_batch_0",
+        "/swarm/alive/robot_batch_0",
+        "/swarm/occupancy",
+        "/clock",
+    ):
         assert sent["rate_per_topic"].get(topic, 0) >= RATE * 0.5, (topic, sent, flood_err[-2000:])
     for name in ("metrics.csv", "final_state.csv"):
         assert (ref / name).read_bytes() == (out / name).read_bytes(), name

@@ -25,8 +25,12 @@ def small_disk(tmp_path):
     def make(size: str) -> Path:
         where = tmp_path / f"disk{len(mounted)}"
         where.mkdir()
-        if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)],
-                          capture_output=True).returncode != 0:
+        if (
+            subprocess.run(
+                ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)], capture_output=True
+            ).returncode
+            != 0
+        ):
             pytest.skip("cannot mount a tmpfs here (needs root)")
         mounted.append(where)
         return where
@@ -46,15 +50,17 @@ def test_a_disk_nearly_full_is_refused_before_anything_starts(small_disk, tmp_pa
     (disk / "fill").write_bytes(b"\0" * (3 * 1024 * 1024))
     done = _swarm(command, "--out", str(disk / "r"), "--quiet", cwd=tmp_path)
     assert done.returncode == 2, done.stderr
-    assert done.stderr.count("\n") == 1 and "MiB free on its disk; a run needs at least 8 MiB" in done.stderr, \
+    assert done.stderr.count("\n") == 1 and "MiB free on its disk; a run needs at least 8 MiB" in done.stderr, (
         done.stderr
+    )
     assert sorted(p.name for p in disk.iterdir()) == ["fill"]
 
 
 def test_simulate_whose_recording_fills_the_disk_says_so_and_leaves_nothing(small_disk, tmp_path):
     disk = small_disk("9m")  # the torus's recording takes about 4.6 kB a tick: 2500 ticks do not fit
-    done = _swarm("simulate", "--shape", "torus", "--max-ticks", "2500", "--out", str(disk / "r"), "--quiet",
-                  cwd=tmp_path)
+    done = _swarm(
+        "simulate", "--shape", "torus", "--max-ticks", "2500", "--out", str(disk / "r"), "--quiet", cwd=tmp_path
+    )
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1, done.stderr
     assert "the recording could not be written whole (no space left on device); it is removed" in done.stderr

@@ -26,14 +26,39 @@ pytestmark = pytest.mark.unit
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
-scalars = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6), st.floats(allow_nan=True),
-                    st.text(max_size=12))
-keys = st.one_of(st.sampled_from(["shape", "robots", "vision_radius", "seed", "max_ticks", "wiggle_deg",
-                                  "world_radius", "ros__parameters", "/**", "/world", "/monitor", "name",
-                                  "repetitions", "shapes", "star", "rectangle", "out_dir", "record_every"]),
-                 st.text(max_size=8))
-documents = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=4),
-                                                          st.dictionaries(keys, inner, max_size=5)), max_leaves=12)
+scalars = st.one_of(
+    st.none(), st.booleans(), st.integers(-(10**6), 10**6), st.floats(allow_nan=True), st.text(max_size=12)
+)
+keys = st.one_of(
+    st.sampled_from(
+        [
+            "shape",
+            "robots",
+            "vision_radius",
+            "seed",
+            "max_ticks",
+            "wiggle_deg",
+            "world_radius",
+            "ros__parameters",
+            "/**",
+            "/world",
+            "/monitor",
+            "name",
+            "repetitions",
+            "shapes",
+            "star",
+            "rectangle",
+            "out_dir",
+            "record_every",
+        ]
+    ),
+    st.text(max_size=8),
+)
+documents = st.recursive(
+    scalars,
+    lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(keys, inner, max_size=5)),
+    max_leaves=12,
+)
 
 
 def _one_line_naming(exc: InputError, path) -> None:
@@ -87,9 +112,13 @@ def test_parameter_file_parser_on_random_documents(tmp_path_factory, doc):
 
 
 @FUZZ
-@given(st.dictionaries(st.sampled_from(["/**", "/world", "/monitor", "/robot_batch", "x"]),
-                       st.fixed_dictionaries({"ros__parameters": st.dictionaries(keys, scalars, max_size=4)}),
-                       max_size=3))
+@given(
+    st.dictionaries(
+        st.sampled_from(["/**", "/world", "/monitor", "/robot_batch", "x"]),
+        st.fixed_dictionaries({"ros__parameters": st.dictionaries(keys, scalars, max_size=4)}),
+        max_size=3,
+    )
+)
 def test_parameter_file_parser_on_near_valid_documents(tmp_path_factory, doc):
     _accepts_or_names(load_params_file, tmp_path_factory, yaml.safe_dump(doc), Settings)
 
@@ -101,13 +130,24 @@ def test_parameter_file_parser_on_random_text(tmp_path_factory, text):
 
 
 @FUZZ
-@given(st.fixed_dictionaries({"seed": scalars, "repetitions": scalars, "vision_radius": st.one_of(scalars,
-                              st.lists(scalars, max_size=3))},
-                             optional={"shapes": st.one_of(documents, st.dictionaries(
-                                 st.sampled_from(["rectangle", "star", "nope", "x.txt"]),
-                                 st.lists(st.one_of(st.integers(-5, 2000), st.just("patches"), scalars),
-                                          max_size=3), max_size=2)),
-                                       "max_ticks": scalars, "name": scalars, "extra": scalars}))
+@given(
+    st.fixed_dictionaries(
+        {"seed": scalars, "repetitions": scalars, "vision_radius": st.one_of(scalars, st.lists(scalars, max_size=3))},
+        optional={
+            "shapes": st.one_of(
+                documents,
+                st.dictionaries(
+                    st.sampled_from(["rectangle", "star", "nope", "x.txt"]),
+                    st.lists(st.one_of(st.integers(-5, 2000), st.just("patches"), scalars), max_size=3),
+                    max_size=2,
+                ),
+            ),
+            "max_ticks": scalars,
+            "name": scalars,
+            "extra": scalars,
+        },
+    )
+)
 def test_experiment_parser_on_random_documents(tmp_path_factory, doc):
     text = io.StringIO()
     yaml.safe_dump(doc, text)

@@ -41,8 +41,14 @@ def _installed_env(prefix: Path, home: Path) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}
     hooks = (prefix / "share" / "swarm_ros" / "hook").iterdir()
     assert {"ament_prefix_path.dsv", "pythonpath.dsv"} <= {h.name for h in hooks}
-    return {**env, "PYTHONPATH": str(site), "AMENT_PREFIX_PATH": str(prefix), "HOME": str(home),
-            "ROS_LOG_DIR": str(home / "ros"), "PYTHONUNBUFFERED": "1"}
+    return {
+        **env,
+        "PYTHONPATH": str(site),
+        "AMENT_PREFIX_PATH": str(prefix),
+        "HOME": str(home),
+        "ROS_LOG_DIR": str(home / "ros"),
+        "PYTHONUNBUFFERED": "1",
+    }
 
 
 def test_node_scripts_and_data_land_where_ros2_run_and_the_ament_index_look(prefix):
@@ -53,8 +59,9 @@ def test_node_scripts_and_data_land_where_ros2_run_and_the_ament_index_look(pref
     assert (share / "package.xml").is_file() and (share / "config" / "swarm_ros.yaml").is_file()
     assert (share / "config" / "fastdds.xml").is_file() and (share / "config" / "experiments" / "paper.yaml").is_file()
     assert (share / "launch" / "swarm.launch.py").is_file() and (share / "rviz" / "swarm.rviz").is_file()
-    assert sorted(p.stem for p in (share / "shapes").glob("*.txt")) == \
-        sorted(p.stem for p in (ROOT / "shapes").glob("*.txt"))
+    assert sorted(p.stem for p in (share / "shapes").glob("*.txt")) == sorted(
+        p.stem for p in (ROOT / "shapes").glob("*.txt")
+    )
 
 
 def test_installed_nodes_run_a_swarm_to_its_end_from_the_install_space(prefix, tmp_path):
@@ -64,19 +71,28 @@ def test_installed_nodes_run_a_swarm_to_its_end_from_the_install_space(prefix, t
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
     run = tmp_path / "run"
     params = tmp_path / "params.yaml"
-    params.write_text(params_yaml(Settings(shape=str(shape), robots=430, seed=3, world_radius=16),
-                                  {"monitor": {"out_dir": str(run)}}))
-    env = {**_installed_env(prefix, tmp_path), "ROS_DOMAIN_ID": str(150 + os.getpid() % 50),
-           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-           "FASTRTPS_DEFAULT_PROFILES_FILE": str(prefix / "share" / "swarm_ros" / "config" / "fastdds.xml")}
+    params.write_text(
+        params_yaml(Settings(shape=str(shape), robots=430, seed=3, world_radius=16), {"monitor": {"out_dir": str(run)}})
+    )
+    env = {
+        **_installed_env(prefix, tmp_path),
+        "ROS_DOMAIN_ID": str(150 + os.getpid() % 50),
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        "FASTRTPS_DEFAULT_PROFILES_FILE": str(prefix / "share" / "swarm_ros" / "config" / "fastdds.xml"),
+    }
     procs = {}
     try:
         for name, extra in (("monitor", []), ("robot_batch", ["-p", "batch:=0", "-p", "batches:=1"]), ("world", [])):
             # what `ros2 run swarm_ros <name>` runs: the install's script, with this machine's Python
             exe = prefix / "lib" / "swarm_ros" / name
-            procs[name] = subprocess.Popen([sys.executable, str(exe), "--ros-args", "--params-file", str(params),
-                                            *extra], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                                           stderr=subprocess.STDOUT, text=True)
+            procs[name] = subprocess.Popen(
+                [sys.executable, str(exe), "--ros-args", "--params-file", str(params), *extra],
+                cwd=tmp_path,
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+            )
         outputs = {name: p.communicate(timeout=120)[0] for name, p in procs.items()}
     finally:
         for p in procs.values():
@@ -91,18 +107,27 @@ def test_installed_nodes_run_a_swarm_to_its_end_from_the_install_space(prefix, t
 def test_installed_copy_finds_its_shapes_and_config_through_the_ament_prefix(prefix, tmp_path):
     site = next(prefix.glob("lib/python3*/site-packages"))
     env = {**os.environ, "PYTHONPATH": str(site), "AMENT_PREFIX_PATH": str(prefix)}
-    code = ("import swarm_ros; from swarm_ros.core.resources import data_dir; "
-            "print(swarm_ros.__file__); print(data_dir('shapes')); print(data_dir('config'))")
-    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
-                          timeout=60)
+    code = (
+        "import swarm_ros; from swarm_ros.core.resources import data_dir; "
+        "print(swarm_ros.__file__); print(data_dir('shapes')); print(data_dir('config'))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60
+    )
     assert done.returncode == 0, done.stderr
     module, shapes, config = done.stdout.split()
     assert module.startswith(str(site)), "the installed copy, not the source tree, must be imported"
     assert shapes == str(prefix / "share" / "swarm_ros" / "shapes")
     assert config == str(prefix / "share" / "swarm_ros" / "config")
     # the script colcon installed, run by this machine's Python (its shebang is `/usr/bin/env python3`: setup.cfg)
-    listed = subprocess.run([sys.executable, str(prefix / "lib" / "swarm_ros" / "swarm-ros"), "shapes"], cwd=tmp_path,
-                            env=env, capture_output=True, text=True, timeout=60)
+    listed = subprocess.run(
+        [sys.executable, str(prefix / "lib" / "swarm_ros" / "swarm-ros"), "shapes"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert listed.returncode == 0, listed.stderr
     assert "star" in listed.stdout and str(prefix / "share" / "swarm_ros" / "shapes" / "star.txt") in listed.stdout
 

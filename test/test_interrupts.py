@@ -44,12 +44,32 @@ def _wait_for(predicate, timeout: float = 120) -> None:
 def test_sigterm_to_simulate_writes_an_interrupted_run_directory(tmp_path):
     out = tmp_path / "run"
     # crowding 'disc' at vision 3 nearly freezes the swarm at this density: a long run (docs/model.md)
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "simulate", "--shape", "star", "--vision", "3", "--rules",
-                             "local", "--crowding", "disc", "--record-every", "50", "--out", str(out)],
-                            stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    _wait_for(lambda: (tmp_path / "run.partial.rrd").exists() and (tmp_path / "run.partial.rrd").stat().st_size
-              > 200_000)  # running and recording
+    proc = subprocess.Popen(
+        [
+            PY,
+            "-m",
+            "swarm_ros",
+            "simulate",
+            "--shape",
+            "star",
+            "--vision",
+            "3",
+            "--rules",
+            "local",
+            "--crowding",
+            "disc",
+            "--record-every",
+            "50",
+            "--out",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    _wait_for(
+        lambda: (tmp_path / "run.partial.rrd").exists() and (tmp_path / "run.partial.rrd").stat().st_size > 200_000
+    )  # running and recording
     start = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
@@ -69,8 +89,12 @@ def test_sigterm_to_simulate_writes_an_interrupted_run_directory(tmp_path):
 def test_sigterm_to_an_experiment_stops_its_workers_and_keeps_finished_runs(tmp_path):
     config = small_config(tmp_path, repetitions=40)
     out = tmp_path / "exp"
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(out), "--jobs", "2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(out), "--jobs", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     results = out / "results.csv"
     _wait_for(lambda: results.exists() and len(results.read_text().splitlines()) > 4)
     start = time.monotonic()
@@ -87,9 +111,24 @@ def test_sigterm_to_an_experiment_stops_its_workers_and_keeps_finished_runs(tmp_
 def test_sigterm_to_a_ros2_experiment_stops_the_graphs_of_its_workers(tmp_path):
 
     config = small_config(tmp_path, repetitions=3, vision_radius=[1], shapes={"disc.txt": [60]})
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(tmp_path / "exp"),
-                             "--engine", "ros2", "--jobs", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    proc = subprocess.Popen(
+        [
+            PY,
+            "-m",
+            "swarm_ros",
+            "experiment",
+            str(config),
+            "--out",
+            str(tmp_path / "exp"),
+            "--engine",
+            "ros2",
+            "--jobs",
+            "1",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     mentioning = lambda: set(processes_mentioning("swarm_ros-exp-"))  # a worker's graph, of any experiment
     _wait_for(lambda: mentioning() & set(descendants_of(proc.pid)))  # this one's graph is up
     family = descendants_of(proc.pid)
@@ -106,10 +145,19 @@ def test_sigterm_to_run_before_tick_0_leaves_nothing_behind(tmp_path):
     """Stopped while its processes start: no run directory (there is no run yet), and nothing the run made
     (logs, partial recording or bag, the folders made for --out) is left; said in one line."""
     out = tmp_path / "made" / "for" / "run"
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    _wait_for(lambda: any((logs / "world.log").exists() for logs in out.parent.glob(".run.logs-*"))
-              if out.parent.exists() else False)  # every node process has been started; none is ready
+    proc = subprocess.Popen(
+        [PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    _wait_for(
+        lambda: (
+            any((logs / "world.log").exists() for logs in out.parent.glob(".run.logs-*"))
+            if out.parent.exists()
+            else False
+        )
+    )  # every node process has been started; none is ready
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
@@ -121,12 +169,19 @@ def test_sigterm_to_run_as_tick_0_goes_out_keeps_the_ticks_the_world_sent(tmp_pa
     """Stopped once the world has sent tick 0, whether or not the monitor has loaded: an interrupted run
     directory of the ticks sent, and no litter beside it."""
     out = tmp_path / "run"
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--rules", "local", "--out",
-                             str(out), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [PY, "-m", "swarm_ros", "run", "--shape", "star", "--rules", "local", "--out", str(out), "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
     def world_started() -> bool:
-        return any(": tick 0" in (logs / "world.log").read_text(errors="replace")
-                   for logs in tmp_path.glob(".run.logs-*") if (logs / "world.log").exists())
+        return any(
+            ": tick 0" in (logs / "world.log").read_text(errors="replace")
+            for logs in tmp_path.glob(".run.logs-*")
+            if (logs / "world.log").exists()
+        )
 
     _wait_for(world_started, timeout=120)
     proc.send_signal(signal.SIGTERM)
@@ -146,8 +201,12 @@ def test_ctrl_c_as_run_shuts_down_says_the_run_ended_and_keeps_it_whole(tmp_path
 
     out = tmp_path / "run"
     for _ in range(3):  # the nodes take ~0.3 s to stop: the Ctrl-C nearly always lands in that time
-        proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out), "--quiet"],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            [PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out), "--quiet"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         deadline = time.monotonic() + 180
         while not (out / "summary.json").exists() and time.monotonic() < deadline:
             time.sleep(0.005)
@@ -158,8 +217,11 @@ def test_ctrl_c_as_run_shuts_down_says_the_run_ended_and_keeps_it_whole(tmp_path
         shutil.rmtree(out)  # the command had ended before the Ctrl-C reached it: again
     assert proc.returncode == 130, err
     summary = json.loads((out / "summary.json").read_text())
-    assert f"interrupted after the run had ended (complete at tick {summary['convergence_tick']}); it is whole " \
-           f"in {out}" in err and "Traceback" not in err, err
+    assert (
+        f"interrupted after the run had ended (complete at tick {summary['convergence_tick']}); it is whole in {out}"
+        in err
+        and "Traceback" not in err
+    ), err
     assert summary["outcome"] == "complete" and summary["shutdown_seconds"] is not None
     assert (out / "logs" / "launcher.log").is_file()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
@@ -170,8 +232,9 @@ def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, command):
     """Ctrl-C while the command imports its modules (the first few tenths of a second): one line, exit 130."""
     script = Path(sys.executable).parent / "swarm-ros"
     for delay in (0.08, 0.15):
-        proc = subprocess.Popen([str(script), *command], cwd=tmp_path, stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            [str(script), *command], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
         time.sleep(delay)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
@@ -215,9 +278,13 @@ def test_a_terminal_ctrl_c_to_a_dask_experiment_leaves_no_worker_traceback(tmp_p
 
     config = small_config(tmp_path, repetitions=200)
     out = tmp_path / "exp"
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(out), "--jobs", "2",
-                             "--executor", "dask"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        [PY, "-m", "swarm_ros", "experiment", str(config), "--out", str(out), "--jobs", "2", "--executor", "dask"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     results = out / "results.csv"
     _wait_for(lambda: results.exists() and len(results.read_text().splitlines()) > 4)
     os.killpg(proc.pid, signal.SIGINT)
@@ -236,8 +303,13 @@ def test_sigterm_to_topics_closes_its_participant_and_leaves_no_log_file(tmp_pat
     before = set(os.listdir("/dev/shm"))
     env = {**os.environ, "HOME": str(home), "ROS_DOMAIN_ID": "229"}
     env.pop("ROS_LOG_DIR", None)
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "topics", "--echo", "/swarm/metrics", "--seconds", "20"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [PY, "-m", "swarm_ros", "topics", "--echo", "/swarm/metrics", "--seconds", "20"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     held: set[str] = set()  # the shared-memory files it uses (none with the UDP transport swarm_ros sets)
     waiting = time.monotonic() + 2  # waiting for the topic
     while time.monotonic() < waiting:
@@ -260,12 +332,20 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
     import os
 
     out = tmp_path / "run"
-    proc = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--rules", "local", "--out", str(out),
-                             "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [PY, "-m", "swarm_ros", "run", "--shape", "star", "--rules", "local", "--out", str(out), "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
     def listed() -> list[str]:
-        return [f for logs in tmp_path.glob(".run.logs-*") if (logs / "shm-files").exists()
-                for f in (logs / "shm-files").read_text().split()]
+        return [
+            f
+            for logs in tmp_path.glob(".run.logs-*")
+            if (logs / "shm-files").exists()
+            for f in (logs / "shm-files").read_text().split()
+        ]
 
     # every node is up and its files listed, and the monitor has begun the recording (which must then stay)
     _wait_for(lambda: len(listed()) >= 4 and (tmp_path / "run.partial.rrd").exists(), timeout=120)
@@ -277,8 +357,12 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
     assert left, "a SIGKILLed launcher left no shared-memory file: nothing to test"
     hidden = list(tmp_path.glob(".run.logs-*"))
     assert len(hidden) == 1
-    again = subprocess.run([PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out), "--quiet"],
-                           capture_output=True, text=True, timeout=120)
+    again = subprocess.run(
+        [PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert again.returncode == 2
     assert f"an earlier run of {out} was killed; its logs are now in {tmp_path / 'run.logs'}" in again.stderr
     assert "run.partial.rrd: left by an earlier run" in again.stderr

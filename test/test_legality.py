@@ -20,8 +20,7 @@ pytestmark = pytest.mark.unit
 
 def _check(sim: Simulation, d: Decisions) -> np.ndarray:
     s = sim.state
-    return illegal(sim.params, sim.shape.world.radius, s.frontier, s.x[d.ids], s.y[d.ids], d.claim, d.x, d.y,
-                   d.heading)
+    return illegal(sim.params, sim.shape.world.radius, s.frontier, s.x[d.ids], s.y[d.ids], d.claim, d.x, d.y, d.heading)
 
 
 @pytest.mark.parametrize("rules,vision", [("paper", 1.0), ("local", 1.0), ("local", 3.0), ("literal", 2.0)])
@@ -61,17 +60,22 @@ def _claim_row(sim: Simulation, d: Decisions, patch: int) -> int:
     return 0
 
 
-@pytest.mark.parametrize("change,why", [
-    (lambda sim, d: d.x.__setitem__(0, d.x[0] + 5.0), "a move of 5 patches"),
-    (lambda sim, d: d.x.__setitem__(0, np.nan), "NaN"),
-    (lambda sim, d: d.y.__setitem__(0, 1e300), "outside the world"),
-    (lambda sim, d: d.heading.__setitem__(0, 7.0), "a heading over 2 pi"),
-    (lambda sim, d: d.heading.__setitem__(0, -math.inf), "an infinite heading"),
-    (lambda sim, d: d.claim.__setitem__(0, 10 ** 8), "a claim outside the grid"),
-    (lambda sim, d: d.claim.__setitem__(0, -7), "a claim code below -1"),
-    (lambda sim, d: _claim_row(sim, d, int(np.flatnonzero(sim.shape.mask.ravel() & ~sim.state.frontier)[0])),
-     "a claim on a shape patch off the frontier"),
-])
+@pytest.mark.parametrize(
+    "change,why",
+    [
+        (lambda sim, d: d.x.__setitem__(0, d.x[0] + 5.0), "a move of 5 patches"),
+        (lambda sim, d: d.x.__setitem__(0, np.nan), "NaN"),
+        (lambda sim, d: d.y.__setitem__(0, 1e300), "outside the world"),
+        (lambda sim, d: d.heading.__setitem__(0, 7.0), "a heading over 2 pi"),
+        (lambda sim, d: d.heading.__setitem__(0, -math.inf), "an infinite heading"),
+        (lambda sim, d: d.claim.__setitem__(0, 10**8), "a claim outside the grid"),
+        (lambda sim, d: d.claim.__setitem__(0, -7), "a claim code below -1"),
+        (
+            lambda sim, d: _claim_row(sim, d, int(np.flatnonzero(sim.shape.mask.ravel() & ~sim.state.frontier)[0])),
+            "a claim on a shape patch off the frontier",
+        ),
+    ],
+)
 def test_a_wrong_decision_is_illegal_and_only_it(tick1, change, why):
     sim, d = tick1
     assert not _check(sim, d).any()
@@ -117,16 +121,18 @@ def _reference(params, radius, frontier, x0, y0, claim, x, y, heading, z0=None, 
     bad |= (claim < -1) | (claim >= size ** len(before))
     ok_claim = claims & ~bad
     p = claim[ok_claim]
-    cells = [p % size - radius, (p // size) % size - radius, p // (size * size) - radius] if solid else \
-        [p % size - radius, p // size - radius]
+    cells = (
+        [p % size - radius, (p // size) % size - radius, p // (size * size) - radius]
+        if solid
+        else [p % size - radius, p // size - radius]
+    )
     far = np.sqrt(sum((c - b[ok_claim]) ** 2 for c, b in zip(cells, before))) > reach(params, len(before)) + SLACK
     bad[np.flatnonzero(ok_claim)[far | ~frontier[p]]] = True
     return bad
 
 
-
 @settings(max_examples=300, deadline=None)
-@given(seed=st.integers(0, 2 ** 32 - 1), solid=st.booleans(), rules=st.sampled_from(["paper", "local", "literal"]))
+@given(seed=st.integers(0, 2**32 - 1), solid=st.booleans(), rules=st.sampled_from(["paper", "local", "literal"]))
 def test_the_compiled_check_equals_the_bounds_stated_in_numpy(seed, solid, rules):
     rng = np.random.default_rng(seed)
     radius = int(rng.integers(3, 12))
@@ -145,5 +151,7 @@ def test_the_compiled_check_equals_the_bounds_stated_in_numpy(seed, solid, rules
         pitch = rng.uniform(-2, 2, n)
         pitch[rng.random(n) < 0.05] = np.nan
         extra = {"z0": z0, "z": z0 + rng.normal(0, 1.5, n), "pitch": pitch}
-    assert np.array_equal(illegal(params, radius, frontier, x0, y0, claim, x, y, heading, **extra),
-                          _reference(params, radius, frontier, x0, y0, claim, x, y, heading, **extra))
+    assert np.array_equal(
+        illegal(params, radius, frontier, x0, y0, claim, x, y, heading, **extra),
+        _reference(params, radius, frontier, x0, y0, claim, x, y, heading, **extra),
+    )

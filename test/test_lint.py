@@ -1,5 +1,6 @@
-"""The code passes the project's linter (ruff, configured in pyproject.toml): imports in order, no unused names,
-no likely bugs. Run ``.venv/bin/ruff check --fix .`` to fix most of what it finds."""
+"""The code passes the project's linter and formatter (ruff, configured in pyproject.toml): imports in order, no
+unused names, no likely bugs, one layout. Run ``.venv/bin/ruff check --fix . && .venv/bin/ruff format .`` to fix
+most of what they find."""
 
 from __future__ import annotations
 
@@ -18,24 +19,48 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_ruff_finds_nothing():
     ruff = shutil.which("ruff", path=str(Path(sys.executable).parent))
     assert ruff, "ruff is not installed in this venv (requirements.txt pins it; scripts/setup.sh installs it)"
-    done = subprocess.run([ruff, "check", "--output-format", "concise", "--no-cache", "."], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [ruff, "check", "--output-format", "concise", "--no-cache", "."],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
 
 
+def test_the_code_is_laid_out_as_ruff_format_lays_it_out():
+    ruff = shutil.which("ruff", path=str(Path(sys.executable).parent))
+    assert ruff, "ruff is not installed in this venv (requirements.txt pins it; scripts/setup.sh installs it)"
+    done = subprocess.run(
+        [ruff, "format", "--check", "--no-cache", "."], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, "run .venv/bin/ruff format .\n" + done.stdout + done.stderr
+
+
 def test_the_pre_commit_hooks_pass_on_the_whole_tree(tmp_path):
-    """.pre-commit-config.yaml's hooks (ruff, the docs' tables, the layers, mypy), run as ``pre-commit run --all-files``
-    runs them before a commit: the configuration works, offline, with the venv's own tools."""
+    """.pre-commit-config.yaml's hooks (ruff, its formatter, the docs' tables, the layers, mypy), run as
+    ``pre-commit run --all-files`` runs them before a commit: the configuration works, offline, with the venv's
+    own tools."""
     if not (ROOT / ".git").exists():
         pytest.skip("not a git checkout: pre-commit runs on a repository's files")
     pre_commit = shutil.which("pre-commit", path=str(Path(sys.executable).parent))
     assert pre_commit, "pre-commit is not installed in this venv (requirements.txt pins it)"
-    env = {"PATH": str(Path(sys.executable).parent) + ":/usr/bin:/bin", "HOME": str(tmp_path),
-           "PRE_COMMIT_HOME": str(tmp_path / "pre-commit")}
-    done = subprocess.run([pre_commit, "run", "--all-files", "--show-diff-on-failure"], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=300)
+    env = {
+        "PATH": str(Path(sys.executable).parent) + ":/usr/bin:/bin",
+        "HOME": str(tmp_path),
+        "PRE_COMMIT_HOME": str(tmp_path / "pre-commit"),
+    }
+    done = subprocess.run(
+        [pre_commit, "run", "--all-files", "--show-diff-on-failure"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
-    assert done.stdout.count("Passed") == 4, done.stdout
+    assert done.stdout.count("Passed") == 5, done.stdout  # every hook ran
 
 
 def test_mypy_finds_nothing_in_the_core_and_the_protocol():
@@ -43,6 +68,11 @@ def test_mypy_finds_nothing_in_the_core_and_the_protocol():
     code and the contract between processes as their annotations say. No cache is written."""
     mypy = shutil.which("mypy", path=str(Path(sys.executable).parent))
     assert mypy, "mypy is not installed in this venv (requirements.txt pins it; scripts/setup.sh installs it)"
-    done = subprocess.run([mypy, "--cache-dir", "/dev/null", "--python-executable", sys.executable], cwd=ROOT,
-                          capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [mypy, "--cache-dir", "/dev/null", "--python-executable", sys.executable],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stdout + done.stderr

@@ -21,15 +21,6 @@ from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STI
 pytestmark = pytest.mark.unit
 
 
-
-
-
-
-
-
-
-
-
 def test_a_run_through_the_lockstep_is_the_engines_run_tick_for_tick():
     r = LockstepRun(batches=3)
     r.start()
@@ -285,10 +276,11 @@ class RegionCheck:
     def follow(self) -> None:
         from swarm_ros.protocol.checks import apply_robots
 
-        for tick, k, rows in self.run.port.regions[self.seen:]:
+        for tick, k, rows in self.run.port.regions[self.seen :]:
             rep = self.replicas[k]
             if rep.tick < 0:
                 from swarm_ros.protocol.rows import pose_of
+
                 rep.load(tick, rows["id"], rows["state"], **pose_of(rows))
             elif tick == rep.tick + 1:
                 apply_robots(rep, tick, rows)
@@ -315,9 +307,18 @@ class RegionCheck:
             assert np.array_equal(rep.state.frontier, s.frontier)
 
 
-@pytest.mark.parametrize(("batches", "cuts", "shape"), [(1, None, "star"), (2, None, "star"), (4, None, "star"),
-                                                        (8, None, "star"), (3, [-20, -19], "star"),
-                                                        (2, [9], "star"), (3, None, "box")])
+@pytest.mark.parametrize(
+    ("batches", "cuts", "shape"),
+    [
+        (1, None, "star"),
+        (2, None, "star"),
+        (4, None, "star"),
+        (8, None, "star"),
+        (3, [-20, -19], "star"),
+        (2, [9], "star"),
+        (3, None, "box"),
+    ],
+)
 def test_any_partition_into_strips_gives_the_engines_run_and_each_batch_sees_exactly_its_region(batches, cuts, shape):
     """Equality for several partitions (balanced, lopsided, a one-column strip, 3D), and the routing: each
     batch's regional replica, fed only its snapshot and region rows, equals the world where it must."""

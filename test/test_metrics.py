@@ -14,14 +14,17 @@ def test_metrics_from_state_counts():
     assert m == TickMetrics(tick=12, stationary=54, localized=54, inside=7, moving=48, empty_patches=46, walking=11)
 
 
-@pytest.mark.parametrize("m,robots,expected", [
-    (TickMetrics(5, 100, 100, 0, 0, 0, 0), 100, Outcome.COMPLETE),
-    (TickMetrics(5, 100, 100, 0, 3, 0, 0), 103, Outcome.COMPLETE_WITH_EXTRAS),
-    (TickMetrics(5, 90, 90, 0, 0, 10, 0), 90, Outcome.INCOMPLETE),
-    (TickMetrics(50, 90, 90, 1, 5, 10, 0), 95, Outcome.TIMEOUT),
-    (TickMetrics(49, 90, 90, 1, 5, 10, 0), 95, None),
-    (TickMetrics(50, 100, 100, 0, 0, 0, 0), 100, Outcome.COMPLETE),  # completion wins over the limit
-])
+@pytest.mark.parametrize(
+    "m,robots,expected",
+    [
+        (TickMetrics(5, 100, 100, 0, 0, 0, 0), 100, Outcome.COMPLETE),
+        (TickMetrics(5, 100, 100, 0, 3, 0, 0), 103, Outcome.COMPLETE_WITH_EXTRAS),
+        (TickMetrics(5, 90, 90, 0, 0, 10, 0), 90, Outcome.INCOMPLETE),
+        (TickMetrics(50, 90, 90, 1, 5, 10, 0), 95, Outcome.TIMEOUT),
+        (TickMetrics(49, 90, 90, 1, 5, 10, 0), 95, None),
+        (TickMetrics(50, 100, 100, 0, 0, 0, 0), 100, Outcome.COMPLETE),  # completion wins over the limit
+    ],
+)
 def test_outcome_is_checked_in_model_order(m, robots, expected):
     assert outcome_of(m, shape_patches=100, robots=robots, max_ticks=50) is expected
 
@@ -40,5 +43,11 @@ def test_state_codes_are_stable():
     from swarm_ros.core import RobotState
 
     assert [(s.value, s.label) for s in RobotState] == [
-        (0, "seed"), (1, "moving_outside"), (2, "moving_inside"), (3, "localized"), (4, "separated"),
-        (5, "removed"), (6, "walking")]
+        (0, "seed"),
+        (1, "moving_outside"),
+        (2, "moving_inside"),
+        (3, "localized"),
+        (4, "separated"),
+        (5, "removed"),
+        (6, "walking"),
+    ]

@@ -72,8 +72,10 @@ def test_a_monitor_whose_robots_never_come_fails_once_the_world_has_ended_instea
     from swarm_ros.ros import graph as msgs
     from swarm_ros.ros.auth import Signer
 
-    with _monitor(tmp_path, Settings(shape="star", robots=60)) as (proc, domain, key), \
-            _peer(domain, monkeypatch) as node:
+    with (
+        _monitor(tmp_path, Settings(shape="star", robots=60)) as (proc, domain, key),
+        _peer(domain, monkeypatch) as node,
+    ):
         status = Signer(node, key, "world").publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
         status.publish(msgs.status_message(40, "complete", "complete at tick 40"))
         try:

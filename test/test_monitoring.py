@@ -89,8 +89,9 @@ def world_messages(params: RunParams) -> tuple[Simulation, list[tuple[bytes, byt
         decisions = decider.decide(sim.state, sim.moving_ids(), sim.tick + 1)
         sim.apply(decisions)
         ids = np.union1d(np.sort(decisions.ids), sim.last_removed)
-        out.append((encode_cloud(state_rows(ids, sim.state), sim.tick),
-                    encode_cloud(decision_rows(decisions), sim.tick)))
+        out.append(
+            (encode_cloud(state_rows(ids, sim.state), sim.tick), encode_cloud(decision_rows(decisions), sim.tick))
+        )
     return sim, out
 
 
@@ -107,12 +108,15 @@ def feed(core: MonitorCore, messages, upto: int | None = None) -> None:
             core.decisions(decode_cloud(decided))
 
 
-@pytest.mark.parametrize("params", [
-    RunParams(robots=60, seed=3, max_ticks=400),
-    RunParams(robots=90, seed=5, rules="local", vision_radius=3.0, max_ticks=400),
-    RunParams(robots=60, seed=7, max_ticks=300, fail_fraction=0.2, fail_tick=20),
-    RunParams(robots=60, seed=1, max_ticks=300, fail_fraction=0.2, fail_tick=3),  # no robot joins at tick 3
-])
+@pytest.mark.parametrize(
+    "params",
+    [
+        RunParams(robots=60, seed=3, max_ticks=400),
+        RunParams(robots=90, seed=5, rules="local", vision_radius=3.0, max_ticks=400),
+        RunParams(robots=60, seed=7, max_ticks=300, fail_fraction=0.2, fail_tick=20),
+        RunParams(robots=60, seed=1, max_ticks=300, fail_fraction=0.2, fail_tick=3),  # no robot joins at tick 3
+    ],
+)
 def test_the_core_counts_the_worlds_rows_as_the_engine_does(params):
     sim, messages = world_messages(params)
     recorder = Recorder()
@@ -125,8 +129,9 @@ def test_the_core_counts_the_worlds_rows_as_the_engine_does(params):
     # the occupancy is reported changed at tick 0 and when a robot joined or was removed, only then
     changed = [c for _, _, c in port.counted]
     localized = sim.history[:, 2]
-    assert changed[1:] == [bool(localized[t] != localized[t - 1]) or any(at == t for at, _ in sim.losses)
-                           for t in range(1, sim.tick + 1)]
+    assert changed[1:] == [
+        bool(localized[t] != localized[t - 1]) or any(at == t for at, _ in sim.losses) for t in range(1, sim.tick + 1)
+    ]
     assert port.decisions == list(range(1, sim.tick + 1))
     assert recorder.ticks == list(range(sim.tick + 1)) and recorder.forced == [False] * sim.tick + [True]
     assert core.bag_complete()
@@ -266,8 +271,9 @@ def test_a_bag_whose_metrics_are_not_its_rows_fails_the_restart():
         core.replayed(wrong)
 
 
-@pytest.mark.parametrize("stopped,ended,expected", [(True, False, "interrupted"), (False, False, "failed"),
-                                                    (False, True, "interrupted")])
+@pytest.mark.parametrize(
+    "stopped,ended,expected", [(True, False, "interrupted"), (False, False, "failed"), (False, True, "interrupted")]
+)
 def test_a_run_stopped_before_it_was_written_closes_its_recording_marked(stopped, ended, expected):
     params = RunParams(robots=60, seed=3, max_ticks=400)
     sim, messages = world_messages(params)

@@ -39,10 +39,19 @@ LAN_ROBOTS = int(os.environ.get("SWARM_ROS_LAN_ROBOTS", "0"))  #: 0: the small r
 def _logs(tmp_path, procs, hosts: list[str], links: list[str]) -> str:
     """Each node's exit status (None: still running) and the end of its log, and the links' counters,
     for a failure's message."""
-    logs = [f"--- {name} (exit {proc.poll()}):\n{(tmp_path / f'{name}.log').read_text()[-1500:]}"
-            for name, (proc, _) in procs.items()]
-    return "\n".join([*logs, *(f"--- {dev} in {ns}:\n{ip_in('-n', ns, '-s', 'link', 'show', 'dev', dev).stdout}"
-                               for ns, dev in zip(hosts, links))])
+    logs = [
+        f"--- {name} (exit {proc.poll()}):\n{(tmp_path / f'{name}.log').read_text()[-1500:]}"
+        for name, (proc, _) in procs.items()
+    ]
+    return "\n".join(
+        [
+            *logs,
+            *(
+                f"--- {dev} in {ns}:\n{ip_in('-n', ns, '-s', 'link', 'show', 'dev', dev).stdout}"
+                for ns, dev in zip(hosts, links)
+            ),
+        ]
+    )
 
 
 def _link_bytes(ns: str, dev: str) -> dict:
@@ -61,23 +70,52 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
     # hosts: the subnet, plus each host's address as a static peer (unicast, should multicast be lost).
     env = host_env()
     net = int(links[0].removeprefix("swra")) % 250
-    env.update({"ROS_DOMAIN_ID": str(100 + os.getpid() % 100), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
-                "ROS_STATIC_PEERS": ";".join(SUBNET.format(net, i + 1) for i in range(len(hosts))),
-                "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",  # shared memory would bypass the namespaces
-                "HOME": str(tmp_path), "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1",
-                KEY_ENV: new_key()})  # one run key on every host (docs/operations.md, Several hosts)
+    env.update(
+        {
+            "ROS_DOMAIN_ID": str(100 + os.getpid() % 100),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+            "ROS_STATIC_PEERS": ";".join(SUBNET.format(net, i + 1) for i in range(len(hosts))),
+            "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",  # shared memory would bypass the namespaces
+            "HOME": str(tmp_path),
+            "ROS_LOG_DIR": str(tmp_path / "ros"),
+            "PYTHONUNBUFFERED": "1",
+            KEY_ENV: new_key(),
+        }
+    )  # one run key on every host (docs/operations.md, Several hosts)
     procs = {}
     try:
         for host, name, module, extra in plan:
             log = open(tmp_path / f"{name}.log", "w")
-            procs[name] = (subprocess.Popen(["ip", "netns", "exec", hosts[host], PY, "-m",
-                                             f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params),
-                                             "-r", f"__node:={name}", *extra],
-                                            env=env, stdout=log, stderr=subprocess.STDOUT), log)
+            procs[name] = (
+                subprocess.Popen(
+                    [
+                        "ip",
+                        "netns",
+                        "exec",
+                        hosts[host],
+                        PY,
+                        "-m",
+                        f"swarm_ros.nodes.{module}",
+                        "--ros-args",
+                        "--params-file",
+                        str(params),
+                        "-r",
+                        f"__node:={name}",
+                        *extra,
+                    ],
+                    env=env,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                ),
+                log,
+            )
         monitor = procs["monitor"][0]
         deadline = time.monotonic() + timeout  # a node that failed ends the wait
-        while monitor.poll() is None and time.monotonic() < deadline and \
-                not any(p.poll() not in (None, 0) for p, _ in procs.values()):
+        while (
+            monitor.poll() is None
+            and time.monotonic() < deadline
+            and not any(p.poll() not in (None, 0) for p, _ in procs.values())
+        ):
             time.sleep(0.1)
         assert monitor.poll() == 0, _logs(tmp_path, procs, hosts, links)
         deadline = time.monotonic() + 30
@@ -97,8 +135,10 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
 
 def _batches(hosts: list[int], k: int) -> list[tuple]:
     """Batch b of ``k`` on host ``hosts[b]``."""
-    return [(host, f"robot_batch_{b}", "robot_batch", ["-p", f"batch:={b}", "-p", f"batches:={k}"])
-            for b, host in enumerate(hosts)]
+    return [
+        (host, f"robot_batch_{b}", "robot_batch", ["-p", f"batch:={b}", "-p", f"batches:={k}"])
+        for b, host in enumerate(hosts)
+    ]
 
 
 def _moving(ref: Path) -> list[int]:
@@ -150,11 +190,18 @@ def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts,
     simulated = time.perf_counter() - began
     before = [_link_bytes(ns, dev) for ns, dev in zip(hosts, links)]
     began = time.perf_counter()
-    run = _run_on_hosts(tmp_path, hosts, links, settings,
-                        [(0, "world", "world", []), (0, "monitor", "monitor", []), *_batches([0, 1, 2, 3], 4)],
-                        timeout)
-    print(f"four hosts: simulate {simulated:.1f} s, the graph {time.perf_counter() - began:.1f} s "
-          f"(run {json.loads((run / 'summary.json').read_text())['wall_seconds']:.2f} s)")
+    run = _run_on_hosts(
+        tmp_path,
+        hosts,
+        links,
+        settings,
+        [(0, "world", "world", []), (0, "monitor", "monitor", []), *_batches([0, 1, 2, 3], 4)],
+        timeout,
+    )
+    print(
+        f"four hosts: simulate {simulated:.1f} s, the graph {time.perf_counter() - began:.1f} s "
+        f"(run {json.loads((run / 'summary.json').read_text())['wall_seconds']:.2f} s)"
+    )
     world_log = (tmp_path / "world.log").read_text()
     assert all(f"robot_batch_{b} hosts" in world_log for b in range(4))
     assert_same_run(ref, run, launched=False)

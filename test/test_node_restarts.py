@@ -43,9 +43,13 @@ SHORT = [*STAR_LOCAL, "--max-ticks", "1500"]
 
 
 def _launch(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "swarm_ros", "run", *SHORT, "--processes", "2", "--out",
-                             str(out), "--quiet", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=run_env())
+    return subprocess.Popen(
+        [sys.executable, "-m", "swarm_ros", "run", *SHORT, "--processes", "2", "--out", str(out), "--quiet", *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=run_env(),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -53,16 +57,6 @@ def reference(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("node-restart-ref") / "ref"
     assert cli.main(["simulate", *SHORT, "--out", str(out), "--quiet", "--no-recording"]) == 0
     return out
-
-
-
-
-
-
-
-
-
-
 
 
 def _recording_whole(out: Path) -> Recording:
@@ -95,12 +89,14 @@ def test_a_world_killed_at_tick_0_goes_on_from_it_and_the_run_is_identical(refer
     assert summary["restarts"][0]["tick"] < 20
 
 
-@pytest.mark.parametrize(("node", "went_on", "logged"), [
-    ("world", "a new world process went on from its checkpoint", "world restarted: going on from tick {tick}"),
-    ("monitor", "a new monitor process went on from its bag", "went on from tick"),
-])
-def test_a_node_killed_mid_run_goes_on_and_the_run_is_identical_and_whole(reference, tmp_path, node, went_on,
-                                                                         logged):
+@pytest.mark.parametrize(
+    ("node", "went_on", "logged"),
+    [
+        ("world", "a new world process went on from its checkpoint", "world restarted: going on from tick {tick}"),
+        ("monitor", "a new monitor process went on from its bag", "went on from tick"),
+    ],
+)
+def test_a_node_killed_mid_run_goes_on_and_the_run_is_identical_and_whole(reference, tmp_path, node, went_on, logged):
     """The world from its checkpoint, the monitor from its bag; the recording shows the restart at its tick."""
     out = tmp_path / "run"
     launcher = _launch(out)

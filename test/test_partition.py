@@ -39,12 +39,22 @@ def _shard_apply(sim: Simulation, decisions, mine: np.ndarray) -> tuple:
     take = np.flatnonzero(mine | outside)
     s = sim.state.copy()
     world, empty = SHAPE.world, np.empty(0)
-    moves = Moves(claims[take].astype(np.int64), decisions.x[take], decisions.y[take], empty, decisions.heading[take],
-                  empty)
+    moves = Moves(
+        claims[take].astype(np.int64), decisions.x[take], decisions.y[take], empty, decisions.heading[take], empty
+    )
     grid = grid_of(SHAPE, s, SHAPE.mask.ravel().copy(), world.wall_mask().ravel(), world.neighbour_offsets())
-    resolve_kernel(decisions.ids[take], moves, robots_of(s), grid, rules_of(sim.params), decisions.tick,
-                   np.full(world.patch_count, -1, dtype=np.int64), sim.metrics.localized, SHAPE.patches,
-                   np.empty(take.size, dtype=np.int8))
+    resolve_kernel(
+        decisions.ids[take],
+        moves,
+        robots_of(s),
+        grid,
+        rules_of(sim.params),
+        decisions.tick,
+        np.full(world.patch_count, -1, dtype=np.int64),
+        sim.metrics.localized,
+        SHAPE.patches,
+        np.empty(take.size, dtype=np.int8),
+    )
     return s, decisions.ids[outside]
 
 
@@ -55,8 +65,12 @@ def test_a_tick_applied_by_region_shards_is_the_worlds_tick(rules, vision):
     rng = np.random.default_rng(35)
     outside_claims = 0
     for _ in range(60):
-        params = RunParams(robots=SHAPE.patches + int(rng.integers(10, SHAPE.patches)), seed=int(rng.integers(10 ** 6)),
-                           rules=rules, vision_radius=vision)
+        params = RunParams(
+            robots=SHAPE.patches + int(rng.integers(10, SHAPE.patches)),
+            seed=int(rng.integers(10**6)),
+            rules=rules,
+            vision_radius=vision,
+        )
         cuts = np.sort(rng.choice(np.arange(1, 2 * WORLD.radius + 1), size=int(rng.integers(1, 9)), replace=False))
         outside_claims += _check_one_tick(params, int(rng.integers(0, 60)), cuts)
     assert outside_claims > 0  # the case that matters was met: a shard needed its neighbours' claims
@@ -101,8 +115,7 @@ def _check_one_tick(params: RunParams, ticks: int, cuts: np.ndarray) -> int:
     for ids, state in shards:
         for i in ids[state.state[ids] == RobotState.LOCALIZED]:
             p = int(np.flatnonzero(state.occupancy == i)[0])
-            occupy(p, i, occupancy, frontier, blocks, SHAPE.mask.ravel().copy(), WORLD.neighbour_offsets(),
-                   WORLD.size)
+            occupy(p, i, occupancy, frontier, blocks, SHAPE.mask.ravel().copy(), WORLD.neighbour_offsets(), WORLD.size)
     assert np.array_equal(occupancy, world.occupancy) and np.array_equal(frontier, world.frontier)
     assert np.array_equal(blocks, world.frontier_blocks)
     # the tick's metrics are the sum of the shards' own counts (and of the robots that did not decide)

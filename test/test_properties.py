@@ -47,8 +47,9 @@ def runs(draw):
     seed = draw(st.integers(0, 2**63 - 1))
     rules = draw(st.sampled_from(["paper", "local", "literal"]))
     crowding = draw(st.sampled_from(["", "ahead", "disc"]))
-    return shape, RunParams(robots=robots, vision_radius=vision, seed=seed, max_ticks=300, rules=rules,
-                            crowding=crowding)
+    return shape, RunParams(
+        robots=robots, vision_radius=vision, seed=seed, max_ticks=300, rules=rules, crowding=crowding
+    )
 
 
 SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

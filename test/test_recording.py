@@ -82,7 +82,13 @@ def assert_matches_run(rec: Recording, run_dir: Path, every: int = 1) -> None:
 
 def test_simulate_writes_recording_and_convergence_plot(run_dir):
     assert sorted(p.name for p in run_dir.iterdir()) == [
-        "convergence.png", "final.png", "final_state.csv", "metrics.csv", "recording.rrd", "summary.json"]
+        "convergence.png",
+        "final.png",
+        "final_state.csv",
+        "metrics.csv",
+        "recording.rrd",
+        "summary.json",
+    ]
     assert (run_dir / "convergence.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list(run_dir.parent.glob("*.partial.rrd"))
 
@@ -113,16 +119,25 @@ def run_table(rrd: Path) -> str:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         chunks = RrdReader(str(rrd)).stream().to_chunks()
-    texts = [c.to_record_batch().column("TextDocument:text").flatten().to_pylist()[0]
-             for c in chunks if c.entity_path == f"/{RUN_INFO}" and c.is_static]
+    texts = [
+        c.to_record_batch().column("TextDocument:text").flatten().to_pylist()[0]
+        for c in chunks
+        if c.entity_path == f"/{RUN_INFO}" and c.is_static
+    ]
     assert len(texts) == 1
     return texts[0]
 
 
 def test_the_run_table_names_the_rule_set_and_its_switches(run_dir):
     table = run_table(run_dir / "recording.rrd")
-    for row in ("| rules | paper |", "| join | walk |", "| crowding | ahead |", "| steps | one |",
-                "| rule set in force | paper |", "| robots logged | every 1 tick(s) |"):
+    for row in (
+        "| rules | paper |",
+        "| join | walk |",
+        "| crowding | ahead |",
+        "| steps | one |",
+        "| rule set in force | paper |",
+        "| robots logged | every 1 tick(s) |",
+    ):
         assert row in table, row
 
 
@@ -146,12 +161,14 @@ def test_a_large_swarm_is_logged_every_kth_tick_chosen_from_its_size_and_says_so
     out = tmp_path / "auto"
     assert cli.main(["simulate", *[f for f in FLAGS if f != "--quiet"], "--out", str(out)]) == 0
     assert_matches_run(Recording(out / "recording.rrd"), out, every=3)
-    assert "the recording logs the robots every 3 ticks (460 robots; --record-every 1 logs every tick)" \
+    assert (
+        "the recording logs the robots every 3 ticks (460 robots; --record-every 1 logs every tick)"
         in capsys.readouterr().err
+    )
     assert "| robots logged | every 3 tick(s) |" in run_table(out / "recording.rrd")
     monkeypatch.setattr(recording_options, "POSES_PER_TICK", 460)  # as many as the swarm: every tick
     assert recording_options.RecordingOptions().every_for(460) == 1
-    assert recording_options.RecordingOptions(every=7).every_for(10 ** 6) == 7  # chosen by the user: kept
+    assert recording_options.RecordingOptions(every=7).every_for(10**6) == 7  # chosen by the user: kept
 
 
 def test_same_seed_gives_a_recording_with_the_same_data(recording, tmp_path):
@@ -243,15 +260,17 @@ def test_an_interrupted_run_writes_its_run_directory_so_far(tmp_path, monkeypatc
 def test_a_killed_run_leaves_a_recording_readable_up_to_the_last_batch(tmp_path):
     """SIGKILL: no footer is written, but what was sent before is in the file and reads back."""
     out = tmp_path / "killed"
-    code = ("import sys, numpy as np; from swarm_ros.app import cli; from swarm_ros.core.engine import "
-            "Simulation\n"
-            "real = Simulation.run\n"
-            "def run(self, max_ticks=None, on_tick=None):\n"
-            "    if self.tick >= 300:\n"
-            "        import os, signal, time; time.sleep(0.5); os.kill(os.getpid(), signal.SIGKILL)\n"
-            "    return real(self, max_ticks=min(max_ticks or 10**9, 300 - self.tick), on_tick=on_tick)\n"
-            "Simulation.run = run\n"
-            f"cli.main(['simulate', *{FLAGS!r}, '--out', {str(out)!r}])\n")
+    code = (
+        "import sys, numpy as np; from swarm_ros.app import cli; from swarm_ros.core.engine import "
+        "Simulation\n"
+        "real = Simulation.run\n"
+        "def run(self, max_ticks=None, on_tick=None):\n"
+        "    if self.tick >= 300:\n"
+        "        import os, signal, time; time.sleep(0.5); os.kill(os.getpid(), signal.SIGKILL)\n"
+        "    return real(self, max_ticks=min(max_ticks or 10**9, 300 - self.tick), on_tick=on_tick)\n"
+        "Simulation.run = run\n"
+        f"cli.main(['simulate', *{FLAGS!r}, '--out', {str(out)!r}])\n"
+    )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == -signal.SIGKILL, done.stderr
     rec = Recording(tmp_path / "killed.partial.rrd")
@@ -282,8 +301,12 @@ def test_connect_to_a_port_where_no_viewer_listens_says_so_in_one_line_and_goes_
 def test_connect_streams_the_same_data_to_a_running_viewer(recording, tmp_path):
     """A headless `rerun --serve-grpc --save` stands in for a viewer and saves what it receives."""
     port, saved = _free_port(), tmp_path / "live.rrd"
-    server = subprocess.Popen([str(Path(sys.executable).with_name("rerun")), "--serve-grpc", "--port", str(port),
-                               "--save", str(saved)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    server = subprocess.Popen(
+        [str(Path(sys.executable).with_name("rerun")), "--serve-grpc", "--port", str(port), "--save", str(saved)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:
@@ -301,10 +324,13 @@ def test_connect_streams_the_same_data_to_a_running_viewer(recording, tmp_path):
     assert Recording(out / "recording.rrd").same_data(recording)
 
 
-@pytest.mark.parametrize("args,message", [
-    (["--record-every=-1"], "record_every must be an integer >= 1 (0 = chosen from the swarm's size), got -1"),
-    (["--connect", "http://localhost:9876"], "viewer URL must start with one of rerun://"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--record-every=-1"], "record_every must be an integer >= 1 (0 = chosen from the swarm's size), got -1"),
+        (["--connect", "http://localhost:9876"], "viewer URL must start with one of rerun://"),
+    ],
+)
 def test_bad_recording_options_get_one_line_and_write_nothing(tmp_path, capsys, args, message):
     assert simulate(tmp_path / "run", *args) == 2
     err = capsys.readouterr().err
@@ -323,8 +349,11 @@ def test_spawn_returns_the_url_of_a_viewer_that_answers_and_stays_up(tmp_path, c
     from swarm_ros.artifacts.rerun_recording import spawn_viewer
 
     port = _free_port()
-    exe = _fake_viewer(tmp_path, "import socket, sys, time\nport = int(sys.argv[1].split('=')[1])\n"
-                                 "s = socket.create_server(('127.0.0.1', port))\ntime.sleep(30)")
+    exe = _fake_viewer(
+        tmp_path,
+        "import socket, sys, time\nport = int(sys.argv[1].split('=')[1])\n"
+        "s = socket.create_server(('127.0.0.1', port))\ntime.sleep(30)",
+    )
     assert spawn_viewer(port, exe=exe) == f"rerun+http://127.0.0.1:{port}/proxy"
     assert capsys.readouterr().err == ""
 
@@ -333,10 +362,13 @@ def test_spawn_without_a_display_says_so_in_one_line_and_goes_on(tmp_path, capsy
     """The real viewer, with no display, binds its port and exits: no URL, one warning, no viewer's errors."""
     from swarm_ros.artifacts.rerun_recording import spawn_viewer
 
-    exe = _fake_viewer(tmp_path, "import socket, sys, time\nport = int(sys.argv[1].split('=')[1])\n"
-                                 "s = socket.create_server(('127.0.0.1', port))\n"
-                                 "print('Error: neither WAYLAND_DISPLAY nor DISPLAY is set', file=sys.stderr)\n"
-                                 "sys.exit(1)")
+    exe = _fake_viewer(
+        tmp_path,
+        "import socket, sys, time\nport = int(sys.argv[1].split('=')[1])\n"
+        "s = socket.create_server(('127.0.0.1', port))\n"
+        "print('Error: neither WAYLAND_DISPLAY nor DISPLAY is set', file=sys.stderr)\n"
+        "sys.exit(1)",
+    )
     start = time.monotonic()
     assert spawn_viewer(_free_port(), exe=exe) is None
     err = capsys.readouterr().err

@@ -34,7 +34,7 @@ def test_strips_tile_the_columns_exactly_once_for_any_cuts(radius, batches, data
 
 
 @settings(deadline=None)  # the first example loads numba's cached kernels (0.3 s) when this module runs alone
-@given(seed=st.integers(0, 10 ** 6), batches=st.integers(1, 12))
+@given(seed=st.integers(0, 10**6), batches=st.integers(1, 12))
 def test_balanced_cuts_give_each_strip_about_as_many_robots(seed, batches):
     shape = Shape.load("star")
     radius = shape.world.radius
@@ -51,16 +51,22 @@ def test_balanced_cuts_leave_every_strip_a_column_even_when_the_robots_crowd_one
     assert [strip(k, 7, cuts, 3) for k in range(7)] == [(k, k) for k in range(7)]
 
 
-@pytest.mark.parametrize(("text", "why"), [("a,b", "whole x positions"), ("3,1", "strictly ascending"),
-                                           ("1.5", "whole x positions")])
+@pytest.mark.parametrize(
+    ("text", "why"), [("a,b", "whole x positions"), ("3,1", "strictly ascending"), ("1.5", "whole x positions")]
+)
 def test_bad_cuts_are_refused_in_one_line(text, why):
     with pytest.raises(ParameterError, match=why):
         parse_cuts(text)
 
 
-@pytest.mark.parametrize(("cuts", "batches", "why"), [([0], 3, "gives 1 cuts; 3 batches need 2"),
-                                                      ([-40], 2, "leave a strip with no column"),
-                                                      ([0, 0], 3, "leave a strip with no column")])
+@pytest.mark.parametrize(
+    ("cuts", "batches", "why"),
+    [
+        ([0], 3, "gives 1 cuts; 3 batches need 2"),
+        ([-40], 2, "leave a strip with no column"),
+        ([0, 0], 3, "leave a strip with no column"),
+    ],
+)
 def test_cuts_that_do_not_fit_the_batches_are_refused(cuts, batches, why):
     with pytest.raises(ParameterError, match=why):
         strip(0, batches, np.asarray(cuts), 32)
@@ -104,15 +110,20 @@ def test_compact_rows_hold_the_exact_pose_in_fewer_bytes():
     assert [f[0] for f in point_fields(REGION_ROW)] == ["x", "y", "heading", "id", "state"]
 
 
-
 def test_a_decider_whose_row_did_not_change_is_sent_to_no_batch():
     """A walker that lost its claim stands as it was: its row is the same, so no batch receives it again."""
     from types import SimpleNamespace
 
     radius = 10
     moving = RobotState.WALKING
-    state = SimpleNamespace(state=np.full(3, moving, dtype=np.int8), x=np.array([-5.0, 0.0, 5.0]), y=np.zeros(3),
-                            heading=np.zeros(3), z=None, pitch=None)
+    state = SimpleNamespace(
+        state=np.full(3, moving, dtype=np.int8),
+        x=np.array([-5.0, 0.0, 5.0]),
+        y=np.zeros(3),
+        heading=np.zeros(3),
+        z=None,
+        pitch=None,
+    )
     h = hosting.Hosting(radius, 1.0)
     h.admit("a", (0, 20), [])
     deciders = np.arange(3)

@@ -57,13 +57,13 @@ def reference(tmp_path_factory) -> Path:
 
 
 def _launch(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([PY, "-m", "swarm_ros", "run", *STAR_LOCAL, "--processes", "3", "--out", str(out),
-                             "--quiet", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=run_env())
-
-
-
-
+    return subprocess.Popen(
+        [PY, "-m", "swarm_ros", "run", *STAR_LOCAL, "--processes", "3", "--out", str(out), "--quiet", *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=run_env(),
+    )
 
 
 def _wait_for_tick_0(out: Path, timeout: float = 120) -> Path:
@@ -76,8 +76,6 @@ def _wait_for_tick_0(out: Path, timeout: float = 120) -> Path:
                 return logs
         time.sleep(0.05)
     raise AssertionError("tick 0 never came")
-
-
 
 
 def _handovers(batch: int, ticks: range) -> int:
@@ -128,15 +126,20 @@ def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_iden
     summary = assert_identical_run(reference, out)
     [restart] = summary["restarts"]
     assert restart["node"] == "robot_batch_2" and 0 < restart["tick"] < summary["convergence_tick"]
-    back = re.search(r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_2 is back \(restart 1\) at tick (\d+); "
-                     r"sending it a snapshot", _world_log(out))
+    back = re.search(
+        r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_2 is back \(restart 1\) at tick (\d+); "
+        r"sending it a snapshot",
+        _world_log(out),
+    )
     assert back and int(back.group(2)) == restart["tick"]
     print(f"restart to resume: {float(back.group(1)) - killed:.2f} s after the SIGKILL")
     # robots were being handed over to and from its strip when it died: the snapshot carried them
     assert _handovers(2, range(restart["tick"] - 1, restart["tick"] + 2)) > 0
     events = Recording(out / "recording.rrd").events
-    assert (restart["tick"], f"robot_batch_2 restarted at tick {restart['tick']}: a new process took over its "
-                             f"robots") in events
+    assert (
+        restart["tick"],
+        f"robot_batch_2 restarted at tick {restart['tick']}: a new process took over its robots",
+    ) in events
 
 
 def test_a_batch_killed_twice_in_a_row_is_restarted_twice_and_the_run_is_identical(reference, tmp_path):
@@ -159,8 +162,16 @@ def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference
     settings = Settings(shape="star", seed=5, rules="local")
     shape, params = settings.resolve()
     out = tmp_path / "run"
-    launch = Launch(settings=settings, shape=shape, params=params, processes=3, out=out, quiet=True,
-                    recording=RecordingOptions(enabled=False), world={"max_restarts": 1})
+    launch = Launch(
+        settings=settings,
+        shape=shape,
+        params=params,
+        processes=3,
+        out=out,
+        quiet=True,
+        recording=RecordingOptions(enabled=False),
+        world={"max_restarts": 1},
+    )
     errors: list[BaseException] = []
 
     def run() -> None:
@@ -226,8 +237,10 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
     deadline = time.monotonic() + 60
     # every node process (world, monitor, 3 batches) has its participant's segments, and the launcher lists them
     while time.monotonic() < deadline and not (
-            len(nodes := run_processes(out)) == 5
-            and all(locks := [shm_locks(p) for p in nodes]) and set().union(*locks) <= listed()):
+        len(nodes := run_processes(out)) == 5
+        and all(locks := [shm_locks(p) for p in nodes])
+        and set().union(*locks) <= listed()
+    ):
         look()
         time.sleep(0.1)
     look()
@@ -281,21 +294,50 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
 
     out = tmp_path / "run"
     params = tmp_path / "params.yaml"
-    params.write_text(params_yaml(Settings(shape="star", seed=5, rules="local"),
-                                  {"monitor": {"out_dir": str(out), "record": False, "bag": False},
-                                   "world": {"checkpoint": str(tmp_path / "world.checkpoint")}}))
-    env = {**run_env(), **dds_defaults(), "ROS_DOMAIN_ID": str(200 + os.getpid() % 30), "HOME": str(tmp_path),
-           "ROS_LOG_DIR": str(tmp_path / "ros"), "PYTHONUNBUFFERED": "1"}
+    params.write_text(
+        params_yaml(
+            Settings(shape="star", seed=5, rules="local"),
+            {
+                "monitor": {"out_dir": str(out), "record": False, "bag": False},
+                "world": {"checkpoint": str(tmp_path / "world.checkpoint")},
+            },
+        )
+    )
+    env = {
+        **run_env(),
+        **dds_defaults(),
+        "ROS_DOMAIN_ID": str(200 + os.getpid() % 30),
+        "HOME": str(tmp_path),
+        "ROS_LOG_DIR": str(tmp_path / "ros"),
+        "PYTHONUNBUFFERED": "1",
+    }
 
     def start(name: str, module: str, *extra: str) -> subprocess.Popen:
         log = open(tmp_path / f"{name}.log", "a")
-        return subprocess.Popen([PY, "-m", f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params),
-                                 "-r", f"__node:={name}", *extra], env=env, stdout=log, stderr=subprocess.STDOUT)
+        return subprocess.Popen(
+            [
+                PY,
+                "-m",
+                f"swarm_ros.nodes.{module}",
+                "--ros-args",
+                "--params-file",
+                str(params),
+                "-r",
+                f"__node:={name}",
+                *extra,
+            ],
+            env=env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
 
     batch = ["-p", "batch:=1", "-p", "batches:=2"]
-    procs = {"monitor": start("monitor", "monitor"), "world": start("world", "world"),
-             "robot_batch_0": start("robot_batch_0", "robot_batch", "-p", "batch:=0", "-p", "batches:=2"),
-             "robot_batch_1": start("robot_batch_1", "robot_batch", *batch)}
+    procs = {
+        "monitor": start("monitor", "monitor"),
+        "world": start("world", "world"),
+        "robot_batch_0": start("robot_batch_0", "robot_batch", "-p", "batch:=0", "-p", "batches:=2"),
+        "robot_batch_1": start("robot_batch_1", "robot_batch", *batch),
+    }
     try:
         wait_saved(tmp_path, 100)  # mid-run: the world's checkpoint holds tick 100
         procs["robot_batch_1"].kill()

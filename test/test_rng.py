@@ -40,6 +40,10 @@ def test_uniform_draws_are_uniform_on_unit_interval():
 def test_streams_ticks_and_seeds_are_uncorrelated():
     ids = np.arange(50_000, dtype=np.int64)
     base = uniform_array(7, ids, 3, STREAM_WIGGLE)
-    for other in (uniform_array(7, ids, 3, STREAM_TURN), uniform_array(7, ids, 4, STREAM_WIGGLE),
-                  uniform_array(8, ids, 3, STREAM_WIGGLE), uniform_array(7, ids + 1, 3, STREAM_WIGGLE)):
+    for other in (
+        uniform_array(7, ids, 3, STREAM_TURN),
+        uniform_array(7, ids, 4, STREAM_WIGGLE),
+        uniform_array(8, ids, 3, STREAM_WIGGLE),
+        uniform_array(7, ids + 1, 3, STREAM_WIGGLE),
+    ):
         assert abs(np.corrcoef(base, other)[0, 1]) < 0.02

@@ -73,12 +73,14 @@ def _saved_tick(checkpoint: Path) -> int:
 
 def _launch_dir(ros: Ros2, before: list[Path]) -> Path:
     """The log directory of the launch started after ``before`` was listed."""
-    return wait_for(lambda: next((p.parent for p in ros.launch_logs() if p not in before), None), 60,
-                    "the launch's params.yaml")
+    return wait_for(
+        lambda: next((p.parent for p in ros.launch_logs() if p not in before), None), 60, "the launch's params.yaml"
+    )
 
 
 def _node_pid(launch_dir: Path, name: str) -> int:
     """The pid of node ``name`` of the launch whose logs are in ``launch_dir`` (its params file names it)."""
+
     def find():
         for pid in processes_mentioning(f"__node:={name}"):
             try:
@@ -88,6 +90,7 @@ def _node_pid(launch_dir: Path, name: str) -> int:
             if f"__node:={name}" in args and "python" in args[0] and any(str(launch_dir) in a for a in args):
                 return pid
         return None
+
     return wait_for(find, 60, f"the process of {name}")
 
 
@@ -98,8 +101,12 @@ def _summary(run: Path) -> dict:
 def test_ros2_pkg_lists_the_node_executables(ros):
     done = ros.run("ros2 pkg executables swarm_ros")
     assert done.returncode == 0, done.stderr
-    assert sorted(done.stdout.split("\n")[:-1]) == ["swarm_ros monitor", "swarm_ros robot_batch",
-                                                    "swarm_ros swarm-ros", "swarm_ros world"]
+    assert sorted(done.stdout.split("\n")[:-1]) == [
+        "swarm_ros monitor",
+        "swarm_ros robot_batch",
+        "swarm_ros swarm-ros",
+        "swarm_ros world",
+    ]
 
 
 def test_ros2_launch_with_its_defaults_compiles_once_and_writes_the_run_simulate_writes(ros, tmp_path):
@@ -126,19 +133,40 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
     """Each run argument wins over the parameter file, the file's /monitor section is applied, out_dir is where
     the run goes; the run equals simulate's with the same values."""
     params = tmp_path / "mine.yaml"
-    params.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"shape": "tyre", "seed": 4, "rules": "paper"}},
-                                      "/monitor": {"ros__parameters": {"record": False}}}))
-    values = {"shape": "rectangle", "mesh_scale": "1.0", "robots": "300", "vision_radius": "1.5", "rules": "local",
-              "join": "local", "crowding": "disc", "steps": "literal", "seed": "7", "max_ticks": "300",
-              "wiggle_deg": "30.0", "fail_fraction": "0.05", "fail_tick": "100", "world_radius": "20"}
+    params.write_text(
+        yaml.safe_dump(
+            {
+                "/**": {"ros__parameters": {"shape": "tyre", "seed": 4, "rules": "paper"}},
+                "/monitor": {"ros__parameters": {"record": False}},
+            }
+        )
+    )
+    values = {
+        "shape": "rectangle",
+        "mesh_scale": "1.0",
+        "robots": "300",
+        "vision_radius": "1.5",
+        "rules": "local",
+        "join": "local",
+        "crowding": "disc",
+        "steps": "literal",
+        "seed": "7",
+        "max_ticks": "300",
+        "wiggle_deg": "30.0",
+        "fail_fraction": "0.05",
+        "fail_tick": "100",
+        "world_radius": "20",
+    }
     assert set(values) == {p.name for p in RUN_PARAMETERS}, "every run argument is given"
     out = tmp_path / "deep" / "run"
     before = ros.launch_logs()
     done = ros.run(f"{LAUNCH} params_file:={params} out_dir:={out} processes:=3 {_arguments(values)}", timeout=240)
     assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
     _clean(done.stdout + done.stderr)
-    typed = {k: yaml.safe_load(v) if k not in ("shape", "join", "crowding", "steps", "rules") else v
-             for k, v in values.items()}
+    typed = {
+        k: yaml.safe_load(v) if k not in ("shape", "join", "crowding", "steps", "rules") else v
+        for k, v in values.items()
+    }
     written = yaml.safe_load((_launch_dir(ros, before) / "params.yaml").read_text())
     assert written["/**"]["ros__parameters"] == typed, "what every node reads"
     assert len(re.findall(r"\[robot_batch_\d\]: robot_batch_\d: strip x ", done.stdout + done.stderr)) == 3
@@ -156,12 +184,14 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
 
 
 def test_bad_launch_arguments_fail_in_one_line_before_any_node_starts(ros, tmp_path):
-    for line, said in ((f"{LAUNCH} seed:=abc", "launch argument seed:=abc: seed must be an integer"),
-                       (f"{LAUNCH} processes:=0", "launch argument processes:=0: processes must be an integer >= 1"),
-                       (f"{LAUNCH} shape:=nope", "nope"),
-                       (f"{LAUNCH} mesh_scale:=2.0", "mesh_scale applies to mesh shapes"),
-                       (f"{LAUNCH} processes:=1033", "a world of 65 columns cannot be cut into 1033 strips"),
-                       (f"{LAUNCH} params_file:={tmp_path / 'missing.yaml'}", "missing.yaml")):
+    for line, said in (
+        (f"{LAUNCH} seed:=abc", "launch argument seed:=abc: seed must be an integer"),
+        (f"{LAUNCH} processes:=0", "launch argument processes:=0: processes must be an integer >= 1"),
+        (f"{LAUNCH} shape:=nope", "nope"),
+        (f"{LAUNCH} mesh_scale:=2.0", "mesh_scale applies to mesh shapes"),
+        (f"{LAUNCH} processes:=1033", "a world of 65 columns cannot be cut into 1033 strips"),
+        (f"{LAUNCH} params_file:={tmp_path / 'missing.yaml'}", "missing.yaml"),
+    ):
         done = ros.run(line, cwd=tmp_path, timeout=120)
         output = done.stdout + done.stderr
         assert done.returncode == 1, output
@@ -203,7 +233,8 @@ def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros,
 
 
 def test_a_batch_the_world_and_the_monitor_sigkilled_under_ros2_launch_come_back_and_the_run_is_identical(
-        ros, tmp_path):
+    ros, tmp_path
+):
     ref = _simulate(tmp_path / "ref", "--shape", "star", "--seed", "5", "--rules", "local", "--max-ticks", "1500")
     out = tmp_path / "run"
     before = ros.launch_logs()
@@ -231,17 +262,33 @@ def test_the_three_terminals_of_ros2_run_the_docs_show(ros, tmp_path):
     """docs/operations.md's commands, each node in its own process as in its own terminal, after the exports it
     shows; the run equals simulate's."""
     out = tmp_path / "star"
-    exports = ('export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST '
-               'FASTRTPS_DEFAULT_PROFILES_FILE=$(ros2 pkg prefix swarm_ros)/share/swarm_ros/config/fastdds.xml '
-               'SWARM_ROS_RUN_KEY=0123456789abcdef0123456789abcdef && ')
+    exports = (
+        "export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
+        "FASTRTPS_DEFAULT_PROFILES_FILE=$(ros2 pkg prefix swarm_ros)/share/swarm_ros/config/fastdds.xml "
+        "SWARM_ROS_RUN_KEY=0123456789abcdef0123456789abcdef && "
+    )
     config = "$(ros2 pkg prefix swarm_ros)/share/swarm_ros/config/swarm_ros.yaml"
-    lines = [f"ros2 run swarm_ros monitor --ros-args --params-file {config} -p out_dir:={out}",
-             *[f"ros2 run swarm_ros robot_batch --ros-args --params-file {config} -r __node:=robot_batch_{k} "
-               f"-p batch:={k} -p batches:=2" for k in (0, 1)],
-             f"ros2 run swarm_ros world --ros-args --params-file {config}"]
-    terminals = [subprocess.Popen(["bash", "-c", ros.prelude + exports + "exec " + line], cwd=ros.home, env=ros.env,
-                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
-                 for line in lines]
+    lines = [
+        f"ros2 run swarm_ros monitor --ros-args --params-file {config} -p out_dir:={out}",
+        *[
+            f"ros2 run swarm_ros robot_batch --ros-args --params-file {config} -r __node:=robot_batch_{k} "
+            f"-p batch:={k} -p batches:=2"
+            for k in (0, 1)
+        ],
+        f"ros2 run swarm_ros world --ros-args --params-file {config}",
+    ]
+    terminals = [
+        subprocess.Popen(
+            ["bash", "-c", ros.prelude + exports + "exec " + line],
+            cwd=ros.home,
+            env=ros.env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            start_new_session=True,
+        )
+        for line in lines
+    ]
     try:
         outputs = [p.communicate(timeout=180)[0] for p in terminals]
     finally:
@@ -265,15 +312,20 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
         def listed():
             done = ros.run("ros2 node list")
             return done.returncode == 0 and tuple(done.stdout.split()) == NODES
+
         wait_for(listed, 30, "all four nodes in ros2 node list", poll=0.5)
         info = ros.run("ros2 node info /world").stdout
         assert "/swarm/robots: sensor_msgs/msg/PointCloud2" in info.split("Publishers:")[1].split("Service")[0]
         assert "/swarm/decisions/robot_batch_0: sensor_msgs/msg/PointCloud2" in info.split("Subscribers:")[1]
 
         topics = ros.run("ros2 topic list -t").stdout
-        for line in ("/swarm/robots [sensor_msgs/msg/PointCloud2]", "/swarm/metrics [std_msgs/msg/Int64MultiArray]",
-                     "/swarm/shape [nav_msgs/msg/OccupancyGrid]", "/clock [rosgraph_msgs/msg/Clock]",
-                     "/swarm/status [diagnostic_msgs/msg/DiagnosticArray]"):
+        for line in (
+            "/swarm/robots [sensor_msgs/msg/PointCloud2]",
+            "/swarm/metrics [std_msgs/msg/Int64MultiArray]",
+            "/swarm/shape [nav_msgs/msg/OccupancyGrid]",
+            "/clock [rosgraph_msgs/msg/Clock]",
+            "/swarm/status [diagnostic_msgs/msg/DiagnosticArray]",
+        ):
             assert line in topics.splitlines(), topics
         verbose = ros.run("ros2 topic info -v /swarm/robots").stdout
         assert "Publisher count: 1" in verbose and "Node name: world" in verbose
@@ -299,8 +351,14 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
         assert ros.run("ros2 param get /monitor out_dir").stdout.strip() == f"String value is: {out}"
         assert ros.run("ros2 param get /robot_batch_1 batch").stdout.strip() == "Integer value is: 1"
         described = ros.run("ros2 param describe /world wiggle_deg").stdout
-        for line in ("Type: double", "Description: max turn per tick, degrees", "Read only: true",
-                     "Min value: 0.0", "Max value: 180.0", "Additional constraints: a number >= 0 and <= 180"):
+        for line in (
+            "Type: double",
+            "Description: max turn per tick, degrees",
+            "Read only: true",
+            "Min value: 0.0",
+            "Max value: 180.0",
+            "Additional constraints: a number >= 0 and <= 180",
+        ):
             assert line in described, described
         refused = ros.run("ros2 param set /world seed 3").stderr
         assert "Setting parameter failed: Trying to set a read-only parameter: seed." in refused, refused
@@ -316,11 +374,14 @@ def test_swarm_ros_replay_is_watched_with_ros2_topic_echo(ros, tmp_path):
     done = ros.run(f"{LAUNCH} out_dir:={graph} shape:=rectangle seed:=6", timeout=240)
     assert done.returncode == 0, done.stdout[-3000:]
     domain = int(ros.env["ROS_DOMAIN_ID"])
-    replay = ros.start(f"swarm-ros replay {graph} --domain-id {domain} --loop --start-offset 0.5 --rate 2 "
-                       f"--delay 0.5 --quiet", log=tmp_path / "replay.log")
+    replay = ros.start(
+        f"swarm-ros replay {graph} --domain-id {domain} --loop --start-offset 0.5 --rate 2 --delay 0.5 --quiet",
+        log=tmp_path / "replay.log",
+    )
     try:
-        echo = ros.run("ros2 topic echo --once --no-lost-messages /swarm/metrics std_msgs/msg/Int64MultiArray",
-                       timeout=60)  # with its type, echo waits for the replay's publisher
+        echo = ros.run(
+            "ros2 topic echo --once --no-lost-messages /swarm/metrics std_msgs/msg/Int64MultiArray", timeout=60
+        )  # with its type, echo waits for the replay's publisher
         metrics = yaml.safe_load(echo.stdout.split("---")[0])
         assert isinstance(metrics, dict) and "data" in metrics, echo.stdout + echo.stderr
         assert metrics["data"][0] > 0, "from the offset on, not the first tick"

@@ -26,29 +26,39 @@ PY = sys.executable
 TIMEOUT = 240
 
 
-
-
 def swarm_ros(*args: str, timeout: float = TIMEOUT, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([PY, "-m", "swarm_ros", *args], capture_output=True, text=True, timeout=timeout,
-                          env=run_env(), **kw)
-
-
-
-
-
-
+    return subprocess.run(
+        [PY, "-m", "swarm_ros", *args], capture_output=True, text=True, timeout=timeout, env=run_env(), **kw
+    )
 
 
 CASES = {
     # name: (shape builder args, run flags); robots relative to the shape's patches (420 ring, 245 cross)
     "ring-extras": (dict(outer=12.5, hole=5), ["--world-radius", "16", "--robots", "+20"]),  # paper rules
     "cross-incomplete": (dict(outer=13, cross=True), ["--world-radius", "16", "--robots", "-25"]),
-    "ring-literal": (dict(outer=12.5, hole=5), ["--world-radius", "16", "--robots", "+20", "--rules", "literal",
-                                                 "--vision", "2"]),
+    "ring-literal": (
+        dict(outer=12.5, hole=5),
+        ["--world-radius", "16", "--robots", "+20", "--rules", "literal", "--vision", "2"],
+    ),
     "cross-literal": (dict(outer=13, cross=True), ["--world-radius", "16", "--robots", "-25", "--rules", "literal"]),
     # the reading before rule sets (local join, disc crowding) gridlocks at vision 2: a timeout
-    "ring-timeout": (dict(outer=12.5, hole=5), ["--world-radius", "16", "--robots", "-120", "--vision", "2",
-                                                 "--rules", "local", "--crowding", "disc", "--max-ticks", "1500"]),
+    "ring-timeout": (
+        dict(outer=12.5, hole=5),
+        [
+            "--world-radius",
+            "16",
+            "--robots",
+            "-120",
+            "--vision",
+            "2",
+            "--rules",
+            "local",
+            "--crowding",
+            "disc",
+            "--max-ticks",
+            "1500",
+        ],
+    ),
     "ring-fail": (dict(outer=12.5, hole=5), ["--world-radius", "16", "--robots", "+20", "--fail-robots", "0.15@40"]),
 }
 
@@ -79,8 +89,11 @@ def references(tmp_path_factory) -> dict[str, tuple[list[str], Path]]:
     return refs
 
 
-@pytest.mark.parametrize("case,processes", [(case, k) for case in ("ring-extras", "cross-incomplete")
-                                            for k in (1, 2, 4)] + [("ring-literal", 2), ("cross-literal", 4)])
+@pytest.mark.parametrize(
+    "case,processes",
+    [(case, k) for case in ("ring-extras", "cross-incomplete") for k in (1, 2, 4)]
+    + [("ring-literal", 2), ("cross-literal", 4)],
+)
 def test_ros_graph_equals_in_process_engine(references, tmp_path, case, processes):
     flags, ref = references[case]
     out = tmp_path / "run"
@@ -89,7 +102,8 @@ def test_ros_graph_equals_in_process_engine(references, tmp_path, case, processe
     assert_same_run(ref, out)
     assert sorted(p.name for p in (out / "logs").iterdir()) == sorted(
         ["launcher.log", "monitor.log", "world.log", "params.yaml", "ros"]
-        + [f"robot_batch_{k}.log" for k in range(processes)])
+        + [f"robot_batch_{k}.log" for k in range(processes)]
+    )
     assert not processes_mentioning(str(out)), "a node process outlived the run"
 
 
@@ -107,11 +121,14 @@ def test_ros_graph_equals_in_process_engine_at_a_timeout_recording_every_7th_tic
 def test_run_applies_the_node_sections_of_a_parameter_file_and_flags_override_them(references, tmp_path):
     flags, ref = references["cross-incomplete"]
     pf = tmp_path / "params.yaml"
-    pf.write_text("/world:\n  ros__parameters:\n    monitor_window: 64\n    on_batch_loss: remove\n"
-                  "    max_restarts: 2\n/monitor:\n  ros__parameters:\n    record: false\n")
+    pf.write_text(
+        "/world:\n  ros__parameters:\n    monitor_window: 64\n    on_batch_loss: remove\n"
+        "    max_restarts: 2\n/monitor:\n  ros__parameters:\n    record: false\n"
+    )
     out = tmp_path / "run"
-    done = swarm_ros("run", *flags, "--params-file", str(pf), "--on-batch-loss", "restart", "--out", str(out),
-                     "--quiet")
+    done = swarm_ros(
+        "run", *flags, "--params-file", str(pf), "--on-batch-loss", "restart", "--out", str(out), "--quiet"
+    )
     assert done.returncode == 0, done.stderr
     assert not (out / "recording.rrd").exists()
     for name in ("metrics.csv", "final_state.csv"):
@@ -138,13 +155,36 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
     domain = str(150 + os.getpid() % 80)
     env = {**run_env(), "ROS_DOMAIN_ID": domain}
     # the reading before rule sets gridlocks at vision 2: a run that lasts until it is stopped
-    launcher = subprocess.Popen([PY, "-m", "swarm_ros", "run", "--shape", "star", "--vision", "2", "--rules",
-                                 "local", "--crowding", "disc", "--out", str(out)], env=env,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    launcher = subprocess.Popen(
+        [
+            PY,
+            "-m",
+            "swarm_ros",
+            "run",
+            "--shape",
+            "star",
+            "--vision",
+            "2",
+            "--rules",
+            "local",
+            "--crowding",
+            "disc",
+            "--out",
+            str(out),
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
-        expected = {"/swarm/robots": "sensor_msgs/msg/PointCloud2", "/clock": "rosgraph_msgs/msg/Clock",
-                    "/swarm/shape": "nav_msgs/msg/OccupancyGrid", "/swarm/metrics": "std_msgs/msg/Int64MultiArray",
-                    "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray"}
+        expected = {
+            "/swarm/robots": "sensor_msgs/msg/PointCloud2",
+            "/clock": "rosgraph_msgs/msg/Clock",
+            "/swarm/shape": "nav_msgs/msg/OccupancyGrid",
+            "/swarm/metrics": "std_msgs/msg/Int64MultiArray",
+            "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray",
+        }
         listed: dict[str, str] = {}
         for _ in range(20):  # on a loaded 2-core machine discovery of every participant can take a while
             listing = swarm_ros("topics", "--domain-id", domain, "--seconds", "2").stdout
@@ -224,8 +264,10 @@ print(json.dumps(heard))
 
 
 def test_stop_escalates_to_sigkill_for_a_process_that_ignores_int_and_term(tmp_path):
-    code = "import signal,time; [signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)]; " \
-           "print('ready', flush=True); time.sleep(60)"
+    code = (
+        "import signal,time; [signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)]; "
+        "print('ready', flush=True); time.sleep(60)"
+    )
     log = tmp_path / "stubborn.log"
     f = open(log, "wb")
     proc = subprocess.Popen([PY, "-c", code], stdout=f, start_new_session=True)
@@ -237,12 +279,15 @@ def test_stop_escalates_to_sigkill_for_a_process_that_ignores_int_and_term(tmp_p
     assert time.monotonic() - start < 8
 
 
-@pytest.mark.parametrize("args,message", [
-    (["--processes", "2000"], "a world of 65 columns cannot be cut into 2000 strips"),
-    (["--domain-id", "500"], "ROS domain id must be in [0, 232], got 500"),
-    (["--shape", "nope"], "nope: no such shape file or built-in shape"),
-    (["--robots", "99999"], "do not fit"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--processes", "2000"], "a world of 65 columns cannot be cut into 2000 strips"),
+        (["--domain-id", "500"], "ROS domain id must be in [0, 232], got 500"),
+        (["--shape", "nope"], "nope: no such shape file or built-in shape"),
+        (["--robots", "99999"], "do not fit"),
+    ],
+)
 def test_run_refuses_bad_input_in_one_line_before_starting_anything(tmp_path, args, message):
     done = swarm_ros("run", *args, "--out", str(tmp_path / "x"), timeout=60)
     assert done.returncode == 2
@@ -250,21 +295,36 @@ def test_run_refuses_bad_input_in_one_line_before_starting_anything(tmp_path, ar
     assert not (tmp_path / "x").exists() and not (tmp_path / "x.logs").exists()
 
 
-@pytest.mark.parametrize("node,ros_args,message", [
-    ("world", ["-p", "bogus:=1"], "swarm_ros world: error: node 'world': unknown parameter 'bogus'"),
-    ("robot_batch", ["-p", "robots:=abc"], "robots must be an integer >= 4 (0 = the shape's patch count), got 'abc'"),
-    ("monitor", ["--params-file", "/nonexistent.yaml"], "swarm_ros monitor: error: cannot start ROS 2"),
-    ("robot_batch", ["-p", "batches:=2", "-p", "region_cuts:=-40"], "leave a strip with no column"),
-    ("world", ["-p", "shape:=nope"], "nope: no such shape file or built-in shape"),
-    ("monitor", ["-p", "record_every:=-1"],
-     "record_every must be an integer >= 1 (0 = chosen from the swarm's size), got -1"),
-    ("monitor", ["-p", "viewer_url:=localhost:9876"], "viewer URL must start with one of rerun://"),
-    ("world", ["-p", "rules:=fast"], "rules must be one of paper, local, literal, got 'fast'"),
-    ("robot_batch", ["-p", "steps:=two"], "steps must be one of one, literal ('' = the rule set's own), got 'two'"),
-])
+@pytest.mark.parametrize(
+    "node,ros_args,message",
+    [
+        ("world", ["-p", "bogus:=1"], "swarm_ros world: error: node 'world': unknown parameter 'bogus'"),
+        (
+            "robot_batch",
+            ["-p", "robots:=abc"],
+            "robots must be an integer >= 4 (0 = the shape's patch count), got 'abc'",
+        ),
+        ("monitor", ["--params-file", "/nonexistent.yaml"], "swarm_ros monitor: error: cannot start ROS 2"),
+        ("robot_batch", ["-p", "batches:=2", "-p", "region_cuts:=-40"], "leave a strip with no column"),
+        ("world", ["-p", "shape:=nope"], "nope: no such shape file or built-in shape"),
+        (
+            "monitor",
+            ["-p", "record_every:=-1"],
+            "record_every must be an integer >= 1 (0 = chosen from the swarm's size), got -1",
+        ),
+        ("monitor", ["-p", "viewer_url:=localhost:9876"], "viewer URL must start with one of rerun://"),
+        ("world", ["-p", "rules:=fast"], "rules must be one of paper, local, literal, got 'fast'"),
+        ("robot_batch", ["-p", "steps:=two"], "steps must be one of one, literal ('' = the rule set's own), got 'two'"),
+    ],
+)
 def test_nodes_refuse_bad_parameters_in_one_line(node, ros_args, message):
-    done = subprocess.run([PY, "-m", f"swarm_ros.nodes.{node}", "--ros-args", *ros_args], capture_output=True,
-                          text=True, timeout=60, env={**run_env(), "ROS_DOMAIN_ID": "231"})
+    done = subprocess.run(
+        [PY, "-m", f"swarm_ros.nodes.{node}", "--ros-args", *ros_args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**run_env(), "ROS_DOMAIN_ID": "231"},
+    )
     assert done.returncode == 2
     errors = [ln for ln in done.stderr.splitlines() if "error" in ln]
     assert len(errors) == 1 and message in errors[0], done.stderr
@@ -276,9 +336,16 @@ def test_two_runs_started_together_do_not_see_each_other(references, tmp_path):
     for case in ("ring-extras", "cross-incomplete"):
         flags, _ = references[case]
         out = tmp_path / case
-        procs[case] = (out, subprocess.Popen([PY, "-m", "swarm_ros", "run", *flags, "--processes", "2",
-                                              "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                             text=True, env=run_env()))
+        procs[case] = (
+            out,
+            subprocess.Popen(
+                [PY, "-m", "swarm_ros", "run", *flags, "--processes", "2", "--out", str(out)],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                env=run_env(),
+            ),
+        )
     domains = []
     for case, (out, proc) in procs.items():
         stdout, stderr = proc.communicate(timeout=TIMEOUT)
@@ -304,7 +371,8 @@ def test_topics_echo_gives_up_after_the_seconds_it_was_given(tmp_path):
     start = time.monotonic()
     done = swarm_ros("topics", "--domain-id", domain, "--echo", "/nope", "--seconds", "1")
     took = time.monotonic() - start
-    assert done.returncode == 2 and done.stderr.startswith("swarm-ros: error: no publisher of /nope on this domain "
-                                                           "within 1 s"), done.stderr
+    assert done.returncode == 2 and done.stderr.startswith(
+        "swarm-ros: error: no publisher of /nope on this domain within 1 s"
+    ), done.stderr
     assert done.stderr.count("\n") == 1
     assert took < 8, f"--seconds 1 took {took:.1f} s (start-up included)"  # it was 11.9 s: the 10 s floor is gone

@@ -68,9 +68,13 @@ def ros_context():
 
 
 def _node(context, kind, **values):
-    return Node(kind, context=context, allow_undeclared_parameters=True,
-                automatically_declare_parameters_from_overrides=True,
-                parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+    return Node(
+        kind,
+        context=context,
+        allow_undeclared_parameters=True,
+        automatically_declare_parameters_from_overrides=True,
+        parameter_overrides=[Parameter(k, value=v) for k, v in values.items()],
+    )
 
 
 def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
@@ -78,19 +82,33 @@ def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
     run, own = read_parameters(node, "world")
     assert run == Settings(robots=500, vision_radius=2.0)
     assert isinstance(run.vision_radius, float)
-    assert own == {"monitor_window": 0, "start_timeout": 60.0, "on_batch_loss": "restart", "max_restarts": 3,
-                   "restart_timeout": 30.0, "checkpoint": "", "incarnation": 0}
+    assert own == {
+        "monitor_window": 0,
+        "start_timeout": 60.0,
+        "on_batch_loss": "restart",
+        "max_restarts": 3,
+        "restart_timeout": 30.0,
+        "checkpoint": "",
+        "incarnation": 0,
+    }
     node.destroy_node()
 
 
-@pytest.mark.parametrize("kind,values,message", [
-    ("world", {"bogus": 1}, "node 'world': unknown parameter 'bogus'"),
-    ("world", {"batch": 1}, "unknown parameter 'batch'"),
-    ("robot_batch", {"robots": "many"}, "robots must be an integer >= 4 \\(0 = the shape's patch count\\), got 'many'"),
-    ("monitor", {"overwrite": 1}, "overwrite must be a boolean, got 1"),
-    ("monitor", {"seed": 1.5}, "seed must be an integer >= 0 and <= 9223372036854775807, got 1.5"),
-    ("robot_batch", {"region_cuts": [4, 5]}, "region_cuts must be a string \\(.*\\), got \\[4, 5\\]"),
-])
+@pytest.mark.parametrize(
+    "kind,values,message",
+    [
+        ("world", {"bogus": 1}, "node 'world': unknown parameter 'bogus'"),
+        ("world", {"batch": 1}, "unknown parameter 'batch'"),
+        (
+            "robot_batch",
+            {"robots": "many"},
+            "robots must be an integer >= 4 \\(0 = the shape's patch count\\), got 'many'",
+        ),
+        ("monitor", {"overwrite": 1}, "overwrite must be a boolean, got 1"),
+        ("monitor", {"seed": 1.5}, "seed must be an integer >= 0 and <= 9223372036854775807, got 1.5"),
+        ("robot_batch", {"region_cuts": [4, 5]}, "region_cuts must be a string \\(.*\\), got \\[4, 5\\]"),
+    ],
+)
 def test_unknown_or_ill_typed_parameters_are_refused(ros_context, kind, values, message):
     node = _node(ros_context, kind, **values)
     with pytest.raises(ConfigError, match=message):
@@ -98,16 +116,22 @@ def test_unknown_or_ill_typed_parameters_are_refused(ros_context, kind, values, 
     node.destroy_node()
 
 
-@pytest.mark.parametrize("kind,values,message", [
-    ("world", {"monitor_window": -5}, "monitor_window must be an integer >= 0 (0 = do not wait for one), got -5"),
-    ("world", {"start_timeout": 0}, "start_timeout must be a number > 0, got 0"),
-    ("world", {"on_batch_loss": "ignore"}, "on_batch_loss must be one of restart, remove, got 'ignore'"),
-    ("world", {"max_restarts": -1}, "max_restarts must be an integer >= 0, got -1"),
-    ("world", {"restart_timeout": -2.0}, "restart_timeout must be a number > 0, got -2"),
-    ("robot_batch", {"incarnation": -1}, "incarnation must be an integer >= 0, got -1"),
-    ("monitor", {"record_every": -1},
-     "record_every must be an integer >= 1 (0 = chosen from the swarm's size), got -1"),
-])
+@pytest.mark.parametrize(
+    "kind,values,message",
+    [
+        ("world", {"monitor_window": -5}, "monitor_window must be an integer >= 0 (0 = do not wait for one), got -5"),
+        ("world", {"start_timeout": 0}, "start_timeout must be a number > 0, got 0"),
+        ("world", {"on_batch_loss": "ignore"}, "on_batch_loss must be one of restart, remove, got 'ignore'"),
+        ("world", {"max_restarts": -1}, "max_restarts must be an integer >= 0, got -1"),
+        ("world", {"restart_timeout": -2.0}, "restart_timeout must be a number > 0, got -2"),
+        ("robot_batch", {"incarnation": -1}, "incarnation must be an integer >= 0, got -1"),
+        (
+            "monitor",
+            {"record_every": -1},
+            "record_every must be an integer >= 1 (0 = chosen from the swarm's size), got -1",
+        ),
+    ],
+)
 def test_node_parameters_out_of_range_are_refused(ros_context, kind, values, message):
     node = _node(ros_context, kind, **values)
     with pytest.raises(ConfigError, match=re.escape(f"node '{kind}': {message}")):
@@ -122,16 +146,23 @@ def test_a_p_argument_wins_over_the_shipped_parameter_file(kind):
     from swarm_ros.core.params import NODE_PARAMETERS
     from swarm_ros.core.resources import data_dir
 
-    given = {p.name: (not p.default if p.kind is bool else p.default + 1 if p.kind in (int, float) else "x")
-             for p in NODE_PARAMETERS[kind] if not p.choices}
+    given = {
+        p.name: (not p.default if p.kind is bool else p.default + 1 if p.kind in (int, float) else "x")
+        for p in NODE_PARAMETERS[kind]
+        if not p.choices
+    }
     args = ["--ros-args", "--params-file", str(data_dir("config") / "swarm_ros.yaml"), "-p", "seed:=7"]
     for name, value in given.items():
         args += ["-p", f"{name}:={str(value).lower() if isinstance(value, bool) else value}"]
     context = Context()
     rclpy.init(args=args, context=context)
     try:
-        node = Node(kind, context=context, allow_undeclared_parameters=True,
-                    automatically_declare_parameters_from_overrides=True)
+        node = Node(
+            kind,
+            context=context,
+            allow_undeclared_parameters=True,
+            automatically_declare_parameters_from_overrides=True,
+        )
         run, own = read_parameters(node, kind)
         node.destroy_node()
     finally:
@@ -162,8 +193,10 @@ def test_every_parameter_is_declared_with_its_descriptor_read_only_with_its_rang
             assert ranges == [], p.name
     assert described["seed"].type == ParameterType.PARAMETER_INTEGER
     assert described["vision_radius"].type == ParameterType.PARAMETER_DOUBLE
-    assert (described["wiggle_deg"].floating_point_range[0].from_value,
-            described["wiggle_deg"].floating_point_range[0].to_value) == (0.0, 180.0)
+    assert (
+        described["wiggle_deg"].floating_point_range[0].from_value,
+        described["wiggle_deg"].floating_point_range[0].to_value,
+    ) == (0.0, 180.0)
     assert node.get_parameter("vision_radius").value == 2.0 and node.get_parameter("seed").value == 9
     assert node.get_parameter("max_restarts").value == own["max_restarts"] == 3  # not overridden: the default
     refused = node.set_parameters([Parameter("seed", value=3)])[0]

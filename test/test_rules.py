@@ -34,9 +34,15 @@ def with_robots(shape: Shape, robots: list[tuple[float, float, float]], walking=
     flat = shape.world.flat_index(*shape.world.patch_of(xs, ys))
     st_ = np.where(shape.mask.ravel()[flat], RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE)
     st_[list(walking)] = RobotState.WALKING
-    return SwarmState(x=np.r_[s.x, xs], y=np.r_[s.y, ys], heading=np.r_[s.heading, hs],
-                      state=np.r_[s.state, st_].astype(np.int8), occupancy=s.occupancy, frontier=s.frontier,
-                      frontier_blocks=s.frontier_blocks)
+    return SwarmState(
+        x=np.r_[s.x, xs],
+        y=np.r_[s.y, ys],
+        heading=np.r_[s.heading, hs],
+        state=np.r_[s.state, st_].astype(np.int8),
+        occupancy=s.occupancy,
+        frontier=s.frontier,
+        frontier_blocks=s.frontier_blocks,
+    )
 
 
 def decide_all(view, shape, **kw) -> Decisions:
@@ -154,8 +160,9 @@ def frontiers(draw):
 def test_block_search_finds_what_brute_force_finds(case):
     world, frontier, x, y = case
     blocks = frontier_blocks_of(frontier, world.size)
-    assert nearest_frontier(x, y, frontier, blocks, world.radius, world.size) == \
-        nearest_frontier_patch(frontier, x, y, world)
+    assert nearest_frontier(x, y, frontier, blocks, world.radius, world.size) == nearest_frontier_patch(
+        frontier, x, y, world
+    )
 
 
 # -- join: local --------------------------------------------------------------------

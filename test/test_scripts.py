@@ -19,18 +19,38 @@ def test_bench_scale_prints_each_engine_and_the_projection_on_k_hosts():
     """A tiny disc, K = 1 and 2, no recording: the table, the K ratios and a projection row per K whose
     projected tick is what it is built from: the world's CPU plus the slowest batch's plus the transport's,
     or the monitor's if longer."""
-    done = subprocess.run([sys.executable, str(SCRIPTS / "bench_scale.py"), "--robots", "300", "--ticks", "5",
-                           "--processes", "1", "2", "--bare", "--projection"],
-                          capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(SCRIPTS / "bench_scale.py"),
+            "--robots",
+            "300",
+            "--ticks",
+            "5",
+            "--processes",
+            "1",
+            "2",
+            "--bare",
+            "--projection",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     out = done.stdout
     assert re.search(r"^in-process\s+\d", out, re.M), out
     for k in (1, 2):
         assert re.search(rf"^ROS 2 graph, K = {k}\s+\d.*world \d", out, re.M), out
-    assert re.search(r"^K = 2 against K = 1: run time \d+\.\d\dx, .* largest CPU per tick of a process \d", out,
-                     re.M), out
-    rows = re.findall(r"^\s+300\s+(\d)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+"
-                      r"([\d.]+)x$", out, re.M)
+    assert re.search(
+        r"^K = 2 against K = 1: run time \d+\.\d\dx, .* largest CPU per tick of a process \d", out, re.M
+    ), out
+    rows = re.findall(
+        r"^\s+300\s+(\d)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+"
+        r"([\d.]+)x$",
+        out,
+        re.M,
+    )
     assert [int(r[0]) for r in rows] == [1, 2], out
     for _, world, batch, monitor, transport, tick, sim_tick, ratio in rows:
         assert float(transport) > 0 and float(sim_tick) > 0
@@ -50,8 +70,9 @@ def test_the_shape_generators_check_mode_reports_the_built_in_shapes_and_writes_
 
     shapes = SCRIPTS.parent / "shapes"
     before = _tree(shapes)
-    done = subprocess.run([sys.executable, str(SCRIPTS / script), "--check"], capture_output=True, text=True,
-                          timeout=120)
+    done = subprocess.run(
+        [sys.executable, str(SCRIPTS / script), "--check"], capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     assert _tree(shapes) == before, "--check wrote to shapes/"
     counts = dict(re.findall(r"^(\S+)\s+(?:scale\s+[\d.]+\s+patches\s+)?(\d+)", done.stdout, re.M))
@@ -63,8 +84,12 @@ def test_the_shape_generators_check_mode_reports_the_built_in_shapes_and_writes_
 
 def test_study_bounds_writes_its_table_of_every_shape(tmp_path):
     out = tmp_path / "bounds.md"
-    done = subprocess.run([sys.executable, str(SCRIPTS / "study_bounds.py"), "--out", str(out)],
-                          capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [sys.executable, str(SCRIPTS / "study_bounds.py"), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     rows = [ln for ln in out.read_text().splitlines() if re.match(r"\| [a-z-]+ \| [\d.]+ \(", ln)]
     assert [r.split("|")[1].strip() for r in rows] == ["star", "wrench", "k-letter", "rectangle", "tyre", "spinner"]
@@ -75,8 +100,9 @@ def test_study_bounds_writes_its_table_of_every_shape(tmp_path):
 
 
 def _smoke(script: str) -> str:
-    done = subprocess.run([sys.executable, str(SCRIPTS / script), "--smoke"], capture_output=True, text=True,
-                          timeout=300)
+    done = subprocess.run(
+        [sys.executable, str(SCRIPTS / script), "--smoke"], capture_output=True, text=True, timeout=300
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     return done.stdout
 

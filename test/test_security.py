@@ -62,21 +62,26 @@ class _Batches:
         self.strips = [batch_strip(shape, params, k, 2) for k in range(2)]
         # tagged with the run's key, as the run's own nodes do
         signers = [Signer(node, key, n) for n in self.names]
-        self.pubs = [signers[k].publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS)
-                     for k, n in enumerate(self.names)]
+        self.pubs = [
+            signers[k].publisher(PointCloud2, msgs.decisions_topic(n), msgs.DECISIONS_QOS)
+            for k, n in enumerate(self.names)
+        ]
         self.alive = [node.create_publisher(Empty, msgs.alive_topic(n), msgs.ALIVE_QOS) for n in self.names]
         self.announce = [signer.publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS) for signer in signers]
         self.intruder = Signer(node, key, "intruder").publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
         self.robots_pub = Signer(node, key, "world").publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
-        self.metrics_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.METRICS,
-                                                                  msgs.METRICS_QOS)
+        self.metrics_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         # an outsider's: well-formed messages without a valid tag
-        self.forged = {topic: node.create_publisher(kind, topic, qos) for topic, kind, qos in (
-            (msgs.decisions_topic(self.names[0]), PointCloud2, msgs.DECISIONS_QOS),
-            (msgs.BATCHES, msgs.Int64MultiArray, msgs.BATCHES_QOS),
-            (msgs.METRICS, msgs.Int64MultiArray, msgs.METRICS_QOS),
-            (msgs.STATUS, DiagnosticArray, msgs.LATCHED_QOS),
-            (msgs.ROBOTS, PointCloud2, msgs.ROBOTS_QOS))}
+        self.forged = {
+            topic: node.create_publisher(kind, topic, qos)
+            for topic, kind, qos in (
+                (msgs.decisions_topic(self.names[0]), PointCloud2, msgs.DECISIONS_QOS),
+                (msgs.BATCHES, msgs.Int64MultiArray, msgs.BATCHES_QOS),
+                (msgs.METRICS, msgs.Int64MultiArray, msgs.METRICS_QOS),
+                (msgs.STATUS, DiagnosticArray, msgs.LATCHED_QOS),
+                (msgs.ROBOTS, PointCloud2, msgs.ROBOTS_QOS),
+            )
+        }
         self.world_rows: list = []  # the world's, serialized, as an outsider records them (to replay one)
         node.create_subscription(PointCloud2, msgs.ROBOTS, self.world_rows.append, msgs.ROBOTS_QOS, raw=True)
         # these batches take only what the world's tag proves, as the run's own do
@@ -150,8 +155,8 @@ class _Batches:
             self._send("point layout", 0, msg)
         elif tick == 3:  # the right layout, nonsense rows
             rows = np.zeros(3, dtype=DECISION_ROW)
-            rows["id"] = [10 ** 9, 5, 6]
-            rows["claim"] = [10 ** 8, -1, -1]
+            rows["id"] = [10**9, 5, 6]
+            rows["claim"] = [10**8, -1, -1]
             rows["x"], rows["y"] = [np.nan, 1e300, -1e300], [0.0, np.inf, 0.0]
             self._send("nonsense rows", 0, self._cloud(rows, tick))
         elif tick == 4:  # empty
@@ -189,7 +194,7 @@ class _Batches:
             self.intruder.publish(hello)
             self.sent["world: announcement"] = 1
         elif tick == 14:  # metrics of a tick the world has not reached
-            self.metrics_pub.publish(self.msgs.metrics_message([10 ** 6] + [0] * 6))
+            self.metrics_pub.publish(self.msgs.metrics_message([10**6] + [0] * 6))
             self.sent["world: metrics"] = 1
         elif tick >= 16 and not self.localized_sent:  # a localized robot of the batch, once there is one
             s = self.replica.state
@@ -205,7 +210,7 @@ class _Batches:
             msg.point_step = 13
             self.robots_pub.publish(msg)
             rows = np.zeros(2, dtype=ROBOT_ROW)
-            rows["id"], rows["state"] = [10 ** 6, 3], [1, 9]
+            rows["id"], rows["state"] = [10**6, 3], [1, 9]
             self.robots_pub.publish(self._cloud(rows, tick))
             self.sent["monitor: robots"] = 2
         self.forge(tick, honest)
@@ -245,8 +250,12 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
     params_file.write_text(params_yaml(settings, {"monitor": {"out_dir": str(out), "record": False}}))
     lock = DomainLock()
     env = node_env(lock.domain_id, tmp_path)
-    procs = {name: subprocess.Popen(node_command(name, params_file, name), env=env, stdout=subprocess.PIPE,
-                                    stderr=subprocess.STDOUT, text=True) for name in ("world", "monitor")}
+    procs = {
+        name: subprocess.Popen(
+            node_command(name, params_file, name), env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+        for name in ("world", "monitor")
+    }
     for key, value in dds_defaults().items():
         monkeypatch.setenv(key, value)
     context = Context()
@@ -266,8 +275,9 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
                 proc.kill()
         logs = {name: proc.communicate()[0] for name, proc in procs.items()}
         lock.close()
-    assert {n: p.returncode for n, p in procs.items()} == {"world": 0, "monitor": 0}, \
-        "\n".join(f"--- {n}:\n{text[-3000:]}" for n, text in logs.items())
+    assert {n: p.returncode for n, p in procs.items()} == {"world": 0, "monitor": 0}, "\n".join(
+        f"--- {n}:\n{text[-3000:]}" for n, text in logs.items()
+    )
     assert batches.replica.tick > 15, "the run ended before every kind of bad message was sent"
     for name in ("metrics.csv", "final_state.csv"):
         assert (ref / name).read_bytes() == (out / name).read_bytes(), name
@@ -283,7 +293,6 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
     assert "dropped a message on /swarm/robots (replayed" in logs["monitor"]
 
 
-
 def test_sros2_enclaves_reach_every_node_and_the_run_is_unchanged(tmp_path):
     """swarm-ros run --enclaves: every node process starts with its enclave, and with DDS security off
     (this ROS 2 build has none) rcl accepts the argument and the run is the same. What SROS2 does with
@@ -294,13 +303,22 @@ def test_sros2_enclaves_reach_every_node_and_the_run_is_unchanged(tmp_path):
     assert cli.main(["simulate", *FLAGS, "--out", str(ref), "--quiet", "--no-recording"]) == 0
     settings = Settings(shape="rectangle", robots=ROBOTS, seed=SEED)
     shape, params = settings.resolve()
-    launch = Launch(settings=settings, shape=shape, params=params, processes=2, out=tmp_path / "run", quiet=True,
-                    bag=False, enclaves="/swarm_ros")
+    launch = Launch(
+        settings=settings,
+        shape=shape,
+        params=params,
+        processes=2,
+        out=tmp_path / "run",
+        quiet=True,
+        bag=False,
+        enclaves="/swarm_ros",
+    )
     out = launch.run()
     for name in ("metrics.csv", "final_state.csv"):
         assert (ref / name).read_bytes() == (out / name).read_bytes(), name
     assert {c.name: c.command[c.command.index("--enclave") + 1] for c in launch.children} == {
-        name: f"/swarm_ros/{name}" for name in ("monitor", "robot_batch_0", "robot_batch_1", "world")}
+        name: f"/swarm_ros/{name}" for name in ("monitor", "robot_batch_0", "robot_batch_1", "world")
+    }
 
 
 _INTRUDER = """
@@ -326,15 +344,42 @@ def test_a_one_host_run_is_not_discovered_from_another_network_namespace(two_hos
     domain = str(120 + os.getpid() % 80)
     common = {**host_env(), "ROS_DOMAIN_ID": domain, "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4", "HOME": str(tmp_path)}
     # the intruder announces itself every 50 ms for its first 5 s (the run's own Fast DDS profile)
-    intruder_env = {**common, "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
-                    "FASTRTPS_DEFAULT_PROFILES_FILE": str(Path(__file__).parent.parent / "config" / "fastdds.xml")}
+    intruder_env = {
+        **common,
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+        "FASTRTPS_DEFAULT_PROFILES_FILE": str(Path(__file__).parent.parent / "config" / "fastdds.xml"),
+    }
     run_env = {**common, **({"ROS_AUTOMATIC_DISCOVERY_RANGE": discovery} if discovery != "LOCALHOST" else {})}
-    intruder = subprocess.Popen(["ip", "netns", "exec", b, PY, "-c", _INTRUDER, domain, "10"], env=intruder_env,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    intruder = subprocess.Popen(
+        ["ip", "netns", "exec", b, PY, "-c", _INTRUDER, domain, "10"],
+        env=intruder_env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(0.5)
-    run = subprocess.Popen(["ip", "netns", "exec", a, PY, "-m", "swarm_ros", "run", *FLAGS,
-                            "--out", str(tmp_path / "run"), "--quiet", "--no-recording", "--no-bag"],
-                           env=run_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    run = subprocess.Popen(
+        [
+            "ip",
+            "netns",
+            "exec",
+            a,
+            PY,
+            "-m",
+            "swarm_ros",
+            "run",
+            *FLAGS,
+            "--out",
+            str(tmp_path / "run"),
+            "--quiet",
+            "--no-recording",
+            "--no-bag",
+        ],
+        env=run_env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         _, err = run.communicate(timeout=120)
         out, intruder_err = intruder.communicate(timeout=60)
@@ -371,9 +416,27 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
     ref, out = tmp_path / "ref", tmp_path / "run"
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet", "--no-recording"]) == 0
     lock = DomainLock()
-    run = subprocess.Popen([PY, "-m", "swarm_ros", "run", *flags, "--domain-id", str(lock.domain_id),
-                            "--out", str(out), "--quiet", "--no-recording", "--no-bag", "--processes", "2"],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    run = subprocess.Popen(
+        [
+            PY,
+            "-m",
+            "swarm_ros",
+            "run",
+            *flags,
+            "--domain-id",
+            str(lock.domain_id),
+            "--out",
+            str(out),
+            "--quiet",
+            "--no-recording",
+            "--no-bag",
+            "--processes",
+            "2",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     for key, value in dds_defaults().items():
         monkeypatch.setenv(key, value)
     context = Context()
@@ -383,8 +446,9 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
         node = Node("stranger", context=context, start_parameter_services=False)
         pub = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
         # the batches take rows only from their region topics: the same forgeries go there
-        region_pubs = [node.create_publisher(PointCloud2, msgs.region_topic(f"robot_batch_{k}"), msgs.ROBOTS_QOS)
-                       for k in range(2)]
+        region_pubs = [
+            node.create_publisher(PointCloud2, msgs.region_topic(f"robot_batch_{k}"), msgs.ROBOTS_QOS) for k in range(2)
+        ]
         snapshot_pub = node.create_publisher(PointCloud2, msgs.snapshot_topic("robot_batch_0"), msgs.LATCHED_QOS)
         status_pub = node.create_publisher(DiagnosticArray, msgs.STATUS, msgs.LATCHED_QOS)
 
@@ -415,7 +479,7 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         while run.poll() is None:
-            bad = make_cloud(np.zeros(3, dtype=ROBOT_ROW), 10 ** 6)
+            bad = make_cloud(np.zeros(3, dtype=ROBOT_ROW), 10**6)
             bad.point_step = 13  # another layout
             pub.publish(bad)
             rows = np.zeros(2, dtype=ROBOT_ROW)
@@ -447,5 +511,7 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
         rows = msgs.ROBOTS if node_name == "monitor" else msgs.region_topic(node_name)
         for topic in (rows, msgs.STATUS):
             assert f"dropped a message on {topic} (unauthenticated" in log, (node_name, topic)
-    assert "dropped a message on /swarm/snapshot/robot_batch_0 (unauthenticated" in \
-        (out / "logs" / "robot_batch_0.log").read_text()
+    assert (
+        "dropped a message on /swarm/snapshot/robot_batch_0 (unauthenticated"
+        in (out / "logs" / "robot_batch_0.log").read_text()
+    )

@@ -51,9 +51,12 @@ def test_seed_block_is_the_2x2_block_of_shape_patches_nearest_the_origin(name):
     r = shape.world.radius
     assert shape.mask[seeds[:, 1] + r, seeds[:, 0] + r].all()
     # brute force: no full 2x2 block has its centre nearer the origin
-    best = min((2 * x + 1) ** 2 + (2 * y + 1) ** 2
-               for y in range(-r, r) for x in range(-r, r)
-               if shape.mask[y + r:y + r + 2, x + r:x + r + 2].all())
+    best = min(
+        (2 * x + 1) ** 2 + (2 * y + 1) ** 2
+        for y in range(-r, r)
+        for x in range(-r, r)
+        if shape.mask[y + r : y + r + 2, x + r : x + r + 2].all()
+    )
     assert (2 * x0 + 1) ** 2 + (2 * y0 + 1) ** 2 == best
 
 
@@ -71,11 +74,14 @@ def test_text_grid_round_trip(tmp_path):
     assert np.array_equal(read_text_grid(path), grid)
 
 
-@pytest.mark.parametrize("w,h,expected_x,expected_y", [
-    (3, 3, (-1, 1), (-1, 1)),   # odd sizes: centre cell on the origin
-    (4, 4, (-1, 2), (-1, 2)),   # even sizes: extra column right, extra row up
-    (5, 2, (-2, 2), (0, 1)),
-])
+@pytest.mark.parametrize(
+    "w,h,expected_x,expected_y",
+    [
+        (3, 3, (-1, 1), (-1, 1)),  # odd sizes: centre cell on the origin
+        (4, 4, (-1, 2), (-1, 2)),  # even sizes: extra column right, extra row up
+        (5, 2, (-2, 2), (0, 1)),
+    ],
+)
 def test_grid_centre_lands_on_the_origin(w, h, expected_x, expected_y):
     world = World(radius=8)
     grid = np.ones((h, w), dtype=bool)
@@ -97,7 +103,7 @@ def test_top_row_of_the_file_is_the_top_of_the_world(tmp_path):
 
 def test_png_and_text_give_the_same_shape(tmp_path):
     text = Shape.load("wrench")
-    rows = (Path(text.source).read_text().splitlines())
+    rows = Path(text.source).read_text().splitlines()
     grid = np.array([[c == "#" for c in line] for line in rows if not line.startswith(";")])
     pixels = np.where(grid, 0, 255).astype(np.uint8)
     png = tmp_path / "wrench.png"

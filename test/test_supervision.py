@@ -44,10 +44,15 @@ def test_the_nodes_read_what_swarm_ros_run_writes_for_the_same_settings(tmp_path
 
 def test_arguments_win_over_the_parameter_file_and_its_node_sections_are_kept(tmp_path):
     params = tmp_path / "mine.yaml"
-    params.write_text(yaml.safe_dump({
-        "/**": {"ros__parameters": {"shape": "tyre", "seed": 4}},
-        "/world": {"ros__parameters": {"max_restarts": 1, "on_batch_loss": "remove", "incarnation": 2}},
-        "/monitor": {"ros__parameters": {"record": False, "out_dir": str(tmp_path / "from-file")}}}))
+    params.write_text(
+        yaml.safe_dump(
+            {
+                "/**": {"ros__parameters": {"shape": "tyre", "seed": 4}},
+                "/world": {"ros__parameters": {"max_restarts": 1, "on_batch_loss": "remove", "incarnation": 2}},
+                "/monitor": {"ros__parameters": {"record": False, "out_dir": str(tmp_path / "from-file")}},
+            }
+        )
+    )
     setup = _setup(tmp_path, params, out_dir=str(tmp_path / "from-argument"), seed="5", vision_radius="2")
     written = _written(setup)
     assert (written["/**"]["ros__parameters"]["shape"], written["/**"]["ros__parameters"]["seed"]) == ("tyre", 5)
@@ -66,24 +71,37 @@ def test_without_out_dir_the_run_is_named_once_under_runs(tmp_path, monkeypatch)
     assert _written(setup)["/monitor"]["ros__parameters"]["out_dir"] == str(setup.out)  # a restarted monitor's too
 
 
-@pytest.mark.parametrize("name,text,value", [("seed", "7", 7), ("vision_radius", "2", 2.0), ("shape", "1", "1"),
-                                             ("wiggle_deg", "30.5", 30.5), ("join", "local", "local")])
+@pytest.mark.parametrize(
+    "name,text,value",
+    [
+        ("seed", "7", 7),
+        ("vision_radius", "2", 2.0),
+        ("shape", "1", "1"),
+        ("wiggle_deg", "30.5", 30.5),
+        ("join", "local", "local"),
+    ],
+)
 def test_an_argument_is_read_as_ros_2_reads_a_parameter_value(name, text, value):
     got = argument_value(name, text)
     assert got == value and type(got) is type(value)
 
 
-@pytest.mark.parametrize("call,said", [
-    (lambda p: argument_value("seed", "abc"), "launch argument seed:=abc: seed must be an integer"),
-    (lambda p: argument_value("rules", "fast"), "rules must be one of paper, local, literal, got 'fast'"),
-    (lambda p: argument_value("robots", "[1, 2"), "robots must be an integer"),
-    (lambda p: launch_processes("0"), "launch argument processes:=0: processes must be an integer >= 1"),
-    (lambda p: _setup(p, processes=1033), "a world of 65 columns cannot be cut into 1033 strips, one per "
-                                          "robot-batch process (processes, default 2)"),
-    (lambda p: _setup(p, p / "missing.yaml"), "missing.yaml"),
-    (lambda p: _setup(p, shape="nope"), "nope"),
-    (lambda p: launch_setup(str(CONFIG), BLANK, "", p / "log", 2, "swarm"), "enclaves must be an enclave path"),
-])
+@pytest.mark.parametrize(
+    "call,said",
+    [
+        (lambda p: argument_value("seed", "abc"), "launch argument seed:=abc: seed must be an integer"),
+        (lambda p: argument_value("rules", "fast"), "rules must be one of paper, local, literal, got 'fast'"),
+        (lambda p: argument_value("robots", "[1, 2"), "robots must be an integer"),
+        (lambda p: launch_processes("0"), "launch argument processes:=0: processes must be an integer >= 1"),
+        (
+            lambda p: _setup(p, processes=1033),
+            "a world of 65 columns cannot be cut into 1033 strips, one per robot-batch process (processes, default 2)",
+        ),
+        (lambda p: _setup(p, p / "missing.yaml"), "missing.yaml"),
+        (lambda p: _setup(p, shape="nope"), "nope"),
+        (lambda p: launch_setup(str(CONFIG), BLANK, "", p / "log", 2, "swarm"), "enclaves must be an enclave path"),
+    ],
+)
 def test_bad_launch_arguments_are_refused_in_one_line(tmp_path, call, said):
     with pytest.raises(InputError) as caught:
         call(tmp_path)
@@ -103,34 +121,59 @@ def test_a_file_that_sets_a_run_parameter_in_a_node_section_is_refused(tmp_path)
 KILLED = -signal.SIGKILL
 
 
-@pytest.mark.parametrize("exits,verdicts", [
-    # the normal end: batches and world exit 0 with the run, the monitor once it has written it
-    ([("robot_batch_0", 0), ("world", 0), ("monitor", 0)],
-     [Verdict(), Verdict(wait_for_monitor=True), Verdict(note="the monitor has written the run")]),
-    # a batch killed is started again, up to max_restarts times, then its robots are removed
-    ([("robot_batch_1", KILLED), ("robot_batch_1", KILLED), ("robot_batch_1", 1)],
-     [Verdict(restart=True, note="robot_batch_1 was killed by SIGKILL; restarted (1 of 2)"),
-      Verdict(restart=True, note="robot_batch_1 was killed by SIGKILL; restarted (2 of 2)"),
-      Verdict(note="robot_batch_1 exited with status 1; it was restarted 2 times already: the world removes its "
-                   "robots and the run goes on")]),
-    # the world and the monitor killed come back; once too often, the run cannot go on
-    ([("world", KILLED), ("monitor", KILLED), ("world", KILLED), ("world", KILLED)],
-     [Verdict(restart=True, note="world was killed by SIGKILL; restarted (1 of 2)"),
-      Verdict(restart=True, note="monitor was killed by SIGKILL; restarted (1 of 2)"),
-      Verdict(restart=True, note="world was killed by SIGKILL; restarted (2 of 2)"),
-      Verdict(end="world was killed by SIGKILL; it was restarted 2 times already (max_restarts): the run cannot "
-                  "go on")]),
-    # an error status is the run's failure: a restart would fail the same way
-    ([("world", 1)], [Verdict(end="world exited with status 1")]),
-    ([("world", 0), ("monitor", 1)],
-     [Verdict(wait_for_monitor=True),
-      Verdict(end="the monitor exited with status 1; the swarm ran to its end, but no run directory was written")]),
-    # a batch that dies after the run's end is not started again
-    ([("world", 0), ("robot_batch_0", KILLED)], [Verdict(wait_for_monitor=True), Verdict()]),
-    # Ctrl-C: the terminal signals every process; the first to go stops the launch, nothing comes back
-    ([("robot_batch_0", 130), ("world", 130), ("monitor", -signal.SIGINT)],
-     [Verdict(stop="robot_batch_0 was stopped (exited with status 130): the run stops"), Verdict(), Verdict()]),
-])
+@pytest.mark.parametrize(
+    "exits,verdicts",
+    [
+        # the normal end: batches and world exit 0 with the run, the monitor once it has written it
+        (
+            [("robot_batch_0", 0), ("world", 0), ("monitor", 0)],
+            [Verdict(), Verdict(wait_for_monitor=True), Verdict(note="the monitor has written the run")],
+        ),
+        # a batch killed is started again, up to max_restarts times, then its robots are removed
+        (
+            [("robot_batch_1", KILLED), ("robot_batch_1", KILLED), ("robot_batch_1", 1)],
+            [
+                Verdict(restart=True, note="robot_batch_1 was killed by SIGKILL; restarted (1 of 2)"),
+                Verdict(restart=True, note="robot_batch_1 was killed by SIGKILL; restarted (2 of 2)"),
+                Verdict(
+                    note="robot_batch_1 exited with status 1; it was restarted 2 times already: the world removes its "
+                    "robots and the run goes on"
+                ),
+            ],
+        ),
+        # the world and the monitor killed come back; once too often, the run cannot go on
+        (
+            [("world", KILLED), ("monitor", KILLED), ("world", KILLED), ("world", KILLED)],
+            [
+                Verdict(restart=True, note="world was killed by SIGKILL; restarted (1 of 2)"),
+                Verdict(restart=True, note="monitor was killed by SIGKILL; restarted (1 of 2)"),
+                Verdict(restart=True, note="world was killed by SIGKILL; restarted (2 of 2)"),
+                Verdict(
+                    end="world was killed by SIGKILL; it was restarted 2 times already (max_restarts): the run cannot "
+                    "go on"
+                ),
+            ],
+        ),
+        # an error status is the run's failure: a restart would fail the same way
+        ([("world", 1)], [Verdict(end="world exited with status 1")]),
+        (
+            [("world", 0), ("monitor", 1)],
+            [
+                Verdict(wait_for_monitor=True),
+                Verdict(
+                    end="the monitor exited with status 1; the swarm ran to its end, but no run directory was written"
+                ),
+            ],
+        ),
+        # a batch that dies after the run's end is not started again
+        ([("world", 0), ("robot_batch_0", KILLED)], [Verdict(wait_for_monitor=True), Verdict()]),
+        # Ctrl-C: the terminal signals every process; the first to go stops the launch, nothing comes back
+        (
+            [("robot_batch_0", 130), ("world", 130), ("monitor", -signal.SIGINT)],
+            [Verdict(stop="robot_batch_0 was stopped (exited with status 130): the run stops"), Verdict(), Verdict()],
+        ),
+    ],
+)
 def test_a_process_that_ends_is_handled_as_swarm_ros_run_handles_it(exits, verdicts):
     supervisor = Supervisor(max_restarts=2)
     assert [supervisor.exited(name, code) for name, code in exits] == verdicts
@@ -140,7 +183,8 @@ def test_under_remove_a_lost_batch_is_not_started_again_and_restarts_count_incar
     supervisor = Supervisor(max_restarts=3, on_batch_loss="remove")
     assert supervisor.exited("robot_batch_0", KILLED) == Verdict(
         note="robot_batch_0 was killed by SIGKILL; the world removes its robots (on_batch_loss: remove) and the run "
-             "goes on")
+        "goes on"
+    )
     assert supervisor.incarnation("world") == 0
     supervisor.exited("world", KILLED)
     assert supervisor.incarnation("world") == 1
@@ -155,11 +199,14 @@ def test_stopped_statuses_are_the_nodes_interrupt_statuses():
 def test_before_tick_0_a_lost_batch_is_started_again_under_remove_too_and_its_last_error_is_said():
     supervisor = Supervisor(max_restarts=1, on_batch_loss="remove", said=("--on-batch-loss remove", "--max-restarts"))
     assert supervisor.exited("robot_batch_0", 1, why="boom", started=False) == Verdict(
-        restart=True, note="robot_batch_0 exited with status 1 (boom); restarted (1 of 1)")
+        restart=True, note="robot_batch_0 exited with status 1 (boom); restarted (1 of 1)"
+    )
     assert supervisor.exited("robot_batch_0", KILLED, started=False) == Verdict(
-        end="robot_batch_0 was killed by SIGKILL before the run started, 2 times")
-    assert supervisor.exited("world", KILLED) == Verdict(restart=True, note="world was killed by SIGKILL; restarted "
-                                                                             "(1 of 1)")
+        end="robot_batch_0 was killed by SIGKILL before the run started, 2 times"
+    )
+    assert supervisor.exited("world", KILLED) == Verdict(
+        restart=True, note="world was killed by SIGKILL; restarted (1 of 1)"
+    )
     assert "(--max-restarts)" in supervisor.exited("world", KILLED).end
 
 

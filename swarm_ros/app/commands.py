@@ -37,16 +37,23 @@ def cmd_shapes(args: argparse.Namespace) -> int:
     check_world_memory(args.world_radius, dims=3 if args.solid else 2)
     world = World(args.world_radius)
     if args.solid:
-        print(f"{'shape':<10} {'voxels':>7} {'tunnels':>7} {'cavities':>8}  bounding box "
-              "(xmin, ymin, zmin)-(xmax, ymax, zmax)  file")
+        print(
+            f"{'shape':<10} {'voxels':>7} {'tunnels':>7} {'cavities':>8}  bounding box "
+            "(xmin, ymin, zmin)-(xmax, ymax, zmax)  file"
+        )
         misfits = _list_shapes(builtin_shapes_3d(), world)
-        print(f"world: {World(args.world_radius, 3).describe()} voxels, walls on the outer shell"
-              + (f"; {misfits} shape(s) do not fit in it" if misfits else ""))
+        print(
+            f"world: {World(args.world_radius, 3).describe()} voxels, walls on the outer shell"
+            + (f"; {misfits} shape(s) do not fit in it" if misfits else "")
+        )
         return 0
     print(f"{'shape':<10} {'patches':>7} {'holes':>5}  bounding box (xmin, ymin)-(xmax, ymax)  file")
     misfits = _list_shapes(builtin_shapes(), world)
-    print(f"world: {world.size} x {world.size} patches, walls on the border ring"
-          + (f"; {misfits} shape(s) do not fit in it" if misfits else "") + "; 3D shapes: swarm-ros shapes --3d")
+    print(
+        f"world: {world.size} x {world.size} patches, walls on the border ring"
+        + (f"; {misfits} shape(s) do not fit in it" if misfits else "")
+        + "; 3D shapes: swarm-ros shapes --3d"
+    )
     return 0
 
 
@@ -67,8 +74,7 @@ def _list_shapes(shapes: dict[str, Path], world: World) -> int:
             print(f"{name:<10} {shape.patches:>7} {shape.tunnels:>7} {shape.cavities:>8}  {box}{'':9}{path}")
             continue
         x0, y0, x1, y1 = shape.bbox
-        print(f"{name:<10} {shape.patches:>7} {shape.holes:>5}  ({x0:>3}, {y0:>3})-({x1:>3}, {y1:>3})"
-              f"{'':18}{path}")
+        print(f"{name:<10} {shape.patches:>7} {shape.holes:>5}  ({x0:>3}, {y0:>3})-({x1:>3}, {y1:>3}){'':18}{path}")
     return misfits
 
 
@@ -88,8 +94,9 @@ def _flag(value: object, section: dict[str, object], key: str) -> object:
     return value if value is not None else section.get(key, node_defaults("monitor")[key])
 
 
-def _prepare(args: argparse.Namespace, graph: bool = False) -> tuple[Settings, Shape, RunParams, Path,
-                                                                    RecordingOptions, dict]:
+def _prepare(
+    args: argparse.Namespace, graph: bool = False
+) -> tuple[Settings, Shape, RunParams, Path, RecordingOptions, dict]:
     """Settings, shape, parameters, a usable output directory, the recording options and the node
     parameters of the parameter file, or a InputError before anything runs."""
     from swarm_ros.artifacts.run_dir import check_leftovers, check_out_dir, claim_out_dir, default_run_dir
@@ -97,11 +104,17 @@ def _prepare(args: argparse.Namespace, graph: bool = False) -> tuple[Settings, S
     settings, nodes = _settings(args)
     shape, params = settings.resolve()
     monitor = nodes["monitor"]
-    recording = RecordingOptions(enabled=bool(_flag(args.record, monitor, "record")),
-                                 every=int(_flag(args.record_every, monitor, "record_every")), spawn=args.spawn,
-                                 connect=args.connect or str(monitor.get("viewer_url", "")) or None)
-    out = args.out or (Path(str(monitor["out_dir"])) if monitor.get("out_dir") else
-                       default_run_dir(shape.name, params.robots, params.vision_radius, params.seed))
+    recording = RecordingOptions(
+        enabled=bool(_flag(args.record, monitor, "record")),
+        every=int(_flag(args.record_every, monitor, "record_every")),
+        spawn=args.spawn,
+        connect=args.connect or str(monitor.get("viewer_url", "")) or None,
+    )
+    out = args.out or (
+        Path(str(monitor["out_dir"]))
+        if monitor.get("out_dir")
+        else default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
+    )
     args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
     check_out_dir(out, args.overwrite)
     claim_out_dir(out)  # a second command for the same directory is refused now, not after its run
@@ -111,8 +124,11 @@ def _prepare(args: argparse.Namespace, graph: bool = False) -> tuple[Settings, S
         recover_killed(out)
     check_leftovers(out)
     if recording.active and not recording.every and recording.every_for(params.robots) > 1 and not args.quiet:
-        print(f"{PROG}: the recording logs the robots every {recording.every_for(params.robots)} ticks "
-              f"({params.robots:,} robots; --record-every 1 logs every tick)", file=sys.stderr)
+        print(
+            f"{PROG}: the recording logs the robots every {recording.every_for(params.robots)} ticks "
+            f"({params.robots:,} robots; --record-every 1 logs every tick)",
+            file=sys.stderr,
+        )
     return settings, shape, params, out, recording.reachable(), nodes
 
 
@@ -164,35 +180,60 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarm_ros.artifacts.run_dir import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args, graph=True)
-    changed = {k: v for k, v in nodes["robot_batch"].items()
-               if v != node_defaults("robot_batch")[k] and k != "region_cuts"}
+    changed = {
+        k: v for k, v in nodes["robot_batch"].items() if v != node_defaults("robot_batch")[k] and k != "region_cuts"
+    }
     if changed:
-        raise InputError(f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
-                         f"assigns each of its --processes its strip itself (use ros2 run for your own split)")
+        raise InputError(
+            f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
+            f"assigns each of its --processes its strip itself (use ros2 run for your own split)"
+        )
     cuts = args.region_cuts if args.region_cuts is not None else str(nodes["robot_batch"].get("region_cuts", ""))
-    world = {**nodes["world"], **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
-             **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {})}
+    world = {
+        **nodes["world"],
+        **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
+        **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {}),
+    }
     check_graph(shape, params.robots, args.processes, args.enclaves, region_cuts=cuts)
     domain = _domain_id(args.domain_id)
-    launch = Launch(settings=settings, shape=shape, params=params, processes=args.processes, region_cuts=cuts, out=out,
-                    overwrite=args.overwrite, quiet=args.quiet, domain_id=domain, recording=options,
-                    world=world, bag=bool(_flag(args.bag, nodes["monitor"], "bag")), enclaves=args.enclaves)
+    launch = Launch(
+        settings=settings,
+        shape=shape,
+        params=params,
+        processes=args.processes,
+        region_cuts=cuts,
+        out=out,
+        overwrite=args.overwrite,
+        quiet=args.quiet,
+        domain_id=domain,
+        recording=options,
+        world=world,
+        bag=bool(_flag(args.bag, nodes["monitor"], "bag")),
+        enclaves=args.enclaves,
+    )
     _interrupt_on_sigterm()
     try:
         out = launch.run()
     except KeyboardInterrupt:
         stopped = launch.result()
         if stopped is not None and stopped["outcome"] == "interrupted":
-            print(f"{PROG}: interrupted at tick {stopped['convergence_tick']}; the run so far is in {out}",
-                  file=sys.stderr)
+            print(
+                f"{PROG}: interrupted at tick {stopped['convergence_tick']}; the run so far is in {out}",
+                file=sys.stderr,
+            )
         elif stopped is not None:  # the Ctrl-C came while the nodes were shutting down
-            print(f"{PROG}: interrupted after the run had ended ({stopped['outcome']} at tick "
-                  f"{stopped['convergence_tick']}); it is whole in {out}", file=sys.stderr)
+            print(
+                f"{PROG}: interrupted after the run had ended ({stopped['outcome']} at tick "
+                f"{stopped['convergence_tick']}); it is whole in {out}",
+                file=sys.stderr,
+            )
         elif not launch.started:  # the launcher removed what the run had made (launcher.discard_unstarted)
             print(f"{PROG}: interrupted before tick 0; nothing was written", file=sys.stderr)
         else:
-            print(f"{PROG}: interrupted, but the monitor wrote no run directory (logs: {launch.logs_kept})",
-                  file=sys.stderr)
+            print(
+                f"{PROG}: interrupted, but the monitor wrote no run directory (logs: {launch.logs_kept})",
+                file=sys.stderr,
+            )
             _note_partial(partial_recording(out), options)
         return EXIT_INTERRUPTED
     except BaseException:
@@ -201,8 +242,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
         _print_summary(summary, out, shape.dims)
-        print(f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
-              f"logs in {out / 'logs'}")
+        print(
+            f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
+            f"logs in {out / 'logs'}"
+        )
     global EXIT_AT_ONCE
     EXIT_AT_ONCE = True
     return 0
@@ -217,14 +260,27 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     _interrupt_on_sigterm()
     start = time.perf_counter()
     jobs = args.jobs or (1 if args.engine == "ros2" else default_jobs())
-    out = run_experiment(args.config, args.out, jobs=jobs, engine=args.engine, processes=args.processes,
-                         quiet=args.quiet, executor=args.executor, scheduler=args.scheduler)
+    out = run_experiment(
+        args.config,
+        args.out,
+        jobs=jobs,
+        engine=args.engine,
+        processes=args.processes,
+        quiet=args.quiet,
+        executor=args.executor,
+        scheduler=args.scheduler,
+    )
     if not args.quiet:
-        where = f"Dask at {args.scheduler}" if args.scheduler else f"{jobs} jobs" + \
-            (" on a Dask LocalCluster" if args.executor == "dask" else "")
+        where = (
+            f"Dask at {args.scheduler}"
+            if args.scheduler
+            else f"{jobs} jobs" + (" on a Dask LocalCluster" if args.executor == "dask" else "")
+        )
         print(f"experiment done in {time.perf_counter() - start:.1f} s ({where}, engine {args.engine})")
-        print(f"results  {out / 'results.csv'}\nstats    {out / 'stats.csv'}, {out / 'stats.md'}\n"
-              f"figures  {out / 'figures'}")
+        print(
+            f"results  {out / 'results.csv'}\nstats    {out / 'stats.csv'}, {out / 'stats.md'}\n"
+            f"figures  {out / 'figures'}"
+        )
     return 0
 
 
@@ -290,8 +346,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
     bag = args.bag / "bag" if (args.bag / "bag" / "metadata.yaml").is_file() else args.bag
     domain = _domain_id(args.domain_id)
     _interrupt_on_sigterm()  # its ROS participant is then closed (no Fast DDS files left in /dev/shm)
-    code = replay(bag, 0 if domain is None else domain, rate=args.rate, delay=args.delay, quiet=args.quiet,
-                  start_offset=args.start_offset, loop=args.loop)
+    code = replay(
+        bag,
+        0 if domain is None else domain,
+        rate=args.rate,
+        delay=args.delay,
+        quiet=args.quiet,
+        start_offset=args.start_offset,
+        loop=args.loop,
+    )
     if code == EXIT_INTERRUPTED:
         print(f"{PROG}: interrupted", file=sys.stderr)
     return code
@@ -303,12 +366,14 @@ def cmd_topics(args: argparse.Namespace) -> int:
     domain = _domain_id(args.domain_id)
     _interrupt_on_sigterm()
     seconds = args.seconds or (ECHO_SECONDS if args.echo else LIST_SECONDS)
-    return run_topics(0 if domain is None else domain, echo=args.echo, count=args.count, seconds=seconds,
-                      full=args.full)
+    return run_topics(
+        0 if domain is None else domain, echo=args.echo, count=args.count, seconds=seconds, full=args.full
+    )
 
 
-def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Recorder | None = None,
-                       stop: StopFlag | None = None) -> None:
+def _run_with_progress(
+    sim: Simulation, check: bool, quiet: bool, recorder: Recorder | None = None, stop: StopFlag | None = None
+) -> None:
     """Run ``sim`` to its end (or until ``stop`` is set) with a progress bar, checking invariants and
     recording if asked."""
     from tqdm import tqdm
@@ -320,8 +385,15 @@ def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Reco
     if recorder is not None:
         recorder.metrics(sim.history)
         recorder.robots(sim.state)
-    with tqdm(total=sim.shape.patches, initial=sim.metrics.localized, unit="patch", desc="localized",
-              disable=True if quiet else None, file=sys.stderr, dynamic_ncols=True) as bar:
+    with tqdm(
+        total=sim.shape.patches,
+        initial=sim.metrics.localized,
+        unit="patch",
+        desc="localized",
+        disable=True if quiet else None,
+        file=sys.stderr,
+        dynamic_ncols=True,
+    ) as bar:
         while not sim.done and not (stop and stop.signum):
             before = sim.tick
             if check:
@@ -333,7 +405,7 @@ def _run_with_progress(sim: Simulation, check: bool, quiet: bool, recorder: Reco
             else:
                 sim.run(max_ticks=_PROGRESS_TICKS)
             if recorder is not None:
-                recorder.metrics(sim.history[before + 1:])
+                recorder.metrics(sim.history[before + 1 :])
                 recorder.robots(sim.state, force=sim.done)
             m = sim.metrics
             bar.update(m.localized - bar.n)
@@ -352,9 +424,18 @@ def _print_summary(s: dict, out: Path, dims: int) -> None:
         ("localized", f"{s['localized']} / {s['shape_patches']} {cells}"),
         ("unlocalized", f"{s['unlocalized']}  (separated {s['separated']})"),
         (f"empty {cells}", f"{s['empty_patches']}"),
-        *([("lost robots", f"{s['lost_robots']}  (" + ", ".join(f"{x['robots']} at tick {x['tick']}"
-                                                           for x in s["losses"]) + ")")]
-          if s.get("lost_robots") else []),
+        *(
+            [
+                (
+                    "lost robots",
+                    f"{s['lost_robots']}  ("
+                    + ", ".join(f"{x['robots']} at tick {x['tick']}" for x in s["losses"])
+                    + ")",
+                )
+            ]
+            if s.get("lost_robots")
+            else []
+        ),
         ("convergence rate", f"{s['convergence_rate']:.4f} robots/tick"),
         ("wall time", f"{s['wall_seconds']:.2f} s  ({rate:,.0f} ticks/s)"),
         ("output", str(out)),

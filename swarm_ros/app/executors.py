@@ -63,8 +63,15 @@ def run_ros2(spec: RunSpec, processes: int = PROCESSES.default) -> dict:
     shape = _shape(spec)
     scratch = Path(tempfile.mkdtemp(prefix="swarm_ros-exp-"))
     try:
-        launch = Launch(settings=spec.settings, shape=shape, params=spec.params(), processes=processes,
-                        out=scratch / "run", quiet=True, recording=RecordingOptions(enabled=False))
+        launch = Launch(
+            settings=spec.settings,
+            shape=shape,
+            params=spec.params(),
+            processes=processes,
+            out=scratch / "run",
+            quiet=True,
+            recording=RecordingOptions(enabled=False),
+        )
         out = launch.run()
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     finally:
@@ -108,8 +115,9 @@ def _work(job: tuple[RunSpec, str, int]) -> dict:
             os._exit(130)  # this worker would wait for a next run while the parent waits for it to exit
 
 
-def execute(todo: list[RunSpec], jobs: int, engine: str = "inprocess",
-            processes: int = PROCESSES.default) -> Iterator[dict]:
+def execute(
+    todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes: int = PROCESSES.default
+) -> Iterator[dict]:
     """Yield the row of each run as it finishes, over ``jobs`` worker processes (spawned).
 
     Closing the generator (or an exception in the caller, e.g. Ctrl-C) terminates the workers.
@@ -150,12 +158,16 @@ def _check_ros_workers(client) -> None:
         if env["ROS_DOMAIN_ID"]:
             why = f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} fixes one ROS domain for all its runs"
         elif env["ROS_AUTOMATIC_DISCOVERY_RANGE"] not in ("", "LOCALHOST"):
-            why = (f"ROS_AUTOMATIC_DISCOVERY_RANGE={env['ROS_AUTOMATIC_DISCOVERY_RANGE']} lets runs on different "
-                   f"hosts meet in one domain")
+            why = (
+                f"ROS_AUTOMATIC_DISCOVERY_RANGE={env['ROS_AUTOMATIC_DISCOVERY_RANGE']} lets runs on different "
+                f"hosts meet in one domain"
+            )
         else:
             continue
-        raise ExperimentError(f"--engine ros2 on Dask needs a ROS domain of its own for each run, but on worker "
-                              f"{worker} {why}; unset it where the workers start")
+        raise ExperimentError(
+            f"--engine ros2 on Dask needs a ROS domain of its own for each run, but on worker "
+            f"{worker} {why}; unset it where the workers start"
+        )
 
 
 @contextmanager
@@ -182,12 +194,19 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
                 client = Client(scheduler, timeout=_CONNECT_TIMEOUT)
             except (OSError, TimeoutError, ValueError) as exc:
                 text = str(exc).strip()
-                raise ExperimentError(f"cannot reach the Dask scheduler at {scheduler}: "
-                                      f"{text.splitlines()[0] if text else type(exc).__name__}") from None
+                raise ExperimentError(
+                    f"cannot reach the Dask scheduler at {scheduler}: "
+                    f"{text.splitlines()[0] if text else type(exc).__name__}"
+                ) from None
         else:
             with _workers_ignore_sigint():  # a Ctrl-C is this process's to act on: it stops the workers
-                cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                       silence_logs=logging.ERROR)
+                cluster = LocalCluster(
+                    n_workers=jobs,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=":0",
+                    silence_logs=logging.ERROR,
+                )
             client = Client(cluster)
         if not quiet:
             where = scheduler or f"a LocalCluster of {jobs} workers"
@@ -318,9 +337,15 @@ def execute_dask(client, todo: list[RunSpec], engine: str, processes: int) -> It
         chunk = chunk_size(float(np.median(recent)) if recent else None, len(queue), workers)
         specs = queue[:chunk]
         del queue[:chunk]
-        future = client.submit(run_specs, specs, engine, processes, pure=False,
-                               key=f"swarm_ros-runs-{specs[0].shape}-{specs[0].robots}-{specs[0].repetition}-"
-                                   f"{len(specs)}-{uuid.uuid4().hex[:8]}")
+        future = client.submit(
+            run_specs,
+            specs,
+            engine,
+            processes,
+            pure=False,
+            key=f"swarm_ros-runs-{specs[0].shape}-{specs[0].robots}-{specs[0].repetition}-"
+            f"{len(specs)}-{uuid.uuid4().hex[:8]}",
+        )
         submitted.append(future)
         pending.add(future)
 

@@ -46,8 +46,10 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
         except (OSError, ValueError, KeyError):
             raise ExperimentError(f"{marker}: unreadable; not a swarm-ros experiment directory") from None
         if before != json.loads(json.dumps(exp.as_dict())):
-            raise ExperimentError(f"{out}: holds the results of a different experiment (its {EXPERIMENT_FILE} "
-                                  f"differs from {config}); choose another --out")
+            raise ExperimentError(
+                f"{out}: holds the results of a different experiment (its {EXPERIMENT_FILE} "
+                f"differs from {config}); choose another --out"
+            )
         return
     if out.exists() and any(out.iterdir()):
         raise ExperimentError(f"{out}: exists, is not empty and holds no {EXPERIMENT_FILE}; choose another --out")
@@ -62,9 +64,16 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
         raise ExperimentError(f"{out}: cannot create the experiment directory ({exc.strerror or exc})") from None
 
 
-
-def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, processes: int, quiet: bool,
-                   executor: str = "local", scheduler: str | None = None) -> Path:
+def run_experiment(
+    config: Path,
+    out: Path | None,
+    jobs: int,
+    engine: str,
+    processes: int,
+    quiet: bool,
+    executor: str = "local",
+    scheduler: str | None = None,
+) -> Path:
     """Run (or resume) the experiment of ``config`` into ``out``; build its report; return ``out``.
 
     ``executor`` "local" runs on ``jobs`` worker processes here; "dask" on the Dask cluster at
@@ -90,8 +99,9 @@ def run_experiment(config: Path, out: Path | None, jobs: int, engine: str, proce
     return out
 
 
-def _run_grid(exp: Experiment, config: Path, out: Path | None, client, jobs: int, engine: str, processes: int,
-              quiet: bool) -> Path:
+def _run_grid(
+    exp: Experiment, config: Path, out: Path | None, client, jobs: int, engine: str, processes: int, quiet: bool
+) -> Path:
     """Run what is not yet in results.csv, locally or (``client``) on Dask; return the experiment directory."""
     from tqdm import tqdm
 
@@ -106,21 +116,33 @@ def _run_grid(exp: Experiment, config: Path, out: Path | None, client, jobs: int
     done = results.done()
     todo = [s for s in runs if s.key not in done]
     if not quiet and done:
-        print(f"resuming: {len(runs) - len(todo)} of {len(runs)} runs already in {out / RESULTS_FILE}",
-              file=sys.stderr)
+        print(f"resuming: {len(runs) - len(todo)} of {len(runs)} runs already in {out / RESULTS_FILE}", file=sys.stderr)
     try:
-        with tqdm(total=len(runs), initial=len(runs) - len(todo), unit="run", desc=exp.name, file=sys.stderr,
-                  disable=True if quiet else None, dynamic_ncols=True) as bar:
-            rows = execute_dask(client, todo, engine, processes) if client is not None else \
-                execute(todo, jobs, engine, processes)
+        with tqdm(
+            total=len(runs),
+            initial=len(runs) - len(todo),
+            unit="run",
+            desc=exp.name,
+            file=sys.stderr,
+            disable=True if quiet else None,
+            dynamic_ncols=True,
+        ) as bar:
+            rows = (
+                execute_dask(client, todo, engine, processes)
+                if client is not None
+                else execute(todo, jobs, engine, processes)
+            )
             with closing(rows):  # closed here, on Ctrl-C too: its tasks are cancelled while the client is open
                 for row in rows:
                     results.append(row)
                     bar.update(1)
     except KeyboardInterrupt:
         left = len(runs) - len(results.done() & {s.key for s in runs})
-        print(f"swarm-ros: interrupted with {left} of {len(runs)} runs to go; the finished ones are in "
-              f"{out / RESULTS_FILE}; run the same command again to resume", file=sys.stderr)
+        print(
+            f"swarm-ros: interrupted with {left} of {len(runs)} runs to go; the finished ones are in "
+            f"{out / RESULTS_FILE}; run the same command again to resume",
+            file=sys.stderr,
+        )
         raise InterruptSaid from None
     finally:
         results.close()

@@ -50,12 +50,15 @@ PATCHES = "patches"  #: a group size written as this word is the shape's exact p
 AXES = EXPERIMENT_AXES  #: run parameters that may list several values
 FIXED = tuple(p.name for p in RUN_PARAMETERS if p.experiment == "fixed")  #: one value for every run
 #: The experiment's own keys, declared as run parameters are (checked the same way).
-_OWN = {p.name: p for p in (
-    Param("name", "", "the experiment's name"),
-    Param("seed", 0, "experiment seed", low=0, high=MAX_SEED),
-    Param("repetitions", 1, "runs per grid point", low=1, high=MAX_RUNS),
-    Param("reference", "", "a reference file, relative to the experiment file"),
-)}
+_OWN = {
+    p.name: p
+    for p in (
+        Param("name", "", "the experiment's name"),
+        Param("seed", 0, "experiment seed", low=0, high=MAX_SEED),
+        Param("repetitions", 1, "runs per grid point", low=1, high=MAX_RUNS),
+        Param("reference", "", "a reference file, relative to the experiment file"),
+    )
+}
 _GROUP = Param("robots", 5, "a group size", low=5)  # the four seeds and at least one robot to join
 _KEYS = ("name", "seed", "repetitions", *AXES, *FIXED, "reference", "shapes")
 _REQUIRED = ("seed", "repetitions", "vision_radius", "shapes")
@@ -122,14 +125,22 @@ class Experiment:
             for n in sizes:
                 for values in itertools.product(*(self.axes[a] for a in AXES)):
                     point = self.fixed.updated(shape=file, robots=n, **dict(zip(AXES, values)))
-                    out += [RunSpec(name, r, point.updated(seed=run_seed(self.seed, name, n, point.vision_radius, r)))
-                            for r in range(self.repetitions)]
+                    out += [
+                        RunSpec(name, r, point.updated(seed=run_seed(self.seed, name, n, point.vision_radius, r)))
+                        for r in range(self.repetitions)
+                    ]
         return out
 
     def as_dict(self) -> dict:
-        return {"name": self.name, "seed": self.seed, "repetitions": self.repetitions,
-                **{a: list(self.axes[a]) for a in AXES}, **{f: getattr(self.fixed, f) for f in FIXED},
-                "shapes": [[n, f, p, list(s)] for n, f, p, s in self.shapes], "reference": self.reference}
+        return {
+            "name": self.name,
+            "seed": self.seed,
+            "repetitions": self.repetitions,
+            **{a: list(self.axes[a]) for a in AXES},
+            **{f: getattr(self.fixed, f) for f in FIXED},
+            "shapes": [[n, f, p, list(s)] for n, f, p, s in self.shapes],
+            "reference": self.reference,
+        }
 
 
 def _fail(path: Path, key: str, message: str) -> ExperimentError:
@@ -164,8 +175,9 @@ def load_experiment(path: str | Path) -> Experiment:
     name = data.get("name", path.stem)
     if not isinstance(name, str) or not name.strip() or "/" in name:
         raise _fail(path, "name", f"must be a non-empty name without '/', got {name!r}")
-    own = {key: _checked(path, key, _OWN[key], data[key]) for key in ("seed", "repetitions", "reference")
-           if key in data}
+    own = {
+        key: _checked(path, key, _OWN[key], data[key]) for key in ("seed", "repetitions", "reference") if key in data
+    }
     axes = {}
     for axis in AXES:
         given = data.get(axis, RUN_PARAMETER[axis].default)
@@ -199,10 +211,21 @@ def load_experiment(path: str | Path) -> Experiment:
     shapes = _load_shapes(path, data["shapes"], World(fixed.world_radius))
     runs = own["repetitions"] * sum(len(sizes) for *_, sizes in shapes) * math.prod(len(v) for v in axes.values())
     if runs > MAX_RUNS:
-        raise _fail(path, "repetitions", f"the grid holds {runs:,} runs, more than the {MAX_RUNS:,} an experiment "
-                                         f"may hold; split it into several experiments")
-    exp = Experiment(name=name.strip(), seed=own["seed"], repetitions=own["repetitions"], shapes=shapes, axes=axes,
-                     fixed=fixed, reference=reference)
+        raise _fail(
+            path,
+            "repetitions",
+            f"the grid holds {runs:,} runs, more than the {MAX_RUNS:,} an experiment "
+            f"may hold; split it into several experiments",
+        )
+    exp = Experiment(
+        name=name.strip(),
+        seed=own["seed"],
+        repetitions=own["repetitions"],
+        shapes=shapes,
+        axes=axes,
+        fixed=fixed,
+        reference=reference,
+    )
     for spec in exp.runs()[:: exp.repetitions]:  # the parameters of every grid point
         try:
             spec.params()
@@ -233,8 +256,12 @@ def _load_shapes(path: Path, shapes: object, world: World) -> tuple[tuple[str, s
         for i, n in enumerate(sizes):
             n = _checked(path, f"{where}[{i}]", _GROUP, shape.patches if n == PATCHES else n)
             if n > shape.free_patches:
-                raise _fail(path, f"{where}[{i}]", f"{n} robots do not fit on the {shape.free_patches} free "
-                                                   f"patches of the {world.size} x {world.size} world")
+                raise _fail(
+                    path,
+                    f"{where}[{i}]",
+                    f"{n} robots do not fit on the {shape.free_patches} free "
+                    f"patches of the {world.size} x {world.size} world",
+                )
             robots.append(n)
         out.append((shape.name, source, shape.patches, tuple(sorted(set(robots)))))
     return tuple(out)

@@ -147,8 +147,9 @@ class Launch:
     @cached_property
     def supervisor(self) -> Supervisor:
         """What is done when a node process ends: the rules the launch file follows too."""
-        return Supervisor(self.max_restarts, self.on_batch_loss, said=("--on-batch-loss remove", "--max-restarts"),
-                          stops=frozenset())  # Ctrl-C reaches this process only: a node's signal is a fault
+        return Supervisor(
+            self.max_restarts, self.on_batch_loss, said=("--on-batch-loss remove", "--max-restarts"), stops=frozenset()
+        )  # Ctrl-C reaches this process only: a node's signal is a fault
 
     def run(self) -> Path:
         run_key()  # a SWARM_ROS_RUN_KEY that is set but unusable fails here, before anything is made
@@ -171,8 +172,10 @@ class Launch:
             raise LaunchError(f"{exc} (logs: {logs_target(out, False)})") from None
         except OSError as exc:  # the file system refused (a full disk): before a node started, nothing to keep
             unwritten = not self.children
-            raise LaunchError(f"{exc.filename or out}: {exc.strerror or exc}"
-                              + ("" if unwritten else f" (logs: {logs_target(out, False)})")) from None
+            raise LaunchError(
+                f"{exc.filename or out}: {exc.strerror or exc}"
+                + ("" if unwritten else f" (logs: {logs_target(out, False)})")
+            ) from None
         except KeyboardInterrupt:
             interrupted = True
             raise
@@ -210,8 +213,9 @@ class Launch:
         if not self.quiet:
             print(f"swarm-ros: {COMPILING}", file=sys.stderr, flush=True)
         self._note("compiling the numba kernels")
-        done = subprocess.run([sys.executable, "-m", "swarm_ros.core.kernels"], stdin=subprocess.DEVNULL,
-                              capture_output=True, text=True)
+        done = subprocess.run(
+            [sys.executable, "-m", "swarm_ros.core.kernels"], stdin=subprocess.DEVNULL, capture_output=True, text=True
+        )
         if done.returncode != 0:
             lines = (done.stderr or done.stdout).strip().splitlines()
             raise LaunchError(f"compiling the numba kernels failed ({lines[-1] if lines else done.returncode})")
@@ -229,21 +233,43 @@ class Launch:
 
             viewer = spawn_viewer() or ""
         params_file = logs / "params.yaml"
-        params_file.write_text(params_yaml(run, {"world": {
-            **self.world, "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts,
-            "checkpoint": str(logs / CHECKPOINT)}, "monitor": {
-            "out_dir": str(out), "overwrite": self.overwrite, "record": self.recording.enabled,
-            "record_every": self.recording.every, "viewer_url": viewer, "bag": self.bag}}), encoding="utf-8")
+        params_file.write_text(
+            params_yaml(
+                run,
+                {
+                    "world": {
+                        **self.world,
+                        "on_batch_loss": self.on_batch_loss,
+                        "max_restarts": self.max_restarts,
+                        "checkpoint": str(logs / CHECKPOINT),
+                    },
+                    "monitor": {
+                        "out_dir": str(out),
+                        "overwrite": self.overwrite,
+                        "record": self.recording.enabled,
+                        "record_every": self.recording.every,
+                        "viewer_url": viewer,
+                        "bag": self.bag,
+                    },
+                },
+            ),
+            encoding="utf-8",
+        )
         self.env = node_env(domain_id, logs)
         self.domain = domain_id
         self.params_file = params_file
         for name, module, extra in self.plan():
             log = logs / f"{name}.log"
-            self.children.append(self._spawn(name, node_command(module, params_file, name, extra, self.enclaves),
-                                             log, 0))
+            self.children.append(
+                self._spawn(name, node_command(module, params_file, name, extra, self.enclaves), log, 0)
+            )
         if not self.quiet:
-            print(f"swarm-ros: ROS domain {domain_id}, {plural(self.processes, 'robot-batch process')}, logs in {logs} "
-                  f"(kept in the run directory at the end)", file=sys.stderr, flush=True)
+            print(
+                f"swarm-ros: ROS domain {domain_id}, {plural(self.processes, 'robot-batch process')}, logs in {logs} "
+                f"(kept in the run directory at the end)",
+                file=sys.stderr,
+                flush=True,
+            )
 
     def plan(self) -> list[tuple[str, str, dict[str, int]]]:
         """The node processes, in start order: (node name, executable, parameters beyond the file's).
@@ -258,8 +284,9 @@ class Launch:
             f.write(f"--- swarm-ros: restarted, incarnation {incarnation} ---\n".encode())
             f.flush()
         full = command + (["-p", f"incarnation:={incarnation}"] if incarnation else [])
-        proc = subprocess.Popen(full, env=self.env, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                start_new_session=True)
+        proc = subprocess.Popen(
+            full, env=self.env, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True
+        )
         self._note(f"started {name} (pid {proc.pid})")
         return Child(name, proc, log, f, command=command, incarnation=incarnation)
 
@@ -292,8 +319,12 @@ class Launch:
         # inside the executor's call of a Python callback comes out as a RuntimeError from pybind11.
         # (Signal handlers can only be set from the main thread; a Dask worker runs this in another.)
         stop = StopFlag() if threading.current_thread() is threading.main_thread() else None
-        with stop or nullcontext(), Progress(self.domain, self.shape.patches, self.env[KEY_ENV].encode(),
-                                                      quiet=self.quiet, enclaves=self.enclaves) as progress:
+        with (
+            stop or nullcontext(),
+            Progress(
+                self.domain, self.shape.patches, self.env[KEY_ENV].encode(), quiet=self.quiet, enclaves=self.enclaves
+            ) as progress,
+        ):
             while True:
                 if stop is not None and stop.signum:
                     raise KeyboardInterrupt
@@ -348,8 +379,9 @@ class Launch:
         if len(seen) != self._shm_listed:
             self._shm_listed = len(seen)
             try:
-                (self.params_file.parent / SHM_LIST).write_text("".join(f"{f}\n" for f in sorted(seen)),
-                                                                encoding="utf-8")
+                (self.params_file.parent / SHM_LIST).write_text(
+                    "".join(f"{f}\n" for f in sorted(seen)), encoding="utf-8"
+                )
             except OSError:
                 pass  # a full disk: only the clean-up after a SIGKILL misses them
 

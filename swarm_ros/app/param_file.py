@@ -44,7 +44,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
                 continue  # the base loader refuses it, with its own message
             if key in seen:
                 raise yaml.constructor.ConstructorError(
-                    None, None, f"the key {key!r} is given twice (line {key_node.start_mark.line + 1})")
+                    None, None, f"the key {key!r} is given twice (line {key_node.start_mark.line + 1})"
+                )
             seen.add(key)
         return super().construct_mapping(node, deep)
 
@@ -88,8 +89,11 @@ def read_params_file(path: str | Path, base: Settings | None = None) -> tuple[Se
     values: dict[str, object] = {}
     nodes: dict[str, dict[str, object]] = {kind: {} for kind in NODE_PARAMETERS}
     for node, section in data.items():
-        if not isinstance(section, dict) or set(section) != {"ros__parameters"} \
-                or not isinstance(section["ros__parameters"], dict):
+        if (
+            not isinstance(section, dict)
+            or set(section) != {"ros__parameters"}
+            or not isinstance(section["ros__parameters"], dict)
+        ):
             raise ConfigError(f"{path}: section '{node}' must hold exactly one 'ros__parameters' mapping")
         kind = str(node).lstrip("/")
         own = {p.name: p for p in NODE_PARAMETERS.get(kind, ())}
@@ -99,8 +103,10 @@ def read_params_file(path: str | Path, base: Settings | None = None) -> tuple[Se
                 known = sorted({*RUN_PARAMETER, *own})
                 raise ConfigError(f"{path}: unknown parameter '{key}' in '{node}' (known: {', '.join(known)})")
             if key in RUN_PARAMETER and own:
-                raise ConfigError(f"{path}: '{node}' sets the run parameter '{key}'; run parameters go in '/**', "
-                                  f"which every node reads, so that all nodes run the same swarm")
+                raise ConfigError(
+                    f"{path}: '{node}' sets the run parameter '{key}'; run parameters go in '/**', "
+                    f"which every node reads, so that all nodes run the same swarm"
+                )
             try:
                 checked = param.check(value)
             except ParameterError as exc:
@@ -110,5 +116,3 @@ def read_params_file(path: str | Path, base: Settings | None = None) -> tuple[Se
             else:
                 nodes[kind][key] = checked
     return (base or Settings()).updated(**values), nodes
-
-

@@ -79,8 +79,10 @@ class DomainLock:
                 continue
             self.file, self.domain_id = f, d
             return
-        raise LaunchError(f"every ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is in use by "
-                          f"other swarm-ros runs; set ROS_DOMAIN_ID to choose one")
+        raise LaunchError(
+            f"every ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is in use by "
+            f"other swarm-ros runs; set ROS_DOMAIN_ID to choose one"
+        )
 
     def close(self) -> None:
         if self.file is not None:
@@ -102,8 +104,14 @@ def death(code: int) -> str:
     return f"exited with status {code}"
 
 
-def check_graph(shape, robots: int, processes: int, enclaves: str | None,
-                flags: tuple[str, str] = ("--processes", "--enclaves"), region_cuts: str = "") -> None:
+def check_graph(
+    shape,
+    robots: int,
+    processes: int,
+    enclaves: str | None,
+    flags: tuple[str, str] = ("--processes", "--enclaves"),
+    region_cuts: str = "",
+) -> None:
     """Refuse a graph that cannot run, before any node starts (``swarm-ros run`` and the launch file).
 
     Raises:
@@ -115,19 +123,25 @@ def check_graph(shape, robots: int, processes: int, enclaves: str | None,
 
     source = Path(shape.source)
     if source.exists() and not source.is_file():  # a pipe, /dev/null: read once here, but each node reads it too
-        raise InputError(f"{shape.source}: not a regular file; each node of the graph reads the shape file "
-                         f"itself, so the graph needs a file ('simulate' reads a pipe once)")
+        raise InputError(
+            f"{shape.source}: not a regular file; each node of the graph reads the shape file "
+            f"itself, so the graph needs a file ('simulate' reads a pipe once)"
+        )
     check_world_memory(shape.world.radius, copies=processes + 2)  # the world, the monitor, each batch
     if processes > shape.world.size:
-        raise InputError(f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
-                         f"robot-batch process ({flags[0]}, default 2); each strip needs at least one column")
+        raise InputError(
+            f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
+            f"robot-batch process ({flags[0]}, default 2); each strip needs at least one column"
+        )
     if region_cuts:
         from swarm_ros.core.regions import parse_cuts, strip
 
         strip(0, processes, parse_cuts(region_cuts), shape.world.radius)
     if enclaves is not None and not ENCLAVE_PREFIX.fullmatch(enclaves):
-        raise InputError(f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
-                         f"after each /), got {enclaves!r}")
+        raise InputError(
+            f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
+            f"after each /), got {enclaves!r}"
+        )
 
 
 def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
@@ -142,11 +156,20 @@ def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
     return with_run_key(env)
 
 
-def node_command(module: str, params_file: Path, name: str, extra: dict[str, object] | None = None,
-                 enclaves: str | None = None) -> list[str]:
+def node_command(
+    module: str, params_file: Path, name: str, extra: dict[str, object] | None = None, enclaves: str | None = None
+) -> list[str]:
     """The command of a node process; with ``enclaves`` (SROS2), its enclave is ``<enclaves>/<name>``."""
-    cmd = [sys.executable, "-m", f"swarm_ros.nodes.{module}", "--ros-args", "--params-file", str(params_file),
-           "-r", f"__node:={name}"]
+    cmd = [
+        sys.executable,
+        "-m",
+        f"swarm_ros.nodes.{module}",
+        "--ros-args",
+        "--params-file",
+        str(params_file),
+        "-r",
+        f"__node:={name}",
+    ]
     if enclaves:
         cmd += ["--enclave", f"{enclaves}/{name}"]
     for key, value in (extra or {}).items():
@@ -208,8 +231,13 @@ def recover_killed(out: Path) -> list[Path]:
             listed = (hidden / SHM_LIST).read_text(encoding="utf-8", errors="replace").split()
         except OSError:
             listed = []
-        clean_shm({f for f in listed if Path(f).parent == SHM_DIR and Path(f).name.startswith("fastrtps_")
-                   and f.endswith("_el")})  # its own file, but checked: only Fast DDS lock files in /dev/shm
+        clean_shm(
+            {
+                f
+                for f in listed
+                if Path(f).parent == SHM_DIR and Path(f).name.startswith("fastrtps_") and f.endswith("_el")
+            }
+        )  # its own file, but checked: only Fast DDS lock files in /dev/shm
         for f in hidden.glob(CHECKPOINT + "*"):
             f.unlink(missing_ok=True)
         target = logs_target(out, False)

@@ -24,8 +24,16 @@ from pathlib import Path
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.inputs import YAML_LIMIT, read_bounded
 
-COLUMNS = ("shape", "study_robots", "mean_ticks", "ci95_low", "ci95_high", "group_sizes", "sizes_mean_min",
-           "sizes_mean_max")
+COLUMNS = (
+    "shape",
+    "study_robots",
+    "mean_ticks",
+    "ci95_low",
+    "ci95_high",
+    "group_sizes",
+    "sizes_mean_min",
+    "sizes_mean_max",
+)
 
 
 class ReferenceFileError(InputError):
@@ -71,10 +79,16 @@ def load_reference(path: Path) -> dict[str, Reference]:
             raise ReferenceFileError(f"{path}:{n}: expected {len(COLUMNS)} values, got {len(values)}")
         row = dict(zip(COLUMNS, values))
         try:
-            ref = Reference(shape=row["shape"].strip(), study_robots=int(row["study_robots"]),
-                            mean=float(row["mean_ticks"]), ci95_low=float(row["ci95_low"]),
-                            ci95_high=float(row["ci95_high"]), group_sizes=row["group_sizes"].strip(),
-                            sizes_mean_min=float(row["sizes_mean_min"]), sizes_mean_max=float(row["sizes_mean_max"]))
+            ref = Reference(
+                shape=row["shape"].strip(),
+                study_robots=int(row["study_robots"]),
+                mean=float(row["mean_ticks"]),
+                ci95_low=float(row["ci95_low"]),
+                ci95_high=float(row["ci95_high"]),
+                group_sizes=row["group_sizes"].strip(),
+                sizes_mean_min=float(row["sizes_mean_min"]),
+                sizes_mean_max=float(row["sizes_mean_max"]),
+            )
         except ValueError:
             raise ReferenceFileError(f"{path}:{n}: a value is not a number") from None
         numbers = (ref.mean, ref.ci95_low, ref.ci95_high, ref.sizes_mean_min, ref.sizes_mean_max)

@@ -83,9 +83,11 @@ def _curve(row: dict) -> np.ndarray:
     sim = Simulation(shape, RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model}))
     sim.run()
     if sim.tick != row["convergence_tick"] or sim.outcome.value != row["outcome"]:
-        raise ExperimentError(f"re-running {row['shape']} n={row['robots']} seed {row['seed']} gave "
-                              f"{sim.outcome} at tick {sim.tick}, the results say {row['outcome']} at tick "
-                              f"{row['convergence_tick']}")
+        raise ExperimentError(
+            f"re-running {row['shape']} n={row['robots']} seed {row['seed']} gave "
+            f"{sim.outcome} at tick {sim.tick}, the results say {row['outcome']} at tick "
+            f"{row['convergence_tick']}"
+        )
     return sim.history.copy()
 
 
@@ -99,18 +101,40 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
     patches = s0["shape_patches"]
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), dpi=110)
     (a, b), (c, d) = axes
-    fig.suptitle(f"{s0['shape']} ({patches} patches), rules {s0['rules']}, vision radius {s0['vision_radius']:g}, "
-                 f"{s0['runs']} runs per group size", fontsize=12)
+    fig.suptitle(
+        f"{s0['shape']} ({patches} patches), rules {s0['rules']}, vision radius {s0['vision_radius']:g}, "
+        f"{s0['runs']} runs per group size",
+        fontsize=12,
+    )
     a.plot(n, mean, "o-", color=_COLOURS[0])
     a.set_title("(a) mean convergence time", fontsize=10)
-    b.errorbar(n, mean, yerr=np.nan_to_num(np.vstack([mean - lo, hi - mean])), fmt="o-", capsize=4,
-               color=_COLOURS[0], label="this project")
+    b.errorbar(
+        n,
+        mean,
+        yerr=np.nan_to_num(np.vstack([mean - lo, hi - mean])),
+        fmt="o-",
+        capsize=4,
+        color=_COLOURS[0],
+        label="this project",
+    )
     b.set_title("(b) mean convergence time, 95% CI (Student t)", fontsize=10)
     if ref is not None:
-        b.errorbar([ref.study_robots], [ref.mean], yerr=[[ref.mean - ref.ci95_low], [ref.ci95_high - ref.mean]],
-                   fmt="D", capsize=4, color=_COLOURS[1], label=f"published (N = {ref.study_robots})")
-        b.axhspan(ref.sizes_mean_min, ref.sizes_mean_max, color=_COLOURS[1], alpha=0.08,
-                  label=f"published range over {ref.group_sizes}")
+        b.errorbar(
+            [ref.study_robots],
+            [ref.mean],
+            yerr=[[ref.mean - ref.ci95_low], [ref.ci95_high - ref.mean]],
+            fmt="D",
+            capsize=4,
+            color=_COLOURS[1],
+            label=f"published (N = {ref.study_robots})",
+        )
+        b.axhspan(
+            ref.sizes_mean_min,
+            ref.sizes_mean_max,
+            color=_COLOURS[1],
+            alpha=0.08,
+            label=f"published range over {ref.group_sizes}",
+        )
         b.legend(fontsize=8)
     for ax in (a, b):
         ax.set_xlabel("group size N (robots)")
@@ -118,8 +142,10 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
     c.plot(n, [s["mean_localized"] for s in stats], "o-", color=_COLOURS[0], label="localized robots (left)")
     c.set_ylabel("localized robots", color=_COLOURS[0])
     right = c.twinx()
-    for key, label, colour in (("mean_unlocalized", "unlocalized robots (right)", _COLOURS[1]),
-                               ("mean_empty_patches", "empty shape patches (right)", _COLOURS[3])):
+    for key, label, colour in (
+        ("mean_unlocalized", "unlocalized robots (right)", _COLOURS[1]),
+        ("mean_empty_patches", "empty shape patches (right)", _COLOURS[3]),
+    ):
         right.plot(n, [s[key] for s in stats], "s--", color=colour, label=label)
     right.set_ylabel("unlocalized robots, empty patches")
     right.set_ylim(bottom=0)
@@ -131,8 +157,13 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
     for k, s in enumerate(stats):
         first = min((r for r in rows if r["robots"] == s["robots"]), key=lambda r: r["repetition"])
         h = _curve(first)
-        d.plot(h[:, 0], h[:, empty], color=_COLOURS[k % len(_COLOURS)], lw=1.2,
-               label=f"N = {s['robots']}: {first['outcome']} at {first['convergence_tick']}")
+        d.plot(
+            h[:, 0],
+            h[:, empty],
+            color=_COLOURS[k % len(_COLOURS)],
+            lw=1.2,
+            label=f"N = {s['robots']}: {first['outcome']} at {first['convergence_tick']}",
+        )
     d.set_yscale("symlog", linthresh=1)
     d.set_ylim(bottom=0)
     d.set_title("(d) one run per group size: empty shape patches", fontsize=10)
@@ -176,8 +207,15 @@ def all_shapes_figure(stats: list[dict], vision: float, rules: str, path: Path) 
         x = np.array([s["robots"] - s["shape_patches"] for s in ss])
         m = np.array([s["mean_convergence_tick"] for s in ss])
         err = np.nan_to_num(np.vstack([m - [s["ci95_low"] for s in ss], [s["ci95_high"] for s in ss] - m]))
-        ax.errorbar(x, m, yerr=err, fmt="o-", capsize=3, color=_COLOURS[k % len(_COLOURS)],
-                    label=f"{shape} ({ss[0]['shape_patches']} patches)")
+        ax.errorbar(
+            x,
+            m,
+            yerr=err,
+            fmt="o-",
+            capsize=3,
+            color=_COLOURS[k % len(_COLOURS)],
+            label=f"{shape} ({ss[0]['shape_patches']} patches)",
+        )
     ax.axvline(0, color="#999999", lw=0.8, ls=":")
     ax.set_title(f"Mean convergence time, 95% CI, rules {rules}, vision radius {vision:g}", fontsize=11)
     ax.set_xlabel("group size minus the shape's patch count (robots)")
@@ -234,8 +272,9 @@ def study_figure(stats: list[dict], reference: dict[str, Reference], path: Path)
         marker = "os^Dv<>"[visions.index(vision) % 7]
         xs, ys, lo, hi = [], [], [], []
         for j, name in enumerate(shapes):
-            s = next((s for s in exact if s["shape"] == name and s["rules"] == rules
-                      and s["vision_radius"] == vision), None)
+            s = next(
+                (s for s in exact if s["shape"] == name and s["rules"] == rules and s["vision_radius"] == vision), None
+            )
             if s is None:
                 continue
             m = reference[name].mean
@@ -243,18 +282,21 @@ def study_figure(stats: list[dict], reference: dict[str, Reference], path: Path)
             ys.append(s["mean_convergence_tick"] / m)
             lo.append(np.nan_to_num(s["mean_convergence_tick"] - s["ci95_low"]) / m)
             hi.append(np.nan_to_num(s["ci95_high"] - s["mean_convergence_tick"]) / m)
-        ax.errorbar(xs, ys, yerr=[lo, hi], fmt=marker, capsize=2, ls="none", color=colour,
-                    label=f"{rules}, vision {vision:g}")
+        ax.errorbar(
+            xs, ys, yerr=[lo, hi], fmt=marker, capsize=2, ls="none", color=colour, label=f"{rules}, vision {vision:g}"
+        )
     for j, name in enumerate(shapes):  # the published CI, relative to its mean
         ref = reference[name]
-        ax.fill_between([j - 0.45, j + 0.45], ref.ci95_low / ref.mean, ref.ci95_high / ref.mean, color="#999999",
-                        alpha=0.2, lw=0)
+        ax.fill_between(
+            [j - 0.45, j + 0.45], ref.ci95_low / ref.mean, ref.ci95_high / ref.mean, color="#999999", alpha=0.2, lw=0
+        )
     ax.axhline(1.0, color="#333333", lw=0.8)
     ax.set_yscale("log")
     ax.set_xticks(range(len(shapes)), [f"{n}\n({reference[n].study_robots})" for n in shapes])
     ax.set_ylabel("our mean time / published mean time")
-    ax.set_title("Convergence time at each shape's patch count against the published one (grey: published 95% CI)",
-                 fontsize=10)
+    ax.set_title(
+        "Convergence time at each shape's patch count against the published one (grey: published 95% CI)", fontsize=10
+    )
     ax.grid(alpha=0.3, axis="y")
     ax.legend(fontsize=7, ncol=3)
     fig.tight_layout()
@@ -273,9 +315,12 @@ def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: P
         vs = [s for s in stats if s["vision_radius"] == vision and s["rules"] == rules]
         for shape in sorted({s["shape"] for s in vs}):
             path = figures / f"{shape}_{_safe(rules)}_v{vision:g}.png"
-            shape_figure([s for s in vs if s["shape"] == shape],
-                         [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision
-                          and rules_label(r) == rules], path, reference.get(shape))
+            shape_figure(
+                [s for s in vs if s["shape"] == shape],
+                [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision and rules_label(r) == rules],
+                path,
+                reference.get(shape),
+            )
             written.append(path)
         path = figures / f"all_shapes_{_safe(rules)}_v{vision:g}.png"
         all_shapes_figure(vs, vision, rules, path)

@@ -17,10 +17,26 @@ from swarm_ros.core.rulesets import RULE_SETS, RuleSet
 
 STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"
 OUTCOMES = tuple(o.value for o in Outcome)
-STATS_COLUMNS = ("shape", "shape_patches", "robots", "vision_radius", "rules", "runs", "mean_convergence_tick",
-                 "sd_convergence_tick", "ci95_low", "ci95_high", "mean_localized", "mean_unlocalized",
-                 "mean_separated", "mean_empty_patches", "mean_lost_robots", *OUTCOMES, "completed_fraction",
-                 "mean_convergence_rate")
+STATS_COLUMNS = (
+    "shape",
+    "shape_patches",
+    "robots",
+    "vision_radius",
+    "rules",
+    "runs",
+    "mean_convergence_tick",
+    "sd_convergence_tick",
+    "ci95_low",
+    "ci95_high",
+    "mean_localized",
+    "mean_unlocalized",
+    "mean_separated",
+    "mean_empty_patches",
+    "mean_lost_robots",
+    *OUTCOMES,
+    "completed_fraction",
+    "mean_convergence_rate",
+)
 _COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000")
 
 
@@ -47,16 +63,27 @@ def group_stats(rows: list[dict]) -> list[dict]:
         sd = float(ticks.std(ddof=1)) if n > 1 else math.nan
         half = float(st.t.ppf(0.975, n - 1) * sd / math.sqrt(n)) if n > 1 else math.nan
         counts = {o: sum(r["outcome"] == o for r in runs) for o in OUTCOMES}
-        out.append({
-            "shape": shape, "shape_patches": runs[0]["shape_patches"], "robots": robots, "vision_radius": vision,
-            "rules": rules, "runs": n, "mean_convergence_tick": mean, "sd_convergence_tick": sd,
-            "ci95_low": mean - half, "ci95_high": mean + half,
-            **{f"mean_{k}": float(np.mean([r[k] for r in runs]))
-               for k in ("localized", "unlocalized", "separated", "empty_patches", "lost_robots")},
-            **counts,
-            "completed_fraction": (counts["complete"] + counts["complete_with_extras"]) / n,
-            "mean_convergence_rate": float(np.mean([r["convergence_rate"] for r in runs])),
-        })
+        out.append(
+            {
+                "shape": shape,
+                "shape_patches": runs[0]["shape_patches"],
+                "robots": robots,
+                "vision_radius": vision,
+                "rules": rules,
+                "runs": n,
+                "mean_convergence_tick": mean,
+                "sd_convergence_tick": sd,
+                "ci95_low": mean - half,
+                "ci95_high": mean + half,
+                **{
+                    f"mean_{k}": float(np.mean([r[k] for r in runs]))
+                    for k in ("localized", "unlocalized", "separated", "empty_patches", "lost_robots")
+                },
+                **counts,
+                "completed_fraction": (counts["complete"] + counts["complete_with_extras"]) / n,
+                "mean_convergence_rate": float(np.mean([r["convergence_rate"] for r in runs])),
+            }
+        )
     return out
 
 
@@ -85,14 +112,15 @@ def _rules_order(stats: list[dict]) -> list[str]:
     """The rule set labels of the stats: the named sets in their own order (paper, local, literal), each
     before its variants with overrides, then any other label alphabetically."""
     names = list(RULE_SETS)
-    return sorted({s["rules"] for s in stats}, key=lambda label: (
-        names.index(label.split("+")[0]) if label.split("+")[0] in names else len(names), label))
+    return sorted(
+        {s["rules"] for s in stats},
+        key=lambda label: (names.index(label.split("+")[0]) if label.split("+")[0] in names else len(names), label),
+    )
 
 
 def _sections(stats: list[dict]) -> list[tuple[str, float]]:
     """(rule set, vision radius) of the stats, rule sets in :func:`_rules_order`, radii ascending."""
-    return [(r, v) for r in _rules_order(stats)
-            for v in sorted({s["vision_radius"] for s in stats if s["rules"] == r})]
+    return [(r, v) for r in _rules_order(stats) for v in sorted({s["vision_radius"] for s in stats if s["rules"] == r})]
 
 
 def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = None) -> str:
@@ -100,20 +128,27 @@ def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = N
     with ``reference``, a comparison with the published numbers after it."""
     lines = []
     for rules, vision in _sections(stats):
-        lines += [f"### Rules `{rules}`, vision radius {vision:g}", "",
-                  "| shape | patches | robots | runs | mean time (ticks) | 95% CI | localized | unlocalized "
-                  "| empty patches | outcomes |",
-                  "|---|---:|---:|---:|---:|---|---:|---:|---:|---|"]
+        lines += [
+            f"### Rules `{rules}`, vision radius {vision:g}",
+            "",
+            "| shape | patches | robots | runs | mean time (ticks) | 95% CI | localized | unlocalized "
+            "| empty patches | outcomes |",
+            "|---|---:|---:|---:|---:|---|---:|---:|---:|---|",
+        ]
         for s in (s for s in stats if s["vision_radius"] == vision and s["rules"] == rules):
             outcomes = ", ".join(f"{s[o]} {o}" for o in OUTCOMES if s[o])
             mark = " **=**" if s["robots"] == s["shape_patches"] else ""
-            lines.append(f"| {s['shape']} | {s['shape_patches']} | {s['robots']}{mark} | {s['runs']} | "
-                         f"{s['mean_convergence_tick']:.0f} | {_ci(s)} | {s['mean_localized']:.1f} | "
-                         f"{s['mean_unlocalized']:.1f} | {s['mean_empty_patches']:.1f} | {outcomes} |")
+            lines.append(
+                f"| {s['shape']} | {s['shape_patches']} | {s['robots']}{mark} | {s['runs']} | "
+                f"{s['mean_convergence_tick']:.0f} | {_ci(s)} | {s['mean_localized']:.1f} | "
+                f"{s['mean_unlocalized']:.1f} | {s['mean_empty_patches']:.1f} | {outcomes} |"
+            )
         lines.append("")
-    lines.append("Times are convergence ticks (the tick the run ended). 95% CI: Student t on the runs' "
-                 "convergence ticks, its lower bound shown as 0 where it falls below (stats.csv keeps it as computed). "
-                 "**=** marks the group size equal to the shape's patch count.")
+    lines.append(
+        "Times are convergence ticks (the tick the run ended). 95% CI: Student t on the runs' "
+        "convergence ticks, its lower bound shown as 0 where it falls below (stats.csv keeps it as computed). "
+        "**=** marks the group size equal to the shape's patch count."
+    )
     if reference:
         lines += ["", *against_reference(stats, reference)]
     return "\n".join(lines) + "\n"
@@ -122,20 +157,27 @@ def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = N
 def against_reference(stats: list[dict], reference: dict[str, Reference]) -> list[str]:
     """Markdown: each shape's result at N = its patch count beside the published one, per rule set and radius;
     and the range of the mean over the other group sizes beside the published range."""
-    lines = ["## Against the published numbers", "",
-             "Each shape at N = its exact patch count (the study's count is its own, given in brackets). "
-             "Ratio = our mean / the published mean. *In CI*: whether our mean lies in the published 95% CI. "
-             "Range: the mean over the other group sizes, lowest to highest.", ""]
+    lines = [
+        "## Against the published numbers",
+        "",
+        "Each shape at N = its exact patch count (the study's count is its own, given in brackets). "
+        "Ratio = our mean / the published mean. *In CI*: whether our mean lies in the published 95% CI. "
+        "Range: the mean over the other group sizes, lowest to highest.",
+        "",
+    ]
     for rules, vision in _sections(stats):
         rows = [s for s in stats if s["rules"] == rules and s["vision_radius"] == vision]
         exact = {s["shape"]: s for s in rows if s["robots"] == s["shape_patches"]}
         shapes = [name for name in reference if name in exact]
         if not shapes:
             continue
-        lines += [f"### Rules `{rules}`, vision radius {vision:g}", "",
-                  "| shape | published mean [95% CI] | ours (N) | our mean [95% CI] | ratio | in CI "
-                  "| published range | our range |",
-                  "|---|---|---:|---|---:|---|---|---|"]
+        lines += [
+            f"### Rules `{rules}`, vision radius {vision:g}",
+            "",
+            "| shape | published mean [95% CI] | ours (N) | our mean [95% CI] | ratio | in CI "
+            "| published range | our range |",
+            "|---|---|---:|---|---:|---|---|---|",
+        ]
         for name in shapes:
             ref, s = reference[name], exact[name]
             others = [o["mean_convergence_tick"] for o in rows if o["shape"] == name and o is not s]
@@ -145,14 +187,18 @@ def against_reference(stats: list[dict], reference: dict[str, Reference]) -> lis
                 f"{s['robots']} | {s['mean_convergence_tick']:.1f} {_ci(s)} | "
                 f"{s['mean_convergence_tick'] / ref.mean:.2f} | "
                 f"{'yes' if ref.contains(s['mean_convergence_tick']) else 'no'} | "
-                f"{ref.sizes_mean_min:g}–{ref.sizes_mean_max:g} | {ours} |")
+                f"{ref.sizes_mean_min:g}–{ref.sizes_mean_max:g} | {ours} |"
+            )
         ratios = np.array([exact[n]["mean_convergence_tick"] / reference[n].mean for n in shapes])
-        summary = (f"Ratio {ratios.min():.2f}–{ratios.max():.2f}, geometric mean "
-                   f"{float(np.exp(np.log(ratios).mean())):.2f}; our mean within the published CI for "
-                   f"{sum(reference[n].contains(exact[n]['mean_convergence_tick']) for n in shapes)} of {len(shapes)}")
+        summary = (
+            f"Ratio {ratios.min():.2f}–{ratios.max():.2f}, geometric mean "
+            f"{float(np.exp(np.log(ratios).mean())):.2f}; our mean within the published CI for "
+            f"{sum(reference[n].contains(exact[n]['mean_convergence_tick']) for n in shapes)} of {len(shapes)}"
+        )
         if len(shapes) >= 3:
-            rho = st.spearmanr([reference[n].mean for n in shapes],
-                               [exact[n]["mean_convergence_tick"] for n in shapes]).statistic
+            rho = st.spearmanr(
+                [reference[n].mean for n in shapes], [exact[n]["mean_convergence_tick"] for n in shapes]
+            ).statistic
             summary += f"; the shapes' order by time against the published order: Spearman ρ = {rho:.2f}"
         lines += ["", summary + ".", ""]
     return lines

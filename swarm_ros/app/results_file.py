@@ -22,11 +22,30 @@ REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied 
 _AFTER = {"shape": ("shape_file",), "steps": ("repetition",), "seed": ("shape_patches",)}
 #: One row of results.csv: the run's coordinates (every run parameter, in its declaration's order), then the
 #: summary.json fields of its outcome.
-RESULT_COLUMNS = (*(c for p in RUN_PARAMETERS if p.recorded for c in (p.name, *_AFTER.get(p.name, ()))),
-                  "engine", "outcome", "convergence_tick", "localized", "unlocalized", "separated", "empty_patches",
-                  "lost_robots", "convergence_rate", "wall_seconds")
-_INT_COLUMNS = {"repetition", "shape_patches", "convergence_tick", "localized", "unlocalized", "separated",
-                "empty_patches", "lost_robots", *(p.name for p in RUN_PARAMETERS if p.kind is int)}
+RESULT_COLUMNS = (
+    *(c for p in RUN_PARAMETERS if p.recorded for c in (p.name, *_AFTER.get(p.name, ()))),
+    "engine",
+    "outcome",
+    "convergence_tick",
+    "localized",
+    "unlocalized",
+    "separated",
+    "empty_patches",
+    "lost_robots",
+    "convergence_rate",
+    "wall_seconds",
+)
+_INT_COLUMNS = {
+    "repetition",
+    "shape_patches",
+    "convergence_tick",
+    "localized",
+    "unlocalized",
+    "separated",
+    "empty_patches",
+    "lost_robots",
+    *(p.name for p in RUN_PARAMETERS if p.kind is int),
+}
 _FLOAT_COLUMNS = {"convergence_rate", "wall_seconds", *(p.name for p in RUN_PARAMETERS if p.kind is float)}
 
 
@@ -52,12 +71,15 @@ def read_results(path: Path) -> list[dict]:
         raise ExperimentError(f"{path}: not a swarm-ros results file (not UTF-8 text)") from None
     text = text[: text.rfind("\n") + 1]  # drop a last line cut short
     if text.split("\n", 1)[0] != ",".join(RESULT_COLUMNS):
-        raise ExperimentError(f"{path}: not a swarm-ros results file (expected the columns "
-                              f"{', '.join(RESULT_COLUMNS)})")
+        raise ExperimentError(
+            f"{path}: not a swarm-ros results file (expected the columns {', '.join(RESULT_COLUMNS)})"
+        )
     rows = list(csv.DictReader(io.StringIO(text)))
     try:
-        return [{k: int(v) if k in _INT_COLUMNS else float(v) if k in _FLOAT_COLUMNS else v for k, v in r.items()}
-                for r in rows]
+        return [
+            {k: int(v) if k in _INT_COLUMNS else float(v) if k in _FLOAT_COLUMNS else v for k, v in r.items()}
+            for r in rows
+        ]
     except (TypeError, ValueError):
         raise ExperimentError(f"{path}: a row has a malformed number") from None
 

@@ -101,12 +101,15 @@ class Supervisor:
                 return Verdict(wait_for_monitor=not self.monitor_done)
             if code > 0:
                 if name == MONITOR and self.world_ended:
-                    return Verdict(end=f"the monitor {death(code)}; the swarm ran to its end, but no run "
-                                       f"directory was written")
+                    return Verdict(
+                        end=f"the monitor {death(code)}; the swarm ran to its end, but no run directory was written"
+                    )
                 return Verdict(end=how)
             if done >= self.max_restarts:
-                return Verdict(end=f"{how}; it was restarted {self.max_restarts} times already ({self.said[1]}): "
-                                   f"the run cannot go on")
+                return Verdict(
+                    end=f"{how}; it was restarted {self.max_restarts} times already ({self.said[1]}): "
+                    f"the run cannot go on"
+                )
             return self._restart(name, how)
         if code == 0 or self.world_ended or self.monitor_done:
             return Verdict()
@@ -115,8 +118,11 @@ class Supervisor:
                 return self._restart(name, how)
             if not started:
                 return Verdict(end=f"{how} before the run started, {self.max_restarts + 1} times")
-        then = f"the world removes its robots ({self.said[0]})" if self.on_batch_loss != "restart" else \
-            f"it was restarted {self.max_restarts} times already: the world removes its robots"
+        then = (
+            f"the world removes its robots ({self.said[0]})"
+            if self.on_batch_loss != "restart"
+            else f"it was restarted {self.max_restarts} times already: the world removes its robots"
+        )
         return Verdict(note=f"{how}; {then} and the run goes on")
 
     def _restart(self, name: str, how: str) -> Verdict:
@@ -173,8 +179,15 @@ def argument_value(name: str, text: str) -> object:
         raise ConfigError(f"launch argument {name}:={text}: {exc}") from None
 
 
-def launch_setup(params_file: str, arguments: dict[str, str], out_dir: str, log_dir: Path, processes: int,
-                 enclaves: str = "", region_cuts: str = "") -> LaunchSetup:
+def launch_setup(
+    params_file: str,
+    arguments: dict[str, str],
+    out_dir: str,
+    log_dir: Path,
+    processes: int,
+    enclaves: str = "",
+    region_cuts: str = "",
+) -> LaunchSetup:
     """Resolve a launch's arguments as ``swarm-ros run`` resolves its flags, and write the nodes' parameter
     file into ``log_dir``. A launch argument wins over the parameter file (run parameters and ``out_dir``);
     the world's checkpoint is ``<log_dir>/world.checkpoint``; an empty ``out_dir`` is named here
@@ -187,13 +200,17 @@ def launch_setup(params_file: str, arguments: dict[str, str], out_dir: str, log_
     settings = settings.updated(**{name: argument_value(name, text) for name, text in arguments.items() if text})
     shape, params = settings.resolve()
     region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))
-    check_graph(shape, params.robots, processes, enclaves or None, flags=("processes", "enclaves"),
-                region_cuts=region_cuts)
+    check_graph(
+        shape, params.robots, processes, enclaves or None, flags=("processes", "enclaves"), region_cuts=region_cuts
+    )
     if Path(settings.shape).suffix.lower() in (".txt", ".png"):
         settings = settings.updated(shape=str(Path(settings.shape).absolute()))
     settings = settings.updated(robots=params.robots)
-    out = Path(out_dir or nodes["monitor"].get("out_dir") or
-               default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)).absolute()
+    out = Path(
+        out_dir
+        or nodes["monitor"].get("out_dir")
+        or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
+    ).absolute()
     check_out_dir(out, bool(nodes["monitor"].get("overwrite", False)))
     world = {**node_defaults(WORLD), **nodes["world"], "checkpoint": str(log_dir / CHECKPOINT)}
     sections = {WORLD: world, MONITOR: {**nodes["monitor"], "out_dir": str(out)}}
@@ -204,5 +221,10 @@ def launch_setup(params_file: str, arguments: dict[str, str], out_dir: str, log_
     part = path.with_name(path.name + ".part")
     part.write_text(params_yaml(settings, sections), encoding="utf-8")
     part.replace(path)
-    return LaunchSetup(path, out, log_dir / CHECKPOINT,
-                       Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"])), region_cuts)
+    return LaunchSetup(
+        path,
+        out,
+        log_dir / CHECKPOINT,
+        Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"])),
+        region_cuts,
+    )

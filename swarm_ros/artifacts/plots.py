@@ -44,20 +44,32 @@ def save_final_png(run: RunRecord, path: Path) -> None:
     grid[np.isin(occ, np.arange(4))] = 4
 
     fig, ax = plt.subplots(figsize=(6.4, 6.8), dpi=120)
-    ax.imshow(grid, origin="lower", cmap=ListedColormap([c for _, c in _CLASSES]), vmin=0, vmax=len(_CLASSES) - 1,
-              extent=(-r - 0.5, r + 0.5, -r - 0.5, r + 0.5), interpolation="nearest")
+    ax.imshow(
+        grid,
+        origin="lower",
+        cmap=ListedColormap([c for _, c in _CLASSES]),
+        vmin=0,
+        vmax=len(_CLASSES) - 1,
+        extent=(-r - 0.5, r + 0.5, -r - 0.5, r + 0.5),
+        interpolation="nearest",
+    )
     handles = [Patch(facecolor=c, edgecolor="#999999", label=name) for name, c in _CLASSES[1:]]
     moving = (s.state == RobotState.MOVING_INSIDE) | (s.state == RobotState.MOVING_OUTSIDE)
-    for mask, colour, label in ((moving, _MOVING_COLOUR, "wandering robot"),
-                                (s.state == RobotState.WALKING, _WALKING_COLOUR, "walking robot"),
-                                (s.state == RobotState.SEPARATED, _SEPARATED_COLOUR, "separated robot")):
+    for mask, colour, label in (
+        (moving, _MOVING_COLOUR, "wandering robot"),
+        (s.state == RobotState.WALKING, _WALKING_COLOUR, "walking robot"),
+        (s.state == RobotState.SEPARATED, _SEPARATED_COLOUR, "separated robot"),
+    ):
         if mask.any():
             ax.scatter(s.x[mask], s.y[mask], s=9, c=colour, linewidths=0, zorder=3)
             handles.append(Patch(facecolor=colour, label=f"{label} ({int(mask.sum())})"))
     m, p = run.final, run.params
-    ax.set_title(f"{run.shape.name}: {run.outcome} at tick {m.tick}\n"
-                 f"{p.robots} robots, rules {p.ruleset.label}, vision {p.vision_radius:g}, seed {p.seed}; "
-                 f"{m.localized}/{run.shape.patches} patches filled", fontsize=10)
+    ax.set_title(
+        f"{run.shape.name}: {run.outcome} at tick {m.tick}\n"
+        f"{p.robots} robots, rules {p.ruleset.label}, vision {p.vision_radius:g}, seed {p.seed}; "
+        f"{m.localized}/{run.shape.patches} patches filled",
+        fontsize=10,
+    )
     ax.set_xlabel("x (patches)")
     ax.set_ylabel("y (patches)")
     ax.set_aspect("equal")
@@ -68,8 +80,11 @@ def save_final_png(run: RunRecord, path: Path) -> None:
 
 
 # The three views of a 3D run's final.png: (title, axis projected away, horizontal and vertical axes).
-_VIEWS_3D = (("from above (along z)", 0, "x", "y"), ("from the front (along y)", 1, "x", "z"),
-             ("from the side (along x)", 2, "y", "z"))
+_VIEWS_3D = (
+    ("from above (along z)", 0, "x", "y"),
+    ("from the front (along y)", 1, "x", "z"),
+    ("from the side (along x)", 2, "y", "z"),
+)
 
 
 def save_final_png_3d(run: RunRecord, path: Path) -> None:
@@ -91,14 +106,25 @@ def save_final_png_3d(run: RunRecord, path: Path) -> None:
         total = shape.mask.sum(axis=axis)
         done = filled.sum(axis=axis)
         fraction = np.where(total > 0, done / np.maximum(total, 1), np.nan)
-        image = ax.imshow(fraction, origin="lower", cmap="cividis", vmin=0.0, vmax=1.0, interpolation="nearest",
-                          extent=(-r - 0.5, r + 0.5, -r - 0.5, r + 0.5))
+        image = ax.imshow(
+            fraction,
+            origin="lower",
+            cmap="cividis",
+            vmin=0.0,
+            vmax=1.0,
+            interpolation="nearest",
+            extent=(-r - 0.5, r + 0.5, -r - 0.5, r + 0.5),
+        )
         lo, hi = shape.bbox[:3], shape.bbox[3:]  # zoomed to the shape, 3 voxels round it
         a, u = "xyz".index(across), "xyz".index(up)
         ax.set_xlim(lo[a] - 3.5, hi[a] + 3.5)
         ax.set_ylim(lo[u] - 3.5, hi[u] + 3.5)
-        for state, colour in ((RobotState.MOVING_INSIDE, _MOVING_COLOUR), (RobotState.MOVING_OUTSIDE, _MOVING_COLOUR),
-                              (RobotState.WALKING, _WALKING_COLOUR), (RobotState.SEPARATED, _SEPARATED_COLOUR)):
+        for state, colour in (
+            (RobotState.MOVING_INSIDE, _MOVING_COLOUR),
+            (RobotState.MOVING_OUTSIDE, _MOVING_COLOUR),
+            (RobotState.WALKING, _WALKING_COLOUR),
+            (RobotState.SEPARATED, _SEPARATED_COLOUR),
+        ):
             mask = s.state == state
             if mask.any():
                 ax.scatter(position[across][mask], position[up][mask], s=6, c=colour, linewidths=0, zorder=3)
@@ -107,15 +133,20 @@ def save_final_png_3d(run: RunRecord, path: Path) -> None:
         ax.set_ylabel(f"{up} (voxels)")
         ax.set_aspect("equal")
     fig.colorbar(image, ax=list(axes), shrink=0.8, label="filled fraction of the shape voxels along the line")
-    handles = [Patch(facecolor=c, label=f"{label} ({int(np.isin(s.state, states).sum())})")
-               for label, c, states in (("wandering robot", _MOVING_COLOUR,
-                                         (RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE)),
-                                        ("walking robot", _WALKING_COLOUR, (RobotState.WALKING,)),
-                                        ("separated robot", _SEPARATED_COLOUR, (RobotState.SEPARATED,)))]
+    handles = [
+        Patch(facecolor=c, label=f"{label} ({int(np.isin(s.state, states).sum())})")
+        for label, c, states in (
+            ("wandering robot", _MOVING_COLOUR, (RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE)),
+            ("walking robot", _WALKING_COLOUR, (RobotState.WALKING,)),
+            ("separated robot", _SEPARATED_COLOUR, (RobotState.SEPARATED,)),
+        )
+    ]
     m, p = run.final, run.params
-    fig.suptitle(f"{shape.name} (3D): {run.outcome} at tick {m.tick}; {p.robots} robots, rules {p.ruleset.label}, "
-                 f"vision {p.vision_radius:g}, seed {p.seed}; {m.localized}/{shape.patches} voxels filled",
-                 fontsize=11)
+    fig.suptitle(
+        f"{shape.name} (3D): {run.outcome} at tick {m.tick}; {p.robots} robots, rules {p.ruleset.label}, "
+        f"vision {p.vision_radius:g}, seed {p.seed}; {m.localized}/{shape.patches} voxels filled",
+        fontsize=11,
+    )
     fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8, frameon=False)  # room made for it
     fig.savefig(path)
     plt.close(fig)
@@ -145,11 +176,22 @@ def save_convergence_png(run: RunRecord, path: Path) -> None:
     ax.axhline(run.shape.patches, color="#999999", lw=0.8, ls=":", label=f"shape patches ({run.shape.patches})")
     m = run.final
     ax.axvline(m.tick, color="#333333", lw=1.0)
-    ax.text(m.tick, 0.97, f"{run.outcome} at tick {m.tick} ", transform=ax.get_xaxis_transform(), ha="right",
-            va="top", fontsize=9, color="#333333", bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.85})
+    ax.text(
+        m.tick,
+        0.97,
+        f"{run.outcome} at tick {m.tick} ",
+        transform=ax.get_xaxis_transform(),
+        ha="right",
+        va="top",
+        fontsize=9,
+        color="#333333",
+        bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.85},
+    )
     p = run.params
-    ax.set_title(f"{run.shape.name}: {p.robots} robots, rules {p.ruleset.label}, vision {p.vision_radius:g}, "
-                 f"seed {p.seed}", fontsize=10)
+    ax.set_title(
+        f"{run.shape.name}: {p.robots} robots, rules {p.ruleset.label}, vision {p.vision_radius:g}, seed {p.seed}",
+        fontsize=10,
+    )
     ax.set_xlabel("tick")
     ax.set_ylabel("robots or patches")
     ax.set_xlim(0, max(int(m.tick), 1) * 1.03)

@@ -50,8 +50,10 @@ class RecordingOptions:
     def __post_init__(self) -> None:
         node_parameter("monitor", "record_every").check(self.every)
         if self.connect and not self.connect.startswith(_URL_SCHEMES):
-            raise ParameterError(f"viewer URL must start with one of {', '.join(_URL_SCHEMES)}, "
-                                 f"got {self.connect!r} (e.g. rerun+http://127.0.0.1:9876/proxy)")
+            raise ParameterError(
+                f"viewer URL must start with one of {', '.join(_URL_SCHEMES)}, "
+                f"got {self.connect!r} (e.g. rerun+http://127.0.0.1:9876/proxy)"
+            )
 
     def reachable(self, timeout: float = 1.0) -> RecordingOptions:
         """These options, without ``connect`` if no viewer answers there (said in one line on stderr).
@@ -74,8 +76,12 @@ class RecordingOptions:
             socket.create_connection((host, port), timeout=timeout).close()
             return self
         except OSError as exc:
-            print(f"swarm-ros: warning: no Rerun viewer answers at {self.connect} ({exc.strerror or exc}); "
-                  f"going on without it", file=sys.stderr, flush=True)
+            print(
+                f"swarm-ros: warning: no Rerun viewer answers at {self.connect} ({exc.strerror or exc}); "
+                f"going on without it",
+                file=sys.stderr,
+                flush=True,
+            )
             return replace(self, connect=None)
 
     def every_for(self, robots: int) -> int:
@@ -93,5 +99,11 @@ class RecordingOptions:
             return None
         from swarm_ros.artifacts.rerun_recording import Recorder
 
-        return Recorder(path if self.enabled else None, shape, params, every=self.every_for(params.robots),
-                        spawn=self.spawn, connect=self.connect)
+        return Recorder(
+            path if self.enabled else None,
+            shape,
+            params,
+            every=self.every_for(params.robots),
+            spawn=self.spawn,
+            connect=self.connect,
+        )

@@ -99,8 +99,16 @@ class Recorder:
         connect: URL of a running viewer to stream to too (``rerun+http://host:9876/proxy``).
     """
 
-    def __init__(self, path: Path | None, shape: Shape, params: RunParams, *, every: int = 1,
-                 spawn: bool = False, connect: str | None = None) -> None:
+    def __init__(
+        self,
+        path: Path | None,
+        shape: Shape,
+        params: RunParams,
+        *,
+        every: int = 1,
+        spawn: bool = False,
+        connect: str | None = None,
+    ) -> None:
         if every < 1:
             raise ParameterError(f"every must be >= 1, got {every}")
         self.path, self.every = path, every
@@ -158,8 +166,9 @@ class Recorder:
             self._filled = filled
             self._image_ticks.append(tick)
             if self._solid:  # the filled voxels' centres
-                self._images.append(np.stack(self._world.patch_coords(np.flatnonzero(filled)), axis=1)
-                                    .astype(np.float32))
+                self._images.append(
+                    np.stack(self._world.patch_coords(np.flatnonzero(filled)), axis=1).astype(np.float32)
+                )
             else:
                 self._images.append(np.where(filled, FILLED, FREE).astype(np.uint8))
         if len(self._robot_ticks) >= BATCH_TICKS:
@@ -178,8 +187,10 @@ class Recorder:
         """Log how the run ended (an outcome, or ``interrupted`` / ``failed``) as a text event at ``final.tick``."""
         self.flush()
         self.rec.set_time(TIMELINE, sequence=final.tick)
-        line = (f"{text} at tick {final.tick}: {final.localized} localized, {final.empty_patches} empty "
-                f"patches, {final.moving} moving")
+        line = (
+            f"{text} at tick {final.tick}: {final.localized} localized, {final.empty_patches} empty "
+            f"patches, {final.moving} moving"
+        )
         level = {"interrupted": "WARN", "failed": "ERROR"}.get(text, "INFO")
         self.rec.log(EVENTS, rr.TextLog(line, level=level))
 
@@ -252,19 +263,21 @@ class Recorder:
             return
         lengths = [p.shape[0] for p in self._positions]
         points = rr.Points3D if self._solid else rr.Points2D
-        columns = points.columns(positions=np.concatenate(self._positions),
-                                 class_ids=np.concatenate(self._classes)).partition(lengths)
-        self.rec.send_columns(ROBOTS, indexes=[rr.TimeColumn(TIMELINE, sequence=self._robot_ticks)],
-                              columns=columns)
+        columns = points.columns(
+            positions=np.concatenate(self._positions), class_ids=np.concatenate(self._classes)
+        ).partition(lengths)
+        self.rec.send_columns(ROBOTS, indexes=[rr.TimeColumn(TIMELINE, sequence=self._robot_ticks)], columns=columns)
         self._robot_ticks, self._positions, self._classes = [], [], []
         if self._image_ticks:
             if self._solid:
                 boxes = rr.Boxes3D.columns(centers=np.concatenate(self._images)).partition(
-                    [len(c) for c in self._images])
+                    [len(c) for c in self._images]
+                )
             else:
                 boxes = rr.SegmentationImage.columns(buffer=self._images)
-            self.rec.send_columns(OCCUPANCY, indexes=[rr.TimeColumn(TIMELINE, sequence=self._image_ticks)],
-                                  columns=boxes)
+            self.rec.send_columns(
+                OCCUPANCY, indexes=[rr.TimeColumn(TIMELINE, sequence=self._image_ticks)], columns=boxes
+            )
             self._image_ticks, self._images = [], []
 
     def _send_metric_columns(self) -> None:
@@ -274,8 +287,9 @@ class Recorder:
         self._metric_rows, self._metric_count = [], 0
         ticks = rr.TimeColumn(TIMELINE, sequence=rows[:, 0])
         for k, name in enumerate(METRIC_COLUMNS[1:], start=1):
-            self.rec.send_columns(f"{METRICS}/{name}", indexes=[ticks],
-                                  columns=rr.Scalars.columns(scalars=rows[:, k].astype(np.float64)))
+            self.rec.send_columns(
+                f"{METRICS}/{name}", indexes=[ticks], columns=rr.Scalars.columns(scalars=rows[:, k].astype(np.float64))
+            )
 
 
 #: Seconds a spawned viewer has to answer on its port, and to stay up after it does (without a display it binds
@@ -293,14 +307,20 @@ def spawn_viewer(port: int = 9876, exe: str | None = None) -> str | None:
 
     beside = Path(sys.executable).with_name("rerun")
     exe = exe or (str(beside) if beside.exists() else shutil.which("rerun"))
-    warning = "swarm-ros: warning: the Rerun viewer {}; going on without it (open the recording afterwards: " \
-              "rerun <run>/recording.rrd)"
+    warning = (
+        "swarm-ros: warning: the Rerun viewer {}; going on without it (open the recording afterwards: "
+        "rerun <run>/recording.rrd)"
+    )
     if exe is None:
         print(warning.format("is not installed (no 'rerun' beside Python or on PATH)"), file=sys.stderr, flush=True)
         return None
-    viewer = subprocess.Popen([exe, f"--port={port}", "--memory-limit=75%", "--expect-data-soon"],
-                              stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              start_new_session=True)  # detached: it outlives the run, and a Ctrl-C of it
+    viewer = subprocess.Popen(
+        [exe, f"--port={port}", "--memory-limit=75%", "--expect-data-soon"],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )  # detached: it outlives the run, and a Ctrl-C of it
     deadline, answered = time.monotonic() + SPAWN_WAIT, None
     while viewer.poll() is None and time.monotonic() < deadline:
         if answered is None:
@@ -316,6 +336,5 @@ def spawn_viewer(port: int = 9876, exe: str | None = None) -> str | None:
         viewer.kill()
         print(warning.format(f"did not answer on port {port} within {SPAWN_WAIT:g} s"), file=sys.stderr, flush=True)
     else:
-        print(warning.format(f"exited at once (status {viewer.returncode}; no display?)"), file=sys.stderr,
-              flush=True)
+        print(warning.format(f"exited at once (status {viewer.returncode}; no display?)"), file=sys.stderr, flush=True)
     return None

@@ -33,7 +33,13 @@ from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import RobotState
 
 WORLD, MAP, OCCUPANCY, ROBOTS, EVENTS, RUN_INFO = (
-    "world", "world/map", "world/occupancy", "world/robots", "events", "run")
+    "world",
+    "world/map",
+    "world/occupancy",
+    "world/robots",
+    "events",
+    "run",
+)
 METRICS = "metrics"
 SERIES: tuple[str, ...] = METRIC_COLUMNS[1:]  #: the logged series (every metrics.csv column but tick)
 
@@ -57,8 +63,12 @@ _PATCH_CLASSES = {
     FILLED: ("filled shape patch", (86, 180, 233, 160)),
 }
 _SERIES_COLOURS = {
-    "stationary": (230, 159, 0), "localized": (0, 114, 178), "inside": (240, 228, 66),
-    "moving": (0, 158, 115), "empty_patches": (204, 121, 167), "walking": (86, 180, 233),
+    "stationary": (230, 159, 0),
+    "localized": (0, 114, 178),
+    "inside": (240, 228, 66),
+    "moving": (0, 158, 115),
+    "empty_patches": (204, 121, 167),
+    "walking": (86, 180, 233),
 }
 _ROBOT_RADIUS = 0.35  # patches
 
@@ -84,18 +94,25 @@ def log_scene(rec: rr.RecordingStream, shape: Shape, params: RunParams, every: i
     """The recording's static entities: the classes' names and colours, the world's map, the series' styles,
     the run's parameters (``every``: robots are logged every k-th tick)."""
     world = shape.world
-    classes = [rr.AnnotationInfo(id=int(k), label=label, color=colour)
-               for k, (label, colour) in {**_ROBOT_CLASSES, **_PATCH_CLASSES}.items()]
+    classes = [
+        rr.AnnotationInfo(id=int(k), label=label, color=colour)
+        for k, (label, colour) in {**_ROBOT_CLASSES, **_PATCH_CLASSES}.items()
+    ]
     rec.log(WORLD, rr.AnnotationContext(classes), static=True)
     if world.dims == 3:
         _log_world_3d(rec, shape)
     else:
         _log_world_2d(rec, shape)
     for name in SERIES:
-        rec.log(f"{METRICS}/{name}", rr.SeriesLines(names=name, colors=_SERIES_COLOURS[name], widths=1.5),
-                static=True)
-    lines = [f"# {shape.name}", "", "| parameter | value |", "|---|---|",
-             f"| shape patches | {shape.patches} |", f"| world | {world.describe()} patches |"]
+        rec.log(f"{METRICS}/{name}", rr.SeriesLines(names=name, colors=_SERIES_COLOURS[name], widths=1.5), static=True)
+    lines = [
+        f"# {shape.name}",
+        "",
+        "| parameter | value |",
+        "|---|---|",
+        f"| shape patches | {shape.patches} |",
+        f"| world | {world.describe()} patches |",
+    ]
     lines += [f"| {key} | {value} |" for key, value in params.as_dict().items()]
     lines += [f"| rule set in force | {params.ruleset.label} |"]
     lines += [f"| robots logged | every {every} tick(s) |"]
@@ -106,12 +123,27 @@ def _log_world_3d(rec: rr.RecordingStream, shape: Shape) -> None:
     """The shape's voxels as wire boxes, the walls' inside as one box; filled voxels and robots on top."""
     world = shape.world
     centres = np.stack(world.patch_coords(np.flatnonzero(shape.mask)), axis=1).astype(np.float32)
-    rec.log(MAP, rr.Boxes3D(centers=centres, half_sizes=[0.5, 0.5, 0.5], class_ids=SHAPE_PATCH,
-                            fill_mode="majorwireframe", show_labels=False), static=True)
-    rec.log(f"{MAP}/walls", rr.Boxes3D(centers=[0, 0, 0], half_sizes=[world.radius - 0.5] * 3, class_ids=WALL,
-                                       show_labels=False), static=True)
-    rec.log(OCCUPANCY, rr.Boxes3D.from_fields(half_sizes=[0.45, 0.45, 0.45], class_ids=FILLED, fill_mode="solid",
-                                              show_labels=False), static=True)
+    rec.log(
+        MAP,
+        rr.Boxes3D(
+            centers=centres,
+            half_sizes=[0.5, 0.5, 0.5],
+            class_ids=SHAPE_PATCH,
+            fill_mode="majorwireframe",
+            show_labels=False,
+        ),
+        static=True,
+    )
+    rec.log(
+        f"{MAP}/walls",
+        rr.Boxes3D(centers=[0, 0, 0], half_sizes=[world.radius - 0.5] * 3, class_ids=WALL, show_labels=False),
+        static=True,
+    )
+    rec.log(
+        OCCUPANCY,
+        rr.Boxes3D.from_fields(half_sizes=[0.45, 0.45, 0.45], class_ids=FILLED, fill_mode="solid", show_labels=False),
+        static=True,
+    )
     rec.log(ROBOTS, rr.Points3D.from_fields(radii=_ROBOT_RADIUS), static=True)
 
 
@@ -127,7 +159,11 @@ def _log_world_2d(rec: rr.RecordingStream, shape: Shape) -> None:
     for entity in (MAP, OCCUPANCY):
         rec.log(entity, rr.Transform3D(translation=corner), static=True)
     rec.log(MAP, rr.SegmentationImage(grid, draw_order=0.0), static=True)
-    rec.log(OCCUPANCY, rr.SegmentationImage.from_fields(
-        format=rr.components.ImageFormat(width=world.size, height=world.size, channel_datatype="U8"),
-        draw_order=1.0), static=True)
+    rec.log(
+        OCCUPANCY,
+        rr.SegmentationImage.from_fields(
+            format=rr.components.ImageFormat(width=world.size, height=world.size, channel_datatype="U8"), draw_order=1.0
+        ),
+        static=True,
+    )
     rec.log(ROBOTS, rr.Points2D.from_fields(radii=_ROBOT_RADIUS, draw_order=2.0), static=True)

@@ -45,8 +45,9 @@ def default_run_dir(shape: str, robots: int, vision: float, seed: int, now: date
 
 #: Everything a run directory holds: what :func:`write_run` writes, and ``logs`` (``swarm-ros run``).
 BAG_DIR = "bag"  #: the rosbag2 of a ROS run, in its run directory
-RUN_ENTRIES = frozenset({"summary.json", "metrics.csv", "final_state.csv", "final.png", "convergence.png",
-                         RECORDING_FILE, "logs", BAG_DIR})
+RUN_ENTRIES = frozenset(
+    {"summary.json", "metrics.csv", "final_state.csv", "final.png", "convergence.png", RECORDING_FILE, "logs", BAG_DIR}
+)
 #: summary.json fields that mark a directory as a run directory this tool wrote.
 _SUMMARY_MARKS = ("shape", "engine", "outcome", "convergence_tick", "seed", "robots")
 
@@ -101,8 +102,10 @@ def check_out_dir(out: Path, overwrite: bool, free: int = MIN_FREE) -> None:
                 raise OutputError(f"{out}: output directory exists and is not empty (use --overwrite to replace it)")
             why = foreign_content(out)
             if why is not None:
-                raise OutputError(f"{out}: not a swarm-ros run directory ({why}); --overwrite replaces only run "
-                                  f"directories, so nothing was touched")
+                raise OutputError(
+                    f"{out}: not a swarm-ros run directory ({why}); --overwrite replaces only run "
+                    f"directories, so nothing was touched"
+                )
     # Nothing is created here: the nearest existing ancestor must be a directory we may write.
     base = out.absolute().parent
     while not base.exists():
@@ -117,8 +120,10 @@ def check_out_dir(out: Path, overwrite: bool, free: int = MIN_FREE) -> None:
     except OSError:
         return
     if left < free:
-        raise OutputError(f"{base}: {left / MIB:.1f} MiB free on its disk; a run needs at least {free // MIB} MiB "
-                          f"to start (its recording, bag and logs take more)")
+        raise OutputError(
+            f"{base}: {left / MIB:.1f} MiB free on its disk; a run needs at least {free // MIB} MiB "
+            f"to start (its recording, bag and logs take more)"
+        )
 
 
 #: Bytes a run adds to its directory's name for the names it makes beside it (``.<name>.logs-XXXXXXXX``), and
@@ -163,8 +168,9 @@ def final_state_csv(s: SwarmState) -> str:
     labels = [st.label for st in RobotState]
     if s.z is not None:
         lines = [",".join(FINAL_STATE_COLUMNS_3D)]
-        for i, (x, y, z, h, p, st) in enumerate(zip(s.x.tolist(), s.y.tolist(), s.z.tolist(), s.heading.tolist(),
-                                                    s.pitch.tolist(), s.state.tolist())):
+        for i, (x, y, z, h, p, st) in enumerate(
+            zip(s.x.tolist(), s.y.tolist(), s.z.tolist(), s.heading.tolist(), s.pitch.tolist(), s.state.tolist())
+        ):
             lines.append(f"{i},{x!r},{y!r},{z!r},{h!r},{p!r},{labels[st]}")
         return "\n".join(lines) + "\n"
     lines = [",".join(FINAL_STATE_COLUMNS)]
@@ -239,8 +245,10 @@ def check_leftovers(out: Path) -> None:
     """
     for left in (partial_recording(out), partial_bag(out)):
         if left.exists() or left.is_symlink():
-            raise OutputError(f"{left}: left by an earlier run of {out} that stopped early; move or delete it "
-                              f"first (a new run would write there, and never replaces it)")
+            raise OutputError(
+                f"{left}: left by an earlier run of {out} that stopped early; move or delete it "
+                f"first (a new run would write there, and never replaces it)"
+            )
 
 
 _CLAIMS: list = []  # (lock file, its path) of the run directories this process writes now
@@ -277,8 +285,9 @@ def claim_out_dir(out: Path) -> None:
             f.seek(0)
             holder = " ".join(f.read().split()) or "another process"
             f.close()
-            raise OutputError(f"{out}: another swarm-ros command is writing this run directory now "
-                              f"({holder})") from None
+            raise OutputError(
+                f"{out}: another swarm-ros command is writing this run directory now ({holder})"
+            ) from None
         try:
             same = os.stat(path).st_ino == os.fstat(f.fileno()).st_ino
         except FileNotFoundError:
@@ -331,8 +340,9 @@ def partial_recording(out: Path) -> Path:
     return out.parent / f"{out.name}.partial.rrd"
 
 
-def write_run(out: Path, record: RunRecord, overwrite: bool = False, recording: Path | None = None,
-              bag: Path | None = None) -> Path:
+def write_run(
+    out: Path, record: RunRecord, overwrite: bool = False, recording: Path | None = None, bag: Path | None = None
+) -> Path:
     """Write the run's files into ``out`` atomically (temp dir + rename). Returns ``out``.
 
     ``recording``, a finished .rrd file, is moved in as ``recording.rrd``, and ``bag``, a

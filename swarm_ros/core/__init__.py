@@ -12,11 +12,24 @@ from __future__ import annotations
 import importlib
 
 _HOME = {
-    "JoinOutcome": "arbitration", "Simulation": "engine", "ParameterError": "errors", "ShapeError": "errors",
-    "SwarmError": "errors", "InputError": "errors", "ContractError": "errors",
-    "METRIC_COLUMNS": "metrics", "Outcome": "metrics", "TickMetrics": "metrics",
-    "RunParams": "params", "Decisions": "rules", "decide": "rules", "Shape": "shapes", "builtin_shapes": "shapes",
-    "RobotState": "state", "SwarmState": "state", "World": "grid",
+    "JoinOutcome": "arbitration",
+    "Simulation": "engine",
+    "ParameterError": "errors",
+    "ShapeError": "errors",
+    "SwarmError": "errors",
+    "InputError": "errors",
+    "ContractError": "errors",
+    "METRIC_COLUMNS": "metrics",
+    "Outcome": "metrics",
+    "TickMetrics": "metrics",
+    "RunParams": "params",
+    "Decisions": "rules",
+    "decide": "rules",
+    "Shape": "shapes",
+    "builtin_shapes": "shapes",
+    "RobotState": "state",
+    "SwarmState": "state",
+    "World": "grid",
 }
 __all__ = sorted(_HOME)
 

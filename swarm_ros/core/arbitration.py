@@ -115,11 +115,25 @@ def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape
     to ``outcome[k]``. Returns (joined, moving inside, moving outside, walking) counted over
     ``ids`` after the tick.
     """
-    claim, new_x, new_y, new_z, new_heading, new_pitch = moves.claim, moves.x, moves.y, moves.z, moves.heading, \
-        moves.pitch
+    claim, new_x, new_y, new_z, new_heading, new_pitch = (
+        moves.claim,
+        moves.x,
+        moves.y,
+        moves.z,
+        moves.heading,
+        moves.pitch,
+    )
     x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
-    occupancy, frontier, blocks, shape, nbrs, radius, size, solid = grid.occupancy, grid.frontier, grid.blocks, \
-        grid.shape, grid.nbrs, grid.radius, grid.size, grid.solid
+    occupancy, frontier, blocks, shape, nbrs, radius, size, solid = (
+        grid.occupancy,
+        grid.frontier,
+        grid.blocks,
+        grid.shape,
+        grid.nbrs,
+        grid.radius,
+        grid.size,
+        grid.solid,
+    )
     seed, join = rules.seed, rules.join
     n = ids.size
     walk = join == JOIN_WALK and blocks[blocks.size - 1] > 0  # the frontier the robots saw was not empty
@@ -139,8 +153,11 @@ def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape
         p = claim[k]
         st = state[i]
         if p >= 0:
-            if best[p] == k and localized < shape_patches and (
-                    st == _MOVING_INSIDE or st == _MOVING_OUTSIDE or st == _WALKING):
+            if (
+                best[p] == k
+                and localized < shape_patches
+                and (st == _MOVING_INSIDE or st == _MOVING_OUTSIDE or st == _WALKING)
+            ):
                 occupy(p, i, occupancy, frontier, blocks, shape, nbrs, size)
                 state[i] = _LOCALIZED
                 x[i] = float(p % size - radius)

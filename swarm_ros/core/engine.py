@@ -76,9 +76,13 @@ class Simulation:
         self._nbrs = world.neighbour_offsets()
         self._solid = world.dims == 3
         n, cells = params.robots, world.patch_count
-        self._scratch = Scratch(head=np.full(cells, -1, dtype=np.int32), nxt=np.empty(n, dtype=np.int32),
-                                best=np.full(cells, -1, dtype=np.int64), outcome=np.empty(n, dtype=np.int8),
-                                last_ids=np.empty(n, dtype=np.int64))
+        self._scratch = Scratch(
+            head=np.full(cells, -1, dtype=np.int32),
+            nxt=np.empty(n, dtype=np.int32),
+            best=np.full(cells, -1, dtype=np.int64),
+            outcome=np.empty(n, dtype=np.int8),
+            last_ids=np.empty(n, dtype=np.int64),
+        )
         self._moves = moves_for(n, self._solid)  # the decisions of the last tick, by position
         self._rules = rules_of(params)
         self._moving = self.state.moving_ids()
@@ -93,10 +97,20 @@ class Simulation:
         counts = s.counts()
         self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
         self.outcome: Outcome | None = None
-        code, self._m = close_tick(self._moving, self._m, s.state, 0, self._localized,
-                                    int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
-                                    int(counts[RobotState.WALKING]), shape.patches, params.robots, params.max_ticks,
-                                    self._rows[0])
+        code, self._m = close_tick(
+            self._moving,
+            self._m,
+            s.state,
+            0,
+            self._localized,
+            int(counts[RobotState.MOVING_INSIDE]),
+            int(counts[RobotState.MOVING_OUTSIDE]),
+            int(counts[RobotState.WALKING]),
+            shape.patches,
+            params.robots,
+            params.max_ticks,
+            self._rows[0],
+        )
         self._record(0, 1, code)
 
     def _set_kernel_args(self, alive: int) -> None:
@@ -140,8 +154,15 @@ class Simulation:
         """The decisions applied in the last tick (ids in the order applied): claims and the poses decided."""
         n, mv = self._decided, self._moves
         solid = {"z": mv.z[:n].copy(), "pitch": mv.pitch[:n].copy()} if self._solid else {}
-        return Decisions(tick=self.tick, ids=self._scratch.last_ids[:n].copy(), claim=mv.claim[:n].copy(),
-                         x=mv.x[:n].copy(), y=mv.y[:n].copy(), heading=mv.heading[:n].copy(), **solid)
+        return Decisions(
+            tick=self.tick,
+            ids=self._scratch.last_ids[:n].copy(),
+            claim=mv.claim[:n].copy(),
+            x=mv.x[:n].copy(),
+            y=mv.y[:n].copy(),
+            heading=mv.heading[:n].copy(),
+            **solid,
+        )
 
     # -- advancing --------------------------------------------------------------
     def step(self) -> TickMetrics:
@@ -191,16 +212,36 @@ class Simulation:
         mv.x[:m], mv.y[:m], mv.heading[:m] = decisions.x, decisions.y, decisions.heading
         if self._solid:
             mv.z[:m], mv.pitch[:m] = decisions.z, decisions.pitch
-        joined, inside, outside, walking = resolve_kernel(sc.last_ids[:m], mv, self._robots, self._grid, self._rules,
-                                                          decisions.tick, sc.best, self._localized,
-                                                          self.shape.patches, sc.outcome)
+        joined, inside, outside, walking = resolve_kernel(
+            sc.last_ids[:m],
+            mv,
+            self._robots,
+            self._grid,
+            self._rules,
+            decisions.tick,
+            sc.best,
+            self._localized,
+            self.shape.patches,
+            sc.outcome,
+        )
         self._localized += joined
         self._decided = m
         self._m = compact_moving(self._moving, m, self.state.state)
         self._reserve(1)
-        code, self._m = close_tick(self._moving, self._m, self.state.state, decisions.tick, self._localized,
-                                    inside, outside, walking, self.shape.patches, self._alive,
-                                    self.params.max_ticks, self._rows[self._nrows])
+        code, self._m = close_tick(
+            self._moving,
+            self._m,
+            self.state.state,
+            decisions.tick,
+            self._localized,
+            inside,
+            outside,
+            walking,
+            self.shape.patches,
+            self._alive,
+            self.params.max_ticks,
+            self._rows[self._nrows],
+        )
         self._record(1, 1, code)
         self._after_tick()
         return self.metrics
@@ -225,8 +266,15 @@ class Simulation:
         for i in ids.tolist():
             if s.state[i] in _STATIONARY_LOCALIZED:
                 z = s.z[i] if s.z is not None else 0.0
-                vacate(cell_index(s.x[i], s.y[i], z, self._solid, self._radius, self._size), s.occupancy, s.frontier,
-                       s.frontier_blocks, self._shape, self._nbrs, self._size)
+                vacate(
+                    cell_index(s.x[i], s.y[i], z, self._solid, self._radius, self._size),
+                    s.occupancy,
+                    s.frontier,
+                    s.frontier_blocks,
+                    self._shape,
+                    self._nbrs,
+                    self._size,
+                )
         s.state[ids] = RobotState.REMOVED
         self.last_removed = ids
         if ids.size:
@@ -235,16 +283,36 @@ class Simulation:
         self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
         self._m = compact_moving(self._moving, self._m, s.state)
         self._set_kernel_args(self._alive - int(ids.size))
-        code, self._m = close_tick(self._moving, self._m, s.state, self.tick, self._localized,
-                                    int(counts[RobotState.MOVING_INSIDE]), int(counts[RobotState.MOVING_OUTSIDE]),
-                                    int(counts[RobotState.WALKING]), self.shape.patches, self._alive,
-                                    self.params.max_ticks, self._rows[self._nrows - 1])
+        code, self._m = close_tick(
+            self._moving,
+            self._m,
+            s.state,
+            self.tick,
+            self._localized,
+            int(counts[RobotState.MOVING_INSIDE]),
+            int(counts[RobotState.MOVING_OUTSIDE]),
+            int(counts[RobotState.WALKING]),
+            self.shape.patches,
+            self._alive,
+            self.params.max_ticks,
+            self._rows[self._nrows - 1],
+        )
         self.outcome = OUTCOME_OF_CODE[code]
         return int(ids.size)
 
-    def restore(self, tick: int, x: np.ndarray, y: np.ndarray, heading: np.ndarray, state: np.ndarray,
-                history: np.ndarray, losses: list[tuple[int, int]], outcome: Outcome | None,
-                z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> None:
+    def restore(
+        self,
+        tick: int,
+        x: np.ndarray,
+        y: np.ndarray,
+        heading: np.ndarray,
+        state: np.ndarray,
+        history: np.ndarray,
+        losses: list[tuple[int, int]],
+        outcome: Outcome | None,
+        z: np.ndarray | None = None,
+        pitch: np.ndarray | None = None,
+    ) -> None:
         """Continue from a saved tick (the world node's checkpoint, :mod:`swarm_ros.protocol.checkpoint`): every
         robot's pose and state at the end of ``tick``, the metrics of ticks 0..``tick``, the losses so far
         and the outcome (3D: ``z`` and ``pitch`` too). The occupancy and frontier are rebuilt from the robots,
@@ -311,8 +379,19 @@ class Simulation:
         self._check_running()
         self._reserve(limit)
         n, self._m, self._localized, self._decided, code = run_kernel(
-            self._moving, self._robots, self._grid, self._rules, self._scratch, self._moves, self._end,
-            self._rows[self._nrows:], self._m, self.tick, self._localized, limit)
+            self._moving,
+            self._robots,
+            self._grid,
+            self._rules,
+            self._scratch,
+            self._moves,
+            self._end,
+            self._rows[self._nrows :],
+            self._m,
+            self.tick,
+            self._localized,
+            limit,
+        )
         self._record(n, n, code)
         self._after_tick()
         return n

@@ -51,7 +51,7 @@ class World:
 
     @property
     def patch_count(self) -> int:
-        return self.size ** self.dims
+        return self.size**self.dims
 
     @property
     def grid_shape(self) -> tuple[int, ...]:

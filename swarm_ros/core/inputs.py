@@ -69,8 +69,10 @@ def path_too_long(path: Path | str, margin: int = 0) -> str:
         return f"a name in the path is {longest} bytes long, more than the {NAME_MAX} Linux takes"
     last = len(os.fsencode(path.name))
     if last + margin > NAME_MAX:
-        return f"its name is {last} bytes long; at most {NAME_MAX - margin} fit, since a run makes names " \
-               f"{margin} bytes longer beside it"
+        return (
+            f"its name is {last} bytes long; at most {NAME_MAX - margin} fit, since a run makes names "
+            f"{margin} bytes longer beside it"
+        )
     if len(os.fsencode(os.path.abspath(path))) + margin > PATH_MAX:
         return f"the path is longer than the {PATH_MAX} bytes Linux takes"
     return ""

@@ -59,9 +59,12 @@ def check_state(sim: Simulation) -> None:
     _require(bool(np.all((s.state >= 0) & (s.state < len(RobotState)))), t, "unknown robot state code")
     localized = np.isin(s.state, _STATIONARY)
     seeds = s.state[:4]
-    _require(bool(np.all((seeds == RobotState.SEED) | (seeds == RobotState.REMOVED)))
-             and int(np.sum(s.state == RobotState.SEED)) == int(np.sum(seeds == RobotState.SEED)), t,
-             "robots 0-3, and only they, are seeds (or removed)")
+    _require(
+        bool(np.all((seeds == RobotState.SEED) | (seeds == RobotState.REMOVED)))
+        and int(np.sum(s.state == RobotState.SEED)) == int(np.sum(seeds == RobotState.SEED)),
+        t,
+        "robots 0-3, and only they, are seeds (or removed)",
+    )
     # at most one localized robot per patch, only on shape patches
     position = coords(s)
     cells = [np.floor(c + 0.5).astype(np.int64) for c in position]
@@ -73,16 +76,25 @@ def check_state(sim: Simulation) -> None:
     occupied = np.flatnonzero(s.occupancy >= 0)
     _require(occupied.size == loc_ids.size, t, "occupancy count differs from localized robots")
     _require(bool(np.array_equal(s.occupancy[flat[loc_ids]], loc_ids)), t, "occupancy names the wrong robot")
-    _require(all(bool(np.all(c[loc_ids] == p[loc_ids])) for c, p in zip(position, cells)), t,
-             "a localized robot is off its patch centre")
+    _require(
+        all(bool(np.all(c[loc_ids] == p[loc_ids])) for c, p in zip(position, cells)),
+        t,
+        "a localized robot is off its patch centre",
+    )
     alive = n - int(np.sum(s.state == RobotState.REMOVED))
     _require(alive == n - sim.removed, t, "removed robots miscounted")
     _require(loc_ids.size <= min(alive, patches), t, "#localized > min(N, shape patches)")
     _require(bool(np.array_equal(s.frontier, frontier_of(shape, s.occupancy))), t, "frontier out of date")
-    _require(bool(np.array_equal(s.frontier_blocks, frontier_blocks_of(s.frontier, world.size, world.dims))), t,
-             "frontier block counts out of date")
-    _require(sim.params.join == "walk" or not np.any(s.state == RobotState.WALKING), t,
-             "a robot walks, yet the rule set's join is not 'walk'")
+    _require(
+        bool(np.array_equal(s.frontier_blocks, frontier_blocks_of(s.frontier, world.size, world.dims))),
+        t,
+        "frontier block counts out of date",
+    )
+    _require(
+        sim.params.join == "walk" or not np.any(s.state == RobotState.WALKING),
+        t,
+        "a robot walks, yet the rule set's join is not 'walk'",
+    )
     counts = s.counts()
     _require(sim.metrics == tick_metrics(t, counts, patches), t, f"metrics {sim.metrics} do not match the state")
     wandering = np.isin(s.state, (RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE))
@@ -90,8 +102,11 @@ def check_state(sim: Simulation) -> None:
     _require(bool(np.all(inside_ok | ~wandering)), t, "moving inside/outside mislabelled")
     if sim.outcome is Outcome.COMPLETE_WITH_EXTRAS:
         _require(bool(np.all(localized | (s.state == RobotState.SEPARATED))), t, "extras not separated")
-    _require(not np.any(s.state == RobotState.SEPARATED) or sim.outcome is Outcome.COMPLETE_WITH_EXTRAS, t,
-             "separated robots before the shape completed")
+    _require(
+        not np.any(s.state == RobotState.SEPARATED) or sim.outcome is Outcome.COMPLETE_WITH_EXTRAS,
+        t,
+        "separated robots before the shape completed",
+    )
     if sim.outcome is Outcome.COMPLETE:
         _require(alive == patches == loc_ids.size, t, "complete, yet robots or patches left over")
     if sim.outcome is Outcome.INCOMPLETE:
@@ -109,23 +124,31 @@ def check_tick(prev: SwarmState, sim: Simulation) -> None:
     removed[sim.last_removed] = True
     _require(bool(np.all(s.state[removed] == RobotState.REMOVED)), t, "a removed robot is still in the world")
     _require(bool(np.all(prev.state[removed] != RobotState.REMOVED)), t, "a robot was removed twice")
-    _require(bool(np.all((s.state == RobotState.REMOVED) == (removed | (prev.state == RobotState.REMOVED)))), t,
-             "a robot left the world without a failure")
+    _require(
+        bool(np.all((s.state == RobotState.REMOVED) == (removed | (prev.state == RobotState.REMOVED)))),
+        t,
+        "a robot left the world without a failure",
+    )
     was_loc = np.isin(prev.state, _STATIONARY) & ~removed
     now_loc = np.isin(s.state, _STATIONARY)
     _require(bool(np.all(now_loc[was_loc])), t, "a localized robot became unlocalized")
-    _require(all(bool(np.all(a[was_loc] == b[was_loc])) for a, b in zip(coords(s), coords(prev))), t,
-             "a localized robot moved")
+    _require(
+        all(bool(np.all(a[was_loc] == b[was_loc])) for a, b in zip(coords(s), coords(prev))),
+        t,
+        "a localized robot moved",
+    )
     before, after = int(was_loc.sum()), int(now_loc.sum())
     if not removed.any():
-        _require(shape_status(after, shape.patches) >= shape_status(before, shape.patches), t,
-                 "shape state went backwards")
+        _require(
+            shape_status(after, shape.patches) >= shape_status(before, shape.patches), t, "shape state went backwards"
+        )
     # joins: success only for an unlocalized robot while #localized < patches, on a frontier patch
     ids, claim, outcome = sim.last_joins()
     _require(bool(np.all(np.isin(prev.state[ids], _MOVING))), t, "a non-moving robot decided")
     valid = {int(o) for o in JoinOutcome}
-    _require(set(np.unique(outcome).tolist()) <= valid, t,
-             "join outcome outside {success, already complete, incomplete}")
+    _require(
+        set(np.unique(outcome).tolist()) <= valid, t, "join outcome outside {success, already complete, incomplete}"
+    )
     won = outcome == JoinOutcome.SUCCESS
     kept = won & ~removed[ids]  # a robot may join and then fail at the end of the same tick
     _require(int(kept.sum()) == after - before, t, "successful joins differ from new localized robots")
@@ -164,8 +187,11 @@ def _check_moves(prev: SwarmState, sim: Simulation, removed: np.ndarray) -> None
     solid = world.dims == 3
     pose_now = _present(s.x, s.y, s.heading, s.z, s.pitch)
     pose_decided = _present(d.x, d.y, d.heading, d.z, d.pitch)
-    _require(all(bool(np.all(a[ids[lost]] == b[lost])) for a, b in zip(pose_now, pose_decided)), t,
-             "a robot is not at the pose it decided")
+    _require(
+        all(bool(np.all(a[ids[lost]] == b[lost])) for a, b in zip(pose_now, pose_decided)),
+        t,
+        "a robot is not at the pose it decided",
+    )
     before = [c[ids] for c in coords(prev)]
     decided = _present(d.x, d.y, d.z)
     was_inside = shape.mask.ravel()[world.flat_of(*(np.floor(c + 0.5).astype(np.int64) for c in before))]
@@ -183,31 +209,43 @@ def _check_moves(prev: SwarmState, sim: Simulation, removed: np.ndarray) -> None
         for v in delta:  # "within 1 patch" is d2 <= 1 with d2 computed so, as the rule states it
             d2 += v * v
         if tried[k]:
-            _require(int(d.claim[k]) == target and d2 <= 1.0 and step[k] == 0.0, t,
-                     f"robot {ids[k]} claimed other than the nearest frontier patch within 1 patch")
+            _require(
+                int(d.claim[k]) == target and d2 <= 1.0 and step[k] == 0.0,
+                t,
+                f"robot {ids[k]} claimed other than the nearest frontier patch within 1 patch",
+            )
         else:
-            toward = math.sqrt(sum((float(c) - float(e[k])) ** 2
-                                   for c, e in zip(world.patch_coords(target), decided)))
-            _require(d2 > 1.0 and abs(step[k] - 1.0) < _EPS and abs(toward - (math.sqrt(d2) - 1.0)) < _EPS, t,
-                     f"robot {ids[k]} did not step 1 patch towards the nearest frontier patch")
+            toward = math.sqrt(sum((float(c) - float(e[k])) ** 2 for c, e in zip(world.patch_coords(target), decided)))
+            _require(
+                d2 > 1.0 and abs(step[k] - 1.0) < _EPS and abs(toward - (math.sqrt(d2) - 1.0)) < _EPS,
+                t,
+                f"robot {ids[k]} did not step 1 patch towards the nearest frontier patch",
+            )
     wander = ~walkers
     if p.steps == "one":
-        _require(bool(np.all((step[wander & ~tried] < 1e-12) | (np.abs(step[wander & ~tried] - 1.0) < _EPS))), t,
-                 "a wandering robot moved other than one patch")
+        _require(
+            bool(np.all((step[wander & ~tried] < 1e-12) | (np.abs(step[wander & ~tried] - 1.0) < _EPS))),
+            t,
+            "a wandering robot moved other than one patch",
+        )
         _require(bool(np.all(step[wander & tried] == 0.0)), t, "a claiming robot moved")
-        _require(bool(np.all(reach[wander & tried] <= p.vision_radius + _EPS)), t,
-                 "a claim beyond the vision radius")
+        _require(bool(np.all(reach[wander & tried] <= p.vision_radius + _EPS)), t, "a claim beyond the vision radius")
         _require(bool(np.all(was_inside[wander & tried])), t, "a robot outside the shape claimed")
     else:
         limit = np.where(was_inside, 2.0, 3.0)
-        _require(bool(np.all(step[wander] <= limit[wander] + _EPS)), t,
-                 "a robot moved more than 3 patches outside or 2 inside the shape")
-        _require(bool(np.all(reach[wander & tried] <= p.vision_radius + _EPS)), t,
-                 "a claim beyond the vision radius")
+        _require(
+            bool(np.all(step[wander] <= limit[wander] + _EPS)),
+            t,
+            "a robot moved more than 3 patches outside or 2 inside the shape",
+        )
+        _require(bool(np.all(reach[wander & tried] <= p.vision_radius + _EPS)), t, "a claim beyond the vision radius")
         _require(bool(np.all(was_inside[wander & tried])), t, "a robot outside the shape claimed")
     # the state the world gave each robot that did not win (unless the end separated it)
     after = s.state[ids]
     should_walk = walkers & (~tried | (prev_state == RobotState.WALKING))
     open_ = lost & (after != RobotState.SEPARATED)
-    _require(bool(np.all((after[open_] == RobotState.WALKING) == should_walk[open_])), t,
-             "a robot walks against the rule set, or stopped walking")
+    _require(
+        bool(np.all((after[open_] == RobotState.WALKING) == should_walk[open_])),
+        t,
+        "a robot walks against the rule set, or stopped walking",
+    )

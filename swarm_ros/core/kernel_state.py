@@ -80,23 +80,38 @@ def robots_of(state: SwarmState) -> Robots:
     return Robots(state.x, state.y, z, state.heading, pitch, state.state)
 
 
-def grid_of(shape: Shape, state: SwarmState, shape_mask: np.ndarray, wall: np.ndarray,
-            nbrs: np.ndarray) -> Grid:
+def grid_of(shape: Shape, state: SwarmState, shape_mask: np.ndarray, wall: np.ndarray, nbrs: np.ndarray) -> Grid:
     """The grid of ``state``'s frontier and occupancy (the same arrays), with the world's flat ``shape_mask``,
     ``wall`` and neighbour offsets ``nbrs``."""
     world = shape.world
-    return Grid(shape_mask, wall, state.frontier, state.frontier_blocks, state.occupancy, nbrs, int(world.radius),
-                int(world.size), world.dims == 3)
+    return Grid(
+        shape_mask,
+        wall,
+        state.frontier,
+        state.frontier_blocks,
+        state.occupancy,
+        nbrs,
+        int(world.radius),
+        int(world.size),
+        world.dims == 3,
+    )
 
 
 def rules_of(params: RunParams) -> Rules:
     join, crowd, steps = params.ruleset.codes()
-    return Rules(float(params.vision_radius), float(params.wiggle_rad), int(params.seed), int(join), int(crowd),
-                 int(steps))
+    return Rules(
+        float(params.vision_radius), float(params.wiggle_rad), int(params.seed), int(join), int(crowd), int(steps)
+    )
 
 
 def moves_for(robots: int, solid: bool) -> Moves:
     """Empty arrays for the moves of up to ``robots`` robots."""
     extra = robots if solid else 0
-    return Moves(np.empty(robots, dtype=np.int64), np.empty(robots), np.empty(robots), np.empty(extra),
-                 np.empty(robots), np.empty(extra))
+    return Moves(
+        np.empty(robots, dtype=np.int64),
+        np.empty(robots),
+        np.empty(robots),
+        np.empty(extra),
+        np.empty(robots),
+        np.empty(extra),
+    )

@@ -24,8 +24,10 @@ _CACHE = _CORE / "__pycache__"
 _MARK = "cache=True"  # a module with a cached kernel says so in its source
 _STAMP = "swarm_ros-kernels.compiled"  # in _CACHE: compile_kernels() ran after the last change to a kernel module
 #: What the commands say before they compile (one line, on stderr).
-COMPILING = ("compiling the numba kernels first (once after an install or a change to the core, about 17 s; "
-             "scripts/setup.sh does it too)")
+COMPILING = (
+    "compiling the numba kernels first (once after an install or a change to the core, about 17 s; "
+    "scripts/setup.sh does it too)"
+)
 
 
 def _kernel_modules() -> list[Path]:

@@ -71,9 +71,20 @@ def _illegal(radius, frontier, x0, y0, z0, claim, x, y, z, heading, pitch, step,
         bad[k] = wrong
 
 
-def illegal(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray, y0: np.ndarray,
-            claim: np.ndarray, x: np.ndarray, y: np.ndarray, heading: np.ndarray, z0: np.ndarray | None = None,
-            z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> np.ndarray:
+def illegal(
+    params: RunParams,
+    radius: int,
+    frontier: np.ndarray,
+    x0: np.ndarray,
+    y0: np.ndarray,
+    claim: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    z0: np.ndarray | None = None,
+    z: np.ndarray | None = None,
+    pitch: np.ndarray | None = None,
+) -> np.ndarray:
     """A bool mask of the decisions the rules could not have produced.
 
     Args:
@@ -88,7 +99,21 @@ def illegal(params: RunParams, radius: int, frontier: np.ndarray, x0: np.ndarray
     f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)
     none = np.empty(0)
     bad = np.empty(len(x), dtype=np.bool_)
-    _illegal(radius, frontier, f64(x0), f64(y0), f64(z0) if solid else none, np.ascontiguousarray(claim, np.int64),
-             f64(x), f64(y), f64(z) if solid else none, f64(heading), f64(pitch) if solid else none,
-             max_step(params) + SLACK, reach(params, 3 if solid else 2) + SLACK, solid, bad)
+    _illegal(
+        radius,
+        frontier,
+        f64(x0),
+        f64(y0),
+        f64(z0) if solid else none,
+        np.ascontiguousarray(claim, np.int64),
+        f64(x),
+        f64(y),
+        f64(z) if solid else none,
+        f64(heading),
+        f64(pitch) if solid else none,
+        max_step(params) + SLACK,
+        reach(params, 3 if solid else 2) + SLACK,
+        solid,
+        bad,
+    )
     return bad

@@ -37,8 +37,11 @@ class Outcome(str, Enum):
 # Integer codes of the outcomes inside compiled code; 0 = the run goes on.
 RUNNING, END_COMPLETE, END_EXTRAS, END_INCOMPLETE, END_TIMEOUT = range(5)
 OUTCOME_OF_CODE: dict[int, Outcome | None] = {
-    RUNNING: None, END_COMPLETE: Outcome.COMPLETE, END_EXTRAS: Outcome.COMPLETE_WITH_EXTRAS,
-    END_INCOMPLETE: Outcome.INCOMPLETE, END_TIMEOUT: Outcome.TIMEOUT,
+    RUNNING: None,
+    END_COMPLETE: Outcome.COMPLETE,
+    END_EXTRAS: Outcome.COMPLETE_WITH_EXTRAS,
+    END_INCOMPLETE: Outcome.INCOMPLETE,
+    END_TIMEOUT: Outcome.TIMEOUT,
 }
 
 
@@ -61,8 +64,15 @@ METRIC_COLUMNS: tuple[str, ...] = TickMetrics._fields
 # the monitor) needs no numba; engine.py compiles the same functions for its kernels.
 def metric_values(tick, localized, inside, outside, walking, separated, shape_patches):
     """The :class:`TickMetrics` fields, in order, from running counts (``localized`` includes seeds)."""
-    return (tick, localized + separated, localized, inside, inside + outside + walking, shape_patches - localized,
-            walking)
+    return (
+        tick,
+        localized + separated,
+        localized,
+        inside,
+        inside + outside + walking,
+        shape_patches - localized,
+        walking,
+    )
 
 
 def end_code(localized, moving, tick, shape_patches, robots, max_ticks):
@@ -85,8 +95,7 @@ def tick_metrics(tick: int, counts: Sequence[int] | np.ndarray, shape_patches: i
 
 def outcome_of(metrics: TickMetrics, shape_patches: int, robots: int, max_ticks: int) -> Outcome | None:
     """The run's outcome if it ends at this tick, else None (``robots``: those not removed)."""
-    return OUTCOME_OF_CODE[end_code(metrics.localized, metrics.moving, metrics.tick, shape_patches, robots,
-                                    max_ticks)]
+    return OUTCOME_OF_CODE[end_code(metrics.localized, metrics.moving, metrics.tick, shape_patches, robots, max_ticks)]
 
 
 def convergence_rate(final: TickMetrics) -> float:
@@ -94,11 +103,23 @@ def convergence_rate(final: TickMetrics) -> float:
     return (final.localized - SEEDS) / final.tick if final.tick > 0 else 0.0
 
 
-def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, outcome: Outcome,
-                final: TickMetrics, separated: int, world_radius: int, wall_seconds: float,
-                losses: Sequence[tuple[int, int]] = (), restarts: Sequence[tuple[int, str]] = (),
-                overhead: dict[str, float | None] | None = None, rejected: dict[str, int] | None = None,
-                mesh_scale: float = 1.0) -> dict:
+def run_summary(
+    *,
+    shape: str,
+    shape_patches: int,
+    params: dict,
+    engine: str,
+    outcome: Outcome,
+    final: TickMetrics,
+    separated: int,
+    world_radius: int,
+    wall_seconds: float,
+    losses: Sequence[tuple[int, int]] = (),
+    restarts: Sequence[tuple[int, str]] = (),
+    overhead: dict[str, float | None] | None = None,
+    rejected: dict[str, int] | None = None,
+    mesh_scale: float = 1.0,
+) -> dict:
     """The per-run record written to ``summary.json`` (and one row of an experiment).
 
     ``losses`` are (tick, robots) of robot removals (failures, lost processes);
@@ -115,8 +136,11 @@ def run_summary(*, shape: str, shape_patches: int, params: dict, engine: str, ou
         "shape": shape,
         "shape_patches": shape_patches,
         **({"mesh_scale": mesh_scale} if mesh_scale != 1.0 else {}),
-        **{p.name: robots if p.name == "robots" else world_radius if p.name == "world_radius" else params[p.name]
-           for p in RUN_PARAMETERS if p.name != "shape" and p.recorded},  # every run parameter, as declared
+        **{
+            p.name: robots if p.name == "robots" else world_radius if p.name == "world_radius" else params[p.name]
+            for p in RUN_PARAMETERS
+            if p.name != "shape" and p.recorded
+        },  # every run parameter, as declared
         "engine": engine,
         "outcome": outcome.value,
         "convergence_tick": final.tick,

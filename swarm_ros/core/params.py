@@ -116,14 +116,17 @@ class Param:
             if self.choices:
                 ok = value in self.choices
             elif kind in (int, float):
-                ok = (self.low is None or (value > self.low if self.low_open else value >= self.low)) \
-                    and (self.high is None or value <= self.high)
+                ok = (self.low is None or (value > self.low if self.low_open else value >= self.low)) and (
+                    self.high is None or value <= self.high
+                )
         if ok and kind is int and value > INT64_MAX and (self.high is None or self.high > INT64_MAX):
-            raise ParameterError(f"{self.name} must be {self.describe()} and <= {INT64_MAX} (a 64-bit integer), "
-                                 f"got {value}")
+            raise ParameterError(
+                f"{self.name} must be {self.describe()} and <= {INT64_MAX} (a 64-bit integer), got {value}"
+            )
         if not ok:
-            shown = _number(value) if isinstance(value, float) and math.isfinite(value) and kind is float \
-                else repr(value)  # an integer's 442.0 stays 442.0: the '.0' is what is wrong
+            shown = (
+                _number(value) if isinstance(value, float) and math.isfinite(value) and kind is float else repr(value)
+            )  # an integer's 442.0 stays 442.0: the '.0' is what is wrong
             raise ParameterError(f"{self.name} must be {self.describe()}, got {shown}")
         return kind(value)
 
@@ -147,28 +150,46 @@ class Settings:
     here, in the order of results.csv's columns (:data:`RUN_PARAMETERS` is read from these fields).
     ``robots = 0`` means the shape's patch count; ``join``, ``crowding`` and ``steps`` = "" the rule set's own."""
 
-    shape: str = _param("star", "built-in shape name (2D or 3D), or a shape file: a .txt grid (layers separated by "
-                        "--- for 3D), a .png image, or an .stl/.obj/.ply mesh", experiment="", model=False)
-    mesh_scale: float = _param(1.0, "voxels per mesh unit, for a mesh shape", low=0.0, low_open=True, high=1000.0,
-                               experiment="", model=False, recorded=False)
-    robots: int = _param(0, "robots N, seeds included", low=MIN_ROBOTS, blank="the shape's patch count",
-                         experiment="")
-    vision_radius: float = _param(DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision",
-                                  experiment="axis")
-    rules: str = _param(DEFAULT_RULES, "rule set: paper (join walk, crowding ahead, steps one), local (join local), "
-                        "literal (join local, steps literal); see docs/model.md", choices=tuple(RULE_SETS),
-                        experiment="axis")
+    shape: str = _param(
+        "star",
+        "built-in shape name (2D or 3D), or a shape file: a .txt grid (layers separated by "
+        "--- for 3D), a .png image, or an .stl/.obj/.ply mesh",
+        experiment="",
+        model=False,
+    )
+    mesh_scale: float = _param(
+        1.0,
+        "voxels per mesh unit, for a mesh shape",
+        low=0.0,
+        low_open=True,
+        high=1000.0,
+        experiment="",
+        model=False,
+        recorded=False,
+    )
+    robots: int = _param(0, "robots N, seeds included", low=MIN_ROBOTS, blank="the shape's patch count", experiment="")
+    vision_radius: float = _param(
+        DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision", experiment="axis"
+    )
+    rules: str = _param(
+        DEFAULT_RULES,
+        "rule set: paper (join walk, crowding ahead, steps one), local (join local), "
+        "literal (join local, steps literal); see docs/model.md",
+        choices=tuple(RULE_SETS),
+        experiment="axis",
+    )
     join: str = _param("", "override the rule set's join switch", choices=JOIN_VALUES, blank="the rule set's own")
-    crowding: str = _param("", "override the rule set's crowding switch", choices=CROWDING_VALUES,
-                           blank="the rule set's own")
+    crowding: str = _param(
+        "", "override the rule set's crowding switch", choices=CROWDING_VALUES, blank="the rule set's own"
+    )
     steps: str = _param("", "override the rule set's steps switch", choices=STEPS_VALUES, blank="the rule set's own")
     seed: int = _param(DEFAULT_SEED, "run seed", low=0, high=MAX_SEED, experiment="")
     max_ticks: int = _param(DEFAULT_MAX_TICKS, "tick limit", low=1, high=MAX_TICKS)
-    wiggle_deg: float = _param(DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0,
-                               flag="--wiggle")
+    wiggle_deg: float = _param(DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle")
     world_radius: int = _param(DEFAULT_RADIUS, "the world spans [-R, R] patches", low=MIN_RADIUS, model=False)
-    fail_fraction: float = _param(0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0,
-                                  high=1.0, flag="")
+    fail_fraction: float = _param(
+        0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0, high=1.0, flag=""
+    )
     fail_tick: int = _param(0, "the tick at whose end fail_fraction of the robots fail", low=0, flag="")
 
     def updated(self, **values: Any) -> Settings:
@@ -197,8 +218,10 @@ class Settings:
         params = self.run_params(self.robots or shape.patches)
         params.check_vision(shape.world.radius)
         if params.robots > shape.free_patches:
-            raise ParameterError(f"{shape.source}: {params.robots} robots do not fit on the "
-                                 f"{shape.free_patches} free patches of the {shape.world.describe()} world")
+            raise ParameterError(
+                f"{shape.source}: {params.robots} robots do not fit on the "
+                f"{shape.free_patches} free patches of the {shape.world.describe()} world"
+            )
         return shape, params
 
 
@@ -213,32 +236,61 @@ MAX_RESTARTS = 3  #: restarts of one robot batch's process, at most, before its 
 #: Each ROS node's own parameters (not run parameters: they do not change what the swarm does).
 NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
     "world": (
-        Param("monitor_window", 128, "max ticks the world runs ahead of the monitor", low=0,
-              blank="do not wait for one"),
+        Param(
+            "monitor_window", 128, "max ticks the world runs ahead of the monitor", low=0, blank="do not wait for one"
+        ),
         Param("start_timeout", 60.0, "seconds to wait for robot batches to cover every robot", low=0, low_open=True),
-        Param("on_batch_loss", "restart", "restart: wait for a lost batch process to come back; remove: remove "
-              "its robots", choices=BATCH_LOSS_POLICIES),
-        Param("max_restarts", MAX_RESTARTS, "restarts per node process (each batch, the world, the monitor); a "
-              "batch lost once more has its robots removed, a world or monitor lost once more ends the run", low=0),
-        Param("restart_timeout", 30.0, "seconds to wait for a lost batch or monitor to come back before going on "
-              "without it", low=0, low_open=True),
-        Param("checkpoint", "", "file the world saves each tick into, from which a restarted world goes on",
-              blank="none: a lost world ends the run"),
+        Param(
+            "on_batch_loss",
+            "restart",
+            "restart: wait for a lost batch process to come back; remove: remove its robots",
+            choices=BATCH_LOSS_POLICIES,
+        ),
+        Param(
+            "max_restarts",
+            MAX_RESTARTS,
+            "restarts per node process (each batch, the world, the monitor); a "
+            "batch lost once more has its robots removed, a world or monitor lost once more ends the run",
+            low=0,
+        ),
+        Param(
+            "restart_timeout",
+            30.0,
+            "seconds to wait for a lost batch or monitor to come back before going on without it",
+            low=0,
+            low_open=True,
+        ),
+        Param(
+            "checkpoint",
+            "",
+            "file the world saves each tick into, from which a restarted world goes on",
+            blank="none: a lost world ends the run",
+        ),
         Param("incarnation", 0, "0 for the world's first process; the launcher counts restarts up from 1", low=0),
     ),
     "robot_batch": (
         Param("batch", 0, "this process decides for the robots in strip `batch` of `batches` ...", low=0),
         Param("batches", 1, "... of this many strips of the world along x", low=1),
-        Param("region_cuts", "", "x positions (patches) where strips 1.. start, e.g. -20,0,20; every batch of a run "
-              "needs the same", blank="cut so that each strip starts with as many robots", list_text=True),
+        Param(
+            "region_cuts",
+            "",
+            "x positions (patches) where strips 1.. start, e.g. -20,0,20; every batch of a run needs the same",
+            blank="cut so that each strip starts with as many robots",
+            list_text=True,
+        ),
         Param("incarnation", 0, "0 for a batch's first process; the launcher counts restarts up from 1", low=0),
     ),
     "monitor": (
         Param("out_dir", "", "run directory", blank="runs/<time>_<shape>_n<N>_v<R>_s<seed>"),
         Param("overwrite", False, "replace an existing run directory"),
         Param("record", True, "write recording.rrd (Rerun) into the run directory"),
-        Param("record_every", 0, "log the robots every k-th tick (metrics: every tick)", low=1,
-              blank="chosen from the swarm's size"),
+        Param(
+            "record_every",
+            0,
+            "log the robots every k-th tick (metrics: every tick)",
+            low=1,
+            blank="chosen from the swarm's size",
+        ),
         Param("bag", True, "write bag/, a rosbag2 (MCAP) of every message on the swarm's topics"),
         Param("viewer_url", "", "also stream live to this Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy"),
         Param("incarnation", 0, "0 for the monitor's first process; a restarted one goes on from its bag", low=0),
@@ -299,8 +351,10 @@ class RunParams:
         if self.fail_fraction > 0 and self.fail_tick < 1:
             raise ParameterError(f"fail_tick must be >= 1 when fail_fraction > 0, got {self.fail_tick}")
         if self.fail_fraction > 0 and self.fail_tick >= self.max_ticks:
-            raise ParameterError(f"fail_tick must be before max_ticks ({self.max_ticks}) when fail_fraction > 0, "
-                                 f"got {self.fail_tick}: no robot would fail")
+            raise ParameterError(
+                f"fail_tick must be before max_ticks ({self.max_ticks}) when fail_fraction > 0, "
+                f"got {self.fail_tick}: no robot would fail"
+            )
 
     def check_vision(self, world_radius: int) -> None:
         """Refuse a vision radius beyond the world's radius: a robot would see across the whole world.
@@ -309,8 +363,10 @@ class RunParams:
             ParameterError: ``vision_radius > world_radius``.
         """
         if self.vision_radius > world_radius:
-            raise ParameterError(f"vision_radius must be <= the world radius {world_radius} (a robot would see "
-                                 f"across the whole world), got {self.vision_radius:g}")
+            raise ParameterError(
+                f"vision_radius must be <= the world radius {world_radius} (a robot would see "
+                f"across the whole world), got {self.vision_radius:g}"
+            )
 
     @property
     def failures(self) -> int:

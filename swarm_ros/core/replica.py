@@ -45,11 +45,25 @@ def _apply_rows(ids, rows, robots, grid, first, last):
     Returns the number of rows that were rejected (-1 per row whose id is out of range
     or whose localized patch is not an empty shape patch), else 0.
     """
-    new_state, new_x, new_y, new_z, new_heading, new_pitch = rows.state, rows.x, rows.y, rows.z, rows.heading, \
-        rows.pitch
+    new_state, new_x, new_y, new_z, new_heading, new_pitch = (
+        rows.state,
+        rows.x,
+        rows.y,
+        rows.z,
+        rows.heading,
+        rows.pitch,
+    )
     x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
-    occupancy, frontier, blocks, shape, nbrs, radius, size, solid = grid.occupancy, grid.frontier, grid.blocks, \
-        grid.shape, grid.nbrs, grid.radius, grid.size, grid.solid
+    occupancy, frontier, blocks, shape, nbrs, radius, size, solid = (
+        grid.occupancy,
+        grid.frontier,
+        grid.blocks,
+        grid.shape,
+        grid.nbrs,
+        grid.radius,
+        grid.size,
+        grid.solid,
+    )
     n = state.size
     for k in range(ids.size):
         i = ids[k]
@@ -60,8 +74,15 @@ def _apply_rows(ids, rows, robots, grid, first, last):
         if was == _REMOVED and st != _REMOVED:
             return k + 1  # removed robots never come back
         if st == _REMOVED and (was == _SEED or was == _LOCALIZED):
-            vacate(cell_index(x[i], y[i], z[i] if solid else 0.0, solid, radius, size), occupancy, frontier, blocks,
-                   shape, nbrs, size)
+            vacate(
+                cell_index(x[i], y[i], z[i] if solid else 0.0, solid, radius, size),
+                occupancy,
+                frontier,
+                blocks,
+                shape,
+                nbrs,
+                size,
+            )
         x[i] = new_x[k]
         y[i] = new_y[k]
         heading[i] = new_heading[k]
@@ -109,14 +130,28 @@ class Replica:
         frontier = np.zeros(world.patch_count, dtype=bool)
         solid = {"z": np.zeros(robots), "pitch": np.zeros(robots)} if self._solid else {}
         return SwarmState(
-            x=np.zeros(robots), y=np.zeros(robots), heading=np.zeros(robots),
+            x=np.zeros(robots),
+            y=np.zeros(robots),
+            heading=np.zeros(robots),
             state=np.full(robots, UNKNOWN, dtype=np.int8),
             occupancy=np.full(world.patch_count, NO_ROBOT, dtype=np.int32),
-            frontier=frontier, frontier_blocks=frontier_blocks_of(frontier, world.size, world.dims), tick=-1,
-            **solid)
+            frontier=frontier,
+            frontier_blocks=frontier_blocks_of(frontier, world.size, world.dims),
+            tick=-1,
+            **solid,
+        )
 
-    def load(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-             heading: np.ndarray, z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> None:
+    def load(
+        self,
+        tick: int,
+        ids: np.ndarray,
+        state: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        heading: np.ndarray,
+        z: np.ndarray | None = None,
+        pitch: np.ndarray | None = None,
+    ) -> None:
         """Start again from a snapshot: every robot's row at ``tick`` (how a restarted robot batch catches up);
         for a regional replica, the rows of the stationary robots and of the moving ones in its area.
 
@@ -137,8 +172,17 @@ class Replica:
     def tick(self) -> int:
         return self.state.tick
 
-    def update(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-               heading: np.ndarray, z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> None:
+    def update(
+        self,
+        tick: int,
+        ids: np.ndarray,
+        state: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        heading: np.ndarray,
+        z: np.ndarray | None = None,
+        pitch: np.ndarray | None = None,
+    ) -> None:
         """Apply the rows of ``tick``, which must be the tick after the last one applied.
 
         Raises:
@@ -150,31 +194,47 @@ class Replica:
             raise ContractError(f"rows for tick {tick} arrived after tick {self.state.tick}")
         self._apply(tick, ids, state, x, y, heading, z, pitch)
 
-    def _apply(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-               heading: np.ndarray, z: np.ndarray | None, pitch: np.ndarray | None) -> None:
+    def _apply(
+        self,
+        tick: int,
+        ids: np.ndarray,
+        state: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        heading: np.ndarray,
+        z: np.ndarray | None,
+        pitch: np.ndarray | None,
+    ) -> None:
         s = self.state
         if self._solid != (z is not None and pitch is not None):
             raise ContractError("rows of a 3D world need z and pitch; rows of a 2D world have none")
         ids = np.asarray(ids, dtype=np.int64)
         state = np.asarray(state, dtype=np.int8)
-        if tick == 0 and self.area is None and (ids.size != s.robots
-                                                 or not np.array_equal(np.sort(ids), np.arange(s.robots))):
+        if (
+            tick == 0
+            and self.area is None
+            and (ids.size != s.robots or not np.array_equal(np.sort(ids), np.arange(s.robots)))
+        ):
             raise ContractError(f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows")
         if state.size and (state.min() < 0 or state.max() > max(RobotState)):
             raise ContractError(f"unknown robot state code in the rows of tick {tick}")
         f64 = np.float64
         new_z, new_pitch = (np.asarray(z, f64), np.asarray(pitch, f64)) if self._solid else (self._none, self._none)
-        rows = Robots(np.asarray(x, dtype=f64), np.asarray(y, dtype=f64), new_z, np.asarray(heading, dtype=f64),
-                      new_pitch, state)
+        rows = Robots(
+            np.asarray(x, dtype=f64), np.asarray(y, dtype=f64), new_z, np.asarray(heading, dtype=f64), new_pitch, state
+        )
         grid = grid_of(self.shape, s, self._shape, self._wall, self._nbrs)
         bad = _apply_rows(ids, rows, robots_of(s), grid, self._first, self._last)
         if bad:
-            raise ContractError(f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
-                             f"localizes on a patch that is not an empty shape patch, or returns after removal")
+            raise ContractError(
+                f"tick {tick}: row {bad - 1} (robot {ids[bad - 1]}) is out of range, "
+                f"localizes on a patch that is not an empty shape patch, or returns after removal"
+            )
         s.tick = tick
 
-    def inconsistent(self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-                     z: np.ndarray | None = None) -> str | None:
+    def inconsistent(
+        self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray | None = None
+    ) -> str | None:
         """Why the rows of ``tick`` cannot be the world's next ones (None if they can), changing nothing.
 
         Checks what :meth:`update` would otherwise find half-way through, leaving the replica

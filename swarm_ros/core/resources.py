@@ -72,12 +72,14 @@ def check_world_memory(radius: int, copies: int = 1, dims: int = 2) -> None:
     if available is None or not isinstance(radius, int) or radius < 3:
         return  # not Linux, or a bad radius (World says why)
     side = 2 * radius + 1
-    needed = side ** dims * BYTES_PER_PATCH * copies
+    needed = side**dims * BYTES_PER_PATCH * copies
     if needed > available:
         largest = int(((available / (BYTES_PER_PATCH * copies)) ** (1 / dims) - 1) // 2)
-        gib = 1024 ** 3
+        gib = 1024**3
         each = f" in each of {copies} processes" if copies > 1 else ""
         shape = " x ".join([str(side)] * dims)
-        raise ParameterError(f"world_radius {radius} needs about {needed / gib:,.1f} GiB ({shape} patches at "
-                             f"{BYTES_PER_PATCH} bytes each{each}), more than the {available / gib:.1f} GiB of "
-                             f"memory available now; at most {largest} fits")
+        raise ParameterError(
+            f"world_radius {radius} needs about {needed / gib:,.1f} GiB ({shape} patches at "
+            f"{BYTES_PER_PATCH} bytes each{each}), more than the {available / gib:.1f} GiB of "
+            f"memory available now; at most {largest} fits"
+        )

@@ -130,8 +130,9 @@ def _move(xi, yi, zi, h, p, solid, wiggle, u, v, wall, radius, size):
 def _crowded(solid, crowd, xi, yi, zi, h, ex, ey, ez, me, vision, robots, radius, size, head, nxt) -> bool:
     """The rule set's crowding test for a robot at (xi, yi, zi) facing ``h`` (the unit step (ex, ey, ez))."""
     if solid:
-        return crowded3(crowd, xi, yi, zi, ex, ey, ez, me, vision, robots.x, robots.y, robots.z, radius, size, head,
-                        nxt)
+        return crowded3(
+            crowd, xi, yi, zi, ex, ey, ez, me, vision, robots.x, robots.y, robots.z, radius, size, head, nxt
+        )
     return crowded(crowd, xi, yi, h, me, vision, robots.x, robots.y, radius, size, head, nxt)
 
 
@@ -182,10 +183,22 @@ def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out):
     """
     solid = grid.solid
     x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
-    shape, wall, frontier, blocks, radius, size = grid.shape, grid.wall, grid.frontier, grid.blocks, grid.radius, \
-        grid.size
-    vision, wiggle, seed, join, crowd, steps = rules.vision, rules.wiggle, rules.seed, rules.join, rules.crowd, \
-        rules.steps
+    shape, wall, frontier, blocks, radius, size = (
+        grid.shape,
+        grid.wall,
+        grid.frontier,
+        grid.blocks,
+        grid.radius,
+        grid.size,
+    )
+    vision, wiggle, seed, join, crowd, steps = (
+        rules.vision,
+        rules.wiggle,
+        rules.seed,
+        rules.join,
+        rules.crowd,
+        rules.steps,
+    )
     for k in range(ids.size):
         i = ids[k]
         xi, yi, hi = x[i], y[i], heading[i]
@@ -208,7 +221,8 @@ def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out):
                 u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE)
                 h, p, ex, ey, ez = _wiggled(hi, pi, solid, wiggle, u, v)
                 if wall[cell_index(xi + ex, yi + ey, zi + ez, solid, radius, size)] or _crowded(
-                        solid, crowd, xi, yi, zi, h, ex, ey, ez, i, vision, robots, radius, size, head, nxt):
+                    solid, crowd, xi, yi, zi, h, ex, ey, ez, i, vision, robots, radius, size, head, nxt
+                ):
                     u, v = _draws(solid, seed, i, tick, STREAM_TURN)
                     hi, pi = _turned(solid, u, v)
                 else:
@@ -283,10 +297,20 @@ class Decisions:
     @staticmethod
     def standing(view: SwarmState, ids: np.ndarray, tick: int) -> Decisions:
         """Decisions of robots ``ids`` to stand still, as they are in ``view``: no claim, the same pose."""
-        solid = {"z": view.z[ids].copy(), "pitch": view.pitch[ids].copy()} \
-            if view.z is not None and view.pitch is not None else {}
-        return Decisions(tick=tick, ids=ids, claim=np.full(ids.size, -1, dtype=np.int64), x=view.x[ids].copy(),
-                         y=view.y[ids].copy(), heading=view.heading[ids].copy(), **solid)
+        solid = (
+            {"z": view.z[ids].copy(), "pitch": view.pitch[ids].copy()}
+            if view.z is not None and view.pitch is not None
+            else {}
+        )
+        return Decisions(
+            tick=tick,
+            ids=ids,
+            claim=np.full(ids.size, -1, dtype=np.int64),
+            x=view.x[ids].copy(),
+            y=view.y[ids].copy(),
+            heading=view.heading[ids].copy(),
+            **solid,
+        )
 
     @staticmethod
     def concatenate(parts: list[Decisions]) -> Decisions:
@@ -347,8 +371,17 @@ class Decider:
         n = ids.size
         out = moves_for(n, self.shape.dims == 3)
         try:
-            decide_robots(moving, ids, robots_of(view), grid_of(self.shape, view, self._shape, self._wall, self._nbrs),
-                          self._rules, tick, self._head, self._nxt, out)
+            decide_robots(
+                moving,
+                ids,
+                robots_of(view),
+                grid_of(self.shape, view, self._shape, self._wall, self._nbrs),
+                self._rules,
+                tick,
+                self._head,
+                self._nxt,
+                out,
+            )
         except BaseException:
             self._head.fill(-1)  # the cell list is left as found, whatever happened half-way
             raise

@@ -176,9 +176,7 @@ def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
                     best, best_d2 = _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
             else:  # the rows between: the ring's left and right blocks
                 if bx - k >= 0:
-                    best, best_d2 = _scan_block(bx - k, uy, xi, yi, frontier, blocks, radius, size, nb, best,
-                                                best_d2)
+                    best, best_d2 = _scan_block(bx - k, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
                 if bx + k < nb:
-                    best, best_d2 = _scan_block(bx + k, uy, xi, yi, frontier, blocks, radius, size, nb, best,
-                                                best_d2)
+                    best, best_d2 = _scan_block(bx + k, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
     return best

@@ -29,8 +29,11 @@ TWO_PI = 2.0 * math.pi
 @numba.njit(cache=True, inline="always")
 def voxel_index(x, y, z, radius, size) -> int:
     """Flat index of the voxel whose centre is nearest to (x, y, z)."""
-    return (((int(math.floor(z + 0.5)) + radius) * size + int(math.floor(y + 0.5)) + radius) * size
-            + int(math.floor(x + 0.5)) + radius)
+    return (
+        ((int(math.floor(z + 0.5)) + radius) * size + int(math.floor(y + 0.5)) + radius) * size
+        + int(math.floor(x + 0.5))
+        + radius
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -206,6 +209,7 @@ def nearest_frontier3(xi, yi, zi, frontier, blocks, radius, size) -> int:
             for uy in range(max(by - k, 0), min(by + k, nb - 1) + 1):
                 for ux in range(max(bx - k, 0), min(bx + k, nb - 1) + 1):
                     if max(abs(ux - bx), abs(uy - by), abs(uz - bz)) == k:
-                        best, best_d2 = _scan_cube(ux, uy, uz, xi, yi, zi, frontier, blocks, radius, size, nb,
-                                                   best, best_d2)
+                        best, best_d2 = _scan_cube(
+                            ux, uy, uz, xi, yi, zi, frontier, blocks, radius, size, nb, best, best_d2
+                        )
     return best

@@ -59,8 +59,9 @@ class RuleSet:
     steps: str
 
     @staticmethod
-    def resolve(name: str = DEFAULT_RULES, join: str | None = None, crowding: str | None = None,
-                steps: str | None = None) -> RuleSet:
+    def resolve(
+        name: str = DEFAULT_RULES, join: str | None = None, crowding: str | None = None, steps: str | None = None
+    ) -> RuleSet:
         """The rule set ``name`` with any switch given (not None, not "") overriding its own value.
 
         Raises:

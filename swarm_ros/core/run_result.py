@@ -18,13 +18,37 @@ INPROCESS, ROS2 = "inprocess", "ros2"
 ENGINES = (INPROCESS, ROS2)  #: the engines, as summary.json and results.csv name them
 
 
-def summarize(*, shape: Shape, params: RunParams, state: SwarmState, final: TickMetrics, outcome: Outcome,
-              engine: str, wall_seconds: float, losses=(), restarts=(), overhead=None, rejected=None) -> dict:
+def summarize(
+    *,
+    shape: Shape,
+    params: RunParams,
+    state: SwarmState,
+    final: TickMetrics,
+    outcome: Outcome,
+    engine: str,
+    wall_seconds: float,
+    losses=(),
+    restarts=(),
+    overhead=None,
+    rejected=None,
+) -> dict:
     """The summary.json record of a run, from either engine (fields: :func:`swarm_ros.core.metrics.run_summary`)."""
-    return run_summary(shape=shape.name, shape_patches=shape.patches, params=params.as_dict(), engine=engine,
-                       outcome=outcome, final=final, separated=int((state.state == RobotState.SEPARATED).sum()),
-                       world_radius=shape.world.radius, wall_seconds=wall_seconds, losses=losses,
-                       restarts=restarts, overhead=overhead, rejected=rejected, mesh_scale=shape.mesh_scale)
+    return run_summary(
+        shape=shape.name,
+        shape_patches=shape.patches,
+        params=params.as_dict(),
+        engine=engine,
+        outcome=outcome,
+        final=final,
+        separated=int((state.state == RobotState.SEPARATED).sum()),
+        world_radius=shape.world.radius,
+        wall_seconds=wall_seconds,
+        losses=losses,
+        restarts=restarts,
+        overhead=overhead,
+        rejected=rejected,
+        mesh_scale=shape.mesh_scale,
+    )
 
 
 def summary_of(sim: Simulation, wall_seconds: float = 0.0, stopped: Outcome | None = None) -> dict:
@@ -33,8 +57,16 @@ def summary_of(sim: Simulation, wall_seconds: float = 0.0, stopped: Outcome | No
     outcome = sim.outcome or stopped
     if outcome is None:
         raise ContractError("the run has not ended yet")
-    return summarize(shape=sim.shape, params=sim.params, state=sim.state, final=sim.metrics, outcome=outcome,
-                     engine=INPROCESS, wall_seconds=wall_seconds, losses=sim.losses)
+    return summarize(
+        shape=sim.shape,
+        params=sim.params,
+        state=sim.state,
+        final=sim.metrics,
+        outcome=outcome,
+        engine=INPROCESS,
+        wall_seconds=wall_seconds,
+        losses=sim.losses,
+    )
 
 
 @dataclass(frozen=True)
@@ -64,5 +96,11 @@ class RunRecord:
     def of(sim: Simulation, wall_seconds: float, stopped: Outcome | None = None) -> RunRecord:
         """The record of an in-process run: finished, or ``stopped`` (interrupted) at its current tick."""
         summary = summary_of(sim, wall_seconds=wall_seconds, stopped=stopped)
-        return RunRecord(shape=sim.shape, params=sim.params, state=sim.state, history=sim.history,
-                         outcome=Outcome(summary["outcome"]), summary=summary)
+        return RunRecord(
+            shape=sim.shape,
+            params=sim.params,
+            state=sim.state,
+            history=sim.history,
+            outcome=Outcome(summary["outcome"]),
+            summary=summary,
+        )

@@ -64,8 +64,11 @@ def regions(mask: np.ndarray, connectivity: int) -> tuple[np.ndarray, int]:
     """
     # a uint8 copy: cc3d refuses read-only buffers, and 4.1.1 mislabels bool grids with connectivity 8
     writable = np.array(mask, dtype=np.uint8, order="C")
-    labels, count = cc3d.connected_components(writable, connectivity=connectivity,  # type: ignore[call-overload]
-                                              return_N=True)  # (cc3d's stubs know a bool grid only)
+    labels, count = cc3d.connected_components(
+        writable,
+        connectivity=connectivity,  # type: ignore[call-overload]
+        return_N=True,
+    )  # (cc3d's stubs know a bool grid only)
     return labels, int(count)
 
 
@@ -147,8 +150,10 @@ def read_png_grid(path: Path) -> np.ndarray:
     # Pillow's own bound against decompression bombs (it warns above it, refuses twice it): refused here in our
     # words, before Pillow says anything
     most = Image.MAX_IMAGE_PIXELS or 0
-    too_large = f"{path}: the image has more than {most:,} pixels{{}}, the most a shape image may " \
-                f"have (Pillow's bound against decompression bombs)"
+    too_large = (
+        f"{path}: the image has more than {most:,} pixels{{}}, the most a shape image may "
+        f"have (Pillow's bound against decompression bombs)"
+    )
     try:
         with warnings.catch_warnings():  # Pillow warns of a large image in its own words; it is refused below
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
@@ -183,8 +188,9 @@ def read_grid(path: Path, mesh_scale: float = 1.0) -> np.ndarray:
     """Read a shape file by its extension: ``.png`` as an image, ``.stl``, ``.obj`` and ``.ply`` as
     a mesh voxelized at ``mesh_scale`` voxels per mesh unit, anything else as a text grid."""
     if path.is_dir():
-        raise ShapeError(f"{path}: is a directory, not a shape file (a .txt grid or a .png image) nor a mesh "
-                         "(.stl, .obj, .ply)")
+        raise ShapeError(
+            f"{path}: is a directory, not a shape file (a .txt grid or a .png image) nor a mesh (.stl, .obj, .ply)"
+        )
     suffix = path.suffix.lower()
     if suffix == ".png":
         return read_png_grid(path)
@@ -272,8 +278,7 @@ class Shape:
         if not text.strip():
             raise ShapeError(f"the shape name is empty ({known}; or a .txt / .png file or a mesh)")
         if mesh_scale != 1.0 and Path(text).suffix.lower() not in MESH_SUFFIXES:
-            raise ShapeError(f"{text}: mesh_scale applies to mesh shapes (.stl, .obj, .ply) only, got "
-                             f"{mesh_scale:g}")
+            raise ShapeError(f"{text}: mesh_scale applies to mesh shapes (.stl, .obj, .ply) only, got {mesh_scale:g}")
         builtins = {**flat, **solid}
         if text in builtins:
             path = builtins[text]
@@ -318,8 +323,11 @@ class Shape:
         """Regions of non-shape patches enclosed by the shape (4-connected; 3D: 6-connected): a 2D
         shape's holes, a 3D shape's closed cavities."""
         labels, count = regions(~self.mask, connectivity=CONNECTIVITY[self.dims][1])
-        border = np.unique(np.concatenate([np.moveaxis(labels, axis, 0)[end].ravel()
-                                           for axis in range(labels.ndim) for end in (0, -1)]))
+        border = np.unique(
+            np.concatenate(
+                [np.moveaxis(labels, axis, 0)[end].ravel() for axis in range(labels.ndim) for end in (0, -1)]
+            )
+        )
         return int(count - np.count_nonzero(border))
 
     @property
@@ -351,7 +359,7 @@ class Shape:
         touching = mask & ~inner
         if touching.any():
             at = world.patch_coords(int(np.flatnonzero(touching)[0]))
-            axes = ", ".join(f"|{a}|" for a in "xyz"[:world.dims])
+            axes = ", ".join(f"|{a}|" for a in "xyz"[: world.dims])
             raise ShapeError(
                 f"{src}: shape touches the wall of the {world.describe()} world at patch "
                 f"({', '.join(str(int(c)) for c in at)}); keep shape patches within {axes} <= {world.radius - 2}"
@@ -388,8 +396,10 @@ class Shape:
         corner = m[:-1, :-1, :-1] & m[:-1, :-1, 1:] & m[:-1, 1:, :-1] & m[1:, :-1, :-1]
         iz, iy, ix = np.nonzero(corner)
         if iz.size == 0:
-            raise ShapeError(f"{self.source}: shape has no corner of four voxels (a voxel and its +x, +y and +z "
-                             "neighbours) for the four seed robots")
+            raise ShapeError(
+                f"{self.source}: shape has no corner of four voxels (a voxel and its +x, +y and +z "
+                "neighbours) for the four seed robots"
+            )
         r = self.world.radius
         px, py, pz = ix - r, iy - r, iz - r
         d2 = (4 * px + 1) ** 2 + (4 * py + 1) ** 2 + (4 * pz + 1) ** 2  # centroid (p + 1/4) in quarters

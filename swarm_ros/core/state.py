@@ -95,8 +95,16 @@ class SwarmState:
         return int(self.x.size)
 
     def copy(self) -> SwarmState:
-        return SwarmState(**{f.name: (getattr(self, f.name).copy() if isinstance(getattr(self, f.name), np.ndarray)
-                                      else getattr(self, f.name)) for f in fields(self)})
+        return SwarmState(
+            **{
+                f.name: (
+                    getattr(self, f.name).copy()
+                    if isinstance(getattr(self, f.name), np.ndarray)
+                    else getattr(self, f.name)
+                )
+                for f in fields(self)
+            }
+        )
 
     def counts(self) -> np.ndarray:
         """Robots per :class:`RobotState` code (int64, (STATE_COUNT,))."""
@@ -169,7 +177,7 @@ def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
 
     ids = np.arange(4, robots, dtype=np.int64)
     position = []
-    for axis, stream in enumerate((STREAM_PLACE_X, STREAM_PLACE_Y, STREAM_PLACE_Z)[:world.dims]):
+    for axis, stream in enumerate((STREAM_PLACE_X, STREAM_PLACE_Y, STREAM_PLACE_Z)[: world.dims]):
         c = np.empty(robots)
         c[:4] = seeds[:, axis]
         c[4:] = coords[axis] + (uniform_array(seed, ids, 0, stream) - 0.5)
@@ -191,6 +199,14 @@ def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
     occupancy = np.full(world.patch_count, -1, dtype=np.int32)
     occupancy[seed_flat] = np.arange(4, dtype=np.int32)
     frontier = frontier_of(shape, occupancy)
-    return SwarmState(x=position[0], y=position[1], heading=heading, state=state, occupancy=occupancy,
-                      frontier=frontier, frontier_blocks=frontier_blocks_of(frontier, world.size, world.dims),
-                      tick=0, **extra)
+    return SwarmState(
+        x=position[0],
+        y=position[1],
+        heading=heading,
+        state=state,
+        occupancy=occupancy,
+        frontier=frontier,
+        frontier_blocks=frontier_blocks_of(frontier, world.size, world.dims),
+        tick=0,
+        **extra,
+    )

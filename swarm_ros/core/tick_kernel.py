@@ -95,12 +95,25 @@ def run_kernel(moving, robots, grid, rules, scratch, moves, end, rows, m, tick, 
         ids = moving[:m]
         scratch.last_ids[:m] = ids
         decide_robots(ids, ids, robots, grid, rules, tick, scratch.head, scratch.nxt, moves)
-        joined, inside, outside, walking = resolve_kernel(ids, moves, robots, grid, rules, tick, scratch.best,
-                                                          localized, end.shape_patches, scratch.outcome)
+        joined, inside, outside, walking = resolve_kernel(
+            ids, moves, robots, grid, rules, tick, scratch.best, localized, end.shape_patches, scratch.outcome
+        )
         localized += joined
         decided = m
         m = compact_moving(moving, m, robots.state)
-        code, m = close_tick(moving, m, robots.state, tick, localized, inside, outside, walking, end.shape_patches,
-                              end.robots, end.max_ticks, rows[n])
+        code, m = close_tick(
+            moving,
+            m,
+            robots.state,
+            tick,
+            localized,
+            inside,
+            outside,
+            walking,
+            end.shape_patches,
+            end.robots,
+            end.max_ticks,
+            rows[n],
+        )
         n += 1
     return n, m, localized, decided, code

@@ -55,8 +55,10 @@ def stack_layers(path: Path, layers: list[np.ndarray]) -> np.ndarray:
     first = layers[0].shape
     for k, layer in enumerate(layers[1:], start=2):
         if layer.shape != first:
-            raise ShapeError(f"{path}: layer {k} is {layer.shape[1]} x {layer.shape[0]}, the first layer is "
-                             f"{first[1]} x {first[0]} (columns x rows)")
+            raise ShapeError(
+                f"{path}: layer {k} is {layer.shape[1]} x {layer.shape[0]}, the first layer is "
+                f"{first[1]} x {first[0]} (columns x rows)"
+            )
     return np.stack(layers)
 
 
@@ -77,12 +79,16 @@ def read_mesh(path: Path, scale: float) -> np.ndarray:
         raise ShapeError(f"{path}: the mesh has no triangles")
     if not mesh.is_watertight:
         open_edges = len(trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1))
-        raise ShapeError(f"{path}: the mesh does not close ({open_edges} edges belong to one triangle only); "
-                         "a shape needs a closed surface to have an inside")
+        raise ShapeError(
+            f"{path}: the mesh does not close ({open_edges} edges belong to one triangle only); "
+            "a shape needs a closed surface to have an inside"
+        )
     extent = mesh.extents * scale
     if not np.all(np.isfinite(extent)) or extent.max() > MAX_MESH_VOXELS:
-        raise ShapeError(f"{path}: at mesh_scale {scale:g} the mesh is {extent.max():.0f} voxels wide; "
-                         f"lower mesh_scale so that it fits the world")
+        raise ShapeError(
+            f"{path}: at mesh_scale {scale:g} the mesh is {extent.max():.0f} voxels wide; "
+            f"lower mesh_scale so that it fits the world"
+        )
     mesh.apply_scale(scale)
     voxels = mesh.voxelized(pitch=1.0).fill()
     matrix = np.asarray(voxels.matrix, dtype=bool)  # [ix, iy, iz], low corner first

@@ -38,8 +38,9 @@ def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
         moving = sim.moving_ids()
         d = decider.decide(sim.state, moving, sim.tick + 1, moving)
         before = {"z0": s.z[d.ids], "z": d.z, "pitch": d.pitch} if s.z is not None else {}
-        illegal(params, shape.world.radius, s.frontier, s.x[d.ids], s.y[d.ids], d.claim, d.x, d.y, d.heading,
-                **before)  # the world's check of a batch's decisions
+        illegal(
+            params, shape.world.radius, s.frontier, s.x[d.ids], s.y[d.ids], d.claim, d.x, d.y, d.heading, **before
+        )  # the world's check of a batch's decisions
         sim.apply(d)
         changed = sim.last_joins()[0]  # the deciders: the rows the world would publish
         solid = (s.z[changed], s.pitch[changed]) if s.z is not None and s.pitch is not None else (None, None)

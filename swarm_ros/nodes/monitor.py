@@ -50,16 +50,20 @@ class MonitorNode:
         run, own = read_parameters(node, "monitor")
         self.shape, self.params = run.resolve()
         p = self.params
-        self.out = Path(own["out_dir"]) if own["out_dir"] else \
-            run_dir.default_run_dir(self.shape.name, p.robots, p.vision_radius, p.seed)
+        self.out = (
+            Path(own["out_dir"])
+            if own["out_dir"]
+            else run_dir.default_run_dir(self.shape.name, p.robots, p.vision_radius, p.seed)
+        )
         self.overwrite = bool(own["overwrite"])
         self.incarnation = int(own["incarnation"])
         run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
         if not self.incarnation:  # a restarted process goes on from what its process before left
             run_dir.check_leftovers(self.out)
         self.world_radius = run.world_radius
-        self.recording = RecordingOptions(enabled=bool(own["record"]), every=int(own["record_every"]),
-                                          connect=str(own["viewer_url"]) or None).reachable()
+        self.recording = RecordingOptions(
+            enabled=bool(own["record"]), every=int(own["record_every"]), connect=str(own["viewer_url"]) or None
+        ).reachable()
         self.rrd = run_dir.partial_recording(self.out)
         self.core: MonitorCore | None = None  # made in load(), before the readers can hand it anything
         self.finished = False
@@ -70,8 +74,7 @@ class MonitorNode:
         self.pub_metrics = self.signer.publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         # Serialized subscriptions to the tagged topics it records (plan.MONITOR_READS): see _bagger.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
-        self.handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status,
-                         msgs.DECISIONS: self._on_decisions}
+        self.handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status, msgs.DECISIONS: self._on_decisions}
         self.raw = b""  # the message being handled, as it came (recorded once its handler takes it)
         self.readers = {topic: self._subscribe(topic) for topic in msgs.MONITOR_READS if topic != msgs.STATUS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
@@ -92,8 +95,7 @@ class MonitorNode:
         if self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
         recorder = self.recording.open(self.rrd, self.shape, p)
-        self.core = MonitorCore(self.shape, p, self.world_radius, self, recorder, node.get_logger(),
-                                self.incarnation)
+        self.core = MonitorCore(self.shape, p, self.world_radius, self, recorder, node.get_logger(), self.incarnation)
         self.bag = BagRecorder(self.out, self.shape.dims) if self.bag_on else None
         warm_up(self.shape, p)
         if self.incarnation:
@@ -120,13 +122,16 @@ class MonitorNode:
             self.gate.verifier.taken_before()  # the same messages again from the topics' histories: known
         self.core.replayed(metrics)
         if replayed:
-            self.node.get_logger().warn(f"monitor restarted (incarnation {self.incarnation}): went on from tick "
-                                        f"{self.core.resumed_at} of the bag its process before wrote")
+            self.node.get_logger().warn(
+                f"monitor restarted (incarnation {self.incarnation}): went on from tick "
+                f"{self.core.resumed_at} of the bag its process before wrote"
+            )
 
     def _subscribe(self, topic: str):
         """A reader of ``topic``: each message its tag proves goes into the bag as it came, then to its handler."""
-        return self.gate.subscribe(TOPICS[topic][0], topic, self.handlers.get(topic), TOPICS[topic][1],
-                                   raw_handler=self._bagger(topic))
+        return self.gate.subscribe(
+            TOPICS[topic][0], topic, self.handlers.get(topic), TOPICS[topic][1], raw_handler=self._bagger(topic)
+        )
 
     def _readers_matched(self) -> bool:
         """Every reader has matched a writer; the decisions reader, every batch's the graph shows."""
@@ -139,19 +144,20 @@ class MonitorNode:
     def _announce_when_matched(self) -> None:
         while not self.closing.wait(_MATCH_POLL):
             if self._readers_matched():
-                self.alive = self.node.create_publisher(Empty, msgs.alive_topic(self.node.get_name()),
-                                                        msgs.ALIVE_QOS)
+                self.alive = self.node.create_publisher(Empty, msgs.alive_topic(self.node.get_name()), msgs.ALIVE_QOS)
                 return
 
     def _bagger(self, topic: str):
         """What writes a proven message of ``topic``, as it came, into the bag (if there is one). Rows and
         decisions wait for their handler: only a tick not recorded yet goes in (a restarted world sends the
         last ticks again)."""
+
         def write(data: bytes) -> None:
             if topic in (msgs.ROBOTS, msgs.DECISIONS):
                 self.raw = data
             elif self.bag is not None:
                 self.bag.write(topic, data)
+
         return write
 
     # -- inbound ----------------------------------------------------------------------
@@ -171,8 +177,7 @@ class MonitorNode:
         self.core.status(msgs.status_values(msg), msgs.tick_of(msg.header))
 
     # -- the core's port ---------------------------------------------------------------
-    def tick_counted(self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool,
-                     changed: bool) -> None:
+    def tick_counted(self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool, changed: bool) -> None:
         data = self.pub_metrics.seal(msgs.metrics_message(metrics))
         if self.bag is not None:  # the tick's messages are durable before the world hears of it
             self.bag.write(msgs.ROBOTS, self.raw)
@@ -196,10 +201,13 @@ class MonitorNode:
             self.finished = True
 
     def _write(self, outcome: Outcome | None = None) -> None:
-        self.written = run_dir.write_run(self.out, self.core.record(self.rejections.total, outcome),
-                                         overwrite=self.overwrite,
-                                         recording=self.rrd if self.recording.enabled else None,
-                                         bag=self.bag.close() if self.bag is not None else None)
+        self.written = run_dir.write_run(
+            self.out,
+            self.core.record(self.rejections.total, outcome),
+            overwrite=self.overwrite,
+            recording=self.rrd if self.recording.enabled else None,
+            bag=self.bag.close() if self.bag is not None else None,
+        )
         if self.bag is not None:
             self.bag.discard_holder()
         self.node.get_logger().info(f"run written to {self.written}")

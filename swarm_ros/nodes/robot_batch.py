@@ -50,7 +50,6 @@ _LINGER = 2.0  # seconds, at most, for the last decisions to be acknowledged bef
 _NO_WAIT = Duration(seconds=0)
 
 
-
 class RobotBatchNode:
     def __init__(self) -> None:
         self.node = node = make_node("robot_batch")
@@ -58,8 +57,9 @@ class RobotBatchNode:
         self.shape, self.params = run.resolve()
         n, world = self.params.robots, self.shape.world
         self.strip = regions.batch_strip(self.shape, self.params, own["batch"], own["batches"], own["region_cuts"])
-        self.replica = Replica(self.shape, n, regions.area(self.strip, regions.halo(self.params.vision_radius),
-                                                           world.size))
+        self.replica = Replica(
+            self.shape, n, regions.area(self.strip, regions.halo(self.params.vision_radius), world.size)
+        )
         self.decider = Decider(self.shape, self.params)
         self.finished = False
         self.ended_at: float | None = None  # time.monotonic() when the world's outcome arrived
@@ -70,8 +70,9 @@ class RobotBatchNode:
         self.rejections = Rejections(node.get_logger())
 
         self.signer, self.gate = open_auth(node, self.rejections)
-        self.pub_decisions = self.signer.publisher(PointCloud2, msgs.decisions_topic(node.get_name()),
-                                                   msgs.DECISIONS_QOS)
+        self.pub_decisions = self.signer.publisher(
+            PointCloud2, msgs.decisions_topic(node.get_name()), msgs.DECISIONS_QOS
+        )
         self.gate.subscribe(PointCloud2, msgs.snapshot_topic(node.get_name()), self._on_snapshot, msgs.LATCHED_QOS)
         self.region = msgs.region_topic(node.get_name())
         self.gate.subscribe(PointCloud2, self.region, self._on_robots, msgs.ROBOTS_QOS)
@@ -150,15 +151,17 @@ class RobotBatchNode:
 
     def close(self, code: int) -> None:
         """Nothing to release; say how much this batch received."""
-        self.node.get_logger().info(f"received {self.received} bytes of rows on {self.region} up to tick "
-                                    f"{self.replica.tick}")
+        self.node.get_logger().info(
+            f"received {self.received} bytes of rows on {self.region} up to tick {self.replica.tick}"
+        )
 
     def poll(self) -> None:
         # After the outcome, exit once every reader has acknowledged this batch's decisions: the world
         # has them all, but the monitor, which records them in the bag, may be far behind. A reader
         # that died never acknowledges, so wait at most _LINGER.
-        if self.ended_at is not None and (self.pub_decisions.wait_for_all_acked(_NO_WAIT)
-                                          or time.monotonic() - self.ended_at > _LINGER):
+        if self.ended_at is not None and (
+            self.pub_decisions.wait_for_all_acked(_NO_WAIT) or time.monotonic() - self.ended_at > _LINGER
+        ):
             self.finished = True
 
 

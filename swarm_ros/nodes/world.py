@@ -85,8 +85,7 @@ class WorldNode:
         sim = Simulation(self.shape, self.params)
         warm_up(self.shape, self.params)
         self.pub_shape.publish(self.maps.shape_message(0))
-        self.lockstep = Lockstep(sim, self.policy, self, self.node.get_logger(), self.rejections,
-                                 created=self.created)
+        self.lockstep = Lockstep(sim, self.policy, self, self.node.get_logger(), self.rejections, created=self.created)
         saved = self._open_checkpoint()
         if saved is not None:
             self.lockstep.restore(saved, self.incarnation)
@@ -95,8 +94,10 @@ class WorldNode:
         self._publish_occupancy()
         self.lockstep.publish_status()
         if saved is None:
-            self.node.get_logger().info(f"world: {self.shape.name} ({self.shape.patches} patches), "
-                                        f"{self.params.robots} robots, waiting for robot batches")
+            self.node.get_logger().info(
+                f"world: {self.shape.name} ({self.shape.patches} patches), "
+                f"{self.params.robots} robots, waiting for robot batches"
+            )
 
     def _open_checkpoint(self) -> Saved | None:
         """The checkpoint to write (``checkpoint``); for a restarted world, what the one before saved in it."""
@@ -107,8 +108,9 @@ class WorldNode:
             if self.incarnation and path.exists():
                 self.saver = Checkpoint.open(path, n, self.params.max_ticks, cols, self.shape.dims)
                 return self.saver.saved()
-            self.saver = Checkpoint(path, n, self.params.max_ticks, cols, self.policy.monitor_window + 2,
-                                    self.shape.dims)
+            self.saver = Checkpoint(
+                path, n, self.params.max_ticks, cols, self.policy.monitor_window + 2, self.shape.dims
+            )
             self.saver.create()
         except OSError as exc:
             raise RunFailed(f"checkpoint {path}: {getattr(exc, 'strerror', None) or exc}") from None
@@ -143,8 +145,13 @@ class WorldNode:
             self.saver.monitor_reported(self.lockstep.monitor_tick)
 
     def _watch(self, topic: str, on_change) -> None:
-        self.node.create_subscription(Empty, topic, lambda msg: None, msgs.ALIVE_QOS,
-                                      event_callbacks=SubscriptionEventCallbacks(liveliness=on_change))
+        self.node.create_subscription(
+            Empty,
+            topic,
+            lambda msg: None,
+            msgs.ALIVE_QOS,
+            event_callbacks=SubscriptionEventCallbacks(liveliness=on_change),
+        )
 
     def _on_batch_liveliness(self, k: int, info: QoSLivelinessChangedInfo) -> None:
         self.lockstep.batch_liveliness(k, info.alive_count, info.not_alive_count)
@@ -157,15 +164,15 @@ class WorldNode:
         self.snapshot_pubs.append(self.signer.publisher(PointCloud2, msgs.snapshot_topic(name), msgs.LATCHED_QOS))
         self.region_pubs.append(self.signer.publisher(PointCloud2, msgs.region_topic(name), msgs.ROBOTS_QOS))
         topic = msgs.decisions_topic(name)
-        self.gate.subscribe(PointCloud2, topic, lambda m, k=k, t=topic: self._on_decisions(k, t, m),
-                            msgs.DECISIONS_QOS)
+        self.gate.subscribe(PointCloud2, topic, lambda m, k=k, t=topic: self._on_decisions(k, t, m), msgs.DECISIONS_QOS)
         self._watch(msgs.alive_topic(name), lambda info, k=k: self._on_batch_liveliness(k, info))
 
     def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None:
         self.snapshot_pubs[k].publish_rows(rows, tick)
 
-    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
-                     regional: list[np.ndarray] | None) -> None:
+    def publish_tick(
+        self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None, regional: list[np.ndarray] | None
+    ) -> None:
         for pub, part in zip(self.region_pubs, regional or ()):
             pub.publish_rows(part, tick)  # first: the batches decide the next tick from these
         if applied is not None:
@@ -185,8 +192,7 @@ class WorldNode:
 
     def publish_status(self, status: Status) -> None:
         level = DiagnosticStatus.WARN if status.warn else DiagnosticStatus.OK
-        self.pub_status.publish(msgs.status_message(status.tick, status.outcome, status.message, level,
-                                                    status.values))
+        self.pub_status.publish(msgs.status_message(status.tick, status.outcome, status.message, level, status.values))
         now = time.monotonic()
         if self.lockstep is not None and self.lockstep.started and now - self.occupancy_at >= 1.0:
             self._publish_occupancy()  # once a second at least, for a viewer that reads it volatile
@@ -206,8 +212,10 @@ class WorldNode:
         monitor's liveliness, keeps the bag whole from tick 0: a reader that matched after a
         topic's first messages would keep only the last of a latched one (``/swarm/status``).
         """
-        return all(any(info.node_name == MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
-                   for topic in msgs.MONITOR_READS)
+        return all(
+            any(info.node_name == MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
+            for topic in msgs.MONITOR_READS
+        )
 
     def delivered(self) -> bool:
         return all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots))

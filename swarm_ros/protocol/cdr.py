@@ -80,21 +80,28 @@ def encode_cloud(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str
     return b"".join(cloud_parts(rows, tick, frame_id, tag))
 
 
-def cloud_parts(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str = "") -> tuple[bytes, memoryview,
-                                                                                                bytes]:
+def cloud_parts(
+    rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str = ""
+) -> tuple[bytes, memoryview, bytes]:
     """:func:`encode_cloud`'s bytes in three parts, not joined: everything before the points (the tag
     included), the points as a view of ``rows`` (not copied), and the last byte (is_dense). A sealer takes its
     MAC over the parts and joins them once (:meth:`swarm_ros.protocol.tag.Sealer.seal`)."""
     block, height_at = _fields_block(frame_id, rows.dtype, bool(tag))
-    block = block[:height_at] + struct.pack("<II", 1, rows.size) + block[height_at + 8:]
+    block = block[:height_at] + struct.pack("<II", 1, rows.size) + block[height_at + 8 :]
     if tag:
         block += _field(tag, 0, TAG_DATATYPE, 0, 8 + len(block))
     block += b"\x00"  # is_bigendian
     block += _pad(8 + len(block))
     step = rows.dtype.itemsize
     data = np.ascontiguousarray(rows).view(np.uint8).data.cast("B")
-    head = b"".join((ENCAPSULATION, _STAMP.pack(int(tick) * TICK_SECONDS, 0), block,
-                     struct.pack("<III", step, step * rows.size, data.nbytes)))
+    head = b"".join(
+        (
+            ENCAPSULATION,
+            _STAMP.pack(int(tick) * TICK_SECONDS, 0),
+            block,
+            struct.pack("<III", step, step * rows.size, data.nbytes),
+        )
+    )
     return head, data, b"\x01"
 
 
@@ -103,8 +110,9 @@ def encode_clock(tick: int) -> bytes:
     return ENCAPSULATION + _STAMP.pack(int(tick) * TICK_SECONDS, 0)
 
 
-def encode_grid(cells: np.ndarray, size: int, resolution: float, origin: float, tick: int,
-                frame_id: str = FRAME_ID) -> bytes:
+def encode_grid(
+    cells: np.ndarray, size: int, resolution: float, origin: float, tick: int, frame_id: str = FRAME_ID
+) -> bytes:
     """A serialized ``nav_msgs/OccupancyGrid`` of ``size`` x ``size`` ``cells`` (int8, row-major), stamped and
     loaded at ``tick``, its cell (0, 0)'s corner at (``origin``, ``origin``), unrotated."""
     stamp = _STAMP.pack(int(tick) * TICK_SECONDS, 0)
@@ -183,7 +191,7 @@ class _Reader:
         if not 1 <= n <= MAX_STRING:
             raise Rejected("malformed CDR", f"a string of {n} bytes")
         self.need(n)
-        raw = bytes(self.buf[self.at:self.at + n])
+        raw = bytes(self.buf[self.at : self.at + n])
         self.at += n
         if raw[-1] != 0:
             raise Rejected("malformed CDR", "a string without its terminating zero")
@@ -222,13 +230,23 @@ def decode_cloud(buf: bytes) -> Cloud:
     bigendian = r.u8()
     point_step, row_step, size = r.u32(), r.u32(), r.u32()
     r.need(size)
-    data = r.buf[r.at:r.at + size]
+    data = r.buf[r.at : r.at + size]
     r.at += size
     dense = r.u8()
-    if bigendian > 1 or dense > 1 or any(b for b in bytes(r.buf[r.at:])):
+    if bigendian > 1 or dense > 1 or any(b for b in bytes(r.buf[r.at :])):
         raise Rejected("malformed CDR", "a bool out of range or bytes after the message")
-    return Cloud(Header(Stamp(sec, nanosec), frame_id), height, width, tuple(fields), bool(bigendian), point_step,
-                 row_step, data, bool(dense), tag)
+    return Cloud(
+        Header(Stamp(sec, nanosec), frame_id),
+        height,
+        width,
+        tuple(fields),
+        bool(bigendian),
+        point_step,
+        row_step,
+        data,
+        bool(dense),
+        tag,
+    )
 
 
 _LAYOUTS: list[tuple[bytes, tuple[Field, ...], int]] = []
@@ -244,9 +262,9 @@ def _known_layout(r: _Reader) -> tuple[tuple[Field, ...], int | None]:
         for dtype in ROW_TYPES:
             for tagged in (True, False):
                 block, height_at = _fields_block(FRAME_ID, dtype, tagged)
-                _LAYOUTS.append((block[height_at + 8:], tuple(Field(*f) for f in point_fields(dtype)), int(tagged)))
+                _LAYOUTS.append((block[height_at + 8 :], tuple(Field(*f) for f in point_fields(dtype)), int(tagged)))
     for block, fields, more in _LAYOUTS:
-        if r.buf[r.at:r.at + len(block)] == block:
+        if r.buf[r.at : r.at + len(block)] == block:
             r.at += len(block)
             return fields, more
     return (), None

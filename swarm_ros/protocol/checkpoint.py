@@ -104,20 +104,20 @@ class Checkpoint:
         self._mmap = mmap.mmap(self._fd, self.size)
         self.map = np.frombuffer(self._mmap, dtype=np.uint8)  # a plain array: slicing a np.memmap costs more
         self.header = self.map[: _HEADER * 8].view(np.int64)
-        self.rows = self.map[self.robots_at: self.history_at].view(self.row)
+        self.rows = self.map[self.robots_at : self.history_at].view(self.row)
         self._records = self.rows.view(self.record)
-        self.history = self.map[self.history_at: self.ring_at].view(np.int64).reshape(self.ticks, self.columns)
+        self.history = self.map[self.history_at : self.ring_at].view(np.int64).reshape(self.ticks, self.columns)
 
     def _slot_head(self, tick: int) -> tuple[np.ndarray, int]:
         """The ring slot of ``tick``: its head (tick, robot rows, applied rows), and where its rows start."""
         at = self.ring_at + (tick % self.slots) * self.slot_bytes
-        return self.map[at: at + _SLOT_HEAD * 8].view(np.int64), at + _SLOT_HEAD * 8
+        return self.map[at : at + _SLOT_HEAD * 8].view(np.int64), at + _SLOT_HEAD * 8
 
     def _slot(self, tick: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         head, at = self._slot_head(tick)
-        robots = self.map[at: at + self.robots * self.row.itemsize].view(self.row)
+        robots = self.map[at : at + self.robots * self.row.itemsize].view(self.row)
         at += self.robots * self.row.itemsize
-        applied = self.map[at: at + self.robots * self.decision.itemsize].view(self.decision)
+        applied = self.map[at : at + self.robots * self.decision.itemsize].view(self.decision)
         return head, robots, applied
 
     def write(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None:
@@ -133,11 +133,11 @@ class Checkpoint:
         h[_H_WRITING] = tick
         head[0] = -1  # the slot is being rewritten
         raw = np.ascontiguousarray(rows).view(np.uint8)  # bytes, not records: copied ten times faster
-        self.map[at: at + raw.size] = raw
+        self.map[at : at + raw.size] = raw
         if applied is not None:
             at += self.robots * self.row.itemsize
             raw = np.ascontiguousarray(applied).view(np.uint8)
-            self.map[at: at + raw.size] = raw
+            self.map[at : at + raw.size] = raw
         head[1], head[2] = rows.size, -1 if applied is None else applied.size
         self.history[tick] = metrics
         head[0] = tick
@@ -159,8 +159,11 @@ class Checkpoint:
 
     def remove(self) -> None:
         """Remove the checkpoint's files (the run is over, or stopped: nothing will restart from them)."""
-        for path in (self.path, self.path.with_name(self.path.name + ".json"),
-                     self.path.with_name(self.path.name + ".json.tmp")):
+        for path in (
+            self.path,
+            self.path.with_name(self.path.name + ".json"),
+            self.path.with_name(self.path.name + ".json.tmp"),
+        ):
             path.unlink(missing_ok=True)
 
     # -- reading ----------------------------------------------------------------------
@@ -210,5 +213,11 @@ class Checkpoint:
             book = json.loads(self.path.with_name(self.path.name + ".json").read_text(encoding="utf-8"))
         except (OSError, ValueError):
             book = {}
-        return Saved(tick=tick, robots=np.array(self.rows), history=np.array(self.history[: tick + 1]),
-                     monitor_tick=int(h[_H_MONITOR]), ring=ring, book=book)
+        return Saved(
+            tick=tick,
+            robots=np.array(self.rows),
+            history=np.array(self.history[: tick + 1]),
+            monitor_tick=int(h[_H_MONITOR]),
+            ring=ring,
+            book=book,
+        )

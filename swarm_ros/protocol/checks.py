@@ -77,8 +77,11 @@ def cloud(msg, dtype: np.dtype, max_rows: int, min_rows: int = 1) -> np.ndarray:
     if msg.is_bigendian:
         raise Rejected("byte order", "big-endian data")
     if len(msg.data) != rows * dtype.itemsize or int(msg.row_step) != int(msg.width) * dtype.itemsize:
-        raise Rejected("size", f"{len(msg.data)} bytes for {msg.width} x {msg.height} points of "
-                               f"{dtype.itemsize} bytes (row step {msg.row_step})")
+        raise Rejected(
+            "size",
+            f"{len(msg.data)} bytes for {msg.width} x {msg.height} points of "
+            f"{dtype.itemsize} bytes (row step {msg.row_step})",
+        )
     if rows < min_rows:
         raise Rejected("empty")
     if rows > max_rows:
@@ -91,8 +94,9 @@ def ids_in_range(ids: np.ndarray, low: int, robots: int) -> None:
     from swarm_ros.core.state import has_repeats  # here: core.state loads numba, which the launcher must not
 
     if ids.min() < low or ids.max() >= robots:
-        raise Rejected("robot id out of range", f"ids {int(ids.min())}..{int(ids.max())}, "
-                                                f"the run has {low}..{robots - 1}")
+        raise Rejected(
+            "robot id out of range", f"ids {int(ids.min())}..{int(ids.max())}, the run has {low}..{robots - 1}"
+        )
     if has_repeats(ids):
         raise Rejected("repeated robot id")
 
@@ -202,8 +206,15 @@ def decision_message(msg, robots: int, dims: int = 2) -> tuple[int, np.ndarray]:
     return tick, rows
 
 
-def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, hosts: Callable[[np.ndarray], np.ndarray],
-                      batch: int, decided: np.ndarray, name: str) -> None:
+def decisions_allowed(
+    rows: np.ndarray,
+    tick: int,
+    sim: Simulation,
+    hosts: Callable[[np.ndarray], np.ndarray],
+    batch: int,
+    decided: np.ndarray,
+    name: str,
+) -> None:
     """Whether batch ``batch`` (node ``name``) may send these decision rows for ``tick`` now.
 
     Raises:
@@ -230,12 +241,24 @@ def decisions_allowed(rows: np.ndarray, tick: int, sim: Simulation, hosts: Calla
     if decided[ids].any():
         raise Rejected("decided already", f"robot {int(ids[decided[ids]][0])} at tick {tick}")
     solid = {"z0": s.z[ids], "z": rows["z"], "pitch": rows["pitch"]} if s.z is not None else {}
-    bad = illegal(sim.params, sim.shape.world.radius, s.frontier, s.x[ids], s.y[ids],
-                  rows["claim"].astype(np.int64), rows["x"], rows["y"], rows["heading"], **solid)
+    bad = illegal(
+        sim.params,
+        sim.shape.world.radius,
+        s.frontier,
+        s.x[ids],
+        s.y[ids],
+        rows["claim"].astype(np.int64),
+        rows["x"],
+        rows["y"],
+        rows["heading"],
+        **solid,
+    )
     if bad.any():
         row = rows[int(np.flatnonzero(bad)[0])]
-        raise Rejected("illegal decision", f"robot {int(row['id'])}: claim {int(row['claim'])}, pose "
-                                           f"({row['x']!r}, {row['y']!r}, {row['heading']!r})")
+        raise Rejected(
+            "illegal decision",
+            f"robot {int(row['id'])}: claim {int(row['claim'])}, pose ({row['x']!r}, {row['y']!r}, {row['heading']!r})",
+        )
 
 
 def snapshot(msg, robots: int, radius: int, dims: int = 2) -> tuple[int, np.ndarray]:

@@ -33,8 +33,7 @@ def row_columns(rows: np.ndarray, radius: int) -> np.ndarray:
     return columns(rows["x"] / PATCH_METRES, radius)
 
 
-def route(rows: np.ndarray, before: np.ndarray | None, areas: list[tuple[int, int]],
-          radius: int) -> list[np.ndarray]:
+def route(rows: np.ndarray, before: np.ndarray | None, areas: list[tuple[int, int]], radius: int) -> list[np.ndarray]:
     """A tick's robot rows split into what each area's batch receives, compact.
 
     ``before`` holds each row's robot's column before the tick (None: the rows' own
@@ -46,8 +45,12 @@ def route(rows: np.ndarray, before: np.ndarray | None, areas: list[tuple[int, in
     rows = compact(rows)
     width = 2 * radius + 1
     # take() of the kept rows' indices: a boolean mask over records copies them several times slower
-    return [rows if first == 0 and last == width - 1 else
-            rows.take(np.flatnonzero(everyone | ((high >= first) & (low <= last)))) for first, last in areas]
+    return [
+        rows
+        if first == 0 and last == width - 1
+        else rows.take(np.flatnonzero(everyone | ((high >= first) & (low <= last))))
+        for first, last in areas
+    ]
 
 
 def snapshot(rows: np.ndarray, where: tuple[int, int], radius: int) -> np.ndarray:
@@ -77,8 +80,10 @@ class Hosting:
         cols = np.arange(strip[0], strip[1] + 1)
         taken = cols[self.host[cols] >= 0]
         if taken.size:
-            raise Rejected("columns of another batch", f"'{name}' names {self.text(strip)}, which overlaps "
-                                                       f"{names[self.host[taken[0]]]}'s")
+            raise Rejected(
+                "columns of another batch",
+                f"'{name}' names {self.text(strip)}, which overlaps {names[self.host[taken[0]]]}'s",
+            )
         self.host[cols] = len(self.strips)
         self.strips.append((int(strip[0]), int(strip[1])))
         return len(self.strips) - 1
@@ -87,7 +92,7 @@ class Hosting:
         """The strips a world before this one admitted, in order."""
         self.strips = [(int(first), int(last)) for first, last in strips]
         for k, (first, last) in enumerate(self.strips):
-            self.host[first:last + 1] = k
+            self.host[first : last + 1] = k
 
     def covered(self) -> int:
         """Columns of the world that admitted batches host."""
@@ -106,8 +111,9 @@ class Hosting:
         pose = tuple(getattr(state, name)[ids] for name in _POSE if getattr(state, name) is not None)
         return (columns(state.x[ids], self.radius), *pose)
 
-    def route(self, rows: np.ndarray, moved: np.ndarray | None = None, before: tuple | None = None,
-              state=None) -> list[np.ndarray]:
+    def route(
+        self, rows: np.ndarray, moved: np.ndarray | None = None, before: tuple | None = None, state=None
+    ) -> list[np.ndarray]:
         """A tick's rows (sorted by id) split by batch (:func:`route`). Robots ``moved`` (sorted) were
         :meth:`before` the tick as ``before`` and are as ``state`` now; one whose row did not change is
         sent to no batch (it decided to stand as it was: a walker that lost its claim)."""
@@ -129,8 +135,9 @@ class Hosting:
                 cols[at] = moved_cols
         return route(rows, cols, [self.area(k) for k in range(len(self.strips))], self.radius)
 
-    def orphans(self, x: np.ndarray, moving_ids: Callable[[], np.ndarray], removed: set[int],
-                pending: np.ndarray) -> np.ndarray:
+    def orphans(
+        self, x: np.ndarray, moving_ids: Callable[[], np.ndarray], removed: set[int], pending: np.ndarray
+    ) -> np.ndarray:
         """Of the moving robots (``moving_ids()``, at ``x``), those not ``pending`` removal in the strips of
         ``removed`` batches: the world decides for them itself."""
         if not removed:

@@ -44,10 +44,24 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
     checks (:class:`WorldStatus`), its bookkeeping and restore (:class:`WorldRestore`), its loss policy
     (:class:`WorldLosses`)."""
 
-    def __init__(self, sim: Simulation, policy: Policy, port: WorldPort, logger: Logger, rejections: Rejections,
-                 clock: Callable[[], float] = time.monotonic, created: float | None = None) -> None:
-        self.sim, self.policy, self.port, self.log, self.rejections, self.clock = \
-            sim, policy, port, logger, rejections, clock
+    def __init__(
+        self,
+        sim: Simulation,
+        policy: Policy,
+        port: WorldPort,
+        logger: Logger,
+        rejections: Rejections,
+        clock: Callable[[], float] = time.monotonic,
+        created: float | None = None,
+    ) -> None:
+        self.sim, self.policy, self.port, self.log, self.rejections, self.clock = (
+            sim,
+            policy,
+            port,
+            logger,
+            rejections,
+            clock,
+        )
         n = sim.params.robots
         self.window = policy.monitor_window  # 0 while there is no monitor to wait for
         self.hosting = Hosting(sim.shape.world.radius, sim.params.vision_radius)  # which batch hosts which strip
@@ -139,8 +153,10 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         self.restarts += [(tick, name)] * (incarnation - self.incarnations[k])
         self.incarnations[k] = incarnation
         self.down_since.pop(k, None)
-        self.log.warn(f"{name} is back (restart {self.restart_counts[k]}) at tick {tick}"
-                      + ("; sending it a snapshot" if self.started else ""))
+        self.log.warn(
+            f"{name} is back (restart {self.restart_counts[k]}) at tick {tick}"
+            + ("; sending it a snapshot" if self.started else "")
+        )
         if self.started:
             self._send_snapshot(k)
             self.save_book()
@@ -169,8 +185,9 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
             self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s")
         self.started, self.start_time, self.started_wall = True, self.clock(), time.time()
         self.startup_seconds = self.port.startup_seconds()
-        self.log.info(f"all robots hosted by {len(self.batch_names)} batches{' and the monitor' * bool(self.window)}"
-                      f": tick 0")
+        self.log.info(
+            f"all robots hosted by {len(self.batch_names)} batches{' and the monitor' * bool(self.window)}: tick 0"
+        )
         rows = state_rows(np.arange(self.sim.state.robots), self.sim.state)
         self.save_book()  # first: a checkpoint that holds a tick has the bookkeeping beside it
         self.port.checkpoint(0, rows, None, self.sim.history[0])  # before the snapshots: they tell of tick 0
@@ -262,8 +279,15 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         joined = self.sim.metrics.localized != localized_before or removed.size > 0
         self._emit(tick, state_rows(ids, s), joined, applied, (deciders, before))
 
-    def _emit(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
-              moved: tuple[np.ndarray | None, tuple | None] | None = (None, None), save: bool = True) -> None:
+    def _emit(
+        self,
+        tick: int,
+        rows: np.ndarray,
+        joined: bool,
+        applied: np.ndarray | None,
+        moved: tuple[np.ndarray | None, tuple | None] | None = (None, None),
+        save: bool = True,
+    ) -> None:
         """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than ``window``
         ticks behind; ``moved``: (ids, their rows before) for the region rows, None: none (a restored world)."""
         if save:
@@ -343,15 +367,19 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         for k, since in list(self.down_since.items()):
             if now - since > p.restart_timeout:
                 if not self.started:
-                    raise RunFailed(f"{self.batch_names[k]} was lost before the run started and did not come back "
-                                    f"within {p.restart_timeout:g} s (restart_timeout)")
+                    raise RunFailed(
+                        f"{self.batch_names[k]} was lost before the run started and did not come back "
+                        f"within {p.restart_timeout:g} s (restart_timeout)"
+                    )
                 self._remove_batch(k, f"not back within {p.restart_timeout:g} s")
         if not self.sim.done and now - self.status_at >= STATUS_PERIOD:
             self.publish_status()
         if not self.started and now - self.created > p.start_timeout:
             dropped = f"; dropped: {self.rejections.text()}" if self.rejections.total else ""
-            raise RunFailed(f"robot batches cover {self.hosting.covered()} of {self.hosting.width} columns after "
-                            f"{p.start_timeout:g} s (start_timeout){dropped}")
+            raise RunFailed(
+                f"robot batches cover {self.hosting.covered()} of {self.hosting.width} columns after "
+                f"{p.start_timeout:g} s (start_timeout){dropped}"
+            )
         if not self.started:
             self.maybe_start()
         elif self.removed_batches and not self.queued and not self.received and not self.sim.done:
@@ -360,6 +388,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
             caught_up = self.window == 0 or self.monitor_tick >= self.sim.tick
             # the end is out once every reader acknowledged the last status and rows; a reader that died
             # never does, so wait at most LINGER for that
-            if (caught_up and (self.port.delivered() or now - self.ended_at > LINGER)) \
-                    or now - self.ended_at > FINAL_WAIT:
+            if (
+                caught_up and (self.port.delivered() or now - self.ended_at > LINGER)
+            ) or now - self.ended_at > FINAL_WAIT:
                 self.finished = True

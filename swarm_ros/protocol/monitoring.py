@@ -42,8 +42,9 @@ _REMOVED = int(RobotState.REMOVED)
 class MonitorPort(Protocol):
     """What a :class:`MonitorCore` asks of its node. Never called while it replays a bag."""
 
-    def tick_counted(self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool,
-                     changed: bool) -> None: ...  # the tick's messages into the bag, durable, then its metrics out
+    def tick_counted(
+        self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool, changed: bool
+    ) -> None: ...  # the tick's messages into the bag, durable, then its metrics out
     def decisions_taken(self, tick: int) -> None: ...  # the decisions message being handled, into the bag
     def take_missed(self) -> int: ...  # hand over what waits in the readers; how many messages
 
@@ -64,11 +65,26 @@ class Recording(Protocol):
 class MonitorCore:
     """The run as the monitor counts it (see the module's docstring)."""
 
-    def __init__(self, shape: Shape, params: RunParams, world_radius: int, port: MonitorPort,
-                 recorder: Recording | None, logger, incarnation: int = 0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self.shape, self.params, self.world_radius, self.port, self.recorder, self.log, self.clock = \
-            shape, params, world_radius, port, recorder, logger, clock
+    def __init__(
+        self,
+        shape: Shape,
+        params: RunParams,
+        world_radius: int,
+        port: MonitorPort,
+        recorder: Recording | None,
+        logger,
+        incarnation: int = 0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.shape, self.params, self.world_radius, self.port, self.recorder, self.log, self.clock = (
+            shape,
+            params,
+            world_radius,
+            port,
+            recorder,
+            logger,
+            clock,
+        )
         self.incarnation = incarnation  # 0: the first monitor process of the run
         self.replica = Replica(shape, params.robots)
         self.rows: list[TickMetrics] = []  # the metrics of every tick counted, in order
@@ -106,8 +122,9 @@ class MonitorCore:
         self.rows.append(metrics)
         if not self.replaying:
             joined = len(self.rows) < 2 or metrics[_LOCALIZED] != self.rows[-2][_LOCALIZED]
-            self.port.tick_counted(tick, metrics, self.replica.state.occupancy, len(self.rows) == 1,
-                                   joined or removed > removed_before)
+            self.port.tick_counted(
+                tick, metrics, self.replica.state.occupancy, len(self.rows) == 1, joined or removed > removed_before
+            )
         if removed > removed_before:
             self.losses.append((tick, removed - removed_before))
             self.removed = removed
@@ -170,11 +187,15 @@ class MonitorCore:
             return False
         missed = self.port.take_missed()
         if missed:
-            self.log.warn(f"{missed} messages were still in the readers, not handed over by the executor; handled "
-                          f"before writing the run")
+            self.log.warn(
+                f"{missed} messages were still in the readers, not handed over by the executor; handled "
+                f"before writing the run"
+            )
         if self.world.outcome is not None and self.world.outcome != self.outcome.value:
-            raise RunFailed(f"the world reports '{self.world.outcome}', the monitor counted "
-                            f"'{self.outcome.value}' at tick {self.replica.tick}")
+            raise RunFailed(
+                f"the world reports '{self.world.outcome}', the monitor counted "
+                f"'{self.outcome.value}' at tick {self.replica.tick}"
+            )
         if self.recorder is not None:  # closed only now: the world's last status may add restart events
             self.recorder.outcome(self.outcome.value, self.rows[-1])
             self.recorder.close()
@@ -188,17 +209,28 @@ class MonitorCore:
             return
         self.port.take_missed()
         if self.outcome is None:
-            raise RunFailed(f"the world ended the run ('{self.world.outcome}') at tick {self.world_end[1]}, but the "
-                            f"robots' messages reached the monitor only up to tick {self.replica.tick} within "
-                            f"{STATUS_WAIT:g} s")
+            raise RunFailed(
+                f"the world ended the run ('{self.world.outcome}') at tick {self.world_end[1]}, but the "
+                f"robots' messages reached the monitor only up to tick {self.replica.tick} within "
+                f"{STATUS_WAIT:g} s"
+            )
 
     # -- the end ----------------------------------------------------------------------
     def record(self, rejected: int, outcome: Outcome | None = None) -> RunRecord:
         """The run's record as counted (``outcome``: another than the count's, for a run stopped before its end);
         ``rejected``: the messages the monitor dropped."""
         wall = self.wall if self.outcome is not None else self.clock() - (self.started_at or self.clock())
-        return self.world.record(self.shape, self.params, self.replica.state, self.rows, outcome or self.outcome,
-                                 wall, self.losses, rejected, monitor=(self.incarnation, self.resumed_at))
+        return self.world.record(
+            self.shape,
+            self.params,
+            self.replica.state,
+            self.rows,
+            outcome or self.outcome,
+            wall,
+            self.losses,
+            rejected,
+            monitor=(self.incarnation, self.resumed_at),
+        )
 
     def close_recording(self, stopped: bool) -> None:
         """On the way out of a run stopped before it was written: the recording is closed, marked ``interrupted``

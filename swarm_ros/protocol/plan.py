@@ -24,9 +24,11 @@ def graph_plan(processes: int, region_cuts: str = "") -> list[tuple[str, str, di
     """The node processes, in start order: (node name, executable, its own parameters beyond the file's):
     batch k of ``processes`` hosts strip k, cut at ``region_cuts`` if given (``swarm_ros.core.regions``)."""
     cuts: dict[str, int | str] = {"region_cuts": region_cuts} if region_cuts else {}
-    return [(MONITOR, MONITOR, {}),
-            *[(batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes, **cuts}) for k in range(processes)],
-            (WORLD, WORLD, {})]
+    return [
+        (MONITOR, MONITOR, {}),
+        *[(batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes, **cuts}) for k in range(processes)],
+        (WORLD, WORLD, {}),
+    ]
 
 
 # -- topics -----------------------------------------------------------------------

@@ -26,46 +26,80 @@ FRAME_ID = "world"
 
 # sensor_msgs/PointField datatype codes
 INT8, UINT8, INT16, UINT16, INT32, UINT32, FLOAT32, FLOAT64 = range(1, 9)
-_CODE_OF = {"i1": INT8, "u1": UINT8, "i2": INT16, "u2": UINT16, "i4": INT32, "u4": UINT32, "f4": FLOAT32,
-            "f8": FLOAT64}
+_CODE_OF = {"i1": INT8, "u1": UINT8, "i2": INT16, "u2": UINT16, "i4": INT32, "u4": UINT32, "f4": FLOAT32, "f8": FLOAT64}
 _DTYPE_OF = {code: np.dtype("<" + kind) for kind, code in _CODE_OF.items()}
 
 #: World -> everyone, after each tick: the robots whose row changed (all robots at tick 0).
-ROBOT_ROW = np.dtype({"names": ["x", "y", "z", "heading", "id", "state"],
-                      "formats": ["<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
-                      "offsets": [0, 8, 16, 24, 32, 36], "itemsize": 40})
+ROBOT_ROW = np.dtype(
+    {
+        "names": ["x", "y", "z", "heading", "id", "state"],
+        "formats": ["<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
+        "offsets": [0, 8, 16, 24, 32, 36],
+        "itemsize": 40,
+    }
+)
 
 #: Robot batch -> world, each tick: what each of its moving robots decided.
 #: ``claim`` is the flat index (py + R) * W + (px + R) of the patch claimed, or -1;
 #: x, y, heading are the pose the robot takes if it does not join.
-DECISION_ROW = np.dtype({"names": ["x", "y", "z", "heading", "id", "claim"],
-                         "formats": ["<f8", "<f8", "<f8", "<f8", "<u4", "<i4"],
-                         "offsets": [0, 8, 16, 24, 32, 36], "itemsize": 40})
+DECISION_ROW = np.dtype(
+    {
+        "names": ["x", "y", "z", "heading", "id", "claim"],
+        "formats": ["<f8", "<f8", "<f8", "<f8", "<u4", "<i4"],
+        "offsets": [0, 8, 16, 24, 32, 36],
+        "itemsize": 40,
+    }
+)
 
 
 #: The rows of a 3D world: the same fields and ``pitch``, the heading's elevation (radians, [-pi/2, pi/2]),
 #: after ``heading`` (2D rows keep their layout: their z is 0).
-ROBOT_ROW_3D = np.dtype({"names": ["x", "y", "z", "heading", "pitch", "id", "state"],
-                         "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
-                         "offsets": [0, 8, 16, 24, 32, 40, 44], "itemsize": 48})
+ROBOT_ROW_3D = np.dtype(
+    {
+        "names": ["x", "y", "z", "heading", "pitch", "id", "state"],
+        "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
+        "offsets": [0, 8, 16, 24, 32, 40, 44],
+        "itemsize": 48,
+    }
+)
 #: ``claim`` is the flat index ((pz + R) * W + py + R) * W + px + R of the voxel claimed, or -1.
-DECISION_ROW_3D = np.dtype({"names": ["x", "y", "z", "heading", "pitch", "id", "claim"],
-                            "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<i4"],
-                            "offsets": [0, 8, 16, 24, 32, 40, 44], "itemsize": 48})
+DECISION_ROW_3D = np.dtype(
+    {
+        "names": ["x", "y", "z", "heading", "pitch", "id", "claim"],
+        "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<i4"],
+        "offsets": [0, 8, 16, 24, 32, 40, 44],
+        "itemsize": 48,
+    }
+)
 #: World -> one robot batch, each tick (/swarm/region/<batch>, its snapshots): a robot row without padding or a
 #: 2D world's z, the exact pose in the fewest bytes (29; 3D 45; /swarm/robots rows take 40 and 48).
-REGION_ROW = np.dtype({"names": ["x", "y", "heading", "id", "state"],
-                       "formats": ["<f8", "<f8", "<f8", "<u4", "<u1"],
-                       "offsets": [0, 8, 16, 24, 28], "itemsize": 29})
-REGION_ROW_3D = np.dtype({"names": ["x", "y", "z", "heading", "pitch", "id", "state"],
-                          "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
-                          "offsets": [0, 8, 16, 24, 32, 40, 44], "itemsize": 45})
-ROW_TYPES = (ROBOT_ROW, DECISION_ROW, ROBOT_ROW_3D, DECISION_ROW_3D, REGION_ROW,
-             REGION_ROW_3D)  #: every row layout, for readers of any
+REGION_ROW = np.dtype(
+    {
+        "names": ["x", "y", "heading", "id", "state"],
+        "formats": ["<f8", "<f8", "<f8", "<u4", "<u1"],
+        "offsets": [0, 8, 16, 24, 28],
+        "itemsize": 29,
+    }
+)
+REGION_ROW_3D = np.dtype(
+    {
+        "names": ["x", "y", "z", "heading", "pitch", "id", "state"],
+        "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
+        "offsets": [0, 8, 16, 24, 32, 40, 44],
+        "itemsize": 45,
+    }
+)
+ROW_TYPES = (
+    ROBOT_ROW,
+    DECISION_ROW,
+    ROBOT_ROW_3D,
+    DECISION_ROW_3D,
+    REGION_ROW,
+    REGION_ROW_3D,
+)  #: every row layout, for readers of any
 #: World -> viewers, in a 3D world: a voxel's centre, metres (/swarm/shape: every shape voxel; /swarm/occupancy:
 #: the filled ones). A 2D world sends nav_msgs/OccupancyGrid on those topics instead.
-VOXEL_ROW = np.dtype({"names": ["x", "y", "z"], "formats": ["<f4", "<f4", "<f4"], "offsets": [0, 4, 8],
-                      "itemsize": 12})
+VOXEL_ROW = np.dtype({"names": ["x", "y", "z"], "formats": ["<f4", "<f4", "<f4"], "offsets": [0, 4, 8], "itemsize": 12})
 
 
 def robot_row(dims: int) -> np.dtype:
@@ -117,12 +151,21 @@ def check_fields(fields: list[tuple[str, int, int, int]], point_step: int, dtype
     if fields and fields[-1][3] == 0 and is_tag(fields[-1][0]):
         fields.pop()
     if point_step != dtype.itemsize or fields != point_fields(dtype):
-        raise ContractError(f"unexpected point layout {fields} (step {point_step}); "
-                         f"expected {point_fields(dtype)} (step {dtype.itemsize})")
+        raise ContractError(
+            f"unexpected point layout {fields} (step {point_step}); "
+            f"expected {point_fields(dtype)} (step {dtype.itemsize})"
+        )
 
 
-def robot_rows(ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray,
-               heading: np.ndarray, z: np.ndarray | None = None, pitch: np.ndarray | None = None) -> np.ndarray:
+def robot_rows(
+    ids: np.ndarray,
+    state: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    z: np.ndarray | None = None,
+    pitch: np.ndarray | None = None,
+) -> np.ndarray:
     """Rows of the robots ``ids`` from whole-swarm state arrays (3D rows when ``z`` and ``pitch`` are given)."""
     rows = np.zeros(ids.size, dtype=ROBOT_ROW if z is None else ROBOT_ROW_3D)
     rows["id"] = ids
@@ -144,8 +187,7 @@ def state_rows(ids: np.ndarray, s) -> np.ndarray:
 def pose_of(rows: np.ndarray) -> dict[str, np.ndarray]:
     """The pose a message's robot rows carry, in patches: x, y, heading and (3D rows) z, pitch, as keyword
     arguments of :meth:`~swarm_ros.core.replica.Replica.update`."""
-    pose = {"x": rows["x"] / PATCH_METRES, "y": rows["y"] / PATCH_METRES,
-            "heading": rows["heading"].astype(np.float64)}
+    pose = {"x": rows["x"] / PATCH_METRES, "y": rows["y"] / PATCH_METRES, "heading": rows["heading"].astype(np.float64)}
     if "pitch" in (rows.dtype.names or ()):
         pose["z"] = rows["z"] / PATCH_METRES
         pose["pitch"] = rows["pitch"].astype(np.float64)
@@ -168,8 +210,8 @@ def decision_rows(decisions: Decisions) -> np.ndarray:
 def decisions_of(tick: int, rows: np.ndarray) -> Decisions:
     """The :class:`Decisions` a message of DECISION_ROW (or DECISION_ROW_3D) rows carries."""
     from swarm_ros.core.rules import Decisions
-    return Decisions(tick=tick, ids=rows["id"].astype(np.int64), claim=rows["claim"].astype(np.int64),
-                     **pose_of(rows))
+
+    return Decisions(tick=tick, ids=rows["id"].astype(np.int64), claim=rows["claim"].astype(np.int64), **pose_of(rows))
 
 
 def batch_label(node_name: str, incarnation: int) -> str:

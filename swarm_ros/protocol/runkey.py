@@ -30,8 +30,10 @@ def run_key(env: dict[str, str] | os._Environ = os.environ) -> tuple[bytes, bool
     if not text:
         return PUBLIC_KEY, False
     if len(text) < MIN_KEY_CHARS:
-        raise ConfigError(f"{KEY_ENV} must have at least {MIN_KEY_CHARS} characters (it has {len(text)}); "
-                          f"make one with: python3 -c 'import secrets; print(secrets.token_hex(32))'")
+        raise ConfigError(
+            f"{KEY_ENV} must have at least {MIN_KEY_CHARS} characters (it has {len(text)}); "
+            f"make one with: python3 -c 'import secrets; print(secrets.token_hex(32))'"
+        )
     return text.encode(), True
 
 

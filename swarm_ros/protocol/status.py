@@ -51,8 +51,10 @@ def restarts_text(restarts: list[tuple[int, str]]) -> str:
 
 def restart_event(tick: int, node: str) -> str:
     """The recording's line for a restart of ``node`` at ``tick``."""
-    what = {WORLD: "a new world process went on from its checkpoint",
-            MONITOR: "a new monitor process went on from its bag"}.get(node, "a new process took over its robots")
+    what = {
+        WORLD: "a new world process went on from its checkpoint",
+        MONITOR: "a new monitor process went on from its bag",
+    }.get(node, "a new process took over its robots")
     return f"{node} restarted at tick {tick}: {what}"
 
 
@@ -81,7 +83,7 @@ class WorldReport:
     def update(self, values: dict[str, str]) -> list[tuple[int, str]]:
         """Take in one status message's values; return the restarts it adds."""
         restarts = restarts_of(values.get("restarts", ""))
-        new = restarts[len(self.restarts):]  # the list only grows
+        new = restarts[len(self.restarts) :]  # the list only grows
         self.restarts = max(self.restarts, restarts, key=len)
         for key in ("wall_seconds", "startup_seconds"):
             try:
@@ -96,8 +98,18 @@ class WorldReport:
             self.outcome = values["outcome"]
         return new
 
-    def record(self, shape, params, state, rows: Sequence[tuple[int, ...]], outcome, wall: float,
-               losses: list[tuple[int, int]], rejected: int, monitor: tuple[int, int] = (0, 0)) -> RunRecord:
+    def record(
+        self,
+        shape,
+        params,
+        state,
+        rows: Sequence[tuple[int, ...]],
+        outcome,
+        wall: float,
+        losses: list[tuple[int, int]],
+        rejected: int,
+        monitor: tuple[int, int] = (0, 0),
+    ) -> RunRecord:
         """The record of a run over the graph: the monitor's ``rows`` (metrics of every tick) and final
         ``state``, with what the world reported (its clock, restarts, drops); ``rejected``: the monitor's drops.
         ``monitor``: (the writing monitor's incarnation, the tick it went on from). The world sees a new monitor
@@ -113,9 +125,20 @@ class WorldReport:
         restarts = list(self.restarts)
         unseen = monitor[0] - sum(node == MONITOR for _, node in restarts)
         restarts = sorted(restarts + [(monitor[1], MONITOR)] * unseen, key=lambda r: r[0])
-        summary = summarize(shape=shape, params=params, state=state, final=final, outcome=outcome, engine=ROS2,
-                            wall_seconds=self.times.get("wall_seconds", wall), losses=losses, restarts=restarts,
-                            overhead={"startup_seconds": self.times.get("startup_seconds"),
-                                      "shutdown_seconds": None},  # swarm-ros run fills it in at the end
-                            rejected={"world": self.rejected, "monitor": rejected})
+        summary = summarize(
+            shape=shape,
+            params=params,
+            state=state,
+            final=final,
+            outcome=outcome,
+            engine=ROS2,
+            wall_seconds=self.times.get("wall_seconds", wall),
+            losses=losses,
+            restarts=restarts,
+            overhead={
+                "startup_seconds": self.times.get("startup_seconds"),
+                "shutdown_seconds": None,
+            },  # swarm-ros run fills it in at the end
+            rejected={"world": self.rejected, "monitor": rejected},
+        )
         return RunRecord(shape=shape, params=params, state=state, history=history, outcome=outcome, summary=summary)

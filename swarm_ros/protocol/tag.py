@@ -34,8 +34,10 @@ from swarm_ros.protocol.rows import TAG_PREFIX
 MAC_CHARS = 32  #: hex digits of the MAC (128 bits)
 BLANK = "0" * MAC_CHARS
 #: sender (a node name), nonce, sequence number (from 1), MAC
-_TAG = re.compile(re.escape(TAG_PREFIX) + r":([A-Za-z_][A-Za-z0-9_]{0,63}):([0-9a-f]{16}):([1-9][0-9]{0,18}):"
-                  r"([0-9a-f]{32})")
+_TAG = re.compile(
+    re.escape(TAG_PREFIX) + r":([A-Za-z_][A-Za-z0-9_]{0,63}):([0-9a-f]{16}):([1-9][0-9]{0,18}):"
+    r"([0-9a-f]{32})"
+)
 _TAG_BYTES = re.compile(_TAG.pattern.encode())
 
 
@@ -95,7 +97,7 @@ def padding(size: int) -> bytes:
 def mac_of(key: bytes, topic: str, data: bytes | memoryview, at: int) -> str:
     """The MAC of ``data`` on ``topic``, the 32 bytes at ``at`` (the MAC's own digits) read as zeros."""
     view = memoryview(data)
-    return _mac(key, topic, (view[:at], BLANK.encode(), view[at + MAC_CHARS:]))
+    return _mac(key, topic, (view[:at], BLANK.encode(), view[at + MAC_CHARS :]))
 
 
 def _mac(key: bytes, topic: str, parts) -> str:
@@ -143,15 +145,18 @@ class Sealer:
         size = sum(memoryview(part).nbytes for part in parts)
         parts.append(padding(size))  # aligned, as DDS delivers it
         mark = blank.encode()
-        found = [(k, at) for k, part in enumerate(parts) if isinstance(part, bytes | bytearray)
-                 and (at := part.find(mark)) >= 0]
+        found = [
+            (k, at)
+            for k, part in enumerate(parts)
+            if isinstance(part, bytes | bytearray) and (at := part.find(mark)) >= 0
+        ]
         if not found:
             raise ContractError("the message does not hold its blank tag")
         k, at = found[0]
         mac = _mac(self.key, topic, parts)  # the MAC's digits are zeros (BLANK) meanwhile, as mac_of reads them
         at += len(mark) - MAC_CHARS
         part = parts[k]
-        parts[k] = part[:at] + mac.encode() + part[at + MAC_CHARS:]
+        parts[k] = part[:at] + mac.encode() + part[at + MAC_CHARS :]
         return b"".join(parts)
 
 

@@ -87,8 +87,10 @@ class WorldLosses:
         p = self.policy
         if not self.started or (p.on_batch_loss == "restart" and self.restart_counts[k] < p.max_restarts):
             self.down_since[k] = self.clock()
-            self.log.warn(f"{name} lost ({why}) at tick {self.sim.tick}: waiting up to {p.restart_timeout:g} s for "
-                          f"it to restart (restarts so far: {self.restart_counts[k]} of {p.max_restarts})")
+            self.log.warn(
+                f"{name} lost ({why}) at tick {self.sim.tick}: waiting up to {p.restart_timeout:g} s for "
+                f"it to restart (restarts so far: {self.restart_counts[k]} of {p.max_restarts})"
+            )
             self.publish_status(f"waiting for {name}")
             if k in self.respawned and self.started:  # its new process announced itself already
                 self._respawn(k)
@@ -109,8 +111,9 @@ class WorldLosses:
         self.parts = [r[~np.isin(r["id"], self.pending)] for r in self.parts]
         self.received = sum(r.size for r in self.parts)
         tick = self.sim.tick
-        self.log.warn(f"{name} lost ({why}) at tick {tick}: its {ids.size} robots are removed at the end of tick "
-                      f"{tick + 1}")
+        self.log.warn(
+            f"{name} lost ({why}) at tick {tick}: its {ids.size} robots are removed at the end of tick {tick + 1}"
+        )
         self.publish_status(f"lost {name}")
         self._maybe_advance(tick + 1)  # the lost robots' decisions are no longer awaited
 
@@ -133,8 +136,10 @@ class WorldLosses:
         if MONITOR in self.lost or self.monitor_down_since is not None:
             return
         self.monitor_down_since = self.clock()
-        self.log.warn(f"the monitor was lost ({why}) at tick {self.sim.tick}: waiting up to "
-                      f"{self.policy.restart_timeout:g} s for it to restart")
+        self.log.warn(
+            f"the monitor was lost ({why}) at tick {self.sim.tick}: waiting up to "
+            f"{self.policy.restart_timeout:g} s for it to restart"
+        )
         self.publish_status("waiting for the monitor")
 
     def _lose_monitor(self, why: str) -> None:

@@ -56,8 +56,9 @@ class WorldPort(Protocol):
     def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None: ...  # batch k's region, to start from
     # a tick: the decisions applied in it (None for tick 0), the changed robots' rows, the occupancy if `joined`,
     # and each batch's region's rows (None: none, a restored world's replay)
-    def publish_tick(self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None,
-                     regional: list[np.ndarray] | None) -> None: ...
+    def publish_tick(
+        self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None, regional: list[np.ndarray] | None
+    ) -> None: ...
     def publish_status(self, status: Status) -> None: ...  # the run's state
     # a tick's rows, applied decisions and metrics into the checkpoint (a restarted world goes on from it)
     def checkpoint(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None: ...

@@ -59,8 +59,6 @@ class WorldRestore:
     def save_book(self) -> None:  # the lockstep's own (Lockstep defines it)
         raise NotImplementedError
 
-
-
     def book(self) -> dict:
         """The lockstep's bookkeeping, as JSON data."""
         return {
@@ -77,7 +75,6 @@ class WorldRestore:
             "monitor_nonce": self.monitor_nonce,
         }
 
-
     def _saved_outcome(self, history: np.ndarray, robots: np.ndarray) -> Outcome | None:
         """The outcome after the saved tick, from its metrics (separated robots mean the shape completed with
         extras: the end check of a swarm whose left-overs are separated reads as complete)."""
@@ -86,7 +83,6 @@ class WorldRestore:
             return Outcome.COMPLETE_WITH_EXTRAS
         alive = int((robots["state"] != RobotState.REMOVED).sum())
         return outcome_of(m, self.sim.shape.patches, alive, self.sim.params.max_ticks)
-
 
     def restore_saved(self, saved: Saved, incarnation: int) -> None:
         """Put ``saved`` into this lockstep (fresh, not started): its state and bookkeeping. The lockstep then sends
@@ -103,9 +99,18 @@ class WorldRestore:
         tick = saved.tick
         pose = pose_of(rows)
         try:
-            self.sim.restore(tick, pose["x"], pose["y"], pose["heading"], rows["state"], saved.history,
-                             [tuple(x) for x in b["losses"]], self._saved_outcome(saved.history, rows), pose.get("z"),
-                             pose.get("pitch"))
+            self.sim.restore(
+                tick,
+                pose["x"],
+                pose["y"],
+                pose["heading"],
+                rows["state"],
+                saved.history,
+                [tuple(x) for x in b["losses"]],
+                self._saved_outcome(saved.history, rows),
+                pose.get("z"),
+                pose.get("pitch"),
+            )
         except ContractError as exc:
             raise RunFailed(f"the checkpoint of tick {tick}: {exc}") from None
         self.batch_names = list(b["batches"])
@@ -126,5 +131,7 @@ class WorldRestore:
         for k, name in enumerate(self.batch_names):
             self.port.watch_batch(k, name)
         self.save_book()
-        self.log.warn(f"world restarted: going on from tick {tick} of its checkpoint "
-                    f"({len(self.batch_names)} batches, restarts so far {len(self.restarts) - 1})")
+        self.log.warn(
+            f"world restarted: going on from tick {tick} of its checkpoint "
+            f"({len(self.batch_names)} batches, restarts so far {len(self.restarts) - 1})"
+        )

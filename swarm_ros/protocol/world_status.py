@@ -54,7 +54,6 @@ class WorldStatus:
     def monitor_down(self, why: str) -> None:
         raise NotImplementedError
 
-
     def status(self, note: str = "") -> Status:
         """The run's state now: outcome, the last published tick and its counts, restarts and lost processes."""
         tick = max(self.published_tick, 0)
@@ -81,10 +80,10 @@ class WorldStatus:
         values["rejected_messages"] = self.rejections.total
         values["rejected"] = self.rejections.text()
         values["lost"] = ",".join(self.lost)
-        values["waiting_for"] = ",".join([self.batch_names[k] for k in sorted(self.down_since)]
-                                         + [MONITOR] * (self.monitor_down_since is not None))
+        values["waiting_for"] = ",".join(
+            [self.batch_names[k] for k in sorted(self.down_since)] + [MONITOR] * (self.monitor_down_since is not None)
+        )
         return Status(tick=tick, outcome=outcome, message=message, warn=warn, values=values)
-
 
     def check_stalls(self, now: float) -> None:
         """The fallback to liveliness (a process lost before DDS matched its liveliness topic): a batch
@@ -105,8 +104,10 @@ class WorldStatus:
         if now - self.moved_at >= STILL_S:
             waiting = ", ".join(self.batch_names[k] for k in sorted(self.down_since)) or "no lost process"
             dropped = self.rejections.text() or "nothing"
-            raise RunFailed(f"the run has not moved for {STILL_S:g} s at tick {self.sim.tick} (waiting for: {waiting}; "
-                            f"messages dropped: {dropped}): its messages do not get through")
+            raise RunFailed(
+                f"the run has not moved for {STILL_S:g} s at tick {self.sim.tick} (waiting for: {waiting}; "
+                f"messages dropped: {dropped}): its messages do not get through"
+            )
         if self.queued:
             limit = STALL_S if self.monitor_tick >= 0 else FIRST_STALL_S
             if self.window and now - self.progress_at >= limit:
@@ -130,8 +131,9 @@ class WorldStatus:
         elif now - self.progress_at >= DROWNED_S:
             self._drowned(f"the decisions of {', '.join(alive)}")
 
-
     def _drowned(self, what: str) -> None:
         dropped = self.rejections.text() or "nothing"
-        raise RunFailed(f"{what} did not arrive for {DROWNED_S:g} s at tick {self.sim.tick}, though the process is "
-                        f"alive: its messages do not get through, or it hangs (messages dropped: {dropped})")
+        raise RunFailed(
+            f"{what} did not arrive for {DROWNED_S:g} s at tick {self.sim.tick}, though the process is "
+            f"alive: its messages do not get through, or it hangs (messages dropped: {dropped})"
+        )

@@ -130,8 +130,14 @@ class Gate:
         self.last_tag = None  # the tag of the message being handled (sender, nonce, seq)
         self.known = 0  # messages dropped as taken already by a process before this one (Verifier.known)
 
-    def subscribe(self, msg_type, topic: str, handler: Callable[[object], None] | None, qos,
-                  raw_handler: Callable[[bytes], None] | None = None):
+    def subscribe(
+        self,
+        msg_type,
+        topic: str,
+        handler: Callable[[object], None] | None,
+        qos,
+        raw_handler: Callable[[bytes], None] | None = None,
+    ):
         """A serialized subscription to ``topic``, whose writers offer ``qos`` (read with
         :func:`swarm_ros.ros.graph.reader_qos`: a stranger's flood cannot push a genuine message out).
         Proven messages go to ``raw_handler(data)`` (if given), then ``handler(message)``, without their tag.
@@ -193,6 +199,8 @@ def open_auth(node, rejections: Rejections) -> tuple[Signer, Gate]:
     """
     key, secret = run_key()
     if not secret:
-        node.get_logger().warn(f"{KEY_ENV} is not set: this node seals with a public key, so any participant "
-                               f"on the ROS domain can impersonate the run's nodes (docs/security.md)")
+        node.get_logger().warn(
+            f"{KEY_ENV} is not set: this node seals with a public key, so any participant "
+            f"on the ROS domain can impersonate the run's nodes (docs/security.md)"
+        )
     return Signer(node, key), Gate(node, key, rejections)

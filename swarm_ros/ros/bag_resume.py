@@ -78,8 +78,9 @@ def resume(bag: BagRecorder | None, out: Path, take: Callable[[str, bytes], None
         RunFailed: the run has no bag to go on from, or it does not read back as the run.
     """
     if bag is None:
-        raise RunFailed("a restarted monitor goes on from the bag its process before wrote, and this run has none "
-                        "(bag: false)")
+        raise RunFailed(
+            "a restarted monitor goes on from the bag its process before wrote, and this run has none (bag: false)"
+        )
     resumed = left_by_earlier_process(out, bag.holder)
     for topic, at, data in resumed.messages:
         bag.write(topic, data, at)

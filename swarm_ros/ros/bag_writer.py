@@ -80,11 +80,17 @@ def bag_qos(qos: QoSProfile) -> Qos:
     from rosbags.interfaces import QosLiveliness as Liveliness
     from rosbags.interfaces import QosReliability as Reliability
 
-    return Qos(history=History(int(qos.history)), depth=qos.depth, reliability=Reliability(int(qos.reliability)),
-               durability=Durability(int(qos.durability)), deadline=_duration(qos.deadline),
-               lifespan=_duration(qos.lifespan), liveliness=Liveliness(int(qos.liveliness)),
-               liveliness_lease_duration=_duration(qos.liveliness_lease_duration),
-               avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions)
+    return Qos(
+        history=History(int(qos.history)),
+        depth=qos.depth,
+        reliability=Reliability(int(qos.reliability)),
+        durability=Durability(int(qos.durability)),
+        deadline=_duration(qos.deadline),
+        lifespan=_duration(qos.lifespan),
+        liveliness=Liveliness(int(qos.liveliness)),
+        liveliness_lease_duration=_duration(qos.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions,
+    )
 
 
 def ros_qos(qos: Qos) -> QoSProfile:
@@ -100,11 +106,16 @@ def ros_qos(qos: Qos) -> QoSProfile:
     def duration(t: QosTime) -> Duration:
         return Duration(seconds=t.sec, nanoseconds=t.nsec)
 
-    return QoSProfile(history=policy(HistoryPolicy, qos.history), depth=max(int(qos.depth), 1),
-                      reliability=policy(ReliabilityPolicy, qos.reliability),
-                      durability=policy(DurabilityPolicy, qos.durability), deadline=duration(qos.deadline),
-                      lifespan=duration(qos.lifespan), liveliness=policy(LivelinessPolicy, qos.liveliness),
-                      liveliness_lease_duration=duration(qos.liveliness_lease_duration))
+    return QoSProfile(
+        history=policy(HistoryPolicy, qos.history),
+        depth=max(int(qos.depth), 1),
+        reliability=policy(ReliabilityPolicy, qos.reliability),
+        durability=policy(DurabilityPolicy, qos.durability),
+        deadline=duration(qos.deadline),
+        lifespan=duration(qos.lifespan),
+        liveliness=policy(LivelinessPolicy, qos.liveliness),
+        liveliness_lease_duration=duration(qos.liveliness_lease_duration),
+    )
 
 
 def unfinished_messages(holder: Path) -> list[tuple[str, int, bytes]]:
@@ -166,9 +177,12 @@ class BagRecorder:
         self.writer.open()
         self._maps = None  # the world's map messages (write_world)
         store = get_typestore(Stores(STORE))
-        self.connections = {topic: self.writer.add_connection(topic, type_name(kind), typestore=store,
-                                                              offered_qos_profiles=[bag_qos(qos)])
-                            for topic, (kind, qos) in topics(dims).items()}
+        self.connections = {
+            topic: self.writer.add_connection(
+                topic, type_name(kind), typestore=store, offered_qos_profiles=[bag_qos(qos)]
+            )
+            for topic, (kind, qos) in topics(dims).items()
+        }
         self.closed = False
 
     def write(self, topic: str, data: bytes, at: int | None = None) -> None:

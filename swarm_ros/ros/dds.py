@@ -18,13 +18,15 @@ def dds_defaults() -> dict[str, str]:
     seconds, so processes that start a few seconds apart find each other at once (the file
     says why).
     """
-    defaults = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-                # UDP on the loopback, not shared memory: a process SIGKILLed while it hands a message to another's
-                # shared-memory port can leave that port blocked, and the other process then receives nothing
-                # (seen here once in 30 kills of bench_faults: the world stopped hearing every peer; Fast DDS 2.14,
-                # eProsima/Fast-DDS#5469). A process killed on UDP loses only its own sockets. Cost: about
-                # 5% of the star's run (docs/faults.md). Set it to DEFAULT for shared memory.
-                "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
+    defaults = {
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        # UDP on the loopback, not shared memory: a process SIGKILLed while it hands a message to another's
+        # shared-memory port can leave that port blocked, and the other process then receives nothing
+        # (seen here once in 30 kills of bench_faults: the world stopped hearing every peer; Fast DDS 2.14,
+        # eProsima/Fast-DDS#5469). A process killed on UDP loses only its own sockets. Cost: about
+        # 5% of the star's run (docs/faults.md). Set it to DEFAULT for shared memory.
+        "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",
+    }
     try:
         defaults["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(data_dir("config") / PROFILE_FILE)
     except FileNotFoundError:

@@ -49,32 +49,65 @@ from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS
 #: Lockstep traffic: nothing may be lost, and a reader that matches late (a monitor
 #: started after the world) still gets the ticks it missed, up to the depth.
 ROBOTS_DEPTH = 512
-ROBOTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=ROBOTS_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+ROBOTS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=ROBOTS_DEPTH,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 #: A KEEP_LAST reader keeps ``depth`` samples over all the writers of a topic (the batches on
 #: /swarm/batches), so the depth must exceed the batches that can announce at once.
-DECISIONS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.RELIABLE,
-                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
-BATCHES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DECISIONS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=256,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+BATCHES_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=256,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 #: State that a late joiner needs once: the latest message is kept for it ("latched").
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+LATCHED_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 #: Kept for late readers: a restarted world takes the monitor's last report from it.
-METRICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=64, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+METRICS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=64,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 #: The run's state, ten a second and on every event; the last 256 (25 s) are kept for a late reader: a
 #: restarted monitor records in the bag those sent while it was down.
-STATUS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=256, reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
-                       durability=DurabilityPolicy.VOLATILE)
+STATUS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=256,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+CLOCK_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
 #: Liveliness only: nothing is published. DDS asserts an AUTOMATIC writer alive while its process
 #: runs; a killed or stopped (SIGSTOP) process misses the lease and its readers are told within it.
 LIVELINESS_LEASE_S = 1.0
-ALIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE, liveliness=LivelinessPolicy.AUTOMATIC,
-                       liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE_S))
+ALIVE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+    liveliness=LivelinessPolicy.AUTOMATIC,
+    liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE_S),
+)
 
 
 def reader_qos(offered: QoSProfile) -> QoSProfile:
@@ -82,8 +115,13 @@ def reader_qos(offered: QoSProfile) -> QoSProfile:
     liveliness (so the two match), and a KEEP_ALL history. A reader's history is shared by every writer of
     the topic: kept to the last N, a stranger's flood could push a genuine message out before the node
     takes it. Kept whole, a full reader refuses new samples, and a reliable writer sends them again."""
-    return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=offered.reliability, durability=offered.durability,
-                      liveliness=offered.liveliness, liveliness_lease_duration=offered.liveliness_lease_duration)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_ALL,
+        reliability=offered.reliability,
+        durability=offered.durability,
+        liveliness=offered.liveliness,
+        liveliness_lease_duration=offered.liveliness_lease_duration,
+    )
 
 
 # OccupancyGrid cell values
@@ -185,12 +223,18 @@ class WorldMaps:
         return grid_message(self.shape, cells, tick)
 
 
-def status_message(tick: int, outcome: str, message: str, level: bytes = DiagnosticStatus.OK,
-                   extra: dict[str, object] | None = None) -> DiagnosticArray:
+def status_message(
+    tick: int, outcome: str, message: str, level: bytes = DiagnosticStatus.OK, extra: dict[str, object] | None = None
+) -> DiagnosticArray:
     """The world's status: ``outcome`` is 'starting', 'running' or the run's outcome."""
     values = {"tick": tick, "outcome": outcome, **(extra or {})}
-    status = DiagnosticStatus(level=level, name="swarm_ros/world", message=message, hardware_id="swarm_ros",
-                              values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+    status = DiagnosticStatus(
+        level=level,
+        name="swarm_ros/world",
+        message=message,
+        hardware_id="swarm_ros",
+        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+    )
     return DiagnosticArray(header=Header(stamp=stamp(tick), frame_id=FRAME_ID), status=[status])
 
 

@@ -19,10 +19,10 @@ from swarm_ros.core.params import INT64_MAX, NODE_PARAMETERS, RUN_PARAMETERS, Pa
 # Declared by rclpy itself on every node.
 _RCLPY_OWN = {"use_sim_time", "start_type_description_service"}
 
+
 def make_node(kind: str) -> Node:
     """A node that takes every override as given, so :func:`read_parameters` can check them all."""
-    return Node(kind, allow_undeclared_parameters=True,
-                automatically_declare_parameters_from_overrides=True)
+    return Node(kind, allow_undeclared_parameters=True, automatically_declare_parameters_from_overrides=True)
 
 
 def read_parameters(node: Node, kind: str) -> tuple[Settings, dict[str, Any]]:
@@ -37,8 +37,9 @@ def read_parameters(node: Node, kind: str) -> tuple[Settings, dict[str, Any]]:
         if pname in _RCLPY_OWN:
             continue
         if pname not in schema:
-            raise ConfigError(f"node '{node.get_name()}': unknown parameter '{pname}' "
-                              f"(known: {', '.join(sorted(schema))})")
+            raise ConfigError(
+                f"node '{node.get_name()}': unknown parameter '{pname}' (known: {', '.join(sorted(schema))})"
+            )
         value = node.get_parameter(pname).value  # None, a list, ...: the check names what it got
         try:
             values[pname] = schema[pname].check(value)
@@ -53,8 +54,12 @@ def read_parameters(node: Node, kind: str) -> tuple[Settings, dict[str, Any]]:
     return run, own
 
 
-_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
-          float: ParameterType.PARAMETER_DOUBLE, str: ParameterType.PARAMETER_STRING}
+_TYPES = {
+    bool: ParameterType.PARAMETER_BOOL,
+    int: ParameterType.PARAMETER_INTEGER,
+    float: ParameterType.PARAMETER_DOUBLE,
+    str: ParameterType.PARAMETER_STRING,
+}
 
 
 def descriptor(p: Param) -> ParameterDescriptor:
@@ -65,17 +70,27 @@ def descriptor(p: Param) -> ParameterDescriptor:
     ROS ranges are closed, so a bound a value may not equal (``> 0``) is in the words only; a number whose
     blank value (0) means something of its own (``robots``: the shape's patch count) has no range.
     """
-    d = ParameterDescriptor(name=p.name, type=_TYPES[p.kind], description=p.help,
-                            additional_constraints=p.describe(), read_only=True)
+    d = ParameterDescriptor(
+        name=p.name, type=_TYPES[p.kind], description=p.help, additional_constraints=p.describe(), read_only=True
+    )
     if p.kind in (int, float) and not p.blank and (p.low is not None or p.high is not None):
         if p.kind is int:
-            d.integer_range = [IntegerRange(from_value=int(p.low) if p.low is not None else -INT64_MAX - 1,
-                                            to_value=int(p.high) if p.high is not None else INT64_MAX, step=0)]
+            d.integer_range = [
+                IntegerRange(
+                    from_value=int(p.low) if p.low is not None else -INT64_MAX - 1,
+                    to_value=int(p.high) if p.high is not None else INT64_MAX,
+                    step=0,
+                )
+            ]
         else:
             top = sys.float_info.max
-            d.floating_point_range = [FloatingPointRange(from_value=float(p.low) if p.low is not None else -top,
-                                                         to_value=float(p.high) if p.high is not None else top,
-                                                         step=0.0)]
+            d.floating_point_range = [
+                FloatingPointRange(
+                    from_value=float(p.low) if p.low is not None else -top,
+                    to_value=float(p.high) if p.high is not None else top,
+                    step=0.0,
+                )
+            ]
     return d
 
 

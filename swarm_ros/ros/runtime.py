@@ -125,8 +125,9 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         executor = EventsExecutor()
         executor.add_node(swarm.node)
         swarm.load()
-        swarm.node.get_logger().info(f"ready, {process_age():.2f} s after the process started "
-                                     f"({time.process_time():.2f} s of CPU)")
+        swarm.node.get_logger().info(
+            f"ready, {process_age():.2f} s after the process started ({time.process_time():.2f} s of CPU)"
+        )
         missed = 0
         while not swarm.finished and not stop.signum:
             began = time.monotonic()
@@ -135,19 +136,26 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
                 missed += handle_missed(swarm.node)
             swarm.poll()
         if missed:
-            swarm.node.get_logger().warn(f"the executor missed {missed} messages; each was handled at the next "
-                                         f"idle moment ({_SPIN_TIMEOUT * 1000:g} ms without events)")
-        swarm.node.get_logger().info(f"done, {process_age():.2f} s after the process started "
-                                     f"({time.process_time():.2f} s of CPU)")
-        code = EXIT_OK if swarm.finished or not stop.signum else \
-            EXIT_ORPHANED if stop.signum == signal.SIGHUP else EXIT_INTERRUPTED
+            swarm.node.get_logger().warn(
+                f"the executor missed {missed} messages; each was handled at the next "
+                f"idle moment ({_SPIN_TIMEOUT * 1000:g} ms without events)"
+            )
+        swarm.node.get_logger().info(
+            f"done, {process_age():.2f} s after the process started ({time.process_time():.2f} s of CPU)"
+        )
+        code = (
+            EXIT_OK
+            if swarm.finished or not stop.signum
+            else EXIT_ORPHANED
+            if stop.signum == signal.SIGHUP
+            else EXIT_INTERRUPTED
+        )
     except InputError as exc:
         code = _fail(name, str(exc), EXIT_USAGE)
     except RunFailed as exc:
         code = _fail(name, str(exc), EXIT_FAILED)
     except OSError as exc:  # the file system refused (a full disk): said in one line, as the launcher reports it
-        code = _fail(name, f"{exc.filename}: {exc.strerror}" if exc.filename else str(exc.strerror or exc),
-                     EXIT_FAILED)
+        code = _fail(name, f"{exc.filename}: {exc.strerror}" if exc.filename else str(exc.strerror or exc), EXIT_FAILED)
     except (KeyboardInterrupt, ExternalShutdownException):
         code = EXIT_INTERRUPTED
     finally:
@@ -179,8 +187,11 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
 
 
 def _hung_teardown(name: str, code: int) -> None:
-    print(f"swarm_ros {name}: rclpy's shutdown took over {_TEARDOWN_S:g} s; exiting without it", file=sys.stderr,
-          flush=True)
+    print(
+        f"swarm_ros {name}: rclpy's shutdown took over {_TEARDOWN_S:g} s; exiting without it",
+        file=sys.stderr,
+        flush=True,
+    )
     os._exit(code)
 
 

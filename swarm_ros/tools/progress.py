@@ -30,24 +30,30 @@ _MAX_BATCH = 10_000  # messages handled per spin() at most
 class Progress:
     """Follows /swarm/status on ``domain_id`` and shows localized robots against the shape's patches."""
 
-    def __init__(self, domain_id: int, patches: int, key: bytes, quiet: bool = False,
-                 enclaves: str | None = None) -> None:
+    def __init__(
+        self, domain_id: int, patches: int, key: bytes, quiet: bool = False, enclaves: str | None = None
+    ) -> None:
         from tqdm import tqdm
 
         apply_dds_defaults()  # as the nodes have them (launcher.node_env)
         self.context = Context()
         # Ctrl-C stays a KeyboardInterrupt for the launcher, which then stops its children.
         args = [*TOOL_ROS_ARGS, *(["--enclave", f"{enclaves}/swarm_ros_launcher"] if enclaves else [])]
-        rclpy.init(args=args, context=self.context, domain_id=domain_id,
-                   signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(args=args, context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node("swarm_ros_launcher", context=self.context, start_parameter_services=False)
         # only what the run's nodes tagged (auth.Gate): a stranger's status cannot end the run here
         self.gate = Gate(self.node, key, Rejections(self.node.get_logger()))
         self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.STATUS_QOS)
         self.executor = EventsExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.bar = tqdm(total=patches, unit="patch", desc="localized", disable=True if quiet else None,
-                        file=sys.stderr, dynamic_ncols=True)
+        self.bar = tqdm(
+            total=patches,
+            unit="patch",
+            desc="localized",
+            disable=True if quiet else None,
+            file=sys.stderr,
+            dynamic_ncols=True,
+        )
         self.bar.set_postfix(tick=STARTING, refresh=False)
         self.tick = -1  #: the last tick the world's status reported; -1 before tick 0
         self.started = False  #: the world has sent tick 0 (its status says 'running', or a tick was counted)

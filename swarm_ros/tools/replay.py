@@ -53,8 +53,15 @@ def open_bag(bag: Path):
     return reader
 
 
-def replay(bag: Path, domain_id: int, rate: float = 1.0, delay: float = 1.0, quiet: bool = False,
-           start_offset: float = 0.0, loop: bool = False) -> int:
+def replay(
+    bag: Path,
+    domain_id: int,
+    rate: float = 1.0,
+    delay: float = 1.0,
+    quiet: bool = False,
+    start_offset: float = 0.0,
+    loop: bool = False,
+) -> int:
     """Publish the bag's messages on ``domain_id``; return an exit code (0, or 130 if interrupted).
 
     Raises:
@@ -73,8 +80,9 @@ def replay(bag: Path, domain_id: int, rate: float = 1.0, delay: float = 1.0, qui
         reader.close()
 
 
-def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, quiet: bool, offset: int,
-             loop: bool) -> int:
+def _publish(
+    reader, classes: dict, domain_id: int, rate: float, delay: float, quiet: bool, offset: int, loop: bool
+) -> int:
     import rclpy
     from rclpy.context import Context
     from rclpy.node import Node
@@ -87,8 +95,9 @@ def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, q
 
     apply_dds_defaults()  # on this host, as a run's nodes (set ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET to share it)
     context = Context()
-    rclpy.init(args=list(TOOL_ROS_ARGS), context=context, domain_id=domain_id,
-               signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(
+        args=list(TOOL_ROS_ARGS), context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
+    )
     node = Node("swarm_ros_replay", context=context, start_parameter_services=False)
     try:
         pubs, latched = {}, set()
@@ -99,12 +108,22 @@ def _publish(reader, classes: dict, domain_id: int, rate: float, delay: float, q
             if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL and qos.depth == 1:
                 latched.add(c.id)  # ROS's "latched": a late reader gets the last message
         if not quiet:
-            print(f"swarm-ros: replaying {reader.message_count} messages on {len(pubs)} topics, ROS domain "
-                  f"{domain_id}, at {rate:g}x", file=sys.stderr, flush=True)
+            print(
+                f"swarm-ros: replaying {reader.message_count} messages on {len(pubs)} topics, ROS domain "
+                f"{domain_id}, at {rate:g}x",
+                file=sys.stderr,
+                flush=True,
+            )
         time.sleep(delay)
         first = reader.start_time + offset
-        with tqdm(total=None if loop else reader.message_count, unit="msg", desc="replayed", file=sys.stderr,
-                  disable=True if quiet else None, dynamic_ncols=True) as bar:
+        with tqdm(
+            total=None if loop else reader.message_count,
+            unit="msg",
+            desc="replayed",
+            file=sys.stderr,
+            disable=True if quiet else None,
+            dynamic_ncols=True,
+        ) as bar:
             try:
                 while True:
                     _play(reader, pubs, first, rate, latched, bar)

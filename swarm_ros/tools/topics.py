@@ -77,8 +77,9 @@ def decoded_rows(msg: object, full: bool = False) -> str:
         names = [n for n in dtype.names if n != "z" or "pitch" in dtype.names or dtype is VOXEL_ROW]
         out = [f"# {rows.size} rows decoded: " + "  ".join(f"{n:>10}" for n in names)]
         for r in rows if full else rows[:_SHOWN_ROWS]:
-            out.append("#" + " " * 19 + "  ".join(f"{r[n]:>10.4f}" if r.dtype[n].kind == "f" else f"{r[n]:>10}"
-                                                    for n in names))
+            out.append(
+                "#" + " " * 19 + "  ".join(f"{r[n]:>10.4f}" if r.dtype[n].kind == "f" else f"{r[n]:>10}" for n in names)
+            )
         if not full and rows.size > _SHOWN_ROWS:
             out.append(f"# ... {rows.size - _SHOWN_ROWS} more rows (--full shows all)")
         return "\n".join(out)
@@ -88,8 +89,12 @@ def decoded_rows(msg: object, full: bool = False) -> str:
 class _Inspector:
     def __init__(self, domain_id: int) -> None:
         self.context = Context()
-        rclpy.init(args=list(TOOL_ROS_ARGS), context=self.context, domain_id=domain_id,
-                   signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(
+            args=list(TOOL_ROS_ARGS),
+            context=self.context,
+            domain_id=domain_id,
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
         self.node = Node("swarm_ros_topics", context=self.context, start_parameter_services=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -118,9 +123,11 @@ class _Inspector:
         infos = self.node.get_publishers_info_by_topic(topic)
         reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
         latched = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
-        return QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE if reliable else
-                          ReliabilityPolicy.BEST_EFFORT,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+        return QoSProfile(
+            depth=1000,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        )
 
     def close(self) -> None:
         self.executor.shutdown()
@@ -128,8 +135,9 @@ class _Inspector:
         rclpy.shutdown(context=self.context)
 
 
-def run_topics(domain_id: int, echo: str | None = None, count: int = 1, seconds: float = 2.0,
-               full: bool = False) -> int:
+def run_topics(
+    domain_id: int, echo: str | None = None, count: int = 1, seconds: float = 2.0, full: bool = False
+) -> int:
     """List the topics on ``domain_id`` with rates, or echo ``count`` messages of one. Returns an exit code."""
     deadline = time.monotonic() + seconds
     inspector = _Inspector(domain_id)
@@ -148,11 +156,14 @@ def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
         print(f"no topics on ROS domain {domain_id} (is a run going? 'swarm-ros run' prints its domain id)")
         return 1
     counts = dict.fromkeys(topics, 0)
-    best_effort = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
-                             durability=DurabilityPolicy.VOLATILE)
+    best_effort = QoSProfile(
+        depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE
+    )
     for name, type_name in topics.items():
+
         def bump(_msg: bytes, name: str = name) -> None:
             counts[name] += 1
+
         inspector.node.create_subscription(_message_class(type_name), name, bump, best_effort, raw=True)
     start = time.monotonic()
     inspector.spin_for(seconds)
@@ -165,23 +176,28 @@ def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
         infos = node.get_publishers_info_by_topic(name)
         qos = infos[0].qos_profile if infos else None
         kind = "" if qos is None else f"{qos.reliability.name.lower()}, {qos.durability.name.lower()}"
-        print(f"{name:<{wide}} {type_name:<{kinds}} {len(infos):>4} {node.count_subscribers(name) - 1:>4} "
-              f"{counts[name] / elapsed:>10.1f}  {kind}")
+        print(
+            f"{name:<{wide}} {type_name:<{kinds}} {len(infos):>4} {node.count_subscribers(name) - 1:>4} "
+            f"{counts[name] / elapsed:>10.1f}  {kind}"
+        )
     return 0
 
 
 def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: float, full: bool) -> int:
     """Print ``count`` messages of ``topic``; give up at ``deadline`` (``wait`` seconds after the start)."""
     # A busy graph can take seconds to show every participant: wait for the topic's publishers.
-    inspector.spin_for(deadline - time.monotonic(),
-                       until=lambda: inspector.node.count_publishers(topic) > 0 and topic in inspector.topics())
+    inspector.spin_for(
+        deadline - time.monotonic(),
+        until=lambda: inspector.node.count_publishers(topic) > 0 and topic in inspector.topics(),
+    )
     topics = inspector.topics()
     if topic not in topics or inspector.node.count_publishers(topic) == 0:
-        raise InputError(f"no publisher of {topic} on this domain within {wait:g} s "
-                         f"(topics seen: {', '.join(sorted(topics)) or 'none'})")
+        raise InputError(
+            f"no publisher of {topic} on this domain within {wait:g} s "
+            f"(topics seen: {', '.join(sorted(topics)) or 'none'})"
+        )
     got: list[object] = []
-    inspector.node.create_subscription(_message_class(topics[topic]), topic, got.append,
-                                       inspector.publisher_qos(topic))
+    inspector.node.create_subscription(_message_class(topics[topic]), topic, got.append, inspector.publisher_qos(topic))
     # A latched stream replays its history first; of that burst only the newest messages matter.
     inspector.spin_for(min(0.3, max(0.0, deadline - time.monotonic())))
     del got[: max(0, len(got) - count)]
