@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import small_config
 
 pytestmark = pytest.mark.process
 
@@ -133,3 +134,29 @@ def test_study_3d_density_smoke_prints_its_table_row():
     assert len(rows) == 1, out
     mean = float(rows[0].split("|")[4])
     assert mean > 0, rows[0]
+
+
+def _bench(script: str, *args: str, timeout: float = 300) -> str:
+    done = subprocess.run(
+        [sys.executable, str(SCRIPTS / script), *args], capture_output=True, text=True, timeout=timeout
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
+def test_bench_ros_speed_with_one_process_prints_the_graph_beside_the_engine_and_the_bare_lockstep():
+    """The smallest case of bench_ros (it runs bench_bare's lockstep too): one graph run, K = 1."""
+    out = _bench("bench_ros.py", "--only", "speed", "--repeats", "1", "--processes", "1")
+    (engine,) = re.findall(r"^in-process, run\(\) +([\d,]+)", out, re.M)
+    (graph,) = re.findall(r"^ROS 2 graph, K = 1 +([\d,]+)", out, re.M)
+    (bare,) = re.findall(r"^bare rclpy lockstep, K = 1 +([\d,]+)", out, re.M)
+    rates = [int(x.replace(",", "")) for x in (engine, graph, bare)]
+    assert min(rates) > 0 and rates[0] > rates[1], out  # the in-process engine outruns the graph
+    cpu = dict(re.findall(r"(\w+) ([\d.]+)(?:,|$)", out.split("CPU per tick")[1].split("):")[1].splitlines()[0]))
+    assert set(cpu) == {"world", "monitor", "robot_batch_0"} and min(map(float, cpu.values())) > 0, out
+
+
+def test_bench_experiment_times_a_small_experiment_with_the_local_executor(tmp_path):
+    out = _bench("bench_experiment.py", "--config", str(small_config(tmp_path)), "--executors", "local", "--jobs", "1")
+    assert re.search(r"small\.yaml, executor local: 18 runs \(1 shapes, 3 repetitions, vision 1, 1\.5", out), out
+    assert re.search(r"whole command .*: median [\d.]+ s .*, [\d.]+ runs/s", out), out
