@@ -190,3 +190,25 @@ def test_replay_refuses_a_start_offset_past_the_bags_end_in_one_line(ring_run):
     assert re.fullmatch(
         r"swarm-ros: error: --start-offset 100000 is past the bag's end \(it lasts [\d.]+ s\)\n", done.stderr
     ), done.stderr
+
+
+@pytest.mark.parametrize("how", ["discard", "move_to"])
+def test_a_bag_that_cannot_be_closed_leaves_no_hidden_folder(tmp_path, monkeypatch, how):
+    """A full disk as the bag is closed: discarding it, or moving it beside the run, removes the hidden folder it
+    was written in (no reader could open an unclosed bag)."""
+    import errno
+
+    from swarm_ros.ros.bag_writer import BagRecorder
+
+    bag = BagRecorder(tmp_path / "r")
+    assert bag.holder.is_dir() and bag.holder.name.startswith(".r.bag-")
+
+    def full(*args) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(bag.writer, "close", full)
+    if how == "discard":
+        bag.discard()
+    else:
+        assert bag.move_to(tmp_path / "r.partial-bag") is None
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

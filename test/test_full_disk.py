@@ -77,6 +77,6 @@ def test_run_whose_disk_fills_says_so_and_leaves_no_hidden_or_broken_file(small_
     assert "No space left on device" in done.stderr and "SIGBUS" not in done.stderr, done.stderr
     assert "Traceback" not in done.stderr
     names = sorted(p.name for p in disk.iterdir())
-    assert set(names) <= {"r.logs", "r.partial.rrd"}, names  # no .r.bag-*, no r.partial-bag of an unclosed bag
+    assert set(names) <= {"r.logs", "r.partial.rrd"}, (names, done.stderr)  # no .r.bag-*, no unclosed bag
     if "r.partial.rrd" in names:
         assert rrd_verify(disk / "r.partial.rrd").returncode == 0

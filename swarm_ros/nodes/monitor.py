@@ -240,7 +240,12 @@ class MonitorNode:
         if unstarted:  # its own: a first process refuses to start beside an earlier run's
             self.rrd.unlink(missing_ok=True)
         if interrupted:
-            self._write(Outcome.INTERRUPTED)
+            try:
+                self._write(Outcome.INTERRUPTED)
+            except OSError:  # a full disk: the bag goes beside the run as after a failure, or away if unclosable
+                if self.bag is not None and self.bag.holder.exists():
+                    self.bag.move_to(run_dir.partial_bag(self.out))
+                raise
 
 
 def main(argv: list[str] | None = None) -> int:

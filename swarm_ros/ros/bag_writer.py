@@ -175,7 +175,7 @@ class BagRecorder:
         self.path = self.holder / BAG_DIR
         self.writer = Writer(self.path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
-        self._maps = None  # the world's map messages (write_world)
+        self._maps: msgs.WorldMaps | None = None  # the world's map messages (write_world)
         store = get_typestore(Stores(STORE))
         self.connections = {
             topic: self.writer.add_connection(
@@ -195,9 +195,10 @@ class BagRecorder:
         none of it (a restarted monitor reads it back, :func:`unfinished_messages`). The MCAP writer keeps its
         current chunk in memory until it is closed; here it is closed (one chunk per tick)."""
         storage = self.writer.storage  # rosbags' MCAP storage: pinned (requirements.txt); no public flush
-        if not self.closed and storage is not None and storage.chunk.bio.tell():
-            storage.close_chunk()
-            storage.bio.flush()
+        # its MCAP writer's own fields, not in rosbags' typed interface
+        if not self.closed and storage is not None and storage.chunk.bio.tell():  # type: ignore[attr-defined]
+            storage.close_chunk()  # type: ignore[attr-defined]
+            storage.bio.flush()  # type: ignore[attr-defined]
 
     def write_world(self, shape, occupancy, tick: int, first: bool, changed: bool) -> None:
         """/swarm/shape once (``first``), /swarm/occupancy first and when it ``changed``, /clock every tick: the
@@ -225,8 +226,12 @@ class BagRecorder:
             shutil.rmtree(self.holder, ignore_errors=True)
 
     def discard(self) -> None:
-        """Remove the bag and the hidden folder it was written in (a run that never started holds nothing)."""
-        self.close()
+        """Remove the bag and the hidden folder it was written in (a run that never started holds nothing), whether
+        or not the bag could be closed (a full disk)."""
+        try:
+            self.close()
+        except OSError:
+            pass  # it goes anyway
         shutil.rmtree(self.holder, ignore_errors=True)
 
     def move_to(self, target: Path) -> Path | None:
