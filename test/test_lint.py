@@ -50,7 +50,7 @@ def test_the_pre_commit_hooks_pass_on_the_whole_tree(tmp_path):
         "PATH": str(Path(sys.executable).parent) + ":/usr/bin:/bin",
         "HOME": str(tmp_path),
         "PRE_COMMIT_HOME": str(tmp_path / "pre-commit"),
-        "SKIP": "mypy",  # 25 s: test_mypy_finds_nothing_in_the_core_and_the_protocol runs it
+        "SKIP": "mypy",  # 25 s: test_mypy_finds_nothing_in_the_layers_it_checks runs it
     }
     done = subprocess.run(
         [pre_commit, "run", "--all-files", "--show-diff-on-failure"],
@@ -76,9 +76,10 @@ def test_the_mypy_hook_runs_what_the_mypy_test_runs():
     assert hooks["mypy"]["entry"] == ".venv/bin/mypy" and hooks["mypy"]["pass_filenames"] is False
 
 
-def test_mypy_finds_nothing_in_the_core_and_the_protocol():
-    """The type checker over swarm_ros/core and swarm_ros/protocol (pyproject.toml's [tool.mypy]): the model's
-    code and the contract between processes as their annotations say. No cache is written."""
+def test_mypy_finds_nothing_in_the_layers_it_checks():
+    """The type checker over every layer but the nodes and the app (pyproject.toml's [tool.mypy]): the model's
+    code, the contract between processes, the run's files and the ROS adapters as their annotations say. No
+    cache is written."""
     mypy = shutil.which("mypy", path=str(Path(sys.executable).parent))
     assert mypy, "mypy is not installed in this venv (requirements.txt pins it; scripts/setup.sh installs it)"
     done = subprocess.run(

@@ -99,6 +99,7 @@ def save_final_png_3d(run: RunRecord, path: Path) -> None:
     world, s, shape = run.shape.world, run.state, run.shape
     r = world.radius
     filled = (s.occupancy >= 0).reshape(world.grid_shape)  # [iz, iy, ix]
+    assert s.z is not None, "a 3D run's state has z"
     position = {"x": s.x, "y": s.y, "z": s.z}
     fig, axes = plt.subplots(1, 3, figsize=(13.5, 5.0), dpi=110, layout="constrained")
     image = None
@@ -132,6 +133,7 @@ def save_final_png_3d(run: RunRecord, path: Path) -> None:
         ax.set_xlabel(f"{across} (voxels)")
         ax.set_ylabel(f"{up} (voxels)")
         ax.set_aspect("equal")
+    assert image is not None  # three views: each drew one
     fig.colorbar(image, ax=list(axes), shrink=0.8, label="filled fraction of the shape voxels along the line")
     handles = [
         Patch(facecolor=c, label=f"{label} ({int(np.isin(s.state, states).sum())})")

@@ -96,7 +96,7 @@ def log_scene(rec: rr.RecordingStream, shape: Shape, params: RunParams, every: i
     world = shape.world
     classes = [
         rr.AnnotationInfo(id=int(k), label=label, color=colour)
-        for k, (label, colour) in {**_ROBOT_CLASSES, **_PATCH_CLASSES}.items()
+        for k, (label, colour) in [*_ROBOT_CLASSES.items(), *_PATCH_CLASSES.items()]
     ]
     rec.log(WORLD, rr.AnnotationContext(classes), static=True)
     if world.dims == 3:

@@ -14,6 +14,7 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Sequence
 from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -166,7 +167,7 @@ def final_state_csv(s: SwarmState) -> str:
     from swarm_ros.core.state import RobotState
 
     labels = [st.label for st in RobotState]
-    if s.z is not None:
+    if s.z is not None and s.pitch is not None:
         lines = [",".join(FINAL_STATE_COLUMNS_3D)]
         for i, (x, y, z, h, p, st) in enumerate(
             zip(s.x.tolist(), s.y.tolist(), s.z.tolist(), s.heading.tolist(), s.pitch.tolist(), s.state.tolist())
@@ -202,7 +203,7 @@ def summary_json(summary: dict) -> str:
     return json.dumps(summary, indent=2) + "\n"
 
 
-def fill_summary(out: Path, restarted: list[str] = (), **values: object) -> bool:
+def fill_summary(out: Path, restarted: Sequence[str] = (), **values: object) -> bool:
     """Set fields of the run's ``summary.json`` that it holds as null (e.g. ``shutdown_seconds``, known only
     after the run directory was written), and add to its ``restarts`` those of the node processes
     ``restarted`` (a name per restart) it lacks: the processes restarted after the run's result was

@@ -24,6 +24,7 @@ own verified state). docs/security.md says what this keeps out and what it does 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue
@@ -37,7 +38,7 @@ from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.plan import BATCHES
 from swarm_ros.protocol.rows import TAG_PREFIX, is_tag, parse_batch_label
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
-from swarm_ros.protocol.tag import Known, Sealer, Verifier
+from swarm_ros.protocol.tag import Known, Sealer, Tag, Verifier
 from swarm_ros.ros.graph import reader_qos
 
 TAGGED_TYPES = (PointCloud2, DiagnosticArray, Int64MultiArray)  #: the types that carry a tag
@@ -110,8 +111,8 @@ class SignedPublisher:
         blank = self.sealer.blank()
         return self._send(cloud_parts(rows, tick, tag=blank), blank)
 
-    def _send(self, data: tuple, blank: str) -> bytes:
-        data = self.sealer.seal(self.topic, data, blank)
+    def _send(self, parts: tuple, blank: str) -> bytes:
+        data = self.sealer.seal(self.topic, parts, blank)
         self.pub.publish(data)
         return data
 
@@ -127,7 +128,7 @@ class Gate:
     def __init__(self, node, key: bytes, rejections: Rejections) -> None:
         self.node, self.verifier, self.rejections = node, Verifier(key), rejections
         self.received = 0  # messages arrived so far, taken or not
-        self.last_tag = None  # the tag of the message being handled (sender, nonce, seq)
+        self.last_tag: Tag | None = None  # the tag of the message being handled (sender, nonce, seq)
         self.known = 0  # messages dropped as taken already by a process before this one (Verifier.known)
 
     def subscribe(
@@ -172,6 +173,7 @@ class Gate:
         """
         tag = self.verifier.verify(topic, data)  # before any parser reads the bytes: only a key holder's are read
         self.last_tag = tag
+        msg: Any
         if msg_type is PointCloud2:
             msg = decode_cloud(data)
             text = msg.tag

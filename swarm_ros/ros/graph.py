@@ -213,11 +213,13 @@ class WorldMaps:
     def shape_message(self, tick: int) -> bytes:
         if self.solid:
             return self._voxels(self.shape.mask.ravel(), tick)
+        assert self.cells is not None  # a 2D world's
         return grid_message(self.shape, self.cells, tick)
 
     def occupancy_message(self, occupancy: np.ndarray, tick: int) -> bytes:
         if self.solid:
             return self._voxels(occupancy >= 0, tick)
+        assert self.cells is not None  # a 2D world's
         cells = self.cells.copy()
         cells[occupancy >= 0] = CELL_FULL
         return grid_message(self.shape, cells, tick)

@@ -12,7 +12,7 @@ SHM_DIR = Path("/dev/shm")
 
 def shm_locks(pid: int | str) -> set[str]:
     """The Fast DDS shared-memory lock files (``/dev/shm/fastrtps_*_el``) process ``pid`` has open now."""
-    found = set()
+    found: set[str] = set()
     try:
         fds = os.listdir(f"/proc/{pid}/fd")
     except OSError:

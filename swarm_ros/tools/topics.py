@@ -10,6 +10,7 @@ from __future__ import annotations
 import array
 import sys
 import time
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -35,7 +36,7 @@ def _message_class(type_name: str) -> type:
     return found
 
 
-def to_yaml(msg: object, full: bool = False, indent: int = 0) -> str:
+def to_yaml(msg: Any, full: bool = False, indent: int = 0) -> str:
     """A message as YAML-like text, in field order; long arrays shortened unless ``full``."""
     pad = "  " * indent
     lines = []
@@ -63,7 +64,7 @@ def to_yaml(msg: object, full: bool = False, indent: int = 0) -> str:
     return "\n".join(lines)
 
 
-def decoded_rows(msg: object, full: bool = False) -> str:
+def decoded_rows(msg: Any, full: bool = False) -> str:
     """The rows of a swarm_ros PointCloud2 as a table, or '' for any other message."""
     if type(msg).__name__ != "PointCloud2":
         return ""
@@ -74,7 +75,8 @@ def decoded_rows(msg: object, full: bool = False) -> str:
         except ContractError:
             continue
         rows = np.frombuffer(msg.data, dtype=dtype)
-        names = [n for n in dtype.names if n != "z" or "pitch" in dtype.names or dtype is VOXEL_ROW]
+        fields_of = dtype.names or ()
+        names = [n for n in fields_of if n != "z" or "pitch" in fields_of or dtype is VOXEL_ROW]
         out = [f"# {rows.size} rows decoded: " + "  ".join(f"{n:>10}" for n in names)]
         for r in rows if full else rows[:_SHOWN_ROWS]:
             out.append(
