@@ -1,6 +1,6 @@
 """How fast the graph recovers from a SIGKILL of each kind of node process, and what the fault costs the run.
 
-    .venv/bin/python scripts/bench_faults.py [--trials 3] [--at 1000]
+    .venv/bin/python scripts/bench_faults.py [--trials 3] [--at 1000] [--smoke]
 
 Each trial runs ``swarm-ros run`` on the star (rules local, seed 5, 3,604 ticks, K = 3, recording and bag on,
 the README's defaults) once without a fault, then once for each node kind with that process SIGKILLed once the
@@ -107,14 +107,14 @@ def one_run(base: Path, name: str, victim: str | None, at: int) -> tuple[float, 
     return time.monotonic() - began, moving, out
 
 
-def launcher_trial(base: Path) -> float:
+def launcher_trial(base: Path, at: int = 300) -> float:
     out = base / "launcher"
     launcher = subprocess.Popen(
         [sys.executable, "-m", "swarm_ros", "run", *RUN, "--out", str(out)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    _wait(out, _DONE, 300)
+    _wait(out, _DONE, at)
     pids = list(_nodes(out).values())
     launcher.kill()
     killed = time.monotonic()
@@ -176,13 +176,22 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=3)
     parser.add_argument("--at", type=int, default=1000, help="kill once the world has saved this tick")
+    parser.add_argument(
+        "--smoke",
+        action="store_true",
+        help="a batch killed in runs of 400 ticks, once: checks the script runs (test_scripts.py); no real numbers",
+    )
     args = parser.parse_args()
-    back: dict[str, list[float]] = {k: [] for k in KINDS}
-    slow: dict[str, list[float]] = {k: [] for k in KINDS}
-    same: dict[str, list[bool]] = {k: [] for k in KINDS}
+    if args.smoke:
+        RUN.extend(["--max-ticks", "400"])
+        args.trials, args.at = 1, 100
+    kinds = KINDS[:1] if args.smoke else KINDS  # --smoke: a robot batch only
+    back: dict[str, list[float]] = {k: [] for k in kinds}
+    slow: dict[str, list[float]] = {k: [] for k in kinds}
+    same: dict[str, list[bool]] = {k: [] for k in kinds}
     plain, exits = [], []
     with tempfile.TemporaryDirectory(prefix="swarm_ros-bench-faults-") as tmp:
-        write, bag, durable = tick_costs(Path(tmp))
+        write, bag, durable = tick_costs(Path(tmp), 100 if args.smoke else 3000)
     print(
         f"per tick: the world's checkpoint {write:.1f} us; the monitor's bag {bag:.1f} us, made durable "
         f"{durable:.1f} us",
@@ -193,23 +202,24 @@ def main() -> int:
             base = Path(tmp)
             seconds, _, ref = one_run(base, "plain", None, args.at)
             plain.append(seconds)
-            for kind in KINDS:
+            for kind in kinds:
                 took, moving, out = one_run(base, kind, kind, args.at)
                 back[kind].append(moving)
                 slow[kind].append(took / seconds)
                 same[kind].append(_same(ref, out))
-            exits.append(launcher_trial(base))
+            exits.append(launcher_trial(base, min(300, args.at)))
         print(
             f"trial {trial + 1}: plain {seconds:.2f} s; "
-            + "; ".join(f"{k} back in {back[k][-1]:.2f} s, x{slow[k][-1]:.2f}" for k in KINDS),
+            + "; ".join(f"{k} back in {back[k][-1]:.2f} s, x{slow[k][-1]:.2f}" for k in kinds),
             flush=True,
         )
     print(
-        f"\nstar, rules local, seed 5, K = 3, recording and bag on; kill once tick {args.at} is saved; "
+        f"\nstar, rules local, seed 5, K = 3, recording and bag on{'; --smoke: 400 ticks' if args.smoke else ''}; "
+        f"kill once tick {args.at} is saved; "
         f"{args.trials} trials; unfaulted command {_spread(plain)} s"
     )
     print(f"{'killed':>14} {'kill -> moving s':>22} {'slowdown':>22} {'same':>6}")
-    for k in KINDS:
+    for k in kinds:
         print(f"{k:>14} {_spread(back[k]):>22} {_spread(slow[k], '{:.2f}x'):>22} {'yes' if all(same[k]) else 'NO':>6}")
     print(
         f"node exit after the launcher's SIGKILL: {_spread(exits)} s (target < 2 s: "

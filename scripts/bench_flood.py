@@ -10,7 +10,7 @@ topic, the run's exit status, whether metrics.csv and final_state.csv are byte-i
 ``simulate``'s, the messages the world and the monitor dropped, and the run's and the
 command's seconds against the run alone.
 
-    .venv/bin/python scripts/bench_flood.py [--rates 1000 2500 5000]
+    .venv/bin/python scripts/bench_flood.py [--rates 1000 2500 5000] [--smoke]
 """
 
 from __future__ import annotations
@@ -144,7 +144,15 @@ def flood(rates: list[int], tmp: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rates", type=int, nargs="+", default=[1000, 2500, 5000])
+    parser.add_argument(
+        "--smoke",
+        action="store_true",
+        help="runs of 300 ticks at 200 messages/s: checks the script runs (test_scripts.py); its numbers mean nothing",
+    )
     args = parser.parse_args()
+    if args.smoke:
+        FLAGS.extend(["--max-ticks", "300"])
+        args.rates = [200]
     with tempfile.TemporaryDirectory() as tmp:
         flood(args.rates, Path(tmp))
 

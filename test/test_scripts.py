@@ -160,3 +160,22 @@ def test_bench_experiment_times_a_small_experiment_with_the_local_executor(tmp_p
     out = _bench("bench_experiment.py", "--config", str(small_config(tmp_path)), "--executors", "local", "--jobs", "1")
     assert re.search(r"small\.yaml, executor local: 18 runs \(1 shapes, 3 repetitions, vision 1, 1\.5", out), out
     assert re.search(r"whole command .*: median [\d.]+ s .*, [\d.]+ runs/s", out), out
+
+
+def test_bench_faults_smoke_kills_a_batch_and_the_run_equals_the_unfaulted_one():
+    out = _smoke("bench_faults.py")
+    assert re.search(r"per tick: the world's checkpoint [\d.]+ us; the monitor's bag [\d.]+ us", out), out
+    rows = dict(re.findall(r"^ +(robot_batch_1|world|monitor) +[\d.]+ \([\d.]+-[\d.]+\) +[\d.]+x .* (\w+)$", out, re.M))
+    assert rows == {"robot_batch_1": "yes"}, out
+    assert re.search(r"node exit after the launcher's SIGKILL: [\d.]+", out), out
+
+
+def test_bench_flood_smoke_prints_the_run_alone_and_flooded_both_identical_to_simulate():
+    out = _smoke("bench_flood.py")
+    rows = {int(m[0]): m[1:] for m in re.findall(r"^ +(\d+) +([\d,]+) +(\d+) +[\d,]+ +(-?\d+) +(\w+)", out, re.M)}
+    assert sorted(rows) == [0, 200], out
+    for rate, (reached, topics, code, same) in rows.items():
+        assert (code, same) == ("0", "yes"), out
+        if rate:  # the flood reached every topic of the run
+            assert int(reached.replace(",", "")) > 0 and int(topics) >= 10, out
+    assert "slowdown: run" in out and "A WRONG RESULT" not in out
