@@ -54,6 +54,7 @@ def _shard_apply(sim: Simulation, decisions, mine: np.ndarray) -> tuple:
         sim.metrics.localized,
         SHAPE.patches,
         np.empty(take.size, dtype=np.int8),
+        take.size,
     )
     return s, decisions.ids[outside]
 

@@ -105,15 +105,18 @@ def vacate(p, occupancy, frontier, blocks, shape, nbrs, size):
 
 
 @numba.njit(cache=True)
-def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape_patches, outcome):
-    """Apply the ``moves`` of robots ``ids`` (position k: robot ``ids[k]``'s) to ``robots`` and ``grid`` in place:
-    the lottery of each claimed patch, then each robot's new pose and state
-    (:mod:`swarm_ros.core.kernel_state`).
+def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape_patches, outcome, applied):
+    """Apply the ``moves`` of robots ``ids[:applied]`` (position k: robot ``ids[k]``'s) to ``robots`` and ``grid``
+    in place: the lottery of each claimed patch, then each robot's new pose and state
+    (:mod:`swarm_ros.core.kernel_state`). The robots after ``applied`` only take part in the lottery: their
+    claims can beat an applied robot's, and what becomes of them is left to whoever applies them (a world
+    shard is given its neighbours' claims on the patches its own robots claim, :mod:`swarm_ros.core.shards`).
 
     ``best`` is a W^d int array of -1 (scratch; left as found). ``localized`` is the number of
-    localized robots (seeds included) before the tick. Writes each robot's :class:`JoinOutcome`
-    to ``outcome[k]``. Returns (joined, moving inside, moving outside, walking) counted over
-    ``ids`` after the tick.
+    localized robots (seeds included) before the tick. Writes each applied robot's :class:`JoinOutcome`
+    to ``outcome[k]``. Returns (joined, moving inside, moving outside, walking) counted over the
+    applied robots after the tick. The grant's cap (fewer localized robots than shape patches) never
+    binds, since the winners claim distinct empty shape patches, so the order of ``ids`` changes nothing.
     """
     claim, new_x, new_y, new_z, new_heading, new_pitch = (
         moves.claim,
@@ -148,7 +151,7 @@ def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape
     inside = 0
     outside = 0
     walking = 0
-    for k in range(n):
+    for k in range(applied):
         i = ids[k]
         p = claim[k]
         st = state[i]
@@ -195,6 +198,6 @@ def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape
         p = claim[k]
         if p >= 0:
             best[p] = -1
-            if outcome[k] == _PENDING:
+            if k < applied and outcome[k] == _PENDING:
                 outcome[k] = refused
     return joined, inside, outside, walking

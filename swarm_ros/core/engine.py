@@ -223,6 +223,7 @@ class Simulation:
             self._localized,
             self.shape.patches,
             sc.outcome,
+            m,
         )
         self._localized += joined
         self._decided = m

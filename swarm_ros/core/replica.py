@@ -194,6 +194,24 @@ class Replica:
             raise ContractError(f"rows for tick {tick} arrived after tick {self.state.tick}")
         self._apply(tick, ids, state, x, y, heading, z, pitch)
 
+    def merge(
+        self,
+        ids: np.ndarray,
+        state: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        heading: np.ndarray,
+        z: np.ndarray | None = None,
+        pitch: np.ndarray | None = None,
+    ) -> None:
+        """Apply more rows of the tick already applied (a world shard's: its neighbours' rows of the tick it has
+        applied its own robots' part of, :mod:`swarm_ros.core.shards`).
+
+        Raises:
+            ContractError: as :meth:`update`.
+        """
+        self._apply(self.state.tick, ids, state, x, y, heading, z, pitch)
+
     def _apply(
         self,
         tick: int,

@@ -96,7 +96,7 @@ def run_kernel(moving, robots, grid, rules, scratch, moves, end, rows, m, tick, 
         scratch.last_ids[:m] = ids
         decide_robots(ids, ids, robots, grid, rules, tick, scratch.head, scratch.nxt, moves)
         joined, inside, outside, walking = resolve_kernel(
-            ids, moves, robots, grid, rules, tick, scratch.best, localized, end.shape_patches, scratch.outcome
+            ids, moves, robots, grid, rules, tick, scratch.best, localized, end.shape_patches, scratch.outcome, m
         )
         localized += joined
         decided = m

@@ -1,0 +1,398 @@
+"""The world's half of a tick, split by region: world shards that each own a group of strips.
+
+The distributed engine's world checks every decision and applies every tick for the whole swarm, so its
+work per tick grows with the swarm, whatever the number of robot batches. A :class:`WorldShard` does that
+work for the robots of its own strips only (:class:`ShardPlan`: contiguous columns, like a batch's strip),
+on a regional :class:`~swarm_ros.core.replica.Replica` of its area (its strips and a halo each side, every
+stationary robot). A tick goes in two exchanges between shards, each message bounded by what lies near a
+shard's borders:
+
+1. **Claims.** Each shard sends each other shard the decisions of its robots that claim a patch within that
+   shard's claim window (its strips and a halo each side): the lottery is per patch, and a rival claimant of
+   a patch a shard's robot claims always stands within the halo (``test/test_partition.py``).
+2. **Apply.** Each shard applies its own robots' decisions with the in-process engine's kernel
+   (:func:`~swarm_ros.core.arbitration.resolve_kernel`), its neighbours' claims taking part in the lottery
+   only. It sends each shard the rows its area needs (a moving robot whose column before or after the tick
+   is in that area; every robot that became stationary, to all) and its :class:`Part`'s counts.
+3. **Close.** Every shard sums the counts of all parts (a handful of integers per shard) and ends the tick
+   alone, all alike: the metrics row, the end of the run, the separation of the robots left over (each
+   shard separates the moving robots it knows: every moving robot is known to its owner), and the scheduled
+   failures (each shard removes the failing robots it knows; the counts of the failing moving robots came
+   with the parts).
+
+Nothing here depends on how many shards there are or where the cuts fall: :func:`run_sharded` runs S
+shards in one process, passing only these messages, and gives ``Simulation``'s run byte for byte
+(``test/test_shards.py``). The ROS 2 graph's world does not use the shards yet: the split is built and
+checked here first (docs/operations.md, "At scale").
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarm_ros.core.arbitration import resolve_kernel
+from swarm_ros.core.engine import failing_robots
+from swarm_ros.core.errors import ContractError
+from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
+from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, RUNNING, Outcome, end_code, metric_values
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.regions import area, columns, halo, strip
+from swarm_ros.core.replica import UNKNOWN, Replica
+from swarm_ros.core.rules import Decider, Decisions
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, initial_state
+
+_EMPTY = np.empty(0)
+_INSIDE, _OUTSIDE, _WALKING = int(RobotState.MOVING_INSIDE), int(RobotState.MOVING_OUTSIDE), int(RobotState.WALKING)
+#: a part's counts: robots joined; moving inside, outside, walking after the tick; of them, failing at its end
+COUNTS = ("joined", "inside", "outside", "walking", "failing_inside", "failing_outside", "failing_walking")
+
+
+class ShardPlan:
+    """S shards' strips of whole columns (cut at ``cuts``, x positions, as ``region_cuts``) and their areas."""
+
+    def __init__(self, radius: int, vision_radius: float, cuts: np.ndarray) -> None:
+        cuts = np.asarray(cuts, dtype=np.int64)
+        self.radius, self.width, self.halo = radius, 2 * radius + 1, halo(vision_radius)
+        self.shards = int(cuts.size) + 1
+        self.strips = [strip(k, self.shards, cuts, radius) for k in range(self.shards)]
+        self.areas = [area(s, self.halo, self.width) for s in self.strips]
+        self.owner = np.empty(self.width, dtype=np.int64)  # the shard owning each column
+        for k, (first, last) in enumerate(self.strips):
+            self.owner[first : last + 1] = k
+
+    def routes(self, before: np.ndarray, after: np.ndarray, stationary: np.ndarray, source: int) -> list[np.ndarray]:
+        """Of rows whose robots stood in columns ``before`` and stand in ``after`` (``stationary``: became
+        stationary), the indices each shard but ``source`` receives: those its area follows, and every
+        stationary one."""
+        low, high = np.minimum(before, after), np.maximum(before, after)
+        return [
+            np.empty(0, dtype=np.int64) if j == source else np.flatnonzero(stationary | ((high >= a) & (low <= b)))
+            for j, (a, b) in enumerate(self.areas)
+        ]
+
+
+@dataclass
+class Part:
+    """What a shard sends the others after applying its robots' decisions of ``tick``: their rows (ids ascending;
+    z and pitch empty in 2D), each one's column before the tick, and the counts (:data:`COUNTS`)."""
+
+    tick: int
+    ids: np.ndarray
+    state: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    z: np.ndarray
+    pitch: np.ndarray
+    before: np.ndarray
+    counts: np.ndarray
+
+    def take(self, index: np.ndarray) -> Part:
+        """The rows at ``index`` (what one shard receives), with the part's counts."""
+        z, pitch = (self.z[index], self.pitch[index]) if self.z.size else (self.z, self.pitch)
+        return Part(
+            tick=self.tick,
+            ids=self.ids[index],
+            state=self.state[index],
+            x=self.x[index],
+            y=self.y[index],
+            heading=self.heading[index],
+            z=z,
+            pitch=pitch,
+            before=self.before[index],
+            counts=self.counts,
+        )
+
+
+def _select(d: Decisions, index: np.ndarray) -> Decisions:
+    solid = {"z": d.z[index], "pitch": d.pitch[index]} if d.z is not None and d.pitch is not None else {}
+    return Decisions(d.tick, d.ids[index], d.claim[index], d.x[index], d.y[index], d.heading[index], **solid)
+
+
+class WorldShard:
+    """Shard ``index`` of ``plan``: the world's checks of its own robots and its part of every tick.
+
+    Attributes:
+        replica: its area's state (every stationary robot, the moving robots of its area).
+        history: the metrics of every tick so far (every shard holds the same).
+        outcome: how the run ended, or None.
+    """
+
+    def __init__(self, shape: Shape, params: RunParams, plan: ShardPlan, index: int) -> None:
+        self.shape, self.params, self.plan, self.index = shape, params, plan, index
+        self.strip = plan.strips[index]
+        self.replica = Replica(shape, params.robots, area=plan.areas[index])
+        s0 = initial_state(shape, params.robots, params.seed)
+        ids = np.arange(params.robots)
+        self.replica.load(0, ids, s0.state, s0.x, s0.y, s0.heading, s0.z, s0.pitch)
+        world = shape.world
+        self._solid = world.dims == 3
+        self._mask, self._wall, self._nbrs = (
+            shape.mask.ravel().copy(),
+            world.wall_mask().ravel(),
+            world.neighbour_offsets(),
+        )
+        self._rules = rules_of(params)
+        self._best = np.full(world.patch_count, -1, dtype=np.int64)
+        counts = s0.counts()
+        self.localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
+        self.alive = params.robots
+        self.losses: list[tuple[int, int]] = []
+        self.history: list[tuple[int, ...]] = []
+        self.outcome: Outcome | None = None
+        moving = counts[_INSIDE], counts[_OUTSIDE], counts[_WALKING]
+        self._close(0, *(int(c) for c in moving))
+
+    @property
+    def tick(self) -> int:
+        return self.replica.tick
+
+    @property
+    def state(self) -> SwarmState:
+        return self.replica.state
+
+    def own_moving(self) -> np.ndarray:
+        """The moving robots standing in this shard's strips, ascending: the ones it applies the decisions of."""
+        ids = self.replica.moving_ids()
+        cols = columns(self.state.x[ids], self.plan.radius)
+        return ids[(cols >= self.strip[0]) & (cols <= self.strip[1])]
+
+    def claims(self, decisions: Decisions) -> list[Decisions]:
+        """Exchange 1: per shard, the decisions of this shard's robots claiming a patch in its claim window
+        (its strips and the halo); none for this shard."""
+        size, h = self.plan.width, self.plan.halo
+        cols = decisions.claim % size
+        claiming = decisions.claim >= 0
+        return [
+            _select(decisions, np.flatnonzero(claiming & (cols >= a - h) & (cols <= b + h)))
+            if j != self.index
+            else _select(decisions, np.empty(0, dtype=np.int64))
+            for j, (a, b) in enumerate(self.plan.strips)
+        ]
+
+    def apply(self, decisions: Decisions, rivals: list[Decisions]) -> Part:
+        """Exchange 2: apply this shard's robots' ``decisions`` (one for each of :meth:`own_moving`), ``rivals``
+        (the other shards' claims sent to this one) taking part in the lottery only.
+
+        Raises:
+            ContractError: the decisions are for another tick, or not exactly this shard's moving robots.
+        """
+        if self.outcome is not None:
+            raise ContractError(f"the run has ended ({self.outcome}) at tick {self.tick}")
+        if decisions.tick != self.tick + 1:
+            raise ContractError(f"decisions are for tick {decisions.tick}, the shard is at tick {self.tick}")
+        order = np.argsort(decisions.ids, kind="stable")
+        decisions = _select(decisions, order)
+        own = self.own_moving()
+        if not np.array_equal(decisions.ids, own):
+            raise ContractError(f"shard {self.index}: decisions must cover its moving robots exactly once")
+        wanted = decisions.claim[decisions.claim >= 0]
+        parts = [decisions] + [_select(r, np.flatnonzero(np.isin(r.claim, wanted))) for r in rivals if r.ids.size]
+        every = Decisions.concatenate(parts) if len(parts) > 1 else decisions
+        n = own.size
+        s = self.state
+        before = columns(s.x[own], self.plan.radius)
+        z, pitch = (every.z, every.pitch) if every.z is not None and every.pitch is not None else (_EMPTY, _EMPTY)
+        moves = Moves(every.claim.astype(np.int64), every.x, every.y, z, every.heading, pitch)
+        grid = grid_of(self.shape, s, self._mask, self._wall, self._nbrs)
+        joined, inside, outside, walking = resolve_kernel(
+            every.ids,
+            moves,
+            robots_of(s),
+            grid,
+            self._rules,
+            decisions.tick,
+            self._best,
+            self.localized,
+            self.shape.patches,
+            np.empty(every.ids.size, dtype=np.int8),
+            n,
+        )
+        s.tick = decisions.tick
+        counts = np.zeros(len(COUNTS), dtype=np.int64)
+        counts[:4] = joined, inside, outside, walking
+        p = self.params
+        if p.failures > 0 and decisions.tick == p.fail_tick:
+            failing = np.intersect1d(failing_robots(p), own, assume_unique=True)
+            states = np.bincount(s.state[failing], minlength=8)
+            counts[4:] = states[_INSIDE], states[_OUTSIDE], states[_WALKING]
+        z, pitch = (s.z[own], s.pitch[own]) if s.z is not None and s.pitch is not None else (_EMPTY, _EMPTY)
+        return Part(
+            tick=decisions.tick,
+            ids=own,
+            state=s.state[own],
+            x=s.x[own],
+            y=s.y[own],
+            heading=s.heading[own],
+            z=z,
+            pitch=pitch,
+            before=before,
+            counts=counts,
+        )
+
+    def routes(self, part: Part) -> list[Part]:
+        """What of this shard's ``part`` each shard receives (nothing for this one)."""
+        after = columns(part.x, self.plan.radius)
+        stationary = ~IS_MOVING[part.state]
+        return [part.take(i) for i in self.plan.routes(part.before, after, stationary, self.index)]
+
+    def close(self, own: Part, received: list[Part]) -> None:
+        """Exchange 2's end: take the other shards' rows (``received``: their parts as routed to this shard) and
+        end the tick from the counts of every part (``own``: this shard's), as every other shard does.
+
+        Raises:
+            ContractError: a part of another tick, or rows the replica cannot take (:meth:`Replica.merge`).
+        """
+        tick = self.tick
+        for q in received:
+            if q.tick != tick:
+                raise ContractError(f"shard {self.index}: a part of tick {q.tick} at tick {tick}")
+            if q.ids.size:
+                solid = (q.z, q.pitch) if self._solid else (None, None)
+                self.replica.merge(q.ids, q.state, q.x, q.y, q.heading, *solid)
+        total = own.counts + np.sum([q.counts for q in received], axis=0, dtype=np.int64)
+        self.localized += int(total[0])
+        inside, outside, walking = (int(c) for c in total[1:4])
+        code = self._close(tick, inside, outside, walking)
+        p = self.params
+        if code == RUNNING and p.failures > 0 and tick == p.fail_tick:
+            self.history.pop()  # the tick's metrics are redone after the failures, as Simulation.remove does
+            self._fail(failing_robots(p))
+            self._close(tick, inside - int(total[4]), outside - int(total[5]), walking - int(total[6]))
+
+    def _fail(self, failing: np.ndarray) -> None:
+        """Scheduled failures: remove the failing robots this shard knows, and count them all."""
+        s = self.state
+        known = s.state[failing]
+        gone = failing[known != RobotState.REMOVED]
+        self.localized -= int(((known == RobotState.SEED) | (known == RobotState.LOCALIZED)).sum())
+        self.alive -= int(gone.size)
+        if gone.size:
+            self.losses.append((self.tick, int(gone.size)))
+        here = gone[s.state[gone] != UNKNOWN]
+        solid = (s.z[here], s.pitch[here]) if s.z is not None and s.pitch is not None else (None, None)
+        removed = np.full(here.size, RobotState.REMOVED, dtype=np.int8)
+        self.replica.merge(here, removed, s.x[here], s.y[here], s.heading[here], *solid)
+
+    def _close(self, tick: int, inside: int, outside: int, walking: int) -> int:
+        moving = inside + outside + walking
+        code = end_code(self.localized, moving, tick, self.shape.patches, self.alive, self.params.max_ticks)
+        separated = 0
+        if code == END_EXTRAS:
+            s = self.state
+            known = IS_MOVING[s.state] & (s.state != UNKNOWN)
+            s.state[known] = RobotState.SEPARATED
+            separated, inside, outside, walking = moving, 0, 0, 0
+        self.history.append(
+            metric_values(tick, self.localized, inside, outside, walking, separated, self.shape.patches)
+        )
+        self.outcome = OUTCOME_OF_CODE[code]
+        return code
+
+
+@dataclass
+class ShardedRun:
+    """A run of :func:`run_sharded`: what ``Simulation`` gives, and what each shard did.
+
+    Attributes:
+        history: the metrics of every tick (int64, columns ``METRIC_COLUMNS``), as ``Simulation.history``.
+        state: every robot's final row (each moving robot's from the shard owning it), occupancy and frontier.
+        outcome, losses: as ``Simulation``'s.
+        seconds: per shard, the seconds of its world's work (claims, apply, routing, close) over the run.
+        decide_seconds: per shard, the seconds its robots took to decide (a robot batch's work in the graph).
+        rows_received: per shard, the rows it took from the others over the run.
+        rivals_received: per shard, the claims it took from the others over the run.
+    """
+
+    history: np.ndarray
+    state: SwarmState
+    outcome: Outcome | None
+    losses: list[tuple[int, int]]
+    seconds: np.ndarray
+    decide_seconds: np.ndarray
+    rows_received: np.ndarray
+    rivals_received: np.ndarray
+
+
+class ShardedWorld:
+    """S world shards and their robots in one process, exchanging only the messages of the module's docstring;
+    each shard's robots decide from its regional replica, as a robot batch does. Counts each shard's seconds
+    and what it received (:class:`ShardedRun`)."""
+
+    def __init__(self, shape: Shape, params: RunParams, cuts: np.ndarray) -> None:
+        self.plan = ShardPlan(shape.world.radius, params.vision_radius, cuts)
+        s = self.plan.shards
+        self.shards = [WorldShard(shape, params, self.plan, k) for k in range(s)]
+        self.deciders = [Decider(shape, params) for _ in range(s)]
+        self.seconds, self.decide_seconds = np.zeros(s), np.zeros(s)
+        self.rows, self.rivals = np.zeros(s, dtype=np.int64), np.zeros(s, dtype=np.int64)
+        self.received: list[list[Part]] = []  # the last tick's parts, as each shard received them
+        self.claims: list[list[Decisions]] = []  # the last tick's claims, as each shard received them
+
+    @property
+    def outcome(self) -> Outcome | None:
+        return self.shards[0].outcome
+
+    def step(self) -> None:
+        """One tick: decide, exchange the claims, apply, exchange the rows and counts, close."""
+        shards, clock, count = self.shards, time.perf_counter, range(self.plan.shards)
+        tick = shards[0].tick + 1
+        decisions, claims = [], []
+        for k, sh in enumerate(shards):
+            t0 = clock()
+            decisions.append(self.deciders[k].decide(sh.state, sh.own_moving(), tick, sh.replica.moving_ids()))
+            t1 = clock()
+            claims.append(sh.claims(decisions[k]))
+            self.decide_seconds[k] += t1 - t0
+            self.seconds[k] += clock() - t1
+        self.claims = [[claims[i][k] for i in count if i != k] for k in count]
+        parts, routed = [], []
+        for k, sh in enumerate(shards):
+            t0 = clock()
+            parts.append(sh.apply(decisions[k], self.claims[k]))
+            routed.append(sh.routes(parts[k]))
+            self.seconds[k] += clock() - t0
+            self.rivals[k] += sum(int(r.ids.size) for r in self.claims[k])
+        self.received = [[routed[i][k] for i in count if i != k] for k in count]
+        for k, sh in enumerate(shards):
+            t0 = clock()
+            sh.close(parts[k], self.received[k])
+            self.seconds[k] += clock() - t0
+            self.rows[k] += sum(int(q.ids.size) for q in self.received[k])
+
+    def result(self) -> ShardedRun:
+        first = self.shards[0]
+        history = np.asarray(first.history, dtype=np.int64)
+        return ShardedRun(
+            history, _assemble(self.shards), first.outcome, list(first.losses), self.seconds.copy(),
+            self.decide_seconds.copy(), self.rows.copy(), self.rivals.copy(),
+        )  # fmt: skip
+
+
+def run_sharded(shape: Shape, params: RunParams, cuts: np.ndarray, max_ticks: int | None = None) -> ShardedRun:
+    """Run with the world split into ``len(cuts) + 1`` shards cut at ``cuts`` (x positions), in one process
+    (:class:`ShardedWorld`). Gives ``Simulation(shape, params).run(max_ticks)``'s run."""
+    world = ShardedWorld(shape, params, cuts)
+    left = float("inf") if max_ticks is None else max_ticks
+    while world.outcome is None and left > 0:
+        world.step()
+        left -= 1
+    return world.result()
+
+
+def _assemble(shards: list[WorldShard]) -> SwarmState:
+    """Every robot's row from the shard whose strips hold it (the shards agree on every stationary robot's row,
+    and a moving robot, or one separated or removed while moving, is known for sure to its owner)."""
+    whole = shards[0].state.copy()
+    for sh in shards:
+        s = sh.state
+        cols = columns(s.x, sh.plan.radius)
+        here = np.flatnonzero((s.state != UNKNOWN) & (cols >= sh.strip[0]) & (cols <= sh.strip[1]))
+        for name in ("x", "y", "heading", "state", "z", "pitch"):
+            if getattr(whole, name) is not None:
+                getattr(whole, name)[here] = getattr(s, name)[here]
+    return whole
