@@ -179,3 +179,11 @@ def test_bench_flood_smoke_prints_the_run_alone_and_flooded_both_identical_to_si
         if rate:  # the flood reached every topic of the run
             assert int(reached.replace(",", "")) > 0 and int(topics) >= 10, out
     assert "slowdown: run" in out and "A WRONG RESULT" not in out
+
+
+def test_bench_shards_smoke_measures_each_shard_and_the_runs_are_identical():
+    out = _smoke("bench_shards.py")
+    rows = re.findall(r"^ +(\d+) +([\d.]+) \([\d.]+-[\d.]+\) .* (identical|DIFFERENT)$", out, re.M)
+    assert [(s, same) for s, _, same in rows] == [("1", "identical"), ("2", "identical")], out
+    assert all(float(ms) > 0 for _, ms, _ in rows)
+    assert re.search(r"largest shard, S = 2 against S = 1: [\d.]+x", out), out

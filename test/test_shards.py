@@ -4,15 +4,17 @@ near its strips."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from helpers import disc_shape
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
-from swarm_ros.core.errors import ContractError
+from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.regions import columns
 from swarm_ros.core.replica import UNKNOWN
-from swarm_ros.core.shards import ShardedWorld, run_sharded
+from swarm_ros.core.sharded_run import ShardedWorld, run_sharded
 from swarm_ros.core.state import IS_MOVING, RobotState
 
 pytestmark = pytest.mark.unit
@@ -97,17 +99,83 @@ def test_a_shard_hears_only_of_its_area():
     assert sim.outcome is not None and rivals > 0
 
 
-def test_a_shard_refuses_what_is_not_its_tick():
+def test_a_shard_refuses_decisions_that_are_not_its_own():
     world = ShardedWorld(DISC, RunParams(robots=DISC.patches + 10, seed=2), np.array([0]))
-    sh = world.shards[0]
-    d = world.deciders[0].decide(sh.state, sh.own_moving(), 1, sh.replica.moving_ids())
+    sh, other = world.shards
     with pytest.raises(ContractError, match="for tick 2"):
         sh.apply(world.deciders[0].decide(sh.state, sh.own_moving(), 2, sh.replica.moving_ids()), [])
     with pytest.raises(ContractError, match="exactly once"):
-        other = world.shards[1]
         sh.apply(world.deciders[1].decide(other.state, other.own_moving(), 1, other.replica.moving_ids()), [])
-    part = sh.apply(d, [])
-    stale = sh.routes(part)[1]
-    stale.tick = 5
-    with pytest.raises(ContractError, match="tick 5"):
-        world.shards[1].close(part, [stale])
+
+
+def _tick_parts(world: ShardedWorld) -> tuple[list, list]:
+    """Decide and apply the next tick in every shard of ``world``; (each shard's part, what each receives)."""
+    tick, count = world.shards[0].tick + 1, range(world.plan.shards)
+    decisions = [
+        d.decide(sh.state, sh.own_moving(), tick, sh.replica.moving_ids())
+        for sh, d in zip(world.shards, world.deciders)
+    ]
+    claims = [sh.claims(d) for sh, d in zip(world.shards, decisions)]
+    parts = [sh.apply(decisions[k], [claims[i][k] for i in count if i != k]) for k, sh in enumerate(world.shards)]
+    routed = [sh.routes(p) for sh, p in zip(world.shards, parts)]
+    return parts, [[routed[i][k] for i in count if i != k] for k in count]
+
+
+def _forged(part, **changes):
+    return dataclasses.replace(part, **changes)
+
+
+def test_a_hostile_part_is_refused_whole_and_the_run_goes_on():
+    """Every way a part can be wrong that a shard can see is refused (Rejected, its kind) before anything is
+    taken; the genuine parts taken afterwards give the in-process run."""
+    params = RunParams(robots=DISC.patches + 60, seed=11, vision_radius=2.0)
+    sim, world = Simulation(DISC, params), ShardedWorld(DISC, params, np.array([0]))
+    forged, met = 0, set()
+    while sim.outcome is None:
+        sim.step()
+        parts, received = _tick_parts(world)
+        sh, theirs = world.shards[1], received[1][0]  # shard 1 and what shard 0 sent it
+        s = sh.state
+        joins = np.flatnonzero(theirs.state == RobotState.LOCALIZED)
+        cases = [
+            (_forged(theirs, tick=theirs.tick + 1), "part of another tick"),
+            (_forged(theirs, source=1), "parts of the wrong shards"),
+            (_forged(theirs, counts=theirs.counts[:3]), "malformed part"),
+            (_forged(theirs, counts=theirs.counts - 1 - theirs.counts.max()), "impossible counts"),
+        ]
+        if theirs.ids.size:
+            cases += [
+                (_forged(theirs, x=theirs.x[:-1]), "malformed part"),
+                (_forged(theirs, ids=theirs.ids[::-1].copy()), "bad robot ids"),
+                (_forged(theirs, state=np.full_like(theirs.state, RobotState.SEPARATED)), "bad robot state"),
+                (_forged(theirs, x=theirs.x + np.nan), "bad pose"),
+                (_forged(theirs, before=theirs.before + WORLD.size), "not the sender's robots"),
+                (_forged(theirs, x=theirs.x + 3 * world.plan.halo), "moved too far"),
+            ]
+            stationary = np.flatnonzero(~IS_MOVING[s.state] & (s.state != UNKNOWN))[0]
+            one = theirs.take(np.array([0]))
+            cases.append((_forged(one, ids=np.array([stationary])), "a stationary robot moved"))
+        if joins.size:
+            counts = theirs.counts.copy()
+            counts[0] += 1
+            cases.append((_forged(theirs, counts=counts), "impossible counts"))
+            j = joins[0]
+            taken = np.flatnonzero(s.occupancy >= 0)  # patches robots hold already
+            near = taken[np.abs(taken % WORLD.size - theirs.before[j]) <= world.plan.halo]
+            if near.size:
+                x, y = theirs.x.copy(), theirs.y.copy()
+                x[j], y[j] = near[0] % WORLD.size - WORLD.radius, near[0] // WORLD.size - WORLD.radius
+                cases.append((_forged(theirs, x=x, y=y), "bad join"))
+        for bad, kind in cases:
+            before = s.copy()
+            with pytest.raises(Rejected) as caught:
+                sh.close(parts[1], [bad])
+            assert caught.value.kind == kind
+            met.add(kind)
+            for name in _ROWS[:4] + ("occupancy", "frontier"):
+                assert np.array_equal(getattr(s, name), getattr(before, name)), name  # nothing taken
+            forged += 1
+        for k, shard in enumerate(world.shards):
+            shard.close(parts[k], received[k])
+    assert np.array_equal(np.asarray(world.shards[1].history), sim.history) and forged > 200
+    assert len(met) == 11, met  # every kind of forgery was tried

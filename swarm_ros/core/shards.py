@@ -20,33 +20,35 @@ shard's borders:
    failures (each shard removes the failing robots it knows; the counts of the failing moving robots came
    with the parts).
 
-Nothing here depends on how many shards there are or where the cuts fall: :func:`run_sharded` runs S
-shards in one process, passing only these messages, and gives ``Simulation``'s run byte for byte
+Nothing here depends on how many shards there are or where the cuts fall:
+:func:`~swarm_ros.core.sharded_run.run_sharded` runs S shards in one process, passing only these messages, and
+gives ``Simulation``'s run byte for byte
 (``test/test_shards.py``). The ROS 2 graph's world does not use the shards yet: the split is built and
 checked here first (docs/operations.md, "At scale").
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from swarm_ros.core.arbitration import resolve_kernel
 from swarm_ros.core.engine import failing_robots
-from swarm_ros.core.errors import ContractError
+from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
 from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, RUNNING, Outcome, end_code, metric_values
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import area, columns, halo, strip
 from swarm_ros.core.replica import UNKNOWN, Replica
-from swarm_ros.core.rules import Decider, Decisions
+from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, initial_state
+from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, has_repeats, initial_state
 
 _EMPTY = np.empty(0)
 _INSIDE, _OUTSIDE, _WALKING = int(RobotState.MOVING_INSIDE), int(RobotState.MOVING_OUTSIDE), int(RobotState.WALKING)
+_JOINED = np.array([RobotState.LOCALIZED], dtype=np.int8)
+_PART_STATES = np.array([_INSIDE, _OUTSIDE, _WALKING, RobotState.LOCALIZED], dtype=np.int8)
 #: a part's counts: robots joined; moving inside, outside, walking after the tick; of them, failing at its end
 COUNTS = ("joined", "inside", "outside", "walking", "failing_inside", "failing_outside", "failing_walking")
 
@@ -81,6 +83,7 @@ class Part:
     z and pitch empty in 2D), each one's column before the tick, and the counts (:data:`COUNTS`)."""
 
     tick: int
+    source: int  #: the shard that sent it
     ids: np.ndarray
     state: np.ndarray
     x: np.ndarray
@@ -96,6 +99,7 @@ class Part:
         z, pitch = (self.z[index], self.pitch[index]) if self.z.size else (self.z, self.pitch)
         return Part(
             tick=self.tick,
+            source=self.source,
             ids=self.ids[index],
             state=self.state[index],
             x=self.x[index],
@@ -137,6 +141,7 @@ class WorldShard:
             world.neighbour_offsets(),
         )
         self._rules = rules_of(params)
+        self._patches = shape.patches
         self._best = np.full(world.patch_count, -1, dtype=np.int64)
         counts = s0.counts()
         self.localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
@@ -144,6 +149,7 @@ class WorldShard:
         self.losses: list[tuple[int, int]] = []
         self.history: list[tuple[int, ...]] = []
         self.outcome: Outcome | None = None
+        self._own = self._mine(np.arange(params.robots))  # kept from the rows of each tick on: no scan of the swarm
         moving = counts[_INSIDE], counts[_OUTSIDE], counts[_WALKING]
         self._close(0, *(int(c) for c in moving))
 
@@ -157,9 +163,14 @@ class WorldShard:
 
     def own_moving(self) -> np.ndarray:
         """The moving robots standing in this shard's strips, ascending: the ones it applies the decisions of."""
-        ids = self.replica.moving_ids()
-        cols = columns(self.state.x[ids], self.plan.radius)
-        return ids[(cols >= self.strip[0]) & (cols <= self.strip[1])]
+        return self._own.copy()
+
+    def _mine(self, ids: np.ndarray) -> np.ndarray:
+        """Of ``ids`` (ascending), the moving robots this shard follows that stand in its strips."""
+        s = self.state
+        cols = columns(s.x[ids], self.plan.radius)
+        st = s.state[ids]
+        return ids[IS_MOVING[st] & (st != UNKNOWN) & (cols >= self.strip[0]) & (cols <= self.strip[1])]
 
     def claims(self, decisions: Decisions) -> list[Decisions]:
         """Exchange 1: per shard, the decisions of this shard's robots claiming a patch in its claim window
@@ -208,7 +219,7 @@ class WorldShard:
             decisions.tick,
             self._best,
             self.localized,
-            self.shape.patches,
+            self._patches,
             np.empty(every.ids.size, dtype=np.int8),
             n,
         )
@@ -223,6 +234,7 @@ class WorldShard:
         z, pitch = (s.z[own], s.pitch[own]) if s.z is not None and s.pitch is not None else (_EMPTY, _EMPTY)
         return Part(
             tick=decisions.tick,
+            source=self.index,
             ids=own,
             state=s.state[own],
             x=s.x[own],
@@ -241,19 +253,27 @@ class WorldShard:
         return [part.take(i) for i in self.plan.routes(part.before, after, stationary, self.index)]
 
     def close(self, own: Part, received: list[Part]) -> None:
-        """Exchange 2's end: take the other shards' rows (``received``: their parts as routed to this shard) and
-        end the tick from the counts of every part (``own``: this shard's), as every other shard does.
+        """Exchange 2's end: take the other shards' rows (``received``: one part from each other shard, as routed
+        to this one) and end the tick from the counts of every part (``own``: this shard's), as every other
+        shard does. Every part is checked (:meth:`check`) before any is taken.
 
         Raises:
-            ContractError: a part of another tick, or rows the replica cannot take (:meth:`Replica.merge`).
+            Rejected: a part fails its check; nothing was taken.
         """
         tick = self.tick
+        if sorted(q.source for q in received) != [j for j in range(self.plan.shards) if j != self.index]:
+            raise Rejected("parts of the wrong shards", f"shard {self.index} needs one part from each other shard")
+        joins = [self.check(q) for q in received]
+        every = np.concatenate([own.ids, *(q.ids for q in received)])
+        if has_repeats(every) or has_repeats(np.concatenate([np.empty(0, dtype=np.int64), *joins])):
+            raise Rejected("parts that overlap", "a robot in two parts, or two robots joining on one patch")
         for q in received:
-            if q.tick != tick:
-                raise ContractError(f"shard {self.index}: a part of tick {q.tick} at tick {tick}")
             if q.ids.size:
                 solid = (q.z, q.pitch) if self._solid else (None, None)
                 self.replica.merge(q.ids, q.state, q.x, q.y, q.heading, *solid)
+        heard = [q.ids for q in received if q.ids.size]
+        # the parts are of disjoint robots (each robot decides in one shard): a sort, no unique
+        self._own = self._mine(np.sort(np.concatenate([own.ids, *heard])) if heard else own.ids)
         total = own.counts + np.sum([q.counts for q in received], axis=0, dtype=np.int64)
         self.localized += int(total[0])
         inside, outside, walking = (int(c) for c in total[1:4])
@@ -263,6 +283,67 @@ class WorldShard:
             self.history.pop()  # the tick's metrics are redone after the failures, as Simulation.remove does
             self._fail(failing_robots(p))
             self._close(tick, inside - int(total[4]), outside - int(total[5]), walking - int(total[6]))
+        self._own = self._mine(self._own)  # less the failed and the separated
+
+    def check(self, q: Part) -> np.ndarray:
+        """That ``q`` can be shard ``q.source``'s part of this tick, as far as this shard knows the swarm: its own
+        robots (that stood in its strips, were moving if this shard followed them, and stood where it saw them),
+        moves of at most a halo, joins on distinct frontier patches this shard's robots did not take, and counts
+        that hold its joins. (The counts of its moving robots only the sender knows: in the graph, the tag under
+        the run's key vouches for them.) Returns the patches it joins.
+
+        Raises:
+            Rejected: what failed (its ``kind``), with the part left untaken.
+        """
+        tick, n, size = self.tick, self.params.robots, self.plan.width
+        if q.tick != tick:
+            raise Rejected("part of another tick", f"tick {q.tick} at tick {tick}")
+        k, solid = q.ids.size, self._solid
+        arrays = (q.state, q.x, q.y, q.heading, q.before) + ((q.z, q.pitch) if solid else ())
+        if any(a.shape != (k,) for a in arrays) or (not solid and (q.z.size or q.pitch.size)):
+            raise Rejected("malformed part", "arrays of different lengths")
+        if q.counts.shape != (len(COUNTS),):
+            raise Rejected("malformed part", f"{q.counts.size} counts")
+        c = q.counts
+        if (c < 0).any() or c[1:4].sum() > n or (c[4:] > c[1:4]).any():
+            raise Rejected("impossible counts", str(c.tolist()))
+        if not k:
+            if c[0]:
+                raise Rejected("impossible counts", "joins without their rows")
+            return np.empty(0, dtype=np.int64)
+        ids = q.ids
+        if ids[0] < 0 or ids[-1] >= n or (np.diff(ids) <= 0).any():
+            raise Rejected("bad robot ids", f"out of 0..{n - 1} or not ascending")
+        if not np.isin(q.state, _PART_STATES).all():
+            raise Rejected("bad robot state", "a part holds moving and newly localized robots only")
+        if not all(np.isfinite(a).all() for a in arrays[1:4] + arrays[5:]):
+            raise Rejected("bad pose", "not finite")
+        first, last = self.plan.strips[q.source]
+        if ((q.before < first) | (q.before > last)).any():
+            raise Rejected("not the sender's robots", "a robot that stood outside its strips")
+        s = self.state
+        was = s.state[ids]
+        seen = was != UNKNOWN
+        if (~IS_MOVING[was[seen]]).any():
+            raise Rejected("a stationary robot moved")
+        if (columns(s.x[ids[seen]], self.plan.radius) != q.before[seen]).any():
+            raise Rejected("not where it stood", "a robot's column before the tick is not the one this shard saw")
+        after = [columns(a, self.plan.radius) for a in ((q.x, q.y, q.z) if solid else (q.x, q.y))]
+        if (
+            any((a.min() < 0) | (a.max() >= size) for a in after)
+            or (np.abs(after[0] - q.before) > self.plan.halo).any()
+        ):
+            raise Rejected("moved too far", "out of the world, or further than a halo in a tick")
+        joined = np.isin(q.state, _JOINED)
+        if int(joined.sum()) != c[0]:
+            raise Rejected("impossible counts", "its joins are not its newly localized rows")
+        cells = [a[joined] for a in after]
+        p = cells[-1]
+        for a in reversed(cells[:-1]):
+            p = p * size + a
+        if not (self._mask[p] & (s.occupancy[p] < 0) & s.frontier[p]).all():
+            raise Rejected("bad join", "a robot joins off the frontier, or on a patch taken this tick")
+        return p
 
     def _fail(self, failing: np.ndarray) -> None:
         """Scheduled failures: remove the failing robots this shard knows, and count them all."""
@@ -280,119 +361,13 @@ class WorldShard:
 
     def _close(self, tick: int, inside: int, outside: int, walking: int) -> int:
         moving = inside + outside + walking
-        code = end_code(self.localized, moving, tick, self.shape.patches, self.alive, self.params.max_ticks)
+        code = end_code(self.localized, moving, tick, self._patches, self.alive, self.params.max_ticks)
         separated = 0
         if code == END_EXTRAS:
             s = self.state
             known = IS_MOVING[s.state] & (s.state != UNKNOWN)
             s.state[known] = RobotState.SEPARATED
             separated, inside, outside, walking = moving, 0, 0, 0
-        self.history.append(
-            metric_values(tick, self.localized, inside, outside, walking, separated, self.shape.patches)
-        )
+        self.history.append(metric_values(tick, self.localized, inside, outside, walking, separated, self._patches))
         self.outcome = OUTCOME_OF_CODE[code]
         return code
-
-
-@dataclass
-class ShardedRun:
-    """A run of :func:`run_sharded`: what ``Simulation`` gives, and what each shard did.
-
-    Attributes:
-        history: the metrics of every tick (int64, columns ``METRIC_COLUMNS``), as ``Simulation.history``.
-        state: every robot's final row (each moving robot's from the shard owning it), occupancy and frontier.
-        outcome, losses: as ``Simulation``'s.
-        seconds: per shard, the seconds of its world's work (claims, apply, routing, close) over the run.
-        decide_seconds: per shard, the seconds its robots took to decide (a robot batch's work in the graph).
-        rows_received: per shard, the rows it took from the others over the run.
-        rivals_received: per shard, the claims it took from the others over the run.
-    """
-
-    history: np.ndarray
-    state: SwarmState
-    outcome: Outcome | None
-    losses: list[tuple[int, int]]
-    seconds: np.ndarray
-    decide_seconds: np.ndarray
-    rows_received: np.ndarray
-    rivals_received: np.ndarray
-
-
-class ShardedWorld:
-    """S world shards and their robots in one process, exchanging only the messages of the module's docstring;
-    each shard's robots decide from its regional replica, as a robot batch does. Counts each shard's seconds
-    and what it received (:class:`ShardedRun`)."""
-
-    def __init__(self, shape: Shape, params: RunParams, cuts: np.ndarray) -> None:
-        self.plan = ShardPlan(shape.world.radius, params.vision_radius, cuts)
-        s = self.plan.shards
-        self.shards = [WorldShard(shape, params, self.plan, k) for k in range(s)]
-        self.deciders = [Decider(shape, params) for _ in range(s)]
-        self.seconds, self.decide_seconds = np.zeros(s), np.zeros(s)
-        self.rows, self.rivals = np.zeros(s, dtype=np.int64), np.zeros(s, dtype=np.int64)
-        self.received: list[list[Part]] = []  # the last tick's parts, as each shard received them
-        self.claims: list[list[Decisions]] = []  # the last tick's claims, as each shard received them
-
-    @property
-    def outcome(self) -> Outcome | None:
-        return self.shards[0].outcome
-
-    def step(self) -> None:
-        """One tick: decide, exchange the claims, apply, exchange the rows and counts, close."""
-        shards, clock, count = self.shards, time.perf_counter, range(self.plan.shards)
-        tick = shards[0].tick + 1
-        decisions, claims = [], []
-        for k, sh in enumerate(shards):
-            t0 = clock()
-            decisions.append(self.deciders[k].decide(sh.state, sh.own_moving(), tick, sh.replica.moving_ids()))
-            t1 = clock()
-            claims.append(sh.claims(decisions[k]))
-            self.decide_seconds[k] += t1 - t0
-            self.seconds[k] += clock() - t1
-        self.claims = [[claims[i][k] for i in count if i != k] for k in count]
-        parts, routed = [], []
-        for k, sh in enumerate(shards):
-            t0 = clock()
-            parts.append(sh.apply(decisions[k], self.claims[k]))
-            routed.append(sh.routes(parts[k]))
-            self.seconds[k] += clock() - t0
-            self.rivals[k] += sum(int(r.ids.size) for r in self.claims[k])
-        self.received = [[routed[i][k] for i in count if i != k] for k in count]
-        for k, sh in enumerate(shards):
-            t0 = clock()
-            sh.close(parts[k], self.received[k])
-            self.seconds[k] += clock() - t0
-            self.rows[k] += sum(int(q.ids.size) for q in self.received[k])
-
-    def result(self) -> ShardedRun:
-        first = self.shards[0]
-        history = np.asarray(first.history, dtype=np.int64)
-        return ShardedRun(
-            history, _assemble(self.shards), first.outcome, list(first.losses), self.seconds.copy(),
-            self.decide_seconds.copy(), self.rows.copy(), self.rivals.copy(),
-        )  # fmt: skip
-
-
-def run_sharded(shape: Shape, params: RunParams, cuts: np.ndarray, max_ticks: int | None = None) -> ShardedRun:
-    """Run with the world split into ``len(cuts) + 1`` shards cut at ``cuts`` (x positions), in one process
-    (:class:`ShardedWorld`). Gives ``Simulation(shape, params).run(max_ticks)``'s run."""
-    world = ShardedWorld(shape, params, cuts)
-    left = float("inf") if max_ticks is None else max_ticks
-    while world.outcome is None and left > 0:
-        world.step()
-        left -= 1
-    return world.result()
-
-
-def _assemble(shards: list[WorldShard]) -> SwarmState:
-    """Every robot's row from the shard whose strips hold it (the shards agree on every stationary robot's row,
-    and a moving robot, or one separated or removed while moving, is known for sure to its owner)."""
-    whole = shards[0].state.copy()
-    for sh in shards:
-        s = sh.state
-        cols = columns(s.x, sh.plan.radius)
-        here = np.flatnonzero((s.state != UNKNOWN) & (cols >= sh.strip[0]) & (cols <= sh.strip[1]))
-        for name in ("x", "y", "heading", "state", "z", "pitch"):
-            if getattr(whole, name) is not None:
-                getattr(whole, name)[here] = getattr(s, name)[here]
-    return whole
