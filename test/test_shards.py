@@ -146,7 +146,8 @@ def test_a_hostile_part_is_refused_whole_and_the_run_goes_on():
         if theirs.ids.size:
             cases += [
                 (_forged(theirs, x=theirs.x[:-1]), "malformed part"),
-                (_forged(theirs, ids=theirs.ids[::-1].copy()), "bad robot ids"),
+                (_forged(theirs, ids=theirs.ids + params.robots), "bad robot ids"),
+                (_forged(theirs, state=theirs.state.astype(np.int64)), "malformed part"),
                 (_forged(theirs, state=np.full_like(theirs.state, RobotState.SEPARATED)), "bad robot state"),
                 (_forged(theirs, x=theirs.x + np.nan), "bad pose"),
                 (_forged(theirs, before=theirs.before + WORLD.size), "not the sender's robots"),
@@ -155,6 +156,9 @@ def test_a_hostile_part_is_refused_whole_and_the_run_goes_on():
             stationary = np.flatnonzero(~IS_MOVING[s.state] & (s.state != UNKNOWN))[0]
             one = theirs.take(np.array([0]))
             cases.append((_forged(one, ids=np.array([stationary])), "a stationary robot moved"))
+            twice = np.concatenate([theirs.ids[:1], theirs.ids])[: theirs.ids.size]  # the first robot twice
+            if twice.size > 1:
+                cases.append((_forged(theirs, ids=twice), "bad robot ids"))
         if joins.size:
             counts = theirs.counts.copy()
             counts[0] += 1

@@ -47,8 +47,8 @@ from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, has_repeats,
 
 _EMPTY = np.empty(0)
 _INSIDE, _OUTSIDE, _WALKING = int(RobotState.MOVING_INSIDE), int(RobotState.MOVING_OUTSIDE), int(RobotState.WALKING)
-_JOINED = np.array([RobotState.LOCALIZED], dtype=np.int8)
-_PART_STATES = np.array([_INSIDE, _OUTSIDE, _WALKING, RobotState.LOCALIZED], dtype=np.int8)
+_PART_STATE = np.zeros(256, dtype=bool)  #: by a state code's byte: may a part hold it (moving, newly localized)
+_PART_STATE[[_INSIDE, _OUTSIDE, _WALKING, RobotState.LOCALIZED]] = True
 #: a part's counts: robots joined; moving inside, outside, walking after the tick; of them, failing at its end
 COUNTS = ("joined", "inside", "outside", "walking", "failing_inside", "failing_outside", "failing_walking")
 
@@ -110,6 +110,29 @@ class Part:
             before=self.before[index],
             counts=self.counts,
         )
+
+
+#: a part's arrays and their types, in the order check() takes them
+_PART_FIELDS = {
+    "ids": np.int64,
+    "state": np.int8,
+    "x": np.float64,
+    "y": np.float64,
+    "heading": np.float64,
+    "before": np.int64,
+    "z": np.float64,
+    "pitch": np.float64,
+}
+_PART_DTYPES = tuple(_PART_FIELDS.values())
+
+
+def _concatenate(parts: list[Part]) -> Part:
+    """The rows of ``parts`` in one (source -1; counts empty)."""
+    rows = {
+        f: np.concatenate([getattr(q, f) for q in parts]) if parts else np.empty(0, dtype=d)
+        for f, d in _PART_FIELDS.items()
+    }
+    return Part(tick=parts[0].tick if parts else -1, source=-1, counts=np.empty(0, np.int64), **rows)
 
 
 def _select(d: Decisions, index: np.ndarray) -> Decisions:
@@ -196,9 +219,9 @@ class WorldShard:
             raise ContractError(f"the run has ended ({self.outcome}) at tick {self.tick}")
         if decisions.tick != self.tick + 1:
             raise ContractError(f"decisions are for tick {decisions.tick}, the shard is at tick {self.tick}")
-        order = np.argsort(decisions.ids, kind="stable")
-        decisions = _select(decisions, order)
-        own = self.own_moving()
+        if decisions.ids.size > 1 and not (decisions.ids[1:] > decisions.ids[:-1]).all():
+            decisions = _select(decisions, np.argsort(decisions.ids, kind="stable"))
+        own = self._own
         if not np.array_equal(decisions.ids, own):
             raise ContractError(f"shard {self.index}: decisions must cover its moving robots exactly once")
         wanted = decisions.claim[decisions.claim >= 0]
@@ -255,26 +278,19 @@ class WorldShard:
     def close(self, own: Part, received: list[Part]) -> None:
         """Exchange 2's end: take the other shards' rows (``received``: one part from each other shard, as routed
         to this one) and end the tick from the counts of every part (``own``: this shard's), as every other
-        shard does. Every part is checked (:meth:`check`) before any is taken.
+        shard does. The parts are checked (:meth:`check`) before any is taken.
 
         Raises:
             Rejected: a part fails its check; nothing was taken.
         """
         tick = self.tick
-        if sorted(q.source for q in received) != [j for j in range(self.plan.shards) if j != self.index]:
-            raise Rejected("parts of the wrong shards", f"shard {self.index} needs one part from each other shard")
-        joins = [self.check(q) for q in received]
-        every = np.concatenate([own.ids, *(q.ids for q in received)])
-        if has_repeats(every) or has_repeats(np.concatenate([np.empty(0, dtype=np.int64), *joins])):
-            raise Rejected("parts that overlap", "a robot in two parts, or two robots joining on one patch")
-        for q in received:
-            if q.ids.size:
-                solid = (q.z, q.pitch) if self._solid else (None, None)
-                self.replica.merge(q.ids, q.state, q.x, q.y, q.heading, *solid)
-        heard = [q.ids for q in received if q.ids.size]
-        # the parts are of disjoint robots (each robot decides in one shard): a sort, no unique
-        self._own = self._mine(np.sort(np.concatenate([own.ids, *heard])) if heard else own.ids)
-        total = own.counts + np.sum([q.counts for q in received], axis=0, dtype=np.int64)
+        rows, counts = self.check(received)
+        if rows.ids.size:
+            solid = (rows.z, rows.pitch) if self._solid else (None, None)
+            self.replica.merge(rows.ids, rows.state, rows.x, rows.y, rows.heading, *solid)
+        kept, come = self._mine(own.ids), self._mine(np.sort(rows.ids))  # disjoint, each ascending
+        self._own = np.insert(kept, np.searchsorted(kept, come), come) if come.size else kept
+        total = own.counts + counts
         self.localized += int(total[0])
         inside, outside, walking = (int(c) for c in total[1:4])
         code = self._close(tick, inside, outside, walking)
@@ -285,65 +301,77 @@ class WorldShard:
             self._close(tick, inside - int(total[4]), outside - int(total[5]), walking - int(total[6]))
         self._own = self._mine(self._own)  # less the failed and the separated
 
-    def check(self, q: Part) -> np.ndarray:
-        """That ``q`` can be shard ``q.source``'s part of this tick, as far as this shard knows the swarm: its own
-        robots (that stood in its strips, were moving if this shard followed them, and stood where it saw them),
-        moves of at most a halo, joins on distinct frontier patches this shard's robots did not take, and counts
-        that hold its joins. (The counts of its moving robots only the sender knows: in the graph, the tag under
-        the run's key vouches for them.) Returns the patches it joins.
+    def check(self, received: list[Part]) -> tuple[Part, np.ndarray]:
+        """That ``received`` can be the other shards' parts of this tick, as far as this shard knows the swarm:
+        one from each; each of its own robots (that stood in its strips, were moving if this shard followed
+        them, and stood where it saw them), no robot in two; moves of at most a halo; joins on distinct frontier
+        patches this shard's robots did not take, and counts that hold each part's joins. (The counts of a
+        shard's moving robots only it knows: in the graph, the tag under the run's key vouches for them.)
+        Returns their rows in one part (source -1) and their counts summed. One pass over all the rows,
+        whatever the number of shards.
 
         Raises:
-            Rejected: what failed (its ``kind``), with the part left untaken.
+            Rejected: what failed (its ``kind``), with nothing taken.
         """
-        tick, n, size = self.tick, self.params.robots, self.plan.width
-        if q.tick != tick:
-            raise Rejected("part of another tick", f"tick {q.tick} at tick {tick}")
-        k, solid = q.ids.size, self._solid
-        arrays = (q.state, q.x, q.y, q.heading, q.before) + ((q.z, q.pitch) if solid else ())
-        if any(a.shape != (k,) for a in arrays) or (not solid and (q.z.size or q.pitch.size)):
-            raise Rejected("malformed part", "arrays of different lengths")
-        if q.counts.shape != (len(COUNTS),):
-            raise Rejected("malformed part", f"{q.counts.size} counts")
-        c = q.counts
-        if (c < 0).any() or c[1:4].sum() > n or (c[4:] > c[1:4]).any():
-            raise Rejected("impossible counts", str(c.tolist()))
-        if not k:
-            if c[0]:
+        tick, n, size, solid = self.tick, self.params.robots, self.plan.width, self._solid
+        if sorted(q.source for q in received) != [j for j in range(self.plan.shards) if j != self.index]:
+            raise Rejected("parts of the wrong shards", f"shard {self.index} needs one part from each other shard")
+        for q in received:
+            if q.tick != tick:
+                raise Rejected("part of another tick", f"tick {q.tick} at tick {tick}")
+            k = q.ids.size
+            arrays = (q.ids, q.state, q.x, q.y, q.heading, q.before) + ((q.z, q.pitch) if solid else ())
+            if any(a.shape != (k,) or a.dtype != d for a, d in zip(arrays, _PART_DTYPES)) or (
+                not solid and (q.z.size or q.pitch.size)
+            ):
+                raise Rejected("malformed part", "arrays of other types or lengths")
+            if q.counts.shape != (len(COUNTS),) or q.counts.dtype != np.int64:
+                raise Rejected("malformed part", f"{q.counts.size} counts")
+        counts = np.array([q.counts for q in received], dtype=np.int64).reshape(-1, len(COUNTS))
+        if (counts < 0).any() or (counts[:, 1:4].sum(axis=1) > n).any() or (counts[:, 4:] > counts[:, 1:4]).any():
+            raise Rejected("impossible counts", str(counts.tolist()))
+        rows = _concatenate(received)
+        if not rows.ids.size:
+            if counts[:, 0].any():
                 raise Rejected("impossible counts", "joins without their rows")
-            return np.empty(0, dtype=np.int64)
-        ids = q.ids
-        if ids[0] < 0 or ids[-1] >= n or (np.diff(ids) <= 0).any():
-            raise Rejected("bad robot ids", f"out of 0..{n - 1} or not ascending")
-        if not np.isin(q.state, _PART_STATES).all():
+            return rows, counts.sum(axis=0)
+        ids = rows.ids
+        if ids.min() < 0 or ids.max() >= n or has_repeats(ids):
+            raise Rejected("bad robot ids", f"out of 0..{n - 1}, or a robot in two rows")
+        if not _PART_STATE[rows.state.view(np.uint8)].all():
             raise Rejected("bad robot state", "a part holds moving and newly localized robots only")
-        if not all(np.isfinite(a).all() for a in arrays[1:4] + arrays[5:]):
+        poses = (rows.x, rows.y, rows.heading) + ((rows.z, rows.pitch) if solid else ())
+        if not all(np.isfinite(a).all() for a in poses):
             raise Rejected("bad pose", "not finite")
-        first, last = self.plan.strips[q.source]
-        if ((q.before < first) | (q.before > last)).any():
+        sizes = [q.ids.size for q in received]
+        first = np.repeat([self.plan.strips[q.source][0] for q in received], sizes)
+        last = np.repeat([self.plan.strips[q.source][1] for q in received], sizes)
+        if ((rows.before < first) | (rows.before > last)).any():
             raise Rejected("not the sender's robots", "a robot that stood outside its strips")
         s = self.state
         was = s.state[ids]
-        seen = was != UNKNOWN
+        seen = was != UNKNOWN  # a robot of this shard's in another's part stood elsewhere than this shard saw it
         if (~IS_MOVING[was[seen]]).any():
             raise Rejected("a stationary robot moved")
-        if (columns(s.x[ids[seen]], self.plan.radius) != q.before[seen]).any():
+        if (columns(s.x[ids[seen]], self.plan.radius) != rows.before[seen]).any():
             raise Rejected("not where it stood", "a robot's column before the tick is not the one this shard saw")
-        after = [columns(a, self.plan.radius) for a in ((q.x, q.y, q.z) if solid else (q.x, q.y))]
+        after = [columns(a, self.plan.radius) for a in ((rows.x, rows.y, rows.z) if solid else (rows.x, rows.y))]
         if (
             any((a.min() < 0) | (a.max() >= size) for a in after)
-            or (np.abs(after[0] - q.before) > self.plan.halo).any()
+            or (np.abs(after[0] - rows.before) > self.plan.halo).any()
         ):
             raise Rejected("moved too far", "out of the world, or further than a halo in a tick")
-        joined = np.isin(q.state, _JOINED)
-        if int(joined.sum()) != c[0]:
-            raise Rejected("impossible counts", "its joins are not its newly localized rows")
+        joined = rows.state == RobotState.LOCALIZED
+        part_of = np.repeat(np.arange(len(received)), sizes)
+        if not np.array_equal(np.bincount(part_of[joined], minlength=len(received)), counts[:, 0]):
+            raise Rejected("impossible counts", "a part's joins are not its newly localized rows")
         cells = [a[joined] for a in after]
         p = cells[-1]
         for a in reversed(cells[:-1]):
             p = p * size + a
-        if not (self._mask[p] & (s.occupancy[p] < 0) & s.frontier[p]).all():
-            raise Rejected("bad join", "a robot joins off the frontier, or on a patch taken this tick")
-        return p
+        if not (self._mask[p] & (s.occupancy[p] < 0) & s.frontier[p]).all() or has_repeats(p):
+            raise Rejected("bad join", "off the frontier, on a patch taken this tick, or two robots on one patch")
+        return rows, counts.sum(axis=0)
 
     def _fail(self, failing: np.ndarray) -> None:
         """Scheduled failures: remove the failing robots this shard knows, and count them all."""
