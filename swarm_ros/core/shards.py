@@ -35,7 +35,7 @@ import numpy as np
 
 from swarm_ros.core.arbitration import resolve_kernel
 from swarm_ros.core.engine import failing_robots
-from swarm_ros.core.errors import ContractError, Rejected
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
 from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, RUNNING, Outcome, end_code, metric_values
 from swarm_ros.core.params import RunParams
@@ -43,14 +43,12 @@ from swarm_ros.core.regions import area, columns, halo, strip
 from swarm_ros.core.replica import UNKNOWN, Replica
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, has_repeats, initial_state
+from swarm_ros.core.shard_parts import COUNTS, Part, check_parts
+from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, initial_state
 
 _EMPTY = np.empty(0)
 _INSIDE, _OUTSIDE, _WALKING = int(RobotState.MOVING_INSIDE), int(RobotState.MOVING_OUTSIDE), int(RobotState.WALKING)
-_PART_STATE = np.zeros(256, dtype=bool)  #: by a state code's byte: may a part hold it (moving, newly localized)
-_PART_STATE[[_INSIDE, _OUTSIDE, _WALKING, RobotState.LOCALIZED]] = True
 #: a part's counts: robots joined; moving inside, outside, walking after the tick; of them, failing at its end
-COUNTS = ("joined", "inside", "outside", "walking", "failing_inside", "failing_outside", "failing_walking")
 
 
 class ShardPlan:
@@ -78,61 +76,22 @@ class ShardPlan:
 
 
 @dataclass
-class Part:
-    """What a shard sends the others after applying its robots' decisions of ``tick``: their rows (ids ascending;
-    z and pitch empty in 2D), each one's column before the tick, and the counts (:data:`COUNTS`)."""
+class ShardSaved:
+    """A shard at the end of ``tick`` (:meth:`WorldShard.saved`): the rows it knows (z, pitch: None in 2D), the
+    metrics of every tick, the losses, and the counts it keeps."""
 
     tick: int
-    source: int  #: the shard that sent it
     ids: np.ndarray
     state: np.ndarray
     x: np.ndarray
     y: np.ndarray
     heading: np.ndarray
-    z: np.ndarray
-    pitch: np.ndarray
-    before: np.ndarray
-    counts: np.ndarray
-
-    def take(self, index: np.ndarray) -> Part:
-        """The rows at ``index`` (what one shard receives), with the part's counts."""
-        z, pitch = (self.z[index], self.pitch[index]) if self.z.size else (self.z, self.pitch)
-        return Part(
-            tick=self.tick,
-            source=self.source,
-            ids=self.ids[index],
-            state=self.state[index],
-            x=self.x[index],
-            y=self.y[index],
-            heading=self.heading[index],
-            z=z,
-            pitch=pitch,
-            before=self.before[index],
-            counts=self.counts,
-        )
-
-
-#: a part's arrays and their types, in the order check() takes them
-_PART_FIELDS = {
-    "ids": np.int64,
-    "state": np.int8,
-    "x": np.float64,
-    "y": np.float64,
-    "heading": np.float64,
-    "before": np.int64,
-    "z": np.float64,
-    "pitch": np.float64,
-}
-_PART_DTYPES = tuple(_PART_FIELDS.values())
-
-
-def _concatenate(parts: list[Part]) -> Part:
-    """The rows of ``parts`` in one (source -1; counts empty)."""
-    rows = {
-        f: np.concatenate([getattr(q, f) for q in parts]) if parts else np.empty(0, dtype=d)
-        for f, d in _PART_FIELDS.items()
-    }
-    return Part(tick=parts[0].tick if parts else -1, source=-1, counts=np.empty(0, np.int64), **rows)
+    z: np.ndarray | None
+    pitch: np.ndarray | None
+    history: np.ndarray
+    losses: list[tuple[int, int]]
+    localized: int
+    alive: int
 
 
 def _select(d: Decisions, index: np.ndarray) -> Decisions:
@@ -183,6 +142,41 @@ class WorldShard:
     @property
     def state(self) -> SwarmState:
         return self.replica.state
+
+    def saved(self) -> ShardSaved:
+        """What a restarted process of this shard needs to go on from the tick closed last (:meth:`restore`)."""
+        s = self.state
+        ids = np.flatnonzero(s.state != UNKNOWN)
+        return ShardSaved(
+            tick=self.tick,
+            ids=ids,
+            state=s.state[ids].copy(),
+            x=s.x[ids].copy(),
+            y=s.y[ids].copy(),
+            heading=s.heading[ids].copy(),
+            z=s.z[ids].copy() if s.z is not None else None,
+            pitch=s.pitch[ids].copy() if s.pitch is not None else None,
+            history=np.asarray(self.history, dtype=np.int64),
+            losses=list(self.losses),
+            localized=self.localized,
+            alive=self.alive,
+        )
+
+    def restore(self, saved: ShardSaved) -> None:
+        """Go on from ``saved`` (:meth:`saved` of a process of this shard before this one): the replica is rebuilt
+        from its rows, as a robot batch's is from a snapshot.
+
+        Raises:
+            ContractError: rows that do not make a consistent swarm.
+        """
+        v = saved
+        self.replica.load(v.tick, v.ids, v.state, v.x, v.y, v.heading, v.z, v.pitch)
+        self.history = [tuple(int(c) for c in row) for row in v.history]
+        self.losses, self.localized, self.alive = list(v.losses), v.localized, v.alive
+        self._own = self._mine(np.flatnonzero(self.state.state != UNKNOWN))
+        last = self.history[-1]
+        code = end_code(self.localized, last[4], v.tick, self._patches, self.alive, self.params.max_ticks)
+        self.outcome = OUTCOME_OF_CODE[code]
 
     def own_moving(self) -> np.ndarray:
         """The moving robots standing in this shard's strips, ascending: the ones it applies the decisions of."""
@@ -301,77 +295,14 @@ class WorldShard:
             self._close(tick, inside - int(total[4]), outside - int(total[5]), walking - int(total[6]))
         self._own = self._mine(self._own)  # less the failed and the separated
 
-    def check(self, received: list[Part]) -> tuple[Part, np.ndarray]:
-        """That ``received`` can be the other shards' parts of this tick, as far as this shard knows the swarm:
-        one from each; each of its own robots (that stood in its strips, were moving if this shard followed
-        them, and stood where it saw them), no robot in two; moves of at most a halo; joins on distinct frontier
-        patches this shard's robots did not take, and counts that hold each part's joins. (The counts of a
-        shard's moving robots only it knows: in the graph, the tag under the run's key vouches for them.)
-        Returns their rows in one part (source -1) and their counts summed. One pass over all the rows,
-        whatever the number of shards.
+    def check(self, received: list[Part], whole: bool = True) -> tuple[Part, np.ndarray]:
+        """That ``received`` can be the other shards' parts of this tick (:func:`check_parts`); returns their rows
+        in one part and their counts summed. ``whole=False``: parts of some of the peers only.
 
         Raises:
             Rejected: what failed (its ``kind``), with nothing taken.
         """
-        tick, n, size, solid = self.tick, self.params.robots, self.plan.width, self._solid
-        if sorted(q.source for q in received) != [j for j in range(self.plan.shards) if j != self.index]:
-            raise Rejected("parts of the wrong shards", f"shard {self.index} needs one part from each other shard")
-        for q in received:
-            if q.tick != tick:
-                raise Rejected("part of another tick", f"tick {q.tick} at tick {tick}")
-            k = q.ids.size
-            arrays = (q.ids, q.state, q.x, q.y, q.heading, q.before) + ((q.z, q.pitch) if solid else ())
-            if any(a.shape != (k,) or a.dtype != d for a, d in zip(arrays, _PART_DTYPES)) or (
-                not solid and (q.z.size or q.pitch.size)
-            ):
-                raise Rejected("malformed part", "arrays of other types or lengths")
-            if q.counts.shape != (len(COUNTS),) or q.counts.dtype != np.int64:
-                raise Rejected("malformed part", f"{q.counts.size} counts")
-        counts = np.array([q.counts for q in received], dtype=np.int64).reshape(-1, len(COUNTS))
-        if (counts < 0).any() or (counts[:, 1:4].sum(axis=1) > n).any() or (counts[:, 4:] > counts[:, 1:4]).any():
-            raise Rejected("impossible counts", str(counts.tolist()))
-        rows = _concatenate(received)
-        if not rows.ids.size:
-            if counts[:, 0].any():
-                raise Rejected("impossible counts", "joins without their rows")
-            return rows, counts.sum(axis=0)
-        ids = rows.ids
-        if ids.min() < 0 or ids.max() >= n or has_repeats(ids):
-            raise Rejected("bad robot ids", f"out of 0..{n - 1}, or a robot in two rows")
-        if not _PART_STATE[rows.state.view(np.uint8)].all():
-            raise Rejected("bad robot state", "a part holds moving and newly localized robots only")
-        poses = (rows.x, rows.y, rows.heading) + ((rows.z, rows.pitch) if solid else ())
-        if not all(np.isfinite(a).all() for a in poses):
-            raise Rejected("bad pose", "not finite")
-        sizes = [q.ids.size for q in received]
-        first = np.repeat([self.plan.strips[q.source][0] for q in received], sizes)
-        last = np.repeat([self.plan.strips[q.source][1] for q in received], sizes)
-        if ((rows.before < first) | (rows.before > last)).any():
-            raise Rejected("not the sender's robots", "a robot that stood outside its strips")
-        s = self.state
-        was = s.state[ids]
-        seen = was != UNKNOWN  # a robot of this shard's in another's part stood elsewhere than this shard saw it
-        if (~IS_MOVING[was[seen]]).any():
-            raise Rejected("a stationary robot moved")
-        if (columns(s.x[ids[seen]], self.plan.radius) != rows.before[seen]).any():
-            raise Rejected("not where it stood", "a robot's column before the tick is not the one this shard saw")
-        after = [columns(a, self.plan.radius) for a in ((rows.x, rows.y, rows.z) if solid else (rows.x, rows.y))]
-        if (
-            any((a.min() < 0) | (a.max() >= size) for a in after)
-            or (np.abs(after[0] - rows.before) > self.plan.halo).any()
-        ):
-            raise Rejected("moved too far", "out of the world, or further than a halo in a tick")
-        joined = rows.state == RobotState.LOCALIZED
-        part_of = np.repeat(np.arange(len(received)), sizes)
-        if not np.array_equal(np.bincount(part_of[joined], minlength=len(received)), counts[:, 0]):
-            raise Rejected("impossible counts", "a part's joins are not its newly localized rows")
-        cells = [a[joined] for a in after]
-        p = cells[-1]
-        for a in reversed(cells[:-1]):
-            p = p * size + a
-        if not (self._mask[p] & (s.occupancy[p] < 0) & s.frontier[p]).all() or has_repeats(p):
-            raise Rejected("bad join", "off the frontier, on a patch taken this tick, or two robots on one patch")
-        return rows, counts.sum(axis=0)
+        return check_parts(self, received, whole)
 
     def _fail(self, failing: np.ndarray) -> None:
         """Scheduled failures: remove the failing robots this shard knows, and count them all."""
