@@ -363,3 +363,14 @@ def test_run_refuses_a_pipe_as_its_shape_in_one_line(tmp_path, monkeypatch, caps
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"/dev/fd/{read}: not a regular file; each node of the graph reads" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_summary_says_how_often_the_recording_holds_every_robot(run_dir, tmp_path):
+    assert json.loads((run_dir / "summary.json").read_text())["recording_robots_every"] == 1  # 460 robots
+    big = ["--shape", "star", "--world-radius", "80", "--robots", "25000", "--max-ticks", "2", "--quiet"]
+    assert cli.main(["simulate", *big, "--out", str(tmp_path / "auto")]) == 0
+    assert json.loads((tmp_path / "auto" / "summary.json").read_text())["recording_robots_every"] == 3
+    assert cli.main(["simulate", *big, "--record-every", "2", "--out", str(tmp_path / "two")]) == 0
+    assert json.loads((tmp_path / "two" / "summary.json").read_text())["recording_robots_every"] == 2
+    assert simulate(tmp_path / "none", "--no-recording") == 0
+    assert json.loads((tmp_path / "none" / "summary.json").read_text())["recording_robots_every"] is None

@@ -163,7 +163,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if recorder is not None:
         recorder.outcome(record.outcome.value, record.final)
         recorder.close()  # a recording that could not be written whole (a full disk) fails the command here
-    out = write_run(out, record, overwrite=args.overwrite, recording=rrd if options.enabled else None)
+    out = write_run(
+        out,
+        record,
+        overwrite=args.overwrite,
+        recording=rrd if options.enabled else None,
+        robots_every=options.every_for(params.robots),
+    )
     if stopped is not None:
         print(f"{PROG}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -342,12 +342,19 @@ def partial_recording(out: Path) -> Path:
 
 
 def write_run(
-    out: Path, record: RunRecord, overwrite: bool = False, recording: Path | None = None, bag: Path | None = None
+    out: Path,
+    record: RunRecord,
+    overwrite: bool = False,
+    recording: Path | None = None,
+    bag: Path | None = None,
+    robots_every: int | None = None,
 ) -> Path:
     """Write the run's files into ``out`` atomically (temp dir + rename). Returns ``out``.
 
     ``recording``, a finished .rrd file, is moved in as ``recording.rrd``, and ``bag``, a
     finished rosbag2 directory, as ``bag/`` (each back where it was if the write fails).
+    ``robots_every``: the recording holds every robot's pose every this many ticks; summary.json says so
+    (``recording_robots_every``, null without a recording).
 
     Raises:
         OutputError: the directory cannot be written.
@@ -364,7 +371,8 @@ def write_run(
     except OSError as exc:
         raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc})") from None
     try:
-        (tmp / "summary.json").write_text(summary_json(record.summary), encoding="utf-8")
+        summary = {**record.summary, "recording_robots_every": robots_every if recording is not None else None}
+        (tmp / "summary.json").write_text(summary_json(summary), encoding="utf-8")
         (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
         from swarm_ros.artifacts.plots import (  # matplotlib: only when a run is written

@@ -207,6 +207,7 @@ class MonitorNode:
             overwrite=self.overwrite,
             recording=self.rrd if self.recording.enabled else None,
             bag=self.bag.close() if self.bag is not None else None,
+            robots_every=self.recording.every_for(self.params.robots),
         )
         if self.bag is not None:
             self.bag.discard_holder()
