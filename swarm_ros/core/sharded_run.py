@@ -92,9 +92,15 @@ class ShardedWorld:
         first = self.shards[0]
         history = np.asarray(first.history, dtype=np.int64)
         return ShardedRun(
-            history, _assemble(self.shards), first.outcome, list(first.losses), self.seconds.copy(),
-            self.decide_seconds.copy(), self.rows.copy(), self.rivals.copy(),
-        )  # fmt: skip
+            history=history,
+            state=_assemble(self.shards),
+            outcome=first.outcome,
+            losses=list(first.losses),
+            seconds=self.seconds.copy(),
+            decide_seconds=self.decide_seconds.copy(),
+            rows_received=self.rows.copy(),
+            rivals_received=self.rivals.copy(),
+        )
 
 
 def run_sharded(shape: Shape, params: RunParams, cuts: np.ndarray, max_ticks: int | None = None) -> ShardedRun:

@@ -20,11 +20,12 @@ shard's borders:
    failures (each shard removes the failing robots it knows; the counts of the failing moving robots came
    with the parts).
 
-Nothing here depends on how many shards there are or where the cuts fall:
+A shard takes its peers' parts only once all pass its checks (:func:`~swarm_ros.core.shard_parts.check_parts`),
+and can be saved at a tick's end and restored in another process (:meth:`WorldShard.saved`,
+:meth:`WorldShard.restore`). Nothing here depends on how many shards there are or where the cuts fall:
 :func:`~swarm_ros.core.sharded_run.run_sharded` runs S shards in one process, passing only these messages, and
-gives ``Simulation``'s run byte for byte
-(``test/test_shards.py``). The ROS 2 graph's world does not use the shards yet: the split is built and
-checked here first (docs/operations.md, "At scale").
+gives ``Simulation``'s run byte for byte (``test/test_shards.py``). The ROS 2 graph's world does not use the
+shards yet (docs/operations.md, "World shards").
 """
 
 from __future__ import annotations
@@ -48,7 +49,6 @@ from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, initial_stat
 
 _EMPTY = np.empty(0)
 _INSIDE, _OUTSIDE, _WALKING = int(RobotState.MOVING_INSIDE), int(RobotState.MOVING_OUTSIDE), int(RobotState.WALKING)
-#: a part's counts: robots joined; moving inside, outside, walking after the tick; of them, failing at its end
 
 
 class ShardPlan:
@@ -60,9 +60,6 @@ class ShardPlan:
         self.shards = int(cuts.size) + 1
         self.strips = [strip(k, self.shards, cuts, radius) for k in range(self.shards)]
         self.areas = [area(s, self.halo, self.width) for s in self.strips]
-        self.owner = np.empty(self.width, dtype=np.int64)  # the shard owning each column
-        for k, (first, last) in enumerate(self.strips):
-            self.owner[first : last + 1] = k
 
     def routes(self, before: np.ndarray, after: np.ndarray, stationary: np.ndarray, source: int) -> list[np.ndarray]:
         """Of rows whose robots stood in columns ``before`` and stand in ``after`` (``stationary``: became
