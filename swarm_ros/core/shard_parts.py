@@ -4,7 +4,7 @@ peers' parts before it takes any (:func:`check_parts`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -14,7 +14,53 @@ from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.state import IS_MOVING, RobotState, has_repeats
 
 if TYPE_CHECKING:
-    from swarm_ros.core.shards import WorldShard
+    from swarm_ros.core.params import RunParams
+    from swarm_ros.core.shapes import Shape
+    from swarm_ros.core.state import SwarmState
+
+
+class ShardView(Protocol):
+    """What :func:`check_parts` reads of the shard that checks (a :class:`~swarm_ros.core.shards.WorldShard`)."""
+
+    @property
+    def index(self) -> int: ...
+
+    @property
+    def shape(self) -> Shape: ...
+
+    @property
+    def params(self) -> RunParams: ...
+
+    @property
+    def plan(self) -> PlanView: ...
+
+    @property
+    def tick(self) -> int: ...
+
+    @property
+    def state(self) -> SwarmState: ...
+
+    def own_moving(self) -> np.ndarray: ...
+
+
+class PlanView(Protocol):
+    """What :func:`check_parts` reads of the shards' plan (a :class:`~swarm_ros.core.shards.ShardPlan`)."""
+
+    @property
+    def radius(self) -> int: ...
+
+    @property
+    def width(self) -> int: ...
+
+    @property
+    def halo(self) -> int: ...
+
+    @property
+    def shards(self) -> int: ...
+
+    @property
+    def strips(self) -> list[tuple[int, int]]: ...
+
 
 #: a part's counts: robots joined; moving inside, outside, walking after the tick; of them, failing at its end
 COUNTS = ("joined", "inside", "outside", "walking", "failing_inside", "failing_outside", "failing_walking")
@@ -80,7 +126,7 @@ def _concatenate(parts: list[Part]) -> Part:
     return Part(tick=parts[0].tick if parts else -1, source=-1, counts=np.empty(0, np.int64), **rows)
 
 
-def check_parts(shard: WorldShard, received: list[Part], whole: bool = True) -> tuple[Part, np.ndarray]:
+def check_parts(shard: ShardView, received: list[Part], whole: bool = True) -> tuple[Part, np.ndarray]:
     """That ``received`` can be the other shards' parts of this tick, as far as this shard knows the swarm:
     one from each; each of its own robots (that stood in its strips, were moving if this shard followed
     them, and stood where it saw them), no robot in two; moves of at most a halo; joins on distinct frontier
