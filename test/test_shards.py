@@ -59,9 +59,44 @@ def test_any_cuts_give_the_in_process_run(rules):
     assert len(ends) >= 3, ends  # complete with extras, incomplete and timeout were all met
 
 
+def test_robots_removed_at_a_ticks_end_give_the_in_process_run():
+    """Robots removed at the end of a tick, as the world removes a lost batch's (``Simulation.remove`` after
+    the tick): deciders of that tick picked at random (some localize in it), at several ticks, some in the
+    very tick of the scheduled failures."""
+    rng = np.random.default_rng(37)
+    removed = 0
+    for case in range(12):
+        failing = case % 2 == 1
+        params = RunParams(
+            robots=DISC.patches + int(rng.integers(0, 60)),
+            seed=int(rng.integers(10**6)),
+            rules=("paper", "local", "literal")[case % 3],
+            fail_fraction=0.1 if failing else 0.0,
+            fail_tick=12 if failing else 0,
+        )
+        sim, removals = Simulation(DISC, params), {}
+        at = {int(t) for t in rng.integers(1, 40, size=3)} | ({12} if failing else set())
+        while sim.outcome is None:
+            deciders = sim.moving_ids()
+            sim.step()
+            if sim.tick in at and deciders.size:
+                ids = np.sort(rng.choice(deciders, size=min(deciders.size, int(rng.integers(1, 20))), replace=False))
+                removed += sim.remove(ids)
+                removals[sim.tick] = ids
+        cuts = np.sort(rng.choice(np.arange(-WORLD.radius + 1, WORLD.radius + 1), int(rng.integers(1, 5)), False))
+        run = run_sharded(DISC, params, cuts, removals=removals)
+        assert np.array_equal(run.history, sim.history) and run.outcome == sim.outcome
+        assert run.losses == sim.losses
+        for name in _ROWS[:4] + ("occupancy", "frontier"):
+            assert np.array_equal(getattr(run.state, name), getattr(sim.state, name)), name
+    assert removed > 50
+
+
 def test_a_3d_run_and_the_star():
     box = Shape.load("box")
     _same_run(box, RunParams(robots=box.patches + 20, seed=1, rules="literal"), [-3, 0, 4], max_ticks=120)
+    failing = RunParams(robots=box.patches + 20, seed=2, rules="paper", fail_fraction=0.2, fail_tick=30)
+    _same_run(box, failing, [-2, 3], max_ticks=150)
     _same_run(Shape.load("star"), RunParams(robots=1036, seed=1), [-10, 0, 12])
 
 
@@ -159,6 +194,10 @@ def test_a_hostile_part_is_refused_whole_and_the_run_goes_on():
             twice = np.concatenate([theirs.ids[:1], theirs.ids])[: theirs.ids.size]  # the first robot twice
             if twice.size > 1:
                 cases.append((_forged(theirs, ids=twice), "bad robot ids"))
+        wrong = theirs.counts.copy()
+        wrong[8] = wrong[1] + 1  # more removed inside than it has inside
+        cases.append((_forged(theirs, counts=wrong), "impossible counts"))
+        cases.append((_forged(theirs, removing=np.array([0], dtype=np.int64)), "impossible counts"))  # uncounted
         if joins.size:
             counts = theirs.counts.copy()
             counts[0] += 1

@@ -63,7 +63,19 @@ class PlanView(Protocol):
 
 
 #: a part's counts: robots joined; moving inside, outside, walking after the tick; of them, failing at its end
-COUNTS = ("joined", "inside", "outside", "walking", "failing_inside", "failing_outside", "failing_walking")
+COUNTS = (
+    "joined",
+    "inside",
+    "outside",
+    "walking",
+    "failing_inside",
+    "failing_outside",
+    "failing_walking",
+    "removing_localized",
+    "removing_inside",
+    "removing_outside",
+    "removing_walking",
+)
 _PART_STATE = np.zeros(256, dtype=bool)  #: by a state code's byte: may a part hold it (moving, newly localized)
 _PART_STATE[[RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE, RobotState.WALKING, RobotState.LOCALIZED]] = True
 
@@ -84,6 +96,7 @@ class Part:
     pitch: np.ndarray
     before: np.ndarray
     counts: np.ndarray
+    removing: np.ndarray  #: int64: the sender's robots removed at the tick's end (a lost batch's), to every shard
 
     def take(self, index: np.ndarray) -> Part:
         """The rows at ``index`` (what one shard receives), with the part's counts."""
@@ -100,6 +113,7 @@ class Part:
             pitch=pitch,
             before=self.before[index],
             counts=self.counts,
+            removing=self.removing,
         )
 
 
@@ -123,7 +137,8 @@ def _concatenate(parts: list[Part]) -> Part:
         f: np.concatenate([getattr(q, f) for q in parts]) if parts else np.empty(0, dtype=d)
         for f, d in _PART_FIELDS.items()
     }
-    return Part(tick=parts[0].tick if parts else -1, source=-1, counts=np.empty(0, np.int64), **rows)
+    removing = np.concatenate([np.empty(0, np.int64), *(q.removing for q in parts)])
+    return Part(tick=parts[0].tick if parts else -1, source=-1, counts=np.empty(0, np.int64), removing=removing, **rows)
 
 
 def check_parts(shard: ShardView, received: list[Part], whole: bool = True) -> tuple[Part, np.ndarray]:
@@ -155,9 +170,17 @@ def check_parts(shard: ShardView, received: list[Part], whole: bool = True) -> t
         if q.counts.shape != (len(COUNTS),) or q.counts.dtype != np.int64:
             raise Rejected("malformed part", f"{q.counts.size} counts")
     counts = np.array([q.counts for q in received], dtype=np.int64).reshape(-1, len(COUNTS))
-    if (counts < 0).any() or (counts[:, 1:4].sum(axis=1) > n).any() or (counts[:, 4:] > counts[:, 1:4]).any():
+    if (
+        (counts < 0).any()
+        or (counts[:, 1:4].sum(axis=1) > n).any()
+        or (counts[:, 4:7] > counts[:, 1:4]).any()
+        or (counts[:, 8:11] > counts[:, 1:4]).any()
+        or any(q.removing.size != c[7:].sum() for q, c in zip(received, counts))
+    ):
         raise Rejected("impossible counts", str(counts.tolist()))
     rows = _concatenate(received)
+    if rows.removing.size and (rows.removing.min() < 0 or rows.removing.max() >= n or has_repeats(rows.removing)):
+        raise Rejected("bad robot ids", "robots removed out of range, or twice")
     if not rows.ids.size:
         if counts[:, 0].any():
             raise Rejected("impossible counts", "joins without their rows")

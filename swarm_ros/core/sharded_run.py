@@ -47,11 +47,14 @@ class ShardedWorld:
     each shard's robots decide from its regional replica, as a robot batch does. Counts each shard's seconds
     and what it received (:class:`ShardedRun`)."""
 
-    def __init__(self, shape: Shape, params: RunParams, cuts: np.ndarray) -> None:
+    def __init__(
+        self, shape: Shape, params: RunParams, cuts: np.ndarray, removals: dict[int, np.ndarray] | None = None
+    ) -> None:
         self.plan = ShardPlan(shape.world.radius, params.vision_radius, cuts)
         s = self.plan.shards
         self.shards = [WorldShard(shape, params, self.plan, k) for k in range(s)]
         self.deciders = [Decider(shape, params) for _ in range(s)]
+        self.removals = removals or {}  # tick -> robots removed at its end (as a lost batch's)
         self.seconds, self.decide_seconds = np.zeros(s), np.zeros(s)
         self.rows, self.rivals = np.zeros(s, dtype=np.int64), np.zeros(s, dtype=np.int64)
         self.received: list[list[Part]] = []  # the last tick's parts, as each shard received them
@@ -77,7 +80,8 @@ class ShardedWorld:
         parts, routed = [], []
         for k, sh in enumerate(shards):
             t0 = clock()
-            parts.append(sh.apply(decisions[k], self.claims[k]))
+            gone = np.intersect1d(self.removals.get(tick, np.empty(0, np.int64)), decisions[k].ids)
+            parts.append(sh.apply(decisions[k], self.claims[k], gone))
             routed.append(sh.routes(parts[k]))
             self.seconds[k] += clock() - t0
             self.rivals[k] += sum(int(r.ids.size) for r in self.claims[k])
@@ -103,10 +107,17 @@ class ShardedWorld:
         )
 
 
-def run_sharded(shape: Shape, params: RunParams, cuts: np.ndarray, max_ticks: int | None = None) -> ShardedRun:
+def run_sharded(
+    shape: Shape,
+    params: RunParams,
+    cuts: np.ndarray,
+    max_ticks: int | None = None,
+    removals: dict[int, np.ndarray] | None = None,
+) -> ShardedRun:
     """Run with the world split into ``len(cuts) + 1`` shards cut at ``cuts`` (x positions), in one process
-    (:class:`ShardedWorld`). Gives ``Simulation(shape, params).run(max_ticks)``'s run."""
-    world = ShardedWorld(shape, params, cuts)
+    (:class:`ShardedWorld`). Gives ``Simulation(shape, params).run(max_ticks)``'s run; ``removals``: robots
+    removed at the end of a tick (``Simulation.remove`` after that tick's ``step``), by tick."""
+    world = ShardedWorld(shape, params, cuts, removals)
     left = float("inf") if max_ticks is None else max_ticks
     while world.outcome is None and left > 0:
         world.step()

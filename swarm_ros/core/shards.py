@@ -38,7 +38,7 @@ from swarm_ros.core.arbitration import resolve_kernel
 from swarm_ros.core.engine import failing_robots
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
-from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, RUNNING, Outcome, end_code, metric_values
+from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, Outcome, end_code, metric_values
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import area, columns, halo, strip
 from swarm_ros.core.replica import UNKNOWN, Replica
@@ -89,6 +89,7 @@ class ShardSaved:
     losses: list[tuple[int, int]]
     localized: int
     alive: int
+    removed: np.ndarray  #: every robot removed so far (a shard does not follow every one)
 
 
 def _select(d: Decisions, index: np.ndarray) -> Decisions:
@@ -125,6 +126,7 @@ class WorldShard:
         counts = s0.counts()
         self.localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
         self.alive = params.robots
+        self._removed = np.zeros(params.robots, dtype=bool)  # every robot removed so far, known to every shard
         self.losses: list[tuple[int, int]] = []
         self.history: list[tuple[int, ...]] = []
         self.outcome: Outcome | None = None
@@ -157,6 +159,7 @@ class WorldShard:
             losses=list(self.losses),
             localized=self.localized,
             alive=self.alive,
+            removed=np.flatnonzero(self._removed),
         )
 
     def restore(self, saved: ShardSaved) -> None:
@@ -170,6 +173,8 @@ class WorldShard:
         self.replica.load(v.tick, v.ids, v.state, v.x, v.y, v.heading, v.z, v.pitch)
         self.history = [tuple(int(c) for c in row) for row in v.history]
         self.losses, self.localized, self.alive = list(v.losses), v.localized, v.alive
+        self._removed[:] = False
+        self._removed[v.removed] = True
         self._own = self._mine(np.flatnonzero(self.state.state != UNKNOWN))
         last = self.history[-1]
         code = end_code(self.localized, last[4], v.tick, self._patches, self.alive, self.params.max_ticks)
@@ -199,12 +204,15 @@ class WorldShard:
             for j, (a, b) in enumerate(self.plan.strips)
         ]
 
-    def apply(self, decisions: Decisions, rivals: list[Decisions]) -> Part:
+    def apply(self, decisions: Decisions, rivals: list[Decisions], removing: np.ndarray | None = None) -> Part:
         """Exchange 2: apply this shard's robots' ``decisions`` (one for each of :meth:`own_moving`), ``rivals``
-        (the other shards' claims sent to this one) taking part in the lottery only.
+        (the other shards' claims sent to this one) taking part in the lottery only. ``removing``: robots of
+        this shard's removed at the end of the tick, after the scheduled failures (a lost batch's, as
+        ``Simulation.remove`` after ``Simulation.apply``).
 
         Raises:
-            ContractError: the decisions are for another tick, or not exactly this shard's moving robots.
+            ContractError: the decisions are for another tick, or not exactly this shard's moving robots, or
+                robots removed that are not this shard's.
         """
         if self.outcome is not None:
             raise ContractError(f"the run has ended ({self.outcome}) at tick {self.tick}")
@@ -215,6 +223,11 @@ class WorldShard:
         own = self._own
         if not np.array_equal(decisions.ids, own):
             raise ContractError(f"shard {self.index}: decisions must cover its moving robots exactly once")
+        removing = np.unique(np.asarray(removing if removing is not None else [], dtype=np.int64))
+        if removing.size and (
+            own.size == 0 or (own[np.minimum(np.searchsorted(own, removing), own.size - 1)] != removing).any()
+        ):
+            raise ContractError(f"shard {self.index}: only its own moving robots can be removed")
         wanted = decisions.claim[decisions.claim >= 0]
         parts = [decisions] + [_select(r, np.flatnonzero(np.isin(r.claim, wanted))) for r in rivals if r.ids.size]
         every = Decisions.concatenate(parts) if len(parts) > 1 else decisions
@@ -244,7 +257,10 @@ class WorldShard:
         if p.failures > 0 and decisions.tick == p.fail_tick:
             failing = np.intersect1d(failing_robots(p), own, assume_unique=True)
             states = np.bincount(s.state[failing], minlength=8)
-            counts[4:] = states[_INSIDE], states[_OUTSIDE], states[_WALKING]
+            counts[4:7] = states[_INSIDE], states[_OUTSIDE], states[_WALKING]
+            removing = np.setdiff1d(removing, failing, assume_unique=True)  # removed already, as a failure
+        states = np.bincount(s.state[removing], minlength=8)
+        counts[7:] = states[RobotState.LOCALIZED], states[_INSIDE], states[_OUTSIDE], states[_WALKING]
         z, pitch = (s.z[own], s.pitch[own]) if s.z is not None and s.pitch is not None else (_EMPTY, _EMPTY)
         return Part(
             tick=decisions.tick,
@@ -258,6 +274,7 @@ class WorldShard:
             pitch=pitch,
             before=before,
             counts=counts,
+            removing=removing,
         )
 
     def routes(self, part: Part) -> list[Part]:
@@ -284,13 +301,23 @@ class WorldShard:
         total = own.counts + counts
         self.localized += int(total[0])
         inside, outside, walking = (int(c) for c in total[1:4])
-        code = self._close(tick, inside, outside, walking)
+        self._close(tick, inside, outside, walking)
         p = self.params
-        if code == RUNNING and p.failures > 0 and tick == p.fail_tick:
+        if self.outcome is None and p.failures > 0 and tick == p.fail_tick:
             self.history.pop()  # the tick's metrics are redone after the failures, as Simulation.remove does
             self._fail(failing_robots(p))
-            self._close(tick, inside - int(total[4]), outside - int(total[5]), walking - int(total[6]))
-        self._own = self._mine(self._own)  # less the failed and the separated
+            inside, outside, walking = inside - int(total[4]), outside - int(total[5]), walking - int(total[6])
+            self._close(tick, inside, outside, walking)
+        gone = np.concatenate([own.removing, rows.removing])
+        if self.outcome is None and gone.size:  # then the robots of lost batches, as Lockstep removes them
+            self.history.pop()
+            self.localized -= int(total[7])
+            self.alive -= int(gone.size)
+            self.losses.append((tick, int(gone.size)))
+            self._remove(gone)
+            inside, outside, walking = inside - int(total[8]), outside - int(total[9]), walking - int(total[10])
+            self._close(tick, inside, outside, walking)
+        self._own = self._mine(self._own)  # less the failed, the removed and the separated
 
     def check(self, received: list[Part], whole: bool = True) -> tuple[Part, np.ndarray]:
         """That ``received`` can be the other shards' parts of this tick (:func:`check_parts`); returns their rows
@@ -304,13 +331,19 @@ class WorldShard:
     def _fail(self, failing: np.ndarray) -> None:
         """Scheduled failures: remove the failing robots this shard knows, and count them all."""
         s = self.state
-        known = s.state[failing]
-        gone = failing[known != RobotState.REMOVED]
+        gone = failing[~self._removed[failing]]
+        known = s.state[gone]
         self.localized -= int(((known == RobotState.SEED) | (known == RobotState.LOCALIZED)).sum())
         self.alive -= int(gone.size)
         if gone.size:
             self.losses.append((self.tick, int(gone.size)))
-        here = gone[s.state[gone] != UNKNOWN]
+        self._remove(gone)
+
+    def _remove(self, ids: np.ndarray) -> None:
+        """Robots ``ids`` are removed: those this shard knows turn removed (a localized one frees its patch)."""
+        self._removed[ids] = True
+        s = self.state
+        here = ids[(s.state[ids] != UNKNOWN) & (s.state[ids] != RobotState.REMOVED)]
         solid = (s.z[here], s.pitch[here]) if s.z is not None and s.pitch is not None else (None, None)
         removed = np.full(here.size, RobotState.REMOVED, dtype=np.int8)
         self.replica.merge(here, removed, s.x[here], s.y[here], s.heading[here], *solid)

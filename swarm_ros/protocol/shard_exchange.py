@@ -17,6 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
+
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shards import Part, ShardSaved, WorldShard
@@ -59,6 +61,7 @@ class ShardExchange:
         self.shard, self.port, self.rejections = shard, port, rejections
         self.peers = [j for j in range(shard.plan.shards) if j != shard.index]
         self.decisions: dict[int, Decisions] = {}  # own robots' decisions, by tick
+        self.removing: dict[int, np.ndarray | None] = {}  # own robots removed at a tick's end, by tick
         self.claims: dict[int, dict[int, Decisions]] = {}  # by tick, by peer
         self.parts: dict[int, dict[int, Part]] = {}  # by tick, by peer
         self.applied: Part | None = None  # this shard's part of the tick being closed
@@ -76,8 +79,9 @@ class ShardExchange:
             return True
         return False if self.tick + 1 < tick <= self.tick + 1 + KEPT_TICKS else None
 
-    def own_decisions(self, decisions: Decisions) -> None:
-        """This shard's robots' decisions (all of them) for ``decisions.tick``.
+    def own_decisions(self, decisions: Decisions, removing: np.ndarray | None = None) -> None:
+        """This shard's robots' decisions (all of them) for ``decisions.tick``; ``removing``: its robots removed
+        at that tick's end (a lost batch's).
 
         Raises:
             ContractError: decisions of a tick neither due nor next.
@@ -88,6 +92,7 @@ class ShardExchange:
                 return  # a repeat: a batch's history handed over again
             raise ContractError(f"shard {self.shard.index}: decisions of tick {decisions.tick} at {self.tick}")
         self.decisions[decisions.tick] = decisions
+        self.removing[decisions.tick] = removing
         self._go()
 
     def peer_claims(self, peer: int, tick: int, claims: Decisions) -> None:
@@ -120,7 +125,7 @@ class ShardExchange:
         flight to a peer that died meanwhile is lost). What its process before held it is given again: its peers
         send again when it asks (:meth:`resend`), its batches their decisions."""
         self.shard.restore(saved.shard)
-        self.decisions, self.claims, self.parts, self.applied = {}, {}, {}, None
+        self.decisions, self.removing, self.claims, self.parts, self.applied = {}, {}, {}, {}, None
         self.sent = dict(saved.sent)
         for j in self.peers:
             self.resend(j)
@@ -141,7 +146,8 @@ class ShardExchange:
                 rivals = self.claims.get(tick, {})
                 if len(rivals) < len(self.peers):
                     return
-                self.applied = shard.apply(self.decisions[tick], [rivals[j] for j in self.peers])
+                rival = [rivals[j] for j in self.peers]
+                self.applied = shard.apply(self.decisions[tick], rival, self.removing.get(tick))
                 routed = shard.routes(self.applied)
                 self.sent[tick] = (self.sent[tick][0], routed)
                 for j in self.peers:
@@ -156,7 +162,7 @@ class ShardExchange:
                 self._drop_bad(tick, received, fault)
                 continue
             part, self.applied = self.applied, None
-            for held in (self.decisions, self.claims, self.parts):
+            for held in (self.decisions, self.removing, self.claims, self.parts):
                 held.pop(tick, None)
             for old in [t for t in self.sent if t <= tick - KEPT_TICKS]:
                 del self.sent[old]
