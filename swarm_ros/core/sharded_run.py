@@ -80,7 +80,9 @@ class ShardedWorld:
         parts, routed = [], []
         for k, sh in enumerate(shards):
             t0 = clock()
-            gone = np.intersect1d(self.removals.get(tick, np.empty(0, np.int64)), decisions[k].ids)
+            gone = self.removals.get(tick)
+            if gone is not None:  # its own of the robots removed at this tick's end
+                gone = np.intersect1d(gone, decisions[k].ids)
             parts.append(sh.apply(decisions[k], self.claims[k], gone))
             routed.append(sh.routes(parts[k]))
             self.seconds[k] += clock() - t0
