@@ -142,8 +142,9 @@ def _same_as_simulate(bus: Bus) -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_any_order_and_repeats_give_the_in_process_run(seed):
+    """One shard alone, or four, or six (cuts a column apart among them)."""
     params = RunParams(robots=DISC.patches + 30, seed=seed, rules=("paper", "local", "literal")[seed % 3])
-    bus = Bus(params, [-6, -1, 4], seed)
+    bus = Bus(params, ([], [-6, -1, 4], [-3, -2, -1, 0, 1])[seed % 3], seed)
     _run(bus)
     _same_as_simulate(bus)
 
