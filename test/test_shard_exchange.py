@@ -122,11 +122,14 @@ def _run(bus: Bus, restarts: float = 0.0, forge: float = 0.0) -> None:
         if bus.rng.random() < restarts:
             bus.restart(int(bus.rng.integers(bus.plan.shards)), older=bool(bus.rng.random() < 0.5))
         if forge and bus.rng.random() < forge:
-            parts = [m for m in bus.flight if m[1] == "part" and m[4].ids.size]
-            if parts:
-                to, _, source, tick, part = parts[int(bus.rng.integers(len(parts)))]
-                forged = dataclasses.replace(part, x=part.x + 3 * bus.plan.halo)
-                bus.flight.append((to, "part", source, tick, forged))
+            held = [m for m in bus.flight if m[1] in ("part", "claims") and m[4].ids.size]
+            if held:
+                to, kind, source, tick, genuine = held[int(bus.rng.integers(len(held)))]
+                if kind == "part":  # moved too far
+                    forged = dataclasses.replace(genuine, x=genuine.x + 3 * bus.plan.halo)
+                else:  # a claim on a patch out of the receiver's window: a rival that could steal a patch
+                    forged = dataclasses.replace(genuine, claim=genuine.claim * 0 - 1)
+                bus.flight.append((to, kind, source, tick, forged))
         bus.deliver()
 
 
@@ -160,12 +163,13 @@ def test_shards_restarted_at_any_moment_give_the_in_process_run(seed):
     assert bus.restarts > 5
 
 
-def test_forged_parts_are_dropped_counted_and_asked_for_again():
+def test_forged_parts_and_claims_are_dropped_counted_and_asked_for_again():
     params = RunParams(robots=DISC.patches + 30, seed=5)
     bus = Bus(params, [-4, 3], 5)
     _run(bus, forge=0.05)
     _same_as_simulate(bus)
     assert bus.rejections.total > 5
+    assert {"parts: moved too far", "claims: bad claim"} <= set(bus.rejections.counts)
 
 
 def test_decisions_far_ahead_are_refused():

@@ -156,6 +156,43 @@ def _tick_parts(world: ShardedWorld) -> tuple[list, list]:
     return parts, [[routed[i][k] for i in count if i != k] for k in count]
 
 
+def test_forged_claims_are_refused():
+    """Every way a rival's claims can be wrong that a shard can see, over a whole run: refused with its kind."""
+    params = RunParams(robots=DISC.patches + 60, seed=12, vision_radius=2.0)
+    world = ShardedWorld(DISC, params, np.array([0]))
+    met: set[str] = set()
+    while world.outcome is None:
+        tick, sh, other = world.shards[0].tick + 1, world.shards[1], world.shards[0]
+        d = world.deciders[0].decide(other.state, other.own_moving(), tick, other.replica.moving_ids())
+        theirs = other.claims(d)[1]  # shard 0's claims on shard 1's window
+        sh.check_claims(0, theirs)  # the genuine ones pass
+        if theirs.ids.size:
+            stationary = np.flatnonzero(~IS_MOVING[sh.state.state] & (sh.state.state != UNKNOWN))[0]
+            cases = [
+                (dataclasses.replace(theirs, tick=tick + 1), "claims of another tick"),
+                (dataclasses.replace(theirs, x=theirs.x[:-1]), "malformed claims"),
+                (dataclasses.replace(theirs, claim=theirs.claim.astype(np.int32)), "malformed claims"),
+                (dataclasses.replace(theirs, ids=theirs.ids + params.robots), "bad robot ids"),
+                (dataclasses.replace(theirs, heading=theirs.heading * np.inf), "bad pose"),
+                (dataclasses.replace(theirs, claim=theirs.claim * 0 - 1), "bad claim"),
+                (dataclasses.replace(theirs, claim=theirs.claim * 0), "bad claim"),  # the west wall's corner
+            ]
+            one = dataclasses.replace(
+                theirs, **{f: getattr(theirs, f)[:1] for f in ("ids", "claim", "x", "y", "heading")}
+            )
+            cases.append((dataclasses.replace(one, ids=np.array([stationary])), "not the sender's robots"))
+            if sh.own_moving().size:  # a robot shard 1 decides for itself
+                cases.append((dataclasses.replace(one, ids=sh.own_moving()[:1]), "not the sender's robots"))
+            for bad, kind in cases:
+                with pytest.raises(Rejected) as caught:
+                    sh.check_claims(0, bad)
+                assert caught.value.kind == kind
+                met.add(kind)
+        world.step()
+    kinds = {"claims of another tick", "malformed claims", "bad robot ids", "bad pose", "bad claim"}
+    assert met == kinds | {"not the sender's robots"}
+
+
 def _forged(part, **changes):
     return dataclasses.replace(part, **changes)
 

@@ -1,5 +1,6 @@
 """What world shards send each other after applying a tick (:class:`Part`), and the checks a shard makes of its
-peers' parts before it takes any (:func:`check_parts`)."""
+peers' claims before its lottery (:func:`check_claims`) and of their parts before it takes any
+(:func:`check_parts`)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from swarm_ros.core.state import IS_MOVING, RobotState, has_repeats
 
 if TYPE_CHECKING:
     from swarm_ros.core.params import RunParams
+    from swarm_ros.core.rules import Decisions
     from swarm_ros.core.shapes import Shape
     from swarm_ros.core.state import SwarmState
 
@@ -225,3 +227,56 @@ def check_parts(shard: ShardView, received: list[Part], whole: bool = True) -> t
     if not (shard.shape.mask.ravel()[p] & (s.occupancy[p] < 0) & s.frontier[p]).all() or has_repeats(p):
         raise Rejected("bad join", "off the frontier, on a patch taken this tick, or two robots on one patch")
     return rows, counts.sum(axis=0)
+
+
+_CLAIM_DTYPES = (np.int64, np.int64, np.float64, np.float64, np.float64)
+
+
+def check_claims(shard: ShardView, source: int, claims: Decisions) -> None:
+    """That ``claims`` can be shard ``source``'s claims on this shard's window for the tick it is about to
+    apply, as far as this shard knows the swarm: robots of the sender's that claim (each once) patches of
+    this shard's strips and halo, poses that are numbers, and, for a robot this shard follows, one that is
+    moving and stands in the sender's strips. A forged rival could otherwise win a patch from this shard's
+    robot.
+
+    Raises:
+        Rejected: what failed (its ``kind``), with nothing taken.
+    """
+    n, size, solid, tick = shard.params.robots, shard.plan.width, shard.state.z is not None, shard.tick + 1
+    if claims.tick != tick:
+        raise Rejected("claims of another tick", f"tick {claims.tick} at tick {tick}")
+    k = claims.ids.size
+    arrays = (claims.ids, claims.claim, claims.x, claims.y, claims.heading)
+    extra = (claims.z, claims.pitch)
+    if (
+        any(a.shape != (k,) or a.dtype != d for a, d in zip(arrays, _CLAIM_DTYPES))
+        or (solid and any(a is None or a.shape != (k,) or a.dtype != np.float64 for a in extra))
+        or (not solid and any(a is not None for a in extra))
+    ):
+        raise Rejected("malformed claims", "arrays of other types or lengths")
+    if not k:
+        return
+    ids = claims.ids
+    if ids.min() < 0 or ids.max() >= n or has_repeats(ids):
+        raise Rejected("bad robot ids", f"out of 0..{n - 1}, or a robot twice")
+    poses = arrays[2:] + (tuple(a for a in extra if a is not None) if solid else ())
+    if not all(np.isfinite(a).all() for a in poses):
+        raise Rejected("bad pose", "not finite")
+    first, last = shard.plan.strips[shard.index]
+    h, cols = shard.plan.halo, claims.claim % size
+    if (
+        claims.claim.min() < 0
+        or claims.claim.max() >= shard.shape.world.patch_count
+        or ((cols < first - h) | (cols > last + h)).any()
+    ):
+        raise Rejected("bad claim", "a patch outside this shard's strips and halo")
+    own = shard.own_moving()
+    if own.size and (own[np.minimum(np.searchsorted(own, ids), own.size - 1)] == ids).any():
+        raise Rejected("not the sender's robots", f"a robot shard {shard.index} decides for")
+    s = shard.state
+    was = s.state[ids]
+    seen = was != UNKNOWN
+    where = columns(s.x[ids[seen]], shard.plan.radius)
+    a, b = shard.plan.strips[source]
+    if (~IS_MOVING[was[seen]]).any() or ((where < a) | (where > b)).any():
+        raise Rejected("not the sender's robots", "a robot not moving, or not in its strips")

@@ -44,7 +44,7 @@ from swarm_ros.core.regions import area, columns, halo, strip
 from swarm_ros.core.replica import UNKNOWN, Replica
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.shard_parts import COUNTS, Part, check_parts
+from swarm_ros.core.shard_parts import COUNTS, Part, check_claims, check_parts
 from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, initial_state
 
 _EMPTY = np.empty(0)
@@ -327,6 +327,15 @@ class WorldShard:
             Rejected: what failed (its ``kind``), with nothing taken.
         """
         return check_parts(self, received, whole)
+
+    def check_claims(self, source: int, claims: Decisions) -> None:
+        """That ``claims`` can be shard ``source``'s rival claims for the tick this shard applies next
+        (:func:`~swarm_ros.core.shard_parts.check_claims`).
+
+        Raises:
+            Rejected: what failed (its ``kind``), with nothing taken.
+        """
+        check_claims(self, source, claims)
 
     def _fail(self, failing: np.ndarray) -> None:
         """Scheduled failures: remove the failing robots this shard knows, and count them all."""

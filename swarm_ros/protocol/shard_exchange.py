@@ -96,7 +96,8 @@ class ShardExchange:
         self._go()
 
     def peer_claims(self, peer: int, tick: int, claims: Decisions) -> None:
-        """Peer ``peer``'s claims on this shard's window for ``tick`` (dropped and counted if not one)."""
+        """Peer ``peer``'s claims on this shard's window for ``tick`` (dropped and counted if not one; checked
+        when due, and then dropped, counted and asked for again if they fail; a later one replaces one held)."""
         if peer not in self.peers:
             self.rejections.drop("claims", Rejected("unknown shard", f"{peer}"))
         elif self._due(tick) is not None:
@@ -144,6 +145,15 @@ class ShardExchange:
                     for j in self.peers:
                         self.port.send_claims(j, tick, claims[j])
                 rivals = self.claims.get(tick, {})
+                if len(rivals) < len(self.peers):
+                    return
+                for j in self.peers:
+                    try:
+                        shard.check_claims(j, rivals[j])
+                    except Rejected as fault:  # dropped, counted, and asked for again
+                        self.rejections.drop("claims", fault)
+                        del rivals[j]
+                        self.port.ask_again(j)
                 if len(rivals) < len(self.peers):
                     return
                 rival = [rivals[j] for j in self.peers]
