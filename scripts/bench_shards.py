@@ -10,7 +10,9 @@ each starts with as many robots. For each size, in one process:
 * ``in-process``: ``Simulation.run`` (the fast engine: decide and apply, compiled);
 * for each S, ``run_sharded``: every shard's world work per tick (exchanging claims, applying its robots'
   decisions, routing its rows, taking the others' and closing the tick), the largest and the sum over the
-  shards, the rows and rival claims a shard receives per tick, and whether the run equals ``Simulation``'s.
+  shards, the rows and rival claims a shard receives per tick, the rows the busiest shard applies per tick
+  (its own robots': what a shard process would publish, seal and save, where the one world does all of
+  them), and whether the run equals ``Simulation``'s.
 
 Each shard runs in turn in this one process, so its seconds are its own work, measured without the other
 shards competing for the cores. Median (min-max) over ``--repeats``. docs/operations.md ("At scale") quotes
@@ -82,11 +84,12 @@ def bench(sizes: list[int], shard_counts: list[int], ticks: int, repeats: int, t
         print(f"  one world, Simulation.apply per tick (ms)   {_spread(applies)}")
         print(f"  in-process engine, run() per tick (ms)      {_spread(runs)}")
         head = "shards  largest shard ms/tick   sum of shards ms/tick  largest/one world  rows in/tick  claims in/tick"
-        print(f"  {head}  same run")
+        print(f"  {head}  own rows/tick  same run")
         largest_at: dict[int, float] = {}
+        own_at: dict[int, float] = {}  # the rows the largest shard applies (and would publish) per tick
         for s in shard_counts:
             cuts = balanced_cuts(x0, radius, s)
-            largest, total, rows, rivals, same = [], [], 0.0, 0.0, True
+            largest, total, rows, rivals, own, same = [], [], 0.0, 0.0, 0.0, True
             for _ in range(repeats):
                 run = run_sharded(shape, params, cuts, max_ticks=ticks)
                 t = max(int(run.history[-1, 0]), 1)
@@ -94,17 +97,23 @@ def bench(sizes: list[int], shard_counts: list[int], ticks: int, repeats: int, t
                 largest.append(float(per.max()))
                 total.append(float(per.sum()))
                 rows, rivals = float(run.rows_received.max()) / t, float(run.rivals_received.max()) / t
+                own = float(run.rows_applied.max()) / t
                 same &= bool(np.array_equal(run.history, reference.history)) and run.outcome == reference.outcome
                 same &= bool(np.array_equal(run.state.state, reference.state.state))
             largest_at[s] = statistics.median(largest)
+            own_at[s] = own
             print(
                 f"  {s:>6}  {_spread(largest):>21}  {_spread(total):>21}  "
                 f"{largest_at[s] / statistics.median(applies):>16.2f}x  {rows:>12,.0f}  {rivals:>14,.1f}  "
+                f"{own:>13,.0f}  "
                 f"{'identical' if same else 'DIFFERENT'}"
             )
         first = shard_counts[0]
         for s in shard_counts[1:]:
-            print(f"  largest shard, S = {s} against S = {first}: {largest_at[s] / largest_at[first]:.2f}x")
+            print(
+                f"  largest shard, S = {s} against S = {first}: {largest_at[s] / largest_at[first]:.2f}x of the work, "
+                f"{own_at[s] / own_at[first]:.2f}x of the rows it applies"
+            )
 
 
 def main() -> None:

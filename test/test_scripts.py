@@ -186,4 +186,4 @@ def test_bench_shards_smoke_measures_each_shard_and_the_runs_are_identical():
     rows = re.findall(r"^ +(\d+) +([\d.]+) \([\d.]+-[\d.]+\) .* (identical|DIFFERENT)$", out, re.M)
     assert [(s, same) for s, _, same in rows] == [("1", "identical"), ("2", "identical")], out
     assert all(float(ms) > 0 for _, ms, _ in rows)
-    assert re.search(r"largest shard, S = 2 against S = 1: [\d.]+x", out), out
+    assert re.search(r"largest shard, S = 2 against S = 1: [\d.]+x of the work, [\d.]+x of the rows it applies", out)

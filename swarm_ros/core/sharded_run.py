@@ -29,6 +29,7 @@ class ShardedRun:
         seconds: per shard, the seconds of its world's work (claims, apply, routing, close) over the run.
         decide_seconds: per shard, the seconds its robots took to decide (a robot batch's work in the graph).
         rows_received: per shard, the rows it took from the others over the run.
+        rows_applied: per shard, the rows of its own robots it applied over the run (what it would publish).
         rivals_received: per shard, the claims it took from the others over the run.
     """
 
@@ -40,6 +41,7 @@ class ShardedRun:
     decide_seconds: np.ndarray
     rows_received: np.ndarray
     rivals_received: np.ndarray
+    rows_applied: np.ndarray
 
 
 class ShardedWorld:
@@ -57,6 +59,7 @@ class ShardedWorld:
         self.removals = removals or {}  # tick -> robots removed at its end (as a lost batch's)
         self.seconds, self.decide_seconds = np.zeros(s), np.zeros(s)
         self.rows, self.rivals = np.zeros(s, dtype=np.int64), np.zeros(s, dtype=np.int64)
+        self.applied = np.zeros(s, dtype=np.int64)
         self.received: list[list[Part]] = []  # the last tick's parts, as each shard received them
         self.claims: list[list[Decisions]] = []  # the last tick's claims, as each shard received them
 
@@ -87,6 +90,7 @@ class ShardedWorld:
             routed.append(sh.routes(parts[k]))
             self.seconds[k] += clock() - t0
             self.rivals[k] += sum(int(r.ids.size) for r in self.claims[k])
+            self.applied[k] += parts[k].ids.size
         self.received = [[routed[i][k] for i in count if i != k] for k in count]
         for k, sh in enumerate(shards):
             t0 = clock()
@@ -106,6 +110,7 @@ class ShardedWorld:
             decide_seconds=self.decide_seconds.copy(),
             rows_received=self.rows.copy(),
             rivals_received=self.rivals.copy(),
+            rows_applied=self.applied.copy(),
         )
 
 
