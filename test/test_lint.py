@@ -77,9 +77,9 @@ def test_the_mypy_hook_runs_what_the_mypy_test_runs():
 
 
 def test_mypy_finds_nothing_in_the_layers_it_checks():
-    """The type checker over every layer but the nodes and the app (pyproject.toml's [tool.mypy]): the model's
-    code, the contract between processes, the run's files and the ROS adapters as their annotations say. No
-    cache is written."""
+    """The type checker over every layer (pyproject.toml's [tool.mypy]): the model's code, the contract between
+    processes, the run's files, the ROS adapters, the nodes and the app as their annotations say. No cache is
+    written."""
     mypy = shutil.which("mypy", path=str(Path(sys.executable).parent))
     assert mypy, "mypy is not installed in this venv (requirements.txt pins it; scripts/setup.sh installs it)"
     done = subprocess.run(

@@ -11,6 +11,7 @@ import os
 import re
 import sys
 from pathlib import Path
+from typing import Any
 
 from swarm_ros import __version__
 from swarm_ros.app import commands
@@ -274,7 +275,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         if param.flag == "":
             continue  # fail_fraction and fail_tick: together, as --fail-robots
         default = param.blank or ("none" if param.default == "" else param.default)
-        kwargs = {"choices": param.choices} if param.choices else {"type": _checked(param)}
+        kwargs: dict[str, Any] = {"choices": param.choices} if param.choices else {"type": _checked(param)}
         p.add_argument(param.cli_flag, dest=param.name, help=f"{param.help} (default: {default})", **kwargs)
     p.add_argument(
         "--fail-robots",
@@ -316,8 +317,6 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     try:  # from the first line: a Ctrl-C while the command still loads (run_dir, below) is one line too
-        from swarm_ros.artifacts import run_dir
-
         argv = list(sys.argv[1:] if argv is None else argv)
         for i, word in enumerate(argv[:-1]):  # "--fail-robots -0.1@10": argparse takes -0.1@10 for a flag
             if word == "--fail-robots" and re.match(r"-[\d.]", argv[i + 1]):
@@ -340,9 +339,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{PROG}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     finally:
-        run_dir = sys.modules.get("swarm_ros.artifacts.run_dir")  # not there if its import was interrupted
-        if run_dir is not None:
-            run_dir.release_out_dirs()
+        loaded = sys.modules.get("swarm_ros.artifacts.run_dir")  # not there if its import was interrupted
+        if loaded is not None:
+            loaded.release_out_dirs()
 
 
 def entry() -> None:

@@ -10,7 +10,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from swarm_ros.app.param_file import read_params_file
 from swarm_ros.artifacts.recording_options import RecordingOptions
@@ -80,7 +80,8 @@ def _list_shapes(shapes: dict[str, Path], world: World) -> int:
 
 def _settings(args: argparse.Namespace) -> tuple[Settings, dict[str, dict[str, object]]]:
     """The run settings (parameter file, then flags) and the node parameters the file sets."""
-    settings, nodes = Settings(), {kind: {} for kind in NODE_PARAMETERS}
+    settings = Settings()
+    nodes: dict[str, dict[str, object]] = {kind: {} for kind in NODE_PARAMETERS}
     if args.params_file is not None:
         settings, nodes = read_params_file(args.params_file, settings)
     flags = {p.name: getattr(args, p.name) for p in RUN_PARAMETERS if p.flag != ""}
@@ -89,7 +90,7 @@ def _settings(args: argparse.Namespace) -> tuple[Settings, dict[str, dict[str, o
     return settings.updated(**flags), nodes
 
 
-def _flag(value: object, section: dict[str, object], key: str) -> object:
+def _flag(value: object, section: dict[str, object], key: str) -> Any:
     """A flag's value if given, else the parameter file's /monitor value, else the monitor's default."""
     return value if value is not None else section.get(key, node_defaults("monitor")[key])
 
@@ -163,13 +164,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if recorder is not None:
         recorder.outcome(record.outcome.value, record.final)
         recorder.close()  # a recording that could not be written whole (a full disk) fails the command here
-    out = write_run(
-        out,
-        record,
-        overwrite=args.overwrite,
-        recording=rrd if options.enabled else None,
-        robots_every=options.every_for(params.robots),
-    )
+    rrd_done, every = (rrd if options.enabled else None), options.every_for(params.robots)
+    out = write_run(out, record, overwrite=args.overwrite, recording=rrd_done, robots_every=every)
     if stopped is not None:
         print(f"{PROG}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -12,9 +12,10 @@ import os
 import sys
 import tempfile
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Generator, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -117,7 +118,7 @@ def _work(job: tuple[RunSpec, str, int]) -> dict:
 
 def execute(
     todo: list[RunSpec], jobs: int, engine: str = "inprocess", processes: int = PROCESSES.default
-) -> Iterator[dict]:
+) -> Generator[dict, None, None]:
     """Yield the row of each run as it finishes, over ``jobs`` worker processes (spawned).
 
     Closing the generator (or an exception in the caller, e.g. Ctrl-C) terminates the workers.
@@ -247,13 +248,15 @@ class _QuietAfterInterrupt:
 
         if threading.current_thread() is not threading.main_thread():
             return {}
-        before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+        before: dict[signal.Signals, Callable[[int, Any], Any]] = {}
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            handler = signal.getsignal(sig)
+            if callable(handler):  # Python's, not the OS's
+                before[sig] = handler
 
-        before = {sig: handler for sig, handler in before.items() if callable(handler)}  # Python's, not the OS's
-
-        def noted(signum: int, frame: object) -> None:
+        def noted(signum: int, frame: Any) -> None:
             self.interrupted = True
-            before[signum](signum, frame)
+            before[signal.Signals(signum)](signum, frame)
 
         for sig in before:
             signal.signal(sig, noted)
@@ -311,7 +314,7 @@ def chunk_size(run_seconds: float | None, remaining: int, workers: int) -> int:
     return max(1, min(int(_TASK_SECONDS / run_seconds), balanced, remaining))
 
 
-def execute_dask(client, todo: list[RunSpec], engine: str, processes: int) -> Iterator[dict]:
+def execute_dask(client, todo: list[RunSpec], engine: str, processes: int) -> Generator[dict, None, None]:
     """Yield the row of each run as it finishes, computed on ``client``'s cluster.
 
     Only the runs' coordinates (:class:`RunSpec`) go to the workers and only rows come back.

@@ -31,6 +31,7 @@ import math
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -72,7 +73,7 @@ class RunSpec:
     repetition: int
     settings: Settings  #: every run parameter; its ``shape`` is what Shape.load takes (a name or an absolute path)
 
-    def __getattr__(self, name: str) -> object:
+    def __getattr__(self, name: str) -> Any:  # a run parameter, typed by its declaration
         if name in RUN_PARAMETER and name != "shape":
             return getattr(self.settings, name)
         raise AttributeError(name)
@@ -147,7 +148,7 @@ def _fail(path: Path, key: str, message: str) -> ExperimentError:
     return ExperimentError(f"{path}: {key}: {message}" if key else f"{path}: {message}")
 
 
-def _checked(path: Path, key: str, param: Param, value: object) -> object:
+def _checked(path: Path, key: str, param: Param, value: object) -> Any:
     try:
         return param.check(value)
     except InputError as exc:
@@ -252,7 +253,7 @@ def _load_shapes(path: Path, shapes: object, world: World) -> tuple[tuple[str, s
         names.add(shape.name)
         if not isinstance(sizes, list) or not sizes:
             raise _fail(path, where, f"must be a non-empty list of group sizes (integers or '{PATCHES}')")
-        robots = []
+        robots: list[int] = []
         for i, n in enumerate(sizes):
             n = _checked(path, f"{where}[{i}]", _GROUP, shape.patches if n == PATCHES else n)
             if n > shape.free_patches:

@@ -271,7 +271,7 @@ class Launch:
                 flush=True,
             )
 
-    def plan(self) -> list[tuple[str, str, dict[str, int]]]:
+    def plan(self) -> list[tuple[str, str, dict[str, int | str]]]:
         """The node processes, in start order: (node name, executable, parameters beyond the file's).
 
         ``launch/swarm.launch.py`` starts the same graph (:func:`swarm_ros.protocol.plan.graph_plan`).
@@ -343,7 +343,7 @@ class Launch:
                 self._note_exits()
                 for c in list(self.children):
                     code = c.proc.poll()
-                    if code in (None, 0) or c.name in reported:
+                    if code is None or code == 0 or c.name in reported:
                         continue
                     if c.name == MONITOR and self._written():
                         monitor_done = True  # killed after it wrote the run directory: the run is whole

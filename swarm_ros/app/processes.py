@@ -12,6 +12,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
@@ -157,7 +158,7 @@ def node_env(domain_id: int, log_dir: Path) -> dict[str, str]:
 
 
 def node_command(
-    module: str, params_file: Path, name: str, extra: dict[str, object] | None = None, enclaves: str | None = None
+    module: str, params_file: Path, name: str, extra: Mapping[str, object] | None = None, enclaves: str | None = None
 ) -> list[str]:
     """The command of a node process; with ``enclaves`` (SROS2), its enclave is ``<enclaves>/<name>``."""
     cmd = [

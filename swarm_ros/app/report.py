@@ -82,7 +82,8 @@ def _curve(row: dict) -> np.ndarray:
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
     sim = Simulation(shape, RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model}))
     sim.run()
-    if sim.tick != row["convergence_tick"] or sim.outcome.value != row["outcome"]:
+    outcome = sim.outcome.value if sim.outcome is not None else None
+    if sim.tick != row["convergence_tick"] or outcome != row["outcome"]:
         raise ExperimentError(
             f"re-running {row['shape']} n={row['robots']} seed {row['seed']} gave "
             f"{sim.outcome} at tick {sim.tick}, the results say {row['outcome']} at tick "

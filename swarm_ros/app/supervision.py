@@ -208,7 +208,7 @@ def launch_setup(
     settings = settings.updated(robots=params.robots)
     out = Path(
         out_dir
-        or nodes["monitor"].get("out_dir")
+        or str(nodes["monitor"].get("out_dir") or "")
         or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
     ).absolute()
     check_out_dir(out, bool(nodes["monitor"].get("overwrite", False)))

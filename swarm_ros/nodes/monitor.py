@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.publisher import Publisher
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
@@ -83,10 +84,16 @@ class MonitorNode:
         # topic's first messages would miss them, or keep only the last, and a monitor still loading would
         # take the CPU the first ticks need. (The liveliness writer is made early: DDS takes a few tenths
         # of a second to report a new writer alive, a new reader is discovered in milliseconds.)
-        self.alive = None
+        self.alive: Publisher | None = None
         self.closing = threading.Event()
         threading.Thread(target=self._announce_when_matched, name="monitor-ready", daemon=True).start()
         self.bag_on = bool(own["bag"])
+
+    @property
+    def counter(self) -> MonitorCore:
+        """The monitor's core, for the callbacks: made in load(), before the readers can hand it anything."""
+        assert self.core is not None
+        return self.core
 
     def load(self) -> None:
         """The heavy part, once the first endpoints exist: discovery goes on meanwhile in the DDS threads, and
@@ -116,15 +123,15 @@ class MonitorNode:
             elif topic in self.handlers:
                 self.handlers[topic](self.gate.open(TOPICS[topic][0], topic, data))
 
-        with self.core.replay():
+        with self.counter.replay():
             replayed = resume(self.bag, self.out, take)
         if replayed:
             self.gate.verifier.taken_before()  # the same messages again from the topics' histories: known
-        self.core.replayed(metrics)
+        self.counter.replayed(metrics)
         if replayed:
             self.node.get_logger().warn(
                 f"monitor restarted (incarnation {self.incarnation}): went on from tick "
-                f"{self.core.resumed_at} of the bag its process before wrote"
+                f"{self.counter.resumed_at} of the bag its process before wrote"
             )
 
     def _subscribe(self, topic: str):
@@ -163,18 +170,18 @@ class MonitorNode:
     # -- inbound ----------------------------------------------------------------------
     def _on_robots(self, msg: Cloud) -> None:
         try:
-            self.core.robots(msg)
+            self.counter.robots(msg)
         except Rejected as fault:
             self.rejections.drop(msgs.ROBOTS, fault)
 
     def _on_decisions(self, msg: Cloud) -> None:
         try:
-            self.core.decisions(msg)
+            self.counter.decisions(msg)
         except Rejected as fault:
             self.rejections.drop(msgs.DECISIONS, fault)
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        self.core.status(msgs.status_values(msg), msgs.tick_of(msg.header))
+        self.counter.status(msgs.status_values(msg), msgs.tick_of(msg.header))
 
     # -- the core's port ---------------------------------------------------------------
     def tick_counted(self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool, changed: bool) -> None:
@@ -196,14 +203,14 @@ class MonitorNode:
 
     # -- the node runtime's hooks ----------------------------------------------------------
     def poll(self) -> None:
-        if self.core.due(self.bag is not None):
+        if self.counter.due(self.bag is not None):
             self._write()
             self.finished = True
 
     def _write(self, outcome: Outcome | None = None) -> None:
         self.written = run_dir.write_run(
             self.out,
-            self.core.record(self.rejections.total, outcome),
+            self.counter.record(self.rejections.total, outcome),
             overwrite=self.overwrite,
             recording=self.rrd if self.recording.enabled else None,
             bag=self.bag.close() if self.bag is not None else None,

@@ -12,6 +12,7 @@ one that fails is dropped whole and counted (``rejected_messages`` on /swarm/sta
 
 from __future__ import annotations
 
+import functools
 import os
 import time
 from pathlib import Path
@@ -77,6 +78,12 @@ class WorldNode:
         self._watch(msgs.alive_topic(MONITOR), self._on_monitor_liveliness)
 
     @property
+    def ls(self) -> Lockstep:
+        """The lockstep, for the callbacks: made in load(), before the first of them can run."""
+        assert self.lockstep is not None
+        return self.lockstep
+
+    @property
     def finished(self) -> bool:
         return self.lockstep is not None and self.lockstep.finished
 
@@ -120,29 +127,30 @@ class WorldNode:
     def _on_batch(self, msg: Int64MultiArray) -> None:
         try:
             name, incarnation, strip = checks.announcement(msg, self.shape.world.size)
-            self.lockstep.announce(name, incarnation, strip)
+            self.ls.announce(name, incarnation, strip)
         except Rejected as fault:
             self.rejections.drop(msgs.BATCHES, fault)
 
     def _on_decisions(self, k: int, topic: str, msg: Cloud) -> None:
         """Batch ``k``'s decisions (on ``topic``, its own): used whole once checked, or dropped and counted."""
-        if self.lockstep.over:
+        if self.ls.over:
             return
         try:
             tick, rows = checks.decision_message(msg, self.params.robots, self.shape.dims)
-            self.lockstep.decisions(k, tick, rows)
+            self.ls.decisions(k, tick, rows)
         except Rejected as fault:
             self.rejections.drop(topic, fault)
 
     def _on_metrics(self, msg: Int64MultiArray) -> None:
         try:
-            tick = checks.metrics_tick(msg, METRIC_COLUMNS, self.lockstep.published_tick)
+            tick = checks.metrics_tick(msg, METRIC_COLUMNS, self.ls.published_tick)
         except Rejected as fault:
             self.rejections.drop(msgs.METRICS, fault)
             return
-        self.lockstep.metrics(tick, self.gate.last_tag.nonce)
+        tag = self.gate.last_tag  # the tag of this message, which the gate proved
+        self.ls.metrics(tick, tag.nonce if tag is not None else "")
         if self.saver is not None:
-            self.saver.monitor_reported(self.lockstep.monitor_tick)
+            self.saver.monitor_reported(self.ls.monitor_tick)
 
     def _watch(self, topic: str, on_change) -> None:
         self.node.create_subscription(
@@ -154,18 +162,18 @@ class WorldNode:
         )
 
     def _on_batch_liveliness(self, k: int, info: QoSLivelinessChangedInfo) -> None:
-        self.lockstep.batch_liveliness(k, info.alive_count, info.not_alive_count)
+        self.ls.batch_liveliness(k, info.alive_count, info.not_alive_count)
 
     def _on_monitor_liveliness(self, info: QoSLivelinessChangedInfo) -> None:
-        self.lockstep.monitor_liveliness(info.alive_count, info.not_alive_count)
+        self.ls.monitor_liveliness(info.alive_count, info.not_alive_count)
 
     # -- the lockstep's port ---------------------------------------------------------------
     def watch_batch(self, k: int, name: str) -> None:
         self.snapshot_pubs.append(self.signer.publisher(PointCloud2, msgs.snapshot_topic(name), msgs.LATCHED_QOS))
         self.region_pubs.append(self.signer.publisher(PointCloud2, msgs.region_topic(name), msgs.ROBOTS_QOS))
         topic = msgs.decisions_topic(name)
-        self.gate.subscribe(PointCloud2, topic, lambda m, k=k, t=topic: self._on_decisions(k, t, m), msgs.DECISIONS_QOS)
-        self._watch(msgs.alive_topic(name), lambda info, k=k: self._on_batch_liveliness(k, info))
+        self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_decisions, k, topic), msgs.DECISIONS_QOS)
+        self._watch(msgs.alive_topic(name), functools.partial(self._on_batch_liveliness, k))
 
     def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None:
         self.snapshot_pubs[k].publish_rows(rows, tick)
@@ -199,7 +207,7 @@ class WorldNode:
 
     def _publish_occupancy(self) -> None:
         """The occupancy now, stamped with the world's tick (it may be ahead of the last published rows)."""
-        sim = self.lockstep.sim
+        sim = self.ls.sim
         self.occupancy_at = time.monotonic()
         self.pub_occupancy.publish(self.maps.occupancy_message(sim.state.occupancy, sim.tick))
 
@@ -232,7 +240,7 @@ class WorldNode:
 
     # -- the node runtime's hooks ----------------------------------------------------------
     def poll(self) -> None:
-        self.lockstep.poll()
+        self.ls.poll()
 
     def close(self, code: int) -> None:
         """The checkpoint is removed once the run has ended or was stopped (Ctrl-C): no process of this run

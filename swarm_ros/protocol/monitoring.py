@@ -52,7 +52,9 @@ class MonitorPort(Protocol):
 class Recording(Protocol):
     """The part of :class:`~swarm_ros.artifacts.rerun_recording.Recorder` the monitor uses."""
 
-    closed: bool
+    @property
+    def closed(self) -> bool: ...
+
     every: int
 
     def metrics(self, rows: list) -> None: ...

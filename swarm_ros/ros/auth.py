@@ -135,7 +135,7 @@ class Gate:
         self,
         msg_type,
         topic: str,
-        handler: Callable[[object], None] | None,
+        handler: Callable[[Any], None] | None,
         qos,
         raw_handler: Callable[[bytes], None] | None = None,
     ):

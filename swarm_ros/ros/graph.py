@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import array
 import sys
+from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -156,7 +157,7 @@ def ids_message(ids: np.ndarray) -> Int64MultiArray:
     return msg
 
 
-def metrics_message(row: np.ndarray | list[int]) -> Int64MultiArray:
+def metrics_message(row: np.ndarray | Sequence[int]) -> Int64MultiArray:
     """One tick's metrics, labelled: dim[0].label lists the columns in order."""
     msg = Int64MultiArray()
     n = len(METRIC_COLUMNS)

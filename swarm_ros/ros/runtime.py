@@ -35,7 +35,11 @@ _TEARDOWN_S = 5.0  # seconds rclpy's and DDS's teardown may take once the node i
 
 class SwarmNode(Protocol):
     node: Node
-    finished: bool
+
+    @property
+    def finished(self) -> bool:
+        """Whether the node's work is done and it may exit."""
+        ...
 
     def load(self) -> None:
         """Called once the node is in the executor, before the first spin: the slow part of starting
