@@ -317,6 +317,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     try:  # from the first line: a Ctrl-C while the command still loads (run_dir, below) is one line too
+        from swarm_ros.artifacts import run_dir  # noqa: F401 - loaded in the try: a Ctrl-C meanwhile is one line
+
         argv = list(sys.argv[1:] if argv is None else argv)
         for i, word in enumerate(argv[:-1]):  # "--fail-robots -0.1@10": argparse takes -0.1@10 for a flag
             if word == "--fail-robots" and re.match(r"-[\d.]", argv[i + 1]):
