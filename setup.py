@@ -48,6 +48,7 @@ setup(
         "console_scripts": [
             "swarm-ros = swarm_ros.app.main:entry",
             "world = swarm_ros.app.main:world",
+            "world_shard = swarm_ros.app.main:world_shard",
             "robot_batch = swarm_ros.app.main:robot_batch",
             "monitor = swarm_ros.app.main:monitor",
         ]

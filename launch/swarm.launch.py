@@ -40,7 +40,7 @@ from launch_ros.actions import Node
 from launch import LaunchDescription
 from swarm_ros.app.supervision import END_GRACE, MONITOR_GRACE, RunEnded, launch_processes, launch_setup
 from swarm_ros.core.kernels import COMPILING, kernels_cached
-from swarm_ros.core.params import RUN_PARAMETERS, node_parameter
+from swarm_ros.core.params import RUN_PARAMETERS, WORLD_SHARDS, node_parameter
 from swarm_ros.protocol.plan import PROCESSES, graph_plan
 from swarm_ros.protocol.runkey import KEY_ENV
 
@@ -52,6 +52,7 @@ def graph(context) -> list:
     share = get_package_share_directory(PACKAGE)
     arg = lambda name: LaunchConfiguration(name).perform(context)
     processes = launch_processes(arg("processes"))
+    shards = launch_processes(arg("world_shards"), WORLD_SHARDS)
     enclaves = arg("enclaves")
     setup = launch_setup(
         arg("params_file") or os.path.join(share, "config", "swarm_ros.yaml"),
@@ -61,9 +62,10 @@ def graph(context) -> list:
         processes,
         enclaves,
         arg("region_cuts"),
+        shards,
     )
     supervisor = setup.supervisor
-    plan = {name: (executable, own) for name, executable, own in graph_plan(processes, setup.region_cuts)}
+    plan = {name: (executable, own) for name, executable, own in graph_plan(processes, setup.region_cuts, shards)}
     names: dict[object, str] = {}  # each Node action started -> its node name
     running: set[object] = set()
     timers: list[TimerAction] = []
@@ -163,6 +165,9 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             DeclareLaunchArgument("processes", default_value=str(PROCESSES.default), description=PROCESSES.help),
+            DeclareLaunchArgument(
+                "world_shards", default_value=str(WORLD_SHARDS.default), description=WORLD_SHARDS.help
+            ),
             DeclareLaunchArgument(
                 "region_cuts", default_value="", description=node_parameter("robot_batch", "region_cuts").help
             ),

@@ -24,6 +24,7 @@ from swarm_ros.core.params import (
     MAX_RESTARTS,
     RUN_PARAMETER,
     RUN_PARAMETERS,
+    WORLD_SHARDS,
     Param,
     node_parameter,
 )
@@ -128,6 +129,14 @@ def build_parser() -> argparse.ArgumentParser:
         type=_checked(_OWN["processes"]),
         default=PROCESSES.default,
         help=f"robot-batch processes K (default: {PROCESSES.default})",
+    )
+    run.add_argument(
+        "--world-shards",
+        type=_checked(WORLD_SHARDS),
+        default=WORLD_SHARDS.default,
+        metavar="S",
+        help="world processes: 1 (default) the world node; S > 1 world shards, each owning the strips of "
+        "consecutive robot batches, S <= K (docs/operations.md, World shards)",
     )
     run.add_argument(
         "--region-cuts",

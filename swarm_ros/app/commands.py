@@ -196,7 +196,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
         **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {}),
     }
-    check_graph(shape, params.robots, args.processes, args.enclaves, region_cuts=cuts)
+    check_graph(shape, params.robots, args.processes, args.enclaves, region_cuts=cuts, world_shards=args.world_shards)
     domain = _domain_id(args.domain_id)
     launch = Launch(
         settings=settings,
@@ -204,6 +204,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         params=params,
         processes=args.processes,
         region_cuts=cuts,
+        world_shards=args.world_shards,
         out=out,
         overwrite=args.overwrite,
         quiet=args.quiet,

@@ -51,6 +51,7 @@ from swarm_ros.app.processes import (
     node_command,
     node_env,
     stop,
+    world_sections,
 )
 from swarm_ros.app.supervision import END_GRACE, MONITOR_GRACE, Supervisor
 from swarm_ros.artifacts.recording_options import RecordingOptions
@@ -58,7 +59,7 @@ from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recor
 from swarm_ros.core.params import RunParams, Settings, node_defaults
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.signals import StopFlag, process_age
-from swarm_ros.protocol.plan import MONITOR, WORLD, graph_plan
+from swarm_ros.protocol.plan import MONITOR, graph_plan, is_world
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.ros.shm import clean_shm, shm_locks
@@ -115,6 +116,7 @@ class Launch:
     processes: int
     out: Path
     region_cuts: str = ""  #: where the batches' strips start (x positions), or "": balanced at tick 0
+    world_shards: int = 1  #: world processes: 1 the world node, S > 1 world shards by region
     overwrite: bool = False
     quiet: bool = False
     domain_id: int | None = None
@@ -237,12 +239,11 @@ class Launch:
             params_yaml(
                 run,
                 {
-                    "world": {
-                        **self.world,
-                        "on_batch_loss": self.on_batch_loss,
-                        "max_restarts": self.max_restarts,
-                        "checkpoint": str(logs / CHECKPOINT),
-                    },
+                    **world_sections(
+                        {**self.world, "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts},
+                        self.world_shards,
+                        logs,
+                    ),
                     "monitor": {
                         "out_dir": str(out),
                         "overwrite": self.overwrite,
@@ -276,7 +277,7 @@ class Launch:
 
         ``launch/swarm.launch.py`` starts the same graph (:func:`swarm_ros.protocol.plan.graph_plan`).
         """
-        return graph_plan(self.processes, self.region_cuts)
+        return graph_plan(self.processes, self.region_cuts, self.world_shards)
 
     def _spawn(self, name: str, command: list[str], log: Path, incarnation: int) -> Child:
         f = open(log, "ab")
@@ -361,10 +362,11 @@ class Launch:
                         reported.add(c.name)
                     if verdict.note:
                         self._warn(progress, verdict.note)
-                world, monitor = self._child(WORLD), self._child(MONITOR)
+                monitor = self._child(MONITOR)
                 if monitor_done or monitor.proc.returncode == 0:
                     break
-                if world.proc.returncode == 0 and world_done_at is None:
+                worlds = [c for c in self.children if is_world(c.name)]
+                if all(w.proc.returncode == 0 for w in worlds) and world_done_at is None:
                     world_done_at = time.monotonic()
                 if world_done_at is not None and time.monotonic() - world_done_at > MONITOR_GRACE:
                     raise LaunchError(f"the run ended but the monitor did not write it within {MONITOR_GRACE:g} s")

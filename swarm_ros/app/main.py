@@ -1,5 +1,5 @@
-"""The console scripts (``swarm-ros`` and the nodes' ``world``, ``robot_batch``, ``monitor``, which ``ros2 run``
-and ``ros2 launch`` start): Ctrl-C is answered in one line from the first instant.
+"""The console scripts (``swarm-ros`` and the nodes' ``world``, ``world_shard``, ``robot_batch``, ``monitor``,
+which ``ros2 run`` and ``ros2 launch`` start): Ctrl-C is answered in one line from the first instant.
 
 Importing the command line takes a few tenths of a second (numpy, argparse, the package);
 a Ctrl-C in that time would otherwise end in a traceback of whatever was being imported.
@@ -38,6 +38,10 @@ def _node(module: str) -> None:
 
 def world() -> None:
     _node("world")
+
+
+def world_shard() -> None:
+    _node("world_shard")
 
 
 def robot_batch() -> None:

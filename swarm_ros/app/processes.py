@@ -19,6 +19,7 @@ from typing import IO
 
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.signals import PARENT_ENV
+from swarm_ros.protocol.plan import WORLD, shard_name
 from swarm_ros.protocol.runkey import with_run_key
 from swarm_ros.ros.dds import apply_dds_defaults
 from swarm_ros.ros.shm import SHM_DIR, clean_shm, shm_locks
@@ -112,6 +113,7 @@ def check_graph(
     enclaves: str | None,
     flags: tuple[str, str] = ("--processes", "--enclaves"),
     region_cuts: str = "",
+    world_shards: int = 1,
 ) -> None:
     """Refuse a graph that cannot run, before any node starts (``swarm-ros run`` and the launch file).
 
@@ -128,7 +130,12 @@ def check_graph(
             f"{shape.source}: not a regular file; each node of the graph reads the shape file "
             f"itself, so the graph needs a file ('simulate' reads a pipe once)"
         )
-    check_world_memory(shape.world.radius, copies=processes + 2)  # the world, the monitor, each batch
+    check_world_memory(shape.world.radius, copies=processes + 1 + world_shards)  # the world(s), the monitor, batches
+    if world_shards > processes:
+        raise InputError(
+            f"--world-shards {world_shards} is more than the {processes} robot-batch processes ({flags[0]}): "
+            f"each world shard owns the strips of one batch at least"
+        )
     if processes > shape.world.size:
         raise InputError(
             f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
@@ -198,6 +205,16 @@ def stop(children: list[Child]) -> None:
 
 
 CHECKPOINT = "world.checkpoint"  #: the world's checkpoint file in the run's logs (removed at the end)
+
+
+def world_sections(world: dict, shards: int, logs: Path) -> dict[str, dict]:
+    """The parameter file's section of the world node, or (``shards`` > 1) of each world shard: the world's own
+    parameters, each process with its checkpoint in ``logs`` (world shard i's: ``world.checkpoint.<i>``)."""
+    if shards == 1:
+        return {WORLD: {**world, "checkpoint": str(logs / CHECKPOINT)}}
+    return {shard_name(i): {**world, "checkpoint": str(logs / f"{CHECKPOINT}.{i}")} for i in range(shards)}
+
+
 #: In the run's logs while it goes on: the Fast DDS lock files its processes hold in /dev/shm, a line each, for
 #: the next 'run' of the same directory to remove (recover_killed) if this launcher is SIGKILLed before it does.
 SHM_LIST = "shm-files"

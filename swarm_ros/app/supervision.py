@@ -30,12 +30,12 @@ from pathlib import Path
 import yaml
 
 from swarm_ros.app.param_file import read_params_file
-from swarm_ros.app.processes import CHECKPOINT, check_graph, death
+from swarm_ros.app.processes import CHECKPOINT, check_graph, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
-from swarm_ros.core.params import RUN_PARAMETER, node_defaults
+from swarm_ros.core.params import RUN_PARAMETER, Param, node_defaults
 from swarm_ros.core.signals import EXIT_INTERRUPTED
-from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD
+from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world
 from swarm_ros.ros.node_params import params_yaml
 
 
@@ -92,7 +92,7 @@ class Supervisor:
         if code in self.stops:  # Ctrl-C (the terminal signals every process of the launch) or a user's kill
             self.stopped = True
             return Verdict(stop=f"{name} was stopped ({death(code)}): the run stops")
-        if name in (WORLD, MONITOR):
+        if is_world(name) or name == MONITOR:
             if code == 0:
                 if name == MONITOR:
                     self.monitor_done = True
@@ -154,16 +154,16 @@ def _yaml_value(text: str) -> object:
         return text
 
 
-def launch_processes(text: str) -> int:
-    """The ``processes`` launch argument as a number.
+def launch_processes(text: str, param: Param = PROCESSES) -> int:
+    """The ``processes`` launch argument (or ``param``'s: ``world_shards``) as a number.
 
     Raises:
         ConfigError: not an integer >= 1, in one line.
     """
     try:
-        return PROCESSES.check(_yaml_value(text))
+        return param.check(_yaml_value(text))
     except ParameterError as exc:
-        raise ConfigError(f"launch argument processes:={text}: {exc}") from None
+        raise ConfigError(f"launch argument {param.name}:={text}: {exc}") from None
 
 
 def argument_value(name: str, text: str) -> object:
@@ -187,6 +187,7 @@ def launch_setup(
     processes: int,
     enclaves: str = "",
     region_cuts: str = "",
+    world_shards: int = 1,
 ) -> LaunchSetup:
     """Resolve a launch's arguments as ``swarm-ros run`` resolves its flags, and write the nodes' parameter
     file into ``log_dir``. A launch argument wins over the parameter file (run parameters and ``out_dir``);
@@ -201,7 +202,13 @@ def launch_setup(
     shape, params = settings.resolve()
     region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))
     check_graph(
-        shape, params.robots, processes, enclaves or None, flags=("processes", "enclaves"), region_cuts=region_cuts
+        shape,
+        params.robots,
+        processes,
+        enclaves or None,
+        flags=("processes", "enclaves"),
+        region_cuts=region_cuts,
+        world_shards=world_shards,
     )
     if Path(settings.shape).suffix.lower() in (".txt", ".png"):
         settings = settings.updated(shape=str(Path(settings.shape).absolute()))
@@ -212,8 +219,8 @@ def launch_setup(
         or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
     ).absolute()
     check_out_dir(out, bool(nodes["monitor"].get("overwrite", False)))
-    world = {**node_defaults(WORLD), **nodes["world"], "checkpoint": str(log_dir / CHECKPOINT)}
-    sections = {WORLD: world, MONITOR: {**nodes["monitor"], "out_dir": str(out)}}
+    world = {**node_defaults(WORLD), **nodes["world"]}
+    sections = {**world_sections(world, world_shards, log_dir), MONITOR: {**nodes["monitor"], "out_dir": str(out)}}
     for section in sections.values():
         section.pop("incarnation", None)  # the supervisor's to set
     path = log_dir / "params.yaml"

@@ -234,6 +234,11 @@ BATCH_LOSS_POLICIES = ("restart", "remove")  #: what the graph does when a robot
 MAX_RESTARTS = 3  #: restarts of one robot batch's process, at most, before its robots are removed
 
 #: Each ROS node's own parameters (not run parameters: they do not change what the swarm does).
+#: How many world processes share the world's work by region (``swarm-ros run --world-shards``, the launch file's
+#: ``world_shards``, the monitor's): 1, the one world node; S > 1, S world shard nodes, each owning the strips of
+#: consecutive robot batches (at most one shard per batch).
+WORLD_SHARDS = Param("world_shards", 1, "world processes S: 1 the world node, S > 1 world shards by region", low=1)
+
 NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
     "world": (
         Param(
@@ -294,8 +299,17 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
         Param("bag", True, "write bag/, a rosbag2 (MCAP) of every message on the swarm's topics"),
         Param("viewer_url", "", "also stream live to this Rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy"),
         Param("incarnation", 0, "0 for the monitor's first process; a restarted one goes on from its bag", low=0),
+        WORLD_SHARDS,
     ),
 }
+
+#: A world shard (``--world-shards``) has the world's parameters, the batches' cut, and which shard it is.
+NODE_PARAMETERS["world_shard"] = (
+    *NODE_PARAMETERS["world"],
+    Param("shard", 0, "this process is world shard `shard` of `shards` ...", low=0),
+    Param("shards", 1, "... each owning the strips of consecutive robot batches", low=1),
+    *(p for p in NODE_PARAMETERS["robot_batch"] if p.name in ("batches", "region_cuts")),
+)
 
 
 def node_parameter(kind: str, name: str) -> Param:

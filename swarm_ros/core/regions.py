@@ -90,22 +90,46 @@ def strip(batch: int, batches: int, cuts: np.ndarray, radius: int) -> tuple[int,
     return int(edges[batch]), int(edges[batch + 1]) - 1
 
 
+def batch_cuts(shape, params, batches: int, region_cuts: str = "") -> np.ndarray:
+    """The K - 1 cuts of a run's ``batches`` strips: ``region_cuts``, or (empty) where each strip starts with as
+    many robots; their places at tick 0 follow from the seed, so every process finds the same cuts alone.
+
+    Raises:
+        ParameterError: as :func:`parse_cuts`.
+    """
+    from swarm_ros.core.state import initial_state  # here: it loads numba, which the launcher's checks do without
+
+    if region_cuts:
+        return parse_cuts(region_cuts)
+    return balanced_cuts(initial_state(shape, params.robots, params.seed).x[4:], shape.world.radius, batches)
+
+
 def batch_strip(shape, params, batch: int, batches: int, region_cuts: str = "") -> tuple[int, int]:
-    """The strip batch ``batch`` of ``batches`` hosts in a run of ``shape`` and ``params``: cut at ``region_cuts``,
-    or (empty) where each strip starts with as many robots; their places at tick 0 follow from the seed, so every
-    process finds the same cuts alone.
+    """The strip batch ``batch`` of ``batches`` hosts in a run of ``shape`` and ``params`` (:func:`batch_cuts`).
 
     Raises:
         ParameterError: as :func:`parse_cuts` and :func:`strip`.
     """
-    from swarm_ros.core.state import initial_state  # here: it loads numba, which the launcher's checks do without
+    return strip(batch, batches, batch_cuts(shape, params, batches, region_cuts), shape.world.radius)
 
-    radius = shape.world.radius
-    if region_cuts:
-        cuts = parse_cuts(region_cuts)
-    else:
-        cuts = balanced_cuts(initial_state(shape, params.robots, params.seed).x[4:], radius, batches)
-    return strip(batch, batches, cuts, radius)
+
+def shard_batches(shard: int, shards: int, batches: int) -> range:
+    """The batches world shard ``shard`` of ``shards`` admits: a run of consecutive strips, as many as can be.
+
+    Raises:
+        ParameterError: more shards than batches, or ``shard`` not one of them.
+    """
+    if not 1 <= shards <= batches:
+        raise ParameterError(f"world_shards must be in [1, {batches}] (one batch at least each), got {shards}")
+    if not 0 <= shard < shards:
+        raise ParameterError(f"shard must be in [0, {shards}), got {shard}")
+    return range(shard * batches // shards, (shard + 1) * batches // shards)
+
+
+def shard_cuts(cuts: np.ndarray, shards: int, batches: int) -> np.ndarray:
+    """Of the batches' ``cuts``, those between shards (:func:`shard_batches`): each shard's strips are whole
+    batches' strips."""
+    return np.asarray([cuts[shard_batches(k, shards, batches)[0] - 1] for k in range(1, shards)], dtype=np.int64)
 
 
 def area(strip: tuple[int, int], halo_columns: int, width: int) -> tuple[int, int]:

@@ -48,6 +48,7 @@ from swarm_ros.core.shard_parts import COUNTS, Part, check_claims, check_parts
 from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, initial_state
 
 _EMPTY = np.empty(0)
+_NONE = np.empty(0, dtype=np.int64)
 _INSIDE, _OUTSIDE, _WALKING = int(RobotState.MOVING_INSIDE), int(RobotState.MOVING_OUTSIDE), int(RobotState.WALKING)
 
 
@@ -130,6 +131,8 @@ class WorldShard:
         self.losses: list[tuple[int, int]] = []
         self.history: list[tuple[int, ...]] = []
         self.outcome: Outcome | None = None
+        self.received: Part | None = None  # the peers' rows taken in the last tick closed, as one part
+        self.gone_stationary = _NONE  # stationary robots removed in the last tick closed (failures), that it knew
         self._own = self._mine(np.arange(params.robots))  # kept from the rows of each tick on: no scan of the swarm
         moving = counts[_INSIDE], counts[_OUTSIDE], counts[_WALKING]
         self._close(0, *(int(c) for c in moving))
@@ -293,6 +296,7 @@ class WorldShard:
         """
         tick = self.tick
         rows, counts = self.check(received)
+        self.received, self.gone_stationary = rows, _NONE
         if rows.ids.size:
             solid = (rows.z, rows.pitch) if self._solid else (None, None)
             self.replica.merge(rows.ids, rows.state, rows.x, rows.y, rows.heading, *solid)
@@ -353,6 +357,7 @@ class WorldShard:
         self._removed[ids] = True
         s = self.state
         here = ids[(s.state[ids] != UNKNOWN) & (s.state[ids] != RobotState.REMOVED)]
+        self.gone_stationary = np.union1d(self.gone_stationary, here[~IS_MOVING[s.state[here]]])
         solid = (s.z[here], s.pitch[here]) if s.z is not None and s.pitch is not None else (None, None)
         removed = np.full(here.size, RobotState.REMOVED, dtype=np.int8)
         self.replica.merge(here, removed, s.x[here], s.y[here], s.heading[here], *solid)

@@ -28,6 +28,7 @@ from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome, TickMetrics
 from swarm_ros.core.warmup import warm_up
+from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.monitoring import MonitorCore
@@ -58,6 +59,7 @@ class MonitorNode:
         )
         self.overwrite = bool(own["overwrite"])
         self.incarnation = int(own["incarnation"])
+        self.shards = int(own["world_shards"])  # world processes whose parts make each tick's rows
         run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
         if not self.incarnation:  # a restarted process goes on from what its process before left
             run_dir.check_leftovers(self.out)
@@ -77,6 +79,7 @@ class MonitorNode:
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
         self.handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status, msgs.DECISIONS: self._on_decisions}
         self.raw = b""  # the message being handled, as it came (recorded once its handler takes it)
+        self.raw_parts: dict[int, dict[str, bytes]] = {}  # world shards: tick -> sender -> its part, as it came
         self.readers = {topic: self._subscribe(topic) for topic in msgs.MONITOR_READS if topic != msgs.STATUS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
         # readers have matched their writers (a thread watches, while the heavy part below loads), and its
@@ -102,7 +105,9 @@ class MonitorNode:
         if self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
         recorder = self.recording.open(self.rrd, self.shape, p)
-        self.core = MonitorCore(self.shape, p, self.world_radius, self, recorder, node.get_logger(), self.incarnation)
+        self.core = MonitorCore(
+            self.shape, p, self.world_radius, self, recorder, node.get_logger(), self.incarnation, shards=self.shards
+        )
         self.bag = BagRecorder(self.out, self.shape.dims) if self.bag_on else None
         warm_up(self.shape, p)
         if self.incarnation:
@@ -168,26 +173,35 @@ class MonitorNode:
         return write
 
     # -- inbound ----------------------------------------------------------------------
+    def _sender(self) -> str:
+        tag = self.gate.last_tag  # the tag of the message being handled, which the gate proved
+        return tag.sender if tag is not None else ""
+
     def _on_robots(self, msg: Cloud) -> None:
         try:
-            self.counter.robots(msg)
+            if self.shards > 1:  # a world shard's part: into the bag with the tick's other parts, once all are in
+                tick = checks.tick_stamp(msg.header)
+                self.raw_parts = {t: p for t, p in self.raw_parts.items() if t > self.counter.replica.tick}
+                self.raw_parts.setdefault(tick, {})[self._sender()] = self.raw
+            self.counter.robots(msg, self._sender())
         except Rejected as fault:
             self.rejections.drop(msgs.ROBOTS, fault)
 
     def _on_decisions(self, msg: Cloud) -> None:
         try:
-            self.counter.decisions(msg)
+            self.counter.decisions(msg, self._sender())
         except Rejected as fault:
             self.rejections.drop(msgs.DECISIONS, fault)
 
     def _on_status(self, msg: DiagnosticArray) -> None:
-        self.counter.status(msgs.status_values(msg), msgs.tick_of(msg.header))
+        self.counter.status(msgs.status_values(msg), msgs.tick_of(msg.header), self._sender())
 
     # -- the core's port ---------------------------------------------------------------
     def tick_counted(self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool, changed: bool) -> None:
         data = self.pub_metrics.seal(msgs.metrics_message(metrics))
         if self.bag is not None:  # the tick's messages are durable before the world hears of it
-            self.bag.write(msgs.ROBOTS, self.raw)
+            for raw in self.raw_parts.pop(tick, {}).values() if self.shards > 1 else (self.raw,):
+                self.bag.write(msgs.ROBOTS, raw)
             self.bag.write(msgs.METRICS, data)
             self.bag.write_world(self.shape, occupancy, tick, first, changed)
             take_waiting(self.readers[msgs.DECISIONS])  # one the executor lost the event of: in, now

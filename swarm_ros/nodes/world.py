@@ -49,14 +49,18 @@ _NO_WAIT = Duration(seconds=0)
 class WorldNode:
     """The world's endpoints around a :class:`Lockstep`; its port (``swarm_ros.protocol.lockstep.WorldPort``)."""
 
+    KIND = WORLD  #: its parameters' kind (a world shard's node has more: swarm_ros.nodes.world_shard)
+
     def __init__(self) -> None:
-        self.node = node = make_node("world")
-        run, own = read_parameters(node, "world")
+        self.node = node = make_node(self.KIND)
+        run, own = read_parameters(node, self.KIND)
         self.created = time.monotonic()
         self.shape, self.params = run.resolve()
         self.checkpoint_path = str(own.pop("checkpoint"))
         self.incarnation = int(own.pop("incarnation"))
         self.saver: Checkpoint | None = None
+        self.placement = {name: own.pop(name) for name in ("shard", "shards", "batches", "region_cuts") if name in own}
+        self.viewers = self.placement.get("shard", 0) == 0  # /swarm/shape, /swarm/occupancy, /clock: one process
         self.policy = Policy(**own)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
@@ -183,12 +187,13 @@ class WorldNode:
     ) -> None:
         for pub, part in zip(self.region_pubs, regional or ()):
             pub.publish_rows(part, tick)  # first: the batches decide the next tick from these
-        if applied is not None:
+        if applied is not None and applied.size:  # a world shard whose strips hold no moving robot: none
             self.pub_decisions.publish_rows(applied, tick)
         self.pub_robots.publish_rows(rows, tick)
         if joined:
             self._publish_occupancy()
-        self.pub_clock.publish(msgs.clock_message(tick))
+        if self.viewers:
+            self.pub_clock.publish(msgs.clock_message(tick))
 
     def checkpoint(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None:
         if self.saver is not None:
@@ -209,7 +214,8 @@ class WorldNode:
         """The occupancy now, stamped with the world's tick (it may be ahead of the last published rows)."""
         sim = self.ls.sim
         self.occupancy_at = time.monotonic()
-        self.pub_occupancy.publish(self.maps.occupancy_message(sim.state.occupancy, sim.tick))
+        if self.viewers:
+            self.pub_occupancy.publish(self.maps.occupancy_message(sim.state.occupancy, sim.tick))
 
     def monitor_reads_all(self) -> bool:
         """Whether this node has discovered the monitor's reader of every topic it takes from the network.

@@ -93,6 +93,8 @@ def ids_in_range(ids: np.ndarray, low: int, robots: int) -> None:
     """Raises Rejected unless every id is in ``low``..``robots - 1`` and none repeats."""
     from swarm_ros.core.state import has_repeats  # here: core.state loads numba, which the launcher must not
 
+    if not ids.size:
+        return
     if ids.min() < low or ids.max() >= robots:
         raise Rejected(
             "robot id out of range", f"ids {int(ids.min())}..{int(ids.max())}, the run has {low}..{robots - 1}"
@@ -117,13 +119,13 @@ def inside_world(rows: np.ndarray, radius: int) -> None:
         raise Rejected("pose outside the world", f"({x[i]!r}, {y[i]!r}, heading {heading[i]!r}{z})")
 
 
-def robot_rows(msg, robots: int, radius: int, dims: int = 2, regional: bool = False) -> np.ndarray:
+def robot_rows(msg, robots: int, radius: int, dims: int = 2, regional: bool = False, part: bool = False) -> np.ndarray:
     """The rows of a /swarm/robots message (``regional``: a /swarm/region/<batch> or snapshot message, compact
-    rows), checked: layout, ids, states, poses."""
+    rows; ``part``: a world shard's part of one, which may be empty), checked: layout, ids, states, poses."""
     from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
 
     # a region may have no rows in a tick (the tick still comes); the whole swarm always has some
-    rows = cloud(msg, region_row(dims) if regional else robot_row(dims), robots, min_rows=0 if regional else 1)
+    rows = cloud(msg, region_row(dims) if regional else robot_row(dims), robots, min_rows=0 if regional or part else 1)
     if not rows.size:
         return rows
     ids_in_range(rows["id"].astype(np.int64), 0, robots)
@@ -170,15 +172,15 @@ def metrics_tick(msg, labels: tuple[str, ...], newest: int) -> int:
     return tick
 
 
-def checked_robots(replica: Replica, msg, radius: int) -> tuple[int, np.ndarray]:
-    """(tick, rows) of a /swarm/robots message (a regional ``replica``: of a /swarm/region/<batch> message),
-    checked as a message (:func:`robot_rows`).
+def checked_robots(replica: Replica, msg, radius: int, part: bool = False) -> tuple[int, np.ndarray]:
+    """(tick, rows) of a /swarm/robots message (a regional ``replica``: of a /swarm/region/<batch> message;
+    ``part``: a world shard's part of a tick's), checked as a message (:func:`robot_rows`).
 
     Raises:
         Rejected: malformed, out of range or outside the world.
     """
     tick = tick_stamp(msg.header)
-    return tick, robot_rows(msg, replica.state.robots, radius, replica.shape.dims, replica.area is not None)
+    return tick, robot_rows(msg, replica.state.robots, radius, replica.shape.dims, replica.area is not None, part)
 
 
 def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:

@@ -20,7 +20,7 @@ from typing import Protocol
 
 import numpy as np
 
-from swarm_ros.core.errors import RunFailed
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, tick_metrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.replica import Replica
@@ -30,8 +30,10 @@ from swarm_ros.core.state import STATE_COUNT, RobotState
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import apply_robots, checked_robots
+from swarm_ros.protocol.plan import WORLD
 from swarm_ros.protocol.status import WorldReport, restart_event
 
+PARTS_AHEAD = 1024  #: ticks ahead of the count for which world shards' parts are kept (the world window is 128)
 STATUS_WAIT = 5.0  #: seconds to wait for the world's outcome after the monitor saw the end (and the reverse)
 BAG_WAIT = 1.0  #: seconds to wait, after the end, for the last tick's decisions to reach the bag
 
@@ -77,6 +79,7 @@ class MonitorCore:
         logger,
         incarnation: int = 0,
         clock: Callable[[], float] = time.monotonic,
+        shards: int = 1,
     ) -> None:
         self.shape, self.params, self.world_radius, self.port, self.recorder, self.log, self.clock = (
             shape,
@@ -88,6 +91,8 @@ class MonitorCore:
             clock,
         )
         self.incarnation = incarnation  # 0: the first monitor process of the run
+        self.shards = shards  # world processes: each tick's rows come in this many parts (world shards)
+        self.parts: dict[int, dict[str, np.ndarray]] = {}  # tick -> sender -> rows, until all its parts are in
         self.replica = Replica(shape, params.robots)
         self.rows: list[TickMetrics] = []  # the metrics of every tick counted, in order
         self.losses: list[tuple[int, int]] = []  # (tick, robots removed), seen as rows turning 'removed'
@@ -99,22 +104,41 @@ class MonitorCore:
         self.ended_at: float | None = None  # clock() at the last
         self.wall = 0.0
         self.decided_rows: dict[int, int] = {}  # tick -> decision rows seen
+        self.decided_by: set[tuple[int, str]] = set()  # (tick, sender) of the decisions messages seen
         self.replaying = False  # taking the bag of the process before this one
         self.resumed_at = 0  # the tick it went on from
 
     # -- messages ---------------------------------------------------------------------
-    def robots(self, msg: Cloud) -> None:
-        """The world's rows of a tick: counted, recorded, and (not replaying) made durable and reported.
+    def robots(self, msg: Cloud, sender: str = "") -> None:
+        """The world's rows of a tick (with world shards, ``sender``'s part of them): counted, recorded, and (not
+        replaying) made durable and reported, once every part of the tick is in.
 
         Raises:
             Rejected: malformed, out of range, or not the world's next rows; nothing was taken.
-            RunFailed: rows the checks passed that the replica could not take (a gap in the checks).
+            RunFailed: rows the checks passed that the replica could not take (a gap in the checks), or world
+                shards whose parts of a tick overlap.
         """
         if self.outcome is not None:
             return
-        tick, rows = checked_robots(self.replica, msg, self.world_radius)
+        tick, rows = checked_robots(self.replica, msg, self.world_radius, part=self.shards > 1)
         if tick <= self.replica.tick:
             return  # again (a late-matched reader's history, a restarted world's last ticks)
+        if self.shards == 1:
+            self._count(tick, rows)
+            return
+        if tick > self.replica.tick + PARTS_AHEAD:
+            raise Rejected("future tick", f"tick {tick}; the monitor has counted up to {self.replica.tick}")
+        self.parts.setdefault(tick, {})[sender] = rows  # a shard's restarted process sends the same again
+        while self.outcome is None and len(self.parts.get(self.replica.tick + 1, ())) == self.shards:
+            tick = self.replica.tick + 1
+            joined = np.concatenate(list(self.parts.pop(tick).values()))
+            joined = joined.take(np.argsort(joined["id"], kind="stable"))
+            if joined.size > 1 and (joined["id"][1:] == joined["id"][:-1]).any():
+                raise RunFailed(f"tick {tick}: the world shards' parts hold a robot twice")
+            self._count(tick, joined)
+
+    def _count(self, tick: int, rows: np.ndarray) -> None:
+        """Count a tick's rows (checked), whole."""
         apply_robots(self.replica, tick, rows)
         if self.started_at is None:
             self.started_at = self.clock()
@@ -140,22 +164,24 @@ class MonitorCore:
             self.wall = self.ended_at - self.started_at
             self.log.info(f"last tick, {tick}: {self.outcome.value} ({time.process_time():.2f} s of CPU)")
 
-    def decisions(self, msg: Cloud) -> None:
-        """A tick's applied decisions: counted (the bag is whole once the last tick's are in, :meth:`bag_complete`).
+    def decisions(self, msg: Cloud, sender: str = "") -> None:
+        """A tick's applied decisions (with world shards, ``sender``'s): counted (the bag is whole once the last
+        tick's are in, :meth:`bag_complete`).
 
         Raises:
             Rejected: malformed or out of range; nothing was taken.
         """
         tick, rows = checks.decision_message(msg, self.params.robots, self.shape.dims)
-        if tick in self.decided_rows and not self.replaying:
+        if (tick, sender) in self.decided_by and not self.replaying:
             return  # recorded already (a restarted world sends the last ticks again)
+        self.decided_by.add((tick, sender))
         self.decided_rows[tick] = self.decided_rows.get(tick, 0) + rows.size
         if not self.replaying:
             self.port.decisions_taken(tick)
 
-    def status(self, values: dict[str, str], tick: int) -> None:
-        """One status message of the world's (its values, its stamp's tick)."""
-        for at, node in self.world.update(values):
+    def status(self, values: dict[str, str], tick: int, sender: str = WORLD) -> None:
+        """One status message of the world's, or of world shard ``sender``'s (its values, its stamp's tick)."""
+        for at, node in self.world.update(values, sender):
             self.log.warn(f"{node} was restarted at tick {at}")
             if self.recorder is not None and not self.recorder.closed:
                 self.recorder.event(at, restart_event(at, node))

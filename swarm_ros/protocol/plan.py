@@ -8,11 +8,28 @@ batches, then the world, which starts tick 0 once the batches cover every robot.
 
 from __future__ import annotations
 
+import re
+
 from swarm_ros.core.params import Param
 
 MONITOR, ROBOT_BATCH, WORLD = "monitor", "robot_batch", "world"  #: the node executables (and kinds)
+WORLD_SHARD = "world_shard"  #: the executable (and kind) of a world shard, which stands in for the world
 #: How many robot-batch processes a run starts (``swarm-ros run --processes``, the launch file's ``processes``).
 PROCESSES = Param("processes", 2, "robot-batch processes K", low=1)
+
+
+_SHARD = re.compile(r"world_shard_(0|[1-9][0-9]{0,5})")
+_SHARD_TOPIC = re.compile(r"/swarm/shards/shard_(0|[1-9][0-9]{0,5})/")
+
+
+def shard_name(i: int) -> str:
+    """The node name of world shard ``i``."""
+    return f"{WORLD_SHARD}_{i}"
+
+
+def is_world(sender: str) -> bool:
+    """Whether node ``sender`` speaks for the world: the world node, or a world shard."""
+    return sender == WORLD or _SHARD.fullmatch(sender) is not None
 
 
 def batch_name(k: int) -> str:
@@ -20,14 +37,27 @@ def batch_name(k: int) -> str:
     return f"{ROBOT_BATCH}_{k}"
 
 
-def graph_plan(processes: int, region_cuts: str = "") -> list[tuple[str, str, dict[str, int | str]]]:
+def graph_plan(
+    processes: int, region_cuts: str = "", world_shards: int = 1
+) -> list[tuple[str, str, dict[str, int | str]]]:
     """The node processes, in start order: (node name, executable, its own parameters beyond the file's):
-    batch k of ``processes`` hosts strip k, cut at ``region_cuts`` if given (``swarm_ros.core.regions``)."""
+    batch k of ``processes`` hosts strip k, cut at ``region_cuts`` if given (``swarm_ros.core.regions``); then
+    the world, or ``world_shards`` > 1 world shards, shard i owning the strips of a run of consecutive batches
+    (:func:`swarm_ros.core.regions.shard_batches`)."""
     cuts: dict[str, int | str] = {"region_cuts": region_cuts} if region_cuts else {}
+    monitor: dict[str, int | str] = {"world_shards": world_shards} if world_shards > 1 else {}
+    world: list[tuple[str, str, dict[str, int | str]]] = (
+        [(WORLD, WORLD, {})]
+        if world_shards == 1
+        else [
+            (shard_name(i), WORLD_SHARD, {"shard": i, "shards": world_shards, "batches": processes, **cuts})
+            for i in range(world_shards)
+        ]
+    )
     return [
-        (MONITOR, MONITOR, {}),
+        (MONITOR, MONITOR, monitor),
         *[(batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes, **cuts}) for k in range(processes)],
-        (WORLD, WORLD, {}),
+        *world,
     ]
 
 
@@ -51,6 +81,34 @@ ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's li
 #: CLOCK as it derives them from the rows (these types carry no tag: swarm_ros.ros.auth). The world starts
 #: tick 0 once it has discovered the monitor's reader of each (so the bag misses none of their messages).
 MONITOR_READS = (ROBOTS, DECISIONS, STATUS)
+
+
+#: /swarm/shards/shard_<i>/...: world shard i -> its peers, each tick: ``claims_to_<j>`` and ``part_to_<j>``
+#: (PointCloud2, to shard j), ``counts`` (Int64MultiArray, to every peer) and ``again`` (Int64MultiArray: a peer,
+#: asked to send its kept messages again); only shard i publishes under /swarm/shards/shard_<i>
+SHARDS = "/swarm/shards"
+
+
+def claims_topic(i: int, j: int) -> str:
+    return f"{SHARDS}/shard_{i}/claims_to_{j}"
+
+
+def part_topic(i: int, j: int) -> str:
+    return f"{SHARDS}/shard_{i}/part_to_{j}"
+
+
+def counts_topic(i: int) -> str:
+    return f"{SHARDS}/shard_{i}/counts"
+
+
+def again_topic(i: int) -> str:
+    return f"{SHARDS}/shard_{i}/again"
+
+
+def shard_of_topic(topic: str) -> int | None:
+    """The shard that publishes on ``topic`` (one under /swarm/shards/<i>), or None."""
+    m = _SHARD_TOPIC.match(topic)
+    return int(m[1]) if m else None
 
 
 def alive_topic(node_name: str) -> str:

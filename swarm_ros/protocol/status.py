@@ -68,6 +68,17 @@ def restarts_of(text: str) -> list[tuple[int, str]]:
     return out
 
 
+def joined_restarts(lists: list[list[tuple[int, str]]]) -> list[tuple[int, str]]:
+    """The restarts of the run from what each world process listed (the world's list alone, or each world
+    shard's): each lists its own batches and itself; the monitor's restarts, which every shard sees, are taken
+    from the list that has the most of them. Ordered by tick, each list's order kept."""
+    if len(lists) == 1:
+        return list(lists[0])
+    monitor = max(([r for r in one if r[1] == MONITOR] for one in lists), key=len)
+    others = [r for one in lists for r in one if r[1] != MONITOR]
+    return sorted(others + monitor, key=lambda r: r[0])
+
+
 class WorldReport:
     """What a reader keeps of the world's status messages: restarts, the world's clock, its drops, its outcome.
 
@@ -77,23 +88,31 @@ class WorldReport:
     def __init__(self) -> None:
         self.restarts: list[tuple[int, str]] = []  #: (tick, batch) of every restart
         self.times: dict[str, float] = {}  #: wall_seconds (tick 0 to the outcome) and startup_seconds
-        self.rejected = 0  #: messages the world dropped
+        self.rejected = 0  #: messages the world dropped (world shards: all of them)
+        self.said: dict[str, list[tuple[int, str]]] = {}  # per sender (the world, or each world shard): its restarts
+        self.dropped: dict[str, int] = {}  # per sender: the messages it dropped
         self.outcome: str | None = None  #: the run's outcome, once it ended
 
-    def update(self, values: dict[str, str]) -> list[tuple[int, str]]:
-        """Take in one status message's values; return the restarts it adds."""
+    def update(self, values: dict[str, str], sender: str = WORLD) -> list[tuple[int, str]]:
+        """Take in one status message's values (from ``sender``: the world, or one of the world shards, whose
+        reports are joined); return the restarts it adds."""
         restarts = restarts_of(values.get("restarts", ""))
-        new = restarts[len(self.restarts) :]  # the list only grows
-        self.restarts = max(self.restarts, restarts, key=len)
+        self.said[sender] = max(self.said.get(sender, []), restarts, key=len)  # each list only grows
+        before = list(self.restarts)
+        self.restarts = joined_restarts(list(self.said.values()))
+        new = list(self.restarts)
+        for item in before:
+            new.remove(item)
         for key in ("wall_seconds", "startup_seconds"):
             try:
                 seconds = float(values[key])
             except (KeyError, ValueError):
                 continue
             if math.isfinite(seconds) and seconds >= 0:
-                self.times[key] = seconds
+                self.times[key] = max(self.times.get(key, 0.0), seconds) if sender != WORLD else seconds
         if values.get("rejected_messages", "").isdigit():
-            self.rejected = max(self.rejected, int(values["rejected_messages"]))
+            self.dropped[sender] = max(self.dropped.get(sender, 0), int(values["rejected_messages"]))
+            self.rejected = sum(self.dropped.values())
         if has_ended(values.get("outcome")):
             self.outcome = values["outcome"]
         return new

@@ -28,7 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from swarm_ros.core.errors import ContractError, Rejected
-from swarm_ros.protocol.plan import BATCHES, DECISIONS, METRICS, MONITOR, WORLD
+from swarm_ros.protocol.plan import BATCHES, DECISIONS, METRICS, MONITOR, is_world, shard_name, shard_of_topic
 from swarm_ros.protocol.rows import TAG_PREFIX
 
 MAC_CHARS = 32  #: hex digits of the MAC (128 bits)
@@ -109,15 +109,19 @@ def _mac(key: bytes, topic: str, parts) -> str:
 
 
 def may_send(sender: str, topic: str) -> bool:
-    """Whether a node named ``sender`` publishes on ``topic`` in the graph: the world its topics, the
-    monitor the metrics, a batch its announcement and its own decisions topic."""
+    """Whether a node named ``sender`` publishes on ``topic`` in the graph: the world (or a world shard) its
+    topics, the monitor the metrics, a batch its announcement and its own decisions topic, world shard i the
+    topics under /swarm/shards/<i>."""
     if topic == METRICS:
         return sender == MONITOR
     if topic == BATCHES:
-        return sender not in (WORLD, MONITOR)
+        return not is_world(sender) and sender != MONITOR
     if topic.startswith(DECISIONS + "/"):
         return topic == f"{DECISIONS}/{sender}"
-    return sender == WORLD
+    shard = shard_of_topic(topic)
+    if shard is not None:
+        return sender == shard_name(shard)
+    return is_world(sender)
 
 
 class Sealer:

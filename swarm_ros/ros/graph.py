@@ -70,6 +70,16 @@ BATCHES_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+#: Between world shards: a tick's claims, parts and counts, kept for a peer's restarted process (which asks for
+#: them again as well: swarm_ros.protocol.shard_exchange keeps the last ticks' for it)
+SHARDS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=8,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+#: A shard's requests to a peer to send its kept messages again: only for the peer's process now
+AGAIN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=16, reliability=ReliabilityPolicy.RELIABLE)
 #: State that a late joiner needs once: the latest message is kept for it ("latched").
 LATCHED_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
@@ -148,9 +158,9 @@ def cloud_rows(msg: PointCloud2, dtype: np.dtype) -> np.ndarray:
     return cloud(msg, dtype, max_rows=sys.maxsize, min_rows=0)
 
 
-def ids_message(ids: np.ndarray) -> Int64MultiArray:
+def ids_message(ids: np.ndarray, label: str = "robot_id") -> Int64MultiArray:
     msg = Int64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label="robot_id", size=int(ids.size), stride=int(ids.size))]
+    msg.layout.dim = [MultiArrayDimension(label=label, size=int(ids.size), stride=int(ids.size))]
     data = array.array("q")
     data.frombytes(np.ascontiguousarray(ids, dtype="<i8").tobytes())
     msg.data = data

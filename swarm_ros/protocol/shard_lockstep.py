@@ -1,0 +1,371 @@
+"""A world shard's coordination of the graph, as a plain class: the world's :class:`Lockstep` for the robot
+batches in the shard's strips, each tick closed with the other shards through a :class:`ShardExchange`.
+
+With ``--world-shards S`` the world's work is split by region (docs/operations.md, "World shards"): shard i
+owns the strips of consecutive robot batches (:func:`~swarm_ros.core.regions.shard_batches`). It admits those
+batches, checks their decisions as the world does, and hands them to its exchange, which settles claims near
+its borders with the neighbouring shards and closes the tick from every shard's counts. Once a tick is
+closed it publishes what the world would have, for its part: its batches' region rows, its robots' rows and
+applied decisions for the monitor, which joins the S parts of each tick. Everything else, admission, the
+monitor window, lost batches and their removal, a restarted batch or monitor, is :class:`Lockstep`'s own
+code, reading the shard's replica through :class:`ShardSim`.
+
+A restarted shard goes on from its save (:class:`ShardSave`, written at every close before anything of the
+next tick is sent): it sends its peers its kept messages again and asks for theirs, sends its batches a
+snapshot, and publishes again the ticks the monitor has not confirmed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from swarm_ros.core.errors import ContractError, Rejected, RunFailed
+from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
+from swarm_ros.core.regions import columns
+from swarm_ros.core.replica import UNKNOWN
+from swarm_ros.core.rules import Decisions
+from swarm_ros.core.shard_parts import Part
+from swarm_ros.core.shards import WorldShard
+from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.hosting import Hosting, route, snapshot
+from swarm_ros.protocol.lockstep import Lockstep
+from swarm_ros.protocol.plan import MONITOR
+from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows, state_rows
+from swarm_ros.protocol.shard_exchange import ExchangeSaved, ShardExchange
+from swarm_ros.protocol.world_port import FIRST_STALL_S, Logger, Policy, WorldPort
+
+_LOCALIZED = METRIC_COLUMNS.index("localized")
+
+
+class ShardHosting(Hosting):
+    """A shard's map of its strips to its batches: a batch wholly outside them is another shard's."""
+
+    def __init__(self, radius: int, vision_radius: float, own: tuple[int, int]) -> None:
+        super().__init__(radius, vision_radius)
+        self.own = own
+
+    def holds(self, strip: tuple[int, int]) -> bool:
+        """Whether a batch hosting ``strip`` is this shard's (False: another shard's).
+
+        Raises:
+            Rejected: a strip across the shard's border: no shard can admit it.
+        """
+        first, last = self.own
+        if strip[0] >= first and strip[1] <= last:
+            return True
+        if strip[1] < first or strip[0] > last:
+            return False
+        raise Rejected("columns of another shard", f"{self.text(strip)} crosses the border of {self.text(self.own)}")
+
+    def covered(self) -> int:
+        """Columns hosted: of the shard's strips, by its admitted batches; the others' columns count as covered
+        (their shards admit their batches)."""
+        return int((self.host >= 0).sum()) + self.width - (self.own[1] - self.own[0] + 1)
+
+
+class ShardSim:
+    """What :class:`Lockstep` reads of its ``Simulation``, from a shard: the last tick closed, the shard's replica
+    (exact in its area), the metrics every shard holds, and its own moving robots."""
+
+    def __init__(self, exchange: ShardExchange) -> None:
+        self.exchange, self.shard = exchange, exchange.shard
+        self.shape, self.params = self.shard.shape, self.shard.params
+
+    @property
+    def tick(self) -> int:
+        return self.exchange.tick
+
+    @property
+    def done(self) -> bool:
+        return self.shard.outcome is not None
+
+    @property
+    def outcome(self):
+        return self.shard.outcome
+
+    @property
+    def state(self):
+        return self.shard.state
+
+    @property
+    def history(self) -> list[tuple[int, ...]]:
+        return self.shard.history
+
+    @property
+    def losses(self) -> list[tuple[int, int]]:
+        return self.shard.losses
+
+    @property
+    def metrics(self) -> TickMetrics:
+        return TickMetrics(*self.shard.history[-1])
+
+    def moving_ids(self) -> np.ndarray:
+        return self.shard.own_moving()
+
+
+@dataclass
+class ShardSave:
+    """What a restarted shard process goes on from: its exchange's save, the lockstep's bookkeeping, the robots
+    pending removal, and the ticks it published that the monitor may not have confirmed."""
+
+    exchange: ExchangeSaved
+    book: dict
+    pending: np.ndarray
+    ring: dict[int, tuple[np.ndarray, np.ndarray | None, bool]]  # tick -> (rows, applied, joined)
+    monitor_tick: int
+
+
+class ShardNodePort(WorldPort, Protocol):
+    """What a :class:`ShardLockstep` asks of its node: the world's port, the exchange's sends, and the save."""
+
+    def send_claims(self, peer: int, tick: int, claims: Decisions) -> None: ...
+    def send_part(self, peer: int, tick: int, part: Part) -> None: ...
+    def ask_again(self, peer: int) -> None: ...
+    def save(self, saved: ShardSave) -> None: ...  # durable before anything of the next tick goes out
+
+
+class ShardLockstep(Lockstep):
+    """Shard ``shard.index``'s lockstep (see the module's docstring); the port of its own exchange."""
+
+    def __init__(
+        self,
+        shard: WorldShard,
+        node_name: str,
+        policy: Policy,
+        port: ShardNodePort,
+        logger: Logger,
+        rejections: Rejections,
+        clock: Callable[[], float] = time.monotonic,
+        created: float | None = None,
+    ) -> None:
+        self.exchange = ShardExchange(shard, self, rejections)
+        super().__init__(ShardSim(self.exchange), policy, port, logger, rejections, clock, created)  # type: ignore[arg-type]
+        self.shard, self.node_name, self.shard_port = shard, node_name, port
+        self.hosting = self.own_hosting = ShardHosting(shard.plan.radius, shard.params.vision_radius, shard.strip)
+        self.inflight: tuple[int, np.ndarray] | None = None  # (tick, applied rows) handed to the exchange
+        self.removing = np.empty(0, dtype=np.int64)  # the pending robots removed at the in-flight tick's end
+        self.ring: dict[int, tuple[np.ndarray, np.ndarray | None, bool]] = {}
+        self.exchange_saved: ExchangeSaved | None = None
+        self.deferred: list[tuple[int, str]] = []  # batches to remove once the in-flight tick is closed
+
+    # -- admission ------------------------------------------------------------------
+    def announce(self, name: str, incarnation: int, strip: tuple[int, int]) -> None:
+        """As :meth:`Lockstep.announce`, for a batch in this shard's strips; another shard's is not this one's."""
+        if name in self.batch_names or self.own_hosting.holds(strip):
+            super().announce(name, incarnation, strip)
+
+    def maybe_start(self) -> None:
+        """Tick 0 once this shard's batches host its strips and the monitor is there (as the world starts)."""
+        if self.started or self.hosting.covered() < self.hosting.width:
+            return
+        if self.window and not (self.monitor_alive and self.port.monitor_reads_all()) and MONITOR not in self.lost:
+            if self.clock() - self.created < FIRST_STALL_S:
+                return
+            self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s")
+        self.started, self.start_time, self.started_wall = True, self.clock(), time.time()
+        self.startup_seconds = self.port.startup_seconds()
+        self.log.info(f"{self.node_name}: its strips hosted by {len(self.batch_names)} batches: tick 0")
+        rows = state_rows(self._own_at_zero(), self.sim.state)
+        self.ring[0] = (rows, None, False)
+        self._save()
+        for k in range(len(self.batch_names)):
+            self._send_snapshot(k)
+        self._emit(0, rows, False, None, None, save=False)
+
+    def _own_at_zero(self) -> np.ndarray:
+        """The robots this shard reports at tick 0: every one standing in its strips."""
+        s = self.sim.state
+        known = np.flatnonzero(s.state != UNKNOWN)
+        return known[self._in_strips(s.x[known])]
+
+    def _in_strips(self, x: np.ndarray) -> np.ndarray:
+        cols = columns(x, self.shard.plan.radius)
+        return (cols >= self.shard.strip[0]) & (cols <= self.shard.strip[1])
+
+    def _send_snapshot(self, k: int, rows: np.ndarray | None = None) -> None:
+        """Batch ``k``'s region at the last tick closed, from the shard's replica (which holds it)."""
+        s = self.sim.state
+        rows = state_rows(np.flatnonzero(s.state != UNKNOWN), s)
+        self.port.send_snapshot(k, self.sim.tick, snapshot(rows, self.hosting.area(k), self.hosting.radius))
+
+    # -- ticks ----------------------------------------------------------------------
+    def decisions(self, k: int, tick: int, rows: np.ndarray) -> None:
+        """As :meth:`Lockstep.decisions`; those of the tick being closed with the peers are repeats."""
+        if self.inflight is not None and tick == self.inflight[0]:
+            return
+        super().decisions(k, tick, rows)
+
+    def _maybe_advance(self, tick: int) -> None:
+        """Hand the tick to the exchange once every own moving robot not being removed has decided (one at a
+        time: the next once this one is closed)."""
+        if self.inflight is not None or not self.started or self.sim.done or self.queued:
+            return
+        expected = self.shard.own_moving().size - len(self._standing()) - len(self._orphans())
+        if self.received > expected:
+            raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
+        if self.received == expected:
+            self._advance(self.sim.tick + 1)
+
+    def _advance(self, tick: int) -> None:
+        s = self.sim.state
+        parts = [decisions_of(tick, r) for r in self.parts]
+        standing = self._standing()
+        if standing.size:
+            parts.append(Decisions.standing(s, standing, tick))
+        orphans = self._orphans()
+        if orphans.size:
+            parts.append(self.decider.decide(s, orphans, tick))
+        decisions = Decisions.concatenate(parts) if parts else Decisions.standing(s, np.empty(0, np.int64), tick)
+        self.parts, self.received = [], 0
+        self.decided[decisions.ids] = False
+        self.inflight = (tick, decision_rows(decisions))
+        self.removing = self.pending
+        try:
+            self.exchange.own_decisions(decisions, self.pending if self.pending.size else None)
+        except ContractError as exc:
+            raise RunFailed(f"{self.node_name}, tick {tick}: {exc}") from None
+
+    # -- the exchange's port --------------------------------------------------------
+    def send_claims(self, peer: int, tick: int, claims: Decisions) -> None:
+        self.shard_port.send_claims(peer, tick, claims)
+
+    def send_part(self, peer: int, tick: int, part: Part) -> None:
+        self.shard_port.send_part(peer, tick, part)
+
+    def ask_again(self, peer: int) -> None:
+        self.shard_port.ask_again(peer)
+
+    def closed(self, tick: int, part: Part, saved: ExchangeSaved) -> None:
+        """Tick ``tick`` is closed: save, then publish this shard's part of it (and go on to the next)."""
+        shard, s = self.shard, self.sim.state
+        assert self.inflight is not None and self.inflight[0] == tick  # the exchange closes what it was given
+        applied = self.inflight[1]
+        self.inflight, self.exchange_saved = None, saved
+        if self.removing.size:
+            self.log.warn(f"tick {tick}: removed the {self.removing.size} robots of lost batches")
+            self.pending = np.setdiff1d(self.pending, self.removing)
+            self.removing = np.empty(0, dtype=np.int64)
+        gone = shard.gone_stationary
+        rows = state_rows(np.union1d(part.ids, gone[self._in_strips(s.x[gone])]), s)  # the monitor's: no overlap
+        received = shard.received
+        ids = [part.ids, gone] + ([received.ids] if received is not None else [])
+        before = [part.before, columns(s.x[gone], shard.plan.radius)] + (
+            [received.before] if received is not None else []
+        )
+        every, at = np.unique(np.concatenate(ids), return_index=True)
+        cols = np.concatenate(before)[at]
+        areas = [self.hosting.area(k) for k in range(len(self.batch_names))]
+        regional = route(self._region_rows(every, received), cols, areas, self.hosting.radius)
+        h = shard.history
+        joined = gone.size > 0 or len(h) < 2 or h[-1][_LOCALIZED] != h[-2][_LOCALIZED] or bool(part.removing.size)
+        self.ring[tick] = (rows, applied, joined)
+        self._forget_confirmed()
+        self._save()
+        if gone.size or part.removing.size or (received is not None and received.removing.size):
+            self.save_book()
+        self.queued.append((tick, rows, joined, applied, regional))
+        for k, why in self.deferred:  # batches lost while the tick was with the peers: their robots as they are now
+            super()._remove_batch(k, why)
+        self.deferred = []
+        self._flush()  # and on to the next tick
+
+    def _region_rows(self, ids: np.ndarray, received: Part | None) -> np.ndarray:
+        """The rows of robots ``ids`` after the tick: from the replica, or, for a peer's robot that left this
+        shard's area in the tick (forgotten by the replica), from the peer's part."""
+        rows = state_rows(ids, self.sim.state)
+        gone = np.flatnonzero(self.sim.state.state[ids] == UNKNOWN)
+        if gone.size and received is not None:
+            order = np.argsort(received.ids)
+            at = order[np.searchsorted(received.ids, ids[gone], sorter=order)]
+            solid = (received.z, received.pitch) if received.z.size else (None, None)
+            rows[gone] = robot_rows(at, received.state, received.x, received.y, received.heading, *solid)
+            rows["id"][gone] = ids[gone]
+        return rows
+
+    def _forget_confirmed(self) -> None:
+        """The ticks the monitor confirmed need not be published again by a restarted process."""
+        for old in [t for t in self.ring if t <= self.monitor_tick and t != self.sim.tick]:
+            del self.ring[old]
+
+    def _remove_batch(self, k: int, why: str) -> None:
+        """As :meth:`Lockstep._remove_batch`, between ticks: while a tick is with the peers, its robots may still
+        cross into another shard's strips, so the removal waits for the tick's close."""
+        if self.inflight is not None:
+            self.deferred.append((k, why))
+        else:
+            super()._remove_batch(k, why)
+
+    def check_stalls(self, now: float) -> None:
+        """As :meth:`Lockstep.check_stalls`; while the tick is with the peers, the batches are not waited for (a
+        peer that never answers stops the run after ``STILL_S``; its process is restarted by the launcher)."""
+        if self.inflight is not None:
+            self.progress_at = now
+        super().check_stalls(now)
+
+    def poll(self) -> None:
+        """As :meth:`Lockstep.poll`; and a shard whose own robots are none goes on by itself."""
+        super().poll()
+        self._maybe_advance(self.sim.tick + 1)
+
+    def _flush(self) -> None:
+        super()._flush()
+        if not self.queued:
+            self._maybe_advance(self.sim.tick + 1)
+
+    # -- saves ----------------------------------------------------------------------
+    def save_book(self) -> None:
+        if self.started:
+            self._save()
+
+    def _save(self) -> None:
+        if self.exchange_saved is None:
+            self.exchange_saved = ExchangeSaved(self.shard.saved(), {})
+        self.shard_port.save(
+            ShardSave(self.exchange_saved, self.book(), self.pending.copy(), dict(self.ring), self.monitor_tick)
+        )
+
+    def restore(self, saved: ShardSave, incarnation: int) -> None:  # type: ignore[override]
+        """Go on from ``saved`` (a process of this shard before this one wrote it): its exchange sends its peers
+        the kept messages again and asks for theirs, its batches get a snapshot, the monitor the ticks it has
+        not confirmed."""
+        b = saved.book
+        self.exchange.restore(saved.exchange)
+        self.exchange_saved = saved.exchange
+        self.batch_names = list(b["batches"])
+        self.hosting.restore(b["strips"])
+        self.restart_counts, self.incarnations = list(b["restart_counts"]), list(b["incarnations"])
+        self.known = dict(enumerate(self.incarnations))
+        self.restarts = [(int(t), str(n)) for t, n in b["restarts"]]
+        tick = self.sim.tick
+        before = sum(n == self.node_name for _, n in self.restarts)
+        self.restarts += [(tick, self.node_name)] * max(1, incarnation - before)
+        self.lost, self.removed_batches = list(b["lost"]), set(b["removed_batches"])
+        self.monitor_nonce = str(b["monitor_nonce"])
+        self.started, self.restored = True, True
+        self.started_wall = float(b["started_wall"])
+        self.start_time = self.clock() - max(0.0, time.time() - self.started_wall)
+        self.startup_seconds = float(b["startup_seconds"])
+        self.monitor_tick = saved.monitor_tick
+        self.pending = np.asarray(saved.pending, dtype=np.int64)
+        self.ring = dict(saved.ring)
+        if MONITOR in self.lost:
+            self.window = 0
+        for k, name in enumerate(self.batch_names):
+            self.port.watch_batch(k, name)
+        for j in self.exchange.peers:
+            self.shard_port.ask_again(j)
+        self.log.warn(f"{self.node_name} restarted: going on from tick {tick} of its save")
+        self._save()
+        for k in range(len(self.batch_names)):
+            if k not in self.removed_batches:
+                self._send_snapshot(k)
+        for t in sorted(t for t in self.ring if t > self.monitor_tick or t == tick):
+            rows, applied, joined = self.ring[t]
+            self.queued.append((t, rows, joined, applied, None))
+        self._flush()
+        self.publish_status()

@@ -1,0 +1,257 @@
+"""World shards' coordination (swarm_ros.protocol.shard_lockstep) driven by method calls over fake channels: S
+shard locksteps, the robot batches of their strips (each following its region from snapshots and region rows, as
+a batch process does), and a monitor that joins the S parts of each tick. Channels deliver in order, in a random
+interleaving; a shard process may be killed at any moment and restarted from its last save. Every run must be
+the in-process engine's, tick for tick, as the monitor counts it and as every shard holds it."""
+
+from __future__ import annotations
+
+import pickle
+import random
+from collections import defaultdict, deque
+
+import numpy as np
+import pytest
+from helpers import Clock, Log
+
+from swarm_ros.core.engine import Simulation
+from swarm_ros.core.metrics import tick_metrics
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.regions import area, batch_cuts, columns, halo, shard_batches, shard_cuts, strip
+from swarm_ros.core.replica import Replica
+from swarm_ros.core.rules import Decider
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.shards import ShardPlan, WorldShard
+from swarm_ros.core.state import STATE_COUNT
+from swarm_ros.protocol.checks import Rejections, apply_robots
+from swarm_ros.protocol.plan import batch_name
+from swarm_ros.protocol.rows import decision_rows, pose_of
+from swarm_ros.protocol.shard_lockstep import ShardLockstep
+from swarm_ros.protocol.world_port import Policy
+
+pytestmark = pytest.mark.unit
+
+
+class Batch:
+    """A robot batch as its process behaves: a regional replica fed by its shard, decisions from it."""
+
+    def __init__(self, graph: ShardedGraph, k: int) -> None:
+        self.g, self.k = graph, k
+        self.strip = graph.strips[k]
+        width = 2 * graph.shape.world.radius + 1
+        self.area = area(self.strip, halo(graph.params.vision_radius), width)
+        self.replica = Replica(graph.shape, graph.params.robots, area=self.area)
+        self.decider = Decider(graph.shape, graph.params)
+        self.sent: deque = deque(maxlen=256)  # its decisions topic's history (TRANSIENT_LOCAL, depth 256)
+
+    def snapshot(self, tick: int, rows: np.ndarray) -> None:
+        if tick <= self.replica.tick:
+            return
+        self.replica.load(tick, rows["id"], rows["state"], **pose_of(rows))
+        self.decide()
+
+    def region(self, tick: int, rows: np.ndarray) -> None:
+        if tick != self.replica.tick + 1:
+            return  # before its snapshot, or again
+        apply_robots(self.replica, tick, rows)
+        self.decide()
+
+    def decide(self) -> None:
+        moving = self.replica.moving_ids()
+        cols = columns(self.replica.state.x[moving], self.g.shape.world.radius)
+        own = moving[(cols >= self.strip[0]) & (cols <= self.strip[1])]
+        if own.size:
+            tick = self.replica.tick + 1
+            rows = decision_rows(self.decider.decide(self.replica.state, own, tick, moving))
+            self.sent.append((tick, rows))
+            self.publish(tick, rows)
+
+    def publish(self, tick: int, rows: np.ndarray) -> None:
+        s = self.g.shard_of[self.k]
+        ls = self.g.shards[s]
+        self.g.send(("decisions", self.k), lambda: ls.decisions(ls.batch_names.index(batch_name(self.k)), tick, rows))
+
+
+class Port:
+    """Shard ``s``'s node, as the fake channels see it."""
+
+    def __init__(self, graph: ShardedGraph, s: int) -> None:
+        self.g, self.s = graph, s
+        self.saved: bytes | None = None
+        self.batch_of: dict[int, int] = {}  # the shard's batch number -> the run's
+
+    def watch_batch(self, k, name):
+        self.batch_of[k] = int(name.rsplit("_", 1)[1])
+
+    def send_snapshot(self, k, tick, rows):
+        b = self.g.batches[self.batch_of[k]]
+        self.g.send(("batch", b.k), lambda: b.snapshot(tick, rows))
+
+    def publish_tick(self, tick, rows, joined, applied, regional):
+        for k, part in enumerate(regional or ()):
+            b = self.g.batches[self.batch_of[k]]
+            self.g.send(("batch", b.k), lambda b=b, part=part: b.region(tick, part))
+        self.g.send(("monitor", self.s), lambda: self.g.monitor_rows(self.s, tick, rows))
+
+    def publish_status(self, status):
+        self.g.statuses[self.s] = status
+
+    def monitor_reads_all(self):
+        return True
+
+    def delivered(self):
+        return True
+
+    def startup_seconds(self):
+        return 0.5
+
+    def send_claims(self, peer, tick, claims):
+        self.g.send(("claims", self.s, peer), lambda: self.g.shards[peer].exchange.peer_claims(self.s, tick, claims))
+
+    def send_part(self, peer, tick, part):
+        self.g.send(("part", self.s, peer), lambda: self.g.shards[peer].exchange.peer_part(self.s, tick, part))
+
+    def ask_again(self, peer):
+        self.g.send(("again", self.s, peer), lambda: self.g.shards[peer].exchange.resend(self.s))
+
+    def save(self, saved):
+        self.saved = pickle.dumps(saved)
+
+
+class ShardedGraph:
+    def __init__(self, shape: Shape, params: RunParams, batches: int, shards: int, seed: int, window: int = 3):
+        self.shape, self.params, self.rng = shape, params, random.Random(seed)
+        radius = shape.world.radius
+        cuts = batch_cuts(shape, params, batches)
+        self.strips = [strip(k, batches, cuts, radius) for k in range(batches)]
+        self.plan = ShardPlan(radius, params.vision_radius, shard_cuts(cuts, shards, batches))
+        self.members = [list(shard_batches(s, shards, batches)) for s in range(shards)]
+        self.shard_of = {k: s for s, ks in enumerate(self.members) for k in ks}
+        self.channels: dict[tuple, deque] = defaultdict(deque)
+        self.statuses: dict[int, object] = {}
+        self.clock, self.log = Clock(), Log()
+        self.policy = Policy(monitor_window=window)
+        self.ports = [Port(self, s) for s in range(shards)]
+        self.incarnations = [0] * shards
+        self.shards = [self.make(s) for s in range(shards)]
+        self.batches = [Batch(self, k) for k in range(batches)]
+        self.replica = Replica(shape, params.robots)  # the monitor's
+        self.parts: dict[int, dict[int, np.ndarray]] = defaultdict(dict)
+        self.history: list[tuple[int, ...]] = []
+        self.restarts = 0
+
+    def make(self, s: int) -> ShardLockstep:
+        shard = WorldShard(self.shape, self.params, self.plan, s)
+        return ShardLockstep(
+            shard, f"world_shard_{s}", self.policy, self.ports[s], self.log, Rejections(self.log), clock=self.clock
+        )
+
+    def send(self, channel: tuple, deliver) -> None:
+        self.channels[channel].append(deliver)
+
+    def monitor_rows(self, s: int, tick: int, rows: np.ndarray) -> None:
+        if tick <= self.replica.tick:
+            return  # again: a restarted shard publishes the ticks not confirmed
+        self.parts[tick][s] = rows
+        while len(self.parts.get(self.replica.tick + 1, {})) == len(self.shards):
+            t = self.replica.tick + 1
+            joined = np.concatenate(list(self.parts.pop(t).values()))
+            joined = joined[np.argsort(joined["id"], kind="stable")]
+            assert not (np.diff(joined["id"].astype(np.int64)) == 0).any(), "two shards reported one robot"
+            apply_robots(self.replica, t, joined)
+            counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
+            self.history.append(tuple(int(v) for v in tick_metrics(t, counts, self.shape.patches)))
+            for j in range(len(self.shards)):
+                self.send(("metrics", j), lambda j=j, t=t: self.shards[j].metrics(t, "monitor-1"))
+
+    def start(self) -> None:
+        for ls in self.shards:
+            ls.monitor_liveliness(1, 0)
+        order = list(range(len(self.batches)))
+        self.rng.shuffle(order)
+        for k in order:
+            b = self.batches[k]
+            for ls in self.shards:  # every shard hears every announcement; each admits its own
+                ls.announce(batch_name(k), 0, b.strip)
+
+    def kill(self, s: int) -> None:
+        """Shard ``s``'s process dies; a new one goes on from its save (what was on its way to it is lost)."""
+        saved = self.ports[s].saved
+        if saved is None:
+            return
+        for channel in list(self.channels):
+            to_it = channel[2] == s if channel[0] in ("claims", "part", "again") else channel[1] == s
+            if channel[0] in ("claims", "part", "again", "metrics") and to_it:
+                self.channels[channel].clear()
+            if channel[0] == "decisions" and self.shard_of[channel[1]] == s:
+                self.channels[channel].clear()
+        self.incarnations[s] += 1
+        self.shards[s] = ls = self.make(s)
+        ls.monitor_liveliness(1, 0)
+        ls.restore(pickle.loads(saved), self.incarnations[s])
+        self.restarts += 1
+        if self.replica.tick >= 0:  # the new process's readers get the writers' histories (metrics: depth 64)
+            self.send(("metrics", s), lambda t=self.replica.tick: ls.metrics(t, "monitor-1"))
+        for b in self.batches:
+            if self.shard_of[b.k] == s:
+                ls.announce(batch_name(b.k), 0, b.strip)
+                for tick, rows in b.sent:
+                    b.publish(tick, rows)
+
+    def run(self, kill_every: int = 0, limit: int = 200_000) -> None:
+        for _ in range(limit):
+            if all(ls.sim.done for ls in self.shards) and self.replica.tick == self.shards[0].sim.tick:
+                return
+            busy = [c for c, q in self.channels.items() if q]
+            if not busy:
+                for ls in self.shards:
+                    ls.poll()
+                if not any(q for q in self.channels.values()):
+                    raise AssertionError(f"stalled at ticks {[ls.sim.tick for ls in self.shards]}")
+                continue
+            if kill_every and self.rng.randrange(kill_every) == 0:
+                self.kill(self.rng.randrange(len(self.shards)))
+                continue
+            self.channels[self.rng.choice(busy)].popleft()()
+        raise AssertionError("did not end")
+
+
+CASES = [  # (robots, batches, shards, seed)
+    (60, 2, 2, 1),
+    (200, 4, 2, 2),
+    (200, 4, 4, 3),
+    (300, 6, 3, 4),
+]
+
+
+@pytest.mark.parametrize(("robots", "batches", "shards", "seed"), CASES)
+def test_a_run_over_shards_is_the_engines_run(robots, batches, shards, seed):
+    shape = Shape.load("star")
+    params = RunParams(robots=robots, seed=seed, max_ticks=300)
+    g = ShardedGraph(shape, params, batches, shards, seed)
+    g.start()
+    g.run()
+    ref = Simulation(shape, params)
+    ref.run()
+    assert g.history == [tuple(int(v) for v in row) for row in ref.history]
+    for ls in g.shards:
+        assert ls.sim.history == [tuple(int(v) for v in row) for row in ref.history]
+        assert ls.sim.outcome == ref.outcome
+    assert np.array_equal(g.replica.state.state, ref.state.state)
+    assert np.array_equal(g.replica.state.x, ref.state.x) and np.array_equal(g.replica.state.y, ref.state.y)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_shards_killed_at_any_moment_go_on_from_their_saves(seed):
+    shape = Shape.load("star")
+    params = RunParams(robots=200, seed=seed, max_ticks=200, fail_fraction=0.05, fail_tick=20)
+    g = ShardedGraph(shape, params, 4, 1 + seed % 3 + 1, seed)
+    g.start()
+    g.run(kill_every=150)
+    ref = Simulation(shape, params)
+    ref.run()
+    assert g.restarts >= 2
+    assert g.history == [tuple(int(v) for v in row) for row in ref.history]
+    assert np.array_equal(g.replica.state.state, ref.state.state)
+    restarts = sum(len([r for r in ls.restarts if r[1].startswith("world_shard")]) for ls in g.shards)
+    assert restarts >= 1
