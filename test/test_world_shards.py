@@ -1,0 +1,68 @@
+"""World shards over the ROS 2 graph (``swarm-ros run --world-shards S``): the run is simulate's, byte for byte,
+its bag holds every tick's S parts, and a world shard SIGKILLed in the middle of the run is restarted from its
+save and changes nothing the run writes but ``restarts``."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from helpers import STAR_LOCAL, finish_restarted_run, node_pid, run_env, wait_ticks_recorded
+
+from swarm_ros.app import cli
+
+pytestmark = pytest.mark.process
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("shards-ref") / "ref"
+    assert cli.main(["simulate", *STAR_LOCAL, "--out", str(out), "--quiet", "--no-recording"]) == 0
+    return out
+
+
+def _launch(out: Path, shards: int, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "swarm_ros", "run", *STAR_LOCAL, "--processes", "4", "--world-shards", str(shards)]
+        + ["--out", str(out), "--quiet", *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=run_env(),
+    )
+
+
+def test_a_run_over_three_world_shards_is_simulates(tmp_path):
+    small = ["--robots", "300", "--seed", "3"]
+    reference = tmp_path / "ref"
+    assert cli.main(["simulate", *small, "--out", str(reference), "--quiet", "--no-recording"]) == 0
+    out = tmp_path / "run"
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "swarm_ros", "run", *small, "--processes", "4", "--world-shards", "3"]
+        + ["--out", str(out), "--quiet", "--no-recording"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=run_env(),
+    )
+    summary = finish_restarted_run(launcher, reference, out, [])
+    assert summary["engine"] == "ros2"
+    logs = sorted(p.name for p in (out / "logs").glob("world_shard_*.log"))
+    assert logs == ["world_shard_0.log", "world_shard_1.log", "world_shard_2.log"]
+    assert not (out / "logs" / "world.log").exists()
+
+
+def test_a_world_shard_killed_mid_run_goes_on_from_its_save(reference, tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, 2)
+    wait_ticks_recorded(out, 400_000)
+    os.kill(node_pid(out, "world_shard_1"), signal.SIGKILL)
+    summary = finish_restarted_run(launcher, reference, out, ["world_shard_1"])
+    [restart] = summary["restarts"]
+    assert 0 < restart["tick"] < summary["convergence_tick"]
+    log = (out / "logs" / "world_shard_1.log").read_text()
+    assert "world_shard_1 restarted: going on from tick" in log
