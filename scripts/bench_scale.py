@@ -22,6 +22,7 @@ machine every process of a K = 8 graph shares two cores, so each one's CPU per t
 contention: the projection says what the code's per-process work allows, not what this machine shows.
 
     .venv/bin/python scripts/bench_scale.py [--robots 10000 50000] [--processes 1 2 4] [--ticks 300] [--bare]
+        [--world-shards S]
         [--repeats 3] [--projection]
 """
 
@@ -130,6 +131,11 @@ def _spread(values: list[float]) -> str:
     return f"{statistics.median(values):.2f} ({min(values):.2f}-{max(values):.2f})"
 
 
+def label(k: int, world_shards: int) -> str:
+    """A graph run's row label: its K, and its S if it has world shards."""
+    return f"ROS 2 graph, K = {k}" + f", S = {min(world_shards, k)}" * (world_shards > 1)
+
+
 def scale(
     sizes: list[int],
     processes: list[int],
@@ -139,6 +145,7 @@ def scale(
     repeats: int = 1,
     bare: bool = False,
     projection: bool = False,
+    world_shards: int = 1,
 ) -> None:
     extra = ["--no-recording"] if bare else []  # simulate writes no bag
     graph_extra = ["--no-bag"] if bare else []
@@ -172,14 +179,15 @@ def scale(
             out = tmp / f"run{robots}-{k}"
             runs, whole, cpus = [], [], []
             for _ in range(repeats):
-                whole.append(_swarm(["run", *common, *graph_extra, "--processes", str(k), "--out", str(out)]))
+                shards = ["--world-shards", str(min(world_shards, k))]
+                whole.append(_swarm(["run", *common, *graph_extra, "--processes", str(k), *shards, "--out", str(out)]))
                 runs.append(json.loads((out / "summary.json").read_text())["wall_seconds"])
                 cpus.append(node_cpu(out / "logs", ticks))
             medians[k] = statistics.median(runs)
             cpu_ms = {node: statistics.median(c[node] for c in cpus if node in c) for node in cpus[-1]}
             cpu = ", ".join(f"{node} {ms:.1f}" for node, ms in cpu_ms.items())
             print(
-                f"{f'ROS 2 graph, K = {k}':<22} {_spread(runs):>18} {_spread(whole):>18} "
+                f"{label(k, world_shards):<22} {_spread(runs):>18} {_spread(whole):>18} "
                 f"{medians[k] / sim_run:>13.1f}x   {cpu}"
             )
             traffic[k] = received(out / "logs", ticks)
@@ -223,6 +231,7 @@ def main() -> None:
         action="store_true",
         help="also project the tick on K hosts from each process's CPU and the transport's part",
     )
+    parser.add_argument("--world-shards", type=int, default=1, help="world shards S of every graph run (at most its K)")
     args = parser.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_bare
     with tempfile.TemporaryDirectory() as tmp:
@@ -234,6 +243,7 @@ def main() -> None:
             repeats=args.repeats,
             bare=args.bare,
             projection=args.projection,
+            world_shards=args.world_shards,
         )
 
 

@@ -8,8 +8,8 @@ peer's claims are in too, and the tick once every peer's part is in. A message o
 repeat and is ignored; one of the next tick is kept for when it is due. What it sent for the last two ticks it
 keeps, so that a peer's restarted process, which goes on from its last save (:meth:`WorldShard.saved`), gets
 them again (:meth:`resend`). A part that fails its checks is dropped and counted; the tick waits for the
-genuine one, which it asks the peer for again. Nothing here knows of ROS: the graph's world shard node will
-turn topics into these calls (not built yet: docs/operations.md, "At scale").
+genuine one, which it asks the peer for again. Nothing here knows of ROS: the graph's world shard node
+(:mod:`swarm_ros.nodes.world_shard`) turns topics into these calls.
 """
 
 from __future__ import annotations

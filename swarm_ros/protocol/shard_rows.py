@@ -1,6 +1,6 @@
 """The messages world shards send each other, as standard message payloads (numpy here; no ROS).
 
-A world shard's node (not built yet: docs/operations.md, "World shards") will send, each tick:
+A world shard's node (:mod:`swarm_ros.nodes.world_shard`) sends, each tick:
 
 * its robots' claims on a peer's window: ``sensor_msgs/PointCloud2`` of decision rows
   (:data:`~swarm_ros.protocol.rows.DECISION_ROW`), the layout a batch's decisions take;
