@@ -53,7 +53,8 @@ class _Batches:
         from swarm_ros.core.rules import Decider
         from swarm_ros.protocol.checks import Rejections
         from swarm_ros.ros import graph as msgs
-        from swarm_ros.ros.auth import Gate, Signer
+        from swarm_ros.protocol.tag import Sealer
+        from swarm_ros.ros.auth import Gate, SignedPublisher, Signer
 
         self.msgs, self.node, self.params, self.shape = msgs, node, params, shape
         self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
@@ -68,7 +69,9 @@ class _Batches:
         ]
         self.alive = [node.create_publisher(Empty, msgs.alive_topic(n), msgs.ALIVE_QOS) for n in self.names]
         self.announce = [signer.publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS) for signer in signers]
-        self.intruder = Signer(node, key, "intruder").publisher(msgs.Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)
+        # a key holder's announcements on the last batch's writer: DDS keeps one writer's order, so the world
+        # hears the genuine batches first (from two writers, the intruder's could come first and take its columns)
+        self.intruder = SignedPublisher(Sealer(key, "intruder"), self.announce[-1].pub, msgs.BATCHES)
         self.robots_pub = Signer(node, key, "world").publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
         self.metrics_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         # an outsider's: well-formed messages without a valid tag
