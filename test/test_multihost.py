@@ -214,3 +214,25 @@ def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts,
         got = after["rx"]["bytes"] - before[i]["rx"]["bytes"]
         assert sent > DECISION_ROW.itemsize * math.floor(robots / 8), (i, sent)
         assert got > ROBOT_ROW.itemsize * math.floor(robots / 8), (i, got)
+
+
+def test_four_hosts_each_with_a_world_shard_and_its_batch_equal_the_in_process_engine(four_hosts, tmp_path):
+    """Four strips, four world shards: host i runs robot batch i and world shard i, which owns its strip (host 0
+    also the monitor). The world's checks and apply happen on every host, the shards settle the claims near
+    their borders over the links, and the run equals ``simulate``'s, byte for byte."""
+    hosts, links = four_hosts
+    shape = shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
+    settings = Settings(shape=str(shape), robots=440, seed=7, world_radius=16, rules="local")
+    flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "7", "--robots", "440", "--rules", "local"]
+    ref = tmp_path / "ref"
+    assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
+    shards = [
+        (i, f"world_shard_{i}", "world_shard", ["-p", f"shard:={i}", "-p", "shards:=4", "-p", "batches:=4"])
+        for i in range(4)
+    ]
+    monitor = (0, "monitor", "monitor", ["-p", "world_shards:=4"])
+    run = _run_on_hosts(tmp_path, hosts, links, settings, [*shards, monitor, *_batches([0, 1, 2, 3], 4)], 150)
+    for i in range(4):
+        log = (tmp_path / f"world_shard_{i}.log").read_text()
+        assert f"robot_batch_{i} hosts" in log and "tick 0" in log, log[-2000:]
+    assert_same_run(ref, run, launched=False)
