@@ -52,8 +52,8 @@ class _Batches:
         from swarm_ros.core.replica import Replica
         from swarm_ros.core.rules import Decider
         from swarm_ros.protocol.checks import Rejections
-        from swarm_ros.ros import graph as msgs
         from swarm_ros.protocol.tag import Sealer
+        from swarm_ros.ros import graph as msgs
         from swarm_ros.ros.auth import Gate, SignedPublisher, Signer
 
         self.msgs, self.node, self.params, self.shape = msgs, node, params, shape

@@ -6,7 +6,6 @@ the in-process engine's, tick for tick, as the monitor counts it and as every sh
 
 from __future__ import annotations
 
-import pickle
 import random
 from collections import defaultdict, deque
 
@@ -27,6 +26,7 @@ from swarm_ros.protocol.checks import Rejections, apply_robots
 from swarm_ros.protocol.plan import batch_name
 from swarm_ros.protocol.rows import decision_rows, pose_of
 from swarm_ros.protocol.shard_lockstep import ShardLockstep
+from swarm_ros.protocol.shard_save import ShardSaver
 from swarm_ros.protocol.world_port import Policy
 
 pytestmark = pytest.mark.unit
@@ -77,7 +77,9 @@ class Port:
 
     def __init__(self, graph: ShardedGraph, s: int) -> None:
         self.g, self.s = graph, s
-        self.saved: bytes | None = None
+        g = graph
+        self.saver = ShardSaver(g.folder / f"shard{s}", g.params, g.plan, s, g.policy.monitor_window + 2, 2)
+        self.saver.create()
         self.batch_of: dict[int, int] = {}  # the shard's batch number -> the run's
 
     def watch_batch(self, k, name):
@@ -114,13 +116,18 @@ class Port:
     def ask_again(self, peer):
         self.g.send(("again", self.s, peer), lambda: self.g.shards[peer].exchange.resend(self.s))
 
-    def save(self, saved):
-        self.saved = pickle.dumps(saved)
+    def save_tick(self, tick, rows, published, applied, metrics, sent):
+        self.saver.write_tick(tick, rows, published, applied, metrics, sent)
+
+    def save_book(self, book):
+        self.saver.save_book(book)
 
 
 class ShardedGraph:
-    def __init__(self, shape: Shape, params: RunParams, batches: int, shards: int, seed: int, window: int = 3):
-        self.shape, self.params, self.rng = shape, params, random.Random(seed)
+    def __init__(
+        self, shape: Shape, params: RunParams, batches: int, shards: int, seed: int, folder, window: int = 3
+    ) -> None:
+        self.shape, self.params, self.rng, self.folder = shape, params, random.Random(seed), folder
         radius = shape.world.radius
         cuts = batch_cuts(shape, params, batches)
         self.strips = [strip(k, batches, cuts, radius) for k in range(batches)]
@@ -176,7 +183,9 @@ class ShardedGraph:
 
     def kill(self, s: int) -> None:
         """Shard ``s``'s process dies; a new one goes on from its save (what was on its way to it is lost)."""
-        saved = self.ports[s].saved
+        port = self.ports[s]
+        port.saver = ShardSaver(port.saver.path, self.params, self.plan, s, self.policy.monitor_window + 2, 2)
+        saved = port.saver.restore()
         if saved is None:
             return
         for channel in list(self.channels):
@@ -188,7 +197,7 @@ class ShardedGraph:
         self.incarnations[s] += 1
         self.shards[s] = ls = self.make(s)
         ls.monitor_liveliness(1, 0)
-        ls.restore(pickle.loads(saved), self.incarnations[s])
+        ls.restore(saved, self.incarnations[s])
         self.restarts += 1
         if self.replica.tick >= 0:  # the new process's readers get the writers' histories (metrics: depth 64)
             self.send(("metrics", s), lambda t=self.replica.tick: ls.metrics(t, "monitor-1"))
@@ -225,10 +234,10 @@ CASES = [  # (robots, batches, shards, seed)
 
 
 @pytest.mark.parametrize(("robots", "batches", "shards", "seed"), CASES)
-def test_a_run_over_shards_is_the_engines_run(robots, batches, shards, seed):
+def test_a_run_over_shards_is_the_engines_run(robots, batches, shards, seed, tmp_path):
     shape = Shape.load("star")
     params = RunParams(robots=robots, seed=seed, max_ticks=300)
-    g = ShardedGraph(shape, params, batches, shards, seed)
+    g = ShardedGraph(shape, params, batches, shards, seed, tmp_path)
     g.start()
     g.run()
     ref = Simulation(shape, params)
@@ -242,10 +251,10 @@ def test_a_run_over_shards_is_the_engines_run(robots, batches, shards, seed):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_shards_killed_at_any_moment_go_on_from_their_saves(seed):
+def test_shards_killed_at_any_moment_go_on_from_their_saves(seed, tmp_path):
     shape = Shape.load("star")
     params = RunParams(robots=200, seed=seed, max_ticks=200, fail_fraction=0.05, fail_tick=20)
-    g = ShardedGraph(shape, params, 4, 1 + seed % 3 + 1, seed)
+    g = ShardedGraph(shape, params, 4, 1 + seed % 3 + 1, seed, tmp_path)
     g.start()
     g.run(kill_every=150)
     ref = Simulation(shape, params)

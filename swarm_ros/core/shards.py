@@ -145,6 +145,13 @@ class WorldShard:
     def state(self) -> SwarmState:
         return self.replica.state
 
+    @property
+    def removed(self) -> np.ndarray:
+        """Whether each robot was removed so far (read only)."""
+        view = self._removed.view()
+        view.flags.writeable = False
+        return view
+
     def saved(self) -> ShardSaved:
         """What a restarted process of this shard needs to go on from the tick closed last (:meth:`restore`)."""
         s = self.state

@@ -153,8 +153,11 @@ class WorldNode:
             return
         tag = self.gate.last_tag  # the tag of this message, which the gate proved
         self.ls.metrics(tick, tag.nonce if tag is not None else "")
+        self._monitor_reported(self.ls.monitor_tick)
+
+    def _monitor_reported(self, tick: int) -> None:
         if self.saver is not None:
-            self.saver.monitor_reported(self.ls.monitor_tick)
+            self.saver.monitor_reported(tick)
 
     def _watch(self, topic: str, on_change) -> None:
         self.node.create_subscription(

@@ -15,15 +15,13 @@ proves it and it passes its checks; one that fails is dropped whole and counted.
 from __future__ import annotations
 
 import functools
-import os
-import pickle
 from pathlib import Path
 
 import numpy as np
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
-from swarm_ros.core.errors import ConfigError, ParameterError, Rejected, RunFailed
+from swarm_ros.core.errors import ConfigError, ParameterError, Rejected
 from swarm_ros.core.regions import batch_cuts, shard_batches, shard_cuts
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shard_parts import Part
@@ -35,8 +33,9 @@ from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.plan import WORLD_SHARD, again_topic, claims_topic, counts_topic, part_topic
 from swarm_ros.protocol.rows import decision_row, decision_rows, decisions_of
 from swarm_ros.protocol.shard_exchange import KEPT_TICKS
-from swarm_ros.protocol.shard_lockstep import ShardLockstep, ShardSave
+from swarm_ros.protocol.shard_lockstep import ShardLockstep
 from swarm_ros.protocol.shard_rows import assemble, counts_data, counts_of, part_row, part_rows
+from swarm_ros.protocol.shard_save import ShardSaver
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_OK, run_node
 
@@ -64,6 +63,7 @@ class WorldShardNode(WorldNode):
         self.pub_counts = signed(Int64MultiArray, counts_topic(self.index), qos)
         self.pub_again = signed(Int64MultiArray, again_topic(self.index), msgs.AGAIN_QOS)
         self.held: dict[tuple[int, int], dict[str, object]] = {}  # (peer, tick) -> its part's rows and counts
+        self.shard_saver: ShardSaver | None = None  # made in load(), with a checkpoint path
         self.parts_sent: set[tuple[int, int]] = set()  # (tick, peer) of the parts sent in the kept ticks
         for j in self.peers:
             for topic, handler, kind, q in (
@@ -86,7 +86,20 @@ class WorldShardNode(WorldNode):
             self.pub_shape.publish(self.maps.shape_message(0))
         name, log = self.node.get_name(), self.node.get_logger()
         self.lockstep = ls = ShardLockstep(shard, name, self.policy, self, log, self.rejections, created=self.created)
-        saved = self._read_save()
+        saved = None
+        if self.checkpoint_path:
+            self.shard_saver = saver = ShardSaver(
+                Path(self.checkpoint_path),
+                self.params,
+                self.plan,
+                self.index,
+                self.policy.monitor_window + 2,
+                self.shape.dims,
+            )
+            if self.incarnation and saver.path.exists():
+                saved = saver.restore()
+            else:
+                saver.create()
         if saved is not None:
             ls.restore(saved, self.incarnation)
         else:
@@ -96,19 +109,6 @@ class WorldShardNode(WorldNode):
         if saved is None:
             first, last = shard.strip
             log.info(f"{name}: columns {first}..{last} of {self.shape.name}, waiting for its robot batches")
-
-    def _read_save(self) -> ShardSave | None:
-        """What the shard's process before this one saved (a restarted shard), if anything."""
-        path = Path(self.checkpoint_path) if self.checkpoint_path else None
-        if path is None or not self.incarnation or not path.exists():
-            return None
-        try:
-            saved = pickle.loads(path.read_bytes())  # the product's own file, written by a process of this shard
-        except (OSError, pickle.UnpicklingError, EOFError) as exc:
-            raise RunFailed(f"checkpoint {path}: {exc}") from None
-        if not isinstance(saved, ShardSave):
-            raise RunFailed(f"checkpoint {path}: not a world shard's save")
-        return saved
 
     # -- inbound from peers ------------------------------------------------------------
     def _on_claims(self, peer: int, topic: str, msg: Cloud) -> None:
@@ -178,23 +178,22 @@ class WorldShardNode(WorldNode):
     def ask_again(self, peer: int) -> None:
         self.pub_again.publish(msgs.ids_message(np.array([peer], dtype=np.int64), "shard"))
 
-    def save(self, saved: ShardSave) -> None:
-        """The shard's save, durable under its name before anything of the next tick is sent."""
-        if not self.checkpoint_path:
-            return
-        path = Path(self.checkpoint_path)
-        part = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        try:
-            part.write_bytes(pickle.dumps(saved, protocol=pickle.HIGHEST_PROTOCOL))
-            os.replace(part, path)
-        except OSError as exc:
-            part.unlink(missing_ok=True)
-            raise RunFailed(f"checkpoint {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    def save_tick(self, tick, rows, published, applied, metrics, sent) -> None:
+        if self.shard_saver is not None:
+            self.shard_saver.write_tick(tick, rows, published, applied, metrics, sent)
+
+    def save_book(self, book: dict) -> None:
+        if self.shard_saver is not None:
+            self.shard_saver.save_book(book)
+
+    def _monitor_reported(self, tick: int) -> None:
+        if self.shard_saver is not None:
+            self.shard_saver.monitor_reported(tick)
 
     def close(self, code: int) -> None:
         """The save is removed once the run has ended or was stopped; a failed or orphaned shard leaves it."""
-        if self.checkpoint_path and code in (EXIT_OK, EXIT_INTERRUPTED):
-            Path(self.checkpoint_path).unlink(missing_ok=True)
+        if self.shard_saver is not None and code in (EXIT_OK, EXIT_INTERRUPTED):
+            self.shard_saver.remove()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -35,10 +35,10 @@ import numpy as np
 from swarm_ros.core.errors import RunFailed
 from swarm_ros.protocol.rows import decision_row, robot_row
 
-MAGIC = 0x5357524D434B5031  # "SWRMCKP1"
+MAGIC = 0x5357524D434B5032  # "SWRMCKP2"
 _H_MAGIC, _H_ROBOTS, _H_SLOTS, _H_TICKS, _H_COLS, _H_WRITING, _H_READY, _H_DONE, _H_MONITOR = range(9)
 _HEADER = 16  # int64s
-_SLOT_HEAD = 3  # int64s per ring slot: tick, robot rows, applied rows
+_SLOT_HEAD = 4  # int64s per ring slot: tick, robot rows, applied rows, published rows (the first of the rows)
 
 
 @dataclass
@@ -120,9 +120,13 @@ class Checkpoint:
         applied = self.map[at : at + self.robots * self.decision.itemsize].view(self.decision)
         return head, robots, applied
 
-    def write(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None:
+    def write(
+        self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray, published: int = -1
+    ) -> None:
         """Save tick ``tick``: the rows it publishes (robots that changed; at tick 0 all), the decisions it
-        applied (None at tick 0) and its metrics row. Call before anything about the tick is sent."""
+        applied (None at tick 0) and its metrics row. Call before anything about the tick is sent.
+        ``published``: only the first this many rows were published (a world shard saves the rows of its
+        area's other robots too); -1: all."""
         h = self.header
         head, at = self._slot_head(tick)
         # the blocks of what this tick writes (its slot, its metrics row), before anything of it is written
@@ -139,6 +143,7 @@ class Checkpoint:
             raw = np.ascontiguousarray(applied).view(np.uint8)
             self.map[at : at + raw.size] = raw
         head[1], head[2] = rows.size, -1 if applied is None else applied.size
+        head[3] = rows.size if published < 0 else published
         self.history[tick] = metrics
         head[0] = tick
         h[_H_READY] = tick
@@ -208,7 +213,7 @@ class Checkpoint:
         for t in range(max(0, tick - self.slots + 1), tick + 1):
             head, rows, applied = self._slot(t)
             if head[0] == t:
-                ring[t] = (rows[: head[1]].copy(), None if head[2] < 0 else applied[: head[2]].copy())
+                ring[t] = (rows[: head[3]].copy(), None if head[2] < 0 else applied[: head[2]].copy())
         try:
             book = json.loads(self.path.with_name(self.path.name + ".json").read_text(encoding="utf-8"))
         except (OSError, ValueError):

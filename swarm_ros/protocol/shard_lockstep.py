@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -31,15 +30,24 @@ from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shard_parts import Part
 from swarm_ros.core.shards import WorldShard
+from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.hosting import Hosting, route, snapshot
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows, state_rows
 from swarm_ros.protocol.shard_exchange import ExchangeSaved, ShardExchange
+from swarm_ros.protocol.shard_save import ShardSave
 from swarm_ros.protocol.world_port import FIRST_STALL_S, Logger, Policy, WorldPort
 
 _LOCALIZED = METRIC_COLUMNS.index("localized")
+
+
+def _joined(first: np.ndarray, then: np.ndarray) -> np.ndarray:
+    """Rows of one layout one after the other, in that layout (``np.concatenate`` may repack records)."""
+    out = np.empty(first.size + then.size, dtype=first.dtype)
+    out[: first.size], out[first.size :] = first, then
+    return out
 
 
 class ShardHosting(Hosting):
@@ -108,25 +116,23 @@ class ShardSim:
         return self.shard.own_moving()
 
 
-@dataclass
-class ShardSave:
-    """What a restarted shard process goes on from: its exchange's save, the lockstep's bookkeeping, the robots
-    pending removal, and the ticks it published that the monitor may not have confirmed."""
-
-    exchange: ExchangeSaved
-    book: dict
-    pending: np.ndarray
-    ring: dict[int, tuple[np.ndarray, np.ndarray | None, bool]]  # tick -> (rows, applied, joined)
-    monitor_tick: int
-
-
 class ShardNodePort(WorldPort, Protocol):
     """What a :class:`ShardLockstep` asks of its node: the world's port, the exchange's sends, and the save."""
 
     def send_claims(self, peer: int, tick: int, claims: Decisions) -> None: ...
     def send_part(self, peer: int, tick: int, part: Part) -> None: ...
     def ask_again(self, peer: int) -> None: ...
-    def save(self, saved: ShardSave) -> None: ...  # durable before anything of the next tick goes out
+    # the tick's rows in the shard's view (the first ``published`` its part) and the kept messages, durable before
+    # anything of the next tick goes out (swarm_ros.protocol.shard_save)
+    def save_tick(
+        self,
+        tick: int,
+        rows: np.ndarray,
+        published: int,
+        applied: np.ndarray | None,
+        metrics: tuple[int, ...],
+        sent: dict,
+    ) -> None: ...
 
 
 class ShardLockstep(Lockstep):
@@ -149,8 +155,9 @@ class ShardLockstep(Lockstep):
         self.hosting = self.own_hosting = ShardHosting(shard.plan.radius, shard.params.vision_radius, shard.strip)
         self.inflight: tuple[int, np.ndarray] | None = None  # (tick, applied rows) handed to the exchange
         self.removing = np.empty(0, dtype=np.int64)  # the pending robots removed at the in-flight tick's end
-        self.ring: dict[int, tuple[np.ndarray, np.ndarray | None, bool]] = {}
-        self.exchange_saved: ExchangeSaved | None = None
+        self.losses_booked = 0  # the shard's losses the bookkeeping saved holds
+        self.removed_now = np.empty(0, dtype=np.int64)  # the pending robots removed at the last tick's end
+        self.removals: list[tuple[int, np.ndarray]] = []  # (tick, robots removed at its end), every shard alike
         self.deferred: list[tuple[int, str]] = []  # batches to remove once the in-flight tick is closed
 
     # -- admission ------------------------------------------------------------------
@@ -170,9 +177,12 @@ class ShardLockstep(Lockstep):
         self.started, self.start_time, self.started_wall = True, self.clock(), time.time()
         self.startup_seconds = self.port.startup_seconds()
         self.log.info(f"{self.node_name}: its strips hosted by {len(self.batch_names)} batches: tick 0")
-        rows = state_rows(self._own_at_zero(), self.sim.state)
-        self.ring[0] = (rows, None, False)
-        self._save()
+        own = self._own_at_zero()
+        rows = state_rows(own, self.sim.state)
+        rest = np.setdiff1d(np.arange(self.shard.params.robots), own, assume_unique=True)  # unknown ones as unknown
+        table = _joined(rows, state_rows(rest, self.sim.state))
+        self.save_book()  # first: a save that holds a tick has the bookkeeping beside it
+        self.shard_port.save_tick(0, table, rows.size, None, self.shard.history[0], {})
         for k in range(len(self.batch_names)):
             self._send_snapshot(k)
         self._emit(0, rows, False, None, None, save=False)
@@ -245,13 +255,18 @@ class ShardLockstep(Lockstep):
         shard, s = self.shard, self.sim.state
         assert self.inflight is not None and self.inflight[0] == tick  # the exchange closes what it was given
         applied = self.inflight[1]
-        self.inflight, self.exchange_saved = None, saved
+        self.inflight = None
+        booked = len(shard.losses) != self.losses_booked or bool(self.removing.size)
+        if len(shard.losses) != self.losses_booked:  # robots removed in this tick: which, for the save
+            self.losses_booked = len(shard.losses)
+            known = np.concatenate([ids for _, ids in self.removals]) if self.removals else np.empty(0, np.int64)
+            self.removals.append((tick, np.setdiff1d(np.flatnonzero(shard.removed), known)))
         if self.removing.size:
             self.log.warn(f"tick {tick}: removed the {self.removing.size} robots of lost batches")
             self.pending = np.setdiff1d(self.pending, self.removing)
-            self.removing = np.empty(0, dtype=np.int64)
+            self.removed_now, self.removing = self.removing, np.empty(0, dtype=np.int64)
         gone = shard.gone_stationary
-        rows = state_rows(np.union1d(part.ids, gone[self._in_strips(s.x[gone])]), s)  # the monitor's: no overlap
+        reported = np.union1d(part.ids, gone[self._in_strips(s.x[gone])])  # the monitor's part: no overlap
         received = shard.received
         ids = [part.ids, gone] + ([received.ids] if received is not None else [])
         before = [part.before, columns(s.x[gone], shard.plan.radius)] + (
@@ -260,14 +275,15 @@ class ShardLockstep(Lockstep):
         every, at = np.unique(np.concatenate(ids), return_index=True)
         cols = np.concatenate(before)[at]
         areas = [self.hosting.area(k) for k in range(len(self.batch_names))]
-        regional = route(self._region_rows(every, received), cols, areas, self.hosting.radius)
+        changed = self._region_rows(every, received)
+        regional = route(changed, cols, areas, self.hosting.radius)
+        mine = np.isin(every, reported, assume_unique=True)
+        rows = changed[mine]
         h = shard.history
         joined = gone.size > 0 or len(h) < 2 or h[-1][_LOCALIZED] != h[-2][_LOCALIZED] or bool(part.removing.size)
-        self.ring[tick] = (rows, applied, joined)
-        self._forget_confirmed()
-        self._save()
-        if gone.size or part.removing.size or (received is not None and received.removing.size):
+        if booked:  # robots removed, pending no longer: beside the tick before it is saved
             self.save_book()
+        self.shard_port.save_tick(tick, _joined(rows, changed[~mine]), rows.size, applied, h[-1], saved.sent)
         self.queued.append((tick, rows, joined, applied, regional))
         for k, why in self.deferred:  # batches lost while the tick was with the peers: their robots as they are now
             super()._remove_batch(k, why)
@@ -286,11 +302,6 @@ class ShardLockstep(Lockstep):
             rows[gone] = robot_rows(at, received.state, received.x, received.y, received.heading, *solid)
             rows["id"][gone] = ids[gone]
         return rows
-
-    def _forget_confirmed(self) -> None:
-        """The ticks the monitor confirmed need not be published again by a restarted process."""
-        for old in [t for t in self.ring if t <= self.monitor_tick and t != self.sim.tick]:
-            del self.ring[old]
 
     def _remove_batch(self, k: int, why: str) -> None:
         """As :meth:`Lockstep._remove_batch`, between ticks: while a tick is with the peers, its robots may still
@@ -318,24 +329,25 @@ class ShardLockstep(Lockstep):
             self._maybe_advance(self.sim.tick + 1)
 
     # -- saves ----------------------------------------------------------------------
-    def save_book(self) -> None:
-        if self.started:
-            self._save()
-
-    def _save(self) -> None:
-        if self.exchange_saved is None:
-            self.exchange_saved = ExchangeSaved(self.shard.saved(), {})
-        self.shard_port.save(
-            ShardSave(self.exchange_saved, self.book(), self.pending.copy(), dict(self.ring), self.monitor_tick)
-        )
+    def book(self) -> dict:
+        """The lockstep's bookkeeping, with the robots pending removal and every robot removed so far."""
+        return {
+            **super().book(),
+            # with the robots just removed: a save of the tick before (its next tick's write cut off) removes them
+            # again; one of this tick knows they are removed (restore keeps only those still moving)
+            "pending": np.union1d(self.pending, self.removed_now).tolist(),
+            "removals": [[t, ids.tolist()] for t, ids in self.removals],
+        }
 
     def restore(self, saved: ShardSave, incarnation: int) -> None:  # type: ignore[override]
         """Go on from ``saved`` (a process of this shard before this one wrote it): its exchange sends its peers
         the kept messages again and asks for theirs, its batches get a snapshot, the monitor the ticks it has
         not confirmed."""
         b = saved.book
-        self.exchange.restore(saved.exchange)
-        self.exchange_saved = saved.exchange
+        try:
+            self.exchange.restore(saved.exchange)
+        except ContractError as exc:
+            raise RunFailed(f"{self.node_name}: its save of tick {saved.exchange.shard.tick}: {exc}") from None
         self.batch_names = list(b["batches"])
         self.hosting.restore(b["strips"])
         self.restart_counts, self.incarnations = list(b["restart_counts"]), list(b["incarnations"])
@@ -351,8 +363,10 @@ class ShardLockstep(Lockstep):
         self.start_time = self.clock() - max(0.0, time.time() - self.started_wall)
         self.startup_seconds = float(b["startup_seconds"])
         self.monitor_tick = saved.monitor_tick
-        self.pending = np.asarray(saved.pending, dtype=np.int64)
-        self.ring = dict(saved.ring)
+        state = self.shard.state.state[saved.pending]
+        self.pending = saved.pending[(state != UNKNOWN) & IS_MOVING[np.where(state == UNKNOWN, 0, state)]]
+        self.losses_booked = len(self.shard.losses)
+        self.removals = [(int(t), np.asarray(ids, np.int64)) for t, ids in b["removals"] if t <= tick]
         if MONITOR in self.lost:
             self.window = 0
         for k, name in enumerate(self.batch_names):
@@ -360,12 +374,12 @@ class ShardLockstep(Lockstep):
         for j in self.exchange.peers:
             self.shard_port.ask_again(j)
         self.log.warn(f"{self.node_name} restarted: going on from tick {tick} of its save")
-        self._save()
+        self.save_book()
         for k in range(len(self.batch_names)):
             if k not in self.removed_batches:
                 self._send_snapshot(k)
-        for t in sorted(t for t in self.ring if t > self.monitor_tick or t == tick):
-            rows, applied, joined = self.ring[t]
-            self.queued.append((t, rows, joined, applied, None))
+        for t in sorted(t for t in saved.ring if t > self.monitor_tick or t == tick):
+            rows, applied = saved.ring[t]
+            self.queued.append((t, rows, t == tick, applied, None))
         self._flush()
         self.publish_status()

@@ -1,0 +1,154 @@
+"""A world shard's save: what a restarted shard process goes on from, written at every close for the rows that
+changed only.
+
+It is the world's :class:`~swarm_ros.protocol.checkpoint.Checkpoint` (one mapped file; a tick written so that a
+kill at any instruction leaves it recoverable), holding the shard's view: every robot's last row as the shard
+knew it (its area's moving robots, every stationary one; ``UNKNOWN_ROW`` for one it never knew), the metrics of
+every tick (which every shard holds alike), and a ring of the last ticks' rows, of which the first ones of each
+tick are what the shard published for the monitor. Beside it, ``<file>.json``: the lockstep's bookkeeping with
+the robots pending removal and every robot removed so far, written whole when it changes; and ``<file>.sent``:
+the messages the shard sent its peers for the kept ticks, written whole (to a temporary name, renamed) at every
+close before the tick's rows, so a save never lacks the messages of the tick it holds.
+
+Like the world's checkpoint, these are the shard's own files in the run's log directory, read back only by a
+process of the same shard.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from swarm_ros.core.errors import RunFailed
+from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.regions import columns
+from swarm_ros.core.shards import ShardPlan, ShardSaved
+from swarm_ros.core.state import IS_MOVING
+from swarm_ros.protocol.checkpoint import Checkpoint
+from swarm_ros.protocol.rows import pose_of
+from swarm_ros.protocol.shard_exchange import ExchangeSaved
+
+UNKNOWN_ROW = 255  #: the state byte of a robot the shard never knew, in its save's rows
+_LOCALIZED = METRIC_COLUMNS.index("localized")
+
+
+@dataclass
+class ShardSave:
+    """What a restarted shard process goes on from: its exchange's save, the lockstep's bookkeeping, the robots
+    pending removal, the ticks it published that the monitor may not have confirmed (tick -> rows, applied),
+    and the newest tick the monitor confirmed."""
+
+    exchange: ExchangeSaved
+    book: dict
+    pending: np.ndarray
+    ring: dict[int, tuple[np.ndarray, np.ndarray | None]]
+    monitor_tick: int
+
+
+class ShardSaver:
+    """Shard ``index``'s save files at ``path`` (see the module's docstring)."""
+
+    def __init__(self, path: Path, params: RunParams, plan: ShardPlan, index: int, slots: int, dims: int) -> None:
+        self.path, self.params, self.plan, self.index, self.dims = Path(path), params, plan, index, dims
+        self.slots = slots
+        self.sent_path = self.path.with_name(self.path.name + ".sent")
+        self.checkpoint: Checkpoint | None = None
+
+    def _args(self) -> tuple[Path, int, int, int]:
+        return (self.path, self.params.robots, self.params.max_ticks, len(METRIC_COLUMNS))
+
+    def create(self) -> None:
+        """Make the files for a shard's first process (never over existing ones).
+
+        Raises:
+            RunFailed: they cannot be made.
+        """
+        try:
+            self.checkpoint = Checkpoint(*self._args(), self.slots, self.dims)
+            self.checkpoint.create()
+        except OSError as exc:
+            raise RunFailed(f"checkpoint {self.path}: {getattr(exc, 'strerror', None) or exc}") from None
+
+    def write_tick(
+        self,
+        tick: int,
+        rows: np.ndarray,
+        published: int,
+        applied: np.ndarray | None,
+        metrics: tuple[int, ...],
+        sent: dict,
+    ) -> None:
+        """Save tick ``tick``: the kept messages first, then the rows that changed in the shard's view (the first
+        ``published`` of them its part for the monitor), the applied decisions and the tick's metrics."""
+        assert self.checkpoint is not None  # created or opened
+        tmp = self.sent_path.with_name(self.sent_path.name + ".tmp")
+        try:
+            tmp.write_bytes(pickle.dumps(sent, protocol=pickle.HIGHEST_PROTOCOL))
+            os.replace(tmp, self.sent_path)
+            self.checkpoint.write(tick, rows, applied, np.asarray(metrics, dtype=np.int64), published)
+        except OSError as exc:
+            raise RunFailed(f"checkpoint {self.path}: {getattr(exc, 'strerror', None) or exc}") from None
+
+    def save_book(self, book: dict) -> None:
+        if self.checkpoint is not None:
+            self.checkpoint.save_book(book)
+
+    def monitor_reported(self, tick: int) -> None:
+        if self.checkpoint is not None:
+            self.checkpoint.monitor_reported(tick)
+
+    def remove(self) -> None:
+        """Remove the save's files (the run is over or stopped: no process of this shard will restart)."""
+        if self.checkpoint is not None:
+            self.checkpoint.remove()
+        for path in (self.sent_path, self.sent_path.with_name(self.sent_path.name + ".tmp")):
+            path.unlink(missing_ok=True)
+
+    def restore(self) -> ShardSave | None:
+        """Open the save a process of this shard before this one wrote; what it holds (None: no tick yet).
+
+        Raises:
+            RunFailed: the files are not a save of this run, or are incomplete.
+        """
+        self.checkpoint = Checkpoint.open(*self._args(), self.dims)
+        saved = self.checkpoint.saved()
+        if saved is None:
+            return None
+        b = saved.book
+        try:
+            sent = pickle.loads(self.sent_path.read_bytes())  # this shard's own file (module docstring)
+            pending = np.asarray(b["pending"], np.int64)
+            removals = [np.asarray(ids, np.int64) for t, ids in b["removals"] if t <= saved.tick]
+        except (OSError, pickle.UnpicklingError, EOFError, KeyError, ValueError) as exc:
+            raise RunFailed(f"checkpoint {self.path}: incomplete ({exc})") from None
+        rows, first, last = saved.robots, *self.plan.areas[self.index]
+        pose = pose_of(rows)
+        state = rows["state"]
+        known = state != UNKNOWN_ROW
+        cols = columns(pose["x"], self.plan.radius)
+        keep = np.flatnonzero(known & (~IS_MOVING[np.where(known, state, 0)] | ((cols >= first) & (cols <= last))))
+        losses = [(int(t), int(n)) for t, n in b.get("losses", []) if t <= saved.tick]  # a book ahead of its tick
+        removed = np.concatenate(removals) if removals else np.empty(0, np.int64)
+        history = saved.history
+        shard = ShardSaved(
+            tick=saved.tick,
+            ids=keep,
+            state=state[keep].astype(np.int8),
+            x=pose["x"][keep],
+            y=pose["y"][keep],
+            heading=pose["heading"][keep],
+            z=pose["z"][keep] if "z" in pose else None,
+            pitch=pose["pitch"][keep] if "pitch" in pose else None,
+            history=history,
+            losses=losses,
+            localized=int(history[-1][_LOCALIZED]),
+            alive=self.params.robots - sum(n for _, n in losses),
+            removed=removed,
+        )
+        ring = {t: (r, a) for t, (r, a) in saved.ring.items()}
+        return ShardSave(ExchangeSaved(shard, sent), b, pending, ring, saved.monitor_tick)
