@@ -103,12 +103,12 @@ class Port:
     def ask_again(self, peer):
         self.bus.flight.append((peer, "resend", self.k))
 
-    def closed(self, tick, part, saved):
+    def closed(self, tick, part, saved):  # saved: the messages kept for the peers
         seen = self.bus.closed[self.k]
         if tick in seen:  # closed again by a restarted process: the same rows
             assert np.array_equal(seen[tick].ids, part.ids) and np.array_equal(seen[tick].x, part.x)
         seen[tick] = part
-        self.bus.saves[self.k].append(saved)
+        self.bus.saves[self.k].append(ExchangeSaved(self.bus.exchanges[self.k].shard.saved(), saved))
         self.bus._decide(self.k)
 
 

@@ -38,10 +38,11 @@ class ShardPort(Protocol):
         """Ask ``peer`` to send its kept messages again (:meth:`ShardExchange.resend`): its part failed here."""
         ...
 
-    def closed(self, tick: int, part: Part, saved: ExchangeSaved) -> None:
+    def closed(self, tick: int, part: Part, sent: dict[int, tuple[list[Decisions], list[Part] | None]]) -> None:
         """Tick ``tick`` is closed: ``part`` is what this shard applied (its rows, for its batches and the
-        monitor); ``saved`` what a restarted process would go on from (to be saved before anything of the next
-        tick is sent)."""
+        monitor). A restarted process goes on from ``ExchangeSaved(shard.saved(), sent)`` (the shard as it is
+        now, and the messages kept for its peers), to be saved before anything of the next tick is sent: the
+        port saves what it needs of it (a world shard node, only the rows that changed)."""
         ...
 
 
@@ -176,7 +177,7 @@ class ShardExchange:
                 held.pop(tick, None)
             for old in [t for t in self.sent if t <= tick - KEPT_TICKS]:
                 del self.sent[old]
-            self.port.closed(tick, part, ExchangeSaved(shard.saved(), dict(self.sent)))
+            self.port.closed(tick, part, dict(self.sent))
 
     def _drop_bad(self, tick: int, received: list[Part], fault: Rejected) -> None:
         """Drop the parts that fail alone (counted); if none does, two peers contradict each other: the run fails."""

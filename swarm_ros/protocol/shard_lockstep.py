@@ -36,7 +36,7 @@ from swarm_ros.protocol.hosting import Hosting, route, snapshot
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows, state_rows
-from swarm_ros.protocol.shard_exchange import ExchangeSaved, ShardExchange
+from swarm_ros.protocol.shard_exchange import ShardExchange
 from swarm_ros.protocol.shard_save import ShardSave
 from swarm_ros.protocol.world_port import FIRST_STALL_S, Logger, Policy, WorldPort
 
@@ -250,7 +250,7 @@ class ShardLockstep(Lockstep):
     def ask_again(self, peer: int) -> None:
         self.shard_port.ask_again(peer)
 
-    def closed(self, tick: int, part: Part, saved: ExchangeSaved) -> None:
+    def closed(self, tick: int, part: Part, sent: dict) -> None:
         """Tick ``tick`` is closed: save, then publish this shard's part of it (and go on to the next)."""
         shard, s = self.shard, self.sim.state
         assert self.inflight is not None and self.inflight[0] == tick  # the exchange closes what it was given
@@ -283,7 +283,7 @@ class ShardLockstep(Lockstep):
         joined = gone.size > 0 or len(h) < 2 or h[-1][_LOCALIZED] != h[-2][_LOCALIZED] or bool(part.removing.size)
         if booked:  # robots removed, pending no longer: beside the tick before it is saved
             self.save_book()
-        self.shard_port.save_tick(tick, _joined(rows, changed[~mine]), rows.size, applied, h[-1], saved.sent)
+        self.shard_port.save_tick(tick, _joined(rows, changed[~mine]), rows.size, applied, h[-1], sent)
         self.queued.append((tick, rows, joined, applied, regional))
         for k, why in self.deferred:  # batches lost while the tick was with the peers: their robots as they are now
             super()._remove_batch(k, why)
