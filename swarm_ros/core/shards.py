@@ -190,6 +190,11 @@ class WorldShard:
         code = end_code(self.localized, last[4], v.tick, self._patches, self.alive, self.params.max_ticks)
         self.outcome = OUTCOME_OF_CODE[code]
 
+    @property
+    def own_count(self) -> int:
+        """How many moving robots stand in this shard's strips (:meth:`own_moving`, without the copy)."""
+        return int(self._own.size)
+
     def own_moving(self) -> np.ndarray:
         """The moving robots standing in this shard's strips, ascending: the ones it applies the decisions of."""
         return self._own.copy()

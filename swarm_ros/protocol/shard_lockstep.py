@@ -215,7 +215,7 @@ class ShardLockstep(Lockstep):
         time: the next once this one is closed)."""
         if self.inflight is not None or not self.started or self.sim.done or self.queued:
             return
-        expected = self.shard.own_moving().size - len(self._standing()) - len(self._orphans())
+        expected = self.shard.own_count - len(self._standing()) - len(self._orphans())
         if self.received > expected:
             raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
         if self.received == expected:
