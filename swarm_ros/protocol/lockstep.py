@@ -174,17 +174,24 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         rows = state_rows(np.arange(self.sim.state.robots), self.sim.state) if rows is None else rows
         self.port.send_snapshot(k, self.sim.tick, snapshot(rows, self.hosting.area(k), self.hosting.radius))
 
-    def maybe_start(self) -> None:
-        """Tick 0 once batches host every column and the monitor is there (so the run never stalls for it);
-        without a monitor to wait for (``monitor_window: 0``), or one not seen within ``FIRST_STALL_S``, at once."""
+    def starting(self) -> bool:
+        """Whether tick 0 goes out now (it is then marked started): once batches host every column and the
+        monitor is there (so the run never stalls for it); without a monitor to wait for (``monitor_window: 0``),
+        or one not seen within ``FIRST_STALL_S``, at once."""
         if self.started or self.hosting.covered() < self.hosting.width:
-            return
+            return False
         if self.window and not (self.monitor_alive and self.port.monitor_reads_all()) and MONITOR not in self.lost:
             if self.clock() - self.created < FIRST_STALL_S:
-                return
+                return False
             self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s")
         self.started, self.start_time, self.started_wall = True, self.clock(), time.time()
         self.startup_seconds = self.port.startup_seconds()
+        return True
+
+    def maybe_start(self) -> None:
+        """Tick 0 when :meth:`starting` says so: snapshots to the batches, the tick to the monitor."""
+        if not self.starting():
+            return
         self.log.info(
             f"all robots hosted by {len(self.batch_names)} batches{' and the monitor' * bool(self.window)}: tick 0"
         )

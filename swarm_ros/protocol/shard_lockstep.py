@@ -34,11 +34,10 @@ from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.hosting import Hosting, route, snapshot
 from swarm_ros.protocol.lockstep import Lockstep
-from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows, state_rows
 from swarm_ros.protocol.shard_exchange import ShardExchange
 from swarm_ros.protocol.shard_save import ShardSave
-from swarm_ros.protocol.world_port import FIRST_STALL_S, Logger, Policy, WorldPort
+from swarm_ros.protocol.world_port import Logger, Policy, WorldPort
 
 _LOCALIZED = METRIC_COLUMNS.index("localized")
 
@@ -168,14 +167,8 @@ class ShardLockstep(Lockstep):
 
     def maybe_start(self) -> None:
         """Tick 0 once this shard's batches host its strips and the monitor is there (as the world starts)."""
-        if self.started or self.hosting.covered() < self.hosting.width:
+        if not self.starting():
             return
-        if self.window and not (self.monitor_alive and self.port.monitor_reads_all()) and MONITOR not in self.lost:
-            if self.clock() - self.created < FIRST_STALL_S:
-                return
-            self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s")
-        self.started, self.start_time, self.started_wall = True, self.clock(), time.time()
-        self.startup_seconds = self.port.startup_seconds()
         self.log.info(f"{self.node_name}: its strips hosted by {len(self.batch_names)} batches: tick 0")
         own = self._own_at_zero()
         rows = state_rows(own, self.sim.state)
@@ -348,29 +341,12 @@ class ShardLockstep(Lockstep):
             self.exchange.restore(saved.exchange)
         except ContractError as exc:
             raise RunFailed(f"{self.node_name}: its save of tick {saved.exchange.shard.tick}: {exc}") from None
-        self.batch_names = list(b["batches"])
-        self.hosting.restore(b["strips"])
-        self.restart_counts, self.incarnations = list(b["restart_counts"]), list(b["incarnations"])
-        self.known = dict(enumerate(self.incarnations))
-        self.restarts = [(int(t), str(n)) for t, n in b["restarts"]]
         tick = self.sim.tick
-        before = sum(n == self.node_name for _, n in self.restarts)
-        self.restarts += [(tick, self.node_name)] * max(1, incarnation - before)
-        self.lost, self.removed_batches = list(b["lost"]), set(b["removed_batches"])
-        self.monitor_nonce = str(b["monitor_nonce"])
-        self.started, self.restored = True, True
-        self.started_wall = float(b["started_wall"])
-        self.start_time = self.clock() - max(0.0, time.time() - self.started_wall)
-        self.startup_seconds = float(b["startup_seconds"])
-        self.monitor_tick = saved.monitor_tick
+        self.restore_book(b, tick, saved.monitor_tick, incarnation, self.node_name)
         state = self.shard.state.state[saved.pending]
         self.pending = saved.pending[(state != UNKNOWN) & IS_MOVING[np.where(state == UNKNOWN, 0, state)]]
         self.losses_booked = len(self.shard.losses)
         self.removals = [(int(t), np.asarray(ids, np.int64)) for t, ids in b["removals"] if t <= tick]
-        if MONITOR in self.lost:
-            self.window = 0
-        for k, name in enumerate(self.batch_names):
-            self.port.watch_batch(k, name)
         for j in self.exchange.peers:
             self.shard_port.ask_again(j)
         self.log.warn(f"{self.node_name} restarted: going on from tick {tick} of its save")

@@ -84,6 +84,28 @@ class WorldRestore:
         alive = int((robots["state"] != RobotState.REMOVED).sum())
         return outcome_of(m, self.sim.shape.patches, alive, self.sim.params.max_ticks)
 
+    def restore_book(self, b: dict, tick: int, monitor_tick: int, incarnation: int, node: str) -> None:
+        """Take the bookkeeping ``b`` saved with ``tick`` (the monitor had reported ``monitor_tick``) by the
+        process of ``node`` (the world, or a world shard) before this one, and watch the batches again;
+        ``incarnation`` counts that node's processes before this one."""
+        self.batch_names = list(b["batches"])
+        self.hosting.restore(b["strips"])
+        self.restart_counts, self.incarnations = list(b["restart_counts"]), list(b["incarnations"])
+        self.known = dict(enumerate(self.incarnations))
+        self.restarts = [(int(t), str(n)) for t, n in b["restarts"]]
+        self.restarts += [(tick, node)] * max(1, incarnation - sum(n == node for _, n in self.restarts))
+        self.lost, self.removed_batches = list(b["lost"]), set(b["removed_batches"])
+        self.monitor_nonce = str(b["monitor_nonce"])
+        self.started, self.restored = True, True
+        self.started_wall = float(b["started_wall"])
+        self.start_time = self.clock() - max(0.0, time.time() - self.started_wall)
+        self.startup_seconds = float(b["startup_seconds"])
+        self.monitor_tick = monitor_tick
+        if MONITOR in self.lost:
+            self.window = 0
+        for k, name in enumerate(self.batch_names):
+            self.port.watch_batch(k, name)
+
     def restore_saved(self, saved: Saved, incarnation: int) -> None:
         """Put ``saved`` into this lockstep (fresh, not started): its state and bookkeeping. The lockstep then sends
         again what readers may lack (module doc, :meth:`~swarm_ros.protocol.lockstep.Lockstep.restore`).
@@ -113,23 +135,7 @@ class WorldRestore:
             )
         except ContractError as exc:
             raise RunFailed(f"the checkpoint of tick {tick}: {exc}") from None
-        self.batch_names = list(b["batches"])
-        self.hosting.restore(b["strips"])
-        self.restart_counts, self.incarnations = list(b["restart_counts"]), list(b["incarnations"])
-        self.known = dict(enumerate(self.incarnations))
-        self.restarts = [(int(t), str(n)) for t, n in b["restarts"]]
-        self.restarts += [(tick, WORLD)] * max(1, incarnation - sum(n == WORLD for _, n in self.restarts))
-        self.lost, self.removed_batches = list(b["lost"]), set(b["removed_batches"])
-        self.monitor_nonce = str(b["monitor_nonce"])
-        self.started, self.restored = True, True
-        self.started_wall = float(b["started_wall"])
-        self.start_time = self.clock() - max(0.0, time.time() - self.started_wall)
-        self.startup_seconds = float(b["startup_seconds"])
-        self.monitor_tick = saved.monitor_tick
-        if MONITOR in self.lost:
-            self.window = 0
-        for k, name in enumerate(self.batch_names):
-            self.port.watch_batch(k, name)
+        self.restore_book(b, tick, saved.monitor_tick, incarnation, WORLD)
         self.save_book()
         self.log.warn(
             f"world restarted: going on from tick {tick} of its checkpoint "
