@@ -25,6 +25,7 @@ from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
 from swarm_ros.artifacts.recording_options import RecordingOptions
+from swarm_ros.artifacts.rerun_recording import RecordingError
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome, TickMetrics
 from swarm_ros.core.warmup import warm_up
@@ -258,13 +259,21 @@ class MonitorNode:
         if self.bag is not None and not interrupted:
             # closed, kept beside the run (an interrupted run takes it); before tick 0 removed, not to block the next
             self.bag.discard() if unstarted else self.bag.move_to(run_dir.partial_bag(self.out))
-        core.close_recording(stopped=code in (EXIT_INTERRUPTED, EXIT_ORPHANED))
+        lost: RecordingError | None = None
+        try:
+            core.close_recording(stopped=code in (EXIT_INTERRUPTED, EXIT_ORPHANED))
+        except RecordingError as exc:  # a full disk: the recording is removed; the bag is still to be dealt with
+            if not interrupted:
+                raise
+            lost = exc
         if unstarted:  # its own: a first process refuses to start beside an earlier run's
             self.rrd.unlink(missing_ok=True)
         if interrupted:
             try:
+                if lost is not None:
+                    raise lost  # no whole run without its recording
                 self._write(Outcome.INTERRUPTED)
-            except OSError:  # a full disk: the bag goes beside the run as after a failure, or away if unclosable
+            except (OSError, run_dir.OutputError):  # a full disk: the bag goes beside the run, or away if unclosable
                 if self.bag is not None and self.bag.holder.exists():
                     self.bag.move_to(run_dir.partial_bag(self.out))
                 raise
