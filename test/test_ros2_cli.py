@@ -106,6 +106,7 @@ def test_ros2_pkg_lists_the_node_executables(ros):
         "swarm_ros robot_batch",
         "swarm_ros swarm-ros",
         "swarm_ros world",
+        "swarm_ros world_shard",
     ]
 
 
@@ -254,6 +255,26 @@ def test_a_batch_the_world_and_the_monitor_sigkilled_under_ros2_launch_come_back
     summary = _summary(out)
     assert summary["outcome"] == _summary(ref)["outcome"] and summary["lost_robots"] == 0
     assert {"world", "monitor"} <= {r["node"] for r in summary["restarts"]}, summary["restarts"]
+    assert_bag_holds_run(out)
+    assert not processes_mentioning(str(out)) and not list(logs.glob("world.checkpoint*"))
+
+
+def test_world_shards_under_ros2_launch_a_sigkilled_one_comes_back_and_the_run_is_identical(ros, tmp_path):
+    """``world_shards:=2``: two world shard nodes instead of the world; one SIGKILLed mid-run is started again by
+    the launch file's supervision, goes on from its save, and the run equals simulate's."""
+    ref = _simulate(tmp_path / "ref", "--shape", "star", "--seed", "5", "--rules", "local", "--max-ticks", "1500")
+    out = tmp_path / "run"
+    before = ros.launch_logs()
+    log = tmp_path / "launch.log"
+    proc = ros.start(f"{LAUNCH} out_dir:={out} processes:=4 world_shards:=2 {_arguments(SHORT)}", log=log)
+    logs = _launch_dir(ros, before)
+    wait_for(lambda: _saved_tick(logs / "world.checkpoint.1") >= 300, 120, "tick 300", poll=0.001)
+    os.kill(_node_pid(logs, "world_shard_1"), signal.SIGKILL)
+    assert proc.wait(timeout=240) == 0, log.read_text()[-4000:]
+    assert "swarm_ros: world_shard_1 was killed by SIGKILL; restarted (1 of 3)" in log.read_text()
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    assert [r["node"] for r in _summary(out)["restarts"]] == ["world_shard_1"]
     assert_bag_holds_run(out)
     assert not processes_mentioning(str(out)) and not list(logs.glob("world.checkpoint*"))
 
