@@ -12,14 +12,16 @@ as ratios.
 ``--bare`` turns the recording and the bag off. docs/operations.md ("At scale") discusses the numbers.
 
 ``--projection`` also prints, for each size and K, the tick time the graph would take on K hosts with one
-core per process: the world's CPU per tick plus the slowest batch's plus the transport's part of a tick,
-or the monitor's CPU per tick if that is longer (the monitor runs beside the lockstep, up to
-``monitor_window`` ticks behind). CPU per tick is each node's as measured in the runs above (median over
-``--repeats``); the transport's part is measured here too, by a bare rclpy lockstep
-(scripts/bench_bare.py) of K batches exchanging messages of the measured sizes (the largest batch's
-region rows a tick, its share of the moving robots' decisions) and doing nothing else. On this 2-core
-machine every process of a K = 8 graph shares two cores, so each one's CPU per tick is measured under
-contention: the projection says what the code's per-process work allows, not what this machine shows.
+core per process: the world's CPU per tick (the slowest world shard's with ``--world-shards``) plus the
+slowest batch's plus the transport's part of a tick, or the monitor's CPU per tick if that is longer (the
+monitor runs beside the lockstep, up to ``monitor_window`` ticks behind). CPU per tick is each node's as
+measured in the runs above (median over ``--repeats``); the transport's part is measured here too, by a
+bare rclpy lockstep (scripts/bench_bare.py) of K batches exchanging messages of the measured sizes (the
+largest batch's region rows a tick, its share of the moving robots' decisions) and doing nothing else;
+with S shards, each shard's K / S batches, plus two rounds (claims, parts) of a shard with its S - 1 peers.
+On this 2-core machine every process of a K = 8 graph shares two cores, so each one's CPU per tick is
+measured under contention: the projection says what the code's per-process work allows, not what this
+machine shows.
 
     .venv/bin/python scripts/bench_scale.py [--robots 10000 50000] [--processes 1 2 4] [--ticks 300] [--bare]
         [--world-shards S]
@@ -100,28 +102,40 @@ def moving_per_tick(run: Path) -> float:
     return statistics.fmean(moving[:-1] or moving)
 
 
-def project(robots: int, measured: dict, sim_tick_ms: float, ticks: int) -> list[str]:
+def project(robots: int, measured: dict, sim_tick_ms: float, ticks: int, world_shards: int = 1) -> list[str]:
     """The projection's rows for one size (see the module's docstring); ``measured``: K -> (CPU per tick of
-    each node, largest bytes of rows a batch took per tick, moving robots per tick)."""
+    each node, largest bytes of rows a batch took per tick, moving robots per tick). With S world shards the
+    world's part is the slowest shard's CPU, and the transport adds the shards' two exchange rounds a tick
+    (claims, then parts), each taken as a bare lockstep of one shard with its S - 1 peers trading the moving
+    robots of a shard."""
     import bench_bare
 
     lines = []
     for k, (cpu, largest, moving) in measured.items():
         batches = [ms for node, ms in cpu.items() if node.startswith("robot_batch")]
-        world, batch, monitor = cpu.get("world", 0.0), max(batches, default=0.0), cpu.get("monitor", 0.0)
+        worlds = [ms for node, ms in cpu.items() if node.startswith("world")]
+        world, batch, monitor = max(worlds, default=0.0), max(batches, default=0.0), cpu.get("monitor", 0.0)
+        shards = min(world_shards, k)
         transport = 1000 * bench_bare.bare_fixed(
-            k, max(1, round(largest / ROBOT_ROW_BYTES)), max(1, round(moving / k)), min(ticks, 100), 90 + k
+            -(-k // shards),
+            max(1, round(largest / ROBOT_ROW_BYTES)),
+            max(1, round(moving / k)),
+            min(ticks, 100),
+            90 + k,
         )
+        if shards > 1:
+            per_shard = max(1, round(moving / shards))
+            transport += 2000 * bench_bare.bare_fixed(shards - 1, per_shard, per_shard, min(ticks, 100), 80 + k)
         tick = max(world + batch + transport, monitor)
         lines.append(
-            f"{robots:>9,} {k:>3} {world:>8.1f} {batch:>8.1f} {monitor:>8.1f} {transport:>10.1f} "
+            f"{robots:>9,} {k:>3} {shards:>3} {world:>8.1f} {batch:>8.1f} {monitor:>8.1f} {transport:>10.1f} "
             f"{tick:>10.1f} {sim_tick_ms:>11.1f} {tick / sim_tick_ms:>7.1f}x"
         )
     return lines
 
 
 PROJECTION_HEAD = (
-    f"{'robots':>9} {'K':>3} {'world':>8} {'batch':>8} {'monitor':>8} {'transport':>10} "
+    f"{'robots':>9} {'K':>3} {'S':>3} {'world':>8} {'batch':>8} {'monitor':>8} {'transport':>10} "
     f"{'projected':>10} {'in-process':>11} {'ratio':>8}"
 )
 ROBOT_ROW_BYTES = 40  #: bytes of a /swarm/robots row, the bare lockstep's row (a region row is 29)
@@ -209,7 +223,7 @@ def scale(
                 f"{largest[1] / largest[0]:.2f}x"
             )
         if projection:
-            projected += project(robots, measured, 1000 * sim_run / ticks, ticks)
+            projected += project(robots, measured, 1000 * sim_run / ticks, ticks, world_shards)
     if projection:
         print(
             "\nprojected tick on K hosts, one core per process (ms): world + slowest batch + transport, or the "

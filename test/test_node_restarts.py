@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from bagcheck import assert_bag_holds_run
 from helpers import (
-    STAR_LOCAL,
+    STAR_SHORT,
     Recording,
     assert_identical_run,
     finish_restarted_run,
@@ -38,8 +38,7 @@ from swarm_ros.app import cli
 
 pytestmark = pytest.mark.process
 
-# The star under the local rule, cut at 1,500 ticks (outcome timeout): a few seconds of run, long enough to kill in
-SHORT = [*STAR_LOCAL, "--max-ticks", "1500"]
+SHORT = STAR_SHORT
 
 
 def _launch(out: Path, *extra: str) -> subprocess.Popen:

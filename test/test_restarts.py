@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 from helpers import (
-    STAR_LOCAL,
+    STAR_SHORT,
     Recording,
     alive,
     assert_identical_run,
@@ -52,13 +52,13 @@ PY = sys.executable
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("restart-ref") / "ref"
-    assert cli.main(["simulate", *STAR_LOCAL, "--out", str(out), "--quiet", "--no-recording"]) == 0
+    assert cli.main(["simulate", *STAR_SHORT, "--out", str(out), "--quiet", "--no-recording"]) == 0
     return out
 
 
 def _launch(out: Path, *extra: str) -> subprocess.Popen:
     return subprocess.Popen(
-        [PY, "-m", "swarm_ros", "run", *STAR_LOCAL, "--processes", "3", "--out", str(out), "--quiet", *extra],
+        [PY, "-m", "swarm_ros", "run", *STAR_SHORT, "--processes", "3", "--out", str(out), "--quiet", *extra],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -80,11 +80,11 @@ def _wait_for_tick_0(out: Path, timeout: float = 120) -> Path:
 
 def _handovers(batch: int, ticks: range) -> int:
     """Robots that crossed into or out of ``batch``'s strip (of 3, the default cuts) in ``ticks``, in the
-    in-process run of STAR_LOCAL: the handovers a batch killed then had to get right."""
+    in-process run of STAR_SHORT: the handovers a batch killed then had to get right."""
     from swarm_ros.core import Simulation
     from swarm_ros.core.regions import batch_strip, columns
 
-    shape, params = Settings(shape="star", seed=5, rules="local").resolve()
+    shape, params = Settings(shape="star", seed=5, rules="local", max_ticks=1000).resolve()
     radius = shape.world.radius
     first, last = batch_strip(shape, params, batch, 3)
     sim, crossed = Simulation(shape, params), 0
@@ -125,7 +125,7 @@ def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_iden
     assert launcher.returncode == 0, err
     summary = assert_identical_run(reference, out)
     [restart] = summary["restarts"]
-    assert restart["node"] == "robot_batch_2" and 0 < restart["tick"] < summary["convergence_tick"]
+    assert restart["node"] == "robot_batch_2" and 0 < restart["tick"] < summary["max_ticks"]
     back = re.search(
         r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_2 is back \(restart 1\) at tick (\d+); "
         r"sending it a snapshot",
@@ -159,7 +159,7 @@ def test_a_batch_killed_twice_in_a_row_is_restarted_twice_and_the_run_is_identic
 
 def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference, tmp_path):
     """max_restarts 1: the second death is for good, and the world removes that batch's robots."""
-    settings = Settings(shape="star", seed=5, rules="local")
+    settings = Settings(shape="star", seed=5, rules="local", max_ticks=1000)
     shape, params = settings.resolve()
     out = tmp_path / "run"
     launch = Launch(
@@ -296,7 +296,7 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
     params = tmp_path / "params.yaml"
     params.write_text(
         params_yaml(
-            Settings(shape="star", seed=5, rules="local"),
+            Settings(shape="star", seed=5, rules="local", max_ticks=1000),
             {
                 "monitor": {"out_dir": str(out), "record": False, "bag": False},
                 "world": {"checkpoint": str(tmp_path / "world.checkpoint")},

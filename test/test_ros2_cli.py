@@ -322,6 +322,18 @@ def test_the_three_terminals_of_ros2_run_the_docs_show(ros, tmp_path):
     assert_same_run(_simulate(tmp_path / "ref"), out, launched=False)
 
 
+def _ask_until(ros, line: str, needle: str, what: str) -> str:
+    """Run a ros2 command until its output holds ``needle``; return that output. A fresh ros2 process may list a
+    node before it has discovered all of that node's endpoints: CI once saw ``ros2 node info /world`` without
+    its Publishers section, 50 ticks into a run."""
+
+    def asked():
+        text = ros.run(line).stdout
+        return text if needle in text else ""
+
+    return wait_for(asked, 30, what, poll=0.5)
+
+
 def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
     out = tmp_path / "live"
     before = ros.launch_logs()
@@ -335,11 +347,14 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
             return done.returncode == 0 and tuple(done.stdout.split()) == NODES
 
         wait_for(listed, 30, "all four nodes in ros2 node list", poll=0.5)
-        info = ros.run("ros2 node info /world").stdout
+
+        info = _ask_until(
+            ros, "ros2 node info /world", "/swarm/robots: sensor_msgs", "/world's writers in ros2 node info"
+        )
         assert "/swarm/robots: sensor_msgs/msg/PointCloud2" in info.split("Publishers:")[1].split("Service")[0]
         assert "/swarm/decisions/robot_batch_0: sensor_msgs/msg/PointCloud2" in info.split("Subscribers:")[1]
 
-        topics = ros.run("ros2 topic list -t").stdout
+        topics = _ask_until(ros, "ros2 topic list -t", "/swarm/status [", "every topic in ros2 topic list")
         for line in (
             "/swarm/robots [sensor_msgs/msg/PointCloud2]",
             "/swarm/metrics [std_msgs/msg/Int64MultiArray]",
@@ -348,8 +363,8 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
             "/swarm/status [diagnostic_msgs/msg/DiagnosticArray]",
         ):
             assert line in topics.splitlines(), topics
-        verbose = ros.run("ros2 topic info -v /swarm/robots").stdout
-        assert "Publisher count: 1" in verbose and "Node name: world" in verbose
+        verbose = _ask_until(ros, "ros2 topic info -v /swarm/robots", "Node name: world", "/swarm/robots' writer")
+        assert "Publisher count: 1" in verbose
         assert "Reliability: RELIABLE" in verbose and "Durability: TRANSIENT_LOCAL" in verbose
 
         echo = ros.run("ros2 topic echo --once --no-lost-messages /swarm/metrics").stdout

@@ -17,9 +17,9 @@ SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
 
 def test_bench_scale_prints_each_engine_and_the_projection_on_k_hosts():
-    """A tiny disc, K = 1 and 2, no recording: the table, the K ratios and a projection row per K whose
-    projected tick is what it is built from: the world's CPU plus the slowest batch's plus the transport's,
-    or the monitor's if longer."""
+    """A tiny disc, K = 1 and 2 with up to 2 world shards, no recording: the table, the K ratios and a
+    projection row per K whose projected tick is what it is built from: the slowest world shard's CPU plus
+    the slowest batch's plus the transport's, or the monitor's if longer."""
     done = subprocess.run(
         [
             sys.executable,
@@ -33,6 +33,8 @@ def test_bench_scale_prints_each_engine_and_the_projection_on_k_hosts():
             "2",
             "--bare",
             "--projection",
+            "--world-shards",
+            "2",
         ],
         capture_output=True,
         text=True,
@@ -42,18 +44,22 @@ def test_bench_scale_prints_each_engine_and_the_projection_on_k_hosts():
     out = done.stdout
     assert re.search(r"^in-process\s+\d", out, re.M), out
     for k in (1, 2):
-        assert re.search(rf"^ROS 2 graph, K = {k}\s+\d.*world \d", out, re.M), out
+        assert re.search(rf"^ROS 2 graph, K = {k}, S = {k}\s+\d.*world", out, re.M), out
     assert re.search(
         r"^K = 2 against K = 1: run time \d+\.\d\dx, .* largest CPU per tick of a process \d", out, re.M
     ), out
     rows = re.findall(
-        r"^\s+300\s+(\d)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+"
+        r"^\s+300\s+(\d)\s+(\d)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+"
         r"([\d.]+)x$",
         out,
         re.M,
     )
-    assert [int(r[0]) for r in rows] == [1, 2], out
-    for _, world, batch, monitor, transport, tick, sim_tick, ratio in rows:
+    assert [(int(r[0]), int(r[1])) for r in rows] == [(1, 1), (2, 2)], out
+    sharded = re.search(r"^ROS 2 graph, K = 2, S = 2 .*$", out, re.M).group(0)
+    shard_cpu = [float(ms) for ms in re.findall(r"world_shard_\d ([\d.]+)", sharded)]
+    assert len(shard_cpu) == 2, sharded
+    assert abs(float(rows[1][2]) - max(shard_cpu)) <= 0.1, (rows[1], sharded)  # the world is the slowest shard
+    for _, _, world, batch, monitor, transport, tick, sim_tick, ratio in rows:
         assert float(transport) > 0 and float(sim_tick) > 0
         # the printed figures are rounded to 0.1 ms
         assert float(tick) >= max(float(world) + float(batch) + float(transport), float(monitor)) - 0.2
