@@ -27,7 +27,8 @@ pytestmark = pytest.mark.process
 PY = sys.executable
 FLOOD = Path(__file__).resolve().parents[1] / "scripts" / "flood.py"
 RATE = 2000  #: messages per second on each topic, about 30,000 in all (the bench goes higher)
-FLAGS = ["--shape", "rectangle", "--robots", "200", "--seed", "4", "--rules", "local"]
+#: 300 of the run's ~900 ticks (outcome timeout): the flood covers start-up, the ticks and the shut-down all the same
+FLAGS = ["--shape", "rectangle", "--robots", "200", "--seed", "4", "--rules", "local", "--max-ticks", "300"]
 
 
 def test_a_flood_on_every_topic_slows_the_run_and_leaves_its_result_unchanged(tmp_path):
