@@ -353,19 +353,21 @@ def staged_logs(out: Path, timeout: float = 60) -> Path:
     raise AssertionError("no logs")
 
 
-def saved_tick(logs: Path) -> int:
+def saved_tick(logs: Path, name: str = "world.checkpoint") -> int:
+    """The last tick the world saved (``name``: world.checkpoint.<i> for world shard i); -1 before its first."""
     try:
-        head = np.fromfile(logs / "world.checkpoint", dtype=np.int64, count=8)
+        head = np.fromfile(logs / name, dtype=np.int64, count=8)
     except (OSError, ValueError):
         return -1
     return int(head[_DONE]) if head.size == 8 and head[0] == MAGIC else -1
 
 
-def wait_saved(logs: Path, tick: int, timeout: float = 180) -> int:
-    """Wait (polling fast) until the world has saved ``tick``; return the tick saved when seen."""
+def wait_saved(logs: Path, tick: int, timeout: float = 180, name: str = "world.checkpoint") -> int:
+    """Wait (polling fast) until the world (the shard whose save is ``name``) has saved ``tick``; return the tick
+    saved when seen."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        t = saved_tick(logs)
+        t = saved_tick(logs, name)
         if t >= tick:
             return t
         time.sleep(0.0005)

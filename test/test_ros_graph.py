@@ -190,8 +190,9 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
         for _ in range(20):  # on a loaded 2-core machine discovery of every participant can take a while
             listing = swarm_ros("topics", "--domain-id", domain, "--seconds", "2").stdout
             listed = {ln.split()[0]: ln for ln in listing.splitlines()[1:] if ln.strip()}
-            if set(expected) <= set(listed) and float(listed["/swarm/robots"].split()[4]) > 0:
-                break  # every topic is there and ticks flow (a loaded machine may list them before tick 0)
+            if set(expected) <= set(listed) and float(listed["/swarm/robots"].split()[4]) > 10:
+                break  # every topic is there and ticks flow: a loaded machine may list them before tick 0, or
+                # count a 2 s window that tick 0 ends (CI once measured 2 ticks a second there)
         for topic, kind in expected.items():
             assert kind in listed[topic]
         rate = float(listed["/swarm/robots"].split()[4])

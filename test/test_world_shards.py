@@ -1,9 +1,12 @@
 """World shards over the ROS 2 graph (``swarm-ros run --world-shards S``): the run is simulate's, byte for byte,
-its bag holds every tick's S parts, and a world shard SIGKILLed in the middle of the run is restarted from its
-save and changes nothing the run writes but ``restarts``."""
+its bag holds every tick's S parts, and a world shard SIGKILLed while starting, in the middle of the run or
+right as it writes its save is restarted from that save and changes nothing the run writes but ``restarts``.
+A shard lost more often than ``--max-restarts`` fails the run, which claims no outcome; a batch lost for good
+under ``--on-batch-loss remove`` has its robots removed by the shards that held them."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -11,7 +14,16 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import finish_restarted_run, node_pid, run_env, wait_ticks_recorded
+from helpers import (
+    finish_restarted_run,
+    kill_node,
+    node_pid,
+    processes_mentioning,
+    run_env,
+    staged_logs,
+    wait_saved,
+    wait_ticks_recorded,
+)
 
 from swarm_ros.app import cli
 
@@ -88,3 +100,50 @@ def test_a_world_shard_killed_while_starting_is_restarted_and_the_run_is_identic
     os.kill(node_pid(out, "world_shard_0"), signal.SIGKILL)  # seen as soon as it exists: long before tick 0
     summary = finish_restarted_run(launcher, small_reference, out, ["world_shard_0"])
     assert summary["restarts"] == [{"tick": 0, "node": "world_shard_0"}]
+
+
+def test_a_world_shard_killed_as_it_writes_its_save_goes_on_from_it(reference, tmp_path):
+    """Killed the moment its save's header moves on (polled every 0.5 ms), twice: the process is then writing
+    the next tick's kept messages or ring slot, or publishing what it just saved."""
+    out = tmp_path / "run"
+    launcher = _launch(out, 2, "--no-recording")
+    logs, pid = staged_logs(out), None
+    for tick in (100, 300):
+        wait_saved(logs, tick, name="world.checkpoint.0")
+        pid = kill_node(out, "world_shard_0", not_pid=pid)
+    summary = finish_restarted_run(launcher, reference, out, ["world_shard_0", "world_shard_0"])
+    assert all(0 < r["tick"] < summary["convergence_tick"] for r in summary["restarts"]), summary["restarts"]
+
+
+def test_a_world_shard_killed_more_often_than_the_bound_fails_the_run_and_claims_no_outcome(tmp_path):
+    out = tmp_path / "run"
+    launcher = _launch(out, 2, "--no-recording", "--max-restarts", "0")
+    wait_saved(staged_logs(out), 100, name="world.checkpoint.1")
+    kill_node(out, "world_shard_1")
+    _, err = launcher.communicate(timeout=120)
+    assert launcher.returncode != 0
+    assert "world_shard_1 was killed by SIGKILL; it was restarted 0 times already (--max-restarts)" in err, err
+    assert "Traceback" not in err
+    # the monitor, stopped, writes the run so far, and says so: nothing claims an outcome the run did not reach
+    assert json.loads((out / "summary.json").read_text())["outcome"] == "interrupted"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
+
+
+def test_a_batch_lost_for_good_in_a_sharded_run_has_its_robots_removed(tmp_path):
+    """``--on-batch-loss remove``: robot_batch_1 (world shard 0's second batch) is SIGKILLed mid-run; the shards
+    remove the robots it hosted that were still moving, and the run goes on to its end with the rest; the robots'
+    final rows agree with the counts the monitor made of the shards' parts."""
+    out = tmp_path / "run"
+    launcher = _launch(out, 2, "--no-recording", "--on-batch-loss", "remove")
+    wait_saved(staged_logs(out), 100, name="world.checkpoint.0")
+    kill_node(out, "robot_batch_1")
+    _, err = launcher.communicate(timeout=240)
+    assert launcher.returncode == 0, err
+    assert "the world removes its robots" in err and "restarted" not in err, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["lost_robots"] > 0 and summary["restarts"] == [], summary
+    final = (out / "final_state.csv").read_text().splitlines()  # the robots' rows, against the counted metrics
+    states = [row.rsplit(",", 1)[1] for row in final[1:]]
+    assert len(states) == summary["robots"] and states.count("removed") == summary["lost_robots"], summary
+    assert states.count("localized") + states.count("seed") == summary["localized"], summary
+    assert not processes_mentioning(str(out)), "a process outlived the run"
