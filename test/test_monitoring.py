@@ -80,19 +80,23 @@ class Recorder:
         self.closed = True
 
 
-def world_messages(params: RunParams) -> tuple[Simulation, list[tuple[bytes, bytes | None]]]:
-    """The engine's run, and per tick what a world process publishes: its rows and its applied decisions
-    (None at tick 0), serialized."""
+def world_rows(params: RunParams) -> tuple[Simulation, list[tuple[np.ndarray, np.ndarray | None]]]:
+    """The engine's run, and per tick the rows a world process publishes and its applied decisions (None at
+    tick 0)."""
     sim, decider = Simulation(SHAPE, params), Decider(SHAPE, params)
-    out = [(encode_cloud(state_rows(np.arange(params.robots), sim.state), 0), None)]
+    out: list[tuple[np.ndarray, np.ndarray | None]] = [(state_rows(np.arange(params.robots), sim.state), None)]
     while not sim.done:
         decisions = decider.decide(sim.state, sim.moving_ids(), sim.tick + 1)
         sim.apply(decisions)
         ids = np.union1d(np.sort(decisions.ids), sim.last_removed)
-        out.append(
-            (encode_cloud(state_rows(ids, sim.state), sim.tick), encode_cloud(decision_rows(decisions), sim.tick))
-        )
+        out.append((state_rows(ids, sim.state), decision_rows(decisions)))
     return sim, out
+
+
+def world_messages(params: RunParams) -> tuple[Simulation, list[tuple[bytes, bytes | None]]]:
+    """:func:`world_rows`, serialized."""
+    sim, rows = world_rows(params)
+    return sim, [(encode_cloud(r, t), None if d is None else encode_cloud(d, t)) for t, (r, d) in enumerate(rows)]
 
 
 def make(params: RunParams, recorder: Recorder | None = None, **kw) -> tuple[MonitorCore, Port, Clock, Log]:
@@ -161,6 +165,31 @@ def test_rows_again_and_rows_that_cannot_be_the_next_change_nothing():
     core.decisions(decode_cloud(messages[3][1]))
     core.decisions(decode_cloud(messages[3][1]))  # again: a restarted world's: counted and bagged once
     assert port.decisions == [1, 2, 3]
+
+
+def test_world_shards_parts_are_joined_in_any_order_and_a_robot_in_two_parts_fails_the_run():
+    """With S = 2 the rows of a tick come as two parts, split here by id parity as no shard would split them;
+    a part of the next tick may come before the other part of this one. The joined count is the engine's;
+    parts that hold one robot twice fail the run rather than count it twice."""
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    sim, ticks = world_rows(params)
+    halves = [[encode_cloud(rows[rows["id"] % 2 == k], t) for k in (0, 1)] for t, (rows, _) in enumerate(ticks)]
+    core, _, _, _ = make(params, shards=2)
+    for tick, (_, odd) in enumerate(halves):
+        core.robots(decode_cloud(odd), "world_shard_1")
+        if tick:
+            core.robots(decode_cloud(halves[tick - 1][0]), "world_shard_0")  # the other part, one tick late
+    core.robots(decode_cloud(halves[-1][0]), "world_shard_0")
+    assert [tuple(r) for r in core.rows] == [tuple(r) for r in sim.history] and core.outcome == sim.outcome
+
+    core, _, _, _ = make(params, shards=2)
+    core.robots(decode_cloud(halves[0][0]), "world_shard_0")
+    core.robots(decode_cloud(halves[0][1]), "world_shard_1")
+    rows = ticks[1][0]
+    core.robots(decode_cloud(encode_cloud(rows[rows["id"] % 2 == 0], 1)), "world_shard_0")
+    with pytest.raises(RunFailed, match="hold a robot twice"):
+        core.robots(decode_cloud(encode_cloud(rows, 1)), "world_shard_1")  # every row of the tick: evens twice
+    assert core.replica.tick == 0
 
 
 def _ended(params=RunParams(robots=60, seed=3, max_ticks=400), recorder=None):

@@ -10,6 +10,8 @@ its peers instead.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
@@ -21,11 +23,17 @@ from swarm_ros.core.rules import Decider
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import STATE_COUNT
 
+#: robots of the throw-away run: the kernels' types do not depend on the swarm's size, and placing 50,000
+#: robots took a monitor 1.4 s of its start-up
+WARM_ROBOTS = 1000
+
 
 def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
     """Run ``ticks`` ticks of the graph's code path in this process and throw the result away:
     a robot batch's decisions, the world's check of them and :meth:`Simulation.apply`, a replica's rows
-    and the monitor's metrics. Nothing is shared with the caller's own objects."""
+    and the monitor's metrics, with at most :data:`WARM_ROBOTS` of the run's robots. Nothing is shared with the
+    caller's own objects."""
+    params = replace(params, robots=min(params.robots, WARM_ROBOTS))
     sim = Simulation(shape, params)
     decider = Decider(shape, params)
     replica = Replica(shape, params.robots)

@@ -26,7 +26,7 @@ from swarm_ros.core.params import RunParams
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.run_result import RunRecord
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import STATE_COUNT, RobotState
+from swarm_ros.core.state import STATE_COUNT, RobotState, has_repeats
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import apply_robots, checked_robots
@@ -131,9 +131,8 @@ class MonitorCore:
         self.parts.setdefault(tick, {})[sender] = rows  # a shard's restarted process sends the same again
         while self.outcome is None and len(self.parts.get(self.replica.tick + 1, ())) == self.shards:
             tick = self.replica.tick + 1
-            joined = np.concatenate(list(self.parts.pop(tick).values()))
-            joined = joined.take(np.argsort(joined["id"], kind="stable"))
-            if joined.size > 1 and (joined["id"][1:] == joined["id"][:-1]).any():
+            joined = np.concatenate(list(self.parts.pop(tick).values()))  # in no order: nothing below needs one
+            if has_repeats(joined["id"]):
                 raise RunFailed(f"tick {tick}: the world shards' parts hold a robot twice")
             self._count(tick, joined)
 
