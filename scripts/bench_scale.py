@@ -18,7 +18,8 @@ monitor runs beside the lockstep, up to ``monitor_window`` ticks behind). CPU pe
 measured in the runs above (median over ``--repeats``); the transport's part is measured here too, by a
 bare rclpy lockstep (scripts/bench_bare.py) of K batches exchanging messages of the measured sizes (the
 largest batch's region rows a tick, its share of the moving robots' decisions) and doing nothing else;
-with S shards, each shard's K / S batches, plus two rounds (claims, parts) of a shard with its S - 1 peers.
+with S shards, each shard's K / S batches, plus two rounds (claims, parts) of a shard with its S - 1 peers
+trading what the busiest shard took from them (its log's count of part rows and claims).
 On this 2-core machine every process of a K = 8 graph shares two cores, so each one's CPU per tick is
 measured under contention: the projection says what the code's per-process work allows, not what this
 machine shows.
@@ -93,6 +94,17 @@ def received(logs: Path, ticks: int) -> dict[str, float]:
     return out
 
 
+_PEERS = re.compile(r"received (\d+) part rows and (\d+) claims from its peers")
+
+
+def peer_rows(logs: Path, ticks: int) -> tuple[float, float]:
+    """Part rows and claims the busiest world shard took from its peers per tick (its log's 'received ...'
+    line); (0, 0) without shards."""
+    found = [_PEERS.search(log.read_text(errors="replace")) for log in sorted(logs.glob("world_shard_*.log"))]
+    pairs = [(int(m[1]) / ticks, int(m[2]) / ticks) for m in found if m]
+    return max(pairs, default=(0.0, 0.0))
+
+
 def moving_per_tick(run: Path) -> float:
     """Moving robots per tick of a run (metrics.csv, the ticks before the last): the decisions a tick takes."""
     with (run / "metrics.csv").open() as f:
@@ -104,14 +116,14 @@ def moving_per_tick(run: Path) -> float:
 
 def project(robots: int, measured: dict, sim_tick_ms: float, ticks: int, world_shards: int = 1) -> list[str]:
     """The projection's rows for one size (see the module's docstring); ``measured``: K -> (CPU per tick of
-    each node, largest bytes of rows a batch took per tick, moving robots per tick). With S world shards the
-    world's part is the slowest shard's CPU, and the transport adds the shards' two exchange rounds a tick
-    (claims, then parts), each taken as a bare lockstep of one shard with its S - 1 peers trading the moving
-    robots of a shard."""
+    each node, largest bytes of rows a batch took per tick, moving robots per tick, the busiest shard's part
+    rows and claims from its peers per tick). With S world shards the world's part is the slowest shard's CPU,
+    and the transport adds the shards' two exchange rounds a tick (claims, then parts), each taken as a bare
+    lockstep of one shard with its S - 1 peers, each peer sending its share of what the busiest shard took."""
     import bench_bare
 
     lines = []
-    for k, (cpu, largest, moving) in measured.items():
+    for k, (cpu, largest, moving, (part_rows, claims)) in measured.items():
         batches = [ms for node, ms in cpu.items() if node.startswith("robot_batch")]
         worlds = [ms for node, ms in cpu.items() if node.startswith("world")]
         world, batch, monitor = max(worlds, default=0.0), max(batches, default=0.0), cpu.get("monitor", 0.0)
@@ -124,8 +136,9 @@ def project(robots: int, measured: dict, sim_tick_ms: float, ticks: int, world_s
             90 + k,
         )
         if shards > 1:
-            per_shard = max(1, round(moving / shards))
-            transport += 2000 * bench_bare.bare_fixed(shards - 1, per_shard, per_shard, min(ticks, 100), 80 + k)
+            rows, rivals = (max(1, round(n / (shards - 1))) for n in (part_rows, claims))
+            transport += 1000 * bench_bare.bare_fixed(shards - 1, rivals, rivals, min(ticks, 100), 80 + k)
+            transport += 1000 * bench_bare.bare_fixed(shards - 1, rows, rows, min(ticks, 100), 80 + k)
         tick = max(world + batch + transport, monitor)
         lines.append(
             f"{robots:>9,} {k:>3} {shards:>3} {world:>8.1f} {batch:>8.1f} {monitor:>8.1f} {transport:>10.1f} "
@@ -205,7 +218,12 @@ def scale(
                 f"{medians[k] / sim_run:>13.1f}x   {cpu}"
             )
             traffic[k] = received(out / "logs", ticks)
-            measured[k] = (cpu_ms, max(traffic[k].values(), default=0.0), moving_per_tick(out))
+            measured[k] = (
+                cpu_ms,
+                max(traffic[k].values(), default=0.0),
+                moving_per_tick(out),
+                peer_rows(out / "logs", ticks),
+            )
         print("bytes of rows each batch received per tick (its region topic, the last run):")
         for k, per in traffic.items():
             print(
@@ -213,6 +231,11 @@ def scale(
                 + ", ".join(f"{name} {b / 1e3:,.1f} kB" for name, b in per.items())
                 + (f"; largest {max(per.values()) / 1e3:,.1f} kB" if per else "")
             )
+        for k, (*_, (part_rows, claims)) in measured.items():
+            if part_rows or claims:
+                print(
+                    f"  K = {k}: the busiest world shard took {part_rows:,.0f} part rows, {claims:,.0f} claims a tick"
+                )
         first = processes[0]
         for k in processes[1:]:
             ratio = max(traffic[k].values()) / max(traffic[first].values()) if traffic[k] and traffic[first] else 0

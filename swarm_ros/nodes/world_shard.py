@@ -65,6 +65,7 @@ class WorldShardNode(WorldNode):
         self.held: dict[tuple[int, int], dict[str, object]] = {}  # (peer, tick) -> its part's rows and counts
         self.shard_saver: ShardSaver | None = None  # made in load(), with a checkpoint path
         self.parts_sent: set[tuple[int, int]] = set()  # (tick, peer) of the parts sent in the kept ticks
+        self.peer_rows = [0, 0]  # part rows and claims taken from the peers (scripts/bench_scale.py reports them)
         for j in self.peers:
             for topic, handler, kind, q in (
                 (claims_topic(j, self.index), self._on_claims, PointCloud2, qos),
@@ -116,6 +117,7 @@ class WorldShardNode(WorldNode):
             tick = checks.tick_stamp(msg.header)
             rows = checks.cloud(msg, decision_row(self.shape.dims), self.params.robots, min_rows=0)
             checks.ids_in_range(rows["id"].astype(np.int64), 0, self.params.robots)
+            self.peer_rows[1] += rows.size
             self.shard_ls.exchange.peer_claims(peer, tick, decisions_of(tick, rows))
         except Rejected as fault:
             self.rejections.drop(topic, fault)
@@ -127,6 +129,7 @@ class WorldShardNode(WorldNode):
         except Rejected as fault:
             self.rejections.drop(topic, fault)
             return
+        self.peer_rows[0] += rows.size
         self._hold(peer, tick, "rows", rows, topic)
 
     def _on_counts(self, peer: int, topic: str, msg: Int64MultiArray) -> None:
@@ -191,7 +194,14 @@ class WorldShardNode(WorldNode):
             self.shard_saver.monitor_reported(tick)
 
     def close(self, code: int) -> None:
-        """The save is removed once the run has ended or was stopped; a failed or orphaned shard leaves it."""
+        """The save is removed once the run has ended or was stopped; a failed or orphaned shard leaves it. Say
+        how much this shard took from its peers."""
+        rows, claims = self.peer_rows
+        if isinstance(self.lockstep, ShardLockstep):  # loaded
+            tick = self.lockstep.exchange.tick
+            self.node.get_logger().info(
+                f"received {rows} part rows and {claims} claims from its peers up to tick {tick}"
+            )
         if self.shard_saver is not None and code in (EXIT_OK, EXIT_INTERRUPTED):
             self.shard_saver.remove()
 
