@@ -47,24 +47,42 @@ def main() -> int:
         )
         return 1
     try:
-        viewer.open(str(args.recording.absolute()))
-        time.sleep(args.settle)
-        if args.tick is not None:
-            viewer.set_time("tick", sequence=args.tick, play_state="paused")
-        else:
-            viewer.set_time(play_state="paused")
-        time.sleep(1.0)
-        with tempfile.TemporaryDirectory() as tmp:
-            shot = Path(tmp) / "shot.png"
-            viewer.save_screenshot(str(shot))
-            image = Image.open(shot)
-            if args.width and image.width > args.width:
-                image = image.resize((args.width, round(image.height * args.width / image.width)), Image.LANCZOS)
-            part = args.out.with_name(f".{args.out.name}.tmp")
+        return _shoot(viewer, args)
+    except (ConnectionError, OSError, RuntimeError) as exc:  # the viewer died after it started: no render context
+        print(
+            f"screenshot: error: the headless Rerun viewer stopped ({exc}); it needs a Vulkan driver: "
+            f"try 'apt-get install mesa-vulkan-drivers'",
+            file=sys.stderr,
+        )
+        return 1
+    finally:
+        try:
+            viewer.quit()
+        except (ConnectionError, OSError, RuntimeError):
+            pass  # already gone
+
+
+def _shoot(viewer, args: argparse.Namespace) -> int:
+    """Open the recording in ``viewer``, go to the tick, and write the screenshot to ``args.out``."""
+    viewer.open(str(args.recording.absolute()))
+    time.sleep(args.settle)
+    if args.tick is not None:
+        viewer.set_time("tick", sequence=args.tick, play_state="paused")
+    else:
+        viewer.set_time(play_state="paused")
+    time.sleep(1.0)
+    with tempfile.TemporaryDirectory() as tmp:
+        shot = Path(tmp) / "shot.png"
+        viewer.save_screenshot(str(shot))
+        image = Image.open(shot)
+        if args.width and image.width > args.width:
+            image = image.resize((args.width, round(image.height * args.width / image.width)), Image.LANCZOS)
+        part = args.out.with_name(f".{args.out.name}.tmp")
+        try:
             image.save(part, format="PNG", optimize=True)
             part.replace(args.out)
-    finally:
-        viewer.quit()
+        finally:
+            part.unlink(missing_ok=True)  # only if it was not renamed: nothing half-written is left
     print(f"wrote {args.out}")
     return 0
 
