@@ -19,7 +19,7 @@ measured in the runs above (median over ``--repeats``); the transport's part is 
 bare rclpy lockstep (scripts/bench_bare.py) of K batches exchanging messages of the measured sizes (the
 largest batch's region rows a tick, its share of the moving robots' decisions) and doing nothing else;
 with S shards, each shard's K / S batches, plus two rounds (claims, parts) of a shard with its S - 1 peers
-trading what the busiest shard took from them (its log's count of part rows and claims).
+trading the most part rows and claims a shard took from them (its log's count of each).
 On this 2-core machine every process of a K = 8 graph shares two cores, so each one's CPU per tick is
 measured under contention: the projection says what the code's per-process work allows, not what this
 machine shows.
@@ -98,11 +98,12 @@ _PEERS = re.compile(r"received (\d+) part rows and (\d+) claims from its peers")
 
 
 def peer_rows(logs: Path, ticks: int) -> tuple[float, float]:
-    """Part rows and claims the busiest world shard took from its peers per tick (its log's 'received ...'
-    line); (0, 0) without shards."""
+    """The most part rows and the most claims a world shard took from its peers per tick (its log's 'received
+    ...' line); (0, 0) without shards."""
     found = [_PEERS.search(log.read_text(errors="replace")) for log in sorted(logs.glob("world_shard_*.log"))]
-    pairs = [(int(m[1]) / ticks, int(m[2]) / ticks) for m in found if m]
-    return max(pairs, default=(0.0, 0.0))
+    rows = [int(m[1]) / ticks for m in found if m]
+    claims = [int(m[2]) / ticks for m in found if m]
+    return max(rows, default=0.0), max(claims, default=0.0)
 
 
 def moving_per_tick(run: Path) -> float:
@@ -116,10 +117,10 @@ def moving_per_tick(run: Path) -> float:
 
 def project(robots: int, measured: dict, sim_tick_ms: float, ticks: int, world_shards: int = 1) -> list[str]:
     """The projection's rows for one size (see the module's docstring); ``measured``: K -> (CPU per tick of
-    each node, largest bytes of rows a batch took per tick, moving robots per tick, the busiest shard's part
-    rows and claims from its peers per tick). With S world shards the world's part is the slowest shard's CPU,
+    each node, largest bytes of rows a batch took per tick, moving robots per tick, the most part rows
+    and the most claims a world shard took from its peers per tick). With S world shards the world's part is the slowest shard's CPU,
     and the transport adds the shards' two exchange rounds a tick (claims, then parts), each taken as a bare
-    lockstep of one shard with its S - 1 peers, each peer sending its share of what the busiest shard took."""
+    lockstep of one shard with its S - 1 peers, each peer sending its share of those."""
     import bench_bare
 
     lines = []
@@ -233,9 +234,7 @@ def scale(
             )
         for k, (*_, (part_rows, claims)) in measured.items():
             if part_rows or claims:
-                print(
-                    f"  K = {k}: the busiest world shard took {part_rows:,.0f} part rows, {claims:,.0f} claims a tick"
-                )
+                print(f"  K = {k}: a world shard took at most {part_rows:,.0f} part rows, {claims:,.0f} claims a tick")
         first = processes[0]
         for k in processes[1:]:
             ratio = max(traffic[k].values()) / max(traffic[first].values()) if traffic[k] and traffic[first] else 0

@@ -330,6 +330,7 @@ import rclpy
 from rclpy.node import Node
 rclpy.init(domain_id=int(sys.argv[1]))
 node = Node("intruder")
+print("ready", flush=True)
 seen, end = set(), time.monotonic() + float(sys.argv[2])
 while time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.1)
@@ -360,7 +361,7 @@ def test_a_one_host_run_is_not_discovered_from_another_network_namespace(two_hos
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(0.5)
+    assert intruder.stdout is not None and intruder.stdout.readline().strip() == "ready"  # its participant is up
     run = subprocess.Popen(
         [
             "ip",
