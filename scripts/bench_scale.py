@@ -117,10 +117,10 @@ def moving_per_tick(run: Path) -> float:
 
 def project(robots: int, measured: dict, sim_tick_ms: float, ticks: int, world_shards: int = 1) -> list[str]:
     """The projection's rows for one size (see the module's docstring); ``measured``: K -> (CPU per tick of
-    each node, largest bytes of rows a batch took per tick, moving robots per tick, the most part rows
-    and the most claims a world shard took from its peers per tick). With S world shards the world's part is the slowest shard's CPU,
-    and the transport adds the shards' two exchange rounds a tick (claims, then parts), each taken as a bare
-    lockstep of one shard with its S - 1 peers, each peer sending its share of those."""
+    each node, largest bytes of rows a batch took per tick, moving robots per tick, the most part rows and the
+    most claims a world shard took from its peers per tick). With S world shards the world's part is the
+    slowest shard's CPU, and the transport adds the shards' two exchange rounds a tick (claims, then parts),
+    each taken as a bare lockstep of one shard with its S - 1 peers, each peer sending its share of those."""
     import bench_bare
 
     lines = []
