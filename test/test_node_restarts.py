@@ -113,8 +113,9 @@ def test_a_world_killed_on_the_last_tick_ends_the_run_as_it_would_have(reference
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
     last = _final_tick(reference)
+    world = node_pid(out, "world")  # found first: the kill follows the save within a millisecond, not a /proc scan
     wait_saved(staged_logs(out), last - 1)
-    kill_node(out, "world")
+    os.kill(world, signal.SIGKILL)
     summary = finish_restarted_run(launcher, reference, out, ["world"])
     assert summary["restarts"][0]["tick"] >= last - 1
 
@@ -156,8 +157,9 @@ def test_a_monitor_killed_at_tick_0_goes_on_and_the_run_is_whole(reference, tmp_
 def test_a_monitor_killed_on_the_last_tick_goes_on_and_the_run_is_whole(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
+    monitor = node_pid(out, "monitor")  # found first, as above
     wait_saved(staged_logs(out), _final_tick(reference))
-    kill_node(out, "monitor")
+    os.kill(monitor, signal.SIGKILL)
     summary = finish_restarted_run(launcher, reference, out, ["monitor"])
     assert summary["restarts"][0]["tick"] >= _final_tick(reference) - 130  # the world runs its window ahead
     _recording_whole(out)
