@@ -48,12 +48,15 @@ def main() -> int:
         return 1
     try:
         return _shoot(viewer, args)
-    except (ConnectionError, OSError, RuntimeError) as exc:  # the viewer died after it started: no render context
+    except (ConnectionError, RuntimeError) as exc:  # the viewer died after it started: no render context
         print(
             f"screenshot: error: the headless Rerun viewer stopped ({exc}); it needs a Vulkan driver: "
             f"try 'apt-get install mesa-vulkan-drivers'",
             file=sys.stderr,
         )
+        return 1
+    except OSError as exc:  # the PNG could not be written (a full disk, a folder that is not there)
+        print(f"screenshot: error: cannot write {args.out}: {exc.strerror or exc}", file=sys.stderr)
         return 1
     finally:
         try:
