@@ -127,7 +127,8 @@ def test_bench_engine_smoke_prints_each_rule_set_its_cases_and_the_tick_cost_fit
     out = _smoke("bench_engine.py")
     assert [m for m in re.findall(r"^rules (\w+):", out, re.M)] == ["paper", "local", "literal"]
     assert len(rates := _rates(out)) == 3 * 3 and min(rates) > 0, out  # star first ticks, star whole, a disc
-    assert re.search(r"least squares: cost = [\d.]+ us \+ [\d.]+ ns x moving", out), out
+    # the fit's intercept may come out negative from a smoke run's few, noisy ticks (CI once saw -187.92 us)
+    assert re.search(r"least squares: cost = -?[\d.]+ us \+ -?[\d.]+ ns x moving", out), out
     assert "numbers that mean nothing" in out
 
 
