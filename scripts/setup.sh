@@ -20,6 +20,9 @@ if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ setup.py -nt "$st
   .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
   touch "$stamp"
 fi
+# The package's own bytecode: the environment may set PYTHONDONTWRITEBYTECODE, and then every node process
+# would compile swarm_ros from source as it starts (about 0.15 s of CPU each).
+.venv/bin/python -m compileall -q swarm_ros
 # numba's cache of the core's kernels (nothing to do when it is full; about 15 s to fill it), so the first run
 # does not compile them
 .venv/bin/python -m swarm_ros.core.kernels
