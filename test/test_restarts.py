@@ -219,7 +219,8 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
     out = tmp_path / "run"
     os.environ["FASTDDS_BUILTIN_TRANSPORTS"] = "DEFAULT"  # shared memory, as a user may choose (ros/dds.py)
     try:
-        launcher = _launch(out, "--no-recording")
+        # cut at 400 ticks: the kill is at tick 20, and the restarted batch must take part for the run to end
+        launcher = _launch(out, "--no-recording", "--max-ticks", "400")
     finally:
         del os.environ["FASTDDS_BUILTIN_TRANSPORTS"]
     victim = node_pid(out, "robot_batch_1")
