@@ -39,7 +39,6 @@ setup(
         "rerun-sdk>=0.41,<0.42",
         "rosbags>=0.11,<0.12",
         "mcap>=1.6",  # reading a killed monitor's unfinished bag (ros/bag_writer.py)
-        "ruamel.yaml>=0.18",  # the bag's metadata.yaml, as rosbags writes it
         "dask[distributed]>=2024.1",
     ],
     extras_require={"test": ["pytest>=8", "pytest-xdist>=3.5", "hypothesis>=6.100", "mcap-ros2-support>=0.6"]},
