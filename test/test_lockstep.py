@@ -365,3 +365,43 @@ def test_no_method_of_the_lockstep_is_a_base_class_stand_in():
         if len(body) == 1 and isinstance(body[0], ast.Raise) and "NotImplementedError" in ast.unparse(body[0]):
             stand_ins.append(name)
     assert stand_ins == []
+
+
+def test_tick_rate_publishes_one_tick_a_period_and_the_run_is_unchanged():
+    """``tick_rate``: a tick applied early is held until its time; the node is told when to poll (wake_in); a
+    tick held for the clock is not a stall; and the run is the engine's. (A period of 1/8 s: exact in binary.)"""
+    r = LockstepRun(tick_rate=8.0)
+    r.start()
+    assert r.port.ticks == [0] and r.ls.wake_in() is None  # tick 0 at once: nothing held
+    r.tick()
+    assert r.ls.sim.tick == 1 and r.port.ticks == [0], "applied, and held"
+    assert r.ls.wake_in() == 0.125
+    r.clock.now += 0.0625
+    r.ls.poll()
+    assert r.port.ticks == [0] and r.ls.wake_in() == 0.0625
+    r.clock.now += 0.0625
+    r.ls.poll()
+    assert r.port.ticks == [0, 1] and r.ls.wake_in() is None
+    published = {1: r.clock.now}
+    while not r.ls.sim.done:
+        r.tick()
+        r.clock.now += 0.5 * r.ls.wake_in()  # polled early: nothing goes out
+        r.ls.poll()
+        assert r.port.ticks[-1] == r.ls.sim.tick - 1
+        r.clock.now += r.ls.wake_in()
+        r.ls.poll()
+        published[r.port.ticks[-1]] = r.clock.now
+    gaps = np.diff([published[t] for t in sorted(published)])
+    assert gaps.min() == gaps.max() == 0.125
+    assert not r.ls.lost and not r.ls.down_since and r.ls.monitor_down_since is None
+    assert np.array_equal(r.ls.sim.history, r.engine().history)
+
+
+def test_a_tick_late_for_its_rate_goes_out_at_once_and_the_next_keeps_the_rate():
+    r = LockstepRun(tick_rate=8.0)
+    r.start()
+    r.clock.now += 0.375  # the batches took long: the tick is late
+    r.tick()
+    assert r.port.ticks == [0, 1], "late: published as soon as it is applied"
+    r.tick()
+    assert r.port.ticks == [0, 1] and r.ls.wake_in() == 0.125, "one period later, no burst"

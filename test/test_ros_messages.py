@@ -78,10 +78,10 @@ def _node(context, kind, **values):
 
 
 def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
-    node = _node(ros_context, "world", robots=500, vision_radius=2, monitor_window=0)
+    node = _node(ros_context, "world", robots=500, vision_radius=2, monitor_window=0, tick_rate=20)
     run, own = read_parameters(node, "world")
     assert run == Settings(robots=500, vision_radius=2.0)
-    assert isinstance(run.vision_radius, float)
+    assert isinstance(run.vision_radius, float) and isinstance(own["tick_rate"], float)
     assert own == {
         "monitor_window": 0,
         "start_timeout": 60.0,
@@ -90,6 +90,7 @@ def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
         "restart_timeout": 30.0,
         "checkpoint": "",
         "incarnation": 0,
+        "tick_rate": 20.0,
     }
     node.destroy_node()
 

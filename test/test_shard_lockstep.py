@@ -125,7 +125,15 @@ class Port:
 
 class ShardedGraph:
     def __init__(
-        self, shape: Shape, params: RunParams, batches: int, shards: int, seed: int, folder, window: int = 3
+        self,
+        shape: Shape,
+        params: RunParams,
+        batches: int,
+        shards: int,
+        seed: int,
+        folder,
+        window: int = 3,
+        tick_rate: float = 0.0,
     ) -> None:
         self.shape, self.params, self.rng, self.folder = shape, params, random.Random(seed), folder
         radius = shape.world.radius
@@ -137,7 +145,8 @@ class ShardedGraph:
         self.channels: dict[tuple, deque] = defaultdict(deque)
         self.statuses: dict[int, object] = {}
         self.clock, self.log = Clock(), Log()
-        self.policy = Policy(monitor_window=window)
+        self.policy = Policy(monitor_window=window, tick_rate=tick_rate)
+        self.published: dict[int, list[tuple[int, float]]] = defaultdict(list)  # shard -> (tick, clock) published
         self.ports = [Port(self, s) for s in range(shards)]
         self.incarnations = [0] * shards
         self.shards = [self.make(s) for s in range(shards)]
@@ -157,6 +166,7 @@ class ShardedGraph:
         self.channels[channel].append(deliver)
 
     def monitor_rows(self, s: int, tick: int, rows: np.ndarray) -> None:
+        self.published[s].append((tick, self.clock.now))
         if tick <= self.replica.tick:
             return  # again: a restarted shard publishes the ticks not confirmed
         self.parts[tick][s] = rows
@@ -213,6 +223,9 @@ class ShardedGraph:
                 return
             busy = [c for c, q in self.channels.items() if q]
             if not busy:
+                due = [w for ls in self.shards if (w := ls.wake_in()) is not None]
+                if due:  # tick_rate: what the node's spin would wait for
+                    self.clock.now += min(due)
                 for ls in self.shards:
                     ls.poll()
                 if not any(q for q in self.channels.values()):
@@ -248,6 +261,21 @@ def test_a_run_over_shards_is_the_engines_run(robots, batches, shards, seed, tmp
         assert ls.sim.outcome == ref.outcome
     assert np.array_equal(g.replica.state.state, ref.state.state)
     assert np.array_equal(g.replica.state.x, ref.state.x) and np.array_equal(g.replica.state.y, ref.state.y)
+
+
+def test_paced_shards_publish_a_tick_a_period_apart_and_the_run_is_the_engines(tmp_path):
+    """``tick_rate`` with world shards: each shard holds a closed tick until its time, and the run is unchanged."""
+    shape = Shape.load("star")
+    params = RunParams(robots=200, seed=2, max_ticks=60)
+    g = ShardedGraph(shape, params, 4, 2, 2, tmp_path, tick_rate=8.0)
+    g.start()
+    g.run()
+    ref = Simulation(shape, params)
+    ref.run()
+    assert g.history == [tuple(int(v) for v in row) for row in ref.history]
+    for s in range(2):
+        times = [at for tick, at in g.published[s] if tick > 0]
+        assert len(times) == 60 and min(np.diff(times)) >= 0.125, g.published[s][:5]
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -272,6 +272,14 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
             blank="none: a lost world ends the run",
         ),
         Param("incarnation", 0, "0 for the world's first process; the launcher counts restarts up from 1", low=0),
+        Param(
+            "tick_rate",
+            0.0,
+            "at most this many ticks a second, to watch a run live; results do not change",
+            low=1,
+            high=1000,
+            blank="as fast as the graph goes",
+        ),
     ),
     "robot_batch": (
         Param("batch", 0, "this process decides for the robots in strip `batch` of `batches` ...", low=0),

@@ -217,6 +217,9 @@ class MonitorNode:
         return handle_missed(self.node)  # what the executor may not have handed over (runtime.handle_missed)
 
     # -- the node runtime's hooks ----------------------------------------------------------
+    def wake_in(self) -> float | None:
+        return None  # polled when idle: nothing of its own waits for the clock
+
     def poll(self) -> None:
         if self.counter.due(self.bag is not None):
             self._write()

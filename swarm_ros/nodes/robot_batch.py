@@ -155,6 +155,9 @@ class RobotBatchNode:
             f"received {self.received} bytes of rows on {self.region} up to tick {self.replica.tick}"
         )
 
+    def wake_in(self) -> float | None:
+        return None  # polled when idle: nothing of its own waits for the clock
+
     def poll(self) -> None:
         # After the outcome, exit once every reader has acknowledged this batch's decisions: the world
         # has them all, but the monitor, which records them in the bag, may be far behind. A reader

@@ -251,6 +251,9 @@ class WorldNode:
     def poll(self) -> None:
         self.ls.poll()
 
+    def wake_in(self) -> float | None:
+        return None if self.lockstep is None else self.lockstep.wake_in()
+
     def close(self, code: int) -> None:
         """The checkpoint is removed once the run has ended or was stopped (Ctrl-C): no process of this run
         will restart from it. A failed or orphaned world leaves it."""

@@ -11,6 +11,7 @@ protocol and its fault policy.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Callable
@@ -64,6 +65,8 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         )
         n = sim.params.robots
         self.window = policy.monitor_window  # 0 while there is no monitor to wait for
+        self.period = 1.0 / policy.tick_rate if policy.tick_rate else 0.0  # seconds between ticks published, at least
+        self.paced_at = -math.inf  # clock() from which the next tick may be published (tick_rate)
         self.hosting = Hosting(sim.shape.world.radius, sim.params.vision_radius)  # which batch hosts which strip
         self.decider = Decider(sim.shape, sim.params)  # the world's own, for the strips of batches removed for good
         self.batch_names: list[str] = []
@@ -303,8 +306,24 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         self.queued.append((tick, rows, joined, applied, parts))
         self._flush()
 
+    def _awaits_monitor(self) -> bool:
+        """Whether the next tick queued waits for the monitor to catch up (it is more than ``window`` ahead)."""
+        return bool(self.queued) and self.window > 0 and self.queued[0][0] - self.monitor_tick > self.window
+
+    def wake_in(self) -> float | None:
+        """Seconds until the next tick queued may be published under ``tick_rate`` (the node polls by then);
+        None: nothing waits for the clock."""
+        if not self.period or not self.queued or self._awaits_monitor():
+            return None
+        return max(0.0, self.paced_at - self.clock())
+
     def _flush(self) -> None:
-        while self.queued and (self.window == 0 or self.queued[0][0] - self.monitor_tick <= self.window):
+        while self.queued and not self._awaits_monitor():
+            if self.period:  # tick_rate: each tick goes out at least a period after the one before
+                now = self.clock()
+                if now < self.paced_at:
+                    return  # poll() goes on
+                self.paced_at = now + self.period
             tick, rows, joined, applied, parts = self.queued.popleft()
             self.port.publish_tick(tick, rows, joined, applied, parts)
             self.progress_at = self.moved_at = self.clock()
@@ -387,6 +406,8 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
                 f"robot batches cover {self.hosting.covered()} of {self.hosting.width} columns after "
                 f"{p.start_timeout:g} s (start_timeout){dropped}"
             )
+        if self.period and self.queued:
+            self._flush()  # a tick held for tick_rate, due now
         if not self.started:
             self.maybe_start()
         elif self.removed_batches and not self.queued and not self.received and not self.sim.done:

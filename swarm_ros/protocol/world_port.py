@@ -40,6 +40,7 @@ class Policy:
     on_batch_loss: str = _DEFAULT["on_batch_loss"]
     max_restarts: int = _DEFAULT["max_restarts"]
     restart_timeout: float = _DEFAULT["restart_timeout"]
+    tick_rate: float = _DEFAULT["tick_rate"]
 
 
 class Logger(Protocol):

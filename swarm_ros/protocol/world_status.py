@@ -54,6 +54,9 @@ class WorldStatus:
     def monitor_down(self, why: str) -> None:
         raise NotImplementedError
 
+    def _awaits_monitor(self) -> bool:
+        raise NotImplementedError
+
     def status(self, note: str = "") -> Status:
         """The run's state now: outcome, the last published tick and its counts, restarts and lost processes."""
         tick = max(self.published_tick, 0)
@@ -108,7 +111,9 @@ class WorldStatus:
                 f"the run has not moved for {STILL_S:g} s at tick {self.sim.tick} (waiting for: {waiting}; "
                 f"messages dropped: {dropped}): its messages do not get through"
             )
-        if self.queued:
+        if self.queued:  # held for the monitor, or for tick_rate (nothing is awaited then: at most 1 s)
+            if not self._awaits_monitor():
+                return
             limit = STALL_S if self.monitor_tick >= 0 else FIRST_STALL_S
             if self.window and now - self.progress_at >= limit:
                 if not self.monitor_alive:

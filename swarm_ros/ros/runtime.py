@@ -48,6 +48,10 @@ class SwarmNode(Protocol):
     def poll(self) -> None:
         """Called between callbacks: check timeouts, raise RunFailed to stop."""
 
+    def wake_in(self) -> float | None:
+        """Seconds until :meth:`poll` has something due (the world's ``tick_rate``), if sooner than the next
+        idle poll; None: nothing."""
+
     def close(self, code: int) -> None:
         """Called once on the way out with the exit code (release files, mark a stopped run)."""
 
@@ -135,7 +139,8 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         missed = 0
         while not swarm.finished and not stop.signum:
             began = time.monotonic()
-            executor.spin_once(timeout_sec=_SPIN_TIMEOUT)
+            due = swarm.wake_in()
+            executor.spin_once(timeout_sec=_SPIN_TIMEOUT if due is None else min(due, _SPIN_TIMEOUT))
             if time.monotonic() - began >= _SPIN_TIMEOUT:  # nothing to do: anything in a reader was missed
                 missed += handle_missed(swarm.node)
             swarm.poll()
