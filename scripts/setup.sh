@@ -23,16 +23,24 @@ fi
 # The package's own bytecode: the environment may set PYTHONDONTWRITEBYTECODE, and then every node process
 # would compile swarm_ros from source as it starts (about 0.15 s of CPU each).
 .venv/bin/python -m compileall -q swarm_ros
+# colcon, for the test that builds the package as a ROS 2 workspace. Its own venv: colcon-core pulls in
+# pytest plugins that must not load into the project's tests (requirements-colcon.txt pins it all). It is
+# installed while the kernels compile (below): each step keeps one core busy.
+colcon_venv() {
+  local cstamp=.venv-colcon/.installed
+  if [ ! -f "$cstamp" ] || [ requirements-colcon.txt -nt "$cstamp" ]; then
+    "$PYTHON" -m venv .venv-colcon
+    .venv-colcon/bin/python -m pip install --quiet --disable-pip-version-check pip==26.3
+    .venv-colcon/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-colcon.txt
+    touch "$cstamp"
+  fi
+}
+colcon_venv &
+colcon_pid=$!
 # numba's cache of the core's kernels (nothing to do when it is full; about 15 s to fill it), so the first run
 # does not compile them
-.venv/bin/python -m swarm_ros.core.kernels
-
-# colcon, for the test that builds the package as a ROS 2 workspace. Its own venv: colcon-core pulls in
-# pytest plugins that must not load into the project's tests (requirements-colcon.txt pins it all).
-cstamp=.venv-colcon/.installed
-if [ ! -f "$cstamp" ] || [ requirements-colcon.txt -nt "$cstamp" ]; then
-  "$PYTHON" -m venv .venv-colcon
-  .venv-colcon/bin/python -m pip install --quiet --disable-pip-version-check pip==26.3
-  .venv-colcon/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-colcon.txt
-  touch "$cstamp"
+if ! .venv/bin/python -m swarm_ros.core.kernels; then
+  wait "$colcon_pid" || true
+  exit 1
 fi
+wait "$colcon_pid" || { echo "setup: could not install colcon into .venv-colcon" >&2; exit 1; }
