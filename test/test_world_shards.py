@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 from helpers import (
+    assert_identical_run,
     finish_restarted_run,
     kill_node,
     node_pid,
@@ -80,6 +81,26 @@ def test_a_run_over_three_world_shards_is_simulates(small_reference, tmp_path):
     logs = sorted(p.name for p in (out / "logs").glob("world_shard_*.log"))
     assert logs == ["world_shard_0.log", "world_shard_1.log", "world_shard_2.log"]
     assert not (out / "logs" / "world.log").exists()
+
+
+def test_world_shards_keep_to_the_worlds_tick_rate_and_the_run_is_simulates(tmp_path):
+    """``tick_rate`` in the parameter file's /world section reaches every shard: 60 ticks at 40 a second take
+    at least 59/40 s (unpaced, about 0.2 s), and the run is simulate's."""
+    flags = [*SMALL, "--max-ticks", "60", "--no-recording"]
+    ref, out, paced = tmp_path / "ref", tmp_path / "run", tmp_path / "paced.yaml"
+    assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
+    paced.write_text("/world:\n  ros__parameters:\n    tick_rate: 40.0\n")
+    done = subprocess.run(
+        [sys.executable, "-m", "swarm_ros", "run", *flags, "--processes", "4", "--world-shards", "2"]
+        + ["--params-file", str(paced), "--out", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        env=run_env(),
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    summary = assert_identical_run(ref, out)
+    assert summary["wall_seconds"] >= 0.95 * 59 / 40, summary["wall_seconds"]  # the monitor's receive times
 
 
 def test_a_world_shard_killed_mid_run_goes_on_from_its_save(reference, tmp_path):
