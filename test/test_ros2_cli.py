@@ -339,7 +339,7 @@ def _ask_until(ros, line: str, needle: str, what: str) -> str:
 
 def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
     """A run paced for watching (the world's tick_rate, from a parameter file) inspected with ros2 node, topic
-    and param; ``ros2 topic hz`` sees the rate asked for."""
+    and param; ``ros2 topic hz`` sees about the rate asked for."""
     out = tmp_path / "live"
     paced = tmp_path / "paced.yaml"
     paced.write_text(yaml.safe_dump({"/world": {"ros__parameters": {"tick_rate": float(RATE)}}}))
@@ -384,7 +384,9 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
         assert clock["clock"]["sec"] >= 50
         hz = ros.run("timeout -s INT 5 ros2 topic hz /swarm/robots", timeout=30).stdout
         rates = [float(r) for r in re.findall(r"average rate: ([\d.]+)", hz)]
-        assert rates and RATE / 2 < min(rates) and max(rates) <= RATE * 1.05, hz  # paced: never above tick_rate
+        # paced: about RATE, where the run unpaced goes at hundreds a second. hz times its own receipt of each
+        # message, and a reader that falls behind takes a few at once (CI's first window once said 44 at 40)
+        assert rates and RATE / 2 < rates[-1] < RATE * 1.5, hz
         assert ros.run("ros2 param get /world tick_rate").stdout.strip() == f"Double value is: {float(RATE)}"
 
         written = yaml.safe_load((logs / "params.yaml").read_text())
