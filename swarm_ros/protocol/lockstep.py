@@ -77,6 +77,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         self.respawned: dict[int, tuple[int, int]] = {}  # batch -> strip: re-announced with no higher incarnation
         self.lapsed: set[int] = set()  # batches whose liveliness lapsed since their last accepted announcement
         self.live: set[int] = set()  # batches whose liveliness holds (DDS reports a writer of theirs alive)
+        self.resent_at: dict[int, float] = {}  # batch -> clock() its snapshot was last sent again (check_stalls)
         self.restarts: list[tuple[int, str]] = []  # (tick, node) of every restart: batches, the world, the monitor
         self.known: dict[int, int] = {}  # restored: batch -> incarnation of the process the world before knew
         self.restored = False  # this world went on from a checkpoint (a process before it was lost)

@@ -4,6 +4,7 @@ state machine itself as :class:`WorldStatus`, a base class of the lockstep's."""
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -43,6 +44,7 @@ class WorldStatus:
     decided: np.ndarray
     pending: np.ndarray
     live: set[int]
+    resent_at: dict[int, float]
 
     # the lockstep's own (Lockstep defines them; a WorldStatus alone is not a lockstep)
     def hosts(self, ids: np.ndarray) -> np.ndarray:
@@ -55,6 +57,9 @@ class WorldStatus:
         raise NotImplementedError
 
     def _awaits_monitor(self) -> bool:
+        raise NotImplementedError
+
+    def _send_snapshot(self, k: int, rows: np.ndarray | None = None) -> None:
         raise NotImplementedError
 
     def status(self, note: str = "") -> Status:
@@ -130,11 +135,19 @@ class WorldStatus:
         for k in silent:
             if k not in self.live:
                 self.lose_batch(k, f"no decisions for {limit:g} s")
-        alive = [self.batch_names[k] for k in silent if k in self.live]
+        alive = [k for k in silent if k in self.live]
         if not alive:
             self.progress_at = now
-        elif now - self.progress_at >= DROWNED_S:
-            self._drowned(f"the decisions of {', '.join(alive)}")
+            return
+        if now - self.progress_at >= DROWNED_S:
+            self._drowned(f"the decisions of {', '.join(self.batch_names[k] for k in alive)}")
+        # Alive but silent: the rows it decides from may never have reached it (CI once saw a restarted world's
+        # snapshot to a batch that had missed the last rows not arrive, and the run wait 60 s for nothing). The
+        # current tick's snapshot again, once a STALL_S: a batch that has the tick ignores it.
+        for k in alive:
+            if now - self.resent_at.get(k, -math.inf) >= STALL_S:
+                self.resent_at[k] = now
+                self._send_snapshot(k)
 
     def _drowned(self, what: str) -> None:
         dropped = self.rejections.text() or "nothing"
