@@ -85,7 +85,7 @@ def test_a_run_over_three_world_shards_is_simulates(small_reference, tmp_path):
 
 def test_world_shards_keep_to_the_worlds_tick_rate_and_the_run_is_simulates(tmp_path):
     """``tick_rate`` in the parameter file's /world section reaches every shard: 60 ticks at 40 a second take
-    at least 59/40 s (unpaced, about 0.2 s), and the run is simulate's."""
+    at least 59/40 s (unpaced, about 0.6 s here), and the run is simulate's."""
     flags = [*SMALL, "--max-ticks", "60", "--no-recording"]
     ref, out, paced = tmp_path / "ref", tmp_path / "run", tmp_path / "paced.yaml"
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
