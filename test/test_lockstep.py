@@ -247,6 +247,8 @@ def test_a_monitor_never_seen_is_given_up_on_and_the_swarm_starts_without_it():
     r.clock.now += FIRST_STALL_S + 0.1
     r.ls.poll()
     assert r.ls.started and r.ls.lost == [MONITOR] and r.ls.window == 0
+    # which of the two it waited for, for a log to tell a lost liveliness event from slow discovery
+    assert any("not seen within 30 s: no liveliness, not all its readers found" in line for line in r.log.lines)
 
 
 def test_batches_that_never_cover_the_robots_fail_the_run_at_the_start_timeout():

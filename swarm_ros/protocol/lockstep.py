@@ -187,7 +187,9 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         if self.window and not (self.monitor_alive and self.port.monitor_reads_all()) and MONITOR not in self.lost:
             if self.clock() - self.created < FIRST_STALL_S:
                 return False
-            self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s")
+            liveliness = "its liveliness seen" if self.monitor_alive else "no liveliness"
+            readers = "its readers all found" if self.port.monitor_reads_all() else "not all its readers found"
+            self._lose_monitor(f"not seen within {FIRST_STALL_S:g} s: {liveliness}, {readers}")
         self.started, self.start_time, self.started_wall = True, self.clock(), time.time()
         self.startup_seconds = self.port.startup_seconds()
         return True
