@@ -142,7 +142,7 @@ class WorldStatus:
         if now - self.progress_at >= DROWNED_S:
             self._drowned(f"the decisions of {', '.join(self.batch_names[k] for k in alive)}")
         # Alive but silent: the rows it decides from may never have reached it (CI once saw a restarted world's
-        # snapshot to a batch that had missed the last rows not arrive, and the run wait 60 s for nothing). The
+        # snapshot to a batch that had missed the last rows not arrive, and the run waited 60 s for nothing). The
         # current tick's snapshot again, once a STALL_S: a batch that has the tick ignores it.
         for k in alive:
             if now - self.resent_at.get(k, -math.inf) >= STALL_S:

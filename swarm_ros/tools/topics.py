@@ -27,8 +27,8 @@ from swarm_ros.ros.runtime import TOOL_ROS_ARGS
 
 _SHOWN_ITEMS = 8  # array items printed without --full
 _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
-BURST = 5  #: messages a 0.1 s step that mean a latched topic's history is still arriving (the status: 1 a step)
-BURST_S = 1.5  #: seconds at most that --echo waits, beyond its first 0.3 s, for that history to end
+_BURST = 5  #: messages a 0.1 s step that mean a latched topic's history is still arriving (the status: 1 a step)
+_BURST_S = 1.5  #: seconds at most that --echo waits, beyond its first 0.3 s, for that history to end
 
 
 def _message_class(type_name: str) -> type:
@@ -204,13 +204,13 @@ def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: 
     inspector.node.create_subscription(_message_class(topics[topic]), topic, got.append, inspector.publisher_qos(topic))
     # A latched stream replays its history first; of that burst only the newest messages matter. On a loaded
     # machine the burst takes longer than its usual 0.3 s (CI once printed a status from before tick 0): go on
-    # while it still pours in, BURST or more a 0.1 s step, for at most BURST_S (a fast topic always pours).
+    # while it still pours in, _BURST or more a 0.1 s step, for at most _BURST_S (a fast topic always pours).
     inspector.spin_for(min(0.3, max(0.0, deadline - time.monotonic())))
-    until = min(deadline, time.monotonic() + BURST_S)
+    until = min(deadline, time.monotonic() + _BURST_S)
     while time.monotonic() < until:
         before = len(got)
         inspector.spin_for(0.1)
-        if len(got) - before < BURST:
+        if len(got) - before < _BURST:
             break
     del got[: max(0, len(got) - count)]
     printed = 0
