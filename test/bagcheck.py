@@ -8,6 +8,7 @@ the file), and compare it with the run's own files.
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,8 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from swarm_ros.core.state import MOVING_STATES, RobotState
+from swarm_ros.core.metrics import tick_metrics
+from swarm_ros.core.state import MOVING_STATES, STATE_COUNT, RobotState
 from swarm_ros.protocol.rows import PATCH_METRES, VOXEL_ROW, decision_row, robot_row
 
 TYPES = {
@@ -25,6 +27,7 @@ TYPES = {
     "/swarm/shape": "nav_msgs/msg/OccupancyGrid",
     "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray",
     "/swarm/metrics": "std_msgs/msg/Int64MultiArray",
+    "/swarm/tally": "std_msgs/msg/Int64MultiArray",
     "/clock": "rosgraph_msgs/msg/Clock",
 }
 #: A 3D run's topics: its shape and occupancy are PointCloud2s of voxel centres.
@@ -68,51 +71,86 @@ def read_bag(bag: Path, dims: int = 2) -> tuple[dict, dict[str, list]]:
 
 def assert_bag_holds_run(run: Path) -> None:
     """Every tick's robot rows in the bag rebuild final_state.csv; its metrics equal metrics.csv; every
-    tick's decisions are in it, one per robot moving after the tick before; shape, status, occupancy too."""
+    tick's decisions are in it, one per robot moving after the tick before; shape, status, occupancy too.
+    With ``record_every`` > 1 (summary.json's ``bag_robots_every``): every robot's row every k-th tick and at the
+    last, that tick's decisions, and the world's tallies of every tick, which give metrics.csv."""
     final_state = (run / "final_state.csv").read_text()
     dims = 3 if final_state.startswith("id,x,y,z,") else 2
     _, messages = read_bag(run / "bag", dims)
+    every = json.loads((run / "summary.json").read_text())["bag_robots_every"]
     robots = messages["/swarm/robots"]
     ticks = [m.header.stamp.sec for m in robots]
-    # one robots message per tick, in order; with world shards, one per shard, a tick's together
-    assert sorted(set(ticks)) == list(range(ticks[-1] + 1)) and ticks == sorted(ticks), "every tick, in order"
+    with open(run / "metrics.csv", newline="") as f:
+        table = list(csv.reader(f))
+    last = len(table) - 2  # the header, then ticks 0..last
+    if every == 1:  # one robots message per tick, in order; with world shards, one per shard, a tick's together
+        assert sorted(set(ticks)) == list(range(last + 1)) and ticks == sorted(ticks), "every tick, in order"
+        assert not messages["/swarm/tally"]
+    else:  # every k-th tick and the last, each whole (every robot once, over the shards' parts)
+        recorded = sorted({*range(0, last + 1, every), last})
+        assert sorted(set(ticks)) == recorded and ticks == sorted(ticks), (sorted(set(ticks))[:5], every)
     row_type = robot_row(dims)
     n = sum(np.frombuffer(m.data, dtype=row_type).size for m in robots if m.header.stamp.sec == 0)
     columns = ("x", "y", "z", "heading", "pitch") if dims == 3 else ("x", "y", "heading")
     pose = {name: np.zeros(n) for name in columns}
     state = np.zeros(n, dtype=np.int64)
-    moving_after: list[set[int]] = []
-    for m in robots:
+    moving_after: dict[int, set[int]] = {}
+    by_state: dict[int, np.ndarray] = {}
+    for at, m in enumerate(robots):
         rows = np.frombuffer(m.data, dtype=row_type)
         ids = rows["id"].astype(np.int64)
         state[ids] = rows["state"]
         for name in columns:
             pose[name][ids] = rows[name] / (PATCH_METRES if name in "xyz" else 1.0)
-        if m is robots[-1] or robots[robots.index(m) + 1].header.stamp.sec != m.header.stamp.sec:  # tick whole
-            moving_after.append(set(np.flatnonzero(np.isin(state, MOVING_STATES)).tolist()))
+        tick = m.header.stamp.sec
+        if at + 1 == len(robots) or robots[at + 1].header.stamp.sec != tick:  # the tick is whole
+            moving_after[tick] = set(np.flatnonzero(np.isin(state, MOVING_STATES)).tolist())
+            by_state[tick] = np.bincount(state, minlength=STATE_COUNT)
+            if every > 1:
+                whole = np.sort(
+                    np.concatenate(
+                        [np.frombuffer(r.data, dtype=row_type)["id"] for r in robots if r.header.stamp.sec == tick]
+                    ).astype(np.int64)
+                )
+                assert np.array_equal(whole, np.arange(n)), f"tick {tick}: every robot once"
     labels = [s.label for s in RobotState]
     values = [pose[name].tolist() for name in columns]
     rebuilt = [",".join(("id", *columns, "state"))]
     rebuilt += [",".join([str(i), *(repr(v[i]) for v in values), labels[state[i]]]) for i in range(n)]
     assert "\n".join(rebuilt) + "\n" == final_state
 
-    with open(run / "metrics.csv", newline="") as f:
-        table = list(csv.reader(f))
     got = [[str(v) for v in m.data] for m in messages["/swarm/metrics"]]
     assert [m.layout.dim[0].label for m in messages["/swarm/metrics"][:1]] == [",".join(table[0])]
     assert got == table[1:]
+    if every > 1:  # the tallies of each tick (one per world process) give its metrics; at a recorded tick, its rows
+        tallies: dict[int, list[np.ndarray]] = {}
+        for m in messages["/swarm/tally"]:
+            data = np.asarray(m.data, dtype=np.int64)
+            assert int(data[1]) == every
+            tallies.setdefault(int(data[0]), []).append(data[2:])
+        assert sorted(tallies) == list(range(last + 1)) and len({len(v) for v in tallies.values()}) == 1
+        for tick, parts in tallies.items():
+            counts = np.sum(parts, axis=0)
+            assert [str(v) for v in tick_metrics(tick, counts, 0)[:5]] == table[tick + 1][:5], f"tick {tick}"
+            if tick in by_state:
+                assert np.array_equal(by_state[tick], counts), f"tick {tick}: the rows and the tallies"
 
     # Decisions: the world starts once it has discovered the monitor's readers, so every tick's are in,
     # one row for each robot moving after the tick before (a batch may also decide for the tick after the
-    # last, before it hears the outcome).
+    # last, before it hears the outcome). With record_every > 1, those of the recorded ticks: as many as the
+    # metrics' moving robots after the tick before.
     decided: dict[int, list[int]] = {}
     for m in messages["/swarm/decisions"]:
         rows = np.frombuffer(m.data, dtype=decision_row(dims))
         decided.setdefault(m.header.stamp.sec, []).extend(rows["id"].tolist())
-    last = ticks[-1]
+    moving = table[0].index("moving")
     for tick in range(1, last + 1):
-        assert sorted(decided.get(tick, [])) == sorted(moving_after[tick - 1]), f"decisions of tick {tick}"
-    assert set(decided) <= set(range(1, last + 2)), sorted(set(decided) - set(range(1, last + 2)))
+        if every == 1:
+            assert sorted(decided.get(tick, [])) == sorted(moving_after[tick - 1]), f"decisions of tick {tick}"
+        elif tick in by_state:
+            assert len(decided.get(tick, [])) == int(table[tick][moving]), f"decisions of tick {tick}"
+    allowed = set(range(1, last + 2)) if every == 1 else {t for t in by_state if t > 0} | {last + 1}
+    assert set(decided) <= allowed, sorted(set(decided) - allowed)
     counts = {topic: len(got) for topic, got in messages.items()}
     assert counts["/swarm/shape"] == 1 and counts["/swarm/status"] >= 1 and counts["/swarm/occupancy"] >= 1, counts
     for m in messages["/swarm/occupancy"] + messages["/swarm/shape"]:

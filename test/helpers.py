@@ -289,6 +289,7 @@ def assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
     assert isinstance(startup, float) and 0 < startup < 120
     assert (isinstance(shutdown, float) and 0 < shutdown < 60) if launched else shutdown is None
     assert b.pop("rejected_messages") == {"world": 0, "monitor": 0}  # an honest run: nothing dropped
+    b.pop("bag_robots_every", None)  # checked against the bag (bagcheck)
     assert a == b
     assert (got / "final.png").stat().st_size > 0 and (got / "convergence.png").stat().st_size > 0
     assert_bag_holds_run(got)  # the rosbag2 of the run, read with another library than the one that wrote it
@@ -529,17 +530,17 @@ class LockstepPort:
         self.snapshots.append((k, tick))
         self.regions.append((tick, k, rows))
 
-    def publish_tick(self, tick, rows, joined, applied, regional):
-        assert (applied is None) == (tick == 0)
+    def publish_tick(self, tick, rows, joined, applied, regional, tally):
+        assert (applied is None) == (tick == 0) and tally is None and rows is not None  # record_every 1
         self.ticks.append(tick)
         self.regions += [(tick, k, part) for k, part in enumerate(regional or ())]
 
     def publish_status(self, status):
         self.statuses.append(status)
 
-    def checkpoint(self, tick, rows, applied, metrics):
+    def checkpoint(self, tick, rows, applied, metrics, published, tally):
         if self.saver is not None:
-            self.saver.write(tick, rows, applied, metrics)
+            self.saver.write(tick, rows, applied, metrics, published, tally)
 
     def save_book(self, book):
         self.books.append(book)

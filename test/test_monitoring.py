@@ -38,7 +38,7 @@ class Port:
         self.missed = 0  # how many take_missed() hands over (once)
         self.on_missed = None  # called by take_missed(): a message the executor had not handed over
 
-    def tick_counted(self, tick, metrics, occupancy, first, changed) -> None:
+    def tick_counted(self, tick, metrics, occupancy, first, changed, messages) -> None:
         assert isinstance(metrics, TickMetrics) and metrics.tick == tick
         self.counted.append((tick, first, changed))
 

@@ -109,6 +109,23 @@ def test_a_node_killed_mid_run_goes_on_and_the_run_is_identical_and_whole(refere
     assert logged.format(tick=tick) in (out / "logs" / f"{node}.log").read_text()
 
 
+@pytest.mark.parametrize("node", ["world", "monitor"])
+def test_a_node_killed_mid_run_with_the_robots_every_6th_tick_goes_on_and_the_run_is_whole(reference, tmp_path, node):
+    """``--record-every 6``: the world sends its tally every tick and every robot's row every 6th. A new world
+    sends again, from its checkpoint, the tallies and rows the monitor has not confirmed; a new monitor counts
+    the ticks of its bag from their tallies and its replica from their rows. The run is identical, its bag holds
+    every 6th tick whole and the recording the robots at those ticks."""
+    out = tmp_path / "run"
+    launcher = _launch(out, "--record-every", "6")
+    wait_saved(staged_logs(out), 300)
+    kill_node(out, node)
+    summary = finish_restarted_run(launcher, reference, out, [node])
+    assert 0 < summary["restarts"][0]["tick"] < _final_tick(reference)
+    assert summary["bag_robots_every"] == summary["recording_robots_every"] == 6
+    last = _final_tick(reference)
+    assert sorted(Recording(out / "recording.rrd").robots) == sorted({*range(0, last + 1, 6), last})
+
+
 def test_a_world_killed_on_the_last_tick_ends_the_run_as_it_would_have(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")

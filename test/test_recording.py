@@ -156,8 +156,9 @@ def test_a_large_swarm_is_logged_every_kth_tick_chosen_from_its_size_and_says_so
     """With no --record-every, a swarm of more robots than POSES_PER_TICK is logged every ceil(N / it)-th tick
     (lowered here so that the 460 robots stand for a large swarm); the run table and the command say so."""
     from swarm_ros.artifacts import recording_options
+    from swarm_ros.core import params
 
-    monkeypatch.setattr(recording_options, "POSES_PER_TICK", 200)
+    monkeypatch.setattr(params, "POSES_PER_TICK", 200)
     out = tmp_path / "auto"
     assert cli.main(["simulate", *[f for f in FLAGS if f != "--quiet"], "--out", str(out)]) == 0
     assert_matches_run(Recording(out / "recording.rrd"), out, every=3)
@@ -166,7 +167,7 @@ def test_a_large_swarm_is_logged_every_kth_tick_chosen_from_its_size_and_says_so
         in capsys.readouterr().err
     )
     assert "| robots logged | every 3 tick(s) |" in run_table(out / "recording.rrd")
-    monkeypatch.setattr(recording_options, "POSES_PER_TICK", 460)  # as many as the swarm: every tick
+    monkeypatch.setattr(params, "POSES_PER_TICK", 460)  # as many as the swarm: every tick
     assert recording_options.RecordingOptions().every_for(460) == 1
     assert recording_options.RecordingOptions(every=7).every_for(10**6) == 7  # chosen by the user: kept
 

@@ -14,15 +14,15 @@ import pytest
 from helpers import Clock, Log
 
 from swarm_ros.core.engine import Simulation
-from swarm_ros.core.metrics import tick_metrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import area, batch_cuts, columns, halo, shard_batches, shard_cuts, strip
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.shards import ShardPlan, WorldShard
-from swarm_ros.core.state import STATE_COUNT
+from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.checks import Rejections, apply_robots
+from swarm_ros.protocol.monitoring import MonitorCore
 from swarm_ros.protocol.plan import batch_name
 from swarm_ros.protocol.rows import decision_rows, pose_of
 from swarm_ros.protocol.shard_lockstep import ShardLockstep
@@ -89,11 +89,21 @@ class Port:
         b = self.g.batches[self.batch_of[k]]
         self.g.send(("batch", b.k), lambda: b.snapshot(tick, rows))
 
-    def publish_tick(self, tick, rows, joined, applied, regional):
+    def publish_tick(self, tick, rows, joined, applied, regional, tally):
         for k, part in enumerate(regional or ()):
             b = self.g.batches[self.batch_of[k]]
             self.g.send(("batch", b.k), lambda b=b, part=part: b.region(tick, part))
-        self.g.send(("monitor", self.s), lambda: self.g.monitor_rows(self.s, tick, rows))
+        every = self.g.policy.record_every
+        unrecorded = every > 1 and tick % every > 0 and tick < self.g.end
+        assert (tally is None) == (every == 1) and (rows is None) == unrecorded
+        self.g.published[self.s].append((tick, self.g.clock.now))
+        sender = f"world_shard_{self.s}"  # a channel per topic, as DDS orders a writer's messages per topic
+        if tally is not None:
+            data = np.array([tick, every, *tally], dtype=np.int64)  # the message's numbers, as the node hands them
+            self.g.send(("tally", self.s), lambda: self.g.monitor.tally(data, sender))
+        if rows is not None:
+            msg = encode_cloud(rows, tick)
+            self.g.send(("monitor", self.s), lambda: self.g.monitor.robots(decode_cloud(msg), sender))
 
     def publish_status(self, status):
         self.g.statuses[self.s] = status
@@ -116,8 +126,8 @@ class Port:
     def ask_again(self, peer):
         self.g.send(("again", self.s, peer), lambda: self.g.shards[peer].exchange.resend(self.s))
 
-    def save_tick(self, tick, rows, published, applied, metrics, sent):
-        self.saver.write_tick(tick, rows, published, applied, metrics, sent)
+    def save_tick(self, tick, rows, published, applied, metrics, sent, tally):
+        self.saver.write_tick(tick, rows, published, applied, metrics, sent, tally)
 
     def save_book(self, book):
         self.saver.save_book(book)
@@ -134,6 +144,7 @@ class ShardedGraph:
         folder,
         window: int = 3,
         tick_rate: float = 0.0,
+        every: int = 1,
     ) -> None:
         self.shape, self.params, self.rng, self.folder = shape, params, random.Random(seed), folder
         radius = shape.world.radius
@@ -145,16 +156,33 @@ class ShardedGraph:
         self.channels: dict[tuple, deque] = defaultdict(deque)
         self.statuses: dict[int, object] = {}
         self.clock, self.log = Clock(), Log()
-        self.policy = Policy(monitor_window=window, tick_rate=tick_rate)
+        self.policy = Policy(monitor_window=window, tick_rate=tick_rate, record_every=every)
         self.published: dict[int, list[tuple[int, float]]] = defaultdict(list)  # shard -> (tick, clock) published
         self.ports = [Port(self, s) for s in range(shards)]
         self.incarnations = [0] * shards
         self.shards = [self.make(s) for s in range(shards)]
         self.batches = [Batch(self, k) for k in range(batches)]
-        self.replica = Replica(shape, params.robots)  # the monitor's
-        self.parts: dict[int, dict[int, np.ndarray]] = defaultdict(dict)
-        self.history: list[tuple[int, ...]] = []
+        ref = Simulation(shape, params)
+        ref.run()
+        self.end = ref.tick  # the last tick: its rows go out whatever record_every says
+        self.monitor = MonitorCore(shape, params, radius, self, None, self.log, shards=shards, every=every)
+        self.replica = self.monitor.replica  # the monitor's
         self.restarts = 0
+
+    @property
+    def history(self) -> list[tuple[int, ...]]:
+        return [tuple(int(v) for v in row) for row in self.monitor.rows]
+
+    # -- the monitor's port
+    def tick_counted(self, tick, metrics, occupancy, first, changed, messages) -> None:
+        for j in range(len(self.shards)):
+            self.send(("metrics", j), lambda j=j, t=tick: self.shards[j].metrics(t, "monitor-1"))
+
+    def decisions_taken(self, tick: int) -> None:
+        pass
+
+    def take_missed(self) -> int:
+        return 0
 
     def make(self, s: int) -> ShardLockstep:
         shard = WorldShard(self.shape, self.params, self.plan, s)
@@ -164,22 +192,6 @@ class ShardedGraph:
 
     def send(self, channel: tuple, deliver) -> None:
         self.channels[channel].append(deliver)
-
-    def monitor_rows(self, s: int, tick: int, rows: np.ndarray) -> None:
-        self.published[s].append((tick, self.clock.now))
-        if tick <= self.replica.tick:
-            return  # again: a restarted shard publishes the ticks not confirmed
-        self.parts[tick][s] = rows
-        while len(self.parts.get(self.replica.tick + 1, {})) == len(self.shards):
-            t = self.replica.tick + 1
-            joined = np.concatenate(list(self.parts.pop(t).values()))
-            joined = joined[np.argsort(joined["id"], kind="stable")]
-            assert not (np.diff(joined["id"].astype(np.int64)) == 0).any(), "two shards reported one robot"
-            apply_robots(self.replica, t, joined)
-            counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
-            self.history.append(tuple(int(v) for v in tick_metrics(t, counts, self.shape.patches)))
-            for j in range(len(self.shards)):
-                self.send(("metrics", j), lambda j=j, t=t: self.shards[j].metrics(t, "monitor-1"))
 
     def start(self) -> None:
         for ls in self.shards:
@@ -209,8 +221,8 @@ class ShardedGraph:
         ls.monitor_liveliness(1, 0)
         ls.restore(saved, self.incarnations[s])
         self.restarts += 1
-        if self.replica.tick >= 0:  # the new process's readers get the writers' histories (metrics: depth 64)
-            self.send(("metrics", s), lambda t=self.replica.tick: ls.metrics(t, "monitor-1"))
+        if self.monitor.last >= 0:  # the new process's readers get the writers' histories (metrics: depth 64)
+            self.send(("metrics", s), lambda t=self.monitor.last: ls.metrics(t, "monitor-1"))
         for b in self.batches:
             if self.shard_of[b.k] == s:
                 ls.announce(batch_name(b.k), 0, b.strip)
@@ -219,7 +231,7 @@ class ShardedGraph:
 
     def run(self, kill_every: int = 0, limit: int = 200_000) -> None:
         for _ in range(limit):
-            if all(ls.sim.done for ls in self.shards) and self.replica.tick == self.shards[0].sim.tick:
+            if all(ls.sim.done for ls in self.shards) and self.monitor.outcome is not None:
                 return
             busy = [c for c, q in self.channels.items() if q]
             if not busy:
@@ -263,6 +275,28 @@ def test_a_run_over_shards_is_the_engines_run(robots, batches, shards, seed, tmp
     assert np.array_equal(g.replica.state.x, ref.state.x) and np.array_equal(g.replica.state.y, ref.state.y)
 
 
+@pytest.mark.parametrize(("robots", "batches", "shards", "seed", "every"), [(200, 4, 2, 2, 3), (300, 6, 3, 4, 7)])
+def test_shards_that_send_the_robots_every_kth_tick_are_counted_from_their_tallies(
+    robots, batches, shards, seed, every, tmp_path
+):
+    """``record_every`` > 1: each shard sends the monitor its tally every tick and every robot in its strips every
+    k-th tick and at the last; the monitor counts each tick from the tallies, checks the rows against them, and
+    its count is the engine's tick for tick, its replica the engine's final state."""
+    shape = Shape.load("star")
+    params = RunParams(robots=robots, seed=seed, max_ticks=299, fail_fraction=0.05, fail_tick=10)
+    g = ShardedGraph(shape, params, batches, shards, seed, tmp_path, every=every)
+    g.start()
+    g.run()
+    ref = Simulation(shape, params)
+    ref.run()
+    assert g.history == [tuple(int(v) for v in row) for row in ref.history]
+    assert g.replica.tick == ref.tick and ref.tick % every != 0  # the last tick, whatever k says
+    assert np.array_equal(g.replica.state.state, ref.state.state)
+    assert np.array_equal(g.replica.state.x, ref.state.x) and np.array_equal(g.replica.state.y, ref.state.y)
+    rows_at = sorted({t for ticks in g.published.values() for t, _ in ticks})
+    assert rows_at == list(range(ref.tick + 1))  # a tally of every tick
+
+
 def test_paced_shards_publish_a_tick_a_period_apart_and_the_run_is_the_engines(tmp_path):
     """``tick_rate`` with world shards: each shard holds a closed tick until its time, and the run is unchanged."""
     shape = Shape.load("star")
@@ -278,11 +312,12 @@ def test_paced_shards_publish_a_tick_a_period_apart_and_the_run_is_the_engines(t
         assert len(times) == 60 and min(np.diff(times)) >= 0.125, g.published[s][:5]
 
 
-@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("seed", range(8))
 def test_shards_killed_at_any_moment_go_on_from_their_saves(seed, tmp_path):
+    """Seeds 6 and 7: the shards send the robots every 4th tick (``record_every``), their tallies in between."""
     shape = Shape.load("star")
     params = RunParams(robots=200, seed=seed, max_ticks=200, fail_fraction=0.05, fail_tick=20)
-    g = ShardedGraph(shape, params, 4, 1 + seed % 3 + 1, seed, tmp_path)
+    g = ShardedGraph(shape, params, 4, 1 + seed % 3 + 1, seed, tmp_path, every=1 if seed < 6 else 4)
     g.start()
     g.run(kill_every=150)
     ref = Simulation(shape, params)

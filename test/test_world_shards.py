@@ -125,9 +125,11 @@ def test_a_world_shard_killed_while_starting_is_restarted_and_the_run_is_identic
 
 def test_a_world_shard_killed_as_it_writes_its_save_goes_on_from_it(reference, tmp_path):
     """Killed the moment its save's header moves on (polled every 0.5 ms), twice: the process is then writing
-    the next tick's kept messages or ring slot, or publishing what it just saved."""
+    the next tick's kept messages or ring slot, or publishing what it just saved. The shards send the robots
+    every 4th tick (``--record-every 4``), their tallies in between: the new process sends again what the
+    monitor may lack of each kind, and the bag holds every 4th tick whole."""
     out = tmp_path / "run"
-    launcher = _launch(out, 2, "--no-recording")
+    launcher = _launch(out, 2, "--no-recording", "--record-every", "4")
     logs, pid = staged_logs(out), None
     for tick in (100, 300):
         wait_saved(logs, tick, name="world.checkpoint.0")

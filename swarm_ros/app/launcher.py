@@ -240,7 +240,12 @@ class Launch:
                 run,
                 {
                     **world_sections(
-                        {**self.world, "on_batch_loss": self.on_batch_loss, "max_restarts": self.max_restarts},
+                        {
+                            **self.world,
+                            "on_batch_loss": self.on_batch_loss,
+                            "max_restarts": self.max_restarts,
+                            "record_every": self.recording.every,  # the world publishes the robots that often
+                        },
                         self.world_shards,
                         logs,
                     ),

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarm_ros.core.errors import ParameterError
-from swarm_ros.core.params import node_parameter
+from swarm_ros.core.params import RECORD_EVERY, auto_every
 
 if TYPE_CHECKING:
     from swarm_ros.artifacts.rerun_recording import Recorder
@@ -19,16 +19,6 @@ if TYPE_CHECKING:
     from swarm_ros.core.shapes import Shape
 
 _URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
-#: robot poses the recording takes per tick, on average, when ``every`` is chosen from the swarm's size
-POSES_PER_TICK = 10_000
-
-
-def auto_every(robots: int) -> int:
-    """The recording's ``every`` for a swarm of ``robots``, when the user chose none: every tick up to
-    :data:`POSES_PER_TICK` robots, then every ceil(robots / POSES_PER_TICK)-th tick. Logged every tick, the
-    robots of a 50,000-robot run made the in-process engine's run 1.5x as long and took a fifth of the
-    monitor's CPU."""
-    return max(1, -(-robots // POSES_PER_TICK))
 
 
 @dataclass(frozen=True)
@@ -48,7 +38,7 @@ class RecordingOptions:
     connect: str | None = None
 
     def __post_init__(self) -> None:
-        node_parameter("monitor", "record_every").check(self.every)
+        RECORD_EVERY.check(self.every)
         if self.connect and not self.connect.startswith(_URL_SCHEMES):
             raise ParameterError(
                 f"viewer URL must start with one of {', '.join(_URL_SCHEMES)}, "

@@ -354,7 +354,8 @@ def write_run(
     ``recording``, a finished .rrd file, is moved in as ``recording.rrd``, and ``bag``, a
     finished rosbag2 directory, as ``bag/`` (each back where it was if the write fails).
     ``robots_every``: the recording holds every robot's pose every this many ticks; summary.json says so
-    (``recording_robots_every``, null without a recording).
+    (``recording_robots_every``, null without a recording); a run's ``bag`` holds every robot's row as often
+    (``bag_robots_every``, written with a bag only).
 
     Raises:
         OutputError: the directory cannot be written.
@@ -372,6 +373,8 @@ def write_run(
         raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc})") from None
     try:
         summary = {**record.summary, "recording_robots_every": robots_every if recording is not None else None}
+        if bag is not None:
+            summary["bag_robots_every"] = robots_every
         (tmp / "summary.json").write_text(summary_json(summary), encoding="utf-8")
         (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")

@@ -168,6 +168,53 @@ class Replica:
         self._apply(0, ids, state, x, y, heading, z, pitch)  # the checks of a tick-0 message: every robot once
         self.state.tick = tick
 
+    def leap(
+        self,
+        tick: int,
+        ids: np.ndarray,
+        state: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        heading: np.ndarray,
+        z: np.ndarray | None = None,
+        pitch: np.ndarray | None = None,
+    ) -> str | None:
+        """Go on to ``tick`` from every robot's row at it, ticks after the last one applied (a world that sends the
+        rows only every k-th tick); why not (the replica unchanged), or None.
+
+        Besides :meth:`load`'s checks (every robot once, each localized one on its own shape patch), the rows
+        must be able to follow the replica's: a robot that was stationary (a seed, localized or separated) is
+        where it was, in the same state, or removed; a removed robot stays removed.
+        """
+        s = self.state
+        ids = np.asarray(ids, dtype=np.int64)
+        if self.area is not None or tick <= s.tick:
+            return f"of tick {tick} cannot follow tick {s.tick}"
+        if ids.size != s.robots or has_repeats(ids) or (ids.size and (ids.min() < 0 or ids.max() >= s.robots)):
+            return f"must hold every robot once ({s.robots}), got {ids.size} rows"
+        if s.tick >= 0:
+            after = np.empty(s.robots, dtype=np.int8)
+            after[ids] = state
+            new_x, new_y = np.empty(s.robots), np.empty(s.robots)
+            new_x[ids], new_y[ids] = x, y
+            before = s.state
+            fixed = (before == _SEED) | (before == _LOCALIZED) | (before == _SEPARATED)
+            moved = (new_x != s.x) | (new_y != s.y)
+            if z is not None and self._solid:
+                new_z = np.empty(s.robots)
+                new_z[ids] = z
+                moved |= new_z != s.z
+            kept = after == before
+            if ((before == _REMOVED) & ~kept).any() or (fixed & ~(kept & ~moved) & (after != _REMOVED)).any():
+                return "move a robot that was stationary, or bring back a removed one"
+        saved = self.state
+        try:
+            self.load(tick, ids, state, x, y, heading, z, pitch)
+        except ContractError as exc:
+            self.state = saved
+            return str(exc)
+        return None
+
     @property
     def tick(self) -> int:
         return self.state.tick

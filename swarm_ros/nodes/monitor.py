@@ -27,9 +27,8 @@ from swarm_ros.artifacts import run_dir
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.rerun_recording import RecordingError
 from swarm_ros.core.errors import Rejected, RunFailed
-from swarm_ros.core.metrics import Outcome, TickMetrics
+from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.warmup import warm_up
-from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.monitoring import MonitorCore
@@ -78,9 +77,13 @@ class MonitorNode:
         self.pub_metrics = self.signer.publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
         # Serialized subscriptions to the tagged topics it records (plan.MONITOR_READS): see _bagger.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
-        self.handlers = {msgs.ROBOTS: self._on_robots, msgs.STATUS: self._on_status, msgs.DECISIONS: self._on_decisions}
+        self.handlers = {
+            msgs.ROBOTS: self._on_robots,
+            msgs.STATUS: self._on_status,
+            msgs.DECISIONS: self._on_decisions,
+            msgs.TALLY: self._on_tally,
+        }
         self.raw = b""  # the message being handled, as it came (recorded once its handler takes it)
-        self.raw_parts: dict[int, dict[str, bytes]] = {}  # world shards: tick -> sender -> its part, as it came
         self.readers = {topic: self._subscribe(topic) for topic in msgs.MONITOR_READS if topic != msgs.STATUS}
         # The world starts tick 0 once it sees this node's liveliness writer, which appears only when these
         # readers have matched their writers (a thread watches, while the heavy part below loads), and its
@@ -106,8 +109,9 @@ class MonitorNode:
         if self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
         recorder = self.recording.open(self.rrd, self.shape, p)
+        every, log = self.recording.every_for(p.robots), node.get_logger()
         self.core = MonitorCore(
-            self.shape, p, self.world_radius, self, recorder, node.get_logger(), self.incarnation, shards=self.shards
+            self.shape, p, self.world_radius, self, recorder, log, self.incarnation, self.shards, every
         )
         self.bag = BagRecorder(self.out, self.shape.dims) if self.bag_on else None
         warm_up(self.shape, p)
@@ -166,7 +170,7 @@ class MonitorNode:
         last ticks again)."""
 
         def write(data: bytes) -> None:
-            if topic in (msgs.ROBOTS, msgs.DECISIONS):
+            if topic in (msgs.ROBOTS, msgs.DECISIONS, msgs.TALLY):
                 self.raw = data
             elif self.bag is not None:
                 self.bag.write(topic, data)
@@ -180,13 +184,15 @@ class MonitorNode:
 
     def _on_robots(self, msg: Cloud) -> None:
         try:
-            if self.shards > 1:  # a world shard's part: into the bag with the tick's other parts, once all are in
-                tick = checks.tick_stamp(msg.header)
-                self.raw_parts = {t: p for t, p in self.raw_parts.items() if t > self.counter.replica.tick}
-                self.raw_parts.setdefault(tick, {})[self._sender()] = self.raw
-            self.counter.robots(msg, self._sender())
+            self.counter.robots(msg, self._sender(), self.raw)
         except Rejected as fault:
             self.rejections.drop(msgs.ROBOTS, fault)
+
+    def _on_tally(self, msg: Int64MultiArray) -> None:
+        try:
+            self.counter.tally(np.asarray(msg.data, dtype=np.int64), self._sender(), self.raw)
+        except Rejected as fault:
+            self.rejections.drop(msgs.TALLY, fault)
 
     def _on_decisions(self, msg: Cloud) -> None:
         try:
@@ -198,11 +204,11 @@ class MonitorNode:
         self.counter.status(msgs.status_values(msg), msgs.tick_of(msg.header), self._sender())
 
     # -- the core's port ---------------------------------------------------------------
-    def tick_counted(self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool, changed: bool) -> None:
+    def tick_counted(self, tick, metrics, occupancy, first, changed, messages) -> None:
         data = self.pub_metrics.seal(msgs.metrics_message(metrics))
         if self.bag is not None:  # the tick's messages are durable before the world hears of it
-            for raw in self.raw_parts.pop(tick, {}).values() if self.shards > 1 else (self.raw,):
-                self.bag.write(msgs.ROBOTS, raw)
+            for topic, raw in messages:
+                self.bag.write(topic, raw)
             self.bag.write(msgs.METRICS, data)
             self.bag.write_world(self.shape, occupancy, tick, first, changed)
             take_waiting(self.readers[msgs.DECISIONS])  # one the executor lost the event of: in, now

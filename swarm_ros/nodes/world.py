@@ -68,6 +68,7 @@ class WorldNode:
         self.pub_robots = signed(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
         self.pub_status = signed(DiagnosticArray, msgs.STATUS, msgs.STATUS_QOS)
         self.pub_decisions = signed(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
+        self.pub_tally = signed(Int64MultiArray, msgs.TALLY, msgs.ROBOTS_QOS)  # record_every > 1
         # for viewers only: these types have no field for a tag, and no node of the run reads them (auth)
         self.maps = msgs.WorldMaps(self.shape)  # OccupancyGrids in 2D, voxel clouds in 3D
         self.pub_shape = node.create_publisher(self.maps.kind, msgs.SHAPE, msgs.LATCHED_QOS)
@@ -186,21 +187,38 @@ class WorldNode:
         self.snapshot_pubs[k].publish_rows(rows, tick)
 
     def publish_tick(
-        self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None, regional: list[np.ndarray] | None
+        self,
+        tick: int,
+        rows: np.ndarray | None,
+        joined: bool,
+        applied: np.ndarray | None,
+        regional: list[np.ndarray] | None,
+        tally: np.ndarray | None,
     ) -> None:
         for pub, part in zip(self.region_pubs, regional or ()):
             pub.publish_rows(part, tick)  # first: the batches decide the next tick from these
         if applied is not None and applied.size:  # a world shard whose strips hold no moving robot: none
             self.pub_decisions.publish_rows(applied, tick)
-        self.pub_robots.publish_rows(rows, tick)
+        if tally is not None:
+            self.pub_tally.publish(msgs.tally_message(tick, self.ls.every, tally))
+        if rows is not None:
+            self.pub_robots.publish_rows(rows, tick)
         if joined:
             self._publish_occupancy()
         if self.viewers:
             self.pub_clock.publish(msgs.clock_message(tick))
 
-    def checkpoint(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None:
+    def checkpoint(
+        self,
+        tick: int,
+        rows: np.ndarray,
+        applied: np.ndarray | None,
+        metrics: np.ndarray,
+        published: int,
+        tally: np.ndarray | None,
+    ) -> None:
         if self.saver is not None:
-            self.saver.write(tick, rows, applied, metrics)
+            self.saver.write(tick, rows, applied, metrics, published, tally)
 
     def save_book(self, book: dict) -> None:
         if self.saver is not None:

@@ -181,9 +181,9 @@ class WorldShardNode(WorldNode):
     def ask_again(self, peer: int) -> None:
         self.pub_again.publish(msgs.ids_message(np.array([peer], dtype=np.int64), "shard"))
 
-    def save_tick(self, tick, rows, published, applied, metrics, sent) -> None:
+    def save_tick(self, tick, rows, published, applied, metrics, sent, tally) -> None:
         if self.shard_saver is not None:
-            self.shard_saver.write_tick(tick, rows, published, applied, metrics, sent)
+            self.shard_saver.write_tick(tick, rows, published, applied, metrics, sent, tally)
 
     def save_book(self, book: dict) -> None:
         if self.shard_saver is not None:

@@ -8,7 +8,8 @@ model is a process lost, not a machine (docs/faults.md).
 
 Layout: a header of int64s, every robot's row (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`, or the 3D one,
 indexed by id), the metrics of every tick, and a ring of the last ``slots`` ticks' published
-rows (the robots that changed, and the decisions applied), so the new world can send again
+rows (the robots that changed, or every robot at a tick whose rows are recorded when ``record_every`` > 1, and
+the decisions applied) and tallies (robots by state, when ``record_every`` > 1), so the new world can send again
 the ticks a reader may have lost with the old one (the monitor may be up to ``monitor_window``
 ticks behind). A tick is written in an order that a kill at any instruction leaves
 recoverable: the header's ``writing``, the tick's ring slot, the header's ``ready``, the rows
@@ -33,25 +34,27 @@ from pathlib import Path
 import numpy as np
 
 from swarm_ros.core.errors import RunFailed
+from swarm_ros.core.state import STATE_COUNT
 from swarm_ros.protocol.rows import decision_row, robot_row
 
-MAGIC = 0x5357524D434B5032  # "SWRMCKP2"
+MAGIC = 0x5357524D434B5033  # "SWRMCKP3"
 _H_MAGIC, _H_ROBOTS, _H_SLOTS, _H_TICKS, _H_COLS, _H_WRITING, _H_READY, _H_DONE, _H_MONITOR = range(9)
 _HEADER = 16  # int64s
-_SLOT_HEAD = 4  # int64s per ring slot: tick, robot rows, applied rows, published rows (the first of the rows)
+#: int64s per ring slot: tick, robot rows, applied rows, published rows (the first of the rows), the tally
+_SLOT_HEAD = 4 + STATE_COUNT
 
 
 @dataclass
 class Saved:
     """A checkpoint as read back: the last tick it holds, every robot's row then, the metrics of ticks 0..tick,
-    the newest tick the monitor had reported, the ring's ticks (tick -> (robot rows, applied rows or None)),
-    and the bookkeeping."""
+    the newest tick the monitor had reported, the ring's ticks (tick -> (robot rows, applied rows or None,
+    tally)), and the bookkeeping."""
 
     tick: int
     robots: np.ndarray
     history: np.ndarray
     monitor_tick: int
-    ring: dict[int, tuple[np.ndarray, np.ndarray | None]]
+    ring: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray]]
     book: dict
 
 
@@ -121,12 +124,19 @@ class Checkpoint:
         return head, robots, applied
 
     def write(
-        self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray, published: int = -1
+        self,
+        tick: int,
+        rows: np.ndarray,
+        applied: np.ndarray | None,
+        metrics: np.ndarray,
+        published: int = -1,
+        tally: np.ndarray | None = None,
     ) -> None:
         """Save tick ``tick``: the rows it publishes (robots that changed; at tick 0 all), the decisions it
-        applied (None at tick 0) and its metrics row. Call before anything about the tick is sent.
-        ``published``: only the first this many rows were published (a world shard saves the rows of its
-        area's other robots too); -1: all."""
+        applied (None at tick 0, or when they are not published) and its metrics row. Call before anything
+        about the tick is sent. ``published``: only the first this many rows were published (a world shard
+        saves the rows of its area's other robots too; none at a tick whose rows are not recorded); -1: all.
+        ``tally``: the robots by state it publishes (``record_every`` > 1)."""
         h = self.header
         head, at = self._slot_head(tick)
         # the blocks of what this tick writes (its slot, its metrics row), before anything of it is written
@@ -144,6 +154,7 @@ class Checkpoint:
             self.map[at : at + raw.size] = raw
         head[1], head[2] = rows.size, -1 if applied is None else applied.size
         head[3] = rows.size if published < 0 else published
+        head[4:] = 0 if tally is None else tally
         self.history[tick] = metrics
         head[0] = tick
         h[_H_READY] = tick
@@ -213,7 +224,7 @@ class Checkpoint:
         for t in range(max(0, tick - self.slots + 1), tick + 1):
             head, rows, applied = self._slot(t)
             if head[0] == t:
-                ring[t] = (rows[: head[3]].copy(), None if head[2] < 0 else applied[: head[2]].copy())
+                ring[t] = (rows[: head[3]].copy(), None if head[2] < 0 else applied[: head[2]].copy(), head[4:].copy())
         try:
             book = json.loads(self.path.with_name(self.path.name + ".json").read_text(encoding="utf-8"))
         except (OSError, ValueError):

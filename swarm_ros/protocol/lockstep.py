@@ -20,6 +20,7 @@ import numpy as np
 
 from swarm_ros.core.engine import Simulation
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
+from swarm_ros.core.params import auto_every
 from swarm_ros.core.rules import Decider, Decisions
 from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejections, decisions_allowed
@@ -36,11 +37,12 @@ from swarm_ros.protocol.world_port import (
     Policy,
     WorldPort,
 )
+from swarm_ros.protocol.world_records import WorldRecords
 from swarm_ros.protocol.world_restore import Saved, WorldRestore
 from swarm_ros.protocol.world_status import WorldStatus
 
 
-class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins for another's methods come after it
+class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base's stand-ins come after it
     """Admission, ticks and the monitor window of one run (see the module's docstring); its status and stall
     checks (:class:`WorldStatus`), its bookkeeping and restore (:class:`WorldRestore`), its loss policy
     (:class:`WorldLosses`)."""
@@ -66,6 +68,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         n = sim.params.robots
         self.window = policy.monitor_window  # 0 while there is no monitor to wait for
         self.period = 1.0 / policy.tick_rate if policy.tick_rate else 0.0  # seconds between ticks published, at least
+        self.every = policy.record_every or auto_every(n)  # the robots' rows to the monitor (WorldRecords)
         self.paced_at = -math.inf  # clock() from which the next tick may be published (tick_rate)
         self.hosting = Hosting(sim.shape.world.radius, sim.params.vision_radius)  # which batch hosts which strip
         self.decider = Decider(sim.shape, sim.params)  # the world's own, for the strips of batches removed for good
@@ -91,7 +94,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         self.received = 0
         self.decided = np.zeros(n, dtype=bool)  # robots whose decision for the coming tick is in
         self.pending = np.empty(0, dtype=np.int64)  # robots of lost batches, removed at the end of the next tick
-        self.queued: deque = deque()  # (tick, rows, joined, applied) held while the monitor is behind
+        self.queued: deque = deque()  # (tick, rows, joined, applied, parts, tally) held while the monitor is behind
         self.monitor_tick = -1
         self.monitor_alive = False
         self.published_tick = -1
@@ -203,10 +206,11 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
         )
         rows = state_rows(np.arange(self.sim.state.robots), self.sim.state)
         self.save_book()  # first: a checkpoint that holds a tick has the bookkeeping beside it
-        self.port.checkpoint(0, rows, None, self.sim.history[0])  # before the snapshots: they tell of tick 0
+        tally = self._tally()
+        self.port.checkpoint(0, rows, None, self.sim.history[0], -1, tally)  # before the snapshots: they tell of tick 0
         for k in range(len(self.batch_names)):
             self._send_snapshot(k, rows)
-        self._emit(0, rows, False, None, save=False)
+        self._emit(0, rows, False, None, save=False, tally=tally)
 
     # -- ticks ----------------------------------------------------------------------
     @property
@@ -295,18 +299,28 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
     def _emit(
         self,
         tick: int,
-        rows: np.ndarray,
+        rows: np.ndarray | None,
         joined: bool,
         applied: np.ndarray | None,
         moved: tuple[np.ndarray | None, tuple | None] | None = (None, None),
         save: bool = True,
+        tally: np.ndarray | None = None,
     ) -> None:
-        """Checkpoint a tick (``save``), then publish it now, or queue it while the monitor is more than ``window``
-        ticks behind; ``moved``: (ids, their rows before) for the region rows, None: none (a restored world)."""
+        """Checkpoint a tick (``save``: ``rows``, those that changed, become what goes to the monitor,
+        :meth:`outgoing`), then publish it now, or queue it while the monitor is more than ``window`` ticks
+        behind; ``moved``: (ids, their rows before) for the region rows, None: none (a restored world's, which
+        passes what it published: ``rows`` None at a tick whose rows were not, and its ``tally``)."""
+        parts = None
+        if moved is not None:
+            assert rows is not None  # a new tick's changed rows
+            parts = self.hosting.route(rows, moved[0], moved[1], self.sim.state)
         if save:
-            self.port.checkpoint(tick, rows, applied, self.sim.history[tick])
-        parts = self.hosting.route(rows, moved[0], moved[1], self.sim.state) if moved is not None else None
-        self.queued.append((tick, rows, joined, applied, parts))
+            assert rows is not None
+            out, applied, tally = self.outgoing(tick, rows, applied)
+            saved = rows if out is None else out  # at a recorded tick every robot's row: those changed among them
+            self.port.checkpoint(tick, saved, applied, self.sim.history[tick], -1 if out is not None else 0, tally)
+            rows = out
+        self.queued.append((tick, rows, joined, applied, parts, tally))
         self._flush()
 
     def _awaits_monitor(self) -> bool:
@@ -327,8 +341,8 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
                 if now < self.paced_at:
                     return  # poll() goes on
                 self.paced_at = now + self.period
-            tick, rows, joined, applied, parts = self.queued.popleft()
-            self.port.publish_tick(tick, rows, joined, applied, parts)
+            tick, rows, joined, applied, parts, tally = self.queued.popleft()
+            self.port.publish_tick(tick, rows, joined, applied, parts, tally)
             self.progress_at = self.moved_at = self.clock()
             self.published_tick = tick
             if tick == self.sim.tick and self.sim.done:
@@ -371,8 +385,12 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore):  # a base's stand-ins fo
             if k not in self.removed_batches:
                 self._send_snapshot(k)
         for t in sorted(t for t in saved.ring if t > saved.monitor_tick or t == saved.tick):
-            rows, applied = saved.ring[t]
-            self._emit(t, rows, t == saved.tick, applied, None, save=False)
+            rows, applied, tally = saved.ring[t]
+            if self.every == 1:
+                self._emit(t, rows, t == saved.tick, applied, None, save=False)
+            else:  # the rows and decisions went out only at a recorded tick
+                recorded = self.records(t)
+                self._emit(t, rows if recorded else None, t == saved.tick, applied, None, False, tally)
         self.publish_status()
 
     # -- status -----------------------------------------------------------------------

@@ -29,8 +29,8 @@ from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import STATE_COUNT, RobotState, has_repeats
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
-from swarm_ros.protocol.checks import apply_robots, checked_robots
-from swarm_ros.protocol.plan import WORLD
+from swarm_ros.protocol.checks import apply_robots, checked_robots, tally_values
+from swarm_ros.protocol.plan import ROBOTS, TALLY, WORLD
 from swarm_ros.protocol.status import WorldReport, restart_event
 
 PARTS_AHEAD = 1024  #: ticks ahead of the count for which world shards' parts are kept (the world window is 128)
@@ -45,8 +45,15 @@ class MonitorPort(Protocol):
     """What a :class:`MonitorCore` asks of its node. Never called while it replays a bag."""
 
     def tick_counted(
-        self, tick: int, metrics: TickMetrics, occupancy: np.ndarray, first: bool, changed: bool
-    ) -> None: ...  # the tick's messages into the bag, durable, then its metrics out
+        self,
+        tick: int,
+        metrics: TickMetrics,
+        occupancy: np.ndarray | None,
+        first: bool,
+        changed: bool,
+        messages: list[tuple[str, bytes]],
+    ) -> None: ...  # the tick's `messages` (topic, as they came) into the bag, durable, then its metrics out
+    # (occupancy: None when not known, at a tick whose rows did not come: record_every)
     def decisions_taken(self, tick: int) -> None: ...  # the decisions message being handled, into the bag
     def take_missed(self) -> int: ...  # hand over what waits in the readers; how many messages
 
@@ -66,6 +73,39 @@ class Recording(Protocol):
     def close(self) -> None: ...
 
 
+class HeldMessages:
+    """The messages of the ticks not counted yet, as they came (tick -> (topic, sender) -> bytes): a tick's rows
+    (world shards: their parts) and tallies go into the bag together once it is counted, tallies first."""
+
+    def __init__(self, first: str) -> None:
+        self.first = first  # the topic whose messages go first (a restarted monitor counts the tick from them)
+        self.ticks: dict[int, dict[tuple[str, str], bytes]] = {}
+
+    @contextmanager
+    def holding(self, tick: int, last: int, key: tuple[str, str], raw: bytes) -> Iterator[None]:
+        """Hold ``raw`` while the block hands it to the core (``last``: the tick counted last; one of a tick counted
+        already is not held); if the core refuses it (Rejected), what it replaced is held again."""
+        before = None
+        if tick > last:
+            self.ticks = {t: h for t, h in self.ticks.items() if t > last}
+            before = self.ticks.setdefault(tick, {}).get(key)
+            self.ticks[tick][key] = raw
+        try:
+            yield
+        except Rejected:
+            held = self.ticks.get(tick, {})
+            if before is None:
+                held.pop(key, None)
+            else:
+                held[key] = before
+            raise
+
+    def pop(self, tick: int) -> list[tuple[str, bytes]]:
+        """(topic, message) of tick ``tick``, no longer held, :attr:`first`'s first."""
+        held = self.ticks.pop(tick, {})
+        return [(topic, raw) for (topic, _), raw in sorted(held.items(), key=lambda item: item[0][0] != self.first)]
+
+
 class MonitorCore:
     """The run as the monitor counts it (see the module's docstring)."""
 
@@ -78,8 +118,9 @@ class MonitorCore:
         recorder: Recording | None,
         logger,
         incarnation: int = 0,
-        clock: Callable[[], float] = time.monotonic,
         shards: int = 1,
+        every: int = 1,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.shape, self.params, self.world_radius, self.port, self.recorder, self.log, self.clock = (
             shape,
@@ -93,6 +134,13 @@ class MonitorCore:
         self.incarnation = incarnation  # 0: the first monitor process of the run
         self.shards = shards  # world processes: each tick's rows come in this many parts (world shards)
         self.parts: dict[int, dict[str, np.ndarray]] = {}  # tick -> sender -> rows, until all its parts are in
+        # the world's record_every: 1, every tick's changed rows, counted here; above, a tally per world process
+        # each tick, and every robot's row every ``every``-th tick (and the last), checked against the tallies
+        self.every = every
+        self.tallies: dict[int, dict[str, np.ndarray]] = {}  # tick -> sender -> robots by state (every > 1)
+        self.held = HeldMessages(TALLY)  # the messages of the ticks not counted yet, as they came, for the bag
+        self.last = -1  # the last tick counted
+        self.occupancy_changed = False  # since the occupancy last went to the port (every > 1)
         self.replica = Replica(shape, params.robots)
         self.rows: list[TickMetrics] = []  # the metrics of every tick counted, in order
         self.losses: list[tuple[int, int]] = []  # (tick, robots removed), seen as rows turning 'removed'
@@ -109,9 +157,10 @@ class MonitorCore:
         self.resumed_at = 0  # the tick it went on from
 
     # -- messages ---------------------------------------------------------------------
-    def robots(self, msg: Cloud, sender: str = "") -> None:
+    def robots(self, msg: Cloud, sender: str = "", raw: bytes = b"") -> None:
         """The world's rows of a tick (with world shards, ``sender``'s part of them): counted, recorded, and (not
-        replaying) made durable and reported, once every part of the tick is in.
+        replaying) made durable and reported, once every part of the tick is in. ``raw``: the message as it came,
+        handed to the port with the tick's others once the tick is counted.
 
         Raises:
             Rejected: malformed, out of range, or not the world's next rows; nothing was taken.
@@ -121,43 +170,123 @@ class MonitorCore:
         if self.outcome is not None:
             return
         tick, rows = checked_robots(self.replica, msg, self.world_radius, part=self.shards > 1)
-        if tick <= self.replica.tick:
+        if tick <= self.last:
             return  # again (a late-matched reader's history, a restarted world's last ticks)
-        if self.shards == 1:
-            self._count(tick, rows)
+        with self.held.holding(tick, self.last, (ROBOTS, sender), raw):
+            if self.shards == 1 and self.every == 1:
+                self._count(tick, rows)
+                return
+            self._hold(self.parts, tick, sender, rows)  # a shard's restarted process sends the same again
+            self._go_on()
+
+    def tally(self, data, sender: str = "", raw: bytes = b"") -> None:
+        """A world process's tally of a tick (its robots by state; ``record_every`` > 1): the tick is counted
+        once every world process's is in (and at a tick whose rows go out, every part of those).
+
+        Raises:
+            Rejected: malformed, or too far ahead.
+            RunFailed: the world publishes the robots every other number of ticks than this monitor was told.
+        """
+        if self.outcome is not None:
             return
-        if tick > self.replica.tick + PARTS_AHEAD:
-            raise Rejected("future tick", f"tick {tick}; the monitor has counted up to {self.replica.tick}")
-        self.parts.setdefault(tick, {})[sender] = rows  # a shard's restarted process sends the same again
-        while self.outcome is None and len(self.parts.get(self.replica.tick + 1, ())) == self.shards:
-            tick = self.replica.tick + 1
-            joined = np.concatenate(list(self.parts.pop(tick).values()))  # in no order: nothing below needs one
-            if has_repeats(joined["id"]):
-                raise RunFailed(f"tick {tick}: the world shards' parts hold a robot twice")
-            self._count(tick, joined)
+        tick, every, counts = tally_values(data, self.params.robots)
+        if every != self.every:
+            raise RunFailed(
+                f"the world records the robots every {every} ticks and this monitor was told every {self.every}: "
+                f"give the world and the monitor the same record_every"
+            )
+        if tick <= self.last:
+            return
+        with self.held.holding(tick, self.last, (TALLY, sender), raw):
+            self._hold(self.tallies, tick, sender, counts)
+            self._go_on()
+
+    def _hold(self, held: dict[int, dict[str, np.ndarray]], tick: int, sender: str, value: np.ndarray) -> None:
+        if tick > self.last + PARTS_AHEAD:
+            raise Rejected("future tick", f"tick {tick}; the monitor has counted up to {self.last}")
+        held.setdefault(tick, {})[sender] = value
+
+    def _go_on(self) -> None:
+        """Count every tick whose messages are all in, in order."""
+        while self.outcome is None:
+            tick = self.last + 1
+            parts = self.parts.get(tick, {})
+            if self.every == 1:  # world shards' parts of every tick's changed rows
+                if len(parts) < self.shards:
+                    return
+                self._count(tick, self._joined(tick, parts))
+                continue
+            tallies = self.tallies.get(tick, {})
+            if len(tallies) < self.shards:
+                return
+            counts = np.sum(list(tallies.values()), axis=0)
+            ends = self._outcome(tick_metrics(tick, counts, self.shape.patches), int(counts[_REMOVED])) is not None
+            recorded = tick % self.every == 0 or ends
+            if recorded and len(parts) < self.shards:
+                return
+            if recorded:
+                self._leap(tick, self._joined(tick, parts), counts)
+            self.tallies.pop(tick)
+            self._counted(tick, counts, recorded)
+
+    def _joined(self, tick: int, parts: dict[str, np.ndarray]) -> np.ndarray:
+        del self.parts[tick]
+        joined = np.concatenate(list(parts.values()))  # in no order: nothing below needs one
+        if has_repeats(joined["id"]):
+            raise RunFailed(f"tick {tick}: the world shards' parts hold a robot twice")
+        return joined
+
+    def _leap(self, tick: int, rows: np.ndarray, counts: np.ndarray) -> None:
+        """Every robot's row at ``tick`` (``record_every`` > 1) into the replica, which must agree with the
+        tallies of the tick.
+
+        Raises:
+            RunFailed: the rows are not every robot once, cannot follow the rows before, or do not give the
+                world's tallies (a world that disagrees with itself).
+        """
+        pose = checks.pose_of(rows)
+        why = self.replica.leap(tick, rows["id"], rows["state"], **pose)
+        if why is not None:
+            raise RunFailed(f"tick {tick}: the world's rows {why}")
+        got = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
+        if not np.array_equal(got, counts):
+            raise RunFailed(
+                f"tick {tick}: the world's rows hold {got.tolist()} robots by state, its tallies {counts.tolist()}"
+            )
+
+    def _outcome(self, metrics: TickMetrics, removed: int) -> Outcome | None:
+        p = self.params
+        return outcome_of(metrics, self.shape.patches, p.robots - removed, p.max_ticks)
 
     def _count(self, tick: int, rows: np.ndarray) -> None:
-        """Count a tick's rows (checked), whole."""
+        """Count a tick's changed rows (checked), whole (``record_every`` 1)."""
         apply_robots(self.replica, tick, rows)
+        self._counted(tick, np.bincount(self.replica.state.state, minlength=STATE_COUNT), True)
+
+    def _counted(self, tick: int, counts: np.ndarray, recorded: bool) -> None:
+        """Tick ``tick`` is counted: ``counts``, its robots by state; ``recorded``: the replica holds it."""
         if self.started_at is None:
             self.started_at = self.clock()
-        counts = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
+        self.last = tick
         metrics = tick_metrics(tick, counts, self.shape.patches)
         removed, removed_before = int(counts[_REMOVED]), self.removed
         self.rows.append(metrics)
+        joined = len(self.rows) < 2 or metrics[_LOCALIZED] != self.rows[-2][_LOCALIZED]
+        self.occupancy_changed |= joined or removed > removed_before
         if not self.replaying:
-            joined = len(self.rows) < 2 or metrics[_LOCALIZED] != self.rows[-2][_LOCALIZED]
-            self.port.tick_counted(
-                tick, metrics, self.replica.state.occupancy, len(self.rows) == 1, joined or removed > removed_before
-            )
+            occupancy = self.replica.state.occupancy if recorded else None
+            changed, messages = recorded and self.occupancy_changed, self.held.pop(tick)
+            self.port.tick_counted(tick, metrics, occupancy, len(self.rows) == 1, changed, messages)
+        if recorded:
+            self.occupancy_changed = False
         if removed > removed_before:
             self.losses.append((tick, removed - removed_before))
             self.removed = removed
-        p = self.params
-        self.outcome = outcome_of(metrics, self.shape.patches, p.robots - removed, p.max_ticks)
+        self.outcome = self._outcome(metrics, removed)
         if self.recorder is not None:
             self.recorder.metrics([metrics])
-            self.recorder.robots(self.replica.state, force=self.outcome is not None)
+            if recorded:
+                self.recorder.robots(self.replica.state, force=self.outcome is not None)
         if self.outcome is not None:  # its CPU so far, per tick, without writing the run (scripts/bench_scale.py)
             self.ended_at = self.clock()
             self.wall = self.ended_at - self.started_at
@@ -190,7 +319,7 @@ class MonitorCore:
     # -- the clock --------------------------------------------------------------------
     def bag_complete(self) -> bool:
         """Whether the last tick's decisions are in: they may arrive after the world's last rows."""
-        last = self.replica.tick
+        last = self.last
         if last <= 0 or len(self.rows) < last:
             return True
         return self.decided_rows.get(last, 0) >= self.rows[last - 1][_MOVING]
@@ -221,7 +350,7 @@ class MonitorCore:
         if self.world.outcome is not None and self.world.outcome != self.outcome.value:
             raise RunFailed(
                 f"the world reports '{self.world.outcome}', the monitor counted "
-                f"'{self.outcome.value}' at tick {self.replica.tick}"
+                f"'{self.outcome.value}' at tick {self.last}"
             )
         if self.recorder is not None:  # closed only now: the world's last status may add restart events
             self.recorder.outcome(self.outcome.value, self.rows[-1])
@@ -238,7 +367,7 @@ class MonitorCore:
         if self.outcome is None:
             raise RunFailed(
                 f"the world ended the run ('{self.world.outcome}') at tick {self.world_end[1]}, but the "
-                f"robots' messages reached the monitor only up to tick {self.replica.tick} within "
+                f"robots' messages reached the monitor only up to tick {self.last} within "
                 f"{STATUS_WAIT:g} s"
             )
 
@@ -288,4 +417,4 @@ class MonitorCore:
         """
         if [tuple(r) for r in self.rows] != [tuple(m) for m in metrics]:
             raise RunFailed("the bag of the monitor before this one holds other metrics than its rows give")
-        self.resumed_at = max(self.replica.tick, 0)
+        self.resumed_at = max(self.last, 0)

@@ -74,13 +74,16 @@ SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
 OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
 STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
 METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
+#: world -> monitor, each tick when the robots' rows go out only every ``record_every``-th (> 1): its robots by
+#: state (a world shard's: those in its strips), the monitor's count of the ticks between (Int64MultiArray)
+TALLY = "/swarm/tally"
 CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
 SNAPSHOT = "/swarm/snapshot"  # /swarm/snapshot/<batch>: world -> one batch: its region's rows at a tick (PointCloud2)
 ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
 #: What the monitor reads, bag or no bag: its bag records these, its own METRICS, and SHAPE, OCCUPANCY and
 #: CLOCK as it derives them from the rows (these types carry no tag: swarm_ros.ros.auth). The world starts
 #: tick 0 once it has discovered the monitor's reader of each (so the bag misses none of their messages).
-MONITOR_READS = (ROBOTS, DECISIONS, STATUS)
+MONITOR_READS = (ROBOTS, DECISIONS, STATUS, TALLY)
 
 
 #: /swarm/shards/shard_<i>/...: world shard i -> its peers, each tick: ``claims_to_<j>`` and ``part_to_<j>``

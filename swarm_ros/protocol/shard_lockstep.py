@@ -30,7 +30,7 @@ from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shard_parts import Part
 from swarm_ros.core.shards import WorldShard
-from swarm_ros.core.state import IS_MOVING
+from swarm_ros.core.state import IS_MOVING, STATE_COUNT
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.hosting import Hosting, route, snapshot
 from swarm_ros.protocol.lockstep import Lockstep
@@ -121,7 +121,8 @@ class ShardNodePort(WorldPort, Protocol):
     def send_claims(self, peer: int, tick: int, claims: Decisions) -> None: ...
     def send_part(self, peer: int, tick: int, part: Part) -> None: ...
     def ask_again(self, peer: int) -> None: ...
-    # the tick's rows in the shard's view (the first ``published`` its part) and the kept messages, durable before
+    # the tick's rows in the shard's view (the first ``published`` its part), the kept messages and its tally (None:
+    # record_every 1), durable before
     # anything of the next tick goes out (swarm_ros.protocol.shard_save)
     def save_tick(
         self,
@@ -131,6 +132,7 @@ class ShardNodePort(WorldPort, Protocol):
         applied: np.ndarray | None,
         metrics: tuple[int, ...],
         sent: dict,
+        tally: np.ndarray | None,
     ) -> None: ...
 
 
@@ -170,18 +172,31 @@ class ShardLockstep(Lockstep):
         if not self.starting():
             return
         self.log.info(f"{self.node_name}: its strips hosted by {len(self.batch_names)} batches: tick 0")
-        own = self._own_at_zero()
+        own = self._own()
         rows = state_rows(own, self.sim.state)
         rest = np.setdiff1d(np.arange(self.shard.params.robots), own, assume_unique=True)  # unknown ones as unknown
         table = _joined(rows, state_rows(rest, self.sim.state))
         self.save_book()  # first: a save that holds a tick has the bookkeeping beside it
-        self.shard_port.save_tick(0, table, rows.size, None, self.shard.history[0], {})
+        tally = self._tally()
+        self.shard_port.save_tick(0, table, rows.size, None, self.shard.history[0], {}, tally)
         for k in range(len(self.batch_names)):
             self._send_snapshot(k)
-        self._emit(0, rows, False, None, None, save=False)
+        self._emit(0, rows, False, None, None, save=False, tally=tally)
 
-    def _own_at_zero(self) -> np.ndarray:
-        """The robots this shard reports at tick 0: every one standing in its strips."""
+    def _tally(self) -> np.ndarray | None:
+        """As :meth:`Lockstep._tally`: the robots in this shard's strips, by state."""
+        if self.every == 1:
+            return None
+        return np.bincount(self.sim.state.state[self._own()], minlength=STATE_COUNT).astype(np.int64)
+
+    def _recorded_rows(self) -> np.ndarray:
+        """As :meth:`Lockstep._recorded_rows`: every robot standing in this shard's strips."""
+        return state_rows(self._own(), self.sim.state)
+
+    def _own(self) -> np.ndarray:
+        """The robots this shard reports at tick 0 and at every tick it records: every one standing in its strips
+        (moving robots: those it owns; stationary and removed ones: every shard knows them, this one has the
+        strips they stand in)."""
         s = self.sim.state
         known = np.flatnonzero(s.state != UNKNOWN)
         return known[self._in_strips(s.x[known])]
@@ -276,8 +291,15 @@ class ShardLockstep(Lockstep):
         joined = gone.size > 0 or len(h) < 2 or h[-1][_LOCALIZED] != h[-2][_LOCALIZED] or bool(part.removing.size)
         if booked:  # robots removed, pending no longer: beside the tick before it is saved
             self.save_book()
-        self.shard_port.save_tick(tick, _joined(rows, changed[~mine]), rows.size, applied, h[-1], sent)
-        self.queued.append((tick, rows, joined, applied, regional))
+        out, sent_applied, tally = self.outgoing(tick, rows, applied)
+        if out is None:  # nothing of the robots goes out at this tick: all saved, none published
+            self.shard_port.save_tick(tick, _joined(rows, changed[~mine]), 0, None, h[-1], sent, tally)
+        elif out is rows:  # the rows that changed go out (record_every 1)
+            self.shard_port.save_tick(tick, _joined(rows, changed[~mine]), rows.size, applied, h[-1], sent, None)
+        else:  # every robot in its strips goes out, then the rest of what changed in its view
+            rest = changed[~np.isin(changed["id"], out["id"])]
+            self.shard_port.save_tick(tick, _joined(out, rest), out.size, applied, h[-1], sent, tally)
+        self.queued.append((tick, out, joined, sent_applied, regional, tally))
         for k, why in self.deferred:  # batches lost while the tick was with the peers: their robots as they are now
             super()._remove_batch(k, why)
         self.deferred = []
@@ -355,7 +377,10 @@ class ShardLockstep(Lockstep):
             if k not in self.removed_batches:
                 self._send_snapshot(k)
         for t in sorted(t for t in saved.ring if t > self.monitor_tick or t == tick):
-            rows, applied = saved.ring[t]
-            self.queued.append((t, rows, t == tick, applied, None))
+            rows, applied, tally = saved.ring[t]
+            if self.every == 1:
+                self.queued.append((t, rows, t == tick, applied, None, None))
+            else:  # the rows and decisions went out only at a recorded tick
+                self.queued.append((t, rows if self.records(t) else None, t == tick, applied, None, tally))
         self._flush()
         self.publish_status()

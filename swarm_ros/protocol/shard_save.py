@@ -41,13 +41,13 @@ _LOCALIZED = METRIC_COLUMNS.index("localized")
 @dataclass
 class ShardSave:
     """What a restarted shard process goes on from: its exchange's save, the lockstep's bookkeeping, the robots
-    pending removal, the ticks it published that the monitor may not have confirmed (tick -> rows, applied),
+    pending removal, the ticks it published that the monitor may not have confirmed (tick -> rows, applied, tally),
     and the newest tick the monitor confirmed."""
 
     exchange: ExchangeSaved
     book: dict
     pending: np.ndarray
-    ring: dict[int, tuple[np.ndarray, np.ndarray | None]]
+    ring: dict[int, tuple[np.ndarray, np.ndarray | None, np.ndarray]]
     monitor_tick: int
 
 
@@ -83,15 +83,17 @@ class ShardSaver:
         applied: np.ndarray | None,
         metrics: tuple[int, ...],
         sent: dict,
+        tally: np.ndarray | None = None,
     ) -> None:
         """Save tick ``tick``: the kept messages first, then the rows that changed in the shard's view (the first
-        ``published`` of them its part for the monitor), the applied decisions and the tick's metrics."""
+        ``published`` of them its part for the monitor), the applied decisions, the tick's metrics and the tally it
+        publishes (``record_every`` > 1)."""
         assert self.checkpoint is not None  # created or opened
         tmp = self.sent_path.with_name(self.sent_path.name + ".tmp")
         try:
             tmp.write_bytes(pickle.dumps(self._compact(sent), protocol=pickle.HIGHEST_PROTOCOL))
             os.replace(tmp, self.sent_path)
-            self.checkpoint.write(tick, rows, applied, np.asarray(metrics, dtype=np.int64), published)
+            self.checkpoint.write(tick, rows, applied, np.asarray(metrics, dtype=np.int64), published, tally)
         except OSError as exc:
             raise RunFailed(f"checkpoint {self.path}: {getattr(exc, 'strerror', None) or exc}") from None
 
@@ -171,5 +173,4 @@ class ShardSaver:
             alive=self.params.robots - sum(n for _, n in losses),
             removed=removed,
         )
-        ring = {t: (r, a) for t, (r, a) in saved.ring.items()}
-        return ShardSave(ExchangeSaved(shard, sent), b, pending, ring, saved.monitor_tick)
+        return ShardSave(ExchangeSaved(shard, sent), b, pending, saved.ring, saved.monitor_tick)

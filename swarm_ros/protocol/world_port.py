@@ -41,6 +41,7 @@ class Policy:
     max_restarts: int = _DEFAULT["max_restarts"]
     restart_timeout: float = _DEFAULT["restart_timeout"]
     tick_rate: float = _DEFAULT["tick_rate"]
+    record_every: int = _DEFAULT["record_every"]
 
 
 class Logger(Protocol):
@@ -55,14 +56,30 @@ class WorldPort(Protocol):
 
     def watch_batch(self, k: int, name: str) -> None: ...  # batch k admitted: take its decisions, watch it
     def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None: ...  # batch k's region, to start from
-    # a tick: the decisions applied in it (None for tick 0), the changed robots' rows, the occupancy if `joined`,
-    # and each batch's region's rows (None: none, a restored world's replay)
+    # a tick: the decisions applied in it (None: none go out), the robots' rows (None: none go out at this tick),
+    # the occupancy if `joined`, each batch's region's rows (None: none, a restored world's replay) and the tally
+    # (None: none, record_every 1)
     def publish_tick(
-        self, tick: int, rows: np.ndarray, joined: bool, applied: np.ndarray | None, regional: list[np.ndarray] | None
+        self,
+        tick: int,
+        rows: np.ndarray | None,
+        joined: bool,
+        applied: np.ndarray | None,
+        regional: list[np.ndarray] | None,
+        tally: np.ndarray | None,
     ) -> None: ...
     def publish_status(self, status: Status) -> None: ...  # the run's state
-    # a tick's rows, applied decisions and metrics into the checkpoint (a restarted world goes on from it)
-    def checkpoint(self, tick: int, rows: np.ndarray, applied: np.ndarray | None, metrics: np.ndarray) -> None: ...
+    # a tick's rows (the first `published` of them go out; -1: all), applied decisions (None: none go out), metrics
+    # and tally into the checkpoint (a restarted world goes on from it)
+    def checkpoint(
+        self,
+        tick: int,
+        rows: np.ndarray,
+        applied: np.ndarray | None,
+        metrics: np.ndarray,
+        published: int,
+        tally: np.ndarray | None,
+    ) -> None: ...
     def save_book(self, book: dict) -> None: ...  # the bookkeeping beside the ticks (world_restore)
     def monitor_reads_all(self) -> bool: ...  # the monitor's reader of every topic it records is matched
     def delivered(self) -> bool: ...  # every reader acknowledged the last status and rows

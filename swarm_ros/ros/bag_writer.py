@@ -42,6 +42,7 @@ TOPICS: dict[str, tuple[type, QoSProfile]] = {
     msgs.SHAPE: (OccupancyGrid, msgs.LATCHED_QOS),
     msgs.STATUS: (DiagnosticArray, msgs.STATUS_QOS),
     msgs.METRICS: (Int64MultiArray, msgs.METRICS_QOS),
+    msgs.TALLY: (Int64MultiArray, msgs.ROBOTS_QOS),
     msgs.CLOCK: (Clock, msgs.CLOCK_QOS),
 }
 

@@ -24,7 +24,7 @@ from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.shapes import Shape
 from swarm_ros.protocol.cdr import encode_clock, encode_cloud, encode_grid
-from swarm_ros.protocol.checks import cloud
+from swarm_ros.protocol.checks import TALLY_FIELDS, cloud
 from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
     ALIVE,
     BATCHES,
@@ -38,6 +38,7 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     SHAPE,
     SNAPSHOT,
     STATUS,
+    TALLY,
     alive_topic,
     decisions_topic,
     region_topic,
@@ -173,6 +174,15 @@ def metrics_message(row: np.ndarray | Sequence[int]) -> Int64MultiArray:
     n = len(METRIC_COLUMNS)
     msg.layout.dim = [MultiArrayDimension(label=",".join(METRIC_COLUMNS), size=n, stride=n)]
     msg.data = array.array("q", [int(v) for v in row])
+    return msg
+
+
+def tally_message(tick: int, every: int, counts: np.ndarray) -> Int64MultiArray:
+    """One world process's tally of a tick (:data:`TALLY`), labelled: dim[0].label lists the fields in order."""
+    msg = Int64MultiArray()
+    n = len(TALLY_FIELDS)
+    msg.layout.dim = [MultiArrayDimension(label=",".join(TALLY_FIELDS), size=n, stride=n)]
+    msg.data = array.array("q", [int(tick), int(every), *(int(c) for c in counts)])
     return msg
 
 

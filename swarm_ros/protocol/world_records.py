@@ -1,0 +1,58 @@
+"""What of each tick the world (or a world shard) sends the monitor: a part of
+:class:`~swarm_ros.protocol.lockstep.Lockstep`.
+
+With ``record_every`` 1 (the default up to 10,000 robots) it is every tick's changed rows and applied decisions,
+and the monitor counts each tick from its replica. Above, the rows would bound a large run by the monitor, which
+takes, checks and records every one of them: the world sends instead, every tick, a *tally* (its robots by state;
+a world shard's, those in its strips), from which the monitor counts the tick, and every ``record_every``-th tick
+and at the last, every robot's row (a shard: those in its strips) and that tick's decisions, which the monitor
+checks against the tallies and records.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from swarm_ros.core.state import STATE_COUNT
+from swarm_ros.protocol.rows import state_rows
+
+if TYPE_CHECKING:
+    from swarm_ros.core.engine import Simulation
+
+
+class WorldRecords:
+    """The lockstep's choice of what goes to the monitor (see the module's docstring)."""
+
+    sim: Simulation
+    every: int  #: record_every, resolved: the robots' rows go to the monitor every this many ticks
+
+    def records(self, tick: int) -> bool:
+        """Whether tick ``tick``'s robots' rows go to the monitor (the recording, the bag): every tick when
+        ``every`` is 1, else every ``every``-th tick and the last."""
+        return tick % self.every == 0 or (tick == self.sim.tick and self.sim.done)
+
+    def outgoing(
+        self, tick: int, rows: np.ndarray, applied: np.ndarray | None
+    ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+        """What of the tick just applied (``rows``: the robots that changed) goes to the monitor: (robot rows or
+        None, applied decisions or None, tally or None). With ``every`` = 1, the changed rows and the decisions;
+        above, the tally every tick, and at a tick that :meth:`records`, every robot's row (this process's part)
+        and the decisions."""
+        if self.every == 1:
+            return rows, applied, None
+        if not self.records(tick):
+            return None, None, self._tally()
+        return self._recorded_rows(), applied, self._tally()
+
+    def _tally(self) -> np.ndarray | None:
+        """The robots by state (this process's part of them, a world shard's: those in its strips), or None when
+        the rows go out every tick."""
+        if self.every == 1:
+            return None
+        return np.bincount(self.sim.state.state, minlength=STATE_COUNT).astype(np.int64)
+
+    def _recorded_rows(self) -> np.ndarray:
+        """Every robot's row (a world shard: every robot in its strips) at the tick just applied."""
+        return state_rows(np.arange(self.sim.state.robots), self.sim.state)
