@@ -17,6 +17,7 @@ from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome, TickMetrics
 from swarm_ros.core.rules import Decider
+from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.monitoring import BAG_WAIT, STATUS_WAIT, MonitorCore
 from swarm_ros.protocol.plan import MONITOR
@@ -190,6 +191,102 @@ def test_world_shards_parts_are_joined_in_any_order_and_a_robot_in_two_parts_fai
     with pytest.raises(RunFailed, match="hold a robot twice"):
         core.robots(decode_cloud(encode_cloud(rows, 1)), "world_shard_1")  # every row of the tick: evens twice
     assert core.replica.tick == 0
+
+
+def sampled_messages(params: RunParams, every: int) -> tuple[Simulation, list[tuple[np.ndarray, bytes | None]]]:
+    """What a world with ``record_every`` = ``every`` publishes after each tick: its tally's numbers (as the node
+    hands them over), and every robot's rows at every ``every``-th tick and the last (else None)."""
+    sim, decider = Simulation(SHAPE, params), Decider(SHAPE, params)
+    out = []
+    while True:
+        counts = np.bincount(sim.state.state, minlength=len(RobotState))
+        rows = None
+        if sim.tick % every == 0 or sim.done:
+            rows = encode_cloud(state_rows(np.arange(params.robots), sim.state), sim.tick)
+        out.append((np.array([sim.tick, every, *counts], dtype=np.int64), rows))
+        if sim.done:
+            return sim, out
+        sim.apply(decider.decide(sim.state, sim.moving_ids(), sim.tick + 1))
+
+
+@pytest.mark.parametrize("tallies_first", [True, False])
+def test_with_record_every_the_core_counts_each_tick_from_the_tallies_and_checks_the_rows(tallies_first):
+    """``record_every`` 4: a tally every tick, every robot's row every 4th tick and at the last, in either order.
+    The count is the engine's tick for tick; the occupancy goes to the port, and the robots to the recording,
+    at the ticks whose rows came; the replica ends as the engine's state."""
+    params = RunParams(robots=60, seed=7, max_ticks=300, fail_fraction=0.2, fail_tick=21)
+    sim, messages = sampled_messages(params, 4)
+    recorder = Recorder()
+    core, port, _, _ = make(params, recorder, every=4)
+    seen: list[bool] = []
+    port.tick_counted = lambda tick, metrics, occupancy, first, changed, held: seen.append(occupancy is not None)
+    for tally, rows in messages:
+        if rows is not None and not tallies_first:
+            core.robots(decode_cloud(rows), "world", rows)
+        core.tally(tally, "world", b"tally")
+        if rows is not None and tallies_first:
+            core.robots(decode_cloud(rows), "world", rows)
+    assert [tuple(r) for r in core.rows] == [tuple(r) for r in sim.history]
+    assert core.outcome == sim.outcome and core.losses == sim.losses and sim.tick % 4 != 0
+    recorded = [t % 4 == 0 or t == sim.tick for t in range(sim.tick + 1)]
+    assert seen == recorded and len(recorder.forced) == sum(recorded) and recorder.forced[-1]
+    for name in ("state", "x", "y", "heading", "occupancy"):
+        assert np.array_equal(getattr(core.replica.state, name), getattr(sim.state, name)), name
+
+
+def test_with_record_every_the_port_gets_each_ticks_messages_as_they_came_tallies_first():
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    _, messages = sampled_messages(params, 3)
+    core, port, _, _ = make(params, every=3)
+    got: list[list[tuple[str, bytes]]] = []
+    port.tick_counted = lambda tick, metrics, occupancy, first, changed, held: got.append(held)
+    for tick, (tally, rows) in enumerate(messages[:4]):
+        if rows is not None:
+            core.robots(decode_cloud(rows), "world", rows)
+        with pytest.raises(Rejected, match="malformed tally"):
+            core.tally(tally[:-1], "world", b"short")  # dropped: what it would have replaced is held again
+        core.tally(tally, "world", b"tally %d" % tick)
+    assert got[0] == [("/swarm/tally", b"tally 0"), ("/swarm/robots", messages[0][1])]
+    assert got[1:3] == [[("/swarm/tally", b"tally 1")], [("/swarm/tally", b"tally 2")]]
+    assert got[3] == [("/swarm/tally", b"tally 3"), ("/swarm/robots", messages[3][1])]
+
+
+def test_with_record_every_a_world_that_disagrees_with_itself_or_the_monitor_fails_the_run():
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    _, messages = sampled_messages(params, 2)
+    core, _, _, _ = make(params, every=3)
+    with pytest.raises(RunFailed, match="every 2 ticks and this monitor was told every 3"):
+        core.tally(messages[0][0], "world")
+    core, _, _, _ = make(params, every=2)
+    core.robots(decode_cloud(messages[0][1]), "world")
+    wrong = messages[0][0].copy()
+    wrong[2:4] += [1, -1]  # a seed more, a robot moving outside fewer: not what the rows hold
+    with pytest.raises(RunFailed, match="its tallies"):
+        core.tally(wrong, "world")
+    core, _, _, _ = make(params, every=2)
+    core.robots(decode_cloud(messages[0][1]), "world")
+    for tally, _ in messages[:2]:
+        core.tally(tally, "world")
+    rows = state_rows(np.arange(params.robots), Simulation(SHAPE, params).state)  # tick 0's rows again at tick 2
+    rows["x"][0] += 1.0  # a seed moved
+    core.tally(messages[2][0], "world")
+    with pytest.raises(RunFailed, match="move a robot that was stationary"):
+        core.robots(decode_cloud(encode_cloud(rows, 2)), "world")
+    assert core.last == 1 and core.replica.tick == 0
+
+
+def test_with_record_every_a_run_stopped_between_recorded_ticks_is_recorded_up_to_the_last_of_them():
+    params = RunParams(robots=60, seed=7, max_ticks=300, fail_fraction=0.2, fail_tick=5)
+    sim, messages = sampled_messages(params, 4)
+    core, _, _, _ = make(params, every=4)
+    for tally, rows in messages[:7]:  # ticks 0-6: the rows of 0 and 4 came
+        if rows is not None:
+            core.robots(decode_cloud(rows), "world")
+        core.tally(tally, "world")
+    assert core.last == 6 and core.replica.tick == 4 and core.losses == [(5, sim.losses[0][1])]
+    record = core.record(0, Outcome.INTERRUPTED)
+    assert np.array_equal(record.history, sim.history[:5]) and record.state.tick == 4
+    assert record.summary["convergence_tick"] == 4 and record.summary["lost_robots"] == 0
 
 
 def _ended(params=RunParams(robots=60, seed=3, max_ticks=400), recorder=None):

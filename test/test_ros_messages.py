@@ -91,6 +91,7 @@ def test_parameters_take_defaults_and_accept_integers_for_numbers(ros_context):
         "checkpoint": "",
         "incarnation": 0,
         "tick_rate": 20.0,
+        "record_every": 0,
     }
     node.destroy_node()
 

@@ -36,8 +36,9 @@ def test_the_nodes_read_what_swarm_ros_run_writes_for_the_same_settings(tmp_path
     written = _written(setup)
     run = Settings(shape="rectangle", seed=6, robots=442)
     assert written["/**"] == yaml.safe_load(params_yaml(run, {}))["/**"]
-    assert written["/monitor"]["ros__parameters"] == {"out_dir": str(tmp_path / "run")}
+    assert written["/monitor"]["ros__parameters"] == {"out_dir": str(tmp_path / "run"), "record_every": 0}
     assert written["/world"]["ros__parameters"]["checkpoint"] == str(tmp_path / "log" / CHECKPOINT)
+    assert written["/world"]["ros__parameters"]["record_every"] == 0
     assert setup.checkpoint == tmp_path / "log" / CHECKPOINT and setup.out == tmp_path / "run"
     assert (setup.supervisor.max_restarts, setup.supervisor.on_batch_loss) == (3, "restart")
 
@@ -48,7 +49,14 @@ def test_arguments_win_over_the_parameter_file_and_its_node_sections_are_kept(tm
         yaml.safe_dump(
             {
                 "/**": {"ros__parameters": {"shape": "tyre", "seed": 4}},
-                "/world": {"ros__parameters": {"max_restarts": 1, "on_batch_loss": "remove", "incarnation": 2}},
+                "/world": {
+                    "ros__parameters": {
+                        "max_restarts": 1,
+                        "on_batch_loss": "remove",
+                        "incarnation": 2,
+                        "record_every": 3,
+                    }
+                },
                 "/monitor": {"ros__parameters": {"record": False, "out_dir": str(tmp_path / "from-file")}},
             }
         )
@@ -58,7 +66,9 @@ def test_arguments_win_over_the_parameter_file_and_its_node_sections_are_kept(tm
     assert (written["/**"]["ros__parameters"]["shape"], written["/**"]["ros__parameters"]["seed"]) == ("tyre", 5)
     assert written["/**"]["ros__parameters"]["vision_radius"] == 2.0
     monitor = written["/monitor"]["ros__parameters"]
-    assert monitor == {"record": False, "out_dir": str(tmp_path / "from-argument")}
+    # record_every from the /world section (the monitor's has none), for both: the world and the monitor agree
+    assert monitor == {"record": False, "out_dir": str(tmp_path / "from-argument"), "record_every": 3}
+    assert written["/world"]["ros__parameters"]["record_every"] == 3
     assert "incarnation" not in written["/world"]["ros__parameters"], "the supervisor's to set"
     assert (setup.supervisor.max_restarts, setup.supervisor.on_batch_loss) == (1, "remove")
     assert _setup(tmp_path, params).out == tmp_path / "from-file", "without the argument, the file's out_dir"

@@ -107,7 +107,10 @@ def _prepare(
     monitor = nodes["monitor"]
     recording = RecordingOptions(
         enabled=bool(_flag(args.record, monitor, "record")),
-        every=int(_flag(args.record_every, monitor, "record_every")),
+        # the /monitor section's, else the /world section's: 'run' gives the world and the monitor the same
+        every=int(
+            _flag(args.record_every, {"record_every": nodes["world"].get("record_every", 0), **monitor}, "record_every")
+        ),
         spawn=args.spawn,
         connect=args.connect or str(monitor.get("viewer_url", "")) or None,
     )

@@ -191,6 +191,7 @@ def launch_setup(
 ) -> LaunchSetup:
     """Resolve a launch's arguments as ``swarm-ros run`` resolves its flags, and write the nodes' parameter
     file into ``log_dir``. A launch argument wins over the parameter file (run parameters and ``out_dir``);
+    ``record_every`` goes to the world (or its shards) and the monitor alike;
     the world's checkpoint is ``<log_dir>/world.checkpoint``; an empty ``out_dir`` is named here
     (``runs/<time>_<shape>_...``), once, so that a restarted monitor writes to the same place.
 
@@ -219,8 +220,11 @@ def launch_setup(
         or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
     ).absolute()
     check_out_dir(out, bool(nodes["monitor"].get("overwrite", False)))
-    world = {**node_defaults(WORLD), **nodes["world"]}
-    sections = {**world_sections(world, world_shards, log_dir), MONITOR: {**nodes["monitor"], "out_dir": str(out)}}
+    # record_every, as swarm-ros run sets it: the /monitor section's, else the /world section's, for both
+    every = nodes["monitor"].get("record_every", nodes["world"].get("record_every", 0))
+    world = {**node_defaults(WORLD), **nodes["world"], "record_every": every}
+    monitor = {**nodes["monitor"], "out_dir": str(out), "record_every": every}
+    sections = {**world_sections(world, world_shards, log_dir), MONITOR: monitor}
     for section in sections.values():
         section.pop("incarnation", None)  # the supervisor's to set
     path = log_dir / "params.yaml"

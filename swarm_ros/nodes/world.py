@@ -253,7 +253,7 @@ class WorldNode:
         )
 
     def delivered(self) -> bool:
-        return all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots))
+        return all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots, self.pub_tally))
 
     def startup_seconds(self) -> float:
         """Seconds from the start of ``swarm-ros run`` (its process, if it is this process's parent),

@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
-from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.rows import (
     PATCH_METRES,
     TICK_SECONDS,
@@ -201,20 +200,19 @@ def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
         raise RunFailed(str(exc)) from None
 
 
-#: A tally's numbers (/swarm/tally): the tick, the world's ``record_every``, then its robots in each state.
-TALLY_FIELDS = ("tick", "every", *(s.label for s in RobotState))
-
-
 def tally_values(data, robots: int) -> tuple[int, int, np.ndarray]:
-    """(tick, every, robots by state) of a /swarm/tally message's data, checked in form.
+    """(tick, every, robots by state) of a /swarm/tally message's data (the tick, the world's ``record_every``, then
+    its robots in each state), checked in form.
 
     Raises:
         Rejected: not one number per field, a negative tick or count, ``every`` below 2, or more robots than
             the run has.
     """
+    from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
+
     values = np.asarray(data, dtype=np.int64)
-    if values.ndim != 1 or values.size != len(TALLY_FIELDS):
-        raise Rejected("malformed tally", f"{values.size} numbers, not {len(TALLY_FIELDS)}")
+    if values.ndim != 1 or values.size != 2 + STATE_COUNT:
+        raise Rejected("malformed tally", f"{values.size} numbers, not {2 + STATE_COUNT}")
     tick, every, counts = int(values[0]), int(values[1]), values[2:].copy()
     if tick < 0 or every < 2 or (counts < 0).any() or int(counts.sum()) > robots:
         raise Rejected("malformed tally", f"tick {tick}, every {every}, counts {counts.tolist()}")

@@ -374,16 +374,19 @@ class MonitorCore:
     # -- the end ----------------------------------------------------------------------
     def record(self, rejected: int, outcome: Outcome | None = None) -> RunRecord:
         """The run's record as counted (``outcome``: another than the count's, for a run stopped before its end);
-        ``rejected``: the messages the monitor dropped."""
+        ``rejected``: the messages the monitor dropped. A run stopped between two ticks whose rows came
+        (``record_every`` > 1) is recorded up to the last of them: its files then agree with each other (the bag
+        holds the ticks counted after it)."""
         wall = self.wall if self.outcome is not None else self.clock() - (self.started_at or self.clock())
+        upto = self.replica.tick  # stopped after the last tick whose rows came (record_every): the run up to it
         return self.world.record(
             self.shape,
             self.params,
             self.replica.state,
-            self.rows,
+            self.rows[: upto + 1],
             outcome or self.outcome,
             wall,
-            self.losses,
+            [(tick, n) for tick, n in self.losses if tick <= upto],
             rejected,
             monitor=(self.incarnation, self.resumed_at),
         )

@@ -24,7 +24,7 @@ from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.shapes import Shape
 from swarm_ros.protocol.cdr import encode_clock, encode_cloud, encode_grid
-from swarm_ros.protocol.checks import TALLY_FIELDS, cloud
+from swarm_ros.protocol.checks import cloud
 from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
     ALIVE,
     BATCHES,
@@ -178,10 +178,13 @@ def metrics_message(row: np.ndarray | Sequence[int]) -> Int64MultiArray:
 
 
 def tally_message(tick: int, every: int, counts: np.ndarray) -> Int64MultiArray:
-    """One world process's tally of a tick (:data:`TALLY`), labelled: dim[0].label lists the fields in order."""
+    """One world process's tally of a tick (:data:`TALLY`), labelled: dim[0].label lists its numbers' meanings
+    in order: the tick, the world's ``record_every``, then its robots in each state."""
+    from swarm_ros.core.state import RobotState  # here: the core's state loads numba, which the launcher does without
+
+    fields = ("tick", "every", *(s.label for s in RobotState))
     msg = Int64MultiArray()
-    n = len(TALLY_FIELDS)
-    msg.layout.dim = [MultiArrayDimension(label=",".join(TALLY_FIELDS), size=n, stride=n)]
+    msg.layout.dim = [MultiArrayDimension(label=",".join(fields), size=len(fields), stride=len(fields))]
     msg.data = array.array("q", [int(tick), int(every), *(int(c) for c in counts)])
     return msg
 
