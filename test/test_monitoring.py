@@ -339,12 +339,16 @@ def test_the_last_ticks_decisions_are_waited_for_a_moment():
     _status(core, sim.outcome.value, sim.tick)
     assert not core.bag_complete() and not core.due(bag=True)
     assert core.due(bag=False)  # without a bag nothing waits for them
-    core2, _, clock2, _ = make(params)
+    core2, _, clock2, log2 = make(params)
     feed(core2, messages[:-1])
     core2.robots(decode_cloud(messages[-1][0]))
     _status(core2, sim.outcome.value, sim.tick)
-    clock2.now += BAG_WAIT + 0.1
-    assert core2.due(bag=True)  # given up on: the run is written without them
+    clock2.now += BAG_WAIT - 0.1
+    assert not core2.due(bag=True)
+    clock2.now += 0.2
+    assert core2.due(bag=True)  # given up on: the run is written without them, and the log says so
+    moving = int(sim.history[-2][4])
+    assert f"the bag is written without {moving} of them" in log2.lines[-1]
 
 
 def test_a_world_that_ended_while_the_rows_never_came_fails_the_run_after_a_wait():

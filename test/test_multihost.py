@@ -6,7 +6,7 @@ in-process engine's.
 Needs root and iproute2 (``ip netns``); skipped, with the reason, where namespaces cannot
 be made. Only this test's own namespaces are touched (named after its process id).
 
-``SWARM_ROS_LAN_ROBOTS=100000`` runs the four-host test with a disc of that many robots (50 ticks)
+``SWARM_ROS_LAN_ROBOTS=100000`` runs the four-host tests with a disc of that many robots (50 ticks)
 instead of its small ring: how docs/operations.md's figures over four hosts were taken (minutes, not CI).
 """
 
@@ -167,11 +167,11 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
     assert stats["tx"]["bytes"] >= 2 * ROBOT_ROW.itemsize * 440, stats
 
 
-def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts, tmp_path):
-    """Four strips, one robot batch on each host (host 0 also runs the world and the monitor): every host
-    decides for its region, and the run equals ``simulate``'s, byte for byte."""
-    hosts, links = four_hosts
-    if LAN_ROBOTS:  # by hand: a disc of LAN_ROBOTS robots at the star's density, 50 ticks
+def _four_host_case(tmp_path: Path) -> tuple[Settings, Path, float, float]:
+    """The four-host tests' run: the small ring, or by hand (``SWARM_ROS_LAN_ROBOTS``) a disc of that many robots at
+    the star's density for 50 ticks; with its reference (``simulate``'s run directory), the seconds ``simulate``
+    took and the graph's timeout."""
+    if LAN_ROBOTS:
         sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
         from bench_scale import disc_file
 
@@ -183,11 +183,25 @@ def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts,
         shape = shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
         settings = Settings(shape=str(shape), robots=440, seed=7, world_radius=16, rules="local")
         flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "7", "--robots", "440", "--rules", "local"]
-        timeout = 120
+        timeout = 150
     ref = tmp_path / "ref"
     began = time.perf_counter()
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
-    simulated = time.perf_counter() - began
+    return settings, ref, time.perf_counter() - began, timeout
+
+
+def _say_times(what: str, simulated: float, began: float, run: Path) -> None:
+    print(
+        f"{what}: simulate {simulated:.1f} s, the graph {time.perf_counter() - began:.1f} s "
+        f"(run {json.loads((run / 'summary.json').read_text())['wall_seconds']:.2f} s)"
+    )
+
+
+def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts, tmp_path):
+    """Four strips, one robot batch on each host (host 0 also runs the world and the monitor): every host
+    decides for its region, and the run equals ``simulate``'s, byte for byte."""
+    hosts, links = four_hosts
+    settings, ref, simulated, timeout = _four_host_case(tmp_path)
     before = [_link_bytes(ns, dev) for ns, dev in zip(hosts, links)]
     began = time.perf_counter()
     run = _run_on_hosts(
@@ -198,10 +212,7 @@ def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts,
         [(0, "world", "world", []), (0, "monitor", "monitor", []), *_batches([0, 1, 2, 3], 4)],
         timeout,
     )
-    print(
-        f"four hosts: simulate {simulated:.1f} s, the graph {time.perf_counter() - began:.1f} s "
-        f"(run {json.loads((run / 'summary.json').read_text())['wall_seconds']:.2f} s)"
-    )
+    _say_times("four hosts", simulated, began, run)
     world_log = (tmp_path / "world.log").read_text()
     assert all(f"robot_batch_{b} hosts" in world_log for b in range(4))
     assert_same_run(ref, run, launched=False)
@@ -221,17 +232,15 @@ def test_four_hosts_each_with_a_world_shard_and_its_batch_equal_the_in_process_e
     also the monitor). The world's checks and apply happen on every host, the shards settle the claims near
     their borders over the links, and the run equals ``simulate``'s, byte for byte."""
     hosts, links = four_hosts
-    shape = shape_file(tmp_path / "ring.txt", outer=12.5, hole=5)
-    settings = Settings(shape=str(shape), robots=440, seed=7, world_radius=16, rules="local")
-    flags = ["--shape", str(shape), "--world-radius", "16", "--seed", "7", "--robots", "440", "--rules", "local"]
-    ref = tmp_path / "ref"
-    assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet"]) == 0
+    settings, ref, simulated, timeout = _four_host_case(tmp_path)
     shards = [
         (i, f"world_shard_{i}", "world_shard", ["-p", f"shard:={i}", "-p", "shards:=4", "-p", "batches:=4"])
         for i in range(4)
     ]
     monitor = (0, "monitor", "monitor", ["-p", "world_shards:=4"])
-    run = _run_on_hosts(tmp_path, hosts, links, settings, [*shards, monitor, *_batches([0, 1, 2, 3], 4)], 150)
+    began = time.perf_counter()
+    run = _run_on_hosts(tmp_path, hosts, links, settings, [*shards, monitor, *_batches([0, 1, 2, 3], 4)], timeout)
+    _say_times("four hosts, four world shards", simulated, began, run)
     for i in range(4):
         log = (tmp_path / f"world_shard_{i}.log").read_text()
         assert f"robot_batch_{i} hosts" in log and "tick 0" in log, log[-2000:]

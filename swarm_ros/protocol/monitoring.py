@@ -35,7 +35,9 @@ from swarm_ros.protocol.status import WorldReport, restart_event
 
 PARTS_AHEAD = 1024  #: ticks ahead of the count for which world shards' parts are kept (the world window is 128)
 STATUS_WAIT = 5.0  #: seconds to wait for the world's outcome after the monitor saw the end (and the reverse)
-BAG_WAIT = 1.0  #: seconds to wait, after the end, for the last tick's decisions to reach the bag
+#: seconds to wait, after the end, for the last tick's decisions to reach the bag: they go out before the tick's rows,
+#: but over UDP a message of 100,000 rows was seen to come more than 1 s after them (four namespace hosts)
+BAG_WAIT = 5.0
 
 _LOCALIZED, _MOVING = METRIC_COLUMNS.index("localized"), METRIC_COLUMNS.index("moving")
 _REMOVED = int(RobotState.REMOVED)
@@ -346,6 +348,11 @@ class MonitorCore:
             self.log.warn(
                 f"{missed} messages were still in the readers, not handed over by the executor; handled "
                 f"before writing the run"
+            )
+        if bag and not self.bag_complete():
+            self.log.warn(
+                f"the last tick's decisions did not all come within {BAG_WAIT:g} s: the bag is written without "
+                f"{self.rows[-2][_MOVING] - self.decided_rows.get(self.last, 0)} of them"
             )
         if self.world.outcome is not None and self.world.outcome != self.outcome.value:
             raise RunFailed(
