@@ -328,9 +328,12 @@ def test_sigterm_to_topics_closes_its_participant_and_leaves_no_log_file(tmp_pat
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and err.strip() == "swarm-ros: interrupted", err
-    # what it held, and any new file named after it (other tests' runs may make files meanwhile)
+    # what it held, and any new file named after it (other tests' runs may make files meanwhile). A port's files
+    # (fastrtps_port<N>) are shared with every participant on that port: the full suite once left one that a
+    # neighbouring test's SIGKILLed node held too, which this process's close cannot remove; not counted here
     made = {f"/dev/shm/{f}" for f in set(os.listdir("/dev/shm")) - before if str(proc.pid) in f}
-    left = shm_left(made | held | {el.removesuffix("_el") for el in held})
+    own = {f for f in held if "fastrtps_port" not in f}
+    left = shm_left(made | own | {el.removesuffix("_el") for el in own})
     assert not left, left
     assert not list(home.rglob("*.log")), list(home.rglob("*"))
 
