@@ -257,6 +257,8 @@ def test_with_record_every_a_world_that_disagrees_with_itself_or_the_monitor_fai
     core, _, _, _ = make(params, every=3)
     with pytest.raises(RunFailed, match="every 2 ticks and this monitor was told every 3"):
         core.tally(messages[0][0], "world")
+    with pytest.raises(RunFailed, match="every 1 ticks and this monitor was told every 3"):
+        core.status({"record_every": "1", "outcome": "starting"}, 0)  # said before tick 0: no tally ever comes
     core, _, _, _ = make(params, every=2)
     core.robots(decode_cloud(messages[0][1]), "world")
     wrong = messages[0][0].copy()

@@ -193,15 +193,18 @@ class MonitorCore:
             return
         tick, every, counts = tally_values(data, self.params.robots)
         if every != self.every:
-            raise RunFailed(
-                f"the world records the robots every {every} ticks and this monitor was told every {self.every}: "
-                f"give the world and the monitor the same record_every"
-            )
+            self._mismatch(every)
         if tick <= self.last:
             return
         with self.held.holding(tick, self.last, (TALLY, sender), raw):
             self._hold(self.tallies, tick, sender, counts)
             self._go_on()
+
+    def _mismatch(self, every: int) -> None:
+        raise RunFailed(
+            f"the world records the robots every {every} ticks and this monitor was told every {self.every}: "
+            f"give the world and the monitor the same record_every"
+        )
 
     def _hold(self, held: dict[int, dict[str, np.ndarray]], tick: int, sender: str, value: np.ndarray) -> None:
         if tick > self.last + PARTS_AHEAD:
@@ -310,7 +313,15 @@ class MonitorCore:
             self.port.decisions_taken(tick)
 
     def status(self, values: dict[str, str], tick: int, sender: str = WORLD) -> None:
-        """One status message of the world's, or of world shard ``sender``'s (its values, its stamp's tick)."""
+        """One status message of the world's, or of world shard ``sender``'s (its values, its stamp's tick).
+
+        Raises:
+            RunFailed: the world sends the robots every other number of ticks than this monitor was told (it
+                says so before tick 0): the monitor would wait for tallies that never come, or refuse them.
+        """
+        every = values.get("record_every", "")
+        if every.isdigit() and int(every) != self.every:
+            self._mismatch(int(every))
         for at, node in self.world.update(values, sender):
             self.log.warn(f"{node} was restarted at tick {at}")
             if self.recorder is not None and not self.recorder.closed:

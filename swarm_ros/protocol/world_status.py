@@ -38,6 +38,7 @@ class WorldStatus:
     monitor_alive: bool
     monitor_tick: int
     window: int
+    every: int
     queued: deque
     progress_at: float
     moved_at: float
@@ -75,7 +76,11 @@ class WorldStatus:
             warn = warn or sim.outcome not in (Outcome.COMPLETE, Outcome.COMPLETE_WITH_EXTRAS)
         else:
             outcome, message = RUNNING, note or RUNNING
-        values: dict[str, object] = {"rules": sim.params.ruleset.label, "robots": sim.params.robots}
+        values: dict[str, object] = {
+            "rules": sim.params.ruleset.label,
+            "robots": sim.params.robots,
+            "record_every": self.every,  # the monitor checks it is told the same
+        }
         if self.started:
             m = sim.history[min(tick, sim.tick)]
             values.update({key: int(m[METRIC_COLUMNS.index(key)]) for key in ("localized", "moving", "walking")})
