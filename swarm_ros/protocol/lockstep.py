@@ -386,11 +386,8 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
                 self._send_snapshot(k)
         for t in sorted(t for t in saved.ring if t > saved.monitor_tick or t == saved.tick):
             rows, applied, tally = saved.ring[t]
-            if self.every == 1:
-                self._emit(t, rows, t == saved.tick, applied, None, save=False)
-            else:  # the rows and decisions went out only at a recorded tick
-                recorded = self.records(t)
-                self._emit(t, rows if recorded else None, t == saved.tick, applied, None, False, tally)
+            out, again = self.resent(t, rows, tally)
+            self._emit(t, out, t == saved.tick, applied, None, save=False, tally=again)
         self.publish_status()
 
     # -- status -----------------------------------------------------------------------

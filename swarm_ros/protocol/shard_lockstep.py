@@ -292,13 +292,13 @@ class ShardLockstep(Lockstep):
         if booked:  # robots removed, pending no longer: beside the tick before it is saved
             self.save_book()
         out, sent_applied, tally = self.outgoing(tick, rows, applied)
-        if out is None:  # nothing of the robots goes out at this tick: all saved, none published
-            self.shard_port.save_tick(tick, _joined(rows, changed[~mine]), 0, None, h[-1], sent, tally)
-        elif out is rows:  # the rows that changed go out (record_every 1)
-            self.shard_port.save_tick(tick, _joined(rows, changed[~mine]), rows.size, applied, h[-1], sent, None)
-        else:  # every robot in its strips goes out, then the rest of what changed in its view
-            rest = changed[~np.isin(changed["id"], out["id"])]
-            self.shard_port.save_tick(tick, _joined(out, rest), out.size, applied, h[-1], sent, tally)
+        # saved: what goes out first (the rows that changed, every robot in its strips, or none), then the rest of
+        # what changed in its view
+        if out is None or out is rows:
+            table, published = _joined(rows, changed[~mine]), 0 if out is None else rows.size
+        else:
+            table, published = _joined(out, changed[~np.isin(changed["id"], out["id"])]), out.size
+        self.shard_port.save_tick(tick, table, published, sent_applied, h[-1], sent, tally)
         self.queued.append((tick, out, joined, sent_applied, regional, tally))
         for k, why in self.deferred:  # batches lost while the tick was with the peers: their robots as they are now
             super()._remove_batch(k, why)
@@ -378,9 +378,7 @@ class ShardLockstep(Lockstep):
                 self._send_snapshot(k)
         for t in sorted(t for t in saved.ring if t > self.monitor_tick or t == tick):
             rows, applied, tally = saved.ring[t]
-            if self.every == 1:
-                self.queued.append((t, rows, t == tick, applied, None, None))
-            else:  # the rows and decisions went out only at a recorded tick
-                self.queued.append((t, rows if self.records(t) else None, t == tick, applied, None, tally))
+            out, again = self.resent(t, rows, tally)
+            self.queued.append((t, out, t == tick, applied, None, again))
         self._flush()
         self.publish_status()

@@ -46,6 +46,13 @@ class WorldRecords:
             return None, None, self._tally()
         return self._recorded_rows(), applied, self._tally()
 
+    def resent(self, tick: int, rows: np.ndarray, tally: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """What a restarted process sends again of a saved tick (its checkpoint ring's ``rows`` and ``tally``):
+        (robot rows or None, tally or None), as :meth:`outgoing` sent them."""
+        if self.every == 1:
+            return rows, None
+        return (rows if self.records(tick) else None), tally
+
     def _tally(self) -> np.ndarray | None:
         """The robots by state (this process's part of them, a world shard's: those in its strips), or None when
         the rows go out every tick."""
