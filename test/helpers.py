@@ -553,6 +553,9 @@ class LockstepPort:
     def delivered(self):
         return True
 
+    def decisions_delivered(self):
+        return True
+
     def startup_seconds(self):
         return 0.5
 

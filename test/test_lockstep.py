@@ -16,7 +16,7 @@ from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.regions import columns
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.plan import MONITOR, batch_name
-from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S
+from swarm_ros.protocol.world_port import DECISIONS_LINGER, DROWNED_S, FIRST_STALL_S, LINGER, STALL_S, STILL_S
 
 pytestmark = pytest.mark.unit
 
@@ -29,6 +29,33 @@ def test_a_run_through_the_lockstep_is_the_engines_run_tick_for_tick():
     ref = r.engine()
     assert np.array_equal(r.ls.sim.history, ref.history) and r.ls.sim.outcome == ref.outcome
     assert r.port.statuses[-1].outcome == ref.outcome.value and r.port.statuses[-1].values["restarts"] == ""
+    r.ls.poll()
+    assert r.ls.finished
+
+
+def test_the_world_exits_once_its_last_messages_are_acknowledged_the_decisions_waited_for_longer():
+    """The end is out once the last status, rows and tallies are acknowledged (at most LINGER) and the applied
+    decisions too (at most DECISIONS_LINGER: over a slow link they lag; only a dead reader makes it wait)."""
+    r = LockstepRun(batches=2)
+    r.start()
+    r.run()
+    r.port.decisions_delivered = lambda: False  # the monitor has not acknowledged them yet
+    r.ls.poll()
+    assert not r.ls.finished
+    r.clock.now += LINGER + 0.1
+    r.ls.poll()
+    assert not r.ls.finished
+    r.port.decisions_delivered = lambda: True
+    r.ls.poll()
+    assert r.ls.finished
+    r = LockstepRun(batches=2)
+    r.start()
+    r.run()
+    r.port.delivered = r.port.decisions_delivered = lambda: False  # a reader died: never acknowledged
+    r.clock.now += DECISIONS_LINGER - 0.1
+    r.ls.poll()
+    assert not r.ls.finished
+    r.clock.now += 0.2
     r.ls.poll()
     assert r.ls.finished
 

@@ -114,6 +114,9 @@ class Port:
     def delivered(self):
         return True
 
+    def decisions_delivered(self):
+        return True
+
     def startup_seconds(self):
         return 0.5
 

@@ -253,10 +253,10 @@ class WorldNode:
         )
 
     def delivered(self) -> bool:
-        # the applied decisions too: a run's bag is whole only with them, and over a slow link (UDP between hosts)
-        # they can still be on their way when the monitor has counted the last tick
-        pubs = (self.pub_status, self.pub_robots, self.pub_tally, self.pub_decisions)
-        return all(p.wait_for_all_acked(_NO_WAIT) for p in pubs)
+        return all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots, self.pub_tally))
+
+    def decisions_delivered(self) -> bool:
+        return self.pub_decisions.wait_for_all_acked(_NO_WAIT)
 
     def startup_seconds(self) -> float:
         """Seconds from the start of ``swarm-ros run`` (its process, if it is this process's parent),

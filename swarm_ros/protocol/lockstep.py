@@ -29,6 +29,7 @@ from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
 from swarm_ros.protocol.world_losses import WorldLosses
 from swarm_ros.protocol.world_port import (
+    DECISIONS_LINGER,
     FINAL_WAIT,
     FIRST_STALL_S,
     LINGER,
@@ -432,9 +433,13 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
             self._maybe_advance(self.sim.tick + 1)  # a tick only the world's own robots decide in
         if self.ended_at is not None:
             caught_up = self.window == 0 or self.monitor_tick >= self.sim.tick
-            # the end is out once every reader acknowledged the last status and rows; a reader that died
-            # never does, so wait at most LINGER for that
-            if (
-                caught_up and (self.port.delivered() or now - self.ended_at > LINGER)
-            ) or now - self.ended_at > FINAL_WAIT:
+            # the end is out once every reader acknowledged the last status and rows, and the applied decisions (a
+            # run's bag is whole only with them, and over a slow link they can still be on their way when the
+            # monitor has counted the last tick); a reader that died never does, so wait at most LINGER for the
+            # first, DECISIONS_LINGER for the second
+            waited = now - self.ended_at
+            out = (self.port.delivered() or waited > LINGER) and (
+                self.port.decisions_delivered() or waited > DECISIONS_LINGER
+            )
+            if (caught_up and out) or waited > FINAL_WAIT:
                 self.finished = True

@@ -22,9 +22,10 @@ DROWNED_S = 60.0
 #: of its processes says (longer than any wait for a restart: ``restart_timeout`` is 30 s by default)
 STILL_S = 120.0
 FINAL_WAIT = 30.0  #: seconds to wait, after the end, for the monitor to catch up
-#: at most this many seconds for the last messages to reach their readers before exiting (only a reader that died
-#: makes it wait that long: over UDP between four hosts the last decisions of 100,000 robots took seconds)
-LINGER = 5.0
+LINGER = 1.0  #: at most this many seconds for the last messages to reach their readers before exiting
+#: at most this many for the applied decisions to reach theirs (the monitor's bag): over UDP between four hosts the
+#: decisions of 100,000 robots took seconds. Only a reader that died makes the world wait this long.
+DECISIONS_LINGER = 5.0
 #: seconds of wall time between two status messages while nothing else changes: ten a second, so that a
 #: progress display can follow the run on them alone (it need not take the monitor's metrics of every tick)
 STATUS_PERIOD = 0.1
@@ -84,5 +85,6 @@ class WorldPort(Protocol):
     ) -> None: ...
     def save_book(self, book: dict) -> None: ...  # the bookkeeping beside the ticks (world_restore)
     def monitor_reads_all(self) -> bool: ...  # the monitor's reader of every topic it records is matched
-    def delivered(self) -> bool: ...  # every reader acknowledged the last status, rows, tallies and decisions
+    def delivered(self) -> bool: ...  # every reader acknowledged the last status, rows and tallies
+    def decisions_delivered(self) -> bool: ...  # every reader acknowledged the applied decisions
     def startup_seconds(self) -> float: ...  # from the start of the run's command (or this process) to now
