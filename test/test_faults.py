@@ -100,7 +100,12 @@ def _strip(batch: int, batches: int = 3) -> tuple[int, int]:
 
 def _check_consistent_run(out: Path, batch: int) -> dict:
     """The lost batch's robots, the moving robots in its strip when it was lost, were removed (where they stood
-    still in their last tick), and nothing else changed in the counts."""
+    still in their last tick), and nothing else changed in the counts.
+
+    Another batch the world declared lost at the same tick is taken as lost too: once in CI, with the other
+    worker's test taking the cores, the world's own DDS threads went unscheduled past the 1 s lease and saw a
+    live batch lapse beside the stopped one (it was alive again 60 ms later), and removed its robots as
+    ``remove`` says. Every removed robot must still be one the world said it removed, in a lost batch's strip."""
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["losses"]) == 1
     loss_tick = summary["losses"][0]["tick"]
@@ -108,9 +113,21 @@ def _check_consistent_run(out: Path, batch: int) -> dict:
     removed = [r for r in final if r["state"] == "removed"]
     lost_ids = np.array([int(r["id"]) for r in removed])
     assert summary["lost_robots"] == lost_ids.size > 0
-    first, last = _strip(batch)
+    declared = {
+        int(k): int(n)
+        for k, t, n in re.findall(
+            r"robot_batch_(\d+) lost \(liveliness lapsed\) at tick (\d+): its (\d+) robots are removed",
+            (out / "logs" / "world.log").read_text(),
+        )
+        if int(t) + 1 == loss_tick
+    }
+    assert batch in declared and sum(declared.values()) == lost_ids.size, declared
     cols = columns(np.array([float(r["x"]) for r in removed]), Shape.load("star").world.radius)
-    assert ((cols >= first) & (cols <= last)).all(), "a removed robot was not in the lost batch's strip"
+    inside = np.zeros(cols.size, dtype=bool)
+    for k in declared:
+        first, last = _strip(k)
+        inside |= (cols >= first) & (cols <= last)
+    assert inside.all(), "a removed robot was not in a lost batch's strip"
     rows = np.array(list(csv.reader((out / "metrics.csv").open()))[1:], dtype=np.int64)
     tick, stationary, moving = rows[:, 0], rows[:, 1], rows[:, 4]
     before = tick < loss_tick
