@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from swarm_ros.app.param_file import read_params_file
+from swarm_ros.app.param_file import read_params_file, record_every
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
@@ -107,10 +107,7 @@ def _prepare(
     monitor = nodes["monitor"]
     recording = RecordingOptions(
         enabled=bool(_flag(args.record, monitor, "record")),
-        # the /monitor section's, else the /world section's: 'run' gives the world and the monitor the same
-        every=int(
-            _flag(args.record_every, {"record_every": nodes["world"].get("record_every", 0), **monitor}, "record_every")
-        ),
+        every=int(args.record_every if args.record_every is not None else record_every(nodes)),
         spawn=args.spawn,
         connect=args.connect or str(monitor.get("viewer_url", "")) or None,
     )

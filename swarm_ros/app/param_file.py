@@ -116,3 +116,10 @@ def read_params_file(path: str | Path, base: Settings | None = None) -> tuple[Se
             else:
                 nodes[kind][key] = checked
     return (base or Settings()).updated(**values), nodes
+
+
+def record_every(nodes: dict[str, dict[str, object]]) -> int:
+    """``record_every`` of a parameter file's node sections (:func:`read_params_file`): the /monitor section's, else
+    the /world section's, else 0. ``swarm-ros run`` and the launch file give the world and the monitor this one."""
+    monitor, world = nodes.get("monitor", {}), nodes.get("world", {})
+    return int(monitor.get("record_every", world.get("record_every", 0)))  # type: ignore[call-overload]

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import yaml
 
-from swarm_ros.app.param_file import read_params_file
+from swarm_ros.app.param_file import read_params_file, record_every
 from swarm_ros.app.processes import CHECKPOINT, check_graph, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
@@ -220,8 +220,7 @@ def launch_setup(
         or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
     ).absolute()
     check_out_dir(out, bool(nodes["monitor"].get("overwrite", False)))
-    # record_every, as swarm-ros run sets it: the /monitor section's, else the /world section's, for both
-    every = nodes["monitor"].get("record_every", nodes["world"].get("record_every", 0))
+    every = record_every(nodes)  # as swarm-ros run sets it, for both
     world = {**node_defaults(WORLD), **nodes["world"], "record_every": every}
     monitor = {**nodes["monitor"], "out_dir": str(out), "record_every": every}
     sections = {**world_sections(world, world_shards, log_dir), MONITOR: monitor}
