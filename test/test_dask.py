@@ -270,3 +270,42 @@ def test_an_output_directory_of_something_else_is_refused_before_a_cluster_start
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "is not empty and holds no" in done.stderr  # no "Dask: ..." line
     assert [p.name for p in out.iterdir()] == ["mine.txt"]
+
+
+def _heartbeat_failure(exc: BaseException, msg: str = "Failed to communicate with scheduler during heartbeat."):
+    import logging
+
+    return logging.LogRecord("distributed.worker", logging.ERROR, "worker.py", 1, msg, None, (type(exc), exc, None))
+
+
+def test_a_closed_connection_at_a_heartbeat_is_the_one_worker_error_dropped():
+    """The record a worker logs when the closing scheduler cut its heartbeat is dropped; the same message for
+    another fault, and another error with the same exception, still show."""
+    from distributed.comm.core import CommClosedError
+
+    from swarm_ros.app.dask_workers import keep
+
+    assert not keep(_heartbeat_failure(CommClosedError("in <TCP (closed)>: Stream is closed")))
+    assert keep(_heartbeat_failure(OSError("Connection refused")))
+    assert keep(_heartbeat_failure(CommClosedError("closed"), msg="Unexpected exception during heartbeat."))
+
+
+def _drops_heartbeat_failures() -> bool:
+    import logging
+
+    from swarm_ros.app.dask_workers import keep
+
+    return keep in logging.getLogger("distributed.worker").filters
+
+
+def test_only_the_local_clusters_workers_drop_the_heartbeat_error(scheduler):
+    """The LocalCluster an experiment starts gives each of its workers the filter; the workers of a scheduler
+    the user runs are left as they are."""
+    from swarm_ros.app.executors import dask_client
+
+    with dask_client(None, 2, "inprocess", quiet=True) as client:
+        ours = client.run(_drops_heartbeat_failures)
+    with dask_client(scheduler, 2, "inprocess", quiet=True) as client:
+        theirs = client.run(_drops_heartbeat_failures)
+    assert len(ours) == 2 and all(ours.values()), ours
+    assert len(theirs) == 2 and not any(theirs.values()), theirs

@@ -184,6 +184,8 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
 
     from dask.distributed import Client, LocalCluster
 
+    from swarm_ros.app.dask_workers import QuietHeartbeatAtClose
+
     cluster = client = None
     quiet_after_interrupt = _QuietAfterInterrupt()
     tornado_log = logging.getLogger("tornado.application")
@@ -209,6 +211,7 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
                     silence_logs=logging.ERROR,
                 )
             client = Client(cluster)
+            client.register_plugin(QuietHeartbeatAtClose(), name=QuietHeartbeatAtClose.name)  # ours alone
         if not quiet:
             where = scheduler or f"a LocalCluster of {jobs} workers"
             print(f"swarm-ros: Dask: {where}, dashboard {client.dashboard_link}", file=sys.stderr, flush=True)
