@@ -16,7 +16,15 @@ from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.regions import columns
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.plan import MONITOR, batch_name
-from swarm_ros.protocol.world_port import DECISIONS_LINGER, DROWNED_S, FIRST_STALL_S, LINGER, STALL_S, STILL_S
+from swarm_ros.protocol.world_port import (
+    DECISIONS_LINGER,
+    DROWNED_S,
+    FIRST_STALL_S,
+    LINGER,
+    LOSS_CONFIRM_S,
+    STALL_S,
+    STILL_S,
+)
 
 pytestmark = pytest.mark.unit
 
@@ -142,7 +150,10 @@ def test_past_the_restart_bound_a_lost_batch_has_its_robots_removed_at_the_end_o
     r.announce(1, incarnation=1)
     r.run(ticks=5)
     own = r.own(1)
-    r.ls.batch_liveliness(1, 0, 1)  # lost again: no restarts left
+    r.ls.batch_liveliness(1, 0, 1)  # lost again: no restarts left, its robots removed once the loss is confirmed
+    assert r.ls.lost == [] and 1 in r.ls.down_since
+    r.clock.now += LOSS_CONFIRM_S + 0.1
+    r.ls.poll()
     assert r.ls.lost == [batch_name(1)] and np.array_equal(r.ls.pending, own)
     tick = r.ls.sim.tick
     r.tick(silent=(1,))  # its robots stand still in this tick, then go
@@ -153,14 +164,53 @@ def test_past_the_restart_bound_a_lost_batch_has_its_robots_removed_at_the_end_o
     assert r.ls.sim.done and r.ls.sim.metrics.localized == ROBOTS - own.size
 
 
-def test_under_remove_a_lost_batch_is_not_waited_for():
+def test_under_remove_a_lost_batch_is_waited_for_only_to_confirm_the_loss():
     r = LockstepRun(on_batch_loss="remove")
     r.start()
     r.run(ticks=5)
     r.ls.batch_liveliness(0, 0, 1)
-    assert not r.ls.down_since and r.ls.lost == [batch_name(0)]
+    assert r.ls.lost == [] and r.port.statuses[-1].values["waiting_for"] == batch_name(0)
+    r.clock.now += LOSS_CONFIRM_S - 0.1
+    r.ls.poll()
+    assert r.ls.lost == [], "not before LOSS_CONFIRM_S"
+    r.clock.now += 0.2
+    r.ls.poll()
+    assert not r.ls.down_since and r.ls.lost == [batch_name(0)] and r.ls.pending.size
     r.announce(0, incarnation=1)  # a process that comes back anyway is not taken
     assert r.ls.restarts == []
+
+
+@pytest.mark.parametrize("back", ["liveliness", "decisions"])
+def test_under_remove_a_live_batch_that_only_seemed_lost_keeps_its_robots_and_the_run_is_unchanged(back):
+    """A world starved of CPU past the liveliness lease sees a live batch lapse: its liveliness (or its
+    decisions) back within LOSS_CONFIRM_S, it is a pause, and the run equals the engine's."""
+    r = LockstepRun(on_batch_loss="remove")
+    r.start()
+    r.ls.batch_liveliness(0, 1, 0)
+    r.run(ticks=5)
+    r.ls.batch_liveliness(0, 0, 1)
+    r.clock.now += LOSS_CONFIRM_S - 0.5
+    r.ls.poll()
+    if back == "liveliness":
+        r.ls.batch_liveliness(0, 1, 0)
+    else:
+        r.tick()
+    assert not r.ls.down_since
+    r.clock.now += LOSS_CONFIRM_S
+    r.ls.poll()
+    r.run()
+    assert r.ls.lost == [] and not r.ls.pending.size and r.ls.restarts == []
+    assert np.array_equal(r.ls.sim.history, r.engine().history)
+
+
+def test_under_remove_a_new_process_of_a_lost_batch_confirms_the_loss_at_once():
+    r = LockstepRun(on_batch_loss="remove")
+    r.start()
+    r.run(ticks=5)
+    own = r.own(0)
+    r.ls.batch_liveliness(0, 0, 1)
+    r.announce(0, incarnation=1)  # the process before is gone for sure
+    assert r.ls.lost == [batch_name(0)] and np.array_equal(r.ls.pending, own) and r.ls.restarts == []
 
 
 def test_a_stalled_batch_is_waited_for_and_counts_as_back_when_it_decides_again():

@@ -27,7 +27,7 @@ from swarm_ros.protocol.checks import Rejections, decisions_allowed
 from swarm_ros.protocol.hosting import Hosting, snapshot
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
-from swarm_ros.protocol.world_losses import WorldLosses
+from swarm_ros.protocol.world_losses import Down, WorldLosses
 from swarm_ros.protocol.world_port import (
     DECISIONS_LINGER,
     FINAL_WAIT,
@@ -76,7 +76,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         self.batch_names: list[str] = []
         self.restart_counts: list[int] = []  # per batch
         self.incarnations: list[int] = []  # per batch: the newest process's incarnation heard of
-        self.down_since: dict[int, float] = {}  # batches lost and waited for: since when
+        self.down_since: dict[int, Down] = {}  # batches lost and waited for: since when, how long, why
         self.removed_batches: set[int] = set()
         self.respawned: dict[int, tuple[int, int]] = {}  # batch -> strip: re-announced with no higher incarnation
         self.lapsed: set[int] = set()  # batches whose liveliness lapsed since their last accepted announcement
@@ -140,6 +140,8 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         if self.known.get(k) == incarnation:  # the process the world before this one knew: nothing new
             del self.known[k]
             return
+        if self.started and self.confirm_loss(k, "a new process of it announced itself"):
+            return  # lost for good: its robots are removed, and the new process is not taken
         if incarnation <= self.incarnations[k]:
             # The same process again, an older one's announcement, or a new process that a launcher
             # without restart counting (ros2 launch's respawn) started: that one is taken once the
@@ -409,14 +411,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         if self.monitor_down_since is not None and now - self.monitor_down_since > p.restart_timeout:
             self.monitor_down_since = None
             self._lose_monitor(f"not back within {p.restart_timeout:g} s")
-        for k, since in list(self.down_since.items()):
-            if now - since > p.restart_timeout:
-                if not self.started:
-                    raise RunFailed(
-                        f"{self.batch_names[k]} was lost before the run started and did not come back "
-                        f"within {p.restart_timeout:g} s (restart_timeout)"
-                    )
-                self._remove_batch(k, f"not back within {p.restart_timeout:g} s")
+        self.expire_losses(now)
         if not self.sim.done and now - self.status_at >= STATUS_PERIOD:
             self.publish_status()
         if not self.started and now - self.created > p.start_timeout:

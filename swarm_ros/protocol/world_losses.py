@@ -1,8 +1,9 @@
 """The world's loss policy: a robot batch or the monitor lost (its liveliness lapsed, or it stalled).
 
 A lost batch is waited for (``restart_timeout``) while it has restarts left under ``on_batch_loss:
-restart``, and its robots are removed otherwise: the moving robots in its strip, at the end of the next
-tick, after which the world decides for the robots that move into the strip. A lost monitor is waited
+restart``, and its robots are removed otherwise, once the loss is confirmed (``LOSS_CONFIRM_S``): the moving
+robots in its strip, at the end of the next tick, after which the world decides for the robots that move into
+the strip. A lost monitor is waited
 for as long; the ticks are held back meanwhile, as while it is behind, then the swarm goes on without
 it. docs/faults.md says the policy in full.
 """
@@ -10,13 +11,29 @@ it. docs/faults.md says the policy in full.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import RunFailed
 from swarm_ros.protocol.hosting import Hosting
 from swarm_ros.protocol.plan import MONITOR
-from swarm_ros.protocol.world_port import Logger, Policy
+from swarm_ros.protocol.world_port import LOSS_CONFIRM_S, Logger, Policy
+
+
+class Down(NamedTuple):
+    """A lost batch the world waits for: since when (its clock), for how long, and what to say if it is not back."""
+
+    since: float
+    limit: float
+    why: str  # why it was lost
+    confirming: bool  # lost for good once the wait is over (no restart is awaited)
+
+    def expired(self) -> str:
+        """What to say when its robots are removed for being away too long."""
+        waited = f"not back within {self.limit:g} s"
+        return f"{self.why}; {waited}" if self.confirming else waited
 
 
 class WorldLosses:
@@ -33,7 +50,7 @@ class WorldLosses:
     live: set[int]
     lapsed: set[int]
     respawned: dict[int, tuple[int, int]]
-    down_since: dict[int, float]
+    down_since: dict[int, Down]
     removed_batches: set[int]
     lost: list[str]
     started: bool
@@ -80,22 +97,52 @@ class WorldLosses:
             self.down_since.pop(k)
 
     def lose_batch(self, k: int, why: str) -> None:
-        """Batch ``k``'s process is gone (or stalled). Wait for it to come back, or remove its robots."""
+        """Batch ``k``'s process is gone (or stalled). Wait for it to come back, or remove its robots once the loss
+        is confirmed (:data:`LOSS_CONFIRM_S`)."""
         name = self.batch_names[k]
         if k in self.removed_batches or k in self.down_since or self.sim.done:
             return
-        p = self.policy
+        p, tick = self.policy, self.sim.tick
         if not self.started or (p.on_batch_loss == "restart" and self.restart_counts[k] < p.max_restarts):
-            self.down_since[k] = self.clock()
+            self.down_since[k] = Down(self.clock(), p.restart_timeout, why, False)
             self.log.warn(
-                f"{name} lost ({why}) at tick {self.sim.tick}: waiting up to {p.restart_timeout:g} s for "
+                f"{name} lost ({why}) at tick {tick}: waiting up to {p.restart_timeout:g} s for "
                 f"it to restart (restarts so far: {self.restart_counts[k]} of {p.max_restarts})"
             )
             self.publish_status(f"waiting for {name}")
             if k in self.respawned and self.started:  # its new process announced itself already
                 self._respawn(k)
             return
-        self._remove_batch(k, why)
+        self.down_since[k] = Down(self.clock(), LOSS_CONFIRM_S, why, True)
+        self.log.warn(
+            f"{name} lost ({why}) at tick {tick}: its robots are removed unless it is back within {LOSS_CONFIRM_S:g} s"
+        )
+        self.publish_status(f"waiting for {name}")
+
+    def confirm_loss(self, k: int, why: str) -> bool:
+        """Remove batch ``k``'s robots now if it is lost for good and only waited for to confirm it (a new process
+        of it announced itself: the one before is gone). Whether it was."""
+        down = self.down_since.get(k)
+        if down is None or not down.confirming:
+            return False
+        self._remove_batch(k, f"{down.why}; {why}")
+        return True
+
+    def expire_losses(self, now: float) -> None:
+        """Remove the robots of the batches not back within their wait.
+
+        Raises:
+            RunFailed: a batch lost before tick 0 did not come back within ``restart_timeout``.
+        """
+        for k, down in list(self.down_since.items()):
+            if now - down.since <= down.limit:
+                continue
+            if not self.started:
+                raise RunFailed(
+                    f"{self.batch_names[k]} was lost before the run started and did not come back "
+                    f"within {down.limit:g} s (restart_timeout)"
+                )
+            self._remove_batch(k, down.expired())
 
     def _remove_batch(self, k: int, why: str) -> None:
         """Remove batch ``k``'s robots, the moving robots in its strip, at the end of the next tick (robots lost

@@ -21,6 +21,11 @@ DROWNED_S = 60.0
 #: seconds without a tick published or a report received after which the run fails, whatever the liveliness
 #: of its processes says (longer than any wait for a restart: ``restart_timeout`` is 30 s by default)
 STILL_S = 120.0
+#: seconds a batch lost for good (under ``on_batch_loss: remove``, or out of restarts) is still waited for before
+#: its robots are removed: a world starved of CPU past the 1 s liveliness lease sees a live batch lapse, and the
+#: batch's liveliness or decisions back within this make it a pause, not a loss (CI once removed a live batch's
+#: robots so). A new process of the batch announcing itself meanwhile confirms the loss at once.
+LOSS_CONFIRM_S = 2.0
 FINAL_WAIT = 30.0  #: seconds to wait, after the end, for the monitor to catch up
 LINGER = 1.0  #: at most this many seconds for the last messages to reach their readers before exiting
 #: at most this many for the applied decisions to reach theirs (the monitor's bag): over UDP between four hosts the

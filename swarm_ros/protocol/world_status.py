@@ -16,6 +16,7 @@ from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.status import RUNNING, STARTING, Status, restarts_text
+from swarm_ros.protocol.world_losses import Down
 from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S
 
 
@@ -33,7 +34,7 @@ class WorldStatus:
     restarts: list[tuple[int, str]]
     lost: list[str]
     batch_names: list[str]
-    down_since: dict[int, float]
+    down_since: dict[int, Down]
     monitor_down_since: float | None
     monitor_alive: bool
     monitor_tick: int
