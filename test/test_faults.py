@@ -26,6 +26,7 @@ from helpers import Recording, processes_mentioning, rrd_verify, run_env
 
 from swarm_ros.core import RunParams, Shape
 from swarm_ros.core.regions import batch_strip, columns
+from swarm_ros.protocol.world_port import LOSS_CONFIRM_S
 
 pytestmark = pytest.mark.process
 
@@ -93,6 +94,12 @@ def _lost_at(world_log: str, name: str) -> tuple[float, int]:
     return float(m.group(1)), int(m.group(2))
 
 
+#: the world's warning that a batch's robots are removed: (time, batch, tick, robots)
+_REMOVED = re.compile(
+    r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_(\d+) lost \([^)]*\) at tick (\d+): its (\d+) robots are removed"
+)
+
+
 def _strip(batch: int, batches: int = 3) -> tuple[int, int]:
     """The columns robot_batch_<batch> of ``batches`` hosts in these runs (the default cuts)."""
     return batch_strip(Shape.load("star"), RunParams(robots=ROBOTS), batch, batches)
@@ -102,10 +109,8 @@ def _check_consistent_run(out: Path, batch: int) -> dict:
     """The lost batch's robots, the moving robots in its strip when it was lost, were removed (where they stood
     still in their last tick), and nothing else changed in the counts.
 
-    Another batch the world declared lost at the same tick is taken as lost too: once in CI, with the other
-    worker's test taking the cores, the world's own DDS threads went unscheduled past the 1 s lease and saw a
-    live batch lapse beside the stopped one (it was alive again 60 ms later), and removed its robots as
-    ``remove`` says. Every removed robot must still be one the world said it removed, in a lost batch's strip."""
+    No other batch was removed: a world starved of CPU past the 1 s lease may see a live batch's liveliness lapse
+    (CI once did, beside the stopped batch), but the batch is back within LOSS_CONFIRM_S and keeps its robots."""
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["losses"]) == 1
     loss_tick = summary["losses"][0]["tick"]
@@ -113,21 +118,11 @@ def _check_consistent_run(out: Path, batch: int) -> dict:
     removed = [r for r in final if r["state"] == "removed"]
     lost_ids = np.array([int(r["id"]) for r in removed])
     assert summary["lost_robots"] == lost_ids.size > 0
-    declared = {
-        int(k): int(n)
-        for k, t, n in re.findall(
-            r"robot_batch_(\d+) lost \(liveliness lapsed\) at tick (\d+): its (\d+) robots are removed",
-            (out / "logs" / "world.log").read_text(),
-        )
-        if int(t) + 1 == loss_tick
-    }
-    assert batch in declared and sum(declared.values()) == lost_ids.size, declared
+    declared = [(int(k), int(t), int(n)) for _, k, t, n in _REMOVED.findall((out / "logs" / "world.log").read_text())]
+    assert declared == [(batch, loss_tick - 1, lost_ids.size)], declared
     cols = columns(np.array([float(r["x"]) for r in removed]), Shape.load("star").world.radius)
-    inside = np.zeros(cols.size, dtype=bool)
-    for k in declared:
-        first, last = _strip(k)
-        inside |= (cols >= first) & (cols <= last)
-    assert inside.all(), "a removed robot was not in a lost batch's strip"
+    first, last = _strip(batch)
+    assert ((cols >= first) & (cols <= last)).all(), "a removed robot was not in the lost batch's strip"
     rows = np.array(list(csv.reader((out / "metrics.csv").open()))[1:], dtype=np.int64)
     tick, stationary, moving = rows[:, 0], rows[:, 1], rows[:, 4]
     before = tick < loss_tick
@@ -153,12 +148,16 @@ def test_a_killed_robot_batch_is_noticed_within_2_s_and_the_swarm_repairs_the_sh
     assert launcher.returncode == 0, err
     assert "robot_batch_1 was killed by SIGKILL; the world removes its robots (--on-batch-loss remove)" in err
     assert "restarted" not in err and "[INFO]" not in err  # no restart under 'remove', and no unrelated log line
-    detected, tick = _lost_at((out / "logs" / "world.log").read_text(), "robot_batch_1")
+    world_log = (out / "logs" / "world.log").read_text()
+    detected, _ = _lost_at(world_log, "robot_batch_1")
     assert detected - killed_at < 2.0, f"noticed {detected - killed_at:.2f} s after the kill"
     summary = _check_consistent_run(out, 1)
     assert summary["restarts"] == []
     assert (out / "logs" / "launcher.log").read_text().count("started robot_batch_1 ") == 1
-    assert summary["losses"][0]["tick"] == tick + 1  # removed at the end of the tick after the notice
+    removed_at, _, removed_tick, _ = _REMOVED.search(world_log).groups()
+    waited = float(removed_at) - detected
+    assert LOSS_CONFIRM_S <= waited < LOSS_CONFIRM_S + 1.0, f"removed {waited:.2f} s after the notice"
+    assert summary["losses"][0]["tick"] == int(removed_tick) + 1  # removed at the end of the tick after the notice
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
@@ -170,8 +169,8 @@ def test_a_stalled_robot_batch_is_dropped_and_cannot_corrupt_the_world_when_it_r
     os.kill(victim, signal.SIGSTOP)
     try:
         deadline = time.monotonic() + 20
-        while time.monotonic() < deadline and "robot_batch_2 lost" not in (logs / "world.log").read_text():
-            time.sleep(0.05)
+        while time.monotonic() < deadline and not _REMOVED.search((logs / "world.log").read_text()):
+            time.sleep(0.05)  # its liveliness back before LOSS_CONFIRM_S would make it a pause
     finally:
         os.kill(victim, signal.SIGCONT)  # back, with decisions for ticks long gone and robots it no longer has
     _, err = launcher.communicate(timeout=240)

@@ -14,7 +14,7 @@ from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.protocol.checkpoint import Checkpoint
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR, batch_name
-from swarm_ros.protocol.world_port import Policy
+from swarm_ros.protocol.world_port import LOSS_CONFIRM_S, Policy
 
 pytestmark = pytest.mark.unit
 
@@ -151,8 +151,10 @@ def test_the_bookkeeping_holds_batches_losses_and_times(tmp_path):
     r.start()
     r.run(ticks=3)
     lost = r.own(1)  # the moving robots in its strip
-    r.ls.batch_liveliness(1, 0, 1)  # lost for good under 'remove'
-    r.tick()
+    r.ls.batch_liveliness(1, 0, 1)  # lost for good under 'remove', once the loss is confirmed
+    r.clock.now += LOSS_CONFIRM_S + 0.1
+    r.ls.poll()
+    r.tick(silent=(1,))
     assert r.ls.lost == [batch_name(1)]
     tick = r.ls.sim.tick
     ls = _restarted(r, tmp_path / "ck")
