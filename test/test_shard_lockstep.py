@@ -20,6 +20,7 @@ from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.shards import ShardPlan, WorldShard
+from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.checks import Rejections, apply_robots
 from swarm_ros.protocol.monitoring import MonitorCore
@@ -27,7 +28,7 @@ from swarm_ros.protocol.plan import batch_name
 from swarm_ros.protocol.rows import decision_rows, pose_of
 from swarm_ros.protocol.shard_lockstep import ShardLockstep
 from swarm_ros.protocol.shard_save import ShardSaver
-from swarm_ros.protocol.world_port import Policy
+from swarm_ros.protocol.world_port import LOSS_CONFIRM_S, Policy
 
 pytestmark = pytest.mark.unit
 
@@ -148,6 +149,7 @@ class ShardedGraph:
         window: int = 3,
         tick_rate: float = 0.0,
         every: int = 1,
+        on_batch_loss: str = "restart",
     ) -> None:
         self.shape, self.params, self.rng, self.folder = shape, params, random.Random(seed), folder
         radius = shape.world.radius
@@ -159,7 +161,9 @@ class ShardedGraph:
         self.channels: dict[tuple, deque] = defaultdict(deque)
         self.statuses: dict[int, object] = {}
         self.clock, self.log = Clock(), Log()
-        self.policy = Policy(monitor_window=window, tick_rate=tick_rate, record_every=every)
+        self.policy = Policy(
+            monitor_window=window, tick_rate=tick_rate, record_every=every, on_batch_loss=on_batch_loss
+        )
         self.published: dict[int, list[tuple[int, float]]] = defaultdict(list)  # shard -> (tick, clock) published
         self.ports = [Port(self, s) for s in range(shards)]
         self.incarnations = [0] * shards
@@ -231,6 +235,14 @@ class ShardedGraph:
                 ls.announce(batch_name(b.k), 0, b.strip)
                 for tick, rows in b.sent:
                     b.publish(tick, rows)
+
+    def step_until(self, condition, limit: int = 200_000) -> None:
+        """Deliver messages in a random order until ``condition()`` holds."""
+        for _ in range(limit):
+            if condition():
+                return
+            self.channels[self.rng.choice([c for c, q in self.channels.items() if q])].popleft()()
+        raise AssertionError("never held")
 
     def run(self, kill_every: int = 0, limit: int = 200_000) -> None:
         for _ in range(limit):
@@ -330,3 +342,26 @@ def test_shards_killed_at_any_moment_go_on_from_their_saves(seed, tmp_path):
     assert np.array_equal(g.replica.state.state, ref.state.state)
     restarts = sum(len([r for r in ls.restarts if r[1].startswith("world_shard")]) for ls in g.shards)
     assert restarts >= 1
+
+
+def test_a_batch_lost_for_good_while_its_shards_tick_is_with_the_peers_is_removed_once(tmp_path):
+    """Under ``remove``: batch 0's process dies just after its decisions went in, while its shard's tick is with the
+    peers. The loss, confirmed then, waits for the tick's close, however often the shard polls meanwhile; the robots
+    are removed once, and the run goes on to its end with the world deciding for the robots in the strip."""
+    shape = Shape.load("star")
+    params = RunParams(robots=200, seed=2, max_ticks=300)
+    g = ShardedGraph(shape, params, 4, 2, 2, tmp_path, on_batch_loss="remove")
+    g.start()
+    ls = g.shards[g.shard_of[0]]
+    g.step_until(lambda: ls.sim.tick >= 10 and ls.inflight is not None)
+    g.batches[0].decide = lambda: None  # dead: no more decisions
+    k = ls.batch_names.index(batch_name(0))  # the shard's own numbering
+    ls.batch_liveliness(k, 0, 1)
+    g.clock.now += LOSS_CONFIRM_S + 0.1
+    for _ in range(3):
+        ls.poll()
+    assert ls.inflight is not None and [d for d, _ in ls.deferred] == [k] and not ls.down_since
+    g.run()
+    assert ls.lost == [batch_name(0)] and len(ls.sim.losses) == 1
+    removed = int((g.replica.state.state == RobotState.REMOVED).sum())
+    assert removed == ls.sim.losses[0][1] > 0 and g.history[-1][1] + g.history[-1][4] == params.robots - removed

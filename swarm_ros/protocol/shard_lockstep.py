@@ -322,7 +322,9 @@ class ShardLockstep(Lockstep):
         """As :meth:`Lockstep._remove_batch`, between ticks: while a tick is with the peers, its robots may still
         cross into another shard's strips, so the removal waits for the tick's close."""
         if self.inflight is not None:
-            self.deferred.append((k, why))
+            self.down_since.pop(k, None)  # confirmed: no longer waited for, nor removed again at the next poll
+            if all(k != d for d, _ in self.deferred):
+                self.deferred.append((k, why))
         else:
             super()._remove_batch(k, why)
 
