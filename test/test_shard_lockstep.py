@@ -12,6 +12,8 @@ from collections import defaultdict, deque
 import numpy as np
 import pytest
 from helpers import Clock, Log
+from hypothesis import given
+from hypothesis import strategies as st
 
 from swarm_ros.core.engine import Simulation
 from swarm_ros.core.params import RunParams
@@ -26,7 +28,7 @@ from swarm_ros.protocol.checks import Rejections, apply_robots
 from swarm_ros.protocol.monitoring import MonitorCore
 from swarm_ros.protocol.plan import batch_name
 from swarm_ros.protocol.rows import decision_rows, pose_of
-from swarm_ros.protocol.shard_lockstep import ShardLockstep
+from swarm_ros.protocol.shard_lockstep import ShardLockstep, _first_of
 from swarm_ros.protocol.shard_save import ShardSaver
 from swarm_ros.protocol.world_port import LOSS_CONFIRM_S, Policy
 
@@ -365,3 +367,13 @@ def test_a_batch_lost_for_good_while_its_shards_tick_is_with_the_peers_is_remove
     assert ls.lost == [batch_name(0)] and len(ls.sim.losses) == 1
     removed = int((g.replica.state.state == RobotState.REMOVED).sum())
     assert removed == ls.sim.losses[0][1] > 0 and g.history[-1][1] + g.history[-1][4] == params.robots - removed
+
+
+@given(st.lists(st.sets(st.integers(0, 63), max_size=40), min_size=1, max_size=4), st.randoms(use_true_random=False))
+def test_first_of_is_np_unique_with_the_first_arrays_values(id_sets, rnd):
+    """The linear-time join a shard closes its tick with answers what ``np.unique(..., return_index=True)`` does."""
+    ids = [np.array(sorted(s, key=lambda _: rnd.random()), dtype=np.int64) for s in id_sets]
+    values = [np.array([rnd.randrange(1000) for _ in a], dtype=np.int64) for a in ids]
+    every, first = _first_of(64, ids, values)
+    want, at = np.unique(np.concatenate(ids), return_index=True)
+    assert np.array_equal(every, want) and np.array_equal(first, np.concatenate(values)[at])

@@ -49,6 +49,19 @@ def _joined(first: np.ndarray, then: np.ndarray) -> np.ndarray:
     return out
 
 
+def _first_of(n: int, ids: list[np.ndarray], values: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The robots of ``ids`` (arrays of distinct ids below ``n``) in ascending order, and the value each has in
+    the first array that holds it (``np.unique(..., return_index=True)``'s answer, in time linear in ``n``: the
+    sort took a shard over 1 ms a tick at 50,000 robots)."""
+    held = np.zeros(n, dtype=bool)
+    value = np.empty(n, dtype=np.result_type(*values))
+    for these, their in zip(reversed(ids), reversed(values)):  # the first array's values written last
+        held[these] = True
+        value[these] = their
+    every = np.flatnonzero(held)
+    return every, value[every]
+
+
 class ShardHosting(Hosting):
     """A shard's map of its strips to its batches: a batch wholly outside them is another shard's."""
 
@@ -274,18 +287,19 @@ class ShardLockstep(Lockstep):
             self.pending = np.setdiff1d(self.pending, self.removing)
             self.removed_now, self.removing = self.removing, np.empty(0, dtype=np.int64)
         gone = shard.gone_stationary
-        reported = np.union1d(part.ids, gone[self._in_strips(s.x[gone])])  # the monitor's part: no overlap
         received = shard.received
         ids = [part.ids, gone] + ([received.ids] if received is not None else [])
         before = [part.before, columns(s.x[gone], shard.plan.radius)] + (
             [received.before] if received is not None else []
         )
-        every, at = np.unique(np.concatenate(ids), return_index=True)
-        cols = np.concatenate(before)[at]
+        every, cols = _first_of(self.sim.params.robots, ids, before)
         areas = [self.hosting.area(k) for k in range(len(self.batch_names))]
         changed = self._region_rows(every, received)
         regional = route(changed, cols, areas, self.hosting.radius)
-        mine = np.isin(every, reported, assume_unique=True)
+        reported = np.zeros(self.sim.params.robots, dtype=bool)  # the monitor's part: no overlap
+        reported[part.ids] = True
+        reported[gone[self._in_strips(s.x[gone])]] = True
+        mine = reported[every]
         rows = changed[mine]
         h = shard.history
         joined = gone.size > 0 or len(h) < 2 or h[-1][_LOCALIZED] != h[-2][_LOCALIZED] or bool(part.removing.size)
