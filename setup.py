@@ -40,6 +40,7 @@ setup(
         "rosbags>=0.11,<0.12",
         "mcap>=1.6",  # reading a killed monitor's unfinished bag (ros/bag_writer.py)
         "dask[distributed]>=2024.1",
+        "distributed>=2024.1",  # imported directly too: a LocalCluster worker plugin (app/dask_workers.py)
     ],
     extras_require={"test": ["pytest>=8", "pytest-xdist>=3.5", "hypothesis>=6.100", "mcap-ros2-support>=0.6"]},
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
