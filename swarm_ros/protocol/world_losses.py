@@ -3,9 +3,8 @@
 A lost batch is waited for (``restart_timeout``) while it has restarts left under ``on_batch_loss:
 restart``, and its robots are removed otherwise, once the loss is confirmed (``LOSS_CONFIRM_S``): the moving
 robots in its strip, at the end of the next tick, after which the world decides for the robots that move into
-the strip. A lost monitor is waited
-for as long; the ticks are held back meanwhile, as while it is behind, then the swarm goes on without
-it. docs/faults.md says the policy in full.
+the strip. A lost monitor is waited for as long; the ticks are held back meanwhile, as while it is behind, then
+the swarm goes on without it. docs/faults.md says the policy in full.
 """
 
 from __future__ import annotations
