@@ -35,6 +35,10 @@ ROBOTS = 1036  # the star, ~2700 ticks: a few seconds over the graph
 
 
 def _launch(out: Path, processes: int = 3, *extra: str) -> subprocess.Popen:
+    """The star under ``remove``, paced at 1,000 ticks a second: unpaced it ran in 1.3 s, and once in a loaded
+    run of the tests it had ended before the test saw it running (it then waited 120 s for nothing)."""
+    paced = out.parent / f"{out.name}-paced.yaml"
+    paced.write_text("/world:\n  ros__parameters:\n    tick_rate: 1000.0\n", encoding="utf-8")
     return subprocess.Popen(
         [
             PY,
@@ -50,6 +54,8 @@ def _launch(out: Path, processes: int = 3, *extra: str) -> subprocess.Popen:
             "--quiet",
             "--on-batch-loss",
             "remove",
+            "--params-file",
+            str(paced),
             *extra,
         ],
         stdout=subprocess.PIPE,
@@ -59,13 +65,15 @@ def _launch(out: Path, processes: int = 3, *extra: str) -> subprocess.Popen:
     )
 
 
-def _wait_until_running(out: Path, batches: int = 3, timeout: float = 120) -> Path:
+def _wait_until_running(out: Path, launcher: subprocess.Popen, batches: int = 3, timeout: float = 120) -> Path:
     """The run's staged log directory, once ticks flow (the monitor has recorded a few batches of ticks) and the
     world has seen every batch's liveliness: a batch killed before that is noticed by the 5 s fallback, as
     designed (a CI run once killed one 0.2 s after tick 0, before its liveliness had matched)."""
     partial = out.parent / f"{out.name}.partial.rrd"
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
+        if launcher.poll() is not None:
+            raise AssertionError(f"the run ended (exit {launcher.returncode}) before the test saw it running")
         logs = list(out.parent.glob(f".{out.name}.logs-*"))
         if (
             logs
@@ -140,7 +148,7 @@ def _check_consistent_run(out: Path, batch: int) -> dict:
 def test_a_killed_robot_batch_is_noticed_within_2_s_and_the_swarm_repairs_the_shape(tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
-    logs = _wait_until_running(out)
+    logs = _wait_until_running(out, launcher)
     victim = _pid_of("robot_batch_1", logs)
     killed_at = time.time()
     os.kill(victim, signal.SIGKILL)
@@ -164,7 +172,7 @@ def test_a_killed_robot_batch_is_noticed_within_2_s_and_the_swarm_repairs_the_sh
 def test_a_stalled_robot_batch_is_dropped_and_cannot_corrupt_the_world_when_it_resumes(tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
-    logs = _wait_until_running(out)
+    logs = _wait_until_running(out, launcher)
     victim = _pid_of("robot_batch_2", logs)
     os.kill(victim, signal.SIGSTOP)
     try:
@@ -184,7 +192,7 @@ def test_a_monitor_killed_past_the_restart_bound_fails_the_command_and_its_recor
     run directory. (Restarts: test_node_restarts.py.) What it had recorded reads back."""
     out = tmp_path / "run"
     launcher = _launch(out, 2, "--max-restarts", "0")
-    logs = _wait_until_running(out, batches=2)
+    logs = _wait_until_running(out, launcher, batches=2)
     partial = tmp_path / "run.partial.rrd"
     os.kill(_pid_of("monitor", logs), signal.SIGKILL)
     start = time.monotonic()
