@@ -261,6 +261,7 @@ class MonitorNode:
                 while not core.rows and time.monotonic() < deadline and self.node.count_publishers(msgs.ROBOTS):
                     time.sleep(0.02)
                     handle_missed(self.node)
+                handle_missed(self.node)  # what reached the readers as the world left
             except RunFailed as exc:
                 self.node.get_logger().error(f"while taking the ticks already sent: {exc}")
         unstarted = code == EXIT_INTERRUPTED and not core.rows and not self.incarnation  # holds nothing of a run

@@ -37,7 +37,7 @@ from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR, WORLD
 from swarm_ros.protocol.status import Status
-from swarm_ros.protocol.world_port import Policy
+from swarm_ros.protocol.world_port import LINGER, Policy
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.node_params import make_node, read_parameters
@@ -278,8 +278,18 @@ class WorldNode:
     def close(self, code: int) -> None:
         """The checkpoint is removed once the run has ended or was stopped (Ctrl-C): no process of this run
         will restart from it. A failed or orphaned world leaves it."""
+        self.linger(code)
         if self.saver is not None and code in (EXIT_OK, EXIT_INTERRUPTED):
             self.saver.remove()
+
+    def linger(self, code: int) -> None:
+        """Stopped after tick 0: what it published gets up to ``LINGER`` to reach its readers, as at a run's end.
+        The monitor writes the interrupted run from it (CI once stopped a world just after tick 0: it left before
+        its rows reached the still-loading monitor, and the run directory was not written)."""
+        if code == EXIT_INTERRUPTED and self.lockstep is not None and self.lockstep.started:
+            deadline = time.monotonic() + LINGER
+            while not (self.delivered() and self.decisions_delivered()) and time.monotonic() < deadline:
+                time.sleep(0.01)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -196,6 +196,7 @@ class WorldShardNode(WorldNode):
     def close(self, code: int) -> None:
         """The save is removed once the run has ended or was stopped; a failed or orphaned shard leaves it. Say
         how much this shard took from its peers."""
+        self.linger(code)
         rows, claims = self.peer_rows
         if isinstance(self.lockstep, ShardLockstep):  # loaded
             tick = self.lockstep.exchange.tick
