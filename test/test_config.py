@@ -60,20 +60,66 @@ def test_missing_parameter_file(tmp_path):
         load_params_file(tmp_path / "nope.yaml")
 
 
-def test_node_sections_of_the_shipped_file_hold_every_node_default():
+def _uncommented(tmp_path):
+    """The shipped file with every node section's `# ` removed, as its comment tells a user to."""
+    text = (data_dir("config") / "swarm_ros.yaml").read_text()
+    head, sections = text[: text.index("# /world:")], text[text.index("# /world:") :]
+    path = tmp_path / "uncommented.yaml"
+    path.write_text(head + "\n".join(line[2:] for line in sections.splitlines()) + "\n")
+    return path
+
+
+def test_node_sections_of_the_shipped_file_hold_every_node_default(tmp_path):
     import yaml
 
-    from swarm_ros.core.params import NODE_PARAMETERS, node_defaults
+    from swarm_ros.app.param_file import SECTIONS, read_params_file
+    from swarm_ros.core.params import node_defaults
 
     text = (data_dir("config") / "swarm_ros.yaml").read_text()
-    # the node sections are commented out (a node's own section outranks -p): uncommented, they are the defaults
-    sections = text[text.index("# /world:") :]
-    uncommented = "\n".join(line[2:] for line in sections.splitlines())
-    data = yaml.safe_load(uncommented)
-    for node in NODE_PARAMETERS:  # a world shard's nodes are named world_shard_<i>
-        name = "world_shard_0" if node == "world_shard" else node
-        assert data[f"/{name}"]["ros__parameters"] == node_defaults(node)
     assert set(yaml.safe_load(text)) == {"/**"}, "a node section in force would shadow a node's -p arguments"
+    data = yaml.safe_load(_uncommented(tmp_path).read_text())
+    assert set(data) == {"/**", *(f"/{kind}" for kind in SECTIONS)}
+    for kind in SECTIONS:
+        assert data[f"/{kind}"]["ros__parameters"] == node_defaults(kind)
+    settings, nodes = read_params_file(_uncommented(tmp_path))  # every section, uncommented, loads
+    assert settings == Settings() and all(nodes[kind] == node_defaults(kind) for kind in SECTIONS)
+
+
+def test_the_shipped_file_uncommented_is_taken_by_simulate_and_the_launch(tmp_path):
+    """What the file's comment tells a user to do works in every command that reads it (test_ros_graph.py runs
+    it under swarm-ros run)."""
+    from swarm_ros.app import cli
+    from swarm_ros.app.supervision import launch_setup
+    from swarm_ros.core.params import RUN_PARAMETERS
+
+    path = _uncommented(tmp_path)
+    out = tmp_path / "sim"
+    assert cli.main(["simulate", "--params-file", str(path), "--max-ticks", "3", "--quiet", "--out", str(out)]) == 0
+    assert (out / "summary.json").is_file()
+    setup = launch_setup(str(path), {p.name: "" for p in RUN_PARAMETERS}, str(tmp_path / "l"), tmp_path / "log", 2)
+    assert setup.out == tmp_path / "l"
+
+
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ("/foo:\n  ros__parameters:\n    robots: 500\n", "unknown section '/foo' (a parameter file may hold '/**', "),
+        ("/robot_batch_0:\n  ros__parameters:\n    seed: 9\n", "gives every robot batch the '/robot_batch' section"),
+        ("/world_shard_0:\n  ros__parameters:\n    tick_rate: 5\n", "every world shard takes '/world'"),
+        ("/world_shard:\n  ros__parameters:\n    shard: 1\n", "unknown section '/world_shard'"),
+        ("3:\n  ros__parameters:\n    seed: 9\n", "unknown section '3'"),
+        ("/world:\n  ros__parameters:\n    out_dir: x\n", "in '/world' (it may hold: monitor_window, start_timeout"),
+        ("/**:\n  ros__parameters:\n    tick_rate: 5\n", "'tick_rate' in '/**': it is a node parameter, for /world"),
+        ("/**:\n  ros__parameters:\n    record_every: 5\n", "node parameter, for /world or /monitor"),
+    ],
+)
+def test_a_section_no_node_reads_or_a_key_its_node_lacks_is_refused(tmp_path, text, message):
+    """A section of no node would be ignored, or taken as /**: both changed a run silently."""
+    path = tmp_path / "p.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_params_file(path)
+    assert message in str(info.value) and "\n" not in str(info.value)
 
 
 @pytest.mark.parametrize(

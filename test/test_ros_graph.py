@@ -24,6 +24,7 @@ pytestmark = pytest.mark.process
 
 PY = sys.executable
 TIMEOUT = 240
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def swarm_ros(*args: str, timeout: float = TIMEOUT, **kw) -> subprocess.CompletedProcess:
@@ -121,11 +122,21 @@ def test_ros_graph_equals_in_process_engine_at_a_timeout_recording_every_7th_tic
 
 def test_run_applies_the_node_sections_of_a_parameter_file_and_flags_override_them(references, tmp_path):
     flags, ref = references["cross-incomplete"]
+    """The shipped config/swarm_ros.yaml with every section uncommented, as its comment says, and a few values
+    changed: run takes it."""
+    text = (ROOT / "config" / "swarm_ros.yaml").read_text()
+    head, sections = text[: text.index("# /world:")], text[text.index("# /world:") :]
+    text = head + "\n".join(line[2:] for line in sections.splitlines()) + "\n"
+    for old, new in [
+        ("monitor_window: 128", "monitor_window: 64"),
+        ("on_batch_loss: restart", "on_batch_loss: remove"),
+        ("max_restarts: 3", "max_restarts: 2"),
+        ("record: true", "record: false"),
+    ]:
+        assert old in text
+        text = text.replace(old, new)
     pf = tmp_path / "params.yaml"
-    pf.write_text(
-        "/world:\n  ros__parameters:\n    monitor_window: 64\n    on_batch_loss: remove\n"
-        "    max_restarts: 2\n/monitor:\n  ros__parameters:\n    record: false\n"
-    )
+    pf.write_text(text)
     out = tmp_path / "run"
     done = swarm_ros(
         "run", *flags, "--params-file", str(pf), "--on-batch-loss", "restart", "--out", str(out), "--quiet"

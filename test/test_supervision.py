@@ -53,7 +53,7 @@ def test_arguments_win_over_the_parameter_file_and_its_node_sections_are_kept(tm
                     "ros__parameters": {
                         "max_restarts": 1,
                         "on_batch_loss": "remove",
-                        "incarnation": 2,
+                        "incarnation": 0,
                         "record_every": 3,
                     }
                 },
@@ -72,6 +72,22 @@ def test_arguments_win_over_the_parameter_file_and_its_node_sections_are_kept(tm
     assert "incarnation" not in written["/world"]["ros__parameters"], "the supervisor's to set"
     assert (setup.supervisor.max_restarts, setup.supervisor.on_batch_loss) == (1, "remove")
     assert _setup(tmp_path, params).out == tmp_path / "from-file", "without the argument, the file's out_dir"
+
+
+@pytest.mark.parametrize(
+    "section,values,message",
+    [
+        ("/world", {"incarnation": 2}, "/world sets incarnation, which swarm-ros run and the launch file set"),
+        ("/monitor", {"world_shards": 2}, "/monitor sets world_shards, which swarm-ros run and the launch file set"),
+        ("/robot_batch", {"batch": 1}, "/robot_batch sets batch, which swarm-ros run and the launch file set"),
+    ],
+)
+def test_the_launch_refuses_what_it_sets_for_each_process_itself(tmp_path, section, values, message):
+    """A value the launch would replace for each process (rather than silently drop) is refused, as by run."""
+    params = tmp_path / "mine.yaml"
+    params.write_text(yaml.safe_dump({section: {"ros__parameters": values}}))
+    with pytest.raises(InputError, match=message):
+        _setup(tmp_path, params)
 
 
 def test_without_out_dir_the_run_is_named_once_under_runs(tmp_path, monkeypatch):

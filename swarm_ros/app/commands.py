@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from swarm_ros.app.param_file import read_params_file, record_every
+from swarm_ros.app.param_file import check_launcher_sets, read_params_file, record_every
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
@@ -182,14 +182,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from swarm_ros.artifacts.run_dir import partial_recording
 
     settings, shape, params, out, options, nodes = _prepare(args, graph=True)
-    changed = {
-        k: v for k, v in nodes["robot_batch"].items() if v != node_defaults("robot_batch")[k] and k != "region_cuts"
-    }
-    if changed:
-        raise InputError(
-            f"{args.params_file}: /robot_batch sets {', '.join(sorted(changed))}, but 'swarm-ros run' "
-            f"assigns each of its --processes its strip itself (use ros2 run for your own split)"
-        )
+    check_launcher_sets(args.params_file, nodes)
     cuts = args.region_cuts if args.region_cuts is not None else str(nodes["robot_batch"].get("region_cuts", ""))
     world = {
         **nodes["world"],

@@ -10,15 +10,16 @@ A parameter file maps node names to ``ros__parameters``, so the same file serves
         robots: 0          # 0 = the shape's patch count
         vision_radius: 1.0
 
-Sections are read in file order; a later section overrides an earlier one. A section
-named after a node (``/world``, ``/robot_batch``, ``/monitor``) holds only that node's
-own parameters (``swarm_ros.core.params.NODE_PARAMETERS``), checked like the run's: a run parameter there
-is refused, since nodes that read different values would not run the same swarm. The command line
-applies them where they mean something: ``/monitor`` (recording and output directory)
-in ``simulate`` and ``run``, ``/world`` in ``run``; flags override them. ``run`` refuses
-``/robot_batch`` values other than the defaults, since it assigns each of its processes
-its strip itself, but takes ``region_cuts`` (where the strips start); ``simulate`` has no
-graph, and checks and ignores ``/world`` and ``/robot_batch``.
+Sections are read in file order; a later section overrides an earlier one. A file may hold ``/**`` (the run
+parameters, which every node reads) and a section per node kind, ``/world``, ``/robot_batch`` and ``/monitor``,
+each holding only that node's own parameters (``swarm_ros.core.params.NODE_PARAMETERS``), checked like the
+run's. Anything else is refused in one line: a section no node reads (``/foo``, ``/robot_batch_0``) would be
+ignored or, worse, taken for ``/**``, and a run parameter in a node section would let nodes run different swarms.
+The command line applies node sections where they mean something: ``/monitor`` (recording and output directory)
+in ``simulate`` and ``run``, ``/world`` in ``run`` (every world shard takes it under ``--world-shards``), and
+``/robot_batch``'s ``region_cuts``; flags override them. What ``run`` and the launch file set for each process
+themselves (:data:`LAUNCHER_SETS`: a batch's strip, a shard count, incarnations, checkpoints) may be given only
+at its default. ``simulate`` has no graph, and checks and ignores ``/world`` and ``/robot_batch``.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import yaml
 
 from swarm_ros.core.errors import ConfigError, InputError, ParameterError
 from swarm_ros.core.inputs import YAML_LIMIT, read_bounded
-from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETER, Settings
+from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETER, Settings, node_defaults
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -95,27 +96,90 @@ def read_params_file(path: str | Path, base: Settings | None = None) -> tuple[Se
             or not isinstance(section["ros__parameters"], dict)
         ):
             raise ConfigError(f"{path}: section '{node}' must hold exactly one 'ros__parameters' mapping")
-        kind = str(node).lstrip("/")
+        kind = _section_kind(path, node)
         own = {p.name: p for p in NODE_PARAMETERS.get(kind, ())}
         for key, value in section["ros__parameters"].items():
-            param = RUN_PARAMETER.get(key) or own.get(key)
-            if param is None:
-                known = sorted({*RUN_PARAMETER, *own})
-                raise ConfigError(f"{path}: unknown parameter '{key}' in '{node}' (known: {', '.join(known)})")
-            if key in RUN_PARAMETER and own:
+            if kind == ALL:
+                param = RUN_PARAMETER.get(key)
+                if param is None:
+                    raise ConfigError(f"{path}: unknown parameter '{key}' in '{node}'{_whose(key)}")
+            elif key in RUN_PARAMETER:
                 raise ConfigError(
                     f"{path}: '{node}' sets the run parameter '{key}'; run parameters go in '/**', "
                     f"which every node reads, so that all nodes run the same swarm"
                 )
+            elif key not in own:
+                raise ConfigError(
+                    f"{path}: unknown parameter '{key}' in '{node}' (it may hold: {', '.join(own)})"
+                )
+            else:
+                param = own[key]
             try:
                 checked = param.check(value)
             except ParameterError as exc:
                 raise ConfigError(f"{path}: {node}: {exc}" if own else f"{path}: {exc}") from None
-            if key in RUN_PARAMETER:
+            if kind == ALL:
                 values[key] = checked
             else:
                 nodes[kind][key] = checked
     return (base or Settings()).updated(**values), nodes
+
+
+ALL = "**"  #: the section every node reads: the run parameters
+#: The node sections a parameter file may hold besides ``/**``, one per node kind. A world shard takes the
+#: ``/world`` section; the launcher sets the parameters that tell shards and batches apart.
+SECTIONS = ("world", "robot_batch", "monitor")
+#: Node parameters ``swarm-ros run`` and the launch file set for each process themselves: a file may give only
+#: their defaults (:func:`check_launcher_sets`).
+LAUNCHER_SETS = {
+    "world": ("checkpoint", "incarnation"),
+    "robot_batch": ("batch", "batches", "incarnation"),
+    "monitor": ("incarnation", "world_shards"),
+}
+_FLAG_FOR = {"world_shards": "--world-shards (the launch file: world_shards:=S)", "batches": "--processes"}
+
+
+def _section_kind(path: Path, node: object) -> str:
+    """The kind of section ``node`` (``/**`` or ``**``, ``/world`` or ``world``, ...), or ConfigError naming the
+    sections a file may hold: a section no node reads would be silently ignored, or worse, taken as ``/**``."""
+    kind = str(node).lstrip("/") if isinstance(node, str) else ""
+    if kind == ALL or kind in SECTIONS:
+        return kind
+    hint = ""
+    if kind.startswith(("world_shard", "robot_batch_")):
+        hint = (
+            "; swarm-ros sets what tells its processes apart, and every world shard takes '/world'"
+            if kind.startswith("world_shard")
+            else "; swarm-ros gives every robot batch the '/robot_batch' section"
+        )
+    known = ", ".join(f"'/{s}'" for s in (ALL, *SECTIONS))
+    raise ConfigError(f"{path}: unknown section '{node}' (a parameter file may hold {known}){hint}")
+
+
+def _whose(key: str) -> str:
+    """Where node parameter ``key`` goes, as the end of an 'unknown parameter' error, or the run parameters."""
+    owners = [kind for kind in SECTIONS if any(p.name == key for p in NODE_PARAMETERS[kind])]
+    if owners:
+        return f": it is a node parameter, for {' or '.join(f'/{k}' for k in owners)}"
+    return f" (run parameters: {', '.join(RUN_PARAMETER)})"
+
+
+def check_launcher_sets(path: object, nodes: dict[str, dict[str, object]]) -> None:
+    """Refuse a node section's value for a parameter the launcher sets for each process itself (other than its
+    default), which it would otherwise silently replace.
+
+    Raises:
+        InputError: one line naming the section, the parameter and what sets it instead.
+    """
+    for kind, names in LAUNCHER_SETS.items():
+        defaults = node_defaults(kind)
+        for name in names:
+            if name in nodes.get(kind, {}) and nodes[kind][name] != defaults[name]:
+                instead = _FLAG_FOR.get(name, "the launcher, for each process")
+                raise InputError(
+                    f"{path}: /{kind} sets {name}, which swarm-ros run and the launch file set themselves "
+                    f"({instead}); use ros2 run to start nodes of your own"
+                )
 
 
 def record_every(nodes: dict[str, dict[str, object]]) -> int:

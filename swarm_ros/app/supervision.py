@@ -29,7 +29,7 @@ from pathlib import Path
 
 import yaml
 
-from swarm_ros.app.param_file import read_params_file, record_every
+from swarm_ros.app.param_file import check_launcher_sets, read_params_file, record_every
 from swarm_ros.app.processes import CHECKPOINT, check_graph, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
@@ -199,6 +199,7 @@ def launch_setup(
         InputError: a bad parameter file, argument, shape or output directory, in one line.
     """
     settings, nodes = read_params_file(params_file)
+    check_launcher_sets(params_file, nodes)
     settings = settings.updated(**{name: argument_value(name, text) for name, text in arguments.items() if text})
     shape, params = settings.resolve()
     region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))
