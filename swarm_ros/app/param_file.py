@@ -109,9 +109,7 @@ def read_params_file(path: str | Path, base: Settings | None = None) -> tuple[Se
                     f"which every node reads, so that all nodes run the same swarm"
                 )
             elif key not in own:
-                raise ConfigError(
-                    f"{path}: unknown parameter '{key}' in '{node}' (it may hold: {', '.join(own)})"
-                )
+                raise ConfigError(f"{path}: unknown parameter '{key}' in '{node}' (it may hold: {', '.join(own)})")
             else:
                 param = own[key]
             try:
