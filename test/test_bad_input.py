@@ -80,6 +80,9 @@ def make_fixtures(d: Path) -> None:
     for name, text in files.items():
         (d / name).write_text(text)
     (d / "bomb.png").write_bytes(_png_header(10000, 10000))
+    (d / "loop").symlink_to("loop")
+    (d / "dangling").symlink_to("missing")
+    os.mkfifo(d / "fifo")
     (d / "noise").mkdir()
     (d / "noise" / "results.csv").write_bytes(np.random.default_rng(3).bytes(3000))
     Image.new("L", (9, 9), 255).save(d / "white.png")
@@ -120,7 +123,7 @@ def _make_3d_fixtures(d: Path) -> None:
 
 
 def listing(d: Path) -> dict[str, int]:
-    return {str(p.relative_to(d)): p.stat().st_size for p in d.rglob("*")}
+    return {str(p.relative_to(d)): p.lstat().st_size for p in d.rglob("*")}
 
 
 def test_the_table_has_at_least_20_rows_numbered_in_order():

@@ -241,3 +241,21 @@ def test_under_swarm_ros_run_a_nodes_signal_is_a_fault_not_a_stop():
     supervisor = Supervisor(max_restarts=3, stops=frozenset())
     assert supervisor.exited("robot_batch_0", -signal.SIGTERM).restart
     assert supervisor.exited("world", 130) == Verdict(end="world exited with status 130")
+
+
+def test_the_launch_refuses_an_output_directory_behind_a_symbolic_link_loop_before_any_node(tmp_path):
+    """Before, ros2 launch ran the whole swarm into a looping out_dir:= and failed at the end, leaving its partial
+    recording and bag beside it."""
+    (tmp_path / "L").symlink_to("L")
+    with pytest.raises(InputError, match="a symbolic link that leads nowhere \\(a loop\\)"):
+        _setup(tmp_path, out_dir=str(tmp_path / "L"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["L"]
+
+
+def test_the_launch_refuses_a_named_pipe_as_its_shape_without_opening_it(tmp_path):
+    """A pipe no one writes to blocked the launch's own read of the shape for ever."""
+    import os
+
+    os.mkfifo(tmp_path / "fifo")
+    with pytest.raises(InputError, match="not a regular file"):
+        _setup(tmp_path, shape=str(tmp_path / "fifo"), out_dir=str(tmp_path / "run"))

@@ -68,7 +68,10 @@ def _checked(param: Param):
 
 
 def _path(text: str) -> Path:
-    """An argparse type for a path argument: refused in one line if Linux cannot take it."""
+    """An argparse type for a path argument: refused in one line if empty (Path('') is '.', which no user means)
+    or if Linux cannot take it."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path names no file")
     why = path_too_long(text)
     if why:
         raise argparse.ArgumentTypeError(f"{shown(text)}: {why}")

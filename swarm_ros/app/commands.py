@@ -103,6 +103,10 @@ def _prepare(
     from swarm_ros.artifacts.run_dir import check_leftovers, check_out_dir, claim_out_dir, default_run_dir
 
     settings, nodes = _settings(args)
+    if graph:
+        from swarm_ros.app.processes import check_graph_shape
+
+        check_graph_shape(settings.shape)
     shape, params = settings.resolve()
     monitor = nodes["monitor"]
     recording = RecordingOptions(

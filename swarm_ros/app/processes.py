@@ -106,6 +106,30 @@ def death(code: int) -> str:
     return f"exited with status {code}"
 
 
+def check_graph_shape(shape: str) -> None:
+    """Refuse a shape source the graph's nodes cannot each read, by its file type alone, before anything opens it:
+    a named pipe with no writer would block the command's own read for ever.
+
+    Raises:
+        InputError: the shape names a file that exists but is not a regular file (a pipe, /dev/null, a device).
+    """
+    import stat
+
+    from swarm_ros.core.shapes import builtin_shapes, builtin_shapes_3d
+
+    if shape in builtin_shapes() or shape in builtin_shapes_3d():
+        return
+    try:
+        mode = os.stat(shape).st_mode
+    except (OSError, ValueError):
+        return  # missing or unreadable: the shape's loader says so in its own words
+    if not stat.S_ISREG(mode):  # a pipe, /dev/null: 'simulate' reads one once, but each node reads it too
+        raise InputError(
+            f"{shape}: not a regular file; each node of the graph reads the shape file "
+            f"itself, so the graph needs a file ('simulate' reads a pipe once)"
+        )
+
+
 def check_graph(
     shape,
     robots: int,
@@ -124,12 +148,6 @@ def check_graph(
     """
     from swarm_ros.core.resources import check_world_memory
 
-    source = Path(shape.source)
-    if source.exists() and not source.is_file():  # a pipe, /dev/null: read once here, but each node reads it too
-        raise InputError(
-            f"{shape.source}: not a regular file; each node of the graph reads the shape file "
-            f"itself, so the graph needs a file ('simulate' reads a pipe once)"
-        )
     check_world_memory(shape.world.radius, copies=processes + 1 + world_shards)  # the world(s), the monitor, batches
     if world_shards > processes:
         raise InputError(

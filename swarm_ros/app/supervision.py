@@ -30,7 +30,7 @@ from pathlib import Path
 import yaml
 
 from swarm_ros.app.param_file import check_launcher_sets, read_params_file, record_every
-from swarm_ros.app.processes import CHECKPOINT, check_graph, death, world_sections
+from swarm_ros.app.processes import CHECKPOINT, check_graph, check_graph_shape, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
 from swarm_ros.core.params import RUN_PARAMETER, Param, node_defaults
@@ -201,6 +201,7 @@ def launch_setup(
     settings, nodes = read_params_file(params_file)
     check_launcher_sets(params_file, nodes)
     settings = settings.updated(**{name: argument_value(name, text) for name, text in arguments.items() if text})
+    check_graph_shape(settings.shape)
     shape, params = settings.resolve()
     region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))
     check_graph(

@@ -9,6 +9,7 @@ run gives byte-identical files apart from ``wall_seconds``.
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import json
 import os
@@ -95,6 +96,7 @@ def check_out_dir(out: Path, overwrite: bool, free: int = MIN_FREE) -> None:
             ancestor is not a writable directory; or its disk has less than ``free`` bytes free.
     """
     check_name_length(out)
+    check_links(out)
     if out.exists():
         if not out.is_dir():
             raise OutputError(f"{out}: exists and is not a directory")
@@ -125,6 +127,23 @@ def check_out_dir(out: Path, overwrite: bool, free: int = MIN_FREE) -> None:
             f"{base}: {left / MIB:.1f} MiB free on its disk; a run needs at least {free // MIB} MiB "
             f"to start (its recording, bag and logs take more)"
         )
+
+
+def check_links(out: Path) -> None:
+    """Refuse an output path that is, or passes through, a symbolic link leading nowhere (a loop, or a link to
+    something missing): nothing could be made there, and Python's own path resolution would raise on a loop.
+
+    Raises:
+        OutputError: one line naming the link.
+    """
+    for p in (out, *out.parents):  # as the user wrote it, so that the error names the link as they know it
+        if p.is_symlink() and not p.exists():
+            try:
+                os.stat(p)
+                why = "it cannot be followed"
+            except OSError as exc:
+                why = "a loop" if exc.errno == errno.ELOOP else "its target does not exist"
+            raise OutputError(f"{shown(p)}: a symbolic link that leads nowhere ({why}), so {shown(out)} cannot be made")
 
 
 #: Bytes a run adds to its directory's name for the names it makes beside it (``.<name>.logs-XXXXXXXX``), and
