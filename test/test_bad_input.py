@@ -83,6 +83,14 @@ def make_fixtures(d: Path) -> None:
     (d / "loop").symlink_to("loop")
     (d / "dangling").symlink_to("missing")
     os.mkfifo(d / "fifo")
+    (d / "badrow").mkdir()
+    (d / "badrow" / "results.csv").write_text(
+        "shape,shape_file,robots,vision_radius,rules,join,crowding,steps,repetition,seed,shape_patches,max_ticks,"
+        "wiggle_deg,world_radius,fail_fraction,fail_tick,engine,outcome,convergence_tick,localized,unlocalized,"
+        "separated,empty_patches,lost_robots,convergence_rate,wall_seconds\n"
+        "star,star.txt,1036,1.0,paper,walk,ahead,one,0,1,1036,100000,45.0,32,0.0,0,inprocess,bogus,405,1036,0,0,0,0,"
+        "2.5,0.5\n"
+    )
     (d / "noise").mkdir()
     (d / "noise" / "results.csv").write_bytes(np.random.default_rng(3).bytes(3000))
     Image.new("L", (9, 9), 255).save(d / "white.png")

@@ -403,6 +403,64 @@ def test_read_results_rejects_a_file_that_is_not_a_results_file(tmp_path):
         read_results(path)
 
 
+@pytest.mark.parametrize(
+    "column,value,message",
+    [
+        ("outcome", "bogus", "outcome must be one of complete, complete_with_extras, incomplete, timeout"),
+        ("engine", "gpu", "engine must be one of inprocess, ros2, got 'gpu'"),
+        ("robots", "2", "robots must be an integer >= 4"),
+        ("rules", "fast", "rules must be one of paper, local, literal, got 'fast'"),
+        ("convergence_tick", "-3", "convergence_tick must be a number >= 0, got '-3'"),
+        ("wall_seconds", "nan", "wall_seconds must be a number >= 0, got 'nan'"),
+        ("localized", "many", "localized must be a number, got 'many'"),
+    ],
+)
+def test_report_checks_every_field_of_every_row_before_it_writes_anything(
+    small, tmp_path, capsys, column, value, message
+):
+    """One field out of its set, in the last row (which the figures' re-run check does not pick), is refused in
+    one line naming the line and the field, and the directory is left exactly as it was."""
+    import csv
+    import io
+
+    _, done = small
+    out = tmp_path / "copy"
+    out.mkdir()
+    rows = list(csv.DictReader(io.StringIO((done / "results.csv").read_text())))
+    rows[-1][column] = value
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    (out / "results.csv").write_text(buf.getvalue())
+    assert cli.main(["report", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"results.csv: line {len(rows) + 1}: {message}" in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv"]
+
+
+def test_a_row_the_rerun_check_refuses_leaves_the_report_as_it_was(small, tmp_path, capsys):
+    """The figures re-run one run per curve and compare it with its row: a row that disagrees (here a valid
+    outcome, but not the run's) fails the report before stats.csv or stats.md is written."""
+    import csv
+    import io
+
+    _, done = small
+    out = tmp_path / "copy"
+    out.mkdir()
+    rows = list(csv.DictReader(io.StringIO((done / "results.csv").read_text())))
+    for r in rows:
+        r["outcome"] = "timeout" if r["outcome"] != "timeout" else "incomplete"
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    (out / "results.csv").write_text(buf.getvalue())
+    assert cli.main(["report", str(out)]) == 2
+    assert "re-running" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["results.csv"]
+
+
 # -- the ROS 2 engine --------------------------------------------------------------
 
 

@@ -357,15 +357,17 @@ def build_report(out: Path) -> list[Path]:
         raise ExperimentError(f"{results}: holds no finished runs yet")
     reference = load_reference(out / REFERENCE_FILE) if (out / REFERENCE_FILE).is_file() else {}
     stats = group_stats(rows)
-    written = [out / STATS_CSV, out / STATS_MD]
-    _write_text(written[0], stats_csv(stats))
-    _write_text(written[1], stats_markdown(stats, reference))
-    # figures/ is built whole under a hidden name and swapped in: an interrupt leaves the old set (or none)
+    texts = {out / STATS_CSV: stats_csv(stats), out / STATS_MD: stats_markdown(stats, reference)}
+    # Everything is made before anything is written: the figures re-run runs and check them against their rows,
+    # and a row they refuse must leave the old report (or none) as it was. figures/ is built whole under a
+    # hidden name and swapped in: an interrupt leaves the old set (or none).
     final = out / FIGURES
     figures = Path(tempfile.mkdtemp(prefix=f".{FIGURES}.tmp-", dir=out))
     try:
-        written += [final / p.name for p in all_figures(stats, rows, reference, figures)]
+        drawn = [final / p.name for p in all_figures(stats, rows, reference, figures)]
         public_mode(figures, directory=True)
+        for path, text in texts.items():
+            _write_text(path, text)
         old = Path(tempfile.mkdtemp(prefix=f".{FIGURES}.old-", dir=out))
         if final.exists():
             final.rename(old / FIGURES)
@@ -373,4 +375,4 @@ def build_report(out: Path) -> list[Path]:
         shutil.rmtree(old, ignore_errors=True)
     finally:
         shutil.rmtree(figures, ignore_errors=True)
-    return written
+    return [*texts, *drawn]

@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import os
 from pathlib import Path
 
-from swarm_ros.core.errors import InputError
+from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.inputs import RESULTS_LIMIT, read_bounded
+from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import EXPERIMENT_AXES, RUN_PARAMETERS
+from swarm_ros.core.run_result import ENGINES
 
 RESULTS_FILE = "results.csv"
 REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied into its directory
@@ -35,7 +38,7 @@ RESULT_COLUMNS = (
     "convergence_rate",
     "wall_seconds",
 )
-_INT_COLUMNS = {
+_COUNTS = (
     "repetition",
     "shape_patches",
     "convergence_tick",
@@ -44,8 +47,9 @@ _INT_COLUMNS = {
     "separated",
     "empty_patches",
     "lost_robots",
-    *(p.name for p in RUN_PARAMETERS if p.kind is int),
-}
+)
+_INT_COLUMNS = {*_COUNTS, *(p.name for p in RUN_PARAMETERS if p.kind is int)}
+_OUTCOMES = tuple(o.value for o in Outcome)
 _FLOAT_COLUMNS = {"convergence_rate", "wall_seconds", *(p.name for p in RUN_PARAMETERS if p.kind is float)}
 
 
@@ -74,14 +78,44 @@ def read_results(path: Path) -> list[dict]:
         raise ExperimentError(
             f"{path}: not a swarm-ros results file (expected the columns {', '.join(RESULT_COLUMNS)})"
         )
-    rows = list(csv.DictReader(io.StringIO(text)))
-    try:
-        return [
-            {k: int(v) if k in _INT_COLUMNS else float(v) if k in _FLOAT_COLUMNS else v for k, v in r.items()}
-            for r in rows
-        ]
-    except (TypeError, ValueError):
-        raise ExperimentError(f"{path}: a row has a malformed number") from None
+    rows = []
+    for line, r in enumerate(csv.DictReader(io.StringIO(text)), start=2):
+        try:
+            rows.append(_checked_row(r))
+        except (TypeError, ValueError) as exc:
+            raise ExperimentError(f"{path}: line {line}: {exc}") from None
+    return rows
+
+
+def _checked_row(raw: dict) -> dict:
+    """A results.csv row typed, and every field checked: run parameters by their declarations, the outcome and
+    engine against their sets, counts and times non-negative.
+
+    Raises:
+        ValueError: the first bad field, in words naming it.
+    """
+    row: dict = {}
+    for k, v in raw.items():
+        if k is None or v is None:
+            raise ValueError("the row has another number of fields than the header")
+        try:
+            row[k] = int(v) if k in _INT_COLUMNS else float(v) if k in _FLOAT_COLUMNS else v
+        except ValueError:
+            raise ValueError(f"{k} must be a number, got {v!r}") from None
+    for p in RUN_PARAMETERS:
+        if p.name in row:
+            try:
+                p.check(row[p.name])
+            except ParameterError as exc:
+                raise ValueError(str(exc)) from None
+    if row["outcome"] not in _OUTCOMES:
+        raise ValueError(f"outcome must be one of {', '.join(_OUTCOMES)}, got {row['outcome']!r}")
+    if row["engine"] not in ENGINES:
+        raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {row['engine']!r}")
+    for k in (*_COUNTS, "convergence_rate", "wall_seconds"):
+        if not (row[k] >= 0 and math.isfinite(row[k])):
+            raise ValueError(f"{k} must be a number >= 0, got {raw[k]!r}")
+    return row
 
 
 class ResultsFile:
