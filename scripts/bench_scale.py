@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 STAR_DENSITY = 1036 / 65**2  #: robots per patch of the star's world
-_CPU = re.compile(r"\[(\w+)\]: (ready|last tick|done), .* \((\d+\.\d+) s of CPU\)")
+_CPU = re.compile(r"\[(\w+)\]: (ready|last tick|done), .* \((\d+\.\d+) s of CPU[,)]")
 _RECEIVED = re.compile(r"received (\d+) bytes of rows on ")
 
 

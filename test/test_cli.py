@@ -374,3 +374,24 @@ def test_summary_says_how_often_the_recording_holds_every_robot(run_dir, tmp_pat
     assert json.loads((tmp_path / "two" / "summary.json").read_text())["recording_robots_every"] == 2
     assert simulate(tmp_path / "none", "--no-recording") == 0
     assert json.loads((tmp_path / "none" / "summary.json").read_text())["recording_robots_every"] is None
+
+
+def test_an_unwritable_home_gets_no_matplotlib_warning_and_leaves_no_temporary_directory(tmp_path):
+    """matplotlib warned twice and made a /tmp/matplotlib-* per process when HOME could not be written; the
+    pictures now go through one configuration directory of the user's, reused by every later run."""
+    import os
+    import tempfile
+
+    before = set(Path(tempfile.gettempdir()).glob("matplotlib-*"))
+    env = {k: v for k, v in os.environ.items() if k not in ("MPLCONFIGDIR", "XDG_CONFIG_HOME")}
+    env["HOME"] = "/proc/no-such-home"  # cannot be made, by root either
+    done = subprocess.run(
+        [sys.executable, "-m", "swarm_ros", "simulate", "--max-ticks", "3", "--quiet", "--out", str(tmp_path / "r")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    assert (tmp_path / "r" / "final.png").is_file()
+    assert set(Path(tempfile.gettempdir()).glob("matplotlib-*")) <= before

@@ -261,7 +261,10 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
     assert left == [], f"left in /dev/shm: {left}"
 
 
-def test_every_node_ends_within_2_s_of_a_sigkilled_launcher(tmp_path):
+def test_every_node_ends_within_moments_of_a_sigkilled_launcher(tmp_path):
+    """Each node follows its launcher (PR_SET_PDEATHSIG): it closes and exits on its own, 0.08 s after the kill
+    here (2026-11-26). The bound, 5 s, holds on a far slower machine; a node that did not follow its parent would
+    still run when the wait gives up (10 s)."""
     out = tmp_path / "run"
     launcher = _launch(out)
     wait_ticks_recorded(out, 200_000)
@@ -274,7 +277,7 @@ def test_every_node_ends_within_2_s_of_a_sigkilled_launcher(tmp_path):
     took = time.monotonic() - killed
     launcher.communicate()
     print(f"all {len(nodes)} nodes gone {took:.2f} s after the launcher's SIGKILL")
-    assert took < 2.0, f"nodes outlived the launcher by {took:.2f} s"
+    assert took < 5.0, f"nodes outlived the launcher by {took:.2f} s"
     # no run directory, half-written or whole: the recording so far is kept, closed, beside it
     assert not out.exists() and not list(tmp_path.glob(".run.tmp-*")), "a run directory was left"
     assert rrd_verify(tmp_path / "run.partial.rrd").returncode == 0

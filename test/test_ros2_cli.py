@@ -113,7 +113,7 @@ def test_ros2_pkg_lists_the_node_executables(ros):
 
 def test_ros2_launch_with_its_defaults_compiles_once_and_writes_the_run_simulate_writes(ros, tmp_path):
     """The first launch of a fresh install: the kernels are compiled once, before the nodes start (none of
-    them spends the seconds of CPU a compilation takes); the run goes to runs/<time>_star_n1036_v1_s1 under
+    them compiles one, by numba's own count: seconds of CPU would not tell on a slower machine); the run goes to runs/<time>_star_n1036_v1_s1 under
     the launch's directory, equal to simulate's; the launch ends by itself, cleanly, with exit status 0."""
     before = ros.launch_logs()
     done = ros.run(LAUNCH, cwd=tmp_path, timeout=300)
@@ -121,8 +121,8 @@ def test_ros2_launch_with_its_defaults_compiles_once_and_writes_the_run_simulate
     assert done.returncode == 0, output[-4000:]
     _clean(output)
     assert "compiling the numba kernels first" in output
-    cpu = [float(s) for s in re.findall(r"ready, [\d.]+ s after the process started \(([\d.]+) s of CPU\)", output)]
-    assert len(cpu) == 4 and max(cpu) < 3.0, cpu  # a node that compiled spent 5-8 s
+    ready = r"ready, [\d.]+ s after the process started \([\d.]+ s of CPU, (\d+) kernels compiled\)"
+    assert [int(n) for n in re.findall(ready, output)] == [0, 0, 0, 0], output[-4000:]  # numba's count, not seconds
     (run,) = (tmp_path / "runs").iterdir()
     assert re.fullmatch(r"\d{8}-\d{6}_star_n1036_v1_s1", run.name)
     assert_same_run(_simulate(tmp_path / "ref"), run, launched=False)

@@ -49,6 +49,13 @@ _MAX_RESTARTS = node_parameter("world", "max_restarts")
 _REGION_CUTS = node_parameter("robot_batch", "region_cuts")
 
 
+def _region_cuts(text: str) -> object:
+    """``--region-cuts``: as its parameter, but not empty (given empty, it silently meant the default cuts)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty list of cuts; leave the flag out for the default cuts")
+    return _checked(_REGION_CUTS)(text)
+
+
 def _checked(param: Param):
     """An argparse type for a run parameter's flag: the text as the parameter's type, checked by its declaration."""
 
@@ -143,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--region-cuts",
-        type=_checked(_REGION_CUTS),
+        type=_region_cuts,
         metavar="X,...",
         help="x positions (patches) where the batches' strips 1..K-1 start, e.g. --region-cuts=-10,10 "
         "for K = 3 (default: the parameter file's /robot_batch region_cuts, else cuts that give "

@@ -260,7 +260,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     _interrupt_on_sigterm()
     start = time.perf_counter()
     jobs = args.jobs or (1 if args.engine == "ros2" else default_jobs())
-    out = run_experiment(
+    out, jobs = run_experiment(
         args.config,
         args.out,
         jobs=jobs,

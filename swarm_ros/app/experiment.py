@@ -73,16 +73,19 @@ def run_experiment(
     quiet: bool,
     executor: str = "local",
     scheduler: str | None = None,
-) -> Path:
-    """Run (or resume) the experiment of ``config`` into ``out``; build its report; return ``out``.
+) -> tuple[Path, int]:
+    """Run (or resume) the experiment of ``config`` into ``out``; build its report; return ``out`` and the
+    workers it ran on.
 
     ``executor`` "local" runs on ``jobs`` worker processes here; "dask" on the Dask cluster at
-    ``scheduler``, or on a LocalCluster of ``jobs`` workers. Either way only this process
-    appends to results.csv, a line per finished run, in the order they finish.
+    ``scheduler``, or on a LocalCluster of ``jobs`` workers; ``jobs`` is capped at the experiment's runs (a
+    worker more has nothing to do). Either way only this process appends to results.csv, a line per finished
+    run, in the order they finish.
     """
     from swarm_ros.app.report import build_report
 
     exp = load_experiment(config)
+    jobs = max(1, min(jobs, len(exp.runs())))
     prepare_out_dir(out or EXPERIMENTS_DIR / exp.name, exp, config, create=False)  # before a cluster starts
     closing = None
     with ExitStack() as stack:  # a cluster is reached (or refused) before anything is written
@@ -96,7 +99,7 @@ def run_experiment(
     finally:
         if closing is not None:
             closing.join()
-    return out
+    return out, jobs
 
 
 def _run_grid(

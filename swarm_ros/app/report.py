@@ -33,10 +33,6 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from swarm_ros.app.published import (
@@ -61,6 +57,7 @@ from swarm_ros.app.results_file import (
     ExperimentError,
     read_results,
 )
+from swarm_ros.artifacts.mpl import plt
 from swarm_ros.artifacts.run_dir import public_mode
 from swarm_ros.core.metrics import METRIC_COLUMNS
 

@@ -4,14 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.colors import ListedColormap
-from matplotlib.patches import Patch
 
+from swarm_ros.artifacts.mpl import ListedColormap, Patch, plt
 from swarm_ros.core.run_result import RunRecord
 from swarm_ros.core.state import RobotState
 

@@ -17,6 +17,7 @@ stamp file, and a stamp newer than every kernel module says the cache is filled.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 _CORE = Path(__file__).resolve().parent
@@ -56,6 +57,26 @@ def kernels_cached() -> bool:
     except OSError:
         return False
     return True
+
+
+def count_compiles() -> Callable[[], int]:
+    """Count, from now on, the kernels numba compiles in this process (its ``numba:compile`` event, which a load
+    from the cache does not raise); return what says how many so far. Nodes log it when ready: a node that
+    compiled took the seconds the cache is there to save, whatever the machine's speed."""
+    from numba.core import event
+
+    class _Count(event.Listener):
+        compiled = 0
+
+        def on_start(self, ev: event.Event) -> None:
+            self.compiled += 1
+
+        def on_end(self, ev: event.Event) -> None:
+            pass
+
+    count = _Count()
+    event.register("numba:compile", count)
+    return lambda: count.compiled
 
 
 def compile_kernels() -> None:

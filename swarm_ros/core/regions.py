@@ -44,7 +44,10 @@ def parse_cuts(text: str) -> np.ndarray:
     Raises:
         ParameterError: not a list of integers, or not strictly ascending.
     """
-    parts = [p for p in text.replace(" ", "").split(",") if p]
+    compact = text.replace(" ", "")
+    parts = compact.split(",") if compact else []
+    if "" in parts:  # '-10,,10' or '10,': a position left out is a typo, not a cut fewer
+        raise ParameterError(f"region_cuts must be whole x positions like '-20,0,20', got {text!r} (an empty one)")
     try:
         cuts = np.array([int(p) for p in parts], dtype=np.int64)
     except ValueError:

@@ -23,6 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import get_default_context
 
 from swarm_ros.core.errors import InputError, RunFailed
+from swarm_ros.core.kernels import count_compiles
 from swarm_ros.core.signals import EXIT_INTERRUPTED, PARENT_ENV, StopFlag, process_age
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ORPHANED = 0, 1, 2, 129  # and EXIT_INTERRUPTED, 130 (core.signals)
@@ -125,6 +126,7 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
     stop = StopFlag()
     swarm = executor = None
     code = EXIT_FAILED  # an unexpected exception
+    compiled = count_compiles()
     try:
         swarm = factory()
         # The node joins the executor before it loads: a message that arrives while it loads is then
@@ -134,7 +136,8 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         executor.add_node(swarm.node)
         swarm.load()
         swarm.node.get_logger().info(
-            f"ready, {process_age():.2f} s after the process started ({time.process_time():.2f} s of CPU)"
+            f"ready, {process_age():.2f} s after the process started ({time.process_time():.2f} s of CPU, "
+            f"{compiled()} kernels compiled)"
         )
         missed = 0
         while not swarm.finished and not stop.signum:
