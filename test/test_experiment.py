@@ -564,3 +564,10 @@ def test_the_vision_figure_keeps_a_ci_reaching_below_zero_on_its_log_axis(monkey
     bars = [seg for coll in ax.collections for seg in coll.get_segments()]
     lows = [min(seg[:, 1]) for seg in bars]
     assert bars and min(lows) == 1.0  # the CI below one tick is drawn to 1, not off the axis
+
+
+def test_jobs_beyond_the_experiments_runs_are_not_started_nor_claimed(tmp_path, capsys):
+    """--jobs 1000000 for a one-run experiment said '1000000 jobs' (and a LocalCluster was asked for as many)."""
+    config = small_config(tmp_path, repetitions=1, vision_radius=[1], shapes={"disc.txt": [50]})
+    assert cli.main(["experiment", str(config), "--out", str(tmp_path / "e"), "--jobs", "1000000"]) == 0
+    assert "(1 job, engine inprocess)" in capsys.readouterr().out

@@ -274,7 +274,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         where = (
             f"Dask at {args.scheduler}"
             if args.scheduler
-            else f"{jobs} jobs" + (" on a Dask LocalCluster" if args.executor == "dask" else "")
+            else f"{jobs} job{'s' if jobs != 1 else ''}"
+            + (" on a Dask LocalCluster" if args.executor == "dask" else "")
         )
         print(f"experiment done in {time.perf_counter() - start:.1f} s ({where}, engine {args.engine})")
         print(
