@@ -113,8 +113,9 @@ def test_ros2_pkg_lists_the_node_executables(ros):
 
 def test_ros2_launch_with_its_defaults_compiles_once_and_writes_the_run_simulate_writes(ros, tmp_path):
     """The first launch of a fresh install: the kernels are compiled once, before the nodes start (none of
-    them compiles one, by numba's own count: seconds of CPU would not tell on a slower machine); the run goes to runs/<time>_star_n1036_v1_s1 under
-    the launch's directory, equal to simulate's; the launch ends by itself, cleanly, with exit status 0."""
+    them compiles one, by numba's own count: seconds of CPU would not tell on a slower machine); the run goes to
+    runs/<time>_star_n1036_v1_s1 under the launch's directory, equal to simulate's; the launch ends by itself,
+    cleanly, with exit status 0."""
     before = ros.launch_logs()
     done = ros.run(LAUNCH, cwd=tmp_path, timeout=300)
     output = done.stdout + done.stderr
