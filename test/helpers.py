@@ -289,6 +289,9 @@ def assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
     assert isinstance(startup, float) and 0 < startup < 120
     assert (isinstance(shutdown, float) and 0 < shutdown < 60) if launched else shutdown is None
     assert b.pop("rejected_messages") == {"world": 0, "monitor": 0}  # an honest run: nothing dropped
+    processes, shards = b.pop("processes"), b.pop("world_shards")  # how it ran
+    assert isinstance(shards, int) and shards >= 1
+    assert (isinstance(processes, int) and processes >= shards) if launched else processes is None
     b.pop("bag_robots_every", None)  # checked against the bag (bagcheck)
     assert a == b
     assert (got / "final.png").stat().st_size > 0 and (got / "convergence.png").stat().st_size > 0

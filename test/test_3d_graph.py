@@ -59,6 +59,7 @@ def test_a_3d_ros_graph_run_equals_the_in_process_engine(reference, tmp_path, pr
         a.pop(key, None), b.pop(key, None)
     assert b.pop("rejected_messages") == {"world": 0, "monitor": 0}
     assert b.pop("bag_robots_every") == 1  # checked against the bag (bagcheck)
+    assert (b.pop("processes"), b.pop("world_shards")) == (processes, 1)
     assert a == b
     assert Recording(out / "recording.rrd").same_data(Recording(reference / "recording.rrd"))
     if processes == 2:  # the bag, read with another library: 3D rows, and voxel clouds for shape and occupancy

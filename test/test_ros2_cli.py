@@ -183,6 +183,7 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
     for key in ("engine", "wall_seconds", "startup_seconds", "shutdown_seconds", "rejected_messages"):
         got.pop(key, None), want.pop(key, None)
     assert got.pop("bag_robots_every") == 1  # checked against the bag below
+    assert (got.pop("processes"), got.pop("world_shards")) == (None, 1)  # no swarm-ros run to say K
     assert got == want and got["lost_robots"] > 0, got
     assert not (out / "recording.rrd").exists(), "the file's /monitor record: false"
     assert_bag_holds_run(out)

@@ -78,6 +78,7 @@ def test_a_run_over_three_world_shards_is_simulates(small_reference, tmp_path):
     out = tmp_path / "run"
     summary = finish_restarted_run(_launch_small(out), small_reference, out, [])
     assert summary["engine"] == "ros2"
+    assert (summary["processes"], summary["world_shards"]) == (4, 3), "the run directory says how it ran"
     logs = sorted(p.name for p in (out / "logs").glob("world_shard_*.log"))
     assert logs == ["world_shard_0.log", "world_shard_1.log", "world_shard_2.log"]
     assert not (out / "logs" / "world.log").exists()

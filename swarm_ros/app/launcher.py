@@ -188,7 +188,12 @@ class Launch:
                 self._note("all node processes gone")
                 kept = ok or (interrupted and self.result() is not None)  # Ctrl-C'd after the run was written
                 if kept and self.ended_at is not None:
-                    fill_summary(out, self.restarts, shutdown_seconds=round(time.monotonic() - self.ended_at, 3))
+                    fill_summary(
+                        out,
+                        self.restarts,
+                        shutdown_seconds=round(time.monotonic() - self.ended_at, 3),
+                        processes=self.processes,
+                    )
                 lock.close()
                 self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
                 for f in [*logs.glob(CHECKPOINT + "*"), logs / SHM_LIST]:  # of no use once the run is over

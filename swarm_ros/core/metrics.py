@@ -119,6 +119,7 @@ def run_summary(
     overhead: dict[str, float | None] | None = None,
     rejected: dict[str, int] | None = None,
     mesh_scale: float = 1.0,
+    graph: dict[str, int | None] | None = None,
 ) -> dict:
     """The per-run record written to ``summary.json`` (and one row of an experiment).
 
@@ -128,7 +129,9 @@ def run_summary(
     ``overhead`` (ROS graph only) adds ``startup_seconds`` and ``shutdown_seconds``, placed
     after ``wall_seconds``; ``rejected`` (ROS graph only) the messages the world and the
     monitor dropped as malformed or illegal, as ``rejected_messages``; ``mesh_scale`` is a field
-    only where it is not 1 (a mesh shape at another scale), so that 2D summaries keep their fields.
+    only where it is not 1 (a mesh shape at another scale), so that 2D summaries keep their fields;
+    ``graph`` (ROS graph only) how it ran: ``processes`` (robot batches K, null where no launcher said) and
+    ``world_shards``.
     """
     robots = params["robots"]
     lost = sum(k for _, k in losses)
@@ -152,6 +155,7 @@ def run_summary(
         "wall_seconds": round(wall_seconds, 3),
         **{key: None if value is None else round(value, 3) for key, value in (overhead or {}).items()},
         **({"rejected_messages": dict(rejected)} if rejected is not None else {}),
+        **(graph or {}),
         "lost_robots": lost,
         "losses": [{"tick": t, "robots": k} for t, k in losses],
         "restarts": [{"tick": t, "node": node} for t, node in restarts],

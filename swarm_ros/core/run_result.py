@@ -31,6 +31,7 @@ def summarize(
     restarts=(),
     overhead=None,
     rejected=None,
+    graph=None,
 ) -> dict:
     """The summary.json record of a run, from either engine (fields: :func:`swarm_ros.core.metrics.run_summary`)."""
     return run_summary(
@@ -48,6 +49,7 @@ def summarize(
         overhead=overhead,
         rejected=rejected,
         mesh_scale=shape.mesh_scale,
+        graph=graph,
     )
 
 

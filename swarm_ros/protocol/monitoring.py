@@ -407,6 +407,7 @@ class MonitorCore:
             [(tick, n) for tick, n in self.losses if tick <= upto],
             rejected,
             monitor=(self.incarnation, self.resumed_at),
+            shards=self.shards,
         )
 
     def close_recording(self, stopped: bool) -> None:

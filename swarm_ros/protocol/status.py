@@ -128,11 +128,13 @@ class WorldReport:
         losses: list[tuple[int, int]],
         rejected: int,
         monitor: tuple[int, int] = (0, 0),
+        shards: int = 1,
     ) -> RunRecord:
         """The record of a run over the graph: the monitor's ``rows`` (metrics of every tick) and final
         ``state``, with what the world reported (its clock, restarts, drops); ``rejected``: the monitor's drops.
         ``monitor``: (the writing monitor's incarnation, the tick it went on from). The world sees a new monitor
-        process when its first metrics come; one killed before that is a restart too, listed at that tick."""
+        process when its first metrics come; one killed before that is a restart too, listed at that tick.
+        ``shards``: the world processes (the robot batches' count, ``processes``, is the launcher's to fill in)."""
         import numpy as np  # the engine's modules (numba) load only where a run is written
 
         from swarm_ros.core.metrics import tick_metrics
@@ -159,5 +161,6 @@ class WorldReport:
                 "shutdown_seconds": None,
             },  # swarm-ros run fills it in at the end
             rejected={"world": self.rejected, "monitor": rejected},
+            graph={"processes": None, "world_shards": shards},  # swarm-ros run fills processes in at the end
         )
         return RunRecord(shape=shape, params=params, state=state, history=history, outcome=outcome, summary=summary)
