@@ -89,7 +89,7 @@ def save_final_png_3d(run: RunRecord, path: Path) -> None:
     shape voxel, else coloured by the fraction of its shape voxels that are filled (a
     localized robot or a seed on them), so an empty voxel anywhere along a line shows. The
     left-over robots are drawn where they stand, projected. The views are zoomed to the shape
-    and 3 voxels round it: the legend counts every robot, including any beyond the view.
+    and 3 voxels round it: the legend counts every robot, and says how many stand outside the zoom.
     """
     world, s, shape = run.shape.world, run.state, run.shape
     r = world.radius
@@ -130,8 +130,17 @@ def save_final_png_3d(run: RunRecord, path: Path) -> None:
         ax.set_aspect("equal")
     assert image is not None  # three views: each drew one
     fig.colorbar(image, ax=list(axes), shrink=0.8, label="filled fraction of the shape voxels along the line")
+    lo, hi = np.asarray(shape.bbox[:3]), np.asarray(shape.bbox[3:])
+    xyz = np.stack([s.x, s.y, s.z], axis=1)
+    beyond = ((xyz < lo - 3.5) | (xyz > hi + 3.5)).any(axis=1)  # outside the zoomed box: missing from some view
+
+    def counted(states: tuple[RobotState, ...]) -> str:
+        mask = np.isin(s.state, states)
+        away = int((mask & beyond).sum())
+        return f"{int(mask.sum())}" + (f"; {away} outside the zoom" if away else "")
+
     handles = [
-        Patch(facecolor=c, label=f"{label} ({int(np.isin(s.state, states).sum())})")
+        Patch(facecolor=c, label=f"{label} ({counted(states)})")
         for label, c, states in (
             ("wandering robot", _MOVING_COLOUR, (RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE)),
             ("walking robot", _WALKING_COLOUR, (RobotState.WALKING,)),
