@@ -43,9 +43,10 @@ def _ros_packages() -> set[str]:
 
 
 def _imported() -> dict[str, set[str]]:
-    """Top-level module -> files of the package importing it (lazy imports in functions included)."""
+    """Top-level module -> files of the package importing it (lazy imports in functions included): its Python
+    package and its launch file, which colcon installs beside it."""
     found: dict[str, set[str]] = {}
-    for path in sorted((ROOT / "swarm_ros").rglob("*.py")):
+    for path in [*sorted((ROOT / "swarm_ros").rglob("*.py")), *sorted((ROOT / "launch").glob("*.py"))]:
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
             names = (
                 [a.name for a in node.names]
@@ -84,6 +85,11 @@ def test_every_declared_distribution_is_pinned_in_the_lock():
             pinned[_name(line)] = line
     wanted = _declared() | {_name(r) for r in _setup_keyword("extras_require")["test"]}
     assert not wanted - pinned.keys(), f"declared in setup.py, not pinned in requirements.txt: {wanted - pinned.keys()}"
+
+
+def test_the_launch_files_imports_are_among_what_is_checked():
+    """launch_ros is imported by the launch file only: the check reads launch/ too."""
+    assert _imported()["launch_ros"] == {"launch/swarm.launch.py"}
 
 
 def test_the_check_finds_an_undeclared_import(tmp_path, monkeypatch):

@@ -130,9 +130,9 @@ def save_final_png_3d(run: RunRecord, path: Path) -> None:
         ax.set_aspect("equal")
     assert image is not None  # three views: each drew one
     fig.colorbar(image, ax=list(axes), shrink=0.8, label="filled fraction of the shape voxels along the line")
-    lo, hi = np.asarray(shape.bbox[:3]), np.asarray(shape.bbox[3:])
+    low, high = np.asarray(shape.bbox[:3]), np.asarray(shape.bbox[3:])
     xyz = np.stack([s.x, s.y, s.z], axis=1)
-    beyond = ((xyz < lo - 3.5) | (xyz > hi + 3.5)).any(axis=1)  # outside the zoomed box: missing from some view
+    beyond = ((xyz < low - 3.5) | (xyz > high + 3.5)).any(axis=1)  # outside the zoomed box: missing from some view
 
     def counted(states: tuple[RobotState, ...]) -> str:
         mask = np.isin(s.state, states)
