@@ -38,7 +38,14 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
-from swarm_ros.app.supervision import END_GRACE, MONITOR_GRACE, RunEnded, launch_processes, launch_setup
+from swarm_ros.app.supervision import (
+    END_GRACE,
+    MONITOR_GRACE,
+    RunEnded,
+    launch_processes,
+    launch_setup,
+    parameter_arguments,
+)
 from swarm_ros.core.kernels import COMPILING, kernels_cached
 from swarm_ros.core.params import RUN_PARAMETERS, WORLD_SHARDS, node_parameter
 from swarm_ros.protocol.plan import PROCESSES, graph_plan
@@ -73,15 +80,20 @@ def graph(context) -> list:
     def node(name: str) -> Node:
         executable, own = plan[name]
         incarnation = supervisor.incarnation(name)
-        extra = [own] if own else []
+        # A node's own values go as -p arguments: a dict in `parameters` became a /tmp/launch_params_* file that
+        # launch_ros never removes (one per node and launch).
+        own = {**own, **({"incarnation": incarnation} if incarnation else {})}
         action = Node(
             package=PACKAGE,
             executable=executable,
             name=name,
             output="screen",
-            parameters=[str(setup.params), *extra, *([{"incarnation": incarnation}] if incarnation else [])],
-            # SROS2: each node in its enclave <enclaves>/<node> (as swarm-ros run --enclaves)
-            **({"ros_arguments": ["--enclave", f"{enclaves}/{name}"]} if enclaves else {}),
+            parameters=[str(setup.params)],
+            ros_arguments=[
+                *parameter_arguments(own),
+                # SROS2: each node in its enclave <enclaves>/<node> (as swarm-ros run --enclaves)
+                *(["--enclave", f"{enclaves}/{name}"] if enclaves else []),
+            ],
         )
         names[action] = name
         return action

@@ -16,6 +16,7 @@ import os
 import re
 import signal
 import subprocess
+import tempfile
 import time
 from pathlib import Path
 
@@ -164,8 +165,14 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
     assert set(values) == {p.name for p in RUN_PARAMETERS}, "every run argument is given"
     out = tmp_path / "deep" / "run"
     before = ros.launch_logs()
-    done = ros.run(f"{LAUNCH} params_file:={params} out_dir:={out} processes:=3 {_arguments(values)}", timeout=240)
+    temporary = set(Path(tempfile.gettempdir()).glob("launch_params_*"))
+    done = ros.run(
+        f"{LAUNCH} params_file:={params} out_dir:={out} processes:=3 region_cuts:=-5,5 {_arguments(values)}",
+        timeout=240,
+    )
     assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
+    # each batch told its strip by -p arguments: no launch_params_* file left in /tmp per node and launch
+    assert set(Path(tempfile.gettempdir()).glob("launch_params_*")) <= temporary
     _clean(done.stdout + done.stderr)
     typed = {
         k: yaml.safe_load(v) if k not in ("shape", "join", "crowding", "steps", "rules") else v

@@ -179,6 +179,18 @@ def argument_value(name: str, text: str) -> object:
         raise ConfigError(f"launch argument {name}:={text}: {exc}") from None
 
 
+def parameter_arguments(values: dict[str, object]) -> list[str]:
+    """``-p name:=value`` ROS arguments for ``values``, each value written as the YAML ROS 2 reads it back as the
+    same type (a string such as ``'10'`` stays a string)."""
+    import yaml
+
+    out = []
+    for name, value in values.items():
+        text = yaml.safe_dump(value, default_flow_style=True, width=1 << 20).strip()
+        out += ["-p", f"{name}:={text.removesuffix(chr(10) + '...').strip()}"]
+    return out
+
+
 def launch_setup(
     params_file: str,
     arguments: dict[str, str],
