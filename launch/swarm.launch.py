@@ -1,10 +1,12 @@
-"""The swarm's ROS 2 graph, as ``swarm-ros run`` starts it: a world, K robot batches and a monitor.
+"""The swarm's ROS 2 graph, as ``swarm-ros run`` starts it: a world (or S world shards), K robot batches and a
+monitor.
 
     ros2 launch swarm_ros swarm.launch.py shape:=star processes:=2
     ros2 launch swarm_ros swarm.launch.py params_file:=/path/to/params.yaml out_dir:=runs/mine
 
 Launch arguments: the run parameters (each overrides the parameter file when given), the
-number of robot-batch processes, the parameter file and the monitor's output directory.
+number of robot-batch processes, of world shards, the region cuts, the parameter file, the monitor's output
+directory and the SROS2 enclaves.
 The arguments are resolved as ``swarm-ros run`` resolves its flags, into one parameter file
 in the launch's log directory that every node reads (``swarm_ros.app.supervision.launch_setup``).
 The numba kernels are compiled once, before the nodes start, when their cache is empty. A node

@@ -18,6 +18,9 @@ every node ready (imports, warm-up), tick 0 (all participants discovered and mat
 the last tick, the run directory written, every node process gone, the command done.
 Target: the star, K = 2, whole command under 4 s (median of ``--repeats``).
 
+Then the README's command against ``simulate`` (issue 45): ``swarm-ros run --shape star`` and ``swarm-ros
+simulate --shape star``, alternating, at least 5 pairs. Target: the first within 1.5x of the second.
+
 Then the cost of the bag (issue 13): ``swarm-ros run`` with K = 2 with and without
 ``--no-bag``, alternately. Target: the bag slows the ``swarm-ros run`` command by at most 15%
 (the run's own time, tick 0 to the outcome, is printed too).
@@ -171,6 +174,34 @@ def breakdown(seed: int, processes: list[int], repeats: int, tmp: Path) -> dict[
     return medians
 
 
+def readme_command(repeats: int, tmp: Path) -> float:
+    """The README's main command against ``simulate`` of the same run, back to back and alternating (the star,
+    the defaults: K = 2, recording and bag on), ``repeats`` pairs; print each, the medians and their ratio.
+    Target (issue 45): the README's command within 1.5x of simulate's. Return the ratio of the medians."""
+    exe = [sys.executable, "-m", "swarm_ros"]
+    times: dict[str, list[float]] = {"run": [], "simulate": []}
+    print("\nThe README's command against simulate, the star with the defaults, back to back (seconds)")
+    for r in range(repeats):
+        for command in ("run", "simulate") if r % 2 == 0 else ("simulate", "run"):
+            began = time.perf_counter()
+            done = subprocess.run(
+                [*exe, command, "--shape", "star", "--out", str(tmp / f"readme-{command}-{r}"), "--quiet"],
+                capture_output=True,
+                text=True,
+            )
+            took = time.perf_counter() - began
+            if done.returncode != 0:
+                raise SystemExit(f"{command} failed: {done.stderr.strip()[-500:]}")
+            times[command].append(took)
+        print(f"  pair {r + 1}: run {times['run'][-1]:.2f}, simulate {times['simulate'][-1]:.2f}")
+    med = {c: statistics.median(t) for c, t in times.items()}
+    for c, t in times.items():
+        print(f"{c:<9} median {med[c]:.2f} s ({min(t):.2f}-{max(t):.2f}) over {len(t)}")
+    ratio = med["run"] / med["simulate"]
+    print(f"Target: swarm-ros run within 1.5x of simulate: {'MET' if ratio <= 1.5 else 'NOT MET'} ({ratio:.2f}x)")
+    return ratio
+
+
 def bag_cost(seed: int, repeats: int, tmp: Path) -> None:
     """Print run and command seconds with and without the bag (K = 2, recording on; alternating; median)."""
     cases: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
@@ -297,7 +328,7 @@ def main() -> None:
     parser.add_argument("--rules", default="paper", help="rule set of every run (default: paper)")
     parser.add_argument(
         "--only",
-        choices=("speed", "breakdown", "bag", "recording", "flood", "scale"),
+        choices=("speed", "breakdown", "readme", "bag", "recording", "flood", "scale"),
         nargs="+",
         help="run only these parts (default: all)",
     )
@@ -326,12 +357,14 @@ def main() -> None:
     if args.crowding:
         RULES["crowding"] = args.crowding
 
-    parts = set(args.only or ("speed", "breakdown", "bag", "recording", "flood"))
+    parts = set(args.only or ("speed", "breakdown", "readme", "bag", "recording", "flood"))
     if "speed" in parts:
         speed(args.seed, args.repeats, args.processes)
     with tempfile.TemporaryDirectory() as tmp:
         if "breakdown" in parts:
             breakdown(args.seed, args.processes, max(args.repeats, 3), Path(tmp))
+        if "readme" in parts:
+            readme_command(max(args.repeats, 5), Path(tmp))
         if "bag" in parts:
             bag_cost(args.seed, max(args.repeats, 3), Path(tmp))
         if "recording" in parts:

@@ -9,7 +9,7 @@ median and range over ``--repeats``, and each node's CPU per tick (its CPU from 
 "done" in its log, the monitor's to its "last tick" line, over the ticks); then the bytes of rows
 each batch took from its region topic per tick (its log's last line), and K against the smallest K
 as ratios.
-``--bare`` turns the recording and the bag off. docs/operations.md ("At scale") discusses the numbers.
+``--bare`` turns the recording and the bag off. docs/benchmarks.md ("At scale") discusses the numbers.
 
 ``--projection`` also prints, for each size and K, the tick time the graph would take on K hosts with one
 core per process: the world's CPU per tick (the slowest world shard's with ``--world-shards``) plus the

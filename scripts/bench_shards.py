@@ -15,7 +15,7 @@ each starts with as many robots. For each size, in one process:
   them), and whether the run equals ``Simulation``'s.
 
 Each shard runs in turn in this one process, so its seconds are its own work, measured without the other
-shards competing for the cores. Median (min-max) over ``--repeats``. docs/operations.md ("At scale") quotes
+shards competing for the cores. Median (min-max) over ``--repeats``. docs/benchmarks.md ("World shards") quotes
 the output.
 
     .venv/bin/python scripts/bench_shards.py [--robots 10000 50000 100000] [--shards 1 2 4 8] [--ticks 100]

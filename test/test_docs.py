@@ -86,27 +86,6 @@ def test_generated_output_directories_are_ignored_by_git():
     assert "runs/" in ignored and "experiments/" in ignored
 
 
-def test_the_usage_synopses_name_every_flag_of_simulate_and_run():
-    import re
-
-    from swarm_ros.app.cli import build_parser
-
-    readme = USAGE.read_text()
-    subparsers = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
-    for command in ("simulate", "run"):
-        synopsis = re.search(rf"```\nswarm-ros {command} (.*?)```", readme, re.S).group(1)
-        if command == "run":  # '... the same options as simulate, except --check'
-            synopsis += re.search(r"```\nswarm-ros simulate (.*?)```", readme, re.S).group(1)
-        flags = {
-            f
-            for a in subparsers.choices[command]._actions
-            for f in a.option_strings
-            if f.startswith("--") and f != "--help"
-        }
-        missing = sorted(f for f in flags if f not in synopsis)
-        assert not missing, f"the usage page's synopsis of {command} omits {missing}"
-
-
 _LINK = re.compile(r"\]\(([^)\s#]+)(?:#[^)]*)?\)")  # a markdown link's target, without its anchor
 #: a repository path in backticks: a file with its extension, or a folder with its slash (`swarm_ros/world`, a
 #: status name, is neither)
@@ -114,7 +93,7 @@ _NAMED = re.compile(r"`((?:config|scripts|shapes|docs|launch|test|swarm_ros|rviz
 
 
 def _docs() -> list[Path]:
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "docs" / "guides").glob("*.md"))]
 
 
 @pytest.mark.parametrize("page", _docs(), ids=lambda p: p.name)
@@ -167,3 +146,147 @@ def test_the_docs_tables_of_parameters_are_the_declarations():
         assert tables.render(text) == text, f"{page.name}: a table is stale: run scripts/docs_tables.py"
     names = set(re.findall(r"<!-- table: (\w+) -->", "".join(p.read_text() for p in tables.PAGES)))
     assert names == {"run", *NODE_PARAMETERS}, names
+
+
+# -- the reference against the code: options, nodes, topics, launch arguments -------------------------------
+
+
+def _section(path: Path, heading: str) -> str:
+    """The text of the section of ``path`` under the heading that starts with ``heading``, to the next heading of
+    the same or a higher level."""
+    lines = path.read_text().splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith(heading))
+    level = len(heading) - len(heading.lstrip("#"))
+    end = next(
+        (i for i in range(start + 1, len(lines)) if re.match(rf"#{{1,{level}}} ", lines[i])),
+        len(lines),
+    )
+    return "\n".join(lines[start:end])
+
+
+GUIDE = ROOT / "docs" / "guides" / "graph.md"
+#: Where each command's options are documented: (page, heading of its section).
+COMMAND_SECTIONS = {
+    "simulate": (USAGE, "## `swarm-ros simulate`"),
+    "run": (USAGE, "## `swarm-ros run`"),
+    "experiment": (USAGE, "## `swarm-ros experiment`"),
+    "report": (USAGE, "## `swarm-ros experiment`"),
+    "shapes": (USAGE, "## Shapes"),
+    "replay": (GUIDE, "## Play a past run back: `swarm-ros replay`"),
+    "topics": (GUIDE, "## Look inside a live run: `swarm-ros topics`"),
+}
+
+
+def test_every_option_of_every_command_is_in_its_section_of_the_docs():
+    """The reference names every option the parser takes (a run section may say 'the same options as
+    simulate' for those it shares)."""
+    import argparse
+
+    from swarm_ros.app.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(sub.choices) == set(COMMAND_SECTIONS), "a command without a documented section"
+    shared = {o for a in sub.choices["simulate"]._actions for o in a.option_strings}
+    missing = []
+    for command, parser in sub.choices.items():
+        page, heading = COMMAND_SECTIONS[command]
+        text = _section(page, heading)
+        assert f"swarm-ros {command}" in text, (command, heading)
+        for action in parser._actions:
+            for option in action.option_strings:
+                if not option.startswith("--") or option == "--help":
+                    continue
+                if command == "run" and option in shared and "the same options as simulate" in text:
+                    continue
+                if not re.search(rf"{re.escape(option)}(?![\w-])", text):
+                    missing.append(f"{command} {option}")
+    assert not missing, missing
+
+
+def _node_executables() -> list[str]:
+    import ast
+
+    tree = ast.parse((ROOT / "setup.py").read_text())
+    call = next(n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "setup")
+    scripts = ast.literal_eval(next(k.value for k in call.keywords if k.arg == "entry_points"))["console_scripts"]
+    return [s.split("=")[0].strip() for s in scripts if "swarm-ros" not in s]
+
+
+def test_every_node_executable_is_in_every_list_of_the_nodes():
+    """README, architecture.md, the nodes package and the build guide's `ros2 pkg executables` list them all."""
+    nodes = _node_executables()
+    assert set(nodes) == {"world", "world_shard", "robot_batch", "monitor"}
+    readme = (ROOT / "README.md").read_text()
+    lists = {
+        "README layout": next(ln for ln in readme.splitlines() if ln.startswith("swarm_ros/nodes/")),
+        "README ros2 run": readme[readme.index("ros2 run swarm_ros") :][:80],
+        "architecture.md": next(
+            ln for ln in (ROOT / "docs" / "architecture.md").read_text().splitlines() if "swarm_ros/nodes/" in ln
+        ),
+        "nodes/__init__.py": (ROOT / "swarm_ros" / "nodes" / "__init__.py").read_text().splitlines()[0],
+        "usage.md ros2 run": next(ln for ln in USAGE.read_text().splitlines() if "ros2 run swarm_ros world" in ln),
+    }
+    executables = _section(ROOT / "docs" / "guides" / "ros2_tools.md", "## Build")
+    missing = [f"{where}: {n}" for where, text in lists.items() for n in nodes if not re.search(rf"\b{n}\b", text)]
+    missing += [f"ros2 pkg executables: {n}" for n in nodes if f"`swarm_ros {n}`" not in executables]
+    assert not missing, missing
+
+
+def test_every_topic_is_a_row_of_the_topic_table():
+    """Each topic (or topic family) swarm_ros.protocol.plan names has a row in protocol.md's table."""
+    from swarm_ros.protocol import plan
+
+    section = _section(ROOT / "docs" / "protocol.md", "## Topics")
+    first_cells = [ln.split("|")[1] for ln in section.splitlines() if ln.startswith("| `/")]
+    topics = [v for k, v in vars(plan).items() if k.isupper() and isinstance(v, str) and v.startswith("/")]
+    assert len(topics) >= 12
+    missing = [t for t in topics if not any(f"`{t}`" in cell or f"`{t}/" in cell for cell in first_cells)]
+    assert not missing, missing
+
+
+def test_the_launch_arguments_are_the_ones_the_guide_lists():
+    """The guide's list of launch arguments is the launch file's DeclareLaunchArgument names, run parameters
+    included."""
+    import ast
+
+    from swarm_ros.core.params import RUN_PARAMETERS
+
+    tree = ast.parse((ROOT / "launch" / "swarm.launch.py").read_text())
+    declared = {
+        n.args[0].value
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Call)
+        and getattr(n.func, "id", "") == "DeclareLaunchArgument"
+        and isinstance(n.args[0], ast.Constant)
+    } | {p.name for p in RUN_PARAMETERS}
+    assert {"processes", "world_shards", "region_cuts", "params_file", "out_dir", "enclaves"} <= declared
+    text = _section(ROOT / "docs" / "guides" / "ros2_tools.md", "## `ros2 launch`")
+    listed = text[text.index("Its launch arguments are") :].split("How they are applied")[0]
+    assert set(re.findall(r"`([a-z_]+)`", listed)) == declared
+
+
+def _slug(heading: str) -> str:
+    """A heading's anchor, as GitHub makes it: lower case, punctuation but hyphens dropped, spaces to hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def _anchors(page: Path) -> set[str]:
+    found, code = set(), False
+    for line in page.read_text(encoding="utf-8").splitlines():
+        if line.startswith("```"):
+            code = not code
+        elif not code and line.startswith("#"):
+            found.add(_slug(line.lstrip("#")))
+    return found
+
+
+@pytest.mark.parametrize("page", _docs(), ids=lambda p: p.name)
+def test_every_anchor_a_page_links_to_is_a_heading_of_its_target(page):
+    """Pages moved (operations.md became the guides, bag.md and benchmarks.md): a link's #anchor must still
+    name a heading of the page it points to."""
+    wrong = []
+    for target, anchor in re.findall(r"\]\(([^)\s#]*)#([^)\s]+)\)", page.read_text(encoding="utf-8")):
+        path = page.parent / target if target else page
+        if path.suffix == ".md" and path.exists() and anchor not in _anchors(path):
+            wrong.append(f"{target}#{anchor}")
+    assert not wrong, f"{page.name} links to anchors that are not there: {wrong}"

@@ -7,7 +7,7 @@ Needs root and iproute2 (``ip netns``); skipped, with the reason, where namespac
 be made. Only this test's own namespaces are touched (named after its process id).
 
 ``SWARM_ROS_LAN_ROBOTS=100000`` runs the four-host tests with a disc of that many robots (50 ticks)
-instead of its small ring: how docs/operations.md's figures over four hosts were taken (minutes, not CI).
+instead of its small ring: how docs/benchmarks.md's figures over four hosts were taken (minutes, not CI).
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
     params = tmp_path / "params.yaml"
     params.write_text(params_yaml(settings, {"world": {}, "monitor": {"out_dir": str(run)}}))
     # The environment each host gets, whole: nothing ROS or DDS that an earlier test set in this process
-    # (a Fast DDS profile, a discovery range) leaks in. Discovery as docs/operations.md says for several
+    # (a Fast DDS profile, a discovery range) leaks in. Discovery as docs/guides/several_hosts.md says for several
     # hosts: the subnet, plus each host's address as a static peer (unicast, should multicast be lost).
     env = host_env()
     net = int(links[0].removeprefix("swra")) % 250
@@ -81,7 +81,7 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
             "PYTHONUNBUFFERED": "1",
             KEY_ENV: new_key(),
         }
-    )  # one run key on every host (docs/operations.md, Several hosts)
+    )  # one run key on every host (docs/guides/several_hosts.md)
     procs = {}
     try:
         for host, name, module, extra in plan:

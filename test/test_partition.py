@@ -1,5 +1,5 @@
 """The world's half of a tick can be split by region without changing a byte: what a split of the world's
-checks and apply into region shards (docs/operations.md, "At scale") relies on, checked on the kernel as it is.
+checks and apply into region shards (docs/protocol.md, "World shards") relies on, checked on the kernel as it is.
 
 A *shard* here owns a strip of columns: it applies the decisions of the moving robots standing in its strip,
 on its own copy of the state, with the in-process engine's kernel (:func:`resolve_kernel`), given also the

@@ -1,7 +1,7 @@
 """The package as a ROS 2 user drives it, with ROS 2 Jazzy's own tools (test/ros2_tools.py): a colcon build,
 then ``ros2 launch`` with its defaults, with a parameter file, an output directory and every run argument,
 stopped with Ctrl-C at start-up and mid-run, with a batch, the world and the monitor SIGKILLed; the three
-terminals of ``ros2 run`` that docs/operations.md shows; ``ros2 topic``, ``ros2 node``, ``ros2 param`` and
+terminals of ``ros2 run`` that docs/guides/ros2_tools.md shows; ``ros2 topic``, ``ros2 node``, ``ros2 param`` and
 ``ros2 pkg`` on a live run; and ``swarm-ros replay`` watched with ``ros2 topic echo``.
 
 Each checks what the user would: the run directory where they asked for it, equal to ``simulate``'s,
@@ -220,7 +220,7 @@ def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros,
     log = tmp_path / "early.log"
     proc = ros.start(f"{LAUNCH} out_dir:={out}", log=log)
     # while the nodes load, before tick 0 (a Ctrl-C in the first tenth of a second of a Python process, while
-    # the interpreter itself starts, ends in its own traceback: docs/operations.md, "With ROS 2's own tools")
+    # the interpreter itself starts, ends in its own traceback: docs/guides/ros2_tools.md)
     wait_for(lambda: "robot_batch_1: strip" in log.read_text(), 60, "the nodes' start")
     ctrl_c(proc)
     assert "tick 0" not in log.read_text()
@@ -293,7 +293,7 @@ def test_world_shards_under_ros2_launch_a_sigkilled_one_comes_back_and_the_run_i
 
 
 def test_the_three_terminals_of_ros2_run_the_docs_show(ros, tmp_path):
-    """docs/operations.md's commands, each node in its own process as in its own terminal, after the exports it
+    """docs/guides/ros2_tools.md's commands, each node in its own process as in its own terminal, after the exports it
     shows; the run equals simulate's."""
     out = tmp_path / "star"
     exports = (
@@ -400,7 +400,7 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
         assert ros.run("ros2 param get /world tick_rate").stdout.strip() == f"Double value is: {float(RATE)}"
 
         written = yaml.safe_load((logs / "params.yaml").read_text())
-        listed_names = ros.run("ros2 param list /monitor").stdout.split()  # docs/operations.md's command
+        listed_names = ros.run("ros2 param list /monitor").stdout.split()  # docs/guides/ros2_tools.md's command
         assert {p.name for p in RUN_PARAMETERS} <= set(listed_names), listed_names
         for node in NODES:
             dumped = yaml.safe_load(ros.run(f"ros2 param dump {node}").stdout)[node]["ros__parameters"]

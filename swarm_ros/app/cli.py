@@ -146,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=WORLD_SHARDS.default,
         metavar="S",
         help="world processes: 1 (default) the world node; S > 1 world shards, each owning the strips of "
-        "consecutive robot batches, S <= K (docs/operations.md, World shards)",
+        "consecutive robot batches, S <= K (docs/protocol.md, World shards)",
     )
     run.add_argument(
         "--region-cuts",

@@ -24,8 +24,8 @@ A shard takes its peers' parts only once all pass its checks (:func:`~swarm_ros.
 and can be saved at a tick's end and restored in another process (:meth:`WorldShard.saved`,
 :meth:`WorldShard.restore`). Nothing here depends on how many shards there are or where the cuts fall:
 :func:`~swarm_ros.core.sharded_run.run_sharded` runs S shards in one process, passing only these messages, and
-gives ``Simulation``'s run byte for byte (``test/test_shards.py``). The ROS 2 graph's world does not use the
-shards yet (docs/operations.md, "World shards").
+gives ``Simulation``'s run byte for byte (``test/test_shards.py``); in the ROS 2 graph, ``--world-shards S``
+runs each shard in a node of its own (``swarm_ros.nodes.world_shard``; docs/protocol.md, "World shards").
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """A world shard's coordination of the graph, as a plain class: the world's :class:`Lockstep` for the robot
 batches in the shard's strips, each tick closed with the other shards through a :class:`ShardExchange`.
 
-With ``--world-shards S`` the world's work is split by region (docs/operations.md, "World shards"): shard i
+With ``--world-shards S`` the world's work is split by region (docs/protocol.md, "World shards"): shard i
 owns the strips of consecutive robot batches (:func:`~swarm_ros.core.regions.shard_batches`). It admits those
 batches, checks their decisions as the world does, and hands them to its exchange, which settles claims near
 its borders with the neighbouring shards and closes the tick from every shard's counts. Once a tick is
