@@ -81,8 +81,9 @@ def test_installed_nodes_run_a_swarm_to_its_end_from_the_install_space(prefix, t
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
         "FASTRTPS_DEFAULT_PROFILES_FILE": str(prefix / "share" / "swarm_ros" / "config" / "fastdds.xml"),
     }
-    # the install's kernel cache filled first, as the first `ros2 launch` after a build fills it (docs/guides/ros2_tools.md):
-    # three nodes started by hand on an empty cache would each compile the same kernels at once (45 s of CPU)
+    # the install's kernel cache filled first, as the first `ros2 launch` after a build fills it
+    # (docs/guides/ros2_tools.md): three nodes started by hand on an empty cache would each compile the same
+    # kernels at once (45 s of CPU)
     warm = subprocess.run(
         [sys.executable, "-m", "swarm_ros.core.kernels"], cwd=tmp_path, env=env, capture_output=True, text=True
     )
