@@ -15,7 +15,6 @@ import os
 import shutil
 import signal
 import subprocess
-import time
 from pathlib import Path
 
 import pytest
@@ -142,14 +141,3 @@ class Ros2:
 def ctrl_c(proc: subprocess.Popen) -> None:
     """What Ctrl-C in its terminal does: SIGINT to every process of the foreground process group."""
     os.killpg(proc.pid, signal.SIGINT)
-
-
-def wait_for(predicate, timeout: float, what: str, poll: float = 0.05):
-    """Poll ``predicate`` until it returns something true; return that (fail after ``timeout`` s)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        got = predicate()
-        if got:
-            return got
-        time.sleep(poll)
-    raise AssertionError(f"{what} did not happen within {timeout:g} s")

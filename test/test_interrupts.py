@@ -27,6 +27,7 @@ from helpers import (
     shm_left,
     small_config,
 )
+from waiting import wait_for
 
 import swarm_ros
 from swarm_ros.app.results_file import read_results
@@ -39,10 +40,8 @@ PACKAGE = str(Path(swarm_ros.__file__).parent)  # a frame in here is swarm_ros's
 
 
 def _wait_for(predicate, timeout: float = 120) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and not predicate():
-        time.sleep(0.05)
-    assert predicate(), "timed out"
+    """:func:`waiting.wait_for`, with this module's usual bound."""
+    wait_for(predicate, timeout, "the condition the test waits for")
 
 
 def test_sigterm_to_simulate_writes_an_interrupted_run_directory(tmp_path):
@@ -321,10 +320,25 @@ def test_sigterm_to_topics_closes_its_participant_and_leaves_no_log_file(tmp_pat
         text=True,
     )
     held: set[str] = set()  # the shared-memory files it uses (none with the UDP transport swarm_ros sets)
-    waiting = time.monotonic() + 2  # waiting for the topic
-    while time.monotonic() < waiting:
-        held |= shm_locks(proc.pid)
-        time.sleep(0.1)
+
+    def participating() -> bool:
+        """Its DDS participant is up (its UDP sockets are open): the SIGTERM then lands while it waits for the
+        topic, with something to close."""
+        held.update(shm_locks(proc.pid))
+        try:
+            fds = os.listdir(f"/proc/{proc.pid}/fd")
+        except OSError:
+            return False
+        sockets = 0
+        for fd in fds:
+            try:
+                sockets += os.readlink(f"/proc/{proc.pid}/fd/{fd}").startswith("socket:")
+            except OSError:
+                continue
+        return sockets >= 2 and proc.poll() is None
+
+    _wait_for(participating)
+    held |= shm_locks(proc.pid)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and err.strip() == "swarm-ros: interrupted", err

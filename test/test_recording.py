@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import Recording, rrd_verify
+from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.artifacts.rerun_scene import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
@@ -308,16 +309,22 @@ def test_connect_streams_the_same_data_to_a_running_viewer(recording, tmp_path):
         stderr=subprocess.PIPE,
         text=True,
     )
+
+    def listening() -> bool:
+        with socket.socket() as s:
+            return s.connect_ex(("127.0.0.1", port)) == 0
+
+    def saved_whole() -> bool:  # the server writes what it receives as it comes: read until it is all there
+        try:
+            return Recording(saved).same_data(recording)
+        except Exception:  # not there yet, or cut short mid-message
+            return False
+
     try:
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline:
-            with socket.socket() as s:
-                if s.connect_ex(("127.0.0.1", port)) == 0:
-                    break
-            time.sleep(0.1)
+        wait_for(listening, 30, "the stand-in viewer listening", poll=0.1)
         out = tmp_path / "run"
         assert simulate(out, "--connect", f"rerun+http://127.0.0.1:{port}/proxy") == 0
-        time.sleep(1.0)
+        wait_for(saved_whole, 30, "the viewer saving everything the run streamed", poll=0.2)
     finally:
         server.send_signal(signal.SIGINT)
         server.communicate(timeout=30)

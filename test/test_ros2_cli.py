@@ -25,7 +25,8 @@ import pytest
 import yaml
 from bagcheck import assert_bag_holds_run
 from helpers import assert_same_run, processes_mentioning
-from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools, wait_for
+from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools
+from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import RUN_PARAMETERS
@@ -433,6 +434,7 @@ def test_swarm_ros_replay_is_watched_with_ros2_topic_echo(ros, tmp_path):
     done = ros.run(f"{LAUNCH} out_dir:={graph} shape:=rectangle seed:=6", timeout=240)
     assert done.returncode == 0, done.stdout[-3000:]
     domain = int(ros.env["ROS_DOMAIN_ID"])
+    started = time.monotonic()
     replay = ros.start(
         f"swarm-ros replay {graph} --domain-id {domain} --loop --start-offset 0.5 --rate 2 --delay 0.5 --quiet",
         log=tmp_path / "replay.log",
@@ -444,7 +446,19 @@ def test_swarm_ros_replay_is_watched_with_ros2_topic_echo(ros, tmp_path):
         metrics = yaml.safe_load(echo.stdout.split("---")[0])
         assert isinstance(metrics, dict) and "data" in metrics, echo.stdout + echo.stderr
         assert metrics["data"][0] > 0, "from the offset on, not the first tick"
-        time.sleep(0.5)
+        # without --loop the replay would have ended by now: its delay, one pass over the bag at rate 2, and
+        # its wait for acknowledgements; with it, it is still going
+        from rosbags.rosbag2 import Reader
+
+        from swarm_ros.tools.replay import _ACK_WAIT_S
+
+        with Reader(graph / "bag") as bag:
+            one_pass = 0.5 + (bag.end_time - bag.start_time) / 1e9 / 2 + _ACK_WAIT_S
+        wait_for(
+            lambda: replay.poll() is not None or time.monotonic() - started > one_pass + 1.0,
+            one_pass + 60,
+            "a single pass's end",
+        )
         assert replay.poll() is None, "--loop goes on until stopped"
     finally:
         ctrl_c(replay)
