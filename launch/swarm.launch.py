@@ -52,8 +52,11 @@ from swarm_ros.core.kernels import COMPILING, kernels_cached
 from swarm_ros.core.params import RUN_PARAMETERS, WORLD_SHARDS, node_parameter
 from swarm_ros.protocol.plan import PROCESSES, graph_plan
 from swarm_ros.protocol.runkey import KEY_ENV
+from swarm_ros.ros.dds import dds_defaults
+from swarm_ros.ros.shm import clean_shm, shm_locks
 
 PACKAGE = "swarm_ros"
+SHM_SCAN_S = 0.5  #: seconds between looks at the shared-memory files the nodes hold (they open them at start-up)
 
 
 def graph(context) -> list:
@@ -111,9 +114,26 @@ def graph(context) -> list:
         timers[:] = [TimerAction(period=period, actions=[OpaqueFunction(function=fire)])]
         return timers[0]
 
+    # The Fast DDS lock files each node holds in /dev/shm, seen every SHM_SCAN_S while nodes run: a SIGKILLed
+    # node leaves its files, and the ports of the nodes it talked to, which are removed at the launch's end
+    # (only files no live process uses), as swarm-ros run removes them (swarm_ros.ros.shm).
+    pids: dict[object, int] = {}
+    held: set[str] = set()
+    scanning: list[bool] = [False]
+
+    def scan(context):
+        held.update(*(shm_locks(pids[action]) for action in running if action in pids))
+        scanning[0] = bool(running) and not context.is_shutdown
+        return [TimerAction(period=SHM_SCAN_S, actions=[OpaqueFunction(function=scan)])] if scanning[0] else []
+
     def on_start(event, context):
         if event.action in names:  # a node (not the kernels' compilation)
             running.add(event.action)
+            pids[event.action] = event.pid
+            if not scanning[0]:
+                scanning[0] = True
+                return [TimerAction(period=SHM_SCAN_S, actions=[OpaqueFunction(function=scan)])]
+        return None
 
     def on_exit(event, context):
         name = names.get(event.action)
@@ -144,15 +164,16 @@ def graph(context) -> list:
                     timer.cancel()
         return actions
 
-    def remove_checkpoint(event, context):  # a failed world's (the world removes its own when the run ends)
-        for path in setup.checkpoint.parent.glob(setup.checkpoint.name + "*"):
-            path.unlink(missing_ok=True)
+    def at_shutdown(event, context):
+        for path in setup.checkpoint.parent.glob(setup.checkpoint.name + "*"):  # a failed world's (the world
+            path.unlink(missing_ok=True)  # removes its own when the run ends)
+        clean_shm(held)  # what dead nodes left in /dev/shm: a live process's files stay
 
     nodes = [node(name) for name in plan]  # the graph swarm-ros run starts, in its order
     handlers = [
         RegisterEventHandler(OnProcessStart(on_start=on_start)),
         RegisterEventHandler(OnProcessExit(on_exit=on_exit)),
-        RegisterEventHandler(OnShutdown(on_shutdown=remove_checkpoint)),
+        RegisterEventHandler(OnShutdown(on_shutdown=at_shutdown)),
     ]
     if kernels_cached():
         return handlers + nodes
@@ -175,7 +196,6 @@ def graph(context) -> list:
 
 
 def generate_launch_description() -> LaunchDescription:
-    share = get_package_share_directory(PACKAGE)
     return LaunchDescription(
         [
             DeclareLaunchArgument("processes", default_value=str(PROCESSES.default), description=PROCESSES.help),
@@ -209,14 +229,9 @@ def generate_launch_description() -> LaunchDescription:
                 )
                 for p in RUN_PARAMETERS
             ],
-            # discovery on this host, and Fast DDS's announcements as swarm-ros run sets them (config/fastdds.xml)
-            SetEnvironmentVariable(
-                "ROS_AUTOMATIC_DISCOVERY_RANGE", os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-            ),
-            SetEnvironmentVariable(
-                "FASTRTPS_DEFAULT_PROFILES_FILE",
-                os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE", os.path.join(share, "config", "fastdds.xml")),
-            ),
+            # DDS as swarm-ros run sets it, unless set (swarm_ros.ros.dds): discovery on this host, Fast DDS's
+            # announcements (config/fastdds.xml) and its transports
+            *[SetEnvironmentVariable(key, os.environ.get(key, value)) for key, value in dds_defaults().items()],
             # the run's key, which its nodes tag their messages with (docs/security.md): a new one
             # for each launch unless SWARM_ROS_RUN_KEY is set
             SetEnvironmentVariable(KEY_ENV, os.environ.get(KEY_ENV) or secrets.token_hex(32)),

@@ -24,13 +24,14 @@ import numpy as np
 import pytest
 import yaml
 from bagcheck import assert_bag_holds_run
-from helpers import assert_same_run, processes_mentioning
+from helpers import assert_same_run, processes_mentioning, shm_left
 from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools
 from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import RUN_PARAMETERS
 from swarm_ros.protocol.checkpoint import MAGIC
+from swarm_ros.ros.shm import shm_locks
 
 pytestmark = pytest.mark.process
 
@@ -283,6 +284,10 @@ def test_world_shards_under_ros2_launch_a_sigkilled_one_comes_back_and_the_run_i
     proc = ros.start(f"{LAUNCH} out_dir:={out} processes:=4 world_shards:=2 {run}", log=log)
     logs = _launch_dir(ros, before)
     wait_for(lambda: _saved_tick(logs / "world.checkpoint.1") >= 200, 120, "tick 200", poll=0.001)
+    # the shared-memory files the nodes hold: a SIGKILLed node leaves its own and its peers' ports (before, 10
+    # fastrtps_port* and 10 sem.*_mutex files stayed in /dev/shm after this test); the launch removes them
+    nodes = ["monitor", "world_shard_0", "world_shard_1", *(f"robot_batch_{k}" for k in range(4))]
+    held = set().union(*(shm_locks(_node_pid(logs, name)) for name in nodes))
     os.kill(_node_pid(logs, "world_shard_1"), signal.SIGKILL)
     assert proc.wait(timeout=240) == 0, log.read_text()[-4000:]
     assert "swarm_ros: world_shard_1 was killed by SIGKILL; restarted (1 of 3)" in log.read_text()
@@ -291,6 +296,8 @@ def test_world_shards_under_ros2_launch_a_sigkilled_one_comes_back_and_the_run_i
     assert [r["node"] for r in _summary(out)["restarts"]] == ["world_shard_1"]
     assert_bag_holds_run(out)
     assert not processes_mentioning(str(out)) and not list(logs.glob("world.checkpoint*"))
+    files = {f for el in held for f in (el, el.removesuffix("_el"), f"/dev/shm/sem.{Path(el).name[:-3]}_mutex")}
+    assert held and shm_left(files) == [], shm_left(files)
 
 
 def test_the_three_terminals_of_ros2_run_the_docs_show(ros, tmp_path):
