@@ -1,5 +1,7 @@
 """Initial placement (tick 0)."""
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -78,3 +80,43 @@ def test_has_repeats_says_whether_a_value_occurs_twice(values, ordered):
     """Increasing input takes a shortcut (the graph's rows come sorted by id); anything else is sorted first."""
     values = np.sort(values) if ordered else values
     assert has_repeats(values) == (len(set(values.tolist())) < values.size)
+
+
+#: numpy's transcendental ufuncs: on a CPU with AVX-512 numpy computes them with other code (its SIMD dispatch),
+#: whose last bits differ from the C library's, so a run's result would depend on the machine
+_CPU_DEPENDENT = {
+    "sin", "cos", "tan", "arcsin", "arccos", "arctan", "arctan2", "sinh", "cosh", "tanh",
+    "exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "power", "cbrt",
+}  # fmt: skip
+
+
+def test_the_model_uses_no_numpy_function_whose_last_bits_depend_on_the_cpu():
+    """The same seed gave another 3D run on an AVX-512 machine: the initial pitches came from np.arcsin. The
+    model's transcendental functions are the C library's (math.*, and numba's, which calls it)."""
+    import ast
+    from pathlib import Path
+
+    import swarm_ros.core
+
+    found = []
+    for path in sorted(Path(swarm_ros.core.__file__).parent.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (
+                isinstance(node, ast.Attribute)
+                and node.attr in _CPU_DEPENDENT
+                and isinstance(node.value, ast.Name)
+                and node.value.id in ("np", "numpy")
+            ):
+                found.append(f"{path.name}:{node.lineno}: np.{node.attr}")
+    assert not found, found
+
+
+def test_initial_pitches_are_the_c_librarys_arcsine_of_their_draws():
+    from swarm_ros.core.rng import uniform_array
+    from swarm_ros.core.state import STREAM_PLACE_PITCH
+
+    shape = Shape.load("torus")
+    s = initial_state(shape, 300, 7)
+    ids = np.arange(4, 300)
+    want = [math.asin(2.0 * u - 1.0) for u in uniform_array(7, ids, 0, STREAM_PLACE_PITCH).tolist()]
+    assert s.pitch is not None and s.pitch[4:].tolist() == want

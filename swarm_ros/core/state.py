@@ -188,7 +188,10 @@ def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
     extra = {}
     if world.dims == 3:  # a direction uniform on the sphere: sin(pitch) uniform in [-1, 1)
         pitch = np.zeros(robots)
-        pitch[4:] = np.arcsin(2.0 * uniform_array(seed, ids, 0, STREAM_PLACE_PITCH) - 1.0)
+        # math.asin (the C library's) element by element, not np.arcsin: numpy computes it with other code on a
+        # CPU with AVX-512 (its SIMD dispatch), whose last bits differ, and the same seed gave another 3D run there
+        sines = 2.0 * uniform_array(seed, ids, 0, STREAM_PLACE_PITCH) - 1.0
+        pitch[4:] = np.fromiter(map(math.asin, sines.tolist()), dtype=np.float64, count=sines.size)
         extra = {"z": position[2], "pitch": pitch}
 
     state = np.empty(robots, dtype=np.int8)
