@@ -1,5 +1,7 @@
-"""Fixtures shared by the test modules (their helpers are in helpers.py), and the rule that every test module
-says which kind it is: ``pytestmark = pytest.mark.unit`` or ``pytest.mark.process`` (pytest.ini)."""
+"""Fixtures shared by the test modules (the helpers they share are modules by topic: runs.py, recordings.py,
+graph_runs.py, lockstep_fakes.py, netns.py, layering.py, waiting.py, bagcheck.py, ros2_tools.py), and the rule
+that every test module says which kind it is: ``pytestmark = pytest.mark.unit`` or ``pytest.mark.process``
+(pytest.ini)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,8 @@ import os
 import shutil
 
 import pytest
-from helpers import SUBNET, _wait_until_up, disc_shape, ip_in
+from netns import SUBNET, _wait_until_up, ip_in
+from runs import disc_shape
 
 from swarm_ros.core import Shape, World
 

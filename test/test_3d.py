@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 import pytest
-from helpers import run_checked, run_in_batches
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from runs import run_checked, run_in_batches
 
 from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
 from swarm_ros.core.errors import ContractError, ParameterError

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 from bagcheck import assert_bag_holds_run
-from helpers import Recording, finish_restarted_run, kill_node, staged_logs, wait_saved
+from graph_runs import finish_restarted_run, kill_node, staged_logs, wait_saved
+from recordings import Recording
 
 pytestmark = pytest.mark.process
 

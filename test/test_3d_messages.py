@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import make_cloud
 from rclpy.serialization import deserialize_message, serialize_message
+from runs import make_cloud
 from sensor_msgs.msg import PointCloud2
 
 from swarm_ros.core import RunParams, Shape, Simulation

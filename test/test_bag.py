@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bagcheck import read_bag
-from helpers import run_env, shape_file
+from graph_runs import run_env
+from runs import shape_file
 
 from swarm_ros.protocol.rows import ROBOT_ROW
 

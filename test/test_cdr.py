@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 pytest.importorskip("rclpy")
-from helpers import make_cloud
 from rclpy.serialization import deserialize_message, serialize_message
+from runs import make_cloud
 from sensor_msgs.msg import PointCloud2
 
 from swarm_ros.core.errors import Rejected

@@ -5,7 +5,7 @@ import sys
 import textwrap
 
 import pytest
-from helpers import module_graph
+from layering import module_graph
 
 pytestmark = pytest.mark.process  # runs Python in subprocesses with modules blocked
 

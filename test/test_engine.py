@@ -2,7 +2,7 @@
 and equality between the fused in-process step and the batched decide/apply data flow."""
 
 import pytest
-from helpers import disc_shape, final_of, params, run_checked, run_in_batches
+from runs import disc_shape, final_of, params, run_checked, run_in_batches
 
 from swarm_ros.core import METRIC_COLUMNS, Outcome, RobotState, Shape, Simulation, World
 from swarm_ros.core.errors import ContractError

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from helpers import children_of, small_config
+from graph_runs import children_of
+from runs import small_config
 
 from swarm_ros.app import cli
 from swarm_ros.app.experiment_file import load_experiment, run_seed

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import disc_shape, run_checked
+from runs import disc_shape, run_checked
 
 from swarm_ros.app import cli
 from swarm_ros.core import RunParams, Simulation, World

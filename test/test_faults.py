@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import Recording, processes_mentioning, rrd_verify, run_env
+from graph_runs import processes_mentioning, run_env
+from recordings import Recording, rrd_verify
 
 from swarm_ros.core import RunParams, Shape
 from swarm_ros.core.regions import batch_strip, columns

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import rrd_verify
+from recordings import rrd_verify
 
 pytestmark = pytest.mark.process
 

@@ -16,8 +16,9 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import assert_same_run, shape_file
+from graph_runs import assert_same_run
 from ros2_tools import build_workspace
+from runs import shape_file
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import Settings

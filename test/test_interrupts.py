@@ -16,17 +16,9 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import (
-    Recording,
-    alive,
-    children_of,
-    descendants_of,
-    processes_mentioning,
-    rrd_verify,
-    run_processes,
-    shm_left,
-    small_config,
-)
+from graph_runs import alive, children_of, descendants_of, processes_mentioning, run_processes, shm_left
+from recordings import Recording, rrd_verify
+from runs import small_config
 from waiting import wait_for
 
 import swarm_ros

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from helpers import disc_shape, params
+from runs import disc_shape, params
 
 from swarm_ros.core import RobotState, Shape, Simulation, World
 from swarm_ros.core.arbitration import JoinOutcome

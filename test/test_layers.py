@@ -9,7 +9,7 @@ protocol run (and are tested) without rclpy.
 from __future__ import annotations
 
 import pytest
-from helpers import module_graph
+from layering import module_graph
 
 pytestmark = pytest.mark.unit
 
@@ -78,8 +78,8 @@ def test_node_files_stay_thin_and_modules_small():
 
 
 def test_a_test_module_imports_nothing_from_another_test_module():
-    """What tests share is in helpers.py (and bagcheck.py, ros2_tools.py): a test module's private helper
-    imported elsewhere breaks when that module changes, and loads its tests' fixtures twice."""
+    """What tests share is in modules by topic (runs.py, graph_runs.py, waiting.py, ...): a test module's private
+    helper imported elsewhere breaks when that module changes, and loads its tests' fixtures twice."""
     import ast
     from pathlib import Path
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import ROBOTS, LockstepRun
+from lockstep_fakes import ROBOTS, LockstepRun
 
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.regions import columns

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import Clock, Log, disc_shape
+from lockstep_fakes import Clock, Log
+from runs import disc_shape
 
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.errors import Rejected, RunFailed

@@ -22,7 +22,9 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import SUBNET, assert_same_run, host_env, ip_in, shape_file
+from graph_runs import assert_same_run
+from netns import SUBNET, host_env, ip_in
+from runs import shape_file
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import Settings

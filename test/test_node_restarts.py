@@ -21,9 +21,8 @@ from pathlib import Path
 
 import pytest
 from bagcheck import assert_bag_holds_run
-from helpers import (
+from graph_runs import (
     STAR_SHORT,
-    Recording,
     assert_identical_run,
     finish_restarted_run,
     kill_node,
@@ -33,6 +32,7 @@ from helpers import (
     staged_logs,
     wait_saved,
 )
+from recordings import Recording
 
 from swarm_ros.app import cli
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import disc_shape
+from runs import disc_shape
 
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.arbitration import occupy, resolve_kernel

@@ -6,9 +6,9 @@ reproducible and independent of how robots are split into batches.
 
 import numpy as np
 import pytest
-from helpers import final_of, run_checked, run_in_batches
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from runs import final_of, run_checked, run_in_batches
 
 from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import Recording, rrd_verify
+from recordings import Recording, rrd_verify
 from waiting import wait_for
 
 from swarm_ros.app import cli

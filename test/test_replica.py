@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import params
+from runs import params
 
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.errors import ContractError

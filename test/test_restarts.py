@@ -21,14 +21,12 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import (
+from graph_runs import (
     STAR_SHORT,
-    Recording,
     alive,
     assert_identical_run,
     node_pid,
     processes_mentioning,
-    rrd_verify,
     run_env,
     run_processes,
     saved_tick,
@@ -36,6 +34,7 @@ from helpers import (
     wait_saved,
     wait_ticks_recorded,
 )
+from recordings import Recording, rrd_verify
 
 from swarm_ros.app import cli
 from swarm_ros.app.launcher import Launch

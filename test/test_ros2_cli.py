@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 import yaml
 from bagcheck import assert_bag_holds_run
-from helpers import assert_same_run, processes_mentioning, shm_left
+from graph_runs import assert_same_run, processes_mentioning, shm_left
 from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools
 from waiting import wait_for
 

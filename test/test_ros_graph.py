@@ -15,7 +15,9 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import Recording, assert_same_run, processes_mentioning, rrd_verify, run_env, shape_file
+from graph_runs import assert_same_run, processes_mentioning, run_env
+from recordings import Recording, rrd_verify
+from runs import shape_file
 
 from swarm_ros.app.cli import main as cli_main
 from swarm_ros.app.processes import Child, DomainLock, stop

@@ -7,12 +7,12 @@ import re
 import numpy as np
 import pytest
 import rclpy
-from helpers import make_cloud
 from nav_msgs.msg import OccupancyGrid
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
+from runs import make_cloud
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 

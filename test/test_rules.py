@@ -5,9 +5,9 @@ import math
 
 import numpy as np
 import pytest
-from helpers import disc_shape, params
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from runs import disc_shape, params
 
 from swarm_ros.core import RobotState, Shape, Simulation, World, decide
 from swarm_ros.core.errors import ContractError

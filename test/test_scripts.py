@@ -10,8 +10,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import small_config
 from PIL import Image
+from runs import small_config
 
 from swarm_ros.app import cli
 

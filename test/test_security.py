@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import host_env, make_cloud
+from netns import host_env
+from runs import make_cloud
 
 from swarm_ros.app import cli
 from swarm_ros.app.processes import DomainLock, node_command, node_env

@@ -4,11 +4,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import STUDY_PATCHES, disc_shape
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from PIL import Image
+from runs import STUDY_PATCHES, disc_shape
 from scipy import ndimage
 
 from swarm_ros.core import Shape, ShapeError, World, builtin_shapes

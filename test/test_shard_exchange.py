@@ -8,7 +8,8 @@ import dataclasses
 
 import numpy as np
 import pytest
-from helpers import Log, disc_shape
+from lockstep_fakes import Log
+from runs import disc_shape
 
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.errors import ContractError

@@ -11,9 +11,9 @@ from collections import defaultdict, deque
 
 import numpy as np
 import pytest
-from helpers import Clock, Log
 from hypothesis import given
 from hypothesis import strategies as st
+from lockstep_fakes import Clock, Log
 
 from swarm_ros.core.engine import Simulation
 from swarm_ros.core.params import RunParams

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import disc_shape
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from runs import disc_shape
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
 from swarm_ros.core.errors import Rejected

@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from helpers import disc_shape
+from runs import disc_shape
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
 from swarm_ros.core.errors import ContractError, Rejected

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import MAX_TICKS, ROBOTS, LockstepRun
+from lockstep_fakes import MAX_TICKS, ROBOTS, LockstepRun
 
 from swarm_ros.core import Simulation
 from swarm_ros.core.errors import RunFailed

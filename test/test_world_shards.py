@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import (
+from graph_runs import (
     assert_identical_run,
     finish_restarted_run,
     kill_node,

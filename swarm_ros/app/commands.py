@@ -413,6 +413,10 @@ def _run_with_progress(
             bar.set_postfix(tick=str(m.tick), moving=str(m.moving), refresh=False)
 
 
+#: What a summary's wall time holds, by engine: the engine alone is docs/benchmarks.md's
+_TIMED = {"ros2": "tick 0 to the outcome", "inprocess": "the kernels' loading and the recording included"}
+
+
 def _print_summary(s: dict, out: Path, dims: int) -> None:
     cells = "voxels" if dims == 3 else "patches"
     rate = s["convergence_tick"] / s["wall_seconds"] if s["wall_seconds"] > 0 else float("inf")
@@ -438,15 +442,7 @@ def _print_summary(s: dict, out: Path, dims: int) -> None:
             else []
         ),
         ("convergence rate", f"{s['convergence_rate']:.4f} robots/tick"),
-        (
-            "wall time",
-            f"{s['wall_seconds']:.2f} s  ({rate:,.0f} ticks/s, "
-            + (
-                "tick 0 to the outcome, over the graph)"
-                if s["engine"] == "ros2"
-                else "the kernels' loading and the recording included; the engine alone: docs/benchmarks.md)"
-            ),
-        ),
+        ("wall time", f"{s['wall_seconds']:.2f} s  ({rate:,.0f} ticks/s, {_TIMED[s['engine']]})"),
         ("output", str(out)),
     ]
     for key, value in rows:

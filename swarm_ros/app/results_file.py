@@ -82,7 +82,7 @@ def read_results(path: Path) -> list[dict]:
     for line, r in enumerate(csv.DictReader(io.StringIO(text)), start=2):
         try:
             rows.append(_checked_row(r))
-        except (TypeError, ValueError) as exc:
+        except ExperimentError as exc:
             raise ExperimentError(f"{path}: line {line}: {exc}") from None
     return rows
 
@@ -92,29 +92,29 @@ def _checked_row(raw: dict) -> dict:
     engine against their sets, counts and times non-negative.
 
     Raises:
-        ValueError: the first bad field, in words naming it.
+        ExperimentError: the first bad field, in words naming it (the caller adds the file and the line).
     """
     row: dict = {}
     for k, v in raw.items():
         if k is None or v is None:
-            raise ValueError("the row has another number of fields than the header")
+            raise ExperimentError("the row has another number of fields than the header")
         try:
             row[k] = int(v) if k in _INT_COLUMNS else float(v) if k in _FLOAT_COLUMNS else v
         except ValueError:
-            raise ValueError(f"{k} must be a number, got {v!r}") from None
+            raise ExperimentError(f"{k} must be a number, got {v!r}") from None
     for p in RUN_PARAMETERS:
         if p.name in row:
             try:
                 p.check(row[p.name])
             except ParameterError as exc:
-                raise ValueError(str(exc)) from None
+                raise ExperimentError(str(exc)) from None
     if row["outcome"] not in _OUTCOMES:
-        raise ValueError(f"outcome must be one of {', '.join(_OUTCOMES)}, got {row['outcome']!r}")
+        raise ExperimentError(f"outcome must be one of {', '.join(_OUTCOMES)}, got {row['outcome']!r}")
     if row["engine"] not in ENGINES:
-        raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {row['engine']!r}")
+        raise ExperimentError(f"engine must be one of {', '.join(ENGINES)}, got {row['engine']!r}")
     for k in (*_COUNTS, "convergence_rate", "wall_seconds"):
         if not (row[k] >= 0 and math.isfinite(row[k])):
-            raise ValueError(f"{k} must be a number >= 0, got {raw[k]!r}")
+            raise ExperimentError(f"{k} must be a number >= 0, got {raw[k]!r}")
     return row
 
 

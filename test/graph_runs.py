@@ -1,0 +1,205 @@
+"""Runs of the ROS 2 graph and their processes: the environment, the processes of a run, a node's pid, killing
+it, what its saves and recordings say, and a run checked against simulate's."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+from bagcheck import assert_bag_holds_run
+from recordings import Recording
+
+from swarm_ros.protocol.checkpoint import MAGIC
+
+_DONE = 7  # the checkpoint header's int64 holding the last tick saved (swarm_ros.protocol.checkpoint)
+
+
+def run_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("ROS_DOMAIN_ID", None)  # every run picks a free domain of its own
+    env.setdefault("HOME", "/tmp")
+    return env
+
+
+def _processes_where(read: str, holds) -> list[int]:
+    """Pids of the live processes whose /proc/<pid>/``read`` file's text ``holds`` (one that ended meanwhile: no)."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                text = (proc / read).read_bytes().decode(errors="replace")
+            except OSError:
+                continue
+            if holds(text):
+                found.append(int(proc.name))
+    return found
+
+
+def processes_mentioning(text: str) -> list[int]:
+    """Pids of the processes whose command line holds ``text``."""
+    return _processes_where("cmdline", lambda cmdline: text in cmdline)
+
+
+def run_processes(out: Path) -> list[int]:
+    """Pids of the node processes of the run writing ``out`` (their parameter files are in its hidden logs
+    folder), and of no other run on the machine, a test running beside this one included."""
+    return processes_mentioning(f"{out.absolute().parent}/.{out.name}.logs-")
+
+
+def assert_same_run(ref: Path, got: Path, launched: bool = True) -> None:
+    """``got`` (a ROS run; ``launched``: by ``swarm-ros run``) equals ``ref`` (``simulate``) but for timings."""
+    assert (ref / "metrics.csv").read_bytes() == (got / "metrics.csv").read_bytes()
+    assert (ref / "final_state.csv").read_bytes() == (got / "final_state.csv").read_bytes()
+    a = json.loads((ref / "summary.json").read_text())
+    b = json.loads((got / "summary.json").read_text())
+    assert (a.pop("engine"), b.pop("engine")) == ("inprocess", "ros2")
+    a.pop("wall_seconds"), b.pop("wall_seconds")
+    # a ROS run's overheads: from the command's start to tick 0, and from the outcome to the last process gone
+    # (only the launcher knows the latter, from the world's status: its progress listener heard the graph)
+    startup, shutdown = b.pop("startup_seconds"), b.pop("shutdown_seconds")
+    assert isinstance(startup, float) and 0 < startup < 120
+    assert (isinstance(shutdown, float) and 0 < shutdown < 60) if launched else shutdown is None
+    assert b.pop("rejected_messages") == {"world": 0, "monitor": 0}  # an honest run: nothing dropped
+    processes, shards = b.pop("processes"), b.pop("world_shards")  # how it ran
+    assert isinstance(shards, int) and shards >= 1
+    assert (isinstance(processes, int) and processes >= shards) if launched else processes is None
+    b.pop("bag_robots_every", None)  # checked against the bag (bagcheck)
+    assert a == b
+    assert (got / "final.png").stat().st_size > 0 and (got / "convergence.png").stat().st_size > 0
+    assert_bag_holds_run(got)  # the rosbag2 of the run, read with another library than the one that wrote it
+    # the monitor records with the same module: the same data (ids, timestamps and chunking may differ)
+    assert Recording(got / "recording.rrd").same_data(Recording(ref / "recording.rrd"))
+
+
+# The star under the local join rule: ~3600 ticks, several seconds over the graph, long enough to kill in
+STAR_LOCAL = ["--shape", "star", "--seed", "5", "--rules", "local"]
+
+
+#: STAR_LOCAL cut at 1,000 ticks (outcome timeout): the fault tests' run, about 3 s over the graph once started;
+#: their kills are timed on what the run writes, all before tick 600
+STAR_SHORT = [*STAR_LOCAL, "--max-ticks", "1000"]
+
+
+def node_pid(out: Path, node: str, timeout: float = 60, not_pid: int | None = None) -> int:
+    """The pid of the process running ``node`` for the run into ``out`` (a new one if ``not_pid`` is given)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for pid in run_processes(out):
+            try:
+                cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+            except OSError:
+                continue
+            if f"__node:={node}\0" in cmdline + "\0" and str(out.parent) in cmdline and pid != not_pid:
+                return pid
+        time.sleep(0.02)
+    raise AssertionError(f"no process for {node}")
+
+
+def wait_ticks_recorded(out: Path, size: int, timeout: float = 120) -> None:
+    """Wait until the run's partial recording holds ``size`` bytes: ticks are flowing."""
+    partial = out.parent / f"{out.name}.partial.rrd"
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if partial.exists() and partial.stat().st_size > size:
+            return
+        time.sleep(0.02)
+    raise AssertionError("the run never got going")
+
+
+def assert_identical_run(reference: Path, out: Path) -> dict:
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (reference / name).read_bytes(), name
+    got, ref = (json.loads((d / "summary.json").read_text()) for d in (out, reference))
+    assert got["outcome"] == ref["outcome"] and got["lost_robots"] == 0 and got["losses"] == []
+    return got
+
+
+def staged_logs(out: Path, timeout: float = 60) -> Path:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = list(out.parent.glob(f".{out.name}.logs-*"))
+        if found:
+            return found[0]
+        time.sleep(0.01)
+    raise AssertionError("no logs")
+
+
+def saved_tick(logs: Path, name: str = "world.checkpoint") -> int:
+    """The last tick the world saved (``name``: world.checkpoint.<i> for world shard i); -1 before its first."""
+    try:
+        head = np.fromfile(logs / name, dtype=np.int64, count=8)
+    except (OSError, ValueError):
+        return -1
+    return int(head[_DONE]) if head.size == 8 and head[0] == MAGIC else -1
+
+
+def wait_saved(logs: Path, tick: int, timeout: float = 180, name: str = "world.checkpoint") -> int:
+    """Wait (polling fast) until the world (the shard whose save is ``name``) has saved ``tick``; return the tick
+    saved when seen."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        t = saved_tick(logs, name)
+        if t >= tick:
+            return t
+        time.sleep(0.0005)
+    raise AssertionError(f"tick {tick} never came")
+
+
+def kill_node(out: Path, node: str, not_pid: int | None = None) -> int:
+    pid = node_pid(out, node, not_pid=not_pid)
+    os.kill(pid, signal.SIGKILL)
+    return pid
+
+
+def finish_restarted_run(launcher, reference: Path, out: Path, restarts: list[str]) -> dict:
+    _, err = launcher.communicate(timeout=300)
+    assert launcher.returncode == 0, err
+    summary = assert_identical_run(reference, out)
+    assert [r["node"] for r in summary["restarts"]] == restarts, summary["restarts"]
+    assert_bag_holds_run(out)
+    assert not list(out.parent.glob(f".{out.name}.*")), "nothing of the run left beside it"
+    assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint is removed with the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
+    return summary
+
+
+def children_of(pid: int) -> list[int]:
+    """Pids of the processes whose parent is ``pid``."""
+    return _processes_where("stat", lambda stat: int(stat.rsplit(")", 1)[1].split()[1]) == pid)
+
+
+def shm_left(files) -> list[str]:
+    """Those of the Fast DDS shared-memory ``files`` that still exist and that no live process uses: left
+    behind. A port's files (``fastrtps_portN``) are shared by every participant on that port, so a run or test
+    beside this one may rightly still hold them."""
+    from swarm_ros.ros.shm import in_use
+
+    def group(path: str) -> set[str]:  # a segment, its lock file and (a port's) its semaphore
+        name = Path(path).name.removesuffix("_el")
+        if name.startswith("sem.") and name.endswith("_mutex"):
+            name = name.removeprefix("sem.").removesuffix("_mutex")
+        return {f"/dev/shm/{name}", f"/dev/shm/{name}_el", f"/dev/shm/sem.{name}_mutex"}
+
+    return sorted(f for f in files if os.path.exists(f) and not in_use(group(f)))
+
+
+def descendants_of(pid: int) -> list[int]:
+    """Pids of ``pid``'s children, their children, and so on."""
+    found, todo = [], [pid]
+    while todo:
+        kids = children_of(todo.pop())
+        found += kids
+        todo += kids
+    return found
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (not gone, not a zombie)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False

@@ -1,0 +1,42 @@
+"""Hosts on one machine: Linux network namespaces joined by veth links to a bridge."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import time
+
+import pytest
+
+SUBNET = "10.231.{}.{}"
+
+
+def host_env() -> dict[str, str]:
+    """This process's environment without any ROS or DDS setting (an earlier test may have left some):
+    what a process on another host starts from."""
+    return {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "FASTRTPS_", "RMW_"))}
+
+
+def ip_in(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+
+
+def _wait_until_up(*links: tuple[str, str], limit: float = 10.0) -> None:
+    """Wait until each (namespace, device) reports operstate UP, with its carrier.
+
+    The kernel reports a veth's carrier (operstate UP) asynchronously, after both ends are set
+    up; it usually takes milliseconds. Fast DDS lists a host's interfaces once, when a
+    participant starts, so a node must not start before its interface is really up.
+    """
+    deadline = time.monotonic() + limit
+    while True:
+        states = {
+            dev: json.loads(ip_in("-n", ns, "-j", "link", "show", "dev", dev).stdout or "[{}]")[0].get("operstate")
+            for ns, dev in links
+        }
+        if all(state == "UP" for state in states.values()):
+            return
+        if time.monotonic() > deadline:
+            pytest.fail(f"the veth pair did not come up within {limit:g} s: {states}")
+        time.sleep(0.05)
