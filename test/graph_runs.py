@@ -6,12 +6,12 @@ from __future__ import annotations
 import json
 import os
 import signal
-import time
 from pathlib import Path
 
 import numpy as np
 from bagcheck import assert_bag_holds_run
 from recordings import Recording
+from waiting import wait_for
 
 from swarm_ros.protocol.checkpoint import MAGIC
 
@@ -86,8 +86,8 @@ STAR_SHORT = [*STAR_LOCAL, "--max-ticks", "1000"]
 
 def node_pid(out: Path, node: str, timeout: float = 60, not_pid: int | None = None) -> int:
     """The pid of the process running ``node`` for the run into ``out`` (a new one if ``not_pid`` is given)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+
+    def found() -> int | None:
         for pid in run_processes(out):
             try:
                 cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
@@ -95,19 +95,15 @@ def node_pid(out: Path, node: str, timeout: float = 60, not_pid: int | None = No
                 continue
             if f"__node:={node}\0" in cmdline + "\0" and str(out.parent) in cmdline and pid != not_pid:
                 return pid
-        time.sleep(0.02)
-    raise AssertionError(f"no process for {node}")
+        return None
+
+    return wait_for(found, timeout, f"a process for {node}", poll=0.02)
 
 
 def wait_ticks_recorded(out: Path, size: int, timeout: float = 120) -> None:
     """Wait until the run's partial recording holds ``size`` bytes: ticks are flowing."""
     partial = out.parent / f"{out.name}.partial.rrd"
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if partial.exists() and partial.stat().st_size > size:
-            return
-        time.sleep(0.02)
-    raise AssertionError("the run never got going")
+    wait_for(lambda: partial.exists() and partial.stat().st_size > size, timeout, "the run getting going", poll=0.02)
 
 
 def assert_identical_run(reference: Path, out: Path) -> dict:
@@ -119,13 +115,7 @@ def assert_identical_run(reference: Path, out: Path) -> dict:
 
 
 def staged_logs(out: Path, timeout: float = 60) -> Path:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        found = list(out.parent.glob(f".{out.name}.logs-*"))
-        if found:
-            return found[0]
-        time.sleep(0.01)
-    raise AssertionError("no logs")
+    return wait_for(lambda: next(out.parent.glob(f".{out.name}.logs-*"), None), timeout, "its logs", poll=0.01)
 
 
 def saved_tick(logs: Path, name: str = "world.checkpoint") -> int:
@@ -140,13 +130,10 @@ def saved_tick(logs: Path, name: str = "world.checkpoint") -> int:
 def wait_saved(logs: Path, tick: int, timeout: float = 180, name: str = "world.checkpoint") -> int:
     """Wait (polling fast) until the world (the shard whose save is ``name``) has saved ``tick``; return the tick
     saved when seen."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        t = saved_tick(logs, name)
-        if t >= tick:
-            return t
-        time.sleep(0.0005)
-    raise AssertionError(f"tick {tick} never came")
+    saved = wait_for(  # a one-item list: true even for tick 0
+        lambda: [t for t in (saved_tick(logs, name),) if t >= tick], timeout, f"tick {tick} saved", poll=0.0005
+    )
+    return saved[0]
 
 
 def kill_node(out: Path, node: str, not_pid: int | None = None) -> int:

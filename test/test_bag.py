@@ -20,6 +20,7 @@ import pytest
 from bagcheck import read_bag
 from graph_runs import run_env
 from runs import shape_file
+from waiting import wait_for
 
 from swarm_ros.protocol.rows import ROBOT_ROW
 
@@ -93,9 +94,9 @@ def test_an_interrupted_run_keeps_a_readable_bag_of_its_ticks(tmp_path):
         )
 
     try:  # what can be seen, not a delay: the world sent tick 0 and the monitor is ready to take it
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and not (logged("world", ": tick 0") and logged("monitor", ": ready,")):
-            time.sleep(0.05)
+        wait_for(
+            lambda: logged("world", ": tick 0") and logged("monitor", ": ready,"), 120, "tick 0 with the monitor ready"
+        )
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.artifacts import run_dir as output
@@ -296,11 +297,11 @@ def test_a_second_command_for_a_run_directory_in_use_is_refused_at_once(tmp_path
     )
     try:
         lock_dir = Path(__import__("tempfile").gettempdir()) / "swarm_ros-runs"
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not any(
-            f"pid {first.pid}:" in p.read_text() for p in lock_dir.glob("*.lock") if p.is_file()
-        ):
-            time.sleep(0.05)
+        wait_for(
+            lambda: any(f"pid {first.pid}:" in p.read_text() for p in lock_dir.glob("*.lock") if p.is_file()),
+            60,
+            "the first command's claim on the run directory",
+        )
         for command in ("simulate", "run"):
             started = time.monotonic()
             assert cli.main([command, "--out", str(out), "--quiet"]) == 2

@@ -9,7 +9,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ import pytest
 import yaml
 from graph_runs import children_of
 from runs import small_config
+from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.app.experiment_file import load_experiment, run_seed
@@ -189,11 +189,7 @@ def test_ctrl_c_keeps_finished_runs_and_the_same_command_resumes(small, tmp_path
     cmd = [PY, "-m", "swarm_ros", "experiment", str(big), "--out", str(run_dir), "--jobs", "2"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     results = run_dir / "results.csv"
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        if results.exists() and len(results.read_text().splitlines()) > 4:
-            break
-        time.sleep(0.05)
+    wait_for(lambda: results.exists() and len(results.read_text().splitlines()) > 4, 120, "three finished runs")
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
