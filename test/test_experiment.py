@@ -400,6 +400,23 @@ def test_read_results_rejects_a_file_that_is_not_a_results_file(tmp_path):
         read_results(path)
 
 
+def _edited_results(done: Path, out: Path, edit) -> int:
+    """A copy of ``done``'s results.csv in a new directory ``out``, its rows (dicts of text) passed through
+    ``edit`` first; return how many rows it holds."""
+    import csv
+    import io
+
+    out.mkdir()
+    rows = list(csv.DictReader(io.StringIO((done / "results.csv").read_text())))
+    edit(rows)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    (out / "results.csv").write_text(buf.getvalue())
+    return len(rows)
+
+
 @pytest.mark.parametrize(
     "column,value,message",
     [
@@ -417,42 +434,24 @@ def test_report_checks_every_field_of_every_row_before_it_writes_anything(
 ):
     """One field out of its set, in the last row (which the figures' re-run check does not pick), is refused in
     one line naming the line and the field, and the directory is left exactly as it was."""
-    import csv
-    import io
-
-    _, done = small
     out = tmp_path / "copy"
-    out.mkdir()
-    rows = list(csv.DictReader(io.StringIO((done / "results.csv").read_text())))
-    rows[-1][column] = value
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    (out / "results.csv").write_text(buf.getvalue())
+    rows = _edited_results(small[1], out, lambda rows: rows[-1].update({column: value}))
     assert cli.main(["report", str(out)]) == 2
     err = capsys.readouterr().err
-    assert f"results.csv: line {len(rows) + 1}: {message}" in err and err.count("\n") == 1, err
+    assert f"results.csv: line {rows + 1}: {message}" in err and err.count("\n") == 1, err
     assert sorted(p.name for p in out.iterdir()) == ["results.csv"]
 
 
 def test_a_row_the_rerun_check_refuses_leaves_the_report_as_it_was(small, tmp_path, capsys):
     """The figures re-run one run per curve and compare it with its row: a row that disagrees (here a valid
     outcome, but not the run's) fails the report before stats.csv or stats.md is written."""
-    import csv
-    import io
 
-    _, done = small
+    def swap_outcomes(rows):
+        for r in rows:
+            r["outcome"] = "timeout" if r["outcome"] != "timeout" else "incomplete"
+
     out = tmp_path / "copy"
-    out.mkdir()
-    rows = list(csv.DictReader(io.StringIO((done / "results.csv").read_text())))
-    for r in rows:
-        r["outcome"] = "timeout" if r["outcome"] != "timeout" else "incomplete"
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    (out / "results.csv").write_text(buf.getvalue())
+    _edited_results(small[1], out, swap_outcomes)
     assert cli.main(["report", str(out)]) == 2
     assert "re-running" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["results.csv"]
