@@ -242,8 +242,8 @@ def test_ctrl_c_while_the_command_line_loads_is_one_line(tmp_path, command):
         assert "Traceback" not in err, err
         if proc.returncode == -signal.SIGINT:  # reached before the interpreter had set its handler (a loaded
             assert not err  # machine): killed by the signal as any program, silent; a shell says 130
-        elif proc.returncode != 0:
-            assert proc.returncode == 130 and err.strip().endswith("interrupted"), err
+        elif proc.returncode != 0:  # 'interrupted', or on a fast machine, in the run: 'interrupted at tick 0; ...'
+            assert proc.returncode == 130 and err.startswith("swarm-ros: interrupted") and err.count("\n") == 1, err
 
 
 def test_ctrl_c_while_the_command_imports_its_run_directory_module_is_one_line(monkeypatch, capsys):
