@@ -24,7 +24,9 @@ def dds_defaults() -> dict[str, str]:
         # shared-memory port can leave that port blocked, and the other process then receives nothing
         # (seen here once in 30 kills of bench_faults: the world stopped hearing every peer; Fast DDS 2.14,
         # eProsima/Fast-DDS#5469). A process killed on UDP loses only its own sockets. Cost: about
-        # 5% of the star's run (docs/faults.md). Set it to DEFAULT for shared memory.
+        # 5% of the star's run (docs/faults.md). Set it to DEFAULT for shared memory. With the LOCALHOST range above,
+        # rmw_fastrtps picks the transports itself (UDP and shared memory) and this is not applied: it holds only for
+        # a SUBNET range (docs/faults.md, "Not in effect on one host").
         "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4",
     }
     try:
