@@ -23,6 +23,7 @@ a batch that ends with the run is not started again, and a restarted process is 
 
 from __future__ import annotations
 
+import json
 import signal
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -180,15 +181,9 @@ def argument_value(name: str, text: str) -> object:
 
 
 def parameter_arguments(values: dict[str, object]) -> list[str]:
-    """``-p name:=value`` ROS arguments for ``values``, each value written as the YAML ROS 2 reads it back as the
-    same type (a string such as ``'10'`` stays a string)."""
-    import yaml
-
-    out = []
-    for name, value in values.items():
-        text = yaml.safe_dump(value, default_flow_style=True, width=1 << 20).strip()
-        out += ["-p", f"{name}:={text.removesuffix(chr(10) + '...').strip()}"]
-    return out
+    """``-p name:=value`` ROS arguments for ``values``, each value written as JSON, which ROS 2 reads back as YAML
+    of the same type (a string such as ``"10"`` stays a string)."""
+    return [arg for name, value in values.items() for arg in ("-p", f"{name}:={json.dumps(value)}")]
 
 
 def launch_setup(
