@@ -21,8 +21,8 @@ from ros2_tools import build_workspace
 from runs import shape_file
 
 from swarm_ros.app import cli
+from swarm_ros.app.param_file import params_yaml
 from swarm_ros.core.params import Settings
-from swarm_ros.ros.node_params import params_yaml
 
 pytestmark = pytest.mark.process
 

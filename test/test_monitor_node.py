@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
+from swarm_ros.app.param_file import params_yaml
 from swarm_ros.app.processes import DomainLock, node_command, node_env
 from swarm_ros.core.params import Settings
 from swarm_ros.protocol.runkey import KEY_ENV
-from swarm_ros.ros.node_params import params_yaml
 
 pytest.importorskip("rclpy")
 

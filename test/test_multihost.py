@@ -27,10 +27,10 @@ from netns import SUBNET, host_env, ip_in
 from runs import shape_file
 
 from swarm_ros.app import cli
+from swarm_ros.app.param_file import params_yaml
 from swarm_ros.core.params import Settings
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
 from swarm_ros.protocol.runkey import KEY_ENV, new_key
-from swarm_ros.ros.node_params import params_yaml
 
 pytestmark = pytest.mark.process
 

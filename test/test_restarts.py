@@ -295,8 +295,8 @@ def test_every_node_ends_within_moments_of_a_sigkilled_launcher(tmp_path):
 def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_path):
     """``ros2 launch``'s respawn starts a dead batch again with the very same command (incarnation 0).
     The world takes the new process back once the old one's liveliness lapsed; nothing changes."""
+    from swarm_ros.app.param_file import params_yaml
     from swarm_ros.ros.dds import dds_defaults
-    from swarm_ros.ros.node_params import params_yaml
 
     out = tmp_path / "run"
     params = tmp_path / "params.yaml"

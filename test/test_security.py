@@ -24,6 +24,7 @@ from netns import host_env
 from runs import make_cloud
 
 from swarm_ros.app import cli
+from swarm_ros.app.param_file import params_yaml
 from swarm_ros.app.processes import DomainLock, node_command, node_env
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.params import Settings
@@ -31,7 +32,6 @@ from swarm_ros.core.regions import batch_strip, columns
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, batch_label, compact, decision_rows
 from swarm_ros.protocol.runkey import KEY_ENV
-from swarm_ros.ros.node_params import params_yaml
 
 pytest.importorskip("rclpy")
 

@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 import yaml
 
+from swarm_ros.app.param_file import params_yaml
 from swarm_ros.app.processes import CHECKPOINT
 from swarm_ros.app.supervision import STOPPED, Supervisor, Verdict, argument_value, launch_processes, launch_setup
 from swarm_ros.core.errors import ConfigError, InputError
 from swarm_ros.core.params import RUN_PARAMETERS, Settings
-from swarm_ros.ros.node_params import params_yaml
 
 pytestmark = pytest.mark.unit
 

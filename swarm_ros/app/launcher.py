@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
+from swarm_ros.app.param_file import params_yaml
 from swarm_ros.app.processes import (
     CHECKPOINT,
     SHM_LIST,
@@ -61,7 +62,6 @@ from swarm_ros.core.shapes import Shape
 from swarm_ros.core.signals import StopFlag, process_age
 from swarm_ros.protocol.plan import MONITOR, graph_plan, is_world
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
-from swarm_ros.ros.node_params import params_yaml
 from swarm_ros.ros.shm import clean_shm, shm_locks
 
 

@@ -26,12 +26,13 @@ from __future__ import annotations
 
 from collections.abc import Hashable
 from pathlib import Path
+from typing import Any
 
 import yaml
 
 from swarm_ros.core.errors import ConfigError, InputError, ParameterError
 from swarm_ros.core.inputs import YAML_LIMIT, read_bounded
-from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETER, Settings, node_defaults
+from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETER, RUN_PARAMETERS, Settings, node_defaults
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -185,3 +186,12 @@ def record_every(nodes: dict[str, dict[str, object]]) -> int:
     the /world section's, else 0. ``swarm-ros run`` and the launch file give the world and the monitor this one."""
     monitor, world = nodes.get("monitor", {}), nodes.get("world", {})
     return int(monitor.get("record_every", world.get("record_every", 0)))  # type: ignore[call-overload]
+
+
+def params_yaml(run: Settings, per_node: dict[str, dict[str, Any]]) -> str:
+    """A parameter file in the ROS 2 form: the run under ``/**``, each node's own under ``/<node>``."""
+    doc = {"/**": {"ros__parameters": {p.name: getattr(run, p.name) for p in RUN_PARAMETERS}}}
+    for node, values in per_node.items():
+        if values:
+            doc[f"/{node}"] = {"ros__parameters": dict(values)}
+    return yaml.safe_dump(doc, sort_keys=False)

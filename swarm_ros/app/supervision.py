@@ -30,14 +30,13 @@ from pathlib import Path
 
 import yaml
 
-from swarm_ros.app.param_file import check_launcher_sets, read_params_file, record_every
+from swarm_ros.app.param_file import check_launcher_sets, params_yaml, read_params_file, record_every
 from swarm_ros.app.processes import CHECKPOINT, check_graph, check_graph_shape, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
 from swarm_ros.core.params import RUN_PARAMETER, Param, node_defaults
 from swarm_ros.core.signals import EXIT_INTERRUPTED
 from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world
-from swarm_ros.ros.node_params import params_yaml
 
 
 class RunEnded(RunFailed):

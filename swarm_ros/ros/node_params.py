@@ -92,14 +92,3 @@ def descriptor(p: Param) -> ParameterDescriptor:
                 )
             ]
     return d
-
-
-def params_yaml(run: Settings, per_node: dict[str, dict[str, Any]]) -> str:
-    """A parameter file in the ROS 2 form: the run under ``/**``, each node's own under ``/<node>``."""
-    import yaml  # type: ignore[import-untyped]  # PyYAML ships no type hints
-
-    doc = {"/**": {"ros__parameters": {p.name: getattr(run, p.name) for p in RUN_PARAMETERS}}}
-    for node, values in per_node.items():
-        if values:
-            doc[f"/{node}"] = {"ros__parameters": dict(values)}
-    return yaml.safe_dump(doc, sort_keys=False)
