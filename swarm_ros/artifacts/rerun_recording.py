@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from swarm_ros.artifacts.recording_options import RecordingError
 from swarm_ros.artifacts.rerun_scene import EVENTS, FILLED, FREE, METRICS, OCCUPANCY, ROBOTS, blueprint, log_scene
-from swarm_ros.artifacts.run_dir import OutputError
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
 from swarm_ros.core.params import RunParams
@@ -37,10 +37,6 @@ TIMELINE = "tick"
 BATCH_TICKS = 64  #: ticks of robots and metrics buffered before they are sent
 
 DISK_FULL = "no space left on device"
-
-
-class RecordingError(OutputError):
-    """The recording file could not be written (a full disk, say); what is on disk of it is not whole."""
 
 
 def write_failure(path: Path | None, exc: BaseException | None = None) -> str:

@@ -24,8 +24,7 @@ from rclpy.publisher import Publisher
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
-from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.artifacts.rerun_recording import RecordingError
+from swarm_ros.artifacts.recording_options import RecordingError, RecordingOptions
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.warmup import warm_up
