@@ -36,6 +36,7 @@ setup(
         "pillow>=10",
         "PyYAML>=6",
         "tqdm>=4.66",
+        "setproctitle>=1.3",  # a forked node shows its own command in ps (app/forking.py)
         "rerun-sdk>=0.41,<0.42",
         "rosbags>=0.11,<0.12",
         "mcap>=1.6",  # reading a killed monitor's unfinished bag (ros/bag_writer.py)

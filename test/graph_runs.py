@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import signal
 from pathlib import Path
 
@@ -42,6 +43,21 @@ def _processes_where(read: str, holds) -> list[int]:
 def processes_mentioning(text: str) -> list[int]:
     """Pids of the processes whose command line holds ``text``."""
     return _processes_where("cmdline", lambda cmdline: text in cmdline)
+
+
+def command_args(pid: int) -> list[str]:
+    """Process ``pid``'s command line as arguments: NUL-separated as exec gave them, or a node forked by
+    ``swarm-ros run`` whose title (setproctitle) is its command, quoted (swarm_ros/app/forking.py). [] if gone."""
+    try:
+        raw = Path(f"/proc/{pid}/cmdline").read_bytes().rstrip(b"\0").decode(errors="replace")
+    except OSError:
+        return []
+    if "\0" in raw:
+        return raw.split("\0")
+    try:
+        return shlex.split(raw)
+    except ValueError:
+        return raw.split()
 
 
 def run_processes(out: Path) -> list[int]:
@@ -89,11 +105,8 @@ def node_pid(out: Path, node: str, timeout: float = 60, not_pid: int | None = No
 
     def found() -> int | None:
         for pid in run_processes(out):
-            try:
-                cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
-            except OSError:
-                continue
-            if f"__node:={node}\0" in cmdline + "\0" and str(out.parent) in cmdline and pid != not_pid:
+            args = command_args(pid)
+            if f"__node:={node}" in args and any(str(out.parent) in a for a in args) and pid != not_pid:
                 return pid
         return None
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from graph_runs import processes_mentioning, run_env
+from graph_runs import command_args, processes_mentioning, run_env
 from recordings import Recording, rrd_verify
 
 from swarm_ros.core import RunParams, Shape
@@ -90,8 +90,7 @@ def _wait_until_running(out: Path, launcher: subprocess.Popen, batches: int = 3,
 
 def _pid_of(node: str, logs: Path) -> int:
     for pid in processes_mentioning(str(logs)):
-        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
-        if f"__node:={node}\0" in cmdline + "\0":
+        if f"__node:={node}" in command_args(pid):
             return pid
     raise AssertionError(f"no process for {node}")
 

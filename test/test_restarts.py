@@ -134,6 +134,9 @@ def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_iden
         _world_log(out),
     )
     assert back and int(back.group(2)) == restart["tick"]
+    # forked from the launcher at the start; its restart started afresh (rclpy runs in the launcher by then)
+    launched = re.findall(r"started robot_batch_2 \(pid \d+(, forked)?\)", (out / "logs" / "launcher.log").read_text())
+    assert launched == [", forked", ""]
     print(f"restart to resume: {float(back.group(1)) - killed:.2f} s after the SIGKILL")
     # robots were being handed over to and from its strip when it died: the snapshot carried them
     assert _handovers(2, range(restart["tick"] - 1, restart["tick"] + 2)) > 0

@@ -1,6 +1,7 @@
 """``swarm-ros run``: one run over the ROS 2 graph, each node its own OS process.
 
-The launcher starts the monitor, K robot-batch processes and the world, follows the
+The launcher loads the kernels every node uses, then forks the monitor, K robot-batch processes
+and the world from itself (:mod:`swarm_ros.app.forking`; a restarted node is started afresh), follows the
 run's progress on /swarm/metrics, and waits for the monitor to write the run
 directory. Then it lets every process end by itself, and stops those that do not
 (SIGTERM, then SIGKILL, to the process group of each). If any process
@@ -41,6 +42,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
+from swarm_ros.app.forking import Forked, can_fork, preload, start_node
 from swarm_ros.app.param_file import params_yaml
 from swarm_ros.app.processes import (
     CHECKPOINT,
@@ -134,6 +136,7 @@ class Launch:
     started: bool = False  #: the world has sent tick 0 (as far as this process has heard)
     logs_kept: Path | None = None  #: where the processes' logs went at the end
     _shm_listed: int = 0  #: how many shared-memory lock files SHM_LIST holds
+    _fork: bool = False  #: nodes are forked from this process, which has loaded the kernels (app/forking.py)
 
     def _note(self, event: str, at: float | None = None) -> None:
         self.timeline.append((time.time() if at is None else at, event))
@@ -230,6 +233,9 @@ class Launch:
 
     def _start(self, logs: Path, domain_id: int, out: Path) -> None:
         self._compile_kernels()
+        if can_fork():
+            preload(self.shape, self.params)
+            self._fork = can_fork()
         shape_arg = self.settings.shape
         if Path(shape_arg).suffix.lower() in (".txt", ".png"):
             shape_arg = str(Path(shape_arg).absolute())
@@ -295,10 +301,8 @@ class Launch:
             f.write(f"--- swarm-ros: restarted, incarnation {incarnation} ---\n".encode())
             f.flush()
         full = command + (["-p", f"incarnation:={incarnation}"] if incarnation else [])
-        proc = subprocess.Popen(
-            full, env=self.env, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True
-        )
-        self._note(f"started {name} (pid {proc.pid})")
+        proc = start_node(full, self.env, f, self._fork)
+        self._note(f"started {name} (pid {proc.pid}{', forked' if isinstance(proc, Forked) else ''})")
         return Child(name, proc, log, f, command=command, incarnation=incarnation)
 
     def _restart(self, old: Child) -> Child:

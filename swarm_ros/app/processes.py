@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
+from swarm_ros.app.forking import Forked
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.signals import PARENT_ENV
 from swarm_ros.protocol.plan import WORLD, shard_name
@@ -38,7 +39,7 @@ class LaunchError(InputError):
 @dataclass
 class Child:
     name: str
-    proc: subprocess.Popen
+    proc: subprocess.Popen | Forked
     log: Path
     log_file: IO = field(repr=False)
     command: list[str] = field(default_factory=list)
@@ -212,8 +213,11 @@ def stop(children: list[Child]) -> None:
         for c in alive:
             try:
                 os.killpg(c.proc.pid, sig)
-            except ProcessLookupError:
-                pass
+            except ProcessLookupError:  # a forked node not yet in its own session (app/forking.py)
+                try:
+                    os.kill(c.proc.pid, sig)
+                except ProcessLookupError:
+                    pass
         deadline = time.monotonic() + wait
         while time.monotonic() < deadline and any(c.proc.poll() is None for c in alive):
             time.sleep(0.02)

@@ -1,0 +1,148 @@
+"""Node processes forked from the launcher after it has loaded what every node loads, instead of started afresh.
+
+A node started with ``python -m`` spends about 1 s of CPU before it does anything of its own: numpy, numba
+(which imports scipy.linalg to find a BLAS), and numba's cache load of the kernels (:mod:`swarm_ros.core.warmup`).
+Four such processes on 2 cores were most of the README's command. ``swarm-ros run`` therefore loads these once,
+in its own process, and forks each node from it: the child starts with the kernels in memory and imports only
+rclpy and its node module. What the child does from there is what ``python -m swarm_ros.nodes.<node>`` does.
+
+Forking is only safe from a process without threads that hold locks the child would need. numpy's OpenBLAS
+pool is fork-aware (it re-creates its threads in the child); rclpy and Rerun start threads at import that are
+not. :func:`can_fork` therefore refuses once either is imported, or when other Python threads run (a Dask
+worker runs the launcher in a thread), and the launcher then starts nodes with ``python -m`` as before: a
+restarted node, for one, starts that way, since by then the launcher's progress bar has rclpy running.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Mapping
+from typing import IO
+
+#: modules that start threads at import which a forked child cannot use (found by counting /proc/self/task)
+_THREADED = ("rclpy", "rerun", "distributed")
+_NODE_PREFIX = "swarm_ros.nodes."
+
+
+def can_fork() -> bool:
+    """Whether this process may fork a node: on the main thread, the only Python thread, and neither rclpy nor
+    Rerun nor Dask's distributed loaded."""
+    return (
+        hasattr(os, "fork")
+        and threading.current_thread() is threading.main_thread()
+        and threading.active_count() == 1
+        and not any(m == name or m.startswith(name + ".") for m in sys.modules for name in _THREADED)
+    )
+
+
+def preload(shape, params) -> None:
+    """Load, in this process, what each node would load on its own: numpy, numba and the compiled kernels
+    of the run's code path (from numba's cache, which the launcher has filled)."""
+    from swarm_ros.core.warmup import warm_up
+
+    warm_up(shape, params)
+
+
+def forkable(command: list[str]) -> str | None:
+    """The node module a ``python -m swarm_ros.nodes.<node> ...`` command runs, or None for any other command."""
+    if len(command) >= 3 and command[0] == sys.executable and command[1] == "-m":
+        if command[2].startswith(_NODE_PREFIX):
+            return command[2]
+    return None
+
+
+def start_node(command: list[str], env: Mapping[str, str], log: IO, fork: bool) -> subprocess.Popen | Forked:
+    """Start a node's ``command`` in a session of its own, stdout and stderr into ``log``: forked from this process
+    if ``fork`` (it has preloaded), it may (:func:`can_fork`: a restart comes after rclpy's start) and the command
+    is a node module's; otherwise executed."""
+    module = forkable(command) if fork and can_fork() else None
+    if module is None:
+        return subprocess.Popen(
+            command, env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True
+        )
+    return Forked(module, command[3:], env, log.fileno())
+
+
+class Forked:
+    """A node process forked from this one; what the launcher uses of :class:`subprocess.Popen`: ``pid``,
+    ``returncode``, ``poll()`` and ``wait()``. Its exit status reads as Popen's does (-N: killed by signal N)."""
+
+    def __init__(self, module: str, args: list[str], env: Mapping[str, str], log_fd: int) -> None:
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()  # or the child writes this process's buffered output a second time
+        self.args = [module, *args]
+        self.returncode: int | None = None
+        pid = os.fork()
+        if pid == 0:  # the child: never returns
+            _become_node(module, args, env, log_fd)
+        self.pid = pid
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            try:
+                pid, status = os.waitpid(self.pid, os.WNOHANG)
+            except ChildProcessError:  # reaped elsewhere: its status is lost
+                self.returncode = 255
+                return self.returncode
+            if pid:
+                self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int | None:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.poll() is None:
+            if deadline is not None and time.monotonic() >= deadline:
+                return None
+            time.sleep(0.005)
+        return self.returncode
+
+
+def _become_node(module: str, args: list[str], env: Mapping[str, str], log_fd: int) -> None:
+    """In the forked child: become ``python -m <module> <args>`` with ``env``, stdout and stderr in ``log_fd``,
+    in a session of its own (as ``start_new_session`` makes one); then exit, never returning to the caller."""
+    code = 1
+    try:
+        os.setsid()
+        null = os.open(os.devnull, os.O_RDONLY)
+        os.dup2(null, 0)
+        os.dup2(log_fd, 1)
+        os.dup2(log_fd, 2)
+        os.closerange(3, os.sysconf("SC_OPEN_MAX"))  # the launcher's lock, other nodes' logs: not this node's
+        signal.set_wakeup_fd(-1)
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # the handlers a fresh interpreter has
+            if signal.getsignal(sig) not in (signal.SIG_IGN, signal.SIG_DFL, signal.default_int_handler):
+                signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
+        import setproctitle
+
+        # what ps shows for it; first: it finds the room for the title through the environment as it was
+        setproctitle.setproctitle(shlex.join([sys.executable, "-m", module, *args]))
+        os.environ.clear()
+        os.environ.update(env)
+        sys.stdin = open(0, encoding="utf-8", closefd=False)
+        sys.stdout = open(1, "w", encoding="utf-8", errors="backslashreplace", closefd=False, buffering=1)
+        sys.stderr = open(2, "w", encoding="utf-8", errors="backslashreplace", closefd=False, buffering=1)
+        sys.argv = [module, *args]
+        code = importlib.import_module(module).main(sys.argv)  # a node's main ends the process itself
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        if not isinstance(exc.code, int | None):
+            print(exc.code, file=sys.stderr)
+    except KeyboardInterrupt:  # as the interpreter ends on one: killed by SIGINT
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGINT)
+    except BaseException:
+        traceback.print_exc()
+    finally:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(code)

@@ -1,0 +1,157 @@
+"""A node forked by ``swarm-ros run`` (swarm_ros/app/forking.py) is what ``python -m`` would have started: its own
+session, its own environment and command line, stdin from /dev/null, output in its log, none of the launcher's
+files, and an exit status read as subprocess reads one. A stand-in node module reports what it finds."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from waiting import wait_for
+
+from swarm_ros.app.forking import Forked, forkable, start_node
+
+pytestmark = pytest.mark.process
+
+NODE = textwrap.dedent(
+    """
+    import json, os, signal, sys, time
+
+    def main(argv):
+        what = argv[1]
+        if what == "report":
+            print(json.dumps({
+                "argv": argv,
+                "env": os.environ.get("FORK_TEST"),
+                "launcher_only": os.environ.get("LAUNCHER_ONLY"),
+                "session_leader": os.getsid(0) == os.getpid(),
+                "group_leader": os.getpgid(0) == os.getpid(),
+                "stdin": os.readlink("/proc/self/fd/0"),
+                "fds": sorted(int(fd) for fd in os.listdir("/proc/self/fd")),
+                "cmdline": open("/proc/self/cmdline", "rb").read().rstrip(b"\\0").decode(),
+                "sigterm_default": signal.getsignal(signal.SIGTERM) == signal.SIG_DFL,
+            }))
+            return 0
+        if what == "code":
+            return int(argv[2])
+        if what == "exit-text":
+            raise SystemExit("cannot go on: a reason")
+        if what == "raise":
+            raise ValueError("a bug in the node")
+        if what == "sleep":
+            print("sleeping", flush=True)
+            time.sleep(60)
+        return 9
+    """
+)
+
+
+@pytest.fixture
+def node_module(tmp_path, monkeypatch):
+    (tmp_path / "fork_stand_in.py").write_text(NODE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    return "fork_stand_in"
+
+
+def _fork(module: str, args: list[str], log: Path, env: dict[str, str] | None = None) -> Forked:
+    with open(log, "ab") as f:
+        return Forked(module, args, env if env is not None else {"FORK_TEST": "yes"}, f.fileno())
+
+
+def test_a_forked_node_starts_as_python_dash_m_would(node_module, tmp_path, monkeypatch):
+    monkeypatch.setenv("LAUNCHER_ONLY", "1")  # in this process's environment, not in the one given
+    log = tmp_path / "node.log"
+    held = open(tmp_path / "held", "w")  # a file of the launcher's (its domain lock, another node's log)
+    held_fd = held.fileno()
+    try:
+        child = _fork(node_module, ["report", "--ros-args", "-r", "__node:=x y"], log)
+        assert child.wait(timeout=30) == 0
+    finally:
+        held.close()
+    seen = json.loads(log.read_text())
+    assert seen["argv"] == [node_module, "report", "--ros-args", "-r", "__node:=x y"]
+    assert seen["env"] == "yes" and seen["launcher_only"] is None
+    assert seen["session_leader"] and seen["group_leader"]
+    assert seen["stdin"] == "/dev/null"
+    assert seen["fds"][:3] == [0, 1, 2] and held_fd not in seen["fds"]
+    assert seen["sigterm_default"]
+    # ps shows the node's own command, quoted as a shell would take it
+    assert seen["cmdline"] == f"{sys.executable} -m {node_module} report --ros-args -r '__node:=x y'"
+
+
+@pytest.mark.parametrize(
+    "args,code,logged",
+    [
+        (["code", "0"], 0, ""),
+        (["code", "3"], 3, ""),
+        (["exit-text"], 1, "cannot go on: a reason"),
+        (["raise"], 1, "ValueError: a bug in the node"),
+    ],
+)
+def test_a_forked_nodes_exit_status_and_errors_are_those_of_its_own_process(node_module, tmp_path, args, code, logged):
+    log = tmp_path / "node.log"
+    child = _fork(node_module, args, log)
+    assert child.wait(timeout=30) == code
+    assert child.returncode == code and child.poll() == code
+    assert logged in log.read_text()
+
+
+def test_a_forked_node_killed_by_a_signal_reads_as_popen_reads_it(node_module, tmp_path):
+    log = tmp_path / "node.log"
+    child = _fork(node_module, ["sleep"], log)
+    assert child.poll() is None and child.wait(timeout=0.05) is None
+    wait_for(lambda: "sleeping" in log.read_text(), 30, "the node's main to run")
+    os.killpg(child.pid, signal.SIGTERM)  # its own process group, as processes.stop signals it
+    assert child.wait(timeout=30) == -signal.SIGTERM
+
+
+def test_only_a_node_module_run_with_this_python_is_forked():
+    assert forkable([sys.executable, "-m", "swarm_ros.nodes.world", "--ros-args"]) == "swarm_ros.nodes.world"
+    assert forkable([sys.executable, "-m", "swarm_ros.core.kernels"]) is None
+    assert forkable(["/usr/bin/python3", "-m", "swarm_ros.nodes.world"]) is None
+    assert forkable([sys.executable, "script.py"]) is None
+
+
+def test_no_fork_once_rclpy_or_rerun_is_loaded_or_off_the_main_thread():
+    """In a fresh interpreter (this one has loaded both): each import that starts threads ends forking."""
+    code = (
+        "import sys, threading; from swarm_ros.app.forking import can_fork; seen = [can_fork()]; "
+        "t = threading.Thread(target=lambda: seen.append(can_fork())); t.start(); t.join(); "
+        "import rerun; seen.append(can_fork()); print(seen)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.stdout.strip() == "[True, False, False]", done.stderr
+    pytest.importorskip("rclpy")
+    done = subprocess.run(
+        [sys.executable, "-c", "import rclpy; from swarm_ros.app.forking import can_fork; print(can_fork())"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.stdout.strip() == "False", done.stderr
+
+
+def test_a_command_that_may_not_be_forked_is_executed(tmp_path):
+    """``fork`` False, or another command: subprocess, in a session of its own, as before."""
+    with open(tmp_path / "log", "ab") as f:
+        proc = start_node([sys.executable, "-c", "import os; print(os.getsid(0) == os.getpid())"], {}, f, True)
+    assert isinstance(proc, subprocess.Popen)
+    assert proc.wait(timeout=30) == 0
+    assert (tmp_path / "log").read_text().strip() == "True"
+
+
+def test_the_launcher_imports_neither_rclpy_nor_rerun_before_it_forks():
+    """Its imports up to the fork leave it free to fork (else every node would start with ``python -m``)."""
+    code = (
+        "import sys; import swarm_ros.app.launcher, swarm_ros.app.commands, swarm_ros.app.forking as f; "
+        "from swarm_ros.core import Shape; from swarm_ros.core.params import RunParams; "
+        "s = Shape.load('star'); f.preload(s, RunParams(robots=s.patches)); print(f.can_fork())"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.stdout.strip() == "True", done.stderr
