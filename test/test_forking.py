@@ -138,9 +138,9 @@ def test_no_fork_once_rclpy_or_rerun_is_loaded_or_off_the_main_thread():
 
 
 def test_a_command_that_may_not_be_forked_is_executed(tmp_path):
-    """``fork`` False, or another command: subprocess, in a session of its own, as before."""
+    """Another command than a node module's: subprocess, in a session of its own, as before."""
     with open(tmp_path / "log", "ab") as f:
-        proc = start_node([sys.executable, "-c", "import os; print(os.getsid(0) == os.getpid())"], {}, f, True)
+        proc = start_node([sys.executable, "-c", "import os; print(os.getsid(0) == os.getpid())"], {}, f)
     assert isinstance(proc, subprocess.Popen)
     assert proc.wait(timeout=30) == 0
     assert (tmp_path / "log").read_text().strip() == "True"

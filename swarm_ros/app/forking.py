@@ -59,11 +59,11 @@ def forkable(command: list[str]) -> str | None:
     return None
 
 
-def start_node(command: list[str], env: Mapping[str, str], log: IO, fork: bool) -> subprocess.Popen | Forked:
+def start_node(command: list[str], env: Mapping[str, str], log: IO) -> subprocess.Popen | Forked:
     """Start a node's ``command`` in a session of its own, stdout and stderr into ``log``: forked from this process
-    if ``fork`` (it has preloaded), it may (:func:`can_fork`: a restart comes after rclpy's start) and the command
-    is a node module's; otherwise executed."""
-    module = forkable(command) if fork and can_fork() else None
+    if it may (:func:`can_fork`: a restart comes after rclpy's start) and the command is a node module's;
+    otherwise executed."""
+    module = forkable(command) if can_fork() else None
     if module is None:
         return subprocess.Popen(
             command, env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True

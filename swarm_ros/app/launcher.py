@@ -136,7 +136,6 @@ class Launch:
     started: bool = False  #: the world has sent tick 0 (as far as this process has heard)
     logs_kept: Path | None = None  #: where the processes' logs went at the end
     _shm_listed: int = 0  #: how many shared-memory lock files SHM_LIST holds
-    _fork: bool = False  #: nodes are forked from this process, which has loaded the kernels (app/forking.py)
 
     def _note(self, event: str, at: float | None = None) -> None:
         self.timeline.append((time.time() if at is None else at, event))
@@ -233,9 +232,8 @@ class Launch:
 
     def _start(self, logs: Path, domain_id: int, out: Path) -> None:
         self._compile_kernels()
-        if can_fork():
+        if can_fork():  # the nodes are forked from this process (app/forking.py): they start with the kernels
             preload(self.shape, self.params)
-            self._fork = can_fork()
         shape_arg = self.settings.shape
         if Path(shape_arg).suffix.lower() in (".txt", ".png"):
             shape_arg = str(Path(shape_arg).absolute())
@@ -301,7 +299,7 @@ class Launch:
             f.write(f"--- swarm-ros: restarted, incarnation {incarnation} ---\n".encode())
             f.flush()
         full = command + (["-p", f"incarnation:={incarnation}"] if incarnation else [])
-        proc = start_node(full, self.env, f, self._fork)
+        proc = start_node(full, self.env, f)
         self._note(f"started {name} (pid {proc.pid}{', forked' if isinstance(proc, Forked) else ''})")
         return Child(name, proc, log, f, command=command, incarnation=incarnation)
 
