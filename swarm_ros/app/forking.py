@@ -30,6 +30,7 @@ from typing import IO
 #: modules that start threads at import which a forked child cannot use (found by counting /proc/self/task)
 _THREADED = ("rclpy", "rerun", "distributed")
 _NODE_PREFIX = "swarm_ros.nodes."
+_HELD = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}  #: what stops a launcher: held back while it forks
 
 
 def can_fork() -> bool:
@@ -80,9 +81,17 @@ class Forked:
             stream.flush()  # or the child writes this process's buffered output a second time
         self.args = [module, *args]
         self.returncode: int | None = None
-        pid = os.fork()
-        if pid == 0:  # the child: never returns
-            _become_node(module, args, env, log_fd)
+        # No signal handler may run inside the fork: Python's at-fork hooks (logging's lock, taken before and
+        # given back after) would swallow the KeyboardInterrupt a SIGTERM handler raises there, and the lock
+        # would stay taken for good (seen: the launcher's progress thread hung on it, and the SIGTERM was lost).
+        # Held back until the fork is done, the signal is handled in this process after it, as anywhere else.
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+        try:
+            pid = os.fork()
+            if pid == 0:  # the child: never returns
+                _become_node(module, args, env, log_fd, mask)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         self.pid = pid
 
     def poll(self) -> int | None:
@@ -105,7 +114,9 @@ class Forked:
         return self.returncode
 
 
-def _become_node(module: str, args: list[str], env: Mapping[str, str], log_fd: int) -> None:
+def _become_node(
+    module: str, args: list[str], env: Mapping[str, str], log_fd: int, mask: set[signal.Signals | int]
+) -> None:
     """In the forked child: become ``python -m <module> <args>`` with ``env``, stdout and stderr in ``log_fd``,
     in a session of its own (as ``start_new_session`` makes one); then exit, never returning to the caller."""
     code = 1
@@ -120,6 +131,7 @@ def _become_node(module: str, args: list[str], env: Mapping[str, str], log_fd: i
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # the handlers a fresh interpreter has
             if signal.getsignal(sig) not in (signal.SIG_IGN, signal.SIG_DFL, signal.default_int_handler):
                 signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # the parent's, from before the fork
         import setproctitle
 
         # what ps shows for it; first: it finds the room for the title through the environment as it was
