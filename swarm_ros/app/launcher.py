@@ -50,6 +50,7 @@ from swarm_ros.app.processes import (
     Child,
     DomainLock,
     LaunchError,
+    at_low_priority,
     logs_target,
     node_command,
     node_env,
@@ -332,10 +333,11 @@ class Launch:
         # inside the executor's call of a Python callback comes out as a RuntimeError from pybind11.
         # (Signal handlers can only be set from the main thread; a Dask worker runs this in another.)
         stop = StopFlag() if threading.current_thread() is threading.main_thread() else None
+        key = self.env[KEY_ENV].encode()
         with (
             stop or nullcontext(),
-            Progress(
-                self.domain, self.shape.patches, self.env[KEY_ENV].encode(), quiet=self.quiet, enclaves=self.enclaves
+            at_low_priority(  # its node starts while the graph's do: theirs come first
+                lambda: Progress(self.domain, self.shape.patches, key, quiet=self.quiet, enclaves=self.enclaves)
             ) as progress,
         ):
             while True:
