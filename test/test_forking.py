@@ -118,23 +118,25 @@ def test_only_a_node_module_run_with_this_python_is_forked():
     assert forkable([sys.executable, "script.py"]) is None
 
 
-def test_no_fork_once_rclpy_or_rerun_is_loaded_or_off_the_main_thread():
-    """In a fresh interpreter (this one has loaded both): each import that starts threads ends forking."""
-    code = (
-        "import sys, threading; from swarm_ros.app.forking import can_fork; seen = [can_fork()]; "
-        "t = threading.Thread(target=lambda: seen.append(can_fork())); t.start(); t.join(); "
-        "import rerun; seen.append(can_fork()); print(seen)"
-    )
+def _fresh_python(code: str) -> str:
+    """What ``code`` prints in a fresh interpreter (this one has loaded rclpy and Rerun)."""
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert done.stdout.strip() == "[True, False, False]", done.stderr
-    pytest.importorskip("rclpy")
-    done = subprocess.run(
-        [sys.executable, "-c", "import rclpy; from swarm_ros.app.forking import can_fork; print(can_fork())"],
-        capture_output=True,
-        text=True,
-        timeout=120,
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip()
+
+
+def test_no_fork_once_rclpy_or_rerun_is_loaded_or_off_the_main_thread():
+    """Each import that starts threads ends forking, and so does another thread."""
+    assert (
+        _fresh_python(
+            "import sys, threading; from swarm_ros.app.forking import can_fork; seen = [can_fork()]; "
+            "t = threading.Thread(target=lambda: seen.append(can_fork())); t.start(); t.join(); "
+            "import rerun; seen.append(can_fork()); print(seen)"
+        )
+        == "[True, False, False]"
     )
-    assert done.stdout.strip() == "False", done.stderr
+    pytest.importorskip("rclpy")
+    assert _fresh_python("import rclpy; from swarm_ros.app.forking import can_fork; print(can_fork())") == "False"
 
 
 def test_a_command_that_may_not_be_forked_is_executed(tmp_path):
@@ -153,8 +155,7 @@ def test_the_launcher_imports_neither_rclpy_nor_rerun_before_it_forks():
         "from swarm_ros.core import Shape; from swarm_ros.core.params import RunParams; "
         "s = Shape.load('star'); f.preload(s, RunParams(robots=s.patches)); print(f.can_fork())"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert done.stdout.strip() == "True", done.stderr
+    assert _fresh_python(code) == "True"
 
 
 def test_the_launchers_own_node_is_built_at_a_lower_cpu_priority_than_its_nodes():
