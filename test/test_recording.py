@@ -207,8 +207,8 @@ def test_a_close_stuck_on_a_full_disk_gives_up_and_removes_the_file_one_that_end
     import threading
 
     from swarm_ros.artifacts import rerun_recording
-    from swarm_ros.artifacts.recording_options import RecordingError
     from swarm_ros.artifacts.rerun_recording import Recorder
+    from swarm_ros.artifacts.run_dir import RecordingError
     from swarm_ros.core import RunParams, Shape
 
     shape = Shape.load("rectangle")

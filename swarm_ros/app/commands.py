@@ -303,7 +303,7 @@ def note_compiling(quiet: bool) -> None:
 
 def _closed_whole(recorder: Recorder) -> bool:
     """Close the recording of a run that failed; False if it could not be written whole (it is then removed)."""
-    from swarm_ros.artifacts.recording_options import RecordingError
+    from swarm_ros.artifacts.run_dir import RecordingError
 
     try:
         recorder.close()

@@ -10,7 +10,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from swarm_ros.artifacts.run_dir import OutputError
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.params import RECORD_EVERY, auto_every
 
@@ -20,10 +19,6 @@ if TYPE_CHECKING:
     from swarm_ros.core.shapes import Shape
 
 _URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
-
-
-class RecordingError(OutputError):
-    """The recording file could not be written (a full disk, say); what is on disk of it is not whole."""
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from swarm_ros.artifacts.recording_options import RecordingError
 from swarm_ros.artifacts.rerun_scene import EVENTS, FILLED, FREE, METRICS, OCCUPANCY, ROBOTS, blueprint, log_scene
+from swarm_ros.artifacts.run_dir import RecordingError
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
 from swarm_ros.core.params import RunParams

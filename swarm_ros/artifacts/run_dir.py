@@ -39,6 +39,10 @@ class OutputError(InputError):
     """The output directory cannot be used."""
 
 
+class RecordingError(OutputError):
+    """The recording file could not be written (a full disk, say); what is on disk of it is not whole."""
+
+
 def default_run_dir(shape: str, robots: int, vision: float, seed: int, now: datetime | None = None) -> Path:
     """``runs/<time>_<shape>_n<N>_v<R>_s<seed>`` under the current directory."""
     stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")

@@ -24,7 +24,7 @@ from rclpy.publisher import Publisher
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
-from swarm_ros.artifacts.recording_options import RecordingError, RecordingOptions
+from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.warmup import warm_up
@@ -270,10 +270,10 @@ class MonitorNode:
         if self.bag is not None and not interrupted:
             # closed, kept beside the run (an interrupted run takes it); before tick 0 removed, not to block the next
             self.bag.discard() if unstarted else self.bag.move_to(run_dir.partial_bag(self.out))
-        lost: RecordingError | None = None
+        lost: run_dir.RecordingError | None = None
         try:
             core.close_recording(stopped=code in (EXIT_INTERRUPTED, EXIT_ORPHANED))
-        except RecordingError as exc:  # a full disk: the recording is removed; the bag is still to be dealt with
+        except run_dir.RecordingError as exc:  # a full disk: the recording is removed; the bag is still to go
             if not interrupted:
                 raise
             lost = exc
