@@ -388,3 +388,31 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
     assert not list(tmp_path.glob(".run.logs-*")) and (tmp_path / "run.logs" / "world.log").is_file()
     assert not list((tmp_path / "run.logs").glob("world.checkpoint*"))
     assert shm_left(left) == []
+
+
+@pytest.mark.parametrize(
+    "hang,code,said",
+    [
+        # the teardown waits in Python, or in C with the GIL let go: Python's watchdog exits with the node's code
+        ("time.sleep(60)", 7, "rclpy's shutdown took over 0.5 s; exiting without it"),
+        # in C with the GIL kept, as rclpy waits inside Fast DDS (a deadlock of its threads, seen in CI): only
+        # faulthandler's thread can end it, with the stacks and status 1
+        ("ctypes.PyDLL(None).sleep(60)", 1, "Timeout (0:00:01)!"),
+    ],
+)
+def test_a_node_whose_teardown_hangs_exits_all_the_same(hang, code, said):
+    """A node's process ends within twice the teardown bound however rclpy's teardown hangs, so a node never
+    outlives its launcher (a batch hung for good in CI once its launcher was SIGKILLed)."""
+    pytest.importorskip("rclpy")
+    script = (
+        "import ctypes, time\n"
+        "from swarm_ros.ros import runtime\n"
+        "runtime._TEARDOWN_S = 0.5\n"
+        f"runtime.guard_teardown('robot_batch_0', {code})\n"
+        f"{hang}\n"
+    )
+    began = time.monotonic()
+    done = subprocess.run([PY, "-c", script], capture_output=True, text=True, timeout=60)
+    assert done.returncode == code, done.stderr
+    assert said in done.stderr
+    assert time.monotonic() - began < 30  # not the 60 s of the hang (start-up included, on a slow machine)

@@ -7,6 +7,7 @@ the launcher died (SIGHUP, sent by the kernel: see :func:`follow_parent`).
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
@@ -179,11 +180,7 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
                     code = _fail(name, f"while closing: {exc}", EXIT_FAILED)
                 else:  # the error already said is the one the launcher reports; this one goes to the log
                     swarm.node.get_logger().warn(f"while closing: {exc}")
-        # Everything is saved: rclpy's and DDS's teardown may not hold the exit up (a monitor that had
-        # written its run once hung in it until the launcher killed it, failing a finished run).
-        watchdog = threading.Timer(_TEARDOWN_S, _hung_teardown, (name, code))
-        watchdog.daemon = True
-        watchdog.start()
+        guard_teardown(name, code)
         if executor is not None:
             executor.shutdown()
         if swarm is not None:
@@ -196,6 +193,20 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         sys.stdout.flush()
         sys.stderr.flush()
     os._exit(code)
+
+
+def guard_teardown(name: str, code: int) -> None:
+    """Everything is saved: rclpy's and DDS's teardown may not hold the exit up. After ``_TEARDOWN_S`` the
+    process exits with ``code`` (a monitor that had written its run once hung in it until the launcher killed
+    it, failing a finished run). That watchdog is Python's and needs the GIL, which rclpy keeps while it waits
+    inside Fast DDS: a batch whose launcher was SIGKILLed hung for good in a deadlock of Fast DDS 2.14 (its
+    event thread and a receive thread, each waiting on the other, as the dead launcher's participant was
+    removed). So faulthandler's C thread, which needs no GIL, ends it at twice that: the threads' stacks into
+    the log, exit status 1."""
+    watchdog = threading.Timer(_TEARDOWN_S, _hung_teardown, (name, code))
+    watchdog.daemon = True
+    watchdog.start()
+    faulthandler.dump_traceback_later(2 * _TEARDOWN_S, exit=True)
 
 
 def _hung_teardown(name: str, code: int) -> None:
