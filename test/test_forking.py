@@ -21,7 +21,7 @@ pytestmark = pytest.mark.process
 
 NODE = textwrap.dedent(
     """
-    import json, os, signal, sys, time
+    import ctypes, json, os, signal, sys, time
 
     def main(argv):
         what = argv[1]
@@ -36,6 +36,7 @@ NODE = textwrap.dedent(
                 "fds": sorted(int(fd) for fd in os.listdir("/proc/self/fd")),
                 "cmdline": open("/proc/self/cmdline", "rb").read().rstrip(b"\\0").decode(),
                 "sigterm_default": signal.getsignal(signal.SIGTERM) == signal.SIG_DFL,
+                "program": ctypes.c_char_p.in_dll(ctypes.CDLL(None), "program_invocation_name").value.decode(),
             }))
             return 0
         if what == "code":
@@ -81,6 +82,7 @@ def test_a_forked_node_starts_as_python_dash_m_would(node_module, tmp_path, monk
     assert seen["stdin"] == "/dev/null"
     assert seen["fds"][:3] == [0, 1, 2] and held_fd not in seen["fds"]
     assert seen["sigterm_default"]
+    assert seen["program"] == os.path.basename(sys.executable)  # ROS 2 names its log files by it
     # ps shows the node's own command, quoted as a shell would take it
     assert seen["cmdline"] == f"{sys.executable} -m {node_module} report --ros-args -r '__node:=x y'"
 

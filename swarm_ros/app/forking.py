@@ -15,6 +15,7 @@ restarted node, for one, starts that way, since by then the launcher's progress 
 
 from __future__ import annotations
 
+import ctypes
 import importlib
 import os
 import shlex
@@ -114,6 +115,21 @@ class Forked:
         return self.returncode
 
 
+_PROGRAM = ctypes.create_string_buffer(256)  #: the program's name for libc (and so ROS's log file names)
+
+
+def _name_program(name: str) -> None:
+    """Point libc's program_invocation_name, which ROS 2 names its log files by (``<name>_<pid>_<ms>.log``),
+    back at the interpreter's name: after setproctitle it is the whole title, slashes and spaces included."""
+    try:
+        libc = ctypes.CDLL(None)
+        _PROGRAM.value = name.encode()[: len(_PROGRAM) - 1]
+        for symbol in ("program_invocation_name", "program_invocation_short_name"):
+            ctypes.c_void_p.in_dll(libc, symbol).value = ctypes.addressof(_PROGRAM)
+    except (OSError, ValueError):
+        pass  # not glibc: the log files take the title's last part
+
+
 def _become_node(
     module: str, args: list[str], env: Mapping[str, str], log_fd: int, mask: set[signal.Signals | int]
 ) -> None:
@@ -136,6 +152,7 @@ def _become_node(
 
         # what ps shows for it; first: it finds the room for the title through the environment as it was
         setproctitle.setproctitle(shlex.join([sys.executable, "-m", module, *args]))
+        _name_program(os.path.basename(sys.executable))  # the title now holds argv[0]: ROS names its log by it
         os.environ.clear()
         os.environ.update(env)
         sys.stdin = open(0, encoding="utf-8", closefd=False)
