@@ -214,7 +214,8 @@ def at_low_priority(make: Callable[[], T], nice: int = 10) -> T:
 
     def body() -> None:
         try:
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+            me = threading.get_native_id()
+            os.setpriority(os.PRIO_PROCESS, me, min(os.getpriority(os.PRIO_PROCESS, me) + nice, 19))
         except OSError:
             pass  # not Linux: at the process's own priority
         try:
