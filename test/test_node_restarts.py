@@ -83,8 +83,9 @@ def test_a_world_killed_before_tick_0_starts_again_and_the_run_is_identical(refe
 def test_a_world_killed_at_tick_0_goes_on_from_it_and_the_run_is_identical(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
+    world = node_pid(out, "world")  # found first: the kill follows the save of tick 0 by milliseconds
     wait_saved(staged_logs(out), 0)
-    kill_node(out, "world")
+    os.kill(world, signal.SIGKILL)
     summary = finish_restarted_run(launcher, reference, out, ["world"])
     assert summary["restarts"][0]["tick"] < 20
 
