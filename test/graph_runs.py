@@ -178,13 +178,15 @@ def shm_left(files) -> list[str]:
     beside this one may rightly still hold them."""
     from swarm_ros.ros.shm import in_use
 
-    def group(path: str) -> set[str]:  # a segment, its lock file and (a port's) its semaphore
-        name = Path(path).name.removesuffix("_el")
-        if name.startswith("sem.") and name.endswith("_mutex"):
-            name = name.removeprefix("sem.").removesuffix("_mutex")
-        return {f"/dev/shm/{name}", f"/dev/shm/{name}_el", f"/dev/shm/sem.{name}_mutex"}
+    return sorted(f for f in files if os.path.exists(f) and not in_use(shm_group(f)))
 
-    return sorted(f for f in files if os.path.exists(f) and not in_use(group(f)))
+
+def shm_group(path: str) -> set[str]:
+    """A Fast DDS shared-memory file's group: its segment, its lock file and (a port's) its semaphore."""
+    name = Path(path).name.removesuffix("_el")
+    if name.startswith("sem.") and name.endswith("_mutex"):
+        name = name.removeprefix("sem.").removesuffix("_mutex")
+    return {f"/dev/shm/{name}", f"/dev/shm/{name}_el", f"/dev/shm/sem.{name}_mutex"}
 
 
 def descendants_of(pid: int) -> list[int]:

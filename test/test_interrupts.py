@@ -16,14 +16,14 @@ import time
 from pathlib import Path
 
 import pytest
-from graph_runs import alive, children_of, descendants_of, processes_mentioning, run_processes, shm_left
+from graph_runs import alive, children_of, descendants_of, processes_mentioning, run_processes, shm_group, shm_left
 from recordings import Recording, rrd_verify
 from runs import small_config
 from waiting import wait_for
 
 import swarm_ros
 from swarm_ros.app.results_file import read_results
-from swarm_ros.ros.shm import shm_locks
+from swarm_ros.ros.shm import in_use, shm_locks
 
 pytestmark = pytest.mark.process
 
@@ -376,6 +376,9 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
     assert left, "a SIGKILLed launcher left no shared-memory file: nothing to test"
     hidden = list(tmp_path.glob(".run.logs-*"))
     assert len(hidden) == 1
+    # a port's files are shared by every participant on that port: a test beside this one that has taken the
+    # port since holds them now, rightly, as the tidy-up below runs (and may let go before the check: CI once)
+    shared = {f for f in left if "_port" in Path(f).name and in_use(shm_group(f))}
     again = subprocess.run(
         [PY, "-m", "swarm_ros", "run", "--shape", "star", "--out", str(out), "--quiet"],
         capture_output=True,
@@ -387,7 +390,7 @@ def test_the_next_run_tidies_what_a_sigkilled_launcher_left(tmp_path):
     assert "run.partial.rrd: left by an earlier run" in again.stderr
     assert not list(tmp_path.glob(".run.logs-*")) and (tmp_path / "run.logs" / "world.log").is_file()
     assert not list((tmp_path / "run.logs").glob("world.checkpoint*"))
-    assert shm_left(left) == []
+    assert shm_left([f for f in left if f not in shared]) == []
 
 
 @pytest.mark.parametrize(
