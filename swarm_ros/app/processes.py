@@ -14,6 +14,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TypeVar
@@ -210,26 +211,16 @@ def at_low_priority(make: Callable[[], T], nice: int = 10) -> T:
     """``make()`` in a thread of its own whose CPU priority is lowered by ``nice``, and its result (or its
     exception): the threads it starts inherit the priority. The launcher builds its own ROS node so, while its
     node processes start on the same cores and need them more (tick 0 waits for the slowest)."""
-    got: list = []
 
-    def body() -> None:
+    def lower() -> None:
         try:
             me = threading.get_native_id()
             os.setpriority(os.PRIO_PROCESS, me, min(os.getpriority(os.PRIO_PROCESS, me) + nice, 19))
         except OSError:
             pass  # not Linux: at the process's own priority
-        try:
-            got.append((True, make()))
-        except BaseException as exc:  # raised in the caller's thread, below
-            got.append((False, exc))
 
-    worker = threading.Thread(target=body, name="swarm-ros-low", daemon=True)
-    worker.start()
-    worker.join()
-    ok, value = got[0]
-    if not ok:
-        raise value
-    return value
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="swarm-ros-low", initializer=lower) as pool:
+        return pool.submit(make).result()
 
 
 def stop(children: list[Child]) -> None:
