@@ -27,11 +27,12 @@ def shm_locks(pid: int | str) -> set[str]:
     return found
 
 
-def in_use(paths: set[str]) -> set[str]:
-    """Those of ``paths`` that a live process has mapped or open (every process's /proc maps and fds)."""
+def in_use(paths: set[str], besides: frozenset[int] = frozenset()) -> set[str]:
+    """Those of ``paths`` that a live process (other than the pids ``besides``) has mapped or open (every
+    process's /proc maps and fds)."""
     used: set[str] = set()
     for proc in Path("/proc").iterdir():
-        if not proc.name.isdigit():
+        if not proc.name.isdigit() or int(proc.name) in besides:
             continue
         try:
             with open(proc / "maps", encoding="utf-8", errors="replace") as f:
