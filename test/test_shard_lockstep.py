@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from lockstep_fakes import Clock, Log
 
 from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import area, batch_cuts, columns, halo, shard_batches, shard_cuts, strip
 from swarm_ros.core.replica import Replica
@@ -377,3 +378,22 @@ def test_first_of_is_np_unique_with_the_first_arrays_values(id_sets, rnd):
     every, first = _first_of(64, ids, values)
     want, at = np.unique(np.concatenate(ids), return_index=True)
     assert np.array_equal(every, want) and np.array_equal(first, np.concatenate(values)[at])
+
+
+def test_a_save_without_the_kept_messages_of_its_tick_is_refused_as_incomplete(tmp_path):
+    """A restarted shard resends its peers the messages of the last two ticks from its save: one that lacks them
+    (their slot cut off while being written, with the tick after it) is not gone on from."""
+    shape = Shape.load("star")
+    params = RunParams(robots=200, seed=3, max_ticks=300)
+    g = ShardedGraph(shape, params, 4, 2, 3, tmp_path)
+    g.start()
+    g.step_until(lambda: min(ls.sim.tick for ls in g.shards) >= 5)
+    port = g.ports[0]
+    saver = ShardSaver(port.saver.path, g.params, g.plan, 0, g.policy.monitor_window + 2, 2)
+    saved = saver.restore()
+    assert saved is not None and saver.checkpoint is not None
+    tick, ck = saved.exchange.shard.tick, saver.checkpoint
+    assert tick >= 5 and sorted(saved.exchange.sent) == [tick - 1, tick]
+    ck.map[ck.kept_at + (tick % 3) * ck.kept_slot :][:8].view(np.int64)[0] = -1
+    with pytest.raises(RunFailed, match="incomplete"):
+        ShardSaver(port.saver.path, g.params, g.plan, 0, g.policy.monitor_window + 2, 2).restore()

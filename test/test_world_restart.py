@@ -165,3 +165,32 @@ def test_the_bookkeeping_holds_batches_losses_and_times(tmp_path):
     r.run()
     assert ls.sim.done
     assert Policy().max_restarts == 3
+
+
+def test_a_shards_kept_messages_survive_a_kill_while_the_next_ticks_are_written(tmp_path):
+    """A world shard's messages for its peers are written in place, a tick to a slot of three: a kill while one
+    tick's are written (its slot marked unwritten) leaves the two ticks before whole; more than the file was made
+    for is refused, and a checkpoint sized for other messages is another run's."""
+    path, cols, kept = tmp_path / "ck", len(METRIC_COLUMNS), (3, 64)
+    ck = Checkpoint(path, ROBOTS, MAX_TICKS, cols, 4, kept=kept)
+    ck.create()
+    ticks = {t: [np.arange(t, dtype=np.int64), np.full(2, t, np.uint8), np.empty(0, np.int32)] for t in range(1, 5)}
+    for t in (1, 2, 3):
+        ck.write_kept(t, ticks[t])
+    again = Checkpoint.open(path, ROBOTS, MAX_TICKS, cols, kept=kept)
+    for t in (1, 2, 3):
+        got = again.kept(t)
+        assert got is not None and [g.tobytes() for g in got] == [a.tobytes() for a in ticks[t]]
+    at = again.kept_at + (4 % 3) * again.kept_slot  # tick 4 goes where tick 1 was: killed half way through it
+    again.map[at : at + 8].view(np.int64)[0] = -1
+    assert again.kept(4) is None and again.kept(1) is None
+    assert again.kept(2) is not None and again.kept(3) is not None
+    assert again.kept(0) is None  # never written
+    with pytest.raises(RunFailed, match="exceed"):
+        again.write_kept(5, [np.zeros(9, np.int64), np.zeros(0), np.zeros(0)])  # 72 bytes in room for 64
+    with pytest.raises(RunFailed, match="exceed"):
+        again.write_kept(5, [np.zeros(1)])  # one message of three
+    with pytest.raises(RunFailed, match="another run"):
+        Checkpoint.open(path, ROBOTS, MAX_TICKS, cols, kept=(3, 65))
+    with pytest.raises(RunFailed, match="another run"):
+        Checkpoint.open(path, ROBOTS, MAX_TICKS, cols)

@@ -16,6 +16,11 @@ recoverable: the header's ``writing``, the tick's ring slot, the header's ``read
 into the robots, the header's ``done``. A restore takes ``done``; if it finds ``ready`` ahead,
 it copies that slot's rows into the robots again (the same values) and takes ``ready``.
 
+A world shard's file ends with the messages it sent its peers for the last ticks (``kept``): three slots,
+one per tick (by tick modulo 3), each a head of byte lengths and then that tick's messages as rows, written
+once, in place, at the tick's close and before its ring slot (a restore reads the two ticks up to the one it
+takes, which the slot being written never is). A world alone has none.
+
 The rest of the world's bookkeeping (batches, restarts, losses, times) changes seldom and
 goes into ``<file>.json``, written whole to a temporary name and renamed.
 
@@ -37,8 +42,10 @@ from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.state import STATE_COUNT
 from swarm_ros.protocol.rows import decision_row, robot_row
 
-MAGIC = 0x5357524D434B5033  # "SWRMCKP3"
+MAGIC = 0x5357524D434B5034  # "SWRMCKP4"
 _H_MAGIC, _H_ROBOTS, _H_SLOTS, _H_TICKS, _H_COLS, _H_WRITING, _H_READY, _H_DONE, _H_MONITOR = range(9)
+_H_KEPT_CHUNKS, _H_KEPT_BYTES = 9, 10  # the kept messages' slots: messages (chunks) per tick, bytes for them
+KEPT_SLOTS = 3  #: ticks of kept messages in the file: the two a restore reads, and the one being written
 _HEADER = 16  # int64s
 #: int64s per ring slot: tick, robot rows, applied rows, published rows (the first of the rows), the tally
 _SLOT_HEAD = 4 + STATE_COUNT
@@ -61,8 +68,19 @@ class Saved:
 class Checkpoint:
     """One run's world checkpoint at ``path`` (created empty, or opened to restore from)."""
 
-    def __init__(self, path: Path, robots: int, max_ticks: int, columns: int, slots: int, dims: int = 2) -> None:
+    def __init__(
+        self,
+        path: Path,
+        robots: int,
+        max_ticks: int,
+        columns: int,
+        slots: int,
+        dims: int = 2,
+        kept: tuple[int, int] = (0, 0),
+    ) -> None:
+        """``kept``: (messages, bytes) a tick's kept messages may take (a world shard's; (0, 0): none)."""
         self.path = Path(path)
+        self.kept_chunks, self.kept_bytes = kept
         self.row, self.decision = robot_row(dims), decision_row(dims)  # the rows of a world of ``dims`` dimensions
         self.record = np.dtype((np.void, self.row.itemsize))  # a robot's row as opaque bytes (fast to copy by index)
         self.robots, self.ticks, self.columns, self.slots = robots, max_ticks + 1, columns, max(slots, 2)
@@ -74,7 +92,9 @@ class Checkpoint:
         self.robots_at = _HEADER * 8
         self.history_at = self.robots_at + self.robots * self.row.itemsize
         self.ring_at = self.history_at + self.ticks * self.columns * 8
-        self.size = self.ring_at + self.slots * self.slot_bytes
+        self.kept_at = self.ring_at + self.slots * self.slot_bytes
+        self.kept_slot = (1 + self.kept_chunks) * 8 + self.kept_bytes if self.kept_chunks else 0
+        self.size = self.kept_at + KEPT_SLOTS * self.kept_slot
 
     # -- writing ----------------------------------------------------------------------
     def create(self) -> None:
@@ -85,6 +105,7 @@ class Checkpoint:
         self._reserve(0, self.history_at)  # the header and the robots; the rest, tick by tick, in write()
         h = self.header
         h[_H_ROBOTS], h[_H_SLOTS], h[_H_TICKS], h[_H_COLS] = self.robots, self.slots, self.ticks, self.columns
+        h[_H_KEPT_CHUNKS], h[_H_KEPT_BYTES] = self.kept_chunks, self.kept_bytes
         h[_H_WRITING] = h[_H_READY] = h[_H_DONE] = h[_H_MONITOR] = -1
         h[_H_MAGIC] = MAGIC  # last: a header without it was cut off
 
@@ -161,6 +182,44 @@ class Checkpoint:
         self._records[rows["id"]] = np.ascontiguousarray(rows).view(self.record)
         h[_H_DONE] = tick
 
+    def write_kept(self, tick: int, chunks: list[np.ndarray]) -> None:
+        """Save the messages of tick ``tick`` kept for the peers (``kept``'s number of arrays, any dtype): in its
+        slot, in place, before :meth:`write` of the tick. A kill while writing leaves the slot marked unwritten.
+
+        Raises:
+            RunFailed: more messages or bytes than the file was made for (a bound the caller got wrong).
+        """
+        raw = [np.ascontiguousarray(c).view(np.uint8).reshape(-1) for c in chunks]
+        total = sum(r.size for r in raw)
+        if len(raw) != self.kept_chunks or total > self.kept_bytes:
+            raise RunFailed(f"checkpoint {self.path}: {len(raw)} kept messages of {total} bytes exceed its slots")
+        at = self.kept_at + (tick % KEPT_SLOTS) * self.kept_slot
+        head = self.map[at : at + (1 + self.kept_chunks) * 8].view(np.int64)
+        self._reserve(at, head.size * 8 + total)
+        head[0] = -1  # being rewritten
+        at += head.size * 8
+        for r in raw:
+            self.map[at : at + r.size] = r
+            at += r.size
+        head[1:] = [r.size for r in raw]
+        head[0] = tick
+
+    def kept(self, tick: int) -> list[np.ndarray] | None:
+        """The kept messages of tick ``tick`` as :meth:`write_kept` wrote them (bytes: view them as their
+        dtype), or None if the file does not hold them."""
+        if not self.kept_chunks:
+            return None
+        at = self.kept_at + (tick % KEPT_SLOTS) * self.kept_slot
+        head = self.map[at : at + (1 + self.kept_chunks) * 8].view(np.int64)
+        if head[0] != tick or tick < 0:
+            return None
+        at += head.size * 8
+        chunks = []
+        for length in head[1:]:
+            chunks.append(self.map[at : at + int(length)].copy())
+            at += int(length)
+        return chunks
+
     def monitor_reported(self, tick: int) -> None:
         """The newest tick whose metrics the monitor reported (where a restarted world resends from)."""
         if self.map.size and tick > self.header[_H_MONITOR]:
@@ -184,9 +243,11 @@ class Checkpoint:
 
     # -- reading ----------------------------------------------------------------------
     @classmethod
-    def open(cls, path: Path, robots: int, max_ticks: int, columns: int, dims: int = 2) -> Checkpoint:
+    def open(
+        cls, path: Path, robots: int, max_ticks: int, columns: int, dims: int = 2, kept: tuple[int, int] = (0, 0)
+    ) -> Checkpoint:
         """Map the checkpoint a world before this process wrote at ``path``, to restore from and go on writing
-        (made again, empty, if that world was killed while making it).
+        (made again, empty, if that world was killed while making it); ``kept`` as the process before made it.
 
         Raises:
             RunFailed: the file is not a checkpoint of a run of this size.
@@ -195,14 +256,16 @@ class Checkpoint:
         raw = np.fromfile(path, dtype=np.int64, count=_HEADER)
         if raw.size == _HEADER and not raw.any():  # killed in create(), before the header: it holds nothing
             path.unlink()
-            ck = cls(path, robots, max_ticks, columns, 2, dims)
+            ck = cls(path, robots, max_ticks, columns, 2, dims, kept)
             ck.create()
             return ck
         if raw.size < _HEADER or raw[_H_MAGIC] != MAGIC:
             raise RunFailed(f"{path} is not a world checkpoint")
         if (int(raw[_H_ROBOTS]), int(raw[_H_TICKS]), int(raw[_H_COLS])) != (robots, max_ticks + 1, columns):
             raise RunFailed(f"{path} is the checkpoint of another run ({int(raw[_H_ROBOTS])} robots)")
-        ck = cls(path, robots, max_ticks, columns, int(raw[_H_SLOTS]), dims)
+        if (int(raw[_H_KEPT_CHUNKS]), int(raw[_H_KEPT_BYTES])) != kept:
+            raise RunFailed(f"{path} is the checkpoint of another run (room for other kept messages)")
+        ck = cls(path, robots, max_ticks, columns, int(raw[_H_SLOTS]), dims, kept)
         if path.stat().st_size != ck.size:
             raise RunFailed(f"{path} is not a whole world checkpoint")
         ck._map()

@@ -4,11 +4,12 @@ changed only.
 It is the world's :class:`~swarm_ros.protocol.checkpoint.Checkpoint` (one mapped file; a tick written so that a
 kill at any instruction leaves it recoverable), holding the shard's view: every robot's last row as the shard
 knew it (its area's moving robots, every stationary one; ``UNKNOWN_ROW`` for one it never knew), the metrics of
-every tick (which every shard holds alike), and a ring of the last ticks' rows, of which the first ones of each
-tick are what the shard published for the monitor. Beside it, ``<file>.json``: the lockstep's bookkeeping with
-the robots pending removal and every robot removed so far, written whole when it changes; and ``<file>.sent``:
-the messages the shard sent its peers for the kept ticks, written whole (to a temporary name, renamed) at every
-close before the tick's rows, so a save never lacks the messages of the tick it holds.
+every tick (which every shard holds alike), a ring of the last ticks' rows, of which the first ones of each
+tick are what the shard published for the monitor, and the messages it sent its peers for the kept ticks
+(claims and part rows for each shard, its counts), each tick's written once, in place, at its close and before
+the tick's rows, so a save never lacks the messages of the tick it holds. Beside it, ``<file>.json``: the
+lockstep's bookkeeping with the robots pending removal and every robot removed so far, written whole when it
+changes.
 
 Like the world's checkpoint, these are the shard's own files in the run's log directory, read back only by a
 process of the same shard.
@@ -16,8 +17,6 @@ process of the same shard.
 
 from __future__ import annotations
 
-import os
-import pickle
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,12 +26,13 @@ from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import columns
+from swarm_ros.core.shard_parts import COUNTS
 from swarm_ros.core.shards import ShardPlan, ShardSaved
 from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checkpoint import Checkpoint
-from swarm_ros.protocol.rows import decision_rows, decisions_of, pose_of
-from swarm_ros.protocol.shard_exchange import ExchangeSaved
-from swarm_ros.protocol.shard_rows import assemble, counts_data, counts_of, part_rows
+from swarm_ros.protocol.rows import decision_row, decision_rows, decisions_of, pose_of
+from swarm_ros.protocol.shard_exchange import KEPT_TICKS, ExchangeSaved
+from swarm_ros.protocol.shard_rows import assemble, counts_data, counts_of, part_row, part_rows
 
 UNKNOWN_ROW = 255  #: the state byte of a robot the shard never knew, in its save's rows
 _LOCALIZED = METRIC_COLUMNS.index("localized")
@@ -57,7 +57,12 @@ class ShardSaver:
     def __init__(self, path: Path, params: RunParams, plan: ShardPlan, index: int, slots: int, dims: int) -> None:
         self.path, self.params, self.plan, self.index, self.dims = Path(path), params, plan, index, dims
         self.slots = slots
-        self.sent_path = self.path.with_name(self.path.name + ".sent")
+        self.decision, self.part = decision_row(dims), part_row(dims)
+        shards, robots = plan.shards, params.robots
+        # a tick's kept messages: claims to each shard, part rows to each shard, the counts. None holds a robot
+        # twice (its claim or row goes to each of up to S - 1 peers), the counts at most every robot removed
+        room = shards * robots * (self.decision.itemsize + self.part.itemsize) + (2 + len(COUNTS) + robots) * 8
+        self.kept = (2 * shards + 1, room)
         self.checkpoint: Checkpoint | None = None
 
     def _args(self) -> tuple[Path, int, int, int]:
@@ -70,7 +75,7 @@ class ShardSaver:
             RunFailed: they cannot be made.
         """
         try:
-            self.checkpoint = Checkpoint(*self._args(), self.slots, self.dims)
+            self.checkpoint = Checkpoint(*self._args(), self.slots, self.dims, self.kept)
             self.checkpoint.create()
         except OSError as exc:
             raise RunFailed(f"checkpoint {self.path}: {getattr(exc, 'strerror', None) or exc}") from None
@@ -85,36 +90,36 @@ class ShardSaver:
         sent: dict,
         tally: np.ndarray | None = None,
     ) -> None:
-        """Save tick ``tick``: the kept messages first, then the rows that changed in the shard's view (the first
-        ``published`` of them its part for the monitor), the applied decisions, the tick's metrics and the tally it
-        publishes (``record_every`` > 1)."""
+        """Save tick ``tick``: its kept messages first (``sent[tick]``, none at tick 0: those of the ticks before
+        are in the file already), then the rows that changed in the shard's view (the first ``published`` of them
+        its part for the monitor), the applied decisions, the tick's metrics and the tally it publishes
+        (``record_every`` > 1)."""
         assert self.checkpoint is not None  # created or opened
-        tmp = self.sent_path.with_name(self.sent_path.name + ".tmp")
         try:
-            tmp.write_bytes(pickle.dumps(self._compact(sent), protocol=pickle.HIGHEST_PROTOCOL))
-            os.replace(tmp, self.sent_path)
+            if tick in sent:
+                claims, parts = sent[tick]
+                rows_of = [decision_rows(c) for c in claims] + [part_rows(p, self.dims) for p in parts]
+                self.checkpoint.write_kept(tick, [*rows_of, counts_data(parts[0])])
             self.checkpoint.write(tick, rows, applied, np.asarray(metrics, dtype=np.int64), published, tally)
         except OSError as exc:
             raise RunFailed(f"checkpoint {self.path}: {getattr(exc, 'strerror', None) or exc}") from None
 
-    def _compact(self, sent: dict) -> dict:
-        """The kept messages as their payloads (a few arrays a tick, not a hundred objects: pickling those cost
-        a shard 1.5 ms a tick at 50,000 robots)."""
-        out = {}
-        for tick, (claims, parts) in sent.items():
-            routed = None if parts is None else ([part_rows(p, self.dims) for p in parts], counts_data(parts[0]))
-            out[tick] = ([decision_rows(c) for c in claims], routed)
-        return out
+    def _sent(self, tick: int) -> dict:
+        """The messages kept at tick ``tick``'s close: its own and the tick's before (tick 0 has none).
 
-    def _expand(self, compact: dict) -> dict:
-        """The kept messages back from :meth:`_compact`'s payloads."""
-        sent = {}
-        for tick, (claims, routed) in compact.items():
-            parts = None
-            if routed is not None:
-                counts = counts_of(routed[1], self.params.robots, self.plan.shards)
-                parts = [assemble(tick, self.index, rows, counts) for rows in routed[0]]
-            sent[tick] = ([decisions_of(tick, rows) for rows in claims], parts)
+        Raises:
+            Rejected: the file lacks them, or they are not whole.
+        """
+        assert self.checkpoint is not None
+        sent, shards = {}, self.plan.shards
+        for t in range(max(1, tick - KEPT_TICKS + 1), tick + 1):
+            chunks = self.checkpoint.kept(t)
+            if chunks is None:
+                raise Rejected("incomplete save", f"no kept messages of tick {t}")
+            claims = [decisions_of(t, c.view(self.decision)) for c in chunks[:shards]]
+            counts = counts_of(chunks[-1].view(np.int64), self.params.robots, shards)
+            parts = [assemble(t, self.index, c.view(self.part), counts) for c in chunks[shards:-1]]
+            sent[t] = (claims, parts)
         return sent
 
     def save_book(self, book: dict) -> None:
@@ -129,8 +134,6 @@ class ShardSaver:
         """Remove the save's files (the run is over or stopped: no process of this shard will restart)."""
         if self.checkpoint is not None:
             self.checkpoint.remove()
-        for path in (self.sent_path, self.sent_path.with_name(self.sent_path.name + ".tmp")):
-            path.unlink(missing_ok=True)
 
     def restore(self) -> ShardSave | None:
         """Open the save a process of this shard before this one wrote; what it holds (None: no tick yet).
@@ -138,16 +141,16 @@ class ShardSaver:
         Raises:
             RunFailed: the files are not a save of this run, or are incomplete.
         """
-        self.checkpoint = Checkpoint.open(*self._args(), self.dims)
+        self.checkpoint = Checkpoint.open(*self._args(), self.dims, self.kept)
         saved = self.checkpoint.saved()
         if saved is None:
             return None
         b = saved.book
         try:
-            sent = self._expand(pickle.loads(self.sent_path.read_bytes()))  # this shard's own file (module docstring)
+            sent = self._sent(saved.tick)
             pending = np.asarray(b["pending"], np.int64)
             removals = [np.asarray(ids, np.int64) for t, ids in b["removals"] if t <= saved.tick]
-        except (OSError, pickle.UnpicklingError, EOFError, KeyError, ValueError, Rejected) as exc:
+        except (KeyError, ValueError, Rejected) as exc:
             raise RunFailed(f"checkpoint {self.path}: incomplete ({exc})") from None
         rows, first, last = saved.robots, *self.plan.areas[self.index]
         pose = pose_of(rows)
