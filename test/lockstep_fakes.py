@@ -7,6 +7,7 @@ import numpy as np
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.regions import batch_strip, columns
 from swarm_ros.core.rules import Decider
+from swarm_ros.core.shards import ShardPlan, WorldShard
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import batch_name
@@ -43,7 +44,7 @@ class LockstepPort:
         self.ticks: list[int] = []
         self.statuses: list = []
         self.monitor_ready = True
-        self.saver = None  # a Checkpoint, to restart from (test_world_restart.py)
+        self.saver = None  # a ShardSaver, to restart from (test_world_restart.py)
         self.books: list[dict] = []
         self.regions: list[tuple[int, int, np.ndarray]] = []  # (tick, batch, rows): snapshots and region rows
 
@@ -62,9 +63,17 @@ class LockstepPort:
     def publish_status(self, status):
         self.statuses.append(status)
 
-    def checkpoint(self, tick, rows, applied, metrics, published, tally):
+    def save_tick(self, tick, rows, published, applied, metrics, sent, tally):
         if self.saver is not None:
-            self.saver.write(tick, rows, applied, metrics, published, tally)
+            self.saver.write_tick(tick, rows, published, applied, metrics, sent, tally)
+
+    def send_claims(self, peer, tick, claims):
+        raise AssertionError("the world alone has no peers")
+
+    send_part = send_claims
+
+    def ask_again(self, peer):
+        raise AssertionError("the world alone has no peers")
 
     def save_book(self, book):
         self.books.append(book)
@@ -94,16 +103,15 @@ class LockstepRun:
         self.strips = [batch_strip(self.shape, self.params, k, batches, text) for k in range(batches)]
         self.clock, self.port, self.log = Clock(), LockstepPort(), Log()
         self.rejections = Rejections(self.log)
-        self.ls = Lockstep(
-            Simulation(self.shape, self.params),
-            Policy(**{"monitor_window": 0, **policy}),
-            self.port,
-            self.log,
-            self.rejections,
-            clock=self.clock,
-        )
+        self.ls = self.make(Policy(**{"monitor_window": 0, **policy}))
         self.batches = batches
         self.decider = Decider(self.shape, self.params)
+
+    def make(self, policy: Policy) -> Lockstep:
+        """A world process's lockstep: the world alone, a shard with no peers."""
+        plan = ShardPlan(self.shape.world.radius, self.params.vision_radius, np.empty(0, dtype=np.int64))
+        shard = WorldShard(self.shape, self.params, plan, 0)
+        return Lockstep(shard, "world", policy, self.port, self.log, self.rejections, clock=self.clock)
 
     def announce(self, k: int, incarnation: int = 0) -> None:
         self.ls.announce(batch_name(k), incarnation, self.strips[k])
@@ -138,9 +146,22 @@ class LockstepRun:
                 self.ls.decisions(k, self.ls.sim.tick + 1, rows)
 
     def run(self, ticks: int | None = None) -> None:
+        """Up to ``ticks`` ticks (None: to the end), while the world goes on (it holds a tick back while the
+        monitor is too far behind: then this returns)."""
         end = MAX_TICKS if ticks is None else self.ls.sim.tick + ticks
         while not self.ls.sim.done and self.ls.sim.tick < end:
+            before = self.ls.sim.tick
             self.tick()
+            if self.ls.sim.tick == before and not self._round_moved():
+                return
+
+    def _round_moved(self) -> bool:
+        """Whether another round of decisions could move the world on: a batch has robots not decided yet."""
+        return any(
+            (own := self.own(k)).size and not self.ls.decided[own].all()
+            for k in range(self.batches)
+            if k not in self.ls.removed_batches
+        )
 
     def engine(self) -> Simulation:
         sim = Simulation(self.shape, self.params)

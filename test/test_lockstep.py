@@ -235,9 +235,12 @@ def test_the_world_waits_for_the_monitor_within_its_window_and_for_a_lost_one_up
     r.ls.monitor_liveliness(1, 0)
     assert r.ls.started
     r.run(ticks=6)
-    assert r.port.ticks == [0, 1] and r.ls.sim.tick == 6, "published up to the window, the rest queued"
+    # published up to the window; the next tick applied and held, and the one after not applied while it waits
+    assert r.port.ticks == [0, 1] and r.ls.sim.tick == 2, "published up to the window, the next one held"
     r.ls.metrics(1)
-    assert r.port.ticks == [0, 1, 2, 3]
+    assert r.port.ticks == [0, 1, 2, 3] and r.ls.sim.tick == 3, "tick 3 went on from the decisions in already"
+    r.run(ticks=3)
+    assert r.port.ticks == [0, 1, 2, 3] and r.ls.sim.tick == 4, "tick 4 held for the monitor"
     r.clock.now += STALL_S + 0.1  # no metrics since, but alive: waited for (a flood may drown its metrics)
     r.ls.poll()
     assert r.ls.lost == [] and r.port.ticks == [0, 1, 2, 3]
@@ -247,8 +250,11 @@ def test_the_world_waits_for_the_monitor_within_its_window_and_for_a_lost_one_up
     assert r.ls.monitor_down_since is None and r.ls.status().values["waiting_for"] == ""
     r.ls.monitor_liveliness(0, 1)
     r.clock.now += r.ls.policy.restart_timeout + 0.1
-    r.ls.poll()  # not back in time: lost, the queue goes out
-    assert r.ls.lost == [MONITOR] and r.ls.window == 0 and r.port.ticks == list(range(7))
+    r.ls.poll()  # not back in time: lost, the queue goes out, and the run goes on
+    # tick 4 goes out, and tick 5, whose decisions were in already
+    assert r.ls.lost == [MONITOR] and r.ls.window == 0 and r.port.ticks == list(range(6))
+    r.run(ticks=1)
+    assert r.port.ticks == list(range(7))
     r.ls.monitor_liveliness(1, 0)  # it was only slow
     assert r.ls.lost == [] and r.ls.window == 2
 
@@ -261,8 +267,8 @@ def test_a_live_process_whose_messages_do_not_come_is_never_lost_and_the_run_fai
         r = LockstepRun(monitor_window=2)
         r.start()
         r.ls.monitor_liveliness(1, 0)
-        r.run(ticks=6)  # the world waits for the monitor after tick 1
-        what = "the monitor's metrics did not arrive for 60 s at tick 6"
+        r.run(ticks=6)  # the world waits for the monitor after tick 1, and holds tick 2
+        what = "the monitor's metrics did not arrive for 60 s at tick 2"
     else:
         r = LockstepRun(on_batch_loss="remove")
         r.start()

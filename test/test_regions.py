@@ -114,22 +114,19 @@ def test_a_decider_whose_row_did_not_change_is_sent_to_no_batch():
     """A walker that lost its claim stands as it was: its row is the same, so no batch receives it again."""
     from types import SimpleNamespace
 
-    radius = 10
     moving = RobotState.WALKING
     state = SimpleNamespace(
-        state=np.full(3, moving, dtype=np.int8),
-        x=np.array([-5.0, 0.0, 5.0]),
-        y=np.zeros(3),
-        heading=np.zeros(3),
+        state=np.full(4, moving, dtype=np.int8),
+        x=np.array([-5.0, 0.0, 5.0, 7.0]),
+        y=np.zeros(4),
+        heading=np.zeros(4),
         z=None,
         pitch=None,
     )
-    h = hosting.Hosting(radius, 1.0)
-    h.admit("a", (0, 20), [])
     deciders = np.arange(3)
-    before = h.before(state, deciders)
+    before = hosting.poses(state, deciders)
     state.x[2] = 6.0  # robot 2 moved; robots 0 and 1 stood as they were
     state.heading[1] = 1.0  # robot 1 turned where it stood
-    rows = robot_rows(deciders, state.state, state.x, state.y, state.heading)
-    [part] = h.route(rows, deciders, before, state)
-    assert part["id"].tolist() == [1, 2]
+    state.x[3] = 8.0  # robot 3 did not decide (a peer's, or removed): not a decider that stood
+    assert hosting.stood(before, state, np.arange(4)).tolist() == [True, False, False, False]
+    assert hosting.stood(before, state, np.empty(0, np.int64)).size == 0

@@ -1,4 +1,4 @@
-"""World shards' coordination (swarm_ros.protocol.shard_lockstep) driven by method calls over fake channels: S
+"""World shards' coordination (swarm_ros.protocol.lockstep) driven by method calls over fake channels: S
 shard locksteps, the robot batches of their strips (each following its region from snapshots and region rows, as
 a batch process does), and a monitor that joins the S parts of each tick. Channels deliver in order, in a random
 interleaving; a shard process may be killed at any moment and restarted from its last save. Every run must be
@@ -26,11 +26,12 @@ from swarm_ros.core.shards import ShardPlan, WorldShard
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.checks import Rejections, apply_robots
+from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.monitoring import MonitorCore
 from swarm_ros.protocol.plan import batch_name
 from swarm_ros.protocol.rows import decision_rows, pose_of
-from swarm_ros.protocol.shard_lockstep import ShardLockstep, _first_of
 from swarm_ros.protocol.shard_save import ShardSaver
+from swarm_ros.protocol.world_close import first_of
 from swarm_ros.protocol.world_port import LOSS_CONFIRM_S, Policy
 
 pytestmark = pytest.mark.unit
@@ -194,9 +195,9 @@ class ShardedGraph:
     def take_missed(self) -> int:
         return 0
 
-    def make(self, s: int) -> ShardLockstep:
+    def make(self, s: int) -> Lockstep:
         shard = WorldShard(self.shape, self.params, self.plan, s)
-        return ShardLockstep(
+        return Lockstep(
             shard, f"world_shard_{s}", self.policy, self.ports[s], self.log, Rejections(self.log), clock=self.clock
         )
 
@@ -375,7 +376,7 @@ def test_first_of_is_np_unique_with_the_first_arrays_values(id_sets, rnd):
     """The linear-time join a shard closes its tick with answers what ``np.unique(..., return_index=True)`` does."""
     ids = [np.array(sorted(s, key=lambda _: rnd.random()), dtype=np.int64) for s in id_sets]
     values = [np.array([rnd.randrange(1000) for _ in a], dtype=np.int64) for a in ids]
-    every, first = _first_of(64, ids, values)
+    every, first = first_of(64, ids, values)
     want, at = np.unique(np.concatenate(ids), return_index=True)
     assert np.array_equal(every, want) and np.array_equal(first, np.concatenate(values)[at])
 

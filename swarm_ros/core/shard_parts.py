@@ -143,6 +143,12 @@ def _concatenate(parts: list[Part]) -> Part:
     return Part(tick=parts[0].tick if parts else -1, source=-1, counts=np.empty(0, np.int64), removing=removing, **rows)
 
 
+#: what no peers send (a shard alone: the world): one part shared by every call, so read-only
+_NO_PARTS = _concatenate([])
+for _array in (*(getattr(_NO_PARTS, f) for f in _PART_FIELDS), _NO_PARTS.counts, _NO_PARTS.removing):
+    _array.flags.writeable = False
+
+
 def check_parts(shard: ShardView, received: list[Part], whole: bool = True) -> tuple[Part, np.ndarray]:
     """That ``received`` can be the other shards' parts of this tick, as far as this shard knows the swarm:
     one from each; each of its own robots (that stood in its strips, were moving if this shard followed
@@ -171,6 +177,8 @@ def check_parts(shard: ShardView, received: list[Part], whole: bool = True) -> t
             raise Rejected("malformed part", "arrays of other types or lengths")
         if q.counts.shape != (len(COUNTS),) or q.counts.dtype != np.int64:
             raise Rejected("malformed part", f"{q.counts.size} counts")
+    if not received:  # a shard with no peers (the world alone)
+        return _NO_PARTS, np.zeros(len(COUNTS), dtype=np.int64)
     counts = np.array([q.counts for q in received], dtype=np.int64).reshape(-1, len(COUNTS))
     if (
         (counts < 0).any()

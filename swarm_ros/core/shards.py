@@ -40,7 +40,7 @@ from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
 from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, Outcome, end_code, metric_values
 from swarm_ros.core.params import RunParams
-from swarm_ros.core.regions import area, columns, halo, strip
+from swarm_ros.core.regions import area, batch_cuts, columns, halo, shard_batches, shard_cuts, strip
 from swarm_ros.core.replica import UNKNOWN, Replica
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shapes import Shape
@@ -61,6 +61,20 @@ class ShardPlan:
         self.shards = int(cuts.size) + 1
         self.strips = [strip(k, self.shards, cuts, radius) for k in range(self.shards)]
         self.areas = [area(s, self.halo, self.width) for s in self.strips]
+
+    @classmethod
+    def placed(cls, shape: Shape, params: RunParams, shard: int, shards: int, batches: int, cuts: str) -> ShardPlan:
+        """The plan of a world process: shard ``shard`` of ``shards``, each owning the strips of consecutive robot
+        batches of ``batches`` cut at ``cuts`` (``region_cuts``); one shard (the world alone): the whole world.
+
+        Raises:
+            ParameterError: more shards than batches, a shard index beyond them, or cuts that are no cut.
+        """
+        radius, vision = shape.world.radius, params.vision_radius
+        if shards == 1:
+            return cls(radius, vision, np.empty(0, dtype=np.int64))
+        shard_batches(shard, shards, batches)  # checks S <= K and the index
+        return cls(radius, vision, shard_cuts(batch_cuts(shape, params, batches, cuts), shards, batches))
 
     def routes(self, before: np.ndarray, after: np.ndarray, stationary: np.ndarray, source: int) -> list[np.ndarray]:
         """Of rows whose robots stood in columns ``before`` and stand in ``after`` (``stationary``: became
@@ -209,6 +223,8 @@ class WorldShard:
     def claims(self, decisions: Decisions) -> list[Decisions]:
         """Exchange 1: per shard, the decisions of this shard's robots claiming a patch in its claim window
         (its strips and the halo); none for this shard."""
+        if self.plan.shards == 1:  # no peers: no claims
+            return [_select(decisions, _NONE)]
         size, h = self.plan.width, self.plan.halo
         cols = decisions.claim % size
         claiming = decisions.claim >= 0
@@ -238,7 +254,8 @@ class WorldShard:
         own = self._own
         if not np.array_equal(decisions.ids, own):
             raise ContractError(f"shard {self.index}: decisions must cover its moving robots exactly once")
-        removing = np.unique(np.asarray(removing if removing is not None else [], dtype=np.int64))
+        given = removing is not None and len(removing) > 0
+        removing = np.unique(np.asarray(removing, dtype=np.int64)) if given else np.empty(0, dtype=np.int64)
         if removing.size and (
             own.size == 0 or (own[np.minimum(np.searchsorted(own, removing), own.size - 1)] != removing).any()
         ):
@@ -294,6 +311,8 @@ class WorldShard:
 
     def routes(self, part: Part) -> list[Part]:
         """What of this shard's ``part`` each shard receives (nothing for this one)."""
+        if self.plan.shards == 1:  # no peers: nothing to route
+            return [part.take(_NONE)]
         after = columns(part.x, self.plan.radius)
         stationary = ~IS_MOVING[part.state]
         return [part.take(i) for i in self.plan.routes(part.before, after, stationary, self.index)]
@@ -312,19 +331,28 @@ class WorldShard:
         if rows.ids.size:
             solid = (rows.z, rows.pitch) if self._solid else (None, None)
             self.replica.merge(rows.ids, rows.state, rows.x, rows.y, rows.heading, *solid)
-        kept, come = self._mine(own.ids), self._mine(np.sort(rows.ids))  # disjoint, each ascending
+        kept, come = self._mine(own.ids), self._mine(np.sort(rows.ids)) if rows.ids.size else _NONE  # disjoint, sorted
         self._own = np.insert(kept, np.searchsorted(kept, come), come) if come.size else kept
         total = own.counts + counts
         self.localized += int(total[0])
         inside, outside, walking = (int(c) for c in total[1:4])
-        self._close(tick, inside, outside, walking)
+        code = self._close(tick, inside, outside, walking)
         p = self.params
-        if self.outcome is None and p.failures > 0 and tick == p.fail_tick:
+        failing = self.outcome is None and p.failures > 0 and tick == p.fail_tick
+        gone = np.concatenate([own.removing, rows.removing])
+        if code == END_EXTRAS or failing or gone.size:  # robots left its own: separated, failed or removed
+            self._end_of_tick(tick, total, gone, failing, inside, outside, walking)
+
+    def _end_of_tick(
+        self, tick: int, total: np.ndarray, gone: np.ndarray, failing: bool, inside: int, outside: int, walking: int
+    ) -> None:
+        """The end of a tick where robots stopped being its own: the scheduled failures, then the robots of lost
+        batches, each redoing the tick's metrics as ``Simulation.remove`` does; and its own robots, less those."""
+        if failing:
             self.history.pop()  # the tick's metrics are redone after the failures, as Simulation.remove does
-            self._fail(failing_robots(p))
+            self._fail(failing_robots(self.params))
             inside, outside, walking = inside - int(total[4]), outside - int(total[5]), walking - int(total[6])
             self._close(tick, inside, outside, walking)
-        gone = np.concatenate([own.removing, rows.removing])
         if self.outcome is None and gone.size:  # then the robots of lost batches, as Lockstep removes them
             self.history.pop()
             self.localized -= int(total[7])

@@ -55,6 +55,17 @@ class StopFlag:
 PARENT_ENV = "SWARM_ROS_LAUNCHER_PID"
 
 
+def run_age() -> float:
+    """Seconds from the start of ``swarm-ros run`` (its process, if it is this process's parent), else from the
+    start of this process, to now."""
+    parent = os.environ.get(PARENT_ENV, "")
+    if parent.isdigit() and int(parent) == os.getppid():
+        age = process_age(int(parent))
+        if age == age:  # not NaN
+            return age
+    return process_age()
+
+
 def process_age(pid: int | str = "self") -> float:
     """Seconds since process ``pid`` (this one by default) started, interpreter start-up included,
     to the kernel's 10 ms; NaN where that cannot be read (no such process, not Linux)."""

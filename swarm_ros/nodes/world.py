@@ -1,19 +1,21 @@
-"""The world node: owns the shape and the patch occupancy, settles claims, drives the lockstep ticks.
+"""The world node: owns the shape and the patch occupancy, settles claims, drives the lockstep ticks. The same node
+is a world shard (``--world-shards S``, executable ``world_shard``); the world is the shard with no peers.
 
-A thin shell: every decision about the run (admission of batches, tick 0, applying a tick,
-the monitor window, lost processes) is :class:`swarm_ros.protocol.lockstep.Lockstep`'s.
-This node turns its messages and liveliness events into calls on it, and what it decides
-into messages. Every message is taken only once its tag under the run's key proves it
-(:mod:`swarm_ros.ros.auth`) and it passes its checks (:mod:`swarm_ros.protocol.checks`);
-one that fails is dropped whole and counted (``rejected_messages`` on /swarm/status).
+A thin shell: every decision (admission of batches, tick 0, applying a tick, the monitor window, lost processes)
+is :class:`swarm_ros.protocol.lockstep.Lockstep`'s, every exchange with the peers its exchange's. This node turns
+messages and liveliness events into calls on them (the peers' topics: :mod:`swarm_ros.ros.shard_links`), what they
+decide into messages, and saves each tick (``checkpoint``) before anything of the next goes out. A message is
+taken only once its tag under the run's key proves it (:mod:`swarm_ros.ros.auth`) and it passes its checks
+(:mod:`swarm_ros.protocol.checks`); one that fails is dropped whole and counted (``rejected_messages``).
 
     ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml
+    ros2 run swarm_ros world_shard --ros-args -r __node:=world_shard_0 -p shard:=0 -p shards:=2 -p batches:=4 \\
+        --params-file config/swarm_ros.yaml
 """
 
 from __future__ import annotations
 
 import functools
-import os
 import time
 from pathlib import Path
 
@@ -25,42 +27,47 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.core.engine import Simulation
-from swarm_ros.core.errors import Rejected, RunFailed
+from swarm_ros.core.errors import ConfigError, ParameterError, Rejected
 from swarm_ros.core.metrics import METRIC_COLUMNS
-from swarm_ros.core.signals import PARENT_ENV, process_age
+from swarm_ros.core.shards import ShardPlan, WorldShard
+from swarm_ros.core.signals import run_age
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
-from swarm_ros.protocol.checkpoint import Checkpoint, Saved
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.lockstep import Lockstep
 from swarm_ros.protocol.plan import MONITOR, WORLD
+from swarm_ros.protocol.shard_save import ShardSave, ShardSaver
 from swarm_ros.protocol.status import Status
 from swarm_ros.protocol.world_port import LINGER, Policy
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_OK, run_node
+from swarm_ros.ros.shard_links import ShardLinks
 
 _NO_WAIT = Duration(seconds=0)
 
 
 class WorldNode:
-    """The world's endpoints around a :class:`Lockstep`; its port (``swarm_ros.protocol.lockstep.WorldPort``)."""
+    """The world's (or world shard ``shard``'s) endpoints around a :class:`Lockstep`; its port
+    (``swarm_ros.protocol.world_port.WorldPort``)."""
 
-    KIND = WORLD  #: its parameters' kind (a world shard's node has more: swarm_ros.nodes.world_shard)
-
-    def __init__(self) -> None:
-        self.node = node = make_node(self.KIND)
-        run, own = read_parameters(node, self.KIND)
+    def __init__(self, kind: str = WORLD) -> None:
+        self.node = node = make_node(kind)
+        run, own = read_parameters(node, kind)
         self.created = time.monotonic()
         self.shape, self.params = run.resolve()
         self.checkpoint_path = str(own.pop("checkpoint"))
         self.incarnation = int(own.pop("incarnation"))
-        self.saver: Checkpoint | None = None
-        self.placement = {name: own.pop(name) for name in ("shard", "shards", "batches", "region_cuts") if name in own}
-        self.viewers = self.placement.get("shard", 0) == 0  # /swarm/shape, /swarm/occupancy, /clock: one process
+        placement = {name: own.pop(name) for name in ("shard", "shards", "batches", "region_cuts") if name in own}
+        self.index, self.shards = int(placement.get("shard", 0)), int(placement.get("shards", 1))
+        try:
+            where = (int(placement.get("batches", 1)), str(placement.get("region_cuts", "")))
+            self.plan = ShardPlan.placed(self.shape, self.params, self.index, self.shards, *where)
+        except ParameterError as exc:
+            raise ConfigError(f"node '{node.get_name()}': {exc}") from None
+        self.viewers = self.index == 0  # /swarm/shape, /swarm/occupancy, /clock: one process
         self.policy = Policy(**own)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
@@ -78,9 +85,14 @@ class WorldNode:
         self.region_pubs: list = []  # per batch: /swarm/region/<batch>
         self.occupancy_at = 0.0  # time.monotonic() of the last /swarm/occupancy
         self.lockstep: Lockstep | None = None  # made in load(), before the first callback can run
+        self.saver: ShardSaver | None = None  # made in load(), with a checkpoint path
         self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.gate.subscribe(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
         self._watch(msgs.alive_topic(MONITOR), self._on_monitor_liveliness)
+        # the peers' topics (none for the world alone), and the exchange's sends to them
+        robots, dims = self.params.robots, self.shape.dims
+        self.links = links = ShardLinks(self.signer, self.gate, self.rejections, self.index, self.shards, robots, dims)
+        self.send_claims, self.send_part, self.ask_again = links.send_claims, links.send_part, links.ask_again
 
     @property
     def ls(self) -> Lockstep:
@@ -94,38 +106,37 @@ class WorldNode:
 
     def load(self) -> None:
         """The heavy part, once the endpoints exist: discovery of the peers goes on meanwhile."""
-        sim = Simulation(self.shape, self.params)
+        shard = WorldShard(self.shape, self.params, self.plan, self.index)
         warm_up(self.shape, self.params)
-        self.pub_shape.publish(self.maps.shape_message(0))
-        self.lockstep = Lockstep(sim, self.policy, self, self.node.get_logger(), self.rejections, created=self.created)
+        if self.viewers:
+            self.pub_shape.publish(self.maps.shape_message(0))
+        name, log = self.node.get_name(), self.node.get_logger()
+        self.lockstep = ls = Lockstep(shard, name, self.policy, self, log, self.rejections, created=self.created)
+        self.links.exchange = ls.exchange
         saved = self._open_checkpoint()
         if saved is not None:
-            self.lockstep.restore(saved, self.incarnation)
+            ls.restore(saved, self.incarnation)
         else:  # none before this one got as far as tick 0
-            self.lockstep.restarts += [(0, WORLD)] * self.incarnation
+            ls.restarts += [(0, name)] * self.incarnation
         self._publish_occupancy()
-        self.lockstep.publish_status()
+        ls.publish_status()
         if saved is None:
-            self.node.get_logger().info(
-                f"world: {self.shape.name} ({self.shape.patches} patches), "
+            first, last = shard.strip
+            part = f"columns {first}..{last} of " if self.shards > 1 else ""
+            log.info(
+                f"{name}: {part}{self.shape.name} ({self.shape.patches} patches), "
                 f"{self.params.robots} robots, waiting for robot batches"
             )
 
-    def _open_checkpoint(self) -> Saved | None:
-        """The checkpoint to write (``checkpoint``); for a restarted world, what the one before saved in it."""
+    def _open_checkpoint(self) -> ShardSave | None:
+        """The checkpoint to write (``checkpoint``); for a restarted process, what the one before saved in it."""
         if not self.checkpoint_path:
             return None
-        path, n, cols = Path(self.checkpoint_path), self.params.robots, len(METRIC_COLUMNS)
-        try:
-            if self.incarnation and path.exists():
-                self.saver = Checkpoint.open(path, n, self.params.max_ticks, cols, self.shape.dims)
-                return self.saver.saved()
-            self.saver = Checkpoint(
-                path, n, self.params.max_ticks, cols, self.policy.monitor_window + 2, self.shape.dims
-            )
-            self.saver.create()
-        except OSError as exc:
-            raise RunFailed(f"checkpoint {path}: {getattr(exc, 'strerror', None) or exc}") from None
+        path, slots = Path(self.checkpoint_path), self.policy.monitor_window + 2
+        self.saver = saver = ShardSaver(path, self.params, self.plan, self.index, slots, self.shape.dims)
+        if self.incarnation and saver.path.exists():
+            return saver.restore()
+        saver.create()
         return None
 
     # -- inbound ----------------------------------------------------------------------
@@ -208,17 +219,9 @@ class WorldNode:
         if self.viewers:
             self.pub_clock.publish(msgs.clock_message(tick))
 
-    def checkpoint(
-        self,
-        tick: int,
-        rows: np.ndarray,
-        applied: np.ndarray | None,
-        metrics: np.ndarray,
-        published: int,
-        tally: np.ndarray | None,
-    ) -> None:
+    def save_tick(self, tick, rows, published, applied, metrics, sent, tally) -> None:
         if self.saver is not None:
-            self.saver.write(tick, rows, applied, metrics, published, tally)
+            self.saver.write_tick(tick, rows, published, applied, metrics, sent, tally)
 
     def save_book(self, book: dict) -> None:
         if self.saver is not None:
@@ -259,14 +262,7 @@ class WorldNode:
         return self.pub_decisions.wait_for_all_acked(_NO_WAIT)
 
     def startup_seconds(self) -> float:
-        """Seconds from the start of ``swarm-ros run`` (its process, if it is this process's parent),
-        else from the start of this process, to now."""
-        parent = os.environ.get(PARENT_ENV, "")
-        if parent.isdigit() and int(parent) == os.getppid():
-            age = process_age(int(parent))
-            if age == age:  # not NaN
-                return age
-        return process_age()
+        return run_age()
 
     # -- the node runtime's hooks ----------------------------------------------------------
     def poll(self) -> None:
@@ -276,9 +272,11 @@ class WorldNode:
         return None if self.lockstep is None else self.lockstep.wake_in()
 
     def close(self, code: int) -> None:
-        """The checkpoint is removed once the run has ended or was stopped (Ctrl-C): no process of this run
-        will restart from it. A failed or orphaned world leaves it."""
+        """The save is removed once the run has ended or was stopped (Ctrl-C): no process of this run will restart
+        from it. A failed or orphaned world leaves it. A shard says how much it took from its peers."""
         self.linger(code)
+        if said := self.links.summary():
+            self.node.get_logger().info(said)
         if self.saver is not None and code in (EXIT_OK, EXIT_INTERRUPTED):
             self.saver.remove()
 
@@ -293,7 +291,7 @@ class WorldNode:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node("world", WorldNode, argv)
+    return run_node(WORLD, WorldNode, argv)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ import re
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -30,8 +30,24 @@ from swarm_ros.protocol.rows import (
 )
 
 if TYPE_CHECKING:
-    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.params import RunParams
     from swarm_ros.core.replica import Replica
+    from swarm_ros.core.shapes import Shape
+    from swarm_ros.core.state import SwarmState
+
+
+class WorldView(Protocol):
+    """What the checks of a batch's decisions read of the world process's run: the last tick, the state (exact
+    where the batch's robots are), the run's parameters and shape."""
+
+    @property
+    def tick(self) -> int: ...
+    @property
+    def state(self) -> SwarmState: ...
+
+    params: RunParams
+    shape: Shape
+
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
 _NODE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")  # a ROS node name, as batch names are
@@ -230,7 +246,7 @@ def decision_message(msg, robots: int, dims: int = 2) -> tuple[int, np.ndarray]:
 def decisions_allowed(
     rows: np.ndarray,
     tick: int,
-    sim: Simulation,
+    sim: WorldView,
     hosts: Callable[[np.ndarray], np.ndarray],
     batch: int,
     decided: np.ndarray,

@@ -63,13 +63,47 @@ def snapshot(rows: np.ndarray, where: tuple[int, int], radius: int) -> np.ndarra
 _POSE = ("state", "x", "y", "heading", "z", "pitch")  #: what a robot row carries (z, pitch: 3D only)
 
 
-class Hosting:
-    """The world's map of strips to batches (batch k: the k-th admitted), and the areas it routes rows to."""
+def poses(state, ids: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Robots ``ids`` (ascending) and their rows' fields in ``state`` now (state, x, y, heading; z, pitch in 3D):
+    what :func:`stood` compares with after the tick."""
+    return (ids, *(getattr(state, name)[ids] for name in _POSE if getattr(state, name) is not None))
 
-    def __init__(self, radius: int, vision_radius: float) -> None:
+
+def stood(before: tuple[np.ndarray, ...], state, ids: np.ndarray) -> np.ndarray:
+    """Which of robots ``ids`` are among ``before``'s (:func:`poses`) with the same row in ``state`` now: deciders
+    that stood as they were (a walker that lost its claim), whose row no batch needs again."""
+    was_ids, *was = before
+    if not was_ids.size or not ids.size:
+        return np.zeros(ids.size, dtype=bool)
+    at = np.minimum(np.searchsorted(was_ids, ids), was_ids.size - 1)
+    same = was_ids[at] == ids
+    for name, value in zip((n for n in _POSE if getattr(state, n) is not None), was):
+        same &= getattr(state, name)[ids] == value[at]
+    return same
+
+
+class Hosting:
+    """A world process's map of its strips to batches (batch k: the k-th admitted), and the areas it routes rows
+    to; ``own``: its strips (the world's: every column; a world shard's: those of its batches)."""
+
+    def __init__(self, radius: int, vision_radius: float, own: tuple[int, int] | None = None) -> None:
         self.radius, self.width, self.halo = radius, 2 * radius + 1, halo(vision_radius)
+        self.own = own if own is not None else (0, self.width - 1)
         self.host = np.full(self.width, -1, dtype=np.int64)  # batch number hosting each column
         self.strips: list[tuple[int, int]] = []  # per batch: (first, last) column it hosts
+
+    def holds(self, strip: tuple[int, int]) -> bool:
+        """Whether a batch hosting ``strip`` is this process's (False: another shard's).
+
+        Raises:
+            Rejected: a strip across the border of its strips: no shard can admit it.
+        """
+        first, last = self.own
+        if strip[0] >= first and strip[1] <= last:
+            return True
+        if strip[1] < first or strip[0] > last:
+            return False
+        raise Rejected("columns of another shard", f"{self.text(strip)} crosses the border of {self.text(self.own)}")
 
     def admit(self, name: str, strip: tuple[int, int], names: list[str]) -> int:
         """Take ``strip`` as the next batch's (``name``; ``names``: the batches so far); returns its number.
@@ -95,8 +129,9 @@ class Hosting:
             self.host[first : last + 1] = k
 
     def covered(self) -> int:
-        """Columns of the world that admitted batches host."""
-        return int((self.host >= 0).sum())
+        """Columns hosted: of its strips, by its admitted batches; another shard's columns count as covered (that
+        shard admits their batches)."""
+        return int((self.host >= 0).sum()) + self.width - (self.own[1] - self.own[0] + 1)
 
     def hosts(self, x: np.ndarray) -> np.ndarray:
         """The batch hosting a robot at each x: the one whose strip holds its column."""
@@ -105,35 +140,6 @@ class Hosting:
     def area(self, k: int) -> tuple[int, int]:
         """The columns batch ``k`` follows: its strip and the halo."""
         return area(self.strips[k], self.halo, self.width)
-
-    def before(self, state, ids: np.ndarray) -> tuple[np.ndarray, ...]:
-        """What :meth:`route` needs of robots ``ids`` (the deciders) before the tick: their columns and rows."""
-        pose = tuple(getattr(state, name)[ids] for name in _POSE if getattr(state, name) is not None)
-        return (columns(state.x[ids], self.radius), *pose)
-
-    def route(
-        self, rows: np.ndarray, moved: np.ndarray | None = None, before: tuple | None = None, state=None
-    ) -> list[np.ndarray]:
-        """A tick's rows (sorted by id) split by batch (:func:`route`). Robots ``moved`` (sorted) were
-        :meth:`before` the tick as ``before`` and are as ``state`` now; one whose row did not change is
-        sent to no batch (it decided to stand as it was: a walker that lost its claim)."""
-        cols = None
-        if moved is not None:
-            assert before is not None  # given with moved
-            cols, *pose = before
-            same = np.ones(moved.size, dtype=bool)
-            for name, was in zip((n for n in _POSE if getattr(state, n) is not None), pose):
-                same &= getattr(state, name)[moved] == was
-            if same.any():  # rows and moved are sorted by id, and every moved robot has a row
-                keep = np.ones(rows.size, dtype=bool)
-                keep[np.searchsorted(rows["id"], moved[same])] = False
-                rows = rows.take(np.flatnonzero(keep))
-                moved, cols = moved[~same], cols[~same]
-            if moved.size != rows.size:  # rows of robots that did not decide too (removed)
-                at = np.searchsorted(rows["id"], moved)
-                cols, moved_cols = row_columns(rows, self.radius), cols
-                cols[at] = moved_cols
-        return route(rows, cols, [self.area(k) for k in range(len(self.strips))], self.radius)
 
     def orphans(
         self, x: np.ndarray, moving_ids: Callable[[], np.ndarray], removed: set[int], pending: np.ndarray

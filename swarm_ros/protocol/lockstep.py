@@ -1,12 +1,15 @@
 """The world's coordination of the graph, as a plain class: no rclpy, an injectable clock.
 
-:class:`Lockstep` owns the run's state (a ``Simulation``) and decides everything the world node
-does: which robot batches are admitted, when tick 0 starts, when a tick's decisions are all in
-and the tick is applied (with the in-process engine's own ``Simulation.apply``), how far it may
-run ahead of the monitor, and what happens when a batch or the monitor is lost. The node feeds
-it checked messages and liveliness changes; it answers through a :class:`WorldPort`. Unit tests
-drive it with a fake port and clock (test/test_lockstep.py); docs/protocol.md and docs/faults.md describe the
-protocol and its fault policy.
+:class:`Lockstep` is one world process's: the world's, or world shard i's of S (``--world-shards``); the world
+is the shard with no peers, and runs the same code. It holds its :class:`~swarm_ros.core.shards.WorldShard`
+(the run's state in its area) inside a :class:`~swarm_ros.protocol.shard_exchange.ShardExchange` (its exchanges
+with its peers: none for the world, which closes each tick at once), and decides everything its node does:
+which robot batches it admits (those in its strips), when tick 0 starts, when a tick's decisions are all in
+and the tick goes to the exchange, what it publishes once the tick is closed (:class:`WorldClose`), how far it
+may run ahead of the monitor, and what happens when a batch or the monitor is lost. The node feeds it checked
+messages and liveliness changes; it answers through a :class:`WorldPort`. Unit tests drive it with a fake port
+and clock (test/test_lockstep.py for the world, test/test_shard_lockstep.py for S shards over fake channels);
+docs/protocol.md and docs/faults.md describe the protocol and its fault policy.
 """
 
 from __future__ import annotations
@@ -18,15 +21,19 @@ from collections.abc import Callable
 
 import numpy as np
 
-from swarm_ros.core.engine import Simulation
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 from swarm_ros.core.params import auto_every
+from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.rules import Decider, Decisions
+from swarm_ros.core.shard_parts import Part
+from swarm_ros.core.shards import WorldShard
 from swarm_ros.core.state import IS_MOVING
 from swarm_ros.protocol.checks import Rejections, decisions_allowed
-from swarm_ros.protocol.hosting import Hosting, snapshot
+from swarm_ros.protocol.hosting import Hosting, poses, snapshot
 from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
+from swarm_ros.protocol.shard_exchange import RunView, ShardExchange
+from swarm_ros.protocol.world_close import WorldClose, joined
 from swarm_ros.protocol.world_losses import Down, WorldLosses
 from swarm_ros.protocol.world_port import (
     DECISIONS_LINGER,
@@ -39,18 +46,20 @@ from swarm_ros.protocol.world_port import (
     WorldPort,
 )
 from swarm_ros.protocol.world_records import WorldRecords
-from swarm_ros.protocol.world_restore import Saved, WorldRestore
+from swarm_ros.protocol.world_restore import WorldRestore
 from swarm_ros.protocol.world_status import WorldStatus
 
 
-class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base's stand-ins come after it
-    """Admission, ticks and the monitor window of one run (see the module's docstring); its status and stall
-    checks (:class:`WorldStatus`), its bookkeeping and restore (:class:`WorldRestore`), its loss policy
-    (:class:`WorldLosses`)."""
+class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose):  # a base's stand-ins after it
+    """Admission, ticks and the monitor window of one world process (see the module's docstring); its close of a
+    tick (:class:`WorldClose`), status and stall checks (:class:`WorldStatus`), bookkeeping and restore
+    (:class:`WorldRestore`), loss policy (:class:`WorldLosses`) and records for the monitor (:class:`WorldRecords`);
+    the port of its own exchange."""
 
     def __init__(
         self,
-        sim: Simulation,
+        shard: WorldShard,
+        node_name: str,
         policy: Policy,
         port: WorldPort,
         logger: Logger,
@@ -58,21 +67,17 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         clock: Callable[[], float] = time.monotonic,
         created: float | None = None,
     ) -> None:
-        self.sim, self.policy, self.port, self.log, self.rejections, self.clock = (
-            sim,
-            policy,
-            port,
-            logger,
-            rejections,
-            clock,
-        )
-        n = sim.params.robots
+        self.exchange = ShardExchange(shard, self, rejections)
+        self.shard, self.node_name, self.sim = shard, node_name, RunView(self.exchange)
+        self.policy, self.port, self.log, self.rejections, self.clock = policy, port, logger, rejections, clock
+        n = shard.params.robots
         self.window = policy.monitor_window  # 0 while there is no monitor to wait for
         self.period = 1.0 / policy.tick_rate if policy.tick_rate else 0.0  # seconds between ticks published, at least
         self.every = policy.record_every or auto_every(n)  # the robots' rows to the monitor (WorldRecords)
         self.paced_at = -math.inf  # clock() from which the next tick may be published (tick_rate)
-        self.hosting = Hosting(sim.shape.world.radius, sim.params.vision_radius)  # which batch hosts which strip
-        self.decider = Decider(sim.shape, sim.params)  # the world's own, for the strips of batches removed for good
+        # which batch hosts which of this process's strips (another shard's batches are not this one's)
+        self.hosting = Hosting(shard.plan.radius, shard.params.vision_radius, shard.strip)
+        self.decider = Decider(shard.shape, shard.params)  # its own, for the strips of batches removed for good
         self.batch_names: list[str] = []
         self.restart_counts: list[int] = []  # per batch
         self.incarnations: list[int] = []  # per batch: the newest process's incarnation heard of
@@ -82,20 +87,20 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         self.lapsed: set[int] = set()  # batches whose liveliness lapsed since their last accepted announcement
         self.live: set[int] = set()  # batches whose liveliness holds (DDS reports a writer of theirs alive)
         self.resent_at: dict[int, float] = {}  # batch -> clock() its snapshot was last sent again (check_stalls)
-        self.restarts: list[tuple[int, str]] = []  # (tick, node) of every restart: batches, the world, the monitor
-        self.known: dict[int, int] = {}  # restored: batch -> incarnation of the process the world before knew
-        self.restored = False  # this world went on from a checkpoint (a process before it was lost)
+        self.restarts: list[tuple[int, str]] = []  # (tick, node) of every restart: batches, world processes, monitor
+        self.known: dict[int, int] = {}  # restored: batch -> incarnation of the process the one before knew
+        self.restored = False  # this process went on from a save (a process before it was lost)
         self.monitor_nonce = ""  # the tag nonce of the monitor process whose metrics came last
         self.monitor_down_since: float | None = None  # the monitor lost and waited for: since when
-        self.started_wall = 0.0  # time.time() at tick 0 (a restored world's wall_seconds count from it)
+        self.started_wall = 0.0  # time.time() at tick 0 (a restored process's wall_seconds count from it)
         self.lost: list[str] = []  # batches (and the monitor) lost for good
         self.started = False
         self.created = clock() if created is None else created  # start_timeout counts from here
         self.parts: list[np.ndarray] = []  # decision rows received for the coming tick
         self.received = 0
         self.decided = np.zeros(n, dtype=bool)  # robots whose decision for the coming tick is in
-        self.pending = np.empty(0, dtype=np.int64)  # robots of lost batches, removed at the end of the next tick
-        self.queued: deque = deque()  # (tick, rows, joined, applied, parts, tally) held while the monitor is behind
+        self.pending = np.empty(0, dtype=np.int64)  # robots of lost batches, removed at the end of a coming tick
+        self.queued: deque = deque()  # (tick, rows, joined, applied, regional, tally) held while the monitor is behind
         self.monitor_tick = -1
         self.monitor_alive = False
         self.published_tick = -1
@@ -106,16 +111,28 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         self.startup_seconds = float("nan")
         self.ended_at: float | None = None
         self.finished = False  # the end is out and delivered (or given up on): the node may exit
+        self.inflight: tuple[int, np.ndarray] | None = None  # (tick, applied rows) handed to the exchange
+        self.before: tuple[np.ndarray, ...] = (np.empty(0, dtype=np.int64),)  # the deciders' rows (hosting.poses)
+        self.removing = np.empty(0, dtype=np.int64)  # the pending robots removed at the in-flight tick's end
+        self.losses_booked = 0  # the losses the bookkeeping saved holds
+        self.removed_now = np.empty(0, dtype=np.int64)  # the pending robots removed at the last tick's end
+        self.removals: list[tuple[int, np.ndarray]] = []  # (tick, robots removed at its end), every shard alike
+        self.deferred: list[tuple[int, str]] = []  # batches to remove once the in-flight tick is closed
+        self.advancing = self.again = False  # inside _maybe_advance; asked again from inside it
 
     # -- admission ------------------------------------------------------------------
     def announce(self, name: str, incarnation: int, strip: tuple[int, int]) -> None:
         """A batch's announcement of its strip (checked as a message): admit it, or take it as a restarted process.
+        A batch in another shard's strips is that shard's.
 
         Raises:
-            Rejected: columns another batch hosts, another strip than before, or a new batch after tick 0.
+            Rejected: columns another batch hosts, a strip across this shard's border, another strip than before,
+                or a new batch after tick 0.
         """
         if name in self.batch_names:
             self._reannounced(self.batch_names.index(name), strip, incarnation)
+            return
+        if not self.hosting.holds(strip):
             return
         if self.started:
             raise Rejected("new batch after tick 0", f"'{name}'")
@@ -126,7 +143,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         self.port.watch_batch(k, name)
         covered = self.hosting.covered()
         self.log.info(f"{name} hosts {self.hosting.text(strip)}; {covered}/{self.hosting.width} columns covered")
-        if incarnation:  # restarted before the world heard from the processes before it
+        if incarnation:  # restarted before this process heard from the processes before it
             self._reannounced(k, strip, incarnation)
         if covered == self.hosting.width:
             self.maybe_start()
@@ -137,7 +154,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
     def _reannounced(self, k: int, strip: tuple[int, int], incarnation: int, respawn: bool = False) -> None:
         """A batch announced again: its process was restarted. Send it the current tick to start from."""
         name = self.batch_names[k]
-        if self.known.get(k) == incarnation:  # the process the world before this one knew: nothing new
+        if self.known.get(k) == incarnation:  # the process the one before this one knew: nothing new
             del self.known[k]
             return
         if self.started and self.confirm_loss(k, "a new process of it announced itself"):
@@ -179,15 +196,16 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         except Rejected as fault:
             self.rejections.drop(BATCHES, fault)
 
-    def _send_snapshot(self, k: int, rows: np.ndarray | None = None) -> None:
-        """Batch ``k``'s region at the current tick (``rows``: every robot's, if at hand)."""
-        rows = state_rows(np.arange(self.sim.state.robots), self.sim.state) if rows is None else rows
+    def _send_snapshot(self, k: int) -> None:
+        """Batch ``k``'s region at the last tick closed, from the replica (which holds it)."""
+        s = self.sim.state
+        rows = state_rows(np.flatnonzero(s.state != UNKNOWN), s)
         self.port.send_snapshot(k, self.sim.tick, snapshot(rows, self.hosting.area(k), self.hosting.radius))
 
     def starting(self) -> bool:
-        """Whether tick 0 goes out now (it is then marked started): once batches host every column and the
-        monitor is there (so the run never stalls for it); without a monitor to wait for (``monitor_window: 0``),
-        or one not seen within ``FIRST_STALL_S``, at once."""
+        """Whether tick 0 goes out now (it is then marked started): once batches host every column of this
+        process's strips and the monitor is there (so the run never stalls for it); without a monitor to wait
+        for (``monitor_window: 0``), or one not seen within ``FIRST_STALL_S``, at once."""
         if self.started or self.hosting.covered() < self.hosting.width:
             return False
         if self.window and not (self.monitor_alive and self.port.monitor_reads_all()) and MONITOR not in self.lost:
@@ -201,19 +219,23 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         return True
 
     def maybe_start(self) -> None:
-        """Tick 0 when :meth:`starting` says so: snapshots to the batches, the tick to the monitor."""
+        """Tick 0 when :meth:`starting` says so: the save, snapshots to the batches, the tick to the monitor."""
         if not self.starting():
             return
-        self.log.info(
-            f"all robots hosted by {len(self.batch_names)} batches{' and the monitor' * bool(self.window)}: tick 0"
-        )
-        rows = state_rows(np.arange(self.sim.state.robots), self.sim.state)
-        self.save_book()  # first: a checkpoint that holds a tick has the bookkeeping beside it
+        monitor = " and the monitor" * bool(self.window)
+        self.log.info(f"{self.node_name}: its strips hosted by {len(self.batch_names)} batches{monitor}: tick 0")
+        own = self._own()
+        rows = state_rows(own, self.sim.state)
+        rest = np.setdiff1d(np.arange(self.shard.params.robots), own, assume_unique=True)  # unknown ones as unknown
+        self.save_book()  # first: a save that holds a tick has the bookkeeping beside it
         tally = self._tally()
-        self.port.checkpoint(0, rows, None, self.sim.history[0], -1, tally)  # before the snapshots: they tell of tick 0
+        self.port.save_tick(
+            0, joined(rows, state_rows(rest, self.sim.state)), rows.size, None, self.shard.history[0], {}, tally
+        )
         for k in range(len(self.batch_names)):
-            self._send_snapshot(k, rows)
-        self._emit(0, rows, False, None, save=False, tally=tally)
+            self._send_snapshot(k)
+        self.queued.append((0, rows, False, None, None, tally))
+        self._flush()
 
     # -- ticks ----------------------------------------------------------------------
     @property
@@ -223,18 +245,19 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
 
     def decisions(self, k: int, tick: int, rows: np.ndarray) -> None:
         """Batch ``k``'s decisions for ``tick``: taken whole once checked
-        (:func:`swarm_ros.protocol.checks.decisions_allowed`).
+        (:func:`swarm_ros.protocol.checks.decisions_allowed`); those of the tick being closed with the peers are
+        repeats.
 
         Raises:
             Rejected: the check failed; nothing was taken.
             RunFailed: more decisions than moving robots (a gap in the checks).
         """
-        if self.over:
-            return  # answers to the tick after the last: the run is over
+        if self.over or (self.inflight is not None and tick == self.inflight[0]):
+            return  # answers to the tick after the last, or repeats
         if not self.started:
             raise Rejected("before tick 0")
         if self.restored and tick <= self.sim.tick:
-            return  # sent to the world before this one: the batches' histories hand them over again
+            return  # sent to the process before this one: the batches' histories hand them over again
         if k in self.removed_batches:
             raise Rejected("removed batch", f"{self.batch_names[k]}'s robots were removed; the world decides its strip")
         decisions_allowed(rows, tick, self.sim, self.hosts, k, self.decided, self.batch_names[k])
@@ -248,83 +271,64 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         self._maybe_advance(tick)
 
     def _maybe_advance(self, tick: int) -> None:
-        """Apply the tick once every moving robot that is not being removed or decided by the world has decided;
-        then the ticks that await no batch (only the world's own robots move), while nothing is queued."""
-        while not self.sim.done:
-            expected = self.sim.metrics.moving - len(self._standing()) - len(self._orphans())
-            if self.received > expected:
-                raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
-            if self.received < expected:
-                return
-            self._advance(tick)
-            if self.queued:
-                return  # the monitor is behind: poll() goes on once it has caught up
-            tick += 1
+        """Hand the tick to the exchange once every own moving robot that is not being removed or decided by this
+        process has decided (one at a time: the next once this one is closed, and nothing is queued). A world
+        alone closes it at once, and goes on while only its own robots move: in this loop, not deeper each tick
+        (a close asks for the next tick from inside this call)."""
+        if self.advancing:
+            self.again = True
+            return
+        self.advancing = True
+        try:
+            self.again = True
+            while self.again:
+                self.again = False
+                if self.inflight is not None or not self.started or self.sim.done or self.queued:
+                    return
+                expected = self.shard.own_count - len(self._standing()) - len(self._orphans())
+                if self.received > expected:
+                    raise RunFailed(f"tick {tick}: {self.received} decisions for {expected} moving robots")
+                if self.received == expected:
+                    tick = self.sim.tick + 1
+                    self._advance(tick)
+        finally:
+            self.advancing = False
 
     def _standing(self) -> np.ndarray:  # moving robots of lost batches: they stand still one tick, then go
         return self.pending[IS_MOVING[self.sim.state.state[self.pending]]]
 
-    def _orphans(self) -> np.ndarray:  # moving robots in the strips of batches removed for good: the world's
+    def _orphans(self) -> np.ndarray:  # moving robots in the strips of batches removed for good: its own to decide
         return self.hosting.orphans(self.sim.state.x, self.sim.moving_ids, self.removed_batches, self.pending)
 
     def _advance(self, tick: int) -> None:
+        s = self.sim.state
         parts = [decisions_of(tick, r) for r in self.parts]
         standing = self._standing()
-        s = self.sim.state
         if standing.size:
             parts.append(Decisions.standing(s, standing, tick))
         orphans = self._orphans()
         if orphans.size:
             parts.append(self.decider.decide(s, orphans, tick))
-        decisions = Decisions.concatenate(parts)
-        applied = decision_rows(decisions)
-        deciders = np.sort(decisions.ids)
-        before = self.hosting.before(s, deciders)  # their rows before the tick: for the region rows
+        decisions = Decisions.concatenate(parts) if parts else Decisions.standing(s, np.empty(0, np.int64), tick)
         self.parts, self.received = [], 0
-        self.decided[deciders] = False
-        localized_before, losses_before = self.sim.metrics.localized, len(self.sim.losses)
+        self.decided[decisions.ids] = False
+        self.inflight = (tick, decision_rows(decisions))
+        self.before = poses(s, np.sort(decisions.ids))  # their rows before the tick (WorldClose: the region rows)
+        self.removing = self.pending
         try:
-            self.sim.apply(decisions)
+            self.exchange.own_decisions(decisions, self.pending if self.pending.size else None)
         except ContractError as exc:
-            raise RunFailed(f"tick {tick}: {exc}") from None
-        if self.pending.size:
-            count = self.sim.remove(self.pending)
-            self.log.warn(f"tick {tick}: removed the {count} robots of lost batches")
-            self.pending = np.empty(0, dtype=np.int64)
-        if len(self.sim.losses) != losses_before:  # scheduled failures, or a lost batch's robots
-            self.save_book()
-        s = self.sim.state
-        removed = self.sim.last_removed  # the deciders changed, and failed robots
-        ids = np.union1d(deciders, removed) if removed.size else deciders
-        joined = self.sim.metrics.localized != localized_before or removed.size > 0
-        self._emit(tick, state_rows(ids, s), joined, applied, (deciders, before))
+            raise RunFailed(f"{self.node_name}, tick {tick}: {exc}") from None
 
-    def _emit(
-        self,
-        tick: int,
-        rows: np.ndarray | None,
-        joined: bool,
-        applied: np.ndarray | None,
-        moved: tuple[np.ndarray | None, tuple | None] | None = (None, None),
-        save: bool = True,
-        tally: np.ndarray | None = None,
-    ) -> None:
-        """Checkpoint a tick (``save``: ``rows``, those that changed, become what goes to the monitor,
-        :meth:`outgoing`), then publish it now, or queue it while the monitor is more than ``window`` ticks
-        behind; ``moved``: (ids, their rows before) for the region rows, None: none (a restored world's, which
-        passes what it published: ``rows`` None at a tick whose rows were not, and its ``tally``)."""
-        parts = None
-        if moved is not None:
-            assert rows is not None  # a new tick's changed rows
-            parts = self.hosting.route(rows, moved[0], moved[1], self.sim.state)
-        if save:
-            assert rows is not None
-            out, applied, tally = self.outgoing(tick, rows, applied)
-            saved = rows if out is None else out  # at a recorded tick every robot's row: those changed among them
-            self.port.checkpoint(tick, saved, applied, self.sim.history[tick], -1 if out is not None else 0, tally)
-            rows = out
-        self.queued.append((tick, rows, joined, applied, parts, tally))
-        self._flush()
+    # -- the exchange's port: its sends go to the node; closed() is WorldClose's ----------------------
+    def send_claims(self, peer: int, tick: int, claims: Decisions) -> None:
+        self.port.send_claims(peer, tick, claims)
+
+    def send_part(self, peer: int, tick: int, part: Part) -> None:
+        self.port.send_part(peer, tick, part)
+
+    def ask_again(self, peer: int) -> None:
+        self.port.ask_again(peer)
 
     def _awaits_monitor(self) -> bool:
         """Whether the next tick queued waits for the monitor to catch up (it is more than ``window`` ahead)."""
@@ -338,20 +342,23 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         return max(0.0, self.paced_at - self.clock())
 
     def _flush(self) -> None:
+        """Publish the ticks queued, as far as the monitor window and ``tick_rate`` allow; then on to the next."""
         while self.queued and not self._awaits_monitor():
             if self.period:  # tick_rate: each tick goes out at least a period after the one before
                 now = self.clock()
                 if now < self.paced_at:
                     return  # poll() goes on
                 self.paced_at = now + self.period
-            tick, rows, joined, applied, parts, tally = self.queued.popleft()
-            self.port.publish_tick(tick, rows, joined, applied, parts, tally)
+            tick, rows, joined_, applied, regional, tally = self.queued.popleft()
+            self.port.publish_tick(tick, rows, joined_, applied, regional, tally)
             self.progress_at = self.moved_at = self.clock()
             self.published_tick = tick
             if tick == self.sim.tick and self.sim.done:
                 self._announce_end()
             elif tick == 0:
                 self.publish_status()
+        if not self.queued:
+            self._maybe_advance(self.sim.tick + 1)
 
     def _announce_end(self) -> None:
         m = self.sim.metrics
@@ -361,7 +368,7 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
         self.log.info(f"run ended: {self.sim.outcome.value} at tick {m.tick}, {m.localized} localized")
 
     def metrics(self, tick: int, nonce: str = "") -> None:
-        """The monitor's report of ``tick`` (checked: a tick this world published), from the monitor process
+        """The monitor's report of ``tick`` (checked: a tick this process published), from the monitor process
         whose tags carry ``nonce``: a new one after another is a restarted monitor."""
         if nonce != self.monitor_nonce:
             if self.monitor_nonce and self.started:
@@ -376,22 +383,9 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
             self._flush()
 
     def save_book(self) -> None:
-        """The bookkeeping a restarted world needs besides the ticks (:mod:`swarm_ros.protocol.world_restore`)."""
+        """The bookkeeping a restarted process needs besides the ticks (:mod:`swarm_ros.protocol.world_restore`)."""
         if self.started:
             self.port.save_book(self.book())
-
-    def restore(self, saved: Saved, incarnation: int) -> None:
-        """Go on from the checkpoint a world process before this one wrote (:func:`restore`), then send every
-        batch a snapshot of the saved tick, and the ticks after the monitor's last report again."""
-        self.restore_saved(saved, incarnation)
-        for k in range(len(self.batch_names)):
-            if k not in self.removed_batches:
-                self._send_snapshot(k)
-        for t in sorted(t for t in saved.ring if t > saved.monitor_tick or t == saved.tick):
-            rows, applied, tally = saved.ring[t]
-            out, again = self.resent(t, rows, tally)
-            self._emit(t, out, t == saved.tick, applied, None, save=False, tally=again)
-        self.publish_status()
 
     # -- status -----------------------------------------------------------------------
     def publish_status(self, note: str = "") -> None:
@@ -424,8 +418,8 @@ class Lockstep(WorldLosses, WorldStatus, WorldRestore, WorldRecords):  # a base'
             self._flush()  # a tick held for tick_rate, due now
         if not self.started:
             self.maybe_start()
-        elif self.removed_batches and not self.queued and not self.received and not self.sim.done:
-            self._maybe_advance(self.sim.tick + 1)  # a tick only the world's own robots decide in
+        else:
+            self._maybe_advance(self.sim.tick + 1)  # a tick only its own robots decide in, or none of its own
         if self.ended_at is not None:
             caught_up = self.window == 0 or self.monitor_tick >= self.sim.tick
             # the end is out once every reader acknowledged the last status and rows, and the applied decisions (a

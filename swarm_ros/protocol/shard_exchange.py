@@ -9,7 +9,7 @@ repeat and is ignored; one of the next tick is kept for when it is due. What it 
 keeps, so that a peer's restarted process, which goes on from its last save (:meth:`WorldShard.saved`), gets
 them again (:meth:`resend`). A part that fails its checks is dropped and counted; the tick waits for the
 genuine one, which it asks the peer for again. Nothing here knows of ROS: the graph's world shard node
-(:mod:`swarm_ros.nodes.world_shard`) turns topics into these calls.
+(:mod:`swarm_ros.nodes.world`, through :mod:`swarm_ros.ros.shard_links`) turns topics into these calls.
 """
 
 from __future__ import annotations
@@ -20,8 +20,10 @@ from typing import Protocol
 import numpy as np
 
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
+from swarm_ros.core.metrics import Outcome, TickMetrics
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shards import Part, ShardSaved, WorldShard
+from swarm_ros.core.state import SwarmState
 from swarm_ros.protocol.checks import Rejections
 
 KEPT_TICKS = 2  #: ticks of sent messages kept for a restarted peer: the one being decided and the one before
@@ -193,3 +195,49 @@ class ShardExchange:
             self.rejections.drop("parts", reason)
             del self.parts[tick][source]
             self.port.ask_again(source)
+
+
+class RunView:
+    """The run as a world process holds it, for its lockstep: the last tick its exchange closed, its shard's
+    replica (exact in its area; the world's: everywhere), the metrics every shard holds alike, and its own moving
+    robots."""
+
+    def __init__(self, exchange: ShardExchange) -> None:
+        self.exchange, self.shard = exchange, exchange.shard
+        self.shape, self.params = self.shard.shape, self.shard.params
+
+    @property
+    def tick(self) -> int:
+        return self.exchange.tick
+
+    @property
+    def done(self) -> bool:
+        return self.shard.outcome is not None
+
+    @property
+    def outcome(self) -> Outcome | None:
+        return self.shard.outcome
+
+    @property
+    def state(self) -> SwarmState:
+        return self.shard.state
+
+    @property
+    def history(self) -> list[tuple[int, ...]]:
+        return self.shard.history
+
+    @property
+    def losses(self) -> list[tuple[int, int]]:
+        return self.shard.losses
+
+    @property
+    def removed(self) -> int:
+        """Robots removed so far (failures, lost batches' robots)."""
+        return sum(n for _, n in self.shard.losses)
+
+    @property
+    def metrics(self) -> TickMetrics:
+        return TickMetrics(*self.shard.history[-1])
+
+    def moving_ids(self) -> np.ndarray:
+        return self.shard.own_moving()

@@ -62,7 +62,7 @@ class ShardSaver:
         # a tick's kept messages: claims to each shard, part rows to each shard, the counts. None holds a robot
         # twice (its claim or row goes to each of up to S - 1 peers), the counts at most every robot removed
         room = shards * robots * (self.decision.itemsize + self.part.itemsize) + (2 + len(COUNTS) + robots) * 8
-        self.kept = (2 * shards + 1, room)
+        self.kept = (2 * shards + 1, room) if shards > 1 else (0, 0)  # a shard alone (the world) sends none
         self.checkpoint: Checkpoint | None = None
 
     def _args(self) -> tuple[Path, int, int, int]:
@@ -96,7 +96,7 @@ class ShardSaver:
         (``record_every`` > 1)."""
         assert self.checkpoint is not None  # created or opened
         try:
-            if tick in sent:
+            if tick in sent and self.kept[0]:
                 claims, parts = sent[tick]
                 rows_of = [decision_rows(c) for c in claims] + [part_rows(p, self.dims) for p in parts]
                 self.checkpoint.write_kept(tick, [*rows_of, counts_data(parts[0])])
@@ -112,7 +112,7 @@ class ShardSaver:
         """
         assert self.checkpoint is not None
         sent, shards = {}, self.plan.shards
-        for t in range(max(1, tick - KEPT_TICKS + 1), tick + 1):
+        for t in range(max(1, tick - KEPT_TICKS + 1), tick + 1) if self.kept[0] else ():
             chunks = self.checkpoint.kept(t)
             if chunks is None:
                 raise Rejected("incomplete save", f"no kept messages of tick {t}")

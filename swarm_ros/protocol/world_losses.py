@@ -10,15 +10,17 @@ the swarm goes on without it. docs/faults.md says the policy in full.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from swarm_ros.core.engine import Simulation
 from swarm_ros.core.errors import RunFailed
 from swarm_ros.protocol.hosting import Hosting
 from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.world_port import LOSS_CONFIRM_S, Logger, Policy
+
+if TYPE_CHECKING:
+    from swarm_ros.protocol.shard_exchange import RunView
 
 
 class Down(NamedTuple):
@@ -39,7 +41,7 @@ class WorldLosses:
     """The lockstep's handling of lost processes, as its methods (the fields they read and write are the
     lockstep's own, set in ``Lockstep.__init__``)."""
 
-    sim: Simulation
+    sim: RunView
     policy: Policy
     log: Logger
     clock: Callable[[], float]
@@ -56,6 +58,8 @@ class WorldLosses:
     pending: np.ndarray
     parts: list[np.ndarray]
     received: int
+    inflight: tuple[int, np.ndarray] | None
+    deferred: list[tuple[int, str]]
     monitor_alive: bool
     monitor_down_since: float | None
     window: int
@@ -145,9 +149,15 @@ class WorldLosses:
 
     def _remove_batch(self, k: int, why: str) -> None:
         """Remove batch ``k``'s robots, the moving robots in its strip, at the end of the next tick (robots lost
-        for good); from then on the world decides for the robots that move into the strip."""
+        for good); from then on the world decides for the robots that move into the strip. Between ticks: while a
+        tick is with the peers (world shards), its robots may still cross into another shard's strips, so the
+        removal waits for the tick's close."""
+        self.down_since.pop(k, None)  # confirmed: no longer waited for, nor removed again at the next poll
+        if self.inflight is not None:
+            if all(k != d for d, _ in self.deferred):
+                self.deferred.append((k, why))
+            return
         name = self.batch_names[k]
-        self.down_since.pop(k, None)
         ids = self.hosting.orphans(self.sim.state.x, self.sim.moving_ids, {k}, self.pending)
         self.removed_batches.add(k)
         self.lost.append(name)

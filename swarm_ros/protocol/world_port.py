@@ -11,6 +11,8 @@ from swarm_ros.core.params import node_defaults
 if TYPE_CHECKING:
     import numpy as np
 
+    from swarm_ros.core.rules import Decisions
+    from swarm_ros.core.shard_parts import Part
     from swarm_ros.protocol.status import Status
 
 STALL_S = 5.0  #: seconds without progress after which a silent batch or monitor counts as lost
@@ -77,17 +79,23 @@ class WorldPort(Protocol):
         tally: np.ndarray | None,
     ) -> None: ...
     def publish_status(self, status: Status) -> None: ...  # the run's state
-    # a tick's rows (the first `published` of them go out; -1: all), applied decisions (None: none go out), metrics
-    # and tally into the checkpoint (a restarted world goes on from it)
-    def checkpoint(
+    # a tick's rows in this process's view (the first `published` of them its part for the monitor), the decisions
+    # applied (None: none go out), its metrics, the messages kept for the peers and the tally (None: record_every
+    # 1), durable before anything of the next tick goes out (swarm_ros.protocol.shard_save)
+    def save_tick(
         self,
         tick: int,
         rows: np.ndarray,
-        applied: np.ndarray | None,
-        metrics: np.ndarray,
         published: int,
+        applied: np.ndarray | None,
+        metrics: tuple[int, ...],
+        sent: dict,
         tally: np.ndarray | None,
     ) -> None: ...
+    # the exchange's sends to its peers (world shards; none for the world alone)
+    def send_claims(self, peer: int, tick: int, claims: Decisions) -> None: ...
+    def send_part(self, peer: int, tick: int, part: Part) -> None: ...
+    def ask_again(self, peer: int) -> None: ...
     def save_book(self, book: dict) -> None: ...  # the bookkeeping beside the ticks (world_restore)
     def monitor_reads_all(self) -> bool: ...  # the monitor's reader of every topic it records is matched
     def delivered(self) -> bool: ...  # every reader acknowledged the last status, rows and tallies

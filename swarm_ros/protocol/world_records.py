@@ -15,17 +15,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarm_ros.core.regions import columns
+from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.state import STATE_COUNT
 from swarm_ros.protocol.rows import state_rows
 
 if TYPE_CHECKING:
-    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.shards import WorldShard
+    from swarm_ros.protocol.shard_exchange import RunView
 
 
 class WorldRecords:
     """The lockstep's choice of what goes to the monitor (see the module's docstring)."""
 
-    sim: Simulation
+    sim: RunView
+    shard: WorldShard
     every: int  #: record_every, resolved: the robots' rows go to the monitor every this many ticks
 
     def records(self, tick: int) -> bool:
@@ -54,12 +58,24 @@ class WorldRecords:
         return (rows if self.records(tick) else None), tally
 
     def _tally(self) -> np.ndarray | None:
-        """The robots by state (this process's part of them, a world shard's: those in its strips), or None when
-        the rows go out every tick."""
+        """The robots in this process's strips by state (the world's: every robot), or None when the rows go out
+        every tick."""
         if self.every == 1:
             return None
-        return np.bincount(self.sim.state.state, minlength=STATE_COUNT).astype(np.int64)
+        return np.bincount(self.sim.state.state[self._own()], minlength=STATE_COUNT).astype(np.int64)
 
     def _recorded_rows(self) -> np.ndarray:
-        """Every robot's row (a world shard: every robot in its strips) at the tick just applied."""
-        return state_rows(np.arange(self.sim.state.robots), self.sim.state)
+        """Every robot's row in this process's strips (the world's: every robot's) at the tick just closed."""
+        return state_rows(self._own(), self.sim.state)
+
+    def _own(self) -> np.ndarray:
+        """The robots this process reports at tick 0 and at every tick it records: every one standing in its strips
+        (moving robots: those it owns; stationary and removed ones: every shard knows them, this one has the
+        strips they stand in)."""
+        s = self.sim.state
+        known = np.flatnonzero(s.state != UNKNOWN)
+        return known[self._in_strips(s.x[known])]
+
+    def _in_strips(self, x: np.ndarray) -> np.ndarray:
+        cols = columns(x, self.shard.plan.radius)
+        return (cols >= self.shard.strip[0]) & (cols <= self.shard.strip[1])

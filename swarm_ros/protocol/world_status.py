@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarm_ros.core.engine import Simulation
 from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
 from swarm_ros.core.state import RobotState
@@ -19,12 +19,15 @@ from swarm_ros.protocol.status import RUNNING, STARTING, Status, restarts_text
 from swarm_ros.protocol.world_losses import Down
 from swarm_ros.protocol.world_port import DROWNED_S, FIRST_STALL_S, STALL_S, STILL_S
 
+if TYPE_CHECKING:
+    from swarm_ros.protocol.shard_exchange import RunView
+
 
 class WorldStatus:
     """The lockstep's status and stall checks, as its methods (the fields they read are the lockstep's own,
     set in ``Lockstep.__init__``)."""
 
-    sim: Simulation
+    sim: RunView
     rejections: Rejections
     started: bool
     ended_at: float | None
@@ -47,6 +50,7 @@ class WorldStatus:
     pending: np.ndarray
     live: set[int]
     resent_at: dict[int, float]
+    inflight: tuple[int, np.ndarray] | None
 
     # the lockstep's own (Lockstep defines them; a WorldStatus alone is not a lockstep)
     def hosts(self, ids: np.ndarray) -> np.ndarray:
@@ -61,7 +65,7 @@ class WorldStatus:
     def _awaits_monitor(self) -> bool:
         raise NotImplementedError
 
-    def _send_snapshot(self, k: int, rows: np.ndarray | None = None) -> None:
+    def _send_snapshot(self, k: int) -> None:
         raise NotImplementedError
 
     def status(self, note: str = "") -> Status:
@@ -110,9 +114,14 @@ class WorldStatus:
         ``STILL_S`` fails: liveliness that comes and goes (a transport that has stopped delivering)
         would otherwise keep the rules above from ever firing.
 
+        While a tick is with the peers (world shards), the batches are not waited for (a peer that never answers
+        stops the run after ``STILL_S``; its process is restarted by the launcher).
+
         Raises:
             RunFailed: a batch or the monitor alive but silent for ``DROWNED_S``; the run still for ``STILL_S``.
         """
+        if self.inflight is not None:
+            self.progress_at = now
         if not self.started or self.sim.done:
             return
         if now - self.moved_at >= STILL_S:
