@@ -217,6 +217,7 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
             print(f"swarm-ros: Dask: {where}, dashboard {client.dashboard_link}", file=sys.stderr, flush=True)
         if engine == "ros2":
             _check_ros_workers(client)
+        _WATCHING.append(quiet_after_interrupt)  # execute_dask checks it at every run finished
         yield client
     finally:
         try:
@@ -227,6 +228,8 @@ def dask_client(scheduler: str | None, jobs: int, engine: str, quiet: bool) -> I
         finally:
             tornado_log.removeFilter(quiet_after_interrupt)
             quiet_after_interrupt.unwatch(handlers)
+            if quiet_after_interrupt in _WATCHING:
+                _WATCHING.remove(quiet_after_interrupt)
 
 
 class _QuietAfterInterrupt:
@@ -242,6 +245,17 @@ class _QuietAfterInterrupt:
 
     def filter(self, record: object) -> bool:
         return not self.interrupted
+
+    def check(self) -> None:
+        """Raise the interrupt noted, if Python lost it: a handler's KeyboardInterrupt raised while a garbage
+        collector's callback runs (Dask's GC diagnosis) is printed and dropped, and the experiment ran on to its
+        end (CI saw exit 0 after a Ctrl-C). The main thread checks at every run finished.
+
+        Raises:
+            KeyboardInterrupt: a SIGINT or SIGTERM came.
+        """
+        if self.interrupted:
+            raise KeyboardInterrupt
 
     def watch(self) -> dict:
         """Note a SIGINT or SIGTERM before its handler raises (the loop logs as soon as the raise reaches the
@@ -267,10 +281,18 @@ class _QuietAfterInterrupt:
 
     @staticmethod
     def unwatch(before: dict) -> None:
+        """Give the handlers back, from the main thread (a cluster closed in another thread leaves :meth:`watch`'s
+        in place: they hand each signal on to the ones before)."""
         import signal
+        import threading
 
+        if threading.current_thread() is not threading.main_thread():
+            return
         for sig, handler in before.items():
             signal.signal(sig, handler)
+
+
+_WATCHING: list[_QuietAfterInterrupt] = []  #: the open Dask sessions' watchers (signals are the process's)
 
 
 @contextmanager
@@ -359,6 +381,8 @@ def execute_dask(client, todo: list[RunSpec], engine: str, processes: int) -> Ge
         while queue and len(submitted) < _IN_FLIGHT * workers:
             submit()
         for future in pending:
+            for watching in _WATCHING:  # a Ctrl-C that Python dropped (_QuietAfterInterrupt.check)
+                watching.check()
             rows = future.result()
             recent.extend(max(float(row["wall_seconds"]), 0.0) for row in rows)
             while queue and pending.count() < _IN_FLIGHT * workers:
