@@ -75,8 +75,11 @@ def stood(before: tuple[np.ndarray, ...], state, ids: np.ndarray) -> np.ndarray:
     was_ids, *was = before
     if not was_ids.size or not ids.size:
         return np.zeros(ids.size, dtype=bool)
-    at = np.minimum(np.searchsorted(was_ids, ids), was_ids.size - 1)
-    same = was_ids[at] == ids
+    at: np.ndarray | slice = slice(None)  # the deciders alone (the world's usual tick): each at its own place
+    same = np.ones(ids.size, dtype=bool)
+    if was_ids.size != ids.size or not np.array_equal(was_ids, ids):
+        at = np.minimum(np.searchsorted(was_ids, ids), was_ids.size - 1)
+        same = was_ids[at] == ids
     for name, value in zip((n for n in _POSE if getattr(state, n) is not None), was):
         same &= getattr(state, name)[ids] == value[at]
     return same

@@ -313,7 +313,8 @@ class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose)
         self.parts, self.received = [], 0
         self.decided[decisions.ids] = False
         self.inflight = (tick, decision_rows(decisions))
-        self.before = poses(s, np.sort(decisions.ids))  # their rows before the tick (WorldClose: the region rows)
+        # their rows before the tick (WorldClose: the region rows); the deciders are its own robots (the shard checks)
+        self.before = poses(s, self.shard.own_moving())
         self.removing = self.pending
         try:
             self.exchange.own_decisions(decisions, self.pending if self.pending.size else None)

@@ -58,6 +58,8 @@ def members(ids: np.ndarray, among: np.ndarray) -> np.ndarray:
     """Which of ``ids`` are in ``among`` (both ascending, distinct): ``np.isin`` by binary search."""
     if not among.size:
         return np.zeros(ids.size, dtype=bool)
+    if among.size == ids.size and np.array_equal(among, ids):
+        return np.ones(ids.size, dtype=bool)
     return among[np.minimum(np.searchsorted(among, ids), among.size - 1)] == ids
 
 
@@ -129,7 +131,8 @@ class WorldClose:
         # the monitor's part (no overlap with another shard's): its own robots, and those removed in its strips
         ours = np.union1d(part.ids, gone[self._in_strips(s.x[gone])]) if gone.size else part.ids
         mine = members(every, ours)
-        rows = changed.take(np.flatnonzero(mine))
+        whole = bool(mine.all())  # the world alone: every row is its own
+        rows = changed if whole else changed.take(np.flatnonzero(mine))
         h = shard.history
         joins = gone.size > 0 or len(h) < 2 or h[-1][_LOCALIZED] != h[-2][_LOCALIZED] or bool(part.removing.size)
         if booked:  # robots removed, pending no longer: beside the tick before it is saved
@@ -138,7 +141,8 @@ class WorldClose:
         # saved: what goes out first (the rows that changed, every robot in its strips, or none), then the rest of
         # what changed in its view
         if out is None or out is rows:
-            table, published = joined(rows, changed[~mine]), 0 if out is None else rows.size
+            rest = changed[:0] if whole else changed.take(np.flatnonzero(~mine))
+            table, published = (joined(rows, rest) if rest.size else rows), 0 if out is None else rows.size
         else:
             table, published = joined(out, changed[~np.isin(changed["id"], out["id"])]), out.size
         self.port.save_tick(tick, table, published, sent_applied, h[-1], sent, tally)
