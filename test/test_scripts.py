@@ -241,3 +241,10 @@ def test_screenshot_writes_its_png_or_says_in_one_line_why_it_cannot(tmp_path):
         assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr[-3000:]
         assert done.stderr.strip().splitlines()[-1].startswith("screenshot: error: "), done.stderr[-3000:]
         assert sorted(p.name for p in tmp_path.iterdir()) == ["r"], "nothing written"
+
+
+def test_bench_world_smoke_times_the_worlds_tick_on_the_star_and_a_disc():
+    out = _smoke("bench_world.py")
+    assert "as a shard with no peers" in out
+    assert re.search(r"star: +[0-9.]+ ms a tick .*405 ticks", out), out
+    assert re.search(r"disc 2,000: +[0-9.]+ ms a tick .*3 ticks", out), out

@@ -1,0 +1,158 @@
+#!/usr/bin/env python3
+"""The world's own work per tick, without ROS: a world process's ``Lockstep`` taking two batches' decisions of a
+tick and applying, saving and routing it (to a port that drops what it is given), in milliseconds per tick.
+
+What it leaves out is the same for every version measured: the batches' rule (run here, untimed, on an in-process
+``Simulation`` that the world is checked against at the end), the messages and rclpy. So it is the A/B of a
+change to the world's tick (issue 46: the world as the world shard with no peers), run back to back in two
+trees: this commit's and an older one extracted with ``git archive``. It also runs the ``Lockstep`` of before
+that change (a ``Simulation`` inside, a ``Checkpoint`` for its save), so one script measures both::
+
+    git archive <commit> | tar -x -C /tmp/base
+    PYTHONPATH=/tmp/base .venv/bin/python scripts/bench_world.py        # before
+    .venv/bin/python scripts/bench_world.py                             # this tree
+
+Cases: the star (1,036 robots, its 405 ticks) and a disc of 50,000 robots at the star's density (world radius
+226, ``--ticks`` ticks), seed 1, K = 2 batches; median (min-max) over ``--repeats``.
+
+    .venv/bin/python scripts/bench_world.py [--repeats 5] [--ticks 60] [--robots 50000] [--smoke]
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_scale import disc_file
+
+from swarm_ros.core import RunParams, Shape, Simulation, World
+from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.core.regions import batch_cuts, columns, strip
+from swarm_ros.core.rules import Decider
+from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.lockstep import Lockstep
+from swarm_ros.protocol.plan import batch_name
+from swarm_ros.protocol.rows import decision_rows
+from swarm_ros.protocol.world_port import Policy
+
+UNIFIED = "shard" in inspect.signature(Lockstep.__init__).parameters  #: the world as a shard (issue 46) or before
+BATCHES = 2
+
+
+class _Log:
+    def info(self, text: str) -> None:
+        pass
+
+    warn = info
+
+
+class _Port:
+    """A world node that publishes nothing and saves each tick as the node does."""
+
+    saver = None
+
+    def watch_batch(self, *args) -> None:
+        pass
+
+    send_snapshot = publish_tick = publish_status = save_book = watch_batch
+
+    def checkpoint(self, tick, rows, applied, metrics, published, tally) -> None:  # the Lockstep of before
+        assert self.saver is not None
+        self.saver.write(tick, rows, applied, metrics, published, tally)
+
+    def save_tick(self, tick, rows, published, applied, metrics, sent, tally) -> None:
+        assert self.saver is not None
+        self.saver.write_tick(tick, rows, published, applied, metrics, sent, tally)
+
+    def monitor_reads_all(self) -> bool:
+        return True
+
+    delivered = decisions_delivered = monitor_reads_all
+
+    def startup_seconds(self) -> float:
+        return 0.0
+
+
+def _lockstep(shape: Shape, params: RunParams, folder: Path):
+    port, log = _Port(), _Log()
+    policy, rejections = Policy(monitor_window=0), Rejections(log)
+    if UNIFIED:
+        from swarm_ros.core.shards import ShardPlan, WorldShard
+        from swarm_ros.protocol.shard_save import ShardSaver
+
+        plan = ShardPlan(shape.world.radius, params.vision_radius, np.empty(0, dtype=np.int64))
+        port.saver = saver = ShardSaver(folder / "save", params, plan, 0, 2, shape.dims)
+        saver.create()
+        return Lockstep(WorldShard(shape, params, plan, 0), "world", policy, port, log, rejections)
+    from swarm_ros.protocol.checkpoint import Checkpoint
+
+    port.saver = ck = Checkpoint(folder / "save", params.robots, params.max_ticks, len(METRIC_COLUMNS), 2, shape.dims)
+    ck.create()
+    return Lockstep(Simulation(shape, params), policy, port, log, rejections)  # the signature of before
+
+
+def world_tick_ms(shape: Shape, params: RunParams, max_ticks: int) -> tuple[float, int]:
+    """Milliseconds per tick of the world's decisions-to-tick path, and the ticks run."""
+    cuts = batch_cuts(shape, params, BATCHES)
+    strips = [strip(k, BATCHES, cuts, shape.world.radius) for k in range(BATCHES)]
+    with tempfile.TemporaryDirectory() as folder:
+        ls = _lockstep(shape, params, Path(folder))
+        for k in range(BATCHES):
+            ls.announce(batch_name(k), 0, strips[k])
+        decider, ref = Decider(shape, params), Simulation(shape, params)
+        spent, ticks = 0.0, 0
+        while not ls.sim.done and ticks < max_ticks:
+            s = ref.state
+            decisions = decider.decide(s, s.moving_ids(), ref.tick + 1)
+            rows = decision_rows(decisions)
+            cols = columns(s.x[rows["id"]], shape.world.radius)
+            parts = [rows[(cols >= a) & (cols <= b)] for a, b in strips]
+            began = time.perf_counter()
+            for k, part in enumerate(parts):
+                if part.size:
+                    ls.decisions(k, ref.tick + 1, part)
+            spent += time.perf_counter() - began
+            ref.apply(decisions)
+            ticks += 1
+        if [int(v) for v in ls.sim.history[-1]] != [int(v) for v in ref.history[-1]]:
+            sys.exit("bench_world: the world's run is not the engine's")
+    return 1000 * spent / ticks, ticks
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--ticks", type=int, default=60, help="ticks of the large disc (the star runs to its end)")
+    ap.add_argument("--robots", type=int, default=50_000, help="the large disc's robots")
+    ap.add_argument("--smoke", action="store_true", help="small and quick: checks the script runs (test_scripts)")
+    args = ap.parse_args()
+    if args.smoke:
+        args.repeats, args.ticks, args.robots = 1, 3, 2000
+    print(f"the world's tick, {'as a shard with no peers' if UNIFIED else 'a Simulation inside (before issue 46)'}")
+    with tempfile.TemporaryDirectory() as tmp:
+        disc, radius = disc_file(args.robots, Path(tmp))
+        cases = [
+            ("star", Shape.load("star"), 1036, 10_000),
+            (f"disc {args.robots:,}", Shape.load(disc, World(radius=radius)), args.robots, args.ticks),
+        ]
+        for name, shape, robots, ticks in cases:
+            params = RunParams(robots=robots, seed=1)
+            world_tick_ms(shape, params, 5)  # the kernels' first calls
+            runs = [world_tick_ms(shape, params, ticks) for _ in range(args.repeats)]
+            ms = [m for m, _ in runs]
+            print(
+                f"  {name:>14}: {statistics.median(ms):7.3f} ms a tick ({min(ms):.3f}-{max(ms):.3f}), "
+                f"{runs[0][1]} ticks, median of {args.repeats}"
+            )
+
+
+if __name__ == "__main__":
+    main()
