@@ -5,9 +5,13 @@ A tick has two halves. Robots decide from the state at the end of the last tick
 applies all decisions at once (:meth:`Simulation.apply`), then counts, checks for the
 end of the run and, if the shape is complete with robots left over, separates them.
 :meth:`Simulation.step` and :meth:`Simulation.run` do both halves in compiled code
-(``run`` many ticks per call); a distributed engine gathers its batches' decisions and
-calls :meth:`Simulation.apply`. All paths share every kernel and the end-of-tick
-bookkeeping (:func:`~swarm_ros.core.tick_kernel.close_tick`), so they give identical runs.
+(``run`` many ticks per call); :meth:`Simulation.apply` applies decisions made elsewhere. All
+these share every kernel and the end-of-tick bookkeeping
+(:func:`~swarm_ros.core.tick_kernel.close_tick`), so they give identical runs. The ROS 2
+graph's world applies a tick with the same kernel through a
+:class:`~swarm_ros.core.shards.WorldShard` (the world is the shard with no peers), whose end of a
+tick sums the shards' counts with the same end check and metrics
+(:func:`~swarm_ros.core.metrics.end_code`, :func:`~swarm_ros.core.metrics.metric_values`).
 
 Only moving robots cost anything per tick: the cell list, the claims and the list of
 moving robots are touched only where moving robots are, and the metrics are kept as
@@ -300,55 +304,6 @@ class Simulation:
         )
         self.outcome = OUTCOME_OF_CODE[code]
         return int(ids.size)
-
-    def restore(
-        self,
-        tick: int,
-        x: np.ndarray,
-        y: np.ndarray,
-        heading: np.ndarray,
-        state: np.ndarray,
-        history: np.ndarray,
-        losses: list[tuple[int, int]],
-        outcome: Outcome | None,
-        z: np.ndarray | None = None,
-        pitch: np.ndarray | None = None,
-    ) -> None:
-        """Continue from a saved tick (the world node's checkpoint, :mod:`swarm_ros.protocol.checkpoint`): every
-        robot's pose and state at the end of ``tick``, the metrics of ticks 0..``tick``, the losses so far
-        and the outcome (3D: ``z`` and ``pitch`` too). The occupancy and frontier are rebuilt from the robots,
-        as a replica's are, so
-        the run goes on exactly as the one that saved them would have.
-
-        Raises:
-            ContractError: the rows do not make a consistent swarm (a checkpoint that is not this run's).
-        """
-        from swarm_ros.core.replica import Replica
-
-        n = self.params.robots
-        if history.shape != (tick + 1, len(METRIC_COLUMNS)) or int(history[-1, 0]) != tick:
-            raise ContractError(f"a checkpoint's metrics do not end at its tick {tick}")
-        replica = Replica(self.shape, n)
-        replica.load(tick, np.arange(n), state, x, y, heading, z, pitch)
-        s, r = self.state, replica.state
-        solid = ("z", "pitch") if self._solid else ()
-        for name in ("x", "y", "heading", "state", "occupancy", "frontier", "frontier_blocks", *solid):
-            getattr(s, name)[...] = getattr(r, name)  # in place: the compiled kernels hold these arrays
-        s.tick = tick
-        moving = s.moving_ids()
-        self._m = int(moving.size)
-        self._moving[: self._m] = moving
-        counts = s.counts()
-        self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
-        self._set_kernel_args(n - int(counts[RobotState.REMOVED]))
-        self._nrows = 0
-        self._reserve(tick + 1)
-        self._rows[: tick + 1] = history
-        self._nrows = tick + 1
-        self._decided = 0
-        self.losses = list(losses)
-        self.last_removed = np.empty(0, dtype=np.int64)
-        self.outcome = outcome
 
     @property
     def removed(self) -> int:
