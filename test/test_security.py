@@ -421,15 +421,32 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
     ref, out = tmp_path / "ref", tmp_path / "run"
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet", "--no-recording"]) == 0
     lock = DomainLock()
+    run = subprocess.Popen(
+        [
+            PY,
+            "-m",
+            "swarm_ros",
+            "run",
+            *flags,
+            "--domain-id",
+            str(lock.domain_id),
+            "--out",
+            str(out),
+            "--quiet",
+            "--no-recording",
+            "--no-bag",
+            "--processes",
+            "2",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     for key, value in dds_defaults().items():
         monkeypatch.setenv(key, value)
-    # the stranger is up before the run: each of the run's participants finds it when it starts (found only
-    # later, by the stranger's own announcements, the monitor once matched it after the short run had ended:
-    # CI under load saw the monitor drop nothing)
     context = Context()
     rclpy.init(args=[], context=context, domain_id=lock.domain_id)
     sent: dict[str, int] = {}
-    run = None
     try:
         node = Node("stranger", context=context, start_parameter_services=False)
         pub = node.create_publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
@@ -466,13 +483,6 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
         node.create_subscription(PointCloud2, msgs.snapshot_topic("robot_batch_0"), on_snapshot, msgs.LATCHED_QOS)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        run = subprocess.Popen(
-            [PY, "-m", "swarm_ros", "run", *flags, "--domain-id", str(lock.domain_id), "--out", str(out)]
-            + ["--quiet", "--no-recording", "--no-bag", "--processes", "2"],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
         while run.poll() is None:
             bad = make_cloud(np.zeros(3, dtype=ROBOT_ROW), 10**6)
             bad.point_step = 13  # another layout
@@ -491,7 +501,7 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
         _, err = run.communicate(timeout=120)
     finally:
         rclpy.shutdown(context=context)
-        if run is not None and run.poll() is None:
+        if run.poll() is None:
             run.kill()
             run.wait()
         lock.close()
