@@ -24,14 +24,14 @@ import numpy as np
 import pytest
 import yaml
 from bagcheck import assert_bag_holds_run
-from graph_runs import assert_same_run, processes_mentioning, shm_left
+from graph_runs import assert_same_run, descendants_of, processes_mentioning, shm_group, shm_left
 from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools
 from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import RUN_PARAMETERS
 from swarm_ros.protocol.checkpoint import MAGIC
-from swarm_ros.ros.shm import shm_locks
+from swarm_ros.ros.shm import in_use, shm_locks
 
 pytestmark = pytest.mark.process
 
@@ -289,7 +289,15 @@ def test_world_shards_under_ros2_launch_a_sigkilled_one_comes_back_and_the_run_i
     nodes = ["monitor", "world_shard_0", "world_shard_1", *(f"robot_batch_{k}" for k in range(4))]
     held = set().union(*(shm_locks(_node_pid(logs, name)) for name in nodes))
     os.kill(_node_pid(logs, "world_shard_1"), signal.SIGKILL)
-    assert proc.wait(timeout=240) == 0, log.read_text()[-4000:]
+    # a port's files are shared by every participant on the host: one that another test's process holds as the
+    # launch tidies up is rightly kept then, and may be let go before the check below (CI once saw it)
+    ports = {f for el in held if "fastrtps_port" in el for f in shm_group(el)}
+    elsewhere: set[str] = set()
+    deadline = time.monotonic() + 240
+    while proc.poll() is None and time.monotonic() < deadline:
+        elsewhere |= in_use(ports, besides=frozenset([proc.pid, *descendants_of(proc.pid)]))
+        time.sleep(0.1)
+    assert proc.wait(timeout=10) == 0, log.read_text()[-4000:]
     assert "swarm_ros: world_shard_1 was killed by SIGKILL; restarted (1 of 3)" in log.read_text()
     for name in ("metrics.csv", "final_state.csv"):
         assert (out / name).read_bytes() == (ref / name).read_bytes(), name
@@ -297,7 +305,7 @@ def test_world_shards_under_ros2_launch_a_sigkilled_one_comes_back_and_the_run_i
     assert_bag_holds_run(out)
     assert not processes_mentioning(str(out)) and not list(logs.glob("world.checkpoint*"))
     files = {f for el in held for f in (el, el.removesuffix("_el"), f"/dev/shm/sem.{Path(el).name[:-3]}_mutex")}
-    assert held and shm_left(files) == [], shm_left(files)
+    assert held and shm_left({f for f in files if not shm_group(f) & elsewhere}) == [], (shm_left(files), elsewhere)
 
 
 def test_the_three_terminals_of_ros2_run_the_docs_show(ros, tmp_path):
