@@ -160,32 +160,6 @@ def test_the_launcher_imports_neither_rclpy_nor_rerun_before_it_forks():
     assert _fresh_python(code) == "True"
 
 
-def test_the_launchers_own_node_is_built_at_a_lower_cpu_priority_than_its_nodes():
-    """at_low_priority: the value (or the exception) of what it builds, built in a thread niced by 10 whose own
-    threads inherit that; the caller's priority is unchanged."""
-    import threading
-
-    from swarm_ros.app.processes import at_low_priority
-
-    mine = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-
-    def build() -> tuple[int, int]:
-        inner: list[int] = []
-        t = threading.Thread(target=lambda: inner.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id())))
-        t.start()
-        t.join()
-        return os.getpriority(os.PRIO_PROCESS, threading.get_native_id()), inner[0]
-
-    assert at_low_priority(build) == (min(mine + 10, 19), min(mine + 10, 19))
-    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == mine
-
-    def fail() -> None:
-        raise RuntimeError("cannot start ROS 2")
-
-    with pytest.raises(RuntimeError, match="cannot start ROS 2"):
-        at_low_priority(fail)
-
-
 SIGNAL_STORM = textwrap.dedent(
     """
     import logging, os, signal, subprocess, sys, threading

@@ -383,6 +383,23 @@ def test_ros_graph_equals_in_process_engine_with_failing_robots(references, tmp_
     assert_same_run(ref, out)
 
 
+def test_on_a_machine_whose_cores_are_all_busy_the_launcher_still_hears_the_worlds_outcome(references, tmp_path):
+    """Busy loops on every core and one more: the launcher's own node (the progress bar, the supervisor's
+    knowledge that the run ended, the summary's shutdown time) is heard like every other node's, not starved.
+    (Built in a thread of lower priority, it once missed the world's whole run under this load: shutdown null.)"""
+    flags, ref = references["ring-extras"]
+    out = tmp_path / "run"
+    hogs = [subprocess.Popen([PY, "-c", "while True: pass"]) for _ in range((os.cpu_count() or 1) + 1)]
+    try:
+        done = swarm_ros("run", *flags, "--processes", "2", "--out", str(out), "--quiet")
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
+    assert done.returncode == 0, done.stderr
+    assert_same_run(ref, out)  # with a shutdown time: the launcher heard the world's outcome
+
+
 def test_topics_echo_gives_up_after_the_seconds_it_was_given(tmp_path):
     domain = str(40 + os.getpid() % 50)  # nothing runs here: no publisher will ever come
     start = time.monotonic()

@@ -30,6 +30,7 @@ to ``<run>/logs``; if the run fails they are kept in ``<run>.logs`` instead.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -50,14 +51,13 @@ from swarm_ros.app.processes import (
     Child,
     DomainLock,
     LaunchError,
-    at_low_priority,
     logs_target,
     node_command,
     node_env,
     stop,
     world_sections,
 )
-from swarm_ros.app.supervision import END_GRACE, MONITOR_GRACE, Supervisor
+from swarm_ros.app.supervision import END_GRACE, LATE_STATUS, MONITOR_GRACE, Supervisor
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
 from swarm_ros.core.params import RunParams, Settings, node_defaults
@@ -336,9 +336,7 @@ class Launch:
         key = self.env[KEY_ENV].encode()
         with (
             stop or nullcontext(),
-            at_low_priority(  # its node starts while the graph's do: theirs come first
-                lambda: Progress(self.domain, self.shape.patches, key, quiet=self.quiet, enclaves=self.enclaves)
-            ) as progress,
+            Progress(self.domain, self.shape.patches, key, quiet=self.quiet, enclaves=self.enclaves) as progress,
         ):
             while True:
                 if stop is not None and stop.signum:
@@ -384,10 +382,15 @@ class Launch:
                     world_done_at = time.monotonic()
                 if world_done_at is not None and time.monotonic() - world_done_at > MONITOR_GRACE:
                     raise LaunchError(f"the run ended but the monitor did not write it within {MONITOR_GRACE:g} s")
-        deadline = time.monotonic() + END_GRACE
-        while time.monotonic() < deadline and any(c.proc.poll() is None for c in self.children):
-            self._note_exits()
-            time.sleep(0.01)
+            # while the others end, the world's outcome may still reach this node after the monitor wrote the run
+            # (a loaded machine): the shutdown time counts from it
+            deadline = time.monotonic() + END_GRACE
+            while time.monotonic() < deadline:
+                progress.spin(0.01)
+                self.ended_at = progress.ended_at
+                self._note_exits()
+                if all(c.proc.poll() is not None for c in self.children):
+                    deadline = min(deadline, time.monotonic() + (0 if self.ended_at else LATE_STATUS))
 
     def _list_shm(self) -> None:
         """Write the shared-memory lock files seen so far into the logs (:data:`SHM_LIST`), when there are new ones."""
@@ -406,8 +409,6 @@ class Launch:
 
     def result(self) -> dict | None:
         """The summary of the run directory this run's monitor wrote (whole, whatever its outcome), or None."""
-        import json
-
         if not self._written():
             return None
         try:
@@ -429,10 +430,7 @@ class Launch:
 
     def _write_timeline(self, path: Path) -> None:
         """The launcher's clock: when each process started and ended (epoch seconds, as in the ROS logs)."""
-        try:
-            path.write_text("".join(f"[{at:.6f}] {event}\n" for at, event in self.timeline), encoding="utf-8")
-        except OSError:
-            pass  # the logs are a convenience; never fail a finished run over them
+        path.write_text("".join(f"[{at:.6f}] {event}\n" for at, event in self.timeline), encoding="utf-8")
 
     def _warn(self, progress, text: str) -> None:
         self.warnings.append(text)

@@ -11,13 +11,11 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from collections.abc import Callable, Mapping
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, TypeVar
+from typing import IO
 
 from swarm_ros.app.forking import Forked
 from swarm_ros.core.errors import InputError
@@ -27,7 +25,6 @@ from swarm_ros.protocol.runkey import with_run_key
 from swarm_ros.ros.dds import apply_dds_defaults
 from swarm_ros.ros.shm import SHM_DIR, clean_shm, shm_locks
 
-T = TypeVar("T")
 DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash on Linux
 # SIGTERM first, not SIGINT: a process started from a background job inherits SIGINT *ignored*, and a node
 # ignores it until its own handler is in (after rclpy.init); SIGTERM ends it at once before that, and after it
@@ -205,22 +202,6 @@ def node_command(
     for key, value in (extra or {}).items():
         cmd += ["-p", f"{key}:={value}"]
     return cmd
-
-
-def at_low_priority(make: Callable[[], T], nice: int = 10) -> T:
-    """``make()`` in a thread of its own whose CPU priority is lowered by ``nice``, and its result (or its
-    exception): the threads it starts inherit the priority. The launcher builds its own ROS node so, while its
-    node processes start on the same cores and need them more (tick 0 waits for the slowest)."""
-
-    def lower() -> None:
-        try:
-            me = threading.get_native_id()
-            os.setpriority(os.PRIO_PROCESS, me, min(os.getpriority(os.PRIO_PROCESS, me) + nice, 19))
-        except OSError:
-            pass  # not Linux: at the process's own priority
-
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="swarm-ros-low", initializer=lower) as pool:
-        return pool.submit(make).result()
 
 
 def stop(children: list[Child]) -> None:

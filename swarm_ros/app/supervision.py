@@ -48,6 +48,7 @@ class RunEnded(RunFailed):
 STOPPED = frozenset({EXIT_INTERRUPTED, EXIT_INTERRUPTED - 1, -signal.SIGINT, -signal.SIGTERM, -signal.SIGHUP})
 MONITOR_GRACE = 30.0  #: seconds the monitor has to write the run after the world's end (as ``swarm-ros run``)
 END_GRACE = 10.0  #: seconds the others get to end by themselves once the monitor has written the run
+LATE_STATUS = 1.0  #: seconds the launcher still listens for the world's outcome once every process is gone
 
 
 @dataclass(frozen=True)
