@@ -122,13 +122,13 @@ def assert_bag_holds_run(run: Path) -> None:
     got = [[str(v) for v in m.data] for m in messages["/swarm/metrics"]]
     assert [m.layout.dim[0].label for m in messages["/swarm/metrics"][:1]] == [",".join(table[0])]
     assert got == table[1:]
-    if every > 1:  # the tallies of each tick (one per world process) give its metrics; at a recorded tick, its rows
+    if every > 1:  # one tally a tick (the world's, or world shard 0's) gives its metrics; at a recorded tick, its rows
         tallies: dict[int, list[np.ndarray]] = {}
         for m in messages["/swarm/tally"]:
             data = np.asarray(m.data, dtype=np.int64)
             assert int(data[1]) == every
             tallies.setdefault(int(data[0]), []).append(data[2:])
-        assert sorted(tallies) == list(range(last + 1)) and len({len(v) for v in tallies.values()}) == 1
+        assert sorted(tallies) == list(range(last + 1)) and {len(v) for v in tallies.values()} == {1}
         for tick, parts in tallies.items():
             counts = np.sum(parts, axis=0)
             assert [str(v) for v in tick_metrics(tick, counts, 0)[:5]] == table[tick + 1][:5], f"tick {tick}"

@@ -24,6 +24,7 @@ from swarm_ros.protocol.monitoring import BAG_WAIT, STATUS_WAIT, MonitorCore
 from swarm_ros.protocol.plan import MONITOR
 from swarm_ros.protocol.rows import decision_rows, state_rows
 from swarm_ros.protocol.status import restarts_text
+from swarm_ros.protocol.world_records import state_counts
 
 pytestmark = pytest.mark.unit
 
@@ -233,6 +234,47 @@ def test_with_record_every_the_core_counts_each_tick_from_the_tallies_and_checks
     assert seen == recorded and len(recorder.forced) == sum(recorded) and recorder.forced[-1]
     for name in ("state", "x", "y", "heading", "occupancy"):
         assert np.array_equal(getattr(core.replica.state, name), getattr(sim.state, name)), name
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        RunParams(robots=60, seed=7, max_ticks=300, fail_fraction=0.3, fail_tick=3),  # seeds among the failed
+        RunParams(robots=140, seed=2, max_ticks=400),  # more robots than patches: separated ones at the end
+    ],
+)
+def test_the_worlds_tally_from_its_metrics_is_its_robots_by_state_at_every_tick(params):
+    """state_counts, the tally world process 0 sends from the run's metrics (every shard holds them, not every
+    robot), is the engine's robots by state at every tick, removed seeds and separated robots included."""
+    sim, decider = Simulation(SHAPE, params), Decider(SHAPE, params)
+    while True:
+        removed = sim.state.state == RobotState.REMOVED
+        got = state_counts(sim.metrics, 4 - int(removed[:4].sum()), int(removed.sum()))
+        assert got.tolist() == np.bincount(sim.state.state, minlength=len(RobotState)).tolist(), sim.tick
+        if sim.done:
+            break
+        sim.apply(decider.decide(sim.state, sim.moving_ids(), sim.tick + 1))
+    if params.failures:
+        assert removed[:4].any()  # the case it is here for
+    else:
+        assert (sim.state.state == RobotState.SEPARATED).any()
+
+
+def test_with_world_shards_the_tally_comes_from_shard_0_and_one_from_another_is_dropped():
+    params = RunParams(robots=60, seed=3, max_ticks=400)
+    _, messages = sampled_messages(params, 3)
+    core, port, _, _ = make(params, every=3, shards=2)
+    counted: list[int] = []
+    port.tick_counted = lambda tick, metrics, occupancy, first, changed, held: counted.append(tick)
+    rows = state_rows(np.arange(params.robots), Simulation(SHAPE, params).state)  # tick 0's, in two parts
+    core.robots(decode_cloud(encode_cloud(rows[rows["id"] < 30], 0)), "world_shard_0")
+    core.robots(decode_cloud(encode_cloud(rows[rows["id"] >= 30], 0)), "world_shard_1")
+    with pytest.raises(Rejected, match="unexpected sender"):
+        core.tally(messages[0][0], "world_shard_1")
+    assert counted == []
+    core.tally(messages[0][0], "world_shard_0")
+    core.tally(messages[1][0], "world_shard_0")
+    assert counted == [0, 1]
 
 
 def test_with_record_every_the_port_gets_each_ticks_messages_as_they_came_tallies_first():

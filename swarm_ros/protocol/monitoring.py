@@ -30,7 +30,7 @@ from swarm_ros.core.state import STATE_COUNT, RobotState, has_repeats
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import apply_robots, checked_robots, tally_values
-from swarm_ros.protocol.plan import ROBOTS, TALLY, WORLD
+from swarm_ros.protocol.plan import ROBOTS, TALLY, WORLD, shard_name
 from swarm_ros.protocol.status import WorldReport, restart_event
 
 PARTS_AHEAD = 1024  #: ticks ahead of the count for which world shards' parts are kept (the world window is 128)
@@ -136,10 +136,12 @@ class MonitorCore:
         self.incarnation = incarnation  # 0: the first monitor process of the run
         self.shards = shards  # world processes: each tick's rows come in this many parts (world shards)
         self.parts: dict[int, dict[str, np.ndarray]] = {}  # tick -> sender -> rows, until all its parts are in
-        # the world's record_every: 1, every tick's changed rows, counted here; above, a tally per world process
-        # each tick, and every robot's row every ``every``-th tick (and the last), checked against the tallies
+        # the world's record_every: 1, every tick's changed rows, counted here; above, the run's tally each tick
+        # (from the world, or world shard 0), and every robot's row every ``every``-th tick (and the last),
+        # checked against the tally
         self.every = every
-        self.tallies: dict[int, dict[str, np.ndarray]] = {}  # tick -> sender -> robots by state (every > 1)
+        self.tallier = WORLD if shards == 1 else shard_name(0)  # the world process that sends the tallies
+        self.tallies: dict[int, dict[str, np.ndarray]] = {}  # tick -> the tallier -> robots by state (every > 1)
         self.held = HeldMessages(TALLY)  # the messages of the ticks not counted yet, as they came, for the bag
         self.last = -1  # the last tick counted
         self.occupancy_changed = False  # since the occupancy last went to the port (every > 1)
@@ -182,15 +184,17 @@ class MonitorCore:
             self._go_on()
 
     def tally(self, data, sender: str = "", raw: bytes = b"") -> None:
-        """A world process's tally of a tick (its robots by state; ``record_every`` > 1): the tick is counted
-        once every world process's is in (and at a tick whose rows go out, every part of those).
+        """The world's tally of a tick (the run's robots by state; ``record_every`` > 1; with world shards, shard
+        0's): the tick is counted once it is in (and at a tick whose rows go out, every part of those).
 
         Raises:
-            Rejected: malformed, or too far ahead.
+            Rejected: malformed, too far ahead, or from another world process.
             RunFailed: the world publishes the robots every other number of ticks than this monitor was told.
         """
         if self.outcome is not None:
             return
+        if sender != self.tallier:
+            raise Rejected("unexpected sender", f"a tally from {sender!r}: {self.tallier} sends the run's")
         tick, every, counts = tally_values(data, self.params.robots)
         if every != self.every:
             self._mismatch(every)
@@ -222,9 +226,9 @@ class MonitorCore:
                 self._count(tick, self._joined(tick, parts))
                 continue
             tallies = self.tallies.get(tick, {})
-            if len(tallies) < self.shards:
+            if not tallies:
                 return
-            counts = np.sum(list(tallies.values()), axis=0)
+            counts = tallies[self.tallier]
             ends = self._outcome(tick_metrics(tick, counts, self.shape.patches), int(counts[_REMOVED])) is not None
             recorded = tick % self.every == 0 or ends
             if recorded and len(parts) < self.shards:
@@ -236,7 +240,10 @@ class MonitorCore:
 
     def _joined(self, tick: int, parts: dict[str, np.ndarray]) -> np.ndarray:
         del self.parts[tick]
-        joined = np.concatenate(list(parts.values()))  # in no order: nothing below needs one
+        joined = np.concatenate(list(parts.values()))
+        # in id order, as the one world sends them: the replica takes rows so in well under half the time it takes
+        # them in strips' order (its writes by id stay in cache); each part's ids ascend: the stable sort merges runs
+        joined = joined[np.argsort(joined["id"], kind="stable")]
         if has_repeats(joined["id"]):
             raise RunFailed(f"tick {tick}: the world shards' parts hold a robot twice")
         return joined

@@ -3,10 +3,10 @@
 
 With ``record_every`` 1 (the default up to 10,000 robots) it is every tick's changed rows and applied decisions,
 and the monitor counts each tick from its replica. Above, the rows would bound a large run by the monitor, which
-takes, checks and records every one of them: the world sends instead, every tick, a *tally* (its robots by state;
-a world shard's, those in its strips), from which the monitor counts the tick, and every ``record_every``-th tick
-and at the last, every robot's row (a shard: those in its strips) and that tick's decisions, which the monitor
-checks against the tallies and records.
+takes, checks and records every one of them: the world sends instead, every tick, a *tally* (the run's robots by
+state; with world shards, shard 0 alone sends it, from the metrics every shard holds), from which the monitor counts
+the tick, and every ``record_every``-th tick and at the last, every robot's row (a shard: those in its strips) and
+that tick's decisions, which the monitor checks against the tally and records.
 """
 
 from __future__ import annotations
@@ -15,14 +15,28 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarm_ros.core.metrics import SEEDS, TickMetrics
 from swarm_ros.core.regions import columns
 from swarm_ros.core.replica import UNKNOWN
-from swarm_ros.core.state import STATE_COUNT
+from swarm_ros.core.state import STATE_COUNT, RobotState
 from swarm_ros.protocol.rows import state_rows
 
 if TYPE_CHECKING:
     from swarm_ros.core.shards import WorldShard
     from swarm_ros.protocol.shard_exchange import RunView
+
+
+def state_counts(metrics: TickMetrics, seeds: int, removed: int) -> np.ndarray:
+    """The robots in each :class:`~swarm_ros.core.state.RobotState` (codes in order) at the end of ``metrics``'
+    tick, given the seeds still in the run (robots 0-3) and the robots removed so far: the inverse of
+    :func:`~swarm_ros.core.metrics.tick_metrics`."""
+    counts = np.zeros(STATE_COUNT, dtype=np.int64)
+    counts[RobotState.SEED], counts[RobotState.LOCALIZED] = seeds, metrics.localized - seeds
+    counts[RobotState.SEPARATED] = metrics.stationary - metrics.localized
+    counts[RobotState.REMOVED], counts[RobotState.WALKING] = removed, metrics.walking
+    counts[RobotState.MOVING_INSIDE] = metrics.inside
+    counts[RobotState.MOVING_OUTSIDE] = metrics.moving - metrics.inside - metrics.walking
+    return counts
 
 
 class WorldRecords:
@@ -55,14 +69,15 @@ class WorldRecords:
         (robot rows or None, tally or None), as :meth:`outgoing` sent them."""
         if self.every == 1:
             return rows, None
-        return (rows if self.records(tick) else None), tally
+        return (rows if self.records(tick) else None), (tally if self.shard.index == 0 else None)
 
     def _tally(self) -> np.ndarray | None:
-        """The robots in this process's strips by state (the world's: every robot), or None when the rows go out
-        every tick."""
-        if self.every == 1:
+        """The run's robots by state at the tick just closed, from world process 0 only (every world process holds
+        the run's metrics and its removed robots alike), or None (another process; the rows go out every tick)."""
+        if self.every == 1 or self.shard.index != 0:
             return None
-        return np.bincount(self.sim.state.state[self._own()], minlength=STATE_COUNT).astype(np.int64)
+        removed = self.shard.removed
+        return state_counts(self.sim.metrics, SEEDS - int(removed[:SEEDS].sum()), int(removed.sum()))
 
     def _recorded_rows(self) -> np.ndarray:
         """Every robot's row in this process's strips (the world's: every robot's) at the tick just closed."""
