@@ -54,6 +54,11 @@ from pathlib import Path
 
 from swarm_ros.core import RunParams, Shape, Simulation
 
+#: the tree this script belongs to: its commands run there, so `python -m swarm_ros` imports this tree's package
+#: (the working directory comes first on the import path, before PYTHONPATH): an older tree's copy of this
+#: script, run from anywhere, measures that tree (an A/B of two commits)
+ROOT = Path(__file__).resolve().parents[1]
+
 RULES: dict[str, str] = {"rules": "paper"}  #: rule set and switch overrides of every run (set from the flags)
 
 
@@ -99,6 +104,7 @@ def command(seed: int, out: Path, *args: str, record: bool = False) -> tuple[int
         ],
         capture_output=True,
         text=True,
+        cwd=ROOT,
     )
     whole = time.perf_counter() - t0
     command.started_at = time.time() - whole  # the epoch of the start, for milestones()
@@ -188,6 +194,7 @@ def readme_command(repeats: int, tmp: Path) -> float:
                 [*exe, command, "--shape", "star", "--out", str(tmp / f"readme-{command}-{r}"), "--quiet"],
                 capture_output=True,
                 text=True,
+                cwd=ROOT,
             )
             took = time.perf_counter() - began
             if done.returncode != 0:

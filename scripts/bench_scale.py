@@ -44,6 +44,11 @@ from pathlib import Path
 
 import numpy as np
 
+#: the tree this script belongs to: its commands run there, so `python -m swarm_ros` imports this tree's package
+#: (the working directory comes first on the import path, before PYTHONPATH): an older tree's copy of this
+#: script, run from anywhere, measures that tree (an A/B of two commits)
+ROOT = Path(__file__).resolve().parents[1]
+
 STAR_DENSITY = 1036 / 65**2  #: robots per patch of the star's world
 _CPU = re.compile(r"\[(\w+)\]: (ready|last tick|done), .* \((\d+\.\d+) s of CPU[,)]")
 _RECEIVED = re.compile(r"received (\d+) bytes of rows on ")
@@ -63,7 +68,7 @@ def disc_file(robots: int, folder: Path) -> tuple[Path, int]:
 def _swarm(args: list[str]) -> float:
     t0 = time.perf_counter()
     done = subprocess.run(
-        [sys.executable, "-m", "swarm_ros", *args, "--quiet", "--overwrite"], capture_output=True, text=True
+        [sys.executable, "-m", "swarm_ros", *args, "--quiet", "--overwrite"], capture_output=True, text=True, cwd=ROOT
     )
     if done.returncode != 0:
         sys.exit(f"bench_scale: swarm-ros {args[0]} failed: {done.stderr.strip()[-500:]}")
