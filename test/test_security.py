@@ -420,6 +420,11 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
     flags = ["--shape", "star", "--seed", "2"]
     ref, out = tmp_path / "ref", tmp_path / "run"
     assert cli.main(["simulate", *flags, "--out", str(ref), "--quiet", "--no-recording"]) == 0
+    # paced (results unchanged): the run's 400 ticks last 5 s or more, so the stranger, which discovers the run's
+    # processes as they start, is matched with them long before the end even on a loaded machine (unpaced, the
+    # run took 1.5 s, and CI saw the stranger matched with none of its writers, or the monitor only after the end)
+    paced = tmp_path / "paced.yaml"
+    paced.write_text("/world:\n  ros__parameters:\n    tick_rate: 80.0\n")
     lock = DomainLock()
     run = subprocess.Popen(
         [
@@ -428,6 +433,8 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
             "swarm_ros",
             "run",
             *flags,
+            "--params-file",
+            str(paced),
             "--domain-id",
             str(lock.domain_id),
             "--out",
