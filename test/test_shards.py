@@ -8,14 +8,19 @@ import dataclasses
 
 import numpy as np
 import pytest
+from lockstep_fakes import Log
 from runs import disc_shape
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
 from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.regions import columns
 from swarm_ros.core.replica import UNKNOWN
+from swarm_ros.core.rules import Decider
 from swarm_ros.core.sharded_run import ShardedWorld, run_sharded
+from swarm_ros.core.shards import ShardPlan, WorldShard
 from swarm_ros.core.state import IS_MOVING, RobotState
+from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.shard_exchange import ShardExchange
 
 pytestmark = pytest.mark.unit
 
@@ -57,6 +62,27 @@ def test_any_cuts_give_the_in_process_run(rules):
         cuts = np.sort(rng.choice(np.arange(-WORLD.radius + 1, WORLD.radius + 1), int(rng.integers(0, 8)), False))
         ends.add(_same_run(DISC, params, cuts).outcome)
     assert len(ends) >= 3, ends  # complete with extras, incomplete and timeout were all met
+
+
+def test_shards_beyond_a_claims_reach_trade_no_claims_and_drop_any():
+    """A shard sends claims only to the shards its robots' claims can reach (ShardPlan.reaches: its strips widened
+    by the reach, theirs by the halo) and waits only for theirs: on the star cut in four, its neighbours. A run over
+    such cuts is the in-process run (a claim beyond them would stop it: ContractError), and claims from a shard
+    beyond reach are dropped and counted."""
+    star = Shape.load("star")
+    params = RunParams(robots=star.patches, seed=5)
+    radius = star.world.radius
+    cuts = np.array([-radius // 2, 0, radius // 2])
+    plan = ShardPlan(radius, params.vision_radius, cuts)
+    shards = [WorldShard(star, params, plan, k) for k in range(4)]
+    assert [sh.claims_to for sh in shards] == [[1], [0, 2], [1, 3], [2]]
+    assert [sh.claims_from for sh in shards] == [sh.claims_to for sh in shards]
+    _same_run(star, params, cuts, max_ticks=150)
+    rejections = Rejections(Log())
+    exchange = ShardExchange(shards[0], None, rejections)  # type: ignore[arg-type]  # nothing is sent here
+    far = shards[3].claims(Decider(star, params).decide(shards[3].state, shards[3].own_moving(), 1))[0]
+    exchange.peer_claims(3, 1, far)
+    assert rejections.total == 1 and exchange.claims == {}
 
 
 def test_robots_removed_at_a_ticks_end_give_the_in_process_run():

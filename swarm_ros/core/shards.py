@@ -30,6 +30,7 @@ runs each shard in a node of its own (``swarm_ros.nodes.world_shard``; docs/prot
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,7 @@ from swarm_ros.core.arbitration import resolve_kernel
 from swarm_ros.core.engine import failing_robots
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
+from swarm_ros.core.legality import reach
 from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, Outcome, end_code, metric_values
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import area, batch_cuts, columns, halo, shard_batches, shard_cuts, strip
@@ -61,6 +63,13 @@ class ShardPlan:
         self.shards = int(cuts.size) + 1
         self.strips = [strip(k, self.shards, cuts, radius) for k in range(self.shards)]
         self.areas = [area(s, self.halo, self.width) for s in self.strips]
+
+    def reaches(self, i: int, j: int, claim_reach: float) -> bool:
+        """Whether a robot of shard ``i`` (standing in its strips) can claim a patch in shard ``j``'s claim window
+        (its strips and the halo), a claim being at most ``claim_reach`` patches from where the robot stands:
+        the shards beyond it are sent no claims, and wait for none."""
+        (a, b), (c, d), r = self.strips[i], self.strips[j], math.ceil(claim_reach) + 1  # + 1: a column's rounding
+        return i != j and a - r <= d + self.halo and c - self.halo <= b + r
 
     @classmethod
     def placed(cls, shape: Shape, params: RunParams, shard: int, shards: int, batches: int, cuts: str) -> ShardPlan:
@@ -124,6 +133,9 @@ class WorldShard:
     def __init__(self, shape: Shape, params: RunParams, plan: ShardPlan, index: int) -> None:
         self.shape, self.params, self.plan, self.index = shape, params, plan, index
         self.strip = plan.strips[index]
+        others, claim_reach = range(plan.shards), reach(params, shape.world.dims)
+        self.claims_to = [j for j in others if plan.reaches(index, j, claim_reach)]  #: the shards it may claim in
+        self.claims_from = [i for i in others if plan.reaches(i, index, claim_reach)]  #: those that may claim in it
         self.replica = Replica(shape, params.robots, area=plan.areas[index])
         s0 = initial_state(shape, params.robots, params.seed)
         ids = np.arange(params.robots)
@@ -228,12 +240,16 @@ class WorldShard:
         size, h = self.plan.width, self.plan.halo
         cols = decisions.claim % size
         claiming = decisions.claim >= 0
-        return [
+        claims = [
             _select(decisions, np.flatnonzero(claiming & (cols >= a - h) & (cols <= b + h)))
             if j != self.index
             else _select(decisions, np.empty(0, dtype=np.int64))
             for j, (a, b) in enumerate(self.plan.strips)
         ]
+        beyond = [j for j, c in enumerate(claims) if c.ids.size and j not in self.claims_to]
+        if beyond:  # a robot claiming farther than its reach from its strips: decisions_allowed lets none through
+            raise ContractError(f"shard {self.index}: claims on shards {beyond}, beyond its robots' reach")
+        return claims
 
     def apply(self, decisions: Decisions, rivals: list[Decisions], removing: np.ndarray | None = None) -> Part:
         """Exchange 2: apply this shard's robots' ``decisions`` (one for each of :meth:`own_moving`), ``rivals``

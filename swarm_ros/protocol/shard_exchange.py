@@ -3,8 +3,9 @@ missing until a restarted peer sends them again.
 
 :class:`ShardExchange` wraps one :class:`~swarm_ros.core.shards.WorldShard`. It is told its own robots'
 decisions for a tick, the claims and the parts its peers send, in whatever order the transport delivers them,
-and answers through a :class:`ShardPort`: its claims once its robots' decisions are in, its part once every
-peer's claims are in too, and the tick once every peer's part is in. A message of a tick already closed is a
+and answers through a :class:`ShardPort`: its claims once its robots' decisions are in, its part once the claims
+of every peer whose robots can reach its claim window are in too (peers beyond it send none, and are sent none:
+:meth:`ShardPlan.reaches`), and the tick once every peer's part is in. A message of a tick already closed is a
 repeat and is ignored; one of the next tick is kept for when it is due. What it sent for the last two ticks it
 keeps, so that a peer's restarted process, which goes on from its last save (:meth:`WorldShard.saved`), gets
 them again (:meth:`resend`). A part that fails its checks is dropped and counted; the tick waits for the
@@ -101,8 +102,8 @@ class ShardExchange:
     def peer_claims(self, peer: int, tick: int, claims: Decisions) -> None:
         """Peer ``peer``'s claims on this shard's window for ``tick`` (dropped and counted if not one; checked
         when due, and then dropped, counted and asked for again if they fail; a later one replaces one held)."""
-        if peer not in self.peers:
-            self.rejections.drop("claims", Rejected("unknown shard", f"{peer}"))
+        if peer not in self.shard.claims_from:  # no shard, or one whose robots cannot reach this one's window
+            self.rejections.drop("claims", Rejected("unknown shard", f"{peer} (claims on shard {self.shard.index})"))
         elif self._due(tick) is not None:
             self.claims.setdefault(tick, {})[peer] = claims
             self._go()
@@ -120,7 +121,8 @@ class ShardExchange:
         """Send ``peer`` again what it was sent for the kept ticks (a restarted process of it asks)."""
         for tick in sorted(self.sent):
             claims, parts = self.sent[tick]
-            self.port.send_claims(peer, tick, claims[peer])
+            if peer in self.shard.claims_to:
+                self.port.send_claims(peer, tick, claims[peer])
             if parts is not None:
                 self.port.send_part(peer, tick, parts[peer])
 
@@ -145,21 +147,21 @@ class ShardExchange:
                 if tick not in self.sent:
                     claims = shard.claims(self.decisions[tick])
                     self.sent[tick] = (claims, None)
-                    for j in self.peers:
+                    for j in shard.claims_to:  # none to a shard beyond its robots' reach
                         self.port.send_claims(j, tick, claims[j])
-                rivals = self.claims.get(tick, {})
-                if len(rivals) < len(self.peers):
+                rivals, claimants = self.claims.get(tick, {}), shard.claims_from
+                if len(rivals) < len(claimants):
                     return
-                for j in self.peers:
+                for j in claimants:
                     try:
                         shard.check_claims(j, rivals[j])
                     except Rejected as fault:  # dropped, counted, and asked for again
                         self.rejections.drop("claims", fault)
                         del rivals[j]
                         self.port.ask_again(j)
-                if len(rivals) < len(self.peers):
+                if len(rivals) < len(claimants):
                     return
-                rival = [rivals[j] for j in self.peers]
+                rival = [rivals[j] for j in claimants]
                 self.applied = shard.apply(self.decisions[tick], rival, self.removing.get(tick))
                 routed = shard.routes(self.applied)
                 self.sent[tick] = (self.sent[tick][0], routed)
