@@ -24,9 +24,14 @@ On this 2-core machine every process of a K = 8 graph shares two cores, so each 
 measured under contention: the projection says what the code's per-process work allows, not what this
 machine shows.
 
+``--before DIR`` runs an A/B instead: each K's graph from this tree and from DIR (an older commit's tree,
+``git archive <commit> | tar -x -C DIR``) in turn, ``--repeats`` rounds, each run from inside its own tree
+(``python -m swarm_ros`` imports the working directory's package before PYTHONPATH's); it prints each round,
+the medians, and the graph's summed CPU a tick of this tree against DIR's, round by round.
+
     .venv/bin/python scripts/bench_scale.py [--robots 10000 50000] [--processes 1 2 4] [--ticks 300] [--bare]
         [--world-shards S]
-        [--repeats 3] [--projection]
+        [--repeats 3] [--projection] [--before DIR]
 """
 
 from __future__ import annotations
@@ -65,14 +70,55 @@ def disc_file(robots: int, folder: Path) -> tuple[Path, int]:
     return path, round(math.sqrt(robots / STAR_DENSITY) / 2)
 
 
-def _swarm(args: list[str]) -> float:
+def _swarm(args: list[str], tree: Path = ROOT) -> float:
+    """Seconds of ``swarm-ros ARGS`` run from ``tree`` (whose package it imports: the working directory's)."""
     t0 = time.perf_counter()
     done = subprocess.run(
-        [sys.executable, "-m", "swarm_ros", *args, "--quiet", "--overwrite"], capture_output=True, text=True, cwd=ROOT
+        [sys.executable, "-m", "swarm_ros", *args, "--quiet", "--overwrite"], capture_output=True, text=True, cwd=tree
     )
     if done.returncode != 0:
         sys.exit(f"bench_scale: swarm-ros {args[0]} failed: {done.stderr.strip()[-500:]}")
     return time.perf_counter() - t0
+
+
+def imported_from(tree: Path) -> Path | None:
+    """Where ``python -m swarm_ros`` run from ``tree`` takes the package from (it must be ``tree``), or None."""
+    code = "import pathlib, swarm_ros; print(pathlib.Path(swarm_ros.__file__).resolve().parent.parent)"
+    where = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tree)
+    return Path(where.stdout.strip()) if where.returncode == 0 else None
+
+
+def compare(before: Path, robots: int, k: int, world_shards: int, ticks: int, rounds: int, tmp: Path, bare: bool):
+    """A/B of two trees: the graph run from each tree in turn (this one and ``before``, the order alternating by
+    round), ``rounds`` rounds; each node's CPU per tick and the run's seconds, per round and as medians."""
+    trees = {"this tree": ROOT, "before": before.resolve()}
+    for name, tree in trees.items():
+        source = imported_from(tree)
+        if source != tree:
+            sys.exit(f"bench_scale: {name} ({tree}) imports swarm_ros from {source or 'nowhere'}, not from itself")
+    shape, radius = disc_file(robots, tmp)
+    flags = ["--shape", str(shape), "--world-radius", str(radius), "--max-ticks", str(ticks)]
+    flags += ["--processes", str(k), "--world-shards", str(min(world_shards, k))]
+    flags += ["--no-recording", "--no-bag"] if bare else []
+    got: dict[str, list[tuple[float, dict[str, float]]]] = {name: [] for name in trees}
+    print(f"\n{robots:,} robots, {label(k, world_shards)}, {ticks} ticks, seed 1, {rounds} alternating rounds")
+    for r in range(rounds):
+        for name, tree in list(trees.items())[:: 1 if r % 2 == 0 else -1]:
+            out = tmp / f"ab-{r}-{name.replace(' ', '-')}"
+            _swarm(["run", *flags, "--out", str(out)], tree)
+            cpu = node_cpu(out / "logs", ticks)
+            got[name].append((json.loads((out / "summary.json").read_text())["wall_seconds"], cpu))
+            print(f"  round {r + 1} {name:<9} run {got[name][-1][0]:.2f} s   " + _cpu_text(cpu))
+    for name, runs in got.items():
+        nodes = runs[-1][1]
+        cpu = {node: statistics.median(c[node] for _, c in runs if node in c) for node in nodes}
+        print(f"{name:<9} median  run {_spread([w for w, _ in runs])} s   " + _cpu_text(cpu))
+    ratio = [sum(a[1].values()) / sum(b[1].values()) for a, b in zip(got["this tree"], got["before"])]
+    print("the graph's summed CPU a tick, this tree against before, per round: " + ", ".join(f"{x:.2f}" for x in ratio))
+
+
+def _cpu_text(cpu: dict[str, float]) -> str:
+    return ", ".join(f"{node} {ms:.1f}" for node, ms in cpu.items())
 
 
 def node_cpu(logs: Path, ticks: int) -> dict[str, float]:
@@ -273,9 +319,19 @@ def main() -> None:
         help="also project the tick on K hosts from each process's CPU and the transport's part",
     )
     parser.add_argument("--world-shards", type=int, default=1, help="world shards S of every graph run (at most its K)")
+    parser.add_argument(
+        "--before",
+        type=Path,
+        help="an older tree (git archive <commit> | tar -x -C DIR): an A/B of each K against it, --repeats rounds",
+    )
     args = parser.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_bare
     with tempfile.TemporaryDirectory() as tmp:
+        if args.before is not None:
+            for robots in args.robots:
+                for k in args.processes:
+                    compare(args.before, robots, k, args.world_shards, args.ticks, args.repeats, Path(tmp), args.bare)
+            return
         scale(
             args.robots,
             args.processes,

@@ -20,6 +20,27 @@ pytestmark = pytest.mark.process
 SCRIPTS = Path(__file__).resolve().parent.parent / "scripts"
 
 
+def test_bench_scale_before_alternates_two_trees_each_run_from_inside_itself(tmp_path):
+    """--before DIR: an A/B, each round both trees in turn (the order alternating), then the medians and the
+    summed CPU ratio per round; a DIR whose `python -m swarm_ros` would import another tree's package is refused
+    (a tree with no package: the import falls through to this checkout's install)."""
+    base = [sys.executable, str(SCRIPTS / "bench_scale.py"), "--robots", "300", "--ticks", "5", "--bare"]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    refused = subprocess.run([*base, "--before", str(empty)], capture_output=True, text=True, timeout=120)
+    assert refused.returncode != 0 and "imports swarm_ros from" in refused.stderr, refused.stderr
+    done = subprocess.run(
+        [*base, "--processes", "2", "--repeats", "2", "--before", str(SCRIPTS.parent)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    rounds = re.findall(r"^  round (\d) (this tree|before)\s+run [\d.]+ s\s+monitor", done.stdout, re.M)
+    assert rounds == [("1", "this tree"), ("1", "before"), ("2", "before"), ("2", "this tree")], done.stdout
+    assert re.search(r"^the graph's summed CPU a tick, .* per round: [\d.]+, [\d.]+$", done.stdout, re.M), done.stdout
+
+
 def test_bench_scale_prints_each_engine_and_the_projection_on_k_hosts():
     """A tiny disc, K = 1 and 2 with up to 2 world shards, no recording: the table, the K ratios and a
     projection row per K whose projected tick is what it is built from: the slowest world shard's CPU plus
