@@ -134,7 +134,7 @@ class MonitorCore:
         # checked against the tally
         self.every = every
         self.tallier = WORLD if shards == 1 else shard_name(0)  # the world process that sends the tallies
-        self.tallies: dict[int, dict[str, np.ndarray]] = {}  # tick -> the tallier -> robots by state (every > 1)
+        self.tallies: dict[int, np.ndarray] = {}  # tick -> the run's robots by state (every > 1)
         self.held = HeldMessages(TALLY)  # the messages of the ticks not counted yet, as they came, for the bag
         self.last = -1  # the last tick counted
         self.occupancy_changed = False  # since the occupancy last went to the port (every > 1)
@@ -173,7 +173,8 @@ class MonitorCore:
             if self.shards == 1 and self.every == 1:
                 self._count(tick, rows)
                 return
-            self._hold(self.parts, tick, sender, rows)  # a shard's restarted process sends the same again
+            self._ahead(tick)
+            self.parts.setdefault(tick, {})[sender] = rows  # a shard's restarted process sends the same again
             self._go_on()
 
     def tally(self, data, sender: str = "", raw: bytes = b"") -> None:
@@ -194,7 +195,8 @@ class MonitorCore:
         if tick <= self.last:
             return
         with self.held.holding(tick, self.last, (TALLY, sender), raw):
-            self._hold(self.tallies, tick, sender, counts)
+            self._ahead(tick)
+            self.tallies[tick] = counts
             self._go_on()
 
     def _mismatch(self, every: int) -> None:
@@ -203,10 +205,9 @@ class MonitorCore:
             f"give the world and the monitor the same record_every"
         )
 
-    def _hold(self, held: dict[int, dict[str, np.ndarray]], tick: int, sender: str, value: np.ndarray) -> None:
+    def _ahead(self, tick: int) -> None:
         if tick > self.last + PARTS_AHEAD:
             raise Rejected("future tick", f"tick {tick}; the monitor has counted up to {self.last}")
-        held.setdefault(tick, {})[sender] = value
 
     def _go_on(self) -> None:
         """Count every tick whose messages are all in, in order."""
@@ -218,10 +219,9 @@ class MonitorCore:
                     return
                 self._count(tick, self._joined(tick, parts))
                 continue
-            tallies = self.tallies.get(tick, {})
-            if not tallies:
+            counts = self.tallies.get(tick)
+            if counts is None:
                 return
-            counts = tallies[self.tallier]
             ends = self._outcome(tick_metrics(tick, counts, self.shape.patches), int(counts[_REMOVED])) is not None
             recorded = tick % self.every == 0 or ends
             if recorded and len(parts) < self.shards:
