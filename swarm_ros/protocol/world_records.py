@@ -76,8 +76,8 @@ class WorldRecords:
         the run's metrics and its removed robots alike), or None (another process; the rows go out every tick)."""
         if self.every == 1 or self.shard.index != 0:
             return None
-        removed = self.shard.removed
-        return state_counts(self.sim.metrics, SEEDS - int(removed[:SEEDS].sum()), int(removed.sum()))
+        seeds = SEEDS - int(self.shard.removed[:SEEDS].sum())
+        return state_counts(self.sim.metrics, seeds, self.sim.removed)
 
     def _recorded_rows(self) -> np.ndarray:
         """Every robot's row in this process's strips (the world's: every robot's) at the tick just closed."""
