@@ -70,6 +70,13 @@ def disc_file(robots: int, folder: Path) -> tuple[Path, int]:
     return path, round(math.sqrt(robots / STAR_DENSITY) / 2)
 
 
+def disc_flags(robots: int, tmp: Path, ticks: int, seed: int) -> tuple[list[str], int]:
+    """A run of the disc of ``robots`` (:func:`disc_file`, written into ``tmp``) as flags, and its world radius."""
+    shape, radius = disc_file(robots, tmp)
+    flags = ["--shape", str(shape), "--world-radius", str(radius), "--seed", str(seed), "--max-ticks", str(ticks)]
+    return flags, radius
+
+
 def _swarm(args: list[str], tree: Path = ROOT) -> float:
     """Seconds of ``swarm-ros ARGS`` run from ``tree`` (whose package it imports: the working directory's)."""
     t0 = time.perf_counter()
@@ -96,8 +103,7 @@ def compare(before: Path, robots: int, k: int, world_shards: int, ticks: int, ro
         source = imported_from(tree)
         if source != tree:
             sys.exit(f"bench_scale: {name} ({tree}) imports swarm_ros from {source or 'nowhere'}, not from itself")
-    shape, radius = disc_file(robots, tmp)
-    flags = ["--shape", str(shape), "--world-radius", str(radius), "--max-ticks", str(ticks)]
+    flags, _ = disc_flags(robots, tmp, ticks, 1)
     flags += ["--processes", str(k), "--world-shards", str(min(world_shards, k))]
     flags += ["--no-recording", "--no-bag"] if bare else []
     got: dict[str, list[tuple[float, dict[str, float]]]] = {name: [] for name in trees}
@@ -230,18 +236,8 @@ def scale(
     graph_extra = ["--no-bag"] if bare else []
     projected: list[str] = []
     for robots in sizes:
-        shape, radius = disc_file(robots, tmp)
-        common = [
-            "--shape",
-            str(shape),
-            "--world-radius",
-            str(radius),
-            "--seed",
-            str(seed),
-            "--max-ticks",
-            str(ticks),
-            *extra,
-        ]
+        common, radius = disc_flags(robots, tmp, ticks, seed)
+        common += extra
         print(
             f"\n{robots:,} robots (disc, world radius {radius}), {ticks} ticks, seed {seed}, "
             f"{'no recording, no bag' if bare else 'recording and bag on'}, median (min-max) of {repeats}"
