@@ -223,7 +223,10 @@ class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose)
         if not self.starting():
             return
         monitor = " and the monitor" * bool(self.window)
-        self.log.info(f"{self.node_name}: its strips hosted by {len(self.batch_names)} batches{monitor}: tick 0")
+        self.log.info(
+            f"{self.node_name}: its strips hosted by {len(self.batch_names)} batches{monitor}: tick 0 "
+            f"({time.process_time():.2f} s of CPU)"
+        )
         own = self._own()
         rows = state_rows(own, self.sim.state)
         rest = np.setdiff1d(np.arange(self.shard.params.robots), own, assume_unique=True)  # unknown ones as unknown
@@ -366,7 +369,10 @@ class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose)
         self.ended_at = self.clock()
         self.publish_status()
         assert self.sim.outcome is not None  # called once the run has ended
-        self.log.info(f"run ended: {self.sim.outcome.value} at tick {m.tick}, {m.localized} localized")
+        self.log.info(
+            f"run ended: {self.sim.outcome.value} at tick {m.tick}, {m.localized} localized "
+            f"({time.process_time():.2f} s of CPU)"
+        )
 
     def metrics(self, tick: int, nonce: str = "") -> None:
         """The monitor's report of ``tick`` (checked: a tick this process published), from the monitor process
