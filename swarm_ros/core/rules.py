@@ -171,104 +171,115 @@ def _toward(q, xi, yi, zi, hi, pi, solid, radius, size):
     return -1, xi + dx / d, yi + dy / d, zi, math.atan2(dy, dx) % TWO_PI, pi
 
 
-@numba.njit(cache=True)
-def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out):
-    """Decide for robots ``ids`` (moving, all inserted in the cell list ``head``, ``nxt``) at ``tick`` under
-    ``rules`` (:class:`~swarm_ros.core.kernel_state.Rules`), in a world of either dimension (``grid.solid``:
-    3D, where the robots' geometry is :mod:`swarm_ros.core.rules3d`'s; the rule is this one control flow).
+def _rule_for(solid: bool):
+    """The rule compiled for one dimension: ``solid`` (a 3D world) is a constant of the compilation, not data
+    tested for every robot, so each of the two kernels holds only its own dimension's code. (Tested at run time,
+    inside the inlined helpers, it cost the 2D engine 20-30% of its speed: docs/benchmarks.md.) numba keys each
+    kernel's cache by the value it closes over."""
 
-    Writes ``out`` (:class:`~swarm_ros.core.kernel_state.Moves`), per position k of ``ids``: the claimed
-    patch (flat index, or -1) and the pose the robot takes if it does not win a claim. Reads only the
-    previous tick's ``robots`` and ``grid``; writes only ``out``.
-    """
-    solid = grid.solid
-    x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
-    shape, wall, frontier, blocks, radius, size = (
-        grid.shape,
-        grid.wall,
-        grid.frontier,
-        grid.blocks,
-        grid.radius,
-        grid.size,
-    )
-    vision, wiggle, seed, join, crowd, steps = (
-        rules.vision,
-        rules.wiggle,
-        rules.seed,
-        rules.join,
-        rules.crowd,
-        rules.steps,
-    )
-    for k in range(ids.size):
-        i = ids[k]
-        xi, yi, hi = x[i], y[i], heading[i]
-        zi = z[i] if solid else 0.0
-        pi = pitch[i] if solid else 0.0
-        claim = -1
-        inside = shape[cell_index(xi, yi, zi, solid, radius, size)]
-        walked = False
-        if join == JOIN_WALK and (state[i] == _WALKING or inside):
-            q = _nearest_frontier(xi, yi, zi, solid, frontier, blocks, radius, size)
-            if q >= 0:  # an empty frontier: nothing to walk to, so the robot wanders
-                claim, xi, yi, zi, hi, pi = _toward(q, xi, yi, zi, hi, pi, solid, radius, size)
-                walked = True
-        if walked:
-            pass
-        elif steps == STEPS_ONE:
-            if join == JOIN_LOCAL and inside:
-                claim = _join_target(xi, yi, zi, solid, vision, frontier, radius, size)
-            if claim < 0:
+    @numba.njit(cache=True)
+    def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out):
+        """Decide for robots ``ids`` (moving, all inserted in the cell list ``head``, ``nxt``) at ``tick`` under
+        ``rules`` (:class:`~swarm_ros.core.kernel_state.Rules`), in a world of this kernel's dimension (3D: the
+        robots' geometry is :mod:`swarm_ros.core.rules3d`'s; the rule is this one control flow for both).
+
+        Writes ``out`` (:class:`~swarm_ros.core.kernel_state.Moves`), per position k of ``ids``: the claimed
+        patch (flat index, or -1) and the pose the robot takes if it does not win a claim. Reads only the
+        previous tick's ``robots`` and ``grid``; writes only ``out``.
+        """
+        x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
+        shape, wall, frontier, blocks, radius, size = (
+            grid.shape,
+            grid.wall,
+            grid.frontier,
+            grid.blocks,
+            grid.radius,
+            grid.size,
+        )
+        vision, wiggle, seed, join, crowd, steps = (
+            rules.vision,
+            rules.wiggle,
+            rules.seed,
+            rules.join,
+            rules.crowd,
+            rules.steps,
+        )
+        for k in range(ids.size):
+            i = ids[k]
+            xi, yi, hi = x[i], y[i], heading[i]
+            zi = z[i] if solid else 0.0
+            pi = pitch[i] if solid else 0.0
+            claim = -1
+            inside = shape[cell_index(xi, yi, zi, solid, radius, size)]
+            walked = False
+            if join == JOIN_WALK and (state[i] == _WALKING or inside):
+                q = _nearest_frontier(xi, yi, zi, solid, frontier, blocks, radius, size)
+                if q >= 0:  # an empty frontier: nothing to walk to, so the robot wanders
+                    claim, xi, yi, zi, hi, pi = _toward(q, xi, yi, zi, hi, pi, solid, radius, size)
+                    walked = True
+            if walked:
+                pass
+            elif steps == STEPS_ONE:
+                if join == JOIN_LOCAL and inside:
+                    claim = _join_target(xi, yi, zi, solid, vision, frontier, radius, size)
+                if claim < 0:
+                    u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE)
+                    h, p, ex, ey, ez = _wiggled(hi, pi, solid, wiggle, u, v)
+                    if wall[cell_index(xi + ex, yi + ey, zi + ez, solid, radius, size)] or _crowded(
+                        solid, crowd, xi, yi, zi, h, ex, ey, ez, i, vision, robots, radius, size, head, nxt
+                    ):
+                        u, v = _draws(solid, seed, i, tick, STREAM_TURN)
+                        hi, pi = _turned(solid, u, v)
+                    else:
+                        xi, yi, zi, hi, pi = xi + ex, yi + ey, zi + ez, _normal(h, solid), p
+            else:  # the pseudo-code's Move calls, as written
                 u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE)
-                h, p, ex, ey, ez = _wiggled(hi, pi, solid, wiggle, u, v)
-                if wall[cell_index(xi + ex, yi + ey, zi + ez, solid, radius, size)] or _crowded(
-                    solid, crowd, xi, yi, zi, h, ex, ey, ez, i, vision, robots, radius, size, head, nxt
-                ):
-                    u, v = _draws(solid, seed, i, tick, STREAM_TURN)
-                    hi, pi = _turned(solid, u, v)
-                else:
-                    xi, yi, zi, hi, pi = xi + ex, yi + ey, zi + ez, _normal(h, solid), p
-        else:  # the pseudo-code's Move calls, as written
-            u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE)
-            xi, yi, zi, hi, pi = _move(xi, yi, zi, hi, pi, solid, wiggle, u, v, wall, radius, size)
-            if not inside:
-                ex, ey, ez = _step(hi, pi, solid)
-                if wall[cell_index(xi + ex, yi + ey, zi + ez, solid, radius, size)]:
-                    u, v = _draws(solid, seed, i, tick, STREAM_TURN)
-                    hi, pi = _turned(solid, u, v)
-                else:
-                    u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE_2)
-                    xi, yi, zi, hi, pi = _move(xi, yi, zi, hi, pi, solid, wiggle, u, v, wall, radius, size)
-            ex, ey, ez = _step(hi, pi, solid)
-            if _crowded(solid, crowd, xi, yi, zi, hi, ex, ey, ez, i, vision, robots, radius, size, head, nxt):
-                u, v = _draws(solid, seed, i, tick, STREAM_TURN_2 if not inside else STREAM_TURN)
-                hi, pi = _turned(solid, u, v)
-            else:
-                u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE_3 if not inside else STREAM_WIGGLE_2)
                 xi, yi, zi, hi, pi = _move(xi, yi, zi, hi, pi, solid, wiggle, u, v, wall, radius, size)
-            hi = _normal(hi, solid)
-            if inside and join == JOIN_LOCAL:
-                claim = _join_target(xi, yi, zi, solid, vision, frontier, radius, size)
-        out.claim[k] = claim
-        out.x[k] = xi
-        out.y[k] = yi
-        out.heading[k] = hi
-        if solid:
-            out.z[k] = zi
-            out.pitch[k] = pi
+                if not inside:
+                    ex, ey, ez = _step(hi, pi, solid)
+                    if wall[cell_index(xi + ex, yi + ey, zi + ez, solid, radius, size)]:
+                        u, v = _draws(solid, seed, i, tick, STREAM_TURN)
+                        hi, pi = _turned(solid, u, v)
+                    else:
+                        u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE_2)
+                        xi, yi, zi, hi, pi = _move(xi, yi, zi, hi, pi, solid, wiggle, u, v, wall, radius, size)
+                ex, ey, ez = _step(hi, pi, solid)
+                if _crowded(solid, crowd, xi, yi, zi, hi, ex, ey, ez, i, vision, robots, radius, size, head, nxt):
+                    u, v = _draws(solid, seed, i, tick, STREAM_TURN_2 if not inside else STREAM_TURN)
+                    hi, pi = _turned(solid, u, v)
+                else:
+                    u, v = _draws(solid, seed, i, tick, STREAM_WIGGLE_3 if not inside else STREAM_WIGGLE_2)
+                    xi, yi, zi, hi, pi = _move(xi, yi, zi, hi, pi, solid, wiggle, u, v, wall, radius, size)
+                hi = _normal(hi, solid)
+                if inside and join == JOIN_LOCAL:
+                    claim = _join_target(xi, yi, zi, solid, vision, frontier, radius, size)
+            out.claim[k] = claim
+            out.x[k] = xi
+            out.y[k] = yi
+            out.heading[k] = hi
+            if solid:
+                out.z[k] = zi
+                out.pitch[k] = pi
+
+    return decide_kernel
+
+
+decide_kernel_2d = _rule_for(False)  #: the rule in a 2D world
+decide_kernel_3d = _rule_for(True)  #: the rule in a 3D world
 
 
 @numba.njit(cache=True)
 def decide_robots(moving, ids, robots, grid, rules, tick, head, nxt, out):
     """Decide for robots ``ids`` (a subset of ``moving``, the moving robots they sense) at ``tick``, in either
     dimension: ``moving`` go into the cell list (``head``: all -1, left so), then each of ``ids`` decides
-    (:func:`decide_kernel`) into ``out``."""
+    (the rule compiled for ``grid``'s dimension, :func:`_rule_for`) into ``out``."""
     if grid.solid:
         index_build3(moving, robots.x, robots.y, robots.z, grid.radius, grid.size, head, nxt)
-        decide_kernel(ids, robots, grid, rules, tick, head, nxt, out)
+        decide_kernel_3d(ids, robots, grid, rules, tick, head, nxt, out)
         index_clear3(moving, robots.x, robots.y, robots.z, grid.radius, grid.size, head)
     else:
         index_build(moving, robots.x, robots.y, grid.radius, grid.size, head, nxt)
-        decide_kernel(ids, robots, grid, rules, tick, head, nxt, out)
+        decide_kernel_2d(ids, robots, grid, rules, tick, head, nxt, out)
         index_clear(moving, robots.x, robots.y, grid.radius, grid.size, head)
 
 
