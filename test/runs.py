@@ -3,6 +3,7 @@ experiment files."""
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import yaml
 from swarm_ros.core import RunParams, Shape, Simulation, World, decide
 from swarm_ros.core.invariants import check_state, check_tick
 from swarm_ros.core.rules import Decisions
+from swarm_ros.core.state import FRONTIER_BLOCK
 
 # Robot counts that complete each built-in shape in the original study (docs/model.md, "Shapes").
 STUDY_PATCHES = {"star": 1036, "wrench": 566, "k-letter": 1352, "rectangle": 438, "tyre": 1282, "spinner": 1040}
@@ -23,6 +25,18 @@ def disc_shape(world: World, radius: float, name: str = "disc", hole: float = 0.
     x, y = np.meshgrid(c, c)
     d = np.hypot(x, y)
     return Shape(name=name, mask=(d <= radius) & (d >= hole), world=world, source=f"test {name}")
+
+
+def run_digest(sim: Simulation, *arrays: np.ndarray) -> str:
+    """A short hash of ``arrays``, then of the frontier's counts as the code before the super-blocks kept them
+    (per block, then the total: the hashes of test_2d_unchanged and test_3d_unchanged were made so; the
+    super-blocks' counts are derived from those and checked by the invariants), then of every tick's metrics."""
+    blocks = sim.state.frontier_blocks
+    fine = (-(-sim.shape.world.size // FRONTIER_BLOCK)) ** sim.shape.world.dims
+    digest = hashlib.sha256()
+    for a in (*arrays, np.append(blocks[:fine], blocks[-1]), sim.history):
+        digest.update(np.ascontiguousarray(a).tobytes())
+    return digest.hexdigest()[:16]
 
 
 def run_checked(sim: Simulation) -> Simulation:

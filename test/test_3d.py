@@ -18,7 +18,7 @@ from swarm_ros.core.legality import illegal
 from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules3d import direction, nearest_frontier3, random_direction, wiggled
 from swarm_ros.core.shapes import builtin_shapes_3d, read_text_grid, write_text_grid
-from swarm_ros.core.state import FRONTIER_BLOCK, RobotState, frontier_blocks_of, near_any
+from swarm_ros.core.state import FRONTIER_BLOCK, FRONTIER_SUPER, RobotState, frontier_blocks_of, near_any
 
 pytestmark = pytest.mark.unit
 
@@ -72,13 +72,16 @@ def test_the_3d_dilation_equals_scipys():
 
 
 def test_frontier_blocks_count_the_frontier_per_cube_of_voxels():
-    size, b = 21, FRONTIER_BLOCK
+    size, b, s = 141, FRONTIER_BLOCK, FRONTIER_SUPER
     frontier = np.random.default_rng(3).random(size**3) < 0.1
     blocks = frontier_blocks_of(frontier, size, 3)
-    nb = -(-size // b)
+    nb, ns = -(-size // b), -(-size // (b * s))
     z, y, x = np.unravel_index(np.flatnonzero(frontier), (size,) * 3)
     expect = np.bincount(((z // b) * nb + y // b) * nb + x // b, minlength=nb**3)
-    assert np.array_equal(blocks[:-1], expect) and blocks[-1] == frontier.sum()
+    supers = np.bincount(((z // (b * s)) * ns + y // (b * s)) * ns + x // (b * s), minlength=ns**3)
+    assert ns == 3 and blocks.size == nb**3 + ns**3 + 1
+    assert np.array_equal(blocks[: nb**3], expect) and np.array_equal(blocks[nb**3 : -1], supers)
+    assert blocks[-1] == frontier.sum()
 
 
 # -- shapes ------------------------------------------------------------------------------------------------
@@ -251,13 +254,13 @@ def test_a_random_turn_is_uniform_on_the_sphere():
 
 
 @settings(max_examples=60, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), density=st.floats(0.0005, 0.05))
-def test_the_block_search_finds_the_brute_force_nearest_frontier_voxel(seed, density):
-    world = World(12, 3)
+@given(seed=st.integers(0, 2**32 - 1), density=st.floats(0.0005, 0.05), radius=st.sampled_from([12, 40]))
+def test_the_block_search_finds_the_brute_force_nearest_frontier_voxel(seed, density, radius):
+    world = World(radius, 3)  # 40: two super-blocks a side, the last one cut short
     rng = np.random.default_rng(seed)
-    frontier = rng.random(world.patch_count) < density
+    frontier = rng.random(world.patch_count) < density / (radius / 12) ** 3  # as many voxels: far ones too
     blocks = frontier_blocks_of(frontier, world.size, 3)
-    for x, y, z in rng.uniform(-11.4, 11.4, (20, 3)):
+    for x, y, z in rng.uniform(-radius + 0.6, radius - 0.6, (20, 3)):
         assert nearest_frontier3(x, y, z, frontier, blocks, world.radius, world.size) == nearest_frontier_patch(
             frontier, x, y, world, z
         )

@@ -9,10 +9,8 @@ frontier and every tick's metrics of one run with failures (10% of the robots at
 
 from __future__ import annotations
 
-import hashlib
-
-import numpy as np
 import pytest
+from runs import run_digest
 
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.rules import Decider
@@ -33,10 +31,8 @@ BEFORE_NAMED_STATE = {
 
 
 def _digest(sim: Simulation) -> str:
-    s, digest = sim.state, hashlib.sha256()
-    for a in (s.x, s.y, s.z, s.heading, s.pitch, s.state, s.occupancy, s.frontier, s.frontier_blocks, sim.history):
-        digest.update(np.ascontiguousarray(a).tobytes())
-    return digest.hexdigest()[:16]
+    s = sim.state
+    return run_digest(sim, s.x, s.y, s.z, s.heading, s.pitch, s.state, s.occupancy, s.frontier)
 
 
 @pytest.mark.parametrize("case", sorted(BEFORE_NAMED_STATE))

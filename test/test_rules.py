@@ -142,7 +142,8 @@ def test_a_robot_that_steps_inside_starts_walking_next_tick(disc):
 
 @st.composite
 def frontiers(draw):
-    radius = draw(st.sampled_from([5, 10, 32, 40]))  # sizes 11, 21, 65, 81: partial last blocks too
+    # sizes 11, 21, 65, 81, 301: partial last blocks and super-blocks too; 301 has five super-blocks a side
+    radius = draw(st.sampled_from([5, 10, 32, 40, 150]))
     world = World(radius)
     density = draw(st.sampled_from([0.0005, 0.003, 0.05, 0.5]))
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))

@@ -30,7 +30,7 @@ import numpy as np
 from swarm_ros.core.rng import STREAM_PRIORITY, draw_bits
 from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.rulesets import JOIN_WALK
-from swarm_ros.core.state import FRONTIER_BLOCK, RobotState
+from swarm_ros.core.state import FRONTIER_BLOCK, FRONTIER_SUPER, RobotState
 
 _MOVING_OUTSIDE = np.int8(RobotState.MOVING_OUTSIDE)
 _MOVING_INSIDE = np.int8(RobotState.MOVING_INSIDE)
@@ -59,19 +59,24 @@ def _wins(a, b, ids, seed, tick):
 
 @numba.njit(cache=True, inline="always")
 def _mark(q, on, frontier, blocks, size):
-    """Set patch ``q``'s frontier flag to ``on``, keeping its block's count and the total in step.
+    """Set patch ``q``'s frontier flag to ``on``, keeping its block's count, its super-block's and the total in
+    step (:func:`swarm_ros.core.state.frontier_blocks_of`).
 
-    The block of a flat index in a 2D world (the 3D world's bottom layer) or a 3D one:
-    blocks are numbered in flat order, ``(bz * nb + by) * nb + bx``.
+    Blocks and super-blocks are numbered in flat order, ``(bz * nb + by) * nb + bx``; a 2D world's (its
+    ``frontier`` is ``size`` squared) have no z.
     """
     if frontier[q] != on:
         frontier[q] = on
-        nb = (size + FRONTIER_BLOCK - 1) // FRONTIER_BLOCK
-        bz = (q // (size * size)) // FRONTIER_BLOCK
-        by = ((q // size) % size) // FRONTIER_BLOCK
-        b = (bz * nb + by) * nb + (q % size) // FRONTIER_BLOCK
+        b, s = FRONTIER_BLOCK, FRONTIER_SUPER
+        nb = (size + b - 1) // b
+        ns = (nb + s - 1) // s
+        bz = (q // (size * size)) // b
+        by = ((q // size) % size) // b
+        bx = (q % size) // b
+        base = nb * nb * (nb if frontier.size > size * size else 1)  # the blocks', before the super-blocks'
         d = 1 if on else -1
-        blocks[b] += d
+        blocks[(bz * nb + by) * nb + bx] += d
+        blocks[base + ((bz // s) * ns + by // s) * ns + bx // s] += d
         blocks[blocks.size - 1] += d
 
 

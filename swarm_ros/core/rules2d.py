@@ -11,7 +11,7 @@ import math
 import numba
 
 from swarm_ros.core.rulesets import CROWD_AHEAD
-from swarm_ros.core.state import FRONTIER_BLOCK
+from swarm_ros.core.state import FRONTIER_BLOCK, FRONTIER_SUPER
 
 
 @numba.njit(cache=True, inline="always")
@@ -146,6 +146,27 @@ def _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d
     return best, best_d2
 
 
+@numba.njit(cache=True, inline="always")
+def _scan_line(ux, uy, dx, dy, count, xi, yi, frontier, blocks, radius, size, nb, ns, best, best_d2):
+    """Fold the frontier patches of ``count`` blocks from (ux, uy) on, a step (dx, dy) apart (one of them 1, the
+    other 0), into the nearest-so-far; the stretch in a super-block without frontier patches is passed over whole."""
+    s = FRONTIER_SUPER
+    at = ux if dx else uy  # the coordinate that moves
+    end = at + count
+    while at < end:
+        stop = min(end, (at // s + 1) * s)  # the end of this super-block's stretch of the line
+        if blocks[nb * nb + (uy // s) * ns + ux // s] > 0:
+            for _ in range(stop - at):
+                best, best_d2 = _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
+                ux += dx
+                uy += dy
+        else:
+            ux += dx * (stop - at)
+            uy += dy * (stop - at)
+        at = stop
+    return best, best_d2
+
+
 @numba.njit(cache=True)
 def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
     """Flat index of the nearest frontier patch anywhere (``join: walk``), or -1 if there is none.
@@ -153,13 +174,17 @@ def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
     Distance is Euclidean from (xi, yi) to the patch centre; ties go to the lowest flat
     index, i.e. the lowest (y, x). The search goes outward ring by ring over blocks of
     ``FRONTIER_BLOCK`` patches, skips blocks without frontier patches (``blocks``) or
-    farther than the best so far, and stops once a whole ring is farther: it costs about
-    the blocks within the distance found, not the frontier's size.
+    farther than the best so far, and stops once a whole ring is farther. The stretch of a ring in a super-block
+    of ``FRONTIER_SUPER`` x ``FRONTIER_SUPER`` blocks without frontier patches is passed over in one step, so a
+    search costs about the blocks near the frontier it finds and the super-blocks on the way: not the square of
+    its distance in blocks, as for a robot far inside a large shape whose frontier is still small (the start of
+    a run). Only what is strictly farther is skipped: the answer is the nearest whatever the order.
     """
     if blocks[blocks.size - 1] == 0:
         return -1
     b = FRONTIER_BLOCK
     nb = (size + b - 1) // b
+    ns = (nb + FRONTIER_SUPER - 1) // FRONTIER_SUPER
     bx = (int(math.floor(xi + 0.5)) + radius) // b
     by = (int(math.floor(yi + 0.5)) + radius) // b
     best = -1
@@ -170,13 +195,18 @@ def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
             gap = (k - 1) * b + 0.5
             if gap * gap > best_d2:
                 break
-        for uy in range(max(by - k, 0), min(by + k, nb - 1) + 1):
-            if uy == by - k or uy == by + k:  # the ring's bottom or top row: every block in it
-                for ux in range(max(bx - k, 0), min(bx + k, nb - 1) + 1):
-                    best, best_d2 = _scan_block(ux, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
-            else:  # the rows between: the ring's left and right blocks
-                if bx - k >= 0:
-                    best, best_d2 = _scan_block(bx - k, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
-                if bx + k < nb:
-                    best, best_d2 = _scan_block(bx + k, uy, xi, yi, frontier, blocks, radius, size, nb, best, best_d2)
+        x0, x1 = max(bx - k, 0), min(bx + k, nb - 1)
+        for j in range(2 if k > 0 else 1):  # the ring's bottom and top rows: every block in them
+            uy = by - k if j == 0 else by + k
+            if 0 <= uy < nb:
+                best, best_d2 = _scan_line(
+                    x0, uy, 1, 0, x1 - x0 + 1, xi, yi, frontier, blocks, radius, size, nb, ns, best, best_d2
+                )
+        y0, y1 = max(by - k + 1, 0), min(by + k - 1, nb - 1)
+        for j in range(2 if k > 0 else 0):  # the ring's left and right columns, between those rows
+            ux = bx - k if j == 0 else bx + k
+            if 0 <= ux < nb and y1 >= y0:
+                best, best_d2 = _scan_line(
+                    ux, y0, 0, 1, y1 - y0 + 1, xi, yi, frontier, blocks, radius, size, nb, ns, best, best_d2
+                )
     return best

@@ -22,6 +22,7 @@ from swarm_ros.core.shapes import Shape
 
 NO_ROBOT = -1  #: occupancy value of a patch without a localized robot
 FRONTIER_BLOCK = 8  #: side, in patches, of the blocks whose frontier patches are counted (nearest-frontier search)
+FRONTIER_SUPER = 8  #: side, in blocks, of the super-blocks counted too: the search's coarse level (64 patches)
 
 
 class RobotState(IntEnum):
@@ -71,8 +72,9 @@ class SwarmState:
         frontier: flat world grid (bool, (W*W,)): empty shape patches with at least
             one localized 8-neighbour, i.e. the patches robots may join.
         frontier_blocks: frontier patches per block of ``FRONTIER_BLOCK`` x ``FRONTIER_BLOCK``
-            patches (int32, (B*B + 1,), blocks row by row from the world's bottom-left corner),
-            the last entry the total; kept in step with ``frontier`` (:func:`frontier_blocks_of`).
+            patches (blocks row by row from the world's bottom-left corner), then per super-block of
+            ``FRONTIER_SUPER`` x ``FRONTIER_SUPER`` blocks, then the total (int32, (B*B + S*S + 1,));
+            kept in step with ``frontier`` (:func:`frontier_blocks_of`).
         z, pitch: (3D worlds only; None in 2D) the z position in patches, and the heading's
             elevation in radians, in [-pi/2, pi/2]: a robot faces
             ``(cos pitch cos heading, cos pitch sin heading, sin pitch)``.
@@ -138,13 +140,19 @@ def near_any(grid: np.ndarray) -> np.ndarray:
 
 def frontier_blocks_of(frontier: np.ndarray, size: int, dims: int = 2) -> np.ndarray:
     """Frontier patches per ``FRONTIER_BLOCK``-sided block (cube in 3D) of a flat grid ``size`` patches
-    a side, blocks in flat order from the world's low corner, then the total."""
-    b = FRONTIER_BLOCK
-    nb = -(-size // b)
-    grid = np.zeros((nb * b,) * dims, dtype=np.int32)
-    grid[(slice(0, size),) * dims] = frontier.reshape((size,) * dims)
-    counts = grid.reshape((nb, b) * dims).sum(axis=tuple(range(1, 2 * dims, 2))).ravel()
-    return np.append(counts, counts.sum()).astype(np.int32)
+    a side, blocks in flat order from the world's low corner; then per ``FRONTIER_SUPER``-sided super-block
+    of blocks, in the same order; then the total."""
+    blocks = _block_sums(frontier.reshape((size,) * dims), FRONTIER_BLOCK)
+    supers = _block_sums(blocks, FRONTIER_SUPER)
+    return np.concatenate([blocks.ravel(), supers.ravel(), [blocks.sum()]]).astype(np.int32)
+
+
+def _block_sums(grid: np.ndarray, b: int) -> np.ndarray:
+    """The sums of ``grid`` over blocks of side ``b`` (the last ones cut short at the grid's far edges)."""
+    nb = -(-grid.shape[0] // b)
+    padded = np.zeros((nb * b,) * grid.ndim, dtype=np.int32)
+    padded[tuple(slice(0, n) for n in grid.shape)] = grid
+    return padded.reshape((nb, b) * grid.ndim).sum(axis=tuple(range(1, 2 * grid.ndim, 2)))
 
 
 def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
