@@ -20,9 +20,7 @@ within 10% of its speed. Compare ratios within one run: the machines are shared 
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -30,6 +28,9 @@ from pathlib import Path
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from alternate import alternate, child_report, print_ratios
 
 ROOT = Path(__file__).resolve().parent.parent
 RULES = ("paper", "local", "literal")
@@ -109,33 +110,11 @@ def bench_3d(seeds: int, smoke: bool = False) -> None:
 
 
 def compare_2d(before: Path, rounds: int, seeds: int) -> None:
-    trees = {"this tree": ROOT, "before": before.resolve()}
-    rates: dict[str, list[dict[str, float]]] = {name: [] for name in trees}
-    for k in range(rounds):
-        for name, tree in list(trees.items()) if k % 2 == 0 else list(trees.items())[::-1]:
-            env = {**os.environ, "PYTHONPATH": str(tree)}
-            done = subprocess.run(
-                [sys.executable, str(ROOT / "scripts" / "bench_3d.py"), "--measure-2d", "--seeds", str(seeds)],
-                cwd=tree,
-                env=env,
-                capture_output=True,
-                text=True,
-                check=True,
-            )
-            source, result = done.stdout.splitlines()[-2:]
-            if not Path(source).resolve().is_relative_to(tree):
-                raise SystemExit(f"bench_3d: the {name} measurement imported {source}, not the tree {tree}")
-            rates[name].append(json.loads(result))
+    rates = alternate(
+        Path(__file__).resolve(), ["--measure-2d", "--seeds", str(seeds)], {"this tree": ROOT, "before": before}, rounds
+    )
     print(f"\n2D against {before} ({rounds} rounds, alternating; M robot-steps/s, median of rounds):")
-    print(f"  {'case':<28} {'this tree':>10} {'before':>10} {'ratio':>7}  range")
-    for case in rates["this tree"][0]:
-        new = [r[case] for r in rates["this tree"]]
-        old = [r[case] for r in rates["before"]]
-        ratio = sorted(a / b for a, b in zip(new, old))
-        print(
-            f"  {case:<28} {np.median(new) / 1e6:10.2f} {np.median(old) / 1e6:10.2f} "
-            f"{np.median(ratio):7.3f}  {ratio[0]:.3f}-{ratio[-1]:.3f}"
-        )
+    print_ratios(rates, "this tree", "before")
 
 
 def main() -> int:
@@ -154,10 +133,7 @@ def main() -> int:
         args.seeds = 1
     pinned = _pin()
     if args.measure_2d:
-        import swarm_ros
-
-        print(swarm_ros.__file__)  # the tree measured: the parent checks it
-        print(json.dumps(measure_2d(args.seeds)))
+        child_report(measure_2d(args.seeds))  # the tree measured, which the parent checks, and its rates
         return 0
     smoke = "; --smoke: small cases, numbers that mean nothing" if args.smoke else ""
     print(f"swarm_ros 3D engine benchmark ({pinned}; median of {args.seeds} seeds{smoke})")

@@ -17,14 +17,24 @@ tick-cost table, which times each ``step()``. Pinned to one CPU. Compare the num
 ratios within one run: the machines are shared and noisy. Target (issue 11): at least
 3 M robot-steps/s for ``paper`` on the star.
 
+``--before DIR`` measures every case instead in this tree and in DIR, another checkout
+(``git archive <commit> | tar -x -C DIR``), alternating, ``--rounds`` times, each in a fresh
+process started inside its tree (``scripts/alternate.py``): each tree's median rate, the ratio
+this tree / DIR (median and range over the rounds), and per tree the cost of a robot-step at
+100,000 robots against the star's first 200 ticks (issue 47's targets: every case at least
+DIR's when DIR is ddd3674; 100,000 robots at most 1.3x the star's cost and at least 1.6x DIR's rate).
+
     .venv/bin/python scripts/bench_engine.py [--seeds 3] [--rules paper,local,literal] [--smoke]
+    .venv/bin/python scripts/bench_engine.py --before /tmp/base [--rounds 3] [--seeds 3] [--rules paper]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
+from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -33,6 +43,11 @@ import numpy as np
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
 from swarm_ros.core.rulesets import RULE_SETS
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from alternate import alternate, child_report, print_ratios
+
+ROOT = Path(__file__).resolve().parent.parent
 
 STAR_DENSITY = 1036 / 63**2  # robots per free patch in the default star run
 
@@ -79,6 +94,55 @@ def timed_steps(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
     return np.array(secs), np.array(moving)
 
 
+def cases(rules: str, star: Shape, discs: dict[int, Shape], first_ticks: int) -> list[tuple[str, object, int | None]]:
+    """The cases of one rule set: (label, seed -> Simulation, ticks or None for the whole run)."""
+    out: list[tuple[str, object, int | None]] = [
+        (
+            f"star 1036, first {first_ticks} ticks",
+            lambda s: Simulation(star, RunParams(1036, seed=s, rules=rules)),
+            first_ticks,
+        ),
+        ("star 1036, whole run", lambda s: Simulation(star, RunParams(1036, seed=s, rules=rules)), None),
+    ]
+    for n, shape in discs.items():
+        out.append(
+            (
+                f"disc {n:,} (world {shape.world.size}^2), {first_ticks} ticks",
+                lambda s, sh=shape, n=n: Simulation(sh, RunParams(n, seed=s, rules=rules)),
+                first_ticks,
+            )
+        )
+    return out
+
+
+def measure(rule_sets: list[str], seeds: int, sizes: tuple[int, ...], first_ticks: int) -> dict[str, float]:
+    """Every case's median robot-steps/s over ``seeds`` seeds, in whichever swarm_ros is on sys.path (the child of
+    ``--before``)."""
+    star, discs = Shape.load("star"), {n: disc_world(n) for n in sizes}
+    out = {}
+    for rules in rule_sets:
+        Simulation(star, RunParams(robots=50, max_ticks=3, rules=rules)).run()  # load the kernels
+        for label, make, ticks in cases(rules, star, discs, first_ticks):
+            rates = sorted(steps / secs for secs, _, steps in (timed_run(make(s), ticks) for s in range(1, seeds + 1)))
+            out[f"{rules}, {label}"] = rates[len(rates) // 2]
+    return out
+
+
+def compare(before: Path, rounds: int, seeds: int, rule_sets: list[str], sizes, first_ticks: int) -> None:
+    args = ["--measure", "--seeds", str(seeds), "--rules", ",".join(rule_sets)] + ["--smoke"] * (sizes == (2_000,))
+    rates = alternate(Path(__file__).resolve(), args, {"this tree": ROOT, "before": before}, rounds)
+    print(f"\nAgainst {before} ({rounds} rounds, alternating; M robot-steps/s, median of rounds):")
+    print_ratios(rates, "this tree", "before")
+    big = max(sizes)
+    print(f"\nCost of a robot-step at {big:,} robots against the star's first {first_ticks} ticks (median of rounds):")
+    for name, runs in rates.items():
+        for rules in rule_sets:
+            star = f"{rules}, star 1036, first {first_ticks} ticks"
+            disc = next(case for case in runs[0] if case.startswith(f"{rules}, disc {big:,} "))
+            ratio = sorted(r[star] / r[disc] for r in runs)
+            print(f"  {name:<10} {rules:<8} {np.median(ratio):5.2f}x  ({ratio[0]:.2f}-{ratio[-1]:.2f})")
+
+
 def report(label: str, secs: float, ticks: int, steps: int) -> float:
     rate = steps / secs
     print(
@@ -97,6 +161,9 @@ def main() -> int:
         action="store_true",
         help="one seed, small cases: checks the script runs (test_scripts.py); its numbers mean nothing",
     )
+    ap.add_argument("--before", type=Path, help="another checkout: measure every case in both, alternating")
+    ap.add_argument("--rounds", type=int, default=3, help="alternating rounds of --before")
+    ap.add_argument("--measure", action="store_true", help=argparse.SUPPRESS)  # a child of --before
     args = ap.parse_args()
     rule_sets = [r for r in args.rules.split(",") if r]
     sizes, first_ticks = ((2_000,), 20) if args.smoke else ((10_000, 100_000), 200)
@@ -107,6 +174,13 @@ def main() -> int:
         pinned = "pinned to 1 CPU"
     except (AttributeError, OSError):
         pinned = "not pinned"
+    if args.measure:
+        child_report(measure(rule_sets, args.seeds, sizes, first_ticks))
+        return 0
+    if args.before is not None:
+        print(f"swarm_ros engine benchmark against {args.before} ({pinned}; median of {args.seeds} seeds a round)")
+        compare(args.before, args.rounds, args.seeds, rule_sets, sizes, first_ticks)
+        return 0
     star = Shape.load("star")
     for rules in rule_sets:  # compile / load the kernels
         Simulation(star, RunParams(robots=50, max_ticks=3, rules=rules)).run()
@@ -121,20 +195,9 @@ def main() -> int:
     results = {}
     for rules in rule_sets:
         print(f"\nrules {rules}:")
-        first = median_case(
-            f"star 1036, first {first_ticks} ticks",
-            lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)),
-            first_ticks,
-        )
-        whole = median_case(
-            "star 1036, whole run", lambda s, r=rules: Simulation(star, RunParams(1036, seed=s, rules=r)), None
-        )
-        per_size = {1036: first}
-        for n, shape in discs.items():
-            label = f"disc {n:,} (world {shape.world.size}^2), {first_ticks} ticks"
-            per_size[n] = median_case(
-                label, lambda s, sh=shape, n=n, r=rules: Simulation(sh, RunParams(n, seed=s, rules=r)), first_ticks
-            )
+        rates = [median_case(label, make, ticks) for label, make, ticks in cases(rules, star, discs, first_ticks)]
+        first, whole = rates[0], rates[1]
+        per_size = {1036: first, **dict(zip(discs, rates[2:]))}
         print("  cost per robot-step across swarm sizes (first 200 ticks; flat = linear in N):")
         for n, rate in per_size.items():
             print(

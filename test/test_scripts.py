@@ -153,6 +153,23 @@ def test_bench_engine_smoke_prints_each_rule_set_its_cases_and_the_tick_cost_fit
     assert "numbers that mean nothing" in out
 
 
+def test_bench_engine_before_measures_both_trees_alternating_and_refuses_another_tree_in_their_place(tmp_path):
+    """--before DIR: each round measures both trees in a fresh process started inside each (the order alternating),
+    then prints each case's rates and ratio, and each tree's cost at the largest size against the star's."""
+    base = [sys.executable, str(SCRIPTS / "bench_engine.py"), "--smoke", "--rules", "paper", "--rounds", "2"]
+    done = subprocess.run([*base, "--before", str(SCRIPTS.parent)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    rounds = re.findall(r"round (\d) of 2: (this tree|before) measured", done.stderr)
+    assert rounds == [("1", "this tree"), ("1", "before"), ("2", "before"), ("2", "this tree")], done.stderr
+    cases = re.findall(r"^  (paper, [^\n]+?) +([\d.]+) +([\d.]+) +([\d.]+)  [\d.]+-[\d.]+$", done.stdout, re.M)
+    assert len(cases) == 3 and all(float(a) > 0 and float(b) > 0 for _, a, b, _ in cases), done.stdout
+    assert re.search(r"this tree +paper +[\d.]+x", done.stdout) and re.search(r"before +paper +[\d.]+x", done.stdout)
+    empty = tmp_path / "not-a-checkout"  # no swarm_ros in it: the child imports another, which is refused
+    empty.mkdir()
+    refused = subprocess.run([*base, "--before", str(empty)], capture_output=True, text=True, timeout=300)
+    assert refused.returncode != 0 and "not the tree" in refused.stderr + refused.stdout, refused.stderr
+
+
 def test_bench_3d_smoke_prints_the_torus_and_a_ball_world():
     out = _smoke("bench_3d.py")
     assert re.findall(r"^rules (\w+):", out, re.M) == ["paper"]
