@@ -13,8 +13,8 @@ from swarm_ros.core import RobotState, Shape, Simulation, World, decide
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.invariants import nearest_frontier_patch
 from swarm_ros.core.rules import Decisions
-from swarm_ros.core.rules2d import nearest_frontier
-from swarm_ros.core.state import SwarmState, frontier_blocks_of, initial_state
+from swarm_ros.core.rules2d import block_distances, nearest_frontier
+from swarm_ros.core.state import FRONTIER_BLOCK, SwarmState, frontier_blocks_of, initial_state
 
 pytestmark = pytest.mark.unit
 
@@ -159,11 +159,30 @@ def frontiers(draw):
 @settings(max_examples=300, deadline=None)
 @given(frontiers())
 def test_block_search_finds_what_brute_force_finds(case):
+    """With or without each block's distance to the frontier, which only lets the search skip rings."""
     world, frontier, x, y = case
     blocks = frontier_blocks_of(frontier, world.size)
-    assert nearest_frontier(x, y, frontier, blocks, world.radius, world.size) == nearest_frontier_patch(
-        frontier, x, y, world
-    )
+    nearest = nearest_frontier_patch(frontier, x, y, world)
+    assert nearest_frontier(x, y, frontier, blocks, world.radius, world.size) == nearest
+    near = block_distances(blocks, world.size)
+    assert nearest_frontier(x, y, frontier, blocks, world.radius, world.size, near) == nearest
+
+
+@settings(max_examples=100, deadline=None)
+@given(frontiers())
+def test_block_distances_are_the_king_move_distances_to_the_nearest_block_with_frontier_patches(case):
+    world, frontier, _, _ = case
+    blocks = frontier_blocks_of(frontier, world.size)
+    nb = -(-world.size // FRONTIER_BLOCK)
+    near = block_distances(blocks, world.size).reshape(nb, nb)
+    full = np.flatnonzero(blocks[: nb * nb])
+    if not full.size:  # no frontier at all: every block says farther than the world is wide
+        assert (near >= nb).all()
+        return
+    by, bx = np.divmod(np.arange(nb * nb), nb)
+    fy, fx = np.divmod(full, nb)
+    expect = np.maximum(abs(by[:, None] - fy[None, :]), abs(bx[:, None] - fx[None, :])).min(axis=1)
+    assert np.array_equal(near.ravel(), expect)
 
 
 # -- join: local --------------------------------------------------------------------

@@ -48,6 +48,7 @@ from swarm_ros.core.rng import (
     draw_uniform,
 )
 from swarm_ros.core.rules2d import (
+    block_distances,
     cell_index,
     crowded,
     index_build,
@@ -137,10 +138,10 @@ def _crowded(solid, crowd, xi, yi, zi, h, ex, ey, ez, me, vision, robots, radius
 
 
 @numba.njit(cache=True, inline="always")
-def _nearest_frontier(xi, yi, zi, solid, frontier, blocks, radius, size) -> int:
+def _nearest_frontier(xi, yi, zi, solid, frontier, blocks, radius, size, near) -> int:
     if solid:
         return nearest_frontier3(xi, yi, zi, frontier, blocks, radius, size)
-    return nearest_frontier(xi, yi, frontier, blocks, radius, size)
+    return nearest_frontier(xi, yi, frontier, blocks, radius, size, near)
 
 
 @numba.njit(cache=True, inline="always")
@@ -178,14 +179,16 @@ def _rule_for(solid: bool):
     kernel's cache by the value it closes over."""
 
     @numba.njit(cache=True)
-    def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out):
+    def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out, near):
         """Decide for robots ``ids`` (moving, all inserted in the cell list ``head``, ``nxt``) at ``tick`` under
         ``rules`` (:class:`~swarm_ros.core.kernel_state.Rules`), in a world of this kernel's dimension (3D: the
         robots' geometry is :mod:`swarm_ros.core.rules3d`'s; the rule is this one control flow for both).
 
         Writes ``out`` (:class:`~swarm_ros.core.kernel_state.Moves`), per position k of ``ids``: the claimed
         patch (flat index, or -1) and the pose the robot takes if it does not win a claim. Reads only the
-        previous tick's ``robots`` and ``grid``; writes only ``out``.
+        previous tick's ``robots`` and ``grid``, and ``near`` (2D, ``join: walk``: each block's distance to the
+        frontier, :func:`~swarm_ros.core.rules2d.block_distances`, which only speeds the search up); writes only
+        ``out``.
         """
         x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
         shape, wall, frontier, blocks, radius, size = (
@@ -213,7 +216,7 @@ def _rule_for(solid: bool):
             inside = shape[cell_index(xi, yi, zi, solid, radius, size)]
             walked = False
             if join == JOIN_WALK and (state[i] == _WALKING or inside):
-                q = _nearest_frontier(xi, yi, zi, solid, frontier, blocks, radius, size)
+                q = _nearest_frontier(xi, yi, zi, solid, frontier, blocks, radius, size, near)
                 if q >= 0:  # an empty frontier: nothing to walk to, so the robot wanders
                     claim, xi, yi, zi, hi, pi = _toward(q, xi, yi, zi, hi, pi, solid, radius, size)
                     walked = True
@@ -275,11 +278,13 @@ def decide_robots(moving, ids, robots, grid, rules, tick, head, nxt, out):
     (the rule compiled for ``grid``'s dimension, :func:`_rule_for`) into ``out``."""
     if grid.solid:
         index_build3(moving, robots.x, robots.y, robots.z, grid.radius, grid.size, head, nxt)
-        decide_kernel_3d(ids, robots, grid, rules, tick, head, nxt, out)
+        decide_kernel_3d(ids, robots, grid, rules, tick, head, nxt, out, np.empty(0, np.int32))
         index_clear3(moving, robots.x, robots.y, robots.z, grid.radius, grid.size, head)
     else:
         index_build(moving, robots.x, robots.y, grid.radius, grid.size, head, nxt)
-        decide_kernel_2d(ids, robots, grid, rules, tick, head, nxt, out)
+        # under join: walk, each block's distance to the frontier, once a tick for every search of the tick
+        near = block_distances(grid.blocks, grid.size) if rules.join == JOIN_WALK else np.empty(0, np.int32)
+        decide_kernel_2d(ids, robots, grid, rules, tick, head, nxt, out, near)
         index_clear(moving, robots.x, robots.y, grid.radius, grid.size, head)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 from swarm_ros.core.rulesets import CROWD_AHEAD
 from swarm_ros.core.state import FRONTIER_BLOCK, FRONTIER_SUPER
@@ -168,7 +169,47 @@ def _scan_line(ux, uy, dx, dy, count, xi, yi, frontier, blocks, radius, size, nb
 
 
 @numba.njit(cache=True)
-def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
+def block_distances(blocks, size):
+    """Per block of the world (``size`` patches a side), how many blocks away the nearest block holding frontier
+    patches is, counted as a king moves (Chebyshev): 0 for a block that holds some. Two passes of the 3 x 3
+    neighbourhood over the blocks' counts (``blocks``), which give that distance exactly. A robot's search for
+    the nearest frontier patch starts at that ring (:func:`nearest_frontier`): every ring before it is empty."""
+    nb = (size + FRONTIER_BLOCK - 1) // FRONTIER_BLOCK
+    far = 2 * nb
+    d = np.empty(nb * nb, np.int32)
+    for i in range(nb * nb):
+        d[i] = 0 if blocks[i] > 0 else far
+    for y in range(nb):  # from the low corner: the neighbours already visited
+        for x in range(nb):
+            i = y * nb + x
+            v = d[i]
+            if x > 0:
+                v = min(v, d[i - 1] + 1)
+            if y > 0:
+                v = min(v, d[i - nb] + 1)
+                if x > 0:
+                    v = min(v, d[i - nb - 1] + 1)
+                if x < nb - 1:
+                    v = min(v, d[i - nb + 1] + 1)
+            d[i] = v
+    for y in range(nb - 1, -1, -1):  # and back from the high corner
+        for x in range(nb - 1, -1, -1):
+            i = y * nb + x
+            v = d[i]
+            if x < nb - 1:
+                v = min(v, d[i + 1] + 1)
+            if y < nb - 1:
+                v = min(v, d[i + nb] + 1)
+                if x < nb - 1:
+                    v = min(v, d[i + nb + 1] + 1)
+                if x > 0:
+                    v = min(v, d[i + nb - 1] + 1)
+            d[i] = v
+    return d
+
+
+@numba.njit(cache=True)
+def nearest_frontier(xi, yi, frontier, blocks, radius, size, near=None) -> int:
     """Flat index of the nearest frontier patch anywhere (``join: walk``), or -1 if there is none.
 
     Distance is Euclidean from (xi, yi) to the patch centre; ties go to the lowest flat
@@ -189,7 +230,8 @@ def nearest_frontier(xi, yi, frontier, blocks, radius, size) -> int:
     by = (int(math.floor(yi + 0.5)) + radius) // b
     best = -1
     best_d2 = math.inf
-    for k in range(max(bx, by, nb - 1 - bx, nb - 1 - by) + 1):
+    first = 0 if near is None else near[by * nb + bx]  # the rings before it hold no frontier patch
+    for k in range(first, max(bx, by, nb - 1 - bx, nb - 1 - by) + 1):
         if k > 0:
             # every patch centre in ring k is at least (k - 1) * b + 0.5 away along x or y
             gap = (k - 1) * b + 0.5
