@@ -219,7 +219,8 @@ def nearest_frontier(xi, yi, frontier, blocks, radius, size, near=None) -> int:
     of ``FRONTIER_SUPER`` x ``FRONTIER_SUPER`` blocks without frontier patches is passed over in one step, so a
     search costs about the blocks near the frontier it finds and the super-blocks on the way: not the square of
     its distance in blocks, as for a robot far inside a large shape whose frontier is still small (the start of
-    a run). Only what is strictly farther is skipped: the answer is the nearest whatever the order.
+    a run). Given ``near`` (:func:`block_distances` of ``blocks``), it starts at the first ring that can hold a
+    frontier patch. Only what is strictly farther is skipped: the answer is the nearest whatever the order.
     """
     if blocks[blocks.size - 1] == 0:
         return -1
