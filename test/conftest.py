@@ -14,8 +14,18 @@ from netns import SUBNET, _wait_until_up, ip_in
 from runs import disc_shape
 
 from swarm_ros.core import Shape, World
+from swarm_ros.core.kernels import drop_stale
 
 KINDS = ("unit", "process")
+
+
+def pytest_configure(config):
+    """Before any test process loads a kernel: drop the core's kernel caches older than its newest kernel
+    module (numba would run a cached caller with the code of a callee edited since: swarm_ros.core.kernels)."""
+    if not hasattr(config, "workerinput"):  # the controller, before xdist starts its workers
+        dropped = drop_stale()
+        if dropped:
+            print(f"swarm_ros: dropped {dropped} stale kernel cache files; the kernels compile again")
 
 
 def pytest_collection_modifyitems(config, items):

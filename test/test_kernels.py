@@ -53,3 +53,17 @@ def test_a_stamp_newer_than_every_kernel_module_means_filled(core):
 
 def test_no_cache_at_all_is_not_filled(core):
     assert not kernels.kernels_cached()
+
+
+def test_drop_stale_removes_the_core_caches_written_before_the_last_change_to_a_kernel_module(core):
+    cache = core / "__pycache__"
+    old, new = cache / "engine.tick-2.py311.nbi", cache / "rng.draw-1.py311.nbc"
+    other, stamp = cache / "plain.x-1.py311.nbi", cache / kernels._STAMP  # plain.py has no kernel
+    for path, at in ((old, 1000), (new, 3000), (other, 1000), (stamp, 1000)):
+        path.touch()
+        _at(path, at)
+    _at(core / "rng.py", 500)
+    _at(core / "engine.py", 2000)  # edited after old was written, before new
+    assert kernels.drop_stale() == 1
+    assert not old.exists() and new.exists() and other.exists() and stamp.exists()
+    assert kernels.drop_stale() == 0

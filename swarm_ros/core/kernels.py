@@ -12,6 +12,12 @@ the cache (``python -m swarm_ros.core.kernels``), so the first run does not pay 
 that is only ever inlined into others (``inline="always"``) is not saved again when its module
 changes, so its index can stay older than its source for good: :func:`compile_kernels` leaves a
 stamp file, and a stamp newer than every kernel module says the cache is filled.
+
+numba keys a kernel's cache by its own module's source only, yet links into it the code of the
+kernels it calls: after an edit to ``rules.py`` the cached ``run_kernel`` (``tick_kernel.py``) would
+go on running the old rule. :func:`drop_stale` removes what was cached before the last change to
+any kernel module; :func:`compile_kernels` and the test suite's start call it. (An install brings
+new sources, whose times numba sees: this is for a working tree.)
 """
 
 from __future__ import annotations
@@ -59,6 +65,26 @@ def kernels_cached() -> bool:
     return True
 
 
+def drop_stale() -> int:
+    """Remove the core's cached kernels written before the last change to any kernel module (numba's
+    ``<module>.<kernel>-<line>.py<version>.nbi`` and ``.nbc`` files of these modules, nothing else); how many.
+    Does nothing with the cache elsewhere (``NUMBA_CACHE_DIR`` set)."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return 0
+    dropped = 0
+    try:
+        sources = _kernel_modules()
+        newest = max(p.stat().st_mtime for p in sources)
+        stems = {p.stem for p in sources}
+        for path in [*_CACHE.glob("*.nbi"), *_CACHE.glob("*.nbc")]:
+            if path.name.split(".", 1)[0] in stems and path.stat().st_mtime < newest:
+                path.unlink(missing_ok=True)
+                dropped += 1
+    except (OSError, ValueError):  # no cache directory, a read-only install: nothing to do, or nothing it may do
+        pass
+    return dropped
+
+
 def count_compiles() -> Callable[[], int]:
     """Count, from now on, the kernels numba compiles in this process (its ``numba:compile`` event, which a load
     from the cache does not raise); return what says how many so far. Nodes log it when ready: a node that
@@ -89,6 +115,7 @@ def compile_kernels() -> None:
     from swarm_ros.core.shapes import Shape
     from swarm_ros.core.warmup import warm_up
 
+    drop_stale()
     for name in ("star", "k-block"):  # a 2D and a 3D shape: the 3D kernels are compiled apart
         shape = Shape.load(name, World())
         params = RunParams(robots=shape.patches)
