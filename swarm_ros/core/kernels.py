@@ -128,7 +128,10 @@ def compile_kernels() -> None:
 
 
 def main() -> int:
-    """``python -m swarm_ros.core.kernels``: fill the cache if it is not (prints what it did)."""
+    """``python -m swarm_ros.core.kernels``: drop stale kernels, then fill the cache if it is not (prints what it
+    did)."""
+    if drop_stale():
+        print("swarm_ros: dropped the kernels cached before the last change to the core")
     if kernels_cached():
         print("swarm_ros: the numba kernels are compiled and cached")
         return 0
