@@ -198,7 +198,10 @@ class Launch:
                         processes=self.processes,
                     )
                 lock.close()
-                self.shm_removed += clean_shm(set().union(self.own_shm, *(c.shm for c in self.children)))
+                # its own node is shut down by now, but Fast DDS keeps the segments it mapped (a killed peer's
+                # too) mapped in this process: this process is not a user that keeps them
+                seen = set().union(self.own_shm, *(c.shm for c in self.children))
+                self.shm_removed += clean_shm(seen, frozenset({os.getpid()}))
                 for f in [*logs.glob(CHECKPOINT + "*"), logs / SHM_LIST]:  # of no use once the run is over
                     f.unlink(missing_ok=True)
                 if (interrupted or unwritten) and not kept and not self.started:

@@ -49,7 +49,7 @@ def in_use(paths: set[str], besides: frozenset[int] = frozenset()) -> set[str]:
     return used
 
 
-def clean_shm(lock_files: set[str]) -> list[str]:
+def clean_shm(lock_files: set[str], besides: frozenset[int] = frozenset()) -> list[str]:
     """Remove the Fast DDS shared-memory files behind ``lock_files`` that no live process uses; return them.
 
     Each segment ``/dev/shm/fastrtps_X`` (a participant's, or a port ``fastrtps_portN``)
@@ -61,7 +61,8 @@ def clean_shm(lock_files: set[str]) -> list[str]:
     processes is left behind by every process that talked to a killed one. Such files go
     when no live process has them mapped or open (read from /proc), whatever their lock
     file says; only the files of ``lock_files``, which this run's processes held, are
-    looked at.
+    looked at. The processes ``besides`` do not count as users: the launcher's own node, shut down
+    before it tidies up, leaves Fast DDS's process-wide cache of segments mapped, a killed peer's too.
     """
     groups = []
     for el in sorted(lock_files):
@@ -74,7 +75,7 @@ def clean_shm(lock_files: set[str]) -> list[str]:
         except OSError:
             continue  # locked: a live process owns it
         groups.append((segment, el, str(SHM_DIR / f"sem.{Path(segment).name}_mutex")))
-    used = in_use({path for group in groups for path in group}) if groups else set()
+    used = in_use({path for group in groups for path in group}, besides) if groups else set()
     removed = []
     for group in groups:
         if used.intersection(group):
