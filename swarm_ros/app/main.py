@@ -3,15 +3,15 @@ which ``ros2 run`` and ``ros2 launch`` start): Ctrl-C is answered in one line fr
 
 Importing the command line takes a few tenths of a second (numpy, argparse, the package);
 a Ctrl-C in that time would otherwise end in a traceback of whatever was being imported.
-This module imports only a constant (from a standard-library-only module) before it can catch it.
+This module imports nothing of its own before it can catch it: not even the exit status, whose module
+imports the standard library's ``signal`` (an enum built at import, long enough for a Ctrl-C to land in it:
+CI saw one there). It is imported once a Ctrl-C has been caught.
 """
 
 from __future__ import annotations
 
 import importlib
 import sys
-
-from swarm_ros.core.signals import EXIT_INTERRUPTED  # standard library only
 
 
 def entry() -> None:
@@ -21,7 +21,7 @@ def entry() -> None:
         from swarm_ros.app.cli import entry as run
     except KeyboardInterrupt:
         print("swarm-ros: interrupted", file=sys.stderr)
-        sys.exit(EXIT_INTERRUPTED)
+        sys.exit(_interrupted())
     run()  # its own handling of Ctrl-C starts at its first line (swarm_ros.app.cli.main)
 
 
@@ -32,8 +32,15 @@ def _node(module: str) -> None:
         code = importlib.import_module(f"swarm_ros.nodes.{module}").main()
     except KeyboardInterrupt:
         print(f"{module}: interrupted while starting", file=sys.stderr)
-        code = EXIT_INTERRUPTED
+        code = _interrupted()
     sys.exit(code)
+
+
+def _interrupted() -> int:
+    """The exit status of an interrupted command, imported only now (see the module's doc)."""
+    from swarm_ros.core.signals import EXIT_INTERRUPTED
+
+    return EXIT_INTERRUPTED
 
 
 def world() -> None:
