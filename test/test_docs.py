@@ -290,3 +290,35 @@ def test_every_anchor_a_page_links_to_is_a_heading_of_its_target(page):
         if path.suffix == ".md" and path.exists() and anchor not in _anchors(path):
             wrong.append(f"{target}#{anchor}")
     assert not wrong, f"{page.name} links to anchors that are not there: {wrong}"
+
+
+_DOTTED = re.compile(r"`(swarm_ros(?:\.[A-Za-z_][A-Za-z0-9_]*)+)`")
+_TEXT_NAMES = {"swarm_ros.tag"}  # a message tag's prefix (protocol/rows.py TAG_PREFIX), not a module
+
+
+def _resolves(dotted: str) -> bool:
+    """Whether ``dotted`` is a module of the package, or a name defined in one (a class, then its attributes)."""
+    import importlib
+
+    parts = dotted.split(".")
+    for cut in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:cut]))
+        except ModuleNotFoundError:
+            continue
+        for name in parts[cut:]:
+            if not hasattr(obj, name):
+                return False
+            obj = getattr(obj, name)
+        return True
+    return False
+
+
+@pytest.mark.parametrize("page", _docs(), ids=lambda p: p.name)
+def test_every_dotted_name_of_the_package_a_page_gives_is_defined(page):
+    """A page that names code as ``swarm_ros.<module>[.<name>...]`` (the glossary, "where a tick is applied",
+    "where a message's layout is defined" in architecture.md) names a module or a name the code defines: a
+    rename fails here, not in a reader's search."""
+    text = page.read_text(encoding="utf-8")
+    missing = sorted({n for n in _DOTTED.findall(text) if n not in _TEXT_NAMES and not _resolves(n)})
+    assert not missing, f"{page.name} names what the package does not define: {missing}"
