@@ -205,3 +205,39 @@ def test_a_shards_kept_messages_survive_a_kill_while_the_next_ticks_are_written(
         Checkpoint.open(path, ROBOTS, MAX_TICKS, cols, kept=(3, 65))
     with pytest.raises(RunFailed, match="another run"):
         Checkpoint.open(path, ROBOTS, MAX_TICKS, cols)
+
+
+def test_a_ticks_unpublished_rows_go_to_the_redo_area_and_a_kill_after_ready_copies_them_again(tmp_path):
+    """A tick's published rows go into its ring slot (what may be sent again), the others into the one redo area,
+    rewritten every tick (so the ring's pages are touched only by what is published). Killed after ``ready``, a
+    restore copies both into the robots; the ring gives only the published rows; a tick with none published
+    leaves its slot's rows untouched."""
+    path, cols = tmp_path / "ck", len(METRIC_COLUMNS)
+    ck = Checkpoint(path, ROBOTS, MAX_TICKS, cols, 4)
+    ck.create()
+    rows = np.zeros(ROBOTS, dtype=ck.row)
+    rows["id"] = np.arange(ROBOTS)
+    metrics = np.zeros(cols, np.int64)
+
+    def tick(t: int, published: int) -> np.ndarray:
+        out = rows.copy()
+        out["x"] = t + out["id"] / 1000  # every row new at every tick
+        ck.write(t, out, None, metrics, published=published)
+        return out
+
+    tick(0, -1)
+    second = tick(1, 7)  # 7 rows published, the rest unpublished
+    assert np.array_equal(ck.rows, second)
+    head, slot, _ = ck._slot(1)
+    assert (int(head[1]), int(head[3])) == (ROBOTS, 7)
+    assert np.array_equal(slot[:7], second[:7]) and np.array_equal(ck.redo[: ROBOTS - 7], second[7:])
+    untouched = ck._slot(2)[1].copy()  # the slot tick 2 takes: written by no tick yet
+    third = tick(2, 0)
+    assert np.array_equal(ck._slot(2)[1], untouched), "no row published: the slot's rows are not written"
+    # killed after 'ready' of tick 2, before (or while) its rows went into the robots
+    ck.rows["x"] = -1.0
+    ck.header[7] = 1  # done: tick 1
+    saved = Checkpoint.open(path, ROBOTS, MAX_TICKS, cols).saved()
+    assert saved is not None and saved.tick == 2
+    assert np.array_equal(saved.robots, third), "the redo area's rows are the tick's too"
+    assert saved.ring[1][0].size == 7 and saved.ring[2][0].size == 0 and saved.ring[0][0].size == ROBOTS

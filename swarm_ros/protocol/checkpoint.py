@@ -7,14 +7,22 @@ every tick up to the one being written. A host that loses power loses it; the gr
 model is a process lost, not a machine (docs/faults.md).
 
 Layout: a header of int64s, every robot's row (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`, or the 3D one,
-indexed by id), the metrics of every tick, and a ring of the last ``slots`` ticks' published
+indexed by id), the metrics of every tick, a ring of the last ``slots`` ticks' published
 rows (the robots that changed, or every robot at a tick whose rows are recorded when ``record_every`` > 1, and
 the decisions applied) and tallies (robots by state, when ``record_every`` > 1), so the new world can send again
 the ticks a reader may have lost with the old one (the monitor may be up to ``monitor_window``
-ticks behind). A tick is written in an order that a kill at any instruction leaves
-recoverable: the header's ``writing``, the tick's ring slot, the header's ``ready``, the rows
-into the robots, the header's ``done``. A restore takes ``done``; if it finds ``ready`` ahead,
-it copies that slot's rows into the robots again (the same values) and takes ``ready``.
+ticks behind), and one *redo* area: the rows of the tick being written that were not published (a world shard's
+rows of its area's other robots; every changed row at a tick whose rows are not recorded). A tick is written in
+an order that a kill at any instruction leaves recoverable: the header's ``writing``, the tick's ring slot and the
+redo area, the header's ``ready``, the rows into the robots, the header's ``done``. A restore takes ``done``; if it
+finds ``ready`` ahead, it copies that tick's rows (its slot's, then the redo area's) into the robots again (the
+same values) and takes ``ready``. One redo area is enough: only the tick at ``ready`` can need it, and the next
+tick writes it only after ``done``.
+
+Why the redo area: the ring is ``slots`` times every robot's row, and a tick that wrote all its changed rows into
+a slot of its own touched fresh pages of the file every tick (at 50,000 robots about 2 MB a tick, each page a
+fault through the file system's journal: a third of the world's CPU). The redo area is rewritten every tick, its
+pages stay in memory, and the ring takes only what may have to be sent again.
 
 A world shard's file ends with the messages it sent its peers for the last ticks (``kept``): three slots,
 one per tick (by tick modulo 3), each a head of byte lengths and then that tick's messages as rows, written
@@ -42,7 +50,7 @@ from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.state import STATE_COUNT
 from swarm_ros.protocol.rows import decision_row, robot_row
 
-MAGIC = 0x5357524D434B5034  # "SWRMCKP4"
+MAGIC = 0x5357524D434B5035  # "SWRMCKP5": the redo area since version 5
 _H_MAGIC, _H_ROBOTS, _H_SLOTS, _H_TICKS, _H_COLS, _H_WRITING, _H_READY, _H_DONE, _H_MONITOR = range(9)
 _H_KEPT_CHUNKS, _H_KEPT_BYTES = 9, 10  # the kept messages' slots: messages (chunks) per tick, bytes for them
 KEPT_SLOTS = 3  #: ticks of kept messages in the file: the two a restore reads, and the one being written
@@ -92,7 +100,8 @@ class Checkpoint:
         self.robots_at = _HEADER * 8
         self.history_at = self.robots_at + self.robots * self.row.itemsize
         self.ring_at = self.history_at + self.ticks * self.columns * 8
-        self.kept_at = self.ring_at + self.slots * self.slot_bytes
+        self.redo_at = self.ring_at + self.slots * self.slot_bytes
+        self.kept_at = self.redo_at + self.robots * self.row.itemsize
         self.kept_slot = (1 + self.kept_chunks) * 8 + self.kept_bytes if self.kept_chunks else 0
         self.size = self.kept_at + KEPT_SLOTS * self.kept_slot
 
@@ -102,7 +111,8 @@ class Checkpoint:
         with open(self.path, "xb") as f:  # never over an existing file
             f.truncate(self.size)
         self._map()
-        self._reserve(0, self.history_at)  # the header and the robots; the rest, tick by tick, in write()
+        self._reserve(0, self.history_at)  # the header and the robots; the ring, tick by tick, in write()
+        self._reserve(self.redo_at, self.kept_at - self.redo_at)
         h = self.header
         h[_H_ROBOTS], h[_H_SLOTS], h[_H_TICKS], h[_H_COLS] = self.robots, self.slots, self.ticks, self.columns
         h[_H_KEPT_CHUNKS], h[_H_KEPT_BYTES] = self.kept_chunks, self.kept_bytes
@@ -131,6 +141,7 @@ class Checkpoint:
         self.rows = self.map[self.robots_at : self.history_at].view(self.row)
         self._records = self.rows.view(self.record)
         self.history = self.map[self.history_at : self.ring_at].view(np.int64).reshape(self.ticks, self.columns)
+        self.redo = self.map[self.redo_at : self.kept_at].view(self.row)
 
     def _slot_head(self, tick: int) -> tuple[np.ndarray, int]:
         """The ring slot of ``tick``: its head (tick, robot rows, applied rows), and where its rows start."""
@@ -156,25 +167,28 @@ class Checkpoint:
         """Save tick ``tick``: the rows it publishes (robots that changed; at tick 0 all), the decisions it
         applied (None at tick 0, or when they are not published) and its metrics row. Call before anything
         about the tick is sent. ``published``: only the first this many rows were published (a world shard
-        saves the rows of its area's other robots too; none at a tick whose rows are not recorded); -1: all.
+        saves the rows of its area's other robots too; none at a tick whose rows are not recorded); -1: all. The
+        published rows go into the tick's ring slot, the others into the redo area.
         ``tally``: the robots by state it publishes (``record_every`` > 1)."""
         h = self.header
         head, at = self._slot_head(tick)
+        published = rows.size if published < 0 else published
         # the blocks of what this tick writes (its slot, its metrics row), before anything of it is written
-        self._reserve(at - _SLOT_HEAD * 8, _SLOT_HEAD * 8 + rows.size * self.row.itemsize)
+        self._reserve(at - _SLOT_HEAD * 8, _SLOT_HEAD * 8 + published * self.row.itemsize)
         if applied is not None:
             self._reserve(at + self.robots * self.row.itemsize, applied.size * self.decision.itemsize)
         self._reserve(self.history_at + tick * self.columns * 8, self.columns * 8)
         h[_H_WRITING] = tick
         head[0] = -1  # the slot is being rewritten
         raw = np.ascontiguousarray(rows).view(np.uint8)  # bytes, not records: copied ten times faster
-        self.map[at : at + raw.size] = raw
+        cut = published * self.row.itemsize
+        self.map[at : at + cut] = raw[:cut]
+        self.map[self.redo_at : self.redo_at + raw.size - cut] = raw[cut:]
         if applied is not None:
             at += self.robots * self.row.itemsize
             raw = np.ascontiguousarray(applied).view(np.uint8)
             self.map[at : at + raw.size] = raw
-        head[1], head[2] = rows.size, -1 if applied is None else applied.size
-        head[3] = rows.size if published < 0 else published
+        head[1], head[2], head[3] = rows.size, -1 if applied is None else applied.size, published
         head[4:] = 0 if tally is None else tally
         self.history[tick] = metrics
         head[0] = tick
@@ -275,10 +289,11 @@ class Checkpoint:
         """What the checkpoint holds, or None if no tick yet (the world before died before tick 0)."""
         h = self.header
         tick = int(h[_H_DONE])
-        if h[_H_READY] > tick:  # killed while copying the ready slot's rows into the robots: copy them again
+        if h[_H_READY] > tick:  # killed while copying the ready tick's rows into the robots: copy them again
             tick = int(h[_H_READY])
             head, rows, _ = self._slot(tick)
-            self.rows[rows[: head[1]]["id"]] = rows[: head[1]]
+            for part in (rows[: head[3]], self.redo[: head[1] - head[3]]):
+                self.rows[part["id"]] = part
             h[_H_DONE] = tick
         h[_H_WRITING] = tick
         if tick < 0:
