@@ -45,6 +45,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -180,15 +181,33 @@ def breakdown(seed: int, processes: list[int], repeats: int, tmp: Path) -> dict[
     return medians
 
 
+_DONE_CPU = re.compile(r"\[(\w+)\]: done, .* \((\d+\.\d+) s of CPU\)")
+
+
+def _node_cpu(logs: Path) -> dict[str, float]:
+    """Each node's CPU up to its "done" line (its process's, all threads) in a run directory's logs."""
+    out = {}
+    for log in logs.glob("*.log"):
+        for m in _DONE_CPU.finditer(log.read_text(errors="replace")):
+            out[m.group(1)] = float(m.group(2))
+    return out
+
+
 def readme_command(repeats: int, tmp: Path) -> float:
     """The README's main command against ``simulate`` of the same run, back to back and alternating (the star,
     the defaults: K = 2, recording and bag on), ``repeats`` pairs; print each, the medians and their ratio.
-    Target (issue 45): the README's command within 1.5x of simulate's. Return the ratio of the medians."""
+    Target (issue 45): the README's command within 1.5x of simulate's. Return the ratio of the medians.
+
+    Each command's CPU (user and system, its processes' and their children's: the launcher and every node) is
+    printed too: on a machine of 2 cores a command cannot take less than half its CPU."""
     exe = [sys.executable, "-m", "swarm_ros"]
     times: dict[str, list[float]] = {"run": [], "simulate": []}
+    cpu: dict[str, list[float]] = {"run": [], "simulate": []}
+    nodes: dict[str, list[float]] = {}  # each node process's CPU up to its exit, from its "done" line
     print("\nThe README's command against simulate, the star with the defaults, back to back (seconds)")
     for r in range(repeats):
         for command in ("run", "simulate") if r % 2 == 0 else ("simulate", "run"):
+            used = resource.getrusage(resource.RUSAGE_CHILDREN)
             began = time.perf_counter()
             done = subprocess.run(
                 [*exe, command, "--shape", "star", "--out", str(tmp / f"readme-{command}-{r}"), "--quiet"],
@@ -197,13 +216,32 @@ def readme_command(repeats: int, tmp: Path) -> float:
                 cwd=ROOT,
             )
             took = time.perf_counter() - began
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if done.returncode != 0:
                 raise SystemExit(f"{command} failed: {done.stderr.strip()[-500:]}")
             times[command].append(took)
-        print(f"  pair {r + 1}: run {times['run'][-1]:.2f}, simulate {times['simulate'][-1]:.2f}")
+            cpu[command].append(after.ru_utime - used.ru_utime + after.ru_stime - used.ru_stime)
+            if command == "run":
+                for name, secs in _node_cpu(tmp / f"readme-{command}-{r}" / "logs").items():
+                    nodes.setdefault(name, []).append(secs)
+        print(
+            f"  pair {r + 1}: run {times['run'][-1]:.2f} ({cpu['run'][-1]:.2f} s of CPU), "
+            f"simulate {times['simulate'][-1]:.2f} ({cpu['simulate'][-1]:.2f} s of CPU)"
+        )
     med = {c: statistics.median(t) for c, t in times.items()}
     for c, t in times.items():
-        print(f"{c:<9} median {med[c]:.2f} s ({min(t):.2f}-{max(t):.2f}) over {len(t)}")
+        c_cpu = cpu[c]
+        print(
+            f"{c:<9} median {med[c]:.2f} s ({min(t):.2f}-{max(t):.2f}) over {len(t)}; "
+            f"CPU median {statistics.median(c_cpu):.2f} s ({min(c_cpu):.2f}-{max(c_cpu):.2f})"
+        )
+    if nodes:
+        own = statistics.median(cpu["run"]) - sum(statistics.median(v) for v in nodes.values())
+        print(
+            "run's CPU by process (medians, s): "
+            + ", ".join(f"{name} {statistics.median(v):.2f}" for name, v in sorted(nodes.items()))
+            + f"; the launcher and what the nodes spent after their last line {own:.2f}"
+        )
     ratio = med["run"] / med["simulate"]
     print(f"Target: swarm-ros run within 1.5x of simulate: {'MET' if ratio <= 1.5 else 'NOT MET'} ({ratio:.2f}x)")
     return ratio
