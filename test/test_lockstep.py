@@ -515,3 +515,34 @@ def test_a_batch_alive_but_silent_is_sent_its_snapshot_again_each_stall_period()
     r.tick()  # it decides at last
     r.run()
     assert r.ls.restarts == [] and np.array_equal(r.ls.sim.history, r.engine().history)
+
+
+def test_a_silent_batch_is_found_among_robots_the_world_decides_and_a_removed_batch_is_never_waited_for():
+    """The moving robots in a removed batch's strip are the world's to decide: while another batch is silent
+    they are not 'missing', and the removed batch, alive again (a stalled process resumed), is neither waited
+    for nor blamed. The silent batch gets the tick's snapshot again, and is the one a failure names."""
+    r = LockstepRun(batches=3, on_batch_loss="remove")
+    r.start()
+    for k in range(3):
+        r.ls.batch_liveliness(k, 1, 0)
+    r.run(ticks=20)
+    r.ls.batch_liveliness(1, 0, 1)  # stalled: lost, then removed once the loss is confirmed
+    r.clock.now += LOSS_CONFIRM_S + 0.1
+    r.ls.poll()
+    assert 1 in r.ls.removed_batches
+    r.run(ticks=2)
+    for _ in range(300):  # until robots walk into the removed strip, decided by the world
+        if r.own(1).size and r.own(0).size:
+            break
+        r.run(ticks=1)
+    r.ls.batch_liveliness(1, 1, 0)  # resumed: alive again, its robots removed for good
+    r.tick(silent=(0,))  # batch 0's decisions do not come
+    tick = r.ls.sim.tick
+    assert r.own(1).size and r.own(0).size, "the test needs robots in the removed strip and in the silent one"
+    snapshots = len(r.port.snapshots)
+    r.clock.now += STALL_S + 0.1
+    r.ls.poll()
+    assert r.port.snapshots[snapshots:] == [(0, tick)], "the silent batch's snapshot again, and only its"
+    r.clock.now += DROWNED_S
+    with pytest.raises(RunFailed, match=f"the decisions of {batch_name(0)} did not arrive"):
+        r.ls.poll()

@@ -68,6 +68,9 @@ class WorldStatus:
     def _send_snapshot(self, k: int) -> None:
         raise NotImplementedError
 
+    def _orphans(self) -> np.ndarray:
+        raise NotImplementedError
+
     def status(self, note: str = "") -> Status:
         """The run's state now: outcome, the last published tick and its counts, restarts and lost processes."""
         tick = max(self.published_tick, 0)
@@ -145,7 +148,10 @@ class WorldStatus:
         if now - self.progress_at < limit:
             return
         moving = self.sim.moving_ids()
-        missing = np.setdiff1d(moving[~self.decided[moving]], self.pending)
+        # not awaited from any batch: the robots being removed, and those in removed batches' strips (the world
+        # decides them as it applies the tick): counted, they made a removed batch (alive again after a stall)
+        # the silent one, and the silent batch's snapshot went to it instead
+        missing = np.setdiff1d(moving[~self.decided[moving]], np.union1d(self.pending, self._orphans()))
         silent = np.unique(self.hosts(missing)).tolist()
         for k in silent:
             if k not in self.live:
