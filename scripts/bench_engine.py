@@ -13,9 +13,11 @@ and, under the default rule set (paper), tick cost against the number of moving 
 over the whole star run, with a least-squares fit ``cost = a + b * moving``.
 
 Only ``Simulation.run()`` is timed (set-up and compilation are not), except in the
-tick-cost table, which times each ``step()``. Pinned to one CPU. Compare the numbers as
-ratios within one run: the machines are shared and noisy. Target (issue 11): at least
-3 M robot-steps/s for ``paper`` on the star.
+tick-cost table, which times each ``step()``. A case that runs for less than ``MIN_TIMED_S`` (the star's
+first 200 ticks take about 30 ms) is run again from a fresh simulation of the same seed until it has run that
+long, and its fastest repetition counts: measured once, one interruption by another process moved it by 20%.
+Pinned to one CPU. Compare the numbers as ratios within one run: the machines are shared and noisy. Target
+(issue 11): at least 3 M robot-steps/s for ``paper`` on the star.
 
 ``--before DIR`` measures every case instead in this tree and in DIR, another checkout
 (``git archive <commit> | tar -x -C DIR``), alternating, ``--rounds`` times, each in a fresh
@@ -50,6 +52,8 @@ from alternate import alternate, child_report, print_ratios
 ROOT = Path(__file__).resolve().parent.parent
 
 STAR_DENSITY = 1036 / 63**2  # robots per free patch in the default star run
+MIN_TIMED_S = 0.3  #: seconds a case is timed for at least, over repetitions (its fastest counts)
+MAX_REPEATS = 20
 
 
 def disc_world(robots: int) -> Shape:
@@ -79,6 +83,16 @@ def timed_run(sim: Simulation, ticks: int | None) -> tuple[float, int, int]:
     secs = time.perf_counter() - t0
     moving = sim.history[start_row:-1, 4]  # robots moving at the end of tick t decide at tick t + 1
     return secs, sim.tick - start_row, int(moving.sum())
+
+
+def best_run(make, seed: int, ticks: int | None) -> tuple[float, int, int]:
+    """:func:`timed_run` of ``make(seed)``, repeated on a fresh simulation until ``MIN_TIMED_S`` have been timed
+    (at most ``MAX_REPEATS`` times); the fastest repetition. A run is deterministic, so every repetition does the
+    same work."""
+    runs = [timed_run(make(seed), ticks)]
+    while sum(r[0] for r in runs) < MIN_TIMED_S and len(runs) < MAX_REPEATS:
+        runs.append(timed_run(make(seed), ticks))
+    return min(runs, key=lambda r: r[0])
 
 
 def timed_steps(sim: Simulation) -> tuple[np.ndarray, np.ndarray]:
@@ -123,7 +137,7 @@ def measure(rule_sets: list[str], seeds: int, sizes: tuple[int, ...], first_tick
     for rules in rule_sets:
         Simulation(star, RunParams(robots=50, max_ticks=3, rules=rules)).run()  # load the kernels
         for label, make, ticks in cases(rules, star, discs, first_ticks):
-            rates = sorted(steps / secs for secs, _, steps in (timed_run(make(s), ticks) for s in range(1, seeds + 1)))
+            rates = sorted(steps / secs for secs, _, steps in (best_run(make, s, ticks) for s in range(1, seeds + 1)))
             out[f"{rules}, {label}"] = rates[len(rates) // 2]
     return out
 
@@ -188,7 +202,7 @@ def main() -> int:
     print(f"swarm_ros engine benchmark ({pinned}; median of {args.seeds} seeds{smoke})")
 
     def median_case(label, make, ticks):
-        runs = sorted((timed_run(make(seed), ticks) for seed in range(1, args.seeds + 1)), key=lambda r: r[2] / r[0])
+        runs = sorted((best_run(make, seed, ticks) for seed in range(1, args.seeds + 1)), key=lambda r: r[2] / r[0])
         return report(label, *runs[len(runs) // 2])
 
     discs = {n: disc_world(n) for n in sizes}
