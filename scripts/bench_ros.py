@@ -55,6 +55,9 @@ from pathlib import Path
 
 from swarm_ros.core import RunParams, Shape, Simulation
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_scale import cpu_lines
+
 #: the tree this script belongs to: its commands run there, so `python -m swarm_ros` imports this tree's package
 #: (the working directory comes first on the import path, before PYTHONPATH): an older tree's copy of this
 #: script, run from anywhere, measures that tree (an A/B of two commits)
@@ -181,18 +184,6 @@ def breakdown(seed: int, processes: list[int], repeats: int, tmp: Path) -> dict[
     return medians
 
 
-_DONE_CPU = re.compile(r"\[(\w+)\]: done, .* \((\d+\.\d+) s of CPU\)")
-
-
-def _node_cpu(logs: Path) -> dict[str, float]:
-    """Each node's CPU up to its "done" line (its process's, all threads) in a run directory's logs."""
-    out = {}
-    for log in logs.glob("*.log"):
-        for m in _DONE_CPU.finditer(log.read_text(errors="replace")):
-            out[m.group(1)] = float(m.group(2))
-    return out
-
-
 def readme_command(repeats: int, tmp: Path) -> float:
     """The README's main command against ``simulate`` of the same run, back to back and alternating (the star,
     the defaults: K = 2, recording and bag on), ``repeats`` pairs; print each, the medians and their ratio.
@@ -222,8 +213,9 @@ def readme_command(repeats: int, tmp: Path) -> float:
             times[command].append(took)
             cpu[command].append(after.ru_utime - used.ru_utime + after.ru_stime - used.ru_stime)
             if command == "run":
-                for name, secs in _node_cpu(tmp / f"readme-{command}-{r}" / "logs").items():
-                    nodes.setdefault(name, []).append(secs)
+                for name, lines in cpu_lines(tmp / f"readme-{command}-{r}" / "logs").items():
+                    if "done" in lines:
+                        nodes.setdefault(name, []).append(lines["done"])
         print(
             f"  pair {r + 1}: run {times['run'][-1]:.2f} ({cpu['run'][-1]:.2f} s of CPU), "
             f"simulate {times['simulate'][-1]:.2f} ({cpu['simulate'][-1]:.2f} s of CPU)"

@@ -127,13 +127,19 @@ def _cpu_text(cpu: dict[str, float]) -> str:
     return ", ".join(f"{node} {ms:.1f}" for node, ms in cpu.items())
 
 
-def node_cpu(logs: Path, ticks: int) -> dict[str, float]:
-    """Milliseconds of CPU per tick of each node, between its 'ready' line and its 'last tick' line (the
-    monitor's, before it writes the run directory) or else its 'done' line."""
+def cpu_lines(logs: Path) -> dict[str, dict[str, float]]:
+    """Per node of a run's logs: its process's CPU seconds at its 'ready', 'last tick' and 'done' lines."""
     cpu: dict[str, dict[str, float]] = {}
     for log in logs.glob("*.log"):
         for m in _CPU.finditer(log.read_text(errors="replace")):
             cpu.setdefault(m[1], {})[m[2]] = float(m[3])
+    return cpu
+
+
+def node_cpu(logs: Path, ticks: int) -> dict[str, float]:
+    """Milliseconds of CPU per tick of each node, between its 'ready' line and its 'last tick' line (the
+    monitor's, before it writes the run directory) or else its 'done' line."""
+    cpu = cpu_lines(logs)
     return {
         node: 1000 * (c.get("last tick", c.get("done", 0.0)) - c["ready"]) / ticks
         for node, c in sorted(cpu.items())
