@@ -19,7 +19,11 @@ the last tick, the run directory written, every node process gone, the command d
 Target: the star, K = 2, whole command under 4 s (median of ``--repeats``).
 
 Then the README's command against ``simulate`` (issue 45): ``swarm-ros run --shape star`` and ``swarm-ros
-simulate --shape star``, alternating, at least 5 pairs. Target: the first within 1.5x of the second.
+simulate --shape star``, alternating, at least 5 pairs, with each command's CPU and the run's by node. Target: the
+first within 1.5x of the second.
+
+Then (``rosstart``) what a process pays to be a ROS node at all, in fresh processes with a run's DDS settings:
+importing rclpy, its first node (the DDS participant), 12 endpoints. Every node process of the graph pays it.
 
 Then the cost of the bag (issue 13): ``swarm-ros run`` with K = 2 with and without
 ``--no-bag``, alternately. Target: the bag slows the ``swarm-ros run`` command by at most 15%
@@ -44,6 +48,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import resource
 import statistics
@@ -357,6 +362,52 @@ def speed(seed: int, repeats: int, processes: list[int]) -> None:
         print(f"Target: the whole command under 4 s with K = 2: {'MET' if whole2 < 4 else 'NOT MET'} ({whole2:.2f} s)")
 
 
+_ROS_START = """
+import time
+c0, t0 = time.process_time(), time.perf_counter()
+import rclpy
+from rclpy.node import Node
+from sensor_msgs.msg import PointCloud2
+c1, t1 = time.process_time(), time.perf_counter()
+rclpy.init()
+node = Node("bench_ros_start")
+c2, t2 = time.process_time(), time.perf_counter()
+for k in range(6):
+    node.create_subscription(PointCloud2, f"/bench_ros_start/in{k}", lambda m: None, 10)
+    node.create_publisher(PointCloud2, f"/bench_ros_start/out{k}", 10)
+c3, t3 = time.process_time(), time.perf_counter()
+print(c1 - c0, c2 - c1, c3 - c2, t1 - t0, t2 - t1, t3 - t2)
+"""
+
+
+def ros_start(repeats: int) -> None:
+    """What a process pays to be a ROS node at all, with a run's DDS settings, in a fresh process each time
+    (``repeats``, median): importing rclpy and a message package, the first node (its DDS participant), and
+    12 endpoints (a world's or monitor's order of magnitude). Each node process of the graph pays it;
+    ``simulate`` does not."""
+    from swarm_ros.app.processes import DomainLock
+    from swarm_ros.ros.dds import apply_dds_defaults
+
+    lock = DomainLock()
+    env = dict(os.environ, ROS_DOMAIN_ID=str(lock.domain_id))
+    apply_dds_defaults(env)
+    runs = []
+    try:
+        for _ in range(repeats):
+            done = subprocess.run([sys.executable, "-c", _ROS_START], env=env, capture_output=True, text=True)
+            if done.returncode != 0:
+                raise SystemExit(f"the ROS start-up measurement failed: {done.stderr.strip()[-500:]}")
+            runs.append([float(v) for v in done.stdout.split()])
+    finally:
+        lock.close()
+    med = [statistics.median(r[k] for r in runs) for k in range(6)]
+    print(f"\nWhat a process pays to be a ROS node (a fresh process, a run's DDS settings; median of {repeats}, s)")
+    steps = ("import rclpy and a message package", "the first node (its DDS participant)", "12 endpoints")
+    for k, what in enumerate(steps):
+        print(f"  {what:<40} CPU {med[k]:.3f}   wall {med[k + 3]:.3f}")
+    print(f"  {'in all':<40} CPU {sum(med[:3]):.3f}   wall {sum(med[3:]):.3f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, default=1)
@@ -365,7 +416,7 @@ def main() -> None:
     parser.add_argument("--rules", default="paper", help="rule set of every run (default: paper)")
     parser.add_argument(
         "--only",
-        choices=("speed", "breakdown", "readme", "bag", "recording", "flood", "scale"),
+        choices=("speed", "breakdown", "readme", "rosstart", "bag", "recording", "flood", "scale"),
         nargs="+",
         help="run only these parts (default: all)",
     )
@@ -394,9 +445,11 @@ def main() -> None:
     if args.crowding:
         RULES["crowding"] = args.crowding
 
-    parts = set(args.only or ("speed", "breakdown", "readme", "bag", "recording", "flood"))
+    parts = set(args.only or ("speed", "breakdown", "readme", "rosstart", "bag", "recording", "flood"))
     if "speed" in parts:
         speed(args.seed, args.repeats, args.processes)
+    if "rosstart" in parts:
+        ros_start(max(args.repeats, 5))
     with tempfile.TemporaryDirectory() as tmp:
         if "breakdown" in parts:
             breakdown(args.seed, args.processes, max(args.repeats, 3), Path(tmp))

@@ -205,6 +205,20 @@ def test_bench_ros_speed_with_one_process_prints_the_graph_beside_the_engine_and
     assert set(cpu) == {"world", "monitor", "robot_batch_0"} and min(map(float, cpu.values())) > 0, out
 
 
+def test_bench_ros_rosstart_prints_what_a_process_pays_to_be_a_ros_node():
+    """Each step's CPU and wall seconds, measured in fresh processes, and their sum."""
+    out = _bench("bench_ros.py", "--only", "rosstart", "--repeats", "1")
+    steps = re.findall(r"^  (.+?) +CPU ([\d.]+) +wall ([\d.]+)$", out, re.M)
+    assert [s[0] for s in steps] == [
+        "import rclpy and a message package",
+        "the first node (its DDS participant)",
+        "12 endpoints",
+        "in all",
+    ], out
+    cpu = [float(s[1]) for s in steps]
+    assert min(cpu) > 0 and abs(sum(cpu[:3]) - cpu[3]) < 0.002, out
+
+
 def test_bench_experiment_times_a_small_experiment_with_the_local_executor(tmp_path):
     out = _bench("bench_experiment.py", "--config", str(small_config(tmp_path)), "--executors", "local", "--jobs", "1")
     assert re.search(r"small\.yaml, executor local: 18 runs \(1 shapes, 3 repetitions, vision 1, 1\.5", out), out
