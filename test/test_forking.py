@@ -155,9 +155,71 @@ def test_the_launcher_imports_neither_rclpy_nor_rerun_before_it_forks():
     code = (
         "import sys; import swarm_ros.app.launcher, swarm_ros.app.commands, swarm_ros.app.forking as f; "
         "from swarm_ros.core import Shape; from swarm_ros.core.params import RunParams; "
-        "s = Shape.load('star'); f.preload(s, RunParams(robots=s.patches)); print(f.can_fork())"
+        "s = Shape.load('star'); f.preload(s, RunParams(robots=s.patches)); print(f.can_fork(), 'rclpy' in sys.modules)"
     )
-    assert _fresh_python(code) == "True"
+    assert _fresh_python(code) == "True False"
+
+
+PRELOADED = (
+    "import os, sys; import swarm_ros.app.forking as f; "
+    "from swarm_ros.core import Shape; from swarm_ros.core.params import RunParams; "
+    "s = Shape.load('star'); f.preload(s, RunParams(robots=s.patches), ['swarm_ros.nodes.world']); "
+    "lttng = f._lttng_library(); "
+)
+
+
+def test_rclpy_preloaded_for_the_nodes_leaves_forking_open_until_ros_starts():
+    """The node modules, rclpy and the type support of their messages and services loaded before the fork (each
+    node then skips their load); LTTng's fork hooks found where rclpy loaded LTTng; a started ROS context (DDS
+    threads) ends forking."""
+    pytest.importorskip("rclpy")
+    code = PRELOADED + (
+        "from sensor_msgs.msg import PointCloud2; from rcl_interfaces.srv import GetParameters; "
+        "seen = ['rclpy' in sys.modules, f.can_fork(), lttng is None or f._Preloaded.lttng is not None, "
+        "PointCloud2.__class__._TYPE_SUPPORT is not None and GetParameters.__class__._TYPE_SUPPORT is not None]; "
+        "import rclpy; from rclpy.context import Context; c = Context(); rclpy.init(context=c); "
+        "n = rclpy.create_node('fork_test', context=c); seen.append(f.can_fork()); print(seen)"
+    )
+    assert _fresh_python(code) == "[True, True, True, True, False]"
+
+
+def test_a_node_forked_after_rclpy_was_loaded_starts_ros_and_lttngs_threads_again(node_module, tmp_path):
+    """Forked with rclpy (and so LTTng) loaded: the child has LTTng's listener threads again (its fork hooks ran)
+    and starts a ROS context and a node of its own; the parent can go on forking."""
+    pytest.importorskip("rclpy")
+    child = textwrap.dedent(
+        """
+        import json, os, rclpy
+        from rclpy.context import Context
+
+        def main(argv):
+            before = len(os.listdir("/proc/self/task"))
+            c = Context()
+            rclpy.init(context=c, domain_id=int(argv[1]))
+            node = rclpy.create_node("forked_child", context=c)
+            print(json.dumps({"threads_before_ros": before, "node": node.get_name(),
+                              "threads_with_ros": len(os.listdir("/proc/self/task"))}))
+            node.destroy_node()
+            rclpy.shutdown(context=c)
+            return 0
+        """
+    )
+    (tmp_path / "fork_ros_child.py").write_text(child)
+    code = PRELOADED + (
+        f"sys.path.insert(0, {str(tmp_path)!r}); "
+        "listeners = f._native_threads(); "
+        f"log = os.open({str(tmp_path / 'log')!r}, os.O_WRONLY | os.O_CREAT); "
+        "codes = [f.Forked('fork_ros_child', ['77'], dict(os.environ), log).wait(60) for _ in range(2)]; "
+        "print(codes, f.can_fork(), lttng is not None)"
+    )
+    codes, can, has_lttng = _fresh_python(code).rsplit(" ", 2)
+    assert codes == "[0, 0]" and can == "True"
+    reports = [json.loads(line) for line in (tmp_path / "log").read_text().splitlines() if line.startswith("{")]
+    assert [r["node"] for r in reports] == ["forked_child"] * 2
+    for r in reports:
+        assert r["threads_with_ros"] > r["threads_before_ros"]  # DDS started in the child
+        if has_lttng == "True":  # main thread and LTTng's two listeners, started again by its fork hook
+            assert r["threads_before_ros"] >= 3
 
 
 SIGNAL_STORM = textwrap.dedent(

@@ -1,16 +1,22 @@
 """Node processes forked from the launcher after it has loaded what every node loads, instead of started afresh.
 
 A node started with ``python -m`` spends about 1 s of CPU before it does anything of its own: numpy, numba
-(which imports scipy.linalg to find a BLAS), and numba's cache load of the kernels (:mod:`swarm_ros.core.warmup`).
-Four such processes on 2 cores were most of the README's command. ``swarm-ros run`` therefore loads these once,
-in its own process, and forks each node from it: the child starts with the kernels in memory and imports only
-rclpy and its node module. What the child does from there is what ``python -m swarm_ros.nodes.<node>`` does.
+(which imports scipy.linalg to find a BLAS), numba's cache load of the kernels (:mod:`swarm_ros.core.warmup`),
+rclpy and its node module. Four such processes on 2 cores were most of the README's command. ``swarm-ros run``
+therefore loads these once, in its own process, and forks each node from it: the child starts with all of it in
+memory and goes straight to ``rclpy.init``. What the child does from there is what ``python -m
+swarm_ros.nodes.<node>`` does.
 
 Forking is only safe from a process without threads that hold locks the child would need. numpy's OpenBLAS
-pool is fork-aware (it re-creates its threads in the child); rclpy and Rerun start threads at import that are
-not. :func:`can_fork` therefore refuses once either is imported, or when other Python threads run (a Dask
-worker runs the launcher in a thread), and the launcher then starts nodes with ``python -m`` as before: a
-restarted node, for one, starts that way, since by then the launcher's progress bar has rclpy running.
+pool is fork-aware (it stops its threads before a fork and starts them again when next used). rclpy's import
+loads LTTng-UST (ROS 2's tracing), whose two listener threads are fork-aware only through the hooks LTTng
+exports for the purpose (``ust_before_fork``, ``ust_after_fork_parent``, ``ust_after_fork_child``: what its
+``liblttng-ust-fork`` preload calls around ``fork()``), so :class:`Forked` calls them around its fork. A started
+ROS context (DDS threads) and Rerun (threads of its own) are not fork-safe at all. :func:`can_fork` therefore
+refuses once Rerun is imported, once the process has more threads than it had when :func:`preload` was done
+(rclpy started: the launcher's progress bar), once rclpy is loaded other than by :func:`preload`, or when other
+Python threads run (a Dask worker runs the launcher in a thread); the launcher then starts nodes with ``python
+-m`` as before. A restarted node, for one, starts that way.
 """
 
 from __future__ import annotations
@@ -25,32 +31,77 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import IO
 
 #: modules that start threads at import which a forked child cannot use (found by counting /proc/self/task)
-_THREADED = ("rclpy", "rerun", "distributed")
+_THREADED = ("rerun", "distributed")
+_SIGSET = 128  #: bytes of a sigset_t (glibc): what LTTng's fork hooks save the signal mask in
 _NODE_PREFIX = "swarm_ros.nodes."
 _HELD = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}  #: what stops a launcher: held back while it forks
 
 
+class _Preloaded:
+    """What :func:`preload` left: the threads this process had then, and LTTng's fork hooks if rclpy loaded it."""
+
+    threads: int | None = None  #: native threads once preloaded; None: not preloaded (or not safely)
+    lttng: ctypes.CDLL | None = None
+
+
+def _native_threads() -> int:
+    return len(os.listdir("/proc/self/task"))
+
+
+def _lttng_library() -> str | None:
+    """The path of the LTTng-UST library this process has loaded (rclpy's wheels bring it), or None."""
+    with open("/proc/self/maps", encoding="utf-8", errors="replace") as maps:
+        for line in maps:
+            path = line.rstrip("\n").split(maxsplit=5)[-1]
+            if os.path.basename(path).startswith("liblttng-ust") and "tracepoint" not in os.path.basename(path):
+                return path
+    return None
+
+
 def can_fork() -> bool:
-    """Whether this process may fork a node: on the main thread, the only Python thread, and neither rclpy nor
-    Rerun nor Dask's distributed loaded."""
-    return (
+    """Whether this process may fork a node: on the main thread, the only Python thread, neither Rerun nor
+    Dask's distributed loaded, and rclpy either not loaded or loaded by :func:`preload` and not started since
+    (no thread more than it had then)."""
+    if not (
         hasattr(os, "fork")
         and threading.current_thread() is threading.main_thread()
         and threading.active_count() == 1
         and not any(m == name or m.startswith(name + ".") for m in sys.modules for name in _THREADED)
-    )
+    ):
+        return False
+    if "rclpy" not in sys.modules:
+        return True
+    return _Preloaded.threads is not None and _native_threads() <= _Preloaded.threads
 
 
-def preload(shape, params) -> None:
-    """Load, in this process, what each node would load on its own: numpy, numba and the compiled kernels
-    of the run's code path (from numba's cache, which the launcher has filled)."""
+def preload(shape, params, modules: Sequence[str] = ()) -> None:
+    """Load, in this process, what each node would load on its own: numpy, numba, the compiled kernels of the
+    run's code path (from numba's cache, which the launcher has filled), and the node ``modules`` with rclpy,
+    if this process may still fork once they are loaded (LTTng's fork hooks found, where rclpy brings LTTng)."""
     from swarm_ros.core.warmup import warm_up
 
     warm_up(shape, params)
+    if not modules or not can_fork() or "rclpy" in sys.modules:
+        return
+    for module in modules:
+        importlib.import_module(module)
+    from swarm_ros.ros.runtime import load_type_support
+
+    load_type_support()
+    path = _lttng_library()
+    if path is not None:
+        try:
+            lttng = ctypes.CDLL(path)
+            for hook in ("ust_before_fork", "ust_after_fork_parent", "ust_after_fork_child"):
+                getattr(lttng, hook).argtypes = [ctypes.c_void_p]
+        except (OSError, AttributeError):
+            return  # tracing without its fork hooks: no more forks from here (can_fork)
+        _Preloaded.lttng = lttng
+    _Preloaded.threads = _native_threads()
 
 
 def forkable(command: list[str]) -> str | None:
@@ -87,8 +138,13 @@ class Forked:
         # would stay taken for good (seen: the launcher's progress thread hung on it, and the SIGTERM was lost).
         # Held back until the fork is done, the signal is handled in this process after it, as anywhere else.
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+        lttng, saved = _Preloaded.lttng, ctypes.create_string_buffer(_SIGSET)
         try:
+            if lttng is not None:  # its locks taken, its signals blocked: its threads cannot be mid-way in the fork
+                lttng.ust_before_fork(saved)
             pid = os.fork()
+            if lttng is not None:  # gives the locks back; in the child, starts its listener threads again
+                (lttng.ust_after_fork_child if pid == 0 else lttng.ust_after_fork_parent)(saved)
             if pid == 0:  # the child: never returns
                 _become_node(module, args, env, log_fd, mask)
         finally:

@@ -237,7 +237,7 @@ class Launch:
     def _start(self, logs: Path, domain_id: int, out: Path) -> None:
         self._compile_kernels()
         if can_fork():  # the nodes are forked from this process (app/forking.py): they start with the kernels
-            preload(self.shape, self.params)
+            preload(self.shape, self.params, sorted({f"swarm_ros.nodes.{module}" for _, module, _ in self.plan()}))
         shape_arg = self.settings.shape
         if Path(shape_arg).suffix.lower() in (".txt", ".png"):
             shape_arg = str(Path(shape_arg).absolute())
