@@ -61,7 +61,7 @@ from pathlib import Path
 from swarm_ros.core import RunParams, Shape, Simulation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_scale import cpu_lines
+from bench_scale import USER_ENV, cpu_lines
 
 #: the tree this script belongs to: its commands run there, so `python -m swarm_ros` imports this tree's package
 #: (the working directory comes first on the import path, before PYTHONPATH): an older tree's copy of this
@@ -114,6 +114,7 @@ def command(seed: int, out: Path, *args: str, record: bool = False) -> tuple[int
         capture_output=True,
         text=True,
         cwd=ROOT,
+        env=USER_ENV,
     )
     whole = time.perf_counter() - t0
     command.started_at = time.time() - whole  # the epoch of the start, for milestones()
@@ -202,7 +203,7 @@ def readme_command(repeats: int, tmp: Path) -> float:
     source in every process, the run's five more often than simulate's one), after one untimed pair that
     writes them and fills numba's cache."""
     exe = [sys.executable, "-m", "swarm_ros"]
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env = USER_ENV
     for command in ("run", "simulate"):
         subprocess.run(
             [*exe, command, "--shape", "star", "--out", str(tmp / f"readme-{command}-warm"), "--quiet"],

@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import re
 import statistics
 import subprocess
@@ -77,11 +78,20 @@ def disc_flags(robots: int, tmp: Path, ticks: int, seed: int) -> tuple[list[str]
     return flags, radius
 
 
+#: the commands' environment, as on a user's machine: Python writes its bytecode caches (a shell that sets
+#: PYTHONDONTWRITEBYTECODE would have every process compile each module changed since its cache from source)
+USER_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+
+
 def _swarm(args: list[str], tree: Path = ROOT) -> float:
     """Seconds of ``swarm-ros ARGS`` run from ``tree`` (whose package it imports: the working directory's)."""
     t0 = time.perf_counter()
     done = subprocess.run(
-        [sys.executable, "-m", "swarm_ros", *args, "--quiet", "--overwrite"], capture_output=True, text=True, cwd=tree
+        [sys.executable, "-m", "swarm_ros", *args, "--quiet", "--overwrite"],
+        capture_output=True,
+        text=True,
+        cwd=tree,
+        env=USER_ENV,
     )
     if done.returncode != 0:
         sys.exit(f"bench_scale: swarm-ros {args[0]} failed: {done.stderr.strip()[-500:]}")

@@ -225,7 +225,16 @@ def test_a_node_forked_after_rclpy_was_loaded_starts_ros_and_lttngs_threads_agai
 SIGNAL_STORM = textwrap.dedent(
     """
     import logging, os, signal, subprocess, sys, threading
+    import swarm_ros.app.forking as forking
     from swarm_ros.app.forking import Forked
+
+    if sys.argv[1:] == ["rclpy"]:  # as the launcher forks: rclpy loaded, LTTng's fork hooks around each fork
+        from swarm_ros.core import Shape
+        from swarm_ros.core.params import RunParams
+
+        shape = Shape.load("star")
+        forking.preload(shape, RunParams(robots=shape.patches), ["swarm_ros.nodes.robot_batch"])
+        assert forking.can_fork()
 
     def interrupt(signum, frame):  # as swarm-ros run's own SIGTERM handler does, inside a fork only
         while frame is not None:
@@ -260,14 +269,21 @@ SIGNAL_STORM = textwrap.dedent(
 )
 
 
-def test_a_sigterm_while_the_launcher_forks_is_handled_after_the_fork_and_leaves_no_lock_taken(node_module, tmp_path):
+@pytest.mark.parametrize("loaded", ["", "rclpy"])
+def test_a_sigterm_while_the_launcher_forks_is_handled_after_the_fork_and_leaves_no_lock_taken(
+    node_module, tmp_path, loaded
+):
     """A SIGTERM whose handler raises inside os.fork ran in Python's at-fork hooks, which swallow the exception:
     the signal was lost and logging's lock stayed taken, and the launcher's next thread that logged hung
-    (test_interrupts caught it once in six). Held back during the fork, each one is handled after it."""
+    (test_interrupts caught it once in six). Held back during the fork, each one is handled after it; also with
+    rclpy loaded, where LTTng's fork hooks block every signal and give the mask back after the fork."""
+    if loaded:
+        pytest.importorskip(loaded)
     script = tmp_path / "storm.py"
     script.write_text(SIGNAL_STORM)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path])}
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, env=env)
+    command = [sys.executable, str(script), *([loaded] if loaded else [])]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr
     forked, interrupted, took = done.stdout.split(maxsplit=2)
     assert int(forked) == 150 and int(interrupted) > 0  # signals came during forks, and were handled after them
