@@ -456,3 +456,33 @@ def test_a_ctrl_c_python_dropped_still_stops_a_dask_experiment_and_a_closing_thr
     finally:
         watcher.unwatch(handlers)
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_ctrl_c_inside_a_garbage_collectors_callback_prints_no_traceback_and_still_interrupts(capfd):
+    """Where Python would print a handler's KeyboardInterrupt inside a gc callback as "Exception ignored", with a
+    traceback (CI saw it after a Ctrl-C to a Dask experiment, whose scheduler adds one), the signal is noted and
+    sent again once the collector is done: no traceback, and the interrupt still comes."""
+    import gc
+
+    from swarm_ros.app.executors import _QuietAfterInterrupt
+
+    watcher = _QuietAfterInterrupt()
+    handlers = watcher.watch()
+    came: list[bool] = []
+
+    def callback(phase: str, info: dict) -> None:  # as if the SIGINT landed here
+        if phase == "start" and not came:
+            came.append(True)
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, sys._getframe())
+
+    gc.callbacks.append(callback)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            gc.collect()
+            time.sleep(30)  # the signal sent again arrives long before
+        assert came and watcher.interrupted
+    finally:
+        gc.callbacks.remove(callback)
+        watcher.unwatch(handlers)
+    err = capfd.readouterr().err
+    assert "Exception ignored" not in err and "Traceback" not in err, err

@@ -273,6 +273,11 @@ class _QuietAfterInterrupt:
 
         def noted(signum: int, frame: Any) -> None:
             self.interrupted = True
+            if _in_gc_callback(frame):
+                # Raised here, Python would print the KeyboardInterrupt as "Exception ignored" with its traceback
+                # and drop it. Sent again once the collector is done (and check() raises it at the latest).
+                threading.Timer(_RESEND_S, os.kill, (os.getpid(), signum)).start()
+                return
             before[signal.Signals(signum)](signum, frame)
 
         for sig in before:
@@ -292,6 +297,21 @@ class _QuietAfterInterrupt:
             signal.signal(sig, handler)
 
 
+def _in_gc_callback(frame: Any) -> bool:
+    """Whether ``frame`` (where a signal handler interrupted the main thread) is inside a garbage collector's
+    callback (``gc.callbacks``: Dask's scheduler adds one), where an exception raised is printed and dropped."""
+    import gc
+
+    codes = {getattr(getattr(callback, "__func__", callback), "__code__", None) for callback in gc.callbacks}
+    codes.discard(None)
+    while frame is not None and codes:
+        if frame.f_code in codes:
+            return True
+        frame = frame.f_back
+    return False
+
+
+_RESEND_S = 0.05  #: seconds after which a signal that came inside a collector's callback is sent again
 _WATCHING: list[_QuietAfterInterrupt] = []  #: the open Dask sessions' watchers (signals are the process's)
 
 
