@@ -458,31 +458,47 @@ def test_a_ctrl_c_python_dropped_still_stops_a_dask_experiment_and_a_closing_thr
     assert signal.getsignal(signal.SIGINT) is before
 
 
-def test_a_ctrl_c_inside_a_garbage_collectors_callback_prints_no_traceback_and_still_interrupts(capfd):
-    """Where Python would print a handler's KeyboardInterrupt inside a gc callback as "Exception ignored", with a
-    traceback (CI saw it after a Ctrl-C to a Dask experiment, whose scheduler adds one), the signal is noted and
-    sent again once the collector is done: no traceback, and the interrupt still comes."""
+@pytest.mark.parametrize("where", ["gc callback", "weakref callback"])
+def test_a_ctrl_c_where_python_drops_exceptions_prints_no_traceback_and_still_interrupts(capfd, where):
+    """Where Python would print a handler's KeyboardInterrupt as "Exception ignored", with a traceback, and drop it
+    (inside a gc callback, as CI saw after a Ctrl-C to a Dask experiment, whose scheduler adds one; inside a
+    weakref's callback, as CI saw in this very test), the signal is sent again a moment later: no traceback, and
+    the interrupt still comes."""
     import gc
+    import weakref
 
     from swarm_ros.app.executors import _QuietAfterInterrupt
 
     watcher = _QuietAfterInterrupt()
+    before = sys.unraisablehook
     handlers = watcher.watch()
     came: list[bool] = []
 
-    def callback(phase: str, info: dict) -> None:  # as if the SIGINT landed here
-        if phase == "start" and not came:
+    def interrupt(*_: object) -> None:  # as if the SIGINT landed here
+        if not came:
             came.append(True)
             signal.getsignal(signal.SIGINT)(signal.SIGINT, sys._getframe())
 
-    gc.callbacks.append(callback)
+    class Thing:
+        pass
+
+    if where == "gc callback":
+        gc.callbacks.append(interrupt)
     try:
         with pytest.raises(KeyboardInterrupt):
-            gc.collect()
+            if where == "gc callback":
+                gc.collect()
+            else:
+                thing = Thing()
+                ref = weakref.ref(thing, interrupt)
+                del thing
+                assert ref() is None
             time.sleep(30)  # the signal sent again arrives long before
         assert came and watcher.interrupted
     finally:
-        gc.callbacks.remove(callback)
+        if interrupt in gc.callbacks:
+            gc.callbacks.remove(interrupt)
         watcher.unwatch(handlers)
+    assert sys.unraisablehook is before
     err = capfd.readouterr().err
     assert "Exception ignored" not in err and "Traceback" not in err, err

@@ -12,7 +12,7 @@ import os
 import sys
 import tempfile
 import uuid
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Generator, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -242,6 +242,7 @@ class _QuietAfterInterrupt:
 
     def __init__(self) -> None:
         self.interrupted = False
+        self.signum = 0  #: the last SIGINT or SIGTERM that came
 
     def filter(self, record: object) -> bool:
         return not self.interrupted
@@ -259,29 +260,41 @@ class _QuietAfterInterrupt:
 
     def watch(self) -> dict:
         """Note a SIGINT or SIGTERM before its handler raises (the loop logs as soon as the raise reaches the
-        wait); the handlers before, to give back to :meth:`unwatch`. Nothing in a thread other than the main."""
+        wait); the handlers before, to give back to :meth:`unwatch`. Nothing in a thread other than the main.
+
+        Where Python cannot raise the handler's KeyboardInterrupt, it prints it as "Exception ignored", with a
+        traceback, and drops it: inside a garbage collector's callback (Dask's scheduler adds one), a weakref's
+        callback or a finalizer. ``sys.unraisablehook`` then gets it instead: it prints nothing and sends the
+        signal again :data:`_RESEND_S` later, when the main thread is likely elsewhere (and :meth:`check`
+        raises it at the next run finished at the latest)."""
         import signal
         import threading
 
         if threading.current_thread() is not threading.main_thread():
             return {}
-        before: dict[signal.Signals, Callable[[int, Any], Any]] = {}
+        before: dict[Any, Any] = {}
         for sig in (signal.SIGINT, signal.SIGTERM):
             handler = signal.getsignal(sig)
             if callable(handler):  # Python's, not the OS's
                 before[sig] = handler
 
         def noted(signum: int, frame: Any) -> None:
-            self.interrupted = True
-            if _in_gc_callback(frame):
-                # Raised here, Python would print the KeyboardInterrupt as "Exception ignored" with its traceback
-                # and drop it. Sent again once the collector is done (and check() raises it at the latest).
-                threading.Timer(_RESEND_S, os.kill, (os.getpid(), signum)).start()
-                return
+            self.interrupted, self.signum = True, signum
             before[signal.Signals(signum)](signum, frame)
+
+        hook = sys.unraisablehook
+
+        def dropped(unraisable: Any) -> None:
+            if self.signum and isinstance(unraisable.exc_value, KeyboardInterrupt):
+                threading.Timer(_RESEND_S, os.kill, (os.getpid(), self.signum)).start()
+                return
+            hook(unraisable)
 
         for sig in before:
             signal.signal(sig, noted)
+        if before:
+            sys.unraisablehook = dropped
+            before[_UNRAISABLE] = hook
         return before
 
     @staticmethod
@@ -294,24 +307,14 @@ class _QuietAfterInterrupt:
         if threading.current_thread() is not threading.main_thread():
             return
         for sig, handler in before.items():
-            signal.signal(sig, handler)
+            if sig == _UNRAISABLE:
+                sys.unraisablehook = handler
+            else:
+                signal.signal(sig, handler)
 
 
-def _in_gc_callback(frame: Any) -> bool:
-    """Whether ``frame`` (where a signal handler interrupted the main thread) is inside a garbage collector's
-    callback (``gc.callbacks``: Dask's scheduler adds one), where an exception raised is printed and dropped."""
-    import gc
-
-    codes = {getattr(getattr(callback, "__func__", callback), "__code__", None) for callback in gc.callbacks}
-    codes.discard(None)
-    while frame is not None and codes:
-        if frame.f_code in codes:
-            return True
-        frame = frame.f_back
-    return False
-
-
-_RESEND_S = 0.05  #: seconds after which a signal that came inside a collector's callback is sent again
+_UNRAISABLE = "unraisablehook"  #: the key of sys.unraisablehook's hook before, among the handlers watch() returns
+_RESEND_S = 0.05  #: seconds after which an interrupt Python dropped (see _QuietAfterInterrupt.watch) is sent again
 _WATCHING: list[_QuietAfterInterrupt] = []  #: the open Dask sessions' watchers (signals are the process's)
 
 
