@@ -6,12 +6,10 @@ applies all decisions at once (:meth:`Simulation.apply`), then counts, checks fo
 end of the run and, if the shape is complete with robots left over, separates them.
 :meth:`Simulation.step` and :meth:`Simulation.run` do both halves in compiled code
 (``run`` many ticks per call); :meth:`Simulation.apply` applies decisions made elsewhere. All
-these share every kernel and the end-of-tick bookkeeping
-(:func:`~swarm_ros.core.tick_kernel.close_tick`), so they give identical runs. The ROS 2
-graph's world applies a tick with the same kernel through a
-:class:`~swarm_ros.core.shards.WorldShard` (the world is the shard with no peers), whose end of a
-tick sums the shards' counts with the same end check and metrics
-(:func:`~swarm_ros.core.metrics.end_code`, :func:`~swarm_ros.core.metrics.metric_values`).
+these share every kernel and the end of a tick (:func:`~swarm_ros.core.tick_kernel.end_tick`, through
+:func:`~swarm_ros.core.tick_kernel.close_tick`), so they give identical runs. The ROS 2 graph's world
+applies a tick with the same kernel through a :class:`~swarm_ros.core.shards.WorldShard` (the world is
+the shard with no peers), which sums the shards' counts and ends the tick with the same ``end_tick``.
 
 Only moving robots cost anything per tick: the cell list, the claims and the list of
 moving robots are touched only where moving robots are, and the metrics are kept as

@@ -40,7 +40,7 @@ from swarm_ros.core.engine import failing_robots
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
 from swarm_ros.core.legality import reach
-from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, Outcome, end_code, metric_values
+from swarm_ros.core.metrics import END_EXTRAS, METRIC_COLUMNS, OUTCOME_OF_CODE, Outcome, end_code
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import area, batch_cuts, columns, halo, shard_batches, shard_cuts, strip
 from swarm_ros.core.replica import UNKNOWN, Replica
@@ -48,6 +48,7 @@ from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.shard_parts import COUNTS, Part, check_claims, check_parts
 from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, initial_state
+from swarm_ros.core.tick_kernel import end_tick
 
 _EMPTY = np.empty(0)
 _NONE = np.empty(0, dtype=np.int64)
@@ -419,14 +420,16 @@ class WorldShard:
         self.replica.merge(here, removed, s.x[here], s.y[here], s.heading[here], *solid)
 
     def _close(self, tick: int, inside: int, outside: int, walking: int) -> int:
-        moving = inside + outside + walking
-        code = end_code(self.localized, moving, tick, self._patches, self.alive, self.params.max_ticks)
-        separated = 0
+        """The tick's end from the counts of every shard (:func:`~swarm_ros.core.tick_kernel.end_tick`, as the
+        engine's); robots it separates, this shard marks in its own view."""
+        row = np.empty(len(METRIC_COLUMNS), dtype=np.int64)
+        code, _ = end_tick(
+            tick, self.localized, inside, outside, walking, self._patches, self.alive, self.params.max_ticks, row
+        )
         if code == END_EXTRAS:
             s = self.state
             known = IS_MOVING[s.state] & (s.state != UNKNOWN)
             s.state[known] = RobotState.SEPARATED
-            separated, inside, outside, walking = moving, 0, 0, 0
-        self.history.append(metric_values(tick, self.localized, inside, outside, walking, separated, self._patches))
-        self.outcome = OUTCOME_OF_CODE[code]
-        return code
+        self.history.append(tuple(int(v) for v in row))
+        self.outcome = OUTCOME_OF_CODE[int(code)]
+        return int(code)

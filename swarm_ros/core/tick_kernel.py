@@ -40,22 +40,33 @@ def compact_moving(moving, m, state):
 
 
 @numba.njit(cache=True)
-def close_tick(moving, m, state, tick, localized, inside, outside, walking, shape_patches, robots, max_ticks, row):
-    """End of a tick, for every engine path: check for the end, separate the robots left over
-    if the shape is complete, write the tick's metrics into ``row``. Returns (end code, still moving)."""
+def end_tick(tick, localized, inside, outside, walking, shape_patches, robots, max_ticks, row):
+    """The end of a tick, for every path that advances a world (the engine's, a world shard's): the end code from
+    the tick's counts; if the shape is complete with robots left over (``END_EXTRAS``), those still moving are
+    separated (the caller marks its own: their count is returned) and none counts as moving any more; the
+    tick's metrics into ``row``. Returns (end code, separated)."""
     code = end_code(localized, inside + outside + walking, tick, shape_patches, robots, max_ticks)
     separated = 0
     if code == END_EXTRAS:
-        for k in range(m):
-            state[moving[k]] = _SEPARATED
-        separated = m
-        m = 0
+        separated = inside + outside + walking
         inside = 0
         outside = 0
         walking = 0
     values = metric_values(tick, localized, inside, outside, walking, separated, shape_patches)
     for c in range(len(values)):
         row[c] = values[c]
+    return code, separated
+
+
+@numba.njit(cache=True)
+def close_tick(moving, m, state, tick, localized, inside, outside, walking, shape_patches, robots, max_ticks, row):
+    """The engine's end of a tick (:func:`end_tick`), its robots still moving (``moving[:m]``) separated if the
+    tick separates them. Returns (end code, still moving)."""
+    code, separated = end_tick(tick, localized, inside, outside, walking, shape_patches, robots, max_ticks, row)
+    if code == END_EXTRAS:
+        for k in range(m):
+            state[moving[k]] = _SEPARATED
+        m = 0
     return code, m
 
 
