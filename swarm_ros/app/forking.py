@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import ctypes
 import importlib
+import inspect
 import os
 import shlex
 import signal
@@ -92,6 +93,9 @@ def preload(shape, params, modules: Sequence[str] = ()) -> None:
     from swarm_ros.ros.runtime import load_type_support
 
     load_type_support()
+    # rclpy's logger finds its caller with inspect.getframeinfo, whose first call maps every loaded module to its
+    # file (25-50 ms of CPU with numba loaded): made here once, the map is the children's too
+    inspect.getframeinfo(sys._getframe())
     path = _lttng_library()
     if path is not None:
         try:
