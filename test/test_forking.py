@@ -183,6 +183,18 @@ def test_rclpy_preloaded_for_the_nodes_leaves_forking_open_until_ros_starts():
     assert _fresh_python(code) == "[True, True, True, True, False]"
 
 
+def test_a_node_module_that_cannot_be_preloaded_is_left_to_the_node_to_report():
+    """An import that fails in the launcher is not the launcher's error: preload gives up quietly, and each node
+    then imports (and fails) on its own, in its own log."""
+    code = (
+        "import sys; import swarm_ros.app.forking as f; "
+        "from swarm_ros.core import Shape; from swarm_ros.core.params import RunParams; "
+        "s = Shape.load('star'); f.preload(s, RunParams(robots=s.patches), ['no_such_module_for_the_fork_test']); "
+        "print(f._Preloaded.threads is None, f.can_fork())"
+    )
+    assert _fresh_python(code) == "True True"
+
+
 def test_a_node_forked_after_rclpy_was_loaded_starts_ros_and_lttngs_threads_again(node_module, tmp_path):
     """Forked with rclpy (and so LTTng) loaded: the child has LTTng's listener threads again (its fork hooks ran)
     and starts a ROS context and a node of its own; the parent can go on forking."""

@@ -88,8 +88,11 @@ def preload(shape, params, modules: Sequence[str] = ()) -> None:
     warm_up(shape, params)
     if not modules or not can_fork() or "rclpy" in sys.modules:
         return
-    for module in modules:
-        importlib.import_module(module)
+    try:
+        for module in modules:
+            importlib.import_module(module)
+    except Exception:  # each node, started afresh, reports what it cannot import in its own log
+        return  # can_fork then refuses (rclpy loaded, not preloaded): the nodes start with python -m
     from swarm_ros.ros.runtime import load_type_support
 
     load_type_support()
