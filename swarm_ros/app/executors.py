@@ -243,6 +243,7 @@ class _QuietAfterInterrupt:
     def __init__(self) -> None:
         self.interrupted = False
         self.signum = 0  #: the last SIGINT or SIGTERM that came
+        self._hook: Any = None  #: sys.unraisablehook before watch(), given back by unwatch()
 
     def filter(self, record: object) -> bool:
         return not self.interrupted
@@ -272,7 +273,7 @@ class _QuietAfterInterrupt:
 
         if threading.current_thread() is not threading.main_thread():
             return {}
-        before: dict[Any, Any] = {}
+        before: dict[signal.Signals, Any] = {}
         for sig in (signal.SIGINT, signal.SIGTERM):
             handler = signal.getsignal(sig)
             if callable(handler):  # Python's, not the OS's
@@ -293,27 +294,23 @@ class _QuietAfterInterrupt:
         for sig in before:
             signal.signal(sig, noted)
         if before:
-            sys.unraisablehook = dropped
-            before[_UNRAISABLE] = hook
+            self._hook, sys.unraisablehook = hook, dropped
         return before
 
-    @staticmethod
-    def unwatch(before: dict) -> None:
-        """Give the handlers back, from the main thread (a cluster closed in another thread leaves :meth:`watch`'s
-        in place: they hand each signal on to the ones before)."""
+    def unwatch(self, before: dict) -> None:
+        """Give the handlers and ``sys.unraisablehook`` back, from the main thread (a cluster closed in another
+        thread leaves :meth:`watch`'s in place: they hand each signal on to the ones before)."""
         import signal
         import threading
 
         if threading.current_thread() is not threading.main_thread():
             return
         for sig, handler in before.items():
-            if sig == _UNRAISABLE:
-                sys.unraisablehook = handler
-            else:
-                signal.signal(sig, handler)
+            signal.signal(sig, handler)
+        if self._hook is not None:
+            self._hook, sys.unraisablehook = None, self._hook
 
 
-_UNRAISABLE = "unraisablehook"  #: the key of sys.unraisablehook's hook before, among the handlers watch() returns
 _RESEND_S = 0.05  #: seconds after which an interrupt Python dropped (see _QuietAfterInterrupt.watch) is sent again
 _WATCHING: list[_QuietAfterInterrupt] = []  #: the open Dask sessions' watchers (signals are the process's)
 
