@@ -13,10 +13,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from swarm_ros.app.param_file import check_launcher_sets, read_params_file, record_every
+from swarm_ros.app.summary_print import print_summary
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.core.errors import InputError
+from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.grid import World
-from swarm_ros.core.params import NODE_PARAMETERS, RUN_PARAMETERS, RunParams, Settings, node_defaults
+from swarm_ros.core.params import (
+    DARR_NIAZI,
+    NODE_PARAMETERS,
+    RUBENSTEIN,
+    RUN_PARAMETERS,
+    RunParams,
+    Settings,
+    node_defaults,
+)
 from swarm_ros.core.resources import check_world_memory
 from swarm_ros.core.shapes import Shape, builtin_shapes, builtin_shapes_3d
 from swarm_ros.core.signals import EXIT_INTERRUPTED, StopFlag
@@ -27,7 +36,7 @@ if TYPE_CHECKING:
 
 PROG = "swarm-ros"
 EXIT_USAGE = 2
-_PROGRESS_TICKS = 200  # ticks between progress-bar updates
+PROGRESS_TICKS = 200  # ticks between progress-bar updates
 MAX_DOMAIN_ID = 232  # Fast DDS's ports overflow above this (on Linux, 101 with ephemeral ports in use)
 LIST_SECONDS, ECHO_SECONDS = 2.0, 10.0  # topics: listening time, and --echo's wait
 EXIT_AT_ONCE = False  # set by a finished 'run': see swarm_ros.app.cli.entry()
@@ -108,6 +117,8 @@ def _prepare(
 
         check_graph_shape(settings.shape)
     shape, params = settings.resolve()
+    if graph and params.algorithm == RUBENSTEIN:
+        raise ParameterError(f"the ROS 2 graph runs the {DARR_NIAZI} algorithm only, so far (simulate runs both)")
     monitor = nodes["monitor"]
     recording = RecordingOptions(
         enabled=bool(_flag(args.record, monitor, "record")),
@@ -142,6 +153,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from swarm_ros.core.run_result import RunRecord
 
     _, shape, params, out, options, _ = _prepare(args)
+    if params.algorithm == RUBENSTEIN:
+        from swarm_ros.app.kilobot import simulate_kilobot
+
+        note_compiling(args.quiet)
+        return simulate_kilobot(args, shape, params, out, PROG, PROGRESS_TICKS)
 
     from swarm_ros.core.engine import Simulation  # here: numba is not needed by the other commands' start
     from swarm_ros.core.metrics import Outcome
@@ -174,7 +190,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print(f"{PROG}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
         return EXIT_INTERRUPTED
     if not args.quiet:
-        _print_summary(record.summary, out, shape.dims)
+        print_summary(record.summary, out, shape.dims)
     return 0
 
 
@@ -241,7 +257,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-        _print_summary(summary, out, shape.dims)
+        print_summary(summary, out, shape.dims)
         print(
             f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
             f"logs in {out / 'logs'}"
@@ -402,48 +418,12 @@ def _run_with_progress(
                 sim.step()
                 check_tick(prev, sim)
             elif recorder is not None:  # stop on every tick whose robots are logged
-                sim.run(max_ticks=min(_PROGRESS_TICKS, recorder.every - before % recorder.every))
+                sim.run(max_ticks=min(PROGRESS_TICKS, recorder.every - before % recorder.every))
             else:
-                sim.run(max_ticks=_PROGRESS_TICKS)
+                sim.run(max_ticks=PROGRESS_TICKS)
             if recorder is not None:
                 recorder.metrics(sim.history[before + 1 :])
                 recorder.robots(sim.state, force=sim.done)
             m = sim.metrics
             bar.update(m.localized - bar.n)
             bar.set_postfix(tick=str(m.tick), moving=str(m.moving), refresh=False)
-
-
-#: What a summary's wall time holds, by engine: the engine alone is docs/benchmarks.md's
-_TIMED = {"ros2": "tick 0 to the outcome", "inprocess": "the kernels' loading and the recording included"}
-
-
-def _print_summary(s: dict, out: Path, dims: int) -> None:
-    cells = "voxels" if dims == 3 else "patches"
-    rate = s["convergence_tick"] / s["wall_seconds"] if s["wall_seconds"] > 0 else float("inf")
-    rows = [
-        ("shape", f"{s['shape']} ({s['shape_patches']} {cells})"),
-        ("robots", f"{s['robots']}  (vision {s['vision_radius']:g}, seed {s['seed']}, engine {s['engine']})"),
-        ("rules", f"{s['rules']}  (join {s['join']}, crowding {s['crowding']}, steps {s['steps']})"),
-        ("outcome", s["outcome"]),
-        ("convergence tick", f"{s['convergence_tick']}"),
-        ("localized", f"{s['localized']} / {s['shape_patches']} {cells}"),
-        ("unlocalized", f"{s['unlocalized']}  (separated {s['separated']})"),
-        (f"empty {cells}", f"{s['empty_patches']}"),
-        *(
-            [
-                (
-                    "lost robots",
-                    f"{s['lost_robots']}  ("
-                    + ", ".join(f"{x['robots']} at tick {x['tick']}" for x in s["losses"])
-                    + ")",
-                )
-            ]
-            if s.get("lost_robots")
-            else []
-        ),
-        ("convergence rate", f"{s['convergence_rate']:.4f} robots/tick"),
-        ("wall time", f"{s['wall_seconds']:.2f} s  ({rate:,.0f} ticks/s, {_TIMED[s['engine']]})"),
-        ("output", str(out)),
-    ]
-    for key, value in rows:
-        print(f"{key:<17} {value}")

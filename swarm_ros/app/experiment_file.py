@@ -40,7 +40,15 @@ from swarm_ros.app.published import load_reference
 from swarm_ros.app.results_file import ExperimentError
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
-from swarm_ros.core.params import EXPERIMENT_AXES, MAX_SEED, RUN_PARAMETER, RUN_PARAMETERS, Param, RunParams, Settings
+from swarm_ros.core.params import (
+    EXPERIMENT_AXES,
+    MAX_SEED,
+    RUN_PARAMETER,
+    RUN_PARAMETERS,
+    Param,
+    RunParams,
+    Settings,
+)
 from swarm_ros.core.resources import check_world_memory
 from swarm_ros.core.shapes import Shape
 

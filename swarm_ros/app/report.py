@@ -77,7 +77,7 @@ def _curve(row: dict) -> np.ndarray:
     from swarm_ros.core.shapes import Shape
 
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
-    sim = Simulation(shape, RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model}))
+    sim = Simulation(shape, RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model and p.name in row}))
     sim.run()
     outcome = sim.outcome.value if sim.outcome is not None else None
     if sim.tick != row["convergence_tick"] or outcome != row["outcome"]:

@@ -15,7 +15,7 @@ from pathlib import Path
 from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.inputs import RESULTS_LIMIT, read_bounded
 from swarm_ros.core.metrics import Outcome
-from swarm_ros.core.params import EXPERIMENT_AXES, RUN_PARAMETERS
+from swarm_ros.core.params import EXPERIMENT_AXES, RUBENSTEIN, RUN_PARAMETERS
 from swarm_ros.core.run_result import ENGINES
 
 RESULTS_FILE = "results.csv"
@@ -23,10 +23,12 @@ REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied 
 
 #: Columns results.csv adds after a run parameter's: the shape's file, the repetition, the shape's size.
 _AFTER = {"shape": ("shape_file",), "steps": ("repetition",), "seed": ("shape_patches",)}
-#: One row of results.csv: the run's coordinates (every run parameter, in its declaration's order), then the
-#: summary.json fields of its outcome.
+#: Experiments run the study's model only, so far: results.csv has no column for the algorithm or its parameters.
+_NOT_YET = {"algorithm", *(p.name for p in RUN_PARAMETERS if p.algorithm == RUBENSTEIN)}
+#: One row of results.csv: the run's coordinates (every run parameter an experiment file may set, in its
+#: declaration's order), then the summary.json fields of its outcome.
 RESULT_COLUMNS = (
-    *(c for p in RUN_PARAMETERS if p.recorded for c in (p.name, *_AFTER.get(p.name, ()))),
+    *(c for p in RUN_PARAMETERS if p.recorded and p.name not in _NOT_YET for c in (p.name, *_AFTER.get(p.name, ()))),
     "engine",
     "outcome",
     "convergence_tick",

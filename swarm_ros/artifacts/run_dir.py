@@ -15,7 +15,7 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -383,18 +383,8 @@ def write_run(
     Raises:
         OutputError: the directory cannot be written.
     """
-    check_out_dir(out, overwrite, free=0)  # the run is over: what it writes now either fits or fails whole
-    out = out.absolute()
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{out.parent}: cannot create output directory ({exc.strerror or exc})") from None
-    try:  # fresh names: nothing that exists is ever replaced but ``out``, and only a run directory
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
-        trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
-    except OSError as exc:
-        raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc})") from None
-    try:
+
+    def fill(tmp: Path) -> None:
         summary = {**record.summary, "recording_robots_every": robots_every if recording is not None else None}
         if bag is not None:
             summary["bag_robots_every"] = robots_every
@@ -412,11 +402,8 @@ def write_run(
             recording.rename(tmp / RECORDING_FILE)
         if bag is not None:
             bag.rename(tmp / BAG_DIR)
-        public_mode(tmp, directory=True)
-        if out.exists():
-            out.rename(trash / out.name)
-        tmp.rename(out)
-    except OSError as exc:
+
+    def restore(tmp: Path) -> str:
         kept = ""
         if recording is not None and (tmp / RECORDING_FILE).exists():
             (tmp / RECORDING_FILE).rename(recording)
@@ -424,6 +411,38 @@ def write_run(
             kept = f"; the recording is kept in {recording}"
         if bag is not None and (tmp / BAG_DIR).exists():
             (tmp / BAG_DIR).rename(bag)
+        return kept
+
+    return write_dir(out, overwrite, fill, restore)
+
+
+def write_dir(
+    out: Path, overwrite: bool, fill: Callable[[Path], None], restore: Callable[[Path], str] | None = None
+) -> Path:
+    """Make run directory ``out`` whole or not at all: ``fill`` fills a temporary one that takes its place after.
+
+    Raises:
+        OutputError: the directory cannot be written.
+    """
+    check_out_dir(out, overwrite, free=0)  # the run is over: what it writes now either fits or fails whole
+    out = out.absolute()
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{out.parent}: cannot create output directory ({exc.strerror or exc})") from None
+    try:  # fresh names: nothing that exists is ever replaced but ``out``, and only a run directory
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+        trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+    except OSError as exc:
+        raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc})") from None
+    try:
+        fill(tmp)
+        public_mode(tmp, directory=True)
+        if out.exists():
+            out.rename(trash / out.name)
+        tmp.rename(out)
+    except OSError as exc:
+        kept = restore(tmp) if restore is not None else ""
         raise OutputError(f"{out}: cannot write run output ({exc.strerror or exc}){kept}") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from swarm_ros.core.params import RUN_PARAMETERS
+from swarm_ros.core.params import DARR_NIAZI, RUN_PARAMETERS
 
 SEEDS = 4
 
@@ -142,8 +142,8 @@ def run_summary(
         **{
             p.name: robots if p.name == "robots" else world_radius if p.name == "world_radius" else params[p.name]
             for p in RUN_PARAMETERS
-            if p.name != "shape" and p.recorded
-        },  # every run parameter, as declared
+            if p.name != "shape" and p.recorded and p.algorithm in ("", params.get("algorithm", DARR_NIAZI))
+        },  # every run parameter of the run's algorithm, as declared
         "engine": engine,
         "outcome": outcome.value,
         "convergence_tick": final.tick,

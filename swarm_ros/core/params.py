@@ -16,12 +16,12 @@ declared the same way in :data:`NODE_PARAMETERS`.
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from .errors import ParameterError
 from .grid import DEFAULT_RADIUS, MIN_RADIUS, World
+from .param_decl import INT64_MAX, Param
 from .rulesets import CROWDING_VALUES, DEFAULT_RULES, JOIN_VALUES, RULE_SETS, STEPS_VALUES, RuleSet
 
 if TYPE_CHECKING:
@@ -31,111 +31,14 @@ DEFAULT_SEED = 1
 DEFAULT_VISION = 1.0
 DEFAULT_WIGGLE_DEG = 45.0
 DEFAULT_MAX_TICKS = 100_000
-INT64_MAX = 2**63 - 1  #: every integer parameter fits in 64 bits: a ROS parameter's and the kernels' integers
 MAX_SEED = INT64_MAX
 #: The largest tick limit: far beyond any run (the study's is 100,000; 10^9 ticks take days at the fastest),
 #: and the graph's world keeps a row of metrics per tick in its checkpoint, a sparse file this many rows long.
 MAX_TICKS = 10**9
 MIN_ROBOTS = 4  # the four seeds
-
-_KIND_WORDS = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
-
-
-@dataclass(frozen=True)
-class Param:
-    """One parameter: its name, default (whose type is the parameter's type), meaning and bounds.
-
-    Attributes:
-        low, high: bounds of a number (None: unbounded); ``low_open``: ``low`` itself is out.
-        choices: the values a string may take ("" always allowed when ``blank`` is set).
-        blank: meaning of the empty string or of 0, if that is a value of its own.
-        flag: the command-line flag ("" = none; None = ``--`` and the name with dashes).
-        experiment: ``"axis"`` (an experiment file may list several values), ``"fixed"``
-            (one value for the whole experiment), or ``""`` (not an experiment file key).
-        model: whether it is a field of :class:`RunParams` (the shape and the world are not).
-        recorded: whether summary.json and results.csv have it as a field or column (``mesh_scale``
-            is recorded only where it applies, :func:`swarm_ros.core.metrics.run_summary`).
-    """
-
-    name: str
-    default: Any
-    help: str
-    low: float | None = None
-    high: float | None = None
-    low_open: bool = False
-    choices: tuple[str, ...] = ()
-    blank: str = ""
-    flag: str | None = None
-    experiment: str = "fixed"
-    model: bool = True
-    recorded: bool = True
-    list_text: bool = False  #: a comma-separated list: one whole number (ROS 2 reads ``-p p:=5`` so) is its text
-
-    @property
-    def kind(self) -> type:
-        return type(self.default)
-
-    @property
-    def cli_flag(self) -> str:
-        return "--" + self.name.replace("_", "-") if self.flag is None else self.flag
-
-    def describe(self) -> str:
-        """What a valid value is, in words: ``an integer >= 3``, ``one of paper, local, literal``."""
-        if self.choices:
-            text = f"one of {', '.join(self.choices)}"
-        else:
-            text = _KIND_WORDS[self.kind]
-            if self.low is not None:
-                text += f" {'>' if self.low_open else '>='} {_number(self.low)}"
-            if self.high is not None:
-                text += f" and <= {_number(self.high)}"
-        return text + (f" ({self.blank_value!r} = {self.blank})" if self.blank else "")
-
-    @property
-    def blank_value(self) -> object:
-        return self.kind()
-
-    def check(self, value: Any) -> Any:
-        """``value`` as this parameter's type, if it is one this parameter takes.
-
-        Raises:
-            ParameterError: ``<name> must be <describe()>, got <value>``, in one line.
-        """
-        kind = self.kind
-        if self.list_text and isinstance(value, numbers.Integral) and not isinstance(value, bool):
-            value = str(value)
-        if kind is bool:
-            ok = isinstance(value, bool)
-        elif kind is str:
-            ok = isinstance(value, str)
-        elif kind is int:
-            ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
-        else:
-            ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
-        if ok and not (self.blank and value == self.blank_value):
-            if self.choices:
-                ok = value in self.choices
-            elif kind in (int, float):
-                ok = (self.low is None or (value > self.low if self.low_open else value >= self.low)) and (
-                    self.high is None or value <= self.high
-                )
-        if ok and kind is int and value > INT64_MAX and (self.high is None or self.high > INT64_MAX):
-            raise ParameterError(
-                f"{self.name} must be {self.describe()} and <= {INT64_MAX} (a 64-bit integer), got {value}"
-            )
-        if not ok:
-            shown = (
-                _number(value) if isinstance(value, float) and math.isfinite(value) and kind is float else repr(value)
-            )  # an integer's 442.0 stays 442.0: the '.0' is what is wrong
-            raise ParameterError(f"{self.name} must be {self.describe()}, got {shown}")
-        return kind(value)
-
-
-def _number(x: float) -> str:
-    """``3``, ``0.5``, ``9223372036854775807``: a bound or value as a user would write it."""
-    if isinstance(x, numbers.Integral):
-        return str(x)
-    return str(int(x)) if float(x).is_integer() else f"{x:g}"
+DARR_NIAZI, RUBENSTEIN = "darr-niazi", "rubenstein"
+ALGORITHMS = (DARR_NIAZI, RUBENSTEIN)  #: the shape-formation algorithms; the study's model first, the default
+_DN, _RB = {"algorithm": DARR_NIAZI}, {"algorithm": RUBENSTEIN, "experiment": ""}  # experiments: the model only
 
 
 def _param(default: Any, meaning: str, **declaration: Any) -> Any:
@@ -168,8 +71,15 @@ class Settings:
         recorded=False,
     )
     robots: int = _param(0, "robots N, seeds included", low=MIN_ROBOTS, blank="the shape's patch count", experiment="")
+    algorithm: str = _param(
+        DARR_NIAZI,
+        "shape-formation algorithm: darr-niazi (the study's model) or rubenstein (Rubenstein et al.'s "
+        "Kilobot self-assembly); see docs/model.md",
+        choices=ALGORITHMS,
+        experiment="",  # experiments run the study's model only, so far
+    )
     vision_radius: float = _param(
-        DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision", experiment="axis"
+        DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision", experiment="axis", **_DN
     )
     rules: str = _param(
         DEFAULT_RULES,
@@ -177,20 +87,64 @@ class Settings:
         "literal (join local, steps literal); see docs/model.md",
         choices=tuple(RULE_SETS),
         experiment="axis",
+        **_DN,
     )
-    join: str = _param("", "override the rule set's join switch", choices=JOIN_VALUES, blank="the rule set's own")
+    join: str = _param(
+        "", "override the rule set's join switch", choices=JOIN_VALUES, blank="the rule set's own", **_DN
+    )
     crowding: str = _param(
-        "", "override the rule set's crowding switch", choices=CROWDING_VALUES, blank="the rule set's own"
+        "", "override the rule set's crowding switch", choices=CROWDING_VALUES, blank="the rule set's own", **_DN
     )
-    steps: str = _param("", "override the rule set's steps switch", choices=STEPS_VALUES, blank="the rule set's own")
+    steps: str = _param(
+        "", "override the rule set's steps switch", choices=STEPS_VALUES, blank="the rule set's own", **_DN
+    )
     seed: int = _param(DEFAULT_SEED, "run seed", low=0, high=MAX_SEED, experiment="")
     max_ticks: int = _param(DEFAULT_MAX_TICKS, "tick limit", low=1, high=MAX_TICKS)
-    wiggle_deg: float = _param(DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle")
+    wiggle_deg: float = _param(
+        DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle", **_DN
+    )
     world_radius: int = _param(DEFAULT_RADIUS, "the world spans [-R, R] patches", low=MIN_RADIUS, model=False)
     fail_fraction: float = _param(
-        0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0, high=1.0, flag=""
+        0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0, high=1.0, flag="", **_DN
     )
-    fail_tick: int = _param(0, "the tick at whose end fail_fraction of the robots fail", low=0, flag="")
+    fail_tick: int = _param(0, "the tick at whose end fail_fraction of the robots fail", low=0, flag="", **_DN)
+    # Rubenstein et al.'s algorithm (docs/model.md): lengths in robot diameters d
+    pixel_size: float = _param(1.2, "side of a shape pixel, in robot diameters", low=0.5, high=10.0, **_RB)
+    comm_range: float = _param(3.5, "communication range C, in robot diameters", low=1.0, high=20.0, **_RB)
+    gradient_range: float = _param(
+        1.5, "a neighbour closer than this counts for the gradient (G; d < DESIRED < G < sqrt(3) d)", low=1.0, **_RB
+    )
+    desired_distance: float = _param(1.3, "edge-following distance DESIRED, in d", low=1.0, low_open=True, **_RB)
+    yield_distance: float = _param(2.5, "stop while the edge-follower ahead is closer (YIELD)", low=1.0, **_RB)
+    step_length: float = _param(0.05, "forward step per tick, in d", low=0.0, low_open=True, high=0.5, **_RB)
+    turn_deg: float = _param(7.0, "turn per tick while edge-following, degrees", low=0.0, high=90.0, **_RB)
+    range_noise: float = _param(0.0, "measured distances err uniformly within +-this, in d", low=0.0, high=0.5, **_RB)
+    loc_gain: float = _param(
+        0.25,
+        "localization: the share of the way to each anchor's circle per sweep",
+        low=0.0,
+        low_open=True,
+        high=1.0,
+        **_RB,
+    )
+    loc_sweeps: int = _param(
+        4,
+        "localization sweeps over the anchors per tick (one lags a moving robot: docs/model.md)",
+        low=1,
+        high=100,
+        **_RB,
+    )
+    loc_min_angle_deg: float = _param(
+        15.0, "localization needs an anchor triangle whose smallest angle exceeds this", low=0.0, high=60.0, **_RB
+    )
+    loc_settle: float = _param(
+        0.05, "localized once the estimate moves less than this a tick, in d, ...", low=0.0, low_open=True, **_RB
+    )
+    loc_settle_ticks: int = _param(10, "... for this many ticks in a row", low=1, **_RB)
+    startup_ticks: int = _param(200, "ticks every robot waits at the start (START)", low=0, **_RB)
+    stall_ticks: int = _param(
+        20_000, "the run ends incomplete after this many ticks without a robot joining", low=1, **_RB
+    )
 
     def updated(self, **values: Any) -> Settings:
         """A copy with the given non-None values."""
@@ -216,6 +170,11 @@ class Settings:
         shape = Shape.load(self.shape, World(self.world_radius), mesh_scale=self.mesh_scale)
         check_world_memory(self.world_radius, dims=shape.dims)
         params = self.run_params(self.robots or shape.patches)
+        if params.algorithm == RUBENSTEIN:
+            from .rubenstein.layout import check_shape
+
+            check_shape(shape)  # its robots start in a pack outside the shape's world: no free patch to count
+            return shape, params
         params.check_vision(shape.world.radius)
         if params.robots > shape.free_patches:
             raise ParameterError(
@@ -367,6 +326,7 @@ class RunParams:
     ``robots`` resolved (>= 4) and the rule set's switches resolved ("" becomes the rule set's own value)."""
 
     robots: int
+    algorithm: str = DARR_NIAZI
     vision_radius: float = DEFAULT_VISION
     rules: str = DEFAULT_RULES
     join: str = ""
@@ -377,11 +337,36 @@ class RunParams:
     wiggle_deg: float = DEFAULT_WIGGLE_DEG
     fail_fraction: float = 0.0
     fail_tick: int = 0
+    pixel_size: float = 1.2
+    comm_range: float = 3.5
+    gradient_range: float = 1.5
+    desired_distance: float = 1.3
+    yield_distance: float = 2.5
+    step_length: float = 0.05
+    turn_deg: float = 7.0
+    range_noise: float = 0.0
+    loc_gain: float = 0.25
+    loc_sweeps: int = 4
+    loc_min_angle_deg: float = 15.0
+    loc_settle: float = 0.05
+    loc_settle_ticks: int = 10
+    startup_ticks: int = 200
+    stall_ticks: int = 20_000
 
     def __post_init__(self) -> None:
         for p in RUN_PARAMETERS:
             if p.model and p.name not in ("join", "crowding", "steps", "rules"):
                 object.__setattr__(self, p.name, p.check(getattr(self, p.name)))
+        # the default rule set's switches, resolved, are its defaults too (a summary's parameters hold them so)
+        unset = dict(zip(("join", "crowding", "steps"), RULE_SETS[DEFAULT_RULES]))
+        for p in RUN_PARAMETERS:
+            value = getattr(self, p.name, p.default)
+            if p.algorithm not in ("", self.algorithm) and value not in (p.default, unset.get(p.name)):
+                raise ParameterError(
+                    f"{p.name} is a parameter of the {p.algorithm} algorithm, not of {self.algorithm}, got {value!r}"
+                )
+        if self.algorithm == RUBENSTEIN:
+            self._check_rubenstein()
         if self.robots == 0:
             raise ParameterError(f"robots must be an integer >= {MIN_ROBOTS}, got 0")
         ruleset = RuleSet.resolve(self.rules, self.join, self.crowding, self.steps)
@@ -394,6 +379,20 @@ class RunParams:
                 f"fail_tick must be before max_ticks ({self.max_ticks}) when fail_fraction > 0, "
                 f"got {self.fail_tick}: no robot would fail"
             )
+
+    def _check_rubenstein(self) -> None:
+        """The rubenstein algorithm's lengths: d < DESIRED < G < sqrt(3) d, so that the gradient counts the rings of
+        a touching hexagonal pack; G and YIELD within the communication range."""
+        if not self.desired_distance < self.gradient_range < math.sqrt(3.0):
+            raise ParameterError(
+                "the rubenstein algorithm needs 1 < desired_distance < gradient_range < sqrt(3) (robot diameters), "
+                f"got desired_distance {self.desired_distance:g} and gradient_range {self.gradient_range:g}"
+            )
+        for name in ("gradient_range", "yield_distance"):
+            if getattr(self, name) >= self.comm_range:
+                raise ParameterError(
+                    f"{name} must be below comm_range ({self.comm_range:g}), got {getattr(self, name):g}"
+                )
 
     def check_vision(self, world_radius: int) -> None:
         """Refuse a vision radius beyond the world's radius: a robot would see across the whole world.

@@ -1,0 +1,58 @@
+"""``swarm-ros simulate`` under the rubenstein algorithm (Rubenstein et al.'s Kilobot self-assembly)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.signals import EXIT_INTERRUPTED, StopFlag
+
+
+def simulate_kilobot(
+    args: argparse.Namespace, shape: Shape, params: RunParams, out: Path, prog: str, every: int
+) -> int:
+    """``simulate`` under the rubenstein algorithm: its in-process engine, with a progress bar; the run directory
+    holds no recording (not written for this algorithm yet)."""
+    from tqdm import tqdm
+
+    from swarm_ros.artifacts.kilobot_run import write_kilobot_run
+    from swarm_ros.core.metrics import Outcome
+    from swarm_ros.core.rubenstein.run import KilobotRun, summary_of
+
+    start = time.perf_counter()
+    with StopFlag() as stop:
+        run = KilobotRun(shape, params)
+        with tqdm(
+            total=run.pixels, unit="pixel", desc="covered", disable=True if args.quiet else None, file=sys.stderr
+        ) as bar:
+            while not run.done and not stop.signum:
+                run.run(every)
+                m = run.metrics
+                bar.update(int(m["covered"]) - bar.n)
+                bar.set_postfix(tick=str(run.tick), joined=str(int(m["joined"])), refresh=False)
+    stopped = Outcome.INTERRUPTED if not run.done else None
+    summary = summary_of(run, time.perf_counter() - start, stopped)
+    out = write_kilobot_run(out, run, summary, overwrite=args.overwrite)
+    if stopped is not None:
+        print(f"{prog}: interrupted at tick {run.tick}; the run so far is in {out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    if not args.quiet:
+        rows = [
+            ("shape", f"{summary['shape']} ({run.pixels} pixels of {params.pixel_size:g} d)"),
+            ("robots", f"{params.robots}  (algorithm rubenstein, seed {params.seed})"),
+            ("outcome", summary["outcome"]),
+            ("end tick", str(run.tick)),
+            ("50% / 90% tick", f"{summary['fill_50_tick']} / {summary['fill_90_tick']}"),
+            ("covered", f"{summary['coverage']:.1%} of the pixels"),
+            ("joined", f"{summary['joined']}  (outside the shape {summary['joined_outside']})"),
+            ("loc. error", f"{summary['loc_error']:.3f} d (mean over the joined)"),
+            ("wall time", f"{summary['wall_seconds']:.2f} s"),
+            ("output", str(out)),
+        ]
+        for key, value in rows:
+            print(f"{key:<17} {value}")
+    return 0

@@ -1,0 +1,81 @@
+"""A rubenstein run's directory: summary.json, metrics.csv, final_state.csv and final.png, written whole or not at
+all (:func:`~swarm_ros.artifacts.run_dir.write_dir`)."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+from swarm_ros.artifacts.run_dir import summary_json, write_dir
+from swarm_ros.core.rubenstein.rule import STATE_NAMES
+from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+
+FINAL_COLUMNS = ("id", "x", "y", "heading", "state", "gradient", "estimate_x", "estimate_y", "localized")
+
+
+def metrics_csv(run: KilobotRun) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(COLUMNS)
+    for row in run.history.tolist():
+        writer.writerow([*(int(v) for v in row[:-1]), row[-1]])
+    return buf.getvalue()
+
+
+def final_state_csv(run: KilobotRun) -> str:
+    s = run.robots
+    lines = [",".join(FINAL_COLUMNS)]
+    for i in range(s.x.size):
+        g = int(s.g[i]) if s.g[i] < 1 << 40 else ""
+        est = (repr(float(s.ex[i])), repr(float(s.ey[i]))) if s.est[i] else ("", "")
+        lines.append(
+            f"{i},{float(s.x[i])!r},{float(s.y[i])!r},{float(s.heading[i])!r},{STATE_NAMES[s.state[i]]},{g},"
+            f"{est[0]},{est[1]},{int(s.loc[i])}"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def save_final_png(run: KilobotRun, path: Path) -> None:
+    """The shape's pixels, and each robot where it ended, coloured by state, with its estimate's offset."""
+    from matplotlib.collections import PatchCollection
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle, Rectangle
+
+    f, s = run.frame, run.robots
+    fig = Figure(figsize=(7, 7))
+    ax = fig.add_subplot()
+    rows, cols = f.mask.shape
+    pixels = [
+        Rectangle((f.x0 + c * f.pixel, f.y0 + r * f.pixel), f.pixel, f.pixel)
+        for r in range(rows)
+        for c in range(cols)
+        if f.mask[r, c]
+    ]
+    ax.add_collection(PatchCollection(pixels, facecolor="#e4e4e4", edgecolor="none"))
+    colours = ["#9e9e9e", "#4a7fd6", "#f28e2b", "#e15759", "#2e9e44"]
+    discs = [Circle((x, y), 0.5) for x, y in zip(s.x.tolist(), s.y.tolist())]
+    ax.add_collection(PatchCollection(discs, facecolor=[colours[k] for k in s.state], edgecolor="k", linewidths=0.2))
+    for i in range(s.x.size):
+        if s.est[i]:
+            ax.plot([s.x[i], s.ex[i]], [s.y[i], s.ey[i]], color="#b0009b", linewidth=0.6)
+    ax.set_title(f"{run.shape.name}, {run.params.robots} robots (rubenstein): {run.outcome}, tick {run.tick}")
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    fig.savefig(path, dpi=100)
+
+
+def write_kilobot_run(out: Path, run: KilobotRun, summary: dict, overwrite: bool = False) -> Path:
+    """Write the run's files into ``out``, atomically. Returns ``out``.
+
+    Raises:
+        OutputError: the directory cannot be written.
+    """
+
+    def fill(tmp: Path) -> None:
+        (tmp / "summary.json").write_text(summary_json(summary), encoding="utf-8")
+        (tmp / "metrics.csv").write_text(metrics_csv(run), encoding="utf-8")
+        (tmp / "final_state.csv").write_text(final_state_csv(run), encoding="utf-8")
+        save_final_png(run, tmp / "final.png")
+
+    return write_dir(out, overwrite, fill)

@@ -1,0 +1,236 @@
+"""The rubenstein algorithm's in-process engine: every robot in one process, tick after tick.
+
+A tick: every robot not joined decides from the last tick (:func:`~.kernels.decide_kernel`),
+the world settles the moves so that no two robots overlap (:func:`~.kernels.resolve_kernel`)
+and writes the decisions in; then the robots that joined cover the shape pixels their discs
+meet, and the tick's metrics are taken. How a run ends (:class:`~swarm_ros.core.metrics.Outcome`):
+
+* ``complete``: every shape pixel is covered and every robot has joined;
+  ``complete_with_extras``: every pixel is covered and robots are left over (they keep
+  edge-following, as Kilobots would);
+* ``incomplete``: pixels are left uncovered and every robot has joined, or no robot has joined
+  for ``stall_ticks`` ticks since the start-up (the robots left circle the group for good);
+* ``timeout``: ``max_ticks`` first.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_ros.core.metrics import OUTCOME_OF_CODE, Outcome
+from swarm_ros.core.params import RUBENSTEIN, RunParams
+from swarm_ros.core.rng import STREAM_PLACE_HEADING, uniform_array
+from swarm_ros.core.shapes import Shape
+
+from .layout import SEED_G, SEEDS, ShapeFrame, start_positions
+from .rule import (
+    JOINED,
+    NEVER,
+    START,
+    UNKNOWN_G,
+    Bitmap,
+    Cells,
+    Robots,
+    Rule,
+    decided_for,
+)
+from .ticks import Tally, join_robot, metrics_row, run_kernel
+
+#: metrics.csv's columns for this algorithm, one row per tick (tick 0 first)
+COLUMNS = ("tick", "joined", "moving", "waiting", "covered", "joined_outside", "loc_error")
+CHUNK = 4096  #: ticks per call of the compiled run, at most
+MARGIN = 6.0  #: the cell grid reaches this far (in d, beyond the communication range) past the shape and the pack
+
+
+def robots_at_start(params: RunParams) -> Robots:
+    """The robots at tick 0: the seeds joined and localized, the others in START on the pack, facing a
+    seeded random heading, with no gradient and no estimate."""
+    n = params.robots
+    pos = start_positions(n)
+    f = np.zeros(n)
+    heading = 2.0 * math.pi * uniform_array(params.seed, np.arange(n, dtype=np.int64), 0, STREAM_PLACE_HEADING)
+    s = Robots(
+        x=pos[:, 0].copy(),
+        y=pos[:, 1].copy(),
+        heading=heading,
+        state=np.full(n, START, dtype=np.int8),
+        g=np.full(n, UNKNOWN_G, dtype=np.int64),
+        ex=f.copy(),
+        ey=f.copy(),
+        est=np.zeros(n, dtype=np.int8),
+        loc=np.zeros(n, dtype=np.int8),
+        still=np.zeros(n, dtype=np.int64),
+        near=np.full(n, np.inf),
+        began=np.full(n, NEVER, dtype=np.int64),
+        joined=np.full(n, -1, dtype=np.int64),
+    )
+    k = len(SEEDS)
+    s.state[:k], s.g[:k], s.est[:k], s.loc[:k], s.joined[:k] = JOINED, SEED_G, 1, 1, 0
+    s.ex[:k], s.ey[:k] = SEEDS[:, 0], SEEDS[:, 1]
+    return s
+
+
+def rule_of(params: RunParams) -> Rule:
+    return Rule(
+        comm=params.comm_range,
+        gradient=params.gradient_range,
+        desired=params.desired_distance,
+        yield_dist=params.yield_distance,
+        step=params.step_length,
+        turn=math.radians(params.turn_deg),
+        noise=params.range_noise,
+        gain=params.loc_gain,
+        sweeps=params.loc_sweeps,
+        min_angle=math.radians(params.loc_min_angle_deg),
+        settle=params.loc_settle,
+        settle_ticks=params.loc_settle_ticks,
+        startup=params.startup_ticks,
+        seed=params.seed,
+    )
+
+
+def bitmap_of(frame: ShapeFrame) -> Bitmap:
+    rows, cols = frame.mask.shape
+    return Bitmap(frame.mask.ravel().copy(), rows, cols, frame.pixel, frame.x0, frame.y0)
+
+
+def cells_for(frame: ShapeFrame, start: Robots, params: RunParams) -> Cells:
+    """A cell list of side the communication range over the shape and the pack, with a margin."""
+    xmin, ymin, xmax, ymax = frame.extent
+    pad = params.comm_range + MARGIN
+    x0 = math.floor(min(xmin, start.x.min()) - pad)
+    y0 = math.floor(min(ymin, start.y.min()) - pad)
+    side = params.comm_range
+    nx = int(math.ceil((max(xmax, start.x.max()) + pad - x0) / side))
+    ny = int(math.ceil((max(ymax, start.y.max()) + pad - y0) / side))
+    return Cells(np.full(nx * ny, -1, dtype=np.int64), np.full(params.robots, -1, dtype=np.int64), x0, y0, side, nx, ny)
+
+
+def anchor_capacity(comm: float) -> int:
+    """The most robots that fit within ``comm`` of a robot without overlapping (a hexagonal pack's density over
+    the disc of radius ``comm`` + 1/2), and some."""
+    return int(math.ceil(math.pi * (comm + 0.5) ** 2 / (math.sqrt(3.0) / 2.0))) + 8
+
+
+class KilobotRun:
+    """A run of the rubenstein algorithm in one process.
+
+    Attributes:
+        shape, params: what is run; frame: the shape in the seeds' frame.
+        robots: the robots' arrays (:class:`~.kernels.Robots`), as at the end of ``tick``.
+        covered: per shape pixel (the frame's flat bitmap), 1 once a joined robot's disc meets it.
+        outcome: how the run ended, or None while it goes on.
+    """
+
+    def __init__(self, shape: Shape, params: RunParams) -> None:
+        if params.algorithm != RUBENSTEIN:
+            raise ValueError(f"KilobotRun runs the rubenstein algorithm, not {params.algorithm}")
+        self.shape, self.params = shape, params
+        self.frame = ShapeFrame.of(shape, params.pixel_size)
+        self.robots = robots_at_start(params)
+        self.rule = rule_of(params)
+        self.bitmap = bitmap_of(self.frame)
+        self.cells = cells_for(self.frame, self.robots, params)
+        self.covered = np.zeros(self.bitmap.mask.size, dtype=np.uint8)
+        self.tick = 0
+        self.outcome: Outcome | None = None
+        self._out = decided_for(params.robots)
+        self._granted = np.zeros(params.robots, dtype=np.uint8)
+        self._slot = np.full(params.robots, -1, dtype=np.int64)
+        cap = anchor_capacity(params.comm_range)
+        self._anchors = (np.empty(cap), np.empty(cap), np.empty(cap))
+        self._tally = Tally(np.zeros(1, np.int64), np.zeros(1), np.zeros(1, np.int64))
+        self._end = (len(SEEDS), params.stall_ticks, params.max_ticks)
+        row = np.empty((1, len(COLUMNS)))
+        for k in range(len(SEEDS)):
+            join_robot(k, self.robots, self.bitmap, self.covered, self._tally, len(SEEDS), 0)
+        metrics_row(0, self.robots, self.covered, self._tally, len(SEEDS), row[0])
+        self._rows: list[np.ndarray] = [row]
+
+    # -- reading ---------------------------------------------------------------------------------------------
+    @property
+    def done(self) -> bool:
+        return self.outcome is not None
+
+    @property
+    def pixels(self) -> int:
+        return self.frame.pixels
+
+    @property
+    def history(self) -> np.ndarray:
+        """Every tick's metrics row (``COLUMNS``), tick 0 first."""
+        if len(self._rows) > 1:
+            self._rows = [np.concatenate(self._rows)]
+        return self._rows[0]
+
+    @property
+    def metrics(self) -> dict[str, float]:
+        return dict(zip(COLUMNS, self._rows[-1][-1].tolist()))
+
+    # -- running ---------------------------------------------------------------------------------------------
+    def step(self) -> None:
+        """Advance one tick."""
+        self.run(1)
+
+    def run(self, max_ticks: int | None = None) -> Outcome | None:
+        """Run to the end, or ``max_ticks`` more ticks; the outcome, or None if the run goes on."""
+        if self.outcome is not None:
+            raise RuntimeError(f"the run has ended ({self.outcome}) at tick {self.tick}")
+        while self.outcome is None and (max_ticks is None or max_ticks > 0):
+            limit = CHUNK if max_ticks is None else min(CHUNK, max_ticks)
+            rows = np.empty((limit, len(COLUMNS)))
+            ticks, code = run_kernel(
+                self.robots,
+                self.rule,
+                self.bitmap,
+                self.cells,
+                self._out,
+                self._granted,
+                self._slot,
+                *self._anchors,
+                self.covered,
+                self._tally,
+                rows,
+                self.tick,
+                limit,
+                self._end,
+            )
+            self.tick += ticks
+            self._rows.append(rows[:ticks])
+            self.outcome = OUTCOME_OF_CODE[code]
+            if max_ticks is not None:
+                max_ticks -= ticks
+        return self.outcome
+
+
+def fill_tick(history: np.ndarray, pixels: int, share: float) -> int | None:
+    """The first tick at whose end at least ``share`` of the shape's pixels were covered, or None."""
+    hit = np.flatnonzero(history[:, COLUMNS.index("covered")] >= share * pixels)
+    return int(history[hit[0], 0]) if hit.size else None
+
+
+def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = None) -> dict:
+    """The summary.json record of a rubenstein run: what was run, how it ended, and the comparison's metrics
+    (time: the end tick, ticks to 50% and 90% of the pixels covered; accuracy: the share of pixels covered,
+    robots joined outside the shape, the joined robots' mean localization error in d)."""
+    outcome = run.outcome or stopped
+    if outcome is None:
+        raise ValueError("the run has not ended yet")
+    m, history = run.metrics, run.history
+    return {
+        "shape": run.shape.name,
+        "shape_pixels": run.pixels,
+        **run.params.as_dict(),
+        "engine": "inprocess",
+        "outcome": str(outcome),
+        "convergence_tick": run.tick,
+        "fill_50_tick": fill_tick(history, run.pixels, 0.5),
+        "fill_90_tick": fill_tick(history, run.pixels, 0.9),
+        "coverage": m["covered"] / run.pixels,
+        "joined": int(m["joined"]),
+        "joined_outside": int(m["joined_outside"]),
+        "loc_error": m["loc_error"],
+        "wall_seconds": wall_seconds,
+    }

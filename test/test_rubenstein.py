@@ -1,0 +1,232 @@
+"""The rubenstein algorithm (Rubenstein et al.'s Kilobot self-assembly): each rule piece, the invariants over
+whole runs, the outcomes, and its parameters."""
+
+import math
+
+import numpy as np
+import pytest
+
+from swarm_ros.core import Shape, World
+from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.params import RunParams, Settings
+from swarm_ros.core.rubenstein.layout import SEEDS, ShapeFrame, start_positions
+from swarm_ros.core.rubenstein.rule import (
+    JOINED,
+    MOVE_INSIDE,
+    MOVE_OUTSIDE,
+    NEVER,
+    START,
+    UNKNOWN_G,
+    WAIT,
+    good_geometry,
+    sweep,
+    trilaterate,
+)
+from swarm_ros.core.rubenstein.run import KilobotRun
+
+pytestmark = pytest.mark.unit
+
+
+def square(side: int) -> Shape:
+    """A solid square of ``side`` x ``side`` pixels."""
+    return Shape.from_grid(np.ones((side, side), dtype=bool), World(), name=f"square{side}", source="test")
+
+
+def kilobot(shape: Shape, robots: int, **values) -> KilobotRun:
+    return KilobotRun(shape, RunParams(robots, algorithm="rubenstein", **values))
+
+
+def contacts(pos: np.ndarray) -> list[list[int]]:
+    d = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
+    return [list(np.flatnonzero((row > 0.5) & (row < 1.0 + 1e-9))) for row in d]
+
+
+def test_the_start_is_a_touching_hexagonal_pack_below_the_seeds_and_outside_the_shape():
+    pos = start_positions(200)
+    assert np.allclose(pos[:4], SEEDS)
+    d = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1)) + np.eye(200) * 9
+    assert d.min() > 1.0 - 1e-9  # touching, never overlapping
+    assert (pos[4:, 1] <= -math.sqrt(3) + 1e-9).all()  # the shape lies at y >= 0: every robot 1.5 d from it
+    seen, todo = {0}, [0]  # connected through touching neighbours
+    links = contacts(pos)
+    while todo:
+        for j in links[todo.pop()]:
+            if j not in seen:
+                seen.add(j)
+                todo.append(j)
+    assert len(seen) == 200
+
+
+def test_the_gradient_counts_the_rings_of_a_hexagonal_pack():
+    run = kilobot(square(8), 120, startup_ticks=1000)
+    run.run(60)
+    pos = np.stack([run.robots.x, run.robots.y], axis=1)
+    hops = np.full(120, -1)
+    hops[:4] = [0, 1, 1, 1]
+    frontier = [0, 1, 2, 3]
+    links = contacts(pos)
+    while frontier:  # breadth first from the seeds, through touching robots
+        nxt = []
+        for i in frontier:
+            for j in links[i]:
+                if hops[j] < 0 or hops[j] > hops[i] + 1:
+                    hops[j] = hops[i] + 1
+                    nxt.append(j)
+        frontier = nxt
+    assert (run.robots.state[4:] == START).all()
+    assert np.array_equal(run.robots.g, hops)
+    assert run.robots.g.max() >= 6
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.06])
+def test_localization_of_the_pack_converges_within_a_tenth_of_a_diameter(noise):
+    run = kilobot(square(8), 60, startup_ticks=1000, range_noise=noise, seed=3)
+    run.run(150)
+    s = run.robots
+    assert s.loc.all() and s.est.all()
+    error = np.hypot(s.ex - s.x, s.ey - s.y)
+    assert error.max() < 0.1, error.max()
+
+
+def test_one_sweep_moves_the_estimate_towards_the_measured_circles_and_trilateration_starts_it():
+    anchors = np.array([[0.0, 0.0], [3.0, 0.0], [0.0, 3.0], [3.0, 3.0]])
+    truth = np.array([1.2, 0.7])
+    am = np.hypot(*(anchors - truth).T)
+    ax, ay = anchors[:, 0].copy(), anchors[:, 1].copy()
+    x, y, ok = trilaterate(ax, ay, am, 4)
+    assert ok and math.hypot(x - truth[0], y - truth[1]) < 1e-9
+    px, py = 2.5, 2.5
+    for _ in range(200):
+        px, py = sweep(px, py, ax, ay, am, 4, 0.25)
+    assert math.hypot(px - truth[0], py - truth[1]) < 1e-6
+    assert good_geometry(ax, ay, 4, math.radians(15))
+    line = np.array([0.0, 1.0, 2.0, 3.0])
+    assert not good_geometry(line, line * 0.01, 4, math.radians(15))  # nearly collinear anchors
+
+
+def test_an_edge_follower_keeps_its_distance_around_a_fixed_group():
+    run = kilobot(square(8), 60, startup_ticks=0)
+    s = run.robots
+    mover = 59
+    group = np.arange(59)
+    s.state[group] = JOINED  # a fixed group: nothing else moves, and nothing joins
+    s.joined[group] = 0
+    s.loc[:] = 0  # no anchors: the mover never localizes, so never enters the shape
+    s.state[mover], s.began[mover] = MOVE_OUTSIDE, 0
+    s.x[mover], s.y[mover] = s.x[group].min() - 1.3, s.y[group].mean()
+    s.heading[mover] = math.pi / 2
+    cx, cy = s.x[group].mean(), s.y[group].mean()
+    gaps, angles = [], []
+    for _ in range(6000):
+        run.step()
+        gaps.append(np.hypot(s.x[group] - s.x[mover], s.y[group] - s.y[mover]).min())
+        angles.append(math.atan2(s.y[mover] - cy, s.x[mover] - cx))
+        if s.state[mover] != MOVE_OUTSIDE:
+            break
+    gaps = np.array(gaps[200:])  # once it has settled along the edge
+    assert gaps.min() >= 1.0 - 1e-9 and gaps.max() < 1.3 + 0.5
+    assert abs(np.median(gaps) - 1.3) < 0.15
+    turned = np.unwrap(angles)
+    assert turned[-1] - turned[0] < -math.pi  # clockwise round the group, the group on its right
+
+
+def test_the_start_rule_lets_one_rim_robot_go_at_a_time():
+    run = kilobot(square(8), 150, startup_ticks=50, seed=5)
+    s = run.robots
+    began_any = 0
+    for _ in range(1500):
+        moving_before = np.flatnonzero((s.state == MOVE_OUTSIDE) | (s.state == MOVE_INSIDE))
+        x, y = s.x.copy(), s.y.copy()
+        run.step()
+        new = np.flatnonzero(s.began == run.tick)
+        began_any += new.size
+        for i in new:
+            near = np.hypot(x - x[i], y - y[i]) < run.params.comm_range
+            near[i] = False
+            assert not near[moving_before].any()  # no robot in range was moving
+            assert not near[new].any()  # and none in range began with it
+    assert began_any >= 5
+
+
+def test_no_overlap_ever_joined_robots_stay_put_and_keep_their_gradient():
+    run = kilobot(square(6), 40, seed=1)
+    s = run.robots
+    while not run.done:
+        was = s.state == JOINED
+        x, y, g, ex = s.x[was].copy(), s.y[was].copy(), s.g[was].copy(), s.ex[was].copy()
+        run.step()
+        assert np.array_equal(s.x[was], x) and np.array_equal(s.y[was], y)
+        assert np.array_equal(s.g[was], g) and np.array_equal(s.ex[was], ex)
+        assert (s.state[was] == JOINED).all()
+        if run.tick % 50 == 0 or run.done:
+            d = np.hypot(s.x[:, None] - s.x[None, :], s.y[:, None] - s.y[None, :]) + np.eye(s.x.size) * 9
+            assert d.min() >= 1.0 - 1e-9
+    assert run.outcome.value == "complete"
+
+
+def test_every_tick_is_checked_for_overlap_in_a_short_stretch_of_edge_following():
+    run = kilobot(square(6), 40, seed=2)
+    s = run.robots
+    run.run(400)
+    for _ in range(1200):
+        run.step()
+        d = np.hypot(s.x[:, None] - s.x[None, :], s.y[:, None] - s.y[None, :]) + np.eye(s.x.size) * 9
+        assert d.min() >= 1.0 - 1e-9
+
+
+def test_a_small_solid_shape_completes_and_covers_every_pixel():
+    run = kilobot(square(6), 40, seed=1)
+    run.run()
+    assert run.outcome.value == "complete"
+    m = run.metrics
+    assert m["covered"] == run.pixels == 36 and m["joined"] == 40
+    assert m["loc_error"] < 0.1
+
+
+def test_too_few_robots_leave_the_shape_incomplete_once_every_robot_has_joined():
+    run = kilobot(square(6), 20, seed=1)
+    run.run()
+    assert run.outcome.value == "incomplete"
+    assert run.metrics["joined"] == 20 and run.metrics["covered"] < run.pixels
+
+
+def test_the_same_seed_gives_the_same_run_and_step_equals_run():
+    a, b = kilobot(square(6), 40, seed=4), kilobot(square(6), 40, seed=4)
+    a.run(700)
+    for _ in range(700):
+        b.step()
+    assert np.array_equal(a.history, b.history)
+    for name in a.robots._fields:
+        assert np.array_equal(getattr(a.robots, name), getattr(b.robots, name)), name
+    c = kilobot(square(6), 40, seed=5)
+    c.run(700)
+    assert not np.array_equal(a.robots.x, c.robots.x)
+
+
+def test_the_shape_frame_puts_the_lowest_row_on_the_x_axis_centred():
+    frame = ShapeFrame.of(square(6), 1.5)
+    assert frame.extent == (-4.5, 0.0, 4.5, 9.0)
+    assert frame.inside(np.array([0.0, 0.0, 4.6]), np.array([0.5, -0.1, 1.0])).tolist() == [True, False, False]
+
+
+def test_parameters_of_the_other_algorithm_are_refused_in_one_line():
+    with pytest.raises(ParameterError, match="comm_range is a parameter of the rubenstein algorithm"):
+        RunParams(100, comm_range=4.0)
+    with pytest.raises(ParameterError, match="vision_radius is a parameter of the darr-niazi algorithm"):
+        RunParams(100, algorithm="rubenstein", vision_radius=2.0)
+    with pytest.raises(ParameterError, match="desired_distance < gradient_range"):
+        RunParams(100, algorithm="rubenstein", desired_distance=1.6)
+    with pytest.raises(ParameterError, match="yield_distance must be below comm_range"):
+        RunParams(100, algorithm="rubenstein", yield_distance=3.6)
+    with pytest.raises(ParameterError, match="2D shapes only"):
+        Settings(shape="box", algorithm="rubenstein").resolve()
+    p = RunParams(100, algorithm="rubenstein")
+    assert RunParams(**p.as_dict()) == p  # a summary's parameters, rule set resolved, read back
+
+
+def test_the_state_codes_start_as_documented():
+    run = kilobot(square(6), 30)
+    s = run.robots
+    assert (s.state[:4] == JOINED).all() and (s.state[4:] == START).all()
+    assert s.g[:4].tolist() == [0, 1, 1, 1] and (s.g[4:] == UNKNOWN_G).all()
+    assert (s.began == NEVER).all() and WAIT == 1
