@@ -157,7 +157,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         from swarm_ros.app.kilobot import simulate_kilobot
 
         note_compiling(args.quiet)
-        return simulate_kilobot(args, shape, params, out, PROG, PROGRESS_TICKS)
+        return simulate_kilobot(args, shape, params, out, options, PROG, PROGRESS_TICKS)
 
     from swarm_ros.core.engine import Simulation  # here: numba is not needed by the other commands' start
     from swarm_ros.core.metrics import Outcome

@@ -7,7 +7,7 @@ import csv
 import io
 from pathlib import Path
 
-from swarm_ros.artifacts.run_dir import summary_json, write_dir
+from swarm_ros.artifacts.run_dir import RECORDING_FILE, summary_json, write_dir
 from swarm_ros.core.rubenstein.rule import STATE_NAMES
 from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
 
@@ -65,8 +65,11 @@ def save_final_png(run: KilobotRun, path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
-def write_kilobot_run(out: Path, run: KilobotRun, summary: dict, overwrite: bool = False) -> Path:
-    """Write the run's files into ``out``, atomically. Returns ``out``.
+def write_kilobot_run(
+    out: Path, run: KilobotRun, summary: dict, overwrite: bool = False, recording: Path | None = None
+) -> Path:
+    """Write the run's files into ``out``, atomically, ``recording`` (a finished .rrd) moved in as
+    ``recording.rrd`` (and back where it was if the write fails). Returns ``out``.
 
     Raises:
         OutputError: the directory cannot be written.
@@ -77,5 +80,12 @@ def write_kilobot_run(out: Path, run: KilobotRun, summary: dict, overwrite: bool
         (tmp / "metrics.csv").write_text(metrics_csv(run), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(run), encoding="utf-8")
         save_final_png(run, tmp / "final.png")
+        if recording is not None:
+            recording.rename(tmp / RECORDING_FILE)
 
-    return write_dir(out, overwrite, fill)
+    def restore(tmp: Path) -> str:
+        if recording is not None and (tmp / RECORDING_FILE).exists():
+            (tmp / RECORDING_FILE).rename(recording)
+        return f"; the recording is kept in {recording}" if recording is not None and recording.exists() else ""
+
+    return write_dir(out, overwrite, fill, restore)

@@ -37,8 +37,23 @@ COMPILING = (
 )
 
 
+def _packages() -> tuple[Path, ...]:
+    """The core and its second algorithm's package."""
+    return (_CORE, _CORE / "rubenstein")
+
+
 def _kernel_modules() -> list[Path]:
-    return [p for p in sorted(_CORE.glob("*.py")) if p.name != "kernels.py" and _MARK in p.read_text("utf-8")]
+    return [
+        p
+        for package in _packages()
+        for p in sorted(package.glob("*.py"))
+        if p.name != "kernels.py" and _MARK in p.read_text("utf-8")
+    ]
+
+
+def _cached(suffix: str) -> list[Path]:
+    """numba's cache files of every package (their module names are unique: test_layers)."""
+    return [path for package in _packages() for path in (package / "__pycache__").glob(f"*.{suffix}")]
 
 
 def kernels_cached() -> bool:
@@ -55,7 +70,7 @@ def kernels_cached() -> bool:
         stamp = _CACHE / _STAMP
         if stamp.exists() and stamp.stat().st_mtime >= max(p.stat().st_mtime for p in sources):
             return True
-        indexes = {p.name: p.stat().st_mtime for p in _CACHE.glob("*.nbi")}
+        indexes = {p.name: p.stat().st_mtime for p in _cached("nbi")}
         for source in sources:
             changed = source.stat().st_mtime
             if not any(name.startswith(f"{source.stem}.") and at >= changed for name, at in indexes.items()):
@@ -76,7 +91,7 @@ def drop_stale() -> int:
         sources = _kernel_modules()
         newest = max(p.stat().st_mtime for p in sources)
         stems = {p.stem for p in sources}
-        for path in [*_CACHE.glob("*.nbi"), *_CACHE.glob("*.nbc")]:
+        for path in [*_cached("nbi"), *_cached("nbc")]:
             if path.name.split(".", 1)[0] in stems and path.stat().st_mtime < newest:
                 path.unlink(missing_ok=True)
                 dropped += 1
@@ -107,11 +122,12 @@ def count_compiles() -> Callable[[], int]:
 
 def compile_kernels() -> None:
     """Compile every kernel into numba's cache: two ticks of the graph's code path and a few of the
-    in-process engine's, on the star and on the 3D k-block, with the default parameters (the kernels'
-    types do not depend on them)."""
+    in-process engine's, on the star and on the 3D k-block, and a few of the rubenstein algorithm's, with the
+    default parameters (the kernels' types do not depend on them)."""
     from swarm_ros.core.engine import Simulation
     from swarm_ros.core.grid import World
-    from swarm_ros.core.params import RunParams
+    from swarm_ros.core.params import RUBENSTEIN, RunParams
+    from swarm_ros.core.rubenstein.run import KilobotRun
     from swarm_ros.core.shapes import Shape
     from swarm_ros.core.warmup import warm_up
 
@@ -121,6 +137,8 @@ def compile_kernels() -> None:
         params = RunParams(robots=shape.patches)
         warm_up(shape, params)
         Simulation(shape, params).run(max_ticks=5)
+    shape = Shape.load("rectangle", World())
+    KilobotRun(shape, RunParams(robots=50, algorithm=RUBENSTEIN)).run(max_ticks=5)
     try:
         (_CACHE / _STAMP).touch()
     except OSError:

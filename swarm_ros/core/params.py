@@ -116,6 +116,12 @@ class Settings:
     )
     desired_distance: float = _param(1.3, "edge-following distance DESIRED, in d", low=1.0, low_open=True, **_RB)
     yield_distance: float = _param(2.5, "stop while the edge-follower ahead is closer (YIELD)", low=1.0, **_RB)
+    yield_patience: int = _param(
+        60,
+        "... for at most this many ticks in a row, then edge-follow on (a yielding robot can block the one ahead)",
+        low=0,
+        **_RB,
+    )
     step_length: float = _param(0.05, "forward step per tick, in d", low=0.0, low_open=True, high=0.5, **_RB)
     turn_deg: float = _param(7.0, "turn per tick while edge-following, degrees", low=0.0, high=90.0, **_RB)
     range_noise: float = _param(0.0, "measured distances err uniformly within +-this, in d", low=0.0, high=0.5, **_RB)
@@ -128,7 +134,7 @@ class Settings:
         **_RB,
     )
     loc_sweeps: int = _param(
-        4,
+        10,
         "localization sweeps over the anchors per tick (one lags a moving robot: docs/model.md)",
         low=1,
         high=100,
@@ -138,7 +144,7 @@ class Settings:
         15.0, "localization needs an anchor triangle whose smallest angle exceeds this", low=0.0, high=60.0, **_RB
     )
     loc_settle: float = _param(
-        0.05, "localized once the estimate moves less than this a tick, in d, ...", low=0.0, low_open=True, **_RB
+        0.1, "localized once the estimate moves less than this a tick, in d, ...", low=0.0, low_open=True, **_RB
     )
     loc_settle_ticks: int = _param(10, "... for this many ticks in a row", low=1, **_RB)
     startup_ticks: int = _param(200, "ticks every robot waits at the start (START)", low=0, **_RB)
@@ -342,13 +348,14 @@ class RunParams:
     gradient_range: float = 1.5
     desired_distance: float = 1.3
     yield_distance: float = 2.5
+    yield_patience: int = 60
     step_length: float = 0.05
     turn_deg: float = 7.0
     range_noise: float = 0.0
     loc_gain: float = 0.25
-    loc_sweeps: int = 4
+    loc_sweeps: int = 10
     loc_min_angle_deg: float = 15.0
-    loc_settle: float = 0.05
+    loc_settle: float = 0.1
     loc_settle_ticks: int = 10
     startup_ticks: int = 200
     stall_ticks: int = 20_000

@@ -6,14 +6,16 @@ others at (1/2, 0) and (0, +-sqrt(3)/2).
 
 * **The shape** is the shape's bitmap (any of the package's 2D shapes, a user's grid or PNG) with a
   pixel of side ``pixel_size``. It is placed with its lowest pixel row resting on the x axis (its
-  bottom edge at y = 0) and the middle of that row's set pixels at x = 0, so the upper seed stands
-  inside it and the root and its partner on its lower edge. A point is inside the shape when the
-  pixel it falls in is set.
-* **The start** is a touching hexagonal pack (spacing 1) below the seeds, on the seeds' own lattice:
-  the lattice points at y <= -sqrt(3) (the rows below the lowest seed), nearest the lowest seed
-  first (ties: higher rows, then smaller x), as many as there are robots besides the seeds. The pack
-  is connected to the seeds, and every robot in it is at least sqrt(3) > 1.5 from any point of the
-  shape, which lies at y >= 0.
+  bottom edge at y = 0) and the left edge of that row's leftmost set pixel at x = -1, so the seeds
+  stand at the shape's lower-left corner: the upper seed inside it, the root and its partner on its
+  lower edge. A point is inside the shape when the pixel it falls in is set.
+* **The start** is a touching hexagonal pack (spacing 1) below and left of the seeds, on the seeds'
+  own lattice: the lattice points at y <= -sqrt(3) (the rows below the lowest seed) and x <= 0,
+  nearest the lowest seed first (ties: higher rows, then larger x), as many as there are robots
+  besides the seeds. The pack is connected to the seeds, every robot in it is at least sqrt(3) > 1.5
+  from any point of the shape (which lies at y >= 0), and no part of the shape's lowest row hangs over
+  it: robots that join along that row's lower edge would otherwise wall in the lane the
+  edge-followers take along the pack's top (docs/model.md).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from swarm_ros.core.shapes import Shape
 H = math.sqrt(3.0) / 2.0  #: the height of a row of the touching hexagonal lattice
 #: the seeds, root first
 SEEDS = np.array([[-0.5, 0.0], [0.5, 0.0], [0.0, H], [0.0, -H]])
+LEFT = -1.0  #: the x of the left edge of the shape's lowest row
 SEED_G = np.array([0, 1, 1, 1], dtype=np.int64)  #: the root's gradient is 0, the others' 1
 
 
@@ -55,9 +58,8 @@ class ShapeFrame:
         cols = np.flatnonzero(shape.mask.any(axis=0))
         mask = shape.mask[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1].copy()  # row 0 the bottom
         mask.setflags(write=False)
-        low = np.flatnonzero(mask[0])
-        middle = (low[0] + low[-1] + 1) / 2.0  # in pixels from the left edge
-        return ShapeFrame(mask=mask, pixel=float(pixel), x0=-middle * pixel, y0=0.0)
+        left = int(np.flatnonzero(mask[0])[0])  # the lowest row's leftmost set pixel
+        return ShapeFrame(mask=mask, pixel=float(pixel), x0=LEFT - left * pixel, y0=0.0)
 
     @property
     def pixels(self) -> int:
@@ -86,15 +88,17 @@ def start_positions(robots: int) -> np.ndarray:
     others = robots - len(SEEDS)
     if others < 0:
         raise ParameterError(f"robots must be at least {len(SEEDS)} (the seeds), got {robots}")
-    # lattice points (-1/2 + a + b/2, b H) with rows b <= -2; enough rows and columns for a half disc
-    reach = int(math.ceil(math.sqrt(2.0 * others / math.pi / H))) + 3
+    # lattice points (-1/2 + a + b/2, b H) with rows b <= -2; enough rows and columns for a quarter disc
+    reach = int(math.ceil(math.sqrt(4.0 * others / math.pi / H))) + 3
     b = np.arange(-2, -2 - reach, -1)
     a = np.arange(-2 * reach, 2 * reach + 1)
     bb, aa = np.meshgrid(b, a, indexing="ij")
     x = (-0.5 + aa + bb / 2.0).ravel()
     y = (bb * H).ravel()
+    west = x <= 0.0
+    x, y = x[west], y[west]
     d2 = x * x + (y + H) ** 2  # from the lowest seed
-    order = np.lexsort((x, -y, np.round(d2, 9)))[:others]
+    order = np.lexsort((-x, -y, np.round(d2, 9)))[:others]
     return np.concatenate([SEEDS, np.stack([x[order], y[order]], axis=1)])
 
 

@@ -46,6 +46,7 @@ class Robots(NamedTuple):
     near: np.ndarray  #: the smallest measured distance to a stationary neighbour at the last tick (edge-following)
     began: np.ndarray  #: int64: the tick it began to move (NEVER)
     joined: np.ndarray  #: int64: the tick it joined the shape (-1; the seeds 0)
+    waited: np.ndarray  #: int64: ticks in a row it has had an edge-follower ahead within YIELD
 
 
 class Rule(NamedTuple):
@@ -55,6 +56,7 @@ class Rule(NamedTuple):
     gradient: float
     desired: float
     yield_dist: float
+    patience: int
     step: float
     turn: float
     noise: float
@@ -109,13 +111,14 @@ class Decided(NamedTuple):
     near: np.ndarray
     began: np.ndarray
     joined: np.ndarray
+    waited: np.ndarray
     moves: np.ndarray  #: int8
 
 
 def decided_for(n: int) -> Decided:
     """Empty arrays for the decisions of ``n`` robots."""
     f, i, b = np.float64, np.int64, np.int8
-    kinds = (f, f, f, b, i, f, f, b, b, i, f, i, i, b)
+    kinds = (f, f, f, b, i, f, f, b, b, i, f, i, i, i, b)
     return Decided(*(np.empty(n, dtype=k) for k in kinds))
 
 
@@ -287,7 +290,7 @@ def decide_kernel(ids, s, rule, bm, cells, tick, out, ax, ay, am):
         if good_geometry(ax, ay, n, rule.min_angle):
             if est:
                 px, py = ex, ey
-                for _ in range(rule.sweeps):
+                for _ in range(rule.sweeps if st == MOVE_OUTSIDE or st == MOVE_INSIDE else 1):  # a mover lags
                     px, py = sweep(px, py, ax, ay, am, n, rule.gain)
                 still = still + 1 if math.hypot(px - ex, py - ey) < rule.settle else 0
                 ex, ey = px, py
@@ -315,8 +318,9 @@ def decide_kernel(ids, s, rule, bm, cells, tick, out, ax, ay, am):
             or (g < UNKNOWN_G and g <= g_close)
         ):
             st, joined = JOINED, tick
+        waited = s.waited[i] + 1 if yield_to else 0
         if (st == MOVE_OUTSIDE or st == MOVE_INSIDE) and began < tick:  # edge-follow, or yield
-            if not yield_to:
+            if waited == 0 or waited > rule.patience:
                 if cur < rule.desired:
                     turn = 0.0 if near < cur else rule.turn  # left, unless the distance grows
                 else:
@@ -327,7 +331,7 @@ def decide_kernel(ids, s, rule, bm, cells, tick, out, ax, ay, am):
             near = cur
         out.x[k], out.y[k], out.heading[k], out.state[k], out.g[k] = to_x, to_y, heading, st, g
         out.ex[k], out.ey[k], out.est[k], out.loc[k], out.still[k] = ex, ey, est, loc, still
-        out.near[k], out.began[k], out.joined[k], out.moves[k] = near, began, joined, moves
+        out.near[k], out.began[k], out.joined[k], out.waited[k], out.moves[k] = near, began, joined, waited, moves
 
 
 @numba.njit(cache=True, inline="always")
@@ -382,7 +386,7 @@ def apply_kernel(ids, out, granted, s):
             s.x[i], s.y[i] = out.x[k], out.y[k]
         s.heading[i], s.state[i], s.g[i] = out.heading[k], out.state[k], out.g[k]
         s.ex[i], s.ey[i], s.est[i], s.loc[i], s.still[i] = out.ex[k], out.ey[k], out.est[k], out.loc[k], out.still[k]
-        s.near[i], s.began[i], s.joined[i] = out.near[k], out.began[k], out.joined[k]
+        s.near[i], s.began[i], s.joined[i], s.waited[i] = out.near[k], out.began[k], out.joined[k], out.waited[k]
 
 
 @numba.njit(cache=True)

@@ -19,8 +19,9 @@ import math
 
 import numpy as np
 
+from swarm_ros.core.errors import ContractError, ParameterError
 from swarm_ros.core.metrics import OUTCOME_OF_CODE, Outcome
-from swarm_ros.core.params import RUBENSTEIN, RunParams
+from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETER, RunParams
 from swarm_ros.core.rng import STREAM_PLACE_HEADING, uniform_array
 from swarm_ros.core.shapes import Shape
 
@@ -65,6 +66,7 @@ def robots_at_start(params: RunParams) -> Robots:
         near=np.full(n, np.inf),
         began=np.full(n, NEVER, dtype=np.int64),
         joined=np.full(n, -1, dtype=np.int64),
+        waited=np.zeros(n, dtype=np.int64),
     )
     k = len(SEEDS)
     s.state[:k], s.g[:k], s.est[:k], s.loc[:k], s.joined[:k] = JOINED, SEED_G, 1, 1, 0
@@ -78,6 +80,7 @@ def rule_of(params: RunParams) -> Rule:
         gradient=params.gradient_range,
         desired=params.desired_distance,
         yield_dist=params.yield_distance,
+        patience=params.yield_patience,
         step=params.step_length,
         turn=math.radians(params.turn_deg),
         noise=params.range_noise,
@@ -126,7 +129,7 @@ class KilobotRun:
 
     def __init__(self, shape: Shape, params: RunParams) -> None:
         if params.algorithm != RUBENSTEIN:
-            raise ValueError(f"KilobotRun runs the rubenstein algorithm, not {params.algorithm}")
+            raise ParameterError(f"KilobotRun runs the rubenstein algorithm, not {params.algorithm}")
         self.shape, self.params = shape, params
         self.frame = ShapeFrame.of(shape, params.pixel_size)
         self.robots = robots_at_start(params)
@@ -177,7 +180,7 @@ class KilobotRun:
     def run(self, max_ticks: int | None = None) -> Outcome | None:
         """Run to the end, or ``max_ticks`` more ticks; the outcome, or None if the run goes on."""
         if self.outcome is not None:
-            raise RuntimeError(f"the run has ended ({self.outcome}) at tick {self.tick}")
+            raise ContractError(f"the run has ended ({self.outcome}) at tick {self.tick}")
         while self.outcome is None and (max_ticks is None or max_ticks > 0):
             limit = CHUNK if max_ticks is None else min(CHUNK, max_ticks)
             rows = np.empty((limit, len(COLUMNS)))
@@ -217,12 +220,12 @@ def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = N
     robots joined outside the shape, the joined robots' mean localization error in d)."""
     outcome = run.outcome or stopped
     if outcome is None:
-        raise ValueError("the run has not ended yet")
+        raise ContractError("the run has not ended yet")
     m, history = run.metrics, run.history
     return {
         "shape": run.shape.name,
         "shape_pixels": run.pixels,
-        **run.params.as_dict(),
+        **{k: v for k, v in run.params.as_dict().items() if RUN_PARAMETER[k].algorithm in ("", RUBENSTEIN)},
         "engine": "inprocess",
         "outcome": str(outcome),
         "convergence_tick": run.tick,

@@ -1,0 +1,144 @@
+"""A rubenstein run's Rerun recording: the shape, and every robot every ``every`` ticks, on the timeline ``tick``
+(``swarm-ros simulate --algorithm rubenstein``; to the run's ``recording.rrd`` and/or a live viewer).
+
+Entities (y up, lengths in robot diameters):
+
+* ``world/shape``: the shape's pixels (static);
+* ``world/robots``: each robot's disc where it truly is, coloured by its state (:data:`STATE_COLOURS`);
+* ``world/gradient``: a dot on each robot coloured by its gradient (a cycle of :data:`RING_COLOURS`, so the
+  rings of the gradient show as bands; grey while unknown);
+* ``world/estimates``: an arrow from each robot that has a position estimate to that estimate;
+* ``metrics/<column>``: every tick's metrics (the run's ``metrics.csv`` columns), sent at the end;
+* ``events``: how the run ended.
+
+Robots are buffered for :data:`BATCH` logged ticks and sent as columns.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+
+from swarm_ros.artifacts.rerun_recording import APP_ID, TIMELINE, spawn_viewer, write_failure
+from swarm_ros.artifacts.run_dir import RecordingError
+from swarm_ros.core.rubenstein.rule import UNKNOWN_G
+from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+
+BATCH = 64
+#: start, wait_to_move, move_while_outside, move_while_inside, joined_shape
+STATE_COLOURS = np.array(
+    [[158, 158, 158], [74, 127, 214], [242, 142, 43], [225, 87, 89], [46, 158, 68]], dtype=np.uint8
+)
+RING_COLOURS = np.array(
+    [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37], [240, 120, 40]], dtype=np.uint8
+)
+_UNKNOWN = np.array([200, 200, 200], dtype=np.uint8)
+ROBOTS, GRADIENT, ESTIMATES, SHAPE, METRICS, EVENTS = (
+    "world/robots",
+    "world/gradient",
+    "world/estimates",
+    "world/shape",
+    "metrics",
+    "events",
+)
+
+
+class KilobotRecorder:
+    """Writes ``path`` (an .rrd file) as a rubenstein run goes on; :meth:`close` sends the metrics and ends it."""
+
+    def __init__(
+        self, path: Path | None, run: KilobotRun, every: int = 1, spawn: bool = False, connect: str | None = None
+    ) -> None:
+        self.path, self.every = path, every
+        self._last = -1
+        self._ticks: list[int] = []
+        self._pos: list[np.ndarray] = []
+        self._state: list[np.ndarray] = []
+        self._g: list[np.ndarray] = []
+        self._from: list[np.ndarray] = []
+        self._to: list[np.ndarray] = []
+        p = run.params
+        self.rec = rr.RecordingStream(APP_ID)
+        self.rec.send_recording_name(f"{run.shape.name} n{p.robots} rubenstein s{p.seed}")
+        sinks: list = []
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(str(path)))
+        if spawn:
+            connect = connect or spawn_viewer()
+        if connect:
+            sinks.append(rr.GrpcSink(connect))
+        try:
+            self.rec.set_sinks(*sinks)
+        except RuntimeError as exc:
+            self.rec.disconnect()
+            if path is not None:
+                path.unlink(missing_ok=True)
+            raise RecordingError(f"{path}: cannot write the recording ({write_failure(path, exc)})") from None
+        f = run.frame
+        rows, cols = np.nonzero(f.mask)
+        mins = np.stack([f.x0 + cols * f.pixel, f.y0 + rows * f.pixel], axis=1)
+        self.rec.log("world", rr.Transform3D(mat3x3=[[1, 0, 0], [0, -1, 0], [0, 0, 1]]), static=True)  # y up
+        self.rec.log(
+            SHAPE,
+            rr.Boxes2D(mins=mins, sizes=np.full_like(mins, f.pixel), colors=[228, 228, 228], draw_order=0.0),
+            static=True,
+        )
+        self.rec.log(ROBOTS, rr.Points2D.from_fields(radii=0.5, draw_order=1.0), static=True)
+        self.rec.log(GRADIENT, rr.Points2D.from_fields(radii=0.18, draw_order=2.0), static=True)
+        self.robots(run)
+
+    def due(self, tick: int) -> bool:
+        return tick % self.every == 0
+
+    def robots(self, run: KilobotRun) -> None:
+        """Buffer the robots as they are at ``run.tick``."""
+        s = run.robots
+        self._last = run.tick
+        self._ticks.append(run.tick)
+        self._pos.append(np.stack([s.x, s.y], axis=1))
+        self._state.append(STATE_COLOURS[s.state])
+        known = s.g < UNKNOWN_G
+        g = np.where(known, s.g, 0) % len(RING_COLOURS)
+        self._g.append(np.where(known[:, None], RING_COLOURS[g], _UNKNOWN))
+        est = s.est.astype(bool)
+        self._from.append(np.stack([s.x[est], s.y[est]], axis=1))
+        self._to.append(np.stack([s.ex[est] - s.x[est], s.ey[est] - s.y[est]], axis=1))
+        if len(self._ticks) >= BATCH:
+            self._send()
+
+    def _send(self) -> None:
+        if not self._ticks:
+            return
+        index = [rr.TimeColumn(TIMELINE, sequence=self._ticks)]
+        lengths = [len(p) for p in self._pos]
+        pos = np.concatenate(self._pos)
+        self.rec.send_columns(
+            ROBOTS,
+            indexes=index,
+            columns=rr.Points2D.columns(positions=pos, colors=np.concatenate(self._state)).partition(lengths),
+        )
+        self.rec.send_columns(
+            GRADIENT,
+            indexes=index,
+            columns=rr.Points2D.columns(positions=pos, colors=np.concatenate(self._g)).partition(lengths),
+        )
+        arrows = rr.Arrows2D.columns(origins=np.concatenate(self._from), vectors=np.concatenate(self._to))
+        self.rec.send_columns(ESTIMATES, indexes=index, columns=arrows.partition([len(a) for a in self._from]))
+        self._ticks, self._pos, self._state, self._g, self._from, self._to = [], [], [], [], [], []
+
+    def close(self, run: KilobotRun, outcome: str) -> None:
+        """Send what is buffered, the metrics of every tick and the outcome, and end the file."""
+        if run.tick != self._last:
+            self.robots(run)
+        self._send()
+        history = run.history
+        ticks = [rr.TimeColumn(TIMELINE, sequence=history[:, 0].astype(np.int64))]
+        for k, name in enumerate(COLUMNS[1:], start=1):
+            self.rec.send_columns(f"{METRICS}/{name}", indexes=ticks, columns=rr.Scalars.columns(scalars=history[:, k]))
+        self.rec.set_time(TIMELINE, sequence=run.tick)
+        self.rec.log(EVENTS, rr.TextLog(f"outcome: {outcome}", level="INFO"))
+        self.rec.flush()
+        self.rec.disconnect()
