@@ -13,7 +13,7 @@ tick). Cases, one seed each, ``--rounds`` rounds alternating the two:
 Only ``run()`` is timed (set-up and compilation are not). Pinned to one CPU. Prints each case's
 robot-steps per second per round, the median and the range, and the ticks per second.
 
-    .venv/bin/python scripts/bench_algorithms.py [--rounds 3] [--ticks 4000]
+    .venv/bin/python scripts/bench_algorithms.py [--rounds 3] [--ticks 4000] [--smoke]
 """
 
 from __future__ import annotations
@@ -56,7 +56,10 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--ticks", type=int, default=4000, help="rubenstein ticks timed (default 4000)")
+    parser.add_argument("--smoke", action="store_true", help="one round of 300 ticks: that the bench runs (CI)")
     args = parser.parse_args()
+    if args.smoke:
+        args.rounds, args.ticks = 1, 300
     try:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     except (AttributeError, OSError):

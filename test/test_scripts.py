@@ -170,6 +170,13 @@ def test_bench_engine_before_measures_both_trees_alternating_and_refuses_another
     assert refused.returncode != 0 and "not the tree" in refused.stderr + refused.stdout, refused.stderr
 
 
+def test_bench_algorithms_smoke_prints_both_algorithms_rates():
+    out = _smoke("bench_algorithms.py")
+    rows = {line.split()[0]: line.split() for line in out.splitlines() if line.strip().startswith(("darr", "rub"))}
+    assert set(rows) == {"darr-niazi", "rubenstein"}, out
+    assert "ticks 1-300 (300 ticks)" in out and float(rows["rubenstein"][-2]) > 0, out
+
+
 def test_bench_3d_smoke_prints_the_torus_and_a_ball_world():
     out = _smoke("bench_3d.py")
     assert re.findall(r"^rules (\w+):", out, re.M) == ["paper"]
