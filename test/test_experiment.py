@@ -108,7 +108,7 @@ def test_a_runs_seed_depends_only_on_the_experiment_seed_and_its_coordinates(tmp
     assert len(shared) == 9 and all(a[k] == b[k] for k in shared)
     c = load_experiment(small_config(tmp_path, seed=12)).runs()
     assert all(a[r.key] != r.seed for r in c)
-    assert run_seed(11, "disc", 50, 1.0, 0) == a[("disc", 50, 1.0, "paper", 0)]
+    assert run_seed(11, "disc", 50, 1.0, 0) == a[("disc", 50, "darr-niazi", 1.0, "paper", 0)]
 
 
 # -- running -----------------------------------------------------------------------
@@ -130,7 +130,7 @@ def test_experiment_writes_results_stats_and_figures(small):
     assert len(stats) == 6 and all(s["runs"] == "3" for s in stats)
     md = (out / "stats.md").read_text()
     assert "| shape | patches | robots | runs | mean time (ticks) | 95% CI |" in md
-    assert md.count("| disc | 69 |") == 6 and "### Rules `paper`, vision radius 1.5" in md
+    assert md.count("| disc | 69 |") == 8 and "### Rules `paper`, vision radius 1.5" in md
     assert "Against the published numbers" not in md  # no reference file
     figures = sorted(p.name for p in (out / "figures").iterdir())
     assert figures == [

@@ -294,3 +294,49 @@ def test_the_graph_refuses_the_rubenstein_algorithm_in_one_line(tmp_path):
     assert done.returncode != 0 and "Traceback" not in done.stderr
     assert "runs the darr-niazi algorithm only" in done.stderr.strip().splitlines()[-1]
     assert not (tmp_path / "r").exists()
+
+
+def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_side_by_side(tmp_path):
+    import yaml
+
+    from swarm_ros.app import cli
+    from swarm_ros.app.experiment_file import load_experiment
+    from swarm_ros.app.results_file import read_results
+
+    (tmp_path / "square.txt").write_text("######\n" * 6)
+    config = tmp_path / "h2h.yaml"
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "name": "h2h",
+                "seed": 5,
+                "repetitions": 2,
+                "vision_radius": [1, 2],
+                "algorithm": ["darr-niazi", "rubenstein"],
+                "max_ticks": 30000,
+                "shapes": {"square.txt": [36, 40]},
+            }
+        )
+    )
+    exp = load_experiment(config)
+    algorithms = [s.algorithm for s in exp.runs()]
+    assert (
+        algorithms.count("darr-niazi") == 2 * 2 * 2 and algorithms.count("rubenstein") == 2 * 2
+    )  # once, not per radius
+    out = tmp_path / "out"
+    assert cli.main(["experiment", str(config), "--out", str(out), "--quiet", "--jobs", "2"]) == 0
+    rows = read_results(out / "results.csv")
+    kilobots = [r for r in rows if r["algorithm"] == "rubenstein"]
+    assert len(kilobots) == 4 and all(r["vision_radius"] == 1.0 and r["rules"] == "paper" for r in kilobots)
+    assert all(r["shape_patches"] == 36 and 0 < r["coverage"] <= 1 for r in kilobots)
+    assert all(r["coverage"] > 0.9 and r["fill_50_tick"] <= r["fill_90_tick"] for r in kilobots)
+    studied = [r for r in rows if r["algorithm"] == "darr-niazi"]
+    assert all(
+        r["joined_outside"] == 0 and r["loc_error"] == 0.0 and r["fill_50_tick"] <= r["fill_90_tick"] for r in studied
+    )
+    stats = (out / "stats.md").read_text()
+    table = stats[stats.index("## Time and accuracy") :]
+    assert "| square | 40 | rubenstein | – | 2 |" in table and "| square | 40 | paper | 2 | 2 |" in table
+    assert (out / "figures" / "square_rubenstein_v1.png").stat().st_size > 0
+    refused = cli.main(["experiment", str(config), "--out", str(tmp_path / "ros"), "--quiet", "--engine", "ros2"])
+    assert refused != 0 and not (tmp_path / "ros").exists()

@@ -22,6 +22,7 @@ import numpy as np
 from swarm_ros.app.experiment_file import RunSpec
 from swarm_ros.app.results_file import ExperimentError, result_row
 from swarm_ros.core.grid import World
+from swarm_ros.core.params import RUBENSTEIN
 from swarm_ros.core.shapes import Shape
 from swarm_ros.protocol.plan import PROCESSES
 
@@ -49,7 +50,15 @@ def run_inprocess(spec: RunSpec) -> dict:
     from swarm_ros.core.run_result import summary_of
 
     start = time.perf_counter()
-    sim = Simulation(_shape(spec), spec.params())
+    params = spec.params()
+    if params.algorithm == RUBENSTEIN:
+        from swarm_ros.core.rubenstein.run import KilobotRun
+        from swarm_ros.core.rubenstein.run import summary_of as kilobot_summary
+
+        run = KilobotRun(_shape(spec), params)
+        run.run()
+        return result_row(spec, kilobot_summary(run, wall_seconds=time.perf_counter() - start))
+    sim = Simulation(_shape(spec), params)
     sim.run()
     return result_row(spec, summary_of(sim, wall_seconds=time.perf_counter() - start))
 

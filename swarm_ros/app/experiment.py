@@ -23,6 +23,7 @@ from pathlib import Path
 from swarm_ros.app.executors import dask_client, execute, execute_dask
 from swarm_ros.app.experiment_file import Experiment, load_experiment
 from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, ResultsFile
+from swarm_ros.core.params import DARR_NIAZI
 from swarm_ros.core.signals import InterruptSaid
 
 EXPERIMENTS_DIR = Path("experiments")
@@ -85,6 +86,8 @@ def run_experiment(
     from swarm_ros.app.report import build_report
 
     exp = load_experiment(config)
+    if engine == "ros2" and any(p["algorithm"] != DARR_NIAZI for p in exp.points()):
+        raise ExperimentError(f"{config}: algorithm: the ros2 engine runs the {DARR_NIAZI} algorithm only, so far")
     jobs = max(1, min(jobs, len(exp.runs())))
     prepare_out_dir(out or EXPERIMENTS_DIR / exp.name, exp, config, create=False)  # before a cluster starts
     closing = None

@@ -7,6 +7,8 @@ An experiment file is YAML::
     repetitions: 10
     vision_radius: [1]          # an axis: one number or a list
     rules: [paper, local]       # an axis: one rule set or a list (default: paper)
+    algorithm: [darr-niazi, rubenstein]  # an axis (default: darr-niazi); a rubenstein run takes the study's
+                                # model's parameters (vision_radius, rules, ...) at their defaults, once
     crowding: disc              # optional: override a switch (join, crowding, steps) for every rule set
     reference: study_reference.csv  # optional: published numbers to set beside ours (relative to this file)
     max_ticks: 100000           # optional, as for one run
@@ -41,8 +43,10 @@ from swarm_ros.app.results_file import ExperimentError
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import (
+    DARR_NIAZI,
     EXPERIMENT_AXES,
     MAX_SEED,
+    RUBENSTEIN,
     RUN_PARAMETER,
     RUN_PARAMETERS,
     Param,
@@ -127,13 +131,30 @@ class Experiment:
             return getattr(self.__dict__["fixed"], name)
         raise AttributeError(name)
 
+    def points(self) -> list[dict[str, Any]]:
+        """The grid's points (a value of each axis), in the canonical order. A rubenstein point takes the study's
+        model's parameters at their defaults, whatever their axes list, so it comes once, not once a value."""
+        out, seen = [], set()
+        for values in itertools.product(*(self.axes[a] for a in AXES)):
+            point = dict(zip(AXES, values))
+            if point["algorithm"] == RUBENSTEIN:
+                point.update({a: RUN_PARAMETER[a].default for a in AXES if RUN_PARAMETER[a].algorithm == DARR_NIAZI})
+                if tuple(point.values()) in seen:
+                    continue
+                seen.add(tuple(point.values()))
+            out.append(point)
+        return out
+
     def runs(self) -> list[RunSpec]:
-        """Every run, in the canonical order: shape, group size, each axis, repetition."""
+        """Every run, in the canonical order: shape, group size, each axis, repetition. A rubenstein run takes the
+        study's model's fixed parameters at their defaults too."""
         out = []
+        other = {p.name: p.default for p in RUN_PARAMETERS if p.algorithm == DARR_NIAZI}
         for name, file, _, sizes in self.shapes:
             for n in sizes:
-                for values in itertools.product(*(self.axes[a] for a in AXES)):
-                    point = self.fixed.updated(shape=file, robots=n, **dict(zip(AXES, values)))
+                for values in self.points():
+                    fixed = self.fixed.updated(**other) if values["algorithm"] == RUBENSTEIN else self.fixed
+                    point = fixed.updated(shape=file, robots=n, **values)
                     out += [
                         RunSpec(name, r, point.updated(seed=run_seed(self.seed, name, n, point.vision_radius, r)))
                         for r in range(self.repetitions)
@@ -219,6 +240,7 @@ def load_experiment(path: str | Path) -> Experiment:
             raise _fail(path, f"vision_radius[{i}]", str(exc)) from None
     shapes = _load_shapes(path, data["shapes"], World(fixed.world_radius))
     runs = own["repetitions"] * sum(len(sizes) for *_, sizes in shapes) * math.prod(len(v) for v in axes.values())
+    # (an upper bound: a rubenstein point comes once whatever the study's model's axes list)
     if runs > MAX_RUNS:
         raise _fail(
             path,

@@ -42,6 +42,7 @@ from swarm_ros.app.published import (
 from swarm_ros.app.report_stats import (
     _COLOURS,
     FIGURES,
+    RUBENSTEIN_LABEL,
     STATS_CSV,
     STATS_MD,
     _rules_order,
@@ -70,14 +71,19 @@ def _save(fig: plt.Figure, path: Path) -> None:
 
 
 def _curve(row: dict) -> np.ndarray:
-    """Per-tick metrics of the run in ``row``, re-run in process (checked against the row)."""
+    """The run in ``row`` re-run in process (checked against the row): per tick, the tick and the shape's empty
+    patches (a rubenstein run's uncovered pixels)."""
     from swarm_ros.core.engine import Simulation
     from swarm_ros.core.grid import World
-    from swarm_ros.core.params import RUN_PARAMETERS, RunParams
+    from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETERS, RunParams
+    from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
     from swarm_ros.core.shapes import Shape
 
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
-    sim = Simulation(shape, RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model and p.name in row}))
+    params = RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model and p.name in row})
+    sim: Simulation | KilobotRun = (
+        KilobotRun(shape, params) if params.algorithm == RUBENSTEIN else Simulation(shape, params)
+    )
     sim.run()
     outcome = sim.outcome.value if sim.outcome is not None else None
     if sim.tick != row["convergence_tick"] or outcome != row["outcome"]:
@@ -86,7 +92,10 @@ def _curve(row: dict) -> np.ndarray:
             f"{sim.outcome} at tick {sim.tick}, the results say {row['outcome']} at tick "
             f"{row['convergence_tick']}"
         )
-    return sim.history.copy()
+    if isinstance(sim, KilobotRun):
+        h = sim.history
+        return np.stack([h[:, 0], sim.pixels - h[:, COLUMNS.index("covered")]], axis=1)
+    return sim.history[:, [0, METRIC_COLUMNS.index("empty_patches")]].copy()
 
 
 def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference | None = None) -> None:
@@ -151,13 +160,12 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
     c.legend(handles=handles, fontsize=8, loc="upper center")
     c.set_title("(c) completeness (means over the runs)", fontsize=10)
     c.set_xlabel("group size N (robots)")
-    empty = METRIC_COLUMNS.index("empty_patches")
     for k, s in enumerate(stats):
         first = min((r for r in rows if r["robots"] == s["robots"]), key=lambda r: r["repetition"])
         h = _curve(first)
         d.plot(
             h[:, 0],
-            h[:, empty],
+            h[:, 1],
             color=_COLOURS[k % len(_COLOURS)],
             lw=1.2,
             label=f"N = {s['robots']}: {first['outcome']} at {first['convergence_tick']}",
@@ -317,7 +325,7 @@ def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: P
                 [s for s in vs if s["shape"] == shape],
                 [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision and rules_label(r) == rules],
                 path,
-                reference.get(shape),
+                reference.get(shape) if rules != RUBENSTEIN_LABEL else None,  # the study's numbers: its model's
             )
             written.append(path)
         path = figures / f"all_shapes_{_safe(rules)}_v{vision:g}.png"
@@ -326,8 +334,9 @@ def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: P
     if len({s["vision_radius"] for s in stats}) > 1:
         vision_figure(stats, figures / "vision.png")
         written.append(figures / "vision.png")
-    if any(s["shape"] in reference and s["robots"] == s["shape_patches"] for s in stats):
-        study_figure(stats, reference, figures / "study.png")
+    studied = [s for s in stats if s["rules"] != RUBENSTEIN_LABEL]
+    if any(s["shape"] in reference and s["robots"] == s["shape_patches"] for s in studied):
+        study_figure(studied, reference, figures / "study.png")
         written.append(figures / "study.png")
     return written
 

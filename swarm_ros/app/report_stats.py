@@ -36,13 +36,29 @@ STATS_COLUMNS = (
     *OUTCOMES,
     "completed_fraction",
     "mean_convergence_rate",
+    "mean_coverage",
+    "mean_fill_50_tick",
+    "mean_fill_90_tick",
+    "mean_joined_outside",
+    "mean_loc_error",
 )
+RUBENSTEIN_LABEL = "rubenstein"  #: the label of the rubenstein algorithm's runs, beside the rule sets'
+COMPARED = ("coverage", "fill_50_tick", "fill_90_tick", "joined_outside", "loc_error")
 _COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000")
 
 
 def rules_label(row: dict) -> str:
-    """The rule set a results row ran under: its name, plus any switch overrides (``local+crowding=disc``)."""
+    """The rule set a results row ran under: its name, plus any switch overrides (``local+crowding=disc``); a
+    rubenstein run's label is the algorithm's name (:data:`RUBENSTEIN_LABEL`)."""
+    if row.get("algorithm") == RUBENSTEIN_LABEL:
+        return RUBENSTEIN_LABEL
     return RuleSet(row["rules"], row["join"], row["crowding"], row["steps"]).label
+
+
+def _mean(values: list) -> float:
+    """The mean of the values that are there (a fill tick a run never reached is None); nan if none is."""
+    there = [v for v in values if v is not None]
+    return float(np.mean(there)) if there else math.nan
 
 
 def group_stats(rows: list[dict]) -> list[dict]:
@@ -82,6 +98,7 @@ def group_stats(rows: list[dict]) -> list[dict]:
                 **counts,
                 "completed_fraction": (counts["complete"] + counts["complete_with_extras"]) / n,
                 "mean_convergence_rate": float(np.mean([r["convergence_rate"] for r in runs])),
+                **{f"mean_{k}": _mean([r.get(k) for r in runs]) for k in COMPARED},
             }
         )
     return out
@@ -149,9 +166,41 @@ def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = N
         "convergence ticks, its lower bound shown as 0 where it falls below (stats.csv keeps it as computed). "
         "**=** marks the group size equal to the shape's patch count."
     )
+    lines += ["", *time_and_accuracy(stats)]
     if reference:
-        lines += ["", *against_reference(stats, reference)]
+        lines += ["", *against_reference([s for s in stats if s["rules"] != RUBENSTEIN_LABEL], reference)]
     return "\n".join(lines) + "\n"
+
+
+def time_and_accuracy(stats: list[dict]) -> list[str]:
+    """Markdown: the measures both algorithms are compared on, per shape and group size, each rule set or
+    algorithm in a row."""
+    lines = [
+        "## Time and accuracy",
+        "",
+        "Ticks to 50% and 90% of the shape filled, and at the end: the share of the shape filled (patches "
+        "localized; under rubenstein, shape pixels a joined robot's disc meets), robots joined outside the "
+        "shape and the joined robots' localization error in robot diameters (none under the study's model, "
+        "whose robots localize exactly on patches). Means over the runs; a time no run reached is –.",
+        "",
+        "| shape | robots | rules / algorithm | vision | runs | t50 | t90 | end tick | filled | outside | "
+        "loc. error | completed |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    order = _rules_order(stats)
+    for s in sorted(stats, key=lambda s: (s["shape"], s["robots"], order.index(s["rules"]), s["vision_radius"])):
+        t50, t90 = (_fmt_tick(s[f"mean_fill_{p}_tick"]) for p in (50, 90))
+        vision = "–" if s["rules"] == RUBENSTEIN_LABEL else f"{s['vision_radius']:g}"  # not a parameter of it
+        lines.append(
+            f"| {s['shape']} | {s['robots']} | {s['rules']} | {vision} | {s['runs']} | {t50} | {t90} "
+            f"| {s['mean_convergence_tick']:.0f} | {s['mean_coverage']:.1%} | {s['mean_joined_outside']:.1f} "
+            f"| {s['mean_loc_error']:.3f} | {s['completed_fraction']:.0%} |"
+        )
+    return lines
+
+
+def _fmt_tick(value: float) -> str:
+    return "–" if math.isnan(value) else f"{value:.0f}"
 
 
 def against_reference(stats: list[dict], reference: dict[str, Reference]) -> list[str]:

@@ -15,7 +15,7 @@ from pathlib import Path
 from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.inputs import RESULTS_LIMIT, read_bounded
 from swarm_ros.core.metrics import Outcome
-from swarm_ros.core.params import EXPERIMENT_AXES, RUBENSTEIN, RUN_PARAMETERS
+from swarm_ros.core.params import DARR_NIAZI, EXPERIMENT_AXES, RUBENSTEIN, RUN_PARAMETERS
 from swarm_ros.core.run_result import ENGINES
 
 RESULTS_FILE = "results.csv"
@@ -23,8 +23,8 @@ REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied 
 
 #: Columns results.csv adds after a run parameter's: the shape's file, the repetition, the shape's size.
 _AFTER = {"shape": ("shape_file",), "steps": ("repetition",), "seed": ("shape_patches",)}
-#: Experiments run the study's model only, so far: results.csv has no column for the algorithm or its parameters.
-_NOT_YET = {"algorithm", *(p.name for p in RUN_PARAMETERS if p.algorithm == RUBENSTEIN)}
+#: The rubenstein algorithm's parameters are not experiment keys (its runs take their defaults): no column.
+_NOT_YET = {p.name for p in RUN_PARAMETERS if p.algorithm == RUBENSTEIN}
 #: One row of results.csv: the run's coordinates (every run parameter an experiment file may set, in its
 #: declaration's order), then the summary.json fields of its outcome.
 RESULT_COLUMNS = (
@@ -38,8 +38,15 @@ RESULT_COLUMNS = (
     "empty_patches",
     "lost_robots",
     "convergence_rate",
+    "coverage",
+    "fill_50_tick",
+    "fill_90_tick",
+    "joined_outside",
+    "loc_error",
     "wall_seconds",
 )
+#: A time the run never reached (an empty field): the first ticks at which half and 90% of the shape was filled.
+_MAYBE = ("fill_50_tick", "fill_90_tick")
 _COUNTS = (
     "repetition",
     "shape_patches",
@@ -50,9 +57,15 @@ _COUNTS = (
     "empty_patches",
     "lost_robots",
 )
-_INT_COLUMNS = {*_COUNTS, *(p.name for p in RUN_PARAMETERS if p.kind is int)}
+_INT_COLUMNS = {*_COUNTS, "joined_outside", *_MAYBE, *(p.name for p in RUN_PARAMETERS if p.kind is int)}
 _OUTCOMES = tuple(o.value for o in Outcome)
-_FLOAT_COLUMNS = {"convergence_rate", "wall_seconds", *(p.name for p in RUN_PARAMETERS if p.kind is float)}
+_FLOAT_COLUMNS = {
+    "convergence_rate",
+    "wall_seconds",
+    "coverage",
+    "loc_error",
+    *(p.name for p in RUN_PARAMETERS if p.kind is float),
+}
 
 
 class ExperimentError(InputError):
@@ -100,6 +113,9 @@ def _checked_row(raw: dict) -> dict:
     for k, v in raw.items():
         if k is None or v is None:
             raise ExperimentError("the row has another number of fields than the header")
+        if k in _MAYBE and v == "":
+            row[k] = None
+            continue
         try:
             row[k] = int(v) if k in _INT_COLUMNS else float(v) if k in _FLOAT_COLUMNS else v
         except ValueError:
@@ -114,8 +130,8 @@ def _checked_row(raw: dict) -> dict:
         raise ExperimentError(f"outcome must be one of {', '.join(_OUTCOMES)}, got {row['outcome']!r}")
     if row["engine"] not in ENGINES:
         raise ExperimentError(f"engine must be one of {', '.join(ENGINES)}, got {row['engine']!r}")
-    for k in (*_COUNTS, "convergence_rate", "wall_seconds"):
-        if not (row[k] >= 0 and math.isfinite(row[k])):
+    for k in (*_COUNTS, "convergence_rate", "wall_seconds", "coverage", "joined_outside", "loc_error", *_MAYBE):
+        if row[k] is not None and not (row[k] >= 0 and math.isfinite(row[k])):
             raise ExperimentError(f"{k} must be a number >= 0, got {raw[k]!r}")
     return row
 
@@ -156,5 +172,33 @@ class ResultsFile:
 def result_row(spec, summary: dict) -> dict:
     """A results.csv row from a run's coordinates (a :class:`~swarm_ros.app.experiment_file.RunSpec`) and its
     summary.json record."""
-    row = {**summary, "shape_file": spec.shape_file, "repetition": spec.repetition}
+    if summary.get("algorithm") == RUBENSTEIN:
+        summary = _as_study_columns(summary)
+    # the study's model localizes robots exactly on shape patches: none outside, no localization error
+    row = {
+        "joined_outside": 0,
+        "loc_error": 0.0,
+        **summary,
+        "shape_file": spec.shape_file,
+        "repetition": spec.repetition,
+    }
     return {col: row[col] for col in RESULT_COLUMNS}
+
+
+def _as_study_columns(summary: dict) -> dict:
+    """A rubenstein run's summary in results.csv's columns: its shape pixels are the shape's patches, its joined
+    robots the localized ones (seeds included), its uncovered pixels the empty patches, and the parameters of
+    the study's model their defaults."""
+    robots, joined, pixels = summary["robots"], summary["joined"], summary["shape_pixels"]
+    tick = summary["convergence_tick"]
+    return {
+        **{p.name: p.default for p in RUN_PARAMETERS if p.algorithm == DARR_NIAZI},
+        **summary,
+        "shape_patches": pixels,
+        "localized": joined,
+        "unlocalized": robots - joined,
+        "separated": 0,
+        "empty_patches": pixels - round(summary["coverage"] * pixels),
+        "lost_robots": 0,
+        "convergence_rate": round((joined - 4) / tick, 6) if tick > 0 else 0.0,
+    }

@@ -21,8 +21,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from swarm_ros.artifacts.rerun_recording import APP_ID, TIMELINE, spawn_viewer, write_failure
-from swarm_ros.artifacts.run_dir import RecordingError
+from swarm_ros.artifacts.rerun_recording import TIMELINE, open_stream
 from swarm_ros.core.rubenstein.rule import UNKNOWN_G
 from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
 
@@ -60,23 +59,7 @@ class KilobotRecorder:
         self._from: list[np.ndarray] = []
         self._to: list[np.ndarray] = []
         p = run.params
-        self.rec = rr.RecordingStream(APP_ID)
-        self.rec.send_recording_name(f"{run.shape.name} n{p.robots} rubenstein s{p.seed}")
-        sinks: list = []
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            sinks.append(rr.FileSink(str(path)))
-        if spawn:
-            connect = connect or spawn_viewer()
-        if connect:
-            sinks.append(rr.GrpcSink(connect))
-        try:
-            self.rec.set_sinks(*sinks)
-        except RuntimeError as exc:
-            self.rec.disconnect()
-            if path is not None:
-                path.unlink(missing_ok=True)
-            raise RecordingError(f"{path}: cannot write the recording ({write_failure(path, exc)})") from None
+        self.rec = open_stream(f"{run.shape.name} n{p.robots} rubenstein s{p.seed}", path, spawn, connect)
         f = run.frame
         rows, cols = np.nonzero(f.mask)
         mins = np.stack([f.x0 + cols * f.pixel, f.y0 + rows * f.pixel], axis=1)

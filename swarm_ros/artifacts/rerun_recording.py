@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from swarm_ros.artifacts.rerun_scene import EVENTS, FILLED, FREE, METRICS, OCCUPANCY, ROBOTS, blueprint, log_scene
 from swarm_ros.artifacts.run_dir import RecordingError
@@ -120,23 +121,8 @@ class Recorder:
         self._filled: np.ndarray | None = None
         self._last_robot_tick = -1
         self._closed = False
-        self.rec = rr.RecordingStream(APP_ID)
-        self.rec.send_recording_name(f"{shape.name} n{params.robots} v{params.vision_radius:g} s{params.seed}")
-        sinks: list = []
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)  # the run is starting: runs/ may not exist yet
-            sinks.append(rr.FileSink(str(path)))
-        if spawn:
-            connect = connect or spawn_viewer()
-        if connect:
-            sinks.append(rr.GrpcSink(connect))
-        try:
-            self.rec.set_sinks(*sinks, default_blueprint=blueprint(shape.world.dims))
-        except RuntimeError as exc:  # the file could not be written at all (a full disk)
-            self.rec.disconnect()
-            if path is not None:
-                path.unlink(missing_ok=True)  # made just now by the file sink, and empty
-            raise RecordingError(f"{path}: cannot write the recording ({write_failure(path, exc)})") from None
+        name = f"{shape.name} n{params.robots} v{params.vision_radius:g} s{params.seed}"
+        self.rec = open_stream(name, path, spawn, connect, blueprint(shape.world.dims))
         log_scene(self.rec, shape, params, self.every)
 
     # -- logging ----------------------------------------------------------------
@@ -286,6 +272,35 @@ class Recorder:
             self.rec.send_columns(
                 f"{METRICS}/{name}", indexes=[ticks], columns=rr.Scalars.columns(scalars=rows[:, k].astype(np.float64))
             )
+
+
+def open_stream(
+    name: str, path: Path | None, spawn: bool = False, connect: str | None = None, layout: rrb.Blueprint | None = None
+) -> rr.RecordingStream:
+    """A recording called ``name``, streaming to the file ``path`` (if any) and to a viewer (``spawn`` one, or the
+    one at ``connect``), with the default blueprint ``layout``.
+
+    Raises:
+        RecordingError: the file cannot be written at all (a full disk).
+    """
+    rec = rr.RecordingStream(APP_ID)
+    rec.send_recording_name(name)
+    sinks: list = []
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)  # the run is starting: runs/ may not exist yet
+        sinks.append(rr.FileSink(str(path)))
+    if spawn:
+        connect = connect or spawn_viewer()
+    if connect:
+        sinks.append(rr.GrpcSink(connect))
+    try:
+        rec.set_sinks(*sinks, default_blueprint=layout)
+    except RuntimeError as exc:
+        rec.disconnect()
+        if path is not None:
+            path.unlink(missing_ok=True)  # made just now by the file sink, and empty
+        raise RecordingError(f"{path}: cannot write the recording ({write_failure(path, exc)})") from None
+    return rec
 
 
 #: Seconds a spawned viewer has to answer on its port, and to stay up after it does (without a display it binds

@@ -58,6 +58,7 @@ class TickMetrics(NamedTuple):
 
 
 METRIC_COLUMNS: tuple[str, ...] = TickMetrics._fields
+_LOCALIZED = METRIC_COLUMNS.index("localized")
 
 
 # metric_values and end_code are plain Python here, so that a reader of metrics (the launcher's progress,
@@ -103,6 +104,19 @@ def convergence_rate(final: TickMetrics) -> float:
     return (final.localized - SEEDS) / final.tick if final.tick > 0 else 0.0
 
 
+def fill_ticks(history, shape_patches: int, column: int) -> tuple[int | None, int | None]:
+    """The first ticks at whose end ``column`` of the metrics ``history`` (rows of ``METRIC_COLUMNS``) reached
+    half and 90% of ``shape_patches``, or None."""
+    import numpy as np
+
+    h = np.asarray(history).reshape(-1, len(METRIC_COLUMNS))
+    out = []
+    for share in (0.5, 0.9):
+        hit = np.flatnonzero(h[:, column] >= share * shape_patches)
+        out.append(int(h[hit[0], 0]) if hit.size else None)
+    return out[0], out[1]
+
+
 def run_summary(
     *,
     shape: str,
@@ -120,6 +134,7 @@ def run_summary(
     rejected: dict[str, int] | None = None,
     mesh_scale: float = 1.0,
     graph: dict[str, int | None] | None = None,
+    history=None,
 ) -> dict:
     """The per-run record written to ``summary.json`` (and one row of an experiment).
 
@@ -131,7 +146,9 @@ def run_summary(
     monitor dropped as malformed or illegal, as ``rejected_messages``; ``mesh_scale`` is a field
     only where it is not 1 (a mesh shape at another scale), so that 2D summaries keep their fields;
     ``graph`` (ROS graph only) how it ran: ``processes`` (robot batches K, null where no launcher said) and
-    ``world_shards``.
+    ``world_shards``. ``history`` (every tick's metrics) gives ``fill_50_tick`` and ``fill_90_tick``, the first
+    ticks at whose end half and 90% of the shape's patches were filled (null: never), and ``coverage`` is the
+    share filled at the end: the times and accuracy the two algorithms are compared on.
     """
     robots = params["robots"]
     lost = sum(k for _, k in losses)
@@ -151,6 +168,13 @@ def run_summary(
         "unlocalized": robots - lost - final.localized,
         "separated": separated,
         "empty_patches": final.empty_patches,
+        "coverage": round(final.localized / shape_patches, 6),
+        **dict(
+            zip(
+                ("fill_50_tick", "fill_90_tick"),
+                fill_ticks(history if history is not None else [], shape_patches, _LOCALIZED),
+            )
+        ),
         "convergence_rate": round(convergence_rate(final), 6),
         "wall_seconds": round(wall_seconds, 3),
         **{key: None if value is None else round(value, 3) for key, value in (overhead or {}).items()},

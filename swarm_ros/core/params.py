@@ -76,7 +76,7 @@ class Settings:
         "shape-formation algorithm: darr-niazi (the study's model) or rubenstein (Rubenstein et al.'s "
         "Kilobot self-assembly); see docs/model.md",
         choices=ALGORITHMS,
-        experiment="",  # experiments run the study's model only, so far
+        experiment="axis",
     )
     vision_radius: float = _param(
         DEFAULT_VISION, "vision radius in patches", low=1.0, high=100.0, flag="--vision", experiment="axis", **_DN

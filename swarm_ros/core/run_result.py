@@ -32,6 +32,7 @@ def summarize(
     overhead=None,
     rejected=None,
     graph=None,
+    history=None,
 ) -> dict:
     """The summary.json record of a run, from either engine (fields: :func:`swarm_ros.core.metrics.run_summary`)."""
     return run_summary(
@@ -50,6 +51,7 @@ def summarize(
         rejected=rejected,
         mesh_scale=shape.mesh_scale,
         graph=graph,
+        history=history,
     )
 
 
@@ -68,6 +70,7 @@ def summary_of(sim: Simulation, wall_seconds: float = 0.0, stopped: Outcome | No
         engine=INPROCESS,
         wall_seconds=wall_seconds,
         losses=sim.losses,
+        history=sim.history,
     )
 
 

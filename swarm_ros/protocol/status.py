@@ -162,5 +162,6 @@ class WorldReport:
             },  # swarm-ros run fills it in at the end
             rejected={"world": self.rejected, "monitor": rejected},
             graph={"processes": None, "world_shards": shards},  # swarm-ros run fills processes in at the end
+            history=history,
         )
         return RunRecord(shape=shape, params=params, state=state, history=history, outcome=outcome, summary=summary)

@@ -226,6 +226,7 @@ def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = N
         "shape": run.shape.name,
         "shape_pixels": run.pixels,
         **{k: v for k, v in run.params.as_dict().items() if RUN_PARAMETER[k].algorithm in ("", RUBENSTEIN)},
+        "world_radius": run.shape.world.radius,  # the grid the shape was read into
         "engine": "inprocess",
         "outcome": str(outcome),
         "convergence_tick": run.tick,
