@@ -170,6 +170,29 @@ def test_rerunning_a_finished_experiment_runs_nothing_again(small, capsys):
     assert "resuming: 18 of 18 runs already" in capsys.readouterr().err
 
 
+def test_an_experiment_written_before_the_algorithm_axis_resumes_and_its_results_are_upgraded(small, tmp_path, capsys):
+    """A directory of the previous version (results.csv without the algorithm and the comparison's columns,
+    experiment.json without the axis) resumes with nothing to run; its results.csv is rewritten with the new
+    columns, the study's model's rows completed (share filled from their counts, no fill ticks)."""
+    from swarm_ros.app.results_file import PREVIOUS_COLUMNS
+
+    config, out = small
+    copy = tmp_path / "old"
+    copy.mkdir()
+    record = json.loads((out / "experiment.json").read_text())
+    del record["experiment"]["algorithm"]
+    (copy / "experiment.json").write_text(json.dumps(record))
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    old = [",".join(PREVIOUS_COLUMNS)] + [",".join(r[c] for c in PREVIOUS_COLUMNS) for r in rows]
+    (copy / "results.csv").write_text("\n".join(old) + "\n")
+    assert experiment(config, copy) == 0
+    assert (copy / "results.csv").read_text().split("\n", 1)[0] == ",".join(RESULT_COLUMNS)
+    upgraded = read_results(copy / "results.csv")
+    assert len(upgraded) == len(rows) and all(r["algorithm"] == "darr-niazi" for r in upgraded)
+    assert all(r["fill_50_tick"] is None and r["coverage"] == r["localized"] / r["shape_patches"] for r in upgraded)
+    assert [r["convergence_tick"] for r in upgraded] == [int(r["convergence_tick"]) for r in rows]
+
+
 def test_a_line_cut_short_by_a_crash_is_dropped_and_its_run_redone(small, tmp_path):
     config, out = small
     copy = tmp_path / "copy"

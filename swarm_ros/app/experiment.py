@@ -44,6 +44,7 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
     if marker.exists():
         try:
             before = json.loads(marker.read_text(encoding="utf-8"))["experiment"]
+            before.setdefault("algorithm", [DARR_NIAZI])  # written before the algorithm was an axis
         except (OSError, ValueError, KeyError):
             raise ExperimentError(f"{marker}: unreadable; not a swarm-ros experiment directory") from None
         if before != json.loads(json.dumps(exp.as_dict())):

@@ -47,6 +47,10 @@ RESULT_COLUMNS = (
 )
 #: A time the run never reached (an empty field): the first ticks at which half and 90% of the shape was filled.
 _MAYBE = ("fill_50_tick", "fill_90_tick")
+_ADDED = ("algorithm", "coverage", *_MAYBE, "joined_outside", "loc_error")  #: columns since 2026-11-27
+#: The columns before the algorithm and the comparison's measures: such a file is read with its rows completed
+#: (the study's model; the share filled from its counts; no fill ticks, since results.csv never held the curves)
+PREVIOUS_COLUMNS = tuple(c for c in RESULT_COLUMNS if c not in _ADDED)
 _COUNTS = (
     "repetition",
     "shape_patches",
@@ -89,14 +93,21 @@ def read_results(path: Path) -> list[dict]:
     except UnicodeDecodeError:
         raise ExperimentError(f"{path}: not a swarm-ros results file (not UTF-8 text)") from None
     text = text[: text.rfind("\n") + 1]  # drop a last line cut short
-    if text.split("\n", 1)[0] != ",".join(RESULT_COLUMNS):
+    previous = text.split("\n", 1)[0] == ",".join(PREVIOUS_COLUMNS)
+    if text.split("\n", 1)[0] != ",".join(RESULT_COLUMNS) and not previous:
         raise ExperimentError(
             f"{path}: not a swarm-ros results file (expected the columns {', '.join(RESULT_COLUMNS)})"
         )
     rows = []
     for line, r in enumerate(csv.DictReader(io.StringIO(text)), start=2):
+        if previous and None not in r:  # completed: the study's model, no fill ticks, the share filled below
+            r = {**r, "algorithm": DARR_NIAZI, "coverage": "0", "joined_outside": "0", "loc_error": "0"}
+            r.update(dict.fromkeys(_MAYBE, ""))
         try:
-            rows.append(_checked_row(r))
+            row = _checked_row(r)
+            if previous:
+                row["coverage"] = row["localized"] / row["shape_patches"] if row["shape_patches"] else 0.0
+            rows.append(row)
         except ExperimentError as exc:
             raise ExperimentError(f"{path}: line {line}: {exc}") from None
     return rows
@@ -148,6 +159,10 @@ class ResultsFile:
                 with open(path, "r+b") as f:
                     f.truncate(cut)
             self.rows = read_results(path)
+            if not text.startswith((",".join(RESULT_COLUMNS) + "\n").encode()):  # the previous columns: rewritten
+                part = path.with_name(f".{path.name}.tmp")
+                part.write_text("".join([",".join(RESULT_COLUMNS) + "\n", *map(_csv_line, self.rows)]), "utf-8")
+                part.replace(path)
         else:
             part = path.with_name(f".{path.name}.tmp")
             part.write_text(",".join(RESULT_COLUMNS) + "\n", encoding="utf-8")

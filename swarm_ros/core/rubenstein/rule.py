@@ -175,31 +175,39 @@ def _angle_at(px, py, qx, qy, rx, ry):
     return math.acos(min(1.0, max(-1.0, c)))
 
 
+@numba.njit(cache=True, inline="always")
+def _farthest(ax, ay, n, i):
+    """The anchor of ``[:n]`` farthest from anchor i."""
+    best, far = i, -1.0
+    for k in range(n):
+        d = (ax[k] - ax[i]) ** 2 + (ay[k] - ay[i]) ** 2
+        if d > far:
+            best, far = k, d
+    return best
+
+
 @numba.njit(cache=True)
 def good_geometry(ax, ay, n, min_angle):
-    """Whether anchors ``[:n]`` hold a triangle whose smallest angle exceeds ``min_angle``: the first anchor,
-    the one farthest from it, and the one farthest from the line through those two."""
+    """Whether anchors ``[:n]`` hold a triangle whose smallest angle exceeds ``min_angle``. Tried: the two ends
+    of the anchors' long axis (the anchor farthest from the first, and the one farthest from that) with each
+    other anchor as the third corner, so O(n). A band of anchors a few rows deep along a straight edge of the
+    group passes; a line of them does not."""
     if n < 3:
         return False
-    b, far = 1, -1.0
-    for k in range(1, n):
-        d = (ax[k] - ax[0]) ** 2 + (ay[k] - ay[0]) ** 2
-        if d > far:
-            b, far = k, d
-    c, off = -1, -1.0
-    for k in range(1, n):
-        if k != b:
-            a = abs((ax[b] - ax[0]) * (ay[k] - ay[0]) - (ay[b] - ay[0]) * (ax[k] - ax[0]))
-            if a > off:
-                c, off = k, a
-    if off <= 0.0:
+    a = _farthest(ax, ay, n, 0)
+    b = _farthest(ax, ay, n, a)
+    if a == b:
         return False
-    smallest = min(
-        _angle_at(ax[0], ay[0], ax[b], ay[b], ax[c], ay[c]),
-        _angle_at(ax[b], ay[b], ax[0], ay[0], ax[c], ay[c]),
-        _angle_at(ax[c], ay[c], ax[0], ay[0], ax[b], ay[b]),
-    )
-    return smallest > min_angle
+    for k in range(n):
+        if k != a and k != b:
+            smallest = min(
+                _angle_at(ax[a], ay[a], ax[b], ay[b], ax[k], ay[k]),
+                _angle_at(ax[b], ay[b], ax[a], ay[a], ax[k], ay[k]),
+                _angle_at(ax[k], ay[k], ax[a], ay[a], ax[b], ay[b]),
+            )
+            if smallest > min_angle:
+                return True
+    return False
 
 
 @numba.njit(cache=True)
