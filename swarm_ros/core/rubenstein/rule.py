@@ -295,7 +295,8 @@ def decide_kernel(ids, s, rule, bm, cells, tick, out, ax, ay, am):
         g = gmin + 1 if gmin < UNKNOWN_G else UNKNOWN_G
         # localization
         ex, ey, est, loc, still = s.ex[i], s.ey[i], s.est[i], s.loc[i], s.still[i]
-        if good_geometry(ax, ay, n, rule.min_angle):
+        # the anchors' geometry gates the first estimate; once it has one, a robot sweeps with any three anchors
+        if (est and n >= 3) or good_geometry(ax, ay, n, rule.min_angle):
             if est:
                 px, py = ex, ey
                 for _ in range(rule.sweeps if st == MOVE_OUTSIDE or st == MOVE_INSIDE else 1):  # a mover lags
