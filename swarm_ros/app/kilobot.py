@@ -44,16 +44,21 @@ def simulate_kilobot(
             log_every = options.every or RECORD_EVERY
             recorder = KilobotRecorder(rrd, run, every=log_every, spawn=options.spawn, connect=options.connect)
             every = log_every
-        with tqdm(
-            total=run.pixels, unit="pixel", desc="covered", disable=True if args.quiet else None, file=sys.stderr
-        ) as bar:
-            while not run.done and not stop.signum:
-                run.run(every - run.tick % every)
-                if recorder is not None:
-                    recorder.robots(run)
-                m = run.metrics
-                bar.update(int(m["covered"]) - bar.n)
-                bar.set_postfix(tick=str(run.tick), joined=str(int(m["joined"])), refresh=False)
+        try:
+            with tqdm(
+                total=run.pixels, unit="pixel", desc="covered", disable=True if args.quiet else None, file=sys.stderr
+            ) as bar:
+                while not run.done and not stop.signum:
+                    run.run(every - run.tick % every)
+                    if recorder is not None:
+                        recorder.robots(run)
+                    m = run.metrics
+                    bar.update(int(m["covered"]) - bar.n)
+                    bar.set_postfix(tick=str(run.tick), joined=str(int(m["joined"])), refresh=False)
+        except BaseException:
+            if recorder is not None:  # the recording so far, ended whole where the run failed
+                recorder.close(run, "failed")
+            raise
     stopped = Outcome.INTERRUPTED if not run.done else None
     summary = summary_of(run, time.perf_counter() - start, stopped)
     if recorder is not None:
