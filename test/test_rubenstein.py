@@ -345,3 +345,63 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     assert (out / "figures" / "square_rubenstein_v1.png").stat().st_size > 0
     refused = cli.main(["experiment", str(config), "--out", str(tmp_path / "ros"), "--quiet", "--engine", "ros2"])
     assert refused != 0 and not (tmp_path / "ros").exists()
+
+
+def test_ctrl_c_mid_run_keeps_an_interrupted_run_directory_and_its_recording(tmp_path):
+    """Ctrl-C during a rubenstein simulate: exit 130, one line, and the run so far written whole (outcome
+    interrupted), its recording ended and moved in; nothing left beside it."""
+    import json
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swarm_ros", "simulate", "--algorithm", "rubenstein", "--shape", "star"]
+        + ["--out", str(out), "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    partial = tmp_path / "run.partial.rrd"
+    deadline = time.monotonic() + 120
+    while not partial.exists() and time.monotonic() < deadline:  # the run has started: its recording is open
+        time.sleep(0.05)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("swarm-ros: interrupted at tick"), err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "interrupted" and summary["convergence_tick"] > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+    metrics = (out / "metrics.csv").read_text().splitlines()
+    assert len(metrics) == summary["convergence_tick"] + 2  # the header, tick 0 and every tick run
+    from recordings import rrd_verify
+
+    assert rrd_verify(out / "recording.rrd").returncode == 0
+
+
+@pytest.mark.parametrize(
+    "flags,message",
+    [
+        (["--shape", "box"], "the rubenstein algorithm forms 2D shapes only"),
+        (["--vision", "2"], "vision_radius is a parameter of the darr-niazi algorithm, not of rubenstein, got 2.0"),
+        (["--desired-distance", "1.8"], "1 < desired_distance < gradient_range < sqrt(3)"),
+        (["--comm-range", "0.5"], "comm_range must be a number >= 1 and <= 20, got 0.5"),
+    ],
+)
+def test_bad_rubenstein_input_is_one_line_and_writes_nothing(tmp_path, flags, message):
+    import subprocess
+    import sys
+
+    out = tmp_path / "run"
+    done = subprocess.run(
+        [sys.executable, "-m", "swarm_ros", "simulate", "--algorithm", "rubenstein", *flags, "--out", str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.count("\n") == 1 and message in done.stderr, done.stderr
+    assert list(tmp_path.iterdir()) == []
