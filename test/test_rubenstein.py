@@ -223,6 +223,16 @@ def test_parameters_of_the_other_algorithm_are_refused_in_one_line():
         RunParams(100, algorithm="rubenstein", vision_radius=2.0)
     with pytest.raises(ParameterError, match="desired_distance < gradient_range"):
         RunParams(100, algorithm="rubenstein", desired_distance=1.6)
+    with pytest.raises(ParameterError, match="comm_range must be at least 1 . step_length"):
+        RunParams(
+            100,
+            algorithm="rubenstein",
+            comm_range=1.4,
+            gradient_range=1.2,
+            desired_distance=1.1,
+            yield_distance=1.3,
+            step_length=0.5,
+        )
     with pytest.raises(ParameterError, match="yield_distance must be below comm_range"):
         RunParams(100, algorithm="rubenstein", yield_distance=3.6)
     with pytest.raises(ParameterError, match="2D shapes only"):

@@ -395,6 +395,10 @@ class RunParams:
                 "the rubenstein algorithm needs 1 < desired_distance < gradient_range < sqrt(3) (robot diameters), "
                 f"got desired_distance {self.desired_distance:g} and gradient_range {self.gradient_range:g}"
             )
+        if self.comm_range < 1.0 + self.step_length:  # the world checks a step against the robots within C
+            raise ParameterError(
+                f"comm_range must be at least 1 + step_length ({1.0 + self.step_length:g}), got {self.comm_range:g}"
+            )
         for name in ("gradient_range", "yield_distance"):
             if getattr(self, name) >= self.comm_range:
                 raise ParameterError(
