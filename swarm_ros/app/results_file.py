@@ -14,7 +14,7 @@ from pathlib import Path
 
 from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.inputs import RESULTS_LIMIT, read_bounded
-from swarm_ros.core.metrics import Outcome
+from swarm_ros.core.metrics import SEEDS, Outcome
 from swarm_ros.core.params import DARR_NIAZI, EXPERIMENT_AXES, RUBENSTEIN, RUN_PARAMETERS
 from swarm_ros.core.run_result import ENGINES
 
@@ -215,5 +215,5 @@ def _as_study_columns(summary: dict) -> dict:
         "separated": 0,
         "empty_patches": pixels - round(summary["coverage"] * pixels),
         "lost_robots": 0,
-        "convergence_rate": round((joined - 4) / tick, 6) if tick > 0 else 0.0,
+        "convergence_rate": round((joined - SEEDS) / tick, 6) if tick > 0 else 0.0,
     }

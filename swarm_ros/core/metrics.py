@@ -104,17 +104,25 @@ def convergence_rate(final: TickMetrics) -> float:
     return (final.localized - SEEDS) / final.tick if final.tick > 0 else 0.0
 
 
-def fill_ticks(history, shape_patches: int, column: int) -> tuple[int | None, int | None]:
-    """The first ticks at whose end ``column`` of the metrics ``history`` (rows of ``METRIC_COLUMNS``) reached
-    half and 90% of ``shape_patches``, or None."""
+def fill_ticks(ticks, filled, total: int) -> tuple[int | None, int | None]:
+    """The first of ``ticks`` at whose end ``filled`` (the same length: patches localized, pixels covered) reached
+    half and 90% of ``total``, or None: the times both algorithms are compared on."""
     import numpy as np
 
-    h = np.asarray(history).reshape(-1, len(METRIC_COLUMNS))
+    ticks, filled = np.asarray(ticks), np.asarray(filled)
     out = []
     for share in (0.5, 0.9):
-        hit = np.flatnonzero(h[:, column] >= share * shape_patches)
-        out.append(int(h[hit[0], 0]) if hit.size else None)
+        hit = np.flatnonzero(filled >= share * total)
+        out.append(int(ticks[hit[0]]) if hit.size else None)
     return out[0], out[1]
+
+
+def _filled(history, shape_patches: int) -> tuple[int | None, int | None]:
+    """:func:`fill_ticks` of a metrics history (rows of ``METRIC_COLUMNS``; none: never)."""
+    import numpy as np
+
+    h = np.asarray(history if history is not None else []).reshape(-1, len(METRIC_COLUMNS))
+    return fill_ticks(h[:, 0], h[:, _LOCALIZED], shape_patches)
 
 
 def run_summary(
@@ -172,7 +180,7 @@ def run_summary(
         **dict(
             zip(
                 ("fill_50_tick", "fill_90_tick"),
-                fill_ticks(history if history is not None else [], shape_patches, _LOCALIZED),
+                _filled(history, shape_patches),
             )
         ),
         "convergence_rate": round(convergence_rate(final), 6),

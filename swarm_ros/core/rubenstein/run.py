@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from swarm_ros.core.errors import ContractError, ParameterError
-from swarm_ros.core.metrics import OUTCOME_OF_CODE, Outcome
+from swarm_ros.core.metrics import OUTCOME_OF_CODE, Outcome, fill_ticks
 from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETER, RunParams
 from swarm_ros.core.rng import STREAM_PLACE_HEADING, uniform_array
 from swarm_ros.core.shapes import Shape
@@ -41,6 +41,7 @@ from .ticks import Tally, join_robot, metrics_row, run_kernel
 
 #: metrics.csv's columns for this algorithm, one row per tick (tick 0 first)
 COLUMNS = ("tick", "joined", "moving", "waiting", "covered", "joined_outside", "loc_error")
+_COVERED = COLUMNS.index("covered")
 CHUNK = 4096  #: ticks per call of the compiled run, at most
 MARGIN = 6.0  #: the cell grid reaches this far (in d, beyond the communication range) past the shape and the pack
 
@@ -208,12 +209,6 @@ class KilobotRun:
         return self.outcome
 
 
-def fill_tick(history: np.ndarray, pixels: int, share: float) -> int | None:
-    """The first tick at whose end at least ``share`` of the shape's pixels were covered, or None."""
-    hit = np.flatnonzero(history[:, COLUMNS.index("covered")] >= share * pixels)
-    return int(history[hit[0], 0]) if hit.size else None
-
-
 def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = None) -> dict:
     """The summary.json record of a rubenstein run: what was run, how it ended, and the comparison's metrics
     (time: the end tick, ticks to 50% and 90% of the pixels covered; accuracy: the share of pixels covered,
@@ -230,8 +225,7 @@ def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = N
         "engine": "inprocess",
         "outcome": str(outcome),
         "convergence_tick": run.tick,
-        "fill_50_tick": fill_tick(history, run.pixels, 0.5),
-        "fill_90_tick": fill_tick(history, run.pixels, 0.9),
+        **dict(zip(("fill_50_tick", "fill_90_tick"), fill_ticks(history[:, 0], history[:, _COVERED], run.pixels))),
         "coverage": m["covered"] / run.pixels,
         "joined": int(m["joined"]),
         "joined_outside": int(m["joined_outside"]),
