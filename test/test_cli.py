@@ -214,7 +214,7 @@ BAD = [
     (["--robots", "3"], "robots must be an integer >= 4"),
     (["--vision", "0"], "vision_radius must be a number >= 1 and <= 100, got 0"),
     (["--vision", "nan"], "vision_radius must be a number >= 1 and <= 100, got nan"),
-    (["--max-ticks", "0"], "max_ticks must be an integer >= 1 and <= 1000000000, got 0"),
+    (["--max-ticks", "-1"], "max_ticks must be an integer >= 1 and <= 1000000000 (0 = 100000 under darr-niazi, "),
     (["--seed", "-1"], "seed must be an integer >= 0 and <= 9223372036854775807, got -1"),
     (["--world-radius", "27"], "touches the wall"),
     (["--world-radius", "20"], "reaches beyond the walls"),

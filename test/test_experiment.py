@@ -360,7 +360,7 @@ BAD = [
     ({"vision_radius": 40}, "vision_radius[0]: vision_radius must be <= the world radius 10"),
     ({"fail_fraction": 0.1, "fail_tick": 500, "max_ticks": 400}, "fail_tick must be before max_ticks (400)"),
     ({"repetitions": 0}, "repetitions: repetitions must be an integer >= 1 and <= 1000000, got 0"),
-    ({"max_ticks": "many"}, "max_ticks: max_ticks must be an integer >= 1 and <= 1000000000, got 'many'"),
+    ({"max_ticks": "many"}, "max_ticks: max_ticks must be an integer >= 1 and <= 1000000000 (0 = 100000 under"),
     ({"shapes": {"disc.txt": [500]}}, "shapes.disc.txt[0]: 500 robots do not fit on the 361 free patches"),
     ({"seed": None}, "seed: seed must be an integer >= 0 and <= 9223372036854775807, got None"),
     ({"rules": ["paper", "fast"]}, "rules[1]: rules must be one of paper, local, literal, got 'fast'"),

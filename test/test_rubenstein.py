@@ -22,7 +22,7 @@ from swarm_ros.core.rubenstein.rule import (
     sweep,
     trilaterate,
 )
-from swarm_ros.core.rubenstein.run import KilobotRun
+from swarm_ros.core.rubenstein.run import KilobotRun, hole_filled, summary_of
 
 pytestmark = pytest.mark.unit
 
@@ -30,6 +30,14 @@ pytestmark = pytest.mark.unit
 def square(side: int) -> Shape:
     """A solid square of ``side`` x ``side`` pixels."""
     return Shape.from_grid(np.ones((side, side), dtype=bool), World(), name=f"square{side}", source="test")
+
+
+def ring(side: int, hole: int) -> Shape:
+    """A ``side`` x ``side`` square with a centred ``hole`` x ``hole`` hole."""
+    mask = np.ones((side, side), dtype=bool)
+    a = (side - hole) // 2
+    mask[a : a + hole, a : a + hole] = False
+    return Shape.from_grid(mask, World(), name=f"ring{side}", source="test")
 
 
 def kilobot(shape: Shape, robots: int, **values) -> KilobotRun:
@@ -195,6 +203,39 @@ def test_too_few_robots_leave_the_shape_incomplete_once_every_robot_has_joined()
     assert run.metrics["joined"] == 20 and run.metrics["covered"] < run.pixels
 
 
+def test_the_shape_frame_finds_a_holes_pixels_and_no_hole_in_an_open_notch():
+    assert ShapeFrame.of(ring(9, 3), 1.2).holes.sum() == 9 and ShapeFrame.of(square(6), 1.2).holes.sum() == 0
+    notch = np.ones((6, 6), dtype=bool)
+    notch[2:4, 2:] = False  # open to the right: outside, not a hole
+    frame = ShapeFrame.of(Shape.from_grid(notch, World(), name="notch", source="test"), 1.2)
+    assert frame.holes.sum() == 0
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_shape_with_a_hole_ends_with_its_hole_measured_robots_stop_at_the_rim(seed):
+    """A 9 x 9 square with a 3 x 3 hole, one robot per pixel: the run ends (documented outcomes only), and how
+    much of the hole the joined robots' discs fill is measured. Robots that reach the hole's rim stop there,
+    their centres at most a tenth of d inside it, so they fill a band of it and no robot stands deeper in
+    it. ``hole_filled`` is checked against the same area sampled independently, on a finer grid."""
+    run = kilobot(ring(9, 3), 72, seed=seed)
+    run.run(100_000)
+    assert run.outcome is not None and run.outcome.value != "timeout"
+    s, frame = run.robots, run.frame
+    joined = s.state == JOINED
+    x0, x1 = frame.x0 + 3 * frame.pixel, frame.x0 + 6 * frame.pixel  # the hole's columns 3-5, rows 3-5
+    y0, y1 = frame.y0 + 3 * frame.pixel, frame.y0 + 6 * frame.pixel
+    inside = joined & (s.x > x0) & (s.x < x1) & (s.y > y0) & (s.y < y1)
+    depth = np.minimum.reduce([s.x - x0, x1 - s.x, s.y - y0, y1 - s.y])[inside]
+    assert depth.size == 0 or depth.max() < 0.1
+    g = (np.arange(40) + 0.5) / 40
+    px, py = np.meshgrid(x0 + g * (x1 - x0), y0 + g * (y1 - y0))
+    near = np.hypot(px.ravel()[:, None] - s.x[joined], py.ravel()[:, None] - s.y[joined]).min(axis=1)
+    by_hand = float(np.mean(near < 0.5))
+    summary = summary_of(run, 0.0)
+    assert 0.0 < summary["hole_filled"] == hole_filled(run) < 0.5
+    assert abs(summary["hole_filled"] - by_hand) < 0.03
+
+
 def test_the_same_seed_gives_the_same_run_and_step_equals_run():
     a, b = kilobot(square(6), 40, seed=4), kilobot(square(6), 40, seed=4)
     a.run(700)
@@ -347,7 +388,10 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     assert all(r["coverage"] > 0.9 and r["fill_50_tick"] <= r["fill_90_tick"] for r in kilobots)
     studied = [r for r in rows if r["algorithm"] == "darr-niazi"]
     assert all(
-        r["joined_outside"] == 0 and r["loc_error"] == 0.0 and r["fill_50_tick"] <= r["fill_90_tick"] for r in studied
+        r["joined_outside"] == r["hole_filled"] == 0
+        and r["loc_error"] == 0.0
+        and r["fill_50_tick"] <= r["fill_90_tick"]
+        for r in studied
     )
     stats = (out / "stats.md").read_text()
     table = stats[stats.index("## Time and accuracy") :]

@@ -76,7 +76,10 @@ def simulate_kilobot(
             ("end tick", str(run.tick)),
             ("50% / 90% tick", f"{summary['fill_50_tick']} / {summary['fill_90_tick']}"),
             ("covered", f"{summary['coverage']:.1%} of the pixels"),
-            ("joined", f"{summary['joined']}  (outside the shape {summary['joined_outside']})"),
+            (
+                "joined",
+                f"{summary['joined']}  (outside the shape {summary['joined_outside']})",
+            ),
             ("loc. error", f"{summary['loc_error']:.3f} d (mean over the joined)"),
             ("wall time", f"{summary['wall_seconds']:.2f} s"),
             ("output", str(out)),

@@ -40,10 +40,11 @@ STATS_COLUMNS = (
     "mean_fill_50_tick",
     "mean_fill_90_tick",
     "mean_joined_outside",
+    "mean_hole_filled",
     "mean_loc_error",
 )
 RUBENSTEIN_LABEL = "rubenstein"  #: the label of the rubenstein algorithm's runs, beside the rule sets'
-COMPARED = ("coverage", "fill_50_tick", "fill_90_tick", "joined_outside", "loc_error")
+COMPARED = ("coverage", "fill_50_tick", "fill_90_tick", "joined_outside", "hole_filled", "loc_error")
 _COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000")
 
 
@@ -180,12 +181,14 @@ def time_and_accuracy(stats: list[dict]) -> list[str]:
         "",
         "Ticks to 50% and 90% of the shape filled, and at the end: the share of the shape filled (patches "
         "localized; under rubenstein, shape pixels a joined robot's disc meets), robots joined outside the "
-        "shape and the joined robots' localization error in robot diameters (none under the study's model, "
-        "whose robots localize exactly on patches). Means over the runs; a time no run reached is –.",
+        "shape, the share of the area of its holes (if any) under a joined robot, and the joined robots' "
+        "localization error in robot diameters "
+        "(none of these under the study's model, whose robots localize exactly on shape patches). "
+        "Means over the runs; a time no run reached is –.",
         "",
         "| shape | robots | rules / algorithm | vision | runs | t50 | t90 | end tick | filled | outside | "
-        "loc. error | completed |",
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "hole filled | loc. error | completed |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     order = _rules_order(stats)
     for s in sorted(stats, key=lambda s: (s["shape"], s["robots"], order.index(s["rules"]), s["vision_radius"])):
@@ -194,7 +197,7 @@ def time_and_accuracy(stats: list[dict]) -> list[str]:
         lines.append(
             f"| {s['shape']} | {s['robots']} | {s['rules']} | {vision} | {s['runs']} | {t50} | {t90} "
             f"| {s['mean_convergence_tick']:.0f} | {s['mean_coverage']:.1%} | {s['mean_joined_outside']:.1f} "
-            f"| {s['mean_loc_error']:.3f} | {s['completed_fraction']:.0%} |"
+            f"| {s['mean_hole_filled']:.1%} | {s['mean_loc_error']:.3f} | {s['completed_fraction']:.0%} |"
         )
     return lines
 

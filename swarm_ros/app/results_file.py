@@ -42,12 +42,15 @@ RESULT_COLUMNS = (
     "fill_50_tick",
     "fill_90_tick",
     "joined_outside",
+    "hole_filled",
     "loc_error",
     "wall_seconds",
 )
 #: A time the run never reached (an empty field): the first ticks at which half and 90% of the shape was filled.
 _MAYBE = ("fill_50_tick", "fill_90_tick")
-_ADDED = ("algorithm", "coverage", *_MAYBE, "joined_outside", "loc_error")  #: columns since 2026-11-27
+_ACCURACY = ("joined_outside", "hole_filled", "loc_error")  #: 0 under the study's model (its robots localize
+#: exactly, on shape patches)
+_ADDED = ("algorithm", "coverage", *_MAYBE, *_ACCURACY)  #: columns since 2026-11-27
 #: The columns before the algorithm and the comparison's measures: such a file is read with its rows completed
 #: (the study's model; the share filled from its counts; no fill ticks, since results.csv never held the curves)
 PREVIOUS_COLUMNS = tuple(c for c in RESULT_COLUMNS if c not in _ADDED)
@@ -61,12 +64,18 @@ _COUNTS = (
     "empty_patches",
     "lost_robots",
 )
-_INT_COLUMNS = {*_COUNTS, "joined_outside", *_MAYBE, *(p.name for p in RUN_PARAMETERS if p.kind is int)}
+_INT_COLUMNS = {
+    *_COUNTS,
+    "joined_outside",
+    *_MAYBE,
+    *(p.name for p in RUN_PARAMETERS if p.kind is int),
+}
 _OUTCOMES = tuple(o.value for o in Outcome)
 _FLOAT_COLUMNS = {
     "convergence_rate",
     "wall_seconds",
     "coverage",
+    "hole_filled",
     "loc_error",
     *(p.name for p in RUN_PARAMETERS if p.kind is float),
 }
@@ -101,7 +110,7 @@ def read_results(path: Path) -> list[dict]:
     rows = []
     for line, r in enumerate(csv.DictReader(io.StringIO(text)), start=2):
         if previous and None not in r:  # completed: the study's model, no fill ticks, the share filled below
-            r = {**r, "algorithm": DARR_NIAZI, "coverage": "0", "joined_outside": "0", "loc_error": "0"}
+            r = {**r, "algorithm": DARR_NIAZI, **dict.fromkeys(("coverage", *_ACCURACY), "0")}
             r.update(dict.fromkeys(_MAYBE, ""))
         try:
             row = _checked_row(r)
@@ -141,7 +150,7 @@ def _checked_row(raw: dict) -> dict:
         raise ExperimentError(f"outcome must be one of {', '.join(_OUTCOMES)}, got {row['outcome']!r}")
     if row["engine"] not in ENGINES:
         raise ExperimentError(f"engine must be one of {', '.join(ENGINES)}, got {row['engine']!r}")
-    for k in (*_COUNTS, "convergence_rate", "wall_seconds", "coverage", "joined_outside", "loc_error", *_MAYBE):
+    for k in (*_COUNTS, "convergence_rate", "wall_seconds", "coverage", *_ACCURACY, *_MAYBE):
         if row[k] is not None and not (row[k] >= 0 and math.isfinite(row[k])):
             raise ExperimentError(f"{k} must be a number >= 0, got {raw[k]!r}")
     return row
@@ -189,9 +198,10 @@ def result_row(spec, summary: dict) -> dict:
     summary.json record."""
     if summary.get("algorithm") == RUBENSTEIN:
         summary = _as_study_columns(summary)
-    # the study's model localizes robots exactly on shape patches: none outside, no localization error
+    # the study's model localizes robots exactly on shape patches: none outside (nor in a hole), no error
     row = {
         "joined_outside": 0,
+        "hole_filled": 0.0,
         "loc_error": 0.0,
         **summary,
         "shape_file": spec.shape_file,

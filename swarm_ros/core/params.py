@@ -30,7 +30,6 @@ if TYPE_CHECKING:
 DEFAULT_SEED = 1
 DEFAULT_VISION = 1.0
 DEFAULT_WIGGLE_DEG = 45.0
-DEFAULT_MAX_TICKS = 100_000
 MAX_SEED = INT64_MAX
 #: The largest tick limit: far beyond any run (the study's is 100,000; 10^9 ticks take days at the fastest),
 #: and the graph's world keeps a row of metrics per tick in its checkpoint, a sparse file this many rows long.
@@ -38,6 +37,9 @@ MAX_TICKS = 10**9
 MIN_ROBOTS = 4  # the four seeds
 DARR_NIAZI, RUBENSTEIN = "darr-niazi", "rubenstein"
 ALGORITHMS = (DARR_NIAZI, RUBENSTEIN)  #: the shape-formation algorithms; the study's model first, the default
+#: Each algorithm's tick limit when max_ticks is left at 0: the study's; and, under rubenstein, room for a
+#: 1,024-robot run, in which one robot leaves the pack every hundred-odd ticks (the star: about 180,000 ticks).
+DEFAULT_MAX_TICKS = {DARR_NIAZI: 100_000, RUBENSTEIN: 400_000}
 _DN, _RB = {"algorithm": DARR_NIAZI}, {"algorithm": RUBENSTEIN, "experiment": ""}  # experiments: the model only
 
 
@@ -99,7 +101,13 @@ class Settings:
         "", "override the rule set's steps switch", choices=STEPS_VALUES, blank="the rule set's own", **_DN
     )
     seed: int = _param(DEFAULT_SEED, "run seed", low=0, high=MAX_SEED, experiment="")
-    max_ticks: int = _param(DEFAULT_MAX_TICKS, "tick limit", low=1, high=MAX_TICKS)
+    max_ticks: int = _param(
+        0,
+        "tick limit",
+        low=1,
+        high=MAX_TICKS,
+        blank=", ".join(f"{n} under {a}" for a, n in DEFAULT_MAX_TICKS.items()),
+    )
     wiggle_deg: float = _param(
         DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle", **_DN
     )
@@ -339,7 +347,7 @@ class RunParams:
     crowding: str = ""
     steps: str = ""
     seed: int = DEFAULT_SEED
-    max_ticks: int = DEFAULT_MAX_TICKS
+    max_ticks: int = 0
     wiggle_deg: float = DEFAULT_WIGGLE_DEG
     fail_fraction: float = 0.0
     fail_tick: int = 0
@@ -364,6 +372,8 @@ class RunParams:
         for p in RUN_PARAMETERS:
             if p.model and p.name not in ("join", "crowding", "steps", "rules"):
                 object.__setattr__(self, p.name, p.check(getattr(self, p.name)))
+        if self.max_ticks == 0:  # the algorithm's own
+            object.__setattr__(self, "max_ticks", DEFAULT_MAX_TICKS[self.algorithm])
         # the default rule set's switches, resolved, are its defaults too (a summary's parameters hold them so)
         unset = dict(zip(("join", "crowding", "steps"), RULE_SETS[DEFAULT_RULES]))
         for p in RUN_PARAMETERS:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarm_ros.core.errors import ParameterError
-from swarm_ros.core.shapes import Shape
+from swarm_ros.core.shapes import Shape, regions
 
 H = math.sqrt(3.0) / 2.0  #: the height of a row of the touching hexagonal lattice
 #: the seeds, root first
@@ -71,14 +71,24 @@ class ShapeFrame:
         rows, cols = self.mask.shape
         return self.x0, self.y0, self.x0 + cols * self.pixel, self.y0 + rows * self.pixel
 
-    def inside(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Whether each point is inside the shape."""
+    @property
+    def holes(self) -> np.ndarray:
+        """``holes[row, col]``: True where the pixel lies in one of the shape's holes, a 4-connected region of
+        unset pixels that does not reach the trimmed bitmap's border (as the shape's own count of holes)."""
+        labels, _ = regions(~self.mask, connectivity=4)
+        outer = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+        return (labels > 0) & ~np.isin(labels, outer)
+
+    def inside(self, x: np.ndarray, y: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
+        """Whether each point falls in a set pixel of ``where`` (a mask of the bitmap's size; by default the
+        shape's own)."""
+        where = self.mask if where is None else where
         col = np.floor((np.asarray(x) - self.x0) / self.pixel).astype(np.int64)
         row = np.floor((np.asarray(y) - self.y0) / self.pixel).astype(np.int64)
         rows, cols = self.mask.shape
         ok = (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
         out = np.zeros(np.shape(x), dtype=bool)
-        out[ok] = self.mask[row[ok], col[ok]]
+        out[ok] = where[row[ok], col[ok]]
         return out
 
 

@@ -209,10 +209,34 @@ class KilobotRun:
         return self.outcome
 
 
+HOLE_SAMPLES = 8  #: a hole pixel's area is sampled at this many points along each side
+
+
+def hole_filled(run: KilobotRun) -> float:
+    """The share of the area of the shape's holes (:attr:`ShapeFrame.holes`) under a joined robot's disc, 0 for
+    a shape with no hole: the study's point against this algorithm is that it cannot leave a hole empty. Robots
+    joined on a hole's rim, their centres on its edge, fill a band of it; only robots inside fill more. The area
+    is sampled at ``HOLE_SAMPLES`` x ``HOLE_SAMPLES`` points a pixel, each filled when within 1/2 of a centre."""
+    from scipy.spatial import cKDTree
+
+    frame, s = run.frame, run.robots
+    rows, cols = np.nonzero(frame.holes)
+    joined = s.state == JOINED
+    if rows.size == 0 or not joined.any():
+        return 0.0
+    offsets = (np.arange(HOLE_SAMPLES) + 0.5) / HOLE_SAMPLES * frame.pixel
+    px = (frame.x0 + cols * frame.pixel)[:, None, None] + offsets[None, None, :]
+    py = (frame.y0 + rows * frame.pixel)[:, None, None] + offsets[None, :, None]
+    points = np.column_stack([a.ravel() for a in np.broadcast_arrays(px, py)])
+    distance, _ = cKDTree(np.column_stack((s.x[joined], s.y[joined]))).query(points, distance_upper_bound=0.5)
+    return float(np.count_nonzero(np.isfinite(distance)) / points.shape[0])
+
+
 def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = None) -> dict:
     """The summary.json record of a rubenstein run: what was run, how it ended, and the comparison's metrics
     (time: the end tick, ticks to 50% and 90% of the pixels covered; accuracy: the share of pixels covered,
-    robots joined outside the shape, the joined robots' mean localization error in d)."""
+    robots joined outside the shape, the share of its holes' area filled, the joined robots' mean localization
+    error in d)."""
     outcome = run.outcome or stopped
     if outcome is None:
         raise ContractError("the run has not ended yet")
@@ -229,6 +253,7 @@ def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = N
         "coverage": m["covered"] / run.pixels,
         "joined": int(m["joined"]),
         "joined_outside": int(m["joined_outside"]),
+        "hole_filled": hole_filled(run),
         "loc_error": m["loc_error"],
         "wall_seconds": wall_seconds,
     }
