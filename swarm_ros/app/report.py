@@ -98,6 +98,16 @@ def _curve(row: dict) -> np.ndarray:
     return sim.history[:, [0, METRIC_COLUMNS.index("empty_patches")]].copy()
 
 
+def _setting(rules: str, vision: float) -> str:
+    """A figure's words for what its runs ran: the rule set and vision radius, or the rubenstein algorithm (neither
+    is a parameter of it)."""
+    return "the rubenstein algorithm" if rules == RUBENSTEIN_LABEL else f"rules {rules}, vision radius {vision:g}"
+
+
+def _cells(rules: str) -> str:
+    return "pixels" if rules == RUBENSTEIN_LABEL else "patches"
+
+
 def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference | None = None) -> None:
     """Panels (a)-(d) for one shape at one vision radius and rule set; ``ref`` adds the published point to (b)."""
     s0 = stats[0]
@@ -109,7 +119,7 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), dpi=110)
     (a, b), (c, d) = axes
     fig.suptitle(
-        f"{s0['shape']} ({patches} patches), rules {s0['rules']}, vision radius {s0['vision_radius']:g}, "
+        f"{s0['shape']} ({patches} {_cells(s0['rules'])}), {_setting(s0['rules'], s0['vision_radius'])}, "
         f"{s0['runs']} runs per group size",
         fontsize=12,
     )
@@ -220,10 +230,10 @@ def all_shapes_figure(stats: list[dict], vision: float, rules: str, path: Path) 
             fmt="o-",
             capsize=3,
             color=_COLOURS[k % len(_COLOURS)],
-            label=f"{shape} ({ss[0]['shape_patches']} patches)",
+            label=f"{shape} ({ss[0]['shape_patches']} {_cells(rules)})",
         )
     ax.axvline(0, color="#999999", lw=0.8, ls=":")
-    ax.set_title(f"Mean convergence time, 95% CI, rules {rules}, vision radius {vision:g}", fontsize=11)
+    ax.set_title(f"Mean convergence time, 95% CI, {_setting(rules, vision)}", fontsize=11)
     ax.set_xlabel("group size minus the shape's patch count (robots)")
     ax.set_ylabel("convergence time (ticks)")
     ax.grid(alpha=0.3)
