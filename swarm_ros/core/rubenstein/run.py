@@ -33,11 +33,13 @@ from .rule import (
     UNKNOWN_G,
     Bitmap,
     Cells,
+    Decided,
     Robots,
     Rule,
+    build_cells,
     decided_for,
 )
-from .ticks import Tally, join_robot, metrics_row, run_kernel
+from .ticks import Tally, join_robot, metrics_row, not_joined, run_kernel, settle_tick
 
 #: metrics.csv's columns for this algorithm, one row per tick (tick 0 first)
 COLUMNS = ("tick", "joined", "moving", "waiting", "covered", "joined_outside", "loc_error")
@@ -207,6 +209,51 @@ class KilobotRun:
             if max_ticks is not None:
                 max_ticks -= ticks
         return self.outcome
+
+    def settle(self, parts: list[tuple[np.ndarray, Decided]]) -> Outcome | None:
+        """Advance one tick with decisions made elsewhere (robot batches, :mod:`.strips`): ``parts`` are each
+        batch's ids and decisions (position k robot ``ids[k]``'s), which between them must hold every robot not
+        joined exactly once. The world's half of the tick is :meth:`run`'s, so the result is the same.
+
+        Raises:
+            ContractError: the run has ended, or the parts miss a robot, repeat one or hold a joined one.
+        """
+        if self.outcome is not None:
+            raise ContractError(f"the run has ended ({self.outcome}) at tick {self.tick}")
+        ids = np.concatenate([p[0] for p in parts]) if parts else np.empty(0, dtype=np.int64)
+        mine = _deciding(self.robots.state)
+        order = np.argsort(ids, kind="stable")
+        if ids.size != mine.size or not np.array_equal(ids[order], mine):
+            raise ContractError(f"tick {self.tick + 1}: the decisions are not one for each robot not joined")
+        for field, out in zip(zip(*(p[1] for p in parts)), self._out):
+            out[: mine.size] = np.concatenate(field)[order]
+        row = np.empty((1, len(COLUMNS)))
+        build_cells(np.arange(self.params.robots), self.robots.x, self.robots.y, self.cells)
+        code = settle_tick(
+            mine,
+            self.robots,
+            self.rule,
+            self.bitmap,
+            self.cells,
+            self._out,
+            self._granted,
+            self._slot,
+            self.covered,
+            self._tally,
+            row[0],
+            self.tick + 1,
+            self._end,
+        )
+        self.tick += 1
+        self._rows.append(row)
+        self.outcome = OUTCOME_OF_CODE[code]
+        return self.outcome
+
+
+def _deciding(state: np.ndarray) -> np.ndarray:
+    """The robots that decide a tick: every one not joined, ascending."""
+    ids = np.empty(state.size, dtype=np.int64)
+    return ids[: not_joined(state, ids)]
 
 
 HOLE_SAMPLES = 8  #: a hole pixel's area is sampled at this many points along each side

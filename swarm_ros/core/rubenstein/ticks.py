@@ -17,7 +17,6 @@ from swarm_ros.core.rubenstein.rule import (
     MOVE_OUTSIDE,
     apply_kernel,
     build_cells,
-    clear_cells,
     cover,
     decide_kernel,
     inside,
@@ -76,38 +75,53 @@ def end_code(tick, joined, robots, covered, pixels, last_join, startup, stall, m
 
 
 @numba.njit(cache=True)
+def settle_tick(mine, s, rule, bm, cells, out, granted, slot, covered, tally, row, tick, end):
+    """The world's half of ``tick``: robots ``mine`` (every robot not joined, ascending) decided into ``out``
+    (position k robot ``mine[k]``'s), and ``cells`` holds every robot where it stood. Settle and apply the
+    moves, cover the pixels of the robots that joined, and write the tick's metrics into ``row``. Empties
+    ``cells``. Returns the end code."""
+    n = s.state.size
+    seeds, stall, max_ticks = end
+    m = mine.size
+    for k in range(m):
+        slot[mine[k]] = k
+    resolve_kernel(mine, out, s, rule.seed, cells, tick, slot, granted)
+    cells.head[:] = -1
+    for k in range(m):
+        slot[mine[k]] = -1
+    apply_kernel(mine, out, granted, s)
+    for k in range(m):
+        if s.state[mine[k]] == JOINED:
+            join_robot(mine[k], s, bm, covered, tally, seeds, tick)
+    joined = metrics_row(tick, s, covered, tally, seeds, row)
+    return end_code(tick, joined, n, covered.sum(), bm.mask.sum(), tally.last_join[0], rule.startup, stall, max_ticks)
+
+
+@numba.njit(cache=True)
+def not_joined(state, ids):
+    """Write the ids of the robots not joined, ascending, into ``ids``; return how many."""
+    m = 0
+    for i in range(state.size):
+        if state[i] != JOINED:
+            ids[m] = i
+            m += 1
+    return m
+
+
+@numba.njit(cache=True)
 def run_kernel(s, rule, bm, cells, out, granted, slot, ax, ay, am, covered, tally, rows, tick, limit, end):
     """Up to ``limit`` whole ticks after ``tick`` for every robot, stopping when the run ends; row r of ``rows``
     gets the r-th tick's metrics. ``end`` = (seeds, stall ticks, max ticks). Returns (ticks run, end code)."""
     n = s.state.size
-    seeds, stall, max_ticks = end
     everyone = np.arange(n)
     ids = np.empty(n, dtype=np.int64)
     code = RUNNING
     t = 0
     while t < limit and code == RUNNING:
         tick += 1
-        m = 0
-        for i in range(n):
-            if s.state[i] != JOINED:
-                ids[m] = i
-                m += 1
-        mine = ids[:m]
+        mine = ids[: not_joined(s.state, ids)]
         build_cells(everyone, s.x, s.y, cells)
         decide_kernel(mine, s, rule, bm, cells, tick, out, ax, ay, am)
-        for k in range(m):
-            slot[mine[k]] = k
-        resolve_kernel(mine, out, s, rule.seed, cells, tick, slot, granted)
-        clear_cells(everyone, s.x, s.y, cells)
-        for k in range(m):
-            slot[mine[k]] = -1
-        apply_kernel(mine, out, granted, s)
-        for k in range(m):
-            if s.state[mine[k]] == JOINED:
-                join_robot(mine[k], s, bm, covered, tally, seeds, tick)
-        joined = metrics_row(tick, s, covered, tally, seeds, rows[t])
-        code = end_code(
-            tick, joined, n, covered.sum(), bm.mask.sum(), tally.last_join[0], rule.startup, stall, max_ticks
-        )
+        code = settle_tick(mine, s, rule, bm, cells, out, granted, slot, covered, tally, rows[t], tick, end)
         t += 1
     return t, code

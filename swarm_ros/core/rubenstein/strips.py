@@ -1,0 +1,129 @@
+"""A rubenstein run split among K robot batches, as the ROS 2 graph is to run it: by strips of the cell grid.
+
+The cell list (:class:`~swarm_ros.core.rubenstein.rule.Cells`) has cells the size of the communication
+range C, and a robot decides from the robots in the 3 x 3 cells around its own. So the world is cut
+into K strips of whole cell columns; batch k decides for the robots not joined whose cell, at the last
+tick, lies in its strip, and it needs the robots of its *area*: its strip and one cell column either
+side (the halo, C wide). It builds its own cell list from those robots alone, in ascending id order, on
+the grid of the world's, so each of its robots visits the same neighbours in the same order as in one
+process, and decides the same. The world holds every robot: it sends each batch its area's robots
+as they stand after a tick, takes every batch's decisions for the next, and settles them
+(:meth:`~swarm_ros.core.rubenstein.run.KilobotRun.settle`) as the in-process engine does.
+
+A batch's work a tick is its area's robots and their neighbours, never the whole swarm's. A batch
+keeps nothing between ticks that the world does not send it again, so a restarted batch decides as
+the one it replaces would have.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from swarm_ros.core.errors import ParameterError
+
+from .rule import JOINED, Cells, Decided, Robots, build_cells, clear_cells, decide_kernel, decided_for
+from .run import KilobotRun, anchor_capacity
+
+
+@dataclass(frozen=True)
+class Strips:
+    """K strips of whole cell columns: strip k is the columns ``cuts[k]`` to ``cuts[k + 1] - 1``."""
+
+    cuts: np.ndarray  #: int64, K + 1 ascending column numbers, the first 0 and the last the grid's width
+
+    @staticmethod
+    def even(columns: int, batches: int) -> Strips:
+        """``batches`` strips as nearly equal in width as whole columns allow.
+
+        Raises:
+            ParameterError: more batches than columns.
+        """
+        if not 1 <= batches <= columns:
+            raise ParameterError(f"processes must be between 1 and the {columns} cell columns, got {batches}")
+        return Strips(np.linspace(0, columns, batches + 1).round().astype(np.int64))
+
+    @property
+    def batches(self) -> int:
+        return self.cuts.size - 1
+
+    def strip(self, k: int) -> tuple[int, int]:
+        """The first and last cell column of strip k."""
+        return int(self.cuts[k]), int(self.cuts[k + 1]) - 1
+
+    def area(self, k: int) -> tuple[int, int]:
+        """The first and last cell column of batch k's area: its strip and the halo column either side."""
+        first, last = self.strip(k)
+        return max(first - 1, 0), min(last + 1, int(self.cuts[-1]) - 1)
+
+
+@numba.njit(cache=True)
+def in_columns(x, state, cells, first, last, joined_too, ids):
+    """Write into ``ids`` the robots (ascending) whose cell column lies in ``first``..``last``, the joined ones
+    only if ``joined_too``; return how many."""
+    m = 0
+    for i in range(x.size):
+        if joined_too or state[i] != JOINED:
+            cx = min(max(int(np.floor((x[i] - cells.x0) / cells.side)), 0), cells.nx - 1)
+            if first <= cx <= last:
+                ids[m] = i
+                m += 1
+    return m
+
+
+def area_of(run: KilobotRun, strips: Strips, k: int) -> np.ndarray:
+    """The ids of the robots in batch k's area, as they stand at the run's tick (what the world sends it)."""
+    ids = np.empty(run.params.robots, dtype=np.int64)
+    return ids[: in_columns(run.robots.x, run.robots.state, run.cells, *strips.area(k), True, ids)]
+
+
+class KilobotBatch:
+    """One robot batch: decides for the robots of its strip from the rows of its area alone.
+
+    Its arrays are indexed by robot id, but only its area's rows are written and read a tick: the
+    rest is never looked at (its cell list holds its area's robots only).
+    """
+
+    def __init__(self, run: KilobotRun, strips: Strips, k: int) -> None:
+        n = run.params.robots
+        self.rule, self.bitmap, self.strip = run.rule, run.bitmap, strips.strip(k)
+        self.robots = Robots(*(np.zeros(n, dtype=a.dtype) for a in run.robots))
+        c = run.cells
+        self.cells = Cells(np.full(c.head.size, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64), *c[2:])
+        self._out = decided_for(n)
+        cap = anchor_capacity(run.params.comm_range)
+        self._anchors = (np.empty(cap), np.empty(cap), np.empty(cap))
+
+    def decide(self, tick: int, ids: np.ndarray, rows: Robots) -> tuple[np.ndarray, Decided]:
+        """Take the rows of the area's robots ``ids`` (ascending) as they stood after ``tick - 1`` and decide
+        ``tick`` for the robots of the strip not joined: their ids and decisions (position k robot k's)."""
+        s = self.robots
+        for mine, theirs in zip(s, rows):
+            mine[ids] = theirs
+        c = self.cells
+        column = np.clip(np.floor((s.x[ids] - c.x0) / c.side).astype(np.int64), 0, c.nx - 1)
+        own = ids[(column >= self.strip[0]) & (column <= self.strip[1]) & (s.state[ids] != JOINED)]
+        build_cells(ids, s.x, s.y, self.cells)
+        decide_kernel(own, s, self.rule, self.bitmap, self.cells, tick, self._out, *self._anchors)
+        clear_cells(ids, s.x, s.y, self.cells)
+        return own.copy(), Decided(*(a[: own.size].copy() for a in self._out))
+
+
+def run_batched(run: KilobotRun, batches: int, max_ticks: int | None = None) -> Strips:
+    """Run ``run`` to its end (or ``max_ticks`` more ticks) with its robots' decisions made by ``batches``
+    :class:`KilobotBatch` es, each sent only its area's rows; the result equals ``run.run()``'s. Returns the
+    strips."""
+    strips = Strips.even(run.cells.nx, batches)
+    hosts = [KilobotBatch(run, strips, k) for k in range(batches)]
+    left = max_ticks
+    while run.outcome is None and (left is None or left > 0):
+        tick = run.tick + 1
+        parts = []
+        for k, host in enumerate(hosts):
+            ids = area_of(run, strips, k)
+            parts.append(host.decide(tick, ids, Robots(*(a[ids] for a in run.robots))))
+        run.settle(parts)
+        left = None if left is None else left - 1
+    return strips

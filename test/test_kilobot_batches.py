@@ -1,0 +1,96 @@
+"""The rubenstein algorithm split among robot batches by strips of its cell grid (swarm_ros.core.rubenstein.strips):
+K batches, each sent only its area's robots, give the in-process engine's run byte for byte."""
+
+import numpy as np
+import pytest
+
+from swarm_ros.core import Shape, World
+from swarm_ros.core.errors import ContractError, ParameterError
+from swarm_ros.core.params import RunParams, Settings
+from swarm_ros.core.rubenstein.rule import JOINED, Robots
+from swarm_ros.core.rubenstein.run import KilobotRun
+from swarm_ros.core.rubenstein.strips import KilobotBatch, Strips, area_of, run_batched
+
+pytestmark = pytest.mark.unit
+
+
+def square(side: int) -> Shape:
+    return Shape.from_grid(np.ones((side, side), dtype=bool), World(), name=f"square{side}", source="test")
+
+
+def same(a: KilobotRun, b: KilobotRun) -> bool:
+    return (
+        a.tick == b.tick
+        and a.outcome == b.outcome
+        and all(np.array_equal(x, y) for x, y in zip(a.robots, b.robots))
+        and np.array_equal(a.history, b.history)
+        and np.array_equal(a.covered, b.covered)
+    )
+
+
+@pytest.mark.parametrize("batches", [1, 2, 4])
+def test_k_batches_give_the_in_process_run_to_its_end(batches):
+    params = RunParams(40, algorithm="rubenstein", seed=5, range_noise=0.04)
+    whole, split = KilobotRun(square(6), params), KilobotRun(square(6), params)
+    whole.run()
+    run_batched(split, batches)
+    assert whole.outcome is not None and same(whole, split)
+
+
+@pytest.mark.parametrize("batches", [2, 4, 7])
+def test_k_batches_give_the_in_process_star_while_robots_cross_strips(batches):
+    shape, params = Settings(shape="star", algorithm="rubenstein", robots=150, seed=2).resolve()
+    whole, split = KilobotRun(shape, params), KilobotRun(shape, params)
+    whole.run(2500)
+    strips = run_batched(split, batches, 2500)
+    assert strips.batches == batches and same(whole, split)
+    assert (whole.robots.state == JOINED).sum() > 4  # robots left the pack and joined: some crossed strips
+
+
+def test_strips_cover_the_grid_and_an_area_is_its_strip_and_one_column_either_side():
+    strips = Strips.even(15, 4)
+    assert strips.cuts.tolist() == [0, 4, 8, 11, 15]
+    assert [strips.strip(k) for k in range(4)] == [(0, 3), (4, 7), (8, 10), (11, 14)]
+    assert [strips.area(k) for k in range(4)] == [(0, 4), (3, 8), (7, 11), (10, 14)]
+    with pytest.raises(ParameterError, match="processes must be between 1 and the 15 cell columns, got 16"):
+        Strips.even(15, 16)
+
+
+def test_a_batch_reads_only_its_area_and_decides_only_its_strip():
+    """What a batch holds outside its area (here: garbage) changes nothing it decides; it decides for exactly the
+    robots not joined whose cell lies in its strip."""
+    shape, params = Settings(shape="star", algorithm="rubenstein", robots=150, seed=2).resolve()
+    run = KilobotRun(shape, params)
+    run.run(1500)
+    strips = Strips.even(run.cells.nx, 4)
+    k = 1  # half its area is the pack's edge, its strip's robots leaving it
+    ids = area_of(run, strips, k)
+    rows = Robots(*(a[ids] for a in run.robots))
+    clean, dirty = KilobotBatch(run, strips, k), KilobotBatch(run, strips, k)
+    rng = np.random.default_rng(0)
+    for a in dirty.robots:
+        a[:] = rng.integers(-5, 5, a.size).astype(a.dtype)
+    own, decided = clean.decide(run.tick + 1, ids, rows)
+    own2, decided2 = dirty.decide(run.tick + 1, ids, rows)
+    assert np.array_equal(own, own2) and all(np.array_equal(a, b) for a, b in zip(decided, decided2))
+    column = np.clip(np.floor((run.robots.x - run.cells.x0) / run.cells.side), 0, run.cells.nx - 1)
+    first, last = strips.strip(k)
+    expected = np.flatnonzero((column >= first) & (column <= last) & (run.robots.state != JOINED))
+    assert own.size > 0 and np.array_equal(own, expected) and ids.size < params.robots
+
+
+def test_the_world_refuses_parts_that_miss_or_repeat_a_robot():
+    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
+    strips = Strips.even(run.cells.nx, 2)
+    hosts = [KilobotBatch(run, strips, k) for k in range(2)]
+    parts = []
+    for k, host in enumerate(hosts):
+        ids = area_of(run, strips, k)
+        parts.append(host.decide(1, ids, Robots(*(a[ids] for a in run.robots))))
+    with pytest.raises(ContractError, match="not one for each robot not joined"):
+        run.settle(parts[:1] if parts[1][0].size else parts[1:])
+    with pytest.raises(ContractError, match="not one for each robot not joined"):
+        run.settle([*parts, parts[0] if parts[0][0].size else parts[1]])
+    assert run.tick == 0
+    run.settle(parts)
+    assert run.tick == 1
