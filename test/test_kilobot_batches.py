@@ -5,11 +5,12 @@ import numpy as np
 import pytest
 
 from swarm_ros.core import Shape, World
-from swarm_ros.core.errors import ContractError, ParameterError
+from swarm_ros.core.errors import ContractError, ParameterError, Rejected
 from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
 from swarm_ros.core.rubenstein.run import KilobotRun
 from swarm_ros.core.rubenstein.strips import KilobotBatch, Strips, area_of, run_batched
+from swarm_ros.protocol.kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows, robots_of_rows
 
 pytestmark = pytest.mark.unit
 
@@ -94,3 +95,59 @@ def test_the_world_refuses_parts_that_miss_or_repeat_a_robot():
     assert run.tick == 0
     run.settle(parts)
     assert run.tick == 1
+
+
+def test_the_batches_give_the_in_process_run_through_the_wire_rows():
+    """Every robot and decision passed as the rows the graph sends (KILOBOT_ROW, KILOBOT_DECISION_ROW), checked as
+    a node checks them: the run is still the in-process one, with range noise, to the end."""
+    params = RunParams(40, algorithm="rubenstein", seed=3, range_noise=0.04)
+    whole, split = KilobotRun(square(6), params), KilobotRun(square(6), params)
+    whole.run()
+    strips = Strips.even(split.cells.nx, 3)
+    hosts = [KilobotBatch(split, strips, k) for k in range(3)]
+    while split.outcome is None:
+        tick, parts = split.tick + 1, []
+        for k, host in enumerate(hosts):
+            rows = kilobot_rows(area_of(split, strips, k), split.robots)
+            check_kilobot_rows(rows, params.robots, split.tick)
+            own, decided = host.decide(tick, *robots_of_rows(rows))
+            answer = kilobot_rows(own, decided)
+            check_kilobot_rows(answer, params.robots, tick)
+            parts.append(decided_of_rows(answer))
+        split.settle(parts)
+    assert same(whole, split)
+
+
+@pytest.mark.parametrize(
+    "field,value,kind",
+    [
+        ("id", 40, "bad ids"),
+        ("state", 5, "bad state"),
+        ("est", 2, "bad state"),
+        ("x", np.nan, "bad number"),
+        ("ey", np.inf, "bad number"),
+        ("near", -1.0, "bad number"),
+        ("g", -2, "bad number"),
+        ("began", 99, "bad number"),
+        ("joined", 3, "bad state"),
+    ],
+)
+def test_a_hostile_row_is_rejected_by_kind(field, value, kind):
+    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
+    run.run(50)
+    rows = kilobot_rows(np.arange(40), run.robots)
+    check_kilobot_rows(rows, 40, 50)  # as sent: taken
+    rows[field][-1] = value
+    with pytest.raises(Rejected) as caught:
+        check_kilobot_rows(rows, 40, 50)
+    assert caught.value.kind == kind
+
+
+def test_the_wire_rows_name_the_gradient_and_estimate_and_round_trip_the_sentinels():
+    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
+    rows = kilobot_rows(np.arange(40), run.robots)
+    assert {"x", "y", "z", "g", "ex", "ey", "state"} <= set(rows.dtype.names)
+    assert rows["g"][-1] == -1 and rows["began"][-1] == -1  # unknown gradient, never began: -1 on the wire
+    ids, back = robots_of_rows(rows)
+    assert np.array_equal(ids, np.arange(40))
+    assert all(np.array_equal(a, b) and a.dtype == b.dtype for a, b in zip(run.robots, back))

@@ -1,0 +1,118 @@
+"""The rubenstein algorithm's rows between the world and its robot batches, as numpy record types, and their checks.
+
+A robot's row is everything it broadcasts and keeps (:class:`~swarm_ros.core.rubenstein.rule.Robots`): its
+pose, state, gradient ``g``, position estimate (``ex``, ``ey``), whether it has an estimate and is localized,
+and its counters. The world sends batch k its area's rows after each tick (:mod:`swarm_ros.core.rubenstein.strips`),
+and batch k answers with a decision row per robot of its strip not joined: the same fields as they will be
+after the tick, with ``x``, ``y`` the point the robot moves to if the world grants it, and ``moves``.
+
+They travel as the ``data`` of ``sensor_msgs/PointCloud2`` messages like the study's model's rows
+(:mod:`swarm_ros.protocol.rows`): little-endian, a point per robot, ``x``, ``y``, ``z`` first so viewers
+draw them, and ``g``, ``ex``, ``ey`` named so a reader of the cloud finds a robot's gradient and estimate.
+A PointField has no 64-bit integer, so the counters and ticks travel as int32 (a tick is at most 10^9), a
+gradient unknown and a tick never reached as -1; the floats are float64, so the rows carry the exact state
+and a batch decides exactly as the world would.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarm_ros.core.errors import Rejected
+from swarm_ros.core.rubenstein.rule import JOINED, NEVER, UNKNOWN_G, Decided, Robots, decided_for
+
+_NAMES = ["x", "y", "z", "heading", "ex", "ey", "near", "g", "still", "began", "joined", "waited", "id", "state"]
+_FORMATS = ["<f8"] * 7 + ["<i4"] * 5 + ["<u4", "<u1"]
+_OFFSETS = [0, 8, 16, 24, 32, 40, 48, 56, 60, 64, 68, 72, 76, 80]
+
+#: World -> robot batch k, after each tick: the rows of its area's robots.
+KILOBOT_ROW = np.dtype(
+    {
+        "names": [*_NAMES, "est", "loc"],
+        "formats": [*_FORMATS, "<u1", "<u1"],
+        "offsets": [*_OFFSETS, 81, 82],
+        "itemsize": 88,
+    }
+)
+#: Robot batch k -> world, each tick: each of its robots' decision.
+KILOBOT_DECISION_ROW = np.dtype(
+    {
+        "names": [*_NAMES, "est", "loc", "moves"],
+        "formats": [*_FORMATS, "<u1", "<u1", "<u1"],
+        "offsets": [*_OFFSETS, 81, 82, 83],
+        "itemsize": 88,
+    }
+)
+_COUNTERS = ("still", "began", "joined", "waited")  #: int64 in the core, int32 on the wire
+_STATES = 5  #: the state codes are 0..4 (swarm_ros.core.rubenstein.rule)
+
+
+def _wire(values: np.ndarray, sentinel: int) -> np.ndarray:
+    return np.where(values == sentinel, -1, values).astype(np.int32)
+
+
+def _core(values: np.ndarray, sentinel: int) -> np.ndarray:
+    return np.where(values == -1, sentinel, values.astype(np.int64))
+
+
+def kilobot_rows(ids: np.ndarray, robots: Robots | Decided) -> np.ndarray:
+    """The rows of robots ``ids`` (:class:`Robots`: every robot's arrays, indexed by ``ids``) or of decisions
+    (:class:`Decided`: position k robot ``ids[k]``'s)."""
+    decided = isinstance(robots, Decided)
+    pick: slice | np.ndarray = slice(None) if decided else ids
+    rows = np.zeros(ids.size, dtype=KILOBOT_DECISION_ROW if decided else KILOBOT_ROW)
+    rows["id"] = ids
+    for name in ("x", "y", "heading", "ex", "ey", "near", "state", "est", "loc", "still", "waited"):
+        rows[name] = getattr(robots, name)[pick]
+    rows["g"] = _wire(robots.g[pick], UNKNOWN_G)
+    rows["began"] = _wire(robots.began[pick], NEVER)
+    rows["joined"] = robots.joined[pick]
+    if isinstance(robots, Decided):
+        rows["moves"] = robots.moves
+    return rows
+
+
+def robots_of_rows(rows: np.ndarray) -> tuple[np.ndarray, Robots]:
+    """(ids, the robots' arrays, position k robot ``ids[k]``'s) of checked rows."""
+    fields = {name: rows[name].copy() for name in ("x", "y", "heading", "ex", "ey", "near")}
+    fields.update(state=rows["state"].astype(np.int8), est=rows["est"].astype(np.int8))
+    fields.update(loc=rows["loc"].astype(np.int8), g=_core(rows["g"], UNKNOWN_G), began=_core(rows["began"], NEVER))
+    fields.update({name: rows[name].astype(np.int64) for name in ("still", "joined", "waited")})
+    return rows["id"].astype(np.int64), Robots(**fields)
+
+
+def decided_of_rows(rows: np.ndarray) -> tuple[np.ndarray, Decided]:
+    """(ids, decisions) of checked decision rows."""
+    ids, robots = robots_of_rows(rows)
+    out = decided_for(ids.size)
+    for name, values in robots._asdict().items():
+        getattr(out, name)[:] = values
+    out.moves[:] = rows["moves"]
+    return ids, out
+
+
+def check_kilobot_rows(rows: np.ndarray, robots: int, tick: int) -> None:
+    """Whether rows of tick ``tick`` (the state after it; decisions: the state they make at it) can be a
+    swarm's of ``robots`` robots: ids ascending and in range, states and flags in their sets, the floats
+    finite (``near`` may be +inf: no stationary neighbour yet), gradient and counters -1 or more, no tick
+    after ``tick``, and a joined robot's joining tick set.
+
+    Raises:
+        Rejected: the first fault found, by kind.
+    """
+    ids = rows["id"].astype(np.int64)
+    if ids.size and (ids[-1] >= robots or np.any(np.diff(ids) <= 0)):
+        raise Rejected("bad ids", f"ids must ascend within 0..{robots - 1}")
+    if np.any(rows["state"] >= _STATES) or np.any(rows["est"] > 1) or np.any(rows["loc"] > 1):
+        raise Rejected("bad state", "a state code or flag out of its set")
+    if "moves" in (rows.dtype.names or ()) and np.any(rows["moves"] > 1):
+        raise Rejected("bad state", "moves must be 0 or 1")
+    floats = np.column_stack([rows[name] for name in ("x", "y", "heading", "ex", "ey")])
+    if not np.isfinite(floats).all() or np.isnan(rows["near"]).any() or np.any(rows["near"] < 0):
+        raise Rejected("bad number", "a pose or estimate that is not a finite number")
+    if np.any(rows["g"] < -1) or any(np.any(rows[name] < -1) for name in _COUNTERS):
+        raise Rejected("bad number", "a gradient or counter below -1")
+    if any(np.any(rows[name] > tick) for name in ("began", "joined", "still", "waited")):
+        raise Rejected("bad number", f"a tick or count beyond tick {tick}")
+    if np.any((rows["state"] == JOINED) != (rows["joined"] >= 0)):
+        raise Rejected("bad state", "joined robots, and only they, have a joining tick")
