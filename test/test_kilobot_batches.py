@@ -10,6 +10,7 @@ from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
 from swarm_ros.core.rubenstein.run import KilobotRun
 from swarm_ros.core.rubenstein.strips import KilobotBatch, Strips, area_of, run_batched
+from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep
 from swarm_ros.protocol.kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows, robots_of_rows
 
 pytestmark = pytest.mark.unit
@@ -151,3 +152,80 @@ def test_the_wire_rows_name_the_gradient_and_estimate_and_round_trip_the_sentine
     ids, back = robots_of_rows(rows)
     assert np.array_equal(ids, np.arange(40))
     assert all(np.array_equal(a, b) and a.dtype == b.dtype for a, b in zip(run.robots, back))
+
+
+def lockstep_run(params: RunParams, batches: int) -> tuple[KilobotRun, KilobotLockstep]:
+    """The graph's exchange without ROS: the world's lockstep, and batches sent only its rows."""
+    run = KilobotRun(square(6), params)
+    ls = KilobotLockstep(run)
+    hosts: list[KilobotBatch] = []
+    for k in range(batches):
+        sent = ls.announce(f"robot_batch_{k}", k, batches)
+        hosts.append(KilobotBatch(run, ls.strips, k))
+    assert sent == list(range(batches)) and ls.started
+    while run.outcome is None:
+        tick = run.tick + 1
+        for k in range(batches):
+            own, decided = hosts[k].decide(tick, *robots_of_rows(ls.area(k)))
+            settled = ls.decisions(k, tick, kilobot_rows(own, decided))
+            assert settled == (k == batches - 1)
+    return run, ls
+
+
+@pytest.mark.parametrize("batches", [1, 2, 4])
+def test_the_worlds_lockstep_with_checked_decisions_gives_the_in_process_run(batches):
+    params = RunParams(40, algorithm="rubenstein", seed=6, range_noise=0.05)
+    whole = KilobotRun(square(6), params)
+    whole.run()
+    run, _ = lockstep_run(params, batches)
+    assert same(whole, run)
+
+
+def decisions_of_batch_0(run: KilobotRun, ls: KilobotLockstep) -> np.ndarray:
+    host = KilobotBatch(run, ls.strips, 0)
+    own, decided = host.decide(run.tick + 1, *robots_of_rows(ls.area(0)))
+    return kilobot_rows(own, decided)
+
+
+def _set(field, how):
+    def change(rows):
+        rows[field] = how(rows)
+        return rows
+
+    return change
+
+
+@pytest.mark.parametrize(
+    "change,kind",
+    [
+        (_set("x", lambda r: r["x"] + 0.01 * r["moves"]), "illegal"),  # a step not along the heading
+        (_set("heading", lambda r: (r["heading"] + 0.3) % 6.28), "illegal"),  # a turn beyond the rule's
+        (_set("state", lambda r: np.where(r["state"] < 2, r["state"] + 2, r["state"])), "illegal"),  # skipped
+        (lambda r: r[:-1], "not its robots"),  # a robot left out
+    ],
+)
+def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
+    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    run.run(600)  # robots are edge-following by now
+    ls = KilobotLockstep(run)
+    ls.announce("robot_batch_0", 0, 1)
+    rows = decisions_of_batch_0(run, ls)
+    moving = rows[rows["moves"] == 1]
+    assert moving.size > 0
+    bad = change(rows.copy())
+    with pytest.raises(Rejected) as caught:
+        ls.decisions(0, run.tick + 1, bad)
+    assert caught.value.kind == kind and not ls.parts
+    with pytest.raises(Rejected, match="stale tick"):
+        ls.decisions(0, run.tick + 2, rows)
+    assert ls.decisions(0, run.tick + 1, rows) and run.tick == 601
+
+
+def test_announcements_that_do_not_fit_the_run_are_rejected():
+    ls = KilobotLockstep(KilobotRun(square(6), RunParams(40, algorithm="rubenstein")))
+    assert ls.announce("robot_batch_0", 0, 2) == []
+    for name, k, batches in [("robot_batch_1", 1, 3), ("robot_batch_2", 2, 2), ("other", 0, 2), ("b", 0, 10**6)]:
+        with pytest.raises(Rejected):
+            ls.announce(name, k, batches)
+    assert ls.announce("robot_batch_1", 1, 2) == [0, 1]
+    assert ls.announce("robot_batch_1", 1, 2) == [1]  # a restarted batch: its own area again

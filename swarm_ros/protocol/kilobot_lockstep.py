@@ -1,0 +1,138 @@
+"""The world's coordination of a rubenstein run in the ROS 2 graph, as plain code (no rclpy): which batches are in,
+what each is sent, and when a tick is settled.
+
+Robot batch k of K announces itself (``k`` and ``K``); once every k of the first announcement's K has, the
+world sends each batch its area's rows of tick 0 (:mod:`swarm_ros.core.rubenstein.strips`). A batch answers
+each area with its strip's decisions for the next tick; when every batch has answered, the world settles
+the tick (:meth:`~swarm_ros.core.rubenstein.run.KilobotRun.settle`) and sends the next areas. A batch process
+that announces itself again (restarted) is sent its area of the current tick: a batch keeps nothing between
+ticks, so it decides as the one it replaces would have.
+
+Decisions are checked before they are used (:func:`check_decisions`): the tick, the rows' own bounds
+(:func:`~swarm_ros.protocol.kilobot_rows.check_kilobot_rows`), that they are exactly the batch's robots, and
+that each follows the rule's bounds: a state moves one step along start, wait, move outside, move inside,
+joined; a robot that moves goes one step along its heading, which turned by at most the turn of a tick.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_ros.core.errors import Rejected
+from swarm_ros.core.rubenstein.rule import JOINED, MOVE_OUTSIDE, NEVER, Decided
+from swarm_ros.core.rubenstein.run import KilobotRun
+from swarm_ros.core.rubenstein.strips import Strips, area_of
+
+from .kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows
+
+_TWO_PI = 2.0 * math.pi
+_STEP_TOLERANCE = 1e-9  #: d: a step's end may differ from the rule's in the last bits of another libm's cos
+
+
+class KilobotLockstep:
+    """The world's half of the graph's rubenstein run: ``run`` is the whole swarm, as in one process."""
+
+    def __init__(self, run: KilobotRun) -> None:
+        self.run = run
+        self.strips: Strips | None = None  #: set by the first announcement
+        self.hosts: dict[int, str] = {}  #: batch number -> its node name
+        self.parts: dict[int, tuple[np.ndarray, Decided]] = {}  #: the decisions in for the next tick, by batch
+        self.started = False
+
+    @property
+    def batches(self) -> int:
+        return 0 if self.strips is None else self.strips.batches
+
+    def announce(self, name: str, k: int, batches: int) -> list[int]:
+        """Batch ``k`` of ``batches`` (node ``name``) is up: the batches to send their area now (all of them
+        once every batch is in; a batch that announces itself again, its own).
+
+        Raises:
+            Rejected: a batch number or count that does not fit the run's.
+        """
+        columns = self.run.cells.nx
+        if self.strips is None:
+            if not 1 <= batches <= columns:
+                raise Rejected("strip", f"{batches} batches; the grid has {columns} cell columns")
+            self.strips = Strips.even(columns, batches)
+        if batches != self.strips.batches or not 0 <= k < batches:
+            raise Rejected("strip", f"batch {k} of {batches}; the run has {self.strips.batches} batches")
+        if self.hosts.get(k, name) != name:
+            raise Rejected("strip", f"batch {k} is {self.hosts[k]}, not {name}")
+        self.hosts[k] = name
+        if not self.started:
+            self.started = len(self.hosts) == batches
+            return list(range(batches)) if self.started else []
+        return [k]
+
+    def area(self, k: int) -> np.ndarray:
+        """Batch k's area's rows at the current tick."""
+        assert self.strips is not None
+        return kilobot_rows(area_of(self.run, self.strips, k), self.run.robots)
+
+    def own(self, k: int) -> np.ndarray:
+        """The robots batch k decides for at the next tick: its strip's, not joined, ascending."""
+        assert self.strips is not None
+        s, c = self.run.robots, self.run.cells
+        column = np.clip(np.floor((s.x - c.x0) / c.side).astype(np.int64), 0, c.nx - 1)
+        first, last = self.strips.strip(k)
+        return np.flatnonzero((column >= first) & (column <= last) & (s.state != JOINED))
+
+    def decisions(self, k: int, tick: int, rows: np.ndarray) -> bool:
+        """Batch k's decisions for ``tick``: checked, kept, and once every batch's are in, the tick settled.
+        Returns whether it was.
+
+        Raises:
+            Rejected: decisions that cannot be batch k's for the tick being decided (nothing is kept).
+        """
+        if not self.started:
+            raise Rejected("stale tick", "no tick has gone out yet")
+        if tick != self.run.tick + 1:
+            raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {self.run.tick + 1}")
+        if k in self.parts:
+            return False  # a restarted batch's second answer: the same, by the rule
+        ids, decided = check_decisions(self.run, rows, tick, self.own(k))
+        self.parts[k] = (ids, decided)
+        if len(self.parts) < self.batches:
+            return False
+        self.run.settle([self.parts[b] for b in range(self.batches)])
+        self.parts.clear()
+        return True
+
+
+def check_decisions(run: KilobotRun, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Decided]:
+    """(ids, decisions) of decision rows for ``tick`` that must be exactly the robots ``own``, each within the
+    rule's bounds from where it stands in ``run``.
+
+    Raises:
+        Rejected: by kind: the rows' own bounds, robots other than ``own``, or a decision out of the rule's bounds.
+    """
+    check_kilobot_rows(rows, run.params.robots, tick)
+    ids, d = decided_of_rows(rows)
+    if not np.array_equal(ids, own):
+        raise Rejected("not its robots", f"{ids.size} decisions for the batch's {own.size} robots")
+    s = run.robots
+    was = s.state[ids]
+    if np.any((d.state != was) & (d.state != was + 1)):
+        raise Rejected("illegal", "a state that skips or goes back")
+    newly = (d.state == JOINED) & (was != JOINED)
+    if np.any(newly & (d.joined != tick)) or np.any(~newly & (d.joined != s.joined[ids])):
+        raise Rejected("illegal", "a joining tick other than the tick the robot joined")
+    began = (d.state == MOVE_OUTSIDE) & (was != MOVE_OUTSIDE)
+    if np.any(began & (d.began != tick)) or np.any(~began & (d.began != s.began[ids])):
+        raise Rejected("illegal", "a tick the robot began to move other than the one it did")
+    if np.any(d.began[d.state < MOVE_OUTSIDE] != NEVER):
+        raise Rejected("illegal", "a robot that has not begun to move with a tick it began")
+    h, turn = s.heading[ids], run.rule.turn
+    turned = (d.heading == h) | (d.heading == (h + turn) % _TWO_PI) | (d.heading == (h - turn) % _TWO_PI)
+    if not turned.all():
+        raise Rejected("illegal", "a turn other than the rule's")
+    step = run.rule.step
+    to_x, to_y = s.x[ids] + step * np.cos(d.heading), s.y[ids] + step * np.sin(d.heading)
+    stepped = (np.abs(d.x - to_x) < _STEP_TOLERANCE) & (np.abs(d.y - to_y) < _STEP_TOLERANCE)
+    stays = (d.x == s.x[ids]) & (d.y == s.y[ids])
+    if np.any(np.where(d.moves == 1, ~stepped, ~stays)):
+        raise Rejected("illegal", "a move other than one step along the heading")
+    return ids, d
