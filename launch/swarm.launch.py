@@ -50,7 +50,7 @@ from swarm_ros.app.supervision import (
 )
 from swarm_ros.core.kernels import COMPILING, kernels_cached
 from swarm_ros.core.params import RUN_PARAMETERS, WORLD_SHARDS, node_parameter
-from swarm_ros.protocol.plan import PROCESSES, graph_plan
+from swarm_ros.protocol.plan import PROCESSES
 from swarm_ros.protocol.runkey import KEY_ENV
 from swarm_ros.ros.dds import dds_defaults
 from swarm_ros.ros.shm import clean_shm, shm_locks
@@ -77,7 +77,7 @@ def graph(context) -> list:
         shards,
     )
     supervisor = setup.supervisor
-    plan = {name: (executable, own) for name, executable, own in graph_plan(processes, setup.region_cuts, shards)}
+    plan = {name: (executable, own) for name, executable, own in setup.plan}
     names: dict[object, str] = {}  # each Node action started -> its node name
     running: set[object] = set()
     timers: list[TimerAction] = []

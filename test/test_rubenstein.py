@@ -338,20 +338,6 @@ def test_simulate_writes_the_run_and_a_recording_of_state_gradient_and_estimates
     assert "outcome: complete" in str(last["/events"][1]["TextLog:text"])
 
 
-def test_the_graph_refuses_the_rubenstein_algorithm_in_one_line(tmp_path):
-    import subprocess
-    import sys
-
-    done = subprocess.run(
-        [sys.executable, "-m", "swarm_ros", "run", "--algorithm", "rubenstein", "--out", str(tmp_path / "r")],
-        capture_output=True,
-        text=True,
-    )
-    assert done.returncode != 0 and "Traceback" not in done.stderr
-    assert "runs the darr-niazi algorithm only" in done.stderr.strip().splitlines()[-1]
-    assert not (tmp_path / "r").exists()
-
-
 def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_side_by_side(tmp_path):
     import yaml
 
@@ -397,8 +383,6 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     table = stats[stats.index("## Time and accuracy") :]
     assert "| square | 40 | rubenstein | – | 2 |" in table and "| square | 40 | paper | 2 | 2 |" in table
     assert (out / "figures" / "square_rubenstein_v1.png").stat().st_size > 0
-    refused = cli.main(["experiment", str(config), "--out", str(tmp_path / "ros"), "--quiet", "--engine", "ros2"])
-    assert refused != 0 and not (tmp_path / "ros").exists()
 
 
 def test_ctrl_c_mid_run_keeps_an_interrupted_run_directory_and_its_recording(tmp_path):

@@ -13,12 +13,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from swarm_ros.app.param_file import check_launcher_sets, read_params_file, record_every
-from swarm_ros.app.summary_print import print_summary
+from swarm_ros.app.summary_print import print_kilobot_summary, print_summary
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import (
-    DARR_NIAZI,
     NODE_PARAMETERS,
     RUBENSTEIN,
     RUN_PARAMETERS,
@@ -118,7 +117,7 @@ def _prepare(
         check_graph_shape(settings.shape)
     shape, params = settings.resolve()
     if graph and params.algorithm == RUBENSTEIN:
-        raise ParameterError(f"the ROS 2 graph runs the {DARR_NIAZI} algorithm only, so far (simulate runs both)")
+        _check_kilobot_graph(args, shape, params)
     monitor = nodes["monitor"]
     recording = RecordingOptions(
         enabled=bool(_flag(args.record, monitor, "record")),
@@ -146,6 +145,18 @@ def _prepare(
             file=sys.stderr,
         )
     return settings, shape, params, out, recording.reachable(), nodes
+
+
+def _check_kilobot_graph(args: argparse.Namespace, shape: Shape, params: RunParams) -> None:
+    """Refuse, in one line, what the rubenstein algorithm's graph does not do yet, and a batch count its cell grid
+    cannot be cut into."""
+    from swarm_ros.core.rubenstein.run import KilobotRun
+    from swarm_ros.core.rubenstein.strips import Strips
+
+    for given, flag in ((args.world_shards > 1, "--world-shards"), (args.region_cuts, "--region-cuts")):
+        if given:
+            raise ParameterError(f"{flag} is not for the {RUBENSTEIN} algorithm's graph, which cuts its own strips")
+    Strips.even(KilobotRun(shape, params).cells.nx, args.processes)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -257,7 +268,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-        print_summary(summary, out, shape.dims)
+        if params.algorithm == RUBENSTEIN:
+            print_kilobot_summary(summary, out)
+        else:
+            print_summary(summary, out, shape.dims)
         print(
             f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
             f"logs in {out / 'logs'}"

@@ -87,8 +87,6 @@ def run_experiment(
     from swarm_ros.app.report import build_report
 
     exp = load_experiment(config)
-    if engine == "ros2" and any(p["algorithm"] != DARR_NIAZI for p in exp.points()):
-        raise ExperimentError(f"{config}: algorithm: the ros2 engine runs the {DARR_NIAZI} algorithm only, so far")
     jobs = max(1, min(jobs, len(exp.runs())))
     prepare_out_dir(out or EXPERIMENTS_DIR / exp.name, exp, config, create=False)  # before a cluster starts
     closing = None

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from swarm_ros.app.summary_print import print_kilobot_summary
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
@@ -69,21 +70,5 @@ def simulate_kilobot(
         print(f"{prog}: interrupted at tick {run.tick}; the run so far is in {out}", file=sys.stderr)
         return EXIT_INTERRUPTED
     if not args.quiet:
-        rows = [
-            ("shape", f"{summary['shape']} ({run.pixels} pixels of {params.pixel_size:g} d)"),
-            ("robots", f"{params.robots}  (algorithm rubenstein, seed {params.seed})"),
-            ("outcome", summary["outcome"]),
-            ("end tick", str(run.tick)),
-            ("50% / 90% tick", f"{summary['fill_50_tick']} / {summary['fill_90_tick']}"),
-            ("covered", f"{summary['coverage']:.1%} of the pixels"),
-            (
-                "joined",
-                f"{summary['joined']}  (outside the shape {summary['joined_outside']})",
-            ),
-            ("loc. error", f"{summary['loc_error']:.3f} d (mean over the joined)"),
-            ("wall time", f"{summary['wall_seconds']:.2f} s"),
-            ("output", str(out)),
-        ]
-        for key, value in rows:
-            print(f"{key:<17} {value}")
+        print_kilobot_summary(summary, out)
     return 0

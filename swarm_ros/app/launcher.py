@@ -60,10 +60,10 @@ from swarm_ros.app.processes import (
 from swarm_ros.app.supervision import END_GRACE, LATE_STATUS, MONITOR_GRACE, Supervisor
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
-from swarm_ros.core.params import RunParams, Settings, node_defaults
+from swarm_ros.core.params import DARR_NIAZI, RunParams, Settings, node_defaults
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.signals import StopFlag, process_age
-from swarm_ros.protocol.plan import MONITOR, graph_plan, is_world
+from swarm_ros.protocol.plan import MONITOR, is_world, plan_for
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros.shm import clean_shm, shm_locks
 
@@ -236,7 +236,7 @@ class Launch:
 
     def _start(self, logs: Path, domain_id: int, out: Path) -> None:
         self._compile_kernels()
-        if can_fork():  # the nodes are forked from this process (app/forking.py): they start with the kernels
+        if can_fork() and self.params.algorithm == DARR_NIAZI:  # forked from here (app/forking.py), with the kernels
             preload(self.shape, self.params, sorted({f"swarm_ros.nodes.{module}" for _, module, _ in self.plan()}))
         shape_arg = self.settings.shape
         if Path(shape_arg).suffix.lower() in (".txt", ".png"):
@@ -293,9 +293,9 @@ class Launch:
     def plan(self) -> list[tuple[str, str, dict[str, int | str]]]:
         """The node processes, in start order: (node name, executable, parameters beyond the file's).
 
-        ``launch/swarm.launch.py`` starts the same graph (:func:`swarm_ros.protocol.plan.graph_plan`).
+        ``launch/swarm.launch.py`` starts the same graph (:func:`swarm_ros.protocol.plan.plan_for`).
         """
-        return graph_plan(self.processes, self.region_cuts, self.world_shards)
+        return plan_for(self.params.algorithm, self.processes, self.region_cuts, self.world_shards)
 
     def _spawn(self, name: str, command: list[str], log: Path, incarnation: int) -> Child:
         f = open(log, "ab")

@@ -33,10 +33,10 @@ import yaml
 from swarm_ros.app.param_file import check_launcher_sets, params_yaml, read_params_file, record_every
 from swarm_ros.app.processes import CHECKPOINT, check_graph, check_graph_shape, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
-from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
-from swarm_ros.core.params import RUN_PARAMETER, Param, node_defaults
+from swarm_ros.core.errors import ConfigError, InputError, ParameterError, RunFailed
+from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETER, Param, node_defaults
 from swarm_ros.core.signals import EXIT_INTERRUPTED
-from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world
+from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world, plan_for
 
 
 class RunEnded(RunFailed):
@@ -145,6 +145,7 @@ class LaunchSetup:
     checkpoint: Path
     supervisor: Supervisor
     region_cuts: str = ""  #: where the batches' strips start (the launch argument, else the file's /robot_batch)
+    plan: tuple[tuple[str, str, dict[str, int | str]], ...] = ()  #: the node processes (protocol.plan.plan_for)
 
 
 def _yaml_value(text: str) -> object:
@@ -210,6 +211,8 @@ def launch_setup(
     settings = settings.updated(**{name: argument_value(name, text) for name, text in arguments.items() if text})
     check_graph_shape(settings.shape)
     shape, params = settings.resolve()
+    if params.algorithm == RUBENSTEIN and (world_shards > 1 or region_cuts):
+        raise InputError(f"world_shards and region_cuts are not for the {RUBENSTEIN} algorithm's graph")
     region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))
     check_graph(
         shape,
@@ -246,4 +249,5 @@ def launch_setup(
         log_dir / CHECKPOINT,
         Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"])),
         region_cuts,
+        tuple(plan_for(params.algorithm, processes, region_cuts, world_shards)),
     )

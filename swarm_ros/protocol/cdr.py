@@ -26,7 +26,7 @@ from swarm_ros.core.errors import Rejected
 from swarm_ros.protocol.rows import FRAME_ID, TICK_SECONDS, is_tag, point_fields
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  #: CDR, little-endian (the only encoding read here)
-MAX_FIELDS = 16  #: a cloud with more point fields is not one of the graph's
+MAX_FIELDS = 24  #: a cloud with more point fields is not one of the graph's (a rubenstein row has 18 and the tag)
 MAX_STRING = 256  #: nor one with a longer frame id or field name
 
 _U32 = struct.Struct("<I")

@@ -20,6 +20,7 @@ import numpy as np
 
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.rubenstein.rule import JOINED, NEVER, UNKNOWN_G, Decided, Robots, decided_for
+from swarm_ros.core.rubenstein.run import COLUMNS
 
 _NAMES = ["x", "y", "z", "heading", "ex", "ey", "near", "g", "still", "began", "joined", "waited", "id", "state"]
 _FORMATS = ["<f8"] * 7 + ["<i4"] * 5 + ["<u4", "<u1"]
@@ -43,6 +44,8 @@ KILOBOT_DECISION_ROW = np.dtype(
         "itemsize": 88,
     }
 )
+#: World -> monitor: metrics rows, the columns of swarm_ros.core.rubenstein.run.COLUMNS (float64, exact).
+KILOBOT_METRICS_ROW = np.dtype([(name, "<f8") for name in COLUMNS])
 _COUNTERS = ("still", "began", "joined", "waited")  #: int64 in the core, int32 on the wire
 _STATES = 5  #: the state codes are 0..4 (swarm_ros.core.rubenstein.rule)
 
@@ -116,3 +119,25 @@ def check_kilobot_rows(rows: np.ndarray, robots: int, tick: int) -> None:
         raise Rejected("bad number", f"a tick or count beyond tick {tick}")
     if np.any((rows["state"] == JOINED) != (rows["joined"] >= 0)):
         raise Rejected("bad state", "joined robots, and only they, have a joining tick")
+
+
+def metrics_rows(history: np.ndarray) -> np.ndarray:
+    """Metrics rows (:data:`KILOBOT_METRICS_ROW`) of history rows (``COLUMNS``)."""
+    rows = np.empty(history.shape[0], dtype=KILOBOT_METRICS_ROW)
+    for c, name in enumerate(COLUMNS):
+        rows[name] = history[:, c]
+    return rows
+
+
+def check_metrics_rows(rows: np.ndarray, after: int) -> np.ndarray:
+    """The history rows of metrics rows that must follow tick ``after``, one a tick, counts within bounds.
+
+    Raises:
+        Rejected: ticks out of order or not the next ones, or a count that is negative or not finite.
+    """
+    history = np.column_stack([rows[name] for name in COLUMNS]) if rows.size else np.empty((0, len(COLUMNS)))
+    if not np.isfinite(history).all() or np.any(history < 0):
+        raise Rejected("bad number", "a metric that is negative or not a finite number")
+    if rows.size and not np.array_equal(rows["tick"], np.arange(after + 1, after + 1 + rows.size)):
+        raise Rejected("stale tick", f"metrics of ticks other than the {rows.size} after tick {after}")
+    return history

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import re
 
-from swarm_ros.core.params import Param
+from swarm_ros.core.params import RUBENSTEIN, Param
 
 MONITOR, ROBOT_BATCH, WORLD = "monitor", "robot_batch", "world"  #: the node executables (and kinds)
 WORLD_SHARD = "world_shard"  #: the executable (and kind) of a world shard, which stands in for the world
@@ -61,6 +61,27 @@ def graph_plan(
     ]
 
 
+#: The node executables of a rubenstein run; the nodes keep the study's model's names (world, robot_batch_<k>,
+#: monitor), so the launcher's supervision and the logs are the same.
+KILOBOT_WORLD, KILOBOT_BATCH, KILOBOT_MONITOR = "kilobot_world", "kilobot_batch", "kilobot_monitor"
+
+
+def kilobot_plan(processes: int) -> list[tuple[str, str, dict[str, int | str]]]:
+    """:func:`graph_plan` of a rubenstein run: the monitor, ``processes`` robot batches (batch k decides for
+    strip k of the cell grid: swarm_ros.core.rubenstein.strips), the world."""
+    batches: list[tuple[str, str, dict[str, int | str]]] = [
+        (batch_name(k), KILOBOT_BATCH, {"batch": k, "batches": processes}) for k in range(processes)
+    ]
+    return [(MONITOR, KILOBOT_MONITOR, {}), *batches, (WORLD, KILOBOT_WORLD, {})]
+
+
+def plan_for(
+    algorithm: str, processes: int, region_cuts: str = "", world_shards: int = 1
+) -> list[tuple[str, str, dict[str, int | str]]]:
+    """The node processes of a run of ``algorithm`` (``swarm-ros run`` and the launch file start the same)."""
+    return kilobot_plan(processes) if algorithm == RUBENSTEIN else graph_plan(processes, region_cuts, world_shards)
+
+
 # -- topics -----------------------------------------------------------------------
 ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
 #: world -> all: the decisions it applied in the tick (PointCloud2); under it, /swarm/decisions/<batch>:
@@ -84,6 +105,23 @@ ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's li
 #: CLOCK as it derives them from the rows (these types carry no tag: swarm_ros.ros.auth). The world starts
 #: tick 0 once it has discovered the monitor's reader of each (so the bag misses none of their messages).
 MONITOR_READS = (ROBOTS, DECISIONS, STATUS, TALLY)
+
+
+#: A rubenstein run's (PointCloud2, swarm_ros.protocol.kilobot_rows): world -> monitor and viewers, every robot's
+#: row at tick 0, every ``record_every``-th tick and the last; world -> monitor, the metrics rows of the ticks since
+#: the last message, as often; /swarm/kilobot/area/<batch>: world -> one batch, after each tick, its area's rows;
+#: /swarm/kilobot/decisions/<batch>: one batch -> world, its strip's decisions.
+KILOBOT = "/swarm/kilobot"
+KILOBOT_ROBOTS, KILOBOT_METRICS = f"{KILOBOT}/robots", f"{KILOBOT}/metrics"
+KILOBOT_AREA, KILOBOT_DECISIONS = f"{KILOBOT}/area", f"{KILOBOT}/decisions"
+
+
+def kilobot_area_topic(node_name: str) -> str:
+    return f"{KILOBOT_AREA}/{node_name}"
+
+
+def kilobot_decisions_topic(node_name: str) -> str:
+    return f"{KILOBOT_DECISIONS}/{node_name}"
 
 
 #: /swarm/shards/shard_<i>/...: world shard i -> its peers, each tick: ``claims_to_<j>`` and ``part_to_<j>``

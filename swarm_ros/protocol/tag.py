@@ -28,7 +28,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from swarm_ros.core.errors import ContractError, Rejected
-from swarm_ros.protocol.plan import BATCHES, DECISIONS, METRICS, MONITOR, is_world, shard_name, shard_of_topic
+from swarm_ros.protocol.plan import (
+    BATCHES,
+    DECISIONS,
+    KILOBOT_DECISIONS,
+    METRICS,
+    MONITOR,
+    is_world,
+    kilobot_decisions_topic,
+    shard_name,
+    shard_of_topic,
+)
 from swarm_ros.protocol.rows import TAG_PREFIX
 
 MAC_CHARS = 32  #: hex digits of the MAC (128 bits)
@@ -110,14 +120,16 @@ def _mac(key: bytes, topic: str, parts) -> str:
 
 def may_send(sender: str, topic: str) -> bool:
     """Whether a node named ``sender`` publishes on ``topic`` in the graph: the world (or a world shard) its
-    topics, the monitor the metrics, a batch its announcement and its own decisions topic, world shard i the
-    topics under /swarm/shards/<i>."""
+    topics, the monitor the metrics, a batch its announcement and its own decisions topic (a rubenstein run's
+    batch too), world shard i the topics under /swarm/shards/<i>."""
     if topic == METRICS:
         return sender == MONITOR
     if topic == BATCHES:
         return not is_world(sender) and sender != MONITOR
     if topic.startswith(DECISIONS + "/"):
         return topic == f"{DECISIONS}/{sender}"
+    if topic.startswith(KILOBOT_DECISIONS + "/"):  # a rubenstein run's batch, likewise
+        return topic == kilobot_decisions_topic(sender)
     shard = shard_of_topic(topic)
     if shard is not None:
         return sender == shard_name(shard)

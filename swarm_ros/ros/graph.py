@@ -103,6 +103,11 @@ STATUS_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+#: A rubenstein run's robots and metrics, world -> monitor: every message, none dropped while the monitor lags (the
+#: world waits for the monitor's readers before tick 0, so no late reader needs them kept).
+KILOBOT_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+)
 CLOCK_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=1,

@@ -37,6 +37,7 @@ from .rule import (
     Robots,
     Rule,
     build_cells,
+    cover,
     decided_for,
 )
 from .ticks import Tally, join_robot, metrics_row, not_joined, run_kernel, settle_tick
@@ -209,6 +210,17 @@ class KilobotRun:
             if max_ticks is not None:
                 max_ticks -= ticks
         return self.outcome
+
+    def load(self, tick: int, robots: Robots, history: np.ndarray, outcome: Outcome | None = None) -> None:
+        """Take a state this run reached elsewhere (the graph's world, for its monitor): every robot as at
+        ``tick``, the metrics of every tick up to it, and the outcome (None: going on). The pixels covered
+        are those the joined robots' discs meet, as the run marked them."""
+        for mine, theirs in zip(self.robots, robots):
+            mine[:] = theirs
+        self.tick, self.outcome, self._rows = tick, outcome, [history]
+        self.covered[:] = 0
+        for i in np.flatnonzero(self.robots.state == JOINED):
+            cover(self.robots.x[i], self.robots.y[i], self.bitmap, self.covered)
 
     def settle(self, parts: list[tuple[np.ndarray, Decided]]) -> Outcome | None:
         """Advance one tick with decisions made elsewhere (robot batches, :mod:`.strips`): ``parts`` are each

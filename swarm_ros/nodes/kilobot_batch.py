@@ -1,0 +1,110 @@
+"""A robot-batch node of a rubenstein run: decides, each tick, for the robots of its strip of the cell grid.
+
+Batch k of K announces ``[k, K]`` on /swarm/batches. The world sends it, after each tick, the rows of its
+area (its strip and one cell column of halo, the communication range wide) on /swarm/kilobot/area/<batch>:
+what the robots there broadcast. The batch checks them (dropped and counted if they fail), decides the next
+tick for its strip's robots not joined (:class:`swarm_ros.core.rubenstein.strips.KilobotBatch`) and answers
+on /swarm/kilobot/decisions/<batch>. It keeps nothing between ticks, so a restarted batch decides as the one
+it replaces would have. It stops when /swarm/status reports the run's outcome.
+
+    ros2 run swarm_ros kilobot_batch --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
+        -r __node:=robot_batch_0 -p batch:=0 -p batches:=2
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.duration import Duration
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
+
+from swarm_ros.core.errors import ConfigError, Rejected
+from swarm_ros.core.params import RUBENSTEIN
+from swarm_ros.core.rubenstein.run import KilobotRun
+from swarm_ros.core.rubenstein.strips import KilobotBatch, Strips
+from swarm_ros.protocol import checks
+from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.kilobot_rows import KILOBOT_ROW, check_kilobot_rows, kilobot_rows, robots_of_rows
+from swarm_ros.protocol.plan import BATCHES, ROBOT_BATCH, STATUS, kilobot_area_topic, kilobot_decisions_topic
+from swarm_ros.protocol.rows import batch_label
+from swarm_ros.protocol.status import has_ended
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.auth import open_auth
+from swarm_ros.ros.node_params import make_node, read_parameters
+from swarm_ros.ros.runtime import run_node
+
+_LINGER = 2.0  # seconds, at most, for the last decisions to be acknowledged before exiting
+_NO_WAIT = Duration(seconds=0)
+
+
+class KilobotBatchNode:
+    def __init__(self) -> None:
+        self.node = node = make_node(ROBOT_BATCH)
+        run, own = read_parameters(node, ROBOT_BATCH)
+        self.shape, self.params = run.resolve()
+        if self.params.algorithm != RUBENSTEIN:
+            raise ConfigError(f"the kilobot batch runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
+        self.k, batches = int(own["batch"]), int(own["batches"])
+        frame = KilobotRun(self.shape, self.params)  # the grid, the rule and the shape; its robots are not used
+        strips = Strips.even(frame.cells.nx, batches)
+        self.host = KilobotBatch(frame, strips, self.k)
+        self.tick = -1  # the last tick whose area came in
+        self.ended_at: float | None = None
+        self.finished = False
+        self.rejections = Rejections(node.get_logger())
+        self.signer, self.gate = open_auth(node, self.rejections)
+        name = node.get_name()
+        self.area = kilobot_area_topic(name)
+        self.pub_decisions = self.signer.publisher(PointCloud2, kilobot_decisions_topic(name), msgs.DECISIONS_QOS)
+        self.gate.subscribe(PointCloud2, self.area, self._on_area, msgs.LATCHED_QOS)
+        self.gate.subscribe(DiagnosticArray, STATUS, self._on_status, msgs.STATUS_QOS)
+        announce = self.signer.publisher(Int64MultiArray, BATCHES, msgs.BATCHES_QOS)
+        hello = msgs.ids_message(np.array([self.k, batches], dtype=np.int64))
+        hello.layout.dim[0].label = batch_label(name, int(own["incarnation"]))
+        announce.publish(hello)
+        first, last = strips.strip(self.k)
+        node.get_logger().info(f"{name}: batch {self.k} of {batches}, cell columns {first}..{last}")
+
+    def load(self) -> None:
+        """Nothing heavy: the kernels load on the first area."""
+
+    def _on_area(self, msg: Cloud) -> None:
+        try:
+            tick = checks.tick_stamp(msg.header)
+            rows = checks.cloud(msg, KILOBOT_ROW, self.params.robots, min_rows=0)
+            check_kilobot_rows(rows, self.params.robots, tick)
+        except Rejected as fault:
+            self.rejections.drop(self.area, fault)
+            return
+        if tick <= self.tick:
+            return  # the latched area of a tick decided already
+        self.tick = tick
+        own, decided = self.host.decide(tick + 1, *robots_of_rows(rows))
+        self.pub_decisions.publish_rows(kilobot_rows(own, decided), tick + 1)
+
+    def _on_status(self, msg: DiagnosticArray) -> None:
+        if self.ended_at is None and has_ended(msgs.status_values(msg).get("outcome")):
+            self.ended_at = time.monotonic()
+
+    def poll(self) -> None:
+        if self.ended_at is not None:
+            acked = self.pub_decisions.wait_for_all_acked(_NO_WAIT)
+            self.finished = acked or time.monotonic() - self.ended_at > _LINGER
+
+    def wake_in(self) -> float | None:
+        return None
+
+    def close(self, code: int) -> None:
+        self.node.get_logger().info(f"{self.node.get_name()}: decided up to tick {self.tick + 1}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(ROBOT_BATCH, KilobotBatchNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

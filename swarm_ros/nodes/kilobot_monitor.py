@@ -1,0 +1,158 @@
+"""The monitor node of a rubenstein run: records the run to Rerun as it goes and writes the run directory at the end.
+
+It reads what the world publishes (:mod:`swarm_ros.nodes.kilobot_world`): every robot's row every
+``record_every``-th tick and at the end (/swarm/kilobot/robots), the metrics rows of every tick
+(/swarm/kilobot/metrics), and the outcome (/swarm/status). Each message is checked (dropped and counted if it
+fails); the metrics must come one a tick, in order. It keeps a copy of the run
+(:meth:`swarm_ros.core.rubenstein.run.KilobotRun.load`), streams it to ``<out_dir>.partial.rrd``, and once
+the outcome, the last robots and the metrics up to the last tick are in, writes the run directory as
+``swarm-ros simulate --algorithm rubenstein`` does (summary.json, metrics.csv, final_state.csv, final.png,
+recording.rrd), whole or not at all.
+
+    ros2 run swarm_ros kilobot_monitor --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
+        -p out_dir:=runs/kilobots
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import PointCloud2
+
+from swarm_ros.artifacts import run_dir
+from swarm_ros.core.errors import ConfigError, Rejected
+from swarm_ros.core.metrics import Outcome
+from swarm_ros.core.params import RUBENSTEIN
+from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun, summary_of
+from swarm_ros.protocol import checks
+from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.kilobot_rows import (
+    KILOBOT_METRICS_ROW,
+    KILOBOT_ROW,
+    check_kilobot_rows,
+    check_metrics_rows,
+    robots_of_rows,
+)
+from swarm_ros.protocol.plan import KILOBOT_METRICS, KILOBOT_ROBOTS, MONITOR, STATUS
+from swarm_ros.protocol.status import has_ended
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.auth import open_auth
+from swarm_ros.ros.node_params import make_node, read_parameters
+from swarm_ros.ros.runtime import run_node
+
+RECORD_EVERY = 20  #: as the world's
+
+
+class KilobotMonitorNode:
+    def __init__(self) -> None:
+        self.node = node = make_node(MONITOR)
+        run, own = read_parameters(node, MONITOR)
+        self.shape, self.params = run.resolve()
+        if self.params.algorithm != RUBENSTEIN:
+            raise ConfigError(f"the kilobot monitor runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
+        p = self.params
+        self.out = (
+            Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p.robots, 0, p.seed)
+        )
+        self.overwrite = bool(own["overwrite"])
+        run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
+        self.copy = KilobotRun(self.shape, self.params)  # the run as the world reports it
+        self.history = np.empty((0, len(COLUMNS)))  # the metrics of every tick, as the world sends them
+        self.robots_tick = -1
+        self.outcome: str | None = None
+        self.started_at: float | None = None
+        self.rrd = run_dir.partial_recording(self.out) if own["record"] else None
+        self.every = int(own["record_every"]) or RECORD_EVERY
+        self.recorder = None
+        if self.rrd is not None or own["viewer_url"]:
+            from swarm_ros.artifacts.kilobot_recording import KilobotRecorder
+
+            url = str(own["viewer_url"]) or None
+            self.recorder = KilobotRecorder(self.rrd, self.copy, every=self.every, connect=url)
+        self.finished = False
+        self.rejections = Rejections(node.get_logger())
+        self.signer, self.gate = open_auth(node, self.rejections)
+        self.gate.subscribe(PointCloud2, KILOBOT_ROBOTS, self._on_robots, msgs.KILOBOT_QOS)
+        self.gate.subscribe(PointCloud2, KILOBOT_METRICS, self._on_metrics, msgs.KILOBOT_QOS)
+        self.gate.subscribe(DiagnosticArray, STATUS, self._on_status, msgs.STATUS_QOS)
+
+    def load(self) -> None:
+        """Nothing heavy."""
+
+    @property
+    def last_tick(self) -> int:
+        return int(self.history[-1, 0]) if len(self.history) else -1
+
+    def _on_metrics(self, msg: Cloud) -> None:
+        try:
+            rows = checks.cloud(msg, KILOBOT_METRICS_ROW, 10**9)
+            history = check_metrics_rows(rows, self.last_tick)
+        except Rejected as fault:
+            self.rejections.drop(KILOBOT_METRICS, fault)
+            return
+        if self.started_at is None:
+            self.started_at = time.perf_counter()
+        self.history = np.concatenate([self.history, history]) if len(self.history) else history
+
+    def _on_robots(self, msg: Cloud) -> None:
+        try:
+            tick = checks.tick_stamp(msg.header)
+            rows = checks.cloud(msg, KILOBOT_ROW, self.params.robots, min_rows=self.params.robots)
+            check_kilobot_rows(rows, self.params.robots, tick)
+        except Rejected as fault:
+            self.rejections.drop(KILOBOT_ROBOTS, fault)
+            return
+        if tick <= self.robots_tick:
+            return
+        self.robots_tick = tick
+        _, robots = robots_of_rows(rows)
+        self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
+        if self.recorder is not None and tick > 0:
+            self.recorder.robots(self.copy)
+
+    def _on_status(self, msg: DiagnosticArray) -> None:
+        values = msgs.status_values(msg)
+        outcome = values.get("outcome")
+        if self.outcome is None and has_ended(outcome):
+            self.outcome = outcome
+
+    def poll(self) -> None:
+        if self.outcome is None or self.finished:
+            return
+        end = self.robots_tick
+        if end < 0 or self.last_tick != end:
+            return  # the last robots or metrics are still on their way
+        self._write(Outcome(self.outcome))
+
+    def _write(self, outcome: Outcome) -> None:
+        from swarm_ros.artifacts.kilobot_run import write_kilobot_run
+
+        self.copy.load(self.robots_tick, self.copy.robots, self.history, outcome)
+        wall = time.perf_counter() - self.started_at if self.started_at is not None else 0.0
+        summary = summary_of(self.copy, wall)
+        summary.update(engine="ros2", restarts=[], processes=None, shutdown_seconds=None)  # the launcher's to fill
+        if self.recorder is not None:
+            self.recorder.close(self.copy, summary["outcome"])
+        summary["recording_robots_every"] = self.every if self.rrd is not None else None
+        write_kilobot_run(self.out, self.copy, summary, overwrite=self.overwrite, recording=self.rrd)
+        self.node.get_logger().info(f"wrote {self.out}: {summary['outcome']} at tick {self.copy.tick}")
+        self.finished = True
+
+    def wake_in(self) -> float | None:
+        return None
+
+    def close(self, code: int) -> None:
+        if not self.finished and self.recorder is not None:
+            self.recorder.close(self.copy, "interrupted")
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(MONITOR, KilobotMonitorNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,173 @@
+"""The world node of a rubenstein run (``--algorithm rubenstein``): holds every robot, sends each robot batch its
+area, settles the batches' decisions, and publishes the run for the monitor.
+
+A thin shell around :class:`swarm_ros.protocol.kilobot_lockstep.KilobotLockstep`: batch k of K announces
+itself on /swarm/batches (``[k, K]``); once all K have, and the monitor reads the run's topics, tick 0 goes
+out: each batch's area rows on /swarm/kilobot/area/<batch>, every robot's row on /swarm/kilobot/robots, the
+metrics on /swarm/kilobot/metrics and ``running`` on /swarm/status. Each tick, once every batch's decisions
+are in (checked, or dropped and counted), it settles them and sends the next areas; every ``record_every``-th
+tick and at the end it sends the robots and the metrics rows since the last. At the end it publishes the
+outcome and exits once its readers have everything (or after a grace period).
+
+    ros2 run swarm_ros kilobot_world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.duration import Duration
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
+
+from swarm_ros.core.errors import ConfigError, Rejected, RunFailed
+from swarm_ros.core.params import RUBENSTEIN
+from swarm_ros.core.rubenstein.run import KilobotRun
+from swarm_ros.protocol import checks
+from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.checks import Rejections, parse_batch_label
+from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep
+from swarm_ros.protocol.kilobot_rows import KILOBOT_DECISION_ROW, kilobot_rows, metrics_rows
+from swarm_ros.protocol.plan import (
+    BATCHES,
+    KILOBOT_METRICS,
+    KILOBOT_ROBOTS,
+    MONITOR,
+    STATUS,
+    WORLD,
+    kilobot_area_topic,
+    kilobot_decisions_topic,
+)
+from swarm_ros.protocol.status import RUNNING, STARTING
+from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.auth import open_auth
+from swarm_ros.ros.node_params import make_node, read_parameters
+from swarm_ros.ros.runtime import run_node
+
+RECORD_EVERY = 20  #: the robots go to the monitor every this many ticks unless record_every says otherwise
+_LINGER = 5.0  #: seconds, at most, for the last messages to be acknowledged before exiting
+_NO_WAIT = Duration(seconds=0)
+
+
+class KilobotWorldNode:
+    def __init__(self) -> None:
+        self.node = node = make_node(WORLD)
+        run, own = read_parameters(node, WORLD)
+        self.shape, self.params = run.resolve()
+        if self.params.algorithm != RUBENSTEIN:
+            raise ConfigError(f"the kilobot world runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
+        self.every = int(own["record_every"]) or RECORD_EVERY
+        self.start_timeout = float(own["start_timeout"])
+        self.created = time.monotonic()
+        self.ls = KilobotLockstep(KilobotRun(self.shape, self.params))
+        self.sent_metrics = -1  # the last tick whose metrics row went out
+        self.ended_at: float | None = None
+        self.finished = False
+        self.rejections = Rejections(node.get_logger())
+        self.signer, self.gate = open_auth(node, self.rejections)
+        self.pub_status = self.signer.publisher(DiagnosticArray, STATUS, msgs.STATUS_QOS)
+        self.pub_robots = self.signer.publisher(PointCloud2, KILOBOT_ROBOTS, msgs.KILOBOT_QOS)
+        self.pub_metrics = self.signer.publisher(PointCloud2, KILOBOT_METRICS, msgs.KILOBOT_QOS)
+        self.areas: dict[str, object] = {}  # batch node name -> its area's publisher
+        self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
+        self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
+        self._status(STARTING, "waiting for robot batches and the monitor")
+
+    def load(self) -> None:
+        """Nothing heavy: the kernels compile (or load from numba's cache) on the first tick."""
+
+    # -- inbound ---------------------------------------------------------------------------
+    def _on_batch(self, msg: Int64MultiArray) -> None:
+        try:
+            name, _ = parse_batch_label(msg.layout.dim[0].label if msg.layout.dim else "")
+            if len(msg.data) != 2:
+                raise Rejected("strip", f"{len(msg.data)} values, expected its batch number and the batches")
+            k, batches = int(msg.data[0]), int(msg.data[1])
+            first = name not in self.areas
+            send = self.ls.announce(name, k, batches)
+        except Rejected as fault:
+            self.rejections.drop(BATCHES, fault)
+            return
+        if first:
+            self.areas[name] = self.signer.publisher(PointCloud2, kilobot_area_topic(name), msgs.LATCHED_QOS)
+            topic = kilobot_decisions_topic(name)
+            self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_decisions, k, topic), msgs.DECISIONS_QOS)
+        self.waiting += send
+        self.node.get_logger().info(f"{name}: batch {k} of {batches}")
+
+    def _on_decisions(self, k: int, topic: str, msg: Cloud) -> None:
+        if self.ls.run.outcome is not None:
+            return
+        try:
+            tick = checks.tick_stamp(msg.header)
+            rows = checks.cloud(msg, KILOBOT_DECISION_ROW, self.params.robots, min_rows=0)
+            settled = self.ls.decisions(k, tick, rows)
+        except Rejected as fault:
+            self.rejections.drop(topic, fault)
+            return
+        if settled:
+            self._publish_tick()
+
+    # -- outbound --------------------------------------------------------------------------
+    def _monitor_reads(self) -> bool:
+        return all(
+            any(info.node_name == MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
+            for topic in (KILOBOT_ROBOTS, KILOBOT_METRICS, STATUS)
+        )
+
+    def _send_areas(self, batches: list[int]) -> None:
+        names = {k: name for name, k in ((n, self._number(n)) for n in self.areas)}
+        for k in batches:
+            self.areas[names[k]].publish_rows(self.ls.area(k), self.ls.run.tick)  # type: ignore[attr-defined]
+
+    def _number(self, name: str) -> int:
+        return next(k for k, n in self.ls.hosts.items() if n == name)
+
+    def _publish_tick(self) -> None:
+        run = self.ls.run
+        tick, ended = run.tick, run.outcome is not None
+        if ended or tick % self.every == 0:
+            self.pub_metrics.publish_rows(metrics_rows(run.history[self.sent_metrics + 1 :]), tick)
+            self.sent_metrics = tick
+            everyone = np.arange(self.params.robots)
+            self.pub_robots.publish_rows(kilobot_rows(everyone, run.robots), tick)
+        if ended:
+            self.ended_at = time.monotonic()
+            self._status(str(run.outcome), f"the run ended at tick {tick}: {run.outcome}")
+        else:
+            self._send_areas(list(range(self.ls.batches)))
+
+    def _status(self, outcome: str, message: str) -> None:
+        self.pub_status.publish(msgs.status_message(self.ls.run.tick, outcome, message))
+
+    # -- the node runtime's hooks ----------------------------------------------------------
+    def poll(self) -> None:
+        if self.waiting and self.ls.started and (self.sent_metrics >= 0 or self._monitor_reads()):
+            batches, self.waiting = sorted(set(self.waiting)), []
+            if self.sent_metrics < 0:  # tick 0: the robots, the metrics and the areas
+                self._status(RUNNING, f"{self.ls.batches} robot batches in: tick 0")
+                self._publish_tick()
+            else:  # a batch process that came back: its area at the current tick
+                self._send_areas(batches)
+        if not self.ls.started and time.monotonic() - self.created > self.start_timeout:
+            raise RunFailed(f"robot batches did not all announce themselves within {self.start_timeout:g} s")
+        if self.ended_at is not None:
+            acked = all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots, self.pub_metrics))
+            self.finished = acked or time.monotonic() - self.ended_at > _LINGER
+
+    def wake_in(self) -> float | None:
+        return None
+
+    def close(self, code: int) -> None:
+        self.node.get_logger().info(f"the world ended at tick {self.ls.run.tick}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(WORLD, KilobotWorldNode, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
