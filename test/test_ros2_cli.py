@@ -106,6 +106,9 @@ def test_ros2_pkg_lists_the_node_executables(ros):
     done = ros.run("ros2 pkg executables swarm_ros")
     assert done.returncode == 0, done.stderr
     assert sorted(done.stdout.split("\n")[:-1]) == [
+        "swarm_ros kilobot_batch",
+        "swarm_ros kilobot_monitor",
+        "swarm_ros kilobot_world",
         "swarm_ros monitor",
         "swarm_ros robot_batch",
         "swarm_ros swarm-ros",
@@ -483,3 +486,21 @@ def test_swarm_ros_replay_is_watched_with_ros2_topic_echo(ros, tmp_path):
         ctrl_c(replay)
         replay.wait(timeout=30)
     assert replay.returncode == 130 and "Traceback" not in (tmp_path / "replay.log").read_text()
+
+
+def test_ros2_launch_runs_the_rubenstein_algorithm_as_simulate_does(ros, tmp_path):
+    """`algorithm:=rubenstein`: the launch file starts the algorithm's world, batches and monitor under the usual
+    names, and the run directory holds simulate's run."""
+    (tmp_path / "square6.txt").write_text("######\n" * 6)
+    flags = "--algorithm rubenstein --robots 40 --seed 5"
+    shape = tmp_path / "square6.txt"
+    ref = tmp_path / "ref"
+    assert cli.main(["simulate", "--shape", str(shape), *flags.split(), "--out", str(ref), "--quiet"]) == 0
+    out = tmp_path / "run"
+    done = ros.run(
+        f"{LAUNCH} algorithm:=rubenstein shape:={shape} robots:=40 seed:=5 out_dir:={out}", cwd=tmp_path, timeout=300
+    )
+    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    assert json.loads((out / "summary.json").read_text())["engine"] == "ros2"
