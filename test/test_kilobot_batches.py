@@ -9,7 +9,7 @@ from swarm_ros.core.errors import ContractError, ParameterError, Rejected
 from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
 from swarm_ros.core.rubenstein.run import KilobotRun
-from swarm_ros.core.rubenstein.strips import KilobotBatch, Strips, area_of, run_batched
+from swarm_ros.core.rubenstein.strips import KilobotBatch, Strips, area_of, cell_columns, run_batched, strips_for
 from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep
 from swarm_ros.protocol.kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows, robots_of_rows
 
@@ -49,13 +49,25 @@ def test_k_batches_give_the_in_process_star_while_robots_cross_strips(batches):
     assert (whole.robots.state == JOINED).sum() > 4  # robots left the pack and joined: some crossed strips
 
 
-def test_strips_cover_the_grid_and_an_area_is_its_strip_and_one_column_either_side():
-    strips = Strips.even(15, 4)
-    assert strips.cuts.tolist() == [0, 4, 8, 11, 15]
-    assert [strips.strip(k) for k in range(4)] == [(0, 3), (4, 7), (8, 10), (11, 14)]
-    assert [strips.area(k) for k in range(4)] == [(0, 4), (3, 8), (7, 11), (10, 14)]
+def test_strips_share_the_robots_at_the_start_and_an_area_is_its_strip_and_one_column_either_side():
+    start = np.array([0, 0, 0, 1, 1, 2, 5, 5, 9, 9, 9, 9])  # each robot's cell column at tick 0
+    strips = Strips.balanced(start, 12, 3)
+    assert strips.cuts.tolist() == [0, 2, 6, 12]  # 5, 3 and 4 robots: no cut can share 12 more evenly
+    assert [strips.strip(k) for k in range(3)] == [(0, 1), (2, 5), (6, 11)]
+    assert [strips.area(k) for k in range(3)] == [(0, 2), (1, 6), (5, 11)]
+    assert Strips.balanced(np.full(9, 2), 5, 3).cuts.tolist() == [0, 3, 4, 5]  # one column each at least
     with pytest.raises(ParameterError, match="processes must be between 1 and the 15 cell columns, got 16"):
-        Strips.even(15, 16)
+        Strips.balanced(start, 15, 16)
+    shape, params = Settings(shape="star", algorithm="rubenstein", robots=1024).resolve()
+    held = [area.size for area in (own_at_start(KilobotRun(shape, params), 4, k) for k in range(4))]
+    assert sum(held) == 1020 and max(held) < 2 * min(held), held  # the pack is shared, by whole columns
+
+
+def own_at_start(run: KilobotRun, batches: int, k: int) -> np.ndarray:
+    strips = strips_for(run, batches)
+    column = cell_columns(run.robots.x, run.cells)
+    first, last = strips.strip(k)
+    return np.flatnonzero((column >= first) & (column <= last) & (run.robots.state != JOINED))
 
 
 def test_a_batch_reads_only_its_area_and_decides_only_its_strip():
@@ -64,7 +76,7 @@ def test_a_batch_reads_only_its_area_and_decides_only_its_strip():
     shape, params = Settings(shape="star", algorithm="rubenstein", robots=150, seed=2).resolve()
     run = KilobotRun(shape, params)
     run.run(1500)
-    strips = Strips.even(run.cells.nx, 4)
+    strips = strips_for(run, 4)
     k = 1  # half its area is the pack's edge, its strip's robots leaving it
     ids = area_of(run, strips, k)
     rows = Robots(*(a[ids] for a in run.robots))
@@ -83,7 +95,7 @@ def test_a_batch_reads_only_its_area_and_decides_only_its_strip():
 
 def test_the_world_refuses_parts_that_miss_or_repeat_a_robot():
     run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
-    strips = Strips.even(run.cells.nx, 2)
+    strips = strips_for(run, 2)
     hosts = [KilobotBatch(run, strips, k) for k in range(2)]
     parts = []
     for k, host in enumerate(hosts):
@@ -104,7 +116,7 @@ def test_the_batches_give_the_in_process_run_through_the_wire_rows():
     params = RunParams(40, algorithm="rubenstein", seed=3, range_noise=0.04)
     whole, split = KilobotRun(square(6), params), KilobotRun(square(6), params)
     whole.run()
-    strips = Strips.even(split.cells.nx, 3)
+    strips = strips_for(split, 3)
     hosts = [KilobotBatch(split, strips, k) for k in range(3)]
     while split.outcome is None:
         tick, parts = split.tick + 1, []

@@ -151,12 +151,12 @@ def _check_kilobot_graph(args: argparse.Namespace, shape: Shape, params: RunPara
     """Refuse, in one line, what the rubenstein algorithm's graph does not do yet, and a batch count its cell grid
     cannot be cut into."""
     from swarm_ros.core.rubenstein.run import KilobotRun
-    from swarm_ros.core.rubenstein.strips import Strips
+    from swarm_ros.core.rubenstein.strips import strips_for
 
     for given, flag in ((args.world_shards > 1, "--world-shards"), (args.region_cuts, "--region-cuts")):
         if given:
             raise ParameterError(f"{flag} is not for the {RUBENSTEIN} algorithm's graph, which cuts its own strips")
-    Strips.even(KilobotRun(shape, params).cells.nx, args.processes)
+    strips_for(KilobotRun(shape, params), args.processes)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:

@@ -24,7 +24,7 @@ from std_msgs.msg import Int64MultiArray
 from swarm_ros.core.errors import ConfigError, Rejected
 from swarm_ros.core.params import RUBENSTEIN
 from swarm_ros.core.rubenstein.run import KilobotRun
-from swarm_ros.core.rubenstein.strips import KilobotBatch, Strips
+from swarm_ros.core.rubenstein.strips import KilobotBatch, strips_for
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections
@@ -50,7 +50,7 @@ class KilobotBatchNode:
             raise ConfigError(f"the kilobot batch runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
         self.k, batches = int(own["batch"]), int(own["batches"])
         frame = KilobotRun(self.shape, self.params)  # the grid, the rule and the shape; its robots are not used
-        strips = Strips.even(frame.cells.nx, batches)
+        strips = strips_for(frame, batches)
         self.host = KilobotBatch(frame, strips, self.k)
         self.tick = -1  # the last tick whose area came in
         self.ended_at: float | None = None

@@ -23,7 +23,7 @@ import numpy as np
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.rubenstein.rule import JOINED, MOVE_OUTSIDE, NEVER, Decided
 from swarm_ros.core.rubenstein.run import KilobotRun
-from swarm_ros.core.rubenstein.strips import Strips, area_of
+from swarm_ros.core.rubenstein.strips import Strips, cell_columns, strips_for
 
 from .kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows
 
@@ -40,6 +40,7 @@ class KilobotLockstep:
         self.hosts: dict[int, str] = {}  #: batch number -> its node name
         self.parts: dict[int, tuple[np.ndarray, Decided]] = {}  #: the decisions in for the next tick, by batch
         self.started = False
+        self._columns_at: tuple[int, np.ndarray] = (-1, np.empty(0, dtype=np.int64))
 
     @property
     def batches(self) -> int:
@@ -56,7 +57,7 @@ class KilobotLockstep:
         if self.strips is None:
             if not 1 <= batches <= columns:
                 raise Rejected("strip", f"{batches} batches; the grid has {columns} cell columns")
-            self.strips = Strips.even(columns, batches)
+            self.strips = strips_for(self.run, batches)
         if batches != self.strips.batches or not 0 <= k < batches:
             raise Rejected("strip", f"batch {k} of {batches}; the run has {self.strips.batches} batches")
         if self.hosts.get(k, name) != name:
@@ -67,18 +68,25 @@ class KilobotLockstep:
             return list(range(batches)) if self.started else []
         return [k]
 
+    def _columns(self) -> np.ndarray:
+        """Every robot's cell column at the current tick (found once a tick)."""
+        if self._columns_at[0] != self.run.tick:
+            self._columns_at = (self.run.tick, cell_columns(self.run.robots.x, self.run.cells))
+        return self._columns_at[1]
+
     def area(self, k: int) -> np.ndarray:
         """Batch k's area's rows at the current tick."""
         assert self.strips is not None
-        return kilobot_rows(area_of(self.run, self.strips, k), self.run.robots)
+        first, last = self.strips.area(k)
+        column = self._columns()
+        return kilobot_rows(np.flatnonzero((column >= first) & (column <= last)), self.run.robots)
 
     def own(self, k: int) -> np.ndarray:
         """The robots batch k decides for at the next tick: its strip's, not joined, ascending."""
         assert self.strips is not None
-        s, c = self.run.robots, self.run.cells
-        column = np.clip(np.floor((s.x - c.x0) / c.side).astype(np.int64), 0, c.nx - 1)
         first, last = self.strips.strip(k)
-        return np.flatnonzero((column >= first) & (column <= last) & (s.state != JOINED))
+        column = self._columns()
+        return np.flatnonzero((column >= first) & (column <= last) & (self.run.robots.state != JOINED))
 
     def decisions(self, k: int, tick: int, rows: np.ndarray) -> bool:
         """Batch k's decisions for ``tick``: checked, kept, and once every batch's are in, the tick settled.

@@ -2,7 +2,8 @@
 
 The cell list (:class:`~swarm_ros.core.rubenstein.rule.Cells`) has cells the size of the communication
 range C, and a robot decides from the robots in the 3 x 3 cells around its own. So the world is cut
-into K strips of whole cell columns; batch k decides for the robots not joined whose cell, at the last
+into K strips of whole cell columns (:func:`strips_for`: as many robots in each at the start as whole
+columns allow); batch k decides for the robots not joined whose cell, at the last
 tick, lies in its strip, and it needs the robots of its *area*: its strip and one cell column either
 side (the halo, C wide). It builds its own cell list from those robots alone, in ascending id order, on
 the grid of the world's, so each of its robots visits the same neighbours in the same order as in one
@@ -25,7 +26,7 @@ import numpy as np
 from swarm_ros.core.errors import ParameterError
 
 from .rule import JOINED, Cells, Decided, Robots, build_cells, clear_cells, decide_kernel, decided_for
-from .run import KilobotRun, anchor_capacity
+from .run import KilobotRun, anchor_capacity, robots_at_start
 
 
 @dataclass(frozen=True)
@@ -35,15 +36,23 @@ class Strips:
     cuts: np.ndarray  #: int64, K + 1 ascending column numbers, the first 0 and the last the grid's width
 
     @staticmethod
-    def even(columns: int, batches: int) -> Strips:
-        """``batches`` strips as nearly equal in width as whole columns allow.
+    def balanced(start_columns: np.ndarray, columns: int, batches: int) -> Strips:
+        """``batches`` strips of whole columns holding, at the start, as nearly equal numbers of robots as
+        whole columns allow (``start_columns``: each robot's cell column at tick 0), each at least one column
+        wide. The robots not joined are the ones that decide, and for most of a run most of them wait in the
+        pack, so this shares most of the deciding.
 
         Raises:
             ParameterError: more batches than columns.
         """
         if not 1 <= batches <= columns:
             raise ParameterError(f"processes must be between 1 and the {columns} cell columns, got {batches}")
-        return Strips(np.linspace(0, columns, batches + 1).round().astype(np.int64))
+        held = np.cumsum(np.bincount(start_columns, minlength=columns))
+        cuts = [0]
+        for k in range(1, batches):
+            at = int(np.searchsorted(held, k * held[-1] / batches)) + 1  # columns before it hold k/K of them
+            cuts.append(min(max(at, cuts[-1] + 1), columns - (batches - k)))
+        return Strips(np.array([*cuts, columns], dtype=np.int64))
 
     @property
     def batches(self) -> int:
@@ -71,6 +80,17 @@ def in_columns(x, state, cells, first, last, joined_too, ids):
                 ids[m] = i
                 m += 1
     return m
+
+
+def cell_columns(x: np.ndarray, cells: Cells) -> np.ndarray:
+    """The cell column of each x (as the kernels find a robot's cell)."""
+    return np.clip(np.floor((x - cells.x0) / cells.side).astype(np.int64), 0, cells.nx - 1)
+
+
+def strips_for(run: KilobotRun, batches: int) -> Strips:
+    """The run's strips for ``batches`` batches (:meth:`Strips.balanced` over its robots at tick 0: every process
+    that knows the run's parameters finds the same)."""
+    return Strips.balanced(cell_columns(robots_at_start(run.params).x, run.cells), run.cells.nx, batches)
 
 
 def area_of(run: KilobotRun, strips: Strips, k: int) -> np.ndarray:
@@ -102,8 +122,7 @@ class KilobotBatch:
         s = self.robots
         for mine, theirs in zip(s, rows):
             mine[ids] = theirs
-        c = self.cells
-        column = np.clip(np.floor((s.x[ids] - c.x0) / c.side).astype(np.int64), 0, c.nx - 1)
+        column = cell_columns(s.x[ids], self.cells)
         own = ids[(column >= self.strip[0]) & (column <= self.strip[1]) & (s.state[ids] != JOINED)]
         build_cells(ids, s.x, s.y, self.cells)
         decide_kernel(own, s, self.rule, self.bitmap, self.cells, tick, self._out, *self._anchors)
@@ -115,7 +134,7 @@ def run_batched(run: KilobotRun, batches: int, max_ticks: int | None = None) -> 
     """Run ``run`` to its end (or ``max_ticks`` more ticks) with its robots' decisions made by ``batches``
     :class:`KilobotBatch` es, each sent only its area's rows; the result equals ``run.run()``'s. Returns the
     strips."""
-    strips = Strips.even(run.cells.nx, batches)
+    strips = strips_for(run, batches)
     hosts = [KilobotBatch(run, strips, k) for k in range(batches)]
     left = max_ticks
     while run.outcome is None and (left is None or left > 0):
