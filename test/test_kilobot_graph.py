@@ -111,3 +111,18 @@ def test_an_experiment_over_the_graph_gives_the_in_process_rows(square, tmp_path
         [rows[engine]] = read_results(out / "results.csv")
     differ = {k for k in rows["ros2"] if rows["ros2"][k] != rows["inprocess"][k]}
     assert differ == {"engine", "wall_seconds"}, differ
+
+
+def test_a_world_process_killed_mid_run_fails_the_run_in_one_line_and_writes_nothing(square, tmp_path):
+    """The rubenstein world keeps no checkpoint yet: its restarted process refuses to start the run again from
+    tick 0, so the run fails, and no run directory is written."""
+    out = tmp_path / "run"
+    launcher = _launch(square, out, 2)
+    wait_ticks_recorded(out, 20_000)
+    os.kill(node_pid(out, "world", timeout=10), signal.SIGKILL)
+    _, err = launcher.communicate(timeout=300)
+    said = err.decode().strip().splitlines()
+    assert launcher.returncode not in (0, None) and "Traceback" not in err.decode(), said
+    assert "cannot resume a rubenstein run yet" in said[-1] or "cannot resume" in err.decode(), said
+    assert not out.exists()
+    assert not processes_mentioning(str(out)), "a process outlived the run"

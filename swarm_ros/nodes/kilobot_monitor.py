@@ -23,7 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
 
 from swarm_ros.artifacts import run_dir
-from swarm_ros.core.errors import ConfigError, Rejected
+from swarm_ros.core.errors import ConfigError, Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import RUBENSTEIN
 from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun, summary_of
@@ -54,6 +54,8 @@ class KilobotMonitorNode:
         self.shape, self.params = run.resolve()
         if self.params.algorithm != RUBENSTEIN:
             raise ConfigError(f"the kilobot monitor runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
+        if int(own["incarnation"]):  # the metrics before its death are gone: the run fails, not half-written
+            raise RunFailed("a restarted monitor cannot resume a rubenstein run yet (it keeps no bag)")
         p = self.params
         self.out = (
             Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p.robots, 0, p.seed)

@@ -59,6 +59,8 @@ class KilobotWorldNode:
         self.shape, self.params = run.resolve()
         if self.params.algorithm != RUBENSTEIN:
             raise ConfigError(f"the kilobot world runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
+        if int(own["incarnation"]):  # nothing was saved to go on from: the run fails, in one line, not from tick 0
+            raise RunFailed("a restarted world cannot resume a rubenstein run yet (it keeps no checkpoint)")
         self.every = int(own["record_every"]) or RECORD_EVERY
         self.start_timeout = float(own["start_timeout"])
         self.created = time.monotonic()
