@@ -236,7 +236,14 @@ def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
 def test_announcements_that_do_not_fit_the_run_are_rejected():
     ls = KilobotLockstep(KilobotRun(square(6), RunParams(40, algorithm="rubenstein")))
     assert ls.announce("robot_batch_0", 0, 2) == []
-    for name, k, batches in [("robot_batch_1", 1, 3), ("robot_batch_2", 2, 2), ("other", 0, 2), ("b", 0, 10**6)]:
+    wrong = [
+        ("robot_batch_1", 1, 3),
+        ("robot_batch_2", 2, 2),
+        ("other", 0, 2),
+        ("b", 0, 10**6),
+        ("robot_batch_0", 1, 2),
+    ]
+    for name, k, batches in wrong:
         with pytest.raises(Rejected):
             ls.announce(name, k, batches)
     assert ls.announce("robot_batch_1", 1, 2) == [0, 1]

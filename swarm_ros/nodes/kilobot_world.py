@@ -43,7 +43,7 @@ from swarm_ros.protocol.plan import (
 )
 from swarm_ros.protocol.status import RUNNING, STARTING
 from swarm_ros.ros import graph as msgs
-from swarm_ros.ros.auth import open_auth
+from swarm_ros.ros.auth import SignedPublisher, open_auth
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import run_node
 
@@ -73,7 +73,7 @@ class KilobotWorldNode:
         self.pub_status = self.signer.publisher(DiagnosticArray, STATUS, msgs.STATUS_QOS)
         self.pub_robots = self.signer.publisher(PointCloud2, KILOBOT_ROBOTS, msgs.KILOBOT_QOS)
         self.pub_metrics = self.signer.publisher(PointCloud2, KILOBOT_METRICS, msgs.KILOBOT_QOS)
-        self.areas: dict[str, object] = {}  # batch node name -> its area's publisher
+        self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
         self._status(STARTING, "waiting for robot batches and the monitor")
@@ -121,12 +121,8 @@ class KilobotWorldNode:
         )
 
     def _send_areas(self, batches: list[int]) -> None:
-        names = {k: name for name, k in ((n, self._number(n)) for n in self.areas)}
         for k in batches:
-            self.areas[names[k]].publish_rows(self.ls.area(k), self.ls.run.tick)  # type: ignore[attr-defined]
-
-    def _number(self, name: str) -> int:
-        return next(k for k, n in self.ls.hosts.items() if n == name)
+            self.areas[self.ls.hosts[k]].publish_rows(self.ls.area(k), self.ls.run.tick)
 
     def _publish_tick(self) -> None:
         run = self.ls.run

@@ -62,6 +62,8 @@ class KilobotLockstep:
             raise Rejected("strip", f"batch {k} of {batches}; the run has {self.strips.batches} batches")
         if self.hosts.get(k, name) != name:
             raise Rejected("strip", f"batch {k} is {self.hosts[k]}, not {name}")
+        if any(other == name and b != k for b, other in self.hosts.items()):
+            raise Rejected("strip", f"{name} is another batch than {k}")
         self.hosts[k] = name
         if not self.started:
             self.started = len(self.hosts) == batches
