@@ -281,11 +281,14 @@ def _heartbeat_failure(exc: BaseException, msg: str = "Failed to communicate wit
 def test_a_closed_connection_at_a_heartbeat_is_the_one_worker_error_dropped():
     """The record a worker logs when the closing scheduler cut its heartbeat is dropped; the same message for
     another fault, and another error with the same exception, still show."""
+    import asyncio
+
     from distributed.comm.core import CommClosedError
 
     from swarm_ros.app.dask_workers import keep
 
     assert not keep(_heartbeat_failure(CommClosedError("in <TCP (closed)>: Stream is closed")))
+    assert not keep(_heartbeat_failure(asyncio.CancelledError()))  # its handshake cancelled by the worker's close
     assert keep(_heartbeat_failure(OSError("Connection refused")))
     assert keep(_heartbeat_failure(CommClosedError("closed"), msg="Unexpected exception during heartbeat."))
 

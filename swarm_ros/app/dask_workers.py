@@ -5,6 +5,7 @@ Imported only where such a cluster starts: it loads ``distributed``.
 
 from __future__ import annotations
 
+import asyncio
 import logging
 
 from distributed.comm.core import CommClosedError
@@ -36,6 +37,8 @@ class QuietHeartbeatAtClose(WorkerPlugin):
 
 
 def keep(record: logging.LogRecord) -> bool:
-    """False for a heartbeat's failure on a connection the scheduler closed; True for any other record."""
+    """False for a heartbeat's failure on a connection the scheduler closed, or whose handshake the worker's own
+    closing cancelled (CI saw both forms, distributed 2026.8); True for any other record."""
     exc = record.exc_info[1] if record.exc_info else None
-    return not (isinstance(exc, CommClosedError) and str(record.msg).startswith(_HEARTBEAT_FAILED))
+    closing = isinstance(exc, (CommClosedError, asyncio.CancelledError))
+    return not (closing and str(record.msg).startswith(_HEARTBEAT_FAILED))
