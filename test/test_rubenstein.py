@@ -143,6 +143,35 @@ def test_an_edge_follower_keeps_its_distance_around_a_fixed_group():
     assert turned[-1] - turned[0] < -math.pi  # clockwise round the group, the group on its right
 
 
+@pytest.mark.parametrize("stale", [0, 5, 20])
+def test_a_mover_drops_an_estimate_it_could_not_update_for_loc_stale_ticks_and_never_joins_without_one(stale):
+    """An edge-follower walks on with an estimate and no anchors (no robot is localized): after
+    ``loc_stale_ticks`` ticks it drops it (and is no longer localized), to trilaterate afresh where anchors
+    are; 0 keeps it for good. Placed inside the shape, a robot without an estimate does not join."""
+    run = kilobot(square(8), 60, startup_ticks=0, loc_stale_ticks=stale)
+    s = run.robots
+    mover, group = 59, np.arange(59)
+    s.state[group], s.joined[group], s.loc[:] = JOINED, 0, 0
+    s.state[mover], s.began[mover], s.est[mover], s.loc[mover] = MOVE_OUTSIDE, 0, 1, 1
+    s.x[mover], s.y[mover] = s.x[group].min() - 1.3, s.y[group].mean()
+    s.ex[mover], s.ey[mover] = s.x[mover], s.y[mover]
+    seen = []
+    for _ in range(30):
+        run.step()
+        seen.append((int(s.est[mover]), int(s.loc[mover]), int(s.blind[mover])))
+        assert s.ex[mover] == s.x[group].min() - 1.3 or not s.est[mover]  # never updated without anchors
+    if stale == 0:
+        assert seen == [(1, 1, t) for t in range(1, 31)]
+    else:
+        assert seen[: stale - 1] == [(1, 1, t) for t in range(1, stale)]
+        assert all(flags == (0, 0, 0) for flags in seen[stale - 1 :])
+    # no estimate, inside the shape, next to a stationary robot of the same gradient: it does not join
+    s.state[mover] = MOVE_INSIDE
+    s.x[mover], s.y[mover] = s.x[group[-1]], s.y[group[-1]] + 1.05
+    run.step()
+    assert s.state[mover] == (JOINED if stale == 0 else MOVE_INSIDE)
+
+
 def test_the_start_rule_lets_one_rim_robot_go_at_a_time():
     run = kilobot(square(8), 150, startup_ticks=50, seed=5)
     s = run.robots

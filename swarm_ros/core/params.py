@@ -155,6 +155,9 @@ class Settings:
         0.1, "localized once the estimate moves less than this a tick, in d, ...", low=0.0, low_open=True, **_RB
     )
     loc_settle_ticks: int = _param(10, "... for this many ticks in a row", low=1, **_RB)
+    loc_stale_ticks: int = _param(
+        20, "a moving robot drops its estimate after this many ticks without 3 anchors (0: never)", low=0, **_RB
+    )
     startup_ticks: int = _param(200, "ticks every robot waits at the start (START)", low=0, **_RB)
     stall_ticks: int = _param(
         20_000, "the run ends incomplete after this many ticks without a robot joining", low=1, **_RB
@@ -365,6 +368,7 @@ class RunParams:
     loc_min_angle_deg: float = 15.0
     loc_settle: float = 0.1
     loc_settle_ticks: int = 10
+    loc_stale_ticks: int = 20
     startup_ticks: int = 200
     stall_ticks: int = 20_000
 

@@ -22,16 +22,17 @@ from swarm_ros.core.errors import Rejected
 from swarm_ros.core.rubenstein.rule import JOINED, NEVER, UNKNOWN_G, Decided, Robots, decided_for
 from swarm_ros.core.rubenstein.run import COLUMNS
 
-_NAMES = ["x", "y", "z", "heading", "ex", "ey", "near", "g", "still", "began", "joined", "waited", "id", "state"]
-_FORMATS = ["<f8"] * 7 + ["<i4"] * 5 + ["<u4", "<u1"]
-_OFFSETS = [0, 8, 16, 24, 32, 40, 48, 56, 60, 64, 68, 72, 76, 80]
+_NAMES = ["x", "y", "z", "heading", "ex", "ey", "near"]
+_NAMES += ["g", "still", "began", "joined", "waited", "blind", "id", "state"]
+_FORMATS = ["<f8"] * 7 + ["<i4"] * 6 + ["<u4", "<u1"]
+_OFFSETS = [0, 8, 16, 24, 32, 40, 48, 56, 60, 64, 68, 72, 76, 80, 84]
 
 #: World -> robot batch k, after each tick: the rows of its area's robots.
 KILOBOT_ROW = np.dtype(
     {
         "names": [*_NAMES, "est", "loc"],
         "formats": [*_FORMATS, "<u1", "<u1"],
-        "offsets": [*_OFFSETS, 81, 82],
+        "offsets": [*_OFFSETS, 85, 86],
         "itemsize": 88,
     }
 )
@@ -40,13 +41,13 @@ KILOBOT_DECISION_ROW = np.dtype(
     {
         "names": [*_NAMES, "est", "loc", "moves"],
         "formats": [*_FORMATS, "<u1", "<u1", "<u1"],
-        "offsets": [*_OFFSETS, 81, 82, 83],
+        "offsets": [*_OFFSETS, 85, 86, 87],
         "itemsize": 88,
     }
 )
 #: World -> monitor: metrics rows, the columns of swarm_ros.core.rubenstein.run.COLUMNS (float64, exact).
 KILOBOT_METRICS_ROW = np.dtype([(name, "<f8") for name in COLUMNS])
-_COUNTERS = ("still", "began", "joined", "waited")  #: int64 in the core, int32 on the wire
+_COUNTERS = ("still", "began", "joined", "waited", "blind")  #: int64 in the core, int32 on the wire
 _STATES = 5  #: the state codes are 0..4 (swarm_ros.core.rubenstein.rule)
 
 
@@ -65,7 +66,7 @@ def kilobot_rows(ids: np.ndarray, robots: Robots | Decided) -> np.ndarray:
     pick: slice | np.ndarray = slice(None) if decided else ids
     rows = np.zeros(ids.size, dtype=KILOBOT_DECISION_ROW if decided else KILOBOT_ROW)
     rows["id"] = ids
-    for name in ("x", "y", "heading", "ex", "ey", "near", "state", "est", "loc", "still", "waited"):
+    for name in ("x", "y", "heading", "ex", "ey", "near", "state", "est", "loc", "still", "waited", "blind"):
         rows[name] = getattr(robots, name)[pick]
     rows["g"] = _wire(robots.g[pick], UNKNOWN_G)
     rows["began"] = _wire(robots.began[pick], NEVER)
@@ -80,7 +81,7 @@ def robots_of_rows(rows: np.ndarray) -> tuple[np.ndarray, Robots]:
     fields = {name: rows[name].copy() for name in ("x", "y", "heading", "ex", "ey", "near")}
     fields.update(state=rows["state"].astype(np.int8), est=rows["est"].astype(np.int8))
     fields.update(loc=rows["loc"].astype(np.int8), g=_core(rows["g"], UNKNOWN_G), began=_core(rows["began"], NEVER))
-    fields.update({name: rows[name].astype(np.int64) for name in ("still", "joined", "waited")})
+    fields.update({name: rows[name].astype(np.int64) for name in ("still", "joined", "waited", "blind")})
     return rows["id"].astype(np.int64), Robots(**fields)
 
 
@@ -115,7 +116,7 @@ def check_kilobot_rows(rows: np.ndarray, robots: int, tick: int) -> None:
         raise Rejected("bad number", "a pose or estimate that is not a finite number")
     if np.any(rows["g"] < -1) or any(np.any(rows[name] < -1) for name in _COUNTERS):
         raise Rejected("bad number", "a gradient or counter below -1")
-    if any(np.any(rows[name] > tick) for name in ("began", "joined", "still", "waited")):
+    if any(np.any(rows[name] > tick) for name in ("began", "joined", "still", "waited", "blind")):
         raise Rejected("bad number", f"a tick or count beyond tick {tick}")
     if np.any((rows["state"] == JOINED) != (rows["joined"] >= 0)):
         raise Rejected("bad state", "joined robots, and only they, have a joining tick")

@@ -47,6 +47,7 @@ class Robots(NamedTuple):
     began: np.ndarray  #: int64: the tick it began to move (NEVER)
     joined: np.ndarray  #: int64: the tick it joined the shape (-1; the seeds 0)
     waited: np.ndarray  #: int64: ticks in a row it has had an edge-follower ahead within YIELD
+    blind: np.ndarray  #: int64: ticks in a row it has moved with an estimate and fewer than 3 anchors
 
 
 class Rule(NamedTuple):
@@ -65,6 +66,7 @@ class Rule(NamedTuple):
     min_angle: float
     settle: float
     settle_ticks: int
+    stale: int  #: a mover's estimate is dropped after this many ticks without an update (0: kept)
     startup: int
     seed: int
 
@@ -112,13 +114,14 @@ class Decided(NamedTuple):
     began: np.ndarray
     joined: np.ndarray
     waited: np.ndarray
+    blind: np.ndarray
     moves: np.ndarray  #: int8
 
 
 def decided_for(n: int) -> Decided:
     """Empty arrays for the decisions of ``n`` robots."""
     f, i, b = np.float64, np.int64, np.int8
-    kinds = (f, f, f, b, i, f, f, b, b, i, f, i, i, i, b)
+    kinds = (f, f, f, b, i, f, f, b, b, i, f, i, i, i, i, b)
     return Decided(*(np.empty(n, dtype=k) for k in kinds))
 
 
@@ -294,12 +297,14 @@ def decide_kernel(ids, s, rule, bm, cells, tick, out, ax, ay, am):
                     j = cells.nxt[j]
         g = gmin + 1 if gmin < UNKNOWN_G else UNKNOWN_G
         # localization
-        ex, ey, est, loc, still = s.ex[i], s.ey[i], s.est[i], s.loc[i], s.still[i]
+        ex, ey, est, loc, still, blind = s.ex[i], s.ey[i], s.est[i], s.loc[i], s.still[i], s.blind[i]
+        moving = st == MOVE_OUTSIDE or st == MOVE_INSIDE
         # the anchors' geometry gates the first estimate; once it has one, a robot sweeps with any three anchors
         if (est and n >= 3) or good_geometry(ax, ay, n, rule.min_angle):
+            blind = 0
             if est:
                 px, py = ex, ey
-                for _ in range(rule.sweeps if st == MOVE_OUTSIDE or st == MOVE_INSIDE else 1):  # a mover lags
+                for _ in range(rule.sweeps if moving else 1):  # a mover lags
                     px, py = sweep(px, py, ax, ay, am, n, rule.gain)
                 still = still + 1 if math.hypot(px - ex, py - ey) < rule.settle else 0
                 ex, ey = px, py
@@ -309,6 +314,10 @@ def decide_kernel(ids, s, rule, bm, cells, tick, out, ax, ay, am):
                     ex, ey, est, still = px, py, 1, 0
             if still >= rule.settle_ticks:
                 loc = 1
+        elif est and moving:  # it walks on, its estimate where it was last updated
+            blind += 1
+            if rule.stale > 0 and blind >= rule.stale:  # too stale to descend from: trilaterate afresh
+                est, loc, still, blind = 0, 0, 0, 0
         # the state's rule
         heading, began, joined, near = s.heading[i], s.began[i], s.joined[i], s.near[i]
         moves = 0
@@ -322,9 +331,13 @@ def decide_kernel(ids, s, rule, bm, cells, tick, out, ax, ay, am):
                 st, began = MOVE_OUTSIDE, tick
         elif st == MOVE_OUTSIDE and est and inside(ex, ey, bm):
             st = MOVE_INSIDE
-        elif st == MOVE_INSIDE and (
-            not inside(ex + rule.step * math.cos(heading), ey + rule.step * math.sin(heading), bm)
-            or (g < UNKNOWN_G and g <= g_close)
+        elif (
+            st == MOVE_INSIDE
+            and est
+            and (
+                not inside(ex + rule.step * math.cos(heading), ey + rule.step * math.sin(heading), bm)
+                or (g < UNKNOWN_G and g <= g_close)
+            )
         ):
             st, joined = JOINED, tick
         waited = s.waited[i] + 1 if yield_to else 0
@@ -340,7 +353,8 @@ def decide_kernel(ids, s, rule, bm, cells, tick, out, ax, ay, am):
             near = cur
         out.x[k], out.y[k], out.heading[k], out.state[k], out.g[k] = to_x, to_y, heading, st, g
         out.ex[k], out.ey[k], out.est[k], out.loc[k], out.still[k] = ex, ey, est, loc, still
-        out.near[k], out.began[k], out.joined[k], out.waited[k], out.moves[k] = near, began, joined, waited, moves
+        out.near[k], out.began[k], out.joined[k], out.waited[k], out.blind[k] = near, began, joined, waited, blind
+        out.moves[k] = moves
 
 
 @numba.njit(cache=True, inline="always")
@@ -396,6 +410,7 @@ def apply_kernel(ids, out, granted, s):
         s.heading[i], s.state[i], s.g[i] = out.heading[k], out.state[k], out.g[k]
         s.ex[i], s.ey[i], s.est[i], s.loc[i], s.still[i] = out.ex[k], out.ey[k], out.est[k], out.loc[k], out.still[k]
         s.near[i], s.began[i], s.joined[i], s.waited[i] = out.near[k], out.began[k], out.joined[k], out.waited[k]
+        s.blind[i] = out.blind[k]
 
 
 @numba.njit(cache=True)

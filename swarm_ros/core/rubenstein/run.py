@@ -71,6 +71,7 @@ def robots_at_start(params: RunParams) -> Robots:
         began=np.full(n, NEVER, dtype=np.int64),
         joined=np.full(n, -1, dtype=np.int64),
         waited=np.zeros(n, dtype=np.int64),
+        blind=np.zeros(n, dtype=np.int64),
     )
     k = len(SEEDS)
     s.state[:k], s.g[:k], s.est[:k], s.loc[:k], s.joined[:k] = JOINED, SEED_G, 1, 1, 0
@@ -93,6 +94,7 @@ def rule_of(params: RunParams) -> Rule:
         min_angle=math.radians(params.loc_min_angle_deg),
         settle=params.loc_settle,
         settle_ticks=params.loc_settle_ticks,
+        stale=params.loc_stale_ticks,
         startup=params.startup_ticks,
         seed=params.seed,
     )
