@@ -66,8 +66,7 @@ def test_strips_share_the_robots_at_the_start_and_an_area_is_its_strip_and_one_c
 def own_at_start(run: KilobotRun, batches: int, k: int) -> np.ndarray:
     strips = strips_for(run, batches)
     column = cell_columns(run.robots.x, run.cells)
-    first, last = strips.strip(k)
-    return np.flatnonzero((column >= first) & (column <= last) & (run.robots.state != JOINED))
+    return np.flatnonzero(strips.in_strip(column, k) & (run.robots.state != JOINED))
 
 
 def test_a_batch_reads_only_its_area_and_decides_only_its_strip():

@@ -79,16 +79,12 @@ class KilobotLockstep:
     def area(self, k: int) -> np.ndarray:
         """Batch k's area's rows at the current tick."""
         assert self.strips is not None
-        first, last = self.strips.area(k)
-        column = self._columns()
-        return kilobot_rows(np.flatnonzero((column >= first) & (column <= last)), self.run.robots)
+        return kilobot_rows(np.flatnonzero(self.strips.in_area(self._columns(), k)), self.run.robots)
 
     def own(self, k: int) -> np.ndarray:
         """The robots batch k decides for at the next tick: its strip's, not joined, ascending."""
         assert self.strips is not None
-        first, last = self.strips.strip(k)
-        column = self._columns()
-        return np.flatnonzero((column >= first) & (column <= last) & (self.run.robots.state != JOINED))
+        return np.flatnonzero(self.strips.in_strip(self._columns(), k) & (self.run.robots.state != JOINED))
 
     def decisions(self, k: int, tick: int, rows: np.ndarray) -> bool:
         """Batch k's decisions for ``tick``: checked, kept, and once every batch's are in, the tick settled.

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from swarm_ros.core.errors import ParameterError
@@ -67,19 +66,15 @@ class Strips:
         first, last = self.strip(k)
         return max(first - 1, 0), min(last + 1, int(self.cuts[-1]) - 1)
 
+    def in_strip(self, columns: np.ndarray, k: int) -> np.ndarray:
+        """Which of the robots in cell ``columns`` lie in strip k."""
+        first, last = self.strip(k)
+        return (columns >= first) & (columns <= last)
 
-@numba.njit(cache=True)
-def in_columns(x, state, cells, first, last, joined_too, ids):
-    """Write into ``ids`` the robots (ascending) whose cell column lies in ``first``..``last``, the joined ones
-    only if ``joined_too``; return how many."""
-    m = 0
-    for i in range(x.size):
-        if joined_too or state[i] != JOINED:
-            cx = min(max(int(np.floor((x[i] - cells.x0) / cells.side)), 0), cells.nx - 1)
-            if first <= cx <= last:
-                ids[m] = i
-                m += 1
-    return m
+    def in_area(self, columns: np.ndarray, k: int) -> np.ndarray:
+        """Which of the robots in cell ``columns`` lie in batch k's area."""
+        first, last = self.area(k)
+        return (columns >= first) & (columns <= last)
 
 
 def cell_columns(x: np.ndarray, cells: Cells) -> np.ndarray:
@@ -95,8 +90,7 @@ def strips_for(run: KilobotRun, batches: int) -> Strips:
 
 def area_of(run: KilobotRun, strips: Strips, k: int) -> np.ndarray:
     """The ids of the robots in batch k's area, as they stand at the run's tick (what the world sends it)."""
-    ids = np.empty(run.params.robots, dtype=np.int64)
-    return ids[: in_columns(run.robots.x, run.robots.state, run.cells, *strips.area(k), True, ids)]
+    return np.flatnonzero(strips.in_area(cell_columns(run.robots.x, run.cells), k))
 
 
 class KilobotBatch:
@@ -108,7 +102,7 @@ class KilobotBatch:
 
     def __init__(self, run: KilobotRun, strips: Strips, k: int) -> None:
         n = run.params.robots
-        self.rule, self.bitmap, self.strip = run.rule, run.bitmap, strips.strip(k)
+        self.rule, self.bitmap, self.strips, self.k = run.rule, run.bitmap, strips, k
         self.robots = Robots(*(np.zeros(n, dtype=a.dtype) for a in run.robots))
         c = run.cells
         self.cells = Cells(np.full(c.head.size, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64), *c[2:])
@@ -122,8 +116,7 @@ class KilobotBatch:
         s = self.robots
         for mine, theirs in zip(s, rows):
             mine[ids] = theirs
-        column = cell_columns(s.x[ids], self.cells)
-        own = ids[(column >= self.strip[0]) & (column <= self.strip[1]) & (s.state[ids] != JOINED)]
+        own = ids[self.strips.in_strip(cell_columns(s.x[ids], self.cells), self.k) & (s.state[ids] != JOINED)]
         build_cells(ids, s.x, s.y, self.cells)
         decide_kernel(own, s, self.rule, self.bitmap, self.cells, tick, self._out, *self._anchors)
         clear_cells(ids, s.x, s.y, self.cells)
