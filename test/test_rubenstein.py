@@ -367,10 +367,19 @@ def test_simulate_writes_the_run_and_a_recording_of_state_gradient_and_estimates
     assert "outcome: complete" in str(last["/events"][1]["TextLog:text"])
 
 
-def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_side_by_side(tmp_path):
+def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_side_by_side(tmp_path, monkeypatch):
     import yaml
 
-    from swarm_ros.app import cli
+    from swarm_ros.app import cli, report
+
+    labels: dict[str, set[str]] = {}
+    save = report._save
+
+    def keep_labels(fig, path):
+        labels[path.name] = {ax.get_ylabel() for ax in fig.axes}
+        save(fig, path)
+
+    monkeypatch.setattr(report, "_save", keep_labels)
     from swarm_ros.app.experiment_file import load_experiment
     from swarm_ros.app.results_file import read_results
 
@@ -412,6 +421,9 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     table = stats[stats.index("## Time and accuracy") :]
     assert "| square | 40 | rubenstein | – | 2 |" in table and "| square | 40 | paper | 2 | 2 |" in table
     assert (out / "figures" / "square_rubenstein_v1.png").stat().st_size > 0
+    # each algorithm's counts in its own words: rubenstein's robots join and cover pixels
+    assert {"joined robots", "uncovered pixels"} <= labels["square_rubenstein_v1.png"]
+    assert {"localized robots", "empty shape patches"} <= labels["square_paper_v1.png"]
 
 
 def test_ctrl_c_mid_run_keeps_an_interrupted_run_directory_and_its_recording(tmp_path):

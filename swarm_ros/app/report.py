@@ -108,6 +108,14 @@ def _cells(rules: str) -> str:
     return "pixels" if rules == RUBENSTEIN_LABEL else "patches"
 
 
+def _counts(rules: str) -> tuple[str, str, str]:
+    """The words for results.csv's localized, unlocalized and empty_patches columns: under rubenstein they count
+    the robots joined, the robots not joined and the shape's pixels no joined robot covers."""
+    if rules == RUBENSTEIN_LABEL:
+        return "joined robots", "robots not joined", "uncovered pixels"
+    return "localized robots", "unlocalized robots", "empty shape patches"
+
+
 def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference | None = None) -> None:
     """Panels (a)-(d) for one shape at one vision radius and rule set; ``ref`` adds the published point to (b)."""
     s0 = stats[0]
@@ -156,15 +164,16 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
     for ax in (a, b):
         ax.set_xlabel("group size N (robots)")
         ax.set_ylabel("convergence time (ticks)")
-    c.plot(n, [s["mean_localized"] for s in stats], "o-", color=_COLOURS[0], label="localized robots (left)")
-    c.set_ylabel("localized robots", color=_COLOURS[0])
+    placed, unplaced, empty = _counts(s0["rules"])
+    c.plot(n, [s["mean_localized"] for s in stats], "o-", color=_COLOURS[0], label=f"{placed} (left)")
+    c.set_ylabel(placed, color=_COLOURS[0])
     right = c.twinx()
     for key, label, colour in (
-        ("mean_unlocalized", "unlocalized robots (right)", _COLOURS[1]),
-        ("mean_empty_patches", "empty shape patches (right)", _COLOURS[3]),
+        ("mean_unlocalized", f"{unplaced} (right)", _COLOURS[1]),
+        ("mean_empty_patches", f"{empty} (right)", _COLOURS[3]),
     ):
         right.plot(n, [s[key] for s in stats], "s--", color=colour, label=label)
-    right.set_ylabel("unlocalized robots, empty patches")
+    right.set_ylabel(f"{unplaced}, {empty}")
     right.set_ylim(bottom=0)
     handles = c.get_legend_handles_labels()[0] + right.get_legend_handles_labels()[0]
     c.legend(handles=handles, fontsize=8, loc="upper center")
@@ -182,9 +191,9 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
         )
     d.set_yscale("symlog", linthresh=1)
     d.set_ylim(bottom=0)
-    d.set_title("(d) one run per group size: empty shape patches", fontsize=10)
+    d.set_title(f"(d) one run per group size: {empty}", fontsize=10)
     d.set_xlabel("tick")
-    d.set_ylabel("empty shape patches")
+    d.set_ylabel(empty)
     d.legend(fontsize=7)
     labels = tick_labels(n, keep=patches)
     for ax in (a, b, c):
