@@ -257,9 +257,10 @@ def _known_layout(r: _Reader) -> tuple[tuple[Field, ...], int | None]:
     :func:`encode_cloud` writes for one of the graph's own row layouts (then ``r`` moves past them);
     else ((), None), and ``r`` stays."""
     if not _LAYOUTS:
+        from swarm_ros.protocol.kilobot_rows import KILOBOT_ROW_TYPES
         from swarm_ros.protocol.rows import ROW_TYPES
 
-        for dtype in ROW_TYPES:
+        for dtype in (*ROW_TYPES, *KILOBOT_ROW_TYPES):
             for tagged in (True, False):
                 block, height_at = _fields_block(FRAME_ID, dtype, tagged)
                 _LAYOUTS.append((block[height_at + 8 :], tuple(Field(*f) for f in point_fields(dtype)), int(tagged)))

@@ -16,18 +16,16 @@ joined; a robot that moves goes one step along its heading, which turned by at m
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from swarm_ros.core.errors import Rejected
-from swarm_ros.core.rubenstein.rule import JOINED, MOVE_OUTSIDE, NEVER, Decided
+from swarm_ros.core.rubenstein.rule import JOINED, Decided
 from swarm_ros.core.rubenstein.run import KilobotRun
 from swarm_ros.core.rubenstein.strips import Strips, cell_columns, strips_for
 
+from .kilobot_checks import DECISION_FAULTS, decision_faults, first_fault
 from .kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows
 
-_TWO_PI = 2.0 * math.pi
 _STEP_TOLERANCE = 1e-9  #: d: a step's end may differ from the rule's in the last bits of another libm's cos
 
 
@@ -119,26 +117,9 @@ def check_decisions(run: KilobotRun, rows: np.ndarray, tick: int, own: np.ndarra
     ids, d = decided_of_rows(rows)
     if not np.array_equal(ids, own):
         raise Rejected("not its robots", f"{ids.size} decisions for the batch's {own.size} robots")
-    s = run.robots
-    was = s.state[ids]
-    if np.any((d.state != was) & (d.state != was + 1)):
-        raise Rejected("illegal", "a state that skips or goes back")
-    newly = (d.state == JOINED) & (was != JOINED)
-    if np.any(newly & (d.joined != tick)) or np.any(~newly & (d.joined != s.joined[ids])):
-        raise Rejected("illegal", "a joining tick other than the tick the robot joined")
-    began = (d.state == MOVE_OUTSIDE) & (was != MOVE_OUTSIDE)
-    if np.any(began & (d.began != tick)) or np.any(~began & (d.began != s.began[ids])):
-        raise Rejected("illegal", "a tick the robot began to move other than the one it did")
-    if np.any(d.began[d.state < MOVE_OUTSIDE] != NEVER):
-        raise Rejected("illegal", "a robot that has not begun to move with a tick it began")
-    h, turn = s.heading[ids], run.rule.turn
-    turned = (d.heading == h) | (d.heading == (h + turn) % _TWO_PI) | (d.heading == (h - turn) % _TWO_PI)
-    if not turned.all():
-        raise Rejected("illegal", "a turn other than the rule's")
-    step = run.rule.step
-    to_x, to_y = s.x[ids] + step * np.cos(d.heading), s.y[ids] + step * np.sin(d.heading)
-    stepped = (np.abs(d.x - to_x) < _STEP_TOLERANCE) & (np.abs(d.y - to_y) < _STEP_TOLERANCE)
-    stays = (d.x == s.x[ids]) & (d.y == s.y[ids])
-    if np.any(np.where(d.moves == 1, ~stepped, ~stays)):
-        raise Rejected("illegal", "a move other than one step along the heading")
+    fault = first_fault(
+        decision_faults(ids, d, run.robots, tick, run.rule.turn, run.rule.step, _STEP_TOLERANCE), DECISION_FAULTS
+    )
+    if fault is not None:
+        raise Rejected(*fault)
     return ids, d

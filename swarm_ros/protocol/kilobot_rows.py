@@ -19,8 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from swarm_ros.core.errors import Rejected
-from swarm_ros.core.rubenstein.rule import JOINED, NEVER, UNKNOWN_G, Decided, Robots, decided_for
+from swarm_ros.core.rubenstein.rule import Decided, Robots, decided_for
 from swarm_ros.core.rubenstein.run import COLUMNS
+
+from .kilobot_checks import ROW_FAULTS, first_fault, pack_rows, row_faults, unpack_rows
 
 _NAMES = ["x", "y", "z", "heading", "ex", "ey", "near"]
 _NAMES += ["g", "still", "began", "joined", "waited", "blind", "id", "state"]
@@ -47,30 +49,15 @@ KILOBOT_DECISION_ROW = np.dtype(
 )
 #: World -> monitor: metrics rows, the columns of swarm_ros.core.rubenstein.run.COLUMNS (float64, exact).
 KILOBOT_METRICS_ROW = np.dtype([(name, "<f8") for name in COLUMNS])
-_COUNTERS = ("still", "began", "joined", "waited", "blind")  #: int64 in the core, int32 on the wire
-_STATES = 5  #: the state codes are 0..4 (swarm_ros.core.rubenstein.rule)
-
-
-def _wire(values: np.ndarray, sentinel: int) -> np.ndarray:
-    return np.where(values == sentinel, -1, values).astype(np.int32)
-
-
-def _core(values: np.ndarray, sentinel: int) -> np.ndarray:
-    return np.where(values == -1, sentinel, values.astype(np.int64))
+KILOBOT_ROW_TYPES = (KILOBOT_ROW, KILOBOT_DECISION_ROW, KILOBOT_METRICS_ROW)  #: the rubenstein graph's row layouts
 
 
 def kilobot_rows(ids: np.ndarray, robots: Robots | Decided) -> np.ndarray:
     """The rows of robots ``ids`` (:class:`Robots`: every robot's arrays, indexed by ``ids``) or of decisions
     (:class:`Decided`: position k robot ``ids[k]``'s)."""
     decided = isinstance(robots, Decided)
-    pick: slice | np.ndarray = slice(None) if decided else ids
     rows = np.zeros(ids.size, dtype=KILOBOT_DECISION_ROW if decided else KILOBOT_ROW)
-    rows["id"] = ids
-    for name in ("x", "y", "heading", "ex", "ey", "near", "state", "est", "loc", "still", "waited", "blind"):
-        rows[name] = getattr(robots, name)[pick]
-    rows["g"] = _wire(robots.g[pick], UNKNOWN_G)
-    rows["began"] = _wire(robots.began[pick], NEVER)
-    rows["joined"] = robots.joined[pick]
+    pack_rows(ids.astype(np.int64, copy=False), robots, not decided, rows)
     if isinstance(robots, Decided):
         rows["moves"] = robots.moves
     return rows
@@ -78,48 +65,34 @@ def kilobot_rows(ids: np.ndarray, robots: Robots | Decided) -> np.ndarray:
 
 def robots_of_rows(rows: np.ndarray) -> tuple[np.ndarray, Robots]:
     """(ids, the robots' arrays, position k robot ``ids[k]``'s) of checked rows."""
-    fields = {name: rows[name].copy() for name in ("x", "y", "heading", "ex", "ey", "near")}
-    fields.update(state=rows["state"].astype(np.int8), est=rows["est"].astype(np.int8))
-    fields.update(loc=rows["loc"].astype(np.int8), g=_core(rows["g"], UNKNOWN_G), began=_core(rows["began"], NEVER))
-    fields.update({name: rows[name].astype(np.int64) for name in ("still", "joined", "waited", "blind")})
-    return rows["id"].astype(np.int64), Robots(**fields)
+    out = Robots(*decided_for(rows.size)[:-1])
+    return unpack_rows(rows, out), out
 
 
 def decided_of_rows(rows: np.ndarray) -> tuple[np.ndarray, Decided]:
     """(ids, decisions) of checked decision rows."""
-    ids, robots = robots_of_rows(rows)
-    out = decided_for(ids.size)
-    for name, values in robots._asdict().items():
-        getattr(out, name)[:] = values
+    out = decided_for(rows.size)
+    ids = unpack_rows(rows, out)
     out.moves[:] = rows["moves"]
     return ids, out
 
 
 def check_kilobot_rows(rows: np.ndarray, robots: int, tick: int) -> None:
     """Whether rows of tick ``tick`` (the state after it; decisions: the state they make at it) can be a
-    swarm's of ``robots`` robots: ids ascending and in range, states and flags in their sets, the floats
-    finite (``near`` may be +inf: no stationary neighbour yet), gradient and counters -1 or more, no tick
-    after ``tick``, and a joined robot's joining tick set.
+    swarm's of ``robots`` robots: ids ascending and in range, states and flags in their sets (and ``moves``
+    0 or 1), the floats finite (``near`` may be +inf: no stationary neighbour yet), gradient and counters
+    -1 or more, no tick after ``tick``, and a joined robot's joining tick set. Compiled
+    (:mod:`swarm_ros.protocol.kilobot_checks`).
 
     Raises:
         Rejected: the first fault found, by kind.
     """
-    ids = rows["id"].astype(np.int64)
-    if ids.size and (ids[-1] >= robots or np.any(np.diff(ids) <= 0)):
-        raise Rejected("bad ids", f"ids must ascend within 0..{robots - 1}")
-    if np.any(rows["state"] >= _STATES) or np.any(rows["est"] > 1) or np.any(rows["loc"] > 1):
-        raise Rejected("bad state", "a state code or flag out of its set")
     if "moves" in (rows.dtype.names or ()) and np.any(rows["moves"] > 1):
         raise Rejected("bad state", "moves must be 0 or 1")
-    floats = np.column_stack([rows[name] for name in ("x", "y", "heading", "ex", "ey")])
-    if not np.isfinite(floats).all() or np.isnan(rows["near"]).any() or np.any(rows["near"] < 0):
-        raise Rejected("bad number", "a pose or estimate that is not a finite number")
-    if np.any(rows["g"] < -1) or any(np.any(rows[name] < -1) for name in _COUNTERS):
-        raise Rejected("bad number", "a gradient or counter below -1")
-    if any(np.any(rows[name] > tick) for name in ("began", "joined", "still", "waited", "blind")):
-        raise Rejected("bad number", f"a tick or count beyond tick {tick}")
-    if np.any((rows["state"] == JOINED) != (rows["joined"] >= 0)):
-        raise Rejected("bad state", "joined robots, and only they, have a joining tick")
+    fault = first_fault(row_faults(rows, robots, tick), ROW_FAULTS)
+    if fault is not None:
+        kind, message = fault
+        raise Rejected(kind, message.format(last=robots - 1, tick=tick))
 
 
 def metrics_rows(history: np.ndarray) -> np.ndarray:
