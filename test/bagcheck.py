@@ -34,13 +34,23 @@ TYPES = {
 TYPES_3D = {**TYPES, "/swarm/occupancy": "sensor_msgs/msg/PointCloud2", "/swarm/shape": "sensor_msgs/msg/PointCloud2"}
 
 
-def bag_metadata(bag: Path, dims: int = 2) -> dict:
-    """metadata.yaml, checked against what rosbag2 (version 9) requires of it."""
+#: A rubenstein run's topics.
+KILOBOT_TYPES = {
+    "/swarm/kilobot/robots": "sensor_msgs/msg/PointCloud2",
+    "/swarm/kilobot/metrics": "sensor_msgs/msg/PointCloud2",
+    "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray",
+}
+
+
+def bag_metadata(bag: Path, dims: int = 2, types: dict[str, str] | None = None) -> dict:
+    """metadata.yaml, checked against what rosbag2 (version 9) requires of it, its topics ``types`` (default: a
+    run of the study's model in ``dims`` dimensions)."""
+    types = types or (TYPES if dims == 2 else TYPES_3D)
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["version"] == 9 and info["storage_identifier"] == "mcap"
     assert info["relative_file_paths"] == ["bag_0.mcap"] and [f["path"] for f in info["files"]] == ["bag_0.mcap"]
     topics = {t["topic_metadata"]["name"]: t for t in info["topics_with_message_count"]}
-    assert {name: t["topic_metadata"]["type"] for name, t in topics.items()} == (TYPES if dims == 2 else TYPES_3D)
+    assert {name: t["topic_metadata"]["type"] for name, t in topics.items()} == types
     for t in topics.values():
         meta = t["topic_metadata"]
         assert meta["serialization_format"] == "cdr" and meta["type_description_hash"].startswith("RIHS01_")
@@ -51,13 +61,13 @@ def bag_metadata(bag: Path, dims: int = 2) -> dict:
     return info
 
 
-def read_bag(bag: Path, dims: int = 2) -> tuple[dict, dict[str, list]]:
+def read_bag(bag: Path, dims: int = 2, types: dict[str, str] | None = None) -> tuple[dict, dict[str, list]]:
     """(metadata.yaml, {topic: decoded messages in log order}); counts and times checked against the MCAP file."""
-    info = bag_metadata(bag, dims)
+    info = bag_metadata(bag, dims, types)
     with open(bag / "bag_0.mcap", "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
-        messages: dict[str, list] = {topic: [] for topic in TYPES}
+        messages: dict[str, list] = {topic: [] for topic in (types or TYPES)}
         for _, channel, _, decoded in reader.iter_decoded_messages(log_time_order=True):
             messages[channel.topic].append(decoded)
     counts = {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
@@ -173,3 +183,30 @@ def assert_bag_holds_run(run: Path) -> None:
         final = np.asarray(messages["/swarm/occupancy"][-1].data, dtype=np.int8)
         assert (final == 100).sum() == on_patches, "the last occupancy is the final state's"
     assert messages["/swarm/occupancy"][0].header.stamp.sec == 0
+
+
+def assert_kilobot_bag_holds_run(run: Path) -> None:
+    """A rubenstein run's bag: the metrics rows of every tick, in order, equal metrics.csv; every robot's row every
+    ``bag_robots_every``-th tick and at the last, and the last rebuilds final_state.csv; the status ends with the
+    outcome."""
+    from swarm_ros.core.rubenstein.rule import STATE_NAMES
+    from swarm_ros.protocol.kilobot_rows import KILOBOT_METRICS_ROW, KILOBOT_ROW
+
+    _, messages = read_bag(run / "bag", types=KILOBOT_TYPES)
+    summary = json.loads((run / "summary.json").read_text())
+    table = np.loadtxt(run / "metrics.csv", delimiter=",", skiprows=1, ndmin=2)
+    rows = np.concatenate(
+        [np.frombuffer(m.data, dtype=KILOBOT_METRICS_ROW) for m in messages["/swarm/kilobot/metrics"]]
+    )
+    assert np.array_equal(np.column_stack([rows[name] for name in KILOBOT_METRICS_ROW.names]), table)
+    last = int(table[-1, 0])
+    robots = messages["/swarm/kilobot/robots"]
+    ticks = [m.header.stamp.sec for m in robots]
+    assert ticks == sorted({*range(0, last + 1, summary["bag_robots_every"]), last})
+    final = np.frombuffer(robots[-1].data, dtype=KILOBOT_ROW)
+    with open(run / "final_state.csv", newline="") as f:
+        state = list(csv.DictReader(f))
+    assert [float(r["x"]) for r in state] == final["x"].tolist()
+    assert [r["state"] for r in state] == [STATE_NAMES[c] for c in final["state"]]
+    outcomes = [v.value for m in messages["/swarm/status"] for st in m.status for v in st.values if v.key == "outcome"]
+    assert outcomes[-1] == summary["outcome"]

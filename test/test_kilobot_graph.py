@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from bagcheck import assert_kilobot_bag_holds_run
 from graph_runs import node_pid, processes_mentioning, run_env, wait_ticks_recorded
 
 from swarm_ros.app import cli
@@ -41,7 +42,7 @@ def assert_same_run(reference: Path, out: Path) -> dict:
         assert (out / name).read_bytes() == (reference / name).read_bytes(), name
     got, ref = (json.loads((d / "summary.json").read_text()) for d in (out, reference))
     differ = {k for k in ref if got.get(k) != ref[k]}
-    assert differ <= {"engine", "wall_seconds", "recording_robots_every"}, differ
+    assert differ <= {"engine", "wall_seconds", "recording_robots_every", "bag_robots_every"}, differ
     assert got["engine"] == "ros2" and got["outcome"] == "complete"
     return got
 
@@ -62,6 +63,7 @@ def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_
     summary = assert_same_run(reference, out)
     assert summary["processes"] == processes
     assert (out / "recording.rrd").stat().st_size > 0 and (out / "final.png").stat().st_size > 0
+    assert_kilobot_bag_holds_run(out)
     world = (out / "logs" / "world.log").read_text()
     assert "dropped" not in world, world  # no message of the run's own was refused
     assert not processes_mentioning(str(out)), "a process outlived the run"
@@ -115,7 +117,7 @@ def test_an_experiment_over_the_graph_gives_the_in_process_rows(square, tmp_path
 
 def test_a_world_process_killed_mid_run_fails_the_run_in_one_line_and_writes_nothing(square, tmp_path):
     """The rubenstein world keeps no checkpoint yet: its restarted process refuses to start the run again from
-    tick 0, so the run fails, and no run directory is written."""
+    tick 0, so the run fails, and no run directory is written; the monitor's bag so far is left beside it."""
     out = tmp_path / "run"
     launcher = _launch(square, out, 2)
     wait_ticks_recorded(out, 20_000)
@@ -125,4 +127,9 @@ def test_a_world_process_killed_mid_run_fails_the_run_in_one_line_and_writes_not
     assert launcher.returncode not in (0, None) and "Traceback" not in err.decode(), said
     assert "cannot resume a rubenstein run yet" in said[-1] or "cannot resume" in err.decode(), said
     assert not out.exists()
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([tmp_path / "run.partial-bag"]) as reader:  # the bag so far, closed and readable, beside it
+        metrics = [c for c in reader.connections if c.topic == "/swarm/kilobot/metrics"]
+        assert metrics and sum(c.msgcount for c in metrics) > 0
     assert not processes_mentioning(str(out)), "a process outlived the run"

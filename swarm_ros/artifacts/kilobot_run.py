@@ -7,7 +7,7 @@ import csv
 import io
 from pathlib import Path
 
-from swarm_ros.artifacts.run_dir import RECORDING_FILE, summary_json, write_dir
+from swarm_ros.artifacts.run_dir import BAG_DIR, RECORDING_FILE, summary_json, write_dir
 from swarm_ros.core.rubenstein.rule import STATE_NAMES
 from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
 
@@ -66,10 +66,16 @@ def save_final_png(run: KilobotRun, path: Path) -> None:
 
 
 def write_kilobot_run(
-    out: Path, run: KilobotRun, summary: dict, overwrite: bool = False, recording: Path | None = None
+    out: Path,
+    run: KilobotRun,
+    summary: dict,
+    overwrite: bool = False,
+    recording: Path | None = None,
+    bag: Path | None = None,
 ) -> Path:
     """Write the run's files into ``out``, atomically, ``recording`` (a finished .rrd) moved in as
-    ``recording.rrd`` (and back where it was if the write fails). Returns ``out``.
+    ``recording.rrd`` and ``bag`` (a finished rosbag2 directory, the graph's) as ``bag/`` (each back where it
+    was if the write fails). Returns ``out``.
 
     Raises:
         OutputError: the directory cannot be written.
@@ -82,10 +88,14 @@ def write_kilobot_run(
         save_final_png(run, tmp / "final.png")
         if recording is not None:
             recording.rename(tmp / RECORDING_FILE)
+        if bag is not None:
+            bag.rename(tmp / BAG_DIR)
 
     def restore(tmp: Path) -> str:
         if recording is not None and (tmp / RECORDING_FILE).exists():
             (tmp / RECORDING_FILE).rename(recording)
+        if bag is not None and (tmp / BAG_DIR).exists():
+            (tmp / BAG_DIR).rename(bag)
         return f"; the recording is kept in {recording}" if recording is not None and recording.exists() else ""
 
     return write_dir(out, overwrite, fill, restore)

@@ -7,7 +7,7 @@ fails); the metrics must come one a tick, in order. It keeps a copy of the run
 (:meth:`swarm_ros.core.rubenstein.run.KilobotRun.load`), streams it to ``<out_dir>.partial.rrd``, and once
 the outcome, the last robots and the metrics up to the last tick are in, writes the run directory as
 ``swarm-ros simulate --algorithm rubenstein`` does (summary.json, metrics.csv, final_state.csv, final.png,
-recording.rrd), whole or not at all.
+recording.rrd), whole or not at all, with the run's bag (``bag/``: every message it took, as it came).
 
     ros2 run swarm_ros kilobot_monitor --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
         -p out_dir:=runs/kilobots
@@ -41,6 +41,7 @@ from swarm_ros.protocol.plan import KILOBOT_METRICS, KILOBOT_ROBOTS, MONITOR, ST
 from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
+from swarm_ros.ros.bag_writer import KILOBOT_TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import run_node
 
@@ -76,11 +77,20 @@ class KilobotMonitorNode:
             url = str(own["viewer_url"]) or None
             self.recorder = KilobotRecorder(self.rrd, self.copy, every=self.every, connect=url)
         self.finished = False
+        self.bag = BagRecorder(self.out, recorded=KILOBOT_TOPICS) if own["bag"] else None
+        self.raw = b""  # the message being handled, as it came (into the bag once its handler took it)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
-        self.gate.subscribe(PointCloud2, KILOBOT_ROBOTS, self._on_robots, msgs.KILOBOT_QOS)
-        self.gate.subscribe(PointCloud2, KILOBOT_METRICS, self._on_metrics, msgs.KILOBOT_QOS)
-        self.gate.subscribe(DiagnosticArray, STATUS, self._on_status, msgs.STATUS_QOS)
+        for topic, handler in ((KILOBOT_ROBOTS, self._on_robots), (KILOBOT_METRICS, self._on_metrics)):
+            self.gate.subscribe(PointCloud2, topic, handler, msgs.KILOBOT_QOS, raw_handler=self._keep_raw)
+        self.gate.subscribe(DiagnosticArray, STATUS, self._on_status, msgs.STATUS_QOS, raw_handler=self._keep_raw)
+
+    def _keep_raw(self, data: bytes) -> None:
+        self.raw = data
+
+    def _into_bag(self, topic: str) -> None:
+        if self.bag is not None:
+            self.bag.write(topic, self.raw)
 
     def load(self) -> None:
         """Nothing heavy."""
@@ -99,6 +109,7 @@ class KilobotMonitorNode:
         if self.started_at is None:
             self.started_at = time.perf_counter()
         self.history = np.concatenate([self.history, history]) if len(self.history) else history
+        self._into_bag(KILOBOT_METRICS)
 
     def _on_robots(self, msg: Cloud) -> None:
         try:
@@ -111,12 +122,14 @@ class KilobotMonitorNode:
         if tick <= self.robots_tick:
             return
         self.robots_tick = tick
+        self._into_bag(KILOBOT_ROBOTS)
         _, robots = robots_of_rows(rows)
         self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
         if self.recorder is not None and tick > 0:
             self.recorder.robots(self.copy)
 
     def _on_status(self, msg: DiagnosticArray) -> None:
+        self._into_bag(STATUS)
         values = msgs.status_values(msg)
         outcome = values.get("outcome")
         if self.outcome is None and has_ended(outcome):
@@ -140,7 +153,12 @@ class KilobotMonitorNode:
         if self.recorder is not None:
             self.recorder.close(self.copy, summary["outcome"])
         summary["recording_robots_every"] = self.every if self.rrd is not None else None
-        write_kilobot_run(self.out, self.copy, summary, overwrite=self.overwrite, recording=self.rrd)
+        if self.bag is not None:
+            summary["bag_robots_every"] = self.every
+        bag = self.bag.close() if self.bag is not None else None
+        write_kilobot_run(self.out, self.copy, summary, overwrite=self.overwrite, recording=self.rrd, bag=bag)
+        if self.bag is not None:
+            self.bag.discard_holder()
         self.node.get_logger().info(f"wrote {self.out}: {summary['outcome']} at tick {self.copy.tick}")
         self.finished = True
 
@@ -148,8 +166,14 @@ class KilobotMonitorNode:
         return None
 
     def close(self, code: int) -> None:
-        if not self.finished and self.recorder is not None:
+        """A run that ends here unwritten keeps its recording as ``<out_dir>.partial.rrd`` and its bag, closed, as
+        ``<out_dir>.partial-bag``; a bag that holds nothing of a run (no tick came) is removed."""
+        if self.finished:
+            return
+        if self.recorder is not None:
             self.recorder.close(self.copy, "interrupted")
+        if self.bag is not None:
+            self.bag.move_to(run_dir.partial_bag(self.out)) if len(self.history) else self.bag.discard()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -32,6 +32,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.artifacts.run_dir import BAG_DIR
+from swarm_ros.protocol.plan import KILOBOT_METRICS, KILOBOT_ROBOTS
 from swarm_ros.ros import graph as msgs
 
 #: The recorded topics of a 2D run: name -> (message class, QoS its publisher offers); :func:`topics` for either.
@@ -44,6 +45,15 @@ TOPICS: dict[str, tuple[type, QoSProfile]] = {
     msgs.METRICS: (Int64MultiArray, msgs.METRICS_QOS),
     msgs.TALLY: (Int64MultiArray, msgs.ROBOTS_QOS),
     msgs.CLOCK: (Clock, msgs.CLOCK_QOS),
+}
+
+
+#: The recorded topics of a rubenstein run (its monitor reads no decisions: every robot's row every record_every-th
+#: tick, the metrics of every tick, the status).
+KILOBOT_TOPICS: dict[str, tuple[type, QoSProfile]] = {
+    KILOBOT_ROBOTS: (PointCloud2, msgs.KILOBOT_QOS),
+    KILOBOT_METRICS: (PointCloud2, msgs.KILOBOT_QOS),
+    msgs.STATUS: (DiagnosticArray, msgs.STATUS_QOS),
 }
 
 
@@ -165,9 +175,9 @@ def _name_first_file(bag: Path) -> None:
 class BagRecorder:
     """Writes the recorded topics' serialized messages into a new rosbag2 (MCAP storage)."""
 
-    def __init__(self, out: Path, dims: int = 2) -> None:
+    def __init__(self, out: Path, dims: int = 2, recorded: dict[str, tuple[type, QoSProfile]] | None = None) -> None:
         """Open a bag for the run directory ``out`` (in a fresh hidden place beside it), of a run in a world of
-        ``dims`` dimensions."""
+        ``dims`` dimensions: the topics :func:`topics` names, or ``recorded``."""
         from rosbags.rosbag2 import StoragePlugin, Writer
         from rosbags.typesys import Stores, get_typestore
 
@@ -182,7 +192,7 @@ class BagRecorder:
             topic: self.writer.add_connection(
                 topic, type_name(kind), typestore=store, offered_qos_profiles=[bag_qos(qos)]
             )
-            for topic, (kind, qos) in topics(dims).items()
+            for topic, (kind, qos) in (recorded or topics(dims)).items()
         }
         self.closed = False
 
