@@ -11,9 +11,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from bagcheck import assert_kilobot_bag_holds_run
-from graph_runs import node_pid, processes_mentioning, run_env, wait_ticks_recorded
+from graph_runs import node_pid, processes_mentioning, run_env, staged_logs, wait_ticks_recorded
+from waiting import wait_for
 
 from swarm_ros.app import cli
 
@@ -115,21 +117,45 @@ def test_an_experiment_over_the_graph_gives_the_in_process_rows(square, tmp_path
     assert differ == {"engine", "wall_seconds"}, differ
 
 
-def test_a_world_process_killed_mid_run_fails_the_run_in_one_line_and_writes_nothing(square, tmp_path):
-    """The rubenstein world keeps no checkpoint yet: its restarted process refuses to start the run again from
-    tick 0, so the run fails, and no run directory is written; the monitor's bag so far is left beside it."""
+def saved_tick(checkpoint: Path) -> int:
+    try:
+        with np.load(checkpoint) as f:
+            return int(f["tick"][0])
+    except (OSError, KeyError, ValueError):
+        return -1
+
+
+@pytest.mark.parametrize("moment", ["starting", "mid-run"])
+def test_a_world_killed_goes_on_from_its_checkpoint_and_the_run_is_the_same(square, reference, tmp_path, moment):
+    """The restarted world takes the last checkpoint (saved every 1,000 ticks, and at tick 0 before anything of it
+    goes out; killed before that, it starts afresh), the batches decide the ticks after it again, the monitor
+    drops the metrics it already holds: the run directory is simulate's (5,311 ticks), and its bag holds the run."""
+    out = tmp_path / "run"
+    launcher = _launch(square, out, 2)
+    checkpoint = staged_logs(out) / "world.checkpoint"
+    if moment == "mid-run":
+        wait_for(lambda: saved_tick(checkpoint) >= 2000, 120, "the checkpoint of tick 2000", poll=0.01)
+    os.kill(node_pid(out, "world", timeout=30), signal.SIGKILL)  # "starting": as soon as it is there
+    _, err = launcher.communicate(timeout=300)
+    assert launcher.returncode == 0, err.decode()
+    summary = assert_same_run(reference, out)
+    assert [r["node"] for r in summary["restarts"]] == ["world"]
+    said = (out / "logs" / "world.log").read_text()
+    assert "restarted: on from the checkpoint of tick" in said or "restarted before tick 0 went out" in said
+    assert_kilobot_bag_holds_run(out)
+    assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint outlived the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
+
+
+def test_a_monitor_killed_mid_run_fails_the_run_in_one_line_and_writes_no_run_directory(square, tmp_path):
+    """The rubenstein monitor does not resume from its bag yet: its restarted process refuses, the run fails."""
     out = tmp_path / "run"
     launcher = _launch(square, out, 2)
     wait_ticks_recorded(out, 20_000)
-    os.kill(node_pid(out, "world", timeout=10), signal.SIGKILL)
+    os.kill(node_pid(out, "monitor", timeout=10), signal.SIGKILL)
     _, err = launcher.communicate(timeout=300)
     said = err.decode().strip().splitlines()
     assert launcher.returncode not in (0, None) and "Traceback" not in err.decode(), said
-    assert "cannot resume a rubenstein run yet" in said[-1] or "cannot resume" in err.decode(), said
+    assert "cannot resume a rubenstein run yet" in err.decode(), said
     assert not out.exists()
-    from rosbags.highlevel import AnyReader
-
-    with AnyReader([tmp_path / "run.partial-bag"]) as reader:  # the bag so far, closed and readable, beside it
-        metrics = [c for c in reader.connections if c.topic == "/swarm/kilobot/metrics"]
-        assert metrics and sum(c.msgcount for c in metrics) > 0
     assert not processes_mentioning(str(out)), "a process outlived the run"

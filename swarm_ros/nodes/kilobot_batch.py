@@ -80,9 +80,7 @@ class KilobotBatchNode:
         except Rejected as fault:
             self.rejections.drop(self.area, fault)
             return
-        if tick <= self.tick:
-            return  # the latched area of a tick decided already
-        self.tick = tick
+        self.tick = max(self.tick, tick)  # an older tick's area is a restarted world's, from its checkpoint: decided
         own, decided = self.host.decide(tick + 1, *robots_of_rows(rows))
         self.pub_decisions.publish_rows(kilobot_rows(own, decided), tick + 1)
 

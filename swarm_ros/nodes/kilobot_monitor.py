@@ -102,7 +102,7 @@ class KilobotMonitorNode:
     def _on_metrics(self, msg: Cloud) -> None:
         try:
             rows = checks.cloud(msg, KILOBOT_METRICS_ROW, 10**9)
-            history = check_metrics_rows(rows, self.last_tick)
+            history = check_metrics_rows(rows, self.history)
         except Rejected as fault:
             self.rejections.drop(KILOBOT_METRICS, fault)
             return

@@ -7,7 +7,9 @@ out: each batch's area rows on /swarm/kilobot/area/<batch>, every robot's row on
 metrics on /swarm/kilobot/metrics and ``running`` on /swarm/status. Each tick, once every batch's decisions
 are in (checked, or dropped and counted), it settles them and sends the next areas; every ``record_every``-th
 tick and at the end it sends the robots and the metrics rows since the last. At the end it publishes the
-outcome and exits once its readers have everything (or after a grace period).
+outcome and exits once its readers have everything (or after a grace period). It saves a checkpoint at tick 0
+and every 1,000 ticks or so, before the tick goes out; a restarted process goes on from the last one
+(:mod:`swarm_ros.protocol.kilobot_checkpoint`).
 
     ros2 run swarm_ros kilobot_world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import time
+from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -26,9 +29,10 @@ from std_msgs.msg import Int64MultiArray
 from swarm_ros.core.errors import ConfigError, Rejected, RunFailed
 from swarm_ros.core.params import RUBENSTEIN
 from swarm_ros.core.rubenstein.run import KilobotRun
-from swarm_ros.protocol import checks
+from swarm_ros.protocol import checks, kilobot_checkpoint
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
+from swarm_ros.protocol.kilobot_checkpoint import save_every
 from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep
 from swarm_ros.protocol.kilobot_rows import KILOBOT_DECISION_ROW, kilobot_rows, metrics_rows
 from swarm_ros.protocol.plan import (
@@ -59,13 +63,16 @@ class KilobotWorldNode:
         self.shape, self.params = run.resolve()
         if self.params.algorithm != RUBENSTEIN:
             raise ConfigError(f"the kilobot world runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
-        if int(own["incarnation"]):  # nothing was saved to go on from: the run fails, in one line, not from tick 0
-            raise RunFailed("a restarted world cannot resume a rubenstein run yet (it keeps no checkpoint)")
         self.every = int(own["record_every"]) or RECORD_EVERY
+        self.save_every = save_every(self.every)
+        self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] else None
         self.start_timeout = float(own["start_timeout"])
         self.created = time.monotonic()
         self.ls = KilobotLockstep(KilobotRun(self.shape, self.params))
         self.sent_metrics = -1  # the last tick whose metrics row went out
+        self.first = True  # the first tick this process publishes is still to go out
+        if int(own["incarnation"]):  # a restarted process: on from the last checkpoint
+            self._resume()
         self.ended_at: float | None = None
         self.finished = False
         self.rejections = Rejections(node.get_logger())
@@ -77,6 +84,21 @@ class KilobotWorldNode:
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
         self._status(STARTING, "waiting for robot batches and the monitor")
+
+    def _resume(self) -> None:
+        """Go on from the checkpoint the process before saved: the run at its tick, the batches it served (their
+        announcements, latched, come again and are sent their areas of that tick), and the metrics rows from the
+        last record before it sent again (the monitor drops what it holds)."""
+        if self.checkpoint is None:
+            raise RunFailed("a restarted world has no checkpoint to go on from (the checkpoint parameter is empty)")
+        if not self.checkpoint.exists():  # tick 0 is saved before anything of it goes out: nothing did
+            self.node.get_logger().info("restarted before tick 0 went out: the run starts from tick 0")
+            return
+        saved = kilobot_checkpoint.load(self.checkpoint, self.ls.run)
+        self.ls.run.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
+        self.ls.resume(saved.hosts, saved.batches)
+        self.sent_metrics = saved.tick - self.every if saved.tick else -1
+        self.node.get_logger().info(f"restarted: on from the checkpoint of tick {saved.tick}")
 
     def load(self) -> None:
         """Nothing heavy: the kernels compile (or load from numba's cache) on the first tick."""
@@ -101,7 +123,7 @@ class KilobotWorldNode:
         self.node.get_logger().info(f"{name}: batch {k} of {batches}")
 
     def _on_decisions(self, k: int, topic: str, msg: Cloud) -> None:
-        if self.ls.run.outcome is not None:
+        if self.ls.run.outcome is not None or self.first:  # before its first tick: the process before's (latched)
             return
         try:
             tick = checks.tick_stamp(msg.header)
@@ -127,6 +149,8 @@ class KilobotWorldNode:
     def _publish_tick(self) -> None:
         run = self.ls.run
         tick, ended = run.tick, run.outcome is not None
+        if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
+            kilobot_checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.batches)
         if ended or tick % self.every == 0:
             self.pub_metrics.publish_rows(metrics_rows(run.history[self.sent_metrics + 1 :]), tick)
             self.sent_metrics = tick
@@ -143,10 +167,12 @@ class KilobotWorldNode:
 
     # -- the node runtime's hooks ----------------------------------------------------------
     def poll(self) -> None:
-        if self.waiting and self.ls.started and (self.sent_metrics >= 0 or self._monitor_reads()):
+        heard = self.ls.started and all(name in self.areas for name in self.ls.hosts.values())  # resumed: every batch
+        if self.waiting and heard and (not self.first or self._monitor_reads()):
             batches, self.waiting = sorted(set(self.waiting)), []
-            if self.sent_metrics < 0:  # tick 0: the robots, the metrics and the areas
-                self._status(RUNNING, f"{self.ls.batches} robot batches in: tick 0")
+            if self.first:  # tick 0, or the checkpoint's: the robots, the metrics and the areas
+                self.first = False
+                self._status(RUNNING, f"{self.ls.batches} robot batches in: tick {self.ls.run.tick}")
                 self._publish_tick()
             else:  # a batch process that came back: its area at the current tick
                 self._send_areas(batches)

@@ -68,6 +68,13 @@ class KilobotLockstep:
             return list(range(batches)) if self.started else []
         return [k]
 
+    def resume(self, hosts: dict[int, str], batches: int) -> None:
+        """Serve again, from a checkpoint, the ``batches`` batches named ``hosts`` (batch number -> node name): their
+        announcements are taken as a restarted batch's, each sent its area of the run's tick."""
+        self.strips = strips_for(self.run, batches)
+        self.hosts = dict(hosts)
+        self.started = True
+
     def _columns(self) -> np.ndarray:
         """Every robot's cell column at the current tick (found once a tick)."""
         if self._columns_at[0] != self.run.tick:

@@ -103,15 +103,24 @@ def metrics_rows(history: np.ndarray) -> np.ndarray:
     return rows
 
 
-def check_metrics_rows(rows: np.ndarray, after: int) -> np.ndarray:
-    """The history rows of metrics rows that must follow tick ``after``, one a tick, counts within bounds.
+def check_metrics_rows(rows: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """The history rows of metrics rows, one a tick in order, counts within bounds, that follow ``held`` (the
+    history rows taken so far, tick 0 first): rows of ticks already held (a restarted world sends again the ticks
+    since its last record) must equal those and are left out.
 
     Raises:
-        Rejected: ticks out of order or not the next ones, or a count that is negative or not finite.
+        Rejected: ticks out of order, or leaving a gap after the held ones, a count that is negative or not finite,
+            or a row of a tick already held that differs from it.
     """
     history = np.column_stack([rows[name] for name in COLUMNS]) if rows.size else np.empty((0, len(COLUMNS)))
     if not np.isfinite(history).all() or np.any(history < 0):
         raise Rejected("bad number", "a metric that is negative or not a finite number")
-    if rows.size and not np.array_equal(rows["tick"], np.arange(after + 1, after + 1 + rows.size)):
-        raise Rejected("stale tick", f"metrics of ticks other than the {rows.size} after tick {after}")
-    return history
+    if not rows.size:
+        return history
+    first, after = int(history[0, 0]), held.shape[0] - 1
+    if history[0, 0] != first or first > after + 1 or not np.array_equal(history[:, 0], first + np.arange(rows.size)):
+        raise Rejected("stale tick", f"metrics of ticks other than consecutive ones from at most tick {after + 1}")
+    again = min(after + 1 - first, rows.size)  # rows of ticks already held
+    if not np.array_equal(history[:again], held[first : first + again]):
+        raise Rejected("conflict", "metrics rows that differ from those already taken for their ticks")
+    return history[again:]

@@ -175,6 +175,11 @@ class KilobotRun:
         return self._rows[0]
 
     @property
+    def tally(self) -> Tally:
+        """The run's running counts, as its next tick takes them (a checkpoint saves them)."""
+        return self._tally
+
+    @property
     def metrics(self) -> dict[str, float]:
         return dict(zip(COLUMNS, self._rows[-1][-1].tolist()))
 
@@ -223,6 +228,19 @@ class KilobotRun:
         self.covered[:] = 0
         for i in np.flatnonzero(self.robots.state == JOINED):
             cover(self.robots.x[i], self.robots.y[i], self.bitmap, self.covered)
+
+    def resume(
+        self, tick: int, robots: Robots, covered: np.ndarray, tally: tuple[np.ndarray, ...], history: np.ndarray
+    ) -> None:
+        """Go on from a state this run's world saved at ``tick``, a run still going (the graph's world,
+        restarted): every robot, the pixels covered, the running counts and the metrics of every tick up to it,
+        exactly, so the ticks after it are the ones the run would have had."""
+        for mine, theirs in zip(self.robots, robots):
+            mine[:] = theirs
+        self.covered[:] = covered
+        for count, saved in zip(self._tally, tally):
+            count[:] = saved
+        self.tick, self.outcome, self._rows = tick, None, [history.copy()]
 
     def settle(self, parts: list[tuple[np.ndarray, Decided]]) -> Outcome | None:
         """Advance one tick with decisions made elsewhere (robot batches, :mod:`.strips`): ``parts`` are each

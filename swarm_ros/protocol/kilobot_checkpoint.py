@@ -1,0 +1,97 @@
+"""The rubenstein world's checkpoint: what a restarted world process needs to go on from a tick it saved.
+
+The world saves, every :func:`save_every` ticks (a multiple of ``record_every``, at least :data:`SAVE_TICKS`), and
+before that tick's rows leave the process: its tick, every robot's arrays, the pixels covered, the run's running
+counts (:class:`~swarm_ros.core.rubenstein.ticks.Tally`), the metrics of every tick so far, and the batches it
+serves (their node names and how many). One ``.npz`` file, written whole to a temporary name and renamed, so a
+kill at any instruction leaves the last whole checkpoint or the new one, never a part.
+
+A restarted world takes the last checkpoint and decides again the ticks after it: the batches keep nothing between
+ticks, so they decide them as before, and the run is the same. It sends the monitor the metrics rows from the
+tick after the last ``record_every``-th one before the checkpoint (the monitor may never have had them, if the old
+process died between saving and sending) and the monitor drops what it already holds, once it has checked those
+rows equal its own.
+
+The file holds no key and is not signed: it is the world's own, in the run's log directory, which only the
+user who runs it can write (the same trust as the darr-niazi world's checkpoint, :mod:`swarm_ros.protocol.checkpoint`).
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from swarm_ros.core.errors import RunFailed
+from swarm_ros.core.rubenstein.rule import Robots
+from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+
+SAVE_TICKS = 1000  #: ticks between checkpoints, at least: a save writes the metrics of every tick so far
+
+
+def save_every(record_every: int) -> int:
+    """Ticks between checkpoints: the first multiple of ``record_every`` at or past :data:`SAVE_TICKS`."""
+    return -(-SAVE_TICKS // record_every) * record_every
+
+
+@dataclass(frozen=True)
+class Saved:
+    """A checkpoint read back."""
+
+    tick: int
+    robots: Robots
+    covered: np.ndarray
+    tally: tuple[np.ndarray, ...]
+    history: np.ndarray
+    hosts: dict[int, str]  #: batch number -> its node name
+    batches: int
+
+
+def save(path: Path, run: KilobotRun, hosts: dict[int, str], batches: int) -> None:
+    """Save ``run`` as it stands, and the batches it serves, to ``path`` (whole, or not at all)."""
+    arrays = {f"robot_{name}": values for name, values in run.robots._asdict().items()}
+    arrays.update({f"tally_{name}": values for name, values in run.tally._asdict().items()})
+    numbers = sorted(hosts)
+    arrays.update(
+        tick=np.array([run.tick]),
+        covered=run.covered,
+        history=run.history,
+        batches=np.array([batches]),
+        host_numbers=np.array(numbers, dtype=np.int64),
+        host_names=np.array([hosts[k] for k in numbers]),
+    )
+    part = path.with_name(f"{path.name}.part")  # removed with the checkpoint at the end of the run
+    with open(part, "wb") as f:
+        np.savez(f, **arrays)
+    os.replace(part, path)
+
+
+def load(path: Path, run: KilobotRun) -> Saved:
+    """The checkpoint at ``path`` of a run of ``run``'s parameters.
+
+    Raises:
+        RunFailed: there is none, or it does not read as one of this run.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            got = {name: f[name] for name in f.files}
+        robots = Robots(*(got[f"robot_{name}"] for name in Robots._fields))
+        tally = tuple(got[f"tally_{name}"] for name in run.tally._fields)
+        tick = int(got["tick"][0])
+        hosts = dict(zip(got["host_numbers"].tolist(), got["host_names"].tolist()))
+        saved = Saved(tick, robots, got["covered"], tally, got["history"], hosts, int(got["batches"][0]))
+    except FileNotFoundError as exc:
+        raise RunFailed(f"a restarted world found no checkpoint at {path}") from exc
+    except (OSError, KeyError, ValueError, IndexError, zipfile.BadZipFile) as exc:
+        raise RunFailed(f"the world's checkpoint {path} does not read: {exc}") from exc
+    n = run.params.robots
+    if (
+        any(a.shape != (n,) or a.dtype != b.dtype for a, b in zip(saved.robots, run.robots))
+        or saved.covered.shape != run.covered.shape
+        or saved.history.shape != (tick + 1, len(COLUMNS))
+    ):
+        raise RunFailed(f"the world's checkpoint {path} is not of this run")
+    return saved
