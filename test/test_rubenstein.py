@@ -424,6 +424,23 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     # each algorithm's counts in its own words: rubenstein's robots join and cover pixels
     assert {"joined robots", "uncovered pixels"} <= labels["square_rubenstein_v1.png"]
     assert {"localized robots", "empty shape patches"} <= labels["square_paper_v1.png"]
+    # each grid point's repetition 0 left its step curve, which the report draws without running anything again
+    from swarm_ros.app.curves import curve_name, read_curve
+    from swarm_ros.core.engine import Simulation
+
+    firsts = [r for r in rows if r["repetition"] == 0]
+    assert sorted(p.name for p in (out / "curves").iterdir()) == sorted(curve_name(r) for r in firsts)
+    for r in firsts:
+        curve = read_curve(out, r)
+        assert curve[0, 0] == 0 and curve[-1, 0] == r["convergence_tick"] and curve[-1, 1] == r["empty_patches"]
+        assert np.all(np.diff(curve[:, 0]) > 0) and np.all(np.diff(curve[:-1, 1]) != 0)  # the changes only
+
+    def no_runs(*args, **kwargs):
+        raise AssertionError("the report ran a run")
+
+    monkeypatch.setattr(KilobotRun, "run", no_runs)
+    monkeypatch.setattr(Simulation, "run", no_runs)
+    report.build_report(out)
 
 
 def test_ctrl_c_mid_run_keeps_an_interrupted_run_directory_and_its_recording(tmp_path):

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from swarm_ros.app.curves import CURVE, curve_of, steps
 from swarm_ros.app.experiment_file import RunSpec
 from swarm_ros.app.results_file import ExperimentError, result_row
 from swarm_ros.core.grid import World
@@ -57,10 +58,17 @@ def run_inprocess(spec: RunSpec) -> dict:
 
         run = KilobotRun(_shape(spec), params)
         run.run()
-        return result_row(spec, kilobot_summary(run, wall_seconds=time.perf_counter() - start))
+        return _with_curve(spec, run, result_row(spec, kilobot_summary(run, wall_seconds=time.perf_counter() - start)))
     sim = Simulation(_shape(spec), params)
     sim.run()
-    return result_row(spec, summary_of(sim, wall_seconds=time.perf_counter() - start))
+    return _with_curve(spec, sim, result_row(spec, summary_of(sim, wall_seconds=time.perf_counter() - start)))
+
+
+def _with_curve(spec: RunSpec, run, row: dict) -> dict:
+    """``row``, with its run's step curve under ``CURVE`` if it is its grid point's repetition 0 (the report's)."""
+    if spec.repetition == 0:
+        row[CURVE] = steps(curve_of(run))
+    return row
 
 
 def run_ros2(spec: RunSpec, processes: int = PROCESSES.default) -> dict:

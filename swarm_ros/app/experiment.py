@@ -20,6 +20,7 @@ import threading
 from contextlib import ExitStack, closing
 from pathlib import Path
 
+from swarm_ros.app.curves import CURVE, write_curve
 from swarm_ros.app.executors import dask_client, execute, execute_dask
 from swarm_ros.app.experiment_file import Experiment, load_experiment
 from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, ResultsFile
@@ -139,6 +140,9 @@ def _run_grid(
             )
             with closing(rows):  # closed here, on Ctrl-C too: its tasks are cancelled while the client is open
                 for row in rows:
+                    curve = row.pop(CURVE, None)
+                    if curve is not None:  # before its row: a row in results.csv has its curve, if it made one
+                        write_curve(out, row, curve)
                     results.append(row)
                     bar.update(1)
     except KeyboardInterrupt:

@@ -60,7 +60,6 @@ from swarm_ros.app.results_file import (
 )
 from swarm_ros.artifacts.mpl import plt
 from swarm_ros.artifacts.run_dir import public_mode
-from swarm_ros.core.metrics import METRIC_COLUMNS
 
 
 def _save(fig: plt.Figure, path: Path) -> None:
@@ -70,15 +69,19 @@ def _save(fig: plt.Figure, path: Path) -> None:
     os.replace(part, path)
 
 
-def _curve(row: dict) -> np.ndarray:
-    """The run in ``row`` re-run in process (checked against the row): per tick, the tick and the shape's empty
-    patches (a rubenstein run's uncovered pixels)."""
+def _curve(row: dict, out: Path) -> np.ndarray:
+    """The step curve (:func:`swarm_ros.app.curves.steps`) of the run in ``row``: the experiment's (``out``/curves),
+    or, without one, the run re-run in process (checked against the row)."""
+    from swarm_ros.app.curves import curve_of, read_curve, steps
     from swarm_ros.core.engine import Simulation
     from swarm_ros.core.grid import World
     from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETERS, RunParams
-    from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+    from swarm_ros.core.rubenstein.run import KilobotRun
     from swarm_ros.core.shapes import Shape
 
+    stored = read_curve(out, row)
+    if stored is not None:
+        return stored
     shape = Shape.load(row["shape_file"], World(row["world_radius"]))
     params = RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model and p.name in row})
     sim: Simulation | KilobotRun = (
@@ -92,10 +95,7 @@ def _curve(row: dict) -> np.ndarray:
             f"{sim.outcome} at tick {sim.tick}, the results say {row['outcome']} at tick "
             f"{row['convergence_tick']}"
         )
-    if isinstance(sim, KilobotRun):
-        h = sim.history
-        return np.stack([h[:, 0], sim.pixels - h[:, COLUMNS.index("covered")]], axis=1)
-    return sim.history[:, [0, METRIC_COLUMNS.index("empty_patches")]].copy()
+    return steps(curve_of(sim))
 
 
 def _setting(rules: str, vision: float) -> str:
@@ -116,8 +116,9 @@ def _counts(rules: str) -> tuple[str, str, str]:
     return "localized robots", "unlocalized robots", "empty shape patches"
 
 
-def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference | None = None) -> None:
-    """Panels (a)-(d) for one shape at one vision radius and rule set; ``ref`` adds the published point to (b)."""
+def shape_figure(stats: list[dict], rows: list[dict], path: Path, out: Path, ref: Reference | None = None) -> None:
+    """Panels (a)-(d) for one shape at one vision radius and rule set, of the experiment in ``out``; ``ref`` adds
+    the published point to (b)."""
     s0 = stats[0]
     n = np.array([s["robots"] for s in stats])
     mean = np.array([s["mean_convergence_tick"] for s in stats])
@@ -181,10 +182,11 @@ def shape_figure(stats: list[dict], rows: list[dict], path: Path, ref: Reference
     c.set_xlabel("group size N (robots)")
     for k, s in enumerate(stats):
         first = min((r for r in rows if r["robots"] == s["robots"]), key=lambda r: r["repetition"])
-        h = _curve(first)
+        h = _curve(first, out)
         d.plot(
             h[:, 0],
             h[:, 1],
+            drawstyle="steps-post",
             color=_COLOURS[k % len(_COLOURS)],
             lw=1.2,
             label=f"N = {s['robots']}: {first['outcome']} at {first['convergence_tick']}",
@@ -333,8 +335,8 @@ def _safe(label: str) -> str:
     return label.replace("=", "-")
 
 
-def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: Path) -> list[Path]:
-    """Every figure of the report, into ``figures``; return their paths."""
+def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: Path, out: Path) -> list[Path]:
+    """Every figure of the report of the experiment in ``out``, into ``figures``; return their paths."""
     written = []
     for rules, vision in _sections(stats):
         vs = [s for s in stats if s["vision_radius"] == vision and s["rules"] == rules]
@@ -344,6 +346,7 @@ def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: P
                 [s for s in vs if s["shape"] == shape],
                 [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision and rules_label(r) == rules],
                 path,
+                out,
                 reference.get(shape) if rules != RUBENSTEIN_LABEL else None,  # the study's numbers: its model's
             )
             written.append(path)
@@ -383,13 +386,13 @@ def build_report(out: Path) -> list[Path]:
     reference = load_reference(out / REFERENCE_FILE) if (out / REFERENCE_FILE).is_file() else {}
     stats = group_stats(rows)
     texts = {out / STATS_CSV: stats_csv(stats), out / STATS_MD: stats_markdown(stats, reference)}
-    # Everything is made before anything is written: the figures re-run runs and check them against their rows,
-    # and a row they refuse must leave the old report (or none) as it was. figures/ is built whole under a
-    # hidden name and swapped in: an interrupt leaves the old set (or none).
+    # Everything is made before anything is written: the figures re-run the runs without a stored curve and check
+    # them against their rows, and a row they refuse must leave the old report (or none) as it was. figures/ is
+    # built whole under a hidden name and swapped in: an interrupt leaves the old set (or none).
     final = out / FIGURES
     figures = Path(tempfile.mkdtemp(prefix=f".{FIGURES}.tmp-", dir=out))
     try:
-        drawn = [final / p.name for p in all_figures(stats, rows, reference, figures)]
+        drawn = [final / p.name for p in all_figures(stats, rows, reference, figures, out)]
         public_mode(figures, directory=True)
         for path, text in texts.items():
             _write_text(path, text)
