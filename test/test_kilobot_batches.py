@@ -278,3 +278,52 @@ def test_announcements_that_do_not_fit_the_run_are_rejected():
             ls.announce(name, k, batches)
     assert ls.announce("robot_batch_1", 1, 2) == [0, 1]
     assert ls.announce("robot_batch_1", 1, 2) == [1]  # a restarted batch: its own area again
+
+
+def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbroken_one(tmp_path):
+    """Saved at a tick and resumed in a fresh run, the run continues exactly as the one never broken, to its end;
+    a file that is not a checkpoint, or is another run's, fails in one line."""
+    from swarm_ros.core.errors import RunFailed
+    from swarm_ros.protocol import kilobot_checkpoint
+
+    params = RunParams(40, algorithm="rubenstein", seed=6, range_noise=0.05)
+    whole = KilobotRun(square(6), params)
+    whole.run(1500)
+    path = tmp_path / "world.checkpoint"
+    kilobot_checkpoint.save(path, whole, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["world.checkpoint"]  # no temporary file left
+    fresh = KilobotRun(square(6), params)
+    saved = kilobot_checkpoint.load(path, fresh)
+    assert (saved.tick, saved.hosts, saved.batches) == (1500, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
+    fresh.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
+    whole.run()
+    fresh.run()
+    assert same(whole, fresh) and whole.outcome is not None
+    path.write_bytes(b"not a checkpoint")
+    with pytest.raises(RunFailed, match="does not read"):
+        kilobot_checkpoint.load(path, fresh)
+    kilobot_checkpoint.save(path, KilobotRun(square(6), RunParams(30, algorithm="rubenstein")), {}, 1)
+    with pytest.raises(RunFailed, match="is not of this run"):
+        kilobot_checkpoint.load(path, fresh)
+    with pytest.raises(RunFailed, match="found no checkpoint"):
+        kilobot_checkpoint.load(tmp_path / "none", fresh)
+
+
+def test_metrics_rows_a_restarted_world_sends_again_are_taken_once_and_must_equal_those_held():
+    from swarm_ros.protocol.kilobot_rows import check_metrics_rows, metrics_rows
+
+    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    run.run(100)
+    history = run.history
+    held = history[:61]
+    again = metrics_rows(history[41:81])  # ticks 41..80: 20 held, 20 new
+    assert np.array_equal(check_metrics_rows(again, held), history[61:81])
+    assert check_metrics_rows(metrics_rows(history[:61]), held).shape == (0, history.shape[1])  # all held
+    changed = again.copy()
+    changed["covered"][0] += 1
+    with pytest.raises(Rejected, match="conflict"):
+        check_metrics_rows(changed, held)
+    with pytest.raises(Rejected, match="stale tick"):
+        check_metrics_rows(metrics_rows(history[62:70]), held)  # a gap after tick 60
+    with pytest.raises(Rejected, match="stale tick"):
+        check_metrics_rows(metrics_rows(history[[61, 63]]), held)  # not consecutive
