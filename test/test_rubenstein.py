@@ -435,6 +435,12 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
         assert curve[0, 0] == 0 and curve[-1, 0] == r["convergence_tick"] and curve[-1, 1] == r["empty_patches"]
         assert np.all(np.diff(curve[:, 0]) > 0) and np.all(np.diff(curve[:-1, 1]) != 0)  # the changes only
 
+    gone = out / "curves" / curve_name(firsts[-1])
+    kept = gone.read_text()
+    gone.unlink()
+    report.build_report(out)  # runs that run again, checks it against its row, and keeps its curve again
+    assert gone.read_text() == kept
+
     def no_runs(*args, **kwargs):
         raise AssertionError("the report ran a run")
 

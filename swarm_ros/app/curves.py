@@ -5,7 +5,7 @@ results.csv, before the run's row goes into results.csv: ``tick,empty``, the sha
 rubenstein run's uncovered pixels) at tick 0, at every tick the count changes, and at the last tick; the count
 holds from one row to the next (a step curve, a few hundred rows where a 1,024-robot rubenstein run has 170,000
 ticks). The report (panel (d) of a shape's figure) reads it, or, for a run without one (run over the ROS 2 graph,
-or by an older swarm_ros), runs the run again in process and checks it against its row.
+or by an older swarm_ros), runs the run again in process, checks it against its row and keeps its curve.
 """
 
 from __future__ import annotations

@@ -71,8 +71,8 @@ def _save(fig: plt.Figure, path: Path) -> None:
 
 def _curve(row: dict, out: Path) -> np.ndarray:
     """The step curve (:func:`swarm_ros.app.curves.steps`) of the run in ``row``: the experiment's (``out``/curves),
-    or, without one, the run re-run in process (checked against the row)."""
-    from swarm_ros.app.curves import curve_of, read_curve, steps
+    or, without one, the run re-run in process (checked against the row), then kept there for the next report."""
+    from swarm_ros.app.curves import curve_of, read_curve, steps, write_curve
     from swarm_ros.core.engine import Simulation
     from swarm_ros.core.grid import World
     from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETERS, RunParams
@@ -95,7 +95,9 @@ def _curve(row: dict, out: Path) -> np.ndarray:
             f"{sim.outcome} at tick {sim.tick}, the results say {row['outcome']} at tick "
             f"{row['convergence_tick']}"
         )
-    return steps(curve_of(sim))
+    curve = steps(curve_of(sim))
+    write_curve(out, row, curve)
+    return curve
 
 
 def _setting(rules: str, vision: float) -> str:
