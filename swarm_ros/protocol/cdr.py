@@ -250,6 +250,14 @@ def decode_cloud(buf: bytes) -> Cloud:
 
 
 _LAYOUTS: list[tuple[bytes, tuple[Field, ...], int]] = []
+_MORE_TYPES: list[np.dtype] = []  #: row layouts other modules made known (register_row_types)
+
+
+def register_row_types(*dtypes: np.dtype) -> None:
+    """Make the decoder know these row layouts too (another algorithm's rows, when their module is imported: the
+    study's model's nodes never import it)."""
+    _MORE_TYPES.extend(d for d in dtypes if d not in _MORE_TYPES)
+    _LAYOUTS.clear()
 
 
 def _known_layout(r: _Reader) -> tuple[tuple[Field, ...], int | None]:
@@ -257,10 +265,9 @@ def _known_layout(r: _Reader) -> tuple[tuple[Field, ...], int | None]:
     :func:`encode_cloud` writes for one of the graph's own row layouts (then ``r`` moves past them);
     else ((), None), and ``r`` stays."""
     if not _LAYOUTS:
-        from swarm_ros.protocol.kilobot_rows import KILOBOT_ROW_TYPES
         from swarm_ros.protocol.rows import ROW_TYPES
 
-        for dtype in (*ROW_TYPES, *KILOBOT_ROW_TYPES):
+        for dtype in (*ROW_TYPES, *_MORE_TYPES):
             for tagged in (True, False):
                 block, height_at = _fields_block(FRAME_ID, dtype, tagged)
                 _LAYOUTS.append((block[height_at + 8 :], tuple(Field(*f) for f in point_fields(dtype)), int(tagged)))

@@ -22,6 +22,7 @@ from swarm_ros.core.errors import Rejected
 from swarm_ros.core.rubenstein.rule import Decided, Robots, decided_for
 from swarm_ros.core.rubenstein.run import COLUMNS
 
+from .cdr import register_row_types
 from .kilobot_checks import ROW_FAULTS, first_fault, pack_rows, row_faults, unpack_rows
 
 _NAMES = ["x", "y", "z", "heading", "ex", "ey", "near"]
@@ -50,6 +51,7 @@ KILOBOT_DECISION_ROW = np.dtype(
 #: World -> monitor: metrics rows, the columns of swarm_ros.core.rubenstein.run.COLUMNS (float64, exact).
 KILOBOT_METRICS_ROW = np.dtype([(name, "<f8") for name in COLUMNS])
 KILOBOT_ROW_TYPES = (KILOBOT_ROW, KILOBOT_DECISION_ROW, KILOBOT_METRICS_ROW)  #: the rubenstein graph's row layouts
+register_row_types(*KILOBOT_ROW_TYPES)  # decoded at the speed of the study's model's rows
 
 
 def kilobot_rows(ids: np.ndarray, robots: Robots | Decided) -> np.ndarray:
