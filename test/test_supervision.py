@@ -272,3 +272,7 @@ def test_the_launch_file_starts_the_rubenstein_algorithms_nodes_under_their_name
     assert _written(setup)["/**"]["ros__parameters"]["algorithm"] == "rubenstein"
     with pytest.raises(InputError, match="world_shards and region_cuts are not for the rubenstein"):
         launch_setup(str(CONFIG), {**BLANK, "algorithm": "rubenstein"}, "", tmp_path / "log2", 2, "", "", 2)
+    removing = tmp_path / "remove.yaml"
+    removing.write_text(CONFIG.read_text() + "\n/world:\n  ros__parameters:\n    on_batch_loss: remove\n")
+    with pytest.raises(InputError, match="on_batch_loss: remove is not for the rubenstein algorithm's graph"):
+        _setup(tmp_path, removing, shape="rectangle", algorithm="rubenstein")

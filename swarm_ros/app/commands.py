@@ -220,6 +220,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
         **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {}),
     }
+    if params.algorithm == RUBENSTEIN and world.get("on_batch_loss") == "remove":
+        raise ParameterError(
+            f"--on-batch-loss remove is not for the {RUBENSTEIN} algorithm's graph: a lost batch is restarted"
+        )
     check_graph(shape, params.robots, args.processes, args.enclaves, region_cuts=cuts, world_shards=args.world_shards)
     domain = _domain_id(args.domain_id)
     launch = Launch(

@@ -213,6 +213,10 @@ def launch_setup(
     shape, params = settings.resolve()
     if params.algorithm == RUBENSTEIN and (world_shards > 1 or region_cuts):
         raise InputError(f"world_shards and region_cuts are not for the {RUBENSTEIN} algorithm's graph")
+    if params.algorithm == RUBENSTEIN and nodes["world"].get("on_batch_loss") == "remove":
+        raise InputError(
+            f"on_batch_loss: remove is not for the {RUBENSTEIN} algorithm's graph: a lost batch is restarted"
+        )
     region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))
     check_graph(
         shape,
