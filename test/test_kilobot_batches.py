@@ -327,3 +327,34 @@ def test_metrics_rows_a_restarted_world_sends_again_are_taken_once_and_must_equa
         check_metrics_rows(metrics_rows(history[62:70]), held)  # a gap after tick 60
     with pytest.raises(Rejected, match="stale tick"):
         check_metrics_rows(metrics_rows(history[[61, 63]]), held)  # not consecutive
+
+
+def test_the_world_runs_at_least_one_record_and_at_most_what_the_topics_keep_past_the_monitor():
+    from swarm_ros.protocol.kilobot_lockstep import monitor_reach
+    from swarm_ros.protocol.plan import KILOBOT_KEPT
+
+    assert monitor_reach(0, 20) is None  # no window: the world does not wait
+    assert monitor_reach(128, 20) == 128
+    assert monitor_reach(5, 20) == 20  # the monitor reports a tick only once its record is in
+    assert monitor_reach(10**6, 20) == (KILOBOT_KEPT - 2) * 20
+    for window in (1, 7, 128, 10**6):
+        for every in (1, 3, 20, 1000):
+            reach = monitor_reach(window, every)
+            assert reach is not None
+            records_past = reach // every + 1  # the records in (held, held + reach], and the end's own
+            assert 1 <= reach // every and records_past <= KILOBOT_KEPT - 1
+
+
+def test_the_monitors_held_report_is_checked():
+    from swarm_ros.protocol.kilobot_lockstep import check_held
+
+    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=5))
+    assert check_held(np.array([-1, 0]), run) == (-1, False)
+    assert check_held(np.array([3000, 0]), run) == (3000, False)  # a restarted world's monitor may be past it
+    for values in ([1], [1, 0, 0], [-2, 0], [10**12, 0], [0, 2], [0, 1]):  # the end only once the run has ended
+        with pytest.raises(Rejected, match="held"):
+            check_held(np.array(values), run)
+    run.run()
+    assert check_held(np.array([run.tick, 1]), run) == (run.tick, True)
+    with pytest.raises(Rejected, match="held"):
+        check_held(np.array([run.tick - 1, 1]), run)

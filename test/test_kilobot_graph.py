@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -89,6 +90,7 @@ def test_the_graph_refuses_what_the_rubenstein_graph_does_not_do_in_one_line(squ
     for flags, message in (
         (["--world-shards", "2", "--processes", "2"], "--world-shards is not for the rubenstein algorithm's graph"),
         (["--processes", "500"], "processes must be between 1 and the"),
+        (["--on-batch-loss", "remove"], "--on-batch-loss remove is not for the rubenstein algorithm's graph"),
     ):
         code = cli.main(["run", "--shape", str(square), *RUN, "--out", str(tmp_path / "x"), *flags])
         err = capsys.readouterr().err
@@ -147,15 +149,27 @@ def test_a_world_killed_goes_on_from_its_checkpoint_and_the_run_is_the_same(squa
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
-def test_a_monitor_killed_mid_run_fails_the_run_in_one_line_and_writes_no_run_directory(square, tmp_path):
-    """The rubenstein monitor does not resume from its bag yet: its restarted process refuses, the run fails."""
+@pytest.mark.parametrize("moment", ["starting", "mid-run", "writing"])
+def test_a_monitor_killed_goes_on_from_its_bag_and_the_run_is_the_same(square, reference, tmp_path, moment):
+    """The restarted monitor reads back the bag its process before left and takes the records since from the topics'
+    histories (the world never runs past what they keep; "writing": the world has ended and exited, the bag is all
+    there is): the run directory is simulate's, its bag holds the run once (robots by tick), and its recording is
+    whole."""
     out = tmp_path / "run"
     launcher = _launch(square, out, 2)
-    wait_ticks_recorded(out, 20_000)
-    os.kill(node_pid(out, "monitor", timeout=10), signal.SIGKILL)
+    if moment == "mid-run":
+        wait_ticks_recorded(out, 20_000)
+    if moment == "writing":  # the run directory's temporary folder is there: the monitor writes it
+        wait_for(lambda: any(tmp_path.glob(".run.tmp-*")), 240, "the monitor writing the run", poll=0.002)
+    os.kill(node_pid(out, "monitor", timeout=30), signal.SIGKILL)
     _, err = launcher.communicate(timeout=300)
-    said = err.decode().strip().splitlines()
-    assert launcher.returncode not in (0, None) and "Traceback" not in err.decode(), said
-    assert "cannot resume a rubenstein run yet" in err.decode(), said
-    assert not out.exists()
+    assert launcher.returncode == 0, err.decode()
+    summary = assert_same_run(reference, out)
+    assert [r["node"] for r in summary["restarts"]] == ["monitor"]
+    said = (out / "logs" / "monitor.log").read_text()
+    [resumed_at] = re.findall(r"monitor restarted \(incarnation 1\): went on from tick (-?\d+)", said)
+    assert int(resumed_at) > 0 if moment == "mid-run" else int(resumed_at) >= -1, said
+    assert_kilobot_bag_holds_run(out)
+    assert (out / "recording.rrd").stat().st_size > 0
+    assert not list(tmp_path.glob(".run.*")), "a folder of the killed monitor outlived the run"
     assert not processes_mentioning(str(out)), "a process outlived the run"

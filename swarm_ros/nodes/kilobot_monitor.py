@@ -9,6 +9,12 @@ the outcome, the last robots and the metrics up to the last tick are in, writes 
 ``swarm-ros simulate --algorithm rubenstein`` does (summary.json, metrics.csv, final_state.csv, final.png,
 recording.rrd), whole or not at all, with the run's bag (``bag/``: every message it took, as it came).
 
+Each time it holds a further record (the robots and the metrics up to their tick), and once it holds the
+outcome, it makes its bag durable and reports so on /swarm/kilobot/held (``[tick, ended]``, latched); the world
+runs at most a window past it. A restarted process (``incarnation`` > 0) reads back the bag its process before
+left, through the same handlers (:mod:`swarm_ros.ros.bag_resume`), and takes the rest from the topics' histories:
+the run directory is the one an unbroken run writes.
+
     ros2 run swarm_ros kilobot_monitor --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
         -p out_dir:=runs/kilobots
 """
@@ -21,9 +27,10 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
-from swarm_ros.core.errors import ConfigError, Rejected, RunFailed
+from swarm_ros.core.errors import ConfigError, Rejected
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import RUBENSTEIN
 from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun, summary_of
@@ -37,10 +44,11 @@ from swarm_ros.protocol.kilobot_rows import (
     check_metrics_rows,
     robots_of_rows,
 )
-from swarm_ros.protocol.plan import KILOBOT_METRICS, KILOBOT_ROBOTS, MONITOR, STATUS
+from swarm_ros.protocol.plan import KILOBOT_HELD, KILOBOT_METRICS, KILOBOT_ROBOTS, MONITOR, STATUS
 from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
+from swarm_ros.ros.bag_resume import resume
 from swarm_ros.ros.bag_writer import KILOBOT_TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import run_node
@@ -55,8 +63,7 @@ class KilobotMonitorNode:
         self.shape, self.params = run.resolve()
         if self.params.algorithm != RUBENSTEIN:
             raise ConfigError(f"the kilobot monitor runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
-        if int(own["incarnation"]):  # the metrics before its death are gone: the run fails, not half-written
-            raise RunFailed("a restarted monitor cannot resume a rubenstein run yet (it keeps no bag)")
+        self.incarnation = int(own["incarnation"])
         p = self.params
         self.out = (
             Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p.robots, 0, p.seed)
@@ -67,8 +74,12 @@ class KilobotMonitorNode:
         self.history = np.empty((0, len(COLUMNS)))  # the metrics of every tick, as the world sends them
         self.robots_tick = -1
         self.outcome: str | None = None
+        self.outcome_tick = -1
+        self.reported = (-1, False)  # the last [tick, ended] reported held
         self.started_at: float | None = None
         self.rrd = run_dir.partial_recording(self.out) if own["record"] else None
+        if self.rrd is not None and self.incarnation:
+            self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
         self.every = int(own["record_every"]) or RECORD_EVERY
         self.recorder = None
         if self.rrd is not None or own["viewer_url"]:
@@ -78,19 +89,50 @@ class KilobotMonitorNode:
             self.recorder = KilobotRecorder(self.rrd, self.copy, every=self.every, connect=url)
         self.finished = False
         self.bag = BagRecorder(self.out, recorded=KILOBOT_TOPICS) if own["bag"] else None
-        self.raw = b""  # the message being handled, as it came (into the bag once its handler took it)
+        self.raw: bytes | None = b""  # the message being handled, as it came (into the bag once its handler took it)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
-        for topic, handler in ((KILOBOT_ROBOTS, self._on_robots), (KILOBOT_METRICS, self._on_metrics)):
-            self.gate.subscribe(PointCloud2, topic, handler, msgs.KILOBOT_QOS, raw_handler=self._keep_raw)
-        self.gate.subscribe(DiagnosticArray, STATUS, self._on_status, msgs.STATUS_QOS, raw_handler=self._keep_raw)
+        self.pub_held = self.signer.publisher(Int64MultiArray, KILOBOT_HELD, msgs.LATCHED_QOS)
+        self.handlers = {KILOBOT_ROBOTS: self._on_robots, KILOBOT_METRICS: self._on_metrics, STATUS: self._on_status}
+        if self.incarnation:
+            self._resume()
+        for topic, handler in self.handlers.items():
+            kind, qos = (DiagnosticArray, msgs.STATUS_QOS) if topic == STATUS else (PointCloud2, msgs.KILOBOT_QOS)
+            self.gate.subscribe(kind, topic, handler, qos, raw_handler=self._keep_raw)
+
+    def _resume(self) -> None:
+        """Go on from the bag the process before this one wrote: its messages through the handlers, then the same
+        messages again from the topics' histories are known (:mod:`swarm_ros.ros.bag_resume`)."""
+
+        def take(topic: str, data: bytes) -> None:
+            self.raw = None  # in the bag already
+            self.handlers[topic](self.gate.open(DiagnosticArray if topic == STATUS else PointCloud2, topic, data))
+
+        replayed = resume(self.bag, self.out, take, marker=None)
+        self.raw = b""
+        self.gate.verifier.taken_before()
+        self.node.get_logger().warn(
+            f"monitor restarted (incarnation {self.incarnation}): went on from tick {self.last_tick} of the bag its "
+            f"process before wrote ({replayed} messages)"
+        )
+        self._report()
 
     def _keep_raw(self, data: bytes) -> None:
         self.raw = data
 
     def _into_bag(self, topic: str) -> None:
-        if self.bag is not None:
+        if self.bag is not None and self.raw is not None:
             self.bag.write(topic, self.raw)
+
+    def _report(self) -> None:
+        """Report held the last tick whose record is in (and whether the outcome is), once the bag holds it durably."""
+        tick = min(self.robots_tick, self.last_tick)
+        held = (tick, self.outcome is not None and tick == self.outcome_tick)
+        if held != self.reported and self.raw is not None:  # not while replaying: once, after
+            if self.bag is not None:
+                self.bag.durable()
+            self.pub_held.publish(msgs.ids_message(np.array([held[0], int(held[1])], dtype=np.int64), "held"))
+            self.reported = held
 
     def load(self) -> None:
         """Nothing heavy."""
@@ -110,6 +152,7 @@ class KilobotMonitorNode:
             self.started_at = time.perf_counter()
         self.history = np.concatenate([self.history, history]) if len(self.history) else history
         self._into_bag(KILOBOT_METRICS)
+        self._report()
 
     def _on_robots(self, msg: Cloud) -> None:
         try:
@@ -127,19 +170,21 @@ class KilobotMonitorNode:
         self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
         if self.recorder is not None and tick > 0:
             self.recorder.robots(self.copy)
+        self._report()
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         self._into_bag(STATUS)
         values = msgs.status_values(msg)
         outcome = values.get("outcome")
         if self.outcome is None and has_ended(outcome):
-            self.outcome = outcome
+            self.outcome, self.outcome_tick = outcome, msgs.tick_of(msg.header)
+            self._report()
 
     def poll(self) -> None:
         if self.outcome is None or self.finished:
             return
-        end = self.robots_tick
-        if end < 0 or self.last_tick != end:
+        end = self.outcome_tick  # the outcome may come before the last tick's robots and metrics (other topics)
+        if self.robots_tick != end or self.last_tick != end:
             return  # the last robots or metrics are still on their way
         self._write(Outcome(self.outcome))
 

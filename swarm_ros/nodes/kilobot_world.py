@@ -6,9 +6,12 @@ itself on /swarm/batches (``[k, K]``); once all K have, and the monitor reads th
 out: each batch's area rows on /swarm/kilobot/area/<batch>, every robot's row on /swarm/kilobot/robots, the
 metrics on /swarm/kilobot/metrics and ``running`` on /swarm/status. Each tick, once every batch's decisions
 are in (checked, or dropped and counted), it settles them and sends the next areas; every ``record_every``-th
-tick and at the end it sends the robots and the metrics rows since the last. At the end it publishes the
-outcome and exits once its readers have everything (or after a grace period). It saves a checkpoint at tick 0
-and every 1,000 ticks or so, before the tick goes out; a restarted process goes on from the last one
+tick and at the end it sends the robots and the metrics rows since the last. It runs at most ``monitor_window``
+ticks past the last record the monitor reports held on /swarm/kilobot/held
+(:func:`~swarm_ros.protocol.kilobot_lockstep.monitor_reach`), so a restarted monitor finds in the topics'
+histories every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it
+(or, with no window, once its readers have everything or after a grace period). It saves a checkpoint at tick
+0 and every 1,000 ticks or so, before the tick goes out; a restarted process goes on from the last one
 (:mod:`swarm_ros.protocol.kilobot_checkpoint`).
 
     ros2 run swarm_ros kilobot_world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
@@ -33,10 +36,11 @@ from swarm_ros.protocol import checks, kilobot_checkpoint
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
 from swarm_ros.protocol.kilobot_checkpoint import save_every
-from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep
+from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep, check_held, monitor_reach
 from swarm_ros.protocol.kilobot_rows import KILOBOT_DECISION_ROW, kilobot_rows, metrics_rows
 from swarm_ros.protocol.plan import (
     BATCHES,
+    KILOBOT_HELD,
     KILOBOT_METRICS,
     KILOBOT_ROBOTS,
     MONITOR,
@@ -65,6 +69,9 @@ class KilobotWorldNode:
             raise ConfigError(f"the kilobot world runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
         self.every = int(own["record_every"]) or RECORD_EVERY
         self.save_every = save_every(self.every)
+        self.reach = monitor_reach(int(own["monitor_window"]), self.every)
+        self.held, self.held_end = -1, False  # the monitor's last held record, and whether it holds the outcome
+        self.pending = False  # a settled tick waits for the monitor to catch up before it goes out
         self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] else None
         self.start_timeout = float(own["start_timeout"])
         self.created = time.monotonic()
@@ -82,6 +89,7 @@ class KilobotWorldNode:
         self.pub_metrics = self.signer.publisher(PointCloud2, KILOBOT_METRICS, msgs.KILOBOT_QOS)
         self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
+        self.gate.subscribe(Int64MultiArray, KILOBOT_HELD, self._on_held, msgs.LATCHED_QOS)
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
         self._status(STARTING, "waiting for robot batches and the monitor")
 
@@ -133,6 +141,22 @@ class KilobotWorldNode:
             self.rejections.drop(topic, fault)
             return
         if settled:
+            self.pending = True
+            self._go_on()
+
+    def _on_held(self, msg: Int64MultiArray) -> None:
+        try:
+            tick, ended = check_held(np.asarray(msg.data, dtype=np.int64), self.ls.run)
+        except Rejected as fault:
+            self.rejections.drop(KILOBOT_HELD, fault)
+            return
+        self.held, self.held_end = max(self.held, tick), self.held_end or ended
+        self._go_on()
+
+    def _go_on(self) -> None:
+        """Send the settled tick, unless it is past the monitor's reach (then once the monitor reports more held)."""
+        if self.pending and (self.reach is None or self.ls.run.tick <= self.held + self.reach):
+            self.pending = False
             self._publish_tick()
 
     # -- outbound --------------------------------------------------------------------------
@@ -173,12 +197,15 @@ class KilobotWorldNode:
             if self.first:  # tick 0, or the checkpoint's: the robots, the metrics and the areas
                 self.first = False
                 self._status(RUNNING, f"{self.ls.batches} robot batches in: tick {self.ls.run.tick}")
-                self._publish_tick()
+                self.pending = True
+                self._go_on()
             else:  # a batch process that came back: its area at the current tick
                 self._send_areas(batches)
         if not self.ls.started and time.monotonic() - self.created > self.start_timeout:
             raise RunFailed(f"robot batches did not all announce themselves within {self.start_timeout:g} s")
-        if self.ended_at is not None:
+        if self.ended_at is not None and self.reach is not None:  # the monitor holds the end: nothing more to keep
+            self.finished = self.held_end
+        elif self.ended_at is not None:
             acked = all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots, self.pub_metrics))
             self.finished = acked or time.monotonic() - self.ended_at > _LINGER
 

@@ -19,14 +19,41 @@ from __future__ import annotations
 import numpy as np
 
 from swarm_ros.core.errors import Rejected
+from swarm_ros.core.params import MAX_TICKS
 from swarm_ros.core.rubenstein.rule import JOINED, Decided
 from swarm_ros.core.rubenstein.run import KilobotRun
 from swarm_ros.core.rubenstein.strips import Strips, cell_columns, strips_for
 
 from .kilobot_checks import DECISION_FAULTS, decision_faults, first_fault
 from .kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows
+from .plan import KILOBOT_KEPT as KEPT
 
 _STEP_TOLERANCE = 1e-9  #: d: a step's end may differ from the rule's in the last bits of another libm's cos
+
+
+def monitor_reach(window: int, every: int) -> int | None:
+    """How many ticks past the last tick the monitor holds (durably, in its bag) the world may publish, with the
+    world parameter ``monitor_window`` ``window`` and a record every ``every`` ticks: at least one record (the monitor
+    reports a tick only once its record is in), at most ``KEPT - 2`` (the messages since stay in the topics'
+    histories for a restarted monitor); None with ``window`` 0: the world does not wait for a monitor."""
+    return None if window == 0 else min(max(window, every), (KEPT - 2) * every)
+
+
+def check_held(values: np.ndarray, run: KilobotRun) -> tuple[int, bool]:
+    """The monitor's report on /swarm/kilobot/held, ``[tick, ended]``: the last tick whose record it holds, and
+    whether it holds the outcome too, which only the run's last tick can carry.
+
+    Raises:
+        Rejected: ("held") anything else.
+    """
+    if values.size != 2:
+        raise Rejected("held", f"{values.size} values, expected the tick and whether the run ended")
+    tick, ended = int(values[0]), int(values[1])
+    if not -1 <= tick <= MAX_TICKS or ended not in (0, 1):
+        raise Rejected("held", f"tick {tick}, ended {ended}")
+    if ended and (run.outcome is None or tick != run.tick):
+        raise Rejected("held", f"the end at tick {tick}; the run is at tick {run.tick}, outcome {run.outcome}")
+    return tick, bool(ended)
 
 
 class KilobotLockstep:

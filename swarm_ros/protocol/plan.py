@@ -110,10 +110,15 @@ MONITOR_READS = (ROBOTS, DECISIONS, STATUS, TALLY)
 #: A rubenstein run's (PointCloud2, swarm_ros.protocol.kilobot_rows): world -> monitor and viewers, every robot's
 #: row at tick 0, every ``record_every``-th tick and the last; world -> monitor, the metrics rows of the ticks since
 #: the last message, as often; /swarm/kilobot/area/<batch>: world -> one batch, after each tick, its area's rows;
-#: /swarm/kilobot/decisions/<batch>: one batch -> world, its strip's decisions.
+#: /swarm/kilobot/decisions/<batch>: one batch -> world, its strip's decisions; /swarm/kilobot/held: monitor -> world
+#: (Int64MultiArray, latched), the last tick whose record is in its bag, and 1 once the run's outcome is too.
 KILOBOT = "/swarm/kilobot"
-KILOBOT_ROBOTS, KILOBOT_METRICS = f"{KILOBOT}/robots", f"{KILOBOT}/metrics"
+KILOBOT_ROBOTS, KILOBOT_METRICS, KILOBOT_HELD = f"{KILOBOT}/robots", f"{KILOBOT}/metrics", f"{KILOBOT}/held"
 KILOBOT_AREA, KILOBOT_DECISIONS = f"{KILOBOT}/area", f"{KILOBOT}/decisions"
+#: The robots and metrics messages the world keeps for a late reader (a restarted monitor): one each per record,
+#: so the world runs at most ``KILOBOT_KEPT - 2`` records past the monitor's last held one
+#: (swarm_ros.protocol.kilobot_lockstep.monitor_reach).
+KILOBOT_KEPT = 32
 
 
 def kilobot_area_topic(node_name: str) -> str:

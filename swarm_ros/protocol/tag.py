@@ -32,6 +32,7 @@ from swarm_ros.protocol.plan import (
     BATCHES,
     DECISIONS,
     KILOBOT_DECISIONS,
+    KILOBOT_HELD,
     METRICS,
     MONITOR,
     is_world,
@@ -120,9 +121,9 @@ def _mac(key: bytes, topic: str, parts) -> str:
 
 def may_send(sender: str, topic: str) -> bool:
     """Whether a node named ``sender`` publishes on ``topic`` in the graph: the world (or a world shard) its
-    topics, the monitor the metrics, a batch its announcement and its own decisions topic (a rubenstein run's
-    batch too), world shard i the topics under /swarm/shards/<i>."""
-    if topic == METRICS:
+    topics, the monitor the metrics (a rubenstein run's: what it holds), a batch its announcement and its own
+    decisions topic (a rubenstein run's batch too), world shard i the topics under /swarm/shards/<i>."""
+    if topic in (METRICS, KILOBOT_HELD):
         return sender == MONITOR
     if topic == BATCHES:
         return not is_world(sender) and sender != MONITOR

@@ -11,6 +11,11 @@ while writing the run directory, in that directory's temporary one (``.<run>.tmp
 The new process takes the longest of them up to the end of its last whole tick, copies that into a
 bag of its own, and replays it through its handlers: the replica, the metrics rows and the
 recording come out as they were (:meth:`swarm_ros.protocol.monitoring.MonitorCore.replay`).
+
+A rubenstein run's monitor (:mod:`swarm_ros.nodes.kilobot_monitor`) goes on the same way: it makes
+its bag durable before it reports a record held on /swarm/kilobot/held, the world runs at most a window
+past that. Its bag is not cut: each of its messages is whole alone (the robots at a record tick, the
+metrics rows of a run of ticks, a status), and the handlers check each as they would a live one.
 """
 
 from __future__ import annotations
@@ -35,9 +40,14 @@ class Resumed:
     leftovers: list[Path] = field(default_factory=list)
     trash: list[Path] = field(default_factory=list)  #: write_run's folders for a replaced run: removed if empty
 
+    marker: str | None = (
+        msgs.CLOCK
+    )  #: the topic whose message ends a whole tick in the bag; None: each message is whole
+
     @property
     def ticks(self) -> int:
-        return sum(topic == msgs.CLOCK for topic, _, _ in self.messages)
+        """How much of the run it holds: its whole ticks (its messages, with no marker)."""
+        return sum(self.marker in (None, topic) for topic, _, _ in self.messages)
 
     def remove(self) -> None:
         for folder in self.leftovers:
@@ -49,10 +59,10 @@ class Resumed:
                 pass
 
 
-def left_by_earlier_process(out: Path, own_holder: Path) -> Resumed:
+def left_by_earlier_process(out: Path, own_holder: Path, marker: str | None = msgs.CLOCK) -> Resumed:
     """The messages a killed monitor of the run into ``out`` recorded (the longest bag it left), cut after the
-    last /clock message: the last tick whose messages are all there."""
-    best = Resumed()
+    last message on ``marker``: by default /clock, which ends a tick's messages (None: not cut)."""
+    best = Resumed(marker=marker)
     folders = [h for h in out.parent.glob(f".{out.name}.bag-*") if h != own_holder]
     folders += list(out.parent.glob(f".{out.name}.tmp-*"))
     best.trash = list(out.parent.glob(f".{out.name}.old-*"))
@@ -62,17 +72,22 @@ def left_by_earlier_process(out: Path, own_holder: Path) -> Resumed:
             continue
         found = unfinished_messages(folder)
         # a tick's messages end with its /clock (BagRecorder.write_world), and are made durable then
-        last = max((i for i, (topic, _, _) in enumerate(found) if topic == msgs.CLOCK), default=-1)
-        found = found[: last + 1]
-        if sum(topic == msgs.CLOCK for topic, _, _ in found) > best.ticks:
+        if marker is not None:
+            last = max((i for i, (topic, _, _) in enumerate(found) if topic == marker), default=-1)
+            found = found[: last + 1]
+        held = Resumed(found, marker=marker)
+        if held.ticks > best.ticks:
             best.messages = found
     return best
 
 
-def resume(bag: BagRecorder | None, out: Path, take: Callable[[str, bytes], None]) -> int:
-    """Go on from what the monitor process before this one left (the module's doc): copy its messages into
-    ``bag``, this process's, make them durable, then hand each to ``take`` (topic, the message as recorded),
-    in order. Returns how many there were.
+def resume(
+    bag: BagRecorder | None, out: Path, take: Callable[[str, bytes], None], marker: str | None = msgs.CLOCK
+) -> int:
+    """Go on from what the monitor process before this one left (the module's doc; ``marker``: the topic that
+    ends a whole tick, :func:`left_by_earlier_process`): copy its messages into ``bag``, this process's, make
+    them durable, then hand each to ``take`` (topic, the message as recorded), in order. Returns how many there
+    were.
 
     Raises:
         RunFailed: the run has no bag to go on from, or it does not read back as the run.
@@ -81,7 +96,7 @@ def resume(bag: BagRecorder | None, out: Path, take: Callable[[str, bytes], None
         raise RunFailed(
             "a restarted monitor goes on from the bag its process before wrote, and this run has none (bag: false)"
         )
-    resumed = left_by_earlier_process(out, bag.holder)
+    resumed = left_by_earlier_process(out, bag.holder, marker)
     for topic, at, data in resumed.messages:
         bag.write(topic, data, at)
     bag.durable()

@@ -30,6 +30,7 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     BATCHES,
     CLOCK,
     DECISIONS,
+    KILOBOT_KEPT,
     METRICS,
     MONITOR_READS,
     OCCUPANCY,
@@ -103,10 +104,14 @@ STATUS_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
-#: A rubenstein run's robots and metrics, world -> monitor: every message, none dropped while the monitor lags (the
-#: world waits for the monitor's readers before tick 0, so no late reader needs them kept).
+#: A rubenstein run's robots and metrics, world -> monitor: the last ``KEPT`` messages are kept for a restarted
+#: monitor, and the world never runs so far past the monitor's last held record that one it has not taken would be
+#: pushed out (swarm_ros.protocol.kilobot_lockstep.monitor_reach).
 KILOBOT_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+    history=HistoryPolicy.KEEP_LAST,
+    depth=KILOBOT_KEPT,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 CLOCK_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
