@@ -141,3 +141,15 @@ class Ros2:
 def ctrl_c(proc: subprocess.Popen) -> None:
     """What Ctrl-C in its terminal does: SIGINT to every process of the foreground process group."""
     os.killpg(proc.pid, signal.SIGINT)
+
+
+def stop(proc: subprocess.Popen, timeout: float) -> None:
+    """Ctrl-C, then wait for ``proc`` to end; one that does not within ``timeout`` has its whole process group
+    SIGKILLed (no process outlives the test that started it) and the wait's TimeoutExpired raised."""
+    ctrl_c(proc)
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        raise

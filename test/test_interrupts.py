@@ -26,6 +26,9 @@ from swarm_ros.app.results_file import read_results
 from swarm_ros.ros.shm import in_use, shm_locks
 
 pytestmark = pytest.mark.process
+#: seconds from a signal to the exit, at most: 1-2 s on a quiet machine, 5.7 s seen in CI beside a ROS test on a slow
+#: day (a machine half as fast must pass too); each of these commands, left alone, goes on for minutes
+PROMPT_S = 20
 
 PY = sys.executable
 PACKAGE = str(Path(swarm_ros.__file__).parent)  # a frame in here is swarm_ros's own code
@@ -69,7 +72,7 @@ def test_sigterm_to_simulate_writes_an_interrupted_run_directory(tmp_path):
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
-    assert time.monotonic() - start < 5
+    assert time.monotonic() - start < PROMPT_S
     summary = json.loads((out / "summary.json").read_text())
     last = summary["convergence_tick"]
     assert summary["outcome"] == "interrupted" and 0 < last < 100_000
@@ -96,7 +99,7 @@ def test_sigterm_to_an_experiment_stops_its_workers_and_keeps_finished_runs(tmp_
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
-    assert time.monotonic() - start < 5
+    assert time.monotonic() - start < PROMPT_S
     assert not children_of(proc.pid), "a worker outlived the experiment"
     assert "run the same command again to resume" in err
     assert 3 <= len(read_results(results)) < 240
@@ -131,8 +134,8 @@ def test_sigterm_to_a_ros2_experiment_stops_the_graphs_of_its_workers(tmp_path):
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err
-    _wait_for(lambda: not any(alive(pid) for pid in family), timeout=5)
-    assert time.monotonic() - start < 5
+    _wait_for(lambda: not any(alive(pid) for pid in family), timeout=PROMPT_S)
+    assert time.monotonic() - start < PROMPT_S
     assert "Traceback" not in err
 
 

@@ -25,7 +25,7 @@ import pytest
 import yaml
 from bagcheck import assert_bag_holds_run
 from graph_runs import assert_same_run, descendants_of, processes_mentioning, shm_group, shm_left
-from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools
+from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools, stop
 from waiting import wait_for
 
 from swarm_ros.app import cli
@@ -445,8 +445,7 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
         refused = ros.run("ros2 param set /world seed 3").stderr
         assert "Setting parameter failed: Trying to set a read-only parameter: seed." in refused, refused
     finally:
-        ctrl_c(proc)
-        proc.wait(timeout=60)
+        stop(proc, 60)
     assert _summary(out)["outcome"] == "interrupted"
 
 
@@ -483,8 +482,7 @@ def test_swarm_ros_replay_is_watched_with_ros2_topic_echo(ros, tmp_path):
         )
         assert replay.poll() is None, "--loop goes on until stopped"
     finally:
-        ctrl_c(replay)
-        replay.wait(timeout=30)
+        stop(replay, 30)
     assert replay.returncode == 130 and "Traceback" not in (tmp_path / "replay.log").read_text()
 
 

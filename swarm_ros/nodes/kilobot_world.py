@@ -199,8 +199,8 @@ class KilobotWorldNode:
                 self._status(RUNNING, f"{self.ls.batches} robot batches in: tick {self.ls.run.tick}")
                 self.pending = True
                 self._go_on()
-            else:  # a batch process that came back: its area at the current tick
-                self._send_areas(batches)
+            elif not self.pending:  # a batch process that came back: its area at the current tick (if it went out:
+                self._send_areas(batches)  # a tick waiting for the monitor goes to every batch when it does)
         if not self.ls.started and time.monotonic() - self.created > self.start_timeout:
             raise RunFailed(f"robot batches did not all announce themselves within {self.start_timeout:g} s")
         if self.ended_at is not None and self.reach is not None:  # the monitor holds the end: nothing more to keep
