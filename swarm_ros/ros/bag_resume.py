@@ -39,10 +39,8 @@ class Resumed:
     messages: list[tuple[str, int, bytes]] = field(default_factory=list)
     leftovers: list[Path] = field(default_factory=list)
     trash: list[Path] = field(default_factory=list)  #: write_run's folders for a replaced run: removed if empty
-
-    marker: str | None = (
-        msgs.CLOCK
-    )  #: the topic whose message ends a whole tick in the bag; None: each message is whole
+    #: the topic whose message ends a whole tick in the bag; None: each message is whole
+    marker: str | None = msgs.CLOCK
 
     @property
     def ticks(self) -> int:
