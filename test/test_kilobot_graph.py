@@ -87,6 +87,42 @@ def test_a_batch_process_killed_mid_run_is_restarted_and_the_run_is_the_same(squ
     assert "started robot_batch_0" in (out / "logs" / "launcher.log").read_text()
 
 
+@pytest.mark.parametrize("stop", ["ctrl-c", "a batch lost past --max-restarts"])
+def test_a_run_stopped_mid_way_is_written_up_to_its_last_record_as_simulate_writes_it(square, tmp_path, stop):
+    """Ctrl-C, or a batch lost more often than the restart bound (its robots cannot be removed under this algorithm:
+    the run cannot go on), stops every process; the monitor writes the run up to the last record it holds, outcome
+    interrupted: its metrics and final state are simulate's with --max-ticks at that tick."""
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "swarm_ros", "run", "--shape", str(square), *RUN, "--out", str(out)]
+    launcher = subprocess.Popen(
+        [*command, "--processes", "2", "--max-restarts", "0"], env=run_env(), stderr=subprocess.PIPE, text=True
+    )
+    wait_ticks_recorded(out, 20_000)
+    if stop == "ctrl-c":
+        launcher.send_signal(signal.SIGINT)
+    else:
+        os.kill(node_pid(out, "robot_batch_1", timeout=10), signal.SIGKILL)
+    _, err = launcher.communicate(timeout=120)
+    summary = json.loads((out / "summary.json").read_text())
+    tick = summary["convergence_tick"]
+    if stop == "ctrl-c":
+        assert launcher.returncode == 130 and f"interrupted at tick {tick}; the run so far is in {out}" in err, err
+    else:
+        assert launcher.returncode == 2 and err.count("\n") == 1, err
+        assert "robot_batch_1 was killed by SIGKILL; it was restarted 0 times already (--max-restarts)" in err
+        assert f"(logs: {out}.logs)" in err
+    assert summary["outcome"] == "interrupted" and tick > 0
+    ref = tmp_path / "ref"
+    assert cli.main(["simulate", "--shape", str(square), *RUN, "--max-ticks", str(tick), "--out", str(ref)]) == 0
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    assert_kilobot_bag_holds_run(out, interrupted=True)
+    assert (out / "recording.rrd").stat().st_size > 0
+    beside = ["ref", "run"] + ["run.logs"] * (stop != "ctrl-c")  # a command that failed keeps its logs, and says so
+    assert sorted(p.name for p in tmp_path.iterdir()) == beside, "nothing partial is left beside the run"
+    assert not processes_mentioning(str(out)), "a process outlived the run"
+
+
 def test_the_graph_refuses_what_the_rubenstein_graph_does_not_do_in_one_line(square, tmp_path, capsys):
     for flags, message in (
         (["--world-shards", "2", "--processes", "2"], "--world-shards is not for the rubenstein algorithm's graph"),

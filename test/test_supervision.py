@@ -216,6 +216,18 @@ def test_under_remove_a_lost_batch_is_not_started_again_and_restarts_count_incar
     assert supervisor.incarnation("world") == 1
 
 
+def test_a_batch_whose_robots_cannot_be_removed_ends_the_run_once_out_of_restarts():
+    """The rubenstein algorithm's world cannot remove a lost batch's robots: past the bound the run ends (the
+    launcher stops every process and the monitor writes the run so far), where the study's model's goes on."""
+    supervisor = Supervisor(max_restarts=1, removes=False, said=("--on-batch-loss remove", "--max-restarts"))
+    assert supervisor.exited("robot_batch_0", KILLED).restart
+    assert supervisor.exited("robot_batch_0", KILLED) == Verdict(
+        end="robot_batch_0 was killed by SIGKILL; it was restarted 1 times already (--max-restarts): the run cannot "
+        "go on without its robots"
+    )
+    assert Supervisor(max_restarts=0).exited("robot_batch_0", KILLED).note.endswith("the run goes on")
+
+
 def test_stopped_statuses_are_the_nodes_interrupt_statuses():
     from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_ORPHANED
 

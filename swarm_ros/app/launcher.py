@@ -152,9 +152,9 @@ class Launch:
     @cached_property
     def supervisor(self) -> Supervisor:
         """What is done when a node process ends: the rules the launch file follows too."""
-        return Supervisor(
-            self.max_restarts, self.on_batch_loss, said=("--on-batch-loss remove", "--max-restarts"), stops=frozenset()
-        )  # Ctrl-C reaches this process only: a node's signal is a fault
+        removes = self.params.algorithm == DARR_NIAZI  # only the study's world can remove a lost batch's robots
+        said = ("--on-batch-loss remove", "--max-restarts")
+        return Supervisor(self.max_restarts, self.on_batch_loss, removes, said, stops=frozenset())  # a signal: a fault
 
     def run(self) -> Path:
         run_key()  # a SWARM_ROS_RUN_KEY that is set but unusable fails here, before anything is made

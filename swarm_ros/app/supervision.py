@@ -69,10 +69,12 @@ class Supervisor:
     """The rules above, for one launch (the launch file's, or ``swarm-ros run``'s: :mod:`swarm_ros.app.launcher`).
     ``exited`` is told each process's end; it counts restarts per node. ``said``: how the user set the batch
     policy and the restart bound, for the messages (``--on-batch-loss remove``, ``--max-restarts`` for the
-    command line)."""
+    command line). ``removes``: whether the world can remove a lost batch's robots and go on (the rubenstein
+    algorithm's cannot: a batch lost past the bound ends its run, as the world or the monitor would)."""
 
     max_restarts: int
     on_batch_loss: str = "restart"
+    removes: bool = True
     said: tuple[str, str] = ("on_batch_loss: remove", "max_restarts")
     #: exit statuses that mean the user stopped the run: under ``ros2 launch`` a terminal's Ctrl-C signals every
     #: node; ``swarm-ros run`` gives each node a process group of its own, so there a signal is a fault
@@ -119,6 +121,11 @@ class Supervisor:
                 return self._restart(name, how)
             if not started:
                 return Verdict(end=f"{how} before the run started, {self.max_restarts + 1} times")
+            if not self.removes:
+                return Verdict(
+                    end=f"{how}; it was restarted {self.max_restarts} times already ({self.said[1]}): "
+                    f"the run cannot go on without its robots"
+                )
         then = (
             f"the world removes its robots ({self.said[0]})"
             if self.on_batch_loss != "restart"
@@ -251,7 +258,7 @@ def launch_setup(
         path,
         out,
         log_dir / CHECKPOINT,
-        Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"])),
+        Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"]), removes=params.algorithm != RUBENSTEIN),
         region_cuts,
         tuple(plan_for(params.algorithm, processes, region_cuts, world_shards)),
     )

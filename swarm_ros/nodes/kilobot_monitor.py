@@ -51,7 +51,7 @@ from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.bag_resume import resume
 from swarm_ros.ros.bag_writer import KILOBOT_TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
-from swarm_ros.ros.runtime import run_node
+from swarm_ros.ros.runtime import EXIT_INTERRUPTED, handle_missed, run_node
 
 RECORD_EVERY = 20  #: as the world's
 
@@ -211,12 +211,24 @@ class KilobotMonitorNode:
         return None
 
     def close(self, code: int) -> None:
-        """A run that ends here unwritten keeps its recording as ``<out_dir>.partial.rrd`` and its bag, closed, as
-        ``<out_dir>.partial-bag``; a bag that holds nothing of a run (no tick came) is removed."""
+        """On the way out of a run stopped before its end. Interrupted (Ctrl-C, or the launcher stopping the run) once
+        the robots of a record are in: the run up to that record becomes the run directory, outcome ``interrupted``,
+        as ``simulate`` writes one (metrics.csv, final_state.csv and summary.json agree on its tick). Otherwise the
+        recording so far is kept as ``<out_dir>.partial.rrd`` and the bag, closed, as ``<out_dir>.partial-bag``; a
+        first process interrupted before any tick came keeps neither."""
         if self.finished:
             return
+        if code == EXIT_INTERRUPTED and self.outcome is None:
+            handle_missed(self.node)  # what the world sent before it stopped is the run so far
+            if 0 <= self.robots_tick <= self.last_tick:
+                self.history = self.history[: self.robots_tick + 1]  # one row a tick from tick 0: up to the record
+                self._write(Outcome.INTERRUPTED)
+                return
+        unstarted = code == EXIT_INTERRUPTED and not len(self.history) and not self.incarnation
         if self.recorder is not None:
             self.recorder.close(self.copy, "interrupted")
+        if unstarted and self.rrd is not None:
+            self.rrd.unlink(missing_ok=True)  # its own, of no tick
         if self.bag is not None:
             self.bag.move_to(run_dir.partial_bag(self.out)) if len(self.history) else self.bag.discard()
 
