@@ -358,3 +358,40 @@ def test_the_monitors_held_report_is_checked():
     assert check_held(np.array([run.tick, 1]), run) == (run.tick, True)
     with pytest.raises(Rejected, match="held"):
         check_held(np.array([run.tick - 1, 1]), run)
+
+
+def test_the_world_names_the_batches_it_waits_for():
+    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    ls = KilobotLockstep(run)
+    for k in range(2):
+        ls.announce(f"robot_batch_{k}", k, 2)
+    assert ls.awaited() == ["robot_batch_0", "robot_batch_1"]
+    ls.decisions(0, 1, decisions_of_batch_0(run, ls))
+    assert ls.awaited() == ["robot_batch_1"]
+
+
+def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_what_it_waits_for():
+    """The watch behind the rubenstein world's liveliness lines and its STILL_S bound (a peer started by hand that
+    died would otherwise keep the run waiting for ever)."""
+    from swarm_ros.core.errors import RunFailed
+    from swarm_ros.protocol.kilobot_lockstep import KilobotWatch
+    from swarm_ros.protocol.world_port import STILL_S
+
+    watch = KilobotWatch(now=100.0)
+    assert watch.liveliness("robot_batch_1", 1, 0) == "robot_batch_1 is alive (liveliness)"
+    assert watch.liveliness("robot_batch_1", 1, 0) is None  # a change that says nothing new
+    assert watch.liveliness("robot_batch_1", 0, 1) == "robot_batch_1 was lost (liveliness lapsed): the run waits for it"
+    assert watch.liveliness("robot_batch_1", 0, 1) is None
+    assert watch.lapsed == {"robot_batch_1"}
+    assert not watch.still(100.0 + STILL_S - 1)
+    watch.moved(150.0)  # a tick went out (a restarted process took the run up)
+    assert not watch.still(100.0 + STILL_S + 1)
+    assert watch.still(150.0 + STILL_S)
+    failure = watch.failure(42, ["robot_batch_0", "robot_batch_1"], "")
+    assert isinstance(failure, RunFailed)
+    assert str(failure) == (
+        f"the run has not moved for {STILL_S:g} s at tick 42 (waiting for: robot_batch_0, robot_batch_1 (liveliness "
+        "lapsed); messages dropped: nothing): its processes are gone or their messages do not get through"
+    )
+    assert watch.liveliness("robot_batch_1", 1, 0) == "robot_batch_1 is back (liveliness)"
+    assert watch.lapsed == set()

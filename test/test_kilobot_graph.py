@@ -85,6 +85,8 @@ def test_a_batch_process_killed_mid_run_is_restarted_and_the_run_is_the_same(squ
     summary = assert_same_run(reference, out)
     assert [r["node"] for r in summary["restarts"]] == ["robot_batch_0"]
     assert "started robot_batch_0" in (out / "logs" / "launcher.log").read_text()
+    world = (out / "logs" / "world.log").read_text()  # the world follows each peer's liveliness
+    assert all(f"{name} is alive (liveliness)" in world for name in ("robot_batch_0", "robot_batch_1", "monitor"))
 
 
 @pytest.mark.parametrize("stop", ["ctrl-c", "a batch lost past --max-restarts"])

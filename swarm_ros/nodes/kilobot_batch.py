@@ -19,7 +19,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.duration import Duration
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Int64MultiArray
+from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core.errors import ConfigError, Rejected
 from swarm_ros.core.params import RUBENSTEIN
@@ -62,6 +62,7 @@ class KilobotBatchNode:
         self.pub_decisions = self.signer.publisher(PointCloud2, kilobot_decisions_topic(name), msgs.DECISIONS_QOS)
         self.gate.subscribe(PointCloud2, self.area, self._on_area, msgs.LATCHED_QOS)
         self.gate.subscribe(DiagnosticArray, STATUS, self._on_status, msgs.STATUS_QOS)
+        self.alive = node.create_publisher(Empty, msgs.alive_topic(name), msgs.ALIVE_QOS)  # liveliness only
         announce = self.signer.publisher(Int64MultiArray, BATCHES, msgs.BATCHES_QOS)
         hello = msgs.ids_message(np.array([self.k, batches], dtype=np.int64))
         hello.layout.dim[0].label = batch_label(name, int(own["incarnation"]))

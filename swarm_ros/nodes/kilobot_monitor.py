@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Int64MultiArray
+from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
 from swarm_ros.core.errors import ConfigError, Rejected
@@ -93,6 +93,7 @@ class KilobotMonitorNode:
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_held = self.signer.publisher(Int64MultiArray, KILOBOT_HELD, msgs.LATCHED_QOS)
+        self.alive = node.create_publisher(Empty, msgs.alive_topic(MONITOR), msgs.ALIVE_QOS)  # liveliness only
         self.handlers = {KILOBOT_ROBOTS: self._on_robots, KILOBOT_METRICS: self._on_metrics, STATUS: self._on_status}
         if self.incarnation:
             self._resume()

@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.duration import Duration
+from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Int64MultiArray
+from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core.errors import ConfigError, Rejected, RunFailed
 from swarm_ros.core.params import RUBENSTEIN
@@ -36,7 +37,7 @@ from swarm_ros.protocol import checks, kilobot_checkpoint
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
 from swarm_ros.protocol.kilobot_checkpoint import save_every
-from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep, check_held, monitor_reach
+from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep, KilobotWatch, check_held, monitor_reach
 from swarm_ros.protocol.kilobot_rows import KILOBOT_DECISION_ROW, kilobot_rows, metrics_rows
 from swarm_ros.protocol.plan import (
     BATCHES,
@@ -90,6 +91,8 @@ class KilobotWorldNode:
         self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.gate.subscribe(Int64MultiArray, KILOBOT_HELD, self._on_held, msgs.LATCHED_QOS)
+        self.watch = KilobotWatch(self.created)
+        self._watch_alive(MONITOR)
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
         self._status(STARTING, "waiting for robot batches and the monitor")
 
@@ -127,6 +130,7 @@ class KilobotWorldNode:
             self.areas[name] = self.signer.publisher(PointCloud2, kilobot_area_topic(name), msgs.LATCHED_QOS)
             topic = kilobot_decisions_topic(name)
             self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_decisions, k, topic), msgs.DECISIONS_QOS)
+            self._watch_alive(name)
         self.waiting += send
         self.node.get_logger().info(f"{name}: batch {k} of {batches}")
 
@@ -150,8 +154,28 @@ class KilobotWorldNode:
         except Rejected as fault:
             self.rejections.drop(KILOBOT_HELD, fault)
             return
+        if tick > self.held or ended > self.held_end:
+            self.watch.moved(time.monotonic())
         self.held, self.held_end = max(self.held, tick), self.held_end or ended
         self._go_on()
+
+    def _watch_alive(self, name: str) -> None:
+        """Follow the liveliness of peer ``name``'s silent writer (DDS tells when its process dies or stalls)."""
+        on_change = functools.partial(self._on_liveliness, name)
+        callbacks = SubscriptionEventCallbacks(liveliness=on_change)
+        self.node.create_subscription(
+            Empty, msgs.alive_topic(name), lambda _: None, msgs.ALIVE_QOS, event_callbacks=callbacks
+        )
+
+    def _on_liveliness(self, name: str, info: QoSLivelinessChangedInfo) -> None:
+        said = self.watch.liveliness(name, info.alive_count, info.not_alive_count)
+        if said is not None:
+            if name in self.watch.lapsed:  # (a logger method picked by a conditional expression and called in this
+                self.node.get_logger().warning(said)  # event callback crashed the process inside rclpy, 3 runs of 3)
+            else:
+                self.node.get_logger().info(said)
+            if self.ended_at is None:
+                self._status(RUNNING if self.ls.started and not self.first else STARTING, said)
 
     def _go_on(self) -> None:
         """Send the settled tick, unless it is past the monitor's reach (then once the monitor reports more held)."""
@@ -173,6 +197,7 @@ class KilobotWorldNode:
     def _publish_tick(self) -> None:
         run = self.ls.run
         tick, ended = run.tick, run.outcome is not None
+        self.watch.moved(time.monotonic())
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
             kilobot_checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.batches)
         if ended or tick % self.every == 0:
@@ -187,7 +212,8 @@ class KilobotWorldNode:
             self._send_areas(list(range(self.ls.batches)))
 
     def _status(self, outcome: str, message: str) -> None:
-        self.pub_status.publish(msgs.status_message(self.ls.run.tick, outcome, message))
+        waiting: dict[str, object] = {"waiting_for": ",".join(sorted(self.watch.lapsed))}  # lost peers, awaited
+        self.pub_status.publish(msgs.status_message(self.ls.run.tick, outcome, message, extra=waiting))
 
     # -- the node runtime's hooks ----------------------------------------------------------
     def poll(self) -> None:
@@ -203,6 +229,10 @@ class KilobotWorldNode:
                 self._send_areas(batches)  # a tick waiting for the monitor goes to every batch when it does)
         if not self.ls.started and time.monotonic() - self.created > self.start_timeout:
             raise RunFailed(f"robot batches did not all announce themselves within {self.start_timeout:g} s")
+        if self.ls.started and self.ended_at is None and self.watch.still(time.monotonic()):  # for STILL_S
+            unheard = [name for name in self.ls.hosts.values() if name not in self.areas]  # a resumed world's
+            awaited = (unheard or [MONITOR]) if self.first or self.pending else self.ls.awaited()
+            raise self.watch.failure(self.ls.run.tick, awaited, self.rejections.text())
         if self.ended_at is not None and self.reach is not None:  # the monitor holds the end: nothing more to keep
             self.finished = self.held_end
         elif self.ended_at is not None:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarm_ros.core.errors import Rejected
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.params import MAX_TICKS
 from swarm_ros.core.rubenstein.rule import JOINED, Decided
 from swarm_ros.core.rubenstein.run import KilobotRun
@@ -27,6 +27,7 @@ from swarm_ros.core.rubenstein.strips import Strips, cell_columns, strips_for
 from .kilobot_checks import DECISION_FAULTS, decision_faults, first_fault
 from .kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows
 from .plan import KILOBOT_KEPT as KEPT
+from .world_port import STILL_S
 
 _STEP_TOLERANCE = 1e-9  #: d: a step's end may differ from the rule's in the last bits of another libm's cos
 
@@ -113,6 +114,10 @@ class KilobotLockstep:
         assert self.strips is not None
         return kilobot_rows(np.flatnonzero(self.strips.in_area(self._columns(), k)), self.run.robots)
 
+    def awaited(self) -> list[str]:
+        """The batches whose decisions for the next tick are not in yet, by node name."""
+        return [name for k, name in sorted(self.hosts.items()) if k not in self.parts]
+
     def own(self, k: int) -> np.ndarray:
         """The robots batch k decides for at the next tick: its strip's, not joined, ascending."""
         assert self.strips is not None
@@ -138,6 +143,48 @@ class KilobotLockstep:
         self.run.settle([self.parts[b] for b in range(self.batches)])
         self.parts.clear()
         return True
+
+
+class KilobotWatch:
+    """What the world knows of its peers' processes, and whether the run still moves.
+
+    Each batch and the monitor hold a silent writer whose DDS liveliness lapses when its process dies or stalls. A
+    lapsed peer is only waited for (a launcher starts its process again, and the new one takes the run up where it
+    is); it is named in the status, so a run started by hand says what it waits for. Whatever the liveliness says, a
+    run whose world has neither sent a tick nor heard the monitor hold a further record for ``STILL_S`` fails: a peer
+    started by hand that died, or a transport that stopped delivering, would otherwise keep it waiting for ever."""
+
+    def __init__(self, now: float) -> None:
+        self.moved_at = now  #: when a tick last went out, or the monitor last reported more held
+        self.seen: set[str] = set()  #: the peers whose liveliness was ever seen
+        self.lapsed: set[str] = set()  #: the peers whose liveliness lapsed and has not come back
+
+    def liveliness(self, name: str, alive: int, not_alive: int) -> str | None:
+        """Peer ``name``'s liveliness changed (``alive`` writers alive, ``not_alive`` lapsed): what to log, if any."""
+        if alive > 0:
+            back, first = name in self.lapsed, name not in self.seen
+            self.seen.add(name)
+            self.lapsed.discard(name)
+            return f"{name} is alive (liveliness)" if first else f"{name} is back (liveliness)" if back else None
+        if not_alive > 0 and name not in self.lapsed:
+            self.lapsed.add(name)
+            return f"{name} was lost (liveliness lapsed): the run waits for it"
+        return None
+
+    def moved(self, now: float) -> None:
+        self.moved_at = now
+
+    def still(self, now: float) -> bool:
+        """Whether the run has not moved for ``STILL_S``: it fails then (:meth:`failure`)."""
+        return now - self.moved_at >= STILL_S
+
+    def failure(self, tick: int, awaited: list[str], dropped: str) -> RunFailed:
+        """The error of a run still at ``tick``, waiting for the peers ``awaited``, with ``dropped`` messages."""
+        waits = ", ".join(f"{n} (liveliness lapsed)" if n in self.lapsed else n for n in awaited) or "nothing"
+        return RunFailed(
+            f"the run has not moved for {STILL_S:g} s at tick {tick} (waiting for: {waits}; messages dropped: "
+            f"{dropped or 'nothing'}): its processes are gone or their messages do not get through"
+        )
 
 
 def check_decisions(run: KilobotRun, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Decided]:
