@@ -28,6 +28,7 @@ from swarm_ros.core.params import (
 from swarm_ros.core.resources import check_world_memory
 from swarm_ros.core.shapes import Shape, builtin_shapes, builtin_shapes_3d
 from swarm_ros.core.signals import EXIT_INTERRUPTED, StopFlag
+from swarm_ros.protocol.plan import removes_lost_robots
 
 if TYPE_CHECKING:
     from swarm_ros.artifacts.rerun_recording import Recorder
@@ -220,7 +221,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
         **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {}),
     }
-    if params.algorithm == RUBENSTEIN and world.get("on_batch_loss") == "remove":
+    if not removes_lost_robots(params.algorithm) and world.get("on_batch_loss") == "remove":
         raise ParameterError(
             f"--on-batch-loss remove is not for the {RUBENSTEIN} algorithm's graph: a lost batch is restarted"
         )

@@ -63,7 +63,7 @@ from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recor
 from swarm_ros.core.params import DARR_NIAZI, RunParams, Settings, node_defaults
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.signals import StopFlag, process_age
-from swarm_ros.protocol.plan import MONITOR, is_world, plan_for
+from swarm_ros.protocol.plan import MONITOR, is_world, plan_for, removes_lost_robots
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros.shm import clean_shm, shm_locks
 
@@ -152,8 +152,7 @@ class Launch:
     @cached_property
     def supervisor(self) -> Supervisor:
         """What is done when a node process ends: the rules the launch file follows too."""
-        removes = self.params.algorithm == DARR_NIAZI  # only the study's world can remove a lost batch's robots
-        said = ("--on-batch-loss remove", "--max-restarts")
+        said, removes = ("--on-batch-loss remove", "--max-restarts"), removes_lost_robots(self.params.algorithm)
         return Supervisor(self.max_restarts, self.on_batch_loss, removes, said, stops=frozenset())  # a signal: a fault
 
     def run(self) -> Path:

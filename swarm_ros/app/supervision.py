@@ -36,7 +36,7 @@ from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, InputError, ParameterError, RunFailed
 from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETER, Param, node_defaults
 from swarm_ros.core.signals import EXIT_INTERRUPTED
-from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world, plan_for
+from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world, plan_for, removes_lost_robots
 
 
 class RunEnded(RunFailed):
@@ -220,7 +220,7 @@ def launch_setup(
     shape, params = settings.resolve()
     if params.algorithm == RUBENSTEIN and (world_shards > 1 or region_cuts):
         raise InputError(f"world_shards and region_cuts are not for the {RUBENSTEIN} algorithm's graph")
-    if params.algorithm == RUBENSTEIN and nodes["world"].get("on_batch_loss") == "remove":
+    if not removes_lost_robots(params.algorithm) and nodes["world"].get("on_batch_loss") == "remove":
         raise InputError(
             f"on_batch_loss: remove is not for the {RUBENSTEIN} algorithm's graph: a lost batch is restarted"
         )
@@ -258,7 +258,7 @@ def launch_setup(
         path,
         out,
         log_dir / CHECKPOINT,
-        Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"]), removes=params.algorithm != RUBENSTEIN),
+        Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"]), removes_lost_robots(params.algorithm)),
         region_cuts,
         tuple(plan_for(params.algorithm, processes, region_cuts, world_shards)),
     )

@@ -75,6 +75,13 @@ def kilobot_plan(processes: int) -> list[tuple[str, str, dict[str, int | str]]]:
     return [(MONITOR, KILOBOT_MONITOR, {}), *batches, (WORLD, KILOBOT_WORLD, {})]
 
 
+def removes_lost_robots(algorithm: str) -> bool:
+    """Whether the world of ``algorithm``'s graph can remove a lost batch's robots and go on (``on_batch_loss:
+    remove``, or a batch out of restarts): the study's model's can; the rubenstein algorithm has no robot failure,
+    so its graph refuses the policy and ends a run whose batch is lost past ``max_restarts``."""
+    return algorithm != RUBENSTEIN
+
+
 def plan_for(
     algorithm: str, processes: int, region_cuts: str = "", world_shards: int = 1
 ) -> list[tuple[str, str, dict[str, int | str]]]:
