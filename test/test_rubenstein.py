@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from swarm_ros.core import Shape, World
-from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.errors import InvariantError, ParameterError
 from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.layout import SEEDS, ShapeFrame, start_positions
 from swarm_ros.core.rubenstein.rule import (
@@ -23,6 +23,7 @@ from swarm_ros.core.rubenstein.rule import (
     trilaterate,
 )
 from swarm_ros.core.rubenstein.run import KilobotRun, hole_filled, summary_of
+from swarm_ros.core.rubenstein.tick_checks import check_tick, snapshot
 
 pytestmark = pytest.mark.unit
 
@@ -190,30 +191,61 @@ def test_the_start_rule_lets_one_rim_robot_go_at_a_time():
     assert began_any >= 5
 
 
-def test_no_overlap_ever_joined_robots_stay_put_and_keep_their_gradient():
+def test_every_tick_of_a_run_keeps_what_check_checks():
+    """No overlap ever, joined robots stay put with their gradient and estimate, stationary robots do not move and
+    movers step at most a step: every tick of a whole run, by the checks ``simulate --check`` runs."""
     run = kilobot(square(6), 40, seed=1)
-    s = run.robots
     while not run.done:
-        was = s.state == JOINED
-        x, y, g, ex = s.x[was].copy(), s.y[was].copy(), s.g[was].copy(), s.ex[was].copy()
+        prev, covered = snapshot(run), run.metrics["covered"]
         run.step()
-        assert np.array_equal(s.x[was], x) and np.array_equal(s.y[was], y)
-        assert np.array_equal(s.g[was], g) and np.array_equal(s.ex[was], ex)
-        assert (s.state[was] == JOINED).all()
-        if run.tick % 50 == 0 or run.done:
-            d = np.hypot(s.x[:, None] - s.x[None, :], s.y[:, None] - s.y[None, :]) + np.eye(s.x.size) * 9
-            assert d.min() >= 1.0 - 1e-9
+        check_tick(prev, covered, run)
     assert run.outcome.value in ("complete", "complete_with_extras")
 
 
-def test_every_tick_is_checked_for_overlap_in_a_short_stretch_of_edge_following():
-    run = kilobot(square(6), 40, seed=2)
+def _damaged(what: str) -> tuple[KilobotRun, object, float]:
+    """A run past its first joins, one tick stepped, then ``what`` broken in its robots (before, after, covered)."""
+    run = kilobot(square(6), 40, seed=1)
+    run.run(3000)
+    prev, covered = snapshot(run), run.metrics["covered"]
+    run.step()
     s = run.robots
-    run.run(400)
-    for _ in range(1200):
-        run.step()
-        d = np.hypot(s.x[:, None] - s.x[None, :], s.y[:, None] - s.y[None, :]) + np.eye(s.x.size) * 9
-        assert d.min() >= 1.0 - 1e-9
+    joined = int(np.flatnonzero((prev.state == JOINED) & (np.arange(40) >= 4))[0])
+    mover = int(np.flatnonzero((prev.state == MOVE_OUTSIDE) | (prev.state == MOVE_INSIDE))[0])
+    waiting = int(np.flatnonzero(prev.state == WAIT)[0])
+    if what == "joined moved":
+        s.x[joined] += 0.01
+    elif what == "joined forgot":
+        s.g[joined] += 1
+    elif what == "leapt":
+        s.x[mover] += 0.2
+    elif what == "stationary moved":
+        s.y[waiting] -= 0.01
+    elif what == "back to start":
+        s.state[mover] = START
+    elif what == "unknown state":
+        s.state[waiting] = 9
+    elif what == "overlap":  # a waiting robot that was, and is, half a diameter from a joined one
+        for robots in (prev, s):
+            robots.x[waiting], robots.y[waiting] = s.x[joined] + 0.5, s.y[joined]
+    return run, prev, covered
+
+
+@pytest.mark.parametrize(
+    "what,rule",
+    [
+        ("joined moved", "joined robot \\[\\d+\\] changed its x"),
+        ("joined forgot", "joined robot \\[\\d+\\] changed its g"),
+        ("leapt", "stepped \\[0\\.\\d+\\] d, more than a step"),
+        ("stationary moved", "stationary robot \\[\\d+\\] moved"),
+        ("back to start", "went back to start"),
+        ("unknown state", "a state code outside"),
+        ("overlap", "robots \\[\\[\\d+, \\d+\\]\\] overlap"),
+    ],
+)
+def test_the_tick_checks_name_each_broken_rule(what, rule):
+    run, prev, covered = _damaged(what)
+    with pytest.raises(InvariantError, match=f"tick {run.tick}: .*{rule}"):
+        check_tick(prev, covered, run)
 
 
 def test_a_small_solid_shape_completes_and_covers_every_pixel():
@@ -420,9 +452,11 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     stats = (out / "stats.md").read_text()
     table = stats[stats.index("## Time and accuracy") :]
     assert "| square | 40 | rubenstein | – | 2 |" in table and "| square | 40 | paper | 2 | 2 |" in table
-    assert (out / "figures" / "square_rubenstein_v1.png").stat().st_size > 0
+    assert (out / "figures" / "square_rubenstein.png").stat().st_size > 0  # no vision radius in its name
+    assert (out / "figures" / "algorithms.png").stat().st_size > 0  # both algorithms on shared axes
+    assert "### The rubenstein algorithm" in stats and "| joined | not joined | uncovered pixels |" in stats
     # each algorithm's counts in its own words: rubenstein's robots join and cover pixels
-    assert {"joined robots", "uncovered pixels"} <= labels["square_rubenstein_v1.png"]
+    assert {"joined robots", "uncovered pixels"} <= labels["square_rubenstein.png"]
     assert {"localized robots", "empty shape patches"} <= labels["square_paper_v1.png"]
     # each grid point's repetition 0 left its step curve, which the report draws without running anything again
     from swarm_ros.app.curves import curve_name, read_curve
@@ -507,3 +541,53 @@ def test_bad_rubenstein_input_is_one_line_and_writes_nothing(tmp_path, flags, me
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
     assert done.stderr.count("\n") == 1 and message in done.stderr, done.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_check_runs_the_tick_checks_after_every_tick(tmp_path, monkeypatch):
+    from swarm_ros.app import cli
+    from swarm_ros.core.rubenstein import tick_checks
+
+    checked = []
+    real = tick_checks.check_tick
+
+    def spy(prev, covered, run):
+        checked.append(run.tick)
+        real(prev, covered, run)
+
+    monkeypatch.setattr(tick_checks, "check_tick", spy)
+    grid = tmp_path / "square.txt"
+    grid.write_text("######\n" * 6)
+    flags = ["--algorithm", "rubenstein", "--shape", str(grid), "--robots", "40", "--max-ticks", "300"]
+    assert cli.main(["simulate", *flags, "--check", "--quiet", "--no-recording", "--out", str(tmp_path / "r")]) == 0
+    assert checked == list(range(1, 301))
+
+
+@pytest.mark.parametrize("algorithm", ["darr-niazi", "rubenstein"])
+def test_every_algorithm_takes_at_most_one_robot_a_free_patch_of_its_world(algorithm):
+    """One bound for both (Shape.check_room, called from check_run): the rubenstein pack no longer grows without
+    limit (100,000 robots stood 332 d from a 32-patch world's centre)."""
+    Settings(shape="star", algorithm=algorithm).updated(robots=3969).resolve()  # 63 x 63 free patches: fits
+    with pytest.raises(ParameterError, match=r"star\.txt: 3970 robots do not fit on the 3969 free patches"):
+        Settings(shape="star", algorithm=algorithm).updated(robots=3970).resolve()
+
+
+def test_a_swarm_larger_than_the_memory_available_is_refused_before_anything_is_made(monkeypatch):
+    from swarm_ros.core import resources
+
+    monkeypatch.setattr(resources, "available_memory", lambda: 500 * 1024)  # 500 KiB free
+    Settings(shape="star", robots=1000).resolve()  # 1,000 x 250 bytes: fits
+    with pytest.raises(ParameterError, match=r"1,000 robots need about 0\.6 MiB under rubenstein \(600 bytes each\)"):
+        Settings(shape="star", robots=1000, algorithm="rubenstein").resolve()
+    monkeypatch.setattr(resources, "available_memory", lambda: None)  # not Linux: nothing to go by
+    Settings(shape="star", robots=1000, algorithm="rubenstein").resolve()
+
+
+def test_a_rubenstein_run_directory_is_named_without_a_vision_radius():
+    from datetime import datetime
+
+    from swarm_ros.artifacts.run_dir import default_run_dir
+
+    at = datetime(2026, 11, 28, 14, 0, 0)
+    assert default_run_dir("star", RunParams(1036, seed=1), at).name == "20261128-140000_star_n1036_v1_s1"
+    rb = RunParams(1036, seed=2, algorithm="rubenstein")
+    assert default_run_dir("star", rb, at).name == "20261128-140000_star_n1036_rubenstein_s2"

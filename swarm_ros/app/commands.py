@@ -26,6 +26,7 @@ from swarm_ros.core.params import (
     node_defaults,
 )
 from swarm_ros.core.resources import check_world_memory
+from swarm_ros.core.run_bounds import check_given
 from swarm_ros.core.shapes import Shape, builtin_shapes, builtin_shapes_3d
 from swarm_ros.core.signals import EXIT_INTERRUPTED, StopFlag
 from swarm_ros.protocol.plan import removes_lost_robots
@@ -96,7 +97,9 @@ def _settings(args: argparse.Namespace) -> tuple[Settings, dict[str, dict[str, o
     flags = {p.name: getattr(args, p.name) for p in RUN_PARAMETERS if p.flag != ""}
     if args.fail_robots:
         flags["fail_fraction"], flags["fail_tick"] = args.fail_robots
-    return settings.updated(**flags), nodes
+    settings = settings.updated(**flags)
+    check_given(flags, settings.algorithm)
+    return settings, nodes
 
 
 def _flag(value: object, section: dict[str, object], key: str) -> Any:
@@ -118,7 +121,10 @@ def _prepare(
         check_graph_shape(settings.shape)
     shape, params = settings.resolve()
     if graph and params.algorithm == RUBENSTEIN:
-        _check_kilobot_graph(args, shape, params)
+        from swarm_ros.app.processes import check_rubenstein_graph
+
+        cuts = (args.region_cuts, nodes["robot_batch"].get("region_cuts"))
+        check_rubenstein_graph(shape, params, args.processes, args.world_shards, *cuts, args.params_file)
     monitor = nodes["monitor"]
     recording = RecordingOptions(
         enabled=bool(_flag(args.record, monitor, "record")),
@@ -126,11 +132,7 @@ def _prepare(
         spawn=args.spawn,
         connect=args.connect or str(monitor.get("viewer_url", "")) or None,
     )
-    out = args.out or (
-        Path(str(monitor["out_dir"]))
-        if monitor.get("out_dir")
-        else default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
-    )
+    out = args.out or (Path(str(monitor["out_dir"])) if monitor.get("out_dir") else default_run_dir(shape.name, params))
     args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
     check_out_dir(out, args.overwrite)
     claim_out_dir(out)  # a second command for the same directory is refused now, not after its run
@@ -148,18 +150,6 @@ def _prepare(
     return settings, shape, params, out, recording.reachable(), nodes
 
 
-def _check_kilobot_graph(args: argparse.Namespace, shape: Shape, params: RunParams) -> None:
-    """Refuse, in one line, what the rubenstein algorithm's graph does not do yet, and a batch count its cell grid
-    cannot be cut into."""
-    from swarm_ros.core.rubenstein.run import KilobotRun
-    from swarm_ros.core.rubenstein.strips import strips_for
-
-    for given, flag in ((args.world_shards > 1, "--world-shards"), (args.region_cuts, "--region-cuts")):
-        if given:
-            raise ParameterError(f"{flag} is not for the {RUBENSTEIN} algorithm's graph, which cuts its own strips")
-    strips_for(KilobotRun(shape, params), args.processes)
-
-
 def cmd_simulate(args: argparse.Namespace) -> int:
     from swarm_ros.artifacts.run_dir import partial_recording, write_run
     from swarm_ros.core.run_result import RunRecord
@@ -168,13 +158,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if params.algorithm == RUBENSTEIN:
         from swarm_ros.app.kilobot import simulate_kilobot
 
-        note_compiling(args.quiet)
+        note_compiling(args.quiet, params.algorithm)
         return simulate_kilobot(args, shape, params, out, options, PROG, PROGRESS_TICKS)
 
     from swarm_ros.core.engine import Simulation  # here: numba is not needed by the other commands' start
     from swarm_ros.core.metrics import Outcome
 
-    note_compiling(args.quiet)
+    note_compiling(args.quiet, params.algorithm)
     start = time.perf_counter()
     stopped = recorder = None
     # Ctrl-C or SIGTERM, from here on: the run so far (tick 0 at least) becomes an 'interrupted' run directory
@@ -328,12 +318,12 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def note_compiling(quiet: bool) -> None:
-    """Say in one line (unless ``quiet``) that the numba kernels must be compiled first, if they must."""
-    from swarm_ros.core.kernels import COMPILING, kernels_cached
+def note_compiling(quiet: bool, algorithm: str) -> None:
+    """Say in one line (unless ``quiet``) that ``algorithm``'s numba kernels must be compiled first, if they must."""
+    from swarm_ros.core.kernels import compiling_note, kernels_cached
 
-    if not quiet and not kernels_cached():
-        print(f"{PROG}: {COMPILING}", file=sys.stderr, flush=True)
+    if not quiet and not kernels_cached(algorithm):
+        print(f"{PROG}: {compiling_note(algorithm)}", file=sys.stderr, flush=True)
 
 
 def _closed_whole(recorder: Recorder) -> bool:

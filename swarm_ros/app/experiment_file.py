@@ -54,6 +54,7 @@ from swarm_ros.core.params import (
     Settings,
 )
 from swarm_ros.core.resources import check_world_memory
+from swarm_ros.core.run_bounds import check_run
 from swarm_ros.core.shapes import Shape
 
 #: The most runs an experiment may hold: its runs are listed (and results.csv holds a line each) before the
@@ -238,7 +239,8 @@ def load_experiment(path: str | Path) -> Experiment:
             fixed.updated(vision_radius=v).run_params(robots=5).check_vision(fixed.world_radius)
         except InputError as exc:
             raise _fail(path, f"vision_radius[{i}]", str(exc)) from None
-    shapes = _load_shapes(path, data["shapes"], World(fixed.world_radius))
+    loaded: dict[str, tuple[str, Shape]] = {}
+    shapes = _load_shapes(path, data["shapes"], World(fixed.world_radius), loaded)
     runs = own["repetitions"] * sum(len(sizes) for *_, sizes in shapes) * math.prod(len(v) for v in axes.values())
     # (an upper bound: a rubenstein point comes once whatever the study's model's axes list)
     if runs > MAX_RUNS:
@@ -257,15 +259,20 @@ def load_experiment(path: str | Path) -> Experiment:
         fixed=fixed,
         reference=reference,
     )
-    for spec in exp.runs()[:: exp.repetitions]:  # the parameters of every grid point
+    for spec in exp.runs()[:: exp.repetitions]:  # every grid point, checked as a run checks it (check_run)
+        where, shape = loaded[spec.shape]
         try:
-            spec.params()
+            check_run(shape, spec.params())
         except InputError as exc:
-            raise _fail(path, f"shapes.{spec.shape}", str(exc)) from None
+            raise _fail(path, where, str(exc)) from None
     return exp
 
 
-def _load_shapes(path: Path, shapes: object, world: World) -> tuple[tuple[str, str, int, tuple[int, ...]], ...]:
+def _load_shapes(
+    path: Path, shapes: object, world: World, loaded: dict[str, tuple[str, Shape]] | None = None
+) -> tuple[tuple[str, str, int, tuple[int, ...]], ...]:
+    """The experiment's shapes as (name, source, patches, group sizes), each loaded and its sizes checked; ``loaded``
+    (if given) receives each shape's key in the file and the shape, by name."""
     if not isinstance(shapes, dict) or not shapes:
         raise _fail(path, "shapes", "must map at least one shape to its group sizes, e.g. 'star: [1025, patches]'")
     out, names = [], set()
@@ -286,13 +293,12 @@ def _load_shapes(path: Path, shapes: object, world: World) -> tuple[tuple[str, s
         robots: list[int] = []
         for i, n in enumerate(sizes):
             n = _checked(path, f"{where}[{i}]", _GROUP, shape.patches if n == PATCHES else n)
-            if n > shape.free_patches:
-                raise _fail(
-                    path,
-                    f"{where}[{i}]",
-                    f"{n} robots do not fit on the {shape.free_patches} free "
-                    f"patches of the {world.size} x {world.size} world",
-                )
+            try:
+                shape.check_room(n)
+            except InputError as exc:
+                raise _fail(path, f"{where}[{i}]", str(exc)) from None
             robots.append(n)
         out.append((shape.name, source, shape.patches, tuple(sorted(set(robots)))))
+        if loaded is not None:
+            loaded[shape.name] = (where, shape)
     return tuple(out)

@@ -35,6 +35,7 @@ def simulate_kilobot(
     from swarm_ros.artifacts.run_dir import partial_recording
     from swarm_ros.core.metrics import Outcome
     from swarm_ros.core.rubenstein.run import KilobotRun, summary_of
+    from swarm_ros.core.rubenstein.tick_checks import check_tick, snapshot
 
     start = time.perf_counter()
     rrd = partial_recording(out) if options.enabled else None
@@ -50,7 +51,14 @@ def simulate_kilobot(
                 total=run.pixels, unit="pixel", desc="covered", disable=True if args.quiet else None, file=sys.stderr
             ) as bar:
                 while not run.done and not stop.signum:
-                    run.run(every - run.tick % every)
+                    if args.check:  # tick by tick, each checked (core/rubenstein/tick_checks.py)
+                        prev, covered = snapshot(run), run.metrics["covered"]
+                        run.step()
+                        check_tick(prev, covered, run)
+                    else:
+                        run.run(every - run.tick % every)
+                    if run.tick % every and not run.done:
+                        continue
                     if recorder is not None:
                         recorder.robots(run)
                     m = run.metrics

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import IO
 
 from swarm_ros.app.forking import Forked
-from swarm_ros.core.errors import InputError
+from swarm_ros.core.errors import InputError, RunFailed
 from swarm_ros.core.signals import PARENT_ENV
 from swarm_ros.protocol.plan import WORLD, shard_name
 from swarm_ros.protocol.runkey import with_run_key
@@ -32,8 +32,9 @@ DOMAIN_IDS = range(1, 102)  # 0 is everyone's default; above 101 ports can clash
 _STOP_STEPS = ((signal.SIGTERM, 5.0), (signal.SIGKILL, 2.0))
 
 
-class LaunchError(InputError):
-    """The graph could not run to the end; the message says which process and where its log is."""
+class LaunchError(RunFailed):
+    """The graph could not run to the end; the message says which process and where its log is (a run failure,
+    not bad input: the command exits 1)."""
 
 
 @dataclass
@@ -288,3 +289,54 @@ def recover_killed(out: Path) -> list[Path]:
         kept.append(target)
         print(f"swarm-ros: an earlier run of {out} was killed; its logs are now in {target}", file=sys.stderr)
     return kept
+
+
+def check_rubenstein_graph(
+    shape, params, processes: int, world_shards: int, flag_cuts: str | None, file_cuts: object, params_file: object
+) -> None:
+    """Refuse, in one line, what the rubenstein algorithm's graph does not do yet, from a flag (``--world-shards``,
+    ``--region-cuts``) or the parameter file (``/robot_batch: region_cuts``), and a batch count its cell grid cannot be
+    cut into.
+
+    Raises:
+        InputError: the first of these.
+    """
+    from swarm_ros.core.params import RUBENSTEIN
+    from swarm_ros.core.rubenstein.run import KilobotRun
+    from swarm_ros.core.rubenstein.strips import strips_for
+
+    for given, flag in ((world_shards > 1, "--world-shards"), (flag_cuts, "--region-cuts")):
+        if given:
+            raise InputError(f"{flag} is not for the {RUBENSTEIN} algorithm's graph, which cuts its own strips")
+    if file_cuts:
+        raise InputError(
+            f"{params_file}: /robot_batch sets region_cuts, which is not for the {RUBENSTEIN} algorithm's graph "
+            "(it cuts its own strips)"
+        )
+    strips_for(KilobotRun(shape, params), processes)
+
+
+def compile_first(algorithm: str, quiet: bool) -> bool:
+    """Fill numba's cache of ``algorithm``'s kernels, in a process of its own, if it is empty, saying so in one line
+    (unless ``quiet``): every node process would otherwise compile the same kernels at the same time. Return whether
+    it compiled.
+
+    Raises:
+        LaunchError: compiling failed, with its last line.
+    """
+    from swarm_ros.core.kernels import compiling_note, kernels_cached
+
+    if kernels_cached(algorithm):
+        return False
+    if not quiet:
+        print(f"swarm-ros: {compiling_note(algorithm)}", file=sys.stderr, flush=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "swarm_ros.core.kernels", algorithm],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+    )
+    if done.returncode != 0:
+        lines = (done.stderr or done.stdout).strip().splitlines()
+        raise LaunchError(f"compiling the numba kernels failed ({lines[-1] if lines else done.returncode})")
+    return True

@@ -34,7 +34,8 @@ from swarm_ros.app.param_file import check_launcher_sets, params_yaml, read_para
 from swarm_ros.app.processes import CHECKPOINT, check_graph, check_graph_shape, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, InputError, ParameterError, RunFailed
-from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETER, Param, node_defaults
+from swarm_ros.core.params import DARR_NIAZI, RUBENSTEIN, RUN_PARAMETER, Param, node_defaults
+from swarm_ros.core.run_bounds import check_given
 from swarm_ros.core.signals import EXIT_INTERRUPTED
 from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world, plan_for, removes_lost_robots
 
@@ -153,6 +154,7 @@ class LaunchSetup:
     supervisor: Supervisor
     region_cuts: str = ""  #: where the batches' strips start (the launch argument, else the file's /robot_batch)
     plan: tuple[tuple[str, str, dict[str, int | str]], ...] = ()  #: the node processes (protocol.plan.plan_for)
+    algorithm: str = DARR_NIAZI  #: whose kernels the nodes load
 
 
 def _yaml_value(text: str) -> object:
@@ -215,16 +217,19 @@ def launch_setup(
     """
     settings, nodes = read_params_file(params_file)
     check_launcher_sets(params_file, nodes)
-    settings = settings.updated(**{name: argument_value(name, text) for name, text in arguments.items() if text})
+    given = {name: argument_value(name, text) for name, text in arguments.items() if text}
+    settings = settings.updated(**given)
+    for name, value in given.items():  # an argument given is refused for the other algorithm, as a flag is
+        check_given({name: value}, settings.algorithm, f"launch argument {name}:={arguments[name]}")
     check_graph_shape(settings.shape)
     shape, params = settings.resolve()
+    region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))  # the argument, else the file's
     if params.algorithm == RUBENSTEIN and (world_shards > 1 or region_cuts):
         raise InputError(f"world_shards and region_cuts are not for the {RUBENSTEIN} algorithm's graph")
     if not removes_lost_robots(params.algorithm) and nodes["world"].get("on_batch_loss") == "remove":
         raise InputError(
             f"on_batch_loss: remove is not for the {RUBENSTEIN} algorithm's graph: a lost batch is restarted"
         )
-    region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))
     check_graph(
         shape,
         params.robots,
@@ -237,11 +242,7 @@ def launch_setup(
     if Path(settings.shape).suffix.lower() in (".txt", ".png"):
         settings = settings.updated(shape=str(Path(settings.shape).absolute()))
     settings = settings.updated(robots=params.robots)
-    out = Path(
-        out_dir
-        or str(nodes["monitor"].get("out_dir") or "")
-        or default_run_dir(shape.name, params.robots, params.vision_radius, params.seed)
-    ).absolute()
+    out = Path(out_dir or str(nodes["monitor"].get("out_dir") or "") or default_run_dir(shape.name, params)).absolute()
     check_out_dir(out, bool(nodes["monitor"].get("overwrite", False)))
     every = record_every(nodes)  # as swarm-ros run sets it, for both
     world = {**node_defaults(WORLD), **nodes["world"], "record_every": every}
@@ -261,4 +262,5 @@ def launch_setup(
         Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"]), removes_lost_robots(params.algorithm)),
         region_cuts,
         tuple(plan_for(params.algorithm, processes, region_cuts, world_shards)),
+        params.algorithm,
     )

@@ -48,13 +48,40 @@ def read_bounded(path: Path, limit: int, what: str, error: type[InputError]) -> 
     if stat.S_ISDIR(mode):
         raise error(f"{path}: is a directory, not a {what}")
     try:
-        with open(path, "rb") as f:
-            data = f.read(limit + 1)
+        if stat.S_ISFIFO(mode):
+            data = _read_pipe(path, limit, what, error)
+        else:
+            with open(path, "rb") as f:
+                data = f.read(limit + 1)
     except OSError as exc:
         raise error(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
     if len(data) > limit:
         raise error(f"{path}: larger than {size_words(limit)}, more than any {what} needs")
     return data
+
+
+#: How long a named pipe may keep its reader waiting for a first byte (or its end) before it is refused: a pipe no
+#: one writes to would otherwise hold the command until Ctrl-C.
+PIPE_WAIT = 5.0
+
+
+def _read_pipe(path: Path, limit: int, what: str, error: type[InputError]) -> bytes:
+    """A named pipe's (or the shell's ``<(...)``) bytes, up to ``limit + 1``; ``error`` if nothing (not even its
+    end) comes within :data:`PIPE_WAIT` seconds. Opened without blocking, so a pipe with no writer cannot hold the
+    open either; once a byte or the end is there, read to the end as from a file."""
+    import select
+
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        poller = select.poll()
+        poller.register(fd, select.POLLIN | select.POLLHUP)
+        if not poller.poll(int(PIPE_WAIT * 1000)):
+            raise error(f"{path}: a named pipe no one writes to (nothing came in {PIPE_WAIT:g} s)")
+        os.set_blocking(fd, True)
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            return f.read(limit + 1)
+    finally:
+        os.close(fd)
 
 
 NAME_MAX, PATH_MAX = 255, 4096  #: Linux's longest file name and path, in bytes

@@ -187,17 +187,9 @@ class Settings:
         shape = Shape.load(self.shape, World(self.world_radius), mesh_scale=self.mesh_scale)
         check_world_memory(self.world_radius, dims=shape.dims)
         params = self.run_params(self.robots or shape.patches)
-        if params.algorithm == RUBENSTEIN:
-            from .rubenstein.layout import check_shape
+        from .run_bounds import check_run
 
-            check_shape(shape)  # its robots start in a pack outside the shape's world: no free patch to count
-            return shape, params
-        params.check_vision(shape.world.radius)
-        if params.robots > shape.free_patches:
-            raise ParameterError(
-                f"{shape.source}: {params.robots} robots do not fit on the "
-                f"{shape.free_patches} free patches of the {shape.world.describe()} world"
-            )
+        check_run(shape, params)
         return shape, params
 
 

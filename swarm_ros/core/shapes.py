@@ -38,7 +38,7 @@ from pathlib import Path
 import cc3d
 import numpy as np
 
-from swarm_ros.core.errors import ShapeError
+from swarm_ros.core.errors import ParameterError, ShapeError
 from swarm_ros.core.grid import World
 from swarm_ros.core.inputs import SHAPE_LIMIT, read_bounded, shown
 from swarm_ros.core.resources import check_world_memory, data_dir
@@ -348,6 +348,20 @@ class Shape:
     def free_patches(self) -> int:
         """Patches a robot may stand on at the start: every non-wall patch."""
         return (self.world.size - 2) ** self.dims
+
+    def check_room(self, robots: int) -> None:
+        """Refuse more robots than this shape's world holds: one a free patch, under every algorithm (the bound of
+        a run's group size, here only; docs/model.md, "Group sizes").
+
+        Raises:
+            ParameterError: ``robots`` > :attr:`free_patches`, in one line without the shape's name (the caller
+            says where the count came from).
+        """
+        if robots > self.free_patches:
+            raise ParameterError(
+                f"{robots} robots do not fit on the {self.free_patches} free patches of the {self.world.describe()} "
+                "world"
+            )
 
     # -- validation -------------------------------------------------------------
     def _validate(self) -> None:

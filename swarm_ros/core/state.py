@@ -169,11 +169,10 @@ def initial_state(shape: Shape, robots: int, seed: int) -> SwarmState:
     world = shape.world
     if robots < 4:
         raise ParameterError(f"robots must be at least 4 (the seed robots), got {robots}")
-    if robots > shape.free_patches:
-        raise ParameterError(
-            f"{shape.source}: {robots} robots do not fit on the {shape.free_patches} free patches "
-            f"of the {world.describe()} world"
-        )
+    try:
+        shape.check_room(robots)
+    except ParameterError as exc:
+        raise ParameterError(f"{shape.source}: {exc}") from None
     seeds = shape.seed_patches
     seed_flat = world.flat_of(*seeds.T)
     free = ~world.wall_mask().ravel()
