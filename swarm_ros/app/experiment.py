@@ -23,7 +23,7 @@ from pathlib import Path
 from swarm_ros.app.curves import CURVE, write_curve
 from swarm_ros.app.executors import dask_client, execute, execute_dask
 from swarm_ros.app.experiment_file import Experiment, load_experiment
-from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, ResultsFile
+from swarm_ros.app.results_file import REFERENCE_FILE, RESULTS_FILE, ExperimentError, ResultsFile, stored_shape_file
 from swarm_ros.core.params import DARR_NIAZI
 from swarm_ros.core.signals import InterruptSaid
 
@@ -38,7 +38,7 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
     Raises:
         ExperimentError: ``out`` is a file, cannot be created, or holds another experiment.
     """
-    record = json.dumps({"config": str(config), "experiment": exp.as_dict()}, indent=2) + "\n"
+    record = json.dumps({"config": str(config), "experiment": _as_stored(exp.as_dict(), out)}, indent=2) + "\n"
     marker = out / EXPERIMENT_FILE
     if out.exists() and not out.is_dir():
         raise ExperimentError(f"{out}: exists and is not a directory")
@@ -48,7 +48,7 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
             before.setdefault("algorithm", [DARR_NIAZI])  # written before the algorithm was an axis
         except (OSError, ValueError, KeyError):
             raise ExperimentError(f"{marker}: unreadable; not a swarm-ros experiment directory") from None
-        if before != json.loads(json.dumps(exp.as_dict())):
+        if _as_stored(before, out) != json.loads(json.dumps(_as_stored(exp.as_dict(), out))):
             raise ExperimentError(
                 f"{out}: holds the results of a different experiment (its {EXPERIMENT_FILE} "
                 f"differs from {config}); choose another --out"
@@ -65,6 +65,13 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
         os.replace(part, marker)
     except OSError as exc:
         raise ExperimentError(f"{out}: cannot create the experiment directory ({exc.strerror or exc})") from None
+
+
+def _as_stored(record: dict, out: Path) -> dict:
+    """An experiment's record as its directory ``out`` keeps it: its shape files' paths relative to ``out``
+    (:func:`~swarm_ros.app.results_file.stored_shape_file`; a record written with absolute paths reads the same)."""
+    shapes = [[name, stored_shape_file(str(file), out), *rest] for name, file, *rest in record.get("shapes", [])]
+    return {**record, "shapes": shapes}
 
 
 def run_experiment(
@@ -143,7 +150,7 @@ def _run_grid(
                     curve = row.pop(CURVE, None)
                     if curve is not None:  # before its row: a row in results.csv has its curve, if it made one
                         write_curve(out, row, curve)
-                    results.append(row)
+                    results.append({**row, "shape_file": stored_shape_file(row["shape_file"], out)})
                     bar.update(1)
     except KeyboardInterrupt:
         left = len(runs) - len(results.done() & {s.key for s in runs})

@@ -19,7 +19,13 @@ Figures go to ``figures/``, one set per rule set (``<rules>`` below):
 - ``vision.png`` (with more than one radius): convergence time and localized fraction
   against vision radius at each shape's exact patch count, a column per rule set;
 - ``study.png`` (with a reference): our time / the published time at each shape's patch
-  count, per rule set and radius.
+  count, per rule set and radius;
+- ``algorithms.png`` (with the rubenstein algorithm beside a rule set): a row per shape, every rule set
+  and algorithm on shared axes: ticks to 50% and 90% filled and to the end, and the share filled, with
+  95% CIs.
+
+The rubenstein algorithm has no vision radius: its figures are ``<shape>_rubenstein.png`` and
+``all_shapes_rubenstein.png``, and its panel (c) counts joined robots, robots not joined and uncovered pixels.
 
 Panel (d) needs per-tick metrics, which results.csv does not hold. The report re-runs
 the first repetition of each group size with the in-process engine from the seed in its
@@ -39,6 +45,7 @@ from swarm_ros.app.published import (
     Reference,
     load_reference,
 )
+from swarm_ros.app.report_compare import algorithms_figure
 from swarm_ros.app.report_stats import (
     _COLOURS,
     FIGURES,
@@ -47,6 +54,7 @@ from swarm_ros.app.report_stats import (
     STATS_MD,
     _rules_order,
     _sections,
+    _setting,
     group_stats,
     rules_label,
     stats_csv,
@@ -57,6 +65,7 @@ from swarm_ros.app.results_file import (
     RESULTS_FILE,
     ExperimentError,
     read_results,
+    shape_source,
 )
 from swarm_ros.artifacts.mpl import plt
 from swarm_ros.artifacts.run_dir import public_mode
@@ -74,16 +83,14 @@ def _curve(row: dict, out: Path) -> np.ndarray:
     or, without one, the run re-run in process (checked against the row), then kept there for the next report."""
     from swarm_ros.app.curves import curve_of, read_curve, steps, write_curve
     from swarm_ros.core.engine import Simulation
-    from swarm_ros.core.grid import World
-    from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETERS, RunParams
+    from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETERS, Settings
     from swarm_ros.core.rubenstein.run import KilobotRun
-    from swarm_ros.core.shapes import Shape
 
     stored = read_curve(out, row)
     if stored is not None:
         return stored
-    shape = Shape.load(row["shape_file"], World(row["world_radius"]))
-    params = RunParams(**{p.name: row[p.name] for p in RUN_PARAMETERS if p.model and p.name in row})
+    values = {p.name: row[p.name] for p in RUN_PARAMETERS if p.name in row and p.name != "shape"}
+    shape, params = Settings(shape=shape_source(row["shape_file"], out), **values).resolve()  # as any run (check_run)
     sim: Simulation | KilobotRun = (
         KilobotRun(shape, params) if params.algorithm == RUBENSTEIN else Simulation(shape, params)
     )
@@ -98,12 +105,6 @@ def _curve(row: dict, out: Path) -> np.ndarray:
     curve = steps(curve_of(sim))
     write_curve(out, row, curve)
     return curve
-
-
-def _setting(rules: str, vision: float) -> str:
-    """A figure's words for what its runs ran: the rule set and vision radius, or the rubenstein algorithm (neither
-    is a parameter of it)."""
-    return "the rubenstein algorithm" if rules == RUBENSTEIN_LABEL else f"rules {rules}, vision radius {vision:g}"
 
 
 def _cells(rules: str) -> str:
@@ -332,9 +333,9 @@ def study_figure(stats: list[dict], reference: dict[str, Reference], path: Path)
     _save(fig, path)
 
 
-def _safe(label: str) -> str:
-    """A rule set label as a file-name part."""
-    return label.replace("=", "-")
+def _safe(label: str, vision: float) -> str:
+    """A rule set label and vision radius as a file-name part (``paper_v1``; ``rubenstein``, which has no radius)."""
+    return label if label == RUBENSTEIN_LABEL else f"{label.replace('=', '-')}_v{vision:g}"
 
 
 def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: Path, out: Path) -> list[Path]:
@@ -343,7 +344,7 @@ def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: P
     for rules, vision in _sections(stats):
         vs = [s for s in stats if s["vision_radius"] == vision and s["rules"] == rules]
         for shape in sorted({s["shape"] for s in vs}):
-            path = figures / f"{shape}_{_safe(rules)}_v{vision:g}.png"
+            path = figures / f"{shape}_{_safe(rules, vision)}.png"
             shape_figure(
                 [s for s in vs if s["shape"] == shape],
                 [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision and rules_label(r) == rules],
@@ -352,9 +353,12 @@ def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: P
                 reference.get(shape) if rules != RUBENSTEIN_LABEL else None,  # the study's numbers: its model's
             )
             written.append(path)
-        path = figures / f"all_shapes_{_safe(rules)}_v{vision:g}.png"
+        path = figures / f"all_shapes_{_safe(rules, vision)}.png"
         all_shapes_figure(vs, vision, rules, path)
         written.append(path)
+    if RUBENSTEIN_LABEL in {s["rules"] for s in stats} and len({s["rules"] for s in stats}) > 1:
+        _save(algorithms_figure(stats), figures / "algorithms.png")
+        written.append(figures / "algorithms.png")
     if len({s["vision_radius"] for s in stats}) > 1:
         vision_figure(stats, figures / "vision.png")
         written.append(figures / "vision.png")
@@ -382,6 +386,13 @@ def build_report(out: Path) -> list[Path]:
     results = out / RESULTS_FILE
     if not results.is_file():
         raise ExperimentError(f"{out}: no {RESULTS_FILE} here; is it an experiment directory?")
+    final = out / FIGURES
+    if final.is_symlink() or (final.exists() and not final.is_dir()):
+        raise ExperimentError(f"{final}: not a directory; the report replaces only a {FIGURES}/ of its own pictures")
+    if final.is_dir() and any(not (p.is_file() and p.suffix == ".png") for p in final.iterdir()):
+        raise ExperimentError(
+            f"{final}: holds more than the report's pictures (.png); the report replaces only a {FIGURES}/ of its own"
+        )
     rows = read_results(results)
     if not rows:
         raise ExperimentError(f"{results}: holds no finished runs yet")
@@ -391,7 +402,6 @@ def build_report(out: Path) -> list[Path]:
     # Everything is made before anything is written: the figures re-run the runs without a stored curve and check
     # them against their rows, and a row they refuse must leave the old report (or none) as it was. figures/ is
     # built whole under a hidden name and swapped in: an interrupt leaves the old set (or none).
-    final = out / FIGURES
     figures = Path(tempfile.mkdtemp(prefix=f".{FIGURES}.tmp-", dir=out))
     try:
         drawn = [final / p.name for p in all_figures(stats, rows, reference, figures, out)]

@@ -42,6 +42,7 @@ STATS_COLUMNS = (
     "mean_joined_outside",
     "mean_hole_filled",
     "mean_loc_error",
+    *(f"{what}_{k}" for k in ("coverage", "fill_50_tick", "fill_90_tick") for what in ("ci95_half", "runs")),
 )
 RUBENSTEIN_LABEL = "rubenstein"  #: the label of the rubenstein algorithm's runs, beside the rule sets'
 COMPARED = ("coverage", "fill_50_tick", "fill_90_tick", "joined_outside", "hole_filled", "loc_error")
@@ -56,10 +57,25 @@ def rules_label(row: dict) -> str:
     return RuleSet(row["rules"], row["join"], row["crowding"], row["steps"]).label
 
 
+def _setting(rules: str, vision: float) -> str:
+    """A figure's words for what its runs ran: the rule set and vision radius, or the rubenstein algorithm (neither
+    is a parameter of it)."""
+    return "the rubenstein algorithm" if rules == RUBENSTEIN_LABEL else f"rules {rules}, vision radius {vision:g}"
+
+
 def _mean(values: list) -> float:
     """The mean of the values that are there (a fill tick a run never reached is None); nan if none is."""
     there = [v for v in values if v is not None]
     return float(np.mean(there)) if there else math.nan
+
+
+def _half_ci(values: list) -> tuple[float, int]:
+    """The half-width of the 95% confidence interval (Student t) of the mean of the values that are there, and how
+    many are (a fill tick a run never reached is None); nan with fewer than two."""
+    there = np.array([v for v in values if v is not None], dtype=float)
+    if there.size < 2:
+        return math.nan, int(there.size)
+    return float(st.t.ppf(0.975, there.size - 1) * there.std(ddof=1) / math.sqrt(there.size)), int(there.size)
 
 
 def group_stats(rows: list[dict]) -> list[dict]:
@@ -102,6 +118,8 @@ def group_stats(rows: list[dict]) -> list[dict]:
                 **{f"mean_{k}": _mean([r.get(k) for r in runs]) for k in COMPARED},
             }
         )
+        for k in ("coverage", "fill_50_tick", "fill_90_tick"):
+            out[-1][f"ci95_half_{k}"], out[-1][f"runs_{k}"] = _half_ci([r.get(k) for r in runs])
     return out
 
 
@@ -146,11 +164,18 @@ def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = N
     with ``reference``, a comparison with the published numbers after it."""
     lines = []
     for rules, vision in _sections(stats):
+        if rules == RUBENSTEIN_LABEL:  # no vision radius; its counts are of robots joined and pixels covered
+            title, cells, counts = "### The rubenstein algorithm", "pixels", "joined | not joined | uncovered pixels"
+        else:
+            title, cells, counts = (
+                f"### Rules `{rules}`, vision radius {vision:g}",
+                "patches",
+                ("localized | unlocalized | empty patches"),
+            )
         lines += [
-            f"### Rules `{rules}`, vision radius {vision:g}",
+            title,
             "",
-            "| shape | patches | robots | runs | mean time (ticks) | 95% CI | localized | unlocalized "
-            "| empty patches | outcomes |",
+            f"| shape | {cells} | robots | runs | mean time (ticks) | 95% CI | {counts} | outcomes |",
             "|---|---:|---:|---:|---:|---|---:|---:|---:|---|",
         ]
         for s in (s for s in stats if s["vision_radius"] == vision and s["rules"] == rules):
@@ -165,7 +190,8 @@ def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = N
     lines.append(
         "Times are convergence ticks (the tick the run ended). 95% CI: Student t on the runs' "
         "convergence ticks, its lower bound shown as 0 where it falls below (stats.csv keeps it as computed). "
-        "**=** marks the group size equal to the shape's patch count."
+        "**=** marks the group size equal to the shape's patch count. Under the rubenstein algorithm the counts "
+        "are of robots joined, robots not joined, and shape pixels no joined robot covers."
     )
     lines += ["", *time_and_accuracy(stats)]
     if reference:
@@ -184,7 +210,9 @@ def time_and_accuracy(stats: list[dict]) -> list[str]:
         "shape, the share of the area of its holes (if any) under a joined robot, and the joined robots' "
         "localization error in robot diameters "
         "(none of these under the study's model, whose robots localize exactly on shape patches). "
-        "Means over the runs; a time no run reached is –.",
+        "Means over the runs, with the half-width of their 95% confidence interval (Student t) for t50, t90 and "
+        "filled; a time is the mean of the runs that reached it, with how many did when not all; a time no run "
+        "reached is –; completed: the share of runs that ended complete or complete_with_extras.",
         "",
         "| shape | robots | rules / algorithm | vision | runs | t50 | t90 | end tick | filled | outside | "
         "hole filled | loc. error | completed |",
@@ -192,18 +220,30 @@ def time_and_accuracy(stats: list[dict]) -> list[str]:
     ]
     order = _rules_order(stats)
     for s in sorted(stats, key=lambda s: (s["shape"], s["robots"], order.index(s["rules"]), s["vision_radius"])):
-        t50, t90 = (_fmt_tick(s[f"mean_fill_{p}_tick"]) for p in (50, 90))
+        t50, t90 = (_tick_ci(s, f"fill_{p}_tick") for p in (50, 90))
         vision = "–" if s["rules"] == RUBENSTEIN_LABEL else f"{s['vision_radius']:g}"  # not a parameter of it
+        half = 100 * s["ci95_half_coverage"]
+        filled = f"{s['mean_coverage']:.1%}" if math.isnan(half) else f"{100 * s['mean_coverage']:.1f} ± {half:.1f}%"
         lines.append(
             f"| {s['shape']} | {s['robots']} | {s['rules']} | {vision} | {s['runs']} | {t50} | {t90} "
-            f"| {s['mean_convergence_tick']:.0f} | {s['mean_coverage']:.1%} | {s['mean_joined_outside']:.1f} "
+            f"| {s['mean_convergence_tick']:.0f} | {filled} | {s['mean_joined_outside']:.1f} "
             f"| {s['mean_hole_filled']:.1%} | {s['mean_loc_error']:.3f} | {s['completed_fraction']:.0%} |"
         )
     return lines
 
 
-def _fmt_tick(value: float) -> str:
-    return "–" if math.isnan(value) else f"{value:.0f}"
+def _plus_minus(half: float, spec: str) -> str:
+    return "" if math.isnan(half) else f" ± {half:{spec}}"
+
+
+def _tick_ci(s: dict, key: str) -> str:
+    """A time's mean, its 95% CI's half-width, and (when not every run reached it) how many did."""
+    if math.isnan(s[f"mean_{key}"]):
+        return "–"
+    reached = s[f"runs_{key}"]
+    return f"{s[f'mean_{key}']:.0f}{_plus_minus(s[f'ci95_half_{key}'], '.0f')}" + (
+        f" ({reached} of {s['runs']})" if reached < s["runs"] else ""
+    )
 
 
 def against_reference(stats: list[dict], reference: dict[str, Reference]) -> list[str]:

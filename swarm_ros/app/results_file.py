@@ -92,22 +92,31 @@ def _csv_line(row: dict) -> str:
 
 
 def read_results(path: Path) -> list[dict]:
-    """The rows of a results.csv (typed); a last line cut short by a crash is ignored.
+    """The rows of a results.csv (typed), every one checked before any is returned: its fields
+    (:func:`_checked_row`), and that no run is there twice. Lines may end in CRLF (a file saved on Windows).
 
     Raises:
-        ExperimentError: the file is not a results file of this version.
+        ExperimentError: the file is not a results file of this version, a row is bad, a run is listed twice, or
+            the last line is cut short (an experiment stopped while writing it: run the experiment again, which
+            drops that line and redoes the run, :class:`ResultsFile`).
     """
     try:
         text = read_bounded(path, RESULTS_LIMIT, "results file", ExperimentError).decode("utf-8")
     except UnicodeDecodeError:
         raise ExperimentError(f"{path}: not a swarm-ros results file (not UTF-8 text)") from None
-    text = text[: text.rfind("\n") + 1]  # drop a last line cut short
+    text = text.replace("\r\n", "\n")
+    if text and not text.endswith("\n"):
+        raise ExperimentError(
+            f"{path}: line {text.count(chr(10)) + 1}: cut short (no end of line): the experiment stopped while "
+            "writing it; run the experiment again to resume it (it drops that line and redoes the run)"
+        )
     previous = text.split("\n", 1)[0] == ",".join(PREVIOUS_COLUMNS)
     if text.split("\n", 1)[0] != ",".join(RESULT_COLUMNS) and not previous:
         raise ExperimentError(
             f"{path}: not a swarm-ros results file (expected the columns {', '.join(RESULT_COLUMNS)})"
         )
-    rows = []
+    rows: list[dict] = []
+    lines: dict[tuple, int] = {}
     for line, r in enumerate(csv.DictReader(io.StringIO(text)), start=2):
         if previous and None not in r:  # completed: the study's model, no fill ticks, the share filled below
             r = {**r, "algorithm": DARR_NIAZI, **dict.fromkeys(("coverage", *_ACCURACY), "0")}
@@ -116,10 +125,58 @@ def read_results(path: Path) -> list[dict]:
             row = _checked_row(r)
             if previous:
                 row["coverage"] = row["localized"] / row["shape_patches"] if row["shape_patches"] else 0.0
-            rows.append(row)
+            _check_counts(row)
         except ExperimentError as exc:
             raise ExperimentError(f"{path}: line {line}: {exc}") from None
+        key = run_key(row)
+        if key in lines:
+            raise ExperimentError(
+                f"{path}: line {line}: the run of line {lines[key]} again ({row['shape']}, {row['robots']} robots, "
+                f"{row['algorithm']}, repetition {row['repetition']}): a run counts once"
+            )
+        lines[key] = line
+        rows.append(row)
     return rows
+
+
+def run_key(row: dict) -> tuple:
+    """A row's run: its coordinates in the experiment's grid (shape, group size, every axis, repetition)."""
+    return (row["shape"], row["robots"], *(row[a] for a in EXPERIMENT_AXES), row["repetition"])
+
+
+def _check_counts(row: dict) -> None:
+    """What a row's measures must say together (every run this tool writes says it): shares within [0, 1]; the
+    robots localized (joined), not localized and lost add up to the group; no more empty patches than the shape has;
+    a complete run covers its whole shape; a fill time comes no later than the next one, nor than the run's end.
+
+    Raises:
+        ExperimentError: the first that does not hold, in words.
+    """
+    for k in ("coverage", "hole_filled"):
+        if row[k] > 1:
+            raise ExperimentError(f"{k} must be a share between 0 and 1, got {row[k]!r}")
+    counted = row["localized"] + row["unlocalized"] + row["lost_robots"]
+    if counted != row["robots"]:
+        raise ExperimentError(
+            f"localized + unlocalized + lost_robots must be the {row['robots']} robots, got {counted}"
+        )
+    if row["empty_patches"] > row["shape_patches"]:
+        raise ExperimentError(
+            f"empty_patches must be at most the shape's {row['shape_patches']} patches, got {row['empty_patches']}"
+        )
+    if row["outcome"] in (Outcome.COMPLETE.value, Outcome.COMPLETE_WITH_EXTRAS.value) and (
+        row["coverage"] != 1 or row["empty_patches"] != 0
+    ):
+        raise ExperimentError(
+            f"outcome {row['outcome']} needs the whole shape covered, got coverage {row['coverage']!r} and "
+            f"empty_patches {row['empty_patches']}"
+        )
+    times = [t for t in (row["fill_50_tick"], row["fill_90_tick"], row["convergence_tick"]) if t is not None]
+    if times != sorted(times):
+        raise ExperimentError(
+            f"fill_50_tick, fill_90_tick and convergence_tick must come in that order, got {row['fill_50_tick']}, "
+            f"{row['fill_90_tick']} and {row['convergence_tick']}"
+        )
 
 
 def _checked_row(raw: dict) -> dict:
@@ -181,7 +238,7 @@ class ResultsFile:
 
     def done(self) -> set[tuple]:
         """The coordinates of the runs in the file, as :attr:`~swarm_ros.app.experiment_file.RunSpec.key`."""
-        return {(r["shape"], r["robots"], *(r[a] for a in EXPERIMENT_AXES), r["repetition"]) for r in self.rows}
+        return {run_key(r) for r in self.rows}
 
     def append(self, row: dict) -> None:
         self._file.write(_csv_line(row))
@@ -191,6 +248,21 @@ class ResultsFile:
 
     def close(self) -> None:
         self._file.close()
+
+
+def stored_shape_file(shape_file: str, out: Path) -> str:
+    """What an experiment directory ``out`` stores of a run's shape (results.csv's ``shape_file``, experiment.json): a
+    built-in shape's name as it is, a shape file's path relative to ``out``, so that the results read the same in
+    any clone of a repository that holds both."""
+    if "/" not in shape_file:
+        return shape_file
+    return os.path.relpath(Path(out, shape_file).resolve(), Path(out).resolve())
+
+
+def shape_source(shape_file: str, out: Path) -> str:
+    """The shape a stored ``shape_file`` of the experiment directory ``out`` names, as Shape.load takes it (a path
+    relative to ``out`` made whole; an absolute path, as older results hold, or a name as it is)."""
+    return str(Path(out, shape_file).resolve()) if "/" in shape_file else shape_file
 
 
 def result_row(spec, summary: dict) -> dict:

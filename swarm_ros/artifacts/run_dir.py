@@ -8,9 +8,7 @@ run gives byte-identical files apart from ``wall_seconds``.
 
 from __future__ import annotations
 
-import csv
 import errno
-import io
 import json
 import os
 import shutil
@@ -20,18 +18,15 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.inputs import path_too_long, shown
+from swarm_ros.core.params import RUBENSTEIN
 
 if TYPE_CHECKING:
+    from swarm_ros.core.params import RunParams
     from swarm_ros.core.run_result import RunRecord
-    from swarm_ros.core.state import SwarmState
 
 RUNS_DIR = Path("runs")
-FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
-FINAL_STATE_COLUMNS_3D = ("id", "x", "y", "z", "heading", "pitch", "state")  #: a 3D run's
 RECORDING_FILE = "recording.rrd"
 
 
@@ -43,10 +38,12 @@ class RecordingError(OutputError):
     """The recording file could not be written (a full disk, say); what is on disk of it is not whole."""
 
 
-def default_run_dir(shape: str, robots: int, vision: float, seed: int, now: datetime | None = None) -> Path:
-    """``runs/<time>_<shape>_n<N>_v<R>_s<seed>`` under the current directory."""
+def default_run_dir(shape: str, params: RunParams, now: datetime | None = None) -> Path:
+    """``runs/<time>_<shape>_n<N>_v<R>_s<seed>`` under the current directory; under the rubenstein algorithm, which
+    has no vision radius, ``runs/<time>_<shape>_n<N>_rubenstein_s<seed>``."""
     stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
-    return RUNS_DIR / f"{stamp}_{shape}_n{robots}_v{vision:g}_s{seed}"
+    setting = "rubenstein" if params.algorithm == RUBENSTEIN else f"v{params.vision_radius:g}"
+    return RUNS_DIR / f"{stamp}_{shape}_n{params.robots}_{setting}_s{params.seed}"
 
 
 #: Everything a run directory holds: what :func:`write_run` writes, and ``logs`` (``swarm-ros run``).
@@ -176,33 +173,6 @@ def writable_dir(path: Path) -> bool:
         return False
 
 
-def metrics_csv(history: np.ndarray) -> str:
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    from swarm_ros.core.metrics import METRIC_COLUMNS  # the core's compiled modules load only when a run is written
-
-    writer.writerow(METRIC_COLUMNS)
-    writer.writerows(history.tolist())
-    return buf.getvalue()
-
-
-def final_state_csv(s: SwarmState) -> str:
-    from swarm_ros.core.state import RobotState
-
-    labels = [st.label for st in RobotState]
-    if s.z is not None and s.pitch is not None:
-        lines = [",".join(FINAL_STATE_COLUMNS_3D)]
-        for i, (x, y, z, h, p, st) in enumerate(
-            zip(s.x.tolist(), s.y.tolist(), s.z.tolist(), s.heading.tolist(), s.pitch.tolist(), s.state.tolist())
-        ):
-            lines.append(f"{i},{x!r},{y!r},{z!r},{h!r},{p!r},{labels[st]}")
-        return "\n".join(lines) + "\n"
-    lines = [",".join(FINAL_STATE_COLUMNS)]
-    for i, (x, y, h, st) in enumerate(zip(s.x.tolist(), s.y.tolist(), s.heading.tolist(), s.state.tolist())):
-        lines.append(f"{i},{x!r},{y!r},{h!r},{labels[st]}")
-    return "\n".join(lines) + "\n"
-
-
 def _umask() -> int:
     """This process's umask, read without changing it (setting it to read it back would briefly open every file
     another thread creates meanwhile), from /proc; 0o022 where that cannot be read."""
@@ -226,19 +196,24 @@ def summary_json(summary: dict) -> str:
     return json.dumps(summary, indent=2) + "\n"
 
 
-def fill_summary(out: Path, restarted: Sequence[str] = (), **values: object) -> bool:
+def fill_summary(out: Path, restarted: Sequence[tuple[int, str]] = (), **values: object) -> bool:
     """Set fields of the run's ``summary.json`` that it holds as null (e.g. ``shutdown_seconds``, known only
     after the run directory was written), and add to its ``restarts`` those of the node processes
-    ``restarted`` (a name per restart) it lacks: the processes restarted after the run's result was
-    whole, listed at its last tick. Written to a fresh name and renamed over. Return whether it was."""
+    ``restarted`` ((tick, name) per restart, as the launcher saw them) it lacks: a name's last restarts, at the
+    launcher's ticks (at most the run's last), in tick order. Written to a fresh name and renamed over. Return
+    whether it was."""
     path = out / "summary.json"
     try:
         summary = json.loads(path.read_text(encoding="utf-8"))
         fields = {key: value for key, value in values.items() if key in summary and summary[key] is None}
         listed = [r["node"] for r in summary.get("restarts", [])]
-        late = [name for name in dict.fromkeys(restarted) for _ in range(restarted.count(name) - listed.count(name))]
+        late = [
+            {"tick": min(tick, summary["convergence_tick"]), "node": name}
+            for name in dict.fromkeys(n for _, n in restarted)
+            for tick, _ in [r for r in restarted if r[1] == name][listed.count(name) :]
+        ]
         if late:
-            fields["restarts"] = summary["restarts"] + [{"tick": summary["convergence_tick"], "node": n} for n in late]
+            fields["restarts"] = sorted(summary["restarts"] + late, key=lambda r: r["tick"])
         if not fields:
             return False
         summary.update(fields)
@@ -389,6 +364,8 @@ def write_run(
         if bag is not None:
             summary["bag_robots_every"] = robots_every
         (tmp / "summary.json").write_text(summary_json(summary), encoding="utf-8")
+        from swarm_ros.artifacts.model_files import final_state_csv, metrics_csv
+
         (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
         (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
         from swarm_ros.artifacts.plots import (  # matplotlib: only when a run is written

@@ -65,9 +65,7 @@ class KilobotMonitorNode:
             raise ConfigError(f"the kilobot monitor runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
         self.incarnation = int(own["incarnation"])
         p = self.params
-        self.out = (
-            Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p.robots, 0, p.seed)
-        )
+        self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)
         self.overwrite = bool(own["overwrite"])
         run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
         self.copy = KilobotRun(self.shape, self.params)  # the run as the world reports it

@@ -51,11 +51,7 @@ class MonitorNode:
         run, own = read_parameters(node, "monitor")
         self.shape, self.params = run.resolve()
         p = self.params
-        self.out = (
-            Path(own["out_dir"])
-            if own["out_dir"]
-            else run_dir.default_run_dir(self.shape.name, p.robots, p.vision_radius, p.seed)
-        )
+        self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)
         self.overwrite = bool(own["overwrite"])
         self.incarnation = int(own["incarnation"])
         self.shards = int(own["world_shards"])  # world processes whose parts make each tick's rows
