@@ -13,6 +13,12 @@ setup(
     license="Apache-2.0",
     python_requires=">=3.11",
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
+    # numba's cache of the kernels, if scripts/setup.sh filled it in this tree: numba keys a cached kernel by its
+    # source's contents, so the installed copy loads it instead of compiling again (swarm_ros/core/kernels.py)
+    package_data={
+        f"{PACKAGE}.{sub}": ["__pycache__/*.nbi", "__pycache__/*.nbc", "__pycache__/swarm_ros-kernels-*.compiled"]
+        for sub in ("core", "core.rubenstein", "protocol")
+    },
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

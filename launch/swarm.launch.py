@@ -48,7 +48,7 @@ from swarm_ros.app.supervision import (
     launch_setup,
     parameter_arguments,
 )
-from swarm_ros.core.kernels import COMPILING, kernels_cached
+from swarm_ros.core.kernels import compiling_note, kernels_cached
 from swarm_ros.core.params import RUN_PARAMETERS, WORLD_SHARDS, node_parameter
 from swarm_ros.protocol.plan import PROCESSES
 from swarm_ros.protocol.runkey import KEY_ENV
@@ -175,11 +175,12 @@ def graph(context) -> list:
         RegisterEventHandler(OnProcessExit(on_exit=on_exit)),
         RegisterEventHandler(OnShutdown(on_shutdown=at_shutdown)),
     ]
-    if kernels_cached():
+    if kernels_cached(setup.algorithm):
         return handlers + nodes
-    # fill numba's cache once, here: every node would otherwise compile the same kernels at the same time
+    # fill numba's cache of the run's algorithm once, here: every node would otherwise compile the same kernels at
+    # the same time
     compiling = ExecuteProcess(
-        cmd=[sys.executable, "-m", "swarm_ros.core.kernels"], name="compile_kernels", output="screen"
+        cmd=[sys.executable, "-m", "swarm_ros.core.kernels", setup.algorithm], name="compile_kernels", output="screen"
     )
 
     def compiled(event, context):
@@ -189,7 +190,7 @@ def graph(context) -> list:
 
     return [
         *handlers,
-        LogInfo(msg=f"swarm_ros: {COMPILING}"),
+        LogInfo(msg=f"swarm_ros: {compiling_note(setup.algorithm)}"),
         compiling,
         RegisterEventHandler(OnProcessExit(target_action=compiling, on_exit=compiled)),
     ]

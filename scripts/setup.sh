@@ -25,7 +25,7 @@ fi
 .venv/bin/python -m compileall -q swarm_ros
 # colcon, for the test that builds the package as a ROS 2 workspace. Its own venv: colcon-core pulls in
 # pytest plugins that must not load into the project's tests (requirements-colcon.txt pins it all). It is
-# installed while the kernels compile (below): each step keeps one core busy.
+# installed while the kernels compile (below).
 colcon_venv() {
   local cstamp=.venv-colcon/.installed
   if [ ! -f "$cstamp" ] || [ requirements-colcon.txt -nt "$cstamp" ]; then
@@ -37,10 +37,17 @@ colcon_venv() {
 }
 colcon_venv &
 colcon_pid=$!
-# numba's cache of the core's kernels (nothing to do when it is full; about 15 s to fill it), so the first run
-# does not compile them
-if ! .venv/bin/python -m swarm_ros.core.kernels; then
-  wait "$colcon_pid" || true
+# numba's cache of each algorithm's kernels (nothing to do when it is full), one process each, side by side on
+# the two cores, so the first run does not compile them (scripts/bench_compile.py: about 40 s and 17 s alone)
+.venv/bin/python -m swarm_ros.core.kernels darr-niazi &
+study_pid=$!
+.venv/bin/python -m swarm_ros.core.kernels rubenstein &
+rubenstein_pid=$!
+failed=0
+wait "$study_pid" || failed=1
+wait "$rubenstein_pid" || failed=1
+wait "$colcon_pid" || { echo "setup: could not install colcon into .venv-colcon" >&2; exit 1; }
+if [ "$failed" != 0 ]; then
+  echo "setup: compiling the numba kernels failed" >&2
   exit 1
 fi
-wait "$colcon_pid" || { echo "setup: could not install colcon into .venv-colcon" >&2; exit 1; }

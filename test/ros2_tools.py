@@ -38,8 +38,17 @@ SOURCES = (
 NODES = ("/monitor", "/robot_batch_0", "/robot_batch_1", "/world")  # the default graph (processes:=2)
 
 
+def _sources_only(directory: str, names: list[str]) -> set[str]:
+    """What a copy of the package's tree leaves out: Python's bytecode, but not numba's kernel cache, which a clone
+    that ran scripts/setup.sh holds beside the sources and colcon installs with them (setup.py)."""
+    if Path(directory).name == "__pycache__":
+        return {n for n in names if not n.endswith((".nbi", ".nbc", ".compiled"))}
+    return set()
+
+
 def build_workspace(ws: Path) -> Path:
-    """Copy the package's sources into ``ws/src`` and ``colcon build`` them; return ``ws/install``."""
+    """Copy the package's sources (and the kernels' cache, as scripts/setup.sh left it) into ``ws/src`` and
+    ``colcon build`` them; return ``ws/install``."""
     if not COLCON.exists():
         pytest.skip("colcon is not installed in .venv-colcon (scripts/setup.sh installs it)")
     src = ws / "src" / "swarm_ros"
@@ -47,7 +56,7 @@ def build_workspace(ws: Path) -> Path:
     for name in SOURCES:
         path = ROOT / name
         if path.is_dir():
-            shutil.copytree(path, src / name, ignore=shutil.ignore_patterns("__pycache__"))
+            shutil.copytree(path, src / name, ignore=_sources_only)
         else:
             shutil.copy2(path, src / name)
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}

@@ -19,8 +19,12 @@ def core(tmp_path, monkeypatch):
     (tmp_path / "rng.py").write_text('@numba.njit(cache=True, inline="always")\n')
     (tmp_path / "engine.py").write_text("@numba.njit(cache=True)\n")
     (tmp_path / "plain.py").write_text("x = 1\n")
+    other = tmp_path / "rubenstein"  # the second algorithm's package: one kernel module
+    (other / "__pycache__").mkdir(parents=True)
+    (other / "rule.py").write_text("@numba.njit(cache=True)\n")
     monkeypatch.setattr(kernels, "_CORE", tmp_path)
     monkeypatch.setattr(kernels, "_CACHE", cache)
+    monkeypatch.setattr(kernels, "PACKAGES", {"darr-niazi": tmp_path, "rubenstein": other})
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     return tmp_path
 
@@ -35,20 +39,28 @@ def test_indexes_newer_than_their_sources_mean_filled(core):
         _at(core / "__pycache__" / name, 2000)
     _at(core / "rng.py", 1000)
     _at(core / "engine.py", 1000)
-    assert kernels.kernels_cached()
+    assert kernels.kernels_cached("darr-niazi")
+    assert not kernels.kernels_cached(), "the rubenstein algorithm's are not"
     _at(core / "rng.py", 3000)  # edited: its inlined kernels' index is never written again
-    assert not kernels.kernels_cached()
+    assert not kernels.kernels_cached("darr-niazi")
 
 
 def test_a_stamp_newer_than_every_kernel_module_means_filled(core):
-    stamp = core / "__pycache__" / kernels._STAMP
+    stamp = core / "__pycache__" / kernels._STAMP.format("darr-niazi")
     stamp.touch()
     _at(stamp, 4000)
     _at(core / "rng.py", 3000)
     _at(core / "engine.py", 3000)
-    assert kernels.kernels_cached(), "compile_kernels ran after the last change"
+    assert kernels.kernels_cached("darr-niazi"), "compile_kernels ran after the last change"
+    assert not kernels.kernels_cached("rubenstein"), "each algorithm has a stamp of its own"
+    other = core / "__pycache__" / kernels._STAMP.format("rubenstein")
+    other.touch()
+    _at(other, 4000)
+    _at(core / "rubenstein" / "rule.py", 3000)
+    assert kernels.kernels_cached(), "both algorithms' stamps are newer than their modules"
     _at(core / "engine.py", 5000)
-    assert not kernels.kernels_cached(), "a kernel module changed since"
+    assert not kernels.kernels_cached("darr-niazi"), "a kernel module changed since"
+    assert kernels.kernels_cached("rubenstein"), "a change to the study's model's kernels is not the other's"
 
 
 def test_no_cache_at_all_is_not_filled(core):
@@ -58,12 +70,18 @@ def test_no_cache_at_all_is_not_filled(core):
 def test_drop_stale_removes_the_core_caches_written_before_the_last_change_to_a_kernel_module(core):
     cache = core / "__pycache__"
     old, new = cache / "engine.tick-2.py311.nbi", cache / "rng.draw-1.py311.nbc"
-    other, stamp = cache / "plain.x-1.py311.nbi", cache / kernels._STAMP  # plain.py has no kernel
+    other, stamp = cache / "plain.x-1.py311.nbi", cache / kernels._STAMP.format("darr-niazi")  # plain.py: no kernel
     for path, at in ((old, 1000), (new, 3000), (other, 1000), (stamp, 1000)):
         path.touch()
         _at(path, at)
     _at(core / "rng.py", 500)
+    _at(core / "rubenstein" / "rule.py", 500)
     _at(core / "engine.py", 2000)  # edited after old was written, before new
     assert kernels.drop_stale() == 1
     assert not old.exists() and new.exists() and other.exists() and stamp.exists()
     assert kernels.drop_stale() == 0
+
+
+def test_the_command_names_an_algorithm_it_does_not_know_in_one_line(capsys):
+    assert kernels.main(["kilobots"]) == 2
+    assert capsys.readouterr().err == "swarm_ros: no algorithm 'kilobots' (known: darr-niazi, rubenstein)\n"

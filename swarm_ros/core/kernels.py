@@ -1,17 +1,22 @@
-"""numba's on-disk cache of the core's compiled kernels: is it filled, and fill it.
+"""numba's on-disk cache of the core's compiled kernels, by algorithm: is it filled, and fill it.
 
 The core's hot loops are numba functions compiled with ``cache=True``: the first
-process that calls one after an install (or after a change to the core) compiles it,
-about 17 s for all of them (2D and 3D) on a 2-core machine, and writes it into ``__pycache__``
-beside the source; later processes load it in milliseconds. ``scripts/setup.sh`` fills
-the cache (``python -m swarm_ros.core.kernels``), so the first run does not pay for it;
-``swarm-ros simulate`` and ``swarm-ros run`` say so in one line when they have to, and
-``run`` compiles once, before its node processes start, rather than in each of them.
+process that calls one after an install (or after a change to the core) compiles it
+and writes it into ``__pycache__`` beside the source; later processes load it in milliseconds.
+Each algorithm's kernels are compiled apart, on first use, so a user of one does not wait for the
+other's (scripts/bench_compile.py measures them: about 40 s for the study's model's, 2D and 3D, and 17 s
+for the rubenstein algorithm's, on a quiet 2-core machine; docs/benchmarks.md). ``scripts/setup.sh``
+fills the cache of both at once, one process each (``python -m swarm_ros.core.kernels ALGORITHM``), so
+the first run does not pay for it; ``swarm-ros simulate`` and ``swarm-ros run`` say so in one line
+when they have to, and ``run`` compiles once, before its node processes start, rather than in each of
+them. The cache travels with the package: setup.py installs ``__pycache__``'s kernel files with the
+sources, and numba keys a cached kernel by its source's contents, so a colcon or pip install made after
+``scripts/setup.sh`` loads what setup compiled.
 
 :func:`kernels_cached` loads neither numba nor the kernels: it only looks at files. A kernel
 that is only ever inlined into others (``inline="always"``) is not saved again when its module
 changes, so its index can stay older than its source for good: :func:`compile_kernels` leaves a
-stamp file, and a stamp newer than every kernel module says the cache is filled.
+stamp file per algorithm, and a stamp newer than every kernel module of the algorithm says its cache is filled.
 
 numba keys a kernel's cache by its own module's source only, yet links into it the code of the
 kernels it calls: after an edit to ``rules.py`` the cached ``run_kernel`` (``tick_kernel.py``) would
@@ -23,29 +28,39 @@ new sources, whose times numba sees: this is for a working tree.)
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
 _CORE = Path(__file__).resolve().parent
 _CACHE = _CORE / "__pycache__"
 _MARK = "cache=True"  # a module with a cached kernel says so in its source
-_STAMP = "swarm_ros-kernels.compiled"  # in _CACHE: compile_kernels() ran after the last change to a kernel module
-#: What the commands say before they compile (one line, on stderr).
-COMPILING = (
-    "compiling the numba kernels first (once after an install or a change to the core, about 17 s; "
-    "scripts/setup.sh does it too)"
-)
+_STAMP = "swarm_ros-kernels-{}.compiled"  # in _CACHE: compile_kernels() ran after the last change to its modules
+#: Each algorithm's package of kernel modules (the study's model's are the core's own).
+PACKAGES = {"darr-niazi": _CORE, "rubenstein": _CORE / "rubenstein"}
+#: About how long each algorithm's kernels take to compile (scripts/bench_compile.py, a quiet 2-core machine).
+SECONDS = {"darr-niazi": 40, "rubenstein": 17}
+
+
+def compiling_note(algorithm: str) -> str:
+    """What the commands say before they compile ``algorithm``'s kernels (one line, on stderr)."""
+    return (
+        f"compiling the {algorithm} algorithm's numba kernels first (once after an install or a change to the core, "
+        f"about {SECONDS[algorithm]} s; scripts/setup.sh does it too)"
+    )
 
 
 def _packages() -> tuple[Path, ...]:
-    """The core and its second algorithm's package."""
-    return (_CORE, _CORE / "rubenstein")
+    """Every algorithm's package."""
+    return tuple(PACKAGES.values())
 
 
-def _kernel_modules() -> list[Path]:
+def _kernel_modules(algorithm: str | None = None) -> list[Path]:
+    """The modules with a cached kernel: ``algorithm``'s, or every algorithm's."""
+    packages = _packages() if algorithm is None else (PACKAGES[algorithm],)
     return [
         p
-        for package in _packages()
+        for package in packages
         for p in sorted(package.glob("*.py"))
         if p.name != "kernels.py" and _MARK in p.read_text("utf-8")
     ]
@@ -56,18 +71,21 @@ def _cached(suffix: str) -> list[Path]:
     return [path for package in _packages() for path in (package / "__pycache__").glob(f"*.{suffix}")]
 
 
-def kernels_cached() -> bool:
-    """Whether the cache is filled: :func:`compile_kernels`' stamp is newer than every core module with a
-    cached kernel, or each such module has an index in numba's cache newer than its source.
+def kernels_cached(algorithm: str | None = None) -> bool:
+    """Whether ``algorithm``'s cache (or every algorithm's) is filled: :func:`compile_kernels`' stamp is newer than
+    every module of it with a cached kernel, or each such module has an index in numba's cache newer than its
+    source.
 
     Answers True when the cache is somewhere this function does not look
     (``NUMBA_CACHE_DIR`` set): it never claims work it cannot see.
     """
     if os.environ.get("NUMBA_CACHE_DIR"):
         return True
+    if algorithm is None:
+        return all(kernels_cached(a) for a in PACKAGES)
     try:
-        sources = _kernel_modules()
-        stamp = _CACHE / _STAMP
+        sources = _kernel_modules(algorithm)
+        stamp = _CACHE / _STAMP.format(algorithm)
         if stamp.exists() and stamp.stat().st_mtime >= max(p.stat().st_mtime for p in sources):
             return True
         indexes = {p.name: p.stat().st_mtime for p in _cached("nbi")}
@@ -120,44 +138,57 @@ def count_compiles() -> Callable[[], int]:
     return lambda: count.compiled
 
 
-def compile_kernels() -> None:
-    """Compile every kernel into numba's cache: two ticks of the graph's code path and a few of the
-    in-process engine's, on the star and on the 3D k-block, and a few of the rubenstein algorithm's, with the
-    default parameters (the kernels' types do not depend on them)."""
-    from swarm_ros.core.engine import Simulation
+def compile_kernels(algorithm: str | None = None) -> None:
+    """Compile ``algorithm``'s kernels (or every algorithm's) into numba's cache: under the study's model, two
+    ticks of the graph's code path and a few of the in-process engine's, on the star and on the 3D k-block; under
+    rubenstein, a few ticks of its run; with the default parameters (the kernels' types do not depend on them)."""
     from swarm_ros.core.grid import World
     from swarm_ros.core.params import RUBENSTEIN, RunParams
-    from swarm_ros.core.rubenstein.run import KilobotRun
     from swarm_ros.core.shapes import Shape
-    from swarm_ros.core.warmup import warm_up
 
     drop_stale()
-    for name in ("star", "k-block"):  # a 2D and a 3D shape: the 3D kernels are compiled apart
-        shape = Shape.load(name, World())
-        params = RunParams(robots=shape.patches)
-        warm_up(shape, params)
-        Simulation(shape, params).run(max_ticks=5)
-    shape = Shape.load("rectangle", World())
-    KilobotRun(shape, RunParams(robots=50, algorithm=RUBENSTEIN)).run(max_ticks=5)
-    try:
-        (_CACHE / _STAMP).touch()
-    except OSError:
-        pass  # a read-only install: the indexes alone answer kernels_cached()
+    for name in PACKAGES if algorithm is None else (algorithm,):
+        if name == RUBENSTEIN:
+            from swarm_ros.core.rubenstein.run import KilobotRun
+
+            KilobotRun(Shape.load("rectangle", World()), RunParams(robots=50, algorithm=RUBENSTEIN)).run(max_ticks=5)
+        else:
+            from swarm_ros.core.engine import Simulation
+            from swarm_ros.core.warmup import warm_up
+
+            for shape_name in ("star", "k-block"):  # a 2D and a 3D shape: the 3D kernels are compiled apart
+                shape = Shape.load(shape_name, World())
+                params = RunParams(robots=shape.patches)
+                warm_up(shape, params)
+                Simulation(shape, params).run(max_ticks=5)
+        try:
+            (_CACHE / _STAMP.format(name)).touch()
+        except OSError:
+            pass  # a read-only install: the indexes alone answer kernels_cached()
 
 
-def main() -> int:
-    """``python -m swarm_ros.core.kernels``: drop stale kernels, then fill the cache if it is not (prints what it
-    did)."""
+def main(argv: list[str] | None = None) -> int:
+    """``python -m swarm_ros.core.kernels [ALGORITHM ...]``: drop stale kernels, then fill the cache of each
+    algorithm named (default: every one) whose cache is not filled (prints what it did)."""
+    names = list(sys.argv[1:] if argv is None else argv) or list(PACKAGES)
+    unknown = [n for n in names if n not in PACKAGES]
+    if unknown:
+        print(f"swarm_ros: no algorithm {unknown[0]!r} (known: {', '.join(PACKAGES)})", file=sys.stderr)
+        return 2
     if drop_stale():
         print("swarm_ros: dropped the kernels cached before the last change to the core")
-    if kernels_cached():
-        print("swarm_ros: the numba kernels are compiled and cached")
-        return 0
     import time
 
-    start = time.perf_counter()
-    compile_kernels()
-    print(f"swarm_ros: compiled the numba kernels into their cache in {time.perf_counter() - start:.1f} s")
+    for name in names:
+        if kernels_cached(name):
+            print(f"swarm_ros: the {name} algorithm's numba kernels are compiled and cached")
+            continue
+        start = time.perf_counter()
+        compile_kernels(name)
+        print(
+            f"swarm_ros: compiled the {name} algorithm's numba kernels into their cache in "
+            f"{time.perf_counter() - start:.1f} s"
+        )
     return 0
 
 
