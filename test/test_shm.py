@@ -44,3 +44,35 @@ def test_a_dead_segment_mapped_only_by_the_processes_said_to_be_no_users_goes(de
     removed = clean_shm({str(lock)}, frozenset({os.getpid()}))
     assert sorted(removed) == sorted([str(segment), str(lock)]) and not segment.exists() and not lock.exists()
     assert not Path(SHM_DIR / f"sem.{segment.name}_mutex").exists()  # none was made: nothing else touched
+
+
+def test_a_later_run_tidies_what_a_killed_launcher_recorded_and_only_that(tmp_path, monkeypatch):
+    """The per-user record of each launcher's Fast DDS files (register): a record whose launcher is dead has its
+    files removed once no process holds them, and goes; a live launcher's record, and files no record lists,
+    stay."""
+    from swarm_ros.ros import shm
+
+    if not SHM_DIR.is_dir():
+        pytest.skip("no /dev/shm here")
+    monkeypatch.setattr(shm, "_registry", lambda: tmp_path / "shm")
+    made = []
+    for _ in range(3):
+        name = f"fastrtps_test{uuid.uuid4().hex[:12]}"
+        (SHM_DIR / name).write_bytes(bytes(16))
+        (SHM_DIR / f"{name}_el").touch()
+        made.append((SHM_DIR / name, SHM_DIR / f"{name}_el"))
+    try:
+        dead_pid = 1 << 23  # above Linux's largest pid (2^22): no such process
+        assert not Path(f"/proc/{dead_pid}").exists()
+        shm.register(dead_pid, {str(made[0][1])})
+        shm.register(os.getpid(), {str(made[1][1])})  # a launcher still running
+        assert shm.tidy_dead_runs() == [str(made[0][0]), str(made[0][1])]
+        assert not made[0][0].exists() and not made[0][1].exists()
+        assert all(p.exists() for p in (*made[1], *made[2])), "a live run's files and files of no record stay"
+        assert sorted(p.name for p in (tmp_path / "shm").iterdir()) == [f"{os.getpid()}.list"]
+        shm.unregister(os.getpid())
+        assert shm.tidy_dead_runs() == [] and not list((tmp_path / "shm").iterdir())
+    finally:
+        for pair in made:
+            for path in pair:
+                path.unlink(missing_ok=True)

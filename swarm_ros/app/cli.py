@@ -16,7 +16,7 @@ from typing import Any
 from swarm_ros import __version__
 from swarm_ros.app import commands
 from swarm_ros.app.commands import EXIT_INTERRUPTED, EXIT_USAGE, PROG
-from swarm_ros.core.errors import InputError, ParameterError
+from swarm_ros.core.errors import InputError, ParameterError, RunFailed
 from swarm_ros.core.grid import World
 from swarm_ros.core.inputs import path_too_long, shown
 from swarm_ros.core.params import (
@@ -348,6 +348,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except RunFailed as exc:  # the run could not go on (a node process failed): one line, exit 1, not a usage error
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt as exc:
         if not isinstance(exc, InterruptSaid):
             print(f"{PROG}: interrupted", file=sys.stderr)

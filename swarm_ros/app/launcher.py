@@ -33,7 +33,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import threading
@@ -51,6 +50,7 @@ from swarm_ros.app.processes import (
     Child,
     DomainLock,
     LaunchError,
+    compile_first,
     logs_target,
     node_command,
     node_env,
@@ -65,7 +65,7 @@ from swarm_ros.core.shapes import Shape
 from swarm_ros.core.signals import StopFlag, process_age
 from swarm_ros.protocol.plan import MONITOR, is_world, plan_for, removes_lost_robots
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
-from swarm_ros.ros.shm import clean_shm, shm_locks
+from swarm_ros.ros.shm import clean_shm, register, shm_locks, tidy_dead_runs, unregister
 
 
 def plural(n: int, noun: str) -> str:
@@ -129,7 +129,8 @@ class Launch:
     enclaves: str | None = None  #: SROS2: each node's enclave is <enclaves>/<node> (docs/security.md)
     children: list[Child] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)  #: processes lost during the run
-    restarts: list[str] = field(default_factory=list)  #: names of the batches restarted, once per restart
+    #: (tick, name) of each node process restarted: the last tick the world's status had reported when it was
+    restarts: list[tuple[int, str]] = field(default_factory=list)
     shm_removed: list[str] = field(default_factory=list)  #: shared-memory files left by dead processes, removed
     own_shm: set[str] = field(default_factory=set)  #: Fast DDS lock files of this process's own node
     timeline: list[tuple[float, str]] = field(default_factory=list)  #: (epoch seconds, event), to logs/launcher.log
@@ -157,6 +158,7 @@ class Launch:
 
     def run(self) -> Path:
         run_key()  # a SWARM_ROS_RUN_KEY that is set but unusable fails here, before anything is made
+        self.shm_removed += tidy_dead_runs()  # what a SIGKILLed earlier run, of any directory, left in /dev/shm
         out = self.out.absolute()
         made = [d for d in (out.parent, *out.parent.parents) if not d.exists()]  # deepest first
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -189,18 +191,19 @@ class Launch:
                 self._note_exits()
                 self._note("all node processes gone")
                 kept = ok or (interrupted and self.result() is not None)  # Ctrl-C'd after the run was written
-                if kept and self.ended_at is not None:
-                    fill_summary(
-                        out,
-                        self.restarts,
-                        shutdown_seconds=round(time.monotonic() - self.ended_at, 3),
-                        processes=self.processes,
+                if kept:  # an interrupted run too; its shutdown time only once the world's outcome was heard
+                    shutdown = (
+                        {}
+                        if self.ended_at is None
+                        else {"shutdown_seconds": round(time.monotonic() - self.ended_at, 3)}
                     )
+                    fill_summary(out, self.restarts, processes=self.processes, **shutdown)
                 lock.close()
                 # its own node is shut down by now, but Fast DDS keeps the segments it mapped (a killed peer's
                 # too) mapped in this process: this process is not a user that keeps them
                 seen = set().union(self.own_shm, *(c.shm for c in self.children))
                 self.shm_removed += clean_shm(seen, frozenset({os.getpid()}))
+                unregister(os.getpid())
                 for f in [*logs.glob(CHECKPOINT + "*"), logs / SHM_LIST]:  # of no use once the run is over
                     f.unlink(missing_ok=True)
                 if (interrupted or unwritten) and not kept and not self.started:
@@ -215,26 +218,9 @@ class Launch:
                 raise KeyboardInterrupt
         return out
 
-    def _compile_kernels(self) -> None:
-        """Fill numba's cache once, here, if it is empty: every node process would otherwise compile the same
-        kernels at the same time (about 24 s of start-up on 2 cores instead of about 12)."""
-        from swarm_ros.core.kernels import COMPILING, kernels_cached
-
-        if kernels_cached():
-            return
-        if not self.quiet:
-            print(f"swarm-ros: {COMPILING}", file=sys.stderr, flush=True)
-        self._note("compiling the numba kernels")
-        done = subprocess.run(
-            [sys.executable, "-m", "swarm_ros.core.kernels"], stdin=subprocess.DEVNULL, capture_output=True, text=True
-        )
-        if done.returncode != 0:
-            lines = (done.stderr or done.stdout).strip().splitlines()
-            raise LaunchError(f"compiling the numba kernels failed ({lines[-1] if lines else done.returncode})")
-        self._note("numba kernels compiled")
-
     def _start(self, logs: Path, domain_id: int, out: Path) -> None:
-        self._compile_kernels()
+        if compile_first(self.params.algorithm, self.quiet):  # once, here, not in every node at once
+            self._note("numba kernels compiled")
         if can_fork() and self.params.algorithm == DARR_NIAZI:  # forked from here (app/forking.py), with the kernels
             preload(self.shape, self.params, sorted({f"swarm_ros.nodes.{module}" for _, module, _ in self.plan()}))
         shape_arg = self.settings.shape
@@ -306,13 +292,14 @@ class Launch:
         self._note(f"started {name} (pid {proc.pid}{', forked' if isinstance(proc, Forked) else ''})")
         return Child(name, proc, log, f, command=command, incarnation=incarnation)
 
-    def _restart(self, old: Child) -> Child:
-        """Start a dead robot batch's process again: same robots, next incarnation."""
+    def _restart(self, old: Child, tick: int) -> Child:
+        """Start a dead node's process again (``tick``: the run's tick, as the world's status last said it): same
+        robots, next incarnation."""
         old.log_file.close()
         new = self._spawn(old.name, old.command, old.log, old.incarnation + 1)
         new.shm = old.shm  # cleaned up after the run, with everyone's
         self.children[self.children.index(old)] = new
-        self.restarts.append(old.name)
+        self.restarts.append((max(tick, 0), old.name))
         return new
 
     def _follow(self) -> None:
@@ -370,7 +357,7 @@ class Launch:
                     if verdict.end or verdict.stop:
                         raise LaunchError(verdict.end or verdict.stop)
                     if verdict.restart:
-                        self._restart(c)
+                        self._restart(c, progress.tick)
                         world_done_at = None if c.name == MONITOR else world_done_at
                     else:
                         reported.add(c.name)
@@ -405,6 +392,7 @@ class Launch:
                 )
             except OSError:
                 pass  # a full disk: only the clean-up after a SIGKILL misses them
+            register(os.getpid(), seen)  # for any later run, whatever its output directory (tidy_dead_runs)
 
     def _child(self, name: str) -> Child:
         return next(c for c in self.children if c.name == name)

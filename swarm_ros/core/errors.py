@@ -14,7 +14,7 @@ ContractError     a call handed the core data that does not fit its state     th
                   a message the protocol checks let through                   let through is a gap in them)
 Rejected          a received message that must be dropped, ``kind`` names     the node's ``Rejections``:
                   the fault                                                   counted, logged, never raised on
-RunFailed         the run cannot go on (something the graph did, not input)   the node: its status and exit 1
+RunFailed         the run cannot go on (something the graph did, not input)   the node, the command line: exit 1
 InvariantError    a model invariant does not hold after a tick (``--check``)  nothing: it is a bug to report
 ================  ==========================================================  ==============================
 """

@@ -87,3 +87,58 @@ def clean_shm(lock_files: set[str], besides: frozenset[int] = frozenset()) -> li
             except FileNotFoundError:
                 pass
     return removed
+
+
+def _registry() -> Path:
+    """This user's list of the Fast DDS files each live ``swarm-ros run`` has seen its processes hold: one file per
+    launcher, named by its pid (in the temporary directory, made private)."""
+    import tempfile
+
+    return Path(tempfile.gettempdir()) / f"swarm_ros-{os.getuid()}" / "shm"
+
+
+def register(pid: int, lock_files: set[str]) -> None:
+    """Record (replacing its last record) the lock files launcher ``pid``'s processes have held, so that a later run
+    can tidy them if this launcher is SIGKILLed before it does (:func:`tidy_dead_runs`)."""
+    folder = _registry()
+    try:
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+        part = folder / f".{pid}.tmp"
+        part.write_text("".join(f"{f}\n" for f in sorted(lock_files)), encoding="utf-8")
+        part.replace(folder / f"{pid}.list")
+    except OSError:
+        pass  # a full disk or a read-only /tmp: only the tidying after a SIGKILL misses them
+
+
+def unregister(pid: int) -> None:
+    """Drop launcher ``pid``'s record: it has tidied its own files."""
+    (_registry() / f"{pid}.list").unlink(missing_ok=True)
+
+
+def tidy_dead_runs() -> list[str]:
+    """Remove the Fast DDS files that launchers no longer alive recorded (:func:`register`) and no live process
+    holds (:func:`clean_shm`); drop their records. Any ``swarm-ros run`` calls it as it starts, so what a SIGKILLed
+    one left in /dev/shm lasts only until the next run, whatever its output directory. Only files a record lists,
+    and only Fast DDS lock files in /dev/shm among them, are looked at."""
+    removed: list[str] = []
+    try:
+        records = sorted(_registry().glob("*.list"))
+    except OSError:
+        return removed
+    for record in records:
+        pid = record.stem
+        if not pid.isdigit() or Path(f"/proc/{pid}").exists():
+            continue  # that launcher is alive (or its pid was taken again: left for a later run)
+        try:
+            listed = record.read_text(encoding="utf-8", errors="replace").split()
+        except OSError:
+            continue
+        removed += clean_shm(
+            {
+                f
+                for f in listed
+                if Path(f).parent == SHM_DIR and Path(f).name.startswith("fastrtps_") and f.endswith("_el")
+            }
+        )
+        record.unlink(missing_ok=True)
+    return removed
