@@ -448,6 +448,11 @@ def main() -> None:
         help="messages per second on each topic (flood part)",
     )
     parser.add_argument(
+        "--hog",
+        action="store_true",
+        help="measure beside one CPU-bound process (python -c 'while 1: pass'), as on a shared machine",
+    )
+    parser.add_argument(
         "--scale-robots",
         type=int,
         nargs="+",
@@ -461,6 +466,12 @@ def main() -> None:
         RULES["crowding"] = args.crowding
 
     parts = set(args.only or ("speed", "breakdown", "readme", "rosstart", "bag", "recording", "flood"))
+    if args.hog:  # one core kept busy for the whole bench, stopped at its end however it ends
+        import atexit
+
+        hog = subprocess.Popen([sys.executable, "-c", "while 1: pass"])
+        atexit.register(hog.kill)
+        print("beside one CPU-bound process (--hog)")
     if "speed" in parts:
         speed(args.seed, args.repeats, args.processes)
     if "rosstart" in parts:

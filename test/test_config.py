@@ -13,7 +13,27 @@ pytestmark = pytest.mark.unit
 
 
 def test_shipped_parameter_file_holds_exactly_the_defaults():
-    assert load_params_file(data_dir("config") / "swarm_ros.yaml", Settings(shape="other")) == Settings()
+    import yaml
+
+    from swarm_ros.core.params import RUN_PARAMETERS
+
+    path = data_dir("config") / "swarm_ros.yaml"
+    assert load_params_file(path, Settings(shape="other")) == Settings()
+    keys = list(yaml.safe_load(path.read_text())["/**"]["ros__parameters"])
+    assert sorted(keys) == sorted(p.name for p in RUN_PARAMETERS), "every run parameter, each once"
+
+
+def test_the_shipped_file_with_the_other_algorithm_is_taken(tmp_path):
+    """Its study's-model parameters at their defaults do not stand in the way of algorithm: rubenstein."""
+    from swarm_ros.app.param_file import read_params_file
+
+    text = (data_dir("config") / "swarm_ros.yaml").read_text()
+    assert "    algorithm: darr-niazi" in text
+    path = tmp_path / "p.yaml"
+    path.write_text(text.replace("    algorithm: darr-niazi", "    algorithm: rubenstein"))
+    settings, _ = read_params_file(path)
+    shape, params = settings.resolve()
+    assert params.algorithm == "rubenstein" and params.robots == shape.patches
 
 
 def test_sections_apply_in_order_and_override_the_base(tmp_path):
