@@ -75,6 +75,9 @@ def make_fixtures(d: Path) -> None:
             + "rules: [paper, local, literal]\n",
             "floatexp.yaml": EXPERIMENT.format(shape="star", sizes="442.0"),
             "twice.yaml": "/**:\n  ros__parameters:\n    robots: 500\n    robots: 600\n",
+            "torusexp.yaml": EXPERIMENT.format(shape="torus", sizes="100") + "algorithm: [darr-niazi, rubenstein]\n",
+            "rbcuts.yaml": "/**:\n  ros__parameters:\n    algorithm: rubenstein\n"
+            '/robot_batch:\n  ros__parameters:\n    region_cuts: "0"\n',
         }
     )
     for name, text in files.items():
@@ -91,6 +94,7 @@ def make_fixtures(d: Path) -> None:
         "star,star.txt,1036,1.0,paper,walk,ahead,one,0,1,1036,100000,45.0,32,0.0,0,inprocess,bogus,405,1036,0,0,0,0,"
         "2.5,0.5\n"
     )
+    _make_damaged_results(d)
     (d / "noise").mkdir()
     (d / "noise" / "results.csv").write_bytes(np.random.default_rng(3).bytes(3000))
     Image.new("L", (9, 9), 255).save(d / "white.png")
@@ -102,6 +106,34 @@ def make_fixtures(d: Path) -> None:
     (d / "oldbag").mkdir()
     (d / "oldbag" / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: 99\n")
     _make_3d_fixtures(d)
+
+
+def _make_damaged_results(d: Path) -> None:
+    """Copies of the pilot's results.csv (18 real rows; line 14 is the rectangle's first run under the study's model),
+    each damaged one way, and one beside a regular file named figures."""
+    text = (ROOT / "docs" / "results" / "head_to_head_pilot" / "results.csv").read_text()
+    lines = text.splitlines(keepends=True)
+    complete = lines[13]
+    assert complete.startswith("rectangle,rectangle,442,darr-niazi,") and ",complete," in complete
+    columns = lines[0].strip().split(",")
+
+    def edited(**values: str) -> str:
+        cells = complete.strip().split(",")
+        for key, value in values.items():
+            cells[columns.index(key)] = value
+        return ",".join(cells) + "\n"
+
+    damaged = {
+        "dup": text + complete,
+        "cut": text + complete[:40],
+        "over": "".join([*lines[:13], edited(coverage="7.5"), *lines[14:]]),
+        "partial": "".join([*lines[:13], edited(coverage="0.1"), *lines[14:]]),
+        "figfile": text,
+    }
+    for name, content in damaged.items():
+        (d / name).mkdir()
+        (d / name / "results.csv").write_text(content)
+    (d / "figfile" / "figures").write_text("a file of the user's, not the report's\n")
 
 
 def _png_header(width: int, height: int) -> bytes:

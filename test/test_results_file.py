@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from swarm_ros.app.report_stats import group_stats, time_and_accuracy
-from swarm_ros.app.results_file import ExperimentError, read_results, shape_source, stored_shape_file
+from swarm_ros.app.results_file import ExperimentError, read_results, stored_shape_file
 from swarm_ros.artifacts.run_dir import fill_summary
 
 pytestmark = pytest.mark.unit
@@ -95,14 +95,13 @@ def test_time_and_accuracy_gives_each_mean_its_confidence_interval_and_how_many_
     assert filled.endswith("%") and " ± " in filled
 
 
-def test_an_experiment_directory_stores_a_shape_files_path_relative_to_itself(tmp_path):
-    out = tmp_path / "docs" / "results" / "exp"
+def test_an_experiment_stores_a_shape_files_path_relative_to_the_working_directory_under_it(tmp_path, monkeypatch):
     shape = tmp_path / "config" / "shapes" / "ring9.txt"
-    stored = stored_shape_file(str(shape), out)
-    assert stored == "../../../config/shapes/ring9.txt"
-    assert shape_source(stored, out) == str(shape)
-    assert stored_shape_file("star", out) == "star" == shape_source("star", out)  # a built-in by its name
-    assert shape_source(str(shape), out) == str(shape)  # an absolute path, as older results hold
+    monkeypatch.chdir(tmp_path)
+    assert stored_shape_file(str(shape)) == "config/shapes/ring9.txt"  # as from a repository's root
+    assert stored_shape_file("star") == "star"  # a built-in by its name
+    elsewhere = tmp_path.parent / "other" / "ring9.txt"
+    assert stored_shape_file(str(elsewhere)) == str(elsewhere.resolve())  # not under it: absolute
 
 
 def test_the_launcher_lists_a_restart_the_monitor_did_not_at_the_tick_it_happened(tmp_path):

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from swarm_ros.app.param_file import check_launcher_sets, read_params_file, record_every
+from swarm_ros.app.param_file import check_given, check_launcher_sets, read_params_file, record_every
 from swarm_ros.app.summary_print import print_kilobot_summary, print_summary
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import InputError, ParameterError
@@ -26,7 +26,6 @@ from swarm_ros.core.params import (
     node_defaults,
 )
 from swarm_ros.core.resources import check_world_memory
-from swarm_ros.core.run_bounds import check_given
 from swarm_ros.core.shapes import Shape, builtin_shapes, builtin_shapes_3d
 from swarm_ros.core.signals import EXIT_INTERRUPTED, StopFlag
 from swarm_ros.protocol.plan import removes_lost_robots

@@ -38,7 +38,7 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
     Raises:
         ExperimentError: ``out`` is a file, cannot be created, or holds another experiment.
     """
-    record = json.dumps({"config": str(config), "experiment": _as_stored(exp.as_dict(), out)}, indent=2) + "\n"
+    record = json.dumps({"config": str(config), "experiment": _as_stored(exp.as_dict())}, indent=2) + "\n"
     marker = out / EXPERIMENT_FILE
     if out.exists() and not out.is_dir():
         raise ExperimentError(f"{out}: exists and is not a directory")
@@ -48,7 +48,7 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
             before.setdefault("algorithm", [DARR_NIAZI])  # written before the algorithm was an axis
         except (OSError, ValueError, KeyError):
             raise ExperimentError(f"{marker}: unreadable; not a swarm-ros experiment directory") from None
-        if _as_stored(before, out) != json.loads(json.dumps(_as_stored(exp.as_dict(), out))):
+        if _as_stored(before) != json.loads(json.dumps(_as_stored(exp.as_dict()))):
             raise ExperimentError(
                 f"{out}: holds the results of a different experiment (its {EXPERIMENT_FILE} "
                 f"differs from {config}); choose another --out"
@@ -67,10 +67,10 @@ def prepare_out_dir(out: Path, exp: Experiment, config: Path, create: bool = Tru
         raise ExperimentError(f"{out}: cannot create the experiment directory ({exc.strerror or exc})") from None
 
 
-def _as_stored(record: dict, out: Path) -> dict:
-    """An experiment's record as its directory ``out`` keeps it: its shape files' paths relative to ``out``
+def _as_stored(record: dict) -> dict:
+    """An experiment's record as its directory keeps it: its shape files' paths as results.csv stores them
     (:func:`~swarm_ros.app.results_file.stored_shape_file`; a record written with absolute paths reads the same)."""
-    shapes = [[name, stored_shape_file(str(file), out), *rest] for name, file, *rest in record.get("shapes", [])]
+    shapes = [[name, stored_shape_file(str(file)), *rest] for name, file, *rest in record.get("shapes", [])]
     return {**record, "shapes": shapes}
 
 
@@ -150,7 +150,7 @@ def _run_grid(
                     curve = row.pop(CURVE, None)
                     if curve is not None:  # before its row: a row in results.csv has its curve, if it made one
                         write_curve(out, row, curve)
-                    results.append({**row, "shape_file": stored_shape_file(row["shape_file"], out)})
+                    results.append({**row, "shape_file": stored_shape_file(row["shape_file"])})
                     bar.update(1)
     except KeyboardInterrupt:
         left = len(runs) - len(results.done() & {s.key for s in runs})

@@ -195,3 +195,20 @@ def params_yaml(run: Settings, per_node: dict[str, dict[str, Any]]) -> str:
         if values:
             doc[f"/{node}"] = {"ros__parameters": dict(values)}
     return yaml.safe_dump(doc, sort_keys=False)
+
+
+def check_given(given: dict[str, object], algorithm: str, where: str = "") -> None:
+    """Refuse a run parameter of the other algorithm that was given (a flag, a launch argument), even at its default
+    value: it would do nothing. (A parameter file may hold the other algorithm's at their defaults, so that one file
+    holds them all; RunParams refuses another value.)
+
+    Raises:
+        ParameterError: the first such parameter, ``where`` (if any) before it.
+    """
+    for name, value in given.items():
+        p = RUN_PARAMETER[name]
+        if value is not None and p.algorithm not in ("", algorithm):
+            said = f"{where}: " if where else ""
+            raise ParameterError(
+                f"{said}{name} is a parameter of the {p.algorithm} algorithm, not of {algorithm}, got {value!r}"
+            )

@@ -65,7 +65,6 @@ from swarm_ros.app.results_file import (
     RESULTS_FILE,
     ExperimentError,
     read_results,
-    shape_source,
 )
 from swarm_ros.artifacts.mpl import plt
 from swarm_ros.artifacts.run_dir import public_mode
@@ -90,7 +89,7 @@ def _curve(row: dict, out: Path) -> np.ndarray:
     if stored is not None:
         return stored
     values = {p.name: row[p.name] for p in RUN_PARAMETERS if p.name in row and p.name != "shape"}
-    shape, params = Settings(shape=shape_source(row["shape_file"], out), **values).resolve()  # as any run (check_run)
+    shape, params = Settings(shape=row["shape_file"], **values).resolve()  # checked as any run is (check_run)
     sim: Simulation | KilobotRun = (
         KilobotRun(shape, params) if params.algorithm == RUBENSTEIN else Simulation(shape, params)
     )

@@ -250,19 +250,18 @@ class ResultsFile:
         self._file.close()
 
 
-def stored_shape_file(shape_file: str, out: Path) -> str:
-    """What an experiment directory ``out`` stores of a run's shape (results.csv's ``shape_file``, experiment.json): a
-    built-in shape's name as it is, a shape file's path relative to ``out``, so that the results read the same in
-    any clone of a repository that holds both."""
+def stored_shape_file(shape_file: str) -> str:
+    """What an experiment stores of a run's shape (results.csv's ``shape_file``, experiment.json): a built-in shape's
+    name as it is; a shape file's path relative to the working directory when it lies under it (an experiment run
+    from a repository's root stores paths relative to the repository, the same in any clone), else its absolute
+    path. Shape.load reads either from the same working directory."""
     if "/" not in shape_file:
         return shape_file
-    return os.path.relpath(Path(out, shape_file).resolve(), Path(out).resolve())
-
-
-def shape_source(shape_file: str, out: Path) -> str:
-    """The shape a stored ``shape_file`` of the experiment directory ``out`` names, as Shape.load takes it (a path
-    relative to ``out`` made whole; an absolute path, as older results hold, or a name as it is)."""
-    return str(Path(out, shape_file).resolve()) if "/" in shape_file else shape_file
+    path = Path(shape_file).resolve()
+    try:
+        return str(path.relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def result_row(spec, summary: dict) -> dict:

@@ -30,12 +30,11 @@ from pathlib import Path
 
 import yaml
 
-from swarm_ros.app.param_file import check_launcher_sets, params_yaml, read_params_file, record_every
+from swarm_ros.app.param_file import check_given, check_launcher_sets, params_yaml, read_params_file, record_every
 from swarm_ros.app.processes import CHECKPOINT, check_graph, check_graph_shape, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
 from swarm_ros.core.errors import ConfigError, InputError, ParameterError, RunFailed
 from swarm_ros.core.params import DARR_NIAZI, RUBENSTEIN, RUN_PARAMETER, Param, node_defaults
-from swarm_ros.core.run_bounds import check_given
 from swarm_ros.core.signals import EXIT_INTERRUPTED
 from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world, plan_for, removes_lost_robots
 

@@ -18,7 +18,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from swarm_ros.core.errors import InputError
+from swarm_ros.core.errors import InputError, RunFailed
 from swarm_ros.core.inputs import path_too_long, shown
 from swarm_ros.core.params import RUBENSTEIN
 
@@ -34,8 +34,9 @@ class OutputError(InputError):
     """The output directory cannot be used."""
 
 
-class RecordingError(OutputError):
-    """The recording file could not be written (a full disk, say); what is on disk of it is not whole."""
+class RecordingError(RunFailed):
+    """The recording file could not be written (a full disk, say); what is on disk of it is not whole. A run
+    failure, not bad input: the command exits 1."""
 
 
 def default_run_dir(shape: str, params: RunParams, now: datetime | None = None) -> Path:

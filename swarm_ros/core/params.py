@@ -411,6 +411,15 @@ class RunParams:
                     f"{name} must be below comm_range ({self.comm_range:g}), got {getattr(self, name):g}"
                 )
 
+    def check_shape(self, shape: Shape) -> None:
+        """Refuse a shape the algorithm cannot form (rubenstein: 3D), or a vision radius beyond the world."""
+        if self.algorithm == RUBENSTEIN:
+            from .rubenstein.layout import check_shape
+
+            check_shape(shape)
+        else:
+            self.check_vision(shape.world.radius)
+
     def check_vision(self, world_radius: int) -> None:
         """Refuse a vision radius beyond the world's radius: a robot would see across the whole world.
 
