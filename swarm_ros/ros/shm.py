@@ -112,7 +112,10 @@ def register(pid: int, lock_files: set[str]) -> None:
 
 def unregister(pid: int) -> None:
     """Drop launcher ``pid``'s record: it has tidied its own files."""
-    (_registry() / f"{pid}.list").unlink(missing_ok=True)
+    try:
+        (_registry() / f"{pid}.list").unlink(missing_ok=True)
+    except OSError:
+        pass  # not ours to remove: a later run finds it and tidies nothing a live process holds
 
 
 def tidy_dead_runs() -> list[str]:
