@@ -280,7 +280,7 @@ class MonitorNode:
                 if lost is not None:
                     raise lost  # no whole run without its recording
                 self._write(Outcome.INTERRUPTED)
-            except (OSError, run_dir.OutputError):  # a full disk: the bag goes beside the run, or away if unclosable
+            except (OSError, run_dir.OutputError, run_dir.RecordingError):  # a full disk: the bag goes beside the run
                 if self.bag is not None and self.bag.holder.exists():
                     self.bag.move_to(run_dir.partial_bag(self.out))
                 raise

@@ -200,7 +200,7 @@ def run_node(name: str, factory: Callable[[], SwarmNode], argv: list[str] | None
         if swarm is not None:
             try:
                 swarm.close(code)
-            except (InputError, OSError) as exc:  # closing its files failed (a full disk)
+            except (InputError, RunFailed, OSError) as exc:  # closing its files failed (a full disk)
                 if code == EXIT_OK:
                     code = _fail(name, f"while closing: {exc}", EXIT_FAILED)
                 else:  # the error already said is the one the launcher reports; this one goes to the log
