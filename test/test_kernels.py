@@ -61,6 +61,8 @@ def test_a_stamp_newer_than_every_kernel_module_means_filled(core):
     _at(core / "engine.py", 5000)
     assert not kernels.kernels_cached("darr-niazi"), "a kernel module changed since"
     assert kernels.kernels_cached("rubenstein"), "a change to the study's model's kernels is not the other's"
+    _at(core / "rng.py", 5000)  # but a change to a core kernel the other calls is (kernels.SHARED)
+    assert not kernels.kernels_cached("rubenstein")
 
 
 def test_no_cache_at_all_is_not_filled(core):

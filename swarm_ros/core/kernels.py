@@ -38,6 +38,9 @@ _MARK = "cache=True"  # a module with a cached kernel says so in its source
 _STAMP = "swarm_ros-kernels-{}.compiled"  # in _CACHE: compile_kernels() ran after the last change to its modules
 #: Each algorithm's package of kernel modules (the study's model's are the core's own).
 PACKAGES = {"darr-niazi": _CORE, "rubenstein": _CORE / "rubenstein"}
+#: The core's kernel modules another algorithm's kernels call (and so carry compiled in): a change to one leaves
+#: that algorithm's cache stale too.
+SHARED = {"rubenstein": ("rng.py",)}
 #: About how long each algorithm's kernels take to compile (scripts/bench_compile.py, a quiet 2-core machine).
 SECONDS = {"darr-niazi": 40, "rubenstein": 17}
 
@@ -58,10 +61,11 @@ def _packages() -> tuple[Path, ...]:
 def _kernel_modules(algorithm: str | None = None) -> list[Path]:
     """The modules with a cached kernel: ``algorithm``'s, or every algorithm's."""
     packages = _packages() if algorithm is None else (PACKAGES[algorithm],)
+    shared = [PACKAGES["darr-niazi"] / name for name in SHARED.get(algorithm or "", ())]
     return [
         p
         for package in packages
-        for p in sorted(package.glob("*.py"))
+        for p in [*sorted(package.glob("*.py")), *shared]
         if p.name != "kernels.py" and _MARK in p.read_text("utf-8")
     ]
 
