@@ -38,3 +38,16 @@ def module_graph() -> dict[str, set[str]]:
         name: {m for m in _imports_of(path, name, package) if m in modules and m != name}
         for name, (path, package) in modules.items()
     }
+
+
+#: Each subpackage's layer, lowest first. ``swarm_ros`` itself (its ``__main__``) is above them all.
+LAYERS = {"core": 0, "protocol": 1, "artifacts": 2, "ros": 3, "nodes": 4, "tools": 4, "app": 5}
+
+
+def layer_of(module: str) -> tuple[str, int]:
+    parts = module.split(".")
+    if module == "swarm_ros":
+        return "swarm_ros", -1  # the package itself: only its version, which any layer may read
+    if len(parts) < 2 or parts[1] not in LAYERS:
+        return "swarm_ros", max(LAYERS.values()) + 1
+    return parts[1], LAYERS[parts[1]]

@@ -314,8 +314,8 @@ def test_a_second_command_for_a_run_directory_in_use_is_refused_at_once(tmp_path
         assert first.poll() is None  # the first goes on, untouched
     finally:
         first.send_signal(signal.SIGTERM)
-        first.communicate(timeout=30)
-    assert json.loads((out / "summary.json").read_text())["outcome"] == "interrupted"
+        _, first_err = first.communicate(timeout=30)
+    assert json.loads((out / "summary.json").read_text())["outcome"] == "interrupted", first_err
     assert cli.main(["simulate", "--out", str(tmp_path / "next"), "--quiet", "--max-ticks", "3"]) == 0  # released
 
 

@@ -24,7 +24,6 @@ def core(tmp_path, monkeypatch):
     (other / "rule.py").write_text("@numba.njit(cache=True)\n")
     monkeypatch.setattr(kernels, "_CORE", tmp_path)
     monkeypatch.setattr(kernels, "_CACHE", cache)
-    monkeypatch.setattr(kernels, "PACKAGES", {"darr-niazi": tmp_path, "rubenstein": other})
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     return tmp_path
 

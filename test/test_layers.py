@@ -9,21 +9,9 @@ protocol run (and are tested) without rclpy.
 from __future__ import annotations
 
 import pytest
-from layering import module_graph
+from layering import layer_of, module_graph
 
 pytestmark = pytest.mark.unit
-
-#: Each subpackage's layer, lowest first. ``swarm_ros`` itself (its ``__main__``) is above them all.
-LAYERS = {"core": 0, "protocol": 1, "artifacts": 2, "ros": 3, "nodes": 4, "tools": 4, "app": 5}
-
-
-def layer_of(module: str) -> tuple[str, int]:
-    parts = module.split(".")
-    if module == "swarm_ros":
-        return "swarm_ros", -1  # the package itself: only its version, which any layer may read
-    if len(parts) < 2 or parts[1] not in LAYERS:
-        return "swarm_ros", max(LAYERS.values()) + 1
-    return parts[1], LAYERS[parts[1]]
 
 
 def wrong_way(graph: dict[str, set[str]]) -> list[str]:

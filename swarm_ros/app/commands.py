@@ -13,13 +13,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from swarm_ros.app.param_file import check_given, check_launcher_sets, read_params_file, record_every
-from swarm_ros.app.summary_print import print_kilobot_summary, print_summary
+from swarm_ros.app.summary_print import print_summary
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.core.errors import InputError, ParameterError
+from swarm_ros.core.algorithm import algorithm_of, check_loss_policy, check_regions
+from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import (
     NODE_PARAMETERS,
-    RUBENSTEIN,
     RUN_PARAMETERS,
     RunParams,
     Settings,
@@ -28,7 +28,6 @@ from swarm_ros.core.params import (
 from swarm_ros.core.resources import check_world_memory
 from swarm_ros.core.shapes import Shape, builtin_shapes, builtin_shapes_3d
 from swarm_ros.core.signals import EXIT_INTERRUPTED, StopFlag
-from swarm_ros.protocol.plan import removes_lost_robots
 
 if TYPE_CHECKING:
     from swarm_ros.artifacts.rerun_recording import Recorder
@@ -119,11 +118,14 @@ def _prepare(
 
         check_graph_shape(settings.shape)
     shape, params = settings.resolve()
-    if graph and params.algorithm == RUBENSTEIN:
-        from swarm_ros.app.processes import check_rubenstein_graph
-
-        cuts = (args.region_cuts, nodes["robot_batch"].get("region_cuts"))
-        check_rubenstein_graph(shape, params, args.processes, args.world_shards, *cuts, args.params_file)
+    if graph:
+        check_regions(params.algorithm, args.world_shards > 1, "--world-shards")
+        check_regions(params.algorithm, args.region_cuts, "--region-cuts")
+        file_cuts = nodes["robot_batch"].get("region_cuts")
+        check_regions(params.algorithm, file_cuts, f"{args.params_file}: /robot_batch: region_cuts")
+        own_checks = algorithm_of(params.algorithm).part("check_graph")
+        if own_checks is not None:
+            own_checks(shape, params, args.processes)
     monitor = nodes["monitor"]
     recording = RecordingOptions(
         enabled=bool(_flag(args.record, monitor, "record")),
@@ -134,6 +136,8 @@ def _prepare(
     out = args.out or (Path(str(monitor["out_dir"])) if monitor.get("out_dir") else default_run_dir(shape.name, params))
     args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
     check_out_dir(out, args.overwrite)
+    if not graph:  # numba and the engine loaded first: from the claim to the driver's StopFlag is then a moment
+        algorithm_of(params.algorithm).part("engine")  # (a SIGTERM there ends the command with nothing written)
     claim_out_dir(out)  # a second command for the same directory is refused now, not after its run
     if graph:  # what a SIGKILLed 'run' of the same directory left (no live command holds it: claimed just now)
         from swarm_ros.app.processes import recover_killed
@@ -150,20 +154,28 @@ def _prepare(
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from swarm_ros.artifacts.run_dir import partial_recording, write_run
-    from swarm_ros.core.run_result import RunRecord
-
+    """``simulate``: the run's algorithm's driver (core.algorithm's part ``simulate``)."""
     _, shape, params, out, options, _ = _prepare(args)
-    if params.algorithm == RUBENSTEIN:
-        from swarm_ros.app.kilobot import simulate_kilobot
+    note_compiling(args.quiet, params.algorithm)
+    driver = algorithm_of(params.algorithm).part("simulate")
+    return driver(args, shape, params, out, options, PROG, PROGRESS_TICKS)
 
-        note_compiling(args.quiet, params.algorithm)
-        return simulate_kilobot(args, shape, params, out, options, PROG, PROGRESS_TICKS)
 
+def simulate_darr_niazi(
+    args: argparse.Namespace,
+    shape: Shape,
+    params: RunParams,
+    out: Path,
+    options: RecordingOptions,
+    prog: str,
+    _every: int,
+) -> int:
+    """``simulate`` under the study's model: its in-process engine, with a progress bar and a recording."""
+    from swarm_ros.artifacts.run_dir import partial_recording, write_run
     from swarm_ros.core.engine import Simulation  # here: numba is not needed by the other commands' start
     from swarm_ros.core.metrics import Outcome
+    from swarm_ros.core.run_result import RunRecord
 
-    note_compiling(args.quiet, params.algorithm)
     start = time.perf_counter()
     stopped = recorder = None
     # Ctrl-C or SIGTERM, from here on: the run so far (tick 0 at least) becomes an 'interrupted' run directory
@@ -188,7 +200,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     rrd_done, every = (rrd if options.enabled else None), options.every_for(params.robots)
     out = write_run(out, record, overwrite=args.overwrite, recording=rrd_done, robots_every=every)
     if stopped is not None:
-        print(f"{PROG}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
+        print(f"{prog}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
         return EXIT_INTERRUPTED
     if not args.quiet:
         print_summary(record.summary, out, shape.dims)
@@ -210,10 +222,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         **({"on_batch_loss": args.on_batch_loss} if args.on_batch_loss else {}),
         **({"max_restarts": args.max_restarts} if args.max_restarts is not None else {}),
     }
-    if not removes_lost_robots(params.algorithm) and world.get("on_batch_loss") == "remove":
-        raise ParameterError(
-            f"--on-batch-loss remove is not for the {RUBENSTEIN} algorithm's graph: a lost batch is restarted"
-        )
+    said = "--on-batch-loss" if args.on_batch_loss else f"{args.params_file}: /world: on_batch_loss:"
+    check_loss_policy(params.algorithm, world.get("on_batch_loss"), said)
     check_graph(shape, params.robots, args.processes, args.enclaves, region_cuts=cuts, world_shards=args.world_shards)
     domain = _domain_id(args.domain_id)
     launch = Launch(
@@ -262,10 +272,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-        if params.algorithm == RUBENSTEIN:
-            print_kilobot_summary(summary, out)
-        else:
-            print_summary(summary, out, shape.dims)
+        algorithm_of(params.algorithm).part("print_summary")(summary, out, shape.dims)
         print(
             f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
             f"logs in {out / 'logs'}"

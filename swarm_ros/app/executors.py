@@ -22,8 +22,8 @@ import numpy as np
 from swarm_ros.app.curves import CURVE, curve_of, steps
 from swarm_ros.app.experiment_file import RunSpec
 from swarm_ros.app.results_file import ExperimentError, result_row
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.grid import World
-from swarm_ros.core.params import RUBENSTEIN
 from swarm_ros.core.shapes import Shape
 from swarm_ros.protocol.plan import PROCESSES
 
@@ -47,21 +47,13 @@ def run_inprocess(spec: RunSpec) -> dict:
     """Run ``spec`` with the in-process engine; its results.csv row."""
     import time
 
-    from swarm_ros.core.engine import Simulation
-    from swarm_ros.core.run_result import summary_of
-
     start = time.perf_counter()
     params = spec.params()
-    if params.algorithm == RUBENSTEIN:
-        from swarm_ros.core.rubenstein.run import KilobotRun
-        from swarm_ros.core.rubenstein.run import summary_of as kilobot_summary
-
-        run = KilobotRun(_shape(spec), params)
-        run.run()
-        return _with_curve(spec, run, result_row(spec, kilobot_summary(run, wall_seconds=time.perf_counter() - start)))
-    sim = Simulation(_shape(spec), params)
-    sim.run()
-    return _with_curve(spec, sim, result_row(spec, summary_of(sim, wall_seconds=time.perf_counter() - start)))
+    algorithm = algorithm_of(params.algorithm)
+    run = algorithm.part("engine")(_shape(spec), params)
+    run.run()
+    summary = algorithm.part("summary")(run, wall_seconds=time.perf_counter() - start)
+    return _with_curve(spec, run, result_row(spec, summary))
 
 
 def _with_curve(spec: RunSpec, run, row: dict) -> dict:

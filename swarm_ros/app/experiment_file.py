@@ -43,15 +43,14 @@ from swarm_ros.app.results_file import ExperimentError
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import (
-    DARR_NIAZI,
     EXPERIMENT_AXES,
     MAX_SEED,
-    RUBENSTEIN,
     RUN_PARAMETER,
     RUN_PARAMETERS,
     Param,
     RunParams,
     Settings,
+    foreign_defaults,
 )
 from swarm_ros.core.resources import check_world_memory
 from swarm_ros.core.run_bounds import check_run
@@ -138,8 +137,9 @@ class Experiment:
         out, seen = [], set()
         for values in itertools.product(*(self.axes[a] for a in AXES)):
             point = dict(zip(AXES, values))
-            if point["algorithm"] == RUBENSTEIN:
-                point.update({a: RUN_PARAMETER[a].default for a in AXES if RUN_PARAMETER[a].algorithm == DARR_NIAZI})
+            foreign = {a: v for a, v in foreign_defaults(point["algorithm"]).items() if a in AXES}
+            if foreign:
+                point.update(foreign)
                 if tuple(point.values()) in seen:
                     continue
                 seen.add(tuple(point.values()))
@@ -150,11 +150,10 @@ class Experiment:
         """Every run, in the canonical order: shape, group size, each axis, repetition. A rubenstein run takes the
         study's model's fixed parameters at their defaults too."""
         out = []
-        other = {p.name: p.default for p in RUN_PARAMETERS if p.algorithm == DARR_NIAZI}
         for name, file, _, sizes in self.shapes:
             for n in sizes:
                 for values in self.points():
-                    fixed = self.fixed.updated(**other) if values["algorithm"] == RUBENSTEIN else self.fixed
+                    fixed = self.fixed.updated(**foreign_defaults(values["algorithm"]))
                     point = fixed.updated(shape=file, robots=n, **values)
                     out += [
                         RunSpec(name, r, point.updated(seed=run_seed(self.seed, name, n, point.vision_radius, r)))

@@ -83,9 +83,9 @@ def preload(shape, params, modules: Sequence[str] = ()) -> None:
     """Load, in this process, what each node would load on its own: numpy, numba, the compiled kernels of the
     run's code path (from numba's cache, which the launcher has filled), and the node ``modules`` with rclpy,
     if this process may still fork once they are loaded (LTTng's fork hooks found, where rclpy brings LTTng)."""
-    from swarm_ros.core.warmup import warm_up
+    from swarm_ros.core.algorithm import algorithm_of
 
-    warm_up(shape, params)
+    algorithm_of(params.algorithm).part("warm_up")(shape, params)
     if not modules or not can_fork() or "rclpy" in sys.modules:
         return
     try:

@@ -60,10 +60,11 @@ from swarm_ros.app.processes import (
 from swarm_ros.app.supervision import END_GRACE, LATE_STATUS, MONITOR_GRACE, Supervisor
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
-from swarm_ros.core.params import DARR_NIAZI, RunParams, Settings, node_defaults
+from swarm_ros.core.algorithm import algorithm_of
+from swarm_ros.core.params import RunParams, Settings, node_defaults
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.signals import StopFlag, process_age
-from swarm_ros.protocol.plan import MONITOR, is_world, plan_for, removes_lost_robots
+from swarm_ros.protocol.plan import MONITOR, is_world, plan_for
 from swarm_ros.protocol.runkey import KEY_ENV, run_key
 from swarm_ros.ros.shm import clean_shm, register, shm_locks, tidy_dead_runs, unregister
 
@@ -153,7 +154,8 @@ class Launch:
     @cached_property
     def supervisor(self) -> Supervisor:
         """What is done when a node process ends: the rules the launch file follows too."""
-        said, removes = ("--on-batch-loss remove", "--max-restarts"), removes_lost_robots(self.params.algorithm)
+        removes = algorithm_of(self.params.algorithm).removes_lost_robots
+        said = ("--on-batch-loss remove", "--max-restarts")
         return Supervisor(self.max_restarts, self.on_batch_loss, removes, said, stops=frozenset())  # a signal: a fault
 
     def run(self) -> Path:
@@ -221,7 +223,7 @@ class Launch:
     def _start(self, logs: Path, domain_id: int, out: Path) -> None:
         if compile_first(self.params.algorithm, self.quiet):  # once, here, not in every node at once
             self._note("numba kernels compiled")
-        if can_fork() and self.params.algorithm == DARR_NIAZI:  # forked from here (app/forking.py), with the kernels
+        if can_fork() and algorithm_of(self.params.algorithm).warm_up:  # forked from here (app/forking.py)
             preload(self.shape, self.params, sorted({f"swarm_ros.nodes.{module}" for _, module, _ in self.plan()}))
         shape_arg = self.settings.shape
         if Path(shape_arg).suffix.lower() in (".txt", ".png"):

@@ -291,28 +291,15 @@ def recover_killed(out: Path) -> list[Path]:
     return kept
 
 
-def check_rubenstein_graph(
-    shape, params, processes: int, world_shards: int, flag_cuts: str | None, file_cuts: object, params_file: object
-) -> None:
-    """Refuse, in one line, what the rubenstein algorithm's graph does not do yet, from a flag (``--world-shards``,
-    ``--region-cuts``) or the parameter file (``/robot_batch: region_cuts``), and a batch count its cell grid cannot be
-    cut into.
+def check_rubenstein_graph(shape, params, processes: int) -> None:
+    """Refuse, in one line, a batch count the rubenstein algorithm's cell grid cannot be cut into.
 
     Raises:
-        InputError: the first of these.
+        InputError: that.
     """
-    from swarm_ros.core.params import RUBENSTEIN
     from swarm_ros.core.rubenstein.run import KilobotRun
     from swarm_ros.core.rubenstein.strips import strips_for
 
-    for given, flag in ((world_shards > 1, "--world-shards"), (flag_cuts, "--region-cuts")):
-        if given:
-            raise InputError(f"{flag} is not for the {RUBENSTEIN} algorithm's graph, which cuts its own strips")
-    if file_cuts:
-        raise InputError(
-            f"{params_file}: /robot_batch sets region_cuts, which is not for the {RUBENSTEIN} algorithm's graph "
-            "(it cuts its own strips)"
-        )
     strips_for(KilobotRun(shape, params), processes)
 
 

@@ -49,13 +49,13 @@ from swarm_ros.app.report_compare import algorithms_figure
 from swarm_ros.app.report_stats import (
     _COLOURS,
     FIGURES,
-    RUBENSTEIN_LABEL,
     STATS_CSV,
     STATS_MD,
     _rules_order,
     _sections,
     _setting,
     group_stats,
+    is_algorithm_label,
     rules_label,
     stats_csv,
     stats_markdown,
@@ -81,18 +81,15 @@ def _curve(row: dict, out: Path) -> np.ndarray:
     """The step curve (:func:`swarm_ros.app.curves.steps`) of the run in ``row``: the experiment's (``out``/curves),
     or, without one, the run re-run in process (checked against the row), then kept there for the next report."""
     from swarm_ros.app.curves import curve_of, read_curve, steps, write_curve
-    from swarm_ros.core.engine import Simulation
-    from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETERS, Settings
-    from swarm_ros.core.rubenstein.run import KilobotRun
+    from swarm_ros.core.algorithm import algorithm_of
+    from swarm_ros.core.params import RUN_PARAMETERS, Settings
 
     stored = read_curve(out, row)
     if stored is not None:
         return stored
     values = {p.name: row[p.name] for p in RUN_PARAMETERS if p.name in row and p.name != "shape"}
     shape, params = Settings(shape=row["shape_file"], **values).resolve()  # checked as any run is (check_run)
-    sim: Simulation | KilobotRun = (
-        KilobotRun(shape, params) if params.algorithm == RUBENSTEIN else Simulation(shape, params)
-    )
+    sim = algorithm_of(params.algorithm).part("engine")(shape, params)
     sim.run()
     outcome = sim.outcome.value if sim.outcome is not None else None
     if sim.tick != row["convergence_tick"] or outcome != row["outcome"]:
@@ -107,13 +104,13 @@ def _curve(row: dict, out: Path) -> np.ndarray:
 
 
 def _cells(rules: str) -> str:
-    return "pixels" if rules == RUBENSTEIN_LABEL else "patches"
+    return "pixels" if is_algorithm_label(rules) else "patches"
 
 
 def _counts(rules: str) -> tuple[str, str, str]:
     """The words for results.csv's localized, unlocalized and empty_patches columns: under rubenstein they count
     the robots joined, the robots not joined and the shape's pixels no joined robot covers."""
-    if rules == RUBENSTEIN_LABEL:
+    if is_algorithm_label(rules):
         return "joined robots", "robots not joined", "uncovered pixels"
     return "localized robots", "unlocalized robots", "empty shape patches"
 
@@ -334,7 +331,7 @@ def study_figure(stats: list[dict], reference: dict[str, Reference], path: Path)
 
 def _safe(label: str, vision: float) -> str:
     """A rule set label and vision radius as a file-name part (``paper_v1``; ``rubenstein``, which has no radius)."""
-    return label if label == RUBENSTEIN_LABEL else f"{label.replace('=', '-')}_v{vision:g}"
+    return label if is_algorithm_label(label) else f"{label.replace('=', '-')}_v{vision:g}"
 
 
 def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: Path, out: Path) -> list[Path]:
@@ -349,19 +346,19 @@ def all_figures(stats: list[dict], rows: list[dict], reference: dict, figures: P
                 [r for r in rows if r["shape"] == shape and r["vision_radius"] == vision and rules_label(r) == rules],
                 path,
                 out,
-                reference.get(shape) if rules != RUBENSTEIN_LABEL else None,  # the study's numbers: its model's
+                reference.get(shape) if not is_algorithm_label(rules) else None,  # the study's numbers: its model's
             )
             written.append(path)
         path = figures / f"all_shapes_{_safe(rules, vision)}.png"
         all_shapes_figure(vs, vision, rules, path)
         written.append(path)
-    if RUBENSTEIN_LABEL in {s["rules"] for s in stats} and len({s["rules"] for s in stats}) > 1:
+    if any(is_algorithm_label(s["rules"]) for s in stats) and len({s["rules"] for s in stats}) > 1:
         _save(algorithms_figure(stats), figures / "algorithms.png")
         written.append(figures / "algorithms.png")
     if len({s["vision_radius"] for s in stats}) > 1:
         vision_figure(stats, figures / "vision.png")
         written.append(figures / "vision.png")
-    studied = [s for s in stats if s["rules"] != RUBENSTEIN_LABEL]
+    studied = [s for s in stats if not is_algorithm_label(s["rules"])]
     if any(s["shape"] in reference and s["robots"] == s["shape_patches"] for s in studied):
         study_figure(studied, reference, figures / "study.png")
         written.append(figures / "study.png")

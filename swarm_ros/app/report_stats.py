@@ -12,7 +12,9 @@ import numpy as np
 from scipy import stats as st
 
 from swarm_ros.app.published import Reference
+from swarm_ros.core.algorithm import DARR_NIAZI, names
 from swarm_ros.core.metrics import Outcome
+from swarm_ros.core.params import RUN_PARAMETER
 from swarm_ros.core.rulesets import RULE_SETS, RuleSet
 
 STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"
@@ -44,23 +46,27 @@ STATS_COLUMNS = (
     "mean_loc_error",
     *(f"{what}_{k}" for k in ("coverage", "fill_50_tick", "fill_90_tick") for what in ("ci95_half", "runs")),
 )
-RUBENSTEIN_LABEL = "rubenstein"  #: the label of the rubenstein algorithm's runs, beside the rule sets'
 COMPARED = ("coverage", "fill_50_tick", "fill_90_tick", "joined_outside", "hole_filled", "loc_error")
 _COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#000000")
 
 
 def rules_label(row: dict) -> str:
-    """The rule set a results row ran under: its name, plus any switch overrides (``local+crowding=disc``); a
-    rubenstein run's label is the algorithm's name (:data:`RUBENSTEIN_LABEL`)."""
-    if row.get("algorithm") == RUBENSTEIN_LABEL:
-        return RUBENSTEIN_LABEL
+    """The rule set a results row ran under: its name, plus any switch overrides (``local+crowding=disc``); the
+    label of a run of an algorithm without rule sets (rubenstein) is the algorithm's name."""
+    algorithm = row.get("algorithm", DARR_NIAZI)
+    if RUN_PARAMETER["rules"].algorithm not in ("", algorithm):
+        return algorithm
     return RuleSet(row["rules"], row["join"], row["crowding"], row["steps"]).label
 
 
+def is_algorithm_label(label: str) -> bool:
+    """Whether a :func:`rules_label` names an algorithm without rule sets (and vision radius) rather than a rule set."""
+    return label in names()
+
+
 def _setting(rules: str, vision: float) -> str:
-    """A figure's words for what its runs ran: the rule set and vision radius, or the rubenstein algorithm (neither
-    is a parameter of it)."""
-    return "the rubenstein algorithm" if rules == RUBENSTEIN_LABEL else f"rules {rules}, vision radius {vision:g}"
+    """A figure's words for what its runs ran: the rule set and vision radius, or the algorithm that has neither."""
+    return f"the {rules} algorithm" if is_algorithm_label(rules) else f"rules {rules}, vision radius {vision:g}"
 
 
 def _mean(values: list) -> float:
@@ -164,7 +170,7 @@ def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = N
     with ``reference``, a comparison with the published numbers after it."""
     lines = []
     for rules, vision in _sections(stats):
-        if rules == RUBENSTEIN_LABEL:  # no vision radius; its counts are of robots joined and pixels covered
+        if is_algorithm_label(rules):  # no vision radius; its counts are of robots joined and pixels covered
             title, cells, counts = "### The rubenstein algorithm", "pixels", "joined | not joined | uncovered pixels"
         else:
             title, cells, counts = (
@@ -195,7 +201,7 @@ def stats_markdown(stats: list[dict], reference: dict[str, Reference] | None = N
     )
     lines += ["", *time_and_accuracy(stats)]
     if reference:
-        lines += ["", *against_reference([s for s in stats if s["rules"] != RUBENSTEIN_LABEL], reference)]
+        lines += ["", *against_reference([s for s in stats if not is_algorithm_label(s["rules"])], reference)]
     return "\n".join(lines) + "\n"
 
 
@@ -221,7 +227,7 @@ def time_and_accuracy(stats: list[dict]) -> list[str]:
     order = _rules_order(stats)
     for s in sorted(stats, key=lambda s: (s["shape"], s["robots"], order.index(s["rules"]), s["vision_radius"])):
         t50, t90 = (_tick_ci(s, f"fill_{p}_tick") for p in (50, 90))
-        vision = "–" if s["rules"] == RUBENSTEIN_LABEL else f"{s['vision_radius']:g}"  # not a parameter of it
+        vision = "–" if is_algorithm_label(s["rules"]) else f"{s['vision_radius']:g}"  # not a parameter of it
         half = 100 * s["ci95_half_coverage"]
         filled = f"{s['mean_coverage']:.1%}" if math.isnan(half) else f"{100 * s['mean_coverage']:.1f} ± {half:.1f}%"
         lines.append(

@@ -12,10 +12,11 @@ import math
 import os
 from pathlib import Path
 
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.inputs import RESULTS_LIMIT, read_bounded
 from swarm_ros.core.metrics import SEEDS, Outcome
-from swarm_ros.core.params import DARR_NIAZI, EXPERIMENT_AXES, RUBENSTEIN, RUN_PARAMETERS
+from swarm_ros.core.params import DARR_NIAZI, EXPERIMENT_AXES, RUBENSTEIN, RUN_PARAMETERS, foreign_defaults
 from swarm_ros.core.run_result import ENGINES
 
 RESULTS_FILE = "results.csv"
@@ -23,8 +24,9 @@ REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied 
 
 #: Columns results.csv adds after a run parameter's: the shape's file, the repetition, the shape's size.
 _AFTER = {"shape": ("shape_file",), "steps": ("repetition",), "seed": ("shape_patches",)}
-#: The rubenstein algorithm's parameters are not experiment keys (its runs take their defaults): no column.
-_NOT_YET = {p.name for p in RUN_PARAMETERS if p.algorithm == RUBENSTEIN}
+#: An algorithm's parameters that are not experiment keys (the rubenstein algorithm's: its runs take their
+#: defaults) have no column.
+_NOT_YET = {p.name for p in RUN_PARAMETERS if p.algorithm and not p.experiment}
 #: One row of results.csv: the run's coordinates (every run parameter an experiment file may set, in its
 #: declaration's order), then the summary.json fields of its outcome.
 RESULT_COLUMNS = (
@@ -267,8 +269,9 @@ def stored_shape_file(shape_file: str) -> str:
 def result_row(spec, summary: dict) -> dict:
     """A results.csv row from a run's coordinates (a :class:`~swarm_ros.app.experiment_file.RunSpec`) and its
     summary.json record."""
-    if summary.get("algorithm") == RUBENSTEIN:
-        summary = _as_study_columns(summary)
+    as_study_row = algorithm_of(summary.get("algorithm", DARR_NIAZI)).part("as_study_row")
+    if as_study_row is not None:  # an algorithm whose summary has columns of its own
+        summary = as_study_row(summary)
     # the study's model localizes robots exactly on shape patches: none outside (nor in a hole), no error
     row = {
         "joined_outside": 0,
@@ -281,14 +284,14 @@ def result_row(spec, summary: dict) -> dict:
     return {col: row[col] for col in RESULT_COLUMNS}
 
 
-def _as_study_columns(summary: dict) -> dict:
+def rubenstein_as_study_row(summary: dict) -> dict:
     """A rubenstein run's summary in results.csv's columns: its shape pixels are the shape's patches, its joined
     robots the localized ones (seeds included), its uncovered pixels the empty patches, and the parameters of
     the study's model their defaults."""
     robots, joined, pixels = summary["robots"], summary["joined"], summary["shape_pixels"]
     tick = summary["convergence_tick"]
     return {
-        **{p.name: p.default for p in RUN_PARAMETERS if p.algorithm == DARR_NIAZI},
+        **foreign_defaults(RUBENSTEIN),
         **summary,
         "shape_patches": pixels,
         "localized": joined,

@@ -33,10 +33,11 @@ import yaml
 from swarm_ros.app.param_file import check_given, check_launcher_sets, params_yaml, read_params_file, record_every
 from swarm_ros.app.processes import CHECKPOINT, check_graph, check_graph_shape, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
-from swarm_ros.core.errors import ConfigError, InputError, ParameterError, RunFailed
-from swarm_ros.core.params import DARR_NIAZI, RUBENSTEIN, RUN_PARAMETER, Param, node_defaults
+from swarm_ros.core.algorithm import DARR_NIAZI, algorithm_of, check_loss_policy, check_regions
+from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
+from swarm_ros.core.params import RUN_PARAMETER, Param, node_defaults
 from swarm_ros.core.signals import EXIT_INTERRUPTED
-from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world, plan_for, removes_lost_robots
+from swarm_ros.protocol.plan import MONITOR, PROCESSES, WORLD, is_world, plan_for
 
 
 class RunEnded(RunFailed):
@@ -223,12 +224,9 @@ def launch_setup(
     check_graph_shape(settings.shape)
     shape, params = settings.resolve()
     region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))  # the argument, else the file's
-    if params.algorithm == RUBENSTEIN and (world_shards > 1 or region_cuts):
-        raise InputError(f"world_shards and region_cuts are not for the {RUBENSTEIN} algorithm's graph")
-    if not removes_lost_robots(params.algorithm) and nodes["world"].get("on_batch_loss") == "remove":
-        raise InputError(
-            f"on_batch_loss: remove is not for the {RUBENSTEIN} algorithm's graph: a lost batch is restarted"
-        )
+    check_regions(params.algorithm, world_shards > 1, "world_shards")
+    check_regions(params.algorithm, region_cuts, "region_cuts")
+    check_loss_policy(params.algorithm, nodes["world"].get("on_batch_loss"), "on_batch_loss:")
     check_graph(
         shape,
         params.robots,
@@ -258,7 +256,9 @@ def launch_setup(
         path,
         out,
         log_dir / CHECKPOINT,
-        Supervisor(int(world["max_restarts"]), str(world["on_batch_loss"]), removes_lost_robots(params.algorithm)),
+        Supervisor(
+            int(world["max_restarts"]), str(world["on_batch_loss"]), algorithm_of(params.algorithm).removes_lost_robots
+        ),
         region_cuts,
         tuple(plan_for(params.algorithm, processes, region_cuts, world_shards)),
         params.algorithm,

@@ -18,9 +18,9 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import InputError, RunFailed
 from swarm_ros.core.inputs import path_too_long, shown
-from swarm_ros.core.params import RUBENSTEIN
 
 if TYPE_CHECKING:
     from swarm_ros.core.params import RunParams
@@ -43,7 +43,7 @@ def default_run_dir(shape: str, params: RunParams, now: datetime | None = None) 
     """``runs/<time>_<shape>_n<N>_v<R>_s<seed>`` under the current directory; under the rubenstein algorithm, which
     has no vision radius, ``runs/<time>_<shape>_n<N>_rubenstein_s<seed>``."""
     stamp = (now or datetime.now()).strftime("%Y%m%d-%H%M%S")
-    setting = "rubenstein" if params.algorithm == RUBENSTEIN else f"v{params.vision_radius:g}"
+    setting = algorithm_of(params.algorithm).setting(params)
     return RUNS_DIR / f"{stamp}_{shape}_n{params.robots}_{setting}_s{params.seed}"
 
 

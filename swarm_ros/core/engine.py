@@ -22,8 +22,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from swarm_ros.core.algorithm import check_engine
 from swarm_ros.core.arbitration import resolve_kernel, vacate
-from swarm_ros.core.errors import ContractError, ParameterError
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.metrics import (
     METRIC_COLUMNS,
@@ -31,7 +32,7 @@ from swarm_ros.core.metrics import (
     Outcome,
     TickMetrics,
 )
-from swarm_ros.core.params import DARR_NIAZI, RunParams
+from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.rules2d import cell_index
@@ -68,8 +69,7 @@ class Simulation:
     """
 
     def __init__(self, shape: Shape, params: RunParams) -> None:
-        if params.algorithm != DARR_NIAZI:
-            raise ParameterError(f"this engine runs the {DARR_NIAZI} algorithm, not {params.algorithm}")
+        check_engine(params.algorithm, Simulation)
         self.shape = shape
         self.params = params
         self.state: SwarmState = initial_state(shape, params.robots, params.seed)

@@ -32,36 +32,38 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from swarm_ros.core.algorithm import algorithm_of, names
+
 _CORE = Path(__file__).resolve().parent
 _CACHE = _CORE / "__pycache__"
 _MARK = "cache=True"  # a module with a cached kernel says so in its source
 _STAMP = "swarm_ros-kernels-{}.compiled"  # in _CACHE: compile_kernels() ran after the last change to its modules
-#: Each algorithm's package of kernel modules (the study's model's are the core's own).
-PACKAGES = {"darr-niazi": _CORE, "rubenstein": _CORE / "rubenstein"}
-#: The core's kernel modules another algorithm's kernels call (and so carry compiled in): a change to one leaves
-#: that algorithm's cache stale too.
-SHARED = {"rubenstein": ("rng.py",)}
-#: About how long each algorithm's kernels take to compile (scripts/bench_compile.py, a quiet 2-core machine).
-SECONDS = {"darr-niazi": 40, "rubenstein": 17}
 
 
 def compiling_note(algorithm: str) -> str:
     """What the commands say before they compile ``algorithm``'s kernels (one line, on stderr)."""
     return (
         f"compiling the {algorithm} algorithm's numba kernels first (once after an install or a change to the core, "
-        f"about {SECONDS[algorithm]} s; scripts/setup.sh does it too)"
+        f"about {algorithm_of(algorithm).compile_seconds} s; scripts/setup.sh does it too)"
     )
 
 
+def _package(algorithm: str) -> Path:
+    """``algorithm``'s package of kernel modules (core.algorithm's ``kernel_dir``; the study's model's are the
+    core's own)."""
+    return _CORE / algorithm_of(algorithm).kernel_dir
+
+
 def _packages() -> tuple[Path, ...]:
-    """Every algorithm's package."""
-    return tuple(PACKAGES.values())
+    """Every algorithm's package, once each."""
+    return tuple(dict.fromkeys(_package(a) for a in names()))
 
 
 def _kernel_modules(algorithm: str | None = None) -> list[Path]:
-    """The modules with a cached kernel: ``algorithm``'s, or every algorithm's."""
-    packages = _packages() if algorithm is None else (PACKAGES[algorithm],)
-    shared = [PACKAGES["darr-niazi"] / name for name in SHARED.get(algorithm or "", ())]
+    """The modules with a cached kernel: ``algorithm``'s, or every algorithm's. An algorithm's own include the
+    core's modules its kernels call (core.algorithm's ``shared_kernels``): a change to one leaves its cache stale."""
+    packages = _packages() if algorithm is None else (_package(algorithm),)
+    shared = [_CORE / name for name in (algorithm_of(algorithm).shared_kernels if algorithm else ())]
     return [
         p
         for package in packages
@@ -86,7 +88,7 @@ def kernels_cached(algorithm: str | None = None) -> bool:
     if os.environ.get("NUMBA_CACHE_DIR"):
         return True
     if algorithm is None:
-        return all(kernels_cached(a) for a in PACKAGES)
+        return all(kernels_cached(a) for a in names())
     try:
         sources = _kernel_modules(algorithm)
         stamp = _CACHE / _STAMP.format(algorithm)
@@ -146,25 +148,9 @@ def compile_kernels(algorithm: str | None = None) -> None:
     """Compile ``algorithm``'s kernels (or every algorithm's) into numba's cache: under the study's model, two
     ticks of the graph's code path and a few of the in-process engine's, on the star and on the 3D k-block; under
     rubenstein, a few ticks of its run; with the default parameters (the kernels' types do not depend on them)."""
-    from swarm_ros.core.grid import World
-    from swarm_ros.core.params import RUBENSTEIN, RunParams
-    from swarm_ros.core.shapes import Shape
-
     drop_stale()
-    for name in PACKAGES if algorithm is None else (algorithm,):
-        if name == RUBENSTEIN:
-            from swarm_ros.core.rubenstein.run import KilobotRun
-
-            KilobotRun(Shape.load("rectangle", World()), RunParams(robots=50, algorithm=RUBENSTEIN)).run(max_ticks=5)
-        else:
-            from swarm_ros.core.engine import Simulation
-            from swarm_ros.core.warmup import warm_up
-
-            for shape_name in ("star", "k-block"):  # a 2D and a 3D shape: the 3D kernels are compiled apart
-                shape = Shape.load(shape_name, World())
-                params = RunParams(robots=shape.patches)
-                warm_up(shape, params)
-                Simulation(shape, params).run(max_ticks=5)
+    for name in names() if algorithm is None else (algorithm,):
+        algorithm_of(name).part("compile")()
         try:
             (_CACHE / _STAMP.format(name)).touch()
         except OSError:
@@ -174,16 +160,17 @@ def compile_kernels(algorithm: str | None = None) -> None:
 def main(argv: list[str] | None = None) -> int:
     """``python -m swarm_ros.core.kernels [ALGORITHM ...]``: drop stale kernels, then fill the cache of each
     algorithm named (default: every one) whose cache is not filled (prints what it did)."""
-    names = list(sys.argv[1:] if argv is None else argv) or list(PACKAGES)
-    unknown = [n for n in names if n not in PACKAGES]
+    known = names()
+    asked = list(sys.argv[1:] if argv is None else argv) or list(known)
+    unknown = [n for n in asked if n not in known]
     if unknown:
-        print(f"swarm_ros: no algorithm {unknown[0]!r} (known: {', '.join(PACKAGES)})", file=sys.stderr)
+        print(f"swarm_ros: no algorithm {unknown[0]!r} (known: {', '.join(known)})", file=sys.stderr)
         return 2
     if drop_stale():
         print("swarm_ros: dropped the kernels cached before the last change to the core")
     import time
 
-    for name in names:
+    for name in asked:
         if kernels_cached(name):
             print(f"swarm_ros: the {name} algorithm's numba kernels are compiled and cached")
             continue

@@ -19,6 +19,7 @@ import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
+from .algorithm import DARR_NIAZI, RUBENSTEIN, algorithm_of, names
 from .errors import ParameterError
 from .grid import DEFAULT_RADIUS, MIN_RADIUS, World
 from .param_decl import INT64_MAX, Param
@@ -35,11 +36,7 @@ MAX_SEED = INT64_MAX
 #: and the graph's world keeps a row of metrics per tick in its checkpoint, a sparse file this many rows long.
 MAX_TICKS = 10**9
 MIN_ROBOTS = 4  # the four seeds
-DARR_NIAZI, RUBENSTEIN = "darr-niazi", "rubenstein"
-ALGORITHMS = (DARR_NIAZI, RUBENSTEIN)  #: the shape-formation algorithms; the study's model first, the default
-#: Each algorithm's tick limit when max_ticks is left at 0: the study's; and, under rubenstein, room for a
-#: 1,024-robot run, in which one robot leaves the pack every hundred-odd ticks (the star: about 180,000 ticks).
-DEFAULT_MAX_TICKS = {DARR_NIAZI: 100_000, RUBENSTEIN: 400_000}
+ALGORITHMS = names()  #: the shape-formation algorithms (core.algorithm); the study's model first, the default
 _DN, _RB = {"algorithm": DARR_NIAZI}, {"algorithm": RUBENSTEIN, "experiment": ""}  # experiments: the model only
 
 
@@ -106,7 +103,7 @@ class Settings:
         "tick limit",
         low=1,
         high=MAX_TICKS,
-        blank=", ".join(f"{n} under {a}" for a, n in DEFAULT_MAX_TICKS.items()),
+        blank=", ".join(f"{algorithm_of(a).max_ticks} under {a}" for a in ALGORITHMS),
     )
     wiggle_deg: float = _param(
         DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle", **_DN
@@ -369,7 +366,7 @@ class RunParams:
             if p.model and p.name not in ("join", "crowding", "steps", "rules"):
                 object.__setattr__(self, p.name, p.check(getattr(self, p.name)))
         if self.max_ticks == 0:  # the algorithm's own
-            object.__setattr__(self, "max_ticks", DEFAULT_MAX_TICKS[self.algorithm])
+            object.__setattr__(self, "max_ticks", algorithm_of(self.algorithm).max_ticks)
         # the default rule set's switches, resolved, are its defaults too (a summary's parameters hold them so)
         unset = dict(zip(("join", "crowding", "steps"), RULE_SETS[DEFAULT_RULES]))
         for p in RUN_PARAMETERS:
@@ -378,8 +375,9 @@ class RunParams:
                 raise ParameterError(
                     f"{p.name} is a parameter of the {p.algorithm} algorithm, not of {self.algorithm}, got {value!r}"
                 )
-        if self.algorithm == RUBENSTEIN:
-            self._check_rubenstein()
+        own_checks = algorithm_of(self.algorithm).part("check_params")
+        if own_checks is not None:
+            own_checks(self)
         if self.robots == 0:
             raise ParameterError(f"robots must be an integer >= {MIN_ROBOTS}, got 0")
         ruleset = RuleSet.resolve(self.rules, self.join, self.crowding, self.steps)
@@ -393,32 +391,10 @@ class RunParams:
                 f"got {self.fail_tick}: no robot would fail"
             )
 
-    def _check_rubenstein(self) -> None:
-        """The rubenstein algorithm's lengths: d < DESIRED < G < sqrt(3) d, so that the gradient counts the rings of
-        a touching hexagonal pack; G and YIELD within the communication range."""
-        if not self.desired_distance < self.gradient_range < math.sqrt(3.0):
-            raise ParameterError(
-                "the rubenstein algorithm needs 1 < desired_distance < gradient_range < sqrt(3) (robot diameters), "
-                f"got desired_distance {self.desired_distance:g} and gradient_range {self.gradient_range:g}"
-            )
-        if self.comm_range < 1.0 + self.step_length:  # the world checks a step against the robots within C
-            raise ParameterError(
-                f"comm_range must be at least 1 + step_length ({1.0 + self.step_length:g}), got {self.comm_range:g}"
-            )
-        for name in ("gradient_range", "yield_distance"):
-            if getattr(self, name) >= self.comm_range:
-                raise ParameterError(
-                    f"{name} must be below comm_range ({self.comm_range:g}), got {getattr(self, name):g}"
-                )
-
     def check_shape(self, shape: Shape) -> None:
-        """Refuse a shape the algorithm cannot form (rubenstein: 3D), or a vision radius beyond the world."""
-        if self.algorithm == RUBENSTEIN:
-            from .rubenstein.layout import check_shape
-
-            check_shape(shape)
-        else:
-            self.check_vision(shape.world.radius)
+        """Refuse a shape the algorithm cannot form (rubenstein: 3D; the algorithm's own check), or a vision radius
+        beyond the world."""
+        algorithm_of(self.algorithm).part("check_shape")(self, shape)
 
     def check_vision(self, world_radius: int) -> None:
         """Refuse a vision radius beyond the world's radius: a robot would see across the whole world.
@@ -448,3 +424,14 @@ class RunParams:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def check_vision_fits(params: RunParams, shape: Shape) -> None:
+    """The study's model's shape check (core.algorithm): a vision radius beyond the shape's world is refused."""
+    params.check_vision(shape.world.radius)
+
+
+def foreign_defaults(algorithm: str) -> dict[str, Any]:
+    """The run parameters of every other algorithm, at their defaults: what a run of ``algorithm`` takes for them
+    (an experiment's run, a results.csv row)."""
+    return {p.name: p.default for p in RUN_PARAMETERS if p.algorithm not in ("", algorithm)}

@@ -13,6 +13,7 @@ import os
 import sys
 from pathlib import Path
 
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import ParameterError
 
 PACKAGE = "swarm_ros"
@@ -59,12 +60,6 @@ def available_memory() -> int | None:
     return None
 
 
-#: Memory a run takes per robot, in bytes, by algorithm: peak RSS of ``swarm-ros simulate --world-radius 300
-#: --max-ticks 1`` (recording on) grew by 210 bytes per robot from 20,000 to 200,000 robots under darr-niazi, and by
-#: 480 from 20,000 to 80,000 under rubenstein, rounded up.
-BYTES_PER_ROBOT = {"darr-niazi": 250, "rubenstein": 600}
-
-
 def check_robot_memory(robots: int, algorithm: str) -> None:
     """Refuse a swarm too large for this machine's memory, before anything is allocated for it.
 
@@ -72,7 +67,7 @@ def check_robot_memory(robots: int, algorithm: str) -> None:
         ParameterError: in one line, with the memory needed and the memory available.
     """
     available = available_memory()
-    per = BYTES_PER_ROBOT.get(algorithm, 0)
+    per = algorithm_of(algorithm).bytes_per_robot  # core.algorithm: measured for each
     if available is None or per * robots <= available:
         return
     raise ParameterError(

@@ -54,3 +54,16 @@ def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
         solid = (s.z[changed], s.pitch[changed]) if s.z is not None and s.pitch is not None else (None, None)
         replica.update(sim.tick, changed, s.state[changed], s.x[changed], s.y[changed], s.heading[changed], *solid)
         tick_metrics(sim.tick, np.bincount(replica.state.state, minlength=STATE_COUNT), shape.patches)
+
+
+def compile_kernels() -> None:
+    """The study's model's kernels into numba's cache (core.kernels): two ticks of the graph's code path and a few
+    of the in-process engine's, on the star and on the 3D k-block (the 3D kernels are compiled apart), with the
+    default parameters (the kernels' types do not depend on them)."""
+    from swarm_ros.core.grid import World
+
+    for shape_name in ("star", "k-block"):
+        shape = Shape.load(shape_name, World())
+        params = RunParams(robots=shape.patches)
+        warm_up(shape, params)
+        Simulation(shape, params).run(max_ticks=5)

@@ -21,8 +21,8 @@ from rclpy.duration import Duration
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.core.errors import ConfigError, Rejected
-from swarm_ros.core.params import RUBENSTEIN
+from swarm_ros.core.algorithm import check_serves
+from swarm_ros.core.errors import Rejected
 from swarm_ros.core.rubenstein.run import KilobotRun
 from swarm_ros.core.rubenstein.strips import KilobotBatch, strips_for
 from swarm_ros.protocol import checks
@@ -46,8 +46,7 @@ class KilobotBatchNode:
         self.node = node = make_node(ROBOT_BATCH)
         run, own = read_parameters(node, ROBOT_BATCH)
         self.shape, self.params = run.resolve()
-        if self.params.algorithm != RUBENSTEIN:
-            raise ConfigError(f"the kilobot batch runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
+        check_serves(self.params.algorithm, "kilobot_batch")
         self.k, batches = int(own["batch"]), int(own["batches"])
         frame = KilobotRun(self.shape, self.params)  # the grid, the rule and the shape; its robots are not used
         strips = strips_for(frame, batches)

@@ -30,9 +30,9 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
-from swarm_ros.core.errors import ConfigError, Rejected
+from swarm_ros.core.algorithm import check_serves
+from swarm_ros.core.errors import Rejected
 from swarm_ros.core.metrics import Outcome
-from swarm_ros.core.params import RUBENSTEIN
 from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun, summary_of
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
@@ -61,8 +61,7 @@ class KilobotMonitorNode:
         self.node = node = make_node(MONITOR)
         run, own = read_parameters(node, MONITOR)
         self.shape, self.params = run.resolve()
-        if self.params.algorithm != RUBENSTEIN:
-            raise ConfigError(f"the kilobot monitor runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
+        check_serves(self.params.algorithm, "kilobot_monitor")
         self.incarnation = int(own["incarnation"])
         p = self.params
         self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)

@@ -30,8 +30,8 @@ from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallb
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.core.errors import ConfigError, Rejected, RunFailed
-from swarm_ros.core.params import RUBENSTEIN
+from swarm_ros.core.algorithm import check_serves
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.rubenstein.run import KilobotRun
 from swarm_ros.protocol import checks, kilobot_checkpoint
 from swarm_ros.protocol.cdr import Cloud
@@ -66,8 +66,7 @@ class KilobotWorldNode:
         self.node = node = make_node(WORLD)
         run, own = read_parameters(node, WORLD)
         self.shape, self.params = run.resolve()
-        if self.params.algorithm != RUBENSTEIN:
-            raise ConfigError(f"the kilobot world runs the {RUBENSTEIN} algorithm, got {self.params.algorithm}")
+        check_serves(self.params.algorithm, "kilobot_world")
         self.every = int(own["record_every"]) or RECORD_EVERY
         self.save_every = save_every(self.every)
         self.reach = monitor_reach(int(own["monitor_window"]), self.every)

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import re
 
-from swarm_ros.core.params import RUBENSTEIN, Param
+from swarm_ros.core.algorithm import algorithm_of
+from swarm_ros.core.params import Param
 
 MONITOR, ROBOT_BATCH, WORLD = "monitor", "robot_batch", "world"  #: the node executables (and kinds)
 WORLD_SHARD = "world_shard"  #: the executable (and kind) of a world shard, which stands in for the world
@@ -66,27 +67,24 @@ def graph_plan(
 KILOBOT_WORLD, KILOBOT_BATCH, KILOBOT_MONITOR = "kilobot_world", "kilobot_batch", "kilobot_monitor"
 
 
-def kilobot_plan(processes: int) -> list[tuple[str, str, dict[str, int | str]]]:
+def kilobot_plan(
+    processes: int, region_cuts: str = "", world_shards: int = 1
+) -> list[tuple[str, str, dict[str, int | str]]]:
     """:func:`graph_plan` of a rubenstein run: the monitor, ``processes`` robot batches (batch k decides for
-    strip k of the cell grid: swarm_ros.core.rubenstein.strips), the world."""
+    strip k of the cell grid: swarm_ros.core.rubenstein.strips), the world. No region cuts or world shards (the
+    commands refuse them: core.algorithm's ``no_regions``)."""
     batches: list[tuple[str, str, dict[str, int | str]]] = [
         (batch_name(k), KILOBOT_BATCH, {"batch": k, "batches": processes}) for k in range(processes)
     ]
     return [(MONITOR, KILOBOT_MONITOR, {}), *batches, (WORLD, KILOBOT_WORLD, {})]
 
 
-def removes_lost_robots(algorithm: str) -> bool:
-    """Whether the world of ``algorithm``'s graph can remove a lost batch's robots and go on (``on_batch_loss:
-    remove``, or a batch out of restarts): the study's model's can; the rubenstein algorithm has no robot failure,
-    so its graph refuses the policy and ends a run whose batch is lost past ``max_restarts``."""
-    return algorithm != RUBENSTEIN
-
-
 def plan_for(
     algorithm: str, processes: int, region_cuts: str = "", world_shards: int = 1
 ) -> list[tuple[str, str, dict[str, int | str]]]:
-    """The node processes of a run of ``algorithm`` (``swarm-ros run`` and the launch file start the same)."""
-    return kilobot_plan(processes) if algorithm == RUBENSTEIN else graph_plan(processes, region_cuts, world_shards)
+    """The node processes of a run of ``algorithm`` (``swarm-ros run`` and the launch file start the same): its
+    plan (core.algorithm)."""
+    return algorithm_of(algorithm).part("plan")(processes, region_cuts, world_shards)
 
 
 # -- topics -----------------------------------------------------------------------

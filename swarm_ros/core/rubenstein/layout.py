@@ -22,11 +22,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.shapes import Shape, regions
+
+if TYPE_CHECKING:
+    from swarm_ros.core.params import RunParams
 
 H = math.sqrt(3.0) / 2.0  #: the height of a row of the touching hexagonal lattice
 #: the seeds, root first
@@ -110,6 +114,32 @@ def start_positions(robots: int) -> np.ndarray:
     d2 = x * x + (y + H) ** 2  # from the lowest seed
     order = np.lexsort((-x, -y, np.round(d2, 9)))[:others]
     return np.concatenate([SEEDS, np.stack([x[order], y[order]], axis=1)])
+
+
+def check_params(p: RunParams) -> None:
+    """The rubenstein algorithm's lengths: d < DESIRED < G < sqrt(3) d, so that the gradient counts the rings of
+    a touching hexagonal pack; G and YIELD within the communication range.
+
+    Raises:
+        ParameterError: in one line.
+    """
+    if not p.desired_distance < p.gradient_range < math.sqrt(3.0):
+        raise ParameterError(
+            "the rubenstein algorithm needs 1 < desired_distance < gradient_range < sqrt(3) (robot diameters), "
+            f"got desired_distance {p.desired_distance:g} and gradient_range {p.gradient_range:g}"
+        )
+    if p.comm_range < 1.0 + p.step_length:  # the world checks a step against the robots within C
+        raise ParameterError(
+            f"comm_range must be at least 1 + step_length ({1.0 + p.step_length:g}), got {p.comm_range:g}"
+        )
+    for name in ("gradient_range", "yield_distance"):
+        if getattr(p, name) >= p.comm_range:
+            raise ParameterError(f"{name} must be below comm_range ({p.comm_range:g}), got {getattr(p, name):g}")
+
+
+def check_shape_of(_params: RunParams, shape: Shape) -> None:
+    """:func:`check_shape`, as core.algorithm's part ``check_shape`` (whatever the parameters)."""
+    check_shape(shape)
 
 
 def check_shape(shape: Shape) -> None:

@@ -19,7 +19,8 @@ import math
 
 import numpy as np
 
-from swarm_ros.core.errors import ContractError, ParameterError
+from swarm_ros.core.algorithm import check_engine
+from swarm_ros.core.errors import ContractError
 from swarm_ros.core.metrics import OUTCOME_OF_CODE, Outcome, fill_ticks
 from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETER, RunParams
 from swarm_ros.core.rng import STREAM_PLACE_HEADING, uniform_array
@@ -138,8 +139,7 @@ class KilobotRun:
     """
 
     def __init__(self, shape: Shape, params: RunParams) -> None:
-        if params.algorithm != RUBENSTEIN:
-            raise ParameterError(f"KilobotRun runs the rubenstein algorithm, not {params.algorithm}")
+        check_engine(params.algorithm, KilobotRun)
         self.shape, self.params = shape, params
         self.frame = ShapeFrame.of(shape, params.pixel_size)
         self.robots = robots_at_start(params)
@@ -341,3 +341,10 @@ def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = N
         "loc_error": m["loc_error"],
         "wall_seconds": wall_seconds,
     }
+
+
+def compile_kernels() -> None:
+    """The rubenstein algorithm's kernels into numba's cache (core.kernels): a few ticks of a small run."""
+    from swarm_ros.core.grid import World
+
+    KilobotRun(Shape.load("rectangle", World()), RunParams(robots=50, algorithm=RUBENSTEIN)).run(max_ticks=5)

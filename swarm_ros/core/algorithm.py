@@ -1,0 +1,227 @@
+"""The shape-formation algorithms swarm_ros runs, and what each one supplies: the one place a command, a node or a
+report asks "which algorithm, and what is its own here?". The ``algorithm`` run parameter picks an entry.
+
+An entry is data: numbers the shared code needs (the tick limit, memory a robot, the shape dimensions it forms, the
+loss policies its graph supports) and, for what is code, the dotted name of the function or class that supplies it
+(``"package.module:attribute"``), imported when first asked for. The shared code (the drivers, the nodes, the launch
+file, experiments, the report) calls these parts and never tests an algorithm's name. Each part names the layer it
+lives in (:data:`PART_LAYERS`): a module may ask only for parts of its own layer or a lower one (test_algorithm).
+
+A third algorithm is registered with :func:`register` (docs/adding_an_algorithm.md).
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from .errors import ContractError, ParameterError
+
+DARR_NIAZI, RUBENSTEIN = "darr-niazi", "rubenstein"
+
+#: The layer of each code part of an entry (docs/architecture.md, test_layers): who may ask for it.
+PART_LAYERS = {
+    "engine": "core",
+    "summary": "core",
+    "check_params": "core",
+    "check_shape": "core",
+    "compile": "core",
+    "warm_up": "core",
+    "plan": "protocol",
+    "check_graph": "app",
+    "simulate": "app",
+    "print_summary": "app",
+    "as_study_row": "app",
+}
+
+
+@dataclass(frozen=True)
+class Algorithm:
+    """One shape-formation algorithm: its numbers, and the dotted names of its code parts (see the module)."""
+
+    name: str
+    #: tick limit when ``max_ticks`` is left at 0
+    max_ticks: int
+    #: memory a run takes per robot, in bytes (peak RSS growth per robot; core.resources checks a run against it)
+    bytes_per_robot: int
+    #: its kernel modules' directory, relative to swarm_ros/core ("" the core's own), for core.kernels' cache stamps
+    kernel_dir: str
+    #: about how long its kernels take to compile, in seconds (scripts/bench_compile.py, a quiet 2-core machine)
+    compile_seconds: int
+    #: the directory name's setting part of its default run directory, formatted with the run's parameters
+    run_dir_setting: str
+    #: the node executables its graph runs (a node started for another algorithm's run refuses it)
+    executables: tuple[str, ...]
+    #: the core's kernel modules its kernels call (and so carry compiled in): a change to one leaves its cache stale
+    shared_kernels: tuple[str, ...] = ()
+    #: whether its graph can remove a lost batch's robots and go on (``on_batch_loss: remove``); if not, why not
+    no_removal: str = ""
+    #: why its graph refuses world shards and region cuts ("" if it runs with them)
+    no_regions: str = ""
+    # -- code parts: "module:attribute" (PART_LAYERS says each one's layer) --
+    #: class ``(shape, params)``: the in-process engine (``run()``, ``step()``, ``tick``, ``done``, ``metrics``)
+    engine: str = ""
+    #: ``(run, wall_seconds, stopped=None) -> dict``: the summary.json record of an in-process run
+    summary: str = ""
+    #: ``(params) -> None``: its own checks of the run parameters (ParameterError), or "" for none
+    check_params: str = ""
+    #: ``(params, shape) -> None``: refuse a shape it cannot form (ParameterError)
+    check_shape: str = ""
+    #: ``() -> None``: run a few ticks of each of its code paths, so numba compiles its kernels into their cache
+    compile: str = ""
+    #: ``(shape, params) -> None``: load its run's compiled kernels into this process, or "": the launcher then
+    #: starts each node afresh instead of forking it from a process that has them loaded (app/forking.py)
+    warm_up: str = ""
+    #: ``(processes, region_cuts, world_shards) -> [(name, executable, parameters)]``: its graph's node processes
+    plan: str = ""
+    #: ``(shape, params, processes) -> None``, or "": its own checks of a graph run (ParameterError)
+    check_graph: str = ""
+    #: the ``simulate`` command's driver ``(args, shape, params, out, options, prog, progress_every) -> exit status``
+    simulate: str = ""
+    #: ``(summary, out, dims) -> None``: the summary a command prints at the end of a run
+    print_summary: str = ""
+    #: ``(summary) -> dict``: its summary in the columns of the study's results.csv, or "" if they are its own
+    as_study_row: str = ""
+    _loaded: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def part(self, name: str) -> Any:
+        """The code part ``name``, imported on first use; ``None`` if this algorithm has none."""
+        if name not in PART_LAYERS:
+            raise ContractError(f"no code part {name!r}: one of {', '.join(PART_LAYERS)}")
+        where = getattr(self, name)
+        if not where:
+            return None
+        if name not in self._loaded:
+            module, _, attribute = where.partition(":")
+            self._loaded[name] = getattr(importlib.import_module(module), attribute)
+        return self._loaded[name]
+
+    def setting(self, params: Any) -> str:
+        """The setting part of a default run directory's name (``v1``, ``rubenstein``)."""
+        return self.run_dir_setting.format(**{f.name: getattr(params, f.name) for f in fields(params)})
+
+    @property
+    def removes_lost_robots(self) -> bool:
+        """Whether its graph can remove a lost batch's robots and go on (``on_batch_loss: remove``)."""
+        return not self.no_removal
+
+
+_REGISTRY: dict[str, Algorithm] = {}
+
+
+def register(algorithm: Algorithm) -> Algorithm:
+    """Add ``algorithm`` (a name not yet taken): the ``algorithm`` parameter then accepts its name."""
+    if algorithm.name in _REGISTRY:
+        raise ContractError(f"an algorithm named {algorithm.name!r} is registered already")
+    _REGISTRY[algorithm.name] = algorithm
+    return algorithm
+
+
+def names() -> tuple[str, ...]:
+    """Every registered algorithm's name, in the order registered (the study's model first: the default)."""
+    return tuple(_REGISTRY)
+
+
+def algorithm_of(name: str) -> Algorithm:
+    """The registered algorithm ``name``.
+
+    Raises:
+        ParameterError: no algorithm of that name, in one line with the names there are.
+    """
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise ParameterError(f"algorithm must be one of {', '.join(_REGISTRY)}, got {name!r}") from None
+
+
+def check_serves(name: str, executable: str) -> None:
+    """Refuse to start node ``executable`` for a run of algorithm ``name`` whose graph does not run it.
+
+    Raises:
+        ParameterError: in one line.
+    """
+    if executable not in algorithm_of(name).executables:
+        raise ParameterError(f"the {executable} node is not a node of the {name} algorithm's graph")
+
+
+def check_regions(name: str, given: object, said: str) -> None:
+    """Refuse world shards or region cuts (``given`` true), which ``said`` set, for a graph that has none.
+
+    Raises:
+        ParameterError: in one line, with the reason.
+    """
+    reason = algorithm_of(name).no_regions
+    if given and reason:
+        raise ParameterError(f"{said} is not for the {name} algorithm's graph ({reason})")
+
+
+def check_loss_policy(name: str, policy: object, said: str) -> None:
+    """Refuse ``on_batch_loss: remove`` (``policy``, which ``said`` set) for a graph that cannot remove robots.
+
+    Raises:
+        ParameterError: in one line, with the reason.
+    """
+    reason = algorithm_of(name).no_removal
+    if policy == "remove" and reason:
+        raise ParameterError(f"{said} remove is not for the {name} algorithm's graph ({reason})")
+
+
+def check_engine(name: str, engine: type) -> None:
+    """Refuse to run ``engine`` (an in-process engine class) for algorithm ``name`` if it is not that one's.
+
+    Raises:
+        ParameterError: in one line.
+    """
+    if algorithm_of(name).engine != f"{engine.__module__}:{engine.__qualname__}":
+        raise ParameterError(f"{engine.__qualname__} does not run the {name} algorithm")
+
+
+register(
+    Algorithm(
+        name=DARR_NIAZI,
+        max_ticks=100_000,  # the study's
+        # peak RSS of `swarm-ros simulate --world-radius 300 --max-ticks 1` (recording on) grew by 210 bytes per robot
+        # from 20,000 to 200,000 robots, rounded up
+        bytes_per_robot=250,
+        kernel_dir="",
+        compile_seconds=40,
+        run_dir_setting="v{vision_radius:g}",
+        executables=("world", "world_shard", "robot_batch", "monitor"),
+        engine="swarm_ros.core.engine:Simulation",
+        summary="swarm_ros.core.run_result:summary_of",
+        check_shape="swarm_ros.core.params:check_vision_fits",
+        compile="swarm_ros.core.warmup:compile_kernels",
+        warm_up="swarm_ros.core.warmup:warm_up",
+        plan="swarm_ros.protocol.plan:graph_plan",
+        simulate="swarm_ros.app.commands:simulate_darr_niazi",
+        print_summary="swarm_ros.app.summary_print:print_summary",
+    )
+)
+register(
+    Algorithm(
+        name=RUBENSTEIN,
+        # room for a 1,024-robot run, in which one robot leaves the pack every hundred-odd ticks (the star: about
+        # 180,000 ticks)
+        max_ticks=400_000,
+        # peak RSS grew by 480 bytes per robot from 20,000 to 80,000 robots (as above), rounded up
+        bytes_per_robot=600,
+        kernel_dir="rubenstein",
+        compile_seconds=17,
+        run_dir_setting="rubenstein",
+        executables=("kilobot_world", "kilobot_batch", "kilobot_monitor"),
+        shared_kernels=("rng.py",),
+        no_removal="a lost batch is restarted: the algorithm has no robot failure",
+        no_regions="it cuts its own strips",
+        engine="swarm_ros.core.rubenstein.run:KilobotRun",
+        summary="swarm_ros.core.rubenstein.run:summary_of",
+        check_params="swarm_ros.core.rubenstein.layout:check_params",
+        check_shape="swarm_ros.core.rubenstein.layout:check_shape_of",
+        compile="swarm_ros.core.rubenstein.run:compile_kernels",
+        plan="swarm_ros.protocol.plan:kilobot_plan",
+        check_graph="swarm_ros.app.processes:check_rubenstein_graph",
+        simulate="swarm_ros.app.kilobot:simulate_kilobot",
+        print_summary="swarm_ros.app.summary_print:print_kilobot_summary",
+        as_study_row="swarm_ros.app.results_file:rubenstein_as_study_row",
+    )
+)

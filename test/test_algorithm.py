@@ -1,0 +1,109 @@
+"""The algorithm registry (swarm_ros.core.algorithm): every entry's parts import and live in the layer they are
+declared for, and the checks the shared code makes through it refuse in one line, with the algorithm's reason."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from layering import LAYERS, layer_of, module_graph
+
+from swarm_ros.core import algorithm as registry
+from swarm_ros.core.algorithm import (
+    DARR_NIAZI,
+    PART_LAYERS,
+    RUBENSTEIN,
+    algorithm_of,
+    check_engine,
+    check_loss_policy,
+    check_regions,
+    check_serves,
+    names,
+)
+from swarm_ros.core.errors import ContractError, ParameterError
+from swarm_ros.core.params import RunParams
+
+pytestmark = pytest.mark.unit
+
+PACKAGE = Path(registry.__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("name", names())
+def test_each_part_imports_and_lives_in_the_layer_it_is_declared_for(name):
+    entry = algorithm_of(name)
+    for part, layer in PART_LAYERS.items():
+        where = getattr(entry, part)
+        if not where:
+            continue
+        module = where.partition(":")[0]
+        assert layer_of(module)[1] == LAYERS[layer], f"{name}'s {part} ({where}) is not in the {layer} layer"
+        assert callable(entry.part(part)), f"{name}'s {part} ({where})"
+
+
+def test_a_part_is_asked_for_only_from_its_own_layer_or_a_higher_one():
+    """A module's ``.part("x")`` call: x's layer is at or below the module's (a core module never runs a driver)."""
+    graph = module_graph()
+    asked = re.compile(r"""\.part\(\s*["'](\w+)["']\s*\)""")
+    seen = 0
+    for module in graph:
+        path = PACKAGE.parent / (module.replace(".", "/") + ".py")
+        if not path.exists():
+            continue
+        for part in asked.findall(path.read_text("utf-8")):
+            seen += 1
+            assert LAYERS[PART_LAYERS[part]] <= layer_of(module)[1], f"{module} asks for {part}"
+    assert seen >= 8  # the drivers, the plan, the checks: the shared code does ask
+
+
+def test_the_shared_code_never_tests_an_algorithms_name():
+    """Where the shared code differs by algorithm, it asks the registry: no ``algorithm ==`` outside it."""
+    branch = re.compile(r"algorithm\s*(==|!=)|(==|!=)\s*(RUBENSTEIN|DARR_NIAZI)\b")
+    found = [
+        f"{path.relative_to(PACKAGE.parent)}:{n}"
+        for path in sorted(PACKAGE.rglob("*.py"))
+        if path.name != "algorithm.py"
+        for n, line in enumerate(path.read_text("utf-8").splitlines(), 1)
+        if branch.search(line)
+    ]
+    assert found == []
+
+
+def test_an_unknown_algorithm_or_a_second_of_a_name_is_refused_in_one_line():
+    with pytest.raises(ParameterError, match=r"^algorithm must be one of darr-niazi, rubenstein, got 'kilo'$"):
+        algorithm_of("kilo")
+    with pytest.raises(ContractError, match="registered already"):
+        registry.register(replace(algorithm_of(RUBENSTEIN)))
+    with pytest.raises(ContractError, match="no code part"):
+        algorithm_of(RUBENSTEIN).part("decide")
+    assert names()[0] == DARR_NIAZI  # the default first
+
+
+def test_what_a_graph_cannot_do_is_refused_with_the_algorithms_reason_and_allowed_elsewhere():
+    for check, given in ((check_regions, "0"), (check_loss_policy, "remove")):
+        check(DARR_NIAZI, given, "--flag")  # the study's model's graph does both
+        check(RUBENSTEIN, "" if check is check_regions else "restart", "--flag")  # nothing asked: nothing refused
+    with pytest.raises(ParameterError, match=r"^--region-cuts is not for the rubenstein algorithm's graph \(it cuts"):
+        check_regions(RUBENSTEIN, "0", "--region-cuts")
+    with pytest.raises(ParameterError, match=r"^x: remove is not for the rubenstein .* has no robot failure\)$"):
+        check_loss_policy(RUBENSTEIN, "remove", "x:")
+    assert algorithm_of(DARR_NIAZI).removes_lost_robots and not algorithm_of(RUBENSTEIN).removes_lost_robots
+
+
+def test_a_node_or_an_engine_of_another_algorithm_refuses_the_run():
+    check_serves(RUBENSTEIN, "kilobot_world")
+    check_serves(DARR_NIAZI, "world_shard")
+    with pytest.raises(ParameterError, match="^the world node is not a node of the rubenstein algorithm's graph$"):
+        check_serves(RUBENSTEIN, "world")
+    engine = algorithm_of(DARR_NIAZI).part("engine")
+    check_engine(DARR_NIAZI, engine)
+    with pytest.raises(ParameterError, match="^Simulation does not run the rubenstein algorithm$"):
+        check_engine(RUBENSTEIN, engine)
+
+
+def test_the_default_run_directorys_setting_and_tick_limit_are_each_algorithms_own():
+    assert algorithm_of(DARR_NIAZI).setting(RunParams(robots=10, vision_radius=2.5)) == "v2.5"
+    assert algorithm_of(RUBENSTEIN).setting(RunParams(robots=10, algorithm=RUBENSTEIN)) == "rubenstein"
+    assert RunParams(robots=10).max_ticks == algorithm_of(DARR_NIAZI).max_ticks == 100_000
+    assert RunParams(robots=10, algorithm=RUBENSTEIN).max_ticks == algorithm_of(RUBENSTEIN).max_ticks
