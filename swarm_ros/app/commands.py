@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from swarm_ros.app.param_file import check_given, check_launcher_sets, read_params_file, record_every
-from swarm_ros.app.summary_print import print_summary
+from swarm_ros.app.simulate import note_partial, simulate
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.core.algorithm import algorithm_of, check_loss_policy, check_regions
+from swarm_ros.core.algorithm import algorithm_of, check_can, check_loss_policy, check_regions
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import (
@@ -27,15 +27,13 @@ from swarm_ros.core.params import (
 )
 from swarm_ros.core.resources import check_world_memory
 from swarm_ros.core.shapes import Shape, builtin_shapes, builtin_shapes_3d
-from swarm_ros.core.signals import EXIT_INTERRUPTED, StopFlag
+from swarm_ros.core.signals import EXIT_INTERRUPTED
 
 if TYPE_CHECKING:
-    from swarm_ros.artifacts.rerun_recording import Recorder
-    from swarm_ros.core.engine import Simulation
+    pass
 
 PROG = "swarm-ros"
 EXIT_USAGE = 2
-PROGRESS_TICKS = 200  # ticks between progress-bar updates
 MAX_DOMAIN_ID = 232  # Fast DDS's ports overflow above this (on Linux, 101 with ephemeral ports in use)
 LIST_SECONDS, ECHO_SECONDS = 2.0, 10.0  # topics: listening time, and --echo's wait
 EXIT_AT_ONCE = False  # set by a finished 'run': see swarm_ros.app.cli.entry()
@@ -118,6 +116,7 @@ def _prepare(
 
         check_graph_shape(settings.shape)
     shape, params = settings.resolve()
+    check_can(params.algorithm, "graph" if graph else "check" if getattr(args, "check", False) else "")
     if graph:
         check_regions(params.algorithm, args.world_shards > 1, "--world-shards")
         check_regions(params.algorithm, args.region_cuts, "--region-cuts")
@@ -154,57 +153,10 @@ def _prepare(
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    """``simulate``: the run's algorithm's driver (core.algorithm's part ``simulate``)."""
+    """``simulate``: the run's algorithm in this process (app/simulate.py, one driver for every algorithm)."""
     _, shape, params, out, options, _ = _prepare(args)
     note_compiling(args.quiet, params.algorithm)
-    driver = algorithm_of(params.algorithm).part("simulate")
-    return driver(args, shape, params, out, options, PROG, PROGRESS_TICKS)
-
-
-def simulate_darr_niazi(
-    args: argparse.Namespace,
-    shape: Shape,
-    params: RunParams,
-    out: Path,
-    options: RecordingOptions,
-    prog: str,
-    _every: int,
-) -> int:
-    """``simulate`` under the study's model: its in-process engine, with a progress bar and a recording."""
-    from swarm_ros.artifacts.run_dir import partial_recording, write_run
-    from swarm_ros.core.engine import Simulation  # here: numba is not needed by the other commands' start
-    from swarm_ros.core.metrics import Outcome
-    from swarm_ros.core.run_result import RunRecord
-
-    start = time.perf_counter()
-    stopped = recorder = None
-    # Ctrl-C or SIGTERM, from here on: the run so far (tick 0 at least) becomes an 'interrupted' run directory
-    with StopFlag() as stop:
-        sim = Simulation(shape, params)
-        rrd = partial_recording(out)
-        recorder = options.open(rrd, shape, params)
-        try:
-            _run_with_progress(sim, check=args.check, quiet=args.quiet, recorder=recorder, stop=stop)
-        except BaseException:
-            if recorder is not None:
-                recorder.outcome("failed", sim.metrics)
-                if _closed_whole(recorder):
-                    _note_partial(rrd, options)
-            raise
-        if stop.signum and not sim.done:
-            stopped = Outcome.INTERRUPTED
-    record = RunRecord.of(sim, wall_seconds=time.perf_counter() - start, stopped=stopped)
-    if recorder is not None:
-        recorder.outcome(record.outcome.value, record.final)
-        recorder.close()  # a recording that could not be written whole (a full disk) fails the command here
-    rrd_done, every = (rrd if options.enabled else None), options.every_for(params.robots)
-    out = write_run(out, record, overwrite=args.overwrite, recording=rrd_done, robots_every=every)
-    if stopped is not None:
-        print(f"{prog}: interrupted at tick {sim.tick}; the run so far is in {out}", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    if not args.quiet:
-        print_summary(record.summary, out, shape.dims)
-    return 0
+    return simulate(args, shape, params, out, options, PROG)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -265,10 +217,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                 f"{PROG}: interrupted, but the monitor wrote no run directory (logs: {launch.logs_kept})",
                 file=sys.stderr,
             )
-            _note_partial(partial_recording(out), options)
+            note_partial(partial_recording(out), options, PROG)
         return EXIT_INTERRUPTED
     except BaseException:
-        _note_partial(partial_recording(out), options)
+        note_partial(partial_recording(out), options, PROG)
         raise
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
@@ -332,23 +284,6 @@ def note_compiling(quiet: bool, algorithm: str) -> None:
         print(f"{PROG}: {compiling_note(algorithm)}", file=sys.stderr, flush=True)
 
 
-def _closed_whole(recorder: Recorder) -> bool:
-    """Close the recording of a run that failed; False if it could not be written whole (it is then removed)."""
-    from swarm_ros.artifacts.run_dir import RecordingError
-
-    try:
-        recorder.close()
-    except RecordingError:
-        return False
-    return True
-
-
-def _note_partial(rrd: Path, options: RecordingOptions) -> None:
-    """Tell where the recording of a run that stopped early is."""
-    if options.enabled and rrd.exists():
-        print(f"{PROG}: the recording so far is in {rrd}", file=sys.stderr)
-
-
 def _interrupt_on_sigterm() -> None:
     """SIGTERM ends the command like Ctrl-C does, so its child processes are stopped, not orphaned."""
     import signal
@@ -401,44 +336,3 @@ def cmd_topics(args: argparse.Namespace) -> int:
     return run_topics(
         0 if domain is None else domain, echo=args.echo, count=args.count, seconds=seconds, full=args.full
     )
-
-
-def _run_with_progress(
-    sim: Simulation, check: bool, quiet: bool, recorder: Recorder | None = None, stop: StopFlag | None = None
-) -> None:
-    """Run ``sim`` to its end (or until ``stop`` is set) with a progress bar, checking invariants and
-    recording if asked."""
-    from tqdm import tqdm
-
-    if check:
-        from swarm_ros.core.invariants import check_state, check_tick
-
-        check_state(sim)
-    if recorder is not None:
-        recorder.metrics(sim.history)
-        recorder.robots(sim.state)
-    with tqdm(
-        total=sim.shape.patches,
-        initial=sim.metrics.localized,
-        unit="patch",
-        desc="localized",
-        disable=True if quiet else None,
-        file=sys.stderr,
-        dynamic_ncols=True,
-    ) as bar:
-        while not sim.done and not (stop and stop.signum):
-            before = sim.tick
-            if check:
-                prev = sim.state.copy()
-                sim.step()
-                check_tick(prev, sim)
-            elif recorder is not None:  # stop on every tick whose robots are logged
-                sim.run(max_ticks=min(PROGRESS_TICKS, recorder.every - before % recorder.every))
-            else:
-                sim.run(max_ticks=PROGRESS_TICKS)
-            if recorder is not None:
-                recorder.metrics(sim.history[before + 1 :])
-                recorder.robots(sim.state, force=sim.done)
-            m = sim.metrics
-            bar.update(m.localized - bar.n)
-            bar.set_postfix(tick=str(m.tick), moving=str(m.moving), refresh=False)

@@ -9,12 +9,19 @@ _TIMED = {"ros2": "tick 0 to the outcome", "inprocess": "the kernels' loading an
 
 
 def print_summary(s: dict, out: Path, dims: int) -> None:
+    """A run's summary.json on the study's model's grid, as ``simulate`` and ``run`` print it: the study's model's
+    parameters where the summary has them (another algorithm on the same grid has none)."""
     cells = "voxels" if dims == 3 else "patches"
+    vision, ruled = (f"vision {s['vision_radius']:g}, " if "vision_radius" in s else ""), "rules" in s
     rate = s["convergence_tick"] / s["wall_seconds"] if s["wall_seconds"] > 0 else float("inf")
     rows = [
         ("shape", f"{s['shape']} ({s['shape_patches']} {cells})"),
-        ("robots", f"{s['robots']}  (vision {s['vision_radius']:g}, seed {s['seed']}, engine {s['engine']})"),
-        ("rules", f"{s['rules']}  (join {s['join']}, crowding {s['crowding']}, steps {s['steps']})"),
+        ("robots", f"{s['robots']}  ({vision}seed {s['seed']}, engine {s['engine']})"),
+        *(
+            [("rules", f"{s['rules']}  (join {s['join']}, crowding {s['crowding']}, steps {s['steps']})")]
+            if ruled
+            else []
+        ),
         ("outcome", s["outcome"]),
         ("convergence tick", f"{s['convergence_tick']}"),
         ("localized", f"{s['localized']} / {s['shape_patches']} {cells}"),

@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.rerun_recording import TIMELINE, open_stream
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.rubenstein.rule import UNKNOWN_G
 from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
 
@@ -112,6 +114,15 @@ class KilobotRecorder:
         self.rec.send_columns(ESTIMATES, indexes=index, columns=arrows.partition([len(a) for a in self._from]))
         self._ticks, self._pos, self._state, self._g, self._from, self._to = [], [], [], [], [], []
 
+    def log(self, run: KilobotRun) -> None:
+        """Buffer the robots if due at ``run.tick`` (or the run is done)."""
+        if self.due(run.tick) or run.done:
+            self.robots(run)
+
+    def finish(self, run: KilobotRun, outcome: str) -> None:
+        """:meth:`close`, as simulate's driver ends a recording."""
+        self.close(run, outcome)
+
     def close(self, run: KilobotRun, outcome: str) -> None:
         """Send what is buffered, the metrics of every tick and the outcome, and end the file."""
         if run.tick != self._last:
@@ -125,3 +136,13 @@ class KilobotRecorder:
         self.rec.log(EVENTS, rr.TextLog(f"outcome: {outcome}", level="INFO"))
         self.rec.flush()
         self.rec.disconnect()
+
+
+def open_recording(path: Path, run: KilobotRun, options: RecordingOptions) -> KilobotRecorder | None:
+    """The recording of an in-process rubenstein run (core.algorithm's part ``recording``): to ``path`` if the
+    options write a file, and a viewer; None if nothing is recorded."""
+    if not options.active:
+        return None
+    every = options.every or algorithm_of(run.params.algorithm).record_every
+    path_or_none = path if options.enabled else None
+    return KilobotRecorder(path_or_none, run, every=every, spawn=options.spawn, connect=options.connect)

@@ -112,3 +112,17 @@ def write_kilobot_run(
         return f"; the recording is kept in {recording}" if recording is not None and recording.exists() else ""
 
     return write_dir(out, overwrite, fill, restore)
+
+
+def write_simulation(
+    out: Path,
+    run: KilobotRun,
+    summary: dict,
+    overwrite: bool = False,
+    recording: Path | None = None,
+    every: int | None = None,
+) -> Path:
+    """:func:`write_kilobot_run` of an in-process run (core.algorithm's part ``write_run``): summary.json says
+    how often ``recording`` holds the robots (``every``; null without a recording)."""
+    summary = {**summary, "recording_robots_every": every if recording is not None else None}
+    return write_kilobot_run(out, run, summary, overwrite=overwrite, recording=recording)

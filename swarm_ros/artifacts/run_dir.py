@@ -23,6 +23,7 @@ from swarm_ros.core.errors import InputError, RunFailed
 from swarm_ros.core.inputs import path_too_long, shown
 
 if TYPE_CHECKING:
+    from swarm_ros.core.engine import Simulation
     from swarm_ros.core.params import RunParams
     from swarm_ros.core.run_result import RunRecord
 
@@ -338,6 +339,23 @@ def partial_recording(out: Path) -> Path:
     interrupted, crashes or is killed leaves it here, readable up to that point.
     """
     return out.parent / f"{out.name}.partial.rrd"
+
+
+def write_simulation(
+    out: Path,
+    sim: Simulation,
+    summary: dict,
+    overwrite: bool = False,
+    recording: Path | None = None,
+    every: int | None = None,
+) -> Path:
+    """:func:`write_run` of an in-process run of the study's model and its summary (core.algorithm's part
+    ``write_run``)."""
+    from swarm_ros.core.metrics import Outcome
+    from swarm_ros.core.run_result import RunRecord
+
+    record = RunRecord(sim.shape, sim.params, sim.state, sim.history, Outcome(summary["outcome"]), summary)
+    return write_run(out, record, overwrite=overwrite, recording=recording, robots_every=every)
 
 
 def write_run(

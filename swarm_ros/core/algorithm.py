@@ -7,12 +7,15 @@ loss policies its graph supports) and, for what is code, the dotted name of the 
 file, experiments, the report) calls these parts and never tests an algorithm's name. Each part names the layer it
 lives in (:data:`PART_LAYERS`): a module may ask only for parts of its own layer or a lower one (test_algorithm).
 
-A third algorithm is registered with :func:`register` (docs/adding_an_algorithm.md).
+A third algorithm is a module that calls :func:`register` when imported, named in the environment variable
+``SWARM_ROS_ALGORITHMS`` (modules, comma-separated; the graph's node processes inherit it): it is imported when
+the algorithms are first listed or one not built in is asked for (docs/adding_an_algorithm.md).
 """
 
 from __future__ import annotations
 
 import importlib
+import os
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -28,9 +31,11 @@ PART_LAYERS = {
     "check_shape": "core",
     "compile": "core",
     "warm_up": "core",
+    "checked_step": "core",
     "plan": "protocol",
+    "recording": "artifacts",
+    "write_run": "artifacts",
     "check_graph": "app",
-    "simulate": "app",
     "print_summary": "app",
     "as_study_row": "app",
 }
@@ -53,6 +58,11 @@ class Algorithm:
     run_dir_setting: str
     #: the node executables its graph runs (a node started for another algorithm's run refuses it)
     executables: tuple[str, ...]
+    #: what simulate's progress bar counts: the unit of a cell of the shape, and what is done with it
+    progress_unit: str
+    progress_what: str
+    #: the recording logs the robots every this many ticks unless told; 0: by the swarm's size (params.auto_every)
+    record_every: int = 0
     #: the core's kernel modules its kernels call (and so carry compiled in): a change to one leaves its cache stale
     shared_kernels: tuple[str, ...] = ()
     #: whether its graph can remove a lost batch's robots and go on (``on_batch_loss: remove``); if not, why not
@@ -77,8 +87,13 @@ class Algorithm:
     plan: str = ""
     #: ``(shape, params, processes) -> None``, or "": its own checks of a graph run (ParameterError)
     check_graph: str = ""
-    #: the ``simulate`` command's driver ``(args, shape, params, out, options, prog, progress_every) -> exit status``
-    simulate: str = ""
+    #: ``(run) -> None``: one tick of the engine, with every invariant that must hold over it checked (``--check``)
+    checked_step: str = ""
+    #: ``(path, run, options) -> recorder | None``: the recording of an in-process run (``every``, ``log(run)`` as
+    #: ticks go, ``finish(run, outcome)``); None if the options record nothing
+    recording: str = ""
+    #: ``(out, run, summary, overwrite, recording, every) -> Path``: the run directory of an in-process run
+    write_run: str = ""
     #: ``(summary, out, dims) -> None``: the summary a command prints at the end of a run
     print_summary: str = ""
     #: ``(summary) -> dict``: its summary in the columns of the study's results.csv, or "" if they are its own
@@ -108,6 +123,24 @@ class Algorithm:
 
 
 _REGISTRY: dict[str, Algorithm] = {}
+PLUGINS_VARIABLE = "SWARM_ROS_ALGORITHMS"  #: modules that register an algorithm, comma-separated
+_plugged: set[str] = set()  #: the plug-in modules imported so far
+
+
+def _load_plugins() -> None:
+    """Import the plug-in modules ``SWARM_ROS_ALGORITHMS`` names (each registers its algorithm), once each.
+
+    Raises:
+        ParameterError: a module named cannot be imported, in one line.
+    """
+    for module in (m.strip() for m in os.environ.get(PLUGINS_VARIABLE, "").split(",")):
+        if not module or module in _plugged:
+            continue
+        _plugged.add(module)
+        try:
+            importlib.import_module(module)
+        except Exception as exc:  # whatever a plug-in raises as it loads: said in one line, as bad input
+            raise ParameterError(f"{PLUGINS_VARIABLE}: cannot import {module}: {exc}") from None
 
 
 def register(algorithm: Algorithm) -> Algorithm:
@@ -119,7 +152,9 @@ def register(algorithm: Algorithm) -> Algorithm:
 
 
 def names() -> tuple[str, ...]:
-    """Every registered algorithm's name, in the order registered (the study's model first: the default)."""
+    """Every registered algorithm's name, in the order registered (the study's model first: the default), plug-ins
+    included."""
+    _load_plugins()
     return tuple(_REGISTRY)
 
 
@@ -129,6 +164,8 @@ def algorithm_of(name: str) -> Algorithm:
     Raises:
         ParameterError: no algorithm of that name, in one line with the names there are.
     """
+    if name not in _REGISTRY:
+        _load_plugins()
     try:
         return _REGISTRY[name]
     except KeyError:
@@ -143,6 +180,21 @@ def check_serves(name: str, executable: str) -> None:
     """
     if executable not in algorithm_of(name).executables:
         raise ParameterError(f"the {executable} node is not a node of the {name} algorithm's graph")
+
+
+#: What a command needs of an algorithm beyond its engine: its part, and what the refusal says is missing
+_NEEDS = {"graph": ("plan", "no ROS 2 graph yet (swarm-ros simulate runs it)"), "check": ("checked_step", "no --check")}
+
+
+def check_can(name: str, need: str) -> None:
+    """Refuse, in one line, a command that needs what algorithm ``name`` does not supply: ``"graph"`` (``run``, the
+    launch file, an experiment over the graph) or ``"check"`` (``simulate --check``); ``""`` asks nothing.
+
+    Raises:
+        ParameterError: the algorithm has no such part.
+    """
+    if need and not getattr(algorithm_of(name), _NEEDS[need][0]):
+        raise ParameterError(f"the {name} algorithm has {_NEEDS[need][1]}")
 
 
 def check_regions(name: str, given: object, said: str) -> None:
@@ -188,13 +240,17 @@ register(
         compile_seconds=40,
         run_dir_setting="v{vision_radius:g}",
         executables=("world", "world_shard", "robot_batch", "monitor"),
+        progress_unit="patch",
+        progress_what="localized",
         engine="swarm_ros.core.engine:Simulation",
         summary="swarm_ros.core.run_result:summary_of",
         check_shape="swarm_ros.core.params:check_vision_fits",
         compile="swarm_ros.core.warmup:compile_kernels",
         warm_up="swarm_ros.core.warmup:warm_up",
         plan="swarm_ros.protocol.plan:graph_plan",
-        simulate="swarm_ros.app.commands:simulate_darr_niazi",
+        checked_step="swarm_ros.core.invariants:checked_step",
+        recording="swarm_ros.artifacts.rerun_recording:open_recording",
+        write_run="swarm_ros.artifacts.run_dir:write_simulation",
         print_summary="swarm_ros.app.summary_print:print_summary",
     )
 )
@@ -210,6 +266,9 @@ register(
         compile_seconds=17,
         run_dir_setting="rubenstein",
         executables=("kilobot_world", "kilobot_batch", "kilobot_monitor"),
+        progress_unit="pixel",
+        progress_what="covered",
+        record_every=20,  # a robot steps 0.05 d a tick by default, and a run lasts tens of thousands of ticks
         shared_kernels=("rng.py",),
         no_removal="a lost batch is restarted: the algorithm has no robot failure",
         no_regions="it cuts its own strips",
@@ -220,7 +279,9 @@ register(
         compile="swarm_ros.core.rubenstein.run:compile_kernels",
         plan="swarm_ros.protocol.plan:kilobot_plan",
         check_graph="swarm_ros.app.processes:check_rubenstein_graph",
-        simulate="swarm_ros.app.kilobot:simulate_kilobot",
+        checked_step="swarm_ros.core.rubenstein.tick_checks:checked_step",
+        recording="swarm_ros.artifacts.kilobot_recording:open_recording",
+        write_run="swarm_ros.artifacts.kilobot_run:write_simulation",
         print_summary="swarm_ros.app.summary_print:print_kilobot_summary",
         as_study_row="swarm_ros.app.results_file:rubenstein_as_study_row",
     )

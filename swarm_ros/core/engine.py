@@ -138,6 +138,12 @@ class Simulation:
         """Metrics at the end of the current tick."""
         return TickMetrics(*self._rows[self._nrows - 1].tolist())
 
+    def progress(self) -> tuple[int, int, dict[str, str]]:
+        """The patches localized on so far, the shape's patches, and the tick and the robots moving (simulate's
+        progress bar)."""
+        m = self.metrics
+        return m.localized, self.shape.patches, {"tick": str(m.tick), "moving": str(m.moving)}
+
     @property
     def history(self) -> np.ndarray:
         """Metrics of every tick so far, tick 0 first: int64 array, columns ``METRIC_COLUMNS`` (read-only)."""

@@ -268,3 +268,16 @@ def _check_moves(prev: SwarmState, sim: Simulation, removed: np.ndarray) -> None
         t,
         "a robot walks against the rule set, or stopped walking",
     )
+
+
+def checked_step(sim: Simulation) -> None:
+    """One tick of ``sim``, every invariant checked over it (``simulate --check``); the state at tick 0 first.
+
+    Raises:
+        InvariantError: the first invariant that does not hold.
+    """
+    if sim.tick == 0:
+        check_state(sim)
+    prev = sim.state.copy()
+    sim.step()
+    check_tick(prev, sim)

@@ -30,7 +30,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
-from swarm_ros.core.algorithm import check_serves
+from swarm_ros.core.algorithm import algorithm_of, check_serves
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun, summary_of
@@ -52,8 +52,6 @@ from swarm_ros.ros.bag_resume import resume
 from swarm_ros.ros.bag_writer import KILOBOT_TOPICS, BagRecorder
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, handle_missed, run_node
-
-RECORD_EVERY = 20  #: as the world's
 
 
 class KilobotMonitorNode:
@@ -77,7 +75,7 @@ class KilobotMonitorNode:
         self.rrd = run_dir.partial_recording(self.out) if own["record"] else None
         if self.rrd is not None and self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
-        self.every = int(own["record_every"]) or RECORD_EVERY
+        self.every = int(own["record_every"]) or algorithm_of(self.params.algorithm).record_every
         self.recorder = None
         if self.rrd is not None or own["viewer_url"]:
             from swarm_ros.artifacts.kilobot_recording import KilobotRecorder

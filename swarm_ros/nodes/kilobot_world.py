@@ -30,7 +30,7 @@ from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallb
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.core.algorithm import check_serves
+from swarm_ros.core.algorithm import algorithm_of, check_serves
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.rubenstein.run import KilobotRun
 from swarm_ros.protocol import checks, kilobot_checkpoint
@@ -56,7 +56,6 @@ from swarm_ros.ros.auth import SignedPublisher, open_auth
 from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import run_node
 
-RECORD_EVERY = 20  #: the robots go to the monitor every this many ticks unless record_every says otherwise
 _LINGER = 5.0  #: seconds, at most, for the last messages to be acknowledged before exiting
 _NO_WAIT = Duration(seconds=0)
 
@@ -67,7 +66,7 @@ class KilobotWorldNode:
         run, own = read_parameters(node, WORLD)
         self.shape, self.params = run.resolve()
         check_serves(self.params.algorithm, "kilobot_world")
-        self.every = int(own["record_every"]) or RECORD_EVERY
+        self.every = int(own["record_every"]) or algorithm_of(self.params.algorithm).record_every
         self.save_every = save_every(self.every)
         self.reach = monitor_reach(int(own["monitor_window"]), self.every)
         self.held, self.held_end = -1, False  # the monitor's last held record, and whether it holds the outcome

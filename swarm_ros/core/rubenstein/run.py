@@ -187,6 +187,12 @@ class KilobotRun:
     def metrics(self) -> dict[str, float]:
         return dict(zip(COLUMNS, self._rows[-1][-1].tolist()))
 
+    def progress(self) -> tuple[int, int, dict[str, str]]:
+        """The shape's pixels covered so far, all its pixels, and the tick and the robots joined (simulate's
+        progress bar)."""
+        m = self.metrics
+        return int(m["covered"]), self.pixels, {"tick": str(self.tick), "joined": str(int(m["joined"]))}
+
     # -- running ---------------------------------------------------------------------------------------------
     def step(self) -> None:
         """Advance one tick."""

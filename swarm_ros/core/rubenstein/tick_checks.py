@@ -72,3 +72,14 @@ def check_tick(prev: Robots, covered: float, run: KilobotRun) -> None:
     joined = int(np.count_nonzero(state == JOINED))
     _require(int(row["joined"]) == joined, tick, f"the metrics count {int(row['joined'])} joined, not {joined}")
     _require(row["covered"] >= covered, tick, "a covered pixel was uncovered")
+
+
+def checked_step(run: KilobotRun) -> None:
+    """One tick of ``run``, what every tick must keep checked over it (``simulate --check``).
+
+    Raises:
+        InvariantError: the first rule broken.
+    """
+    prev, covered = snapshot(run), run.metrics["covered"]
+    run.step()
+    check_tick(prev, covered, run)
