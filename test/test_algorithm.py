@@ -107,3 +107,10 @@ def test_the_default_run_directorys_setting_and_tick_limit_are_each_algorithms_o
     assert algorithm_of(RUBENSTEIN).setting(RunParams(robots=10, algorithm=RUBENSTEIN)) == "rubenstein"
     assert RunParams(robots=10).max_ticks == algorithm_of(DARR_NIAZI).max_ticks == 100_000
     assert RunParams(robots=10, algorithm=RUBENSTEIN).max_ticks == algorithm_of(RUBENSTEIN).max_ticks
+
+
+def test_a_plug_in_that_does_not_import_is_refused_in_one_line(monkeypatch):
+    monkeypatch.setenv(registry.PLUGINS_VARIABLE, " , swarm_ros_no_such_plug_in")
+    with pytest.raises(ParameterError, match=r"^SWARM_ROS_ALGORITHMS: cannot import swarm_ros_no_such_plug_in: No"):
+        names()
+    assert algorithm_of(DARR_NIAZI).name == DARR_NIAZI  # a built-in name is found without looking for plug-ins

@@ -151,7 +151,7 @@ def test_a_p_argument_wins_over_the_shipped_parameter_file(kind):
     given = {
         p.name: (not p.default if p.kind is bool else p.default + 1 if p.kind in (int, float) else "x")
         for p in NODE_PARAMETERS[kind]
-        if not p.choices
+        if not p.options
     }
     args = ["--ros-args", "--params-file", str(data_dir("config") / "swarm_ros.yaml"), "-p", "seed:=7"]
     for name, value in given.items():

@@ -294,7 +294,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         if param.flag == "":
             continue  # fail_fraction and fail_tick: together, as --fail-robots
         default = param.blank or ("none" if param.default == "" else param.default)
-        kwargs: dict[str, Any] = {"choices": param.choices} if param.choices else {"type": _checked(param)}
+        kwargs: dict[str, Any] = {"choices": param.options} if param.options else {"type": _checked(param)}
         p.add_argument(param.cli_flag, dest=param.name, help=f"{param.help} (default: {default})", **kwargs)
     p.add_argument(
         "--fail-robots",

@@ -93,8 +93,12 @@ def run_experiment(
     run, in the order they finish.
     """
     from swarm_ros.app.report import build_report
+    from swarm_ros.core.algorithm import check_can
 
     exp = load_experiment(config)
+    if engine == "ros2":  # every algorithm of the grid runs over the graph: refused before anything is written
+        for algorithm in dict.fromkeys(spec.algorithm for spec in exp.runs()):
+            check_can(algorithm, "graph")
     jobs = max(1, min(jobs, len(exp.runs())))
     prepare_out_dir(out or EXPERIMENTS_DIR / exp.name, exp, config, create=False)  # before a cluster starts
     closing = None

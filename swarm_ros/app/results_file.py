@@ -274,6 +274,7 @@ def result_row(spec, summary: dict) -> dict:
         summary = as_study_row(summary)
     # the study's model localizes robots exactly on shape patches: none outside (nor in a hole), no error
     row = {
+        **foreign_defaults(summary["algorithm"]),  # an algorithm's row holds the others' parameters at their defaults
         "joined_outside": 0,
         "hole_filled": 0.0,
         "loc_error": 0.0,

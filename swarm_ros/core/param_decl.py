@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -41,7 +42,7 @@ class Param:
     low: float | None = None
     high: float | None = None
     low_open: bool = False
-    choices: tuple[str, ...] = ()
+    choices: tuple[str, ...] | Callable[[], tuple[str, ...]] = ()
     blank: str = ""
     flag: str | None = None
     experiment: str = "fixed"
@@ -49,6 +50,11 @@ class Param:
     recorded: bool = True
     algorithm: str = ""
     list_text: bool = False  #: a comma-separated list: one whole number (ROS 2 reads ``-p p:=5`` so) is its text
+
+    @property
+    def options(self) -> tuple[str, ...]:
+        """The values a string may take (``choices``, or what it returns when asked: the algorithms registered)."""
+        return self.choices() if callable(self.choices) else self.choices
 
     @property
     def kind(self) -> type:
@@ -60,8 +66,8 @@ class Param:
 
     def describe(self) -> str:
         """What a valid value is, in words: ``an integer >= 3``, ``one of paper, local, literal``."""
-        if self.choices:
-            text = f"one of {', '.join(self.choices)}"
+        if self.options:
+            text = f"one of {', '.join(self.options)}"
         else:
             text = _KIND_WORDS[self.kind]
             if self.low is not None:
@@ -92,8 +98,8 @@ class Param:
         else:
             ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
         if ok and not (self.blank and value == self.blank_value):
-            if self.choices:
-                ok = value in self.choices
+            if self.options:
+                ok = value in self.options
             elif kind in (int, float):
                 ok = (self.low is None or (value > self.low if self.low_open else value >= self.low)) and (
                     self.high is None or value <= self.high

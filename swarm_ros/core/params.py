@@ -36,7 +36,6 @@ MAX_SEED = INT64_MAX
 #: and the graph's world keeps a row of metrics per tick in its checkpoint, a sparse file this many rows long.
 MAX_TICKS = 10**9
 MIN_ROBOTS = 4  # the four seeds
-ALGORITHMS = names()  #: the shape-formation algorithms (core.algorithm); the study's model first, the default
 _DN, _RB = {"algorithm": DARR_NIAZI}, {"algorithm": RUBENSTEIN, "experiment": ""}  # experiments: the model only
 
 
@@ -74,7 +73,7 @@ class Settings:
         DARR_NIAZI,
         "shape-formation algorithm: darr-niazi (the study's model) or rubenstein (Rubenstein et al.'s "
         "Kilobot self-assembly); see docs/model.md",
-        choices=ALGORITHMS,
+        choices=names,  # the algorithms registered (core.algorithm), asked for when a value is checked
         experiment="axis",
     )
     vision_radius: float = _param(
@@ -103,7 +102,7 @@ class Settings:
         "tick limit",
         low=1,
         high=MAX_TICKS,
-        blank=", ".join(f"{algorithm_of(a).max_ticks} under {a}" for a in ALGORITHMS),
+        blank=", ".join(f"{algorithm_of(a).max_ticks} under {a}" for a in (DARR_NIAZI, RUBENSTEIN)),
     )
     wiggle_deg: float = _param(
         DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle", **_DN
