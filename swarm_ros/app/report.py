@@ -68,6 +68,7 @@ from swarm_ros.app.results_file import (
 )
 from swarm_ros.artifacts.mpl import plt
 from swarm_ros.artifacts.run_dir import public_mode
+from swarm_ros.core.algorithm import DARR_NIAZI, algorithm_of
 
 
 def _save(fig: plt.Figure, path: Path) -> None:
@@ -81,7 +82,6 @@ def _curve(row: dict, out: Path) -> np.ndarray:
     """The step curve (:func:`swarm_ros.app.curves.steps`) of the run in ``row``: the experiment's (``out``/curves),
     or, without one, the run re-run in process (checked against the row), then kept there for the next report."""
     from swarm_ros.app.curves import curve_of, read_curve, steps, write_curve
-    from swarm_ros.core.algorithm import algorithm_of
     from swarm_ros.core.params import RUN_PARAMETERS, Settings
 
     stored = read_curve(out, row)
@@ -104,7 +104,9 @@ def _curve(row: dict, out: Path) -> np.ndarray:
 
 
 def _cells(rules: str) -> str:
-    return "pixels" if is_algorithm_label(rules) else "patches"
+    """What a shape's cells are called in a run of ``rules`` (a rule set, or an algorithm's name): its algorithm's
+    ``cells``."""
+    return algorithm_of(rules if is_algorithm_label(rules) else DARR_NIAZI).cells
 
 
 def _counts(rules: str) -> tuple[str, str, str]:

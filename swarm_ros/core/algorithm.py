@@ -61,6 +61,8 @@ class Algorithm:
     #: what simulate's progress bar counts: the unit of a cell of the shape, and what is done with it
     progress_unit: str
     progress_what: str
+    #: what the shape's cells are called in a report ("patches", "pixels")
+    cells: str = "patches"
     #: the recording logs the robots every this many ticks unless told; 0: by the swarm's size (params.auto_every)
     record_every: int = 0
     #: the core's kernel modules its kernels call (and so carry compiled in): a change to one leaves its cache stale
@@ -268,6 +270,7 @@ register(
         executables=("kilobot_world", "kilobot_batch", "kilobot_monitor"),
         progress_unit="pixel",
         progress_what="covered",
+        cells="pixels",
         record_every=20,  # a robot steps 0.05 d a tick by default, and a run lasts tens of thousands of ticks
         shared_kernels=("rng.py",),
         no_removal="a lost batch is restarted: the algorithm has no robot failure",
