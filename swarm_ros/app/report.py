@@ -110,11 +110,10 @@ def _cells(rules: str) -> str:
 
 
 def _counts(rules: str) -> tuple[str, str, str]:
-    """The words for results.csv's localized, unlocalized and empty_patches columns: under rubenstein they count
-    the robots joined, the robots not joined and the shape's pixels no joined robot covers."""
-    if is_algorithm_label(rules):
-        return "joined robots", "robots not joined", "uncovered pixels"
-    return "localized robots", "unlocalized robots", "empty shape patches"
+    """The words for results.csv's localized, unlocalized and empty_patches columns in a run of ``rules`` (a rule
+    set, or an algorithm's name): its algorithm's ``count_words`` (under rubenstein they count the robots joined,
+    the robots not joined and the shape's pixels no joined robot covers)."""
+    return algorithm_of(rules if is_algorithm_label(rules) else DARR_NIAZI).count_words
 
 
 def shape_figure(stats: list[dict], rows: list[dict], path: Path, out: Path, ref: Reference | None = None) -> None:

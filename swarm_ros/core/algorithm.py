@@ -63,6 +63,8 @@ class Algorithm:
     progress_what: str
     #: what the shape's cells are called in a report ("patches", "pixels")
     cells: str = "patches"
+    #: what a report calls the counts in results.csv's localized, unlocalized and empty_patches columns
+    count_words: tuple[str, str, str] = ("localized robots", "unlocalized robots", "empty shape patches")
     #: the recording logs the robots every this many ticks unless told; 0: by the swarm's size (params.auto_every)
     record_every: int = 0
     #: the core's kernel modules its kernels call (and so carry compiled in): a change to one leaves its cache stale
@@ -271,6 +273,7 @@ register(
         progress_unit="pixel",
         progress_what="covered",
         cells="pixels",
+        count_words=("joined robots", "robots not joined", "uncovered pixels"),
         record_every=20,  # a robot steps 0.05 d a tick by default, and a run lasts tens of thousands of ticks
         shared_kernels=("rng.py",),
         no_removal="a lost batch is restarted: the algorithm has no robot failure",
