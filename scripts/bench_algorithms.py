@@ -27,7 +27,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.params import RUBENSTEIN
-from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
 
 ROBOTS = 1024
 
@@ -43,7 +43,7 @@ def darr_niazi(shape: Shape) -> tuple[float, int, int]:
 
 def rubenstein(shape: Shape, ticks: int) -> tuple[float, int, int]:
     """(seconds, ticks, robot-steps) of the first ``ticks`` ticks of a rubenstein run."""
-    run = KilobotRun(shape, RunParams(ROBOTS, algorithm=RUBENSTEIN, seed=1))
+    run = RubensteinRun(shape, RunParams(ROBOTS, algorithm=RUBENSTEIN, seed=1))
     t0 = time.perf_counter()
     run.run(ticks)
     secs = time.perf_counter() - t0
@@ -66,7 +66,7 @@ def main() -> int:
         pass
     shape = Shape.load("star")
     Simulation(shape, RunParams(50, max_ticks=3)).run()  # load the kernels
-    KilobotRun(shape, RunParams(50, algorithm=RUBENSTEIN, max_ticks=3)).run()
+    RubensteinRun(shape, RunParams(50, algorithm=RUBENSTEIN, max_ticks=3)).run()
     results: dict[str, list[tuple[float, int, int]]] = {"darr-niazi": [], "rubenstein": []}
     for r in range(args.rounds):
         order = ("darr-niazi", "rubenstein") if r % 2 == 0 else ("rubenstein", "darr-niazi")

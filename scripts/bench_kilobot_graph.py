@@ -4,7 +4,7 @@
 The star with 1,024 robots, ``--ticks`` ticks from tick 0 (the pack waiting, then the first edge-followers),
 as the README's command runs it (``swarm-ros run``, recording on), for K = 1, 2, 4 robot-batch processes,
 ``--rounds`` rounds. The in-process engine runs the same ticks in this process for the reference
-(``KilobotRun.run``, compiled kernels loaded first). Each node's CPU is what it reports in its log when it
+(``RubensteinRun.run``, compiled kernels loaded first). Each node's CPU is what it reports in its log when it
 ends ("done, ... (S s of CPU)") less what it had spent when it was ready ("ready, ... (S s of CPU"): its
 imports and ROS start-up are not a tick's work. The robot batches' share should follow the robots they
 host: a batch's CPU per tick against the in-process tick shows it. Prints, per K, the wall time, the world's,
@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 from swarm_ros.core.params import Settings
-from swarm_ros.core.rubenstein.run import KilobotRun
+from swarm_ros.core.rubenstein.run import RubensteinRun
 
 DONE = re.compile(r"\[(\w+)\]: done, [\d.]+ s after the process started \(([\d.]+) s of CPU\)")
 READY = re.compile(r"\[(\w+)\]: ready, [\d.]+ s after the process started \(([\d.]+) s of CPU")
@@ -33,8 +33,8 @@ READY = re.compile(r"\[(\w+)\]: ready, [\d.]+ s after the process started \(([\d
 
 def in_process_ms(shape: str, robots: int, ticks: int) -> float:
     shape_, params = Settings(shape=shape, algorithm="rubenstein", robots=robots, seed=1).resolve()
-    KilobotRun(shape_, params).run(5)  # the kernels loaded
-    run = KilobotRun(shape_, params)
+    RubensteinRun(shape_, params).run(5)  # the kernels loaded
+    run = RubensteinRun(shape_, params)
     t0 = time.process_time()
     run.run(ticks)
     return (time.process_time() - t0) * 1000 / ticks

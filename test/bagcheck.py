@@ -185,7 +185,7 @@ def assert_bag_holds_run(run: Path) -> None:
     assert messages["/swarm/occupancy"][0].header.stamp.sec == 0
 
 
-def assert_kilobot_bag_holds_run(run: Path, interrupted: bool = False) -> None:
+def assert_rubenstein_bag_holds_run(run: Path, interrupted: bool = False) -> None:
     """A rubenstein run's bag: the metrics rows of every tick (a tick's again after a world's restart, the same)
     equal metrics.csv; every robot's row every ``bag_robots_every``-th tick and at the last, and the last rebuilds
     final_state.csv; the status ends with the outcome. ``interrupted``: the run was written up to its last record,

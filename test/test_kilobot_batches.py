@@ -8,10 +8,10 @@ from swarm_ros.core import Shape, World
 from swarm_ros.core.errors import ContractError, ParameterError, Rejected
 from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
-from swarm_ros.core.rubenstein.run import KilobotRun
-from swarm_ros.core.rubenstein.strips import KilobotBatch, Strips, area_of, cell_columns, run_batched, strips_for
-from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep
-from swarm_ros.protocol.kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows, robots_of_rows
+from swarm_ros.core.rubenstein.run import RubensteinRun
+from swarm_ros.core.rubenstein.strips import RubensteinBatch, Strips, area_of, cell_columns, run_batched, strips_for
+from swarm_ros.protocol.kilobot_lockstep import RubensteinLockstep
+from swarm_ros.protocol.kilobot_rows import check_rubenstein_rows, decided_of_rows, kilobot_rows, robots_of_rows
 
 pytestmark = pytest.mark.unit
 
@@ -20,7 +20,7 @@ def square(side: int) -> Shape:
     return Shape.from_grid(np.ones((side, side), dtype=bool), World(), name=f"square{side}", source="test")
 
 
-def same(a: KilobotRun, b: KilobotRun) -> bool:
+def same(a: RubensteinRun, b: RubensteinRun) -> bool:
     return (
         a.tick == b.tick
         and a.outcome == b.outcome
@@ -33,7 +33,7 @@ def same(a: KilobotRun, b: KilobotRun) -> bool:
 @pytest.mark.parametrize("batches", [1, 2, 4])
 def test_k_batches_give_the_in_process_run_to_its_end(batches):
     params = RunParams(40, algorithm="rubenstein", seed=5, range_noise=0.04)
-    whole, split = KilobotRun(square(6), params), KilobotRun(square(6), params)
+    whole, split = RubensteinRun(square(6), params), RubensteinRun(square(6), params)
     whole.run()
     run_batched(split, batches)
     assert whole.outcome is not None and same(whole, split)
@@ -42,7 +42,7 @@ def test_k_batches_give_the_in_process_run_to_its_end(batches):
 @pytest.mark.parametrize("batches", [2, 4, 7])
 def test_k_batches_give_the_in_process_star_while_robots_cross_strips(batches):
     shape, params = Settings(shape="star", algorithm="rubenstein", robots=150, seed=2).resolve()
-    whole, split = KilobotRun(shape, params), KilobotRun(shape, params)
+    whole, split = RubensteinRun(shape, params), RubensteinRun(shape, params)
     whole.run(2500)
     strips = run_batched(split, batches, 2500)
     assert strips.batches == batches and same(whole, split)
@@ -59,11 +59,11 @@ def test_strips_share_the_robots_at_the_start_and_an_area_is_its_strip_and_one_c
     with pytest.raises(ParameterError, match="processes must be between 1 and the 15 cell columns, got 16"):
         Strips.balanced(start, 15, 16)
     shape, params = Settings(shape="star", algorithm="rubenstein", robots=1024).resolve()
-    held = [area.size for area in (own_at_start(KilobotRun(shape, params), 4, k) for k in range(4))]
+    held = [area.size for area in (own_at_start(RubensteinRun(shape, params), 4, k) for k in range(4))]
     assert sum(held) == 1020 and max(held) < 2 * min(held), held  # the pack is shared, by whole columns
 
 
-def own_at_start(run: KilobotRun, batches: int, k: int) -> np.ndarray:
+def own_at_start(run: RubensteinRun, batches: int, k: int) -> np.ndarray:
     strips = strips_for(run, batches)
     column = cell_columns(run.robots.x, run.cells)
     return np.flatnonzero(strips.in_strip(column, k) & (run.robots.state != JOINED))
@@ -73,13 +73,13 @@ def test_a_batch_reads_only_its_area_and_decides_only_its_strip():
     """What a batch holds outside its area (here: garbage) changes nothing it decides; it decides for exactly the
     robots not joined whose cell lies in its strip."""
     shape, params = Settings(shape="star", algorithm="rubenstein", robots=150, seed=2).resolve()
-    run = KilobotRun(shape, params)
+    run = RubensteinRun(shape, params)
     run.run(1500)
     strips = strips_for(run, 4)
     k = 1  # half its area is the pack's edge, its strip's robots leaving it
     ids = area_of(run, strips, k)
     rows = Robots(*(a[ids] for a in run.robots))
-    clean, dirty = KilobotBatch(run, strips, k), KilobotBatch(run, strips, k)
+    clean, dirty = RubensteinBatch(run, strips, k), RubensteinBatch(run, strips, k)
     rng = np.random.default_rng(0)
     for a in dirty.robots:
         a[:] = rng.integers(-5, 5, a.size).astype(a.dtype)
@@ -93,9 +93,9 @@ def test_a_batch_reads_only_its_area_and_decides_only_its_strip():
 
 
 def test_the_world_refuses_parts_that_miss_or_repeat_a_robot():
-    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
     strips = strips_for(run, 2)
-    hosts = [KilobotBatch(run, strips, k) for k in range(2)]
+    hosts = [RubensteinBatch(run, strips, k) for k in range(2)]
     parts = []
     for k, host in enumerate(hosts):
         ids = area_of(run, strips, k)
@@ -113,18 +113,18 @@ def test_the_batches_give_the_in_process_run_through_the_wire_rows():
     """Every robot and decision passed as the rows the graph sends (KILOBOT_ROW, KILOBOT_DECISION_ROW), checked as
     a node checks them: the run is still the in-process one, with range noise, to the end."""
     params = RunParams(40, algorithm="rubenstein", seed=3, range_noise=0.04)
-    whole, split = KilobotRun(square(6), params), KilobotRun(square(6), params)
+    whole, split = RubensteinRun(square(6), params), RubensteinRun(square(6), params)
     whole.run()
     strips = strips_for(split, 3)
-    hosts = [KilobotBatch(split, strips, k) for k in range(3)]
+    hosts = [RubensteinBatch(split, strips, k) for k in range(3)]
     while split.outcome is None:
         tick, parts = split.tick + 1, []
         for k, host in enumerate(hosts):
             rows = kilobot_rows(area_of(split, strips, k), split.robots)
-            check_kilobot_rows(rows, params.robots, split.tick)
+            check_rubenstein_rows(rows, params.robots, split.tick)
             own, decided = host.decide(tick, *robots_of_rows(rows))
             answer = kilobot_rows(own, decided)
-            check_kilobot_rows(answer, params.robots, tick)
+            check_rubenstein_rows(answer, params.robots, tick)
             parts.append(decided_of_rows(answer))
         split.settle(parts)
     assert same(whole, split)
@@ -150,34 +150,34 @@ def test_the_batches_give_the_in_process_run_through_the_wire_rows():
     ],
 )
 def test_a_hostile_row_is_rejected_by_kind(field, value, kind):
-    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
     run.run(50)
     rows = kilobot_rows(np.arange(40), run.robots)
-    check_kilobot_rows(rows, 40, 50)  # as sent: taken
+    check_rubenstein_rows(rows, 40, 50)  # as sent: taken
     rows[field][-1] = value
     with pytest.raises(Rejected) as caught:
-        check_kilobot_rows(rows, 40, 50)
+        check_rubenstein_rows(rows, 40, 50)
     assert caught.value.kind == kind
 
 
 def test_rows_with_several_faults_are_rejected_for_the_first_check_that_fails():
     """The compiled check finds every fault in one pass; it names the one the documented order checks first,
     wherever in the rows the faults lie."""
-    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
     run.run(50)
     rows = kilobot_rows(np.arange(40), run.robots)
     rows["x"][3], rows["state"][20], rows["id"][39] = np.nan, 7, 38  # a number, a state, then a repeated id
     with pytest.raises(Rejected) as caught:
-        check_kilobot_rows(rows, 40, 50)
+        check_rubenstein_rows(rows, 40, 50)
     assert str(caught.value) == "bad ids: ids must ascend within 0..39"
     rows["id"][39] = 39
     with pytest.raises(Rejected) as caught:
-        check_kilobot_rows(rows, 40, 50)
+        check_rubenstein_rows(rows, 40, 50)
     assert caught.value.kind == "bad state"
 
 
 def test_the_wire_rows_name_the_gradient_and_estimate_and_round_trip_the_sentinels():
-    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
     rows = kilobot_rows(np.arange(40), run.robots)
     assert {"x", "y", "z", "g", "ex", "ey", "state"} <= set(rows.dtype.names)
     assert rows["g"][-1] == -1 and rows["began"][-1] == -1  # unknown gradient, never began: -1 on the wire
@@ -186,14 +186,14 @@ def test_the_wire_rows_name_the_gradient_and_estimate_and_round_trip_the_sentine
     assert all(np.array_equal(a, b) and a.dtype == b.dtype for a, b in zip(run.robots, back))
 
 
-def lockstep_run(params: RunParams, batches: int) -> tuple[KilobotRun, KilobotLockstep]:
+def lockstep_run(params: RunParams, batches: int) -> tuple[RubensteinRun, RubensteinLockstep]:
     """The graph's exchange without ROS: the world's lockstep, and batches sent only its rows."""
-    run = KilobotRun(square(6), params)
-    ls = KilobotLockstep(run)
-    hosts: list[KilobotBatch] = []
+    run = RubensteinRun(square(6), params)
+    ls = RubensteinLockstep(run)
+    hosts: list[RubensteinBatch] = []
     for k in range(batches):
         sent = ls.announce(f"robot_batch_{k}", k, batches)
-        hosts.append(KilobotBatch(run, ls.strips, k))
+        hosts.append(RubensteinBatch(run, ls.strips, k))
     assert sent == list(range(batches)) and ls.started
     while run.outcome is None:
         tick = run.tick + 1
@@ -207,14 +207,14 @@ def lockstep_run(params: RunParams, batches: int) -> tuple[KilobotRun, KilobotLo
 @pytest.mark.parametrize("batches", [1, 2, 4])
 def test_the_worlds_lockstep_with_checked_decisions_gives_the_in_process_run(batches):
     params = RunParams(40, algorithm="rubenstein", seed=6, range_noise=0.05)
-    whole = KilobotRun(square(6), params)
+    whole = RubensteinRun(square(6), params)
     whole.run()
     run, _ = lockstep_run(params, batches)
     assert same(whole, run)
 
 
-def decisions_of_batch_0(run: KilobotRun, ls: KilobotLockstep) -> np.ndarray:
-    host = KilobotBatch(run, ls.strips, 0)
+def decisions_of_batch_0(run: RubensteinRun, ls: RubensteinLockstep) -> np.ndarray:
+    host = RubensteinBatch(run, ls.strips, 0)
     own, decided = host.decide(run.tick + 1, *robots_of_rows(ls.area(0)))
     return kilobot_rows(own, decided)
 
@@ -247,9 +247,9 @@ def join_at_7(rows):
     ],
 )
 def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
-    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
     run.run(600)  # robots are edge-following by now
-    ls = KilobotLockstep(run)
+    ls = RubensteinLockstep(run)
     ls.announce("robot_batch_0", 0, 1)
     rows = decisions_of_batch_0(run, ls)
     moving = rows[rows["moves"] == 1]
@@ -264,7 +264,7 @@ def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
 
 
 def test_announcements_that_do_not_fit_the_run_are_rejected():
-    ls = KilobotLockstep(KilobotRun(square(6), RunParams(40, algorithm="rubenstein")))
+    ls = RubensteinLockstep(RubensteinRun(square(6), RunParams(40, algorithm="rubenstein")))
     assert ls.announce("robot_batch_0", 0, 2) == []
     wrong = [
         ("robot_batch_1", 1, 3),
@@ -287,12 +287,12 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
     from swarm_ros.protocol import kilobot_checkpoint
 
     params = RunParams(40, algorithm="rubenstein", seed=6, range_noise=0.05)
-    whole = KilobotRun(square(6), params)
+    whole = RubensteinRun(square(6), params)
     whole.run(1500)
     path = tmp_path / "world.checkpoint"
     kilobot_checkpoint.save(path, whole, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["world.checkpoint"]  # no temporary file left
-    fresh = KilobotRun(square(6), params)
+    fresh = RubensteinRun(square(6), params)
     saved = kilobot_checkpoint.load(path, fresh)
     assert (saved.tick, saved.hosts, saved.batches) == (1500, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
     fresh.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
@@ -302,7 +302,7 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
     path.write_bytes(b"not a checkpoint")
     with pytest.raises(RunFailed, match="does not read"):
         kilobot_checkpoint.load(path, fresh)
-    kilobot_checkpoint.save(path, KilobotRun(square(6), RunParams(30, algorithm="rubenstein")), {}, 1)
+    kilobot_checkpoint.save(path, RubensteinRun(square(6), RunParams(30, algorithm="rubenstein")), {}, 1)
     with pytest.raises(RunFailed, match="is not of this run"):
         kilobot_checkpoint.load(path, fresh)
     with pytest.raises(RunFailed, match="found no checkpoint"):
@@ -312,7 +312,7 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
 def test_metrics_rows_a_restarted_world_sends_again_are_taken_once_and_must_equal_those_held():
     from swarm_ros.protocol.kilobot_rows import check_metrics_rows, metrics_rows
 
-    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
     run.run(100)
     history = run.history
     held = history[:61]
@@ -348,7 +348,7 @@ def test_the_world_runs_at_least_one_record_and_at_most_what_the_topics_keep_pas
 def test_the_monitors_held_report_is_checked():
     from swarm_ros.protocol.kilobot_lockstep import check_held
 
-    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=5))
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=5))
     assert check_held(np.array([-1, 0]), run) == (-1, False)
     assert check_held(np.array([3000, 0]), run) == (3000, False)  # a restarted world's monitor may be past it
     for values in ([1], [1, 0, 0], [-2, 0], [10**12, 0], [0, 2], [0, 1]):  # the end only once the run has ended
@@ -361,8 +361,8 @@ def test_the_monitors_held_report_is_checked():
 
 
 def test_the_world_names_the_batches_it_waits_for():
-    run = KilobotRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
-    ls = KilobotLockstep(run)
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    ls = RubensteinLockstep(run)
     for k in range(2):
         ls.announce(f"robot_batch_{k}", k, 2)
     assert ls.awaited() == ["robot_batch_0", "robot_batch_1"]
@@ -374,10 +374,10 @@ def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_wh
     """The watch behind the rubenstein world's liveliness lines and its STILL_S bound (a peer started by hand that
     died would otherwise keep the run waiting for ever)."""
     from swarm_ros.core.errors import RunFailed
-    from swarm_ros.protocol.kilobot_lockstep import KilobotWatch
+    from swarm_ros.protocol.kilobot_lockstep import RubensteinWatch
     from swarm_ros.protocol.world_port import STILL_S
 
-    watch = KilobotWatch(now=100.0)
+    watch = RubensteinWatch(now=100.0)
     assert watch.liveliness("robot_batch_1", 1, 0) == "robot_batch_1 is alive (liveliness)"
     assert watch.liveliness("robot_batch_1", 1, 0) is None  # a change that says nothing new
     assert watch.liveliness("robot_batch_1", 0, 1) == "robot_batch_1 was lost (liveliness lapsed): the run waits for it"

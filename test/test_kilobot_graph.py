@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bagcheck import assert_kilobot_bag_holds_run
+from bagcheck import assert_rubenstein_bag_holds_run
 from graph_runs import node_pid, processes_mentioning, run_env, staged_logs, wait_ticks_recorded
 from waiting import wait_for
 
@@ -67,7 +67,7 @@ def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_
     summary = assert_same_run(reference, out)
     assert summary["processes"] == processes
     assert (out / "recording.rrd").stat().st_size > 0 and (out / "final.png").stat().st_size > 0
-    assert_kilobot_bag_holds_run(out)
+    assert_rubenstein_bag_holds_run(out)
     world = (out / "logs" / "world.log").read_text()
     assert "dropped" not in world, world  # no message of the run's own was refused
     assert not processes_mentioning(str(out)), "a process outlived the run"
@@ -118,7 +118,7 @@ def test_a_run_stopped_mid_way_is_written_up_to_its_last_record_as_simulate_writ
     assert cli.main(["simulate", "--shape", str(square), *RUN, "--max-ticks", str(tick), "--out", str(ref)]) == 0
     for name in ("metrics.csv", "final_state.csv"):
         assert (out / name).read_bytes() == (ref / name).read_bytes(), name
-    assert_kilobot_bag_holds_run(out, interrupted=True)
+    assert_rubenstein_bag_holds_run(out, interrupted=True)
     assert (out / "recording.rrd").stat().st_size > 0
     beside = ["ref", "run"] + ["run.logs"] * (stop != "ctrl-c")  # a command that failed keeps its logs, and says so
     assert sorted(p.name for p in tmp_path.iterdir()) == beside, "nothing partial is left beside the run"
@@ -183,7 +183,7 @@ def test_a_world_killed_goes_on_from_its_checkpoint_and_the_run_is_the_same(squa
     assert [r["node"] for r in summary["restarts"]] == ["world"]
     said = (out / "logs" / "world.log").read_text()
     assert "restarted: on from the checkpoint of tick" in said or "restarted before tick 0 went out" in said
-    assert_kilobot_bag_holds_run(out)
+    assert_rubenstein_bag_holds_run(out)
     assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint outlived the run"
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
@@ -208,7 +208,7 @@ def test_a_monitor_killed_goes_on_from_its_bag_and_the_run_is_the_same(square, r
     said = (out / "logs" / "monitor.log").read_text()
     [resumed_at] = re.findall(r"monitor restarted \(incarnation 1\): went on from tick (-?\d+)", said)
     assert int(resumed_at) > 0 if moment == "mid-run" else int(resumed_at) >= -1, said
-    assert_kilobot_bag_holds_run(out)
+    assert_rubenstein_bag_holds_run(out)
     assert (out / "recording.rrd").stat().st_size > 0
     assert not list(tmp_path.glob(".run.*")), "a folder of the killed monitor outlived the run"
     assert not processes_mentioning(str(out)), "a process outlived the run"

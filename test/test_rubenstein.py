@@ -22,7 +22,7 @@ from swarm_ros.core.rubenstein.rule import (
     sweep,
     trilaterate,
 )
-from swarm_ros.core.rubenstein.run import KilobotRun, hole_filled, summary_of
+from swarm_ros.core.rubenstein.run import RubensteinRun, hole_filled, summary_of
 from swarm_ros.core.rubenstein.tick_checks import check_tick, snapshot
 
 pytestmark = pytest.mark.unit
@@ -41,8 +41,8 @@ def ring(side: int, hole: int) -> Shape:
     return Shape.from_grid(mask, World(), name=f"ring{side}", source="test")
 
 
-def kilobot(shape: Shape, robots: int, **values) -> KilobotRun:
-    return KilobotRun(shape, RunParams(robots, algorithm="rubenstein", **values))
+def kilobot(shape: Shape, robots: int, **values) -> RubensteinRun:
+    return RubensteinRun(shape, RunParams(robots, algorithm="rubenstein", **values))
 
 
 def contacts(pos: np.ndarray) -> list[list[int]]:
@@ -202,7 +202,7 @@ def test_every_tick_of_a_run_keeps_what_check_checks():
     assert run.outcome.value in ("complete", "complete_with_extras")
 
 
-def _damaged(what: str) -> tuple[KilobotRun, object, float]:
+def _damaged(what: str) -> tuple[RubensteinRun, object, float]:
     """A run past its first joins, one tick stepped, then ``what`` broken in its robots (before, after, covered)."""
     run = kilobot(square(6), 40, seed=1)
     run.run(3000)
@@ -478,7 +478,7 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     def no_runs(*args, **kwargs):
         raise AssertionError("the report ran a run")
 
-    monkeypatch.setattr(KilobotRun, "run", no_runs)
+    monkeypatch.setattr(RubensteinRun, "run", no_runs)
     monkeypatch.setattr(Simulation, "run", no_runs)
     report.build_report(out)
 

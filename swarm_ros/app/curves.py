@@ -30,12 +30,12 @@ def curve_name(row: dict) -> str:
 
 def curve_of(run) -> np.ndarray:
     """(tick, empty) of every tick of a finished in-process run: a ``Simulation``'s empty patches, a
-    ``KilobotRun``'s uncovered pixels."""
+    ``RubensteinRun``'s uncovered pixels."""
     from swarm_ros.core.metrics import METRIC_COLUMNS
-    from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+    from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
 
     h = run.history
-    if isinstance(run, KilobotRun):
+    if isinstance(run, RubensteinRun):
         return np.stack([h[:, 0], run.pixels - h[:, COLUMNS.index("covered")]], axis=1)
     return h[:, [0, METRIC_COLUMNS.index("empty_patches")]].astype(float)
 

@@ -297,10 +297,10 @@ def check_rubenstein_graph(shape, params, processes: int) -> None:
     Raises:
         InputError: that.
     """
-    from swarm_ros.core.rubenstein.run import KilobotRun
+    from swarm_ros.core.rubenstein.run import RubensteinRun
     from swarm_ros.core.rubenstein.strips import strips_for
 
-    strips_for(KilobotRun(shape, params), processes)
+    strips_for(RubensteinRun(shape, params), processes)
 
 
 def compile_first(algorithm: str, quiet: bool) -> bool:

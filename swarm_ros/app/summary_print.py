@@ -47,7 +47,7 @@ def print_summary(s: dict, out: Path, dims: int) -> None:
         print(f"{key:<17} {value}")
 
 
-def print_kilobot_summary(s: dict, out: Path, _dims: int = 2) -> None:
+def print_rubenstein_summary(s: dict, out: Path, _dims: int = 2) -> None:
     """A rubenstein run's summary.json, as ``simulate`` and ``run`` print it."""
     rows = [
         ("shape", f"{s['shape']} ({s['shape_pixels']} pixels of {s['pixel_size']:g} d)"),

@@ -25,7 +25,7 @@ from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.rerun_recording import TIMELINE, open_stream
 from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.rubenstein.rule import UNKNOWN_G
-from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
 
 BATCH = 64
 #: start, wait_to_move, move_while_outside, move_while_inside, joined_shape
@@ -46,11 +46,11 @@ ROBOTS, GRADIENT, ESTIMATES, SHAPE, METRICS, EVENTS = (
 )
 
 
-class KilobotRecorder:
+class RubensteinRecorder:
     """Writes ``path`` (an .rrd file) as a rubenstein run goes on; :meth:`close` sends the metrics and ends it."""
 
     def __init__(
-        self, path: Path | None, run: KilobotRun, every: int = 1, spawn: bool = False, connect: str | None = None
+        self, path: Path | None, run: RubensteinRun, every: int = 1, spawn: bool = False, connect: str | None = None
     ) -> None:
         self.path, self.every = path, every
         self._last = -1
@@ -78,7 +78,7 @@ class KilobotRecorder:
     def due(self, tick: int) -> bool:
         return tick % self.every == 0
 
-    def robots(self, run: KilobotRun) -> None:
+    def robots(self, run: RubensteinRun) -> None:
         """Buffer the robots as they are at ``run.tick``."""
         s = run.robots
         self._last = run.tick
@@ -114,16 +114,16 @@ class KilobotRecorder:
         self.rec.send_columns(ESTIMATES, indexes=index, columns=arrows.partition([len(a) for a in self._from]))
         self._ticks, self._pos, self._state, self._g, self._from, self._to = [], [], [], [], [], []
 
-    def log(self, run: KilobotRun) -> None:
+    def log(self, run: RubensteinRun) -> None:
         """Buffer the robots if due at ``run.tick`` (or the run is done)."""
         if self.due(run.tick) or run.done:
             self.robots(run)
 
-    def finish(self, run: KilobotRun, outcome: str) -> None:
+    def finish(self, run: RubensteinRun, outcome: str) -> None:
         """:meth:`close`, as simulate's driver ends a recording."""
         self.close(run, outcome)
 
-    def close(self, run: KilobotRun, outcome: str) -> None:
+    def close(self, run: RubensteinRun, outcome: str) -> None:
         """Send what is buffered, the metrics of every tick and the outcome, and end the file."""
         if run.tick != self._last:
             self.robots(run)
@@ -138,11 +138,11 @@ class KilobotRecorder:
         self.rec.disconnect()
 
 
-def open_recording(path: Path, run: KilobotRun, options: RecordingOptions) -> KilobotRecorder | None:
+def open_recording(path: Path, run: RubensteinRun, options: RecordingOptions) -> RubensteinRecorder | None:
     """The recording of an in-process rubenstein run (core.algorithm's part ``recording``): to ``path`` if the
     options write a file, and a viewer; None if nothing is recorded."""
     if not options.active:
         return None
     every = options.every or algorithm_of(run.params.algorithm).record_every
     path_or_none = path if options.enabled else None
-    return KilobotRecorder(path_or_none, run, every=every, spawn=options.spawn, connect=options.connect)
+    return RubensteinRecorder(path_or_none, run, every=every, spawn=options.spawn, connect=options.connect)

@@ -9,12 +9,12 @@ from pathlib import Path
 
 from swarm_ros.artifacts.run_dir import BAG_DIR, RECORDING_FILE, summary_json, write_dir
 from swarm_ros.core.rubenstein.rule import STATE_NAMES
-from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
 
 FINAL_COLUMNS = ("id", "x", "y", "heading", "state", "gradient", "estimate_x", "estimate_y", "localized")
 
 
-def metrics_csv(run: KilobotRun) -> str:
+def metrics_csv(run: RubensteinRun) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(COLUMNS)
@@ -23,7 +23,7 @@ def metrics_csv(run: KilobotRun) -> str:
     return buf.getvalue()
 
 
-def final_state_csv(run: KilobotRun) -> str:
+def final_state_csv(run: RubensteinRun) -> str:
     s = run.robots
     lines = [",".join(FINAL_COLUMNS)]
     for i in range(s.x.size):
@@ -36,7 +36,7 @@ def final_state_csv(run: KilobotRun) -> str:
     return "\n".join(lines) + "\n"
 
 
-def save_final_png(run: KilobotRun, path: Path) -> None:
+def save_final_png(run: RubensteinRun, path: Path) -> None:
     """The shape's pixels, and each robot where it ended, coloured by state, with its estimate's offset."""
     import numpy as np
     from matplotlib.collections import EllipseCollection, LineCollection, PatchCollection
@@ -78,9 +78,9 @@ def save_final_png(run: KilobotRun, path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
-def write_kilobot_run(
+def write_rubenstein_run(
     out: Path,
-    run: KilobotRun,
+    run: RubensteinRun,
     summary: dict,
     overwrite: bool = False,
     recording: Path | None = None,
@@ -116,13 +116,13 @@ def write_kilobot_run(
 
 def write_simulation(
     out: Path,
-    run: KilobotRun,
+    run: RubensteinRun,
     summary: dict,
     overwrite: bool = False,
     recording: Path | None = None,
     every: int | None = None,
 ) -> Path:
-    """:func:`write_kilobot_run` of an in-process run (core.algorithm's part ``write_run``): summary.json says
+    """:func:`write_rubenstein_run` of an in-process run (core.algorithm's part ``write_run``): summary.json says
     how often ``recording`` holds the robots (``every``; null without a recording)."""
     summary = {**summary, "recording_robots_every": every if recording is not None else None}
-    return write_kilobot_run(out, run, summary, overwrite=overwrite, recording=recording)
+    return write_rubenstein_run(out, run, summary, overwrite=overwrite, recording=recording)

@@ -15,6 +15,7 @@ from swarm_ros.core.params import RECORD_EVERY, auto_every
 
 if TYPE_CHECKING:
     from swarm_ros.artifacts.rerun_recording import Recorder
+    from swarm_ros.core.engine import Simulation
     from swarm_ros.core.params import RunParams
     from swarm_ros.core.shapes import Shape
 
@@ -97,3 +98,36 @@ class RecordingOptions:
             spawn=self.spawn,
             connect=self.connect,
         )
+
+
+class SimulationRecording:
+    """The recording of an in-process run of the study's model (core.algorithm's part ``recording``): the
+    metrics of every tick and the robots every ``every``-th tick and at the end, as the run goes."""
+
+    def __init__(self, recorder: Recorder, sim: Simulation) -> None:
+        self.recorder, self.every = recorder, recorder.every
+        recorder.metrics(sim.history)
+        recorder.robots(sim.state)
+        self._logged = sim.tick
+
+    def log(self, sim: Simulation) -> None:
+        """Log the ticks run since the last call: their metrics, and the robots if due (or the run is done)."""
+        self.recorder.metrics(sim.history[self._logged + 1 :])
+        self.recorder.robots(sim.state, force=sim.done)
+        self._logged = sim.tick
+
+    def finish(self, sim: Simulation, outcome: str) -> None:
+        """Log the outcome and end the file.
+
+        Raises:
+            RecordingError: the file could not be written whole (it is removed).
+        """
+        self.recorder.outcome(outcome, sim.metrics)
+        self.recorder.close()
+
+
+def open_recording(path: Path, sim: Simulation, options: RecordingOptions) -> SimulationRecording | None:
+    """The recording of ``sim`` to ``path`` (if the options write a file) and a viewer, or None if nothing is
+    recorded."""
+    recorder = options.open(path, sim.shape, sim.params)
+    return None if recorder is None else SimulationRecording(recorder, sim)

@@ -20,7 +20,6 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
@@ -33,10 +32,6 @@ from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import SwarmState
-
-if TYPE_CHECKING:
-    from swarm_ros.artifacts.recording_options import RecordingOptions
-    from swarm_ros.core.engine import Simulation
 
 APP_ID = "swarm_ros"
 TIMELINE = "tick"
@@ -277,39 +272,6 @@ class Recorder:
             self.rec.send_columns(
                 f"{METRICS}/{name}", indexes=[ticks], columns=rr.Scalars.columns(scalars=rows[:, k].astype(np.float64))
             )
-
-
-class SimulationRecording:
-    """The recording of an in-process run of the study's model (core.algorithm's part ``recording``): the
-    metrics of every tick and the robots every ``every``-th tick and at the end, as the run goes."""
-
-    def __init__(self, recorder: Recorder, sim: Simulation) -> None:
-        self.recorder, self.every = recorder, recorder.every
-        recorder.metrics(sim.history)
-        recorder.robots(sim.state)
-        self._logged = sim.tick
-
-    def log(self, sim: Simulation) -> None:
-        """Log the ticks run since the last call: their metrics, and the robots if due (or the run is done)."""
-        self.recorder.metrics(sim.history[self._logged + 1 :])
-        self.recorder.robots(sim.state, force=sim.done)
-        self._logged = sim.tick
-
-    def finish(self, sim: Simulation, outcome: str) -> None:
-        """Log the outcome and end the file.
-
-        Raises:
-            RecordingError: the file could not be written whole (it is removed).
-        """
-        self.recorder.outcome(outcome, sim.metrics)
-        self.recorder.close()
-
-
-def open_recording(path: Path, sim: Simulation, options: RecordingOptions) -> SimulationRecording | None:
-    """The recording of ``sim`` to ``path`` (if the options write a file) and a viewer, or None if nothing is
-    recorded."""
-    recorder = options.open(path, sim.shape, sim.params)
-    return None if recorder is None else SimulationRecording(recorder, sim)
 
 
 def open_stream(

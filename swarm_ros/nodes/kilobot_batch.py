@@ -3,7 +3,7 @@
 Batch k of K announces ``[k, K]`` on /swarm/batches. The world sends it, after each tick, the rows of its
 area (its strip and one cell column of halo, the communication range wide) on /swarm/kilobot/area/<batch>:
 what the robots there broadcast. The batch checks them (dropped and counted if they fail), decides the next
-tick for its strip's robots not joined (:class:`swarm_ros.core.rubenstein.strips.KilobotBatch`) and answers
+tick for its strip's robots not joined (:class:`swarm_ros.core.rubenstein.strips.RubensteinBatch`) and answers
 on /swarm/kilobot/decisions/<batch>. It keeps nothing between ticks, so a restarted batch decides as the one
 it replaces would have. It stops when /swarm/status reports the run's outcome.
 
@@ -23,13 +23,13 @@ from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core.algorithm import check_serves
 from swarm_ros.core.errors import Rejected
-from swarm_ros.core.rubenstein.run import KilobotRun
-from swarm_ros.core.rubenstein.strips import KilobotBatch, strips_for
+from swarm_ros.core.rubenstein.run import RubensteinRun
+from swarm_ros.core.rubenstein.strips import RubensteinBatch, strips_for
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections
-from swarm_ros.protocol.kilobot_rows import KILOBOT_ROW, check_kilobot_rows, kilobot_rows, robots_of_rows
-from swarm_ros.protocol.plan import BATCHES, ROBOT_BATCH, STATUS, kilobot_area_topic, kilobot_decisions_topic
+from swarm_ros.protocol.kilobot_rows import KILOBOT_ROW, check_rubenstein_rows, kilobot_rows, robots_of_rows
+from swarm_ros.protocol.plan import BATCHES, ROBOT_BATCH, STATUS, rubenstein_area_topic, rubenstein_decisions_topic
 from swarm_ros.protocol.rows import batch_label
 from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
@@ -41,24 +41,24 @@ _LINGER = 2.0  # seconds, at most, for the last decisions to be acknowledged bef
 _NO_WAIT = Duration(seconds=0)
 
 
-class KilobotBatchNode:
+class RubensteinBatchNode:
     def __init__(self) -> None:
         self.node = node = make_node(ROBOT_BATCH)
         run, own = read_parameters(node, ROBOT_BATCH)
         self.shape, self.params = run.resolve()
         check_serves(self.params.algorithm, "kilobot_batch")
         self.k, batches = int(own["batch"]), int(own["batches"])
-        frame = KilobotRun(self.shape, self.params)  # the grid, the rule and the shape; its robots are not used
+        frame = RubensteinRun(self.shape, self.params)  # the grid, the rule and the shape; its robots are not used
         strips = strips_for(frame, batches)
-        self.host = KilobotBatch(frame, strips, self.k)
+        self.host = RubensteinBatch(frame, strips, self.k)
         self.tick = -1  # the last tick whose area came in
         self.ended_at: float | None = None
         self.finished = False
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
         name = node.get_name()
-        self.area = kilobot_area_topic(name)
-        self.pub_decisions = self.signer.publisher(PointCloud2, kilobot_decisions_topic(name), msgs.DECISIONS_QOS)
+        self.area = rubenstein_area_topic(name)
+        self.pub_decisions = self.signer.publisher(PointCloud2, rubenstein_decisions_topic(name), msgs.DECISIONS_QOS)
         self.gate.subscribe(PointCloud2, self.area, self._on_area, msgs.LATCHED_QOS)
         self.gate.subscribe(DiagnosticArray, STATUS, self._on_status, msgs.STATUS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(name), msgs.ALIVE_QOS)  # liveliness only
@@ -76,7 +76,7 @@ class KilobotBatchNode:
         try:
             tick = checks.tick_stamp(msg.header)
             rows = checks.cloud(msg, KILOBOT_ROW, self.params.robots, min_rows=0)
-            check_kilobot_rows(rows, self.params.robots, tick)
+            check_rubenstein_rows(rows, self.params.robots, tick)
         except Rejected as fault:
             self.rejections.drop(self.area, fault)
             return
@@ -101,7 +101,7 @@ class KilobotBatchNode:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(ROBOT_BATCH, KilobotBatchNode, argv)
+    return run_node(ROBOT_BATCH, RubensteinBatchNode, argv)
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ It reads what the world publishes (:mod:`swarm_ros.nodes.kilobot_world`): every 
 ``record_every``-th tick and at the end (/swarm/kilobot/robots), the metrics rows of every tick
 (/swarm/kilobot/metrics), and the outcome (/swarm/status). Each message is checked (dropped and counted if it
 fails); the metrics must come one a tick, in order. It keeps a copy of the run
-(:meth:`swarm_ros.core.rubenstein.run.KilobotRun.load`), streams it to ``<out_dir>.partial.rrd``, and once
+(:meth:`swarm_ros.core.rubenstein.run.RubensteinRun.load`), streams it to ``<out_dir>.partial.rrd``, and once
 the outcome, the last robots and the metrics up to the last tick are in, writes the run directory as
 ``swarm-ros simulate --algorithm rubenstein`` does (summary.json, metrics.csv, final_state.csv, final.png,
 recording.rrd), whole or not at all, with the run's bag (``bag/``: every message it took, as it came).
@@ -33,15 +33,15 @@ from swarm_ros.artifacts import run_dir
 from swarm_ros.core.algorithm import algorithm_of, check_serves
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.metrics import Outcome
-from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun, summary_of
+from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun, summary_of
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.kilobot_rows import (
     KILOBOT_METRICS_ROW,
     KILOBOT_ROW,
-    check_kilobot_rows,
     check_metrics_rows,
+    check_rubenstein_rows,
     robots_of_rows,
 )
 from swarm_ros.protocol.plan import KILOBOT_HELD, KILOBOT_METRICS, KILOBOT_ROBOTS, MONITOR, STATUS
@@ -54,7 +54,7 @@ from swarm_ros.ros.node_params import make_node, read_parameters
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, handle_missed, run_node
 
 
-class KilobotMonitorNode:
+class RubensteinMonitorNode:
     def __init__(self) -> None:
         self.node = node = make_node(MONITOR)
         run, own = read_parameters(node, MONITOR)
@@ -65,7 +65,7 @@ class KilobotMonitorNode:
         self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)
         self.overwrite = bool(own["overwrite"])
         run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
-        self.copy = KilobotRun(self.shape, self.params)  # the run as the world reports it
+        self.copy = RubensteinRun(self.shape, self.params)  # the run as the world reports it
         self.history = np.empty((0, len(COLUMNS)))  # the metrics of every tick, as the world sends them
         self.robots_tick = -1
         self.outcome: str | None = None
@@ -78,10 +78,10 @@ class KilobotMonitorNode:
         self.every = int(own["record_every"]) or algorithm_of(self.params.algorithm).record_every
         self.recorder = None
         if self.rrd is not None or own["viewer_url"]:
-            from swarm_ros.artifacts.kilobot_recording import KilobotRecorder
+            from swarm_ros.artifacts.kilobot_recording import RubensteinRecorder
 
             url = str(own["viewer_url"]) or None
-            self.recorder = KilobotRecorder(self.rrd, self.copy, every=self.every, connect=url)
+            self.recorder = RubensteinRecorder(self.rrd, self.copy, every=self.every, connect=url)
         self.finished = False
         self.bag = BagRecorder(self.out, recorded=KILOBOT_TOPICS) if own["bag"] else None
         self.raw: bytes | None = b""  # the message being handled, as it came (into the bag once its handler took it)
@@ -154,7 +154,7 @@ class KilobotMonitorNode:
         try:
             tick = checks.tick_stamp(msg.header)
             rows = checks.cloud(msg, KILOBOT_ROW, self.params.robots, min_rows=self.params.robots)
-            check_kilobot_rows(rows, self.params.robots, tick)
+            check_rubenstein_rows(rows, self.params.robots, tick)
         except Rejected as fault:
             self.rejections.drop(KILOBOT_ROBOTS, fault)
             return
@@ -185,7 +185,7 @@ class KilobotMonitorNode:
         self._write(Outcome(self.outcome))
 
     def _write(self, outcome: Outcome) -> None:
-        from swarm_ros.artifacts.kilobot_run import write_kilobot_run
+        from swarm_ros.artifacts.kilobot_run import write_rubenstein_run
 
         self.copy.load(self.robots_tick, self.copy.robots, self.history, outcome)
         wall = time.perf_counter() - self.started_at if self.started_at is not None else 0.0
@@ -197,7 +197,7 @@ class KilobotMonitorNode:
         if self.bag is not None:
             summary["bag_robots_every"] = self.every
         bag = self.bag.close() if self.bag is not None else None
-        write_kilobot_run(self.out, self.copy, summary, overwrite=self.overwrite, recording=self.rrd, bag=bag)
+        write_rubenstein_run(self.out, self.copy, summary, overwrite=self.overwrite, recording=self.rrd, bag=bag)
         if self.bag is not None:
             self.bag.discard_holder()
         self.node.get_logger().info(f"wrote {self.out}: {summary['outcome']} at tick {self.copy.tick}")
@@ -230,7 +230,7 @@ class KilobotMonitorNode:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(MONITOR, KilobotMonitorNode, argv)
+    return run_node(MONITOR, RubensteinMonitorNode, argv)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """The world node of a rubenstein run (``--algorithm rubenstein``): holds every robot, sends each robot batch its
 area, settles the batches' decisions, and publishes the run for the monitor.
 
-A thin shell around :class:`swarm_ros.protocol.kilobot_lockstep.KilobotLockstep`: batch k of K announces
+A thin shell around :class:`swarm_ros.protocol.kilobot_lockstep.RubensteinLockstep`: batch k of K announces
 itself on /swarm/batches (``[k, K]``); once all K have, and the monitor reads the run's topics, tick 0 goes
 out: each batch's area rows on /swarm/kilobot/area/<batch>, every robot's row on /swarm/kilobot/robots, the
 metrics on /swarm/kilobot/metrics and ``running`` on /swarm/status. Each tick, once every batch's decisions
@@ -32,12 +32,12 @@ from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core.algorithm import algorithm_of, check_serves
 from swarm_ros.core.errors import Rejected, RunFailed
-from swarm_ros.core.rubenstein.run import KilobotRun
+from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.protocol import checks, kilobot_checkpoint
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
 from swarm_ros.protocol.kilobot_checkpoint import save_every
-from swarm_ros.protocol.kilobot_lockstep import KilobotLockstep, KilobotWatch, check_held, monitor_reach
+from swarm_ros.protocol.kilobot_lockstep import RubensteinLockstep, RubensteinWatch, check_held, monitor_reach
 from swarm_ros.protocol.kilobot_rows import KILOBOT_DECISION_ROW, kilobot_rows, metrics_rows
 from swarm_ros.protocol.plan import (
     BATCHES,
@@ -47,8 +47,8 @@ from swarm_ros.protocol.plan import (
     MONITOR,
     STATUS,
     WORLD,
-    kilobot_area_topic,
-    kilobot_decisions_topic,
+    rubenstein_area_topic,
+    rubenstein_decisions_topic,
 )
 from swarm_ros.protocol.status import RUNNING, STARTING
 from swarm_ros.ros import graph as msgs
@@ -60,7 +60,7 @@ _LINGER = 5.0  #: seconds, at most, for the last messages to be acknowledged bef
 _NO_WAIT = Duration(seconds=0)
 
 
-class KilobotWorldNode:
+class RubensteinWorldNode:
     def __init__(self) -> None:
         self.node = node = make_node(WORLD)
         run, own = read_parameters(node, WORLD)
@@ -74,7 +74,7 @@ class KilobotWorldNode:
         self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] else None
         self.start_timeout = float(own["start_timeout"])
         self.created = time.monotonic()
-        self.ls = KilobotLockstep(KilobotRun(self.shape, self.params))
+        self.ls = RubensteinLockstep(RubensteinRun(self.shape, self.params))
         self.sent_metrics = -1  # the last tick whose metrics row went out
         self.first = True  # the first tick this process publishes is still to go out
         if int(own["incarnation"]):  # a restarted process: on from the last checkpoint
@@ -89,7 +89,7 @@ class KilobotWorldNode:
         self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.gate.subscribe(Int64MultiArray, KILOBOT_HELD, self._on_held, msgs.LATCHED_QOS)
-        self.watch = KilobotWatch(self.created)
+        self.watch = RubensteinWatch(self.created)
         self._watch_alive(MONITOR)
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
         self._status(STARTING, "waiting for robot batches and the monitor")
@@ -125,8 +125,8 @@ class KilobotWorldNode:
             self.rejections.drop(BATCHES, fault)
             return
         if first:
-            self.areas[name] = self.signer.publisher(PointCloud2, kilobot_area_topic(name), msgs.LATCHED_QOS)
-            topic = kilobot_decisions_topic(name)
+            self.areas[name] = self.signer.publisher(PointCloud2, rubenstein_area_topic(name), msgs.LATCHED_QOS)
+            topic = rubenstein_decisions_topic(name)
             self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_decisions, k, topic), msgs.DECISIONS_QOS)
             self._watch_alive(name)
         self.waiting += send
@@ -245,7 +245,7 @@ class KilobotWorldNode:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(WORLD, KilobotWorldNode, argv)
+    return run_node(WORLD, RubensteinWorldNode, argv)
 
 
 if __name__ == "__main__":

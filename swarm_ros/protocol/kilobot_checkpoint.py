@@ -27,7 +27,7 @@ import numpy as np
 
 from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.rubenstein.rule import Robots
-from swarm_ros.core.rubenstein.run import COLUMNS, KilobotRun
+from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
 
 SAVE_TICKS = 1000  #: ticks between checkpoints, at least: a save writes the metrics of every tick so far
 
@@ -50,7 +50,7 @@ class Saved:
     batches: int
 
 
-def save(path: Path, run: KilobotRun, hosts: dict[int, str], batches: int) -> None:
+def save(path: Path, run: RubensteinRun, hosts: dict[int, str], batches: int) -> None:
     """Save ``run`` as it stands, and the batches it serves, to ``path`` (whole, or not at all)."""
     arrays = {f"robot_{name}": values for name, values in run.robots._asdict().items()}
     arrays.update({f"tally_{name}": values for name, values in run.tally._asdict().items()})
@@ -69,7 +69,7 @@ def save(path: Path, run: KilobotRun, hosts: dict[int, str], batches: int) -> No
     os.replace(part, path)
 
 
-def load(path: Path, run: KilobotRun) -> Saved:
+def load(path: Path, run: RubensteinRun) -> Saved:
     """The checkpoint at ``path`` of a run of ``run``'s parameters.
 
     Raises:

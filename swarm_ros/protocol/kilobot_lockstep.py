@@ -4,12 +4,12 @@ what each is sent, and when a tick is settled.
 Robot batch k of K announces itself (``k`` and ``K``); once every k of the first announcement's K has, the
 world sends each batch its area's rows of tick 0 (:mod:`swarm_ros.core.rubenstein.strips`). A batch answers
 each area with its strip's decisions for the next tick; when every batch has answered, the world settles
-the tick (:meth:`~swarm_ros.core.rubenstein.run.KilobotRun.settle`) and sends the next areas. A batch process
+the tick (:meth:`~swarm_ros.core.rubenstein.run.RubensteinRun.settle`) and sends the next areas. A batch process
 that announces itself again (restarted) is sent its area of the current tick: a batch keeps nothing between
 ticks, so it decides as the one it replaces would have.
 
 Decisions are checked before they are used (:func:`check_decisions`): the tick, the rows' own bounds
-(:func:`~swarm_ros.protocol.kilobot_rows.check_kilobot_rows`), that they are exactly the batch's robots, and
+(:func:`~swarm_ros.protocol.kilobot_rows.check_rubenstein_rows`), that they are exactly the batch's robots, and
 that each follows the rule's bounds: a state moves one step along start, wait, move outside, move inside,
 joined; a robot that moves goes one step along its heading, which turned by at most the turn of a tick.
 """
@@ -21,11 +21,11 @@ import numpy as np
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.params import MAX_TICKS
 from swarm_ros.core.rubenstein.rule import JOINED, Decided
-from swarm_ros.core.rubenstein.run import KilobotRun
+from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.rubenstein.strips import Strips, cell_columns, strips_for
 
 from .kilobot_checks import DECISION_FAULTS, decision_faults, first_fault
-from .kilobot_rows import check_kilobot_rows, decided_of_rows, kilobot_rows
+from .kilobot_rows import check_rubenstein_rows, decided_of_rows, kilobot_rows
 from .plan import KILOBOT_KEPT as KEPT
 from .world_port import STILL_S
 
@@ -40,7 +40,7 @@ def monitor_reach(window: int, every: int) -> int | None:
     return None if window == 0 else min(max(window, every), (KEPT - 2) * every)
 
 
-def check_held(values: np.ndarray, run: KilobotRun) -> tuple[int, bool]:
+def check_held(values: np.ndarray, run: RubensteinRun) -> tuple[int, bool]:
     """The monitor's report on /swarm/kilobot/held, ``[tick, ended]``: the last tick whose record it holds, and
     whether it holds the outcome too, which only the run's last tick can carry.
 
@@ -57,10 +57,10 @@ def check_held(values: np.ndarray, run: KilobotRun) -> tuple[int, bool]:
     return tick, bool(ended)
 
 
-class KilobotLockstep:
+class RubensteinLockstep:
     """The world's half of the graph's rubenstein run: ``run`` is the whole swarm, as in one process."""
 
-    def __init__(self, run: KilobotRun) -> None:
+    def __init__(self, run: RubensteinRun) -> None:
         self.run = run
         self.strips: Strips | None = None  #: set by the first announcement
         self.hosts: dict[int, str] = {}  #: batch number -> its node name
@@ -145,7 +145,7 @@ class KilobotLockstep:
         return True
 
 
-class KilobotWatch:
+class RubensteinWatch:
     """What the world knows of its peers' processes, and whether the run still moves.
 
     Each batch and the monitor hold a silent writer whose DDS liveliness lapses when its process dies or stalls. A
@@ -187,14 +187,14 @@ class KilobotWatch:
         )
 
 
-def check_decisions(run: KilobotRun, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Decided]:
+def check_decisions(run: RubensteinRun, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Decided]:
     """(ids, decisions) of decision rows for ``tick`` that must be exactly the robots ``own``, each within the
     rule's bounds from where it stands in ``run``.
 
     Raises:
         Rejected: by kind: the rows' own bounds, robots other than ``own``, or a decision out of the rule's bounds.
     """
-    check_kilobot_rows(rows, run.params.robots, tick)
+    check_rubenstein_rows(rows, run.params.robots, tick)
     ids, d = decided_of_rows(rows)
     if not np.array_equal(ids, own):
         raise Rejected("not its robots", f"{ids.size} decisions for the batch's {own.size} robots")

@@ -79,7 +79,7 @@ def decided_of_rows(rows: np.ndarray) -> tuple[np.ndarray, Decided]:
     return ids, out
 
 
-def check_kilobot_rows(rows: np.ndarray, robots: int, tick: int) -> None:
+def check_rubenstein_rows(rows: np.ndarray, robots: int, tick: int) -> None:
     """Whether rows of tick ``tick`` (the state after it; decisions: the state they make at it) can be a
     swarm's of ``robots`` robots: ids ascending and in range, states and flags in their sets (and ``moves``
     0 or 1), the floats finite (``near`` may be +inf: no stationary neighbour yet), gradient and counters

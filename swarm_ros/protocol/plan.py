@@ -67,7 +67,7 @@ def graph_plan(
 KILOBOT_WORLD, KILOBOT_BATCH, KILOBOT_MONITOR = "kilobot_world", "kilobot_batch", "kilobot_monitor"
 
 
-def kilobot_plan(
+def rubenstein_plan(
     processes: int, region_cuts: str = "", world_shards: int = 1
 ) -> list[tuple[str, str, dict[str, int | str]]]:
     """:func:`graph_plan` of a rubenstein run: the monitor, ``processes`` robot batches (batch k decides for
@@ -126,11 +126,11 @@ KILOBOT_AREA, KILOBOT_DECISIONS = f"{KILOBOT}/area", f"{KILOBOT}/decisions"
 KILOBOT_KEPT = 32
 
 
-def kilobot_area_topic(node_name: str) -> str:
+def rubenstein_area_topic(node_name: str) -> str:
     return f"{KILOBOT_AREA}/{node_name}"
 
 
-def kilobot_decisions_topic(node_name: str) -> str:
+def rubenstein_decisions_topic(node_name: str) -> str:
     return f"{KILOBOT_DECISIONS}/{node_name}"
 
 

@@ -36,7 +36,7 @@ from swarm_ros.protocol.plan import (
     METRICS,
     MONITOR,
     is_world,
-    kilobot_decisions_topic,
+    rubenstein_decisions_topic,
     shard_name,
     shard_of_topic,
 )
@@ -130,7 +130,7 @@ def may_send(sender: str, topic: str) -> bool:
     if topic.startswith(DECISIONS + "/"):
         return topic == f"{DECISIONS}/{sender}"
     if topic.startswith(KILOBOT_DECISIONS + "/"):  # a rubenstein run's batch, likewise
-        return topic == kilobot_decisions_topic(sender)
+        return topic == rubenstein_decisions_topic(sender)
     shard = shard_of_topic(topic)
     if shard is not None:
         return sender == shard_name(shard)

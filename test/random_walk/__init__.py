@@ -26,7 +26,7 @@ register(
         engine="random_walk.engine:RandomWalk",
         summary="swarm_ros.core.run_result:summary_of",
         check_shape="random_walk.engine:check_shape",
-        recording="swarm_ros.artifacts.rerun_recording:open_recording",
+        recording="swarm_ros.artifacts.recording_options:open_recording",
         write_run="swarm_ros.artifacts.run_dir:write_simulation",
         print_summary="swarm_ros.app.summary_print:print_summary",
     )

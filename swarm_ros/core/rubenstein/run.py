@@ -128,7 +128,7 @@ def anchor_capacity(comm: float) -> int:
     return int(math.ceil(math.pi * (comm + 0.5) ** 2 / (math.sqrt(3.0) / 2.0))) + 8
 
 
-class KilobotRun:
+class RubensteinRun:
     """A run of the rubenstein algorithm in one process.
 
     Attributes:
@@ -139,7 +139,7 @@ class KilobotRun:
     """
 
     def __init__(self, shape: Shape, params: RunParams) -> None:
-        check_engine(params.algorithm, KilobotRun)
+        check_engine(params.algorithm, RubensteinRun)
         self.shape, self.params = shape, params
         self.frame = ShapeFrame.of(shape, params.pixel_size)
         self.robots = robots_at_start(params)
@@ -302,7 +302,7 @@ def _deciding(state: np.ndarray) -> np.ndarray:
 HOLE_SAMPLES = 8  #: a hole pixel's area is sampled at this many points along each side
 
 
-def hole_filled(run: KilobotRun) -> float:
+def hole_filled(run: RubensteinRun) -> float:
     """The share of the area of the shape's holes (:attr:`ShapeFrame.holes`) under a joined robot's disc, 0 for
     a shape with no hole: the study's point against this algorithm is that it cannot leave a hole empty. Robots
     joined on a hole's rim, their centres on its edge, fill a band of it; only robots inside fill more. The area
@@ -322,7 +322,7 @@ def hole_filled(run: KilobotRun) -> float:
     return float(np.count_nonzero(np.isfinite(distance)) / points.shape[0])
 
 
-def summary_of(run: KilobotRun, wall_seconds: float, stopped: Outcome | None = None) -> dict:
+def summary_of(run: RubensteinRun, wall_seconds: float, stopped: Outcome | None = None) -> dict:
     """The summary.json record of a rubenstein run: what was run, how it ended, and the comparison's metrics
     (time: the end tick, ticks to 50% and 90% of the pixels covered; accuracy: the share of pixels covered,
     robots joined outside the shape, the share of its holes' area filled, the joined robots' mean localization
@@ -353,4 +353,4 @@ def compile_kernels() -> None:
     """The rubenstein algorithm's kernels into numba's cache (core.kernels): a few ticks of a small run."""
     from swarm_ros.core.grid import World
 
-    KilobotRun(Shape.load("rectangle", World()), RunParams(robots=50, algorithm=RUBENSTEIN)).run(max_ticks=5)
+    RubensteinRun(Shape.load("rectangle", World()), RunParams(robots=50, algorithm=RUBENSTEIN)).run(max_ticks=5)

@@ -9,7 +9,7 @@ side (the halo, C wide). It builds its own cell list from those robots alone, in
 the grid of the world's, so each of its robots visits the same neighbours in the same order as in one
 process, and decides the same. The world holds every robot: it sends each batch its area's robots
 as they stand after a tick, takes every batch's decisions for the next, and settles them
-(:meth:`~swarm_ros.core.rubenstein.run.KilobotRun.settle`) as the in-process engine does.
+(:meth:`~swarm_ros.core.rubenstein.run.RubensteinRun.settle`) as the in-process engine does.
 
 A batch's work a tick is its area's robots and their neighbours, never the whole swarm's. A batch
 keeps nothing between ticks that the world does not send it again, so a restarted batch decides as
@@ -25,7 +25,7 @@ import numpy as np
 from swarm_ros.core.errors import ParameterError
 
 from .rule import JOINED, Cells, Decided, Robots, build_cells, clear_cells, decide_kernel, decided_for
-from .run import KilobotRun, anchor_capacity, robots_at_start
+from .run import RubensteinRun, anchor_capacity, robots_at_start
 
 
 @dataclass(frozen=True)
@@ -82,25 +82,25 @@ def cell_columns(x: np.ndarray, cells: Cells) -> np.ndarray:
     return np.clip(np.floor((x - cells.x0) / cells.side).astype(np.int64), 0, cells.nx - 1)
 
 
-def strips_for(run: KilobotRun, batches: int) -> Strips:
+def strips_for(run: RubensteinRun, batches: int) -> Strips:
     """The run's strips for ``batches`` batches (:meth:`Strips.balanced` over its robots at tick 0: every process
     that knows the run's parameters finds the same)."""
     return Strips.balanced(cell_columns(robots_at_start(run.params).x, run.cells), run.cells.nx, batches)
 
 
-def area_of(run: KilobotRun, strips: Strips, k: int) -> np.ndarray:
+def area_of(run: RubensteinRun, strips: Strips, k: int) -> np.ndarray:
     """The ids of the robots in batch k's area, as they stand at the run's tick (what the world sends it)."""
     return np.flatnonzero(strips.in_area(cell_columns(run.robots.x, run.cells), k))
 
 
-class KilobotBatch:
+class RubensteinBatch:
     """One robot batch: decides for the robots of its strip from the rows of its area alone.
 
     Its arrays are indexed by robot id, but only its area's rows are written and read a tick: the
     rest is never looked at (its cell list holds its area's robots only).
     """
 
-    def __init__(self, run: KilobotRun, strips: Strips, k: int) -> None:
+    def __init__(self, run: RubensteinRun, strips: Strips, k: int) -> None:
         n = run.params.robots
         self.rule, self.bitmap, self.strips, self.k = run.rule, run.bitmap, strips, k
         self.robots = Robots(*(np.zeros(n, dtype=a.dtype) for a in run.robots))
@@ -123,12 +123,12 @@ class KilobotBatch:
         return own.copy(), Decided(*(a[: own.size].copy() for a in self._out))
 
 
-def run_batched(run: KilobotRun, batches: int, max_ticks: int | None = None) -> Strips:
+def run_batched(run: RubensteinRun, batches: int, max_ticks: int | None = None) -> Strips:
     """Run ``run`` to its end (or ``max_ticks`` more ticks) with its robots' decisions made by ``batches``
-    :class:`KilobotBatch` es, each sent only its area's rows; the result equals ``run.run()``'s. Returns the
+    :class:`RubensteinBatch` es, each sent only its area's rows; the result equals ``run.run()``'s. Returns the
     strips."""
     strips = strips_for(run, batches)
-    hosts = [KilobotBatch(run, strips, k) for k in range(batches)]
+    hosts = [RubensteinBatch(run, strips, k) for k in range(batches)]
     left = max_ticks
     while run.outcome is None and (left is None or left > 0):
         tick = run.tick + 1

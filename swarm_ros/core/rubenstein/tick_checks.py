@@ -1,6 +1,6 @@
 """Checks of what every tick of a rubenstein run must keep (``swarm-ros simulate --algorithm rubenstein --check``).
 
-:func:`check_tick` compares the robots before and after one tick of a :class:`~.run.KilobotRun` and raises
+:func:`check_tick` compares the robots before and after one tick of a :class:`~.run.RubensteinRun` and raises
 :class:`~swarm_ros.core.errors.InvariantError` naming the first broken rule:
 
 * **no overlap**: no two robots' centres are closer than one diameter (the world's settlement grants only such
@@ -22,12 +22,12 @@ from scipy.spatial import cKDTree
 from swarm_ros.core.errors import InvariantError
 
 from .rule import JOINED, MOVE_INSIDE, MOVE_OUTSIDE, START, STATE_NAMES, Robots
-from .run import KilobotRun
+from .run import RubensteinRun
 
 _EPS = 1e-9
 
 
-def snapshot(run: KilobotRun) -> Robots:
+def snapshot(run: RubensteinRun) -> Robots:
     """A copy of the run's robots, to compare with after a tick."""
     return Robots(*(a.copy() for a in run.robots))
 
@@ -37,7 +37,7 @@ def _require(ok: bool, tick: int, rule: str) -> None:
         raise InvariantError(f"tick {tick}: {rule}")
 
 
-def check_tick(prev: Robots, covered: float, run: KilobotRun) -> None:
+def check_tick(prev: Robots, covered: float, run: RubensteinRun) -> None:
     """Check the tick that took the robots from ``prev`` (with ``covered`` pixels) to ``run``'s now.
 
     Raises:
@@ -74,7 +74,7 @@ def check_tick(prev: Robots, covered: float, run: KilobotRun) -> None:
     _require(row["covered"] >= covered, tick, "a covered pixel was uncovered")
 
 
-def checked_step(run: KilobotRun) -> None:
+def checked_step(run: RubensteinRun) -> None:
     """One tick of ``run``, what every tick must keep checked over it (``simulate --check``).
 
     Raises:

@@ -1,5 +1,5 @@
 """The rubenstein algorithm's whole ticks, compiled: the robots decide, the world settles and applies, the joined
-robots cover the shape, and the tick's metrics and end are taken (:class:`~swarm_ros.core.rubenstein.run.KilobotRun`
+robots cover the shape, and the tick's metrics and end are taken (:class:`~swarm_ros.core.rubenstein.run.RubensteinRun`
 calls :func:`run_kernel` for many ticks at a time)."""
 
 from __future__ import annotations
