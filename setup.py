@@ -58,9 +58,6 @@ setup(
             "world_shard = swarm_ros.app.main:world_shard",
             "robot_batch = swarm_ros.app.main:robot_batch",
             "monitor = swarm_ros.app.main:monitor",
-            "kilobot_world = swarm_ros.app.main:kilobot_world",
-            "kilobot_batch = swarm_ros.app.main:kilobot_batch",
-            "kilobot_monitor = swarm_ros.app.main:kilobot_monitor",
         ]
     },
     zip_safe=False,

@@ -35,9 +35,9 @@ TYPES_3D = {**TYPES, "/swarm/occupancy": "sensor_msgs/msg/PointCloud2", "/swarm/
 
 
 #: A rubenstein run's topics.
-KILOBOT_TYPES = {
-    "/swarm/kilobot/robots": "sensor_msgs/msg/PointCloud2",
-    "/swarm/kilobot/metrics": "sensor_msgs/msg/PointCloud2",
+RUBENSTEIN_TYPES = {
+    "/swarm/rubenstein/robots": "sensor_msgs/msg/PointCloud2",
+    "/swarm/rubenstein/metrics": "sensor_msgs/msg/PointCloud2",
     "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray",
 }
 
@@ -191,23 +191,23 @@ def assert_rubenstein_bag_holds_run(run: Path, interrupted: bool = False) -> Non
     final_state.csv; the status ends with the outcome. ``interrupted``: the run was written up to its last record,
     and the bag also holds the metrics of the ticks the monitor took after it; no outcome went out."""
     from swarm_ros.core.rubenstein.rule import STATE_NAMES
-    from swarm_ros.protocol.kilobot_rows import KILOBOT_METRICS_ROW, KILOBOT_ROW
+    from swarm_ros.protocol.rubenstein.rows import RUBENSTEIN_METRICS_ROW, RUBENSTEIN_ROW
 
-    _, messages = read_bag(run / "bag", types=KILOBOT_TYPES)
+    _, messages = read_bag(run / "bag", types=RUBENSTEIN_TYPES)
     summary = json.loads((run / "summary.json").read_text())
     table = np.loadtxt(run / "metrics.csv", delimiter=",", skiprows=1, ndmin=2)
     rows = np.concatenate(
-        [np.frombuffer(m.data, dtype=KILOBOT_METRICS_ROW) for m in messages["/swarm/kilobot/metrics"]]
+        [np.frombuffer(m.data, dtype=RUBENSTEIN_METRICS_ROW) for m in messages["/swarm/rubenstein/metrics"]]
     )
-    got = np.column_stack([rows[name] for name in KILOBOT_METRICS_ROW.names])
+    got = np.column_stack([rows[name] for name in RUBENSTEIN_METRICS_ROW.names])
     _, first = np.unique(got[:, 0], return_index=True)  # a restarted world sends the ticks since its last record again
     assert np.array_equal(got, got[first][got[:, 0].astype(int)]), "a tick's rows sent again differ"
     assert np.array_equal(got[first][: len(table)] if interrupted else got[first], table)
     last = int(table[-1, 0])
-    robots = messages["/swarm/kilobot/robots"]
+    robots = messages["/swarm/rubenstein/robots"]
     ticks = [m.header.stamp.sec for m in robots]
     assert ticks == sorted({*range(0, last + 1, summary["bag_robots_every"]), last})
-    final = np.frombuffer(robots[-1].data, dtype=KILOBOT_ROW)
+    final = np.frombuffer(robots[-1].data, dtype=RUBENSTEIN_ROW)
     with open(run / "final_state.csv", newline="") as f:
         state = list(csv.DictReader(f))
     assert [float(r["x"]) for r in state] == final["x"].tolist()

@@ -19,8 +19,8 @@ from swarm_ros.core.algorithm import (
     check_engine,
     check_loss_policy,
     check_regions,
-    check_serves,
     names,
+    node_of,
 )
 from swarm_ros.core.errors import ContractError, ParameterError
 from swarm_ros.core.params import RunParams
@@ -91,11 +91,17 @@ def test_what_a_graph_cannot_do_is_refused_with_the_algorithms_reason_and_allowe
     assert algorithm_of(DARR_NIAZI).removes_lost_robots and not algorithm_of(RUBENSTEIN).removes_lost_robots
 
 
-def test_a_node_or_an_engine_of_another_algorithm_refuses_the_run():
-    check_serves(RUBENSTEIN, "kilobot_world")
-    check_serves(DARR_NIAZI, "world_shard")
-    with pytest.raises(ParameterError, match="^the world node is not a node of the rubenstein algorithm's graph$"):
-        check_serves(RUBENSTEIN, "world")
+def test_each_role_runs_its_algorithms_node_and_a_role_its_graph_has_not_is_refused():
+    """One set of executables: the world role is each algorithm's own world node; the rubenstein graph has no
+    world shard, and an engine of one algorithm refuses another's run."""
+    assert node_of(RUBENSTEIN, "world").__name__ == "RubensteinWorldNode"
+    assert node_of(DARR_NIAZI, "world") is node_of(DARR_NIAZI, "world_shard")  # a shard is the world, with peers
+    roles = ("world", "robot_batch", "monitor")
+    assert len({node_of(a, r) for a in (DARR_NIAZI, RUBENSTEIN) for r in roles}) == 6
+    with pytest.raises(
+        ParameterError, match="^the world_shard node is not a node of the rubenstein algorithm's graph$"
+    ):
+        node_of(RUBENSTEIN, "world_shard")
     engine = algorithm_of(DARR_NIAZI).part("engine")
     check_engine(DARR_NIAZI, engine)
     with pytest.raises(ParameterError, match="^Simulation does not run the rubenstein algorithm$"):

@@ -163,7 +163,7 @@ def test_the_launcher_imports_neither_rclpy_nor_rerun_before_it_forks():
 PRELOADED = (
     "import os, sys; import swarm_ros.app.forking as f; "
     "from swarm_ros.core import Shape; from swarm_ros.core.params import RunParams; "
-    "s = Shape.load('star'); f.preload(s, RunParams(robots=s.patches), ['swarm_ros.nodes.world']); "
+    "s = Shape.load('star'); f.preload(s, RunParams(robots=s.patches), ['world']); "
     "lttng = f._lttng_library(); "
 )
 
@@ -245,7 +245,7 @@ SIGNAL_STORM = textwrap.dedent(
         from swarm_ros.core.params import RunParams
 
         shape = Shape.load("star")
-        forking.preload(shape, RunParams(robots=shape.patches), ["swarm_ros.nodes.robot_batch"])
+        forking.preload(shape, RunParams(robots=shape.patches), ["robot_batch"])
         assert forking.can_fork()
 
     seen = []

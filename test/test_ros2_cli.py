@@ -106,9 +106,6 @@ def test_ros2_pkg_lists_the_node_executables(ros):
     done = ros.run("ros2 pkg executables swarm_ros")
     assert done.returncode == 0, done.stderr
     assert sorted(done.stdout.split("\n")[:-1]) == [
-        "swarm_ros kilobot_batch",
-        "swarm_ros kilobot_monitor",
-        "swarm_ros kilobot_world",
         "swarm_ros monitor",
         "swarm_ros robot_batch",
         "swarm_ros swarm-ros",
@@ -192,9 +189,9 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
         for k, v in values.items()
     }
     written = yaml.safe_load((_launch_dir(ros, before) / "params.yaml").read_text())["/**"]["ros__parameters"]
-    kilobot = {p.name for p in RUN_PARAMETERS if p.algorithm == RUBENSTEIN}
-    assert {k: v for k, v in written.items() if k not in kilobot} == typed, "what every node reads"
-    assert {k: written[k] for k in kilobot} == {p.name: p.default for p in RUN_PARAMETERS if p.name in kilobot}
+    foreign = {p.name for p in RUN_PARAMETERS if p.algorithm == RUBENSTEIN}
+    assert {k: v for k, v in written.items() if k not in foreign} == typed, "what every node reads"
+    assert {k: written[k] for k in foreign} == {p.name: p.default for p in RUN_PARAMETERS if p.name in foreign}
     assert len(re.findall(r"\[robot_batch_\d\]: robot_batch_\d: strip x ", done.stdout + done.stderr)) == 3
     ref_params = tmp_path / "ref.yaml"
     ref_params.write_text(yaml.safe_dump({"/**": {"ros__parameters": typed}}))

@@ -41,7 +41,7 @@ def ring(side: int, hole: int) -> Shape:
     return Shape.from_grid(mask, World(), name=f"ring{side}", source="test")
 
 
-def kilobot(shape: Shape, robots: int, **values) -> RubensteinRun:
+def rubenstein(shape: Shape, robots: int, **values) -> RubensteinRun:
     return RubensteinRun(shape, RunParams(robots, algorithm="rubenstein", **values))
 
 
@@ -67,7 +67,7 @@ def test_the_start_is_a_touching_hexagonal_pack_below_the_seeds_and_outside_the_
 
 
 def test_the_gradient_counts_the_rings_of_a_hexagonal_pack():
-    run = kilobot(square(8), 120, startup_ticks=1000)
+    run = rubenstein(square(8), 120, startup_ticks=1000)
     run.run(60)
     pos = np.stack([run.robots.x, run.robots.y], axis=1)
     hops = np.full(120, -1)
@@ -89,7 +89,7 @@ def test_the_gradient_counts_the_rings_of_a_hexagonal_pack():
 
 @pytest.mark.parametrize("noise", [0.0, 0.06])
 def test_localization_of_the_pack_converges_within_a_tenth_of_a_diameter(noise):
-    run = kilobot(square(8), 60, startup_ticks=1000, range_noise=noise, seed=3)
+    run = rubenstein(square(8), 60, startup_ticks=1000, range_noise=noise, seed=3)
     run.run(150)
     s = run.robots
     assert s.loc.all() and s.est.all()
@@ -119,7 +119,7 @@ def test_one_sweep_moves_the_estimate_towards_the_measured_circles_and_trilatera
 
 
 def test_an_edge_follower_keeps_its_distance_around_a_fixed_group():
-    run = kilobot(square(8), 60, startup_ticks=0)
+    run = rubenstein(square(8), 60, startup_ticks=0)
     s = run.robots
     mover = 59
     group = np.arange(59)
@@ -149,7 +149,7 @@ def test_a_mover_drops_an_estimate_it_could_not_update_for_loc_stale_ticks_and_n
     """An edge-follower walks on with an estimate and no anchors (no robot is localized): after
     ``loc_stale_ticks`` ticks it drops it (and is no longer localized), to trilaterate afresh where anchors
     are; 0 keeps it for good. Placed inside the shape, a robot without an estimate does not join."""
-    run = kilobot(square(8), 60, startup_ticks=0, loc_stale_ticks=stale)
+    run = rubenstein(square(8), 60, startup_ticks=0, loc_stale_ticks=stale)
     s = run.robots
     mover, group = 59, np.arange(59)
     s.state[group], s.joined[group], s.loc[:] = JOINED, 0, 0
@@ -174,7 +174,7 @@ def test_a_mover_drops_an_estimate_it_could_not_update_for_loc_stale_ticks_and_n
 
 
 def test_the_start_rule_lets_one_rim_robot_go_at_a_time():
-    run = kilobot(square(8), 150, startup_ticks=50, seed=5)
+    run = rubenstein(square(8), 150, startup_ticks=50, seed=5)
     s = run.robots
     began_any = 0
     for _ in range(1500):
@@ -194,7 +194,7 @@ def test_the_start_rule_lets_one_rim_robot_go_at_a_time():
 def test_every_tick_of_a_run_keeps_what_check_checks():
     """No overlap ever, joined robots stay put with their gradient and estimate, stationary robots do not move and
     movers step at most a step: every tick of a whole run, by the checks ``simulate --check`` runs."""
-    run = kilobot(square(6), 40, seed=1)
+    run = rubenstein(square(6), 40, seed=1)
     while not run.done:
         prev, covered = snapshot(run), run.metrics["covered"]
         run.step()
@@ -204,7 +204,7 @@ def test_every_tick_of_a_run_keeps_what_check_checks():
 
 def _damaged(what: str) -> tuple[RubensteinRun, object, float]:
     """A run past its first joins, one tick stepped, then ``what`` broken in its robots (before, after, covered)."""
-    run = kilobot(square(6), 40, seed=1)
+    run = rubenstein(square(6), 40, seed=1)
     run.run(3000)
     prev, covered = snapshot(run), run.metrics["covered"]
     run.step()
@@ -249,7 +249,7 @@ def test_the_tick_checks_name_each_broken_rule(what, rule):
 
 
 def test_a_small_solid_shape_completes_and_covers_every_pixel():
-    run = kilobot(square(6), 40, seed=1)
+    run = rubenstein(square(6), 40, seed=1)
     run.run()
     assert run.outcome.value in ("complete", "complete_with_extras")  # the left-over robots edge-follow on
     m = run.metrics
@@ -258,7 +258,7 @@ def test_a_small_solid_shape_completes_and_covers_every_pixel():
 
 
 def test_too_few_robots_leave_the_shape_incomplete_once_every_robot_has_joined():
-    run = kilobot(square(6), 20, seed=1)
+    run = rubenstein(square(6), 20, seed=1)
     run.run()
     assert run.outcome.value == "incomplete"
     assert run.metrics["joined"] == 20 and run.metrics["covered"] < run.pixels
@@ -278,7 +278,7 @@ def test_a_shape_with_a_hole_ends_with_its_hole_measured_robots_stop_at_the_rim(
     much of the hole the joined robots' discs fill is measured. Robots that reach the hole's rim stop there,
     their centres at most a tenth of d inside it, so they fill a band of it and no robot stands deeper in
     it. ``hole_filled`` is checked against the same area sampled independently, on a finer grid."""
-    run = kilobot(ring(9, 3), 72, seed=seed)
+    run = rubenstein(ring(9, 3), 72, seed=seed)
     run.run(100_000)
     assert run.outcome is not None and run.outcome.value != "timeout"
     s, frame = run.robots, run.frame
@@ -298,14 +298,14 @@ def test_a_shape_with_a_hole_ends_with_its_hole_measured_robots_stop_at_the_rim(
 
 
 def test_the_same_seed_gives_the_same_run_and_step_equals_run():
-    a, b = kilobot(square(6), 40, seed=4), kilobot(square(6), 40, seed=4)
+    a, b = rubenstein(square(6), 40, seed=4), rubenstein(square(6), 40, seed=4)
     a.run(700)
     for _ in range(700):
         b.step()
     assert np.array_equal(a.history, b.history)
     for name in a.robots._fields:
         assert np.array_equal(getattr(a.robots, name), getattr(b.robots, name)), name
-    c = kilobot(square(6), 40, seed=5)
+    c = rubenstein(square(6), 40, seed=5)
     c.run(700)
     assert not np.array_equal(a.robots.x, c.robots.x)
 
@@ -344,7 +344,7 @@ def test_parameters_of_the_other_algorithm_are_refused_in_one_line():
 
 
 def test_the_state_codes_start_as_documented():
-    run = kilobot(square(6), 30)
+    run = rubenstein(square(6), 30)
     s = run.robots
     assert (s.state[:4] == JOINED).all() and (s.state[4:] == START).all()
     assert s.g[:4].tolist() == [0, 1, 1, 1] and (s.g[4:] == UNKNOWN_G).all()
@@ -389,7 +389,7 @@ def test_simulate_writes_the_run_and_a_recording_of_state_gradient_and_estimates
     xy = robots["Points2D:positions"].values.flatten().to_numpy(zero_copy_only=False).reshape(-1, 2)
     assert np.allclose(xy, np.stack([final["x"], final["y"]], axis=1), atol=1e-5)
     colours = robots["Points2D:colors"].values.to_numpy(zero_copy_only=False)
-    from swarm_ros.artifacts.kilobot_recording import STATE_COLOURS
+    from swarm_ros.artifacts.rubenstein.recording import STATE_COLOURS
     from swarm_ros.core.rubenstein.rule import STATE_NAMES
 
     packed = [int.from_bytes(bytes([*STATE_COLOURS[STATE_NAMES.index(st)], 255]), "big") for st in final["state"]]
@@ -438,10 +438,10 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     out = tmp_path / "out"
     assert cli.main(["experiment", str(config), "--out", str(out), "--quiet", "--jobs", "2"]) == 0
     rows = read_results(out / "results.csv")
-    kilobots = [r for r in rows if r["algorithm"] == "rubenstein"]
-    assert len(kilobots) == 4 and all(r["vision_radius"] == 1.0 and r["rules"] == "paper" for r in kilobots)
-    assert all(r["shape_patches"] == 36 and 0 < r["coverage"] <= 1 for r in kilobots)
-    assert all(r["coverage"] > 0.9 and r["fill_50_tick"] <= r["fill_90_tick"] for r in kilobots)
+    theirs = [r for r in rows if r["algorithm"] == "rubenstein"]
+    assert len(theirs) == 4 and all(r["vision_radius"] == 1.0 and r["rules"] == "paper" for r in theirs)
+    assert all(r["shape_patches"] == 36 and 0 < r["coverage"] <= 1 for r in theirs)
+    assert all(r["coverage"] > 0.9 and r["fill_50_tick"] <= r["fill_90_tick"] for r in theirs)
     studied = [r for r in rows if r["algorithm"] == "darr-niazi"]
     assert all(
         r["joined_outside"] == r["hole_filled"] == 0

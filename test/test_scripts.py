@@ -177,8 +177,8 @@ def test_bench_algorithms_smoke_prints_both_algorithms_rates():
     assert "ticks 1-300 (300 ticks)" in out and float(rows["rubenstein"][-2]) > 0, out
 
 
-def test_bench_kilobot_graph_smoke_prints_each_process_cpu_per_tick_against_the_in_process_tick():
-    out = _smoke("bench_kilobot_graph.py")
+def test_bench_rubenstein_graph_smoke_prints_each_process_cpu_per_tick_against_the_in_process_tick():
+    out = _smoke("bench_rubenstein_graph.py")
     nodes = re.findall(r"^  (\w+) +CPU +([\d.]+) ms/tick .* ([\d.]+)x the in-process tick$", out, re.M)
     assert {n for n, _, _ in nodes} == {"world", "monitor", "robot_batch_0", "robot_batch_1"}, out
     assert all(float(ms) > 0 for _, ms, _ in nodes) and "in-process tick:" in out, out

@@ -273,13 +273,13 @@ def test_the_launch_refuses_a_named_pipe_as_its_shape_without_opening_it(tmp_pat
         _setup(tmp_path, shape=str(tmp_path / "fifo"), out_dir=str(tmp_path / "run"))
 
 
-def test_the_launch_file_starts_the_rubenstein_algorithms_nodes_under_their_names(tmp_path):
+def test_the_launch_file_starts_the_rubenstein_algorithms_nodes_from_the_same_executables(tmp_path):
     setup = _setup(tmp_path, out_dir=str(tmp_path / "run"), shape="rectangle", algorithm="rubenstein")
     assert [(name, executable) for name, executable, _ in setup.plan] == [
-        ("monitor", "kilobot_monitor"),
-        ("robot_batch_0", "kilobot_batch"),
-        ("robot_batch_1", "kilobot_batch"),
-        ("world", "kilobot_world"),
+        ("monitor", "monitor"),
+        ("robot_batch_0", "robot_batch"),
+        ("robot_batch_1", "robot_batch"),
+        ("world", "world"),
     ]
     assert _written(setup)["/**"]["ros__parameters"]["algorithm"] == "rubenstein"
     with pytest.raises(InputError, match=r"^world_shards is not for the rubenstein algorithm's graph \(it cuts"):

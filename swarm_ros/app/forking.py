@@ -79,18 +79,20 @@ def can_fork() -> bool:
     return _Preloaded.threads is not None and _native_threads() <= _Preloaded.threads
 
 
-def preload(shape, params, modules: Sequence[str] = ()) -> None:
+def preload(shape, params, roles: Sequence[str] = ()) -> None:
     """Load, in this process, what each node would load on its own: numpy, numba, the compiled kernels of the
-    run's code path (from numba's cache, which the launcher has filled), and the node ``modules`` with rclpy,
-    if this process may still fork once they are loaded (LTTng's fork hooks found, where rclpy brings LTTng)."""
-    from swarm_ros.core.algorithm import algorithm_of
+    run's code path (from numba's cache, which the launcher has filled), and the node executables of ``roles``
+    with the run's algorithm's node classes and rclpy, if this process may still fork once they are loaded
+    (LTTng's fork hooks found, where rclpy brings LTTng)."""
+    from swarm_ros.core.algorithm import algorithm_of, node_of
 
     algorithm_of(params.algorithm).part("warm_up")(shape, params)
-    if not modules or not can_fork() or "rclpy" in sys.modules:
+    if not roles or not can_fork() or "rclpy" in sys.modules:
         return
     try:
-        for module in modules:
-            importlib.import_module(module)
+        for role in roles:
+            importlib.import_module(f"{_NODE_PREFIX}{role}")
+            node_of(params.algorithm, role)
     except Exception:  # each node, started afresh, reports what it cannot import in its own log
         return  # can_fork then refuses (rclpy loaded, not preloaded): the nodes start with python -m
     from swarm_ros.ros.runtime import load_type_support

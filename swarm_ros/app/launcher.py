@@ -224,7 +224,7 @@ class Launch:
         if compile_first(self.params.algorithm, self.quiet):  # once, here, not in every node at once
             self._note("numba kernels compiled")
         if can_fork() and algorithm_of(self.params.algorithm).warm_up:  # forked from here (app/forking.py)
-            preload(self.shape, self.params, sorted({f"swarm_ros.nodes.{module}" for _, module, _ in self.plan()}))
+            preload(self.shape, self.params, sorted({role for _, role, _ in self.plan()}))
         shape_arg = self.settings.shape
         if Path(shape_arg).suffix.lower() in (".txt", ".png"):
             shape_arg = str(Path(shape_arg).absolute())

@@ -57,15 +57,3 @@ def robot_batch() -> None:
 
 def monitor() -> None:
     _node("monitor")
-
-
-def kilobot_world() -> None:
-    _node("kilobot_world")
-
-
-def kilobot_batch() -> None:
-    _node("kilobot_batch")
-
-
-def kilobot_monitor() -> None:
-    _node("kilobot_monitor")

@@ -1,6 +1,6 @@
 """The study's model's run files as text: metrics.csv (a row a tick) and final_state.csv (a row a robot), written
 into the run directory by :func:`~swarm_ros.artifacts.run_dir.write_run` (the rubenstein algorithm's are
-:mod:`~swarm_ros.artifacts.kilobot_run`'s)."""
+:mod:`~swarm_ros.artifacts.rubenstein.run_dir`'s)."""
 
 from __future__ import annotations
 

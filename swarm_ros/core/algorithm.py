@@ -35,6 +35,10 @@ PART_LAYERS = {
     "plan": "protocol",
     "recording": "artifacts",
     "write_run": "artifacts",
+    "world_node": "nodes",
+    "world_shard_node": "nodes",
+    "robot_batch_node": "nodes",
+    "monitor_node": "nodes",
     "check_graph": "app",
     "print_summary": "app",
     "as_study_row": "app",
@@ -56,8 +60,6 @@ class Algorithm:
     compile_seconds: int
     #: the directory name's setting part of its default run directory, formatted with the run's parameters
     run_dir_setting: str
-    #: the node executables its graph runs (a node started for another algorithm's run refuses it)
-    executables: tuple[str, ...]
     #: what simulate's progress bar counts: the unit of a cell of the shape, and what is done with it
     progress_unit: str
     progress_what: str
@@ -89,6 +91,12 @@ class Algorithm:
     warm_up: str = ""
     #: ``(processes, region_cuts, world_shards) -> [(name, executable, parameters)]``: its graph's node processes
     plan: str = ""
+    #: its graph's node classes, one per role its graph runs, each ``(node, settings, own parameters)``: an rclpy node
+    #: made, and its parameters read, by the role's executable (nodes/roles.py); "" for a role its graph has not
+    world_node: str = ""
+    world_shard_node: str = ""
+    robot_batch_node: str = ""
+    monitor_node: str = ""
     #: ``(shape, params, processes) -> None``, or "": its own checks of a graph run (ParameterError)
     check_graph: str = ""
     #: ``(run) -> None``: one tick of the engine, with every invariant that must hold over it checked (``--check``)
@@ -176,14 +184,17 @@ def algorithm_of(name: str) -> Algorithm:
         raise ParameterError(f"algorithm must be one of {', '.join(_REGISTRY)}, got {name!r}") from None
 
 
-def check_serves(name: str, executable: str) -> None:
-    """Refuse to start node ``executable`` for a run of algorithm ``name`` whose graph does not run it.
+def node_of(name: str, role: str) -> Any:
+    """The node class of algorithm ``name`` for ``role`` (world, world_shard, robot_batch, monitor): what that
+    role's executable runs.
 
     Raises:
-        ParameterError: in one line.
+        ParameterError: in one line, if the algorithm's graph has no node of that role.
     """
-    if executable not in algorithm_of(name).executables:
-        raise ParameterError(f"the {executable} node is not a node of the {name} algorithm's graph")
+    node = algorithm_of(name).part(f"{role}_node")
+    if node is None:
+        raise ParameterError(f"the {role} node is not a node of the {name} algorithm's graph")
+    return node
 
 
 #: What a command needs of an algorithm beyond its engine: its part, and what the refusal says is missing
@@ -243,7 +254,6 @@ register(
         kernel_dir="",
         compile_seconds=40,
         run_dir_setting="v{vision_radius:g}",
-        executables=("world", "world_shard", "robot_batch", "monitor"),
         progress_unit="patch",
         progress_what="localized",
         engine="swarm_ros.core.engine:Simulation",
@@ -252,6 +262,10 @@ register(
         compile="swarm_ros.core.warmup:compile_kernels",
         warm_up="swarm_ros.core.warmup:warm_up",
         plan="swarm_ros.protocol.plan:graph_plan",
+        world_node="swarm_ros.nodes.darr_niazi.world:WorldNode",
+        world_shard_node="swarm_ros.nodes.darr_niazi.world:WorldNode",
+        robot_batch_node="swarm_ros.nodes.darr_niazi.robot_batch:RobotBatchNode",
+        monitor_node="swarm_ros.nodes.darr_niazi.monitor:MonitorNode",
         checked_step="swarm_ros.core.invariants:checked_step",
         recording="swarm_ros.artifacts.recording_options:open_recording",
         write_run="swarm_ros.artifacts.run_dir:write_simulation",
@@ -269,7 +283,6 @@ register(
         kernel_dir="rubenstein",
         compile_seconds=17,
         run_dir_setting="rubenstein",
-        executables=("kilobot_world", "kilobot_batch", "kilobot_monitor"),
         progress_unit="pixel",
         progress_what="covered",
         cells="pixels",
@@ -284,10 +297,13 @@ register(
         check_shape="swarm_ros.core.rubenstein.layout:check_shape_of",
         compile="swarm_ros.core.rubenstein.run:compile_kernels",
         plan="swarm_ros.protocol.plan:rubenstein_plan",
+        world_node="swarm_ros.nodes.rubenstein.world:RubensteinWorldNode",
+        robot_batch_node="swarm_ros.nodes.rubenstein.robot_batch:RubensteinBatchNode",
+        monitor_node="swarm_ros.nodes.rubenstein.monitor:RubensteinMonitorNode",
         check_graph="swarm_ros.app.processes:check_rubenstein_graph",
         checked_step="swarm_ros.core.rubenstein.tick_checks:checked_step",
-        recording="swarm_ros.artifacts.kilobot_recording:open_recording",
-        write_run="swarm_ros.artifacts.kilobot_run:write_simulation",
+        recording="swarm_ros.artifacts.rubenstein.recording:open_recording",
+        write_run="swarm_ros.artifacts.rubenstein.run_dir:write_simulation",
         print_summary="swarm_ros.app.summary_print:print_rubenstein_summary",
         as_study_row="swarm_ros.app.results_file:rubenstein_as_study_row",
     )

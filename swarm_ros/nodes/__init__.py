@@ -1,5 +1,7 @@
-"""The node executables: world, world_shard, robot_batch, monitor, kilobot_world, kilobot_batch, kilobot_monitor.
+"""The node executables: world, world_shard, robot_batch, monitor: one set for every algorithm.
 
-Each is a thin shell: it wires ROS callbacks to the plain classes of the protocol layer and
-the core, and owns no rule of its own.
+Each executable (``world.py``, ...) makes its rclpy node, reads its parameters and runs the node class the run's
+algorithm supplies for its role (:mod:`swarm_ros.nodes.roles`): ``darr_niazi/`` holds the study's model's, and
+``rubenstein/`` Rubenstein et al.'s. A node class is a thin shell: it wires ROS callbacks to the plain classes of
+the protocol layer and the core, and owns no rule of its own.
 """

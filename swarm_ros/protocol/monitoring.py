@@ -4,7 +4,7 @@
 of the swarm, counts each tick with the in-process engine's own functions
 (:func:`~swarm_ros.core.metrics.tick_metrics`, :func:`~swarm_ros.core.metrics.outcome_of`), feeds the
 recording, keeps what the world's status says, and decides when the run may be written and whether the
-world and it agree on the outcome. The monitor node (:mod:`swarm_ros.nodes.monitor`) feeds it messages
+world and it agree on the outcome. The monitor node (:mod:`swarm_ros.nodes.darr_niazi.monitor`) feeds it messages
 (as :class:`~swarm_ros.protocol.cdr.Cloud` views and status values) and does the rest through a
 :class:`MonitorPort`: the bag, the metrics message, the readers. A restarted monitor replays its bag
 through the same calls inside :meth:`MonitorCore.replay`. Unit tests drive it with a fake port and

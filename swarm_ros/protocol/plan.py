@@ -13,7 +13,8 @@ import re
 from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.params import Param
 
-MONITOR, ROBOT_BATCH, WORLD = "monitor", "robot_batch", "world"  #: the node executables (and kinds)
+#: the node executables (and kinds), one set for every algorithm: each runs its algorithm's node (nodes/roles.py)
+MONITOR, ROBOT_BATCH, WORLD = "monitor", "robot_batch", "world"
 WORLD_SHARD = "world_shard"  #: the executable (and kind) of a world shard, which stands in for the world
 #: How many robot-batch processes a run starts (``swarm-ros run --processes``, the launch file's ``processes``).
 PROCESSES = Param("processes", 2, "robot-batch processes K", low=1)
@@ -62,11 +63,6 @@ def graph_plan(
     ]
 
 
-#: The node executables of a rubenstein run; the nodes keep the study's model's names (world, robot_batch_<k>,
-#: monitor), so the launcher's supervision and the logs are the same.
-KILOBOT_WORLD, KILOBOT_BATCH, KILOBOT_MONITOR = "kilobot_world", "kilobot_batch", "kilobot_monitor"
-
-
 def rubenstein_plan(
     processes: int, region_cuts: str = "", world_shards: int = 1
 ) -> list[tuple[str, str, dict[str, int | str]]]:
@@ -74,9 +70,9 @@ def rubenstein_plan(
     strip k of the cell grid: swarm_ros.core.rubenstein.strips), the world. No region cuts or world shards (the
     commands refuse them: core.algorithm's ``no_regions``)."""
     batches: list[tuple[str, str, dict[str, int | str]]] = [
-        (batch_name(k), KILOBOT_BATCH, {"batch": k, "batches": processes}) for k in range(processes)
+        (batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes}) for k in range(processes)
     ]
-    return [(MONITOR, KILOBOT_MONITOR, {}), *batches, (WORLD, KILOBOT_WORLD, {})]
+    return [(MONITOR, MONITOR, {}), *batches, (WORLD, WORLD, {})]
 
 
 def plan_for(
@@ -112,26 +108,28 @@ ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's li
 MONITOR_READS = (ROBOTS, DECISIONS, STATUS, TALLY)
 
 
-#: A rubenstein run's (PointCloud2, swarm_ros.protocol.kilobot_rows): world -> monitor and viewers, every robot's
+#: A rubenstein run's (PointCloud2, swarm_ros.protocol.rubenstein.rows): world -> monitor and viewers, every robot's
 #: row at tick 0, every ``record_every``-th tick and the last; world -> monitor, the metrics rows of the ticks since
-#: the last message, as often; /swarm/kilobot/area/<batch>: world -> one batch, after each tick, its area's rows;
-#: /swarm/kilobot/decisions/<batch>: one batch -> world, its strip's decisions; /swarm/kilobot/held: monitor -> world
-#: (Int64MultiArray, latched), the last tick whose record is in its bag, and 1 once the run's outcome is too.
-KILOBOT = "/swarm/kilobot"
-KILOBOT_ROBOTS, KILOBOT_METRICS, KILOBOT_HELD = f"{KILOBOT}/robots", f"{KILOBOT}/metrics", f"{KILOBOT}/held"
-KILOBOT_AREA, KILOBOT_DECISIONS = f"{KILOBOT}/area", f"{KILOBOT}/decisions"
+#: the last message, as often; /swarm/rubenstein/area/<batch>: world -> one batch, after each tick, its area's
+#: rows; /swarm/rubenstein/decisions/<batch>: one batch -> world, its strip's decisions; /swarm/rubenstein/held:
+#: monitor -> world (Int64MultiArray, latched), the last tick whose record is in its bag, and 1 once the run's
+#: outcome is too.
+RUBENSTEIN = "/swarm/rubenstein"
+RUBENSTEIN_ROBOTS, RUBENSTEIN_METRICS = f"{RUBENSTEIN}/robots", f"{RUBENSTEIN}/metrics"
+RUBENSTEIN_HELD = f"{RUBENSTEIN}/held"
+RUBENSTEIN_AREA, RUBENSTEIN_DECISIONS = f"{RUBENSTEIN}/area", f"{RUBENSTEIN}/decisions"
 #: The robots and metrics messages the world keeps for a late reader (a restarted monitor): one each per record,
-#: so the world runs at most ``KILOBOT_KEPT - 2`` records past the monitor's last held one
-#: (swarm_ros.protocol.kilobot_lockstep.monitor_reach).
-KILOBOT_KEPT = 32
+#: so the world runs at most ``RUBENSTEIN_KEPT - 2`` records past the monitor's last held one
+#: (swarm_ros.protocol.rubenstein.lockstep.monitor_reach).
+RUBENSTEIN_KEPT = 32
 
 
 def rubenstein_area_topic(node_name: str) -> str:
-    return f"{KILOBOT_AREA}/{node_name}"
+    return f"{RUBENSTEIN_AREA}/{node_name}"
 
 
 def rubenstein_decisions_topic(node_name: str) -> str:
-    return f"{KILOBOT_DECISIONS}/{node_name}"
+    return f"{RUBENSTEIN_DECISIONS}/{node_name}"
 
 
 #: /swarm/shards/shard_<i>/...: world shard i -> its peers, each tick: ``claims_to_<j>`` and ``part_to_<j>``

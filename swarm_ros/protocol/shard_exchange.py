@@ -10,7 +10,7 @@ repeat and is ignored; one of the next tick is kept for when it is due. What it 
 keeps, so that a peer's restarted process, which goes on from its last save (:meth:`WorldShard.saved`), gets
 them again (:meth:`resend`). A part that fails its checks is dropped and counted; the tick waits for the
 genuine one, which it asks the peer for again. Nothing here knows of ROS: the graph's world shard node
-(:mod:`swarm_ros.nodes.world`, through :mod:`swarm_ros.ros.shard_links`) turns topics into these calls.
+(:mod:`swarm_ros.nodes.darr_niazi.world`, through :mod:`swarm_ros.ros.shard_links`) turns topics into these calls.
 """
 
 from __future__ import annotations

@@ -31,10 +31,10 @@ from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.protocol.plan import (
     BATCHES,
     DECISIONS,
-    KILOBOT_DECISIONS,
-    KILOBOT_HELD,
     METRICS,
     MONITOR,
+    RUBENSTEIN_DECISIONS,
+    RUBENSTEIN_HELD,
     is_world,
     rubenstein_decisions_topic,
     shard_name,
@@ -123,13 +123,13 @@ def may_send(sender: str, topic: str) -> bool:
     """Whether a node named ``sender`` publishes on ``topic`` in the graph: the world (or a world shard) its
     topics, the monitor the metrics (a rubenstein run's: what it holds), a batch its announcement and its own
     decisions topic (a rubenstein run's batch too), world shard i the topics under /swarm/shards/<i>."""
-    if topic in (METRICS, KILOBOT_HELD):
+    if topic in (METRICS, RUBENSTEIN_HELD):
         return sender == MONITOR
     if topic == BATCHES:
         return not is_world(sender) and sender != MONITOR
     if topic.startswith(DECISIONS + "/"):
         return topic == f"{DECISIONS}/{sender}"
-    if topic.startswith(KILOBOT_DECISIONS + "/"):  # a rubenstein run's batch, likewise
+    if topic.startswith(RUBENSTEIN_DECISIONS + "/"):  # a rubenstein run's batch, likewise
         return topic == rubenstein_decisions_topic(sender)
     shard = shard_of_topic(topic)
     if shard is not None:

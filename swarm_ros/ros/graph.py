@@ -30,12 +30,12 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     BATCHES,
     CLOCK,
     DECISIONS,
-    KILOBOT_KEPT,
     METRICS,
     MONITOR_READS,
     OCCUPANCY,
     REGION,
     ROBOTS,
+    RUBENSTEIN_KEPT,
     SHAPE,
     SNAPSHOT,
     STATUS,
@@ -106,10 +106,10 @@ STATUS_QOS = QoSProfile(
 )
 #: A rubenstein run's robots and metrics, world -> monitor: the last ``KEPT`` messages are kept for a restarted
 #: monitor, and the world never runs so far past the monitor's last held record that one it has not taken would be
-#: pushed out (swarm_ros.protocol.kilobot_lockstep.monitor_reach).
-KILOBOT_QOS = QoSProfile(
+#: pushed out (swarm_ros.protocol.rubenstein.lockstep.monitor_reach).
+RUBENSTEIN_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
-    depth=KILOBOT_KEPT,
+    depth=RUBENSTEIN_KEPT,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )

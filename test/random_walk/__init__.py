@@ -18,7 +18,6 @@ register(
         kernel_dir="",  # no kernels of its own
         compile_seconds=0,
         run_dir_setting="walk",
-        executables=(),  # no graph yet
         progress_unit="patch",
         progress_what="localized",
         no_removal="it has no graph",

@@ -10,8 +10,8 @@ from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
 from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.rubenstein.strips import RubensteinBatch, Strips, area_of, cell_columns, run_batched, strips_for
-from swarm_ros.protocol.kilobot_lockstep import RubensteinLockstep
-from swarm_ros.protocol.kilobot_rows import check_rubenstein_rows, decided_of_rows, kilobot_rows, robots_of_rows
+from swarm_ros.protocol.rubenstein.lockstep import RubensteinLockstep
+from swarm_ros.protocol.rubenstein.rows import check_rubenstein_rows, decided_of_rows, robots_of_rows, rubenstein_rows
 
 pytestmark = pytest.mark.unit
 
@@ -110,7 +110,7 @@ def test_the_world_refuses_parts_that_miss_or_repeat_a_robot():
 
 
 def test_the_batches_give_the_in_process_run_through_the_wire_rows():
-    """Every robot and decision passed as the rows the graph sends (KILOBOT_ROW, KILOBOT_DECISION_ROW), checked as
+    """Every robot and decision passed as the rows the graph sends (RUBENSTEIN_ROW, RUBENSTEIN_DECISION_ROW), checked as
     a node checks them: the run is still the in-process one, with range noise, to the end."""
     params = RunParams(40, algorithm="rubenstein", seed=3, range_noise=0.04)
     whole, split = RubensteinRun(square(6), params), RubensteinRun(square(6), params)
@@ -120,10 +120,10 @@ def test_the_batches_give_the_in_process_run_through_the_wire_rows():
     while split.outcome is None:
         tick, parts = split.tick + 1, []
         for k, host in enumerate(hosts):
-            rows = kilobot_rows(area_of(split, strips, k), split.robots)
+            rows = rubenstein_rows(area_of(split, strips, k), split.robots)
             check_rubenstein_rows(rows, params.robots, split.tick)
             own, decided = host.decide(tick, *robots_of_rows(rows))
-            answer = kilobot_rows(own, decided)
+            answer = rubenstein_rows(own, decided)
             check_rubenstein_rows(answer, params.robots, tick)
             parts.append(decided_of_rows(answer))
         split.settle(parts)
@@ -152,7 +152,7 @@ def test_the_batches_give_the_in_process_run_through_the_wire_rows():
 def test_a_hostile_row_is_rejected_by_kind(field, value, kind):
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
     run.run(50)
-    rows = kilobot_rows(np.arange(40), run.robots)
+    rows = rubenstein_rows(np.arange(40), run.robots)
     check_rubenstein_rows(rows, 40, 50)  # as sent: taken
     rows[field][-1] = value
     with pytest.raises(Rejected) as caught:
@@ -165,7 +165,7 @@ def test_rows_with_several_faults_are_rejected_for_the_first_check_that_fails():
     wherever in the rows the faults lie."""
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
     run.run(50)
-    rows = kilobot_rows(np.arange(40), run.robots)
+    rows = rubenstein_rows(np.arange(40), run.robots)
     rows["x"][3], rows["state"][20], rows["id"][39] = np.nan, 7, 38  # a number, a state, then a repeated id
     with pytest.raises(Rejected) as caught:
         check_rubenstein_rows(rows, 40, 50)
@@ -178,7 +178,7 @@ def test_rows_with_several_faults_are_rejected_for_the_first_check_that_fails():
 
 def test_the_wire_rows_name_the_gradient_and_estimate_and_round_trip_the_sentinels():
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=1))
-    rows = kilobot_rows(np.arange(40), run.robots)
+    rows = rubenstein_rows(np.arange(40), run.robots)
     assert {"x", "y", "z", "g", "ex", "ey", "state"} <= set(rows.dtype.names)
     assert rows["g"][-1] == -1 and rows["began"][-1] == -1  # unknown gradient, never began: -1 on the wire
     ids, back = robots_of_rows(rows)
@@ -199,7 +199,7 @@ def lockstep_run(params: RunParams, batches: int) -> tuple[RubensteinRun, Rubens
         tick = run.tick + 1
         for k in range(batches):
             own, decided = hosts[k].decide(tick, *robots_of_rows(ls.area(k)))
-            settled = ls.decisions(k, tick, kilobot_rows(own, decided))
+            settled = ls.decisions(k, tick, rubenstein_rows(own, decided))
             assert settled == (k == batches - 1)
     return run, ls
 
@@ -216,7 +216,7 @@ def test_the_worlds_lockstep_with_checked_decisions_gives_the_in_process_run(bat
 def decisions_of_batch_0(run: RubensteinRun, ls: RubensteinLockstep) -> np.ndarray:
     host = RubensteinBatch(run, ls.strips, 0)
     own, decided = host.decide(run.tick + 1, *robots_of_rows(ls.area(0)))
-    return kilobot_rows(own, decided)
+    return rubenstein_rows(own, decided)
 
 
 def _set(field, how):
@@ -284,16 +284,16 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
     """Saved at a tick and resumed in a fresh run, the run continues exactly as the one never broken, to its end;
     a file that is not a checkpoint, or is another run's, fails in one line."""
     from swarm_ros.core.errors import RunFailed
-    from swarm_ros.protocol import kilobot_checkpoint
+    from swarm_ros.protocol.rubenstein import checkpoint
 
     params = RunParams(40, algorithm="rubenstein", seed=6, range_noise=0.05)
     whole = RubensteinRun(square(6), params)
     whole.run(1500)
     path = tmp_path / "world.checkpoint"
-    kilobot_checkpoint.save(path, whole, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
+    checkpoint.save(path, whole, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["world.checkpoint"]  # no temporary file left
     fresh = RubensteinRun(square(6), params)
-    saved = kilobot_checkpoint.load(path, fresh)
+    saved = checkpoint.load(path, fresh)
     assert (saved.tick, saved.hosts, saved.batches) == (1500, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
     fresh.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
     whole.run()
@@ -301,16 +301,16 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
     assert same(whole, fresh) and whole.outcome is not None
     path.write_bytes(b"not a checkpoint")
     with pytest.raises(RunFailed, match="does not read"):
-        kilobot_checkpoint.load(path, fresh)
-    kilobot_checkpoint.save(path, RubensteinRun(square(6), RunParams(30, algorithm="rubenstein")), {}, 1)
+        checkpoint.load(path, fresh)
+    checkpoint.save(path, RubensteinRun(square(6), RunParams(30, algorithm="rubenstein")), {}, 1)
     with pytest.raises(RunFailed, match="is not of this run"):
-        kilobot_checkpoint.load(path, fresh)
+        checkpoint.load(path, fresh)
     with pytest.raises(RunFailed, match="found no checkpoint"):
-        kilobot_checkpoint.load(tmp_path / "none", fresh)
+        checkpoint.load(tmp_path / "none", fresh)
 
 
 def test_metrics_rows_a_restarted_world_sends_again_are_taken_once_and_must_equal_those_held():
-    from swarm_ros.protocol.kilobot_rows import check_metrics_rows, metrics_rows
+    from swarm_ros.protocol.rubenstein.rows import check_metrics_rows, metrics_rows
 
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
     run.run(100)
@@ -330,23 +330,23 @@ def test_metrics_rows_a_restarted_world_sends_again_are_taken_once_and_must_equa
 
 
 def test_the_world_runs_at_least_one_record_and_at_most_what_the_topics_keep_past_the_monitor():
-    from swarm_ros.protocol.kilobot_lockstep import monitor_reach
-    from swarm_ros.protocol.plan import KILOBOT_KEPT
+    from swarm_ros.protocol.plan import RUBENSTEIN_KEPT
+    from swarm_ros.protocol.rubenstein.lockstep import monitor_reach
 
     assert monitor_reach(0, 20) is None  # no window: the world does not wait
     assert monitor_reach(128, 20) == 128
     assert monitor_reach(5, 20) == 20  # the monitor reports a tick only once its record is in
-    assert monitor_reach(10**6, 20) == (KILOBOT_KEPT - 2) * 20
+    assert monitor_reach(10**6, 20) == (RUBENSTEIN_KEPT - 2) * 20
     for window in (1, 7, 128, 10**6):
         for every in (1, 3, 20, 1000):
             reach = monitor_reach(window, every)
             assert reach is not None
             records_past = reach // every + 1  # the records in (held, held + reach], and the end's own
-            assert 1 <= reach // every and records_past <= KILOBOT_KEPT - 1
+            assert 1 <= reach // every and records_past <= RUBENSTEIN_KEPT - 1
 
 
 def test_the_monitors_held_report_is_checked():
-    from swarm_ros.protocol.kilobot_lockstep import check_held
+    from swarm_ros.protocol.rubenstein.lockstep import check_held
 
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=5))
     assert check_held(np.array([-1, 0]), run) == (-1, False)
@@ -374,7 +374,7 @@ def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_wh
     """The watch behind the rubenstein world's liveliness lines and its STILL_S bound (a peer started by hand that
     died would otherwise keep the run waiting for ever)."""
     from swarm_ros.core.errors import RunFailed
-    from swarm_ros.protocol.kilobot_lockstep import RubensteinWatch
+    from swarm_ros.protocol.rubenstein.lockstep import RubensteinWatch
     from swarm_ros.protocol.world_port import STILL_S
 
     watch = RubensteinWatch(now=100.0)

@@ -28,14 +28,14 @@ RUN = ["--algorithm", "rubenstein", "--robots", "40", "--seed", "5", "--quiet"]
 
 @pytest.fixture(scope="module")
 def square(tmp_path_factory) -> Path:
-    path = tmp_path_factory.mktemp("kilobot-shape") / "square6.txt"
+    path = tmp_path_factory.mktemp("rubenstein-shape") / "square6.txt"
     path.write_text(SQUARE)
     return path
 
 
 @pytest.fixture(scope="module")
 def reference(square, tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("kilobot-ref") / "ref"
+    out = tmp_path_factory.mktemp("rubenstein-ref") / "ref"
     assert cli.main(["simulate", "--shape", str(square), *RUN, "--out", str(out), "--no-recording"]) == 0
     return out
 

@@ -10,7 +10,7 @@ imports and ROS start-up are not a tick's work. The robot batches' share should 
 host: a batch's CPU per tick against the in-process tick shows it. Prints, per K, the wall time, the world's,
 the monitor's and each batch's CPU per tick in ms, and the in-process tick in ms.
 
-    .venv/bin/python scripts/bench_kilobot_graph.py [--rounds 3] [--ticks 2000] [--processes 1 2 4] [--smoke]
+    .venv/bin/python scripts/bench_rubenstein_graph.py [--rounds 3] [--ticks 2000] [--processes 1 2 4] [--smoke]
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def in_process_ms(shape: str, robots: int, ticks: int) -> float:
 
 def graph(shape: str, robots: int, ticks: int, processes: int) -> tuple[float, dict[str, float]]:
     """(wall seconds, CPU seconds by node) of one ``swarm-ros run``."""
-    with tempfile.TemporaryDirectory(prefix="bench-kilobot-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="bench-rubenstein-") as tmp:
         out = Path(tmp) / "run"
         command = [sys.executable, "-m", "swarm_ros", "run", "--algorithm", "rubenstein", "--shape", shape]
         command += ["--robots", str(robots), "--seed", "1", "--max-ticks", str(ticks), "--quiet", "--out", str(out)]

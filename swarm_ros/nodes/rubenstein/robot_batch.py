@@ -1,52 +1,50 @@
 """A robot-batch node of a rubenstein run: decides, each tick, for the robots of its strip of the cell grid.
 
 Batch k of K announces ``[k, K]`` on /swarm/batches. The world sends it, after each tick, the rows of its
-area (its strip and one cell column of halo, the communication range wide) on /swarm/kilobot/area/<batch>:
+area (its strip and one cell column of halo, the communication range wide) on /swarm/rubenstein/area/<batch>:
 what the robots there broadcast. The batch checks them (dropped and counted if they fail), decides the next
 tick for its strip's robots not joined (:class:`swarm_ros.core.rubenstein.strips.RubensteinBatch`) and answers
-on /swarm/kilobot/decisions/<batch>. It keeps nothing between ticks, so a restarted batch decides as the one
+on /swarm/rubenstein/decisions/<batch>. It keeps nothing between ticks, so a restarted batch decides as the one
 it replaces would have. It stops when /swarm/status reports the run's outcome.
 
-    ros2 run swarm_ros kilobot_batch --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
+    ros2 run swarm_ros robot_batch --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
         -r __node:=robot_batch_0 -p batch:=0 -p batches:=2
 """
 
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.duration import Duration
+from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.core.algorithm import check_serves
 from swarm_ros.core.errors import Rejected
+from swarm_ros.core.params import Settings
 from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.rubenstein.strips import RubensteinBatch, strips_for
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections
-from swarm_ros.protocol.kilobot_rows import KILOBOT_ROW, check_rubenstein_rows, kilobot_rows, robots_of_rows
-from swarm_ros.protocol.plan import BATCHES, ROBOT_BATCH, STATUS, rubenstein_area_topic, rubenstein_decisions_topic
+from swarm_ros.protocol.plan import BATCHES, STATUS, rubenstein_area_topic, rubenstein_decisions_topic
 from swarm_ros.protocol.rows import batch_label
+from swarm_ros.protocol.rubenstein.rows import RUBENSTEIN_ROW, check_rubenstein_rows, robots_of_rows, rubenstein_rows
 from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
-from swarm_ros.ros.node_params import make_node, read_parameters
-from swarm_ros.ros.runtime import run_node
 
 _LINGER = 2.0  # seconds, at most, for the last decisions to be acknowledged before exiting
 _NO_WAIT = Duration(seconds=0)
 
 
 class RubensteinBatchNode:
-    def __init__(self) -> None:
-        self.node = node = make_node(ROBOT_BATCH)
-        run, own = read_parameters(node, ROBOT_BATCH)
+    def __init__(self, node: Node, run: Settings, own: dict[str, Any]) -> None:
+        self.node = node
         self.shape, self.params = run.resolve()
-        check_serves(self.params.algorithm, "kilobot_batch")
         self.k, batches = int(own["batch"]), int(own["batches"])
         frame = RubensteinRun(self.shape, self.params)  # the grid, the rule and the shape; its robots are not used
         strips = strips_for(frame, batches)
@@ -75,14 +73,14 @@ class RubensteinBatchNode:
     def _on_area(self, msg: Cloud) -> None:
         try:
             tick = checks.tick_stamp(msg.header)
-            rows = checks.cloud(msg, KILOBOT_ROW, self.params.robots, min_rows=0)
+            rows = checks.cloud(msg, RUBENSTEIN_ROW, self.params.robots, min_rows=0)
             check_rubenstein_rows(rows, self.params.robots, tick)
         except Rejected as fault:
             self.rejections.drop(self.area, fault)
             return
         self.tick = max(self.tick, tick)  # an older tick's area is a restarted world's, from its checkpoint: decided
         own, decided = self.host.decide(tick + 1, *robots_of_rows(rows))
-        self.pub_decisions.publish_rows(kilobot_rows(own, decided), tick + 1)
+        self.pub_decisions.publish_rows(rubenstein_rows(own, decided), tick + 1)
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         if self.ended_at is None and has_ended(msgs.status_values(msg).get("outcome")):
@@ -98,11 +96,3 @@ class RubensteinBatchNode:
 
     def close(self, code: int) -> None:
         self.node.get_logger().info(f"{self.node.get_name()}: decided up to tick {self.tick + 1}")
-
-
-def main(argv: list[str] | None = None) -> int:
-    return run_node(ROBOT_BATCH, RubensteinBatchNode, argv)
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

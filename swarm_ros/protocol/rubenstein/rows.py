@@ -22,8 +22,8 @@ from swarm_ros.core.errors import Rejected
 from swarm_ros.core.rubenstein.rule import Decided, Robots, decided_for
 from swarm_ros.core.rubenstein.run import COLUMNS
 
-from .cdr import register_row_types
-from .kilobot_checks import ROW_FAULTS, first_fault, pack_rows, row_faults, unpack_rows
+from ..cdr import register_row_types
+from .checks import ROW_FAULTS, first_fault, pack_rows, row_faults, unpack_rows
 
 _NAMES = ["x", "y", "z", "heading", "ex", "ey", "near"]
 _NAMES += ["g", "still", "began", "joined", "waited", "blind", "id", "state"]
@@ -31,7 +31,7 @@ _FORMATS = ["<f8"] * 7 + ["<i4"] * 6 + ["<u4", "<u1"]
 _OFFSETS = [0, 8, 16, 24, 32, 40, 48, 56, 60, 64, 68, 72, 76, 80, 84]
 
 #: World -> robot batch k, after each tick: the rows of its area's robots.
-KILOBOT_ROW = np.dtype(
+RUBENSTEIN_ROW = np.dtype(
     {
         "names": [*_NAMES, "est", "loc"],
         "formats": [*_FORMATS, "<u1", "<u1"],
@@ -40,7 +40,7 @@ KILOBOT_ROW = np.dtype(
     }
 )
 #: Robot batch k -> world, each tick: each of its robots' decision.
-KILOBOT_DECISION_ROW = np.dtype(
+RUBENSTEIN_DECISION_ROW = np.dtype(
     {
         "names": [*_NAMES, "est", "loc", "moves"],
         "formats": [*_FORMATS, "<u1", "<u1", "<u1"],
@@ -49,16 +49,20 @@ KILOBOT_DECISION_ROW = np.dtype(
     }
 )
 #: World -> monitor: metrics rows, the columns of swarm_ros.core.rubenstein.run.COLUMNS (float64, exact).
-KILOBOT_METRICS_ROW = np.dtype([(name, "<f8") for name in COLUMNS])
-KILOBOT_ROW_TYPES = (KILOBOT_ROW, KILOBOT_DECISION_ROW, KILOBOT_METRICS_ROW)  #: the rubenstein graph's row layouts
-register_row_types(*KILOBOT_ROW_TYPES)  # decoded at the speed of the study's model's rows
+RUBENSTEIN_METRICS_ROW = np.dtype([(name, "<f8") for name in COLUMNS])
+RUBENSTEIN_ROW_TYPES = (
+    RUBENSTEIN_ROW,
+    RUBENSTEIN_DECISION_ROW,
+    RUBENSTEIN_METRICS_ROW,
+)  #: the rubenstein graph's row layouts
+register_row_types(*RUBENSTEIN_ROW_TYPES)  # decoded at the speed of the study's model's rows
 
 
-def kilobot_rows(ids: np.ndarray, robots: Robots | Decided) -> np.ndarray:
+def rubenstein_rows(ids: np.ndarray, robots: Robots | Decided) -> np.ndarray:
     """The rows of robots ``ids`` (:class:`Robots`: every robot's arrays, indexed by ``ids``) or of decisions
     (:class:`Decided`: position k robot ``ids[k]``'s)."""
     decided = isinstance(robots, Decided)
-    rows = np.zeros(ids.size, dtype=KILOBOT_DECISION_ROW if decided else KILOBOT_ROW)
+    rows = np.zeros(ids.size, dtype=RUBENSTEIN_DECISION_ROW if decided else RUBENSTEIN_ROW)
     pack_rows(ids.astype(np.int64, copy=False), robots, not decided, rows)
     if isinstance(robots, Decided):
         rows["moves"] = robots.moves
@@ -84,7 +88,7 @@ def check_rubenstein_rows(rows: np.ndarray, robots: int, tick: int) -> None:
     swarm's of ``robots`` robots: ids ascending and in range, states and flags in their sets (and ``moves``
     0 or 1), the floats finite (``near`` may be +inf: no stationary neighbour yet), gradient and counters
     -1 or more, no tick after ``tick``, and a joined robot's joining tick set. Compiled
-    (:mod:`swarm_ros.protocol.kilobot_checks`).
+    (:mod:`swarm_ros.protocol.rubenstein.checks`).
 
     Raises:
         Rejected: the first fault found, by kind.
@@ -98,8 +102,8 @@ def check_rubenstein_rows(rows: np.ndarray, robots: int, tick: int) -> None:
 
 
 def metrics_rows(history: np.ndarray) -> np.ndarray:
-    """Metrics rows (:data:`KILOBOT_METRICS_ROW`) of history rows (``COLUMNS``)."""
-    rows = np.empty(history.shape[0], dtype=KILOBOT_METRICS_ROW)
+    """Metrics rows (:data:`RUBENSTEIN_METRICS_ROW`) of history rows (``COLUMNS``)."""
+    rows = np.empty(history.shape[0], dtype=RUBENSTEIN_METRICS_ROW)
     for c, name in enumerate(COLUMNS):
         rows[name] = history[:, c]
     return rows

@@ -9,7 +9,7 @@ that announces itself again (restarted) is sent its area of the current tick: a 
 ticks, so it decides as the one it replaces would have.
 
 Decisions are checked before they are used (:func:`check_decisions`): the tick, the rows' own bounds
-(:func:`~swarm_ros.protocol.kilobot_rows.check_rubenstein_rows`), that they are exactly the batch's robots, and
+(:func:`~swarm_ros.protocol.rubenstein.rows.check_rubenstein_rows`), that they are exactly the batch's robots, and
 that each follows the rule's bounds: a state moves one step along start, wait, move outside, move inside,
 joined; a robot that moves goes one step along its heading, which turned by at most the turn of a tick.
 """
@@ -24,10 +24,10 @@ from swarm_ros.core.rubenstein.rule import JOINED, Decided
 from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.rubenstein.strips import Strips, cell_columns, strips_for
 
-from .kilobot_checks import DECISION_FAULTS, decision_faults, first_fault
-from .kilobot_rows import check_rubenstein_rows, decided_of_rows, kilobot_rows
-from .plan import KILOBOT_KEPT as KEPT
-from .world_port import STILL_S
+from ..plan import RUBENSTEIN_KEPT as KEPT
+from ..world_port import STILL_S
+from .checks import DECISION_FAULTS, decision_faults, first_fault
+from .rows import check_rubenstein_rows, decided_of_rows, rubenstein_rows
 
 _STEP_TOLERANCE = 1e-9  #: d: a step's end may differ from the rule's in the last bits of another libm's cos
 
@@ -41,7 +41,7 @@ def monitor_reach(window: int, every: int) -> int | None:
 
 
 def check_held(values: np.ndarray, run: RubensteinRun) -> tuple[int, bool]:
-    """The monitor's report on /swarm/kilobot/held, ``[tick, ended]``: the last tick whose record it holds, and
+    """The monitor's report on /swarm/rubenstein/held, ``[tick, ended]``: the last tick whose record it holds, and
     whether it holds the outcome too, which only the run's last tick can carry.
 
     Raises:
@@ -112,7 +112,7 @@ class RubensteinLockstep:
     def area(self, k: int) -> np.ndarray:
         """Batch k's area's rows at the current tick."""
         assert self.strips is not None
-        return kilobot_rows(np.flatnonzero(self.strips.in_area(self._columns(), k)), self.run.robots)
+        return rubenstein_rows(np.flatnonzero(self.strips.in_area(self._columns(), k)), self.run.robots)
 
     def awaited(self) -> list[str]:
         """The batches whose decisions for the next tick are not in yet, by node name."""

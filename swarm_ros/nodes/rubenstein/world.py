@@ -1,20 +1,20 @@
 """The world node of a rubenstein run (``--algorithm rubenstein``): holds every robot, sends each robot batch its
 area, settles the batches' decisions, and publishes the run for the monitor.
 
-A thin shell around :class:`swarm_ros.protocol.kilobot_lockstep.RubensteinLockstep`: batch k of K announces
+A thin shell around :class:`swarm_ros.protocol.rubenstein.lockstep.RubensteinLockstep`: batch k of K announces
 itself on /swarm/batches (``[k, K]``); once all K have, and the monitor reads the run's topics, tick 0 goes
-out: each batch's area rows on /swarm/kilobot/area/<batch>, every robot's row on /swarm/kilobot/robots, the
-metrics on /swarm/kilobot/metrics and ``running`` on /swarm/status. Each tick, once every batch's decisions
+out: each batch's area rows on /swarm/rubenstein/area/<batch>, every robot's row on /swarm/rubenstein/robots, the
+metrics on /swarm/rubenstein/metrics and ``running`` on /swarm/status. Each tick, once every batch's decisions
 are in (checked, or dropped and counted), it settles them and sends the next areas; every ``record_every``-th
 tick and at the end it sends the robots and the metrics rows since the last. It runs at most ``monitor_window``
-ticks past the last record the monitor reports held on /swarm/kilobot/held
-(:func:`~swarm_ros.protocol.kilobot_lockstep.monitor_reach`), so a restarted monitor finds in the topics'
+ticks past the last record the monitor reports held on /swarm/rubenstein/held
+(:func:`~swarm_ros.protocol.rubenstein.lockstep.monitor_reach`), so a restarted monitor finds in the topics'
 histories every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it
 (or, with no window, once its readers have everything or after a grace period). It saves a checkpoint at tick
 0 and every 1,000 ticks or so, before the tick goes out; a restarted process goes on from the last one
-(:mod:`swarm_ros.protocol.kilobot_checkpoint`).
+(:mod:`swarm_ros.protocol.rubenstein.checkpoint`).
 
-    ros2 run swarm_ros kilobot_world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
+    ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
 """
 
 from __future__ import annotations
@@ -22,50 +22,49 @@ from __future__ import annotations
 import functools
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.duration import Duration
 from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
+from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.core.algorithm import algorithm_of, check_serves
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import Rejected, RunFailed
+from swarm_ros.core.params import Settings
 from swarm_ros.core.rubenstein.run import RubensteinRun
-from swarm_ros.protocol import checks, kilobot_checkpoint
+from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
-from swarm_ros.protocol.kilobot_checkpoint import save_every
-from swarm_ros.protocol.kilobot_lockstep import RubensteinLockstep, RubensteinWatch, check_held, monitor_reach
-from swarm_ros.protocol.kilobot_rows import KILOBOT_DECISION_ROW, kilobot_rows, metrics_rows
 from swarm_ros.protocol.plan import (
     BATCHES,
-    KILOBOT_HELD,
-    KILOBOT_METRICS,
-    KILOBOT_ROBOTS,
     MONITOR,
+    RUBENSTEIN_HELD,
+    RUBENSTEIN_METRICS,
+    RUBENSTEIN_ROBOTS,
     STATUS,
-    WORLD,
     rubenstein_area_topic,
     rubenstein_decisions_topic,
 )
+from swarm_ros.protocol.rubenstein import checkpoint
+from swarm_ros.protocol.rubenstein.checkpoint import save_every
+from swarm_ros.protocol.rubenstein.lockstep import RubensteinLockstep, RubensteinWatch, check_held, monitor_reach
+from swarm_ros.protocol.rubenstein.rows import RUBENSTEIN_DECISION_ROW, metrics_rows, rubenstein_rows
 from swarm_ros.protocol.status import RUNNING, STARTING
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import SignedPublisher, open_auth
-from swarm_ros.ros.node_params import make_node, read_parameters
-from swarm_ros.ros.runtime import run_node
 
 _LINGER = 5.0  #: seconds, at most, for the last messages to be acknowledged before exiting
 _NO_WAIT = Duration(seconds=0)
 
 
 class RubensteinWorldNode:
-    def __init__(self) -> None:
-        self.node = node = make_node(WORLD)
-        run, own = read_parameters(node, WORLD)
+    def __init__(self, node: Node, run: Settings, own: dict[str, Any]) -> None:
+        self.node = node
         self.shape, self.params = run.resolve()
-        check_serves(self.params.algorithm, "kilobot_world")
         self.every = int(own["record_every"]) or algorithm_of(self.params.algorithm).record_every
         self.save_every = save_every(self.every)
         self.reach = monitor_reach(int(own["monitor_window"]), self.every)
@@ -84,11 +83,11 @@ class RubensteinWorldNode:
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_status = self.signer.publisher(DiagnosticArray, STATUS, msgs.STATUS_QOS)
-        self.pub_robots = self.signer.publisher(PointCloud2, KILOBOT_ROBOTS, msgs.KILOBOT_QOS)
-        self.pub_metrics = self.signer.publisher(PointCloud2, KILOBOT_METRICS, msgs.KILOBOT_QOS)
+        self.pub_robots = self.signer.publisher(PointCloud2, RUBENSTEIN_ROBOTS, msgs.RUBENSTEIN_QOS)
+        self.pub_metrics = self.signer.publisher(PointCloud2, RUBENSTEIN_METRICS, msgs.RUBENSTEIN_QOS)
         self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
-        self.gate.subscribe(Int64MultiArray, KILOBOT_HELD, self._on_held, msgs.LATCHED_QOS)
+        self.gate.subscribe(Int64MultiArray, RUBENSTEIN_HELD, self._on_held, msgs.LATCHED_QOS)
         self.watch = RubensteinWatch(self.created)
         self._watch_alive(MONITOR)
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
@@ -103,7 +102,7 @@ class RubensteinWorldNode:
         if not self.checkpoint.exists():  # tick 0 is saved before anything of it goes out: nothing did
             self.node.get_logger().info("restarted before tick 0 went out: the run starts from tick 0")
             return
-        saved = kilobot_checkpoint.load(self.checkpoint, self.ls.run)
+        saved = checkpoint.load(self.checkpoint, self.ls.run)
         self.ls.run.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
         self.ls.resume(saved.hosts, saved.batches)
         self.sent_metrics = saved.tick - self.every if saved.tick else -1
@@ -137,7 +136,7 @@ class RubensteinWorldNode:
             return
         try:
             tick = checks.tick_stamp(msg.header)
-            rows = checks.cloud(msg, KILOBOT_DECISION_ROW, self.params.robots, min_rows=0)
+            rows = checks.cloud(msg, RUBENSTEIN_DECISION_ROW, self.params.robots, min_rows=0)
             settled = self.ls.decisions(k, tick, rows)
         except Rejected as fault:
             self.rejections.drop(topic, fault)
@@ -150,7 +149,7 @@ class RubensteinWorldNode:
         try:
             tick, ended = check_held(np.asarray(msg.data, dtype=np.int64), self.ls.run)
         except Rejected as fault:
-            self.rejections.drop(KILOBOT_HELD, fault)
+            self.rejections.drop(RUBENSTEIN_HELD, fault)
             return
         if tick > self.held or ended > self.held_end:
             self.watch.moved(time.monotonic())
@@ -185,7 +184,7 @@ class RubensteinWorldNode:
     def _monitor_reads(self) -> bool:
         return all(
             any(info.node_name == MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
-            for topic in (KILOBOT_ROBOTS, KILOBOT_METRICS, STATUS)
+            for topic in (RUBENSTEIN_ROBOTS, RUBENSTEIN_METRICS, STATUS)
         )
 
     def _send_areas(self, batches: list[int]) -> None:
@@ -197,12 +196,12 @@ class RubensteinWorldNode:
         tick, ended = run.tick, run.outcome is not None
         self.watch.moved(time.monotonic())
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
-            kilobot_checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.batches)
+            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.batches)
         if ended or tick % self.every == 0:
             self.pub_metrics.publish_rows(metrics_rows(run.history[self.sent_metrics + 1 :]), tick)
             self.sent_metrics = tick
             everyone = np.arange(self.params.robots)
-            self.pub_robots.publish_rows(kilobot_rows(everyone, run.robots), tick)
+            self.pub_robots.publish_rows(rubenstein_rows(everyone, run.robots), tick)
         if ended:
             self.ended_at = time.monotonic()
             self._status(str(run.outcome), f"the run ended at tick {tick}: {run.outcome}")
@@ -242,11 +241,3 @@ class RubensteinWorldNode:
 
     def close(self, code: int) -> None:
         self.node.get_logger().info(f"the world ended at tick {self.ls.run.tick}")
-
-
-def main(argv: list[str] | None = None) -> int:
-    return run_node(WORLD, RubensteinWorldNode, argv)
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,8 +1,8 @@
 """The monitor node of a rubenstein run: records the run to Rerun as it goes and writes the run directory at the end.
 
-It reads what the world publishes (:mod:`swarm_ros.nodes.kilobot_world`): every robot's row every
-``record_every``-th tick and at the end (/swarm/kilobot/robots), the metrics rows of every tick
-(/swarm/kilobot/metrics), and the outcome (/swarm/status). Each message is checked (dropped and counted if it
+It reads what the world publishes (:mod:`swarm_ros.nodes.rubenstein.world`): every robot's row every
+``record_every``-th tick and at the end (/swarm/rubenstein/robots), the metrics rows of every tick
+(/swarm/rubenstein/metrics), and the outcome (/swarm/status). Each message is checked (dropped and counted if it
 fails); the metrics must come one a tick, in order. It keeps a copy of the run
 (:meth:`swarm_ros.core.rubenstein.run.RubensteinRun.load`), streams it to ``<out_dir>.partial.rrd``, and once
 the outcome, the last robots and the metrics up to the last tick are in, writes the run directory as
@@ -10,56 +10,56 @@ the outcome, the last robots and the metrics up to the last tick are in, writes 
 recording.rrd), whole or not at all, with the run's bag (``bag/``: every message it took, as it came).
 
 Each time it holds a further record (the robots and the metrics up to their tick), and once it holds the
-outcome, it makes its bag durable and reports so on /swarm/kilobot/held (``[tick, ended]``, latched); the world
+outcome, it makes its bag durable and reports so on /swarm/rubenstein/held (``[tick, ended]``, latched); the world
 runs at most a window past it. A restarted process (``incarnation`` > 0) reads back the bag its process before
 left, through the same handlers (:mod:`swarm_ros.ros.bag_resume`), and takes the rest from the topics' histories:
 the run directory is the one an unbroken run writes.
 
-    ros2 run swarm_ros kilobot_monitor --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
-        -p out_dir:=runs/kilobots
+    ros2 run swarm_ros monitor --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
+        -p out_dir:=runs/rubenstein
 """
 
 from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
-from swarm_ros.core.algorithm import algorithm_of, check_serves
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.metrics import Outcome
+from swarm_ros.core.params import Settings
 from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun, summary_of
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import Rejections
-from swarm_ros.protocol.kilobot_rows import (
-    KILOBOT_METRICS_ROW,
-    KILOBOT_ROW,
+from swarm_ros.protocol.plan import MONITOR, RUBENSTEIN_HELD, RUBENSTEIN_METRICS, RUBENSTEIN_ROBOTS, STATUS
+from swarm_ros.protocol.rubenstein.rows import (
+    RUBENSTEIN_METRICS_ROW,
+    RUBENSTEIN_ROW,
     check_metrics_rows,
     check_rubenstein_rows,
     robots_of_rows,
 )
-from swarm_ros.protocol.plan import KILOBOT_HELD, KILOBOT_METRICS, KILOBOT_ROBOTS, MONITOR, STATUS
 from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.bag_resume import resume
-from swarm_ros.ros.bag_writer import KILOBOT_TOPICS, BagRecorder
-from swarm_ros.ros.node_params import make_node, read_parameters
-from swarm_ros.ros.runtime import EXIT_INTERRUPTED, handle_missed, run_node
+from swarm_ros.ros.bag_writer import RUBENSTEIN_TOPICS, BagRecorder
+from swarm_ros.ros.runtime import EXIT_INTERRUPTED, handle_missed
 
 
 class RubensteinMonitorNode:
-    def __init__(self) -> None:
-        self.node = node = make_node(MONITOR)
-        run, own = read_parameters(node, MONITOR)
+    def __init__(self, node: Node, run: Settings, own: dict[str, Any]) -> None:
+        self.node = node
         self.shape, self.params = run.resolve()
-        check_serves(self.params.algorithm, "kilobot_monitor")
         self.incarnation = int(own["incarnation"])
         p = self.params
         self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)
@@ -78,22 +78,26 @@ class RubensteinMonitorNode:
         self.every = int(own["record_every"]) or algorithm_of(self.params.algorithm).record_every
         self.recorder = None
         if self.rrd is not None or own["viewer_url"]:
-            from swarm_ros.artifacts.kilobot_recording import RubensteinRecorder
+            from swarm_ros.artifacts.rubenstein.recording import RubensteinRecorder
 
             url = str(own["viewer_url"]) or None
             self.recorder = RubensteinRecorder(self.rrd, self.copy, every=self.every, connect=url)
         self.finished = False
-        self.bag = BagRecorder(self.out, recorded=KILOBOT_TOPICS) if own["bag"] else None
+        self.bag = BagRecorder(self.out, recorded=RUBENSTEIN_TOPICS) if own["bag"] else None
         self.raw: bytes | None = b""  # the message being handled, as it came (into the bag once its handler took it)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
-        self.pub_held = self.signer.publisher(Int64MultiArray, KILOBOT_HELD, msgs.LATCHED_QOS)
+        self.pub_held = self.signer.publisher(Int64MultiArray, RUBENSTEIN_HELD, msgs.LATCHED_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(MONITOR), msgs.ALIVE_QOS)  # liveliness only
-        self.handlers = {KILOBOT_ROBOTS: self._on_robots, KILOBOT_METRICS: self._on_metrics, STATUS: self._on_status}
+        self.handlers = {
+            RUBENSTEIN_ROBOTS: self._on_robots,
+            RUBENSTEIN_METRICS: self._on_metrics,
+            STATUS: self._on_status,
+        }
         if self.incarnation:
             self._resume()
         for topic, handler in self.handlers.items():
-            kind, qos = (DiagnosticArray, msgs.STATUS_QOS) if topic == STATUS else (PointCloud2, msgs.KILOBOT_QOS)
+            kind, qos = (DiagnosticArray, msgs.STATUS_QOS) if topic == STATUS else (PointCloud2, msgs.RUBENSTEIN_QOS)
             self.gate.subscribe(kind, topic, handler, qos, raw_handler=self._keep_raw)
 
     def _resume(self) -> None:
@@ -139,29 +143,29 @@ class RubensteinMonitorNode:
 
     def _on_metrics(self, msg: Cloud) -> None:
         try:
-            rows = checks.cloud(msg, KILOBOT_METRICS_ROW, 10**9)
+            rows = checks.cloud(msg, RUBENSTEIN_METRICS_ROW, 10**9)
             history = check_metrics_rows(rows, self.history)
         except Rejected as fault:
-            self.rejections.drop(KILOBOT_METRICS, fault)
+            self.rejections.drop(RUBENSTEIN_METRICS, fault)
             return
         if self.started_at is None:
             self.started_at = time.perf_counter()
         self.history = np.concatenate([self.history, history]) if len(self.history) else history
-        self._into_bag(KILOBOT_METRICS)
+        self._into_bag(RUBENSTEIN_METRICS)
         self._report()
 
     def _on_robots(self, msg: Cloud) -> None:
         try:
             tick = checks.tick_stamp(msg.header)
-            rows = checks.cloud(msg, KILOBOT_ROW, self.params.robots, min_rows=self.params.robots)
+            rows = checks.cloud(msg, RUBENSTEIN_ROW, self.params.robots, min_rows=self.params.robots)
             check_rubenstein_rows(rows, self.params.robots, tick)
         except Rejected as fault:
-            self.rejections.drop(KILOBOT_ROBOTS, fault)
+            self.rejections.drop(RUBENSTEIN_ROBOTS, fault)
             return
         if tick <= self.robots_tick:
             return
         self.robots_tick = tick
-        self._into_bag(KILOBOT_ROBOTS)
+        self._into_bag(RUBENSTEIN_ROBOTS)
         _, robots = robots_of_rows(rows)
         self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
         if self.recorder is not None and tick > 0:
@@ -185,7 +189,7 @@ class RubensteinMonitorNode:
         self._write(Outcome(self.outcome))
 
     def _write(self, outcome: Outcome) -> None:
-        from swarm_ros.artifacts.kilobot_run import write_rubenstein_run
+        from swarm_ros.artifacts.rubenstein.run_dir import write_rubenstein_run
 
         self.copy.load(self.robots_tick, self.copy.robots, self.history, outcome)
         wall = time.perf_counter() - self.started_at if self.started_at is not None else 0.0
@@ -227,11 +231,3 @@ class RubensteinMonitorNode:
             self.rrd.unlink(missing_ok=True)  # its own, of no tick
         if self.bag is not None:
             self.bag.move_to(run_dir.partial_bag(self.out)) if len(self.history) else self.bag.discard()
-
-
-def main(argv: list[str] | None = None) -> int:
-    return run_node(MONITOR, RubensteinMonitorNode, argv)
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

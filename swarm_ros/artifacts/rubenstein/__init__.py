@@ -1,0 +1,1 @@
+"""The rubenstein algorithm's files: its recording and its run directory."""

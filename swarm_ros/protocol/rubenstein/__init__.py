@@ -1,0 +1,1 @@
+"""The rubenstein algorithm's rows between its graph's nodes, their checks, its lockstep and its checkpoint."""
