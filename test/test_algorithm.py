@@ -120,3 +120,17 @@ def test_a_plug_in_that_does_not_import_is_refused_in_one_line(monkeypatch):
     with pytest.raises(ParameterError, match=r"^SWARM_ROS_ALGORITHMS: cannot import swarm_ros_no_such_plug_in: No"):
         names()
     assert algorithm_of(DARR_NIAZI).name == DARR_NIAZI  # a built-in name is found without looking for plug-ins
+
+
+def test_one_rule_says_how_often_the_robots_are_recorded_for_every_algorithm():
+    """The algorithm's own cadence (the entry's record_every), or rarer by the swarm's size: the same rule for both."""
+    from swarm_ros.core.params import POSES_PER_TICK, auto_every
+
+    assert auto_every(RunParams(1024)) == 1 and auto_every(RunParams(1024, algorithm=RUBENSTEIN)) == 20
+    assert auto_every(RunParams(5 * POSES_PER_TICK)) == 5
+    assert auto_every(RunParams(20 * POSES_PER_TICK, algorithm=RUBENSTEIN)) == 20
+    assert (
+        auto_every(RunParams(25 * POSES_PER_TICK, algorithm=RUBENSTEIN))
+        == 25
+        == auto_every(RunParams(25 * POSES_PER_TICK))
+    )

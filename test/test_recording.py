@@ -25,6 +25,7 @@ from swarm_ros.app import cli
 from swarm_ros.artifacts.rerun_scene import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
 from swarm_ros.core.engine import Simulation
 from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.core.params import RunParams
 from swarm_ros.core.state import RobotState
 
 pytestmark = pytest.mark.process
@@ -169,8 +170,8 @@ def test_a_large_swarm_is_logged_every_kth_tick_chosen_from_its_size_and_says_so
     )
     assert "| robots logged | every 3 tick(s) |" in run_table(out / "recording.rrd")
     monkeypatch.setattr(params, "POSES_PER_TICK", 460)  # as many as the swarm: every tick
-    assert recording_options.RecordingOptions().every_for(460) == 1
-    assert recording_options.RecordingOptions(every=7).every_for(10**6) == 7  # chosen by the user: kept
+    assert recording_options.RecordingOptions().every_for(RunParams(460)) == 1
+    assert recording_options.RecordingOptions(every=7).every_for(RunParams(10**6)) == 7  # chosen by the user: kept
 
 
 def test_same_seed_gives_a_recording_with_the_same_data(recording, tmp_path):

@@ -143,9 +143,10 @@ def _prepare(
 
         recover_killed(out)
     check_leftovers(out)
-    if recording.active and not recording.every and recording.every_for(params.robots) > 1 and not args.quiet:
+    every = recording.every_for(params)
+    if recording.active and not recording.every and every > algorithm_of(params.algorithm).record_every:  # by size
         print(
-            f"{PROG}: the recording logs the robots every {recording.every_for(params.robots)} ticks "
+            f"{PROG}: the recording logs the robots every {every} ticks "
             f"({params.robots:,} robots; --record-every 1 logs every tick)",
             file=sys.stderr,
         )

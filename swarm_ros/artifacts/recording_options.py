@@ -28,7 +28,7 @@ class RecordingOptions:
 
     Attributes:
         enabled: write recording.rrd (default on).
-        every: log the robots every ``every``-th tick (>= 1); 0: :func:`auto_every` of the swarm's size.
+        every: log the robots every ``every``-th tick (>= 1); 0: :func:`auto_every` of the run.
         spawn: start a viewer and stream to it live.
         connect: stream live to the viewer at this URL.
     """
@@ -75,9 +75,9 @@ class RecordingOptions:
             )
             return replace(self, connect=None)
 
-    def every_for(self, robots: int) -> int:
-        """The robots are logged every this many ticks in a run of ``robots``."""
-        return self.every or auto_every(robots)
+    def every_for(self, params: RunParams) -> int:
+        """The robots are logged every this many ticks in a run of ``params``."""
+        return self.every or auto_every(params)
 
     @property
     def active(self) -> bool:
@@ -94,7 +94,7 @@ class RecordingOptions:
             path if self.enabled else None,
             shape,
             params,
-            every=self.every_for(params.robots),
+            every=self.every_for(params),
             spawn=self.spawn,
             connect=self.connect,
         )

@@ -67,8 +67,8 @@ class Algorithm:
     cells: str = "patches"
     #: what a report calls the counts in results.csv's localized, unlocalized and empty_patches columns
     count_words: tuple[str, str, str] = ("localized robots", "unlocalized robots", "empty shape patches")
-    #: the recording logs the robots every this many ticks unless told; 0: by the swarm's size (params.auto_every)
-    record_every: int = 0
+    #: the robots are recorded every this many ticks unless told, or more rarely in a large swarm (params.auto_every)
+    record_every: int = 1
     #: the core's kernel modules its kernels call (and so carry compiled in): a change to one leaves its cache stale
     shared_kernels: tuple[str, ...] = ()
     #: whether its graph can remove a lost batch's robots and go on (``on_batch_loss: remove``); if not, why not

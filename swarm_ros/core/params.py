@@ -217,12 +217,13 @@ RECORD_EVERY = Param(
 POSES_PER_TICK = 10_000
 
 
-def auto_every(robots: int) -> int:
-    """``record_every`` for a swarm of ``robots``, when the user chose none: every tick up to
-    :data:`POSES_PER_TICK` robots, then every ceil(robots / POSES_PER_TICK)-th tick. Logged every tick, the
-    robots of a 50,000-robot run made the in-process engine's run 1.5x as long and took a fifth of the
-    monitor's CPU; in the graph, every robot's row every tick bounded the run by the monitor."""
-    return max(1, -(-robots // POSES_PER_TICK))
+def auto_every(params: RunParams) -> int:
+    """``record_every`` of a run, when the user chose none, one rule for every algorithm: its algorithm's own
+    cadence (the entry's ``record_every``: the study's model every tick, the rubenstein algorithm, whose robots
+    step 0.05 d a tick, every 20th), or every ceil(robots / :data:`POSES_PER_TICK`)-th tick if that is rarer. Logged
+    every tick, the robots of a 50,000-robot run made the in-process engine's run 1.5x as long and took a fifth of
+    the monitor's CPU; in the graph, every robot's row every tick bounded the run by the monitor."""
+    return max(algorithm_of(params.algorithm).record_every, -(-params.robots // POSES_PER_TICK))
 
 
 NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {

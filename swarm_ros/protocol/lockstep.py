@@ -73,7 +73,7 @@ class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose)
         n = shard.params.robots
         self.window = policy.monitor_window  # 0 while there is no monitor to wait for
         self.period = 1.0 / policy.tick_rate if policy.tick_rate else 0.0  # seconds between ticks published, at least
-        self.every = policy.record_every or auto_every(n)  # the robots' rows to the monitor (WorldRecords)
+        self.every = policy.record_every or auto_every(shard.params)  # the robots' rows to the monitor (WorldRecords)
         self.paced_at = -math.inf  # clock() from which the next tick may be published (tick_rate)
         # which batch hosts which of this process's strips (another shard's batches are not this one's)
         self.hosting = Hosting(shard.plan.radius, shard.params.vision_radius, shard.strip)

@@ -23,7 +23,6 @@ import rerun as rr
 
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.rerun_recording import TIMELINE, open_stream
-from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.rubenstein.rule import UNKNOWN_G
 from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
 
@@ -143,6 +142,6 @@ def open_recording(path: Path, run: RubensteinRun, options: RecordingOptions) ->
     options write a file, and a viewer; None if nothing is recorded."""
     if not options.active:
         return None
-    every = options.every or algorithm_of(run.params.algorithm).record_every
+    every = options.every_for(run.params)
     path_or_none = path if options.enabled else None
     return RubensteinRecorder(path_or_none, run, every=every, spawn=options.spawn, connect=options.connect)

@@ -107,7 +107,7 @@ class MonitorNode:
         if self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
         recorder = self.recording.open(self.rrd, self.shape, p)
-        every, log = self.recording.every_for(p.robots), node.get_logger()
+        every, log = self.recording.every_for(p), node.get_logger()
         self.core = MonitorCore(
             self.shape, p, self.world_radius, self, recorder, log, self.incarnation, self.shards, every
         )
@@ -236,7 +236,7 @@ class MonitorNode:
             overwrite=self.overwrite,
             recording=self.rrd if self.recording.enabled else None,
             bag=self.bag.close() if self.bag is not None else None,
-            robots_every=self.recording.every_for(self.params.robots),
+            robots_every=self.recording.every_for(self.params),
         )
         if self.bag is not None:
             self.bag.discard_holder()

@@ -32,10 +32,9 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
-from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.metrics import Outcome
-from swarm_ros.core.params import Settings
+from swarm_ros.core.params import Settings, auto_every
 from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun, summary_of
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
@@ -75,7 +74,7 @@ class RubensteinMonitorNode:
         self.rrd = run_dir.partial_recording(self.out) if own["record"] else None
         if self.rrd is not None and self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
-        self.every = int(own["record_every"]) or algorithm_of(self.params.algorithm).record_every
+        self.every = int(own["record_every"]) or auto_every(self.params)
         self.recorder = None
         if self.rrd is not None or own["viewer_url"]:
             from swarm_ros.artifacts.rubenstein.recording import RubensteinRecorder

@@ -32,9 +32,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
-from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import Rejected, RunFailed
-from swarm_ros.core.params import Settings
+from swarm_ros.core.params import Settings, auto_every
 from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
@@ -65,7 +64,7 @@ class RubensteinWorldNode:
     def __init__(self, node: Node, run: Settings, own: dict[str, Any]) -> None:
         self.node = node
         self.shape, self.params = run.resolve()
-        self.every = int(own["record_every"]) or algorithm_of(self.params.algorithm).record_every
+        self.every = int(own["record_every"]) or auto_every(self.params)
         self.save_every = save_every(self.every)
         self.reach = monitor_reach(int(own["monitor_window"]), self.every)
         self.held, self.held_end = -1, False  # the monitor's last held record, and whether it holds the outcome
