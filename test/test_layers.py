@@ -60,13 +60,20 @@ def test_no_two_modules_share_a_file_name_or_shadow_the_standard_library():
     assert sorted({n.split(".")[0] for n in names} & set(sys.stdlib_module_names)) == []
 
 
+#: Modules past the line cap because one concept needs the room, and why: a module is split by concept, never to
+#: fit the cap (the world's lockstep was five base classes that redeclared each other's fields and methods).
+PAST_THE_CAP = {"protocol/lockstep.py": "the world's coordination: one state machine, whose parts share its fields"}
+
+
 def test_node_files_stay_thin_and_modules_small():
-    """A node file routes callbacks into plain classes (at most 300 lines); no module passes 450."""
+    """A node file routes callbacks into plain classes (at most 300 lines); no module passes 450 but those that name
+    their one concept in PAST_THE_CAP, each of them past it."""
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1] / "swarm_ros"
     sizes = {str(p.relative_to(root)): len(p.read_text().splitlines()) for p in root.rglob("*.py")}
-    assert {p: n for p, n in sizes.items() if n > (300 if p.startswith("nodes/") else 450)} == {}
+    past = {p for p, n in sizes.items() if n > (300 if p.startswith("nodes/") else 450)}
+    assert past == set(PAST_THE_CAP), "a module past the cap names its one concept here; one back under it leaves"
 
 
 def test_a_test_module_imports_nothing_from_another_test_module():

@@ -26,12 +26,11 @@ from swarm_ros.core.shards import ShardPlan, WorldShard
 from swarm_ros.core.state import RobotState
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.checks import Rejections, apply_robots
-from swarm_ros.protocol.lockstep import Lockstep
+from swarm_ros.protocol.lockstep import Lockstep, first_of
 from swarm_ros.protocol.monitoring import MonitorCore
 from swarm_ros.protocol.plan import batch_name
 from swarm_ros.protocol.rows import decision_rows, pose_of
 from swarm_ros.protocol.shard_save import ShardSaver
-from swarm_ros.protocol.world_close import first_of
 from swarm_ros.protocol.world_port import LOSS_CONFIRM_S, Policy
 
 pytestmark = pytest.mark.unit

@@ -1,4 +1,4 @@
-"""A world process lost at any tick goes on from its checkpoint (swarm_ros.protocol.checkpoint, world_restore),
+"""A world process lost at any tick goes on from its checkpoint (swarm_ros.protocol.checkpoint, Lockstep.restore),
 driven through the lockstep with a fake port and clock, as test_lockstep.py does: the run after a restore is the
 in-process engine's, tick for tick, whatever tick the world was lost at and however far the write had got."""
 

@@ -5,7 +5,7 @@ is the shard with no peers, and runs the same code. It holds its :class:`~swarm_
 (the run's state in its area) inside a :class:`~swarm_ros.protocol.shard_exchange.ShardExchange` (its exchanges
 with its peers: none for the world, which closes each tick at once), and decides everything its node does:
 which robot batches it admits (those in its strips), when tick 0 starts, when a tick's decisions are all in
-and the tick goes to the exchange, what it publishes once the tick is closed (:class:`WorldClose`), how far it
+and the tick goes to the exchange, what it publishes once the tick is closed, how far it
 may run ahead of the monitor, and what happens when a batch or the monitor is lost. The node feeds it checked
 messages and liveliness changes; it answers through a :class:`WorldPort`. Unit tests drive it with a fake port
 and clock (test/test_lockstep.py for the world, test/test_shard_lockstep.py for S shards over fake channels);
@@ -18,43 +18,96 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
+from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
 from swarm_ros.core.params import auto_every
+from swarm_ros.core.regions import columns
 from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.rules import Decider, Decisions
 from swarm_ros.core.shard_parts import Part
 from swarm_ros.core.shards import WorldShard
-from swarm_ros.core.state import IS_MOVING
+from swarm_ros.core.state import IS_MOVING, RobotState
 from swarm_ros.protocol.checks import Rejections, decisions_allowed
-from swarm_ros.protocol.hosting import Hosting, poses, snapshot
+from swarm_ros.protocol.hosting import Hosting, poses, route, snapshot, stood
 from swarm_ros.protocol.plan import BATCHES, MONITOR
-from swarm_ros.protocol.rows import decision_rows, decisions_of, state_rows
+from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows, state_rows
 from swarm_ros.protocol.shard_exchange import RunView, ShardExchange
-from swarm_ros.protocol.world_close import WorldClose, joined
-from swarm_ros.protocol.world_losses import Down, WorldLosses
+from swarm_ros.protocol.shard_save import ShardSave
+from swarm_ros.protocol.status import RUNNING, STARTING, Status, restarts_text
 from swarm_ros.protocol.world_port import (
     DECISIONS_LINGER,
+    DROWNED_S,
     FINAL_WAIT,
     FIRST_STALL_S,
     LINGER,
+    LOSS_CONFIRM_S,
+    STALL_S,
     STATUS_PERIOD,
+    STILL_S,
     Logger,
     Policy,
     WorldPort,
 )
 from swarm_ros.protocol.world_records import WorldRecords
-from swarm_ros.protocol.world_restore import WorldRestore
-from swarm_ros.protocol.world_status import WorldStatus
 
 
-class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose):  # a base's stand-ins after it
-    """Admission, ticks and the monitor window of one world process (see the module's docstring); its close of a
-    tick (:class:`WorldClose`), status and stall checks (:class:`WorldStatus`), bookkeeping and restore
-    (:class:`WorldRestore`), loss policy (:class:`WorldLosses`) and records for the monitor (:class:`WorldRecords`);
-    the port of its own exchange."""
+class Down(NamedTuple):
+    """A lost batch the world waits for: since when (its clock), for how long, and what to say if it is not back."""
+
+    since: float
+    limit: float
+    why: str  # why it was lost
+    confirming: bool  # lost for good once the wait is over (no restart is awaited)
+
+    def expired(self) -> str:
+        """What to say when its robots are removed for being away too long."""
+        waited = f"not back within {self.limit:g} s"
+        return f"{self.why}; {waited}" if self.confirming else waited
+
+
+_LOCALIZED = METRIC_COLUMNS.index("localized")
+
+
+def joined(first: np.ndarray, then: np.ndarray) -> np.ndarray:
+    """Rows of one layout one after the other, in that layout (``np.concatenate`` may repack records)."""
+    out = np.empty(first.size + then.size, dtype=first.dtype)
+    out[: first.size], out[first.size :] = first, then
+    return out
+
+
+def first_of(n: int, ids: list[np.ndarray], values: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The robots of ``ids`` (arrays of distinct ids below ``n``) in ascending order, and the value each has in
+    the first array that holds it (``np.unique(..., return_index=True)``'s answer, in time linear in ``n``: the
+    sort took a shard over 1 ms a tick at 50,000 robots)."""
+    given = [(these, their) for these, their in zip(ids, values) if these.size]
+    if len(given) == 1 and (given[0][0][1:] > given[0][0][:-1]).all():  # one array, ascending: itself
+        return given[0]
+    held = np.zeros(n, dtype=bool)
+    value = np.empty(n, dtype=np.result_type(*values))
+    for these, their in zip(reversed(ids), reversed(values)):  # the first array's values written last
+        held[these] = True
+        value[these] = their
+    every = np.flatnonzero(held)
+    return every, value[every]
+
+
+def members(ids: np.ndarray, among: np.ndarray) -> np.ndarray:
+    """Which of ``ids`` are in ``among`` (both ascending, distinct): ``np.isin`` by binary search."""
+    if not among.size:
+        return np.zeros(ids.size, dtype=bool)
+    if among.size == ids.size and np.array_equal(among, ids):
+        return np.ones(ids.size, dtype=bool)
+    return among[np.minimum(np.searchsorted(among, ids), among.size - 1)] == ids
+
+
+class Lockstep(WorldRecords):
+    """One world process's coordination (see the module's docstring): admission, ticks, the monitor window, the close
+    of a tick, status and stall checks, bookkeeping and restore, and the loss policy; what of each tick goes to the
+    monitor is :class:`WorldRecords`'. The port of its own exchange."""
 
     def __init__(
         self,
@@ -316,7 +369,7 @@ class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose)
         self.parts, self.received = [], 0
         self.decided[decisions.ids] = False
         self.inflight = (tick, decision_rows(decisions))
-        # their rows before the tick (WorldClose: the region rows); the deciders are its own robots (the shard checks)
+        # their rows before the tick (closed(): the region rows); the deciders are its own robots (the shard checks)
         self.before = poses(s, self.shard.own_moving())
         self.removing = self.pending
         try:
@@ -324,7 +377,7 @@ class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose)
         except ContractError as exc:
             raise RunFailed(f"{self.node_name}, tick {tick}: {exc}") from None
 
-    # -- the exchange's port: its sends go to the node; closed() is WorldClose's ----------------------
+    # -- the exchange's port: its sends go to the node; closed() is below, with the close of a tick ---------
     def send_claims(self, peer: int, tick: int, claims: Decisions) -> None:
         self.port.send_claims(peer, tick, claims)
 
@@ -390,7 +443,7 @@ class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose)
             self._flush()
 
     def save_book(self) -> None:
-        """The bookkeeping a restarted process needs besides the ticks (:mod:`swarm_ros.protocol.world_restore`)."""
+        """The bookkeeping a restarted process needs besides the ticks (``restore``, below)."""
         if self.started:
             self.port.save_book(self.book())
 
@@ -439,3 +492,387 @@ class Lockstep(WorldLosses, WorldRecords, WorldStatus, WorldRestore, WorldClose)
             )
             if (caught_up and out) or waited > FINAL_WAIT:
                 self.finished = True
+
+    # -- a closed tick: saved, then what goes out of it queued (each batch's region rows, this process's part of the
+    # robots' rows and applied decisions for the monitor, whether the occupancy changed); the world alone has no
+    # peers, and its view is the whole swarm
+    def closed(self, tick: int, part: Part, sent: dict[int, tuple[list[Decisions], list[Part] | None]]) -> None:
+        """Tick ``tick`` is closed (the exchange's port): save, then queue this process's part of it for
+        publishing (and go on to the next)."""
+        shard, s = self.shard, self.sim.state
+        assert self.inflight is not None and self.inflight[0] == tick  # the exchange closes what it was given
+        applied = self.inflight[1]
+        self.inflight = None
+        booked = len(shard.losses) != self.losses_booked or bool(self.removing.size)
+        if len(shard.losses) != self.losses_booked:  # robots removed in this tick: which, for the save
+            self.losses_booked = len(shard.losses)
+            known = np.concatenate([ids for _, ids in self.removals]) if self.removals else np.empty(0, np.int64)
+            self.removals.append((tick, np.setdiff1d(np.flatnonzero(shard.removed), known)))
+        if self.removing.size:
+            self.log.warn(f"tick {tick}: removed the {self.removing.size} robots of lost batches")
+            self.pending = np.setdiff1d(self.pending, self.removing)
+            self.removed_now, self.removing = self.removing, np.empty(0, dtype=np.int64)
+        gone = shard.gone_stationary
+        received = shard.received
+        ids = [part.ids, gone] + ([received.ids] if received is not None else [])
+        before = [part.before, columns(s.x[gone], shard.plan.radius)] + (
+            [received.before] if received is not None else []
+        )
+        every, cols = first_of(self.sim.params.robots, ids, before)
+        areas = [self.hosting.area(k) for k in range(len(self.batch_names))]
+        changed = self._region_rows(every, received)
+        moved = ~stood(self.before, s, every)  # a decider whose row is the same goes to no batch again
+        regional = route(changed[moved], cols[moved], areas, self.hosting.radius)
+        # the monitor's part (no overlap with another shard's): its own robots, and those removed in its strips
+        ours = np.union1d(part.ids, gone[self._in_strips(s.x[gone])]) if gone.size else part.ids
+        mine = members(every, ours)
+        whole = bool(mine.all())  # the world alone: every row is its own
+        rows = changed if whole else changed.take(np.flatnonzero(mine))
+        h = shard.history
+        joins = gone.size > 0 or len(h) < 2 or h[-1][_LOCALIZED] != h[-2][_LOCALIZED] or bool(part.removing.size)
+        if booked:  # robots removed, pending no longer: beside the tick before it is saved
+            self.save_book()
+        out, sent_applied, tally = self.outgoing(tick, rows, applied)
+        # saved: what goes out first (the rows that changed, every robot in its strips, or none), then the rest of
+        # what changed in its view
+        if out is None or out is rows:
+            rest = changed[:0] if whole else changed.take(np.flatnonzero(~mine))
+            table, published = (joined(rows, rest) if rest.size else rows), 0 if out is None else rows.size
+        else:
+            table, published = joined(out, changed[~np.isin(changed["id"], out["id"])]), out.size
+        self.port.save_tick(tick, table, published, sent_applied, h[-1], sent, tally)
+        self.queued.append((tick, out, joins, sent_applied, regional, tally))
+        for k, why in self.deferred:  # batches lost while the tick was with the peers: their robots as they are now
+            self._remove_batch(k, why)
+        self.deferred = []
+        self._flush()  # and on to the next tick
+
+    def _region_rows(self, ids: np.ndarray, received: Part | None) -> np.ndarray:
+        """The rows of robots ``ids`` after the tick: from the replica, or, for a peer's robot that left this
+        shard's area in the tick (forgotten by the replica), from the peer's part."""
+        rows = state_rows(ids, self.sim.state)
+        gone = np.flatnonzero(self.sim.state.state[ids] == UNKNOWN)
+        if gone.size and received is not None:
+            order = np.argsort(received.ids)
+            at = order[np.searchsorted(received.ids, ids[gone], sorter=order)]
+            solid = (received.z, received.pitch) if received.z.size else (None, None)
+            rows[gone] = robot_rows(at, received.state, received.x, received.y, received.heading, *solid)
+            rows["id"][gone] = ids[gone]
+        return rows
+
+    # -- what it says about the run (/swarm/status), and how it notices a silent process (the fallback to liveliness)
+    def status(self, note: str = "") -> Status:
+        """The run's state now: outcome, the last published tick and its counts, restarts and lost processes."""
+        tick = max(self.published_tick, 0)
+        sim, warn = self.sim, bool(note or self.lost or self.down_since or self.monitor_down_since is not None)
+        if not self.started:
+            outcome, message = STARTING, "waiting for robot batches"
+        elif self.ended_at is not None:
+            assert sim.outcome is not None  # the run has ended
+            outcome = sim.outcome.value
+            message = f"{outcome} at tick {tick}"
+            warn = warn or sim.outcome not in (Outcome.COMPLETE, Outcome.COMPLETE_WITH_EXTRAS)
+        else:
+            outcome, message = RUNNING, note or RUNNING
+        values: dict[str, object] = {
+            "rules": sim.params.ruleset.label,
+            "robots": sim.params.robots,
+            "record_every": self.every,  # the monitor checks it is told the same
+        }
+        if self.started:
+            m = sim.history[min(tick, sim.tick)]
+            values.update({key: int(m[METRIC_COLUMNS.index(key)]) for key in ("localized", "moving", "walking")})
+            values["startup_seconds"] = f"{self.startup_seconds:.3f}"
+        if self.ended_at is not None:
+            values["separated"] = int((sim.state.state == RobotState.SEPARATED).sum())
+            assert self.start_time is not None  # set at tick 0, before any end
+            values["wall_seconds"] = f"{self.ended_at - self.start_time:.3f}"
+        values["restarts"] = restarts_text(self.restarts)
+        values["rejected_messages"] = self.rejections.total
+        values["rejected"] = self.rejections.text()
+        values["lost"] = ",".join(self.lost)
+        values["waiting_for"] = ",".join(
+            [self.batch_names[k] for k in sorted(self.down_since)] + [MONITOR] * (self.monitor_down_since is not None)
+        )
+        return Status(tick=tick, outcome=outcome, message=message, warn=warn, values=values)
+
+    def check_stalls(self, now: float) -> None:
+        """The fallback to liveliness (a process lost before DDS matched its liveliness topic): a batch
+        whose robots have not decided, or a monitor that has not reported, for ``STALL_S`` is lost.
+        Before the first decisions or report, while discovery may still be going on, the limit is
+        ``FIRST_STALL_S``. One whose liveliness holds is not lost for its silence (its messages may be
+        drowned by a flood): it is waited for, and after ``DROWNED_S`` the run fails.
+
+        Whatever the liveliness says, a run that has not moved (no tick published, no report) for
+        ``STILL_S`` fails: liveliness that comes and goes (a transport that has stopped delivering)
+        would otherwise keep the rules above from ever firing.
+
+        While a tick is with the peers (world shards), the batches are not waited for (a peer that never answers
+        stops the run after ``STILL_S``; its process is restarted by the launcher).
+
+        Raises:
+            RunFailed: a batch or the monitor alive but silent for ``DROWNED_S``; the run still for ``STILL_S``.
+        """
+        if self.inflight is not None:
+            self.progress_at = now
+        if not self.started or self.sim.done:
+            return
+        if now - self.moved_at >= STILL_S:
+            waiting = ", ".join(self.batch_names[k] for k in sorted(self.down_since)) or "no lost process"
+            dropped = self.rejections.text() or "nothing"
+            raise RunFailed(
+                f"the run has not moved for {STILL_S:g} s at tick {self.sim.tick} (waiting for: {waiting}; "
+                f"messages dropped: {dropped}): its messages do not get through"
+            )
+        if self.queued:  # held for the monitor, or for tick_rate (nothing is awaited then: at most 1 s)
+            if not self._awaits_monitor():
+                return
+            limit = STALL_S if self.monitor_tick >= 0 else FIRST_STALL_S
+            if self.window and now - self.progress_at >= limit:
+                if not self.monitor_alive:
+                    self.monitor_down(f"no metrics for {limit:g} s")
+                elif now - self.progress_at >= DROWNED_S:
+                    self._drowned("the monitor's metrics")
+            return
+        limit = STALL_S if self.sim.tick > 0 else FIRST_STALL_S
+        if now - self.progress_at < limit:
+            return
+        moving = self.sim.moving_ids()
+        # not awaited from any batch: the robots being removed, and those in removed batches' strips (the world
+        # decides them as it applies the tick): counted, they made a removed batch (alive again after a stall)
+        # the silent one, and the silent batch's snapshot went to it instead
+        missing = np.setdiff1d(moving[~self.decided[moving]], np.union1d(self.pending, self._orphans()))
+        silent = np.unique(self.hosts(missing)).tolist()
+        for k in silent:
+            if k not in self.live:
+                self.lose_batch(k, f"no decisions for {limit:g} s")
+        alive = [k for k in silent if k in self.live]
+        if not alive:
+            self.progress_at = now
+            return
+        if now - self.progress_at >= DROWNED_S:
+            self._drowned(f"the decisions of {', '.join(self.batch_names[k] for k in alive)}")
+        # Alive but silent: the rows it decides from may never have reached it (CI once saw a restarted world's
+        # snapshot to a batch that had missed the last rows not arrive, and the run waited 60 s for nothing). The
+        # current tick's snapshot again, once a STALL_S: a batch that has the tick ignores it.
+        for k in alive:
+            if now - self.resent_at.get(k, -math.inf) >= STALL_S:
+                self.resent_at[k] = now
+                self._send_snapshot(k)
+
+    def _drowned(self, what: str) -> None:
+        dropped = self.rejections.text() or "nothing"
+        raise RunFailed(
+            f"{what} did not arrive for {DROWNED_S:g} s at tick {self.sim.tick}, though the process is "
+            f"alive: its messages do not get through, or it hangs (messages dropped: {dropped})"
+        )
+
+    # -- its bookkeeping beside the ticks, and a restarted process's restore from its save
+    # (swarm_ros.protocol.shard_save): it sends again what a reader may have lost with the process before; a tick's
+    # decisions are a pure function of the state, so the run goes on as if nothing had happened
+    def book(self) -> dict:
+        """The lockstep's bookkeeping, as JSON data: with the robots pending removal (and those just removed: a
+        save of the tick before, its next tick's write cut off, removes them again; one of this tick knows they
+        are removed) and every robot removed so far, by tick."""
+        return {
+            "batches": self.batch_names,
+            "strips": [list(strip) for strip in self.hosting.strips],
+            "restart_counts": self.restart_counts,
+            "incarnations": self.incarnations,
+            "restarts": [[t, n] for t, n in self.restarts],
+            "lost": self.lost,
+            "removed_batches": sorted(self.removed_batches),
+            "losses": [[t, n] for t, n in self.sim.losses],
+            "started_wall": self.started_wall,
+            "startup_seconds": self.startup_seconds,
+            "monitor_nonce": self.monitor_nonce,
+            "pending": np.union1d(self.pending, self.removed_now).tolist(),
+            "removals": [[t, ids.tolist()] for t, ids in self.removals],
+        }
+
+    def restore_book(self, b: dict, tick: int, monitor_tick: int, incarnation: int, node: str) -> None:
+        """Take the bookkeeping ``b`` saved with ``tick`` (the monitor had reported ``monitor_tick``) by the
+        process of ``node`` (the world, or a world shard) before this one, and watch the batches again;
+        ``incarnation`` counts that node's processes before this one."""
+        self.batch_names = list(b["batches"])
+        self.hosting.restore(b["strips"])
+        self.restart_counts, self.incarnations = list(b["restart_counts"]), list(b["incarnations"])
+        self.known = dict(enumerate(self.incarnations))
+        self.restarts = [(int(t), str(n)) for t, n in b["restarts"]]
+        self.restarts += [(tick, node)] * max(1, incarnation - sum(n == node for _, n in self.restarts))
+        self.lost, self.removed_batches = list(b["lost"]), set(b["removed_batches"])
+        self.monitor_nonce = str(b["monitor_nonce"])
+        self.started, self.restored = True, True
+        self.started_wall = float(b["started_wall"])
+        self.start_time = self.clock() - max(0.0, time.time() - self.started_wall)
+        self.startup_seconds = float(b["startup_seconds"])
+        self.monitor_tick = monitor_tick
+        if MONITOR in self.lost:
+            self.window = 0
+        for k, name in enumerate(self.batch_names):
+            self.port.watch_batch(k, name)
+
+    def restore(self, saved: ShardSave, incarnation: int) -> None:
+        """Go on from ``saved`` (a process of this node before this one wrote it; ``incarnation`` counts those
+        processes: one killed before it wrote anything is a restart too, at the same tick): its exchange sends its
+        peers the kept messages again and asks for theirs, its batches get a snapshot, the monitor the ticks it has
+        not confirmed.
+
+        Raises:
+            RunFailed: the save does not make a consistent swarm.
+        """
+        b = saved.book
+        try:
+            self.exchange.restore(saved.exchange)
+        except ContractError as exc:
+            raise RunFailed(f"{self.node_name}: its save of tick {saved.exchange.shard.tick}: {exc}") from None
+        tick = self.sim.tick
+        self.restore_book(b, tick, saved.monitor_tick, incarnation, self.node_name)
+        state = self.shard.state.state[saved.pending]
+        self.pending = saved.pending[(state != UNKNOWN) & IS_MOVING[np.where(state == UNKNOWN, 0, state)]]
+        self.losses_booked = len(self.shard.losses)
+        self.removals = [(int(t), np.asarray(ids, np.int64)) for t, ids in b["removals"] if t <= tick]
+        for j in self.exchange.peers:
+            self.port.ask_again(j)
+        self.log.warn(
+            f"{self.node_name} restarted: going on from tick {tick} of its save "
+            f"({len(self.batch_names)} batches, restarts so far {len(self.restarts) - 1})"
+        )
+        self.save_book()
+        for k in range(len(self.batch_names)):
+            if k not in self.removed_batches:
+                self._send_snapshot(k)
+        for t in sorted(t for t in saved.ring if t > self.monitor_tick or t == tick):
+            rows, applied, tally = saved.ring[t]
+            out, again = self.resent(t, rows, tally)
+            self.queued.append((t, out, t == tick, applied, None, again))
+        self._flush()
+        self.publish_status()
+
+    # -- the loss policy: a lost batch is waited for (restart_timeout) while it has restarts left under on_batch_loss:
+    # restart, and its robots removed otherwise once the loss is confirmed (LOSS_CONFIRM_S); a lost monitor is waited
+    # for as long, the ticks held back meanwhile, then the swarm goes on without it (docs/faults.md)
+    def batch_liveliness(self, k: int, alive: int, not_alive: int) -> None:
+        """Batch ``k``'s liveliness changed: ``alive`` writers alive, ``not_alive`` lapsed."""
+        if alive > 0 and k not in self.live:  # from now on a loss is noticed by liveliness, not the fallback
+            self.log.info(f"{self.batch_names[k]} is alive (liveliness)")
+        if alive > 0:
+            self.live.add(k)
+        else:
+            self.live.discard(k)
+        if alive == 0 and not_alive > 0:
+            self.lapsed.add(k)
+            self.lose_batch(k, "liveliness lapsed")
+        elif alive > 0 and k in self.respawned and self.started:  # a respawned process is up
+            self._respawn(k)
+        elif alive > 0 and k in self.down_since:  # a process of this batch is alive (again)
+            self.down_since.pop(k)
+
+    def lose_batch(self, k: int, why: str) -> None:
+        """Batch ``k``'s process is gone (or stalled). Wait for it to come back, or remove its robots once the loss
+        is confirmed (:data:`LOSS_CONFIRM_S`)."""
+        name = self.batch_names[k]
+        if k in self.removed_batches or k in self.down_since or self.sim.done:
+            return
+        p, tick = self.policy, self.sim.tick
+        if not self.started or (p.on_batch_loss == "restart" and self.restart_counts[k] < p.max_restarts):
+            self.down_since[k] = Down(self.clock(), p.restart_timeout, why, False)
+            self.log.warn(
+                f"{name} lost ({why}) at tick {tick}: waiting up to {p.restart_timeout:g} s for "
+                f"it to restart (restarts so far: {self.restart_counts[k]} of {p.max_restarts})"
+            )
+            self.publish_status(f"waiting for {name}")
+            if k in self.respawned and self.started:  # its new process announced itself already
+                self._respawn(k)
+            return
+        self.down_since[k] = Down(self.clock(), LOSS_CONFIRM_S, why, True)
+        self.log.warn(
+            f"{name} lost ({why}) at tick {tick}: its robots are removed unless it is back within {LOSS_CONFIRM_S:g} s"
+        )
+        self.publish_status(f"waiting for {name}")
+
+    def confirm_loss(self, k: int, why: str) -> bool:
+        """Remove batch ``k``'s robots now if it is lost for good and only waited for to confirm it (a new process
+        of it announced itself: the one before is gone). Whether it was."""
+        down = self.down_since.get(k)
+        if down is None or not down.confirming:
+            return False
+        self._remove_batch(k, f"{down.why}; {why}")
+        return True
+
+    def expire_losses(self, now: float) -> None:
+        """Remove the robots of the batches not back within their wait.
+
+        Raises:
+            RunFailed: a batch lost before tick 0 did not come back within ``restart_timeout``.
+        """
+        for k, down in list(self.down_since.items()):
+            if now - down.since <= down.limit:
+                continue
+            if not self.started:
+                raise RunFailed(
+                    f"{self.batch_names[k]} was lost before the run started and did not come back "
+                    f"within {down.limit:g} s (restart_timeout)"
+                )
+            self._remove_batch(k, down.expired())
+
+    def _remove_batch(self, k: int, why: str) -> None:
+        """Remove batch ``k``'s robots, the moving robots in its strip, at the end of the next tick (robots lost
+        for good); from then on the world decides for the robots that move into the strip. Between ticks: while a
+        tick is with the peers (world shards), its robots may still cross into another shard's strips, so the
+        removal waits for the tick's close."""
+        self.down_since.pop(k, None)  # confirmed: no longer waited for, nor removed again at the next poll
+        if self.inflight is not None:
+            if all(k != d for d, _ in self.deferred):
+                self.deferred.append((k, why))
+            return
+        name = self.batch_names[k]
+        ids = self.hosting.orphans(self.sim.state.x, self.sim.moving_ids, {k}, self.pending)
+        self.removed_batches.add(k)
+        self.lost.append(name)
+        self.save_book()
+        self.pending = np.union1d(self.pending, ids)
+        # decisions it sent for this tick before it was lost no longer count either
+        self.parts = [r[~np.isin(r["id"], self.pending)] for r in self.parts]
+        self.received = sum(r.size for r in self.parts)
+        tick = self.sim.tick
+        self.log.warn(
+            f"{name} lost ({why}) at tick {tick}: its {ids.size} robots are removed at the end of tick {tick + 1}"
+        )
+        self.publish_status(f"lost {name}")
+        self._maybe_advance(tick + 1)  # the lost robots' decisions are no longer awaited
+
+    def monitor_liveliness(self, alive: int, not_alive: int) -> None:
+        self.monitor_alive = alive > 0
+        if self.monitor_alive:
+            self.monitor_down_since = None
+            self.maybe_start()
+        if alive == 0 and not_alive > 0:
+            self.monitor_down("liveliness lapsed")
+        elif alive > 0 and MONITOR in self.lost:  # it was only starved of CPU for a moment
+            self.lost.remove(MONITOR)
+            self.window = self.policy.monitor_window
+            self.log.warn(f"the monitor is back at tick {self.sim.tick}")
+            self.publish_status()
+
+    def monitor_down(self, why: str) -> None:
+        """The monitor's process is gone: wait up to ``restart_timeout`` for a new one, holding the ticks
+        back as while it is behind (they stay in the topics' histories for it), then go on without it."""
+        if MONITOR in self.lost or self.monitor_down_since is not None:
+            return
+        self.monitor_down_since = self.clock()
+        self.log.warn(
+            f"the monitor was lost ({why}) at tick {self.sim.tick}: waiting up to "
+            f"{self.policy.restart_timeout:g} s for it to restart"
+        )
+        self.publish_status("waiting for the monitor")
+
+    def _lose_monitor(self, why: str) -> None:
+        if MONITOR in self.lost:
+            return
+        self.lost.append(MONITOR)
+        self.save_book()
+        self.window = 0  # nobody to wait for: run on
+        self.log.warn(f"the monitor was lost ({why}) at tick {self.sim.tick}; the swarm goes on without it")
+        self.publish_status("lost the monitor")
+        self._flush()
