@@ -18,7 +18,7 @@ from swarm_ros.core.algorithm import (
     algorithm_of,
     check_engine,
     check_loss_policy,
-    check_regions,
+    check_world_shards,
     names,
     node_of,
 )
@@ -81,11 +81,13 @@ def test_an_unknown_algorithm_or_a_second_of_a_name_is_refused_in_one_line():
 
 
 def test_what_a_graph_cannot_do_is_refused_with_the_algorithms_reason_and_allowed_elsewhere():
-    for check, given in ((check_regions, "0"), (check_loss_policy, "remove")):
+    for check, given in ((check_world_shards, True), (check_loss_policy, "remove")):
         check(DARR_NIAZI, given, "--flag")  # the study's model's graph does both
-        check(RUBENSTEIN, "" if check is check_regions else "restart", "--flag")  # nothing asked: nothing refused
-    with pytest.raises(ParameterError, match=r"^--region-cuts is not for the rubenstein algorithm's graph \(it cuts"):
-        check_regions(RUBENSTEIN, "0", "--region-cuts")
+        check(RUBENSTEIN, False if check is check_world_shards else "restart", "--flag")  # nothing asked: no refusal
+    with pytest.raises(
+        ParameterError, match=r"^--world-shards is not for the rubenstein algorithm's graph \(its world"
+    ):
+        check_world_shards(RUBENSTEIN, True, "--world-shards")
     with pytest.raises(ParameterError, match=r"^x: remove is not for the rubenstein .* has no robot failure\)$"):
         check_loss_policy(RUBENSTEIN, "remove", "x:")
     assert algorithm_of(DARR_NIAZI).removes_lost_robots and not algorithm_of(RUBENSTEIN).removes_lost_robots

@@ -77,7 +77,7 @@ def make_fixtures(d: Path) -> None:
             "twice.yaml": "/**:\n  ros__parameters:\n    robots: 500\n    robots: 600\n",
             "torusexp.yaml": EXPERIMENT.format(shape="torus", sizes="100") + "algorithm: [darr-niazi, rubenstein]\n",
             "rbcuts.yaml": "/**:\n  ros__parameters:\n    algorithm: rubenstein\n"
-            '/robot_batch:\n  ros__parameters:\n    region_cuts: "0"\n',
+            '/robot_batch:\n  ros__parameters:\n    region_cuts: "500"\n',
         }
     )
     for name, text in files.items():

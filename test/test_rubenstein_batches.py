@@ -186,14 +186,15 @@ def test_the_wire_rows_name_the_gradient_and_estimate_and_round_trip_the_sentine
     assert all(np.array_equal(a, b) and a.dtype == b.dtype for a, b in zip(run.robots, back))
 
 
-def lockstep_run(params: RunParams, batches: int) -> tuple[RubensteinRun, RubensteinLockstep]:
-    """The graph's exchange without ROS: the world's lockstep, and batches sent only its rows."""
+def lockstep_run(params: RunParams, batches: int, region_cuts: str = "") -> tuple[RubensteinRun, RubensteinLockstep]:
+    """The graph's exchange without ROS: the world's lockstep, and batches sent only its rows (each announcing its
+    strip, in reverse order: the world numbers them from the west)."""
     run = RubensteinRun(square(6), params)
     ls = RubensteinLockstep(run)
-    hosts: list[RubensteinBatch] = []
-    for k in range(batches):
-        sent = ls.announce(f"robot_batch_{k}", k, batches)
-        hosts.append(RubensteinBatch(run, ls.strips, k))
+    strips = strips_for(run, batches, region_cuts)
+    for k in reversed(range(batches)):
+        sent = ls.announce(f"robot_batch_{k}", strips.strip(k))
+    hosts = [RubensteinBatch(run, strips, k) for k in range(batches)]
     assert sent == list(range(batches)) and ls.started
     while run.outcome is None:
         tick = run.tick + 1
@@ -211,6 +212,23 @@ def test_the_worlds_lockstep_with_checked_decisions_gives_the_in_process_run(bat
     whole.run()
     run, _ = lockstep_run(params, batches)
     assert same(whole, run)
+
+
+def test_region_cuts_cut_the_strips_where_they_say_and_the_run_is_still_the_in_process_one():
+    """``region_cuts`` are x positions in d: strip k starts at the cell column holding cut k - 1 (here the grid's 10
+    columns, 3.5 d wide, span x = -16 to 19); a cut count or place that leaves a strip without a column is refused."""
+    params = RunParams(40, algorithm="rubenstein", seed=6, range_noise=0.05)
+    whole = RubensteinRun(square(6), params)
+    whole.run()
+    run, ls = lockstep_run(params, 3, "-9,5")
+    assert ls.cuts.tolist() == [0, 2, 6, 10] and same(whole, run)
+    cells = whole.cells
+    assert (cells.x0, cells.side, cells.nx) == (-16, 3.5, 10)
+    with pytest.raises(ParameterError, match="^region_cuts gives 1 cuts; 3 batches need 2$"):
+        strips_for(whole, 3, "5")
+    for cuts in ("-9,-8", "-30", "19"):
+        with pytest.raises(ParameterError, match=r"leave a strip with no cell column \(the grid's 10 columns, 3.5 d"):
+            strips_for(whole, cuts.count(",") + 2, cuts)
 
 
 def decisions_of_batch_0(run: RubensteinRun, ls: RubensteinLockstep) -> np.ndarray:
@@ -250,7 +268,7 @@ def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
     run.run(600)  # robots are edge-following by now
     ls = RubensteinLockstep(run)
-    ls.announce("robot_batch_0", 0, 1)
+    ls.announce("robot_batch_0", (0, run.cells.nx - 1))
     rows = decisions_of_batch_0(run, ls)
     moving = rows[rows["moves"] == 1]
     assert moving.size > 0
@@ -264,20 +282,25 @@ def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
 
 
 def test_announcements_that_do_not_fit_the_run_are_rejected():
+    """A strip outside the grid, one that overlaps another's, a node's second strip before the start; after it, a
+    strip or a node that is not one of the run's batches. The run starts once the strips tile the grid."""
     ls = RubensteinLockstep(RubensteinRun(square(6), RunParams(40, algorithm="rubenstein")))
-    assert ls.announce("robot_batch_0", 0, 2) == []
-    wrong = [
-        ("robot_batch_1", 1, 3),
-        ("robot_batch_2", 2, 2),
-        ("other", 0, 2),
-        ("b", 0, 10**6),
-        ("robot_batch_0", 1, 2),
-    ]
-    for name, k, batches in wrong:
-        with pytest.raises(Rejected):
-            ls.announce(name, k, batches)
-    assert ls.announce("robot_batch_1", 1, 2) == [0, 1]
-    assert ls.announce("robot_batch_1", 1, 2) == [1]  # a restarted batch: its own area again
+    last = ls.run.cells.nx - 1
+    assert last >= 3
+    assert ls.announce("robot_batch_0", (0, 1)) == [] and not ls.started
+    before = [("robot_batch_1", (1, last)), ("robot_batch_1", (-1, 0)), ("robot_batch_1", (2, last + 1))]
+    before += [("robot_batch_0", (0, 2)), ("robot_batch_1", (3, 2))]
+    for name, strip in before:
+        with pytest.raises(Rejected, match="^strip"):
+            ls.announce(name, strip)
+    assert ls.announce("robot_batch_2", (3, last)) == [] and not ls.started  # a gap: column 2 is no one's
+    assert ls.announce("robot_batch_1", (2, 2)) == [0, 1, 2] and ls.started
+    assert ls.hosts == {0: "robot_batch_0", 1: "robot_batch_1", 2: "robot_batch_2"}
+    assert ls.cuts.tolist() == [0, 2, 3, last + 1] and ls.number("robot_batch_2") == 2 and ls.number("x") is None
+    assert ls.announce("robot_batch_1", (2, 2)) == [1]  # a restarted batch: its own area again
+    for name, strip in [("robot_batch_1", (0, 1)), ("other", (2, 2)), ("robot_batch_3", (0, last))]:
+        with pytest.raises(Rejected, match="no batch's strip"):
+            ls.announce(name, strip)
 
 
 def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbroken_one(tmp_path):
@@ -290,11 +313,12 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
     whole = RubensteinRun(square(6), params)
     whole.run(1500)
     path = tmp_path / "world.checkpoint"
-    checkpoint.save(path, whole, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
+    checkpoint.save(path, whole, {0: "robot_batch_0", 1: "robot_batch_1"}, np.array([0, 2, whole.cells.nx]))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["world.checkpoint"]  # no temporary file left
     fresh = RubensteinRun(square(6), params)
     saved = checkpoint.load(path, fresh)
-    assert (saved.tick, saved.hosts, saved.batches) == (1500, {0: "robot_batch_0", 1: "robot_batch_1"}, 2)
+    assert (saved.tick, saved.hosts) == (1500, {0: "robot_batch_0", 1: "robot_batch_1"})
+    assert saved.cuts.tolist() == [0, 2, whole.cells.nx]
     fresh.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
     whole.run()
     fresh.run()
@@ -302,7 +326,8 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
     path.write_bytes(b"not a checkpoint")
     with pytest.raises(RunFailed, match="does not read"):
         checkpoint.load(path, fresh)
-    checkpoint.save(path, RubensteinRun(square(6), RunParams(30, algorithm="rubenstein")), {}, 1)
+    other = RubensteinRun(square(6), RunParams(30, algorithm="rubenstein"))
+    checkpoint.save(path, other, {}, np.array([0, other.cells.nx]))
     with pytest.raises(RunFailed, match="is not of this run"):
         checkpoint.load(path, fresh)
     with pytest.raises(RunFailed, match="found no checkpoint"):
@@ -363,8 +388,9 @@ def test_the_monitors_held_report_is_checked():
 def test_the_world_names_the_batches_it_waits_for():
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
     ls = RubensteinLockstep(run)
+    strips = strips_for(run, 2)
     for k in range(2):
-        ls.announce(f"robot_batch_{k}", k, 2)
+        ls.announce(f"robot_batch_{k}", strips.strip(k))
     assert ls.awaited() == ["robot_batch_0", "robot_batch_1"]
     ls.decisions(0, 1, decisions_of_batch_0(run, ls))
     assert ls.awaited() == ["robot_batch_1"]

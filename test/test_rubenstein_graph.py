@@ -50,18 +50,19 @@ def assert_same_run(reference: Path, out: Path) -> dict:
     return got
 
 
-def _launch(square: Path, out: Path, processes: int) -> subprocess.Popen:
-    command = [sys.executable, "-m", "swarm_ros", "run", "--shape", str(square), *RUN, "--out", str(out)]
+def _launch(square: Path, out: Path, processes: int, *flags: str) -> subprocess.Popen:
+    command = [sys.executable, "-m", "swarm_ros", "run", "--shape", str(square), *RUN, "--out", str(out), *flags]
     return subprocess.Popen(
         [*command, "--processes", str(processes)], env=run_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
 
 
-@pytest.mark.parametrize("processes", [1, 4])
-def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_path, processes):
-    """K = 2 is every restart test's below, each compared with simulate's run the same way."""
+@pytest.mark.parametrize("processes, cuts", [(1, ""), (4, ""), (3, "-9,5")])
+def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_path, processes, cuts):
+    """K = 2 is every restart test's below, each compared with simulate's run the same way; K = 3 with the strips
+    cut where the user says (x positions in d: the grid's cell columns 0-1, 2-5 and 6-9)."""
     out = tmp_path / "run"
-    launcher = _launch(square, out, processes)
+    launcher = _launch(square, out, processes, *([f"--region-cuts={cuts}"] if cuts else []))
     _, err = launcher.communicate(timeout=300)
     assert launcher.returncode == 0, err.decode()
     summary = assert_same_run(reference, out)
@@ -70,6 +71,8 @@ def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_
     assert_rubenstein_bag_holds_run(out)
     world = (out / "logs" / "world.log").read_text()
     assert "dropped" not in world, world  # no message of the run's own was refused
+    if cuts:
+        assert all(f"cell columns {strip}" in world for strip in ("0..1", "2..5", "6..9")), world
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 

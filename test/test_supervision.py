@@ -282,15 +282,19 @@ def test_the_launch_file_starts_the_rubenstein_algorithms_nodes_from_the_same_ex
         ("world", "world"),
     ]
     assert _written(setup)["/**"]["ros__parameters"]["algorithm"] == "rubenstein"
-    with pytest.raises(InputError, match=r"^world_shards is not for the rubenstein algorithm's graph \(it cuts"):
+    with pytest.raises(InputError, match=r"^world_shards is not for the rubenstein algorithm's graph \(its world"):
         launch_setup(str(CONFIG), {**BLANK, "algorithm": "rubenstein"}, "", tmp_path / "log2", 2, "", "", 2)
     removing = tmp_path / "remove.yaml"
     removing.write_text(CONFIG.read_text() + "\n/world:\n  ros__parameters:\n    on_batch_loss: remove\n")
     with pytest.raises(InputError, match="on_batch_loss: remove is not for the rubenstein algorithm's graph"):
         _setup(tmp_path, removing, shape="rectangle", algorithm="rubenstein")
-    cutting = tmp_path / "cuts.yaml"  # the file's cuts, as the argument's: refused, not ignored
-    cutting.write_text(CONFIG.read_text() + '\n/robot_batch:\n  ros__parameters:\n    region_cuts: "0"\n')
-    with pytest.raises(InputError, match=r"^region_cuts is not for the rubenstein algorithm's graph \(it cuts"):
+    cutting = tmp_path / "cuts.yaml"  # the file's cuts, as the argument's: checked in the algorithm's unit (d)
+    cutting.write_text(CONFIG.read_text() + '\n/robot_batch:\n  ros__parameters:\n    region_cuts: "500"\n')
+    with pytest.raises(InputError, match=r"^region_cuts \[500\] leave a strip with no cell column \(the grid's"):
         _setup(tmp_path, cutting, shape="rectangle", algorithm="rubenstein")
+    cut = launch_setup(
+        str(CONFIG), {**BLANK, "algorithm": "rubenstein", "shape": "rectangle"}, "", tmp_path / "l3", 2, "", "0"
+    )
+    assert [own.get("region_cuts") for _, _, own in cut.plan] == [None, "0", "0", None]  # to the batches
     with pytest.raises(InputError, match=r"launch argument vision_radius:=1: vision_radius is a parameter of the "):
         _setup(tmp_path, shape="rectangle", algorithm="rubenstein", vision_radius="1")  # even at its default

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 from swarm_ros.app.param_file import check_given, check_launcher_sets, read_params_file, record_every
 from swarm_ros.app.simulate import note_partial, simulate
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.core.algorithm import algorithm_of, check_can, check_loss_policy, check_regions
+from swarm_ros.core.algorithm import algorithm_of, check_can, check_loss_policy, check_world_shards
 from swarm_ros.core.errors import InputError
 from swarm_ros.core.grid import World
 from swarm_ros.core.params import (
@@ -118,13 +118,7 @@ def _prepare(
     shape, params = settings.resolve()
     check_can(params.algorithm, "graph" if graph else "check" if getattr(args, "check", False) else "")
     if graph:
-        check_regions(params.algorithm, args.world_shards > 1, "--world-shards")
-        check_regions(params.algorithm, args.region_cuts, "--region-cuts")
-        file_cuts = nodes["robot_batch"].get("region_cuts")
-        check_regions(params.algorithm, file_cuts, f"{args.params_file}: /robot_batch: region_cuts")
-        own_checks = algorithm_of(params.algorithm).part("check_graph")
-        if own_checks is not None:
-            own_checks(shape, params, args.processes)
+        check_world_shards(params.algorithm, args.world_shards > 1, "--world-shards")
     monitor = nodes["monitor"]
     recording = RecordingOptions(
         enabled=bool(_flag(args.record, monitor, "record")),
@@ -177,7 +171,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     }
     said = "--on-batch-loss" if args.on_batch_loss else f"{args.params_file}: /world: on_batch_loss:"
     check_loss_policy(params.algorithm, world.get("on_batch_loss"), said)
-    check_graph(shape, params.robots, args.processes, args.enclaves, region_cuts=cuts, world_shards=args.world_shards)
+    check_graph(shape, params, args.processes, args.enclaves, region_cuts=cuts, world_shards=args.world_shards)
     domain = _domain_id(args.domain_id)
     launch = Launch(
         settings=settings,

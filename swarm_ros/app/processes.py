@@ -134,7 +134,7 @@ def check_graph_shape(shape: str) -> None:
 
 def check_graph(
     shape,
-    robots: int,
+    params,
     processes: int,
     enclaves: str | None,
     flags: tuple[str, str] = ("--processes", "--enclaves"),
@@ -145,9 +145,11 @@ def check_graph(
 
     Raises:
         InputError: a shape source the nodes cannot each read, too little memory, fewer columns than
-            batches, region cuts that do not cut the world into ``processes`` strips, a bad enclave path;
-            in one line (``flags``: how the user named the batch count and the enclaves).
+            batches, region cuts that do not cut the world into ``processes`` strips (the algorithm's
+            ``check_graph``), a bad enclave path; in one line (``flags``: how the user named the batch count and
+            the enclaves).
     """
+    from swarm_ros.core.algorithm import algorithm_of
     from swarm_ros.core.resources import check_world_memory
 
     check_world_memory(shape.world.radius, copies=processes + 1 + world_shards)  # the world(s), the monitor, batches
@@ -156,15 +158,9 @@ def check_graph(
             f"--world-shards {world_shards} is more than the {processes} robot-batch processes ({flags[0]}): "
             f"each world shard owns the strips of one batch at least"
         )
-    if processes > shape.world.size:
-        raise InputError(
-            f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
-            f"robot-batch process ({flags[0]}, default 2); each strip needs at least one column"
-        )
-    if region_cuts:
-        from swarm_ros.core.regions import parse_cuts, strip
-
-        strip(0, processes, parse_cuts(region_cuts), shape.world.radius)
+    own_checks = algorithm_of(params.algorithm).part("check_graph")
+    if own_checks is not None:
+        own_checks(shape, params, processes, region_cuts, flags[0])
     if enclaves is not None and not ENCLAVE_PREFIX.fullmatch(enclaves):
         raise InputError(
             f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
@@ -291,8 +287,27 @@ def recover_killed(out: Path) -> list[Path]:
     return kept
 
 
-def check_rubenstein_graph(shape, params, processes: int) -> None:
-    """Refuse, in one line, a batch count the rubenstein algorithm's cell grid cannot be cut into.
+def check_study_graph(shape, params, processes: int, region_cuts: str, flag: str) -> None:
+    """Refuse, in one line, more batches than the study's model's world has columns, or region cuts (x positions in
+    patches) that do not cut it into ``processes`` strips (``flag``: how the user named the batch count).
+
+    Raises:
+        InputError: that.
+    """
+    if processes > shape.world.size:
+        raise InputError(
+            f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
+            f"robot-batch process ({flag}, default 2); each strip needs at least one column"
+        )
+    if region_cuts:
+        from swarm_ros.core.regions import parse_cuts, strip
+
+        strip(0, processes, parse_cuts(region_cuts), shape.world.radius)
+
+
+def check_rubenstein_graph(shape, params, processes: int, region_cuts: str, flag: str) -> None:
+    """Refuse, in one line, a batch count (``processes``, whatever ``flag`` named it) or region cuts (x positions
+    in d) the rubenstein algorithm's cell grid cannot be cut by.
 
     Raises:
         InputError: that.
@@ -300,7 +315,7 @@ def check_rubenstein_graph(shape, params, processes: int) -> None:
     from swarm_ros.core.rubenstein.run import RubensteinRun
     from swarm_ros.core.rubenstein.strips import strips_for
 
-    strips_for(RubensteinRun(shape, params), processes)
+    strips_for(RubensteinRun(shape, params), processes, region_cuts)
 
 
 def compile_first(algorithm: str, quiet: bool) -> bool:

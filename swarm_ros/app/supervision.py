@@ -33,7 +33,7 @@ import yaml
 from swarm_ros.app.param_file import check_given, check_launcher_sets, params_yaml, read_params_file, record_every
 from swarm_ros.app.processes import CHECKPOINT, check_graph, check_graph_shape, death, world_sections
 from swarm_ros.artifacts.run_dir import check_out_dir, default_run_dir
-from swarm_ros.core.algorithm import DARR_NIAZI, algorithm_of, check_can, check_loss_policy, check_regions
+from swarm_ros.core.algorithm import DARR_NIAZI, algorithm_of, check_can, check_loss_policy, check_world_shards
 from swarm_ros.core.errors import ConfigError, ParameterError, RunFailed
 from swarm_ros.core.params import RUN_PARAMETER, Param, node_defaults
 from swarm_ros.core.signals import EXIT_INTERRUPTED
@@ -225,12 +225,11 @@ def launch_setup(
     shape, params = settings.resolve()
     region_cuts = region_cuts or str(nodes["robot_batch"].get("region_cuts", ""))  # the argument, else the file's
     check_can(params.algorithm, "graph")
-    check_regions(params.algorithm, world_shards > 1, "world_shards")
-    check_regions(params.algorithm, region_cuts, "region_cuts")
+    check_world_shards(params.algorithm, world_shards > 1, "world_shards")
     check_loss_policy(params.algorithm, nodes["world"].get("on_batch_loss"), "on_batch_loss:")
     check_graph(
         shape,
-        params.robots,
+        params,
         processes,
         enclaves or None,
         flags=("processes", "enclaves"),

@@ -73,8 +73,8 @@ class Algorithm:
     shared_kernels: tuple[str, ...] = ()
     #: whether its graph can remove a lost batch's robots and go on (``on_batch_loss: remove``); if not, why not
     no_removal: str = ""
-    #: why its graph refuses world shards and region cuts ("" if it runs with them)
-    no_regions: str = ""
+    #: why its graph refuses world shards ("" if it runs with them)
+    no_world_shards: str = ""
     # -- code parts: "module:attribute" (PART_LAYERS says each one's layer) --
     #: class ``(shape, params)``: the in-process engine (``run()``, ``step()``, ``tick``, ``done``, ``metrics``)
     engine: str = ""
@@ -97,7 +97,9 @@ class Algorithm:
     world_shard_node: str = ""
     robot_batch_node: str = ""
     monitor_node: str = ""
-    #: ``(shape, params, processes) -> None``, or "": its own checks of a graph run (ParameterError)
+    #: ``(shape, params, processes, region_cuts, flag) -> None``: its own checks of a graph run (ParameterError): that
+    #: its world cuts into ``processes`` strips (``flag``: how the user named that count), at ``region_cuts`` (x
+    #: positions in its unit) if given
     check_graph: str = ""
     #: ``(run) -> None``: one tick of the engine, with every invariant that must hold over it checked (``--check``)
     checked_step: str = ""
@@ -212,13 +214,13 @@ def check_can(name: str, need: str) -> None:
         raise ParameterError(f"the {name} algorithm has {_NEEDS[need][1]}")
 
 
-def check_regions(name: str, given: object, said: str) -> None:
-    """Refuse world shards or region cuts (``given`` true), which ``said`` set, for a graph that has none.
+def check_world_shards(name: str, given: object, said: str) -> None:
+    """Refuse world shards (``given`` true), which ``said`` set, for a graph that has none.
 
     Raises:
         ParameterError: in one line, with the reason.
     """
-    reason = algorithm_of(name).no_regions
+    reason = algorithm_of(name).no_world_shards
     if given and reason:
         raise ParameterError(f"{said} is not for the {name} algorithm's graph ({reason})")
 
@@ -262,6 +264,7 @@ register(
         compile="swarm_ros.core.warmup:compile_kernels",
         warm_up="swarm_ros.core.warmup:warm_up",
         plan="swarm_ros.protocol.plan:graph_plan",
+        check_graph="swarm_ros.app.processes:check_study_graph",
         world_node="swarm_ros.nodes.darr_niazi.world:WorldNode",
         world_shard_node="swarm_ros.nodes.darr_niazi.world:WorldNode",
         robot_batch_node="swarm_ros.nodes.darr_niazi.robot_batch:RobotBatchNode",
@@ -290,7 +293,8 @@ register(
         record_every=20,  # a robot steps 0.05 d a tick by default, and a run lasts tens of thousands of ticks
         shared_kernels=("rng.py",),
         no_removal="a lost batch is restarted: the algorithm has no robot failure",
-        no_regions="it cuts its own strips",
+        no_world_shards="its world is one process: world shards are not built for it yet",
+        check_graph="swarm_ros.app.processes:check_rubenstein_graph",
         engine="swarm_ros.core.rubenstein.run:RubensteinRun",
         summary="swarm_ros.core.rubenstein.run:summary_of",
         check_params="swarm_ros.core.rubenstein.layout:check_params",
@@ -300,7 +304,6 @@ register(
         world_node="swarm_ros.nodes.rubenstein.world:RubensteinWorldNode",
         robot_batch_node="swarm_ros.nodes.rubenstein.robot_batch:RubensteinBatchNode",
         monitor_node="swarm_ros.nodes.rubenstein.monitor:RubensteinMonitorNode",
-        check_graph="swarm_ros.app.processes:check_rubenstein_graph",
         checked_step="swarm_ros.core.rubenstein.tick_checks:checked_step",
         recording="swarm_ros.artifacts.rubenstein.recording:open_recording",
         write_run="swarm_ros.artifacts.rubenstein.run_dir:write_simulation",

@@ -275,7 +275,7 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
         Param(
             "region_cuts",
             "",
-            "x positions (patches) where strips 1.. start, e.g. -20,0,20; every batch of a run needs the same",
+            "x positions where strips 1.. start, e.g. -20,0,20 (patches; rubenstein: d); every batch needs the same",
             blank="cut so that each strip starts with as many robots",
             list_text=True,
         ),

@@ -67,10 +67,11 @@ def rubenstein_plan(
     processes: int, region_cuts: str = "", world_shards: int = 1
 ) -> list[tuple[str, str, dict[str, int | str]]]:
     """:func:`graph_plan` of a rubenstein run: the monitor, ``processes`` robot batches (batch k decides for
-    strip k of the cell grid: swarm_ros.core.rubenstein.strips), the world. No region cuts or world shards (the
-    commands refuse them: core.algorithm's ``no_regions``)."""
+    strip k of the cell grid, cut at ``region_cuts`` if given: swarm_ros.core.rubenstein.strips), the world. No
+    world shards (the commands refuse them: core.algorithm's ``no_world_shards``)."""
+    cuts: dict[str, int | str] = {"region_cuts": region_cuts} if region_cuts else {}
     batches: list[tuple[str, str, dict[str, int | str]]] = [
-        (batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes}) for k in range(processes)
+        (batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes, **cuts}) for k in range(processes)
     ]
     return [(MONITOR, MONITOR, {}), *batches, (WORLD, WORLD, {})]
 

@@ -21,7 +21,7 @@ register(
         progress_unit="patch",
         progress_what="localized",
         no_removal="it has no graph",
-        no_regions="it has no graph",
+        no_world_shards="it has no graph",
         engine="random_walk.engine:RandomWalk",
         summary="swarm_ros.core.run_result:summary_of",
         check_shape="random_walk.engine:check_shape",

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarm_ros.core.errors import ParameterError
+from swarm_ros.core.regions import parse_cuts
 
 from .rule import JOINED, Cells, Decided, Robots, build_cells, clear_cells, decide_kernel, decided_for
 from .run import RubensteinRun, anchor_capacity, robots_at_start
@@ -53,6 +54,37 @@ class Strips:
             cuts.append(min(max(at, cuts[-1] + 1), columns - (batches - k)))
         return Strips(np.array([*cuts, columns], dtype=np.int64))
 
+    @staticmethod
+    def cut(at: np.ndarray, cells: Cells, batches: int) -> Strips:
+        """``batches`` strips cut at ``at`` (K - 1 ascending x positions in d, ``region_cuts``): strip k starts at the
+        cell column that holds cut k - 1.
+
+        Raises:
+            ParameterError: not K - 1 cuts, or cuts that leave a strip without a cell column.
+        """
+        if at.size != batches - 1:
+            raise ParameterError(f"region_cuts gives {at.size} cuts; {batches} batches need {batches - 1}")
+        starts = np.floor((at - cells.x0) / cells.side).astype(np.int64)
+        cuts = np.concatenate([[0], starts, [cells.nx]]).astype(np.int64)
+        if (np.diff(cuts) < 1).any():
+            end = cells.x0 + cells.nx * cells.side
+            raise ParameterError(
+                f"region_cuts {at.tolist()} leave a strip with no cell column (the grid's {cells.nx} columns, "
+                f"{cells.side:g} d wide, span x = {cells.x0:g} to {end:g} d)"
+            )
+        return Strips(cuts)
+
+    @staticmethod
+    def tiling(strips: list[tuple[int, int]], columns: int) -> Strips | None:
+        """The strips ``strips`` ((first, last) cell columns, in any order) make, if they tile the ``columns``
+        columns of the grid with no gap or overlap; None if they do not (yet)."""
+        ordered = sorted(strips)
+        if not ordered or ordered[0][0] != 0 or ordered[-1][1] != columns - 1:
+            return None
+        if any(before[1] + 1 != after[0] for before, after in zip(ordered, ordered[1:])):
+            return None
+        return Strips(np.array([first for first, _ in ordered] + [columns], dtype=np.int64))
+
     @property
     def batches(self) -> int:
         return self.cuts.size - 1
@@ -82,9 +114,16 @@ def cell_columns(x: np.ndarray, cells: Cells) -> np.ndarray:
     return np.clip(np.floor((x - cells.x0) / cells.side).astype(np.int64), 0, cells.nx - 1)
 
 
-def strips_for(run: RubensteinRun, batches: int) -> Strips:
-    """The run's strips for ``batches`` batches (:meth:`Strips.balanced` over its robots at tick 0: every process
-    that knows the run's parameters finds the same)."""
+def strips_for(run: RubensteinRun, batches: int, region_cuts: str = "") -> Strips:
+    """The run's strips for ``batches`` batches: cut at ``region_cuts`` (x positions in d, :meth:`Strips.cut`), or,
+    with none, :meth:`Strips.balanced` over its robots at tick 0 (every process that knows the run's parameters
+    finds the same).
+
+    Raises:
+        ParameterError: cuts or a batch count the grid cannot be cut by.
+    """
+    if region_cuts:
+        return Strips.cut(parse_cuts(region_cuts), run.cells, batches)
     return Strips.balanced(cell_columns(robots_at_start(run.params).x, run.cells), run.cells.nx, batches)
 
 
@@ -123,11 +162,11 @@ class RubensteinBatch:
         return own.copy(), Decided(*(a[: own.size].copy() for a in self._out))
 
 
-def run_batched(run: RubensteinRun, batches: int, max_ticks: int | None = None) -> Strips:
+def run_batched(run: RubensteinRun, batches: int, max_ticks: int | None = None, region_cuts: str = "") -> Strips:
     """Run ``run`` to its end (or ``max_ticks`` more ticks) with its robots' decisions made by ``batches``
-    :class:`RubensteinBatch` es, each sent only its area's rows; the result equals ``run.run()``'s. Returns the
-    strips."""
-    strips = strips_for(run, batches)
+    :class:`RubensteinBatch` es (cut at ``region_cuts``, if given), each sent only its area's rows; the result equals
+    ``run.run()``'s. Returns the strips."""
+    strips = strips_for(run, batches, region_cuts)
     hosts = [RubensteinBatch(run, strips, k) for k in range(batches)]
     left = max_ticks
     while run.outcome is None and (left is None or left > 0):

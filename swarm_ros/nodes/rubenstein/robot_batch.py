@@ -1,11 +1,13 @@
 """A robot-batch node of a rubenstein run: decides, each tick, for the robots of its strip of the cell grid.
 
-Batch k of K announces ``[k, K]`` on /swarm/batches. The world sends it, after each tick, the rows of its
-area (its strip and one cell column of halo, the communication range wide) on /swarm/rubenstein/area/<batch>:
-what the robots there broadcast. The batch checks them (dropped and counted if they fail), decides the next
-tick for its strip's robots not joined (:class:`swarm_ros.core.rubenstein.strips.RubensteinBatch`) and answers
-on /swarm/rubenstein/decisions/<batch>. It keeps nothing between ticks, so a restarted batch decides as the one
-it replaces would have. It stops when /swarm/status reports the run's outcome.
+Batch k of K announces its strip, ``[first, last]`` cell column, on /swarm/batches (the strips cut at
+``region_cuts``, x positions in d, or balanced over the robots at tick 0:
+:func:`~swarm_ros.core.rubenstein.strips.strips_for`). The world sends it, after each tick, the rows of its area
+(its strip and one cell column of halo, the communication range wide) on /swarm/rubenstein/area/<batch>: what the
+robots there broadcast. The batch checks them (dropped and counted if they fail), decides the next tick for its
+strip's robots not joined (:class:`swarm_ros.core.rubenstein.strips.RubensteinBatch`) and answers on
+/swarm/rubenstein/decisions/<batch>. It keeps nothing between ticks, so a restarted batch decides as the one it
+replaces would have. It stops when /swarm/status reports the run's outcome.
 
     ros2 run swarm_ros robot_batch --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein \\
         -r __node:=robot_batch_0 -p batch:=0 -p batches:=2
@@ -47,8 +49,9 @@ class RubensteinBatchNode:
         self.shape, self.params = run.resolve()
         self.k, batches = int(own["batch"]), int(own["batches"])
         frame = RubensteinRun(self.shape, self.params)  # the grid, the rule and the shape; its robots are not used
-        strips = strips_for(frame, batches)
+        strips = strips_for(frame, batches, str(own["region_cuts"]))
         self.host = RubensteinBatch(frame, strips, self.k)
+        first, last = strips.strip(self.k)
         self.tick = -1  # the last tick whose area came in
         self.ended_at: float | None = None
         self.finished = False
@@ -61,10 +64,9 @@ class RubensteinBatchNode:
         self.gate.subscribe(DiagnosticArray, STATUS, self._on_status, msgs.STATUS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(name), msgs.ALIVE_QOS)  # liveliness only
         announce = self.signer.publisher(Int64MultiArray, BATCHES, msgs.BATCHES_QOS)
-        hello = msgs.ids_message(np.array([self.k, batches], dtype=np.int64))
+        hello = msgs.ids_message(np.array([first, last], dtype=np.int64))  # the cell columns it decides for
         hello.layout.dim[0].label = batch_label(name, int(own["incarnation"]))
         announce.publish(hello)
-        first, last = strips.strip(self.k)
         node.get_logger().info(f"{name}: batch {self.k} of {batches}, cell columns {first}..{last}")
 
     def load(self) -> None:

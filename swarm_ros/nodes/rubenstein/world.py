@@ -1,17 +1,17 @@
 """The world node of a rubenstein run (``--algorithm rubenstein``): holds every robot, sends each robot batch its
 area, settles the batches' decisions, and publishes the run for the monitor.
 
-A thin shell around :class:`swarm_ros.protocol.rubenstein.lockstep.RubensteinLockstep`: batch k of K announces
-itself on /swarm/batches (``[k, K]``); once all K have, and the monitor reads the run's topics, tick 0 goes
-out: each batch's area rows on /swarm/rubenstein/area/<batch>, every robot's row on /swarm/rubenstein/robots, the
-metrics on /swarm/rubenstein/metrics and ``running`` on /swarm/status. Each tick, once every batch's decisions
-are in (checked, or dropped and counted), it settles them and sends the next areas; every ``record_every``-th
-tick and at the end it sends the robots and the metrics rows since the last. It runs at most ``monitor_window``
-ticks past the last record the monitor reports held on /swarm/rubenstein/held
+A thin shell around :class:`swarm_ros.protocol.rubenstein.lockstep.RubensteinLockstep`: each batch announces its
+strip of cell columns on /swarm/batches (``[first, last]``); once the strips tile the grid, and the monitor reads
+the run's topics, tick 0 goes out: each batch's area rows on /swarm/rubenstein/area/<batch>, every robot's row on
+/swarm/rubenstein/robots, the metrics on /swarm/rubenstein/metrics and ``running`` on /swarm/status. Each tick, once
+every batch's decisions are in (checked, or dropped and counted), it settles them and sends the next areas; every
+``record_every``-th tick and at the end it sends the robots and the metrics rows since the last. It runs at most
+``monitor_window`` ticks past the last record the monitor reports held on /swarm/rubenstein/held
 (:func:`~swarm_ros.protocol.rubenstein.lockstep.monitor_reach`), so a restarted monitor finds in the topics'
-histories every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it
-(or, with no window, once its readers have everything or after a grace period). It saves a checkpoint at tick
-0 and every 1,000 ticks or so, before the tick goes out; a restarted process goes on from the last one
+histories every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it (or,
+with no window, once its readers have everything or after a grace period). It saves a checkpoint at tick 0 and every
+1,000 ticks or so, before the tick goes out; a restarted process goes on from the last one
 (:mod:`swarm_ros.protocol.rubenstein.checkpoint`).
 
     ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
@@ -103,7 +103,7 @@ class RubensteinWorldNode:
             return
         saved = checkpoint.load(self.checkpoint, self.ls.run)
         self.ls.run.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
-        self.ls.resume(saved.hosts, saved.batches)
+        self.ls.resume(saved.hosts, saved.cuts)
         self.sent_metrics = saved.tick - self.every if saved.tick else -1
         self.node.get_logger().info(f"restarted: on from the checkpoint of tick {saved.tick}")
 
@@ -115,23 +115,26 @@ class RubensteinWorldNode:
         try:
             name, _ = parse_batch_label(msg.layout.dim[0].label if msg.layout.dim else "")
             if len(msg.data) != 2:
-                raise Rejected("strip", f"{len(msg.data)} values, expected its batch number and the batches")
-            k, batches = int(msg.data[0]), int(msg.data[1])
+                raise Rejected("strip", f"{len(msg.data)} values, expected its first and last cell column")
+            strip = int(msg.data[0]), int(msg.data[1])
             first = name not in self.areas
-            send = self.ls.announce(name, k, batches)
+            send = self.ls.announce(name, strip)
         except Rejected as fault:
             self.rejections.drop(BATCHES, fault)
             return
         if first:
             self.areas[name] = self.signer.publisher(PointCloud2, rubenstein_area_topic(name), msgs.LATCHED_QOS)
             topic = rubenstein_decisions_topic(name)
-            self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_decisions, k, topic), msgs.DECISIONS_QOS)
+            self.gate.subscribe(
+                PointCloud2, topic, functools.partial(self._on_decisions, name, topic), msgs.DECISIONS_QOS
+            )
             self._watch_alive(name)
         self.waiting += send
-        self.node.get_logger().info(f"{name}: batch {k} of {batches}")
+        self.node.get_logger().info(f"{name}: cell columns {strip[0]}..{strip[1]}")
 
-    def _on_decisions(self, k: int, topic: str, msg: Cloud) -> None:
-        if self.ls.run.outcome is not None or self.first:  # before its first tick: the process before's (latched)
+    def _on_decisions(self, name: str, topic: str, msg: Cloud) -> None:
+        k = self.ls.number(name)
+        if self.ls.run.outcome is not None or self.first or k is None:  # before its first tick: the process before's
             return
         try:
             tick = checks.tick_stamp(msg.header)
@@ -195,7 +198,7 @@ class RubensteinWorldNode:
         tick, ended = run.tick, run.outcome is not None
         self.watch.moved(time.monotonic())
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
-            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.batches)
+            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts)
         if ended or tick % self.every == 0:
             self.pub_metrics.publish_rows(metrics_rows(run.history[self.sent_metrics + 1 :]), tick)
             self.sent_metrics = tick

@@ -47,10 +47,10 @@ class Saved:
     tally: tuple[np.ndarray, ...]
     history: np.ndarray
     hosts: dict[int, str]  #: batch number -> its node name
-    batches: int
+    cuts: np.ndarray  #: the batches' strips (swarm_ros.core.rubenstein.strips.Strips.cuts)
 
 
-def save(path: Path, run: RubensteinRun, hosts: dict[int, str], batches: int) -> None:
+def save(path: Path, run: RubensteinRun, hosts: dict[int, str], cuts: np.ndarray) -> None:
     """Save ``run`` as it stands, and the batches it serves, to ``path`` (whole, or not at all)."""
     arrays = {f"robot_{name}": values for name, values in run.robots._asdict().items()}
     arrays.update({f"tally_{name}": values for name, values in run.tally._asdict().items()})
@@ -59,7 +59,7 @@ def save(path: Path, run: RubensteinRun, hosts: dict[int, str], batches: int) ->
         tick=np.array([run.tick]),
         covered=run.covered,
         history=run.history,
-        batches=np.array([batches]),
+        cuts=np.asarray(cuts, dtype=np.int64),
         host_numbers=np.array(numbers, dtype=np.int64),
         host_names=np.array([hosts[k] for k in numbers]),
     )
@@ -82,7 +82,7 @@ def load(path: Path, run: RubensteinRun) -> Saved:
         tally = tuple(got[f"tally_{name}"] for name in run.tally._fields)
         tick = int(got["tick"][0])
         hosts = dict(zip(got["host_numbers"].tolist(), got["host_names"].tolist()))
-        saved = Saved(tick, robots, got["covered"], tally, got["history"], hosts, int(got["batches"][0]))
+        saved = Saved(tick, robots, got["covered"], tally, got["history"], hosts, got["cuts"])
     except FileNotFoundError as exc:
         raise RunFailed(f"a restarted world found no checkpoint at {path}") from exc
     except (OSError, KeyError, ValueError, IndexError, zipfile.BadZipFile) as exc:

@@ -1,8 +1,9 @@
 """The world's coordination of a rubenstein run in the ROS 2 graph, as plain code (no rclpy): which batches are in,
 what each is sent, and when a tick is settled.
 
-Robot batch k of K announces itself (``k`` and ``K``); once every k of the first announcement's K has, the
-world sends each batch its area's rows of tick 0 (:mod:`swarm_ros.core.rubenstein.strips`). A batch answers
+A robot batch announces the strip of cell columns it decides for (``[first, last]``: the study's model's batches
+announce theirs in patch columns); once the batches' strips tile the grid, batch k being the k-th from the west,
+the world sends each batch its area's rows of tick 0 (:mod:`swarm_ros.core.rubenstein.strips`). A batch answers
 each area with its strip's decisions for the next tick; when every batch has answered, the world settles
 the tick (:meth:`~swarm_ros.core.rubenstein.run.RubensteinRun.settle`) and sends the next areas. A batch process
 that announces itself again (restarted) is sent its area of the current tick: a batch keeps nothing between
@@ -22,7 +23,7 @@ from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.params import MAX_TICKS
 from swarm_ros.core.rubenstein.rule import JOINED, Decided
 from swarm_ros.core.rubenstein.run import RubensteinRun
-from swarm_ros.core.rubenstein.strips import Strips, cell_columns, strips_for
+from swarm_ros.core.rubenstein.strips import Strips, cell_columns
 
 from ..plan import RUBENSTEIN_KEPT as KEPT
 from ..world_port import STILL_S
@@ -62,8 +63,9 @@ class RubensteinLockstep:
 
     def __init__(self, run: RubensteinRun) -> None:
         self.run = run
-        self.strips: Strips | None = None  #: set by the first announcement
+        self.strips: Strips | None = None  #: set once the announced strips tile the grid
         self.hosts: dict[int, str] = {}  #: batch number -> its node name
+        self.announced: dict[str, tuple[int, int]] = {}  #: before the start: node name -> its strip
         self.parts: dict[int, tuple[np.ndarray, Decided]] = {}  #: the decisions in for the next tick, by batch
         self.started = False
         self._columns_at: tuple[int, np.ndarray] = (-1, np.empty(0, dtype=np.int64))
@@ -72,34 +74,51 @@ class RubensteinLockstep:
     def batches(self) -> int:
         return 0 if self.strips is None else self.strips.batches
 
-    def announce(self, name: str, k: int, batches: int) -> list[int]:
-        """Batch ``k`` of ``batches`` (node ``name``) is up: the batches to send their area now (all of them
-        once every batch is in; a batch that announces itself again, its own).
+    def announce(self, name: str, strip: tuple[int, int]) -> list[int]:
+        """Node ``name`` is up and decides for the cell columns ``strip`` (first, last): the batches to send their
+        area now (all of them once the strips tile the grid; a batch that announces itself again, its own).
 
         Raises:
-            Rejected: a batch number or count that does not fit the run's.
+            Rejected: a strip outside the grid, one that overlaps another batch's, another strip than the node's
+                before, or, once the run has started, a strip or a name that is not one of its batches'.
         """
+        first, last = strip
         columns = self.run.cells.nx
-        if self.strips is None:
-            if not 1 <= batches <= columns:
-                raise Rejected("strip", f"{batches} batches; the grid has {columns} cell columns")
-            self.strips = strips_for(self.run, batches)
-        if batches != self.strips.batches or not 0 <= k < batches:
-            raise Rejected("strip", f"batch {k} of {batches}; the run has {self.strips.batches} batches")
-        if self.hosts.get(k, name) != name:
-            raise Rejected("strip", f"batch {k} is {self.hosts[k]}, not {name}")
-        if any(other == name and b != k for b, other in self.hosts.items()):
-            raise Rejected("strip", f"{name} is another batch than {k}")
-        self.hosts[k] = name
-        if not self.started:
-            self.started = len(self.hosts) == batches
-            return list(range(batches)) if self.started else []
-        return [k]
+        if not 0 <= first <= last < columns:
+            raise Rejected("strip", f"cell columns {first}..{last}; the grid has {columns}")
+        if self.strips is not None:  # started: a batch's process again
+            k = next((k for k in range(self.strips.batches) if self.strips.strip(k) == (first, last)), None)
+            if k is None or self.hosts[k] != name:
+                raise Rejected("strip", f"{name}'s cell columns {first}..{last} are no batch's strip of the run")
+            return [k]
+        if self.announced.get(name, strip) != strip:
+            raise Rejected("strip", f"{name} announced cell columns {self.announced[name]} before, now {strip}")
+        if any(other != name and not (b < first or a > last) for other, (a, b) in self.announced.items()):
+            raise Rejected("strip", f"{name}'s cell columns {first}..{last} overlap another batch's")
+        self.announced[name] = (first, last)
+        strips = Strips.tiling(list(self.announced.values()), columns)
+        if strips is None:
+            return []
+        by_strip = {where: who for who, where in self.announced.items()}
+        self.hosts = {k: by_strip[strips.strip(k)] for k in range(strips.batches)}
+        self.strips, self.started = strips, True
+        return list(range(strips.batches))
 
-    def resume(self, hosts: dict[int, str], batches: int) -> None:
-        """Serve again, from a checkpoint, the ``batches`` batches named ``hosts`` (batch number -> node name): their
-        announcements are taken as a restarted batch's, each sent its area of the run's tick."""
-        self.strips = strips_for(self.run, batches)
+    @property
+    def cuts(self) -> np.ndarray:
+        """The batches' strips, once the run has started (:attr:`Strips.cuts`)."""
+        assert self.strips is not None
+        return self.strips.cuts
+
+    def number(self, name: str) -> int | None:
+        """The batch number of node ``name``, once the run has started; None for a node that is no batch of it."""
+        return next((k for k, who in self.hosts.items() if who == name), None)
+
+    def resume(self, hosts: dict[int, str], cuts: np.ndarray) -> None:
+        """Serve again, from a checkpoint, the batches named ``hosts`` (batch number -> node name) of the strips cut
+        at ``cuts`` (:attr:`Strips.cuts`): their announcements are taken as a restarted batch's, each sent its area
+        of the run's tick."""
+        self.strips = Strips(np.asarray(cuts, dtype=np.int64))
         self.hosts = dict(hosts)
         self.started = True
 
