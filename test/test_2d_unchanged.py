@@ -1,7 +1,7 @@
 """2D runs are byte-identical to those of the release before the 3D model (commit d168d39).
 
 The hashes below were computed by that release's code; the 3D model shares the arbitration, the
-frontier's upkeep and the replica with 2D, and must not change a bit of a 2D run. Each covers the
+frontier's upkeep and the view with 2D, and must not change a bit of a 2D run. Each covers the
 final positions, headings, states, occupancy, frontier and every tick's metrics of one run with
 failures (10% of the robots at tick 50), vision 2, 600 ticks.
 """

@@ -15,10 +15,10 @@ from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
 from swarm_ros.core.errors import ContractError, ParameterError
 from swarm_ros.core.invariants import nearest_frontier_patch
 from swarm_ros.core.legality import illegal
-from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules3d import direction, nearest_frontier3, random_direction, wiggled
 from swarm_ros.core.shapes import builtin_shapes_3d, read_text_grid, write_text_grid
 from swarm_ros.core.state import FRONTIER_BLOCK, FRONTIER_SUPER, RobotState, frontier_blocks_of, near_any
+from swarm_ros.core.swarm_view import SwarmView
 
 pytestmark = pytest.mark.unit
 
@@ -328,27 +328,27 @@ def test_batched_decide_and_apply_equal_the_fused_engine_in_3d(batches, rules):
     assert _final(run_in_batches(shape, p, batches, seed=batches)) == _final(fused)
 
 
-def test_a_replica_fed_the_changed_rows_equals_the_world_in_3d():
+def test_a_view_fed_the_changed_rows_equals_the_world_in_3d():
     shape = Shape.load("torus", World(16))
     sim = Simulation(shape, RunParams(robots=shape.patches, seed=3, max_ticks=400, fail_fraction=0.02, fail_tick=200))
     s = sim.state
-    replica = Replica(shape, s.robots)
-    replica.load(0, np.arange(s.robots), s.state, s.x, s.y, s.heading, s.z, s.pitch)
+    view = SwarmView(shape, s.robots)
+    view.load(0, np.arange(s.robots), s.state, s.x, s.y, s.heading, s.z, s.pitch)
     while not sim.done:
         sim.step()
         ids = np.union1d(sim.last_joins()[0], sim.last_removed)
-        assert replica.inconsistent(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.z[ids]) is None
-        replica.update(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.heading[ids], s.z[ids], s.pitch[ids])
-    r = replica.state
+        assert view.inconsistent(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.z[ids]) is None
+        view.update(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.heading[ids], s.z[ids], s.pitch[ids])
+    r = view.state
     for name in ("x", "y", "z", "heading", "pitch", "state", "occupancy", "frontier", "frontier_blocks"):
         assert np.array_equal(getattr(r, name), getattr(s, name)), name
 
 
-def test_a_3d_replica_refuses_rows_without_z():
+def test_a_3d_view_refuses_rows_without_z():
     shape = Shape.load("box", World(12))
-    replica = Replica(shape, 10)
+    view = SwarmView(shape, 10)
     with pytest.raises(ContractError, match="need z and pitch"):
-        replica.load(0, np.arange(10), np.zeros(10, dtype=np.int8), np.zeros(10), np.zeros(10), np.zeros(10))
+        view.load(0, np.arange(10), np.zeros(10, dtype=np.int8), np.zeros(10), np.zeros(10), np.zeros(10))
 
 
 def test_the_legality_bounds_hold_for_3d_decisions_and_catch_a_jump_in_z():

@@ -1,4 +1,4 @@
-"""The algorithm registry (swarm_ros.core.algorithm): every entry's parts import and live in the layer they are
+"""The algorithm registry (swarm_ros.core.algorithm): every entry's hooks import and live in the layer they are
 declared for, and the checks the shared code makes through it refuse in one line, with the algorithm's reason."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from layering import LAYERS, layer_of, module_graph
 from swarm_ros.core import algorithm as registry
 from swarm_ros.core.algorithm import (
     DARR_NIAZI,
-    PART_LAYERS,
+    HOOK_LAYERS,
     RUBENSTEIN,
     algorithm_of,
     check_engine,
@@ -31,29 +31,29 @@ PACKAGE = Path(registry.__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("name", names())
-def test_each_part_imports_and_lives_in_the_layer_it_is_declared_for(name):
+def test_each_hook_imports_and_lives_in_the_layer_it_is_declared_for(name):
     entry = algorithm_of(name)
-    for part, layer in PART_LAYERS.items():
-        where = getattr(entry, part)
+    for hook, layer in HOOK_LAYERS.items():
+        where = getattr(entry, hook)
         if not where:
             continue
         module = where.partition(":")[0]
-        assert layer_of(module)[1] == LAYERS[layer], f"{name}'s {part} ({where}) is not in the {layer} layer"
-        assert callable(entry.part(part)), f"{name}'s {part} ({where})"
+        assert layer_of(module)[1] == LAYERS[layer], f"{name}'s {hook} ({where}) is not in the {layer} layer"
+        assert callable(entry.hook(hook)), f"{name}'s {hook} ({where})"
 
 
-def test_a_part_is_asked_for_only_from_its_own_layer_or_a_higher_one():
-    """A module's ``.part("x")`` call: x's layer is at or below the module's (a core module never runs a driver)."""
+def test_a_hook_is_asked_for_only_from_its_own_layer_or_a_higher_one():
+    """A module's ``.hook("x")`` call: x's layer is at or below the module's (a core module never runs a driver)."""
     graph = module_graph()
-    asked = re.compile(r"""\.part\(\s*["'](\w+)["']\s*\)""")
+    asked = re.compile(r"""\.hook\(\s*["'](\w+)["']\s*\)""")
     seen = 0
     for module in graph:
         path = PACKAGE.parent / (module.replace(".", "/") + ".py")
         if not path.exists():
             continue
-        for part in asked.findall(path.read_text("utf-8")):
+        for hook in asked.findall(path.read_text("utf-8")):
             seen += 1
-            assert LAYERS[PART_LAYERS[part]] <= layer_of(module)[1], f"{module} asks for {part}"
+            assert LAYERS[HOOK_LAYERS[hook]] <= layer_of(module)[1], f"{module} asks for {hook}"
     assert seen >= 8  # the drivers, the plan, the checks: the shared code does ask
 
 
@@ -75,8 +75,8 @@ def test_an_unknown_algorithm_or_a_second_of_a_name_is_refused_in_one_line():
         algorithm_of("kilo")
     with pytest.raises(ContractError, match="registered already"):
         registry.register(replace(algorithm_of(RUBENSTEIN)))
-    with pytest.raises(ContractError, match="no code part"):
-        algorithm_of(RUBENSTEIN).part("decide")
+    with pytest.raises(ContractError, match="no hook"):
+        algorithm_of(RUBENSTEIN).hook("decide")
     assert names()[0] == DARR_NIAZI  # the default first
 
 
@@ -104,7 +104,7 @@ def test_each_role_runs_its_algorithms_node_and_a_role_its_graph_has_not_is_refu
         ParameterError, match="^the world_shard node is not a node of the rubenstein algorithm's graph$"
     ):
         node_of(RUBENSTEIN, "world_shard")
-    engine = algorithm_of(DARR_NIAZI).part("engine")
+    engine = algorithm_of(DARR_NIAZI).hook("engine")
     check_engine(DARR_NIAZI, engine)
     with pytest.raises(ParameterError, match="^Simulation does not run the rubenstein algorithm$"):
         check_engine(RUBENSTEIN, engine)

@@ -1,5 +1,5 @@
 """Robot failures (--fail-robots P@T, and Simulation.remove for lost processes): removal, self-repair,
-the formal checks' one exception, and the replica following the world."""
+the formal checks' one exception, and the view following the world."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.arbitration import JoinOutcome
 from swarm_ros.core.engine import failing_robots
 from swarm_ros.core.errors import ContractError, ParameterError
-from swarm_ros.core.replica import Replica
 from swarm_ros.core.run_result import summary_of
 from swarm_ros.core.state import RobotState, frontier_of
+from swarm_ros.core.swarm_view import SwarmView
 
 pytestmark = pytest.mark.unit
 
@@ -69,10 +69,10 @@ def test_the_same_seed_fails_the_same_robots_in_run_and_in_step(disc):
     assert not np.array_equal(failing_robots(p), other)
 
 
-def test_replica_follows_removals_and_rejects_a_removed_robot_coming_back(disc):
+def test_view_follows_removals_and_rejects_a_removed_robot_coming_back(disc):
     p = RunParams(robots=disc.patches, seed=5, fail_fraction=0.3, fail_tick=50)
     sim = Simulation(disc, p)
-    rep = Replica(disc, p.robots)
+    rep = SwarmView(disc, p.robots)
     s = sim.state
     rep.update(0, np.arange(p.robots), s.state, s.x, s.y, s.heading)
     while not sim.done:

@@ -343,18 +343,18 @@ def test_batches_that_never_cover_the_robots_fail_the_run_at_the_start_timeout()
 
 
 class RegionCheck:
-    """Follows each batch's snapshot and region rows into a regional replica, as a batch process does, and
+    """Follows each batch's snapshot and region rows into a regional view, as a batch process does, and
     checks after every tick that it holds exactly the world's moving robots in its area, and every stationary
     robot, with the world's poses and the world's frontier."""
 
     def __init__(self, run: LockstepRun) -> None:
         from swarm_ros.core.regions import area, halo
-        from swarm_ros.core.replica import Replica
+        from swarm_ros.core.swarm_view import SwarmView
 
         self.run, self.seen = run, 0
         world = run.shape.world
         self.areas = [area(s, halo(run.params.vision_radius), world.size) for s in run.strips]
-        self.replicas = [Replica(run.shape, ROBOTS, a) for a in self.areas]
+        self.views = [SwarmView(run.shape, ROBOTS, a) for a in self.areas]
         self.handovers = 0
         self.owner = None
 
@@ -362,7 +362,7 @@ class RegionCheck:
         from swarm_ros.protocol.checks import apply_robots
 
         for tick, k, rows in self.run.port.regions[self.seen :]:
-            rep = self.replicas[k]
+            rep = self.views[k]
             if rep.tick < 0:
                 from swarm_ros.protocol.rows import pose_of
 
@@ -382,7 +382,7 @@ class RegionCheck:
             self.handovers += int(((was >= 0) & (was != owner)).sum())
         self.owner = np.full(s.robots, -1)
         self.owner[moving] = owner
-        for rep, (first, last) in zip(self.replicas, self.areas):
+        for rep, (first, last) in zip(self.views, self.areas):
             assert rep.tick == s.tick
             inside = moving[(cols >= first) & (cols <= last)]
             assert np.array_equal(rep.moving_ids(), inside)
@@ -406,7 +406,7 @@ class RegionCheck:
 )
 def test_any_partition_into_strips_gives_the_engines_run_and_each_batch_sees_exactly_its_region(batches, cuts, shape):
     """Equality for several partitions (balanced, lopsided, a one-column strip, 3D), and the routing: each
-    batch's regional replica, fed only its snapshot and region rows, equals the world where it must."""
+    batch's regional view, fed only its snapshot and region rows, equals the world where it must."""
     r = LockstepRun(batches=batches, cuts=cuts, shape=shape)
     check = RegionCheck(r)
     r.start()

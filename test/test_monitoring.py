@@ -158,13 +158,13 @@ def test_rows_again_and_rows_that_cannot_be_the_next_change_nothing():
     core.robots(decode_cloud(messages[1][0]))  # again: a late-matched reader's history
     with pytest.raises(Rejected, match="inconsistent rows"):
         core.robots(decode_cloud(messages[4][0]))  # tick 4 after tick 2
-    bad = state_rows(np.arange(3), core.replica.state)
+    bad = state_rows(np.arange(3), core.view.state)
     bad["id"][0] = params.robots  # out of range
     with pytest.raises(Rejected):
         core.robots(decode_cloud(encode_cloud(bad, 3)))
-    assert [tuple(r) for r in core.rows] == before and len(port.counted) == 3 and core.replica.tick == 2
+    assert [tuple(r) for r in core.rows] == before and len(port.counted) == 3 and core.view.tick == 2
     core.robots(decode_cloud(messages[3][0]))  # the true next rows are still taken
-    assert core.replica.tick == 3
+    assert core.view.tick == 3
     core.decisions(decode_cloud(messages[3][1]))
     core.decisions(decode_cloud(messages[3][1]))  # again: a restarted world's: counted and bagged once
     assert port.decisions == [1, 2, 3]
@@ -192,7 +192,7 @@ def test_world_shards_parts_are_joined_in_any_order_and_a_robot_in_two_parts_fai
     core.robots(decode_cloud(encode_cloud(rows[rows["id"] % 2 == 0], 1)), "world_shard_0")
     with pytest.raises(RunFailed, match="hold a robot twice"):
         core.robots(decode_cloud(encode_cloud(rows, 1)), "world_shard_1")  # every row of the tick: evens twice
-    assert core.replica.tick == 0
+    assert core.view.tick == 0
 
 
 def sampled_messages(params: RunParams, every: int) -> tuple[Simulation, list[tuple[np.ndarray, bytes | None]]]:
@@ -215,7 +215,7 @@ def sampled_messages(params: RunParams, every: int) -> tuple[Simulation, list[tu
 def test_with_record_every_the_core_counts_each_tick_from_the_tallies_and_checks_the_rows(tallies_first):
     """``record_every`` 4: a tally every tick, every robot's row every 4th tick and at the last, in either order.
     The count is the engine's tick for tick; the occupancy goes to the port, and the robots to the recording,
-    at the ticks whose rows came; the replica ends as the engine's state."""
+    at the ticks whose rows came; the view ends as the engine's state."""
     params = RunParams(robots=60, seed=7, max_ticks=300, fail_fraction=0.2, fail_tick=21)
     sim, messages = sampled_messages(params, 4)
     recorder = Recorder()
@@ -233,7 +233,7 @@ def test_with_record_every_the_core_counts_each_tick_from_the_tallies_and_checks
     recorded = [t % 4 == 0 or t == sim.tick for t in range(sim.tick + 1)]
     assert seen == recorded and len(recorder.forced) == sum(recorded) and recorder.forced[-1]
     for name in ("state", "x", "y", "heading", "occupancy"):
-        assert np.array_equal(getattr(core.replica.state, name), getattr(sim.state, name)), name
+        assert np.array_equal(getattr(core.view.state, name), getattr(sim.state, name)), name
 
 
 @pytest.mark.parametrize(
@@ -317,7 +317,7 @@ def test_with_record_every_a_world_that_disagrees_with_itself_or_the_monitor_fai
     core.tally(messages[2][0], "world")
     with pytest.raises(RunFailed, match="move a robot that was stationary"):
         core.robots(decode_cloud(encode_cloud(rows, 2)), "world")
-    assert core.last == 1 and core.replica.tick == 0
+    assert core.last == 1 and core.view.tick == 0
 
 
 def test_with_record_every_a_run_stopped_between_recorded_ticks_is_recorded_up_to_the_last_of_them():
@@ -328,7 +328,7 @@ def test_with_record_every_a_run_stopped_between_recorded_ticks_is_recorded_up_t
         if rows is not None:
             core.robots(decode_cloud(rows), "world")
         core.tally(tally, "world")
-    assert core.last == 6 and core.replica.tick == 4 and core.losses == [(5, sim.losses[0][1])]
+    assert core.last == 6 and core.view.tick == 4 and core.losses == [(5, sim.losses[0][1])]
     record = core.record(0, Outcome.INTERRUPTED)
     assert np.array_equal(record.history, sim.history[:5]) and record.state.tick == 4
     assert record.summary["convergence_tick"] == 4 and record.summary["lost_robots"] == 0

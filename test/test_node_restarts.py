@@ -101,7 +101,7 @@ def test_a_node_killed_mid_run_goes_on_and_the_run_is_identical_and_whole(refere
     """The world from its checkpoint, the monitor from its bag; the recording shows the restart at its tick.
     With ``--record-every 6`` the world sends its tally every tick and every robot's row every 6th: a new world
     sends again, from its checkpoint, the tallies and rows the monitor has not confirmed; a new monitor counts
-    the ticks of its bag from their tallies and its replica from their rows. (Every other kill here runs with
+    the ticks of its bag from their tallies and its view from their rows. (Every other kill here runs with
     the robots every tick.)"""
     out = tmp_path / "run"
     launcher = _launch(out, "--record-every", "6")

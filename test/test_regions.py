@@ -1,7 +1,7 @@
 """Strips, halos and routing (swarm_ros.core.regions, swarm_ros.protocol.hosting): no ROS needed.
 
 The lockstep tests (test_lockstep.py) run whole swarms through several partitions and check each
-batch's regional replica against the world tick by tick; these check the parts on their own.
+batch's regional view against the world tick by tick; these check the parts on their own.
 """
 
 from __future__ import annotations

@@ -373,7 +373,7 @@ def test_two_runs_started_together_do_not_see_each_other(references, tmp_path):
 
 
 def test_ros_graph_equals_in_process_engine_with_failing_robots(references, tmp_path):
-    """--fail-robots: the world removes the same robots at the same tick, the replicas free their patches."""
+    """--fail-robots: the world removes the same robots at the same tick, the views free their patches."""
     flags, ref = references["ring-fail"]
     out = tmp_path / "run"
     done = swarm_ros("run", *flags, "--processes", "3", "--out", str(out), "--quiet")

@@ -275,7 +275,7 @@ def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
     bad = change(rows.copy())
     with pytest.raises(Rejected) as caught:
         ls.decisions(0, run.tick + 1, bad)
-    assert str(caught.value).startswith(kind) and not ls.parts
+    assert str(caught.value).startswith(kind) and not ls.decided
     with pytest.raises(Rejected, match="stale tick"):
         ls.decisions(0, run.tick + 2, rows)
     assert ls.decisions(0, run.tick + 1, rows) and run.tick == 601

@@ -50,15 +50,15 @@ class _Batches:
         from sensor_msgs.msg import PointCloud2
         from std_msgs.msg import Empty
 
-        from swarm_ros.core.replica import Replica
         from swarm_ros.core.rules import Decider
+        from swarm_ros.core.swarm_view import SwarmView
         from swarm_ros.protocol.checks import Rejections
         from swarm_ros.protocol.tag import Sealer
         from swarm_ros.ros import graph as msgs
         from swarm_ros.ros.auth import Gate, SignedPublisher, Signer
 
         self.msgs, self.node, self.params, self.shape = msgs, node, params, shape
-        self.replica, self.decider = Replica(shape, params.robots), Decider(shape, params)
+        self.view, self.decider = SwarmView(shape, params.robots), Decider(shape, params)
         self.radius = shape.world.radius
         self.names = ["robot_batch_0", "robot_batch_1"]
         self.strips = [batch_strip(shape, params, k, 2) for k in range(2)]
@@ -111,11 +111,11 @@ class _Batches:
     def _on_robots(self, msg) -> None:
         from swarm_ros.protocol.checks import apply_robots, checked_robots
 
-        try:  # the whole swarm's rows from tick 0 (these batches keep a whole replica, not regional ones)
-            tick, rows = checked_robots(self.replica, msg, self.radius)
-            if tick != self.replica.tick + 1:
+        try:  # the whole swarm's rows from tick 0 (these batches keep a whole view, not regional ones)
+            tick, rows = checked_robots(self.view, msg, self.radius)
+            if tick != self.view.tick + 1:
                 return
-            apply_robots(self.replica, tick, rows)
+            apply_robots(self.view, tick, rows)
         except Rejected:
             return  # the garbage this test sends on /swarm/robots itself
         if tick == 5:  # an outsider's copy of the world's rows, restamped as the next tick's, before them
@@ -132,9 +132,9 @@ class _Batches:
         self.sent[f"world: {kind}"] = self.sent.get(f"world: {kind}", 0) + 1
 
     def _decide(self) -> None:
-        s = self.replica.state
-        moving = self.replica.moving_ids()
-        tick = self.replica.tick + 1
+        s = self.view.state
+        moving = self.view.moving_ids()
+        tick = self.view.tick + 1
         honest = []
         cols = columns(s.x[moving], self.radius)
         for k in range(2):
@@ -183,7 +183,7 @@ class _Batches:
             rows["x"][0] += 5.0
             self._send("move of 5", 0, self._cloud(rows, tick))
         elif tick == 10:  # a claim on a shape patch off the frontier
-            s = self.replica.state
+            s = self.view.state
             off = int(np.flatnonzero(self.shape.mask.ravel() & ~s.frontier & (s.occupancy < 0))[0])
             rows = mine[:1].copy()
             rows["claim"] = off
@@ -201,7 +201,7 @@ class _Batches:
             self.metrics_pub.publish(self.msgs.metrics_message([10**6] + [0] * 6))
             self.sent["world: metrics"] = 1
         elif tick >= 16 and not self.localized_sent:  # a localized robot of the batch, once there is one
-            s = self.replica.state
+            s = self.view.state
             localized = np.flatnonzero(s.state == RobotState.LOCALIZED)
             if localized.size:
                 rows = np.zeros(1, dtype=DECISION_ROW)
@@ -282,7 +282,7 @@ def test_bad_messages_are_dropped_and_counted_and_the_run_equals_simulate(tmp_pa
     assert {n: p.returncode for n, p in procs.items()} == {"world": 0, "monitor": 0}, "\n".join(
         f"--- {n}:\n{text[-3000:]}" for n, text in logs.items()
     )
-    assert batches.replica.tick > 15, "the run ended before every kind of bad message was sent"
+    assert batches.view.tick > 15, "the run ended before every kind of bad message was sent"
     for name in ("metrics.csv", "final_state.csv"):
         assert (ref / name).read_bytes() == (out / name).read_bytes(), name
     summary = json.loads((out / "summary.json").read_text())

@@ -26,7 +26,7 @@ DISC = disc_shape(WORLD, 7.0)
 
 
 class Bus:
-    """S shards, their robots (deciding from the shard's replica, as a batch does) and a transport that delivers
+    """S shards, their robots (deciding from the shard's view, as a batch does) and a transport that delivers
     what is in flight in a random order, sometimes twice; ``restart(k)`` replaces shard k's process."""
 
     def __init__(self, params: RunParams, cuts, seed: int) -> None:
@@ -52,7 +52,7 @@ class Bus:
             tick = sh.tick + 1
             if tick not in self.decided[k]:
                 self.decided[k][tick] = Decider(DISC, self.params).decide(
-                    sh.state, sh.own_moving(), tick, sh.replica.moving_ids()
+                    sh.state, sh.own_moving(), tick, sh.view.moving_ids()
                 )
             self.flight.append((k, "decisions", self.decided[k][tick]))
 

@@ -19,11 +19,11 @@ from swarm_ros.core.engine import Simulation
 from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import area, batch_cuts, columns, halo, shard_batches, shard_cuts, strip
-from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.shards import ShardPlan, WorldShard
 from swarm_ros.core.state import RobotState
+from swarm_ros.core.swarm_view import SwarmView
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.checks import Rejections, apply_robots
 from swarm_ros.protocol.lockstep import Lockstep, first_of
@@ -37,36 +37,36 @@ pytestmark = pytest.mark.unit
 
 
 class Batch:
-    """A robot batch as its process behaves: a regional replica fed by its shard, decisions from it."""
+    """A robot batch as its process behaves: a regional view fed by its shard, decisions from it."""
 
     def __init__(self, graph: ShardedGraph, k: int) -> None:
         self.g, self.k = graph, k
         self.strip = graph.strips[k]
         width = 2 * graph.shape.world.radius + 1
         self.area = area(self.strip, halo(graph.params.vision_radius), width)
-        self.replica = Replica(graph.shape, graph.params.robots, area=self.area)
+        self.view = SwarmView(graph.shape, graph.params.robots, area=self.area)
         self.decider = Decider(graph.shape, graph.params)
         self.sent: deque = deque(maxlen=256)  # its decisions topic's history (TRANSIENT_LOCAL, depth 256)
 
     def snapshot(self, tick: int, rows: np.ndarray) -> None:
-        if tick <= self.replica.tick:
+        if tick <= self.view.tick:
             return
-        self.replica.load(tick, rows["id"], rows["state"], **pose_of(rows))
+        self.view.load(tick, rows["id"], rows["state"], **pose_of(rows))
         self.decide()
 
     def region(self, tick: int, rows: np.ndarray) -> None:
-        if tick != self.replica.tick + 1:
+        if tick != self.view.tick + 1:
             return  # before its snapshot, or again
-        apply_robots(self.replica, tick, rows)
+        apply_robots(self.view, tick, rows)
         self.decide()
 
     def decide(self) -> None:
-        moving = self.replica.moving_ids()
-        cols = columns(self.replica.state.x[moving], self.g.shape.world.radius)
+        moving = self.view.moving_ids()
+        cols = columns(self.view.state.x[moving], self.g.shape.world.radius)
         own = moving[(cols >= self.strip[0]) & (cols <= self.strip[1])]
         if own.size:
-            tick = self.replica.tick + 1
-            rows = decision_rows(self.decider.decide(self.replica.state, own, tick, moving))
+            tick = self.view.tick + 1
+            rows = decision_rows(self.decider.decide(self.view.state, own, tick, moving))
             self.sent.append((tick, rows))
             self.publish(tick, rows)
 
@@ -176,7 +176,7 @@ class ShardedGraph:
         ref.run()
         self.end = ref.tick  # the last tick: its rows go out whatever record_every says
         self.monitor = MonitorCore(shape, params, radius, self, None, self.log, shards=shards, every=every)
-        self.replica = self.monitor.replica  # the monitor's
+        self.view = self.monitor.view  # the monitor's
         self.restarts = 0
 
     @property
@@ -289,8 +289,8 @@ def test_a_run_over_shards_is_the_engines_run(robots, batches, shards, seed, tmp
     for ls in g.shards:
         assert ls.sim.history == [tuple(int(v) for v in row) for row in ref.history]
         assert ls.sim.outcome == ref.outcome
-    assert np.array_equal(g.replica.state.state, ref.state.state)
-    assert np.array_equal(g.replica.state.x, ref.state.x) and np.array_equal(g.replica.state.y, ref.state.y)
+    assert np.array_equal(g.view.state.state, ref.state.state)
+    assert np.array_equal(g.view.state.x, ref.state.x) and np.array_equal(g.view.state.y, ref.state.y)
 
 
 @pytest.mark.parametrize(("robots", "batches", "shards", "seed", "every"), [(200, 4, 2, 2, 3), (300, 6, 3, 4, 7)])
@@ -299,7 +299,7 @@ def test_shards_that_send_the_robots_every_kth_tick_are_counted_from_their_talli
 ):
     """``record_every`` > 1: shard 0 sends the monitor the run's tally every tick (the others none), each shard every
     robot in its strips every k-th tick and at the last; the monitor counts each tick from the tally, checks the
-    rows against it, and its count is the engine's tick for tick, its replica the engine's final state."""
+    rows against it, and its count is the engine's tick for tick, its view the engine's final state."""
     shape = Shape.load("star")
     params = RunParams(robots=robots, seed=seed, max_ticks=299, fail_fraction=0.05, fail_tick=10)
     g = ShardedGraph(shape, params, batches, shards, seed, tmp_path, every=every)
@@ -308,9 +308,9 @@ def test_shards_that_send_the_robots_every_kth_tick_are_counted_from_their_talli
     ref = Simulation(shape, params)
     ref.run()
     assert g.history == [tuple(int(v) for v in row) for row in ref.history]
-    assert g.replica.tick == ref.tick and ref.tick % every != 0  # the last tick, whatever k says
-    assert np.array_equal(g.replica.state.state, ref.state.state)
-    assert np.array_equal(g.replica.state.x, ref.state.x) and np.array_equal(g.replica.state.y, ref.state.y)
+    assert g.view.tick == ref.tick and ref.tick % every != 0  # the last tick, whatever k says
+    assert np.array_equal(g.view.state.state, ref.state.state)
+    assert np.array_equal(g.view.state.x, ref.state.x) and np.array_equal(g.view.state.y, ref.state.y)
     rows_at = sorted({t for ticks in g.published.values() for t, _ in ticks})
     assert rows_at == list(range(ref.tick + 1))  # a tally of every tick
 
@@ -342,7 +342,7 @@ def test_shards_killed_at_any_moment_go_on_from_their_saves(seed, tmp_path):
     ref.run()
     assert g.restarts >= 2
     assert g.history == [tuple(int(v) for v in row) for row in ref.history]
-    assert np.array_equal(g.replica.state.state, ref.state.state)
+    assert np.array_equal(g.view.state.state, ref.state.state)
     restarts = sum(len([r for r in ls.restarts if r[1].startswith("world_shard")]) for ls in g.shards)
     assert restarts >= 1
 
@@ -366,7 +366,7 @@ def test_a_batch_lost_for_good_while_its_shards_tick_is_with_the_peers_is_remove
     assert ls.inflight is not None and [d for d, _ in ls.deferred] == [k] and not ls.down_since
     g.run()
     assert ls.lost == [batch_name(0)] and len(ls.sim.losses) == 1
-    removed = int((g.replica.state.state == RobotState.REMOVED).sum())
+    removed = int((g.view.state.state == RobotState.REMOVED).sum())
     assert removed == ls.sim.losses[0][1] > 0 and g.history[-1][1] + g.history[-1][4] == params.robots - removed
 
 

@@ -14,11 +14,11 @@ from runs import disc_shape
 from swarm_ros.core import RunParams, Shape, Simulation, World
 from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.regions import columns
-from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.sharded_run import ShardedWorld, run_sharded
 from swarm_ros.core.shards import ShardPlan, WorldShard
 from swarm_ros.core.state import IS_MOVING, RobotState
+from swarm_ros.core.swarm_view import UNKNOWN
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.shard_exchange import ShardExchange
 
@@ -127,7 +127,7 @@ def test_a_3d_run_and_the_star():
 
 
 def test_a_shard_hears_only_of_its_area():
-    """Every tick: each shard's replica equals the world's in its area (every stationary robot, the moving
+    """Every tick: each shard's view equals the world's in its area (every stationary robot, the moving
     robots of its strips and halo) and its occupancy is the world's; the rows it received are of robots in its
     area before or after the tick, or that became stationary; the claims it received, of robots in its halo."""
     params = RunParams(robots=DISC.patches + 40, seed=8, rules="literal", vision_radius=2.0)
@@ -139,7 +139,7 @@ def test_a_shard_hears_only_of_its_area():
         world.step()
         s = sim.state
         for sh, parts, claims in zip(world.shards, world.received, world.claims):
-            first, last = sh.replica.area
+            first, last = sh.view.area
             known = sh.state.state != UNKNOWN
             cols = columns(s.x, WORLD.radius)
             # robots separated at the end were moving: a shard separates those it follows, and tells no one
@@ -164,17 +164,16 @@ def test_a_shard_refuses_decisions_that_are_not_its_own():
     world = ShardedWorld(DISC, RunParams(robots=DISC.patches + 10, seed=2), np.array([0]))
     sh, other = world.shards
     with pytest.raises(ContractError, match="for tick 2"):
-        sh.apply(world.deciders[0].decide(sh.state, sh.own_moving(), 2, sh.replica.moving_ids()), [])
+        sh.apply(world.deciders[0].decide(sh.state, sh.own_moving(), 2, sh.view.moving_ids()), [])
     with pytest.raises(ContractError, match="exactly once"):
-        sh.apply(world.deciders[1].decide(other.state, other.own_moving(), 1, other.replica.moving_ids()), [])
+        sh.apply(world.deciders[1].decide(other.state, other.own_moving(), 1, other.view.moving_ids()), [])
 
 
 def _tick_parts(world: ShardedWorld) -> tuple[list, list]:
     """Decide and apply the next tick in every shard of ``world``; (each shard's part, what each receives)."""
     tick, count = world.shards[0].tick + 1, range(world.plan.shards)
     decisions = [
-        d.decide(sh.state, sh.own_moving(), tick, sh.replica.moving_ids())
-        for sh, d in zip(world.shards, world.deciders)
+        d.decide(sh.state, sh.own_moving(), tick, sh.view.moving_ids()) for sh, d in zip(world.shards, world.deciders)
     ]
     claims = [sh.claims(d) for sh, d in zip(world.shards, decisions)]
     parts = [sh.apply(decisions[k], [claims[i][k] for i in count if i != k]) for k, sh in enumerate(world.shards)]
@@ -189,7 +188,7 @@ def test_forged_claims_are_refused():
     met: set[str] = set()
     while world.outcome is None:
         tick, sh, other = world.shards[0].tick + 1, world.shards[1], world.shards[0]
-        d = world.deciders[0].decide(other.state, other.own_moving(), tick, other.replica.moving_ids())
+        d = world.deciders[0].decide(other.state, other.own_moving(), tick, other.view.moving_ids())
         theirs = other.claims(d)[1]  # shard 0's claims on shard 1's window
         sh.check_claims(0, theirs)  # the genuine ones pass
         if theirs.ids.size:

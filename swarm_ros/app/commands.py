@@ -130,7 +130,7 @@ def _prepare(
     args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
     check_out_dir(out, args.overwrite)
     if not graph:  # numba and the engine loaded first: from the claim to the driver's StopFlag is then a moment
-        algorithm_of(params.algorithm).part("engine")  # (a SIGTERM there ends the command with nothing written)
+        algorithm_of(params.algorithm).hook("engine")  # (a SIGTERM there ends the command with nothing written)
     claim_out_dir(out)  # a second command for the same directory is refused now, not after its run
     if graph:  # what a SIGKILLed 'run' of the same directory left (no live command holds it: claimed just now)
         from swarm_ros.app.processes import recover_killed
@@ -219,7 +219,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise
     if not args.quiet:
         summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-        algorithm_of(params.algorithm).part("print_summary")(summary, out, shape.dims)
+        algorithm_of(params.algorithm).hook("print_summary")(summary, out, shape.dims)
         print(
             f"{'ROS graph':<17} domain {launch.domain}, {plural(args.processes, 'robot-batch process')}; "
             f"logs in {out / 'logs'}"

@@ -50,9 +50,9 @@ def run_inprocess(spec: RunSpec) -> dict:
     start = time.perf_counter()
     params = spec.params()
     algorithm = algorithm_of(params.algorithm)
-    run = algorithm.part("engine")(_shape(spec), params)
+    run = algorithm.hook("engine")(_shape(spec), params)
     run.run()
-    summary = algorithm.part("summary")(run, wall_seconds=time.perf_counter() - start)
+    summary = algorithm.hook("summary")(run, wall_seconds=time.perf_counter() - start)
     return _with_curve(spec, run, result_row(spec, summary))
 
 

@@ -86,7 +86,7 @@ def preload(shape, params, roles: Sequence[str] = ()) -> None:
     (LTTng's fork hooks found, where rclpy brings LTTng)."""
     from swarm_ros.core.algorithm import algorithm_of, node_of
 
-    algorithm_of(params.algorithm).part("warm_up")(shape, params)
+    algorithm_of(params.algorithm).hook("warm_up")(shape, params)
     if not roles or not can_fork() or "rclpy" in sys.modules:
         return
     try:

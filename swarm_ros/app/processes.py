@@ -158,7 +158,7 @@ def check_graph(
             f"--world-shards {world_shards} is more than the {processes} robot-batch processes ({flags[0]}): "
             f"each world shard owns the strips of one batch at least"
         )
-    own_checks = algorithm_of(params.algorithm).part("check_graph")
+    own_checks = algorithm_of(params.algorithm).hook("check_graph")
     if own_checks is not None:
         own_checks(shape, params, processes, region_cuts, flags[0])
     if enclaves is not None and not ENCLAVE_PREFIX.fullmatch(enclaves):

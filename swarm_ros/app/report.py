@@ -89,7 +89,7 @@ def _curve(row: dict, out: Path) -> np.ndarray:
         return stored
     values = {p.name: row[p.name] for p in RUN_PARAMETERS if p.name in row and p.name != "shape"}
     shape, params = Settings(shape=row["shape_file"], **values).resolve()  # checked as any run is (check_run)
-    sim = algorithm_of(params.algorithm).part("engine")(shape, params)
+    sim = algorithm_of(params.algorithm).hook("engine")(shape, params)
     sim.run()
     outcome = sim.outcome.value if sim.outcome is not None else None
     if sim.tick != row["convergence_tick"] or outcome != row["outcome"]:

@@ -269,7 +269,7 @@ def stored_shape_file(shape_file: str) -> str:
 def result_row(spec, summary: dict) -> dict:
     """A results.csv row from a run's coordinates (a :class:`~swarm_ros.app.experiment_file.RunSpec`) and its
     summary.json record."""
-    as_study_row = algorithm_of(summary.get("algorithm", DARR_NIAZI)).part("as_study_row")
+    as_study_row = algorithm_of(summary.get("algorithm", DARR_NIAZI)).hook("as_study_row")
     if as_study_row is not None:  # an algorithm whose summary has columns of its own
         summary = as_study_row(summary)
     # the study's model localizes robots exactly on shape patches: none outside (nor in a hole), no error

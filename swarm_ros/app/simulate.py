@@ -1,6 +1,6 @@
 """``swarm-ros simulate``: one driver for every algorithm. It runs the algorithm's in-process engine to its end, or
 to Ctrl-C or SIGTERM, with a progress bar, ``--check``'s per-tick checks and a recording, and writes the run
-directory; the algorithm supplies the engine and its parts (core.algorithm): ``checked_step``, ``recording``,
+directory; the algorithm supplies the engine and its hooks (core.algorithm): ``checked_step``, ``recording``,
 ``summary``, ``write_run`` and ``print_summary``.
 
 An engine is what core.algorithm's ``engine`` says: ``run(max_ticks)``, ``step()``, ``tick``, ``done`` and
@@ -37,8 +37,8 @@ def simulate(
     rrd = partial_recording(out)
     # Ctrl-C or SIGTERM, from here on: the run so far (tick 0 at least) becomes an 'interrupted' run directory
     with StopFlag() as stop:
-        run = algorithm.part("engine")(shape, params)
-        recorder = algorithm.part("recording")(rrd, run, options) if options.active else None
+        run = algorithm.hook("engine")(shape, params)
+        recorder = algorithm.hook("recording")(rrd, run, options) if options.active else None
         try:
             _run_with_progress(run, algorithm, args.check, args.quiet, recorder, stop)
         except BaseException:
@@ -47,17 +47,17 @@ def simulate(
             raise
         if stop.signum and not run.done:
             stopped = Outcome.INTERRUPTED
-    summary = algorithm.part("summary")(run, wall_seconds=time.perf_counter() - start, stopped=stopped)
+    summary = algorithm.hook("summary")(run, wall_seconds=time.perf_counter() - start, stopped=stopped)
     if recorder is not None:  # a recording that could not be written whole (a full disk) fails the command here
         recorder.finish(run, summary["outcome"])
     recorded = rrd if options.enabled else None
     every = recorder.every if recorder is not None and recorded is not None else None
-    out = algorithm.part("write_run")(out, run, summary, overwrite=args.overwrite, recording=recorded, every=every)
+    out = algorithm.hook("write_run")(out, run, summary, overwrite=args.overwrite, recording=recorded, every=every)
     if stopped is not None:
         print(f"{prog}: interrupted at tick {run.tick}; the run so far is in {out}", file=sys.stderr)
         return EXIT_INTERRUPTED
     if not args.quiet:
-        algorithm.part("print_summary")(summary, out, shape.dims)
+        algorithm.hook("print_summary")(summary, out, shape.dims)
     return 0
 
 
@@ -68,7 +68,7 @@ def _run_with_progress(
     logged to ``recorder`` as it falls due."""
     from tqdm import tqdm
 
-    checked_step = algorithm.part("checked_step") if check else None
+    checked_step = algorithm.hook("checked_step") if check else None
     done, total, words = run.progress()
     with tqdm(
         total=total,

@@ -4,8 +4,8 @@ report asks "which algorithm, and what is its own here?". The ``algorithm`` run 
 An entry is data: numbers the shared code needs (the tick limit, memory a robot, the shape dimensions it forms, the
 loss policies its graph supports) and, for what is code, the dotted name of the function or class that supplies it
 (``"package.module:attribute"``), imported when first asked for. The shared code (the drivers, the nodes, the launch
-file, experiments, the report) calls these parts and never tests an algorithm's name. Each part names the layer it
-lives in (:data:`PART_LAYERS`): a module may ask only for parts of its own layer or a lower one (test_algorithm).
+file, experiments, the report) calls these hooks and never tests an algorithm's name. Each hook names the layer it
+lives in (:data:`HOOK_LAYERS`): a module may ask only for hooks of its own layer or a lower one (test_algorithm).
 
 A third algorithm is a module that calls :func:`register` when imported, named in the environment variable
 ``SWARM_ROS_ALGORITHMS`` (modules, comma-separated; the graph's node processes inherit it): it is imported when
@@ -23,8 +23,8 @@ from .errors import ContractError, ParameterError
 
 DARR_NIAZI, RUBENSTEIN = "darr-niazi", "rubenstein"
 
-#: The layer of each code part of an entry (docs/architecture.md, test_layers): who may ask for it.
-PART_LAYERS = {
+#: The layer of each hook of an entry (docs/architecture.md, test_layers): who may ask for it.
+HOOK_LAYERS = {
     "engine": "core",
     "summary": "core",
     "check_params": "core",
@@ -47,7 +47,7 @@ PART_LAYERS = {
 
 @dataclass(frozen=True)
 class Algorithm:
-    """One shape-formation algorithm: its numbers, and the dotted names of its code parts (see the module)."""
+    """One shape-formation algorithm: its numbers, and the dotted names of its hooks (see the module)."""
 
     name: str
     #: tick limit when ``max_ticks`` is left at 0
@@ -75,7 +75,7 @@ class Algorithm:
     no_removal: str = ""
     #: why its graph refuses world shards ("" if it runs with them)
     no_world_shards: str = ""
-    # -- code parts: "module:attribute" (PART_LAYERS says each one's layer) --
+    # -- hooks: "module:attribute" (HOOK_LAYERS says each one's layer) --
     #: class ``(shape, params)``: the in-process engine (``run()``, ``step()``, ``tick``, ``done``, ``metrics``)
     engine: str = ""
     #: ``(run, wall_seconds, stopped=None) -> dict``: the summary.json record of an in-process run
@@ -114,10 +114,10 @@ class Algorithm:
     as_study_row: str = ""
     _loaded: dict = field(default_factory=dict, compare=False, repr=False)
 
-    def part(self, name: str) -> Any:
-        """The code part ``name``, imported on first use; ``None`` if this algorithm has none."""
-        if name not in PART_LAYERS:
-            raise ContractError(f"no code part {name!r}: one of {', '.join(PART_LAYERS)}")
+    def hook(self, name: str) -> Any:
+        """The hook ``name``, imported on first use; ``None`` if this algorithm has none."""
+        if name not in HOOK_LAYERS:
+            raise ContractError(f"no hook {name!r}: one of {', '.join(HOOK_LAYERS)}")
         where = getattr(self, name)
         if not where:
             return None
@@ -193,13 +193,13 @@ def node_of(name: str, role: str) -> Any:
     Raises:
         ParameterError: in one line, if the algorithm's graph has no node of that role.
     """
-    node = algorithm_of(name).part(f"{role}_node")
+    node = algorithm_of(name).hook(f"{role}_node")
     if node is None:
         raise ParameterError(f"the {role} node is not a node of the {name} algorithm's graph")
     return node
 
 
-#: What a command needs of an algorithm beyond its engine: its part, and what the refusal says is missing
+#: What a command needs of an algorithm beyond its engine: its hook, and what the refusal says is missing
 _NEEDS = {"graph": ("plan", "no ROS 2 graph yet (swarm-ros simulate runs it)"), "check": ("checked_step", "no --check")}
 
 
@@ -208,7 +208,7 @@ def check_can(name: str, need: str) -> None:
     launch file, an experiment over the graph) or ``"check"`` (``simulate --check``); ``""`` asks nothing.
 
     Raises:
-        ParameterError: the algorithm has no such part.
+        ParameterError: the algorithm has no such hook.
     """
     if need and not getattr(algorithm_of(name), _NEEDS[need][0]):
         raise ParameterError(f"the {name} algorithm has {_NEEDS[need][1]}")

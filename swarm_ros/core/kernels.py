@@ -150,7 +150,7 @@ def compile_kernels(algorithm: str | None = None) -> None:
     rubenstein, a few ticks of its run; with the default parameters (the kernels' types do not depend on them)."""
     drop_stale()
     for name in names() if algorithm is None else (algorithm,):
-        algorithm_of(name).part("compile")()
+        algorithm_of(name).hook("compile")()
         try:
             (_CACHE / _STAMP.format(name)).touch()
         except OSError:

@@ -375,7 +375,7 @@ class RunParams:
                 raise ParameterError(
                     f"{p.name} is a parameter of the {p.algorithm} algorithm, not of {self.algorithm}, got {value!r}"
                 )
-        own_checks = algorithm_of(self.algorithm).part("check_params")
+        own_checks = algorithm_of(self.algorithm).hook("check_params")
         if own_checks is not None:
             own_checks(self)
         if self.robots == 0:
@@ -394,7 +394,7 @@ class RunParams:
     def check_shape(self, shape: Shape) -> None:
         """Refuse a shape the algorithm cannot form (rubenstein: 3D; the algorithm's own check), or a vision radius
         beyond the world."""
-        algorithm_of(self.algorithm).part("check_shape")(self, shape)
+        algorithm_of(self.algorithm).hook("check_shape")(self, shape)
 
     def check_vision(self, world_radius: int) -> None:
         """Refuse a vision radius beyond the world's radius: a robot would see across the whole world.

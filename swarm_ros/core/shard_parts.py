@@ -11,8 +11,8 @@ import numpy as np
 
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.regions import columns
-from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.state import IS_MOVING, RobotState, has_repeats
+from swarm_ros.core.swarm_view import UNKNOWN
 
 if TYPE_CHECKING:
     from swarm_ros.core.params import RunParams

@@ -11,11 +11,11 @@ import numpy as np
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import columns
-from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.rules import Decider, Decisions
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.shards import Part, ShardPlan, WorldShard
 from swarm_ros.core.state import SwarmState
+from swarm_ros.core.swarm_view import UNKNOWN
 
 
 @dataclass
@@ -46,7 +46,7 @@ class ShardedRun:
 
 class ShardedWorld:
     """S world shards and their robots in one process, exchanging only the messages of the module's docstring;
-    each shard's robots decide from its regional replica, as a robot batch does. Counts each shard's seconds
+    each shard's robots decide from its regional view, as a robot batch does. Counts each shard's seconds
     and what it received (:class:`ShardedRun`)."""
 
     def __init__(
@@ -74,7 +74,7 @@ class ShardedWorld:
         decisions, claims = [], []
         for k, sh in enumerate(shards):
             t0 = clock()
-            decisions.append(self.deciders[k].decide(sh.state, sh.own_moving(), tick, sh.replica.moving_ids()))
+            decisions.append(self.deciders[k].decide(sh.state, sh.own_moving(), tick, sh.view.moving_ids()))
             t1 = clock()
             claims.append(sh.claims(decisions[k]))
             self.decide_seconds[k] += t1 - t0

@@ -3,7 +3,7 @@
 The distributed engine's world checks every decision and applies every tick for the whole swarm, so its
 work per tick grows with the swarm, whatever the number of robot batches. A :class:`WorldShard` does that
 work for the robots of its own strips only (:class:`ShardPlan`: contiguous columns, like a batch's strip),
-on a regional :class:`~swarm_ros.core.replica.Replica` of its area (its strips and a halo each side, every
+on a regional :class:`~swarm_ros.core.swarm_view.SwarmView` of its area (its strips and a halo each side, every
 stationary robot). A tick goes in two exchanges between shards, each message bounded by what lies near a
 shard's borders:
 
@@ -43,11 +43,11 @@ from swarm_ros.core.legality import reach
 from swarm_ros.core.metrics import END_EXTRAS, METRIC_COLUMNS, OUTCOME_OF_CODE, Outcome, end_code
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import area, batch_cuts, columns, halo, shard_batches, shard_cuts, strip
-from swarm_ros.core.replica import UNKNOWN, Replica
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.shard_parts import COUNTS, Part, check_claims, check_parts
 from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState, initial_state
+from swarm_ros.core.swarm_view import UNKNOWN, SwarmView
 from swarm_ros.core.tick_kernel import end_tick
 
 _EMPTY = np.empty(0)
@@ -126,7 +126,7 @@ class WorldShard:
     """Shard ``index`` of ``plan``: the world's checks of its own robots and its part of every tick.
 
     Attributes:
-        replica: its area's state (every stationary robot, the moving robots of its area).
+        view: its area's state (every stationary robot, the moving robots of its area).
         history: the metrics of every tick so far (every shard holds the same).
         outcome: how the run ended, or None.
     """
@@ -137,10 +137,10 @@ class WorldShard:
         others, claim_reach = range(plan.shards), reach(params, shape.world.dims)
         self.claims_to = [j for j in others if plan.reaches(index, j, claim_reach)]  #: the shards it may claim in
         self.claims_from = [i for i in others if plan.reaches(i, index, claim_reach)]  #: those that may claim in it
-        self.replica = Replica(shape, params.robots, area=plan.areas[index])
+        self.view = SwarmView(shape, params.robots, area=plan.areas[index])
         s0 = initial_state(shape, params.robots, params.seed)
         ids = np.arange(params.robots)
-        self.replica.load(0, ids, s0.state, s0.x, s0.y, s0.heading, s0.z, s0.pitch)
+        self.view.load(0, ids, s0.state, s0.x, s0.y, s0.heading, s0.z, s0.pitch)
         world = shape.world
         self._solid = world.dims == 3
         self._mask, self._wall, self._nbrs = (
@@ -166,11 +166,11 @@ class WorldShard:
 
     @property
     def tick(self) -> int:
-        return self.replica.tick
+        return self.view.tick
 
     @property
     def state(self) -> SwarmState:
-        return self.replica.state
+        return self.view.state
 
     @property
     def removed(self) -> np.ndarray:
@@ -200,14 +200,14 @@ class WorldShard:
         )
 
     def restore(self, saved: ShardSaved) -> None:
-        """Go on from ``saved`` (:meth:`saved` of a process of this shard before this one): the replica is rebuilt
+        """Go on from ``saved`` (:meth:`saved` of a process of this shard before this one): the view is rebuilt
         from its rows, as a robot batch's is from a snapshot.
 
         Raises:
             ContractError: rows that do not make a consistent swarm.
         """
         v = saved
-        self.replica.load(v.tick, v.ids, v.state, v.x, v.y, v.heading, v.z, v.pitch)
+        self.view.load(v.tick, v.ids, v.state, v.x, v.y, v.heading, v.z, v.pitch)
         self.history = [tuple(int(c) for c in row) for row in v.history]
         self.losses, self.localized, self.alive = list(v.losses), v.localized, v.alive
         self._removed[:] = False
@@ -347,7 +347,7 @@ class WorldShard:
         self.received, self.gone_stationary = rows, _NONE
         if rows.ids.size:
             solid = (rows.z, rows.pitch) if self._solid else (None, None)
-            self.replica.merge(rows.ids, rows.state, rows.x, rows.y, rows.heading, *solid)
+            self.view.merge(rows.ids, rows.state, rows.x, rows.y, rows.heading, *solid)
         kept, come = self._mine(own.ids), self._mine(np.sort(rows.ids)) if rows.ids.size else _NONE  # disjoint, sorted
         self._own = np.insert(kept, np.searchsorted(kept, come), come) if come.size else kept
         total = own.counts + counts
@@ -417,7 +417,7 @@ class WorldShard:
         self.gone_stationary = np.union1d(self.gone_stationary, here[~IS_MOVING[s.state[here]]])
         solid = (s.z[here], s.pitch[here]) if s.z is not None and s.pitch is not None else (None, None)
         removed = np.full(here.size, RobotState.REMOVED, dtype=np.int8)
-        self.replica.merge(here, removed, s.x[here], s.y[here], s.heading[here], *solid)
+        self.view.merge(here, removed, s.x[here], s.y[here], s.heading[here], *solid)
 
     def _close(self, tick: int, inside: int, outside: int, walking: int) -> int:
         """The tick's end from the counts of every shard (:func:`~swarm_ros.core.tick_kernel.end_tick`, as the

@@ -18,10 +18,10 @@ from swarm_ros.core.engine import Simulation
 from swarm_ros.core.legality import illegal
 from swarm_ros.core.metrics import tick_metrics
 from swarm_ros.core.params import RunParams
-from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import STATE_COUNT
+from swarm_ros.core.swarm_view import SwarmView
 
 #: robots of the throw-away run: the kernels' types do not depend on the swarm's size, and placing 50,000
 #: robots took a monitor 1.4 s of its start-up
@@ -30,16 +30,16 @@ WARM_ROBOTS = 1000
 
 def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
     """Run ``ticks`` ticks of the graph's code path in this process and throw the result away:
-    a robot batch's decisions, the world's check of them and :meth:`Simulation.apply`, a replica's rows
+    a robot batch's decisions, the world's check of them and :meth:`Simulation.apply`, a view's rows
     and the monitor's metrics, with at most :data:`WARM_ROBOTS` of the run's robots. Nothing is shared with the
     caller's own objects."""
     params = replace(params, robots=min(params.robots, WARM_ROBOTS))
     sim = Simulation(shape, params)
     decider = Decider(shape, params)
-    replica = Replica(shape, params.robots)
+    view = SwarmView(shape, params.robots)
     s = sim.state
     everyone = np.arange(s.robots)
-    replica.load(0, everyone, s.state, s.x, s.y, s.heading, s.z, s.pitch)
+    view.load(0, everyone, s.state, s.x, s.y, s.heading, s.z, s.pitch)
     for _ in range(ticks):
         if sim.done:
             break
@@ -52,8 +52,8 @@ def warm_up(shape: Shape, params: RunParams, ticks: int = 2) -> None:
         sim.apply(d)
         changed = sim.last_joins()[0]  # the deciders: the rows the world would publish
         solid = (s.z[changed], s.pitch[changed]) if s.z is not None and s.pitch is not None else (None, None)
-        replica.update(sim.tick, changed, s.state[changed], s.x[changed], s.y[changed], s.heading[changed], *solid)
-        tick_metrics(sim.tick, np.bincount(replica.state.state, minlength=STATE_COUNT), shape.patches)
+        view.update(sim.tick, changed, s.state[changed], s.x[changed], s.y[changed], s.heading[changed], *solid)
+        tick_metrics(sim.tick, np.bincount(view.state.state, minlength=STATE_COUNT), shape.patches)
 
 
 def compile_kernels() -> None:

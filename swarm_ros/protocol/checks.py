@@ -31,9 +31,9 @@ from swarm_ros.protocol.rows import (
 
 if TYPE_CHECKING:
     from swarm_ros.core.params import RunParams
-    from swarm_ros.core.replica import Replica
     from swarm_ros.core.shapes import Shape
     from swarm_ros.core.state import SwarmState
+    from swarm_ros.core.swarm_view import SwarmView
 
 
 class WorldView(Protocol):
@@ -188,30 +188,30 @@ def metrics_tick(msg, labels: tuple[str, ...], newest: int) -> int:
     return tick
 
 
-def checked_robots(replica: Replica, msg, radius: int, part: bool = False) -> tuple[int, np.ndarray]:
-    """(tick, rows) of a /swarm/robots message (a regional ``replica``: of a /swarm/region/<batch> message;
+def checked_robots(view: SwarmView, msg, radius: int, part: bool = False) -> tuple[int, np.ndarray]:
+    """(tick, rows) of a /swarm/robots message (a regional ``view``: of a /swarm/region/<batch> message;
     ``part``: a world shard's part of a tick's), checked as a message (:func:`robot_rows`).
 
     Raises:
         Rejected: malformed, out of range or outside the world.
     """
     tick = tick_stamp(msg.header)
-    return tick, robot_rows(msg, replica.state.robots, radius, replica.shape.dims, replica.area is not None, part)
+    return tick, robot_rows(msg, view.state.robots, radius, view.shape.dims, view.area is not None, part)
 
 
-def apply_robots(replica: Replica, tick: int, rows: np.ndarray) -> None:
-    """Apply checked rows of ``tick`` (:func:`checked_robots`) to ``replica``.
+def apply_robots(view: SwarmView, tick: int, rows: np.ndarray) -> None:
+    """Apply checked rows of ``tick`` (:func:`checked_robots`) to ``view``.
 
     Raises:
-        Rejected: they cannot be the world's next rows (:meth:`Replica.inconsistent`); the
-            replica is unchanged.
+        Rejected: they cannot be the world's next rows (:meth:`SwarmView.inconsistent`); the
+            view is unchanged.
     """
     pose = pose_of(rows)
-    why = replica.inconsistent(tick, rows["id"], rows["state"], pose["x"], pose["y"], pose.get("z"))
+    why = view.inconsistent(tick, rows["id"], rows["state"], pose["x"], pose["y"], pose.get("z"))
     if why is not None:
         raise Rejected("inconsistent rows", why)
     try:
-        replica.update(tick, rows["id"], rows["state"], **pose)
+        view.update(tick, rows["id"], rows["state"], **pose)
     except ContractError as exc:  # checked above: a gap in those checks
         raise RunFailed(str(exc)) from None
 

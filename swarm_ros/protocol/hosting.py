@@ -2,7 +2,7 @@
 
 :mod:`swarm_ros.core.regions` cuts the world into strips of columns, one per batch. After
 each tick the world sends each batch, on /swarm/region/<batch>, the rows it needs to
-keep its regional :class:`~swarm_ros.core.replica.Replica` equal to the world's state
+keep its regional :class:`~swarm_ros.core.swarm_view.SwarmView` equal to the world's state
 where it decides:
 
 * the row of every moving robot whose column before or after the tick lies in the

@@ -26,11 +26,11 @@ from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
 from swarm_ros.core.params import auto_every
 from swarm_ros.core.regions import columns
-from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.rules import Decider, Decisions
 from swarm_ros.core.shard_parts import Part
 from swarm_ros.core.shards import WorldShard
 from swarm_ros.core.state import IS_MOVING, RobotState
+from swarm_ros.core.swarm_view import UNKNOWN
 from swarm_ros.protocol.checks import Rejections, decisions_allowed
 from swarm_ros.protocol.hosting import Hosting, poses, route, snapshot, stood
 from swarm_ros.protocol.plan import BATCHES, MONITOR
@@ -149,7 +149,7 @@ class Lockstep(WorldRecords):
         self.lost: list[str] = []  # batches (and the monitor) lost for good
         self.started = False
         self.created = clock() if created is None else created  # start_timeout counts from here
-        self.parts: list[np.ndarray] = []  # decision rows received for the coming tick
+        self.decision_rows: list[np.ndarray] = []  # decision rows received for the coming tick
         self.received = 0
         self.decided = np.zeros(n, dtype=bool)  # robots whose decision for the coming tick is in
         self.pending = np.empty(0, dtype=np.int64)  # robots of lost batches, removed at the end of a coming tick
@@ -250,7 +250,7 @@ class Lockstep(WorldRecords):
             self.rejections.drop(BATCHES, fault)
 
     def _send_snapshot(self, k: int) -> None:
-        """Batch ``k``'s region at the last tick closed, from the replica (which holds it)."""
+        """Batch ``k``'s region at the last tick closed, from the view (which holds it)."""
         s = self.sim.state
         rows = state_rows(np.flatnonzero(s.state != UNKNOWN), s)
         self.port.send_snapshot(k, self.sim.tick, snapshot(rows, self.hosting.area(k), self.hosting.radius))
@@ -322,7 +322,7 @@ class Lockstep(WorldRecords):
                 return
         self.decided[rows["id"]] = True
         self.down_since.pop(k, None)  # a batch deciding is not lost
-        self.parts.append(rows)
+        self.decision_rows.append(rows)
         self.received += rows.size
         self._maybe_advance(tick)
 
@@ -358,15 +358,15 @@ class Lockstep(WorldRecords):
 
     def _advance(self, tick: int) -> None:
         s = self.sim.state
-        parts = [decisions_of(tick, r) for r in self.parts]
+        each = [decisions_of(tick, r) for r in self.decision_rows]
         standing = self._standing()
         if standing.size:
-            parts.append(Decisions.standing(s, standing, tick))
+            each.append(Decisions.standing(s, standing, tick))
         orphans = self._orphans()
         if orphans.size:
-            parts.append(self.decider.decide(s, orphans, tick))
-        decisions = Decisions.concatenate(parts) if parts else Decisions.standing(s, np.empty(0, np.int64), tick)
-        self.parts, self.received = [], 0
+            each.append(self.decider.decide(s, orphans, tick))
+        decisions = Decisions.concatenate(each) if each else Decisions.standing(s, np.empty(0, np.int64), tick)
+        self.decision_rows, self.received = [], 0
         self.decided[decisions.ids] = False
         self.inflight = (tick, decision_rows(decisions))
         # their rows before the tick (closed(): the region rows); the deciders are its own robots (the shard checks)
@@ -548,8 +548,8 @@ class Lockstep(WorldRecords):
         self._flush()  # and on to the next tick
 
     def _region_rows(self, ids: np.ndarray, received: Part | None) -> np.ndarray:
-        """The rows of robots ``ids`` after the tick: from the replica, or, for a peer's robot that left this
-        shard's area in the tick (forgotten by the replica), from the peer's part."""
+        """The rows of robots ``ids`` after the tick: from the view, or, for a peer's robot that left this
+        shard's area in the tick (forgotten by the view), from the peer's part."""
         rows = state_rows(ids, self.sim.state)
         gone = np.flatnonzero(self.sim.state.state[ids] == UNKNOWN)
         if gone.size and received is not None:
@@ -833,8 +833,8 @@ class Lockstep(WorldRecords):
         self.save_book()
         self.pending = np.union1d(self.pending, ids)
         # decisions it sent for this tick before it was lost no longer count either
-        self.parts = [r[~np.isin(r["id"], self.pending)] for r in self.parts]
-        self.received = sum(r.size for r in self.parts)
+        self.decision_rows = [r[~np.isin(r["id"], self.pending)] for r in self.decision_rows]
+        self.received = sum(r.size for r in self.decision_rows)
         tick = self.sim.tick
         self.log.warn(
             f"{name} lost ({why}) at tick {tick}: its {ids.size} robots are removed at the end of tick {tick + 1}"

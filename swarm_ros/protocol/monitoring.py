@@ -1,6 +1,6 @@
 """The monitor's side of the run as a plain class: no rclpy, no files, an injectable clock.
 
-:class:`MonitorCore` counts the run from the world's rows: it keeps a :class:`~swarm_ros.core.replica.Replica`
+:class:`MonitorCore` counts the run from the world's rows: it keeps a :class:`~swarm_ros.core.swarm_view.SwarmView`
 of the swarm, counts each tick with the in-process engine's own functions
 (:func:`~swarm_ros.core.metrics.tick_metrics`, :func:`~swarm_ros.core.metrics.outcome_of`), feeds the
 recording, keeps what the world's status says, and decides when the run may be written and whether the
@@ -23,10 +23,10 @@ import numpy as np
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, outcome_of, tick_metrics
 from swarm_ros.core.params import RunParams
-from swarm_ros.core.replica import Replica
 from swarm_ros.core.run_result import RunRecord
 from swarm_ros.core.shapes import Shape
 from swarm_ros.core.state import STATE_COUNT, RobotState
+from swarm_ros.core.swarm_view import SwarmView
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import apply_robots, checked_robots, tally_values
@@ -138,7 +138,7 @@ class MonitorCore:
         self.held = HeldMessages(TALLY)  # the messages of the ticks not counted yet, as they came, for the bag
         self.last = -1  # the last tick counted
         self.occupancy_changed = False  # since the occupancy last went to the port (every > 1)
-        self.replica = Replica(shape, params.robots)
+        self.view = SwarmView(shape, params.robots)
         self.rows: list[TickMetrics] = []  # the metrics of every tick counted, in order
         self.losses: list[tuple[int, int]] = []  # (tick, robots removed), seen as rows turning 'removed'
         self.removed = 0
@@ -161,12 +161,12 @@ class MonitorCore:
 
         Raises:
             Rejected: malformed, out of range, or not the world's next rows; nothing was taken.
-            RunFailed: rows the checks passed that the replica could not take (a gap in the checks), or world
+            RunFailed: rows the checks passed that the view could not take (a gap in the checks), or world
                 shards whose parts of a tick overlap.
         """
         if self.outcome is not None:
             return
-        tick, rows = checked_robots(self.replica, msg, self.world_radius, part=self.shards > 1)
+        tick, rows = checked_robots(self.view, msg, self.world_radius, part=self.shards > 1)
         if tick <= self.last:
             return  # again (a late-matched reader's history, a restarted world's last ticks)
         with self.held.holding(tick, self.last, (ROBOTS, sender), raw):
@@ -232,7 +232,7 @@ class MonitorCore:
             self._counted(tick, counts, recorded)
 
     def _joined(self, tick: int, parts: dict[str, np.ndarray]) -> np.ndarray:
-        """The parts of ``tick`` in id order, as the one world sends them (the replica takes them so in under half
+        """The parts of ``tick`` in id order, as the one world sends them (the view takes them so in under half
         the time: its writes stay in cache; each part's ids ascend, the sort merges runs). RunFailed: a robot twice."""
         del self.parts[tick]
         joined = np.concatenate(list(parts.values()))
@@ -244,7 +244,7 @@ class MonitorCore:
         return joined
 
     def _leap(self, tick: int, rows: np.ndarray, counts: np.ndarray) -> None:
-        """Every robot's row at ``tick`` (``record_every`` > 1) into the replica, which must agree with the
+        """Every robot's row at ``tick`` (``record_every`` > 1) into the view, which must agree with the
         tallies of the tick.
 
         Raises:
@@ -252,10 +252,10 @@ class MonitorCore:
                 world's tallies (a world that disagrees with itself).
         """
         pose = checks.pose_of(rows)
-        why = self.replica.leap(tick, rows["id"], rows["state"], **pose)
+        why = self.view.leap(tick, rows["id"], rows["state"], **pose)
         if why is not None:
             raise RunFailed(f"tick {tick}: the world's rows {why}")
-        got = np.bincount(self.replica.state.state, minlength=STATE_COUNT)
+        got = np.bincount(self.view.state.state, minlength=STATE_COUNT)
         if not np.array_equal(got, counts):
             raise RunFailed(
                 f"tick {tick}: the world's rows hold {got.tolist()} robots by state, its tallies {counts.tolist()}"
@@ -267,11 +267,11 @@ class MonitorCore:
 
     def _count(self, tick: int, rows: np.ndarray) -> None:
         """Count a tick's changed rows (checked), whole (``record_every`` 1)."""
-        apply_robots(self.replica, tick, rows)
-        self._counted(tick, np.bincount(self.replica.state.state, minlength=STATE_COUNT), True)
+        apply_robots(self.view, tick, rows)
+        self._counted(tick, np.bincount(self.view.state.state, minlength=STATE_COUNT), True)
 
     def _counted(self, tick: int, counts: np.ndarray, recorded: bool) -> None:
-        """Tick ``tick`` is counted: ``counts``, its robots by state; ``recorded``: the replica holds it."""
+        """Tick ``tick`` is counted: ``counts``, its robots by state; ``recorded``: the view holds it."""
         if self.started_at is None:
             self.started_at = self.clock()
         self.last = tick
@@ -281,7 +281,7 @@ class MonitorCore:
         joined = len(self.rows) < 2 or metrics[_LOCALIZED] != self.rows[-2][_LOCALIZED]
         self.occupancy_changed |= joined or removed > removed_before
         if not self.replaying:
-            occupancy = self.replica.state.occupancy if recorded else None
+            occupancy = self.view.state.occupancy if recorded else None
             changed, messages = recorded and self.occupancy_changed, self.held.pop(tick)
             self.port.tick_counted(tick, metrics, occupancy, len(self.rows) == 1, changed, messages)
         if recorded:
@@ -293,7 +293,7 @@ class MonitorCore:
         if self.recorder is not None:
             self.recorder.metrics([metrics])
             if recorded:
-                self.recorder.robots(self.replica.state, force=self.outcome is not None)
+                self.recorder.robots(self.view.state, force=self.outcome is not None)
         if self.outcome is not None:  # its CPU so far, per tick, without writing the run (scripts/bench_scale.py)
             self.ended_at = self.clock()
             self.wall = self.ended_at - self.started_at
@@ -398,11 +398,11 @@ class MonitorCore:
         (``record_every`` > 1) is recorded up to the last of them: its files then agree with each other (the bag
         holds the ticks counted after it)."""
         wall = self.wall if self.outcome is not None else self.clock() - (self.started_at or self.clock())
-        upto = self.replica.tick  # stopped after the last tick whose rows came (record_every): the run up to it
+        upto = self.view.tick  # stopped after the last tick whose rows came (record_every): the run up to it
         return self.world.record(
             self.shape,
             self.params,
-            self.replica.state,
+            self.view.state,
             self.rows[: upto + 1],
             outcome or self.outcome,
             wall,

@@ -81,7 +81,7 @@ def plan_for(
 ) -> list[tuple[str, str, dict[str, int | str]]]:
     """The node processes of a run of ``algorithm`` (``swarm-ros run`` and the launch file start the same): its
     plan (core.algorithm)."""
-    return algorithm_of(algorithm).part("plan")(processes, region_cuts, world_shards)
+    return algorithm_of(algorithm).hook("plan")(processes, region_cuts, world_shards)
 
 
 # -- topics -----------------------------------------------------------------------

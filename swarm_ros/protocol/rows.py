@@ -186,7 +186,7 @@ def state_rows(ids: np.ndarray, s) -> np.ndarray:
 
 def pose_of(rows: np.ndarray) -> dict[str, np.ndarray]:
     """The pose a message's robot rows carry, in patches: x, y, heading and (3D rows) z, pitch, as keyword
-    arguments of :meth:`~swarm_ros.core.replica.Replica.update`."""
+    arguments of :meth:`~swarm_ros.core.swarm_view.SwarmView.update`."""
     pose = {"x": rows["x"] / PATCH_METRES, "y": rows["y"] / PATCH_METRES, "heading": rows["heading"].astype(np.float64)}
     if "pitch" in (rows.dtype.names or ()):
         pose["z"] = rows["z"] / PATCH_METRES

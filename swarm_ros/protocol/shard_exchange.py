@@ -201,7 +201,7 @@ class ShardExchange:
 
 class RunView:
     """The run as a world process holds it, for its lockstep: the last tick its exchange closed, its shard's
-    replica (exact in its area; the world's: everywhere), the metrics every shard holds alike, and its own moving
+    view (exact in its area; the world's: everywhere), the metrics every shard holds alike, and its own moving
     robots."""
 
     def __init__(self, exchange: ShardExchange) -> None:

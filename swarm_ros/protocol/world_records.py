@@ -2,7 +2,7 @@
 :class:`~swarm_ros.protocol.lockstep.Lockstep`.
 
 With ``record_every`` 1 (the default up to 10,000 robots) it is every tick's changed rows and applied decisions,
-and the monitor counts each tick from its replica. Above, the rows would bound a large run by the monitor, which
+and the monitor counts each tick from its view. Above, the rows would bound a large run by the monitor, which
 takes, checks and records every one of them: the world sends instead, every tick, a *tally* (the run's robots by
 state; with world shards, shard 0 alone sends it, from the metrics every shard holds), from which the monitor counts
 the tick, and every ``record_every``-th tick and at the last, every robot's row (a shard: those in its strips) and
@@ -17,8 +17,8 @@ import numpy as np
 
 from swarm_ros.core.metrics import SEEDS, TickMetrics
 from swarm_ros.core.regions import columns
-from swarm_ros.core.replica import UNKNOWN
 from swarm_ros.core.state import STATE_COUNT, RobotState
+from swarm_ros.core.swarm_view import UNKNOWN
 from swarm_ros.protocol.rows import state_rows
 
 if TYPE_CHECKING:

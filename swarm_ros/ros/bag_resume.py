@@ -9,7 +9,7 @@ of rows, :data:`~swarm_ros.ros.graph.STATUS_QOS`'s statuses) hold the rest for t
 A killed monitor's bag is in its hidden holder (``.<run>.bag-XXXX/bag``), or, if it was killed
 while writing the run directory, in that directory's temporary one (``.<run>.tmp-XXXX/bag``).
 The new process takes the longest of them up to the end of its last whole tick, copies that into a
-bag of its own, and replays it through its handlers: the replica, the metrics rows and the
+bag of its own, and replays it through its handlers: the view, the metrics rows and the
 recording come out as they were (:meth:`swarm_ros.protocol.monitoring.MonitorCore.replay`).
 
 A rubenstein run's monitor (:mod:`swarm_ros.nodes.rubenstein.monitor`) goes on the same way: it makes

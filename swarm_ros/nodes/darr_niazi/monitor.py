@@ -1,6 +1,6 @@
 """The monitor node: per-tick metrics from what the world publishes, and the run's output directory.
 
-It rebuilds the swarm's state from /swarm/robots (:class:`swarm_ros.core.replica.Replica`), counts it
+It rebuilds the swarm's state from /swarm/robots (:class:`swarm_ros.core.swarm_view.SwarmView`), counts it
 with the in-process engine's own functions (:func:`swarm_ros.core.metrics.tick_metrics`, :func:`~.outcome_of`),
 publishes each tick's metrics on /swarm/metrics, records the run with the in-process
 engine's own :class:`~swarm_ros.artifacts.rerun_recording.Recorder` (streamed to ``<out_dir>.partial.rrd``

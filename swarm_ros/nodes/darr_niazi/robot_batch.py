@@ -5,14 +5,14 @@ world answers with a snapshot of its region (the strip and a halo: the robots it
 robots can sense, and every stationary robot) on /swarm/snapshot/<batch> (at tick 0, or
 at the current tick for a batch process that was restarted in the middle of a run); the
 batch builds its regional copy of the swarm's state from it
-(:class:`swarm_ros.core.replica.Replica`), follows the world's rows for its region on
+(:class:`swarm_ros.core.swarm_view.SwarmView`), follows the world's rows for its region on
 /swarm/region/<batch> from there (:mod:`swarm_ros.protocol.hosting`), and after each
 tick publishes, on its own /swarm/decisions/<batch>, what each moving robot in its
 strip decided for the next one. A robot that crosses into another strip is that
 batch's from the next tick on: the world's row of it is the handover.
 It takes only messages whose tag proves them the world's (:mod:`swarm_ros.ros.auth`), and tags its own.
 Every message it takes is checked first (:mod:`swarm_ros.protocol.checks`, and
-:meth:`Replica.inconsistent` for rows); one that fails is dropped, counted and logged. A decision is a pure function
+:meth:`SwarmView.inconsistent` for rows); one that fails is dropped, counted and logged. A decision is a pure function
 of the state, the seed, the robot and the tick, so a restarted batch decides exactly
 as the one it replaces would have. A robot senses only what arrived on the topics, and the rule reads only the
 robots within its vision radius of the point ahead. It stops when /swarm/status
@@ -36,8 +36,8 @@ from std_msgs.msg import Empty, Int64MultiArray
 from swarm_ros.core import regions
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 from swarm_ros.core.params import Settings
-from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider
+from swarm_ros.core.swarm_view import SwarmView
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
@@ -57,7 +57,7 @@ class RobotBatchNode:
         self.shape, self.params = run.resolve()
         n, world = self.params.robots, self.shape.world
         self.strip = regions.batch_strip(self.shape, self.params, own["batch"], own["batches"], own["region_cuts"])
-        self.replica = Replica(
+        self.view = SwarmView(
             self.shape, n, regions.area(self.strip, regions.halo(self.params.vision_radius), world.size)
         )
         self.decider = Decider(self.shape, self.params)
@@ -96,27 +96,27 @@ class RobotBatchNode:
         except Rejected as fault:
             self.rejections.drop(msgs.snapshot_topic(self.node.get_name()), fault)
             return
-        if tick <= self.replica.tick:
+        if tick <= self.view.tick:
             return  # an older snapshot (latched from an earlier restart of this batch)
         try:
-            self.replica.load(tick, rows["id"], rows["state"], **pose_of(rows))
+            self.view.load(tick, rows["id"], rows["state"], **pose_of(rows))
         except ContractError as exc:
             raise RunFailed(f"snapshot of tick {tick}: {exc}") from None
-        while self.replica.tick + 1 in self.early:  # rows published after the snapshot was taken
-            self._apply(self.replica.tick + 1, self.early.pop(self.replica.tick + 1))
+        while self.view.tick + 1 in self.early:  # rows published after the snapshot was taken
+            self._apply(self.view.tick + 1, self.early.pop(self.view.tick + 1))
         self.early.clear()
         self._decide()
 
     def _on_robots(self, msg: Cloud) -> None:
         self.received += len(msg.data)
         try:
-            tick, rows = checked_robots(self.replica, msg, self.radius)
+            tick, rows = checked_robots(self.view, msg, self.radius)
         except Rejected as fault:
             self.rejections.drop(self.region, fault)
             return
-        if tick <= self.replica.tick:
+        if tick <= self.view.tick:
             return  # history from before the snapshot
-        if tick > self.replica.tick + 1:
+        if tick > self.view.tick + 1:
             # No snapshot yet, or an old one (latched from before a restart): keep the newest rows
             # until the world's answer to our announcement, a snapshot of the current tick, comes.
             self.early[tick] = rows
@@ -127,22 +127,22 @@ class RobotBatchNode:
             self._decide()
 
     def _apply(self, tick: int, rows) -> bool:
-        """Apply checked rows to the replica; False (and counted) if they cannot be the world's."""
+        """Apply checked rows to the view; False (and counted) if they cannot be the world's."""
         try:
-            apply_robots(self.replica, tick, rows)
+            apply_robots(self.view, tick, rows)
         except Rejected as fault:
             self.rejections.drop(self.region, fault)
             return False
         return True
 
     def _decide(self) -> None:
-        """Publish the decisions of the moving robots in this batch's strip for the tick after the replica's."""
-        moving = self.replica.moving_ids()
-        cols = regions.columns(self.replica.state.x[moving], self.radius)
+        """Publish the decisions of the moving robots in this batch's strip for the tick after the view's."""
+        moving = self.view.moving_ids()
+        cols = regions.columns(self.view.state.x[moving], self.radius)
         own = moving[(cols >= self.strip[0]) & (cols <= self.strip[1])]
         if own.size:
-            tick = self.replica.tick + 1
-            decisions = self.decider.decide(self.replica.state, own, tick, moving)
+            tick = self.view.tick + 1
+            decisions = self.decider.decide(self.view.state, own, tick, moving)
             self.pub_decisions.publish_rows(decision_rows(decisions), tick)
 
     def _on_status(self, msg: DiagnosticArray) -> None:
@@ -152,7 +152,7 @@ class RobotBatchNode:
     def close(self, code: int) -> None:
         """Nothing to release; say how much this batch received."""
         self.node.get_logger().info(
-            f"received {self.received} bytes of rows on {self.region} up to tick {self.replica.tick}"
+            f"received {self.received} bytes of rows on {self.region} up to tick {self.view.tick}"
         )
 
     def wake_in(self) -> float | None:

@@ -66,7 +66,7 @@ class RubensteinLockstep:
         self.strips: Strips | None = None  #: set once the announced strips tile the grid
         self.hosts: dict[int, str] = {}  #: batch number -> its node name
         self.announced: dict[str, tuple[int, int]] = {}  #: before the start: node name -> its strip
-        self.parts: dict[int, tuple[np.ndarray, Decided]] = {}  #: the decisions in for the next tick, by batch
+        self.decided: dict[int, tuple[np.ndarray, Decided]] = {}  #: the decisions in for the next tick, by batch
         self.started = False
         self._columns_at: tuple[int, np.ndarray] = (-1, np.empty(0, dtype=np.int64))
 
@@ -135,7 +135,7 @@ class RubensteinLockstep:
 
     def awaited(self) -> list[str]:
         """The batches whose decisions for the next tick are not in yet, by node name."""
-        return [name for k, name in sorted(self.hosts.items()) if k not in self.parts]
+        return [name for k, name in sorted(self.hosts.items()) if k not in self.decided]
 
     def own(self, k: int) -> np.ndarray:
         """The robots batch k decides for at the next tick: its strip's, not joined, ascending."""
@@ -153,14 +153,14 @@ class RubensteinLockstep:
             raise Rejected("stale tick", "no tick has gone out yet")
         if tick != self.run.tick + 1:
             raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {self.run.tick + 1}")
-        if k in self.parts:
+        if k in self.decided:
             return False  # a restarted batch's second answer: the same, by the rule
         ids, decided = check_decisions(self.run, rows, tick, self.own(k))
-        self.parts[k] = (ids, decided)
-        if len(self.parts) < self.batches:
+        self.decided[k] = (ids, decided)
+        if len(self.decided) < self.batches:
             return False
-        self.run.settle([self.parts[b] for b in range(self.batches)])
-        self.parts.clear()
+        self.run.settle([self.decided[b] for b in range(self.batches)])
+        self.decided.clear()
         return True
 
 

@@ -4,11 +4,11 @@ The distributed engine's world publishes, after each tick, one row per robot who
 row changed in that tick (at tick 0, every robot): id, state, x, y, heading (3D: and z,
 pitch). Only
 moving robots change, so those rows are exactly the robots that decided in the tick.
-A :class:`Replica` applies the rows in tick order and keeps the occupancy and frontier
+A :class:`SwarmView` applies the rows in tick order and keeps the occupancy and frontier
 grids in step, so after tick t it holds the same :class:`~swarm_ros.core.state.SwarmState`
 as the world: the monitor counts it.
 
-A robot batch keeps a *regional* replica (``area``: the columns of its strip and halo,
+A robot batch keeps a *regional* view (``area``: the columns of its strip and halo,
 :mod:`swarm_ros.core.regions`): it receives the rows of the robots in that area, the
 rows of robots that left it, and every robot's change to a stationary state. It holds
 every stationary robot (so the occupancy and frontier are whole) and the moving robots
@@ -100,16 +100,16 @@ def _apply_rows(ids, rows, robots, grid, first, last):
         elif st != _SEED and st != _LOCALIZED and st != _SEPARATED and st != _REMOVED:
             column = int(math.floor(x[i] + 0.5)) + radius
             if column < first or column > last:
-                state[i] = UNKNOWN  # moved out of the area this replica follows
+                state[i] = UNKNOWN  # moved out of the area this view follows
     return 0
 
 
-class Replica:
+class SwarmView:
     """The swarm's state as seen through the world's per-tick rows.
 
     Attributes:
         state: the rebuilt :class:`SwarmState`; ``state.tick`` is -1 until tick 0 arrives.
-        area: (first, last) column this replica follows moving robots in (regional), or None: every robot.
+        area: (first, last) column this view follows moving robots in (regional), or None: every robot.
     """
 
     def __init__(self, shape: Shape, robots: int, area: tuple[int, int] | None = None) -> None:
@@ -153,13 +153,13 @@ class Replica:
         pitch: np.ndarray | None = None,
     ) -> None:
         """Start again from a snapshot: every robot's row at ``tick`` (how a restarted robot batch catches up);
-        for a regional replica, the rows of the stationary robots and of the moving ones in its area.
+        for a regional view, the rows of the stationary robots and of the moving ones in its area.
 
-        The occupancy and frontier are rebuilt from the rows, so the replica equals one
+        The occupancy and frontier are rebuilt from the rows, so the view equals one
         that applied every tick's rows from tick 0 to ``tick``.
 
         Raises:
-            ContractError: as :meth:`update` for tick 0; the replica is then unusable.
+            ContractError: as :meth:`update` for tick 0; the view is then unusable.
         """
         if tick < 0:
             raise ContractError(f"a snapshot of tick {tick}")
@@ -180,10 +180,10 @@ class Replica:
         pitch: np.ndarray | None = None,
     ) -> str | None:
         """Go on to ``tick`` from every robot's row at it, ticks after the last one applied (a world that sends the
-        rows only every k-th tick); why not (the replica unchanged), or None.
+        rows only every k-th tick); why not (the view unchanged), or None.
 
         Besides :meth:`load`'s checks (every robot once, each localized one on its own shape patch), the rows
-        must be able to follow the replica's: a robot that was stationary (a seed, localized or separated) is
+        must be able to follow the view's: a robot that was stationary (a seed, localized or separated) is
         where it was, in the same state, or removed; a removed robot stays removed.
         """
         s = self.state
@@ -235,7 +235,7 @@ class Replica:
         Raises:
             ContractError: a tick was skipped or repeated, tick 0 does not cover every robot,
                 an id is out of range, a state code is unknown, or a robot localizes on a
-                patch that is not an empty shape patch. The replica is then unusable.
+                patch that is not an empty shape patch. The view is then unusable.
         """
         if tick != self.state.tick + 1:
             raise ContractError(f"rows for tick {tick} arrived after tick {self.state.tick}")
@@ -302,10 +302,10 @@ class Replica:
     ) -> str | None:
         """Why the rows of ``tick`` cannot be the world's next ones (None if they can), changing nothing.
 
-        Checks what :meth:`update` would otherwise find half-way through, leaving the replica
+        Checks what :meth:`update` would otherwise find half-way through, leaving the view
         unusable: the tick follows the last one; tick 0 holds every robot once; after tick 0,
         only robots that were moving change, except that any robot may be removed, once; a
-        robot that localizes does so on a frontier patch, one robot per patch. A regional replica
+        robot that localizes does so on a frontier patch, one robot per patch. A regional view
         also takes any row of a robot it does not follow (one entering its area), and cannot check
         that tick 0 holds every robot. Ids and state
         codes must be in range (:mod:`swarm_ros.protocol.checks` checks them first).
@@ -340,6 +340,6 @@ class Replica:
         return None
 
     def moving_ids(self) -> np.ndarray:
-        """Ids of the moving robots (a regional replica: those in its area), ascending."""
+        """Ids of the moving robots (a regional view: those in its area), ascending."""
         state = self.state.state
         return np.flatnonzero(IS_MOVING[state] & (state != UNKNOWN))

@@ -1,4 +1,4 @@
-"""The Replica rebuilds the world's state from broadcast rows; the Decider equals decide()."""
+"""The SwarmView rebuilds the world's state from broadcast rows; the Decider equals decide()."""
 
 from __future__ import annotations
 
@@ -8,16 +8,16 @@ from runs import params
 
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.errors import ContractError
-from swarm_ros.core.replica import Replica
 from swarm_ros.core.rules import Decider, Decisions, decide
 from swarm_ros.core.state import RobotState
+from swarm_ros.core.swarm_view import SwarmView
 
 pytestmark = pytest.mark.unit
 
 
-def _feed(replica: Replica, sim: Simulation, ids: np.ndarray) -> None:
+def _feed(view: SwarmView, sim: Simulation, ids: np.ndarray) -> None:
     s = sim.state
-    replica.update(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.heading[ids])
+    view.update(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.heading[ids])
 
 
 def _assert_same(a, b) -> None:
@@ -27,31 +27,31 @@ def _assert_same(a, b) -> None:
 
 
 @pytest.mark.parametrize("robots_over_patches", [-30, 0, 25])
-def test_replica_fed_the_changed_rows_equals_the_world_every_tick(small_ring, robots_over_patches):
+def test_view_fed_the_changed_rows_equals_the_world_every_tick(small_ring, robots_over_patches):
     sim = Simulation(small_ring, params(small_ring.patches + robots_over_patches, seed=3))
-    replica = Replica(small_ring, sim.params.robots)
-    _feed(replica, sim, np.arange(sim.params.robots))
-    _assert_same(replica.state, sim.state)
+    view = SwarmView(small_ring, sim.params.robots)
+    _feed(view, sim, np.arange(sim.params.robots))
+    _assert_same(view.state, sim.state)
     while not sim.done:
         sim.step()
-        _feed(replica, sim, sim.last_joins()[0])
-        _assert_same(replica.state, sim.state)
+        _feed(view, sim, sim.last_joins()[0])
+        _assert_same(view.state, sim.state)
     assert sim.outcome is not None
 
 
-def test_decider_from_a_replica_gives_the_fused_engines_run(small_ring):
+def test_decider_from_a_view_gives_the_fused_engines_run(small_ring):
     p = params(small_ring.patches + 5, seed=11, vision_radius=2.0)
     fused = Simulation(small_ring, p)
     fused.run()
     sim = Simulation(small_ring, p)
-    replica = Replica(small_ring, p.robots)
-    _feed(replica, sim, np.arange(p.robots))
+    view = SwarmView(small_ring, p.robots)
+    _feed(view, sim, np.arange(p.robots))
     decider = Decider(small_ring, p)
     while not sim.done:
-        moving = replica.moving_ids()
-        halves = [decider.decide(replica.state, part, sim.tick + 1, moving) for part in np.array_split(moving, 2)]
+        moving = view.moving_ids()
+        halves = [decider.decide(view.state, part, sim.tick + 1, moving) for part in np.array_split(moving, 2)]
         sim.apply(Decisions.concatenate([h for h in halves if h.ids.size]))
-        _feed(replica, sim, sim.last_joins()[0])
+        _feed(view, sim, sim.last_joins()[0])
     np.testing.assert_array_equal(sim.history, fused.history)
     _assert_same(sim.state, fused.state)
 
@@ -70,39 +70,39 @@ def test_decider_reused_across_ticks_equals_one_shot_decide():
         sim.apply(a)
 
 
-def test_replica_rejects_skipped_ticks_partial_tick_zero_and_impossible_joins(small_disc):
+def test_view_rejects_skipped_ticks_partial_tick_zero_and_impossible_joins(small_disc):
     sim = Simulation(small_disc, params(40, seed=2))
     s, all_ids = sim.state, np.arange(40)
-    replica = Replica(small_disc, 40)
+    view = SwarmView(small_disc, 40)
     with pytest.raises(ContractError, match="tick 0 must hold every robot"):
-        replica.update(0, all_ids[:-1], s.state[:-1], s.x[:-1], s.y[:-1], s.heading[:-1])
-    replica = Replica(small_disc, 40)
+        view.update(0, all_ids[:-1], s.state[:-1], s.x[:-1], s.y[:-1], s.heading[:-1])
+    view = SwarmView(small_disc, 40)
     with pytest.raises(ContractError, match="arrived after tick -1"):
-        replica.update(1, all_ids, s.state, s.x, s.y, s.heading)
-    replica.update(0, all_ids, s.state, s.x, s.y, s.heading)
+        view.update(1, all_ids, s.state, s.x, s.y, s.heading)
+    view.update(0, all_ids, s.state, s.x, s.y, s.heading)
     with pytest.raises(ContractError, match="unknown robot state"):
-        replica.update(1, all_ids[4:5], np.array([9]), s.x[4:5], s.y[4:5], s.heading[4:5])
-    replica = Replica(small_disc, 40)
-    replica.update(0, all_ids, s.state, s.x, s.y, s.heading)
+        view.update(1, all_ids[4:5], np.array([9]), s.x[4:5], s.y[4:5], s.heading[4:5])
+    view = SwarmView(small_disc, 40)
+    view.update(0, all_ids, s.state, s.x, s.y, s.heading)
     # robot 4 "localizes" on a seed's patch: not an empty shape patch
     with pytest.raises(ContractError, match="not an empty shape patch"):
-        replica.update(1, np.array([4]), np.array([RobotState.LOCALIZED]), s.x[:1], s.y[:1], s.heading[:1])
+        view.update(1, np.array([4]), np.array([RobotState.LOCALIZED]), s.x[:1], s.y[:1], s.heading[:1])
 
 
 @pytest.mark.parametrize("fail", [0.0, 0.2])
-def test_a_replica_loaded_from_a_snapshot_equals_one_that_followed_every_tick(small_ring, fail):
+def test_a_view_loaded_from_a_snapshot_equals_one_that_followed_every_tick(small_ring, fail):
     """How a restarted robot batch catches up: every robot's row at tick t gives the same state,
     occupancy, frontier and frontier blocks as following the rows from tick 0 (removals included)."""
     sim = Simulation(small_ring, params(small_ring.patches + 10, seed=5, fail_fraction=fail, fail_tick=12))
     every = np.arange(sim.params.robots)
-    followed = Replica(small_ring, sim.params.robots)
+    followed = SwarmView(small_ring, sim.params.robots)
     _feed(followed, sim, every)
     loads = 0
     while not sim.done:
         sim.step()
         _feed(followed, sim, np.union1d(sim.last_joins()[0], sim.last_removed))
         if sim.tick % 7 == 0 or sim.done:
-            loaded = Replica(small_ring, sim.params.robots)
+            loaded = SwarmView(small_ring, sim.params.robots)
             s = sim.state
             loaded.load(sim.tick, every[::-1], s.state[::-1], s.x[::-1], s.y[::-1], s.heading[::-1])  # any order
             _assert_same(loaded.state, followed.state)
@@ -116,27 +116,27 @@ def test_a_replica_loaded_from_a_snapshot_equals_one_that_followed_every_tick(sm
 def test_a_snapshot_must_hold_every_robot_once(small_disc):
     sim = Simulation(small_disc, params(small_disc.patches, seed=1))
     s = sim.state
-    replica = Replica(small_disc, sim.params.robots)
+    view = SwarmView(small_disc, sim.params.robots)
     ids = np.arange(sim.params.robots)
     with pytest.raises(ContractError, match="must hold every robot once"):
-        replica.load(5, ids[1:], s.state[1:], s.x[1:], s.y[1:], s.heading[1:])
+        view.load(5, ids[1:], s.state[1:], s.x[1:], s.y[1:], s.heading[1:])
     with pytest.raises(ContractError, match="a snapshot of tick -1"):
-        replica.load(-1, ids, s.state, s.x, s.y, s.heading)
+        view.load(-1, ids, s.state, s.x, s.y, s.heading)
 
 
 def test_a_leap_to_every_robots_row_ticks_later_equals_the_world_and_refuses_what_cannot_follow(small_ring):
-    """Replica.leap (a world that sends the rows every k-th tick): from tick 0 to tick 25, then to 30, in one step
+    """SwarmView.leap (a world that sends the rows every k-th tick): from tick 0 to tick 25, then to 30, in one step
     each, equals the world; rows that move a stationary robot, bring back a removed one, or miss a robot are
-    refused and leave the replica as it was."""
+    refused and leave the view as it was."""
     sim = Simulation(small_ring, params(small_ring.patches, seed=3, fail_fraction=0.2, fail_tick=5))
-    replica = Replica(small_ring, sim.params.robots)
+    view = SwarmView(small_ring, sim.params.robots)
     everyone = np.arange(sim.params.robots)
-    _feed(replica, sim, everyone)
+    _feed(view, sim, everyone)
 
     def leap(state=None, x=None, ids=everyone):
         s = sim.state
         state, x = s.state if state is None else state, s.x if x is None else x
-        return replica.leap(sim.tick, ids, state[ids], x[ids], s.y[ids], s.heading[ids])
+        return view.leap(sim.tick, ids, state[ids], x[ids], s.y[ids], s.heading[ids])
 
     for _ in range(25):
         sim.step()
@@ -145,9 +145,9 @@ def test_a_leap_to_every_robots_row_ticks_later_equals_the_world_and_refuses_wha
     moved[np.flatnonzero(np.isin(s.state, [RobotState.SEED, RobotState.LOCALIZED]))[0]] += 1.0
     assert "stationary" in leap(x=moved)
     assert "every robot once" in leap(ids=everyone[1:])
-    assert replica.tick == 0
+    assert view.tick == 0
     assert leap() is None
-    _assert_same(replica.state, sim.state)
+    _assert_same(view.state, sim.state)
     removed = np.flatnonzero(s.state == RobotState.REMOVED)
     assert removed.size
     for _ in range(5):
@@ -155,6 +155,6 @@ def test_a_leap_to_every_robots_row_ticks_later_equals_the_world_and_refuses_wha
     back = sim.state.state.copy()
     back[removed[0]] = RobotState.MOVING_OUTSIDE
     assert "removed" in leap(state=back)
-    assert replica.tick == 25
+    assert view.tick == 25
     assert leap() is None
-    _assert_same(replica.state, sim.state)
+    _assert_same(view.state, sim.state)
