@@ -127,6 +127,24 @@ def assert_identical_run(reference: Path, out: Path) -> dict:
     return got
 
 
+def wait_rubenstein_saved(out: Path, tick: int, timeout: float = 120) -> None:
+    """Wait until a rubenstein run's world has saved its checkpoint of ``tick`` or a later one: ticks are flowing, and
+    the monitor holds the records up to its window behind it (the world runs no further ahead). Not the partial
+    recording's size: Rerun may flush a small run's file only at its end."""
+    import zipfile
+
+    logs = staged_logs(out)
+
+    def past() -> bool:
+        try:
+            with np.load(logs / "world.checkpoint") as saved:
+                return int(saved["tick"][0]) >= tick
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):  # not there yet, or being replaced
+            return False
+
+    wait_for(past, timeout, f"the world saving tick {tick}", poll=0.02)
+
+
 def staged_logs(out: Path, timeout: float = 60) -> Path:
     return wait_for(lambda: next(out.parent.glob(f".{out.name}.logs-*"), None), timeout, "its logs", poll=0.01)
 
