@@ -33,13 +33,13 @@ import threading
 import time
 import traceback
 from collections.abc import Mapping, Sequence
-from typing import IO
+from typing import IO, Any
 
 #: modules that start threads at import which a forked child cannot use (found by counting /proc/self/task)
 _THREADED = ("rerun", "distributed")
 _SIGSET = 128  #: bytes of a sigset_t (glibc): what LTTng's fork hooks save the signal mask in
 _NODE_PREFIX = "swarm_ros.nodes."
-_HELD = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}  #: what stops a launcher: held back while it forks
+_HELD = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  #: what stops a launcher: only noted while it forks
 
 
 class _Preloaded:
@@ -142,11 +142,14 @@ class Forked:
             stream.flush()  # or the child writes this process's buffered output a second time
         self.args = [module, *args]
         self.returncode: int | None = None
-        # No signal handler may run inside the fork: Python's at-fork hooks (logging's lock, taken before and
-        # given back after) would swallow the KeyboardInterrupt a SIGTERM handler raises there, and the lock
-        # would stay taken for good (seen: the launcher's progress thread hung on it, and the SIGTERM was lost).
-        # Held back until the fork is done, the signal is handled in this process after it, as anywhere else.
-        mask = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+        # No signal handler may raise inside the fork. Python's at-fork hooks swallow its KeyboardInterrupt (the
+        # signal was lost, and logging's lock stayed taken for good); one raised between LTTng's hooks leaves
+        # LTTng's locks taken, and the next fork hangs on them (CI saw it once under a SIGTERM storm). Blocking
+        # the signals in this thread does not keep them out: another thread (OpenBLAS's pool) takes the signal
+        # and Python runs the handler here, at this thread's next bytecode. So while this forks the handlers
+        # only note a signal; it is raised again after the fork, where the handler that was there handles it.
+        noted: list[int] = []
+        previous = _note_signals(noted)
         lttng, saved = _Preloaded.lttng, ctypes.create_string_buffer(_SIGSET)
         try:
             if lttng is not None:  # its locks taken, its signals blocked: its threads cannot be mid-way in the fork
@@ -155,10 +158,13 @@ class Forked:
             if lttng is not None:  # gives the locks back; in the child, starts its listener threads again
                 (lttng.ust_after_fork_child if pid == 0 else lttng.ust_after_fork_parent)(saved)
             if pid == 0:  # the child: never returns
-                _become_node(module, args, env, log_fd, mask)
+                _become_node(module, args, env, log_fd)
+            self.pid = pid
         finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-        self.pid = pid
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        for signum in dict.fromkeys(noted):
+            signal.raise_signal(signum)
 
     def poll(self) -> int | None:
         if self.returncode is None:
@@ -180,6 +186,23 @@ class Forked:
         return self.returncode
 
 
+def _note_signals(noted: list[int]) -> dict[int, Any]:
+    """Make each Python handler of :data:`_HELD` append its signal to ``noted`` instead; the handlers that were
+    there, to give back. None in a thread other than the main one: Python runs handlers only in that one."""
+    previous: dict[int, Any] = {}
+    if threading.current_thread() is not threading.main_thread():
+        return previous
+    try:
+        for sig in _HELD:
+            if callable(signal.getsignal(sig)):  # the OS's own action (ignore, end the process) raises nothing
+                previous[sig] = signal.signal(sig, lambda signum, frame: noted.append(signum))
+    except BaseException:  # signal.signal ran a pending handler, which raised: nothing is forked yet
+        for taken, handler in previous.items():
+            signal.signal(taken, handler)
+        raise
+    return previous
+
+
 _PROGRAM = ctypes.create_string_buffer(256)  #: the program's name for libc (and so ROS's log file names)
 
 
@@ -195,9 +218,7 @@ def _name_program(name: str) -> None:
         pass  # not glibc: the log files take the title's last part
 
 
-def _become_node(
-    module: str, args: list[str], env: Mapping[str, str], log_fd: int, mask: set[signal.Signals | int]
-) -> None:
+def _become_node(module: str, args: list[str], env: Mapping[str, str], log_fd: int) -> None:
     """In the forked child: become ``python -m <module> <args>`` with ``env``, stdout and stderr in ``log_fd``,
     in a session of its own (as ``start_new_session`` makes one); then exit, never returning to the caller."""
     code = 1
@@ -212,7 +233,6 @@ def _become_node(
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # the handlers a fresh interpreter has
             if signal.getsignal(sig) not in (signal.SIG_IGN, signal.SIG_DFL, signal.default_int_handler):
                 signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # the parent's, from before the fork
         import setproctitle
 
         # what ps shows for it; first: it finds the room for the title through the environment as it was
