@@ -93,6 +93,7 @@ def preload(shape, params, roles: Sequence[str] = ()) -> None:
         for role in roles:
             importlib.import_module(f"{_NODE_PREFIX}{role}")
             node_of(params.algorithm, role)
+        algorithm_of(params.algorithm).hook("batch_host")  # what the robot-batch node runs for this algorithm
     except Exception:  # each node, started afresh, reports what it cannot import in its own log
         return  # can_fork then refuses (rclpy loaded, not preloaded): the nodes start with python -m
     from swarm_ros.ros.runtime import load_type_support

@@ -33,6 +33,7 @@ HOOK_LAYERS = {
     "warm_up": "core",
     "checked_step": "core",
     "plan": "protocol",
+    "batch_host": "protocol",
     "recording": "artifacts",
     "write_run": "artifacts",
     "world_node": "nodes",
@@ -91,6 +92,10 @@ class Algorithm:
     warm_up: str = ""
     #: ``(processes, region_cuts, world_shards) -> [(name, executable, parameters)]``: its graph's node processes
     plan: str = ""
+    #: class ``(shape, params, own, drop)``: what a robot batch of its graph hears and decides (a
+    #: :class:`~swarm_ros.protocol.batch_host.BatchHost`), for the one robot-batch node (``robot_batch_node``
+    #: ``swarm_ros.nodes.robot_batch:RobotBatchNode``)
+    batch_host: str = ""
     #: its graph's node classes, one per role its graph runs, each ``(node, settings, own parameters)``: an rclpy node
     #: made, and its parameters read, by the role's executable (nodes/roles.py); "" for a role its graph has not
     world_node: str = ""
@@ -267,7 +272,8 @@ register(
         check_graph="swarm_ros.app.processes:check_study_graph",
         world_node="swarm_ros.nodes.darr_niazi.world:WorldNode",
         world_shard_node="swarm_ros.nodes.darr_niazi.world:WorldNode",
-        robot_batch_node="swarm_ros.nodes.darr_niazi.robot_batch:RobotBatchNode",
+        robot_batch_node="swarm_ros.nodes.robot_batch:RobotBatchNode",
+        batch_host="swarm_ros.protocol.darr_niazi.batch_host:StudyBatch",
         monitor_node="swarm_ros.nodes.darr_niazi.monitor:MonitorNode",
         checked_step="swarm_ros.core.invariants:checked_step",
         recording="swarm_ros.artifacts.recording_options:open_recording",
@@ -302,7 +308,8 @@ register(
         compile="swarm_ros.core.rubenstein.run:compile_kernels",
         plan="swarm_ros.protocol.plan:rubenstein_plan",
         world_node="swarm_ros.nodes.rubenstein.world:RubensteinWorldNode",
-        robot_batch_node="swarm_ros.nodes.rubenstein.robot_batch:RubensteinBatchNode",
+        robot_batch_node="swarm_ros.nodes.robot_batch:RobotBatchNode",
+        batch_host="swarm_ros.protocol.rubenstein.batch_host:RubensteinBatchHost",
         monitor_node="swarm_ros.nodes.rubenstein.monitor:RubensteinMonitorNode",
         checked_step="swarm_ros.core.rubenstein.tick_checks:checked_step",
         recording="swarm_ros.artifacts.rubenstein.recording:open_recording",

@@ -85,6 +85,7 @@ def plan_for(
 
 
 # -- topics -----------------------------------------------------------------------
+ROBOTS_DEPTH = 512  #: ticks of rows a reader of /swarm/robots or /swarm/region/<batch> keeps (its history depth)
 ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
 #: world -> all: the decisions it applied in the tick (PointCloud2); under it, /swarm/decisions/<batch>:
 #: one batch -> world: its robots' decisions (decisions_topic)

@@ -35,6 +35,7 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     OCCUPANCY,
     REGION,
     ROBOTS,
+    ROBOTS_DEPTH,
     RUBENSTEIN_KEPT,
     SHAPE,
     SNAPSHOT,
@@ -51,7 +52,6 @@ from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS
 # -- QoS ----------------------------------------------------------------------------
 #: Lockstep traffic: nothing may be lost, and a reader that matches late (a monitor
 #: started after the world) still gets the ticks it missed, up to the depth.
-ROBOTS_DEPTH = 512
 ROBOTS_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=ROBOTS_DEPTH,
