@@ -1,6 +1,6 @@
 """The run's parameters are declared once, as the fields of :class:`Settings` (swarm_ros.core.params): the table
 every other place reads (RUN_PARAMETERS) is those fields, and RunParams, the model's resolved parameters, has
-exactly the fields declared ``model``, with their types and defaults. Both are plain dataclasses that an editor
+exactly the fields declared ``model``: the same declarations, inherited. Both are plain dataclasses that an editor
 and a type checker can see, and that pickle by name (to experiment workers)."""
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import pickle
 
 import pytest
 
+from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.params import RUN_PARAMETER, RUN_PARAMETERS, RunParams, Settings
 
 pytestmark = pytest.mark.unit
@@ -28,9 +29,9 @@ def test_run_params_has_the_model_parameters_with_their_types_and_defaults():
     fields = dataclasses.fields(RunParams)
     assert [f.name for f in fields] == [p.name for p in model]  # robots first, as declared
     for f, p in zip(fields, model):
-        assert f.type == p.kind.__name__, f.name
-        if f.name != "robots":  # RunParams needs robots resolved: it has no default
-            assert f.default == p.default, f.name
+        assert f.type == p.kind.__name__ and f.default == p.default, f.name  # the same declaration
+    with pytest.raises(ParameterError, match="^robots must be an integer >= 4, got 0$"):  # resolved, or refused
+        RunParams()
 
 
 def test_settings_and_run_params_pickle_by_name_and_compare_equal():

@@ -29,7 +29,8 @@ class Param:
         flag: the command-line flag ("" = none; None = ``--`` and the name with dashes).
         experiment: ``"axis"`` (an experiment file may list several values), ``"fixed"``
             (one value for the whole experiment), or ``""`` (not an experiment file key).
-        model: whether it is a field of :class:`RunParams` (the shape and the world are not).
+        model: whether it is a field of :class:`RunParams` (the shape and the world are not): set from the class
+            that declares it (``swarm_ros.core.params``).
         recorded: whether summary.json and results.csv have it as a field or column (``mesh_scale``
             is recorded only where it applies, :func:`swarm_ros.core.metrics.run_summary`).
         algorithm: the shape-formation algorithm the parameter belongs to ("" = every one); another

@@ -2,10 +2,10 @@
 
 Each field carries its declaration (:class:`Param`: meaning, bounds or choices, command-line flag, role in
 an experiment file); :data:`RUN_PARAMETERS` is those declarations, in the fields' order. From them come the
-model's resolved parameters (:class:`RunParams`, a plain dataclass whose fields a test holds to the
-declarations), the command-line flags (``swarm_ros.app.cli``), the keys of a parameter file and of each
-node's ROS parameters, the keys of an experiment file (``swarm_ros.app.experiment_file``), the columns of
-``results.csv``, the launch file's arguments and the docs' tables of parameters (``scripts/docs_tables.py``).
+model's resolved parameters (:class:`RunParams`: the same declarations of the ``model`` fields), the command-line
+flags (``swarm_ros.app.cli``), the keys of a parameter file and of each node's ROS parameters, the keys of an
+experiment file (``swarm_ros.app.experiment_file``), the columns of ``results.csv``, the launch file's arguments
+and the docs' tables of parameters (``scripts/docs_tables.py``).
 Every value is checked by :meth:`Param.check`, so every input path says the same thing about a bad value:
 ``<name> must be <what>, got <value>``.
 
@@ -45,18 +45,20 @@ def _param(default: Any, meaning: str, **declaration: Any) -> Any:
     return field(default=default, metadata={"param": Param("", default, meaning, **declaration)})
 
 
+# The run parameters are declared once, as the fields of the four classes below; :class:`Settings` has them all,
+# :class:`RunParams` the model's (``model``). They are four only for the order of results.csv's columns, which is
+# Settings' fields' order: a dataclass puts its bases' fields first, the last base's first.
+
+
 @dataclass(frozen=True)
-class Settings:
-    """What a run needs before the shape is loaded: every run parameter with its default, declared here and only
-    here, in the order of results.csv's columns (:data:`RUN_PARAMETERS` is read from these fields).
-    ``robots = 0`` means the shape's patch count; ``join``, ``crowding`` and ``steps`` = "" the rule set's own."""
+class _Where:
+    """Where the swarm forms its shape: the first columns."""
 
     shape: str = _param(
         "star",
         "built-in shape name (2D or 3D), or a shape file: a .txt grid (layers separated by "
         "--- for 3D), a .png image, or an .stl/.obj/.ply mesh",
         experiment="",
-        model=False,
     )
     mesh_scale: float = _param(
         1.0,
@@ -65,9 +67,15 @@ class Settings:
         low_open=True,
         high=1000.0,
         experiment="",
-        model=False,
         recorded=False,
     )
+
+
+@dataclass(frozen=True)
+class _Model:
+    """The model's parameters, first part: ``robots = 0`` means the shape's patch count; ``join``, ``crowding`` and
+    ``steps`` = "" the rule set's own."""
+
     robots: int = _param(0, "robots N, seeds included", low=MIN_ROBOTS, blank="the shape's patch count", experiment="")
     algorithm: str = _param(
         DARR_NIAZI,
@@ -107,7 +115,17 @@ class Settings:
     wiggle_deg: float = _param(
         DEFAULT_WIGGLE_DEG, "max turn per tick, degrees", low=0.0, high=180.0, flag="--wiggle", **_DN
     )
-    world_radius: int = _param(DEFAULT_RADIUS, "the world spans [-R, R] patches", low=MIN_RADIUS, model=False)
+
+
+@dataclass(frozen=True)
+class _World:
+    world_radius: int = _param(DEFAULT_RADIUS, "the world spans [-R, R] patches", low=MIN_RADIUS)
+
+
+@dataclass(frozen=True)
+class _ModelRest:
+    """The model's parameters, second part: its robot failures, then the rubenstein algorithm's."""
+
     fail_fraction: float = _param(
         0.0, "fraction of the robots that fail at the end of fail_tick", low=0.0, high=1.0, flag="", **_DN
     )
@@ -159,6 +177,12 @@ class Settings:
         20_000, "the run ends incomplete after this many ticks without a robot joining", low=1, **_RB
     )
 
+
+@dataclass(frozen=True)
+class Settings(_ModelRest, _World, _Model, _Where):
+    """What a run needs before the shape is loaded: every run parameter with its default, in the order of
+    results.csv's columns (:data:`RUN_PARAMETERS` is read from these fields)."""
+
     def updated(self, **values: Any) -> Settings:
         """A copy with the given non-None values."""
         return replace(self, **{k: v for k, v in values.items() if v is not None})
@@ -189,8 +213,11 @@ class Settings:
         return shape, params
 
 
+_MODEL = {f.name for part in (_Model, _ModelRest) for f in fields(part)}
 #: The run's parameters, in the order of results.csv's columns: :class:`Settings`' fields' declarations.
-RUN_PARAMETERS: tuple[Param, ...] = tuple(replace(f.metadata["param"], name=f.name) for f in fields(Settings))
+RUN_PARAMETERS: tuple[Param, ...] = tuple(
+    replace(f.metadata["param"], name=f.name, model=f.name in _MODEL) for f in fields(Settings)
+)
 RUN_PARAMETER = {p.name: p for p in RUN_PARAMETERS}
 EXPERIMENT_AXES = tuple(p.name for p in RUN_PARAMETERS if p.experiment == "axis")  #: may list several values
 
@@ -326,40 +353,10 @@ def check_node_values(kind: str, values: dict[str, object], where: str = "") -> 
 
 
 @dataclass(frozen=True)
-class RunParams:
+class RunParams(_ModelRest, _Model):
     """Everything that, with the shape, fixes a run: the model's run parameters (the :class:`Settings` fields
-    declared ``model``, in their order, with their defaults: test_params checks it), validated on construction,
-    ``robots`` resolved (>= 4) and the rule set's switches resolved ("" becomes the rule set's own value)."""
-
-    robots: int
-    algorithm: str = DARR_NIAZI
-    vision_radius: float = DEFAULT_VISION
-    rules: str = DEFAULT_RULES
-    join: str = ""
-    crowding: str = ""
-    steps: str = ""
-    seed: int = DEFAULT_SEED
-    max_ticks: int = 0
-    wiggle_deg: float = DEFAULT_WIGGLE_DEG
-    fail_fraction: float = 0.0
-    fail_tick: int = 0
-    pixel_size: float = 1.2
-    comm_range: float = 3.5
-    gradient_range: float = 1.5
-    desired_distance: float = 1.3
-    yield_distance: float = 2.5
-    yield_patience: int = 60
-    step_length: float = 0.05
-    turn_deg: float = 7.0
-    range_noise: float = 0.0
-    loc_gain: float = 0.25
-    loc_sweeps: int = 10
-    loc_min_angle_deg: float = 15.0
-    loc_settle: float = 0.1
-    loc_settle_ticks: int = 10
-    loc_stale_ticks: int = 20
-    startup_ticks: int = 200
-    stall_ticks: int = 20_000
+    declared ``model``, in their order, with their defaults), validated on construction, ``robots`` resolved (>= 4:
+    0 is refused) and the rule set's switches resolved ("" becomes the rule set's own value)."""
 
     def __post_init__(self) -> None:
         for p in RUN_PARAMETERS:
