@@ -46,19 +46,20 @@ class LockstepPort:
         self.monitor_ready = True
         self.saver = None  # a ShardSaver, to restart from (test_world_restart.py)
         self.books: list[dict] = []
-        self.regions: list[tuple[int, int, np.ndarray]] = []  # (tick, batch, rows): snapshots and region rows
+        #: (tick, batch, rows, snapshot): snapshots and region rows, as sent
+        self.regions: list[tuple[int, int, np.ndarray, bool]] = []
 
     def watch_batch(self, k, name):
         self.watched.append(name)
 
     def send_snapshot(self, k, tick, rows):
         self.snapshots.append((k, tick))
-        self.regions.append((tick, k, rows))
+        self.regions.append((tick, k, rows, True))
 
     def publish_tick(self, tick, rows, joined, applied, regional, tally):
         assert (applied is None) == (tick == 0) and tally is None and rows is not None  # record_every 1
         self.ticks.append(tick)
-        self.regions += [(tick, k, part) for k, part in enumerate(regional or ())]
+        self.regions += [(tick, k, part, False) for k, part in enumerate(regional or ())]
 
     def publish_status(self, status):
         self.statuses.append(status)
@@ -99,7 +100,7 @@ class LockstepRun:
     def __init__(self, batches: int = 2, cuts: list[int] | None = None, shape: str = "star", **policy) -> None:
         self.shape = Shape.load(shape)
         self.params = RunParams(robots=ROBOTS, seed=7, max_ticks=MAX_TICKS)
-        text = ",".join(map(str, cuts or []))
+        self.cuts = text = ",".join(map(str, cuts or []))
         self.strips = [batch_strip(self.shape, self.params, k, batches, text) for k in range(batches)]
         self.clock, self.port, self.log = Clock(), LockstepPort(), Log()
         self.rejections = Rejections(self.log)

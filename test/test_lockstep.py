@@ -343,34 +343,40 @@ def test_batches_that_never_cover_the_robots_fail_the_run_at_the_start_timeout()
 
 
 class RegionCheck:
-    """Follows each batch's snapshot and region rows into a regional view, as a batch process does, and
-    checks after every tick that it holds exactly the world's moving robots in its area, and every stationary
-    robot, with the world's poses and the world's frontier."""
+    """Each batch's host as a robot-batch process runs it (:class:`StudyBatch`), fed its snapshot and region rows
+    as the messages the world sends; checks after every tick that its regional view holds exactly the world's
+    moving robots in its area, and every stationary robot, with the world's poses and the world's frontier."""
 
     def __init__(self, run: LockstepRun) -> None:
-        from swarm_ros.core.regions import area, halo
-        from swarm_ros.core.swarm_view import SwarmView
+        from swarm_ros.protocol.darr_niazi.batch_host import StudyBatch
 
-        self.run, self.seen = run, 0
-        world = run.shape.world
-        self.areas = [area(s, halo(run.params.vision_radius), world.size) for s in run.strips]
-        self.views = [SwarmView(run.shape, ROBOTS, a) for a in self.areas]
+        self.run, self.seen, self.dropped = run, 0, []
+        self.hosts = [
+            StudyBatch(
+                run.shape,
+                run.params,
+                {"batch": k, "batches": run.batches, "region_cuts": run.cuts, "name": batch_name(k)},
+                lambda topic, fault: self.dropped.append((topic, fault)),
+            )
+            for k in range(run.batches)
+        ]
         self.handovers = 0
         self.owner = None
 
-    def follow(self) -> None:
-        from swarm_ros.protocol.checks import apply_robots
+    def follow(self) -> dict[int, tuple[np.ndarray, int]]:
+        """What each host decided from the messages sent since the last call, by batch."""
+        from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 
-        for tick, k, rows in self.run.port.regions[self.seen :]:
-            rep = self.views[k]
-            if rep.tick < 0:
-                from swarm_ros.protocol.rows import pose_of
-
-                rep.load(tick, rows["id"], rows["state"], **pose_of(rows))
-            elif tick == rep.tick + 1:
-                apply_robots(rep, tick, rows)
+        decided = {}
+        for tick, k, rows, snapshot in self.run.port.regions[self.seen :]:
+            inbox = self.hosts[k].inboxes[0 if snapshot else 1]
+            out = inbox.take(decode_cloud(encode_cloud(rows, tick)))
+            if out is not None:
+                decided[k] = out
         self.seen = len(self.run.port.regions)
+        assert self.dropped == []
         self._check()
+        return decided
 
     def _check(self) -> None:
         s = self.run.ls.sim.state
@@ -382,7 +388,8 @@ class RegionCheck:
             self.handovers += int(((was >= 0) & (was != owner)).sum())
         self.owner = np.full(s.robots, -1)
         self.owner[moving] = owner
-        for rep, (first, last) in zip(self.views, self.areas):
+        for host in self.hosts:
+            rep, (first, last) = host.view, host.view.area
             assert rep.tick == s.tick
             inside = moving[(cols >= first) & (cols <= last)]
             assert np.array_equal(rep.moving_ids(), inside)
@@ -406,13 +413,18 @@ class RegionCheck:
 )
 def test_any_partition_into_strips_gives_the_engines_run_and_each_batch_sees_exactly_its_region(batches, cuts, shape):
     """Equality for several partitions (balanced, lopsided, a one-column strip, 3D), and the routing: each
-    batch's regional view, fed only its snapshot and region rows, equals the world where it must."""
+    batch's host, fed only its snapshot and region rows, sees the world where it must and decides the engine's
+    run."""
     r = LockstepRun(batches=batches, cuts=cuts, shape=shape)
     check = RegionCheck(r)
     r.start()
+    decided = check.follow()
     while not r.ls.sim.done:
-        r.tick()
-        check.follow()
+        before = r.ls.sim.tick
+        for k, (rows, tick) in decided.items():
+            r.ls.decisions(k, tick, rows)
+        decided = check.follow()
+        assert r.ls.sim.tick == before + 1, "the hosts' decisions did not make the next tick"
     assert np.array_equal(r.ls.sim.history, r.engine().history)
     if batches > 1:
         assert check.handovers > 0, "no robot crossed a cut: the test would not test handovers"
