@@ -10,6 +10,8 @@ from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
 from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.rubenstein.strips import RubensteinBatch, Strips, area_of, cell_columns, run_batched, strips_for
+from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
+from swarm_ros.protocol.rubenstein.batch_host import RubensteinBatchHost
 from swarm_ros.protocol.rubenstein.lockstep import RubensteinLockstep
 from swarm_ros.protocol.rubenstein.rows import check_rubenstein_rows, decided_of_rows, robots_of_rows, rubenstein_rows
 
@@ -187,22 +189,32 @@ def test_the_wire_rows_name_the_gradient_and_estimate_and_round_trip_the_sentine
 
 
 def lockstep_run(params: RunParams, batches: int, region_cuts: str = "") -> tuple[RubensteinRun, RubensteinLockstep]:
-    """The graph's exchange without ROS: the world's lockstep, and batches sent only its rows (each announcing its
+    """The graph's exchange without ROS: the world's lockstep, and batches as a robot-batch process runs them
+    (:class:`RubensteinBatchHost`), each sent only its area as the message the world sends (each announcing its
     strip, in reverse order: the world numbers them from the west)."""
     run = RubensteinRun(square(6), params)
     ls = RubensteinLockstep(run)
-    strips = strips_for(run, batches, region_cuts)
+    own = {"batches": batches, "region_cuts": region_cuts}
+    hosts = [
+        RubensteinBatchHost(run.shape, params, {**own, "batch": k, "name": f"robot_batch_{k}"}, _no_drop)
+        for k in range(batches)
+    ]
     for k in reversed(range(batches)):
-        sent = ls.announce(f"robot_batch_{k}", strips.strip(k))
-    hosts = [RubensteinBatch(run, strips, k) for k in range(batches)]
+        sent = ls.announce(f"robot_batch_{k}", hosts[k].strip)
     assert sent == list(range(batches)) and ls.started
     while run.outcome is None:
-        tick = run.tick + 1
         for k in range(batches):
-            own, decided = hosts[k].decide(tick, *robots_of_rows(ls.area(k)))
-            settled = ls.decisions(k, tick, rubenstein_rows(own, decided))
+            area = hosts[k].inboxes[0]
+            assert area.topic == f"/swarm/rubenstein/area/robot_batch_{k}" and area.latched
+            decided = area.take(decode_cloud(encode_cloud(ls.area(k), run.tick)))
+            assert decided is not None
+            settled = ls.decisions(k, decided[1], decided[0])
             assert settled == (k == batches - 1)
     return run, ls
+
+
+def _no_drop(topic: str, fault: Rejected) -> None:
+    raise AssertionError(f"{topic}: {fault}")
 
 
 @pytest.mark.parametrize("batches", [1, 2, 4])
