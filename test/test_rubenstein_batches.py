@@ -12,7 +12,7 @@ from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.rubenstein.strips import RubensteinBatch, Strips, area_of, cell_columns, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.rubenstein.batch_host import RubensteinBatchHost
-from swarm_ros.protocol.rubenstein.lockstep import RubensteinLockstep
+from swarm_ros.protocol.rubenstein.lockstep import RubensteinLockstep, monitor_reach
 from swarm_ros.protocol.rubenstein.rows import check_rubenstein_rows, decided_of_rows, robots_of_rows, rubenstein_rows
 
 pytestmark = pytest.mark.unit
@@ -433,3 +433,115 @@ def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_wh
     )
     assert watch.liveliness("robot_batch_1", 1, 0) == "robot_batch_1 is back (liveliness)"
     assert watch.lapsed == set()
+
+
+class WorldPort:
+    """What a RubensteinWorld sends, recorded; the monitor reads from the start, readers acknowledge at once."""
+
+    def __init__(self) -> None:
+        self.watched: list[str] = []
+        self.areas: list[tuple[str, int, np.ndarray]] = []
+        self.records: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self.statuses: list[tuple[int, str, str, str]] = []
+
+    def watch_batch(self, name):
+        self.watched.append(name)
+
+    def send_area(self, name, tick, rows):
+        self.areas.append((name, tick, rows))
+
+    def publish_record(self, tick, metrics, robots):
+        self.records.append((tick, metrics, robots))
+
+    def publish_status(self, tick, outcome, message, waiting):
+        self.statuses.append((tick, outcome, message, waiting))
+
+    def monitor_reads(self):
+        return True
+
+    def delivered(self):
+        return True
+
+    def dropped(self):
+        return ""
+
+
+class _Log:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def info(self, text: str) -> None:
+        self.lines.append(text)
+
+    warning = info
+
+
+def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
+    """A RubensteinWorld over a fake port and clock, its batches' hosts fed the areas it sends, and a monitor that
+    reports each record held as it goes out (``slow``: only once the world waits for it). Checks, throughout, that
+    the world never runs past the monitor's reach."""
+    from swarm_ros.protocol.rubenstein.lockstep import RubensteinWorld
+
+    params = RunParams(40, algorithm="rubenstein", seed=6)
+    run, port, log, now = RubensteinRun(square(6), params), WorldPort(), _Log(), [0.0]
+    own = {"record_every": every, "monitor_window": window, "start_timeout": 60.0, "incarnation": 0}
+    own["checkpoint"] = str(tmp_path / "world.npz") if tmp_path else ""
+    world = RubensteinWorld(run, own, port, log, clock=lambda: now[0])
+    hosts = {}
+    for k in reversed(range(2)):
+        name = f"robot_batch_{k}"
+        hosts[name] = RubensteinBatchHost(
+            run.shape, params, {"batch": k, "batches": 2, "region_cuts": "", "name": name}, _no_drop
+        )
+        world.batch(name, hosts[name].strip)
+    assert port.areas == [] and port.watched == ["robot_batch_1", "robot_batch_0"]
+    world.poll()  # tick 0 goes out
+    held, sent, world.waits = -1, 0, 0
+    reach = monitor_reach(window, every)
+    for _ in range(10**6):
+        now[0] += 0.001
+        moved = sent < len(port.areas)
+        while sent < len(port.areas):  # the world sends the next areas as the last batch's decisions come in
+            name, tick, rows = port.areas[sent]
+            sent += 1
+            rows_out, at = hosts[name].inboxes[0].take(decode_cloud(encode_cloud(rows, tick)))
+            world.decisions(name, at, rows_out)
+        out = max(port.areas[-1][1], port.records[-1][0])  # the last tick that went out
+        assert reach is None or held < 0 or out <= held + reach
+        last = port.records[-1][0]
+        ended = world.ended_at is not None and last == run.tick
+        if last > held and (not slow or not moved):
+            world.waits += slow and not ended
+            held = last
+            moved = True
+            world.held_report(np.array([held, int(ended)]))
+        world.poll()
+        if world.finished:
+            return run, world, port
+        if not moved:
+            raise AssertionError(f"stuck at tick {run.tick}")
+    raise AssertionError("no end")
+
+
+@pytest.mark.parametrize(("window", "every"), [(0, 20), (40, 20), (5, 7)])
+def test_the_worlds_logic_over_a_fake_port_runs_the_in_process_run_with_a_record_every_k_ticks(window, every, tmp_path):
+    params = RunParams(40, algorithm="rubenstein", seed=6)
+    whole = RubensteinRun(square(6), params)
+    whole.run()
+    run, world, port = world_run(window, every, tmp_path)
+    assert same(whole, run)
+    ticks = [tick for tick, _, _ in port.records]
+    assert ticks == [*range(0, run.tick, every), run.tick] or ticks == list(range(0, run.tick + 1, every))
+    metrics = np.concatenate([m for _, m, _ in port.records])
+    assert len(metrics) == run.tick + 1  # every tick's metrics row once, in order
+    assert port.statuses[-1][:2] == (run.tick, str(run.outcome)) and world.finished
+    assert (tmp_path / "world.npz").exists()
+
+
+def test_the_world_holds_a_tick_past_the_monitors_reach_until_the_monitor_reports_more():
+    run, world, port = world_run(40, 20, slow=True)
+    assert world.waits > 10 and world.held_end and world.finished  # it waited, again and again, and ended
+    params = RunParams(40, algorithm="rubenstein", seed=6)
+    whole = RubensteinRun(square(6), params)
+    whole.run()
+    assert same(whole, run)

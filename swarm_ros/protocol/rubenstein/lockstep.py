@@ -17,18 +17,30 @@ joined; a robot that moves goes one step along its heading, which turned by at m
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 
 from swarm_ros.core.errors import Rejected, RunFailed
-from swarm_ros.core.params import MAX_TICKS
+from swarm_ros.core.params import MAX_TICKS, auto_every
 from swarm_ros.core.rubenstein.rule import JOINED, Decided
 from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.rubenstein.strips import Strips, cell_columns
 
+from ..plan import MONITOR
 from ..plan import RUBENSTEIN_KEPT as KEPT
+from ..status import RUNNING, STARTING
 from ..world_port import STILL_S
+from . import checkpoint
+from .checkpoint import save_every
 from .checks import DECISION_FAULTS, decision_faults, first_fault
-from .rows import check_rubenstein_rows, decided_of_rows, rubenstein_rows
+from .rows import check_rubenstein_rows, decided_of_rows, metrics_rows, rubenstein_rows
+
+#: seconds, at most, for the last messages to be acknowledged before exiting, when the world waits for no monitor
+LINGER = 5.0
 
 _STEP_TOLERANCE = 1e-9  #: d: a step's end may differ from the rule's in the last bits of another libm's cos
 
@@ -223,3 +235,169 @@ def check_decisions(run: RubensteinRun, rows: np.ndarray, tick: int, own: np.nda
     if fault is not None:
         raise Rejected(*fault)
     return ids, d
+
+
+class RubensteinWorld:
+    """The world node's logic, on a :class:`RubensteinLockstep`: tick 0 once the strips tile the grid and the monitor
+    reads the run's topics; each settled tick sent unless it is past the monitor's reach (``monitor_window`` past
+    the last record the monitor reports held: :func:`monitor_reach`); a checkpoint every :func:`save_every` ticks,
+    before the tick goes out; the records (every robot's row and the metrics rows since the last) every
+    ``record_every`` ticks and at the end; the peers' liveliness and a still run's failure (:class:`RubensteinWatch`);
+    the end once the monitor holds it (or, with no window, once its readers have everything, or after ``LINGER``).
+
+    Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writer, decisions
+    reader and liveliness), ``send_area(name, tick, rows)``, ``publish_record(tick, metrics_rows, robot_rows)``,
+    ``publish_status(tick, outcome, message, waiting)``, and answers ``monitor_reads()`` (the monitor reads the
+    run's topics) and ``delivered()`` (every reader has the last messages)."""
+
+    def __init__(
+        self, run: RubensteinRun, own: dict, port: Any, log: Any, clock: Callable[[], float] = time.monotonic
+    ) -> None:
+        self.ls = RubensteinLockstep(run)
+        self.port, self.log, self.clock = port, log, clock
+        self.every = int(own["record_every"]) or auto_every(run.params)
+        self.save_every = save_every(self.every)
+        self.reach = monitor_reach(int(own["monitor_window"]), self.every)
+        self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] else None
+        self.start_timeout = float(own["start_timeout"])
+        self.created = clock()
+        self.held, self.held_end = -1, False  # the monitor's last held record, and whether it holds the outcome
+        self.pending = False  # a settled tick waits for the monitor to catch up before it goes out
+        self.sent_metrics = -1  # the last tick whose metrics row went out
+        self.first = True  # the first tick this process publishes is still to go out
+        self.watched: set[str] = set()  # the batches whose endpoints the port made
+        self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
+        self.ended_at: float | None = None
+        self.finished = False
+        self.watch = RubensteinWatch(self.created)
+        if int(own["incarnation"]):  # a restarted process: on from the last checkpoint
+            self._resume()
+
+    @property
+    def run(self) -> RubensteinRun:
+        return self.ls.run
+
+    def _resume(self) -> None:
+        """Go on from the checkpoint the process before saved: the run at its tick, the batches it served (their
+        announcements, latched, come again and are sent their areas of that tick), and the metrics rows from the
+        last record before it sent again (the monitor drops what it holds)."""
+        if self.checkpoint is None:
+            raise RunFailed("a restarted world has no checkpoint to go on from (the checkpoint parameter is empty)")
+        if not self.checkpoint.exists():  # tick 0 is saved before anything of it goes out: nothing did
+            self.log.info("restarted before tick 0 went out: the run starts from tick 0")
+            return
+        saved = checkpoint.load(self.checkpoint, self.run)
+        self.run.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
+        self.ls.resume(saved.hosts, saved.cuts)
+        self.sent_metrics = saved.tick - self.every if saved.tick else -1
+        self.log.info(f"restarted: on from the checkpoint of tick {saved.tick}")
+
+    # -- what comes in ----------------------------------------------------------------------
+    def batch(self, name: str, strip: tuple[int, int]) -> None:
+        """Node ``name`` announced the cell columns ``strip`` (:meth:`RubensteinLockstep.announce`).
+
+        Raises:
+            Rejected: a strip that does not fit the run.
+        """
+        send = self.ls.announce(name, strip)
+        if name not in self.watched:
+            self.watched.add(name)
+            self.port.watch_batch(name)
+        self.waiting += send
+        self.log.info(f"{name}: cell columns {strip[0]}..{strip[1]}")
+
+    def decisions(self, name: str, tick: int, rows: np.ndarray) -> None:
+        """Node ``name``'s decisions for ``tick`` (checked as rows by the caller).
+
+        Raises:
+            Rejected: decisions that cannot be that batch's for the tick being decided.
+        """
+        k = self.ls.number(name)
+        if self.run.outcome is not None or self.first or k is None:  # before its first tick: the process before's
+            return
+        if self.ls.decisions(k, tick, rows):
+            self.pending = True
+            self._go_on()
+
+    def held_report(self, values: np.ndarray) -> None:
+        """The monitor's report on /swarm/rubenstein/held (:func:`check_held`).
+
+        Raises:
+            Rejected: ("held") a report that cannot be of this run.
+        """
+        tick, ended = check_held(values, self.run)
+        if tick > self.held or ended > self.held_end:
+            self.watch.moved(self.clock())
+        self.held, self.held_end = max(self.held, tick), self.held_end or ended
+        self._go_on()
+
+    def liveliness(self, name: str, alive: int, not_alive: int) -> None:
+        said = self.watch.liveliness(name, alive, not_alive)
+        if said is None:
+            return
+        if name in self.watch.lapsed:  # (a logger method picked by a conditional expression and called in an rclpy
+            self.log.warning(said)  # event callback crashed the process inside rclpy, 3 runs of 3)
+        else:
+            self.log.info(said)
+        if self.ended_at is None:
+            self.status(RUNNING if self.ls.started and not self.first else STARTING, said)
+
+    # -- what goes out ----------------------------------------------------------------------
+    def _go_on(self) -> None:
+        """Send the settled tick, unless it is past the monitor's reach (then once the monitor reports more held)."""
+        if self.pending and (self.reach is None or self.run.tick <= self.held + self.reach):
+            self.pending = False
+            self._publish_tick()
+
+    def _send_areas(self, batches: list[int]) -> None:
+        for k in batches:
+            self.port.send_area(self.ls.hosts[k], self.run.tick, self.ls.area(k))
+
+    def _publish_tick(self) -> None:
+        run = self.run
+        tick, ended = run.tick, run.outcome is not None
+        self.watch.moved(self.clock())
+        if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
+            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts)
+        if ended or tick % self.every == 0:
+            everyone = rubenstein_rows(np.arange(run.params.robots), run.robots)
+            self.port.publish_record(tick, metrics_rows(run.history[self.sent_metrics + 1 :]), everyone)
+            self.sent_metrics = tick
+        if ended:
+            self.ended_at = self.clock()
+            self.status(str(run.outcome), f"the run ended at tick {tick}: {run.outcome}")
+        else:
+            self._send_areas(list(range(self.ls.batches)))
+
+    def status(self, outcome: str, message: str) -> None:
+        self.port.publish_status(self.run.tick, outcome, message, ",".join(sorted(self.watch.lapsed)))
+
+    # -- between messages ---------------------------------------------------------------------
+    def poll(self) -> None:
+        """Tick 0 (or a resumed world's tick) once every batch is in and the monitor reads; a batch process that
+        came back sent its area; the start timeout and a still run; whether the node may exit.
+
+        Raises:
+            RunFailed: the batches did not all announce themselves within ``start_timeout``, or the run is still.
+        """
+        now = self.clock()
+        heard = self.ls.started and all(name in self.watched for name in self.ls.hosts.values())  # resumed: all
+        if self.waiting and heard and (not self.first or self.port.monitor_reads()):
+            batches, self.waiting = sorted(set(self.waiting)), []
+            if self.first:  # tick 0, or the checkpoint's: the robots, the metrics and the areas
+                self.first = False
+                self.status(RUNNING, f"{self.ls.batches} robot batches in: tick {self.run.tick}")
+                self.pending = True
+                self._go_on()
+            elif not self.pending:  # a batch process that came back: its area at the current tick (if it went out:
+                self._send_areas(batches)  # a tick waiting for the monitor goes to every batch when it does)
+        if not self.ls.started and now - self.created > self.start_timeout:
+            raise RunFailed(f"robot batches did not all announce themselves within {self.start_timeout:g} s")
+        if self.ls.started and self.ended_at is None and self.watch.still(now):  # for STILL_S
+            unheard = [name for name in self.ls.hosts.values() if name not in self.watched]  # a resumed world's
+            awaited = (unheard or [MONITOR]) if self.first or self.pending else self.ls.awaited()
+            raise self.watch.failure(self.run.tick, awaited, self.port.dropped())
+        if self.ended_at is not None and self.reach is not None:  # the monitor holds the end: nothing more to keep
+            self.finished = self.held_end
+        elif self.ended_at is not None:
+            self.finished = self.port.delivered() or now - self.ended_at > LINGER
