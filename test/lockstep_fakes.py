@@ -32,7 +32,7 @@ class Log:
     def info(self, text: str) -> None:
         self.lines.append(text)
 
-    warn = info
+    warn = warning = info
 
 
 class LockstepPort:

@@ -3,6 +3,7 @@ K batches, each sent only its area's robots, give the in-process engine's run by
 
 import numpy as np
 import pytest
+from lockstep_fakes import Log
 
 from swarm_ros.core import Shape, World
 from swarm_ros.core.errors import ContractError, ParameterError, Rejected
@@ -466,16 +467,6 @@ class WorldPort:
         return ""
 
 
-class _Log:
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-
-    def info(self, text: str) -> None:
-        self.lines.append(text)
-
-    warning = info
-
-
 def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
     """A RubensteinWorld over a fake port and clock, its batches' hosts fed the areas it sends, and a monitor that
     reports each record held as it goes out (``slow``: only once the world waits for it). Checks, throughout, that
@@ -483,7 +474,7 @@ def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
     from swarm_ros.protocol.rubenstein.lockstep import RubensteinWorld
 
     params = RunParams(40, algorithm="rubenstein", seed=6)
-    run, port, log, now = RubensteinRun(square(6), params), WorldPort(), _Log(), [0.0]
+    run, port, log, now = RubensteinRun(square(6), params), WorldPort(), Log(), [0.0]
     own = {"record_every": every, "monitor_window": window, "start_timeout": 60.0, "incarnation": 0}
     own["checkpoint"] = str(tmp_path / "world.npz") if tmp_path else ""
     world = RubensteinWorld(run, own, port, log, clock=lambda: now[0])
