@@ -26,7 +26,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core.algorithm import algorithm_of
-from swarm_ros.core.errors import Rejected
+from swarm_ros.core.errors import ParameterError, Rejected
 from swarm_ros.core.params import Settings
 from swarm_ros.nodes.roles import start
 from swarm_ros.protocol.batch_host import BatchHost, Inbox
@@ -48,9 +48,10 @@ class RobotBatchNode:
         name = node.get_name()
         shape, params = run.resolve()
         self.rejections = Rejections(node.get_logger())
-        self.host: BatchHost = algorithm_of(run.algorithm).hook("batch_host")(
-            shape, params, {**own, "name": name}, self.rejections.drop
-        )
+        host = algorithm_of(run.algorithm).hook("batch_host")
+        if host is None:
+            raise ParameterError(f"the {run.algorithm} algorithm has no batch_host for its robot-batch node")
+        self.host: BatchHost = host(shape, params, {**own, "name": name}, self.rejections.drop)
         self.finished = False
         self.ended_at: float | None = None  # time.monotonic() when the world's outcome arrived
         self.signer, self.gate = open_auth(node, self.rejections)

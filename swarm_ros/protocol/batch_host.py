@@ -19,8 +19,9 @@ import numpy as np
 
 from swarm_ros.protocol.cdr import Cloud
 
-#: the rows to publish on the batch's decisions topic and the tick they decide; None: nothing to send yet
-Decided = tuple[np.ndarray, int] | None
+#: a host's reply to a message: the rows to publish on the batch's decisions topic and the tick they decide; None:
+#: nothing to send yet
+Reply = tuple[np.ndarray, int] | None
 
 
 @dataclass(frozen=True)
@@ -32,7 +33,7 @@ class Inbox:
 
     topic: str
     latched: bool
-    take: Callable[[Cloud], Decided]
+    take: Callable[[Cloud], Reply]
 
 
 class BatchHost(Protocol):

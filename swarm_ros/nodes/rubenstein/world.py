@@ -1,13 +1,13 @@
 """The world node of a rubenstein run (``--algorithm rubenstein``): holds every robot, sends each robot batch its
 area, settles the batches' decisions, and publishes the run for the monitor.
 
-A thin shell around :class:`swarm_ros.protocol.rubenstein.lockstep.RubensteinWorld`, its port: each batch
-announces its strip of cell columns on /swarm/batches (``[first, last]``); once the strips tile the grid, and the monitor reads
-the run's topics, tick 0 goes out: each batch's area rows on /swarm/rubenstein/area/<batch>, every robot's row on
-/swarm/rubenstein/robots, the metrics on /swarm/rubenstein/metrics and ``running`` on /swarm/status. Each tick, once
-every batch's decisions are in (checked, or dropped and counted), it settles them and sends the next areas; every
-``record_every``-th tick and at the end it sends the robots and the metrics rows since the last. It runs at most
-``monitor_window`` ticks past the last record the monitor reports held on /swarm/rubenstein/held
+A thin shell around :class:`swarm_ros.protocol.rubenstein.lockstep.RubensteinWorld`, its port: each batch announces
+its strip of cell columns on /swarm/batches (``[first, last]``); once the strips tile the grid, and the monitor
+reads the run's topics, tick 0 goes out: each batch's area rows on /swarm/rubenstein/area/<batch>, every robot's row
+on /swarm/rubenstein/robots, the metrics on /swarm/rubenstein/metrics and ``running`` on /swarm/status. Each tick,
+once every batch's decisions are in (checked, or dropped and counted), it settles them and sends the next areas;
+every ``record_every``-th tick and at the end it sends the robots and the metrics rows since the last. It runs at
+most ``monitor_window`` ticks past the last record the monitor reports held on /swarm/rubenstein/held
 (:func:`~swarm_ros.protocol.rubenstein.lockstep.monitor_reach`), so a restarted monitor finds in the topics'
 histories every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it (or,
 with no window, once its readers have everything or after a grace period). It saves a checkpoint at tick 0 and every

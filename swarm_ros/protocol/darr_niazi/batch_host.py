@@ -28,7 +28,7 @@ from swarm_ros.core.shapes import Shape
 from swarm_ros.core.swarm_view import SwarmView
 from swarm_ros.core.warmup import warm_up
 from swarm_ros.protocol import checks
-from swarm_ros.protocol.batch_host import Decided, Inbox
+from swarm_ros.protocol.batch_host import Inbox, Reply
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.checks import apply_robots, checked_robots
 from swarm_ros.protocol.plan import ROBOTS_DEPTH, decisions_topic, region_topic, snapshot_topic
@@ -66,7 +66,7 @@ class StudyBatch:
     def summary(self) -> str:
         return f"received {self.received} bytes of rows on {self.region} up to tick {self.view.tick}"
 
-    def _on_snapshot(self, msg: Cloud) -> Decided:
+    def _on_snapshot(self, msg: Cloud) -> Reply:
         """This batch's region at some tick (its area's moving robots, every stationary one): start (again) from
         it if it is newer than what the view holds."""
         tick, rows = checks.snapshot(msg, self.params.robots, self.radius, self.shape.dims)
@@ -81,7 +81,7 @@ class StudyBatch:
         self.early.clear()
         return self._decide()
 
-    def _on_robots(self, msg: Cloud) -> Decided:
+    def _on_robots(self, msg: Cloud) -> Reply:
         self.received += len(msg.data)
         tick, rows = checked_robots(self.view, msg, self.radius)
         if tick <= self.view.tick:
@@ -104,7 +104,7 @@ class StudyBatch:
             return False
         return True
 
-    def _decide(self) -> Decided:
+    def _decide(self) -> Reply:
         """The decisions of the moving robots in this batch's strip for the tick after the view's."""
         moving = self.view.moving_ids()
         cols = regions.columns(self.view.state.x[moving], self.radius)

@@ -20,7 +20,7 @@ from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.rubenstein.strips import RubensteinBatch, strips_for
 from swarm_ros.core.shapes import Shape
 from swarm_ros.protocol import checks
-from swarm_ros.protocol.batch_host import Decided, Inbox
+from swarm_ros.protocol.batch_host import Inbox, Reply
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.plan import rubenstein_area_topic, rubenstein_decisions_topic
 from swarm_ros.protocol.rubenstein.rows import RUBENSTEIN_ROW, check_rubenstein_rows, robots_of_rows, rubenstein_rows
@@ -49,7 +49,7 @@ class RubensteinBatchHost:
     def summary(self) -> str:
         return f"decided up to tick {self.tick + 1}"
 
-    def _on_area(self, msg: Cloud) -> Decided:
+    def _on_area(self, msg: Cloud) -> Reply:
         tick = checks.tick_stamp(msg.header)
         rows = checks.cloud(msg, RUBENSTEIN_ROW, self.robots, min_rows=0)
         check_rubenstein_rows(rows, self.robots, tick)
