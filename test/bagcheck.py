@@ -191,7 +191,11 @@ def assert_rubenstein_bag_holds_run(run: Path, interrupted: bool = False) -> Non
     final_state.csv; the status ends with the outcome. ``interrupted``: the run was written up to its last record,
     and the bag also holds the metrics of the ticks the monitor took after it; no outcome went out."""
     from swarm_ros.core.rubenstein.rule import STATE_NAMES
-    from swarm_ros.protocol.rubenstein.rows import RUBENSTEIN_METRICS_ROW, RUBENSTEIN_ROW
+    from swarm_ros.core.rubenstein.run import COLUMNS
+    from swarm_ros.protocol.central_rows import metrics_row
+    from swarm_ros.protocol.rubenstein.rows import RUBENSTEIN_ROW
+
+    RUBENSTEIN_METRICS_ROW = metrics_row(COLUMNS)
 
     _, messages = read_bag(run / "bag", types=RUBENSTEIN_TYPES)
     summary = json.loads((run / "summary.json").read_text())

@@ -97,12 +97,12 @@ def test_each_role_runs_its_algorithms_node_and_a_role_its_graph_has_not_is_refu
     """One set of executables: the world role is each algorithm's own world node, the robot batch one node over
     each algorithm's batch host; the rubenstein graph has no world shard, and an engine of one algorithm refuses
     another's run."""
-    assert node_of(RUBENSTEIN, "world").__name__ == "RubensteinWorldNode"
+    assert node_of(RUBENSTEIN, "world").__name__ == "CentralWorldNode"
     assert node_of(DARR_NIAZI, "world") is node_of(DARR_NIAZI, "world_shard")  # a shard is the world, with peers
     assert len({node_of(a, r) for a in (DARR_NIAZI, RUBENSTEIN) for r in ("world", "monitor")}) == 4
     assert node_of(DARR_NIAZI, "robot_batch") is node_of(RUBENSTEIN, "robot_batch")
     hosts = {algorithm_of(a).hook("batch_host").__name__ for a in (DARR_NIAZI, RUBENSTEIN)}
-    assert hosts == {"StudyBatch", "RubensteinBatchHost"}
+    assert hosts == {"StudyBatch", "CentralBatch"}
     with pytest.raises(
         ParameterError, match="^the world_shard node is not a node of the rubenstein algorithm's graph$"
     ):

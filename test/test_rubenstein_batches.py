@@ -1,4 +1,5 @@
-"""The rubenstein algorithm split among robot batches by strips of its cell grid (swarm_ros.core.rubenstein.strips):
+"""The rubenstein algorithm split among robot batches by strips of its cell grid (swarm_ros.core.strips), and the
+central world's graph code (swarm_ros.protocol.central_world) over it:
 K batches, each sent only its area's robots, give the in-process engine's run byte for byte."""
 
 import numpy as np
@@ -8,19 +9,33 @@ from lockstep_fakes import Log
 from swarm_ros.core import Shape, World
 from swarm_ros.core.errors import ContractError, ParameterError, Rejected
 from swarm_ros.core.params import RunParams, Settings
+from swarm_ros.core.rubenstein.batch import RubensteinBatch
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
 from swarm_ros.core.rubenstein.run import RubensteinRun
-from swarm_ros.core.rubenstein.strips import RubensteinBatch, Strips, area_of, cell_columns, run_batched, strips_for
+from swarm_ros.core.strips import Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
-from swarm_ros.protocol.rubenstein.batch_host import RubensteinBatchHost
-from swarm_ros.protocol.rubenstein.lockstep import RubensteinLockstep, monitor_reach
-from swarm_ros.protocol.rubenstein.rows import check_rubenstein_rows, decided_of_rows, robots_of_rows, rubenstein_rows
+from swarm_ros.protocol.central_batch import CentralBatch
+from swarm_ros.protocol.central_world import CentralLockstep, monitor_reach
+from swarm_ros.protocol.rubenstein.rows import (
+    RubensteinWire,
+    check_rubenstein_rows,
+    decided_of_rows,
+    robots_of_rows,
+    rubenstein_rows,
+)
 
 pytestmark = pytest.mark.unit
 
 
 def square(side: int) -> Shape:
     return Shape.from_grid(np.ones((side, side), dtype=bool), World(), name=f"square{side}", source="test")
+
+
+def batched(run: RubensteinRun, batches: int, max_ticks: int | None = None) -> Strips:
+    """Run ``run`` with its decisions made by ``batches`` RubensteinBatch es; the strips."""
+    strips = strips_for(run, batches)
+    run_batched(run, [RubensteinBatch(run, strips, k) for k in range(batches)], max_ticks)
+    return strips
 
 
 def same(a: RubensteinRun, b: RubensteinRun) -> bool:
@@ -38,7 +53,7 @@ def test_k_batches_give_the_in_process_run_to_its_end(batches):
     params = RunParams(40, algorithm="rubenstein", seed=5, range_noise=0.04)
     whole, split = RubensteinRun(square(6), params), RubensteinRun(square(6), params)
     whole.run()
-    run_batched(split, batches)
+    batched(split, batches)
     assert whole.outcome is not None and same(whole, split)
 
 
@@ -47,7 +62,7 @@ def test_k_batches_give_the_in_process_star_while_robots_cross_strips(batches):
     shape, params = Settings(shape="star", algorithm="rubenstein", robots=150, seed=2).resolve()
     whole, split = RubensteinRun(shape, params), RubensteinRun(shape, params)
     whole.run(2500)
-    strips = run_batched(split, batches, 2500)
+    strips = batched(split, batches, 2500)
     assert strips.batches == batches and same(whole, split)
     assert (whole.robots.state == JOINED).sum() > 4  # robots left the pack and joined: some crossed strips
 
@@ -68,7 +83,7 @@ def test_strips_share_the_robots_at_the_start_and_an_area_is_its_strip_and_one_c
 
 def own_at_start(run: RubensteinRun, batches: int, k: int) -> np.ndarray:
     strips = strips_for(run, batches)
-    column = cell_columns(run.robots.x, run.cells)
+    column = run.grid.columns(run.robots.x)
     return np.flatnonzero(strips.in_strip(column, k) & (run.robots.state != JOINED))
 
 
@@ -189,15 +204,15 @@ def test_the_wire_rows_name_the_gradient_and_estimate_and_round_trip_the_sentine
     assert all(np.array_equal(a, b) and a.dtype == b.dtype for a, b in zip(run.robots, back))
 
 
-def lockstep_run(params: RunParams, batches: int, region_cuts: str = "") -> tuple[RubensteinRun, RubensteinLockstep]:
+def lockstep_run(params: RunParams, batches: int, region_cuts: str = "") -> tuple[RubensteinRun, CentralLockstep]:
     """The graph's exchange without ROS: the world's lockstep, and batches as a robot-batch process runs them
-    (:class:`RubensteinBatchHost`), each sent only its area as the message the world sends (each announcing its
+    (:class:`CentralBatch`), each sent only its area as the message the world sends (each announcing its
     strip, in reverse order: the world numbers them from the west)."""
     run = RubensteinRun(square(6), params)
-    ls = RubensteinLockstep(run)
+    ls = CentralLockstep(run, RubensteinWire)
     own = {"batches": batches, "region_cuts": region_cuts}
     hosts = [
-        RubensteinBatchHost(run.shape, params, {**own, "batch": k, "name": f"robot_batch_{k}"}, _no_drop)
+        CentralBatch(run.shape, params, {**own, "batch": k, "name": f"robot_batch_{k}"}, _no_drop)
         for k in range(batches)
     ]
     for k in reversed(range(batches)):
@@ -244,7 +259,7 @@ def test_region_cuts_cut_the_strips_where_they_say_and_the_run_is_still_the_in_p
             strips_for(whole, cuts.count(",") + 2, cuts)
 
 
-def decisions_of_batch_0(run: RubensteinRun, ls: RubensteinLockstep) -> np.ndarray:
+def decisions_of_batch_0(run: RubensteinRun, ls: CentralLockstep) -> np.ndarray:
     host = RubensteinBatch(run, ls.strips, 0)
     own, decided = host.decide(run.tick + 1, *robots_of_rows(ls.area(0)))
     return rubenstein_rows(own, decided)
@@ -280,7 +295,7 @@ def join_at_7(rows):
 def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
     run.run(600)  # robots are edge-following by now
-    ls = RubensteinLockstep(run)
+    ls = CentralLockstep(run, RubensteinWire)
     ls.announce("robot_batch_0", (0, run.cells.nx - 1))
     rows = decisions_of_batch_0(run, ls)
     moving = rows[rows["moves"] == 1]
@@ -297,7 +312,7 @@ def test_the_world_rejects_decisions_out_of_the_rules_bounds(change, kind):
 def test_announcements_that_do_not_fit_the_run_are_rejected():
     """A strip outside the grid, one that overlaps another's, a node's second strip before the start; after it, a
     strip or a node that is not one of the run's batches. The run starts once the strips tile the grid."""
-    ls = RubensteinLockstep(RubensteinRun(square(6), RunParams(40, algorithm="rubenstein")))
+    ls = CentralLockstep(RubensteinRun(square(6), RunParams(40, algorithm="rubenstein")), RubensteinWire)
     last = ls.run.cells.nx - 1
     assert last >= 3
     assert ls.announce("robot_batch_0", (0, 1)) == [] and not ls.started
@@ -320,7 +335,7 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
     """Saved at a tick and resumed in a fresh run, the run continues exactly as the one never broken, to its end;
     a file that is not a checkpoint, or is another run's, fails in one line."""
     from swarm_ros.core.errors import RunFailed
-    from swarm_ros.protocol.rubenstein import checkpoint
+    from swarm_ros.protocol import central_checkpoint as checkpoint
 
     params = RunParams(40, algorithm="rubenstein", seed=6, range_noise=0.05)
     whole = RubensteinRun(square(6), params)
@@ -332,7 +347,6 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
     saved = checkpoint.load(path, fresh)
     assert (saved.tick, saved.hosts) == (1500, {0: "robot_batch_0", 1: "robot_batch_1"})
     assert saved.cuts.tolist() == [0, 2, whole.cells.nx]
-    fresh.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
     whole.run()
     fresh.run()
     assert same(whole, fresh) and whole.outcome is not None
@@ -348,43 +362,48 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
 
 
 def test_metrics_rows_a_restarted_world_sends_again_are_taken_once_and_must_equal_those_held():
-    from swarm_ros.protocol.rubenstein.rows import check_metrics_rows, metrics_rows
+    from swarm_ros.core.rubenstein.run import COLUMNS
+    from swarm_ros.protocol.central_rows import check_metrics_rows
+    from swarm_ros.protocol.central_rows import metrics_rows as rows_of
+
+    def metrics_rows(history):
+        return rows_of(history, COLUMNS)
 
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
     run.run(100)
     history = run.history
     held = history[:61]
     again = metrics_rows(history[41:81])  # ticks 41..80: 20 held, 20 new
-    assert np.array_equal(check_metrics_rows(again, held), history[61:81])
-    assert check_metrics_rows(metrics_rows(history[:61]), held).shape == (0, history.shape[1])  # all held
+    assert np.array_equal(check_metrics_rows(again, held, COLUMNS), history[61:81])
+    assert check_metrics_rows(metrics_rows(history[:61]), held, COLUMNS).shape == (0, history.shape[1])  # all held
     changed = again.copy()
     changed["covered"][0] += 1
     with pytest.raises(Rejected, match="conflict"):
-        check_metrics_rows(changed, held)
+        check_metrics_rows(changed, held, COLUMNS)
     with pytest.raises(Rejected, match="stale tick"):
-        check_metrics_rows(metrics_rows(history[62:70]), held)  # a gap after tick 60
+        check_metrics_rows(metrics_rows(history[62:70]), held, COLUMNS)  # a gap after tick 60
     with pytest.raises(Rejected, match="stale tick"):
-        check_metrics_rows(metrics_rows(history[[61, 63]]), held)  # not consecutive
+        check_metrics_rows(metrics_rows(history[[61, 63]]), held, COLUMNS)  # not consecutive
 
 
 def test_the_world_runs_at_least_one_record_and_at_most_what_the_topics_keep_past_the_monitor():
-    from swarm_ros.protocol.plan import RUBENSTEIN_KEPT
-    from swarm_ros.protocol.rubenstein.lockstep import monitor_reach
+    from swarm_ros.protocol.central_world import monitor_reach
+    from swarm_ros.protocol.plan import CENTRAL_KEPT
 
     assert monitor_reach(0, 20) is None  # no window: the world does not wait
     assert monitor_reach(128, 20) == 128
     assert monitor_reach(5, 20) == 20  # the monitor reports a tick only once its record is in
-    assert monitor_reach(10**6, 20) == (RUBENSTEIN_KEPT - 2) * 20
+    assert monitor_reach(10**6, 20) == (CENTRAL_KEPT - 2) * 20
     for window in (1, 7, 128, 10**6):
         for every in (1, 3, 20, 1000):
             reach = monitor_reach(window, every)
             assert reach is not None
             records_past = reach // every + 1  # the records in (held, held + reach], and the end's own
-            assert 1 <= reach // every and records_past <= RUBENSTEIN_KEPT - 1
+            assert 1 <= reach // every and records_past <= CENTRAL_KEPT - 1
 
 
 def test_the_monitors_held_report_is_checked():
-    from swarm_ros.protocol.rubenstein.lockstep import check_held
+    from swarm_ros.protocol.central_world import check_held
 
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=5))
     assert check_held(np.array([-1, 0]), run) == (-1, False)
@@ -400,7 +419,7 @@ def test_the_monitors_held_report_is_checked():
 
 def test_the_world_names_the_batches_it_waits_for():
     run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
-    ls = RubensteinLockstep(run)
+    ls = CentralLockstep(run, RubensteinWire)
     strips = strips_for(run, 2)
     for k in range(2):
         ls.announce(f"robot_batch_{k}", strips.strip(k))
@@ -413,10 +432,10 @@ def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_wh
     """The watch behind the rubenstein world's liveliness lines and its STILL_S bound (a peer started by hand that
     died would otherwise keep the run waiting for ever)."""
     from swarm_ros.core.errors import RunFailed
-    from swarm_ros.protocol.rubenstein.lockstep import RubensteinWatch
+    from swarm_ros.protocol.central_world import Watch
     from swarm_ros.protocol.world_port import STILL_S
 
-    watch = RubensteinWatch(now=100.0)
+    watch = Watch(now=100.0)
     assert watch.liveliness("robot_batch_1", 1, 0) == "robot_batch_1 is alive (liveliness)"
     assert watch.liveliness("robot_batch_1", 1, 0) is None  # a change that says nothing new
     assert watch.liveliness("robot_batch_1", 0, 1) == "robot_batch_1 was lost (liveliness lapsed): the run waits for it"
@@ -437,7 +456,7 @@ def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_wh
 
 
 class WorldPort:
-    """What a RubensteinWorld sends, recorded; the monitor reads from the start, readers acknowledge at once."""
+    """What a CentralWorld sends, recorded; the monitor reads from the start, readers acknowledge at once."""
 
     def __init__(self) -> None:
         self.watched: list[str] = []
@@ -468,20 +487,20 @@ class WorldPort:
 
 
 def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
-    """A RubensteinWorld over a fake port and clock, its batches' hosts fed the areas it sends, and a monitor that
+    """A CentralWorld over a fake port and clock, its batches' hosts fed the areas it sends, and a monitor that
     reports each record held as it goes out (``slow``: only once the world waits for it). Checks, throughout, that
     the world never runs past the monitor's reach."""
-    from swarm_ros.protocol.rubenstein.lockstep import RubensteinWorld
+    from swarm_ros.protocol.central_world import CentralWorld
 
     params = RunParams(40, algorithm="rubenstein", seed=6)
     run, port, log, now = RubensteinRun(square(6), params), WorldPort(), Log(), [0.0]
     own = {"record_every": every, "monitor_window": window, "start_timeout": 60.0, "incarnation": 0}
     own["checkpoint"] = str(tmp_path / "world.npz") if tmp_path else ""
-    world = RubensteinWorld(run, own, port, log, clock=lambda: now[0])
+    world = CentralWorld(run, RubensteinWire, own, port, log, clock=lambda: now[0])
     hosts = {}
     for k in reversed(range(2)):
         name = f"robot_batch_{k}"
-        hosts[name] = RubensteinBatchHost(
+        hosts[name] = CentralBatch(
             run.shape, params, {"batch": k, "batches": 2, "region_cuts": "", "name": name}, _no_drop
         )
         world.batch(name, hosts[name].strip)

@@ -72,7 +72,7 @@ def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_
     world = (out / "logs" / "world.log").read_text()
     assert "dropped" not in world, world  # no message of the run's own was refused
     if cuts:
-        assert all(f"cell columns {strip}" in world for strip in ("0..1", "2..5", "6..9")), world
+        assert all(f"columns {strip}" in world for strip in ("0..1", "2..5", "6..9")), world
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 

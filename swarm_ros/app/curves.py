@@ -29,15 +29,9 @@ def curve_name(row: dict) -> str:
 
 
 def curve_of(run) -> np.ndarray:
-    """(tick, empty) of every tick of a finished in-process run: a ``Simulation``'s empty patches, a
-    ``RubensteinRun``'s uncovered pixels."""
-    from swarm_ros.core.metrics import METRIC_COLUMNS
-    from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
-
-    h = run.history
-    if isinstance(run, RubensteinRun):
-        return np.stack([h[:, 0], run.pixels - h[:, COLUMNS.index("covered")]], axis=1)
-    return h[:, [0, METRIC_COLUMNS.index("empty_patches")]].astype(float)
+    """(tick, empty) of every tick of a finished in-process run: its engine's ``empty_curve()`` (a
+    ``Simulation``'s empty patches, a ``RubensteinRun``'s uncovered pixels)."""
+    return run.empty_curve()
 
 
 def steps(curve: np.ndarray) -> np.ndarray:

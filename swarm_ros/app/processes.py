@@ -305,17 +305,17 @@ def check_study_graph(shape, params, processes: int, region_cuts: str, flag: str
         strip(0, processes, parse_cuts(region_cuts), shape.world.radius)
 
 
-def check_rubenstein_graph(shape, params, processes: int, region_cuts: str, flag: str) -> None:
-    """Refuse, in one line, a batch count (``processes``, whatever ``flag`` named it) or region cuts (x positions
-    in d) the rubenstein algorithm's cell grid cannot be cut by.
+def check_central_graph(shape, params, processes: int, region_cuts: str, flag: str) -> None:
+    """Refuse, in one line, a batch count (``processes``, whatever ``flag`` named it) or region cuts (x positions in
+    its unit) a central world's grid of columns (core.strips) cannot be cut by.
 
     Raises:
         InputError: that.
     """
-    from swarm_ros.core.rubenstein.run import RubensteinRun
-    from swarm_ros.core.rubenstein.strips import strips_for
+    from swarm_ros.core.algorithm import algorithm_of
+    from swarm_ros.core.strips import strips_for
 
-    strips_for(RubensteinRun(shape, params), processes, region_cuts)
+    strips_for(algorithm_of(params.algorithm).hook("engine")(shape, params), processes, region_cuts)
 
 
 def compile_first(algorithm: str, quiet: bool) -> bool:

@@ -348,14 +348,14 @@ def write_simulation(
     overwrite: bool = False,
     recording: Path | None = None,
     every: int | None = None,
+    bag: Path | None = None,
 ) -> Path:
-    """:func:`write_run` of an in-process run of the study's model and its summary (core.algorithm's part
-    ``write_run``)."""
+    """:func:`write_run` of a run of the study's model and its summary (core.algorithm's part ``write_run``)."""
     from swarm_ros.core.metrics import Outcome
     from swarm_ros.core.run_result import RunRecord
 
     record = RunRecord(sim.shape, sim.params, sim.state, sim.history, Outcome(summary["outcome"]), summary)
-    return write_run(out, record, overwrite=overwrite, recording=recording, robots_every=every)
+    return write_run(out, record, overwrite=overwrite, recording=recording, bag=bag, robots_every=every)
 
 
 def write_run(

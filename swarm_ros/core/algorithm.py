@@ -34,6 +34,7 @@ HOOK_LAYERS = {
     "checked_step": "core",
     "plan": "protocol",
     "batch_host": "protocol",
+    "wire": "protocol",
     "recording": "artifacts",
     "write_run": "artifacts",
     "world_node": "nodes",
@@ -77,7 +78,9 @@ class Algorithm:
     #: why its graph refuses world shards ("" if it runs with them)
     no_world_shards: str = ""
     # -- hooks: "module:attribute" (HOOK_LAYERS says each one's layer) --
-    #: class ``(shape, params)``: the in-process engine (``run()``, ``step()``, ``tick``, ``done``, ``metrics``)
+    #: class ``(shape, params)``: the in-process engine (``run(max_ticks)``, ``tick``, ``done``, ``outcome``,
+    #: ``history``, ``progress()``, ``empty_curve()``; ``step()`` for ``checked_step``; a central world's also what
+    #: :class:`~swarm_ros.core.strips.CentralRun` says)
     engine: str = ""
     #: ``(run, wall_seconds, stopped=None) -> dict``: the summary.json record of an in-process run
     summary: str = ""
@@ -96,6 +99,9 @@ class Algorithm:
     #: :class:`~swarm_ros.protocol.batch_host.BatchHost`), for the one robot-batch node (``robot_batch_node``
     #: ``swarm_ros.nodes.robot_batch:RobotBatchNode``)
     batch_host: str = ""
+    #: a central world's graph (one world process holding every robot: core.strips): its rows on the wire, their
+    #: checks and its batch (a :class:`~swarm_ros.protocol.central_rows.Wire`); "" for a graph of its own
+    wire: str = ""
     #: its graph's node classes, one per role its graph runs, each ``(node, settings, own parameters)``: an rclpy node
     #: made, and its parameters read, by the role's executable (nodes/roles.py); "" for a role its graph has not
     world_node: str = ""
@@ -111,7 +117,8 @@ class Algorithm:
     #: ``(path, run, options) -> recorder | None``: the recording of an in-process run (``every``, ``log(run)`` as
     #: ticks go, ``finish(run, outcome)``); None if the options record nothing
     recording: str = ""
-    #: ``(out, run, summary, overwrite, recording, every) -> Path``: the run directory of an in-process run
+    #: ``(out, run, summary, overwrite, recording, every, bag=None) -> Path``: the run directory of a run (an
+    #: in-process one's; a central world's monitor's, with its ``bag``)
     write_run: str = ""
     #: ``(summary, out, dims) -> None``: the summary a command prints at the end of a run
     print_summary: str = ""
@@ -251,6 +258,21 @@ def check_engine(name: str, engine: type) -> None:
         raise ParameterError(f"{engine.__qualname__} does not run the {name} algorithm")
 
 
+#: The hooks of an algorithm whose world is one process holding every robot (a central world: core.strips), all
+#: but its own (``engine``, ``summary``, ``wire``): ``Algorithm(**CENTRAL, ...)`` takes the graph's nodes, plan and
+#: checks, and a plain recording and run directory, which an entry may replace with its own.
+CENTRAL: dict[str, Any] = {
+    "plan": "swarm_ros.protocol.plan:central_plan",
+    "check_graph": "swarm_ros.app.processes:check_central_graph",
+    "world_node": "swarm_ros.nodes.central.world:CentralWorldNode",
+    "robot_batch_node": "swarm_ros.nodes.robot_batch:RobotBatchNode",
+    "batch_host": "swarm_ros.protocol.central_batch:CentralBatch",
+    "monitor_node": "swarm_ros.nodes.central.monitor:CentralMonitorNode",
+    "recording": "swarm_ros.artifacts.central_recording:open_recording",
+    "write_run": "swarm_ros.artifacts.central_run_dir:write_simulation",
+    "no_world_shards": "its world is one process: world shards are not built for a central world yet",
+}
+
 register(
     Algorithm(
         name=DARR_NIAZI,
@@ -298,23 +320,20 @@ register(
         count_words=("joined robots", "robots not joined", "uncovered pixels"),
         record_every=20,  # a robot steps 0.05 d a tick by default, and a run lasts tens of thousands of ticks
         shared_kernels=("rng.py",),
+        **{
+            **CENTRAL,  # its own recording, run directory and printed summary:
+            "recording": "swarm_ros.artifacts.rubenstein.recording:open_recording",
+            "write_run": "swarm_ros.artifacts.rubenstein.run_dir:write_simulation",
+            "print_summary": "swarm_ros.app.summary_print:print_rubenstein_summary",
+        },
         no_removal="a lost batch is restarted: the algorithm has no robot failure",
-        no_world_shards="its world is one process: world shards are not built for it yet",
-        check_graph="swarm_ros.app.processes:check_rubenstein_graph",
         engine="swarm_ros.core.rubenstein.run:RubensteinRun",
         summary="swarm_ros.core.rubenstein.run:summary_of",
         check_params="swarm_ros.core.rubenstein.layout:check_params",
         check_shape="swarm_ros.core.rubenstein.layout:check_shape_of",
         compile="swarm_ros.core.rubenstein.run:compile_kernels",
-        plan="swarm_ros.protocol.plan:rubenstein_plan",
-        world_node="swarm_ros.nodes.rubenstein.world:RubensteinWorldNode",
-        robot_batch_node="swarm_ros.nodes.robot_batch:RobotBatchNode",
-        batch_host="swarm_ros.protocol.rubenstein.batch_host:RubensteinBatchHost",
-        monitor_node="swarm_ros.nodes.rubenstein.monitor:RubensteinMonitorNode",
+        wire="swarm_ros.protocol.rubenstein.rows:RubensteinWire",
         checked_step="swarm_ros.core.rubenstein.tick_checks:checked_step",
-        recording="swarm_ros.artifacts.rubenstein.recording:open_recording",
-        write_run="swarm_ros.artifacts.rubenstein.run_dir:write_simulation",
-        print_summary="swarm_ros.app.summary_print:print_rubenstein_summary",
         as_study_row="swarm_ros.app.results_file:rubenstein_as_study_row",
     )
 )

@@ -151,6 +151,10 @@ class Simulation:
         view.flags.writeable = False
         return view
 
+    def empty_curve(self) -> np.ndarray:
+        """(tick, the shape's empty patches) of every tick so far, as floats (an experiment's curves)."""
+        return self.history[:, [0, METRIC_COLUMNS.index("empty_patches")]].astype(float)
+
     def moving_ids(self) -> np.ndarray:
         """Ids of the robots that decide at the next tick, ascending (a copy)."""
         return self._moving[: self._m].copy()

@@ -391,7 +391,9 @@ class RunParams(_ModelRest, _Model):
     def check_shape(self, shape: Shape) -> None:
         """Refuse a shape the algorithm cannot form (rubenstein: 3D; the algorithm's own check), or a vision radius
         beyond the world."""
-        algorithm_of(self.algorithm).hook("check_shape")(self, shape)
+        own_check = algorithm_of(self.algorithm).hook("check_shape")
+        if own_check is not None:
+            own_check(self, shape)
 
     def check_vision(self, world_radius: int) -> None:
         """Refuse a vision radius beyond the world's radius: a robot would see across the whole world.

@@ -9,6 +9,7 @@ batches, then the world, which starts tick 0 once the batches cover every robot.
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 
 from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.params import Param
@@ -63,12 +64,12 @@ def graph_plan(
     ]
 
 
-def rubenstein_plan(
+def central_plan(
     processes: int, region_cuts: str = "", world_shards: int = 1
 ) -> list[tuple[str, str, dict[str, int | str]]]:
-    """:func:`graph_plan` of a rubenstein run: the monitor, ``processes`` robot batches (batch k decides for
-    strip k of the cell grid, cut at ``region_cuts`` if given: swarm_ros.core.rubenstein.strips), the world. No
-    world shards (the commands refuse them: core.algorithm's ``no_world_shards``)."""
+    """:func:`graph_plan` of a central world's run (an algorithm whose world is one process: core.strips): the
+    monitor, ``processes`` robot batches (batch k decides for strip k, cut at ``region_cuts`` if given), the world.
+    No world shards (the commands refuse them: core.algorithm's ``no_world_shards``)."""
     cuts: dict[str, int | str] = {"region_cuts": region_cuts} if region_cuts else {}
     batches: list[tuple[str, str, dict[str, int | str]]] = [
         (batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes, **cuts}) for k in range(processes)
@@ -110,28 +111,55 @@ ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's li
 MONITOR_READS = (ROBOTS, DECISIONS, STATUS, TALLY)
 
 
-#: A rubenstein run's (PointCloud2, swarm_ros.protocol.rubenstein.rows): world -> monitor and viewers, every robot's
-#: row at tick 0, every ``record_every``-th tick and the last; world -> monitor, the metrics rows of the ticks since
-#: the last message, as often; /swarm/rubenstein/area/<batch>: world -> one batch, after each tick, its area's
-#: rows; /swarm/rubenstein/decisions/<batch>: one batch -> world, its strip's decisions; /swarm/rubenstein/held:
-#: monitor -> world (Int64MultiArray, latched), the last tick whose record is in its bag, and 1 once the run's
-#: outcome is too.
-RUBENSTEIN = "/swarm/rubenstein"
-RUBENSTEIN_ROBOTS, RUBENSTEIN_METRICS = f"{RUBENSTEIN}/robots", f"{RUBENSTEIN}/metrics"
-RUBENSTEIN_HELD = f"{RUBENSTEIN}/held"
-RUBENSTEIN_AREA, RUBENSTEIN_DECISIONS = f"{RUBENSTEIN}/area", f"{RUBENSTEIN}/decisions"
+#: A central world's run talks under /swarm/<algorithm> (the name's hyphens as underscores; PointCloud2, the
+#: algorithm's rows: swarm_ros.protocol.central_world): ``robots``: world -> monitor and viewers, every robot's row at
+#: tick 0, every ``record_every``-th tick and the last; ``metrics``: world -> monitor, the metrics rows of the ticks
+#: since the last message, as often; ``area/<batch>``: world -> one batch, after each tick, its area's rows;
+#: ``decisions/<batch>``: one batch -> world, its strip's decisions; ``held``: monitor -> world (Int64MultiArray,
+#: latched), the last tick whose record is in its bag, and 1 once the run's outcome is too.
 #: The robots and metrics messages the world keeps for a late reader (a restarted monitor): one each per record,
-#: so the world runs at most ``RUBENSTEIN_KEPT - 2`` records past the monitor's last held one
-#: (swarm_ros.protocol.rubenstein.lockstep.monitor_reach).
-RUBENSTEIN_KEPT = 32
+#: so the world runs at most ``CENTRAL_KEPT - 2`` records past the monitor's last held one
+#: (swarm_ros.protocol.central_world.monitor_reach).
+CENTRAL_KEPT = 32
+_CENTRAL = re.compile(r"/swarm/([a-z][a-z0-9_]*)/(held|decisions/(.+))")
 
 
-def rubenstein_area_topic(node_name: str) -> str:
-    return f"{RUBENSTEIN_AREA}/{node_name}"
+@dataclass(frozen=True)
+class CentralTopics:
+    """The topics of a central world's run of one algorithm (above)."""
+
+    root: str
+
+    @staticmethod
+    def of(algorithm: str) -> CentralTopics:
+        return CentralTopics(f"/swarm/{algorithm.replace('-', '_')}")
+
+    @property
+    def robots(self) -> str:
+        return f"{self.root}/robots"
+
+    @property
+    def metrics(self) -> str:
+        return f"{self.root}/metrics"
+
+    @property
+    def held(self) -> str:
+        return f"{self.root}/held"
+
+    def area(self, node_name: str) -> str:
+        return f"{self.root}/area/{node_name}"
+
+    def decisions(self, node_name: str) -> str:
+        return f"{self.root}/decisions/{node_name}"
 
 
-def rubenstein_decisions_topic(node_name: str) -> str:
-    return f"{RUBENSTEIN_DECISIONS}/{node_name}"
+def central_sender(topic: str) -> str | None:
+    """Who alone sends on ``topic`` if it is a central world's run's monitor's or batch's (``held``: the monitor;
+    ``decisions/<batch>``: that batch), else None."""
+    got = _CENTRAL.fullmatch(topic)
+    if got is None:
+        return None
+    return MONITOR if got.group(2) == "held" else got.group(3)
 
 
 #: /swarm/shards/shard_<i>/...: world shard i -> its peers, each tick: ``claims_to_<j>`` and ``part_to_<j>``

@@ -33,10 +33,8 @@ from swarm_ros.protocol.plan import (
     DECISIONS,
     METRICS,
     MONITOR,
-    RUBENSTEIN_DECISIONS,
-    RUBENSTEIN_HELD,
+    central_sender,
     is_world,
-    rubenstein_decisions_topic,
     shard_name,
     shard_of_topic,
 )
@@ -121,16 +119,17 @@ def _mac(key: bytes, topic: str, parts) -> str:
 
 def may_send(sender: str, topic: str) -> bool:
     """Whether a node named ``sender`` publishes on ``topic`` in the graph: the world (or a world shard) its
-    topics, the monitor the metrics (a rubenstein run's: what it holds), a batch its announcement and its own
-    decisions topic (a rubenstein run's batch too), world shard i the topics under /swarm/shards/<i>."""
-    if topic in (METRICS, RUBENSTEIN_HELD):
+    topics, the monitor the metrics (a central world's run's: what it holds), a batch its announcement and its own
+    decisions topic (a central world's run's batch too), world shard i the topics under /swarm/shards/<i>."""
+    if topic == METRICS:
         return sender == MONITOR
     if topic == BATCHES:
         return not is_world(sender) and sender != MONITOR
     if topic.startswith(DECISIONS + "/"):
         return topic == f"{DECISIONS}/{sender}"
-    if topic.startswith(RUBENSTEIN_DECISIONS + "/"):  # a rubenstein run's batch, likewise
-        return topic == rubenstein_decisions_topic(sender)
+    central = central_sender(topic)  # a central world's run's monitor or batch, likewise
+    if central is not None:
+        return sender == central
     shard = shard_of_topic(topic)
     if shard is not None:
         return sender == shard_name(shard)

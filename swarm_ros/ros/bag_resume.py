@@ -12,8 +12,8 @@ The new process takes the longest of them up to the end of its last whole tick, 
 bag of its own, and replays it through its handlers: the view, the metrics rows and the
 recording come out as they were (:meth:`swarm_ros.protocol.monitoring.MonitorCore.replay`).
 
-A rubenstein run's monitor (:mod:`swarm_ros.nodes.rubenstein.monitor`) goes on the same way: it makes
-its bag durable before it reports a record held on /swarm/rubenstein/held, the world runs at most a window
+A central world's monitor (:mod:`swarm_ros.nodes.central.monitor`) goes on the same way: it makes
+its bag durable before it reports a record held on /swarm/<algorithm>/held, the world runs at most a window
 past that. Its bag is not cut: each of its messages is whole alone (the robots at a record tick, the
 metrics rows of a run of ticks, a status), and the handlers check each as they would a live one.
 """

@@ -32,7 +32,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.artifacts.run_dir import BAG_DIR
-from swarm_ros.protocol.plan import RUBENSTEIN_METRICS, RUBENSTEIN_ROBOTS
+from swarm_ros.protocol.plan import CentralTopics
 from swarm_ros.ros import graph as msgs
 
 #: The recorded topics of a 2D run: name -> (message class, QoS its publisher offers); :func:`topics` for either.
@@ -48,13 +48,15 @@ TOPICS: dict[str, tuple[type, QoSProfile]] = {
 }
 
 
-#: The recorded topics of a rubenstein run (its monitor reads no decisions: every robot's row every record_every-th
-#: tick, the metrics of every tick, the status).
-RUBENSTEIN_TOPICS: dict[str, tuple[type, QoSProfile]] = {
-    RUBENSTEIN_ROBOTS: (PointCloud2, msgs.RUBENSTEIN_QOS),
-    RUBENSTEIN_METRICS: (PointCloud2, msgs.RUBENSTEIN_QOS),
-    msgs.STATUS: (DiagnosticArray, msgs.STATUS_QOS),
-}
+def central_topics(algorithm: str) -> dict[str, tuple[type, QoSProfile]]:
+    """The recorded topics of a central world's run of ``algorithm`` (its monitor reads no decisions: every robot's
+    row every record_every-th tick, the metrics of every tick, the status)."""
+    topics = CentralTopics.of(algorithm)
+    return {
+        topics.robots: (PointCloud2, msgs.CENTRAL_QOS),
+        topics.metrics: (PointCloud2, msgs.CENTRAL_QOS),
+        msgs.STATUS: (DiagnosticArray, msgs.STATUS_QOS),
+    }
 
 
 def topics(dims: int) -> dict[str, tuple[type, QoSProfile]]:

@@ -28,6 +28,7 @@ from swarm_ros.protocol.checks import cloud
 from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
     ALIVE,
     BATCHES,
+    CENTRAL_KEPT,
     CLOCK,
     DECISIONS,
     METRICS,
@@ -36,7 +37,6 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     REGION,
     ROBOTS,
     ROBOTS_DEPTH,
-    RUBENSTEIN_KEPT,
     SHAPE,
     SNAPSHOT,
     STATUS,
@@ -104,12 +104,12 @@ STATUS_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
-#: A rubenstein run's robots and metrics, world -> monitor: the last ``KEPT`` messages are kept for a restarted
-#: monitor, and the world never runs so far past the monitor's last held record that one it has not taken would be
-#: pushed out (swarm_ros.protocol.rubenstein.lockstep.monitor_reach).
-RUBENSTEIN_QOS = QoSProfile(
+#: A central world's robots and metrics, world -> monitor: the last ``CENTRAL_KEPT`` messages are kept for a
+#: restarted monitor, and the world never runs so far past the monitor's last held record that one it has not taken
+#: would be pushed out (swarm_ros.protocol.central_world.monitor_reach).
+CENTRAL_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
-    depth=RUBENSTEIN_KEPT,
+    depth=CENTRAL_KEPT,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )

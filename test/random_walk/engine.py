@@ -1,97 +1,136 @@
-"""The random walk's rule and its in-process engine (see the package)."""
+"""The random walk's rule, engine and summary: each tick a walking robot on a shape cell next to (4-way) a stopped
+robot stops there; any other steps a cell in a random direction unless the grid's edge, or a robot there or granted
+first (lower ids first), holds it back; the run ends with the shape covered, every robot stopped, or max_ticks."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from swarm_ros.core.algorithm import check_engine
-from swarm_ros.core.errors import ParameterError
-from swarm_ros.core.metrics import Outcome, TickMetrics, outcome_of, tick_metrics
-from swarm_ros.core.state import RobotState, frontier_blocks_of, frontier_of, initial_state
+from swarm_ros.core.errors import ContractError
+from swarm_ros.core.metrics import Outcome
+from swarm_ros.core.params import RUN_PARAMETER
+from swarm_ros.core.rng import uniform_array
+from swarm_ros.core.strips import StripGrid
 
-STEPS = np.array([(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)])  #: the eight directions
-MOVING = (RobotState.MOVING_OUTSIDE, RobotState.MOVING_INSIDE)
+NAME, STREAM = "random-walk", 100
+COLUMNS = ("tick", "stopped", "walking", "covered")
+STEPS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])  #: a step's (dx, dy), by its draw
 
 
-def check_shape(_params, shape) -> None:
-    """It walks on the plane only."""
-    if shape.dims != 2:
-        raise ParameterError(f"{shape.source}: the random-walk algorithm forms 2D shapes only")
+class Robots(NamedTuple):
+    x: np.ndarray  #: the robot's cell column
+    y: np.ndarray  #: its cell row
+    state: np.ndarray  #: 0 walking, 1 stopped
+
+
+class Batch:
+    """Decides for the walking robots of strip k (all of them with no strips) from its area's robots alone."""
+
+    def __init__(self, run: RandomWalk, strips, k: int) -> None:
+        self.mask, self.seed, self.strips, self.k = run.mask, run.params.seed, strips, k
+
+    def decide(self, tick: int, ids: np.ndarray, area: Robots) -> tuple[np.ndarray, Robots]:
+        rows, cols = self.mask.shape
+        stopped = np.zeros((rows + 2, cols + 2), dtype=bool)  # a border of cells that never hold a robot
+        stopped[area.y[area.state == 1] + 1, area.x[area.state == 1] + 1] = True
+        mine = (area.state == 0) & (self.strips is None or self.strips.in_strip(area.x, self.k))
+        x, y = area.x[mine], area.y[mine]
+        stop = self.mask[y, x] & np.any([stopped[y + 1 + dy, x + 1 + dx] for dx, dy in STEPS], axis=0)
+        step = STEPS[(uniform_array(self.seed, ids[mine], tick, STREAM) * 4).astype(np.int64)]
+        tx = np.where(stop, x, np.clip(x + step[:, 0], 0, cols - 1))
+        ty = np.where(stop, y, np.clip(y + step[:, 1], 0, rows - 1))
+        return ids[mine], Robots(tx, ty, stop.astype(np.int8))
 
 
 class RandomWalk:
-    """The engine: ``run``, ``step``, ``tick``, ``done``, ``outcome``, ``metrics``, ``history``, ``progress``."""
+    """The in-process engine, and the central world's :class:`~swarm_ros.core.strips.CentralRun`."""
+
+    columns = COLUMNS
 
     def __init__(self, shape, params) -> None:
-        check_engine(params.algorithm, RandomWalk)
-        self.shape, self.params = shape, params
-        self.state = initial_state(shape, params.robots, params.seed)
-        self.outcome: Outcome | None = None
-        self.losses: list[tuple[int, int]] = []  # no robot fails
-        self._rng = np.random.default_rng([params.seed, 0x57A1])  # its own stream, from the run's seed
-        self._rows, self._n = np.zeros((1024, len(TickMetrics._fields)), dtype=np.int64), 0
-        self._append(self._metrics())
+        self.shape, self.params, self.mask = shape, params, np.asarray(shape.mask, dtype=bool)
+        rows, cols = self.mask.shape
+        first = int(np.flatnonzero(self.mask)[0])
+        others = np.random.default_rng(params.seed).permutation(np.delete(np.arange(rows * cols), first))
+        cells = np.concatenate([[first], others[: params.robots - 1]])
+        self.robots = Robots(cells % cols, cells // cols, (np.arange(params.robots) == 0).astype(np.int8))
+        self.grid, self.tick, self.outcome = StripGrid(-0.5, 1.0, cols, "cells"), 0, None
+        self._rows = [self._metrics()]
+
+    def _metrics(self) -> list[float]:
+        s, stopped = self.robots, int(self.robots.state.sum())
+        return [self.tick, stopped, s.state.size - stopped, int(np.count_nonzero(self.mask[s.y, s.x] & (s.state == 1)))]
 
     @property
-    def tick(self) -> int:
-        return self.state.tick
+    def history(self) -> np.ndarray:
+        return np.array(self._rows, dtype=float)
 
     @property
     def done(self) -> bool:
         return self.outcome is not None
 
-    @property
-    def metrics(self) -> TickMetrics:
-        return TickMetrics(*self._rows[self._n - 1].tolist())
-
-    @property
-    def history(self) -> np.ndarray:
-        return self._rows[: self._n]
-
-    def _append(self, row: TickMetrics) -> None:
-        if self._n == len(self._rows):  # doubled when full: a tick's row costs O(1)
-            self._rows = np.concatenate([self._rows, np.zeros_like(self._rows)])
-        self._rows[self._n], self._n = row, self._n + 1
-
     def progress(self) -> tuple[int, int, dict[str, str]]:
-        m = self.metrics
-        return m.localized, self.shape.patches, {"tick": str(m.tick), "moving": str(m.moving)}
+        return int(self._rows[-1][3]), int(self.mask.sum()), {"tick": str(self.tick)}
 
-    def step(self) -> None:
-        self.run(1)
+    def empty_curve(self) -> np.ndarray:
+        return np.stack([self.history[:, 0], self.mask.sum() - self.history[:, 3]], axis=1)
+
+    def deciding(self) -> np.ndarray:
+        return np.flatnonzero(self.robots.state == 0)
 
     def run(self, max_ticks: int | None = None) -> Outcome | None:
-        ran = 0
-        while not self.done and (max_ticks is None or ran < max_ticks):
-            self._tick()
-            ran += 1
+        everyone = np.arange(self.params.robots)
+        while self.outcome is None and (max_ticks is None or max_ticks > 0):
+            self.settle([Batch(self, None, 0).decide(self.tick + 1, everyone, self.robots)])
+            max_ticks = None if max_ticks is None else max_ticks - 1
         return self.outcome
 
-    def _tick(self) -> None:
-        s, world = self.state, self.shape.world
-        r, w = world.radius, world.size
-        blocked = world.wall_mask().ravel()
-        moving = np.flatnonzero(np.isin(s.state, MOVING))
-        heading = self._rng.integers(0, len(STEPS), size=moving.size)
-        for i, k in zip(moving.tolist(), heading.tolist()):  # in id order: a robot that stops is seen by the next
-            px, py = int(np.floor(s.x[i] + 0.5)) + STEPS[k][0], int(np.floor(s.y[i] + 0.5)) + STEPS[k][1]
-            if not (-r <= px <= r and -r <= py <= r):
-                continue
-            cell = (py + r) * w + (px + r)
-            if blocked[cell] or s.occupancy[cell] >= 0:
-                continue
-            s.x[i], s.y[i], s.heading[i] = float(px), float(py), np.arctan2(STEPS[k][1], STEPS[k][0]) % (2 * np.pi)
-            if s.frontier[cell]:  # a free shape patch next to a stopped robot: it stops here for good
-                s.state[i], s.occupancy[cell] = RobotState.LOCALIZED, i
-                s.frontier[:] = frontier_of(self.shape, s.occupancy)
-            else:
-                inside = self.shape.mask.ravel()[cell]
-                s.state[i] = RobotState.MOVING_INSIDE if inside else RobotState.MOVING_OUTSIDE
-        s.frontier_blocks[:] = frontier_blocks_of(s.frontier, w)
-        s.tick += 1
-        self._append(self._metrics())
-        self.outcome = outcome_of(self.metrics, self.shape.patches, s.robots, self.params.max_ticks)
+    def settle(self, parts: list[tuple[np.ndarray, Robots]]) -> Outcome | None:
+        """One tick from every walking robot's decision: stops, then steps by ascending id onto cells still free."""
+        ids = np.concatenate([p[0] for p in parts])
+        if self.outcome is not None or not np.array_equal(np.sort(ids), self.deciding()):
+            raise ContractError(f"tick {self.tick + 1}: not one decision for each walking robot")
+        d = Robots(*(np.concatenate([p[1][f] for p in parts]) for f in range(3)))
+        s, taken = self.robots, np.zeros(self.mask.shape, dtype=bool)
+        taken[s.y, s.x] = True
+        for k in np.argsort(ids, kind="stable"):
+            i, tx, ty = ids[k], d.x[k], d.y[k]
+            if d.state[k]:
+                s.state[i] = 1
+            elif not taken[ty, tx]:
+                taken[s.y[i], s.x[i]], taken[ty, tx] = False, True
+                s.x[i], s.y[i] = tx, ty
+        self.tick += 1
+        self._rows.append(self._metrics())
+        _, stopped, walking, covered = self._rows[-1]
+        if covered == self.mask.sum():
+            self.outcome = Outcome.COMPLETE if walking == 0 else Outcome.COMPLETE_WITH_EXTRAS
+        elif walking == 0 or self.tick >= self.params.max_ticks:
+            self.outcome = Outcome.INCOMPLETE if walking == 0 else Outcome.TIMEOUT
+        return self.outcome
 
-    def _metrics(self) -> TickMetrics:
-        counts = np.bincount(self.state.state, minlength=len(RobotState))
-        return tick_metrics(self.state.tick, counts, self.shape.patches)
+    def load(self, tick: int, robots: Robots, history: np.ndarray, outcome: Outcome | None = None) -> None:
+        for mine, theirs in zip(self.robots, robots):
+            mine[:] = theirs
+        self.tick, self.outcome, self._rows = tick, outcome, history.tolist()
+
+    def saved(self) -> dict[str, np.ndarray]:
+        return {**self.robots._asdict(), "history": self.history}
+
+    def restore(self, tick: int, arrays: dict[str, np.ndarray]) -> None:
+        if arrays["x"].shape != self.robots.x.shape or len(arrays["history"]) != tick + 1:
+            raise ContractError("another run's arrays")
+        self.load(tick, Robots(*(arrays[f] for f in Robots._fields)), arrays["history"])
+
+
+def summary_of(run: RandomWalk, wall_seconds: float, stopped: Outcome | None = None) -> dict:
+    """Its summary.json, in the study's results.csv columns: a stopped robot is a localized one."""
+    outcome, cells, (_, done, walking, covered) = run.outcome or stopped, int(run.mask.sum()), run._rows[-1]
+    mine = {k: v for k, v in run.params.as_dict().items() if RUN_PARAMETER[k].algorithm in ("", NAME)}
+    counts = {"localized": int(done), "unlocalized": int(walking), "empty_patches": cells - int(covered)}
+    return {"shape": run.shape.name, "shape_patches": cells, **mine, "world_radius": run.shape.world.radius,
+            "engine": "inprocess", "outcome": str(outcome), "convergence_tick": run.tick, **counts, "separated": 0,
+            "lost_robots": 0, "convergence_rate": 0.0, "coverage": covered / cells, "fill_50_tick": None,
+            "fill_90_tick": None, "wall_seconds": wall_seconds}  # fmt: skip

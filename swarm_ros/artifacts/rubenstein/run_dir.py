@@ -1,5 +1,5 @@
 """A rubenstein run's directory: summary.json, metrics.csv, final_state.csv and final.png, written whole or not at
-all (:func:`~swarm_ros.artifacts.run_dir.write_dir`)."""
+all (:func:`~swarm_ros.artifacts.central_run_dir.write_central_run`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import csv
 import io
 from pathlib import Path
 
-from swarm_ros.artifacts.run_dir import BAG_DIR, RECORDING_FILE, summary_json, write_dir
+from swarm_ros.artifacts.central_run_dir import write_central_run
 from swarm_ros.core.rubenstein.rule import STATE_NAMES
 from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
 
@@ -86,32 +86,18 @@ def write_rubenstein_run(
     recording: Path | None = None,
     bag: Path | None = None,
 ) -> Path:
-    """Write the run's files into ``out``, atomically, ``recording`` (a finished .rrd) moved in as
-    ``recording.rrd`` and ``bag`` (a finished rosbag2 directory, the graph's) as ``bag/`` (each back where it
-    was if the write fails). Returns ``out``.
+    """Write the run's files into ``out``, atomically, with its ``recording`` and ``bag``
+    (:func:`~swarm_ros.artifacts.central_run_dir.write_central_run`). Returns ``out``.
 
     Raises:
         OutputError: the directory cannot be written.
     """
-
-    def fill(tmp: Path) -> None:
-        (tmp / "summary.json").write_text(summary_json(summary), encoding="utf-8")
-        (tmp / "metrics.csv").write_text(metrics_csv(run), encoding="utf-8")
-        (tmp / "final_state.csv").write_text(final_state_csv(run), encoding="utf-8")
-        save_final_png(run, tmp / "final.png")
-        if recording is not None:
-            recording.rename(tmp / RECORDING_FILE)
-        if bag is not None:
-            bag.rename(tmp / BAG_DIR)
-
-    def restore(tmp: Path) -> str:
-        if recording is not None and (tmp / RECORDING_FILE).exists():
-            (tmp / RECORDING_FILE).rename(recording)
-        if bag is not None and (tmp / BAG_DIR).exists():
-            (tmp / BAG_DIR).rename(bag)
-        return f"; the recording is kept in {recording}" if recording is not None and recording.exists() else ""
-
-    return write_dir(out, overwrite, fill, restore)
+    files = {
+        "metrics.csv": lambda path: path.write_text(metrics_csv(run), encoding="utf-8"),
+        "final_state.csv": lambda path: path.write_text(final_state_csv(run), encoding="utf-8"),
+        "final.png": lambda path: save_final_png(run, path),
+    }
+    return write_central_run(out, summary, files, overwrite=overwrite, recording=recording, bag=bag)
 
 
 def write_simulation(
@@ -121,8 +107,9 @@ def write_simulation(
     overwrite: bool = False,
     recording: Path | None = None,
     every: int | None = None,
+    bag: Path | None = None,
 ) -> Path:
-    """:func:`write_rubenstein_run` of an in-process run (core.algorithm's part ``write_run``): summary.json says
-    how often ``recording`` holds the robots (``every``; null without a recording)."""
+    """:func:`write_rubenstein_run` (core.algorithm's part ``write_run``): summary.json says how often ``recording``
+    holds the robots (``every``; null without a recording)."""
     summary = {**summary, "recording_robots_every": every if recording is not None else None}
-    return write_rubenstein_run(out, run, summary, overwrite=overwrite, recording=recording)
+    return write_rubenstein_run(out, run, summary, overwrite=overwrite, recording=recording, bag=bag)

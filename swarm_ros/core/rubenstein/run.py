@@ -25,6 +25,7 @@ from swarm_ros.core.metrics import OUTCOME_OF_CODE, Outcome, fill_ticks
 from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETER, RunParams
 from swarm_ros.core.rng import STREAM_PLACE_HEADING, uniform_array
 from swarm_ros.core.shapes import Shape
+from swarm_ros.core.strips import StripGrid
 
 from .layout import SEED_G, SEEDS, ShapeFrame, start_positions
 from .rule import (
@@ -129,7 +130,8 @@ def anchor_capacity(comm: float) -> int:
 
 
 class RubensteinRun:
-    """A run of the rubenstein algorithm in one process.
+    """A run of the rubenstein algorithm in one process (a :class:`~swarm_ros.core.strips.CentralRun`: the graph's
+    world holds one, its strips' columns the cell list's).
 
     Attributes:
         shape, params: what is run; frame: the shape in the seeds' frame.
@@ -137,6 +139,8 @@ class RubensteinRun:
         covered: per shape pixel (the frame's flat bitmap), 1 once a joined robot's disc meets it.
         outcome: how the run ended, or None while it goes on.
     """
+
+    columns = COLUMNS
 
     def __init__(self, shape: Shape, params: RunParams) -> None:
         check_engine(params.algorithm, RubensteinRun)
@@ -146,6 +150,7 @@ class RubensteinRun:
         self.rule = rule_of(params)
         self.bitmap = bitmap_of(self.frame)
         self.cells = cells_for(self.frame, self.robots, params)
+        self.grid = StripGrid(self.cells.x0, self.cells.side, self.cells.nx, "d")
         self.covered = np.zeros(self.bitmap.mask.size, dtype=np.uint8)
         self.tick = 0
         self.outcome: Outcome | None = None
@@ -179,13 +184,13 @@ class RubensteinRun:
         return self._rows[0]
 
     @property
-    def tally(self) -> Tally:
-        """The run's running counts, as its next tick takes them (a checkpoint saves them)."""
-        return self._tally
-
-    @property
     def metrics(self) -> dict[str, float]:
         return dict(zip(COLUMNS, self._rows[-1][-1].tolist()))
+
+    def empty_curve(self) -> np.ndarray:
+        """(tick, the shape's uncovered pixels) of every tick so far (an experiment's curves)."""
+        h = self.history
+        return np.stack([h[:, 0], self.pixels - h[:, _COVERED]], axis=1)
 
     def progress(self) -> tuple[int, int, dict[str, str]]:
         """The shape's pixels covered so far, all its pixels, and the tick and the robots joined (simulate's
@@ -240,18 +245,33 @@ class RubensteinRun:
         for i in np.flatnonzero(self.robots.state == JOINED):
             cover(self.robots.x[i], self.robots.y[i], self.bitmap, self.covered)
 
-    def resume(
-        self, tick: int, robots: Robots, covered: np.ndarray, tally: tuple[np.ndarray, ...], history: np.ndarray
-    ) -> None:
-        """Go on from a state this run's world saved at ``tick``, a run still going (the graph's world,
-        restarted): every robot, the pixels covered, the running counts and the metrics of every tick up to it,
-        exactly, so the ticks after it are the ones the run would have had."""
-        for mine, theirs in zip(self.robots, robots):
-            mine[:] = theirs
-        self.covered[:] = covered
-        for count, saved in zip(self._tally, tally):
-            count[:] = saved
+    def saved(self) -> dict[str, np.ndarray]:
+        """Everything a restarted world needs to go on from this tick exactly: every robot, the pixels covered,
+        the running counts and the metrics of every tick so far (a checkpoint, :meth:`restore`)."""
+        arrays = {f"robot_{name}": values for name, values in self.robots._asdict().items()}
+        arrays.update({f"tally_{name}": values for name, values in self._tally._asdict().items()})
+        return {**arrays, "covered": self.covered, "history": self.history}
+
+    def restore(self, tick: int, arrays: dict[str, np.ndarray]) -> None:
+        """Go on from :meth:`saved`'s ``arrays`` of ``tick``, a run still going, so the ticks after it are the ones
+        the run would have had.
+
+        Raises:
+            KeyError, ContractError: arrays that are not a save of a run of these parameters.
+        """
+        for name, mine in self.robots._asdict().items():
+            mine[:] = _same_shape(arrays[f"robot_{name}"], mine)
+        for name, count in self._tally._asdict().items():
+            count[:] = _same_shape(arrays[f"tally_{name}"], count)
+        self.covered[:] = _same_shape(arrays["covered"], self.covered)
+        history = arrays["history"]
+        if history.shape != (tick + 1, len(COLUMNS)):
+            raise ContractError(f"{history.shape[0]} metrics rows for tick {tick}")
         self.tick, self.outcome, self._rows = tick, None, [history.copy()]
+
+    def deciding(self) -> np.ndarray:
+        """The robots that decide the next tick: every one not joined, ascending."""
+        return _deciding(self.robots.state)
 
     def settle(self, parts: list[tuple[np.ndarray, Decided]]) -> Outcome | None:
         """Advance one tick with decisions made elsewhere (robot batches, :mod:`.strips`): ``parts`` are each
@@ -291,6 +311,12 @@ class RubensteinRun:
         self._rows.append(row)
         self.outcome = OUTCOME_OF_CODE[code]
         return self.outcome
+
+
+def _same_shape(saved: np.ndarray, mine: np.ndarray) -> np.ndarray:
+    if saved.shape != mine.shape or saved.dtype != mine.dtype:
+        raise ContractError(f"an array of {saved.shape} {saved.dtype}, expected {mine.shape} {mine.dtype}")
+    return saved
 
 
 def _deciding(state: np.ndarray) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 Each check finds every fault of the rows at once as a bit mask, one bit per kind of fault in the order
 the checks are documented in (:func:`~swarm_ros.protocol.rubenstein.rows.check_rubenstein_rows`,
-:func:`~swarm_ros.protocol.rubenstein.lockstep.check_decisions`); the caller names the lowest bit set, so the
+:func:`~swarm_ros.protocol.rubenstein.rows.check_decisions`); the caller names the lowest bit set, so the
 fault reported is the one the first failing check finds. A message of a few hundred rows is checked in
 microseconds, where numpy's two dozen passes over strided fields took a large share of a tick.
 """

@@ -1,4 +1,5 @@
-"""The rubenstein algorithm's rows between the world and its robot batches, as numpy record types, and their checks.
+"""The rubenstein algorithm's rows between the world and its robot batches, as numpy record types, and their checks:
+its ``wire`` in the central world's graph (:data:`WIRE`).
 
 A robot's row is everything it broadcasts and keeps (:class:`~swarm_ros.core.rubenstein.rule.Robots`): its
 pose, state, gradient ``g``, position estimate (``ex``, ``ey``), whether it has an estimate and is localized,
@@ -19,11 +20,12 @@ from __future__ import annotations
 import numpy as np
 
 from swarm_ros.core.errors import Rejected
+from swarm_ros.core.rubenstein.batch import RubensteinBatch
 from swarm_ros.core.rubenstein.rule import Decided, Robots, decided_for
-from swarm_ros.core.rubenstein.run import COLUMNS
+from swarm_ros.core.rubenstein.run import RubensteinRun
 
 from ..cdr import register_row_types
-from .checks import ROW_FAULTS, first_fault, pack_rows, row_faults, unpack_rows
+from .checks import DECISION_FAULTS, ROW_FAULTS, decision_faults, first_fault, pack_rows, row_faults, unpack_rows
 
 _NAMES = ["x", "y", "z", "heading", "ex", "ey", "near"]
 _NAMES += ["g", "still", "began", "joined", "waited", "blind", "id", "state"]
@@ -48,14 +50,9 @@ RUBENSTEIN_DECISION_ROW = np.dtype(
         "itemsize": 88,
     }
 )
-#: World -> monitor: metrics rows, the columns of swarm_ros.core.rubenstein.run.COLUMNS (float64, exact).
-RUBENSTEIN_METRICS_ROW = np.dtype([(name, "<f8") for name in COLUMNS])
-RUBENSTEIN_ROW_TYPES = (
-    RUBENSTEIN_ROW,
-    RUBENSTEIN_DECISION_ROW,
-    RUBENSTEIN_METRICS_ROW,
-)  #: the rubenstein graph's row layouts
+RUBENSTEIN_ROW_TYPES = (RUBENSTEIN_ROW, RUBENSTEIN_DECISION_ROW)  #: the rubenstein graph's row layouts
 register_row_types(*RUBENSTEIN_ROW_TYPES)  # decoded at the speed of the study's model's rows
+_STEP_TOLERANCE = 1e-9  #: d: a step's end may differ from the rule's in the last bits of another libm's cos
 
 
 def rubenstein_rows(ids: np.ndarray, robots: Robots | Decided) -> np.ndarray:
@@ -101,32 +98,36 @@ def check_rubenstein_rows(rows: np.ndarray, robots: int, tick: int) -> None:
         raise Rejected(kind, message.format(last=robots - 1, tick=tick))
 
 
-def metrics_rows(history: np.ndarray) -> np.ndarray:
-    """Metrics rows (:data:`RUBENSTEIN_METRICS_ROW`) of history rows (``COLUMNS``)."""
-    rows = np.empty(history.shape[0], dtype=RUBENSTEIN_METRICS_ROW)
-    for c, name in enumerate(COLUMNS):
-        rows[name] = history[:, c]
-    return rows
-
-
-def check_metrics_rows(rows: np.ndarray, held: np.ndarray) -> np.ndarray:
-    """The history rows of metrics rows, one a tick in order, counts within bounds, that follow ``held`` (the
-    history rows taken so far, tick 0 first): rows of ticks already held (a restarted world sends again the ticks
-    since its last record) must equal those and are left out.
+def check_decisions(run: RubensteinRun, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Decided]:
+    """(ids, decisions) of decision rows for ``tick`` that must be exactly the robots ``own``, each within the
+    rule's bounds from where it stands in ``run``: a state moves one step along start, wait, move outside, move
+    inside, joined; a robot that moves goes one step along its heading, which turned by at most the turn of a tick.
 
     Raises:
-        Rejected: ticks out of order, or leaving a gap after the held ones, a count that is negative or not finite,
-            or a row of a tick already held that differs from it.
+        Rejected: by kind: the rows' own bounds, robots other than ``own``, or a decision out of the rule's bounds.
     """
-    history = np.column_stack([rows[name] for name in COLUMNS]) if rows.size else np.empty((0, len(COLUMNS)))
-    if not np.isfinite(history).all() or np.any(history < 0):
-        raise Rejected("bad number", "a metric that is negative or not a finite number")
-    if not rows.size:
-        return history
-    first, after = int(history[0, 0]), held.shape[0] - 1
-    if history[0, 0] != first or first > after + 1 or not np.array_equal(history[:, 0], first + np.arange(rows.size)):
-        raise Rejected("stale tick", f"metrics of ticks other than consecutive ones from at most tick {after + 1}")
-    again = min(after + 1 - first, rows.size)  # rows of ticks already held
-    if not np.array_equal(history[:again], held[first : first + again]):
-        raise Rejected("conflict", "metrics rows that differ from those already taken for their ticks")
-    return history[again:]
+    check_rubenstein_rows(rows, run.params.robots, tick)
+    ids, d = decided_of_rows(rows)
+    if not np.array_equal(ids, own):
+        raise Rejected("not its robots", f"{ids.size} decisions for the batch's {own.size} robots")
+    fault = first_fault(
+        decision_faults(ids, d, run.robots, tick, run.rule.turn, run.rule.step, _STEP_TOLERANCE), DECISION_FAULTS
+    )
+    if fault is not None:
+        raise Rejected(*fault)
+    return ids, d
+
+
+class RubensteinWire:
+    """The rubenstein algorithm's rows in the central world's graph (:class:`swarm_ros.protocol.central_rows.Wire`)."""
+
+    row, decision_row = RUBENSTEIN_ROW, RUBENSTEIN_DECISION_ROW
+    rows = staticmethod(rubenstein_rows)
+    decision_rows = staticmethod(rubenstein_rows)
+    robots_of = staticmethod(robots_of_rows)
+    check_decisions = staticmethod(check_decisions)
+    batch = RubensteinBatch
+
+    @staticmethod
+    def check_rows(run: RubensteinRun, rows: np.ndarray, tick: int) -> None:
+        check_rubenstein_rows(rows, run.params.robots, tick)

@@ -1,16 +1,16 @@
-"""The monitor node of a rubenstein run: records the run to Rerun as it goes and writes the run directory at the end.
+"""The monitor node of a central world's run (:mod:`swarm_ros.nodes.central.world`): records the run to Rerun as it
+goes and writes the run directory at the end.
 
-It reads what the world publishes (:mod:`swarm_ros.nodes.rubenstein.world`): every robot's row every
-``record_every``-th tick and at the end (/swarm/rubenstein/robots), the metrics rows of every tick
-(/swarm/rubenstein/metrics), and the outcome (/swarm/status). Each message is checked (dropped and counted if it
-fails); the metrics must come one a tick, in order. It keeps a copy of the run
-(:meth:`swarm_ros.core.rubenstein.run.RubensteinRun.load`), streams it to ``<out_dir>.partial.rrd``, and once
-the outcome, the last robots and the metrics up to the last tick are in, writes the run directory as
-``swarm-ros simulate --algorithm rubenstein`` does (summary.json, metrics.csv, final_state.csv, final.png,
-recording.rrd), whole or not at all, with the run's bag (``bag/``: every message it took, as it came).
+It reads what the world publishes: every robot's row every ``record_every``-th tick and at the end
+(/swarm/<algorithm>/robots), the metrics rows of every tick (/swarm/<algorithm>/metrics), and the outcome
+(/swarm/status). Each message is checked (dropped and counted if it fails); the metrics must come one a tick, in
+order. It keeps a copy of the run (the engine's :meth:`~swarm_ros.core.strips.CentralRun.load`), streams it to
+``<out_dir>.partial.rrd`` (the algorithm's ``recording``), and once the outcome, the last robots and the metrics up
+to the last tick are in, writes the run directory as ``swarm-ros simulate`` does (the algorithm's ``summary`` and
+``write_run``), whole or not at all, with the run's bag (``bag/``: every message it took, as it came).
 
 Each time it holds a further record (the robots and the metrics up to their tick), and once it holds the
-outcome, it makes its bag durable and reports so on /swarm/rubenstein/held (``[tick, ended]``, latched); the world
+outcome, it makes its bag durable and reports so on /swarm/<algorithm>/held (``[tick, ended]``, latched); the world
 runs at most a window past it. A restarted process (``incarnation`` > 0) reads back the bag its process before
 left, through the same handlers (:mod:`swarm_ros.ros.bag_resume`), and takes the rest from the topics' histories:
 the run directory is the one an unbroken run writes.
@@ -32,40 +32,38 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
+from swarm_ros.artifacts.recording_options import RecordingOptions
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import Settings, auto_every
-from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun, summary_of
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.central_rows import check_metrics_rows, metrics_row
 from swarm_ros.protocol.checks import Rejections
-from swarm_ros.protocol.plan import MONITOR, RUBENSTEIN_HELD, RUBENSTEIN_METRICS, RUBENSTEIN_ROBOTS, STATUS
-from swarm_ros.protocol.rubenstein.rows import (
-    RUBENSTEIN_METRICS_ROW,
-    RUBENSTEIN_ROW,
-    check_metrics_rows,
-    check_rubenstein_rows,
-    robots_of_rows,
-)
+from swarm_ros.protocol.plan import MONITOR, STATUS, CentralTopics
 from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.bag_resume import resume
-from swarm_ros.ros.bag_writer import RUBENSTEIN_TOPICS, BagRecorder
+from swarm_ros.ros.bag_writer import BagRecorder, central_topics
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, handle_missed
 
 
-class RubensteinMonitorNode:
+class CentralMonitorNode:
     def __init__(self, node: Node, run: Settings, own: dict[str, Any]) -> None:
         self.node = node
         self.shape, self.params = run.resolve()
+        self.algorithm = algorithm_of(self.params.algorithm)
+        self.wire, self.topics = self.algorithm.hook("wire"), CentralTopics.of(self.algorithm.name)
         self.incarnation = int(own["incarnation"])
         p = self.params
         self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)
         self.overwrite = bool(own["overwrite"])
         run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
-        self.copy = RubensteinRun(self.shape, self.params)  # the run as the world reports it
-        self.history = np.empty((0, len(COLUMNS)))  # the metrics of every tick, as the world sends them
+        self.copy = self.algorithm.hook("engine")(self.shape, self.params)  # the run as the world reports it
+        self.columns = tuple(self.copy.columns)
+        self.history = np.empty((0, len(self.columns)))  # the metrics of every tick, as the world sends them
         self.robots_tick = -1
         self.outcome: str | None = None
         self.outcome_tick = -1
@@ -75,28 +73,25 @@ class RubensteinMonitorNode:
         if self.rrd is not None and self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
         self.every = int(own["record_every"]) or auto_every(self.params)
-        self.recorder = None
-        if self.rrd is not None or own["viewer_url"]:
-            from swarm_ros.artifacts.rubenstein.recording import RubensteinRecorder
-
-            url = str(own["viewer_url"]) or None
-            self.recorder = RubensteinRecorder(self.rrd, self.copy, every=self.every, connect=url)
+        options = RecordingOptions(self.rrd is not None, self.every, connect=str(own["viewer_url"]) or None)
+        self.recorder = self.algorithm.hook("recording")(self.rrd, self.copy, options) if options.active else None
         self.finished = False
-        self.bag = BagRecorder(self.out, recorded=RUBENSTEIN_TOPICS) if own["bag"] else None
+        recorded = central_topics(self.algorithm.name)
+        self.bag = BagRecorder(self.out, recorded=recorded) if own["bag"] else None
         self.raw: bytes | None = b""  # the message being handled, as it came (into the bag once its handler took it)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
-        self.pub_held = self.signer.publisher(Int64MultiArray, RUBENSTEIN_HELD, msgs.LATCHED_QOS)
+        self.pub_held = self.signer.publisher(Int64MultiArray, self.topics.held, msgs.LATCHED_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(MONITOR), msgs.ALIVE_QOS)  # liveliness only
         self.handlers = {
-            RUBENSTEIN_ROBOTS: self._on_robots,
-            RUBENSTEIN_METRICS: self._on_metrics,
+            self.topics.robots: self._on_robots,
+            self.topics.metrics: self._on_metrics,
             STATUS: self._on_status,
         }
         if self.incarnation:
             self._resume()
         for topic, handler in self.handlers.items():
-            kind, qos = (DiagnosticArray, msgs.STATUS_QOS) if topic == STATUS else (PointCloud2, msgs.RUBENSTEIN_QOS)
+            kind, qos = recorded[topic]
             self.gate.subscribe(kind, topic, handler, qos, raw_handler=self._keep_raw)
 
     def _resume(self) -> None:
@@ -142,33 +137,33 @@ class RubensteinMonitorNode:
 
     def _on_metrics(self, msg: Cloud) -> None:
         try:
-            rows = checks.cloud(msg, RUBENSTEIN_METRICS_ROW, 10**9)
-            history = check_metrics_rows(rows, self.history)
+            rows = checks.cloud(msg, metrics_row(self.columns), 10**9)
+            history = check_metrics_rows(rows, self.history, self.columns)
         except Rejected as fault:
-            self.rejections.drop(RUBENSTEIN_METRICS, fault)
+            self.rejections.drop(self.topics.metrics, fault)
             return
         if self.started_at is None:
             self.started_at = time.perf_counter()
         self.history = np.concatenate([self.history, history]) if len(self.history) else history
-        self._into_bag(RUBENSTEIN_METRICS)
+        self._into_bag(self.topics.metrics)
         self._report()
 
     def _on_robots(self, msg: Cloud) -> None:
         try:
             tick = checks.tick_stamp(msg.header)
-            rows = checks.cloud(msg, RUBENSTEIN_ROW, self.params.robots, min_rows=self.params.robots)
-            check_rubenstein_rows(rows, self.params.robots, tick)
+            rows = checks.cloud(msg, self.wire.row, self.params.robots, min_rows=self.params.robots)
+            self.wire.check_rows(self.copy, rows, tick)
         except Rejected as fault:
-            self.rejections.drop(RUBENSTEIN_ROBOTS, fault)
+            self.rejections.drop(self.topics.robots, fault)
             return
         if tick <= self.robots_tick:
             return
         self.robots_tick = tick
-        self._into_bag(RUBENSTEIN_ROBOTS)
-        _, robots = robots_of_rows(rows)
+        self._into_bag(self.topics.robots)
+        _, robots = self.wire.robots_of(rows)
         self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
-        if self.recorder is not None and tick > 0:
-            self.recorder.robots(self.copy)
+        if self.recorder is not None and tick > 0:  # (tick 0's: logged as the recorder opened)
+            self.recorder.log(self.copy)
         self._report()
 
     def _on_status(self, msg: DiagnosticArray) -> None:
@@ -188,19 +183,18 @@ class RubensteinMonitorNode:
         self._write(Outcome(self.outcome))
 
     def _write(self, outcome: Outcome) -> None:
-        from swarm_ros.artifacts.rubenstein.run_dir import write_rubenstein_run
-
         self.copy.load(self.robots_tick, self.copy.robots, self.history, outcome)
         wall = time.perf_counter() - self.started_at if self.started_at is not None else 0.0
-        summary = summary_of(self.copy, wall)
+        summary = self.algorithm.hook("summary")(self.copy, wall)
         summary.update(engine="ros2", restarts=[], processes=None, shutdown_seconds=None)  # the launcher's to fill
         if self.recorder is not None:
-            self.recorder.close(self.copy, summary["outcome"])
+            self.recorder.finish(self.copy, summary["outcome"])
         summary["recording_robots_every"] = self.every if self.rrd is not None else None
         if self.bag is not None:
             summary["bag_robots_every"] = self.every
         bag = self.bag.close() if self.bag is not None else None
-        write_rubenstein_run(self.out, self.copy, summary, overwrite=self.overwrite, recording=self.rrd, bag=bag)
+        write = self.algorithm.hook("write_run")
+        write(self.out, self.copy, summary, overwrite=self.overwrite, recording=self.rrd, every=self.every, bag=bag)
         if self.bag is not None:
             self.bag.discard_holder()
         self.node.get_logger().info(f"wrote {self.out}: {summary['outcome']} at tick {self.copy.tick}")
@@ -225,7 +219,7 @@ class RubensteinMonitorNode:
                 return
         unstarted = code == EXIT_INTERRUPTED and not len(self.history) and not self.incarnation
         if self.recorder is not None:
-            self.recorder.close(self.copy, "interrupted")
+            self.recorder.finish(self.copy, "interrupted")
         if unstarted and self.rrd is not None:
             self.rrd.unlink(missing_ok=True)  # its own, of no tick
         if self.bag is not None:

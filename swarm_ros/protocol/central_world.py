@@ -1,18 +1,19 @@
-"""The world's coordination of a rubenstein run in the ROS 2 graph, as plain code (no rclpy): which batches are in,
-what each is sent, and when a tick is settled.
+"""The world's coordination of a central world's run in the ROS 2 graph, as plain code (no rclpy): which batches
+are in, what each is sent, and when a tick is settled. A central world is one process holding every robot
+(:mod:`swarm_ros.core.strips`): the rubenstein algorithm's, and a plug-in's.
 
-A robot batch announces the strip of cell columns it decides for (``[first, last]``: the study's model's batches
+A robot batch announces the strip of columns it decides for (``[first, last]``: the study's model's batches
 announce theirs in patch columns); once the batches' strips tile the grid, batch k being the k-th from the west,
-the world sends each batch its area's rows of tick 0 (:mod:`swarm_ros.core.rubenstein.strips`). A batch answers
-each area with its strip's decisions for the next tick; when every batch has answered, the world settles
-the tick (:meth:`~swarm_ros.core.rubenstein.run.RubensteinRun.settle`) and sends the next areas. A batch process
-that announces itself again (restarted) is sent its area of the current tick: a batch keeps nothing between
-ticks, so it decides as the one it replaces would have.
+the world sends each batch its area's rows of tick 0. A batch answers each area with its strip's decisions for the
+next tick; when every batch has answered, the world settles the tick (the engine's
+:meth:`~swarm_ros.core.strips.CentralRun.settle`) and sends the next areas. A batch process that announces itself
+again (restarted) is sent its area of the current tick: a batch keeps nothing between ticks, so it decides as the one
+it replaces would have.
 
-Decisions are checked before they are used (:func:`check_decisions`): the tick, the rows' own bounds
-(:func:`~swarm_ros.protocol.rubenstein.rows.check_rubenstein_rows`), that they are exactly the batch's robots, and
-that each follows the rule's bounds: a state moves one step along start, wait, move outside, move inside,
-joined; a robot that moves goes one step along its heading, which turned by at most the turn of a tick.
+What is the algorithm's own here is its :class:`~swarm_ros.protocol.central_rows.Wire` (the registry's ``wire``
+hook): its rows and their checks.
+Decisions are checked before they are used: the tick, then the wire's ``check_decisions`` (the rows' own bounds,
+that they are exactly the batch's robots, and that each follows the rule's bounds).
 """
 
 from __future__ import annotations
@@ -26,23 +27,18 @@ import numpy as np
 
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.params import MAX_TICKS, auto_every
-from swarm_ros.core.rubenstein.rule import JOINED, Decided
-from swarm_ros.core.rubenstein.run import RubensteinRun
-from swarm_ros.core.rubenstein.strips import Strips, cell_columns
+from swarm_ros.core.strips import CentralRun, Strips
 
-from ..plan import MONITOR
-from ..plan import RUBENSTEIN_KEPT as KEPT
-from ..status import RUNNING, STARTING
-from ..world_port import STILL_S
-from . import checkpoint
-from .checkpoint import save_every
-from .checks import DECISION_FAULTS, decision_faults, first_fault
-from .rows import check_rubenstein_rows, decided_of_rows, metrics_rows, rubenstein_rows
+from . import central_checkpoint as checkpoint
+from .central_checkpoint import save_every
+from .central_rows import Wire, metrics_rows
+from .plan import CENTRAL_KEPT as KEPT
+from .plan import MONITOR
+from .status import RUNNING, STARTING
+from .world_port import STILL_S
 
 #: seconds, at most, for the last messages to be acknowledged before exiting, when the world waits for no monitor
 LINGER = 5.0
-
-_STEP_TOLERANCE = 1e-9  #: d: a step's end may differ from the rule's in the last bits of another libm's cos
 
 
 def monitor_reach(window: int, every: int) -> int | None:
@@ -53,8 +49,8 @@ def monitor_reach(window: int, every: int) -> int | None:
     return None if window == 0 else min(max(window, every), (KEPT - 2) * every)
 
 
-def check_held(values: np.ndarray, run: RubensteinRun) -> tuple[int, bool]:
-    """The monitor's report on /swarm/rubenstein/held, ``[tick, ended]``: the last tick whose record it holds, and
+def check_held(values: np.ndarray, run: CentralRun) -> tuple[int, bool]:
+    """The monitor's report on /swarm/<algorithm>/held, ``[tick, ended]``: the last tick whose record it holds, and
     whether it holds the outcome too, which only the run's last tick can carry.
 
     Raises:
@@ -70,15 +66,16 @@ def check_held(values: np.ndarray, run: RubensteinRun) -> tuple[int, bool]:
     return tick, bool(ended)
 
 
-class RubensteinLockstep:
-    """The world's half of the graph's rubenstein run: ``run`` is the whole swarm, as in one process."""
+class CentralLockstep:
+    """The world's half of a central world's run: ``run`` is the whole swarm, as in one process; ``wire`` the
+    algorithm's rows."""
 
-    def __init__(self, run: RubensteinRun) -> None:
-        self.run = run
+    def __init__(self, run: CentralRun, wire: Wire) -> None:
+        self.run, self.wire = run, wire
         self.strips: Strips | None = None  #: set once the announced strips tile the grid
         self.hosts: dict[int, str] = {}  #: batch number -> its node name
         self.announced: dict[str, tuple[int, int]] = {}  #: before the start: node name -> its strip
-        self.decided: dict[int, tuple[np.ndarray, Decided]] = {}  #: the decisions in for the next tick, by batch
+        self.decided: dict[int, tuple[np.ndarray, Any]] = {}  #: the decisions in for the next tick, by batch
         self.started = False
         self._columns_at: tuple[int, np.ndarray] = (-1, np.empty(0, dtype=np.int64))
 
@@ -95,7 +92,7 @@ class RubensteinLockstep:
                 before, or, once the run has started, a strip or a name that is not one of its batches'.
         """
         first, last = strip
-        columns = self.run.cells.nx
+        columns = self.run.grid.nx
         if not 0 <= first <= last < columns:
             raise Rejected("strip", f"cell columns {first}..{last}; the grid has {columns}")
         if self.strips is not None:  # started: a batch's process again
@@ -137,22 +134,23 @@ class RubensteinLockstep:
     def _columns(self) -> np.ndarray:
         """Every robot's cell column at the current tick (found once a tick)."""
         if self._columns_at[0] != self.run.tick:
-            self._columns_at = (self.run.tick, cell_columns(self.run.robots.x, self.run.cells))
+            self._columns_at = (self.run.tick, self.run.grid.columns(self.run.robots.x))
         return self._columns_at[1]
 
     def area(self, k: int) -> np.ndarray:
         """Batch k's area's rows at the current tick."""
         assert self.strips is not None
-        return rubenstein_rows(np.flatnonzero(self.strips.in_area(self._columns(), k)), self.run.robots)
+        return self.wire.rows(np.flatnonzero(self.strips.in_area(self._columns(), k)), self.run.robots)
 
     def awaited(self) -> list[str]:
         """The batches whose decisions for the next tick are not in yet, by node name."""
         return [name for k, name in sorted(self.hosts.items()) if k not in self.decided]
 
     def own(self, k: int) -> np.ndarray:
-        """The robots batch k decides for at the next tick: its strip's, not joined, ascending."""
+        """The robots batch k decides for at the next tick: its strip's deciding robots, ascending."""
         assert self.strips is not None
-        return np.flatnonzero(self.strips.in_strip(self._columns(), k) & (self.run.robots.state != JOINED))
+        deciding = self.run.deciding()
+        return deciding[self.strips.in_strip(self._columns()[deciding], k)]
 
     def decisions(self, k: int, tick: int, rows: np.ndarray) -> bool:
         """Batch k's decisions for ``tick``: checked, kept, and once every batch's are in, the tick settled.
@@ -167,7 +165,7 @@ class RubensteinLockstep:
             raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {self.run.tick + 1}")
         if k in self.decided:
             return False  # a restarted batch's second answer: the same, by the rule
-        ids, decided = check_decisions(self.run, rows, tick, self.own(k))
+        ids, decided = self.wire.check_decisions(self.run, rows, tick, self.own(k))
         self.decided[k] = (ids, decided)
         if len(self.decided) < self.batches:
             return False
@@ -176,7 +174,7 @@ class RubensteinLockstep:
         return True
 
 
-class RubensteinWatch:
+class Watch:
     """What the world knows of its peers' processes, and whether the run still moves.
 
     Each batch and the monitor hold a silent writer whose DDS liveliness lapses when its process dies or stalls. A
@@ -218,31 +216,12 @@ class RubensteinWatch:
         )
 
 
-def check_decisions(run: RubensteinRun, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Decided]:
-    """(ids, decisions) of decision rows for ``tick`` that must be exactly the robots ``own``, each within the
-    rule's bounds from where it stands in ``run``.
-
-    Raises:
-        Rejected: by kind: the rows' own bounds, robots other than ``own``, or a decision out of the rule's bounds.
-    """
-    check_rubenstein_rows(rows, run.params.robots, tick)
-    ids, d = decided_of_rows(rows)
-    if not np.array_equal(ids, own):
-        raise Rejected("not its robots", f"{ids.size} decisions for the batch's {own.size} robots")
-    fault = first_fault(
-        decision_faults(ids, d, run.robots, tick, run.rule.turn, run.rule.step, _STEP_TOLERANCE), DECISION_FAULTS
-    )
-    if fault is not None:
-        raise Rejected(*fault)
-    return ids, d
-
-
-class RubensteinWorld:
-    """The world node's logic, on a :class:`RubensteinLockstep`: tick 0 once the strips tile the grid and the monitor
+class CentralWorld:
+    """The world node's logic, on a :class:`CentralLockstep`: tick 0 once the strips tile the grid and the monitor
     reads the run's topics; each settled tick sent unless it is past the monitor's reach (``monitor_window`` past
     the last record the monitor reports held: :func:`monitor_reach`); a checkpoint every :func:`save_every` ticks,
     before the tick goes out; the records (every robot's row and the metrics rows since the last) every
-    ``record_every`` ticks and at the end; the peers' liveliness and a still run's failure (:class:`RubensteinWatch`);
+    ``record_every`` ticks and at the end; the peers' liveliness and a still run's failure (:class:`Watch`);
     the end once the monitor holds it (or, with no window, once its readers have everything, or after ``LINGER``).
 
     Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writer, decisions
@@ -251,9 +230,15 @@ class RubensteinWorld:
     run's topics) and ``delivered()`` (every reader has the last messages)."""
 
     def __init__(
-        self, run: RubensteinRun, own: dict, port: Any, log: Any, clock: Callable[[], float] = time.monotonic
+        self,
+        run: CentralRun,
+        wire: Wire,
+        own: dict,
+        port: Any,
+        log: Any,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self.ls = RubensteinLockstep(run)
+        self.ls = CentralLockstep(run, wire)
         self.port, self.log, self.clock = port, log, clock
         self.every = int(own["record_every"]) or auto_every(run.params)
         self.save_every = save_every(self.every)
@@ -269,12 +254,12 @@ class RubensteinWorld:
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
         self.ended_at: float | None = None
         self.finished = False
-        self.watch = RubensteinWatch(self.created)
+        self.watch = Watch(self.created)
         if int(own["incarnation"]):  # a restarted process: on from the last checkpoint
             self._resume()
 
     @property
-    def run(self) -> RubensteinRun:
+    def run(self) -> CentralRun:
         return self.ls.run
 
     def _resume(self) -> None:
@@ -287,14 +272,13 @@ class RubensteinWorld:
             self.log.info("restarted before tick 0 went out: the run starts from tick 0")
             return
         saved = checkpoint.load(self.checkpoint, self.run)
-        self.run.resume(saved.tick, saved.robots, saved.covered, saved.tally, saved.history)
         self.ls.resume(saved.hosts, saved.cuts)
         self.sent_metrics = saved.tick - self.every if saved.tick else -1
         self.log.info(f"restarted: on from the checkpoint of tick {saved.tick}")
 
     # -- what comes in ----------------------------------------------------------------------
     def batch(self, name: str, strip: tuple[int, int]) -> None:
-        """Node ``name`` announced the cell columns ``strip`` (:meth:`RubensteinLockstep.announce`).
+        """Node ``name`` announced the columns ``strip`` (:meth:`CentralLockstep.announce`).
 
         Raises:
             Rejected: a strip that does not fit the run.
@@ -304,7 +288,7 @@ class RubensteinWorld:
             self.watched.add(name)
             self.port.watch_batch(name)
         self.waiting += send
-        self.log.info(f"{name}: cell columns {strip[0]}..{strip[1]}")
+        self.log.info(f"{name}: columns {strip[0]}..{strip[1]}")
 
     def decisions(self, name: str, tick: int, rows: np.ndarray) -> None:
         """Node ``name``'s decisions for ``tick`` (checked as rows by the caller).
@@ -320,7 +304,7 @@ class RubensteinWorld:
             self._go_on()
 
     def held_report(self, values: np.ndarray) -> None:
-        """The monitor's report on /swarm/rubenstein/held (:func:`check_held`).
+        """The monitor's report on /swarm/<algorithm>/held (:func:`check_held`).
 
         Raises:
             Rejected: ("held") a report that cannot be of this run.
@@ -360,8 +344,9 @@ class RubensteinWorld:
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
             checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts)
         if ended or tick % self.every == 0:
-            everyone = rubenstein_rows(np.arange(run.params.robots), run.robots)
-            self.port.publish_record(tick, metrics_rows(run.history[self.sent_metrics + 1 :]), everyone)
+            everyone = self.ls.wire.rows(np.arange(run.params.robots), run.robots)
+            metrics = metrics_rows(run.history[self.sent_metrics + 1 :], run.columns)
+            self.port.publish_record(tick, metrics, everyone)
             self.sent_metrics = tick
         if ended:
             self.ended_at = self.clock()

@@ -1,18 +1,19 @@
-"""The world node of a rubenstein run (``--algorithm rubenstein``): holds every robot, sends each robot batch its
-area, settles the batches' decisions, and publishes the run for the monitor.
+"""The world node of a central world's run (an algorithm whose world is one process, as the rubenstein algorithm's:
+:mod:`swarm_ros.core.strips`): holds every robot, sends each robot batch its area, settles the batches' decisions,
+and publishes the run for the monitor.
 
-A thin shell around :class:`swarm_ros.protocol.rubenstein.lockstep.RubensteinWorld`, its port: each batch announces
-its strip of cell columns on /swarm/batches (``[first, last]``); once the strips tile the grid, and the monitor
-reads the run's topics, tick 0 goes out: each batch's area rows on /swarm/rubenstein/area/<batch>, every robot's row
-on /swarm/rubenstein/robots, the metrics on /swarm/rubenstein/metrics and ``running`` on /swarm/status. Each tick,
+A thin shell around :class:`swarm_ros.protocol.central_world.CentralWorld`, its port: each batch announces its strip
+of columns on /swarm/batches (``[first, last]``); once the strips tile the grid, and the monitor reads the run's
+topics, tick 0 goes out: each batch's area rows on /swarm/<algorithm>/area/<batch>, every robot's row on
+/swarm/<algorithm>/robots, the metrics on /swarm/<algorithm>/metrics and ``running`` on /swarm/status. Each tick,
 once every batch's decisions are in (checked, or dropped and counted), it settles them and sends the next areas;
 every ``record_every``-th tick and at the end it sends the robots and the metrics rows since the last. It runs at
-most ``monitor_window`` ticks past the last record the monitor reports held on /swarm/rubenstein/held
-(:func:`~swarm_ros.protocol.rubenstein.lockstep.monitor_reach`), so a restarted monitor finds in the topics'
-histories every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it (or,
-with no window, once its readers have everything or after a grace period). It saves a checkpoint at tick 0 and every
-1,000 ticks or so, before the tick goes out; a restarted process goes on from the last one
-(:mod:`swarm_ros.protocol.rubenstein.checkpoint`).
+most ``monitor_window`` ticks past the last record the monitor reports held on /swarm/<algorithm>/held
+(:func:`~swarm_ros.protocol.central_world.monitor_reach`), so a restarted monitor finds in the topics' histories
+every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it (or, with no
+window, once its readers have everything or after a grace period). It saves a checkpoint at tick 0 and every 1,000
+ticks or so, before the tick goes out; a restarted process goes on from the last one
+(:mod:`swarm_ros.protocol.central_checkpoint`). The algorithm's name's hyphens are underscores in the topics.
 
     ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
 """
@@ -30,24 +31,14 @@ from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
+from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.params import Settings
-from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.central_world import CentralWorld
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
-from swarm_ros.protocol.plan import (
-    BATCHES,
-    MONITOR,
-    RUBENSTEIN_HELD,
-    RUBENSTEIN_METRICS,
-    RUBENSTEIN_ROBOTS,
-    STATUS,
-    rubenstein_area_topic,
-    rubenstein_decisions_topic,
-)
-from swarm_ros.protocol.rubenstein.lockstep import RubensteinWorld
-from swarm_ros.protocol.rubenstein.rows import RUBENSTEIN_DECISION_ROW
+from swarm_ros.protocol.plan import BATCHES, MONITOR, STATUS, CentralTopics
 from swarm_ros.protocol.status import STARTING
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import SignedPublisher, open_auth
@@ -55,21 +46,24 @@ from swarm_ros.ros.auth import SignedPublisher, open_auth
 _NO_WAIT = Duration(seconds=0)
 
 
-class RubensteinWorldNode:
-    """The endpoints of a :class:`RubensteinWorld`, and its port."""
+class CentralWorldNode:
+    """The endpoints of a :class:`CentralWorld`, and its port."""
 
     def __init__(self, node: Node, run: Settings, own: dict[str, Any]) -> None:
         self.node = node
         shape, self.params = run.resolve()
+        algorithm = algorithm_of(self.params.algorithm)
+        self.wire, self.topics = algorithm.hook("wire"), CentralTopics.of(algorithm.name)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_status = self.signer.publisher(DiagnosticArray, STATUS, msgs.STATUS_QOS)
-        self.pub_robots = self.signer.publisher(PointCloud2, RUBENSTEIN_ROBOTS, msgs.RUBENSTEIN_QOS)
-        self.pub_metrics = self.signer.publisher(PointCloud2, RUBENSTEIN_METRICS, msgs.RUBENSTEIN_QOS)
+        self.pub_robots = self.signer.publisher(PointCloud2, self.topics.robots, msgs.CENTRAL_QOS)
+        self.pub_metrics = self.signer.publisher(PointCloud2, self.topics.metrics, msgs.CENTRAL_QOS)
         self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
-        self.world = RubensteinWorld(RubensteinRun(shape, self.params), own, self, node.get_logger())
+        engine = algorithm.hook("engine")(shape, self.params)
+        self.world = CentralWorld(engine, self.wire, own, self, node.get_logger())
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
-        self.gate.subscribe(Int64MultiArray, RUBENSTEIN_HELD, self._on_held, msgs.LATCHED_QOS)
+        self.gate.subscribe(Int64MultiArray, self.topics.held, self._on_held, msgs.LATCHED_QOS)
         self._watch_alive(MONITOR)
         self.world.status(STARTING, "waiting for robot batches and the monitor")
 
@@ -85,7 +79,7 @@ class RubensteinWorldNode:
         try:
             name, _ = parse_batch_label(msg.layout.dim[0].label if msg.layout.dim else "")
             if len(msg.data) != 2:
-                raise Rejected("strip", f"{len(msg.data)} values, expected its first and last cell column")
+                raise Rejected("strip", f"{len(msg.data)} values, expected its first and last column")
             self.world.batch(name, (int(msg.data[0]), int(msg.data[1])))
         except Rejected as fault:
             self.rejections.drop(BATCHES, fault)
@@ -93,7 +87,7 @@ class RubensteinWorldNode:
     def _on_decisions(self, name: str, topic: str, msg: Cloud) -> None:
         try:
             tick = checks.tick_stamp(msg.header)
-            rows = checks.cloud(msg, RUBENSTEIN_DECISION_ROW, self.params.robots, min_rows=0)
+            rows = checks.cloud(msg, self.wire.decision_row, self.params.robots, min_rows=0)
             self.world.decisions(name, tick, rows)
         except Rejected as fault:
             self.rejections.drop(topic, fault)
@@ -102,7 +96,7 @@ class RubensteinWorldNode:
         try:
             self.world.held_report(np.asarray(msg.data, dtype=np.int64))
         except Rejected as fault:
-            self.rejections.drop(RUBENSTEIN_HELD, fault)
+            self.rejections.drop(self.topics.held, fault)
 
     def _watch_alive(self, name: str) -> None:
         """Follow the liveliness of peer ``name``'s silent writer (DDS tells when its process dies or stalls)."""
@@ -117,8 +111,8 @@ class RubensteinWorldNode:
 
     # -- the world's port -------------------------------------------------------------------
     def watch_batch(self, name: str) -> None:
-        self.areas[name] = self.signer.publisher(PointCloud2, rubenstein_area_topic(name), msgs.LATCHED_QOS)
-        topic = rubenstein_decisions_topic(name)
+        self.areas[name] = self.signer.publisher(PointCloud2, self.topics.area(name), msgs.LATCHED_QOS)
+        topic = self.topics.decisions(name)
         self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_decisions, name, topic), msgs.DECISIONS_QOS)
         self._watch_alive(name)
 
@@ -135,7 +129,7 @@ class RubensteinWorldNode:
     def monitor_reads(self) -> bool:
         return all(
             any(info.node_name == MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
-            for topic in (RUBENSTEIN_ROBOTS, RUBENSTEIN_METRICS, STATUS)
+            for topic in (self.topics.robots, self.topics.metrics, STATUS)
         )
 
     def delivered(self) -> bool:

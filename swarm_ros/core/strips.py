@@ -1,0 +1,178 @@
+"""A run cut among K robot batches by strips of columns, for an algorithm whose world is one process holding every
+robot (a *central world*: the rubenstein algorithm's, and a plug-in's; the study's model cuts its world by
+:mod:`swarm_ros.core.regions` instead).
+
+The algorithm's engine lays a grid of columns over its world (:class:`StripGrid`: columns ``side`` wide from
+``x0``), wide enough that a robot decides from the robots within one column either side of its own. The world is
+cut into K strips of whole columns (:func:`strips_for`: at ``region_cuts``, or as many robots in each at the start
+as whole columns allow); batch k decides for the deciding robots whose column, at the last tick, lies in its strip,
+and it needs the robots of its *area*: its strip and one column either side (the halo). The world sends each batch
+its area's robots as they stand after a tick, takes every batch's decisions for the next, and settles them as the
+in-process engine does. A batch keeps nothing between ticks that the world does not send it again, so a restarted
+batch decides as the one it replaces would have, and a batch's work a tick is its area's, never the whole swarm's.
+
+What an engine gives for it (:class:`CentralRun`) is the graph's whole contract with the algorithm's core; the
+rows on the wire are the algorithm's protocol part (:mod:`swarm_ros.protocol.central_world`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+
+from .errors import ParameterError
+from .regions import parse_cuts
+
+
+class StripGrid(NamedTuple):
+    """Columns ``side`` wide from x = ``x0``, ``nx`` of them: a robot's column is where its x falls (clipped);
+    ``unit``: the unit of x, as an error names it."""
+
+    x0: float
+    side: float
+    nx: int
+    unit: str = ""
+
+    def columns(self, x: np.ndarray) -> np.ndarray:
+        """The column of each x."""
+        return np.clip(np.floor((x - self.x0) / self.side).astype(np.int64), 0, self.nx - 1)
+
+
+class CentralRun(Protocol):
+    """What an in-process engine gives the central world's graph (beside ``run()``, ``step()`` and the rest every
+    engine has): the graph's world holds one, its monitor a copy it loads with what the world reports."""
+
+    params: Any
+    tick: int
+    outcome: Any
+    robots: Any  #: a NamedTuple of arrays indexed by robot id, ``x`` among them
+    grid: StripGrid  #: the columns the batches' strips are cut in
+    columns: tuple[str, ...]  #: metrics.csv's columns, the first ``tick``: a row of them a tick (``history``)
+
+    @property
+    def history(self) -> np.ndarray: ...  # every tick's metrics row (the engine's ``columns``), tick 0 first
+
+    def deciding(self) -> np.ndarray: ...  # the robots that decide the next tick, ascending ids
+
+    def settle(self, parts: list[tuple[np.ndarray, Any]]) -> Any: ...  # one tick from each batch's (ids, decisions)
+
+    def load(self, tick: int, robots: Any, history: np.ndarray, outcome: Any = None) -> None: ...
+
+    def saved(self) -> dict[str, np.ndarray]: ...  # all a restarted world needs to go on exactly (a checkpoint)
+
+    def restore(self, tick: int, arrays: dict[str, np.ndarray]) -> None: ...  # from saved(); ContractError if not
+
+
+@dataclass(frozen=True)
+class Strips:
+    """K strips of whole columns: strip k is the columns ``cuts[k]`` to ``cuts[k + 1] - 1``."""
+
+    cuts: np.ndarray  #: int64, K + 1 ascending column numbers, the first 0 and the last the grid's width
+
+    @staticmethod
+    def balanced(start_columns: np.ndarray, columns: int, batches: int) -> Strips:
+        """``batches`` strips of whole columns holding, at the start, as nearly equal numbers of robots as whole
+        columns allow (``start_columns``: each robot's column at tick 0), each at least one column wide.
+
+        Raises:
+            ParameterError: more batches than columns.
+        """
+        if not 1 <= batches <= columns:
+            raise ParameterError(f"processes must be between 1 and the {columns} cell columns, got {batches}")
+        held = np.cumsum(np.bincount(start_columns, minlength=columns))
+        cuts = [0]
+        for k in range(1, batches):
+            at = int(np.searchsorted(held, k * held[-1] / batches)) + 1  # columns before it hold k/K of them
+            cuts.append(min(max(at, cuts[-1] + 1), columns - (batches - k)))
+        return Strips(np.array([*cuts, columns], dtype=np.int64))
+
+    @staticmethod
+    def cut(at: np.ndarray, grid: StripGrid, batches: int) -> Strips:
+        """``batches`` strips cut at ``at`` (K - 1 ascending x positions, ``region_cuts``): strip k starts at the
+        column that holds cut k - 1.
+
+        Raises:
+            ParameterError: not K - 1 cuts, or cuts that leave a strip without a column.
+        """
+        if at.size != batches - 1:
+            raise ParameterError(f"region_cuts gives {at.size} cuts; {batches} batches need {batches - 1}")
+        starts = np.floor((at - grid.x0) / grid.side).astype(np.int64)
+        cuts = np.concatenate([[0], starts, [grid.nx]]).astype(np.int64)
+        if (np.diff(cuts) < 1).any():
+            end, unit = grid.x0 + grid.nx * grid.side, f" {grid.unit}" if grid.unit else ""
+            raise ParameterError(
+                f"region_cuts {at.tolist()} leave a strip with no cell column (the grid's {grid.nx} columns, "
+                f"{grid.side:g}{unit} wide, span x = {grid.x0:g} to {end:g}{unit})"
+            )
+        return Strips(cuts)
+
+    @staticmethod
+    def tiling(strips: list[tuple[int, int]], columns: int) -> Strips | None:
+        """The strips ``strips`` ((first, last) columns, in any order) make, if they tile the ``columns`` columns
+        of the grid with no gap or overlap; None if they do not (yet)."""
+        ordered = sorted(strips)
+        if not ordered or ordered[0][0] != 0 or ordered[-1][1] != columns - 1:
+            return None
+        if any(before[1] + 1 != after[0] for before, after in zip(ordered, ordered[1:])):
+            return None
+        return Strips(np.array([first for first, _ in ordered] + [columns], dtype=np.int64))
+
+    @property
+    def batches(self) -> int:
+        return self.cuts.size - 1
+
+    def strip(self, k: int) -> tuple[int, int]:
+        """The first and last column of strip k."""
+        return int(self.cuts[k]), int(self.cuts[k + 1]) - 1
+
+    def area(self, k: int) -> tuple[int, int]:
+        """The first and last column of batch k's area: its strip and the halo column either side."""
+        first, last = self.strip(k)
+        return max(first - 1, 0), min(last + 1, int(self.cuts[-1]) - 1)
+
+    def in_strip(self, columns: np.ndarray, k: int) -> np.ndarray:
+        """Which of the robots in ``columns`` lie in strip k."""
+        first, last = self.strip(k)
+        return (columns >= first) & (columns <= last)
+
+    def in_area(self, columns: np.ndarray, k: int) -> np.ndarray:
+        """Which of the robots in ``columns`` lie in batch k's area."""
+        first, last = self.area(k)
+        return (columns >= first) & (columns <= last)
+
+
+def strips_for(start: CentralRun, batches: int, region_cuts: str = "") -> Strips:
+    """The strips of a run for ``batches`` batches (``start``: the run at tick 0): cut at ``region_cuts`` (x
+    positions, :meth:`Strips.cut`), or, with none, :meth:`Strips.balanced` over its robots at tick 0 (every process
+    that knows the run's parameters finds the same).
+
+    Raises:
+        ParameterError: cuts or a batch count the grid cannot be cut by.
+    """
+    grid = start.grid
+    if region_cuts:
+        return Strips.cut(parse_cuts(region_cuts), grid, batches)
+    return Strips.balanced(grid.columns(start.robots.x), grid.nx, batches)
+
+
+def area_of(run: CentralRun, strips: Strips, k: int) -> np.ndarray:
+    """The ids of the robots in batch k's area, as they stand at the run's tick (what the world sends it)."""
+    return np.flatnonzero(strips.in_area(run.grid.columns(run.robots.x), k))
+
+
+def run_batched(run: CentralRun, hosts: list[Any], max_ticks: int | None = None) -> None:
+    """Run ``run`` to its end (or ``max_ticks`` more ticks) with its robots' decisions made by ``hosts`` (one per
+    strip, each ``decide(tick, ids, robots)`` -> (ids, decisions) from its area's robots alone): the result equals
+    the in-process run's."""
+    strips = hosts[0].strips
+    left = max_ticks
+    while run.outcome is None and (left is None or left > 0):
+        tick = run.tick + 1
+        parts = []
+        for k, host in enumerate(hosts):
+            ids = area_of(run, strips, k)
+            parts.append(host.decide(tick, ids, type(run.robots)(*(a[ids] for a in run.robots))))
+        run.settle(parts)
+        left = None if left is None else left - 1

@@ -1,0 +1,61 @@
+"""A central world's robot batch: decides, each tick, for the deciding robots of its strip
+(:mod:`swarm_ros.core.strips`).
+
+Batch k of K announces its strip, ``[first, last]`` column (the strips cut at ``region_cuts``, x positions, or
+balanced over the robots at tick 0: :func:`~swarm_ros.core.strips.strips_for`). The world sends it, after each tick,
+the rows of its area (its strip and one column of halo) on /swarm/<algorithm>/area/<batch>: what the robots there
+broadcast. The batch checks them, decides the next tick for its strip's deciding robots (the algorithm's ``wire``:
+its rows and its batch) and answers on /swarm/<algorithm>/decisions/<batch>. It keeps nothing between ticks, so a
+restarted batch decides as the one it replaces would have.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from swarm_ros.core.algorithm import algorithm_of
+from swarm_ros.core.errors import Rejected
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.shapes import Shape
+from swarm_ros.core.strips import strips_for
+from swarm_ros.protocol import checks
+from swarm_ros.protocol.batch_host import Inbox, Reply
+from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.plan import CentralTopics
+
+
+class CentralBatch:
+    """A :class:`~swarm_ros.protocol.batch_host.BatchHost` of a central world's run (the ``batch_host`` hook)."""
+
+    def __init__(
+        self, shape: Shape, params: RunParams, own: dict[str, Any], drop: Callable[[str, Rejected], None]
+    ) -> None:
+        algorithm = algorithm_of(params.algorithm)
+        self.robots = params.robots
+        self.wire = algorithm.hook("wire")
+        self.start = algorithm.hook("engine")(shape, params)  # the grid, the rule and the shape; robots at tick 0
+        strips = strips_for(self.start, int(own["batches"]), str(own["region_cuts"]))
+        self.host = self.wire.batch(self.start, strips, int(own["batch"]))
+        self.strip = strips.strip(int(own["batch"]))
+        self.tick = -1  # the last tick whose area came in
+        name, topics = str(own["name"]), CentralTopics.of(params.algorithm)
+        self.decisions = topics.decisions(name)
+        self.inboxes = (Inbox(topics.area(name), True, self._on_area),)
+
+    def describe(self) -> str:
+        return f"columns {self.strip[0]}..{self.strip[1]}"
+
+    def load(self) -> None:
+        """Nothing heavy: the kernels load on the first area."""
+
+    def summary(self) -> str:
+        return f"decided up to tick {self.tick + 1}"
+
+    def _on_area(self, msg: Cloud) -> Reply:
+        tick = checks.tick_stamp(msg.header)
+        rows = checks.cloud(msg, self.wire.row, self.robots, min_rows=0)
+        self.wire.check_rows(self.start, rows, tick)
+        self.tick = max(self.tick, tick)  # an older tick's area is a restarted world's, from its checkpoint: decided
+        own, decided = self.host.decide(tick + 1, *self.wire.robots_of(rows))
+        return self.wire.decision_rows(own, decided), tick + 1

@@ -1,0 +1,116 @@
+"""A third algorithm plugged in from a folder of the tests (test/random_walk, a random walk that stops next to a
+stopped robot), with no edit to swarm_ros: one folder of at most 200 lines, and its robot batches, fed the central
+world's messages, decide as its in-process engine does (its commands and graph runs: test_plugin_algorithm)."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarm_ros.app import cli
+from swarm_ros.core import Shape, World, algorithm
+from swarm_ros.core.errors import Rejected
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.strips import run_batched, strips_for
+from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
+from swarm_ros.protocol.central_batch import CentralBatch
+from swarm_ros.protocol.central_world import CentralLockstep
+
+pytestmark = pytest.mark.unit
+
+FOLDER = Path(__file__).resolve().parent / "random_walk"
+random_walk = None  #: the plug-in's module, imported (and registered) for this module's tests only
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _registered():
+    """The plug-in registered into a copy of the registry for this module's tests: the registry is global, and the
+    other tests of this process see the built-in algorithms only."""
+    global random_walk
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(algorithm, "_REGISTRY", dict(algorithm._REGISTRY))
+        for module in ("random_walk", "random_walk.engine"):
+            sys.modules.pop(module, None)
+        random_walk = importlib.import_module("random_walk")
+        yield
+
+
+SHAPE = "#####\n" * 4  #: 20 cells in a world of 13 x 13
+
+
+@pytest.fixture(scope="module")
+def shape_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("walk") / "sq.txt"
+    path.write_text(SHAPE)
+    return path
+
+
+@pytest.fixture
+def shape(shape_file) -> Shape:
+    return Shape.load(str(shape_file), World(6))
+
+
+def params(**more) -> RunParams:
+    return RunParams(40, algorithm=random_walk.NAME, seed=3, max_ticks=300, **more)
+
+
+def test_the_plugin_is_one_folder_of_at_most_200_lines_that_swarm_ros_never_names():
+    lines = sum(len(p.read_text().splitlines()) for p in FOLDER.glob("*.py"))
+    assert lines <= 200, lines
+    assert random_walk.NAME in algorithm.names() and algorithm.algorithm_of(random_walk.NAME).wire == "random_walk:Wire"
+    package = Path(cli.__file__).parents[1]
+    named = [p for p in package.rglob("*.py") if "random_walk" in p.read_text() or "random-walk" in p.read_text()]
+    assert named == []
+
+
+@pytest.mark.parametrize("batches", [1, 2, 3])
+def test_k_batches_fed_the_worlds_messages_decide_as_the_in_process_engine(batches, shape):
+    """The world's lockstep and the shared robot-batch host over the plug-in's rows, each batch sent only its area
+    as the message the world sends: the run is the in-process one, tick for tick."""
+    whole = random_walk.RandomWalk(shape, params())
+    whole.run()
+    split = random_walk.RandomWalk(shape, params())
+    ls = CentralLockstep(split, random_walk.Wire)
+    own = {"batches": batches, "region_cuts": ""}
+    hosts = [
+        CentralBatch(split.shape, split.params, {**own, "batch": k, "name": f"b{k}"}, None) for k in range(batches)
+    ]
+    for k, host in enumerate(hosts):
+        ls.announce(f"b{k}", host.strip)
+    assert ls.started and sum(len(ls.own(k)) for k in range(batches)) == 39
+    while split.outcome is None:
+        for k, host in enumerate(hosts):
+            rows, tick = host.inboxes[0].take(decode_cloud(encode_cloud(ls.area(k), split.tick)))
+            ls.decisions(k, tick, rows)
+    assert split.tick == whole.tick and np.array_equal(split.history, whole.history)
+    assert all(np.array_equal(a, b) for a, b in zip(split.robots, whole.robots))
+    assert whole.history[-1, 1] > 10  # robots stopped: decisions next to stopped robots across strips were made
+    plain = random_walk.RandomWalk(shape, params())
+    strips = strips_for(plain, 3)
+    run_batched(plain, [random_walk.Batch(plain, strips, k) for k in range(3)])
+    assert np.array_equal(plain.history, whole.history)
+
+
+def test_the_world_rejects_hostile_rows_and_decisions_by_kind(shape):
+    run = random_walk.RandomWalk(shape, params())
+    ls = CentralLockstep(run, random_walk.Wire)
+    ls.announce("b0", (0, run.grid.nx - 1))
+    area = ls.area(0)
+    for field, value, kind in (("x", 13, "bad state"), ("y", 2.5, "bad state"), ("id", 40, "bad ids")):
+        bad = area.copy()
+        bad[field][-1] = value
+        with pytest.raises(Rejected, match=kind):
+            random_walk.Wire.check_rows(run, bad, 0)
+    ids, decided = random_walk.Batch(run, ls.strips, 0).decide(1, *random_walk.Wire.robots_of(area))
+    rows = random_walk.Wire.decision_rows(ids, decided)
+    jump = rows.copy()
+    jump["x"][0] = (jump["x"][0] + 2) % 13
+    with pytest.raises(Rejected, match="illegal"):
+        ls.decisions(0, 1, jump)
+    with pytest.raises(Rejected, match="not its robots"):
+        ls.decisions(0, 1, rows[1:])
+    assert ls.decisions(0, 1, rows) and run.tick == 1
