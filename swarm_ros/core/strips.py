@@ -56,7 +56,7 @@ class CentralRun(Protocol):
 
     def deciding(self) -> np.ndarray: ...  # the robots that decide the next tick, ascending ids
 
-    def settle(self, parts: list[tuple[np.ndarray, Any]]) -> Any: ...  # one tick from each batch's (ids, decisions)
+    def settle(self, decided: list[tuple[np.ndarray, Any]]) -> Any: ...  # a tick from each batch's (ids, decisions)
 
     def load(self, tick: int, robots: Any, history: np.ndarray, outcome: Any = None) -> None: ...
 
@@ -170,9 +170,9 @@ def run_batched(run: CentralRun, hosts: list[Any], max_ticks: int | None = None)
     left = max_ticks
     while run.outcome is None and (left is None or left > 0):
         tick = run.tick + 1
-        parts = []
+        decided = []
         for k, host in enumerate(hosts):
             ids = area_of(run, strips, k)
-            parts.append(host.decide(tick, ids, type(run.robots)(*(a[ids] for a in run.robots))))
-        run.settle(parts)
+            decided.append(host.decide(tick, ids, type(run.robots)(*(a[ids] for a in run.robots))))
+        run.settle(decided)
         left = None if left is None else left - 1

@@ -87,12 +87,12 @@ class RandomWalk:
             max_ticks = None if max_ticks is None else max_ticks - 1
         return self.outcome
 
-    def settle(self, parts: list[tuple[np.ndarray, Robots]]) -> Outcome | None:
+    def settle(self, decided: list[tuple[np.ndarray, Robots]]) -> Outcome | None:
         """One tick from every walking robot's decision: stops, then steps by ascending id onto cells still free."""
-        ids = np.concatenate([p[0] for p in parts])
+        ids = np.concatenate([p[0] for p in decided])
         if self.outcome is not None or not np.array_equal(np.sort(ids), self.deciding()):
             raise ContractError(f"tick {self.tick + 1}: not one decision for each walking robot")
-        d = Robots(*(np.concatenate([p[1][f] for p in parts]) for f in range(3)))
+        d = Robots(*(np.concatenate([p[1][f] for p in decided]) for f in range(3)))
         s, taken = self.robots, np.zeros(self.mask.shape, dtype=bool)
         taken[s.y, s.x] = True
         for k in np.argsort(ids, kind="stable"):

@@ -273,22 +273,22 @@ class RubensteinRun:
         """The robots that decide the next tick: every one not joined, ascending."""
         return _deciding(self.robots.state)
 
-    def settle(self, parts: list[tuple[np.ndarray, Decided]]) -> Outcome | None:
-        """Advance one tick with decisions made elsewhere (robot batches, :mod:`.strips`): ``parts`` are each
-        batch's ids and decisions (position k robot ``ids[k]``'s), which between them must hold every robot not
-        joined exactly once. The world's half of the tick is :meth:`run`'s, so the result is the same.
+    def settle(self, decided: list[tuple[np.ndarray, Decided]]) -> Outcome | None:
+        """Advance one tick with decisions made elsewhere (robot batches, :mod:`swarm_ros.core.strips`): ``decided``
+        holds each batch's ids and decisions (position k robot ``ids[k]``'s), which between them must hold every
+        robot not joined exactly once. The world's half of the tick is :meth:`run`'s, so the result is the same.
 
         Raises:
-            ContractError: the run has ended, or the parts miss a robot, repeat one or hold a joined one.
+            ContractError: the run has ended, or the decisions miss a robot, repeat one or hold a joined one.
         """
         if self.outcome is not None:
             raise ContractError(f"the run has ended ({self.outcome}) at tick {self.tick}")
-        ids = np.concatenate([p[0] for p in parts]) if parts else np.empty(0, dtype=np.int64)
+        ids = np.concatenate([p[0] for p in decided]) if decided else np.empty(0, dtype=np.int64)
         mine = _deciding(self.robots.state)
         order = np.argsort(ids, kind="stable")
         if ids.size != mine.size or not np.array_equal(ids[order], mine):
             raise ContractError(f"tick {self.tick + 1}: the decisions are not one for each robot not joined")
-        for field, out in zip(zip(*(p[1] for p in parts)), self._out):
+        for field, out in zip(zip(*(p[1] for p in decided)), self._out):
             out[: mine.size] = np.concatenate(field)[order]
         row = np.empty((1, len(COLUMNS)))
         build_cells(np.arange(self.params.robots), self.robots.x, self.robots.y, self.cells)

@@ -3,7 +3,7 @@ its ``wire`` in the central world's graph (:data:`WIRE`).
 
 A robot's row is everything it broadcasts and keeps (:class:`~swarm_ros.core.rubenstein.rule.Robots`): its
 pose, state, gradient ``g``, position estimate (``ex``, ``ey``), whether it has an estimate and is localized,
-and its counters. The world sends batch k its area's rows after each tick (:mod:`swarm_ros.core.rubenstein.strips`),
+and its counters. The world sends batch k its area's rows after each tick (:mod:`swarm_ros.core.strips`),
 and batch k answers with a decision row per robot of its strip not joined: the same fields as they will be
 after the tick, with ``x``, ``y`` the point the robot moves to if the world grants it, and ``moves``.
 
