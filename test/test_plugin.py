@@ -95,6 +95,20 @@ def test_k_batches_fed_the_worlds_messages_decide_as_the_in_process_engine(batch
     assert np.array_equal(plain.history, whole.history)
 
 
+@pytest.mark.parametrize("shards, batches", [(2, 2), (3, 3)])
+def test_world_shards_give_the_in_process_run(shards, batches, shape):
+    """The shared world-shard split (swarm_ros.core.central_shards) serves it as it is: each shard holds its columns
+    and a halo, and every shard's metrics, and each robot's row at its owner, are the one world's."""
+    from swarm_ros.core.central_shards import run_sharded
+
+    whole = random_walk.RandomWalk(shape, params())
+    whole.run()
+    world = run_sharded(lambda: random_walk.RandomWalk(shape, params()), random_walk.Batch, shards, batches)
+    assert all(np.array_equal(w.run.history, whole.history) for w in world) and whole.history[-1, 1] > 10
+    assert all(np.array_equal(a[w.own], b[w.own]) for w in world for a, b in zip(w.run.robots, whole.robots))
+    assert np.array_equal(np.sort(np.concatenate([w.own for w in world])), np.arange(40))
+
+
 def test_the_world_rejects_hostile_rows_and_decisions_by_kind(shape):
     run = random_walk.RandomWalk(shape, params())
     ls = CentralLockstep(run, random_walk.Wire)

@@ -67,6 +67,25 @@ def test_k_batches_give_the_in_process_star_while_robots_cross_strips(batches):
     assert (whole.robots.state == JOINED).sum() > 4  # robots left the pack and joined: some crossed strips
 
 
+@pytest.mark.parametrize("shards, batches", [(2, 2), (3, 4)])
+def test_world_shards_each_holding_its_columns_and_a_halo_give_the_in_process_run(shards, batches):
+    """S world shards (swarm_ros.core.central_shards), each holding only the robots of its columns and one column
+    either side, passing only border decisions, joins, counts and handovers: every shard's metrics are the run's,
+    each robot's row its owner's, and no shard holds the whole swarm."""
+    from swarm_ros.core.central_shards import run_sharded
+
+    params = RunParams(40, algorithm="rubenstein", seed=5, range_noise=0.04)
+    whole = RubensteinRun(square(6), params)
+    whole.run(1200)
+    world = run_sharded(lambda: RubensteinRun(square(6), params), RubensteinBatch, shards, batches, 1200)
+    owners = np.concatenate([w.own for w in world])
+    assert np.array_equal(np.sort(owners), np.arange(40))
+    for w in world:
+        assert np.array_equal(w.run.history, whole.history)
+        assert all(np.array_equal(a[w.own], b[w.own]) for a, b in zip(w.run.robots, whole.robots))
+    assert (whole.robots.state == JOINED).sum() > 4 and min(w.present.size for w in world) < 40
+
+
 def test_strips_share_the_robots_at_the_start_and_an_area_is_its_strip_and_one_column_either_side():
     start = np.array([0, 0, 0, 1, 1, 2, 5, 5, 9, 9, 9, 9])  # each robot's cell column at tick 0
     strips = Strips.balanced(start, 12, 3)

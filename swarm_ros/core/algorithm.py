@@ -89,6 +89,7 @@ class Algorithm:
     #: ``(params, shape) -> None``: refuse a shape it cannot form (ParameterError)
     check_shape: str = ""
     #: ``() -> None``: run a few ticks of each of its code paths, so numba compiles its kernels into their cache
+    #: ("": it has no kernels of its own)
     compile: str = ""
     #: ``(shape, params) -> None``: load its run's compiled kernels into this process, or "": the launcher then
     #: starts each node afresh instead of forking it from a process that has them loaded (app/forking.py)

@@ -83,12 +83,15 @@ def kernels_cached(algorithm: str | None = None) -> bool:
     source.
 
     Answers True when the cache is somewhere this function does not look
-    (``NUMBA_CACHE_DIR`` set): it never claims work it cannot see.
+    (``NUMBA_CACHE_DIR`` set): it never claims work it cannot see; and for an algorithm with no ``compile`` hook
+    (no kernels of its own).
     """
     if os.environ.get("NUMBA_CACHE_DIR"):
         return True
     if algorithm is None:
         return all(kernels_cached(a) for a in names())
+    if not algorithm_of(algorithm).compile:  # no kernels of its own to compile
+        return True
     try:
         sources = _kernel_modules(algorithm)
         stamp = _CACHE / _STAMP.format(algorithm)
@@ -150,7 +153,10 @@ def compile_kernels(algorithm: str | None = None) -> None:
     rubenstein, a few ticks of its run; with the default parameters (the kernels' types do not depend on them)."""
     drop_stale()
     for name in names() if algorithm is None else (algorithm,):
-        algorithm_of(name).hook("compile")()
+        compile_ = algorithm_of(name).hook("compile")
+        if compile_ is None:  # no kernels of its own
+            continue
+        compile_()
         try:
             (_CACHE / _STAMP.format(name)).touch()
         except OSError:

@@ -1,9 +1,6 @@
-"""A third, minimal algorithm, to show that an algorithm is a plug-in of swarm_ros (docs/adding_an_algorithm.md): robot
-0 stands on the shape's first cell; the others start on random cells and walk, a random step a tick, until one stands
-on a shape cell next to a stopped robot, where it stops. Its world is one process holding every robot, so it takes the
-central world's graph as it is (``CENTRAL``). ``SWARM_ROS_ALGORITHMS=random_walk`` with this folder's parent on
-PYTHONPATH registers it.
-"""
+"""A third, minimal algorithm, to show that an algorithm is a plug-in of swarm_ros (docs/adding_an_algorithm.md): a
+random walk that stops on a shape cell next to a stopped robot. Its world is one process holding every robot, so it
+takes the central world's graph as it is (``CENTRAL``). ``SWARM_ROS_ALGORITHMS=random_walk`` registers it."""
 
 from __future__ import annotations
 
@@ -14,18 +11,16 @@ from swarm_ros.core.errors import Rejected
 
 from .engine import NAME, Batch, RandomWalk, Robots
 
-ROW = np.dtype({"names": ["x", "y", "z", "id", "state"], "formats": ["<f4", "<f4", "<f4", "<u4", "<u1"]})
-
 
 class Wire:
     """Its rows on the wire: a robot's cell, id and state; a decision is the same row (the cell it steps to)."""
 
-    row = decision_row = ROW
+    row = decision_row = np.dtype({"names": [*"xyz", "id", "state"], "formats": ["<f4", "<f4", "<f4", "<u4", "<u1"]})
     batch = Batch
 
     @staticmethod
     def rows(ids: np.ndarray, robots: Robots) -> np.ndarray:
-        rows = np.zeros(ids.size, dtype=ROW)
+        rows = np.zeros(ids.size, dtype=Wire.row)
         rows["id"] = ids
         rows["x"], rows["y"], rows["state"] = (a if a.size == ids.size else a[ids] for a in robots)
         return rows

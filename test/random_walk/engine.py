@@ -1,6 +1,5 @@
-"""The random walk's rule, engine and summary: each tick a walking robot on a shape cell next to (4-way) a stopped
-robot stops there; any other steps a cell in a random direction unless the grid's edge, or a robot there or granted
-first (lower ids first), holds it back; the run ends with the shape covered, every robot stopped, or max_ticks."""
+"""The random walk: a walking robot on a shape cell next to (4-way) a stopped robot stops; any other steps a cell in a
+random direction unless the grid's edge, a robot there or a lower id asking for the cell holds it back."""
 
 from __future__ import annotations
 
@@ -15,7 +14,6 @@ from swarm_ros.core.rng import uniform_array
 from swarm_ros.core.strips import StripGrid
 
 NAME, STREAM = "random-walk", 100
-COLUMNS = ("tick", "stopped", "walking", "covered")
 STEPS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])  #: a step's (dx, dy), by its draw
 
 
@@ -29,13 +27,13 @@ class Batch:
     """Decides for the walking robots of strip k (all of them with no strips) from its area's robots alone."""
 
     def __init__(self, run: RandomWalk, strips, k: int) -> None:
-        self.mask, self.seed, self.strips, self.k = run.mask, run.params.seed, strips, k
+        self.mask, self.seed, self.strips, self.k, self.grid = run.mask, run.params.seed, strips, k, run.grid
 
     def decide(self, tick: int, ids: np.ndarray, area: Robots) -> tuple[np.ndarray, Robots]:
         rows, cols = self.mask.shape
         stopped = np.zeros((rows + 2, cols + 2), dtype=bool)  # a border of cells that never hold a robot
         stopped[area.y[area.state == 1] + 1, area.x[area.state == 1] + 1] = True
-        mine = (area.state == 0) & (self.strips is None or self.strips.in_strip(area.x, self.k))
+        mine = (area.state == 0) & (self.strips is None or self.strips.in_strip(self.grid.columns(area.x), self.k))
         x, y = area.x[mine], area.y[mine]
         stop = self.mask[y, x] & np.any([stopped[y + 1 + dy, x + 1 + dx] for dx, dy in STEPS], axis=0)
         step = STEPS[(uniform_array(self.seed, ids[mine], tick, STREAM) * 4).astype(np.int64)]
@@ -47,7 +45,7 @@ class Batch:
 class RandomWalk:
     """The in-process engine, and the central world's :class:`~swarm_ros.core.strips.CentralRun`."""
 
-    columns = COLUMNS
+    columns = ("tick", "stopped", "walking", "covered")
 
     def __init__(self, shape, params) -> None:
         self.shape, self.params, self.mask = shape, params, np.asarray(shape.mask, dtype=bool)
@@ -56,20 +54,11 @@ class RandomWalk:
         others = np.random.default_rng(params.seed).permutation(np.delete(np.arange(rows * cols), first))
         cells = np.concatenate([[first], others[: params.robots - 1]])
         self.robots = Robots(cells % cols, cells // cols, (np.arange(params.robots) == 0).astype(np.int8))
-        self.grid, self.tick, self.outcome = StripGrid(-0.5, 1.0, cols, "cells"), 0, None
-        self._rows = [self._metrics()]
+        self.grid, self.tick, self.outcome = StripGrid(-0.5, 2.0, (cols + 1) // 2, "cells"), 0, None  # 2 cells wide
+        self._rows = [[0, *self.counts(np.arange(params.robots)).tolist()]]
 
-    def _metrics(self) -> list[float]:
-        s, stopped = self.robots, int(self.robots.state.sum())
-        return [self.tick, stopped, s.state.size - stopped, int(np.count_nonzero(self.mask[s.y, s.x] & (s.state == 1)))]
-
-    @property
-    def history(self) -> np.ndarray:
-        return np.array(self._rows, dtype=float)
-
-    @property
-    def done(self) -> bool:
-        return self.outcome is not None
+    history = property(lambda self: np.array(self._rows, dtype=float))  #: a row of ``columns`` a tick
+    done = property(lambda self: self.outcome is not None)
 
     def progress(self) -> tuple[int, int, dict[str, str]]:
         return int(self._rows[-1][3]), int(self.mask.sum()), {"tick": str(self.tick)}
@@ -77,8 +66,14 @@ class RandomWalk:
     def empty_curve(self) -> np.ndarray:
         return np.stack([self.history[:, 0], self.mask.sum() - self.history[:, 3]], axis=1)
 
-    def deciding(self) -> np.ndarray:
-        return np.flatnonzero(self.robots.state == 0)
+    def deciding(self, among: np.ndarray | None = None) -> np.ndarray:
+        ids = np.arange(self.params.robots) if among is None else among
+        return ids[self.robots.state[ids] == 0]
+
+    def counts(self, ids: np.ndarray) -> np.ndarray:
+        s, stopped = self.robots, self.robots.state[ids] == 1
+        covered = np.count_nonzero(stopped & self.mask[s.y[ids], s.x[ids]])
+        return np.array([stopped.sum(), ids.size - stopped.sum(), covered], dtype=np.int64)
 
     def run(self, max_ticks: int | None = None) -> Outcome | None:
         everyone = np.arange(self.params.robots)
@@ -88,23 +83,32 @@ class RandomWalk:
         return self.outcome
 
     def settle(self, decided: list[tuple[np.ndarray, Robots]]) -> Outcome | None:
-        """One tick from every walking robot's decision: stops, then steps by ascending id onto cells still free."""
         ids = np.concatenate([p[0] for p in decided])
         if self.outcome is not None or not np.array_equal(np.sort(ids), self.deciding()):
             raise ContractError(f"tick {self.tick + 1}: not one decision for each walking robot")
         d = Robots(*(np.concatenate([p[1][f] for p in decided]) for f in range(3)))
-        s, taken = self.robots, np.zeros(self.mask.shape, dtype=bool)
-        taken[s.y, s.x] = True
-        for k in np.argsort(ids, kind="stable"):
-            i, tx, ty = ids[k], d.x[k], d.y[k]
-            if d.state[k]:
-                s.state[i] = 1
-            elif not taken[ty, tx]:
-                taken[s.y[i], s.x[i]], taken[ty, tx] = False, True
-                s.x[i], s.y[i] = tx, ty
+        self.settle_shard(ids, d, ids[:0], Robots(*(a[:0] for a in d)), everyone := np.arange(self.params.robots))
+        return self.close_shard(ids[:0], d, self.counts(everyone))
+
+    def settle_shard(self, own, decided: Robots, halo, halo_decided: Robots, present: np.ndarray) -> np.ndarray:
+        """Stops; steps onto cells free at the start, the lowest id first (a grant reads two cells: one column)."""
+        s, ids = self.robots, np.concatenate([own, halo])
+        tx, ty, stop = (np.concatenate(f) for f in zip(decided, halo_decided))
+        taken = np.zeros(self.mask.shape, dtype=bool)
+        taken[s.y[present], s.x[present]] = True
+        asks, cell = np.flatnonzero((stop == 0) & ~taken[ty, tx]), ty * self.mask.shape[1] + tx
+        asks = asks[np.lexsort((ids[asks], cell[asks]))]
+        first, go = np.ones(asks.size, dtype=bool), np.zeros(ids.size, dtype=bool)
+        first[1:] = np.diff(cell[asks]) != 0
+        go[asks[first]] = True
+        k = np.arange(own.size)
+        s.x[own], s.y[own], s.state[own] = np.where(go[k], tx[k], s.x[own]), np.where(go[k], ty[k], s.y[own]), stop[k]
+        return own[:0]  # nothing every shard shares but the counts
+
+    def close_shard(self, _joined: np.ndarray, _rows: Robots, counts: np.ndarray) -> Outcome | None:
         self.tick += 1
-        self._rows.append(self._metrics())
-        _, stopped, walking, covered = self._rows[-1]
+        self._rows.append([self.tick, *counts.tolist()])
+        stopped, walking, covered = counts.tolist()
         if covered == self.mask.sum():
             self.outcome = Outcome.COMPLETE if walking == 0 else Outcome.COMPLETE_WITH_EXTRAS
         elif walking == 0 or self.tick >= self.params.max_ticks:
@@ -119,10 +123,8 @@ class RandomWalk:
     def saved(self) -> dict[str, np.ndarray]:
         return {**self.robots._asdict(), "history": self.history}
 
-    def restore(self, tick: int, arrays: dict[str, np.ndarray]) -> None:
-        if arrays["x"].shape != self.robots.x.shape or len(arrays["history"]) != tick + 1:
-            raise ContractError("another run's arrays")
-        self.load(tick, Robots(*(arrays[f] for f in Robots._fields)), arrays["history"])
+    def restore(self, tick: int, arrays: dict[str, np.ndarray]) -> None:  # another run's: ValueError, in load
+        self.load(tick, Robots(*(arrays[f] for f in Robots._fields)), arrays["history"][: tick + 1])
 
 
 def summary_of(run: RandomWalk, wall_seconds: float, stopped: Outcome | None = None) -> dict:

@@ -30,6 +30,8 @@ from swarm_ros.core.strips import StripGrid
 from .layout import SEED_G, SEEDS, ShapeFrame, start_positions
 from .rule import (
     JOINED,
+    MOVE_INSIDE,
+    MOVE_OUTSIDE,
     NEVER,
     START,
     UNKNOWN_G,
@@ -42,7 +44,16 @@ from .rule import (
     cover,
     decided_for,
 )
-from .ticks import Tally, join_robot, metrics_row, not_joined, run_kernel, settle_tick
+from .ticks import (
+    Tally,
+    end_code,
+    join_robot,
+    metrics_row,
+    not_joined,
+    run_kernel,
+    settle_shard_kernel,
+    settle_tick,
+)
 
 #: metrics.csv's columns for this algorithm, one row per tick (tick 0 first)
 COLUMNS = ("tick", "joined", "moving", "waiting", "covered", "joined_outside", "loc_error")
@@ -269,9 +280,59 @@ class RubensteinRun:
             raise ContractError(f"{history.shape[0]} metrics rows for tick {tick}")
         self.tick, self.outcome, self._rows = tick, None, [history.copy()]
 
-    def deciding(self) -> np.ndarray:
-        """The robots that decide the next tick: every one not joined, ascending."""
-        return _deciding(self.robots.state)
+    def deciding(self, among: np.ndarray | None = None) -> np.ndarray:
+        """The robots that decide the next tick: every one not joined, ascending (of ``among``, ascending, if
+        given)."""
+        if among is None:
+            return _deciding(self.robots.state)
+        return among[self.robots.state[among] != JOINED]
+
+    def counts(self, ids: np.ndarray) -> np.ndarray:
+        """Robots ``ids``' share of the tick's counts: joined, moving, waiting (a world shard's, summed over the
+        shards: :meth:`close_shard`)."""
+        state = self.robots.state[ids]
+        moving = np.count_nonzero((state == MOVE_OUTSIDE) | (state == MOVE_INSIDE))
+        joined = np.count_nonzero(state == JOINED)
+        return np.array([joined, moving, ids.size - joined - moving], dtype=np.int64)
+
+    def settle_shard(
+        self, own: np.ndarray, decided: Decided, halo: np.ndarray, halo_decided: Decided, present: np.ndarray
+    ) -> np.ndarray:
+        """A world shard's half of the next tick (:mod:`swarm_ros.core.central_shards`): ``own`` its deciding
+        robots and ``halo`` its halo's (the peers' batches decided them), each ascending, with their decisions;
+        ``present``: every robot it holds, where it stands. Settles its own robots' moves against every robot
+        present, as :meth:`settle` does, and applies them. Returns the ids of its robots that joined: their rows
+        change what every shard shares (the pixels covered, the running counts: :meth:`close_shard`)."""
+        deciding = np.concatenate([own, halo])
+        for out, mine, theirs in zip(self._out, decided, halo_decided):
+            out[: deciding.size] = np.concatenate([mine, theirs])
+        settle_shard_kernel(
+            present, deciding, own.size, self.robots, self.rule, self.cells, self._out, self._granted, self._slot,
+            self.tick + 1,
+        )  # fmt: skip
+        return own[self.robots.state[own] == JOINED]
+
+    def close_shard(self, joined: np.ndarray, rows: Robots, counts: np.ndarray) -> Outcome | None:
+        """Close the next tick on a world shard, as every shard does alike: the robots ``joined`` (ascending, their
+        ``rows`` as they joined) cover their pixels and enter the running counts in id order, as :meth:`settle`
+        takes them, and the tick's metrics are those ``counts`` (joined, moving, waiting, summed over the shards)
+        and the shared state give. Returns the outcome, None while the run goes on."""
+        tick, (seeds, stall, max_ticks) = self.tick + 1, self._end
+        s = self.robots
+        for k, i in enumerate(joined.tolist()):
+            s.x[i], s.y[i], s.ex[i], s.ey[i] = rows.x[k], rows.y[k], rows.ex[k], rows.ey[k]
+            join_robot(i, s, self.bitmap, self.covered, self._tally, seeds, tick)
+        others, covered = int(counts[0]) - seeds, int(self.covered.sum())
+        error = self._tally.error[0] / others if others > 0 else 0.0
+        row = np.array([[tick, *counts.tolist(), covered, self._tally.outside[0], error]], dtype=float)
+        self.tick += 1
+        self._rows.append(row)
+        code = end_code(
+            tick, int(counts[0]), s.state.size, covered, int(self.bitmap.mask.sum()), self._tally.last_join[0],
+            self.rule.startup, stall, max_ticks,
+        )  # fmt: skip
+        self.outcome = OUTCOME_OF_CODE[code]
+        return self.outcome
 
     def settle(self, decided: list[tuple[np.ndarray, Decided]]) -> Outcome | None:
         """Advance one tick with decisions made elsewhere (robot batches, :mod:`swarm_ros.core.strips`): ``decided``

@@ -17,6 +17,7 @@ from swarm_ros.core.rubenstein.rule import (
     MOVE_OUTSIDE,
     apply_kernel,
     build_cells,
+    clear_cells,
     cover,
     decide_kernel,
     inside,
@@ -95,6 +96,23 @@ def settle_tick(mine, s, rule, bm, cells, out, granted, slot, covered, tally, ro
             join_robot(mine[k], s, bm, covered, tally, seeds, tick)
     joined = metrics_row(tick, s, covered, tally, seeds, row)
     return end_code(tick, joined, n, covered.sum(), bm.mask.sum(), tally.last_join[0], rule.startup, stall, max_ticks)
+
+
+@numba.njit(cache=True)
+def settle_shard_kernel(present, deciding, own, s, rule, cells, out, granted, slot, tick):
+    """A world shard's half of ``tick`` (:mod:`swarm_ros.core.central_shards`): ``deciding`` holds its own deciding
+    robots (the first ``own``) and then its halo's, their decisions in ``out``; ``present`` every robot it holds
+    (ascending), where it stood. Settle every deciding robot's move against the robots present, as
+    :func:`settle_tick` does (a grant reads the robots within one cell, each in the shard's own columns or its
+    halo), and apply its own robots' decisions."""
+    for k in range(deciding.size):
+        slot[deciding[k]] = k
+    build_cells(present, s.x, s.y, cells)
+    resolve_kernel(deciding, out, s, rule.seed, cells, tick, slot, granted)
+    clear_cells(present, s.x, s.y, cells)
+    for k in range(deciding.size):
+        slot[deciding[k]] = -1
+    apply_kernel(deciding[:own], out, granted, s)
 
 
 @numba.njit(cache=True)
