@@ -95,18 +95,49 @@ def test_k_batches_fed_the_worlds_messages_decide_as_the_in_process_engine(batch
     assert np.array_equal(plain.history, whole.history)
 
 
-@pytest.mark.parametrize("shards, batches", [(2, 2), (3, 3)])
-def test_world_shards_give_the_in_process_run(shards, batches, shape):
+@pytest.mark.parametrize("shards, batches, seed", [(2, 2, 0), (3, 3, 1), (3, 4, 2)])
+def test_world_shards_give_the_in_process_run(shards, batches, seed, shape):
     """The shared world-shard split (swarm_ros.core.central_shards) serves it as it is: each shard holds its columns
-    and a halo, and every shard's metrics, and each robot's row at its owner, are the one world's."""
+    and a halo, its messages delivered in a shuffled order, and every shard's metrics, and each robot's row at its
+    owner, are the one world's."""
     from swarm_ros.core.central_shards import run_sharded
 
     whole = random_walk.RandomWalk(shape, params())
     whole.run()
-    world = run_sharded(lambda: random_walk.RandomWalk(shape, params()), random_walk.Batch, shards, batches)
+    make = lambda: random_walk.RandomWalk(shape, params())
+    world = run_sharded(make, random_walk.Batch, shards, batches, seed=seed)
     assert all(np.array_equal(w.run.history, whole.history) for w in world) and whole.history[-1, 1] > 10
     assert all(np.array_equal(a[w.own], b[w.own]) for w in world for a, b in zip(w.run.robots, whole.robots))
     assert np.array_equal(np.sort(np.concatenate([w.own for w in world])), np.arange(40))
+
+
+def test_a_shard_keeps_what_comes_early_ignores_repeats_and_refuses_the_rest(shape):
+    from swarm_ros.core.central_shards import CentralExchange, CentralShard
+
+    run = random_walk.RandomWalk(shape, params())
+    strips = strips_for(run, 3)
+    sent = []
+
+    class Port:
+        def __getattr__(self, name):
+            return lambda *args: sent.append((name, args[0]))
+
+    middle = CentralExchange(CentralShard(run, strips, 1, 3), Port())
+    assert middle.neighbours == [0, 2] and middle.tick == 1
+    no_rows = random_walk.Robots(*(np.empty(0, dtype=np.int64),) * 3)
+    middle.border(0, 2, np.empty(0, dtype=np.int64), no_rows)  # the next tick's, early: kept
+    middle.border(0, 0, np.empty(0, dtype=np.int64), no_rows)  # a closed tick's: a repeat
+    assert list(middle.inbox) == [("border", 2)]
+    with pytest.raises(Rejected, match="stale tick"):
+        middle.border(2, 3, np.empty(0, dtype=np.int64), no_rows)
+    with pytest.raises(Rejected, match="not its peer"):
+        middle.border(5, 1, np.empty(0, dtype=np.int64), no_rows)
+    own = run.deciding(middle.shard.own)
+    area = random_walk.Robots(*(a[own] for a in run.robots))
+    middle.decided(1, *random_walk.Batch(run, None, 0).decide(1, own, area))
+    assert sorted(sent) == [("send_border", 0), ("send_border", 2)] and not run.tick  # waits for its neighbours
+    with pytest.raises(Rejected, match="stale tick"):
+        middle.decided(1, own, no_rows)
 
 
 def test_the_world_rejects_hostile_rows_and_decisions_by_kind(shape):

@@ -17,17 +17,20 @@ only the robots it holds (``present``) are read. A tick, for shard s:
    into the other's columns are handed over, and the other's halo is what its neighbours' robots are now.
 
 A robot moves less than a column a tick, and a decision or a grant reads the robots within one column, so each shard
-decides, settles and closes as the one world does. :func:`run_sharded` runs S shards end to end in one process,
-passing between them only those messages, for tests.
+decides, settles and closes as the one world does. :class:`CentralExchange` is a shard's side of those messages,
+whatever order they come in; :func:`run_sharded` runs S shards end to end in one process over it, delivering the
+messages in a shuffled order, for tests.
 """
 
 from __future__ import annotations
 
+import random
 from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
 
+from .errors import ContractError, Rejected
 from .regions import shard_batches
 from .strips import CentralRun, Strips
 
@@ -61,15 +64,22 @@ def _concat(parts: list[tuple[np.ndarray, Any]]) -> tuple[np.ndarray, Any]:
     return ids[order], rows
 
 
+def ranges(strips: Strips, shards: int) -> list[tuple[int, int]]:
+    """Each shard's own columns (first, last): the strips of its batches
+    (:func:`~swarm_ros.core.regions.shard_batches`)."""
+    spans = [shard_batches(s, shards, strips.batches) for s in range(shards)]
+    return [(int(strips.cuts[b[0]]), int(strips.cuts[b[-1] + 1]) - 1) for b in spans]
+
+
 class CentralShard:
-    """World shard ``shard`` of ``shards``: the strips of its batches (:func:`~swarm_ros.core.regions.shard_batches`)
-    and one column either side. ``run``: its engine, at tick 0 (every robot's rows then true)."""
+    """World shard ``shard`` of ``shards``: the strips of its batches and one column either side. ``run``: its
+    engine, at tick 0 (every robot's rows then true)."""
 
     def __init__(self, run: ShardedRun, strips: Strips, shard: int, shards: int) -> None:
-        self.run, self.strips = run, strips
+        self.run, self.strips, self.index = run, strips, shard
         self.batches = shard_batches(shard, shards, strips.batches)
-        self.first = int(strips.cuts[self.batches[0]])
-        self.last = int(strips.cuts[self.batches[-1] + 1]) - 1
+        self.ranges = ranges(strips, shards)
+        self.first, self.last = self.ranges[shard]
         self.present = self._within(np.arange(run.params.robots), self.first - 1, self.last + 1)
 
     def _within(self, ids: np.ndarray, first: int, last: int) -> np.ndarray:
@@ -86,25 +96,151 @@ class CentralShard:
         first, last = self.strips.area(k)
         return self._within(self.present, first, last)
 
-    def border(self, other: CentralShard, ids: np.ndarray) -> np.ndarray:
-        """Which of robots ``ids`` (its own) lie in ``other``'s halo."""
-        columns = self.run.grid.columns(self.run.robots.x[ids])
-        return (columns == other.first - 1) | (columns == other.last + 1)
+    def neighbours(self) -> list[int]:
+        """The shards whose own columns or halo touch its own: those it sends border decisions and rows to."""
+        return [
+            o for o, (a, b) in enumerate(self.ranges) if o != self.index and a - 1 <= self.last and b + 1 >= self.first
+        ]
 
-    def reach(self, other: CentralShard, ids: np.ndarray) -> np.ndarray:
-        """Which of robots ``ids`` (its own) lie in ``other``'s own columns or halo."""
+    def border(self, peer: int, ids: np.ndarray) -> np.ndarray:
+        """Which of robots ``ids`` (its own) lie in shard ``peer``'s halo."""
+        first, last = self.ranges[peer]
         columns = self.run.grid.columns(self.run.robots.x[ids])
-        return (columns >= other.first - 1) & (columns <= other.last + 1)
+        return (columns == first - 1) | (columns == last + 1)
+
+    def reach(self, peer: int, ids: np.ndarray) -> np.ndarray:
+        """Which of robots ``ids`` (its own) lie in shard ``peer``'s own columns or halo."""
+        first, last = self.ranges[peer]
+        columns = self.run.grid.columns(self.run.robots.x[ids])
+        return (columns >= first - 1) & (columns <= last + 1)
 
     def receive(self, mine: np.ndarray, rows: list[tuple[np.ndarray, Any]]) -> None:
         """After a tick: it holds its robots ``mine`` still within reach, and the peers' robots ``rows`` (ids,
         every array's rows) they sent it (:meth:`reach`)."""
         kept = self._within(mine, self.first - 1, self.last + 1)
-        parts = [(kept, _take(self.run.robots, kept)), *rows]
-        ids, got = _concat(parts)
+        ids, got = _concat([(kept, _take(self.run.robots, kept)), *rows])
         for a, b in zip(self.run.robots, got):
             a[ids] = b
         self.present = ids
+
+
+class ShardPort(Protocol):
+    """What a :class:`CentralExchange` sends, and to whom (peers by shard index)."""
+
+    def send_border(self, peer: int, tick: int, ids: np.ndarray, decided: Any) -> None: ...
+
+    def send_shared(self, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray) -> None: ...  # to every peer
+
+    def send_rows(self, peer: int, tick: int, ids: np.ndarray, rows: Any) -> None: ...
+
+    def closed(self, tick: int) -> None: ...  # the tick is closed on this shard: its next areas may go out
+
+
+DECIDING, BORDER, SHARED, ROWS = range(4)  #: what a shard waits for in a tick: its batches, then its peers'
+
+
+class CentralExchange:
+    """A world shard's side of each tick's exchanges (the module's steps 2 to 5), messages in any order: what comes
+    for the tick being settled or the next is kept until it is due, a repeat of a closed tick is ignored, anything
+    else is refused (:class:`~swarm_ros.core.errors.Rejected`, by kind). It answers through a :class:`ShardPort`."""
+
+    def __init__(self, shard: CentralShard, port: ShardPort) -> None:
+        self.shard, self.port = shard, port
+        self.neighbours = shard.neighbours()
+        self.peers = [o for o in range(len(shard.ranges)) if o != shard.index]
+        self.tick, self.phase = shard.run.tick + 1, DECIDING  # the tick being settled, and what it waits for
+        self.inbox: dict[tuple[str, int], dict[int, tuple]] = {}
+        self.mine = self.own = self.decided_ = None  # type: Any
+
+    def decided(self, tick: int, ids: np.ndarray, decided: Any) -> None:
+        """Its batches' decisions for ``tick`` (every deciding robot of its own, ascending): on to its peers."""
+        if tick != self.tick or self.phase != DECIDING:
+            raise Rejected("stale tick", f"decisions for tick {tick}; the shard is at tick {self.tick}")
+        self.mine, self.own, self.decided_ = self.shard.own, ids, decided
+        for peer in self.neighbours:
+            keep = self.shard.border(peer, ids)
+            self.port.send_border(peer, tick, ids[keep], _take(decided, keep))
+        self.phase = BORDER
+        self._advance()
+
+    def border(self, peer: int, tick: int, ids: np.ndarray, decided: Any) -> None:
+        self._keep("border", peer, tick, (ids, decided), self.neighbours)
+
+    def shared(self, peer: int, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray) -> None:
+        self._keep("shared", peer, tick, (ids, rows, counts), self.peers)
+
+    def rows(self, peer: int, tick: int, ids: np.ndarray, rows: Any) -> None:
+        self._keep("rows", peer, tick, (ids, rows), self.neighbours)
+
+    def _keep(self, kind: str, peer: int, tick: int, message: tuple, senders: list[int]) -> None:
+        if peer not in senders:
+            raise Rejected("not its peer", f"{kind} from shard {peer}, which sends this shard none")
+        if tick < self.tick:
+            return  # a repeat of a closed tick
+        if tick > self.tick + 1:
+            raise Rejected("stale tick", f"{kind} of tick {tick}; the shard is at tick {self.tick}")
+        self.inbox.setdefault((kind, tick), {}).setdefault(peer, message)
+        self._advance()
+
+    def _all(self, kind: str, senders: list[int]) -> dict[int, tuple] | None:
+        got = self.inbox.get((kind, self.tick), {})
+        return got if all(p in got for p in senders) else None
+
+    def _advance(self) -> None:
+        shard, run = self.shard, self.shard.run
+        if self.phase == BORDER and (borders := self._all("border", self.neighbours)) is not None:
+            empty = (self.own[:0], _take(self.decided_, slice(0, 0)))
+            halo, halo_decided = _concat([empty, *borders.values()])
+            ids = run.settle_shard(self.own, self.decided_, halo, halo_decided, shard.present)
+            rows, counts = _take(run.robots, ids), run.counts(self.mine)
+            self.inbox.setdefault(("shared", self.tick), {})[shard.index] = (ids, rows, counts)
+            self.port.send_shared(self.tick, ids, rows, counts)
+            self.phase = SHARED
+        if self.phase == SHARED and (shared := self._all("shared", [*self.peers, shard.index])) is not None:
+            ids, rows = _concat([(i, r) for i, r, _ in shared.values()])
+            run.close_shard(ids, rows, np.sum([c for _, _, c in shared.values()], axis=0))
+            for peer in self.neighbours:
+                keep = shard.reach(peer, self.mine)
+                self.port.send_rows(peer, self.tick, self.mine[keep], _take(run.robots, self.mine[keep]))
+            self.phase = ROWS
+        if self.phase == ROWS and (rows_in := self._all("rows", self.neighbours)) is not None:
+            shard.receive(self.mine, list(rows_in.values()))
+            for kind in ("border", "shared", "rows"):
+                self.inbox.pop((kind, self.tick), None)
+            self.tick, self.phase = self.tick + 1, DECIDING
+            self.port.closed(self.tick - 1)
+
+
+class _Mail:
+    """An in-process transport: every message into one bag, delivered in a shuffled order."""
+
+    def __init__(self, seed: int) -> None:
+        self.bag: list[Callable[[], None]] = []
+        self.rng = random.Random(seed)
+        self.exchanges: list[CentralExchange] = []
+        self.closed: list[int] = []
+
+    def port(self, s: int) -> ShardPort:
+        mail, others = self, lambda: [o for o in range(len(self.exchanges)) if o != s]
+
+        class Port:
+            def send_border(self, peer, tick, ids, decided):
+                mail.bag.append(lambda: mail.exchanges[peer].border(s, tick, ids, decided))
+
+            def send_shared(self, tick, ids, rows, counts):
+                mail.bag += [lambda o=o: mail.exchanges[o].shared(s, tick, ids, rows, counts) for o in others()]
+
+            def send_rows(self, peer, tick, ids, rows):
+                mail.bag.append(lambda: mail.exchanges[peer].rows(s, tick, ids, rows))
+
+            def closed(self, tick):
+                mail.closed.append(s)
+
+        return Port()
+
+    def deliver(self) -> None:
+        while self.bag:
+            self.bag.pop(self.rng.randrange(len(self.bag)))()
 
 
 def run_sharded(
@@ -114,39 +250,29 @@ def run_sharded(
     batches: int,
     max_ticks: int | None = None,
     region_cuts: str = "",
+    seed: int = 0,
 ) -> list[CentralShard]:
     """Run a central world as ``shards`` world shards of ``batches`` batches (``batch(run, strips, k)`` gives batch
     k, as the algorithm's wire does), from ``make_run()`` (a fresh engine, one per shard), to its end or
-    ``max_ticks`` ticks, passing between shards only their messages. Returns the shards: each one's engine has the
-    run's metrics and outcome, and the rows of its own robots."""
+    ``max_ticks`` ticks: each shard a :class:`CentralExchange`, their messages delivered in an order shuffled by
+    ``seed``. Returns the shards: each one's engine has the run's metrics and outcome, and the rows of its own
+    robots."""
     from .strips import strips_for
 
     runs = [make_run() for _ in range(shards)]
     strips = strips_for(runs[0], batches, region_cuts)
     world = [CentralShard(runs[s], strips, s, shards) for s in range(shards)]
     hosts = {k: batch(w.run, strips, k) for w in world for k in w.batches}
+    mail = _Mail(seed)
+    mail.exchanges = [CentralExchange(w, mail.port(s)) for s, w in enumerate(world)]
     left = max_ticks
     while world[0].run.outcome is None and (left is None or left > 0):
-        tick = world[0].run.tick + 1
-        decided = []
-        for w in world:  # 1. the batches decide; what each shard's own deciding robots decided
+        tick, mail.closed = world[0].run.tick + 1, []
+        for w, exchange in zip(world, mail.exchanges):  # the batches decide, from their areas alone
             parts = [hosts[k].decide(tick, ids, _take(w.run.robots, ids)) for k in w.batches for ids in [w.area(k)]]
-            decided.append(_concat(parts))
-        border = [[(ids[keep], _take(d, keep)) for o, (ids, d) in enumerate(decided) if o != s
-                   for keep in [world[o].border(w, ids)]] for s, w in enumerate(world)]  # fmt: skip
-        mine = [w.own for w in world]  # 2. the border's decisions, and who owns which robot, before any moves
-        joined, counts = [], []
-        for s, w in enumerate(world):  # 3. settle and apply its own
-            halo, halo_decided = _concat([(decided[s][0][:0], _take(decided[s][1], slice(0, 0))), *border[s]])
-            ids = w.run.settle_shard(decided[s][0], decided[s][1], halo, halo_decided, w.present)
-            joined.append((ids, _take(w.run.robots, ids)))
-            counts.append(w.run.counts(mine[s]))
-        shared, total = _concat(joined), np.sum(counts, axis=0)
-        for w in world:  # 4. the shared rows and the counts in: the tick closes alike on every shard
-            w.run.close_shard(*shared, total)
-        sent = [[(ids[keep], _take(w.run.robots, ids[keep])) for ids in [mine[s]] for keep in [w.reach(o, ids)]]
-                for s, w in enumerate(world) for o in world]  # fmt: skip
-        for s, w in enumerate(world):  # 5. handovers and halos
-            w.receive(mine[s], [sent[o * shards + s][0] for o in range(shards) if o != s])
+            exchange.decided(tick, *_concat(parts))
+        mail.deliver()
+        if sorted(mail.closed) != list(range(shards)):
+            raise ContractError(f"tick {tick}: shards {mail.closed} closed it, not every shard")
         left = None if left is None else left - 1
     return world
