@@ -55,14 +55,20 @@ class CentralRecorder:
         """Log the last robots, the metrics of every tick and the outcome, and end the recording."""
         if run.tick != self._last:
             self.robots(run)
-        history = run.history
-        ticks = [rr.TimeColumn(TIMELINE, sequence=history[:, 0].astype(np.int64))]
-        for k, name in enumerate(run.columns[1:], start=1):
-            self.rec.send_columns(f"{METRICS}/{name}", indexes=ticks, columns=rr.Scalars.columns(scalars=history[:, k]))
-        self.rec.set_time(TIMELINE, sequence=run.tick)
-        self.rec.log(EVENTS, rr.TextLog(f"outcome: {outcome}", level="INFO"))
-        self.rec.flush()
-        self.rec.disconnect()
+        end_recording(self.rec, run, outcome)
+
+
+def end_recording(rec: rr.RecordingStream, run: Any, outcome: str) -> None:
+    """Send a run's metrics of every tick (``metrics/<column>`` of its ``columns``) and its outcome (``events``), and
+    end the recording ``rec``."""
+    history = run.history
+    ticks = [rr.TimeColumn(TIMELINE, sequence=history[:, 0].astype(np.int64))]
+    for k, name in enumerate(run.columns[1:], start=1):
+        rec.send_columns(f"{METRICS}/{name}", indexes=ticks, columns=rr.Scalars.columns(scalars=history[:, k]))
+    rec.set_time(TIMELINE, sequence=run.tick)
+    rec.log(EVENTS, rr.TextLog(f"outcome: {outcome}", level="INFO"))
+    rec.flush()
+    rec.disconnect()
 
 
 def open_recording(path: Path, run: Any, options: RecordingOptions) -> CentralRecorder | None:

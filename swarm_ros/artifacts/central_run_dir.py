@@ -21,7 +21,7 @@ from swarm_ros.artifacts.run_dir import BAG_DIR, RECORDING_FILE, summary_json, w
 def write_central_run(
     out: Path,
     summary: dict,
-    files: dict[str, Callable[[Path], None]],
+    files: dict[str, Callable[[Path], object]],
     overwrite: bool = False,
     recording: Path | None = None,
     bag: Path | None = None,
@@ -83,12 +83,14 @@ def write_simulation(
     recording: Path | None = None,
     every: int | None = None,
     bag: Path | None = None,
+    files: dict[str, Callable[[Path], object]] | None = None,
 ) -> Path:
-    """A ``write_run`` for an algorithm with no files of its own: summary.json (saying how often ``recording`` holds
-    the robots: ``every``, null without a recording), metrics.csv and final_state.csv."""
+    """A ``write_run`` (core.algorithm) of a central world's run: summary.json (saying how often ``recording`` holds
+    the robots: ``every``, null without a recording) and ``files`` (with none, metrics.csv and final_state.csv)."""
     summary = {**summary, "recording_robots_every": every if recording is not None else None}
-    files = {
-        "metrics.csv": lambda path: path.write_text(metrics_csv(run), encoding="utf-8"),
-        "final_state.csv": lambda path: path.write_text(robots_csv(run), encoding="utf-8"),
-    }
+    if files is None:
+        files = {
+            "metrics.csv": lambda path: path.write_text(metrics_csv(run), encoding="utf-8"),
+            "final_state.csv": lambda path: path.write_text(robots_csv(run), encoding="utf-8"),
+        }
     return write_central_run(out, summary, files, overwrite=overwrite, recording=recording, bag=bag)

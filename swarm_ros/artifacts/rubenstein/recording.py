@@ -21,10 +21,11 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from swarm_ros.artifacts.central_recording import end_recording
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.rerun_recording import TIMELINE, open_stream
 from swarm_ros.core.rubenstein.rule import UNKNOWN_G
-from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
+from swarm_ros.core.rubenstein.run import RubensteinRun
 
 BATCH = 64
 #: start, wait_to_move, move_while_outside, move_while_inside, joined_shape
@@ -127,14 +128,7 @@ class RubensteinRecorder:
         if run.tick != self._last:
             self.robots(run)
         self._send()
-        history = run.history
-        ticks = [rr.TimeColumn(TIMELINE, sequence=history[:, 0].astype(np.int64))]
-        for k, name in enumerate(COLUMNS[1:], start=1):
-            self.rec.send_columns(f"{METRICS}/{name}", indexes=ticks, columns=rr.Scalars.columns(scalars=history[:, k]))
-        self.rec.set_time(TIMELINE, sequence=run.tick)
-        self.rec.log(EVENTS, rr.TextLog(f"outcome: {outcome}", level="INFO"))
-        self.rec.flush()
-        self.rec.disconnect()
+        end_recording(self.rec, run, outcome)
 
 
 def open_recording(path: Path, run: RubensteinRun, options: RecordingOptions) -> RubensteinRecorder | None:

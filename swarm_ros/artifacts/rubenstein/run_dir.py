@@ -7,7 +7,7 @@ import csv
 import io
 from pathlib import Path
 
-from swarm_ros.artifacts.central_run_dir import write_central_run
+from swarm_ros.artifacts.central_run_dir import write_simulation as write_central
 from swarm_ros.core.rubenstein.rule import STATE_NAMES
 from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
 
@@ -78,28 +78,6 @@ def save_final_png(run: RubensteinRun, path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
-def write_rubenstein_run(
-    out: Path,
-    run: RubensteinRun,
-    summary: dict,
-    overwrite: bool = False,
-    recording: Path | None = None,
-    bag: Path | None = None,
-) -> Path:
-    """Write the run's files into ``out``, atomically, with its ``recording`` and ``bag``
-    (:func:`~swarm_ros.artifacts.central_run_dir.write_central_run`). Returns ``out``.
-
-    Raises:
-        OutputError: the directory cannot be written.
-    """
-    files = {
-        "metrics.csv": lambda path: path.write_text(metrics_csv(run), encoding="utf-8"),
-        "final_state.csv": lambda path: path.write_text(final_state_csv(run), encoding="utf-8"),
-        "final.png": lambda path: save_final_png(run, path),
-    }
-    return write_central_run(out, summary, files, overwrite=overwrite, recording=recording, bag=bag)
-
-
 def write_simulation(
     out: Path,
     run: RubensteinRun,
@@ -109,7 +87,12 @@ def write_simulation(
     every: int | None = None,
     bag: Path | None = None,
 ) -> Path:
-    """:func:`write_rubenstein_run` (core.algorithm's part ``write_run``): summary.json says how often ``recording``
-    holds the robots (``every``; null without a recording)."""
-    summary = {**summary, "recording_robots_every": every if recording is not None else None}
-    return write_rubenstein_run(out, run, summary, overwrite=overwrite, recording=recording, bag=bag)
+    """A rubenstein run's directory (core.algorithm's part ``write_run``): a central world's
+    (:func:`~swarm_ros.artifacts.central_run_dir.write_simulation`), with its metrics.csv, final_state.csv and
+    final.png."""
+    files = {
+        "metrics.csv": lambda path: path.write_text(metrics_csv(run), encoding="utf-8"),
+        "final_state.csv": lambda path: path.write_text(final_state_csv(run), encoding="utf-8"),
+        "final.png": lambda path: save_final_png(run, path),
+    }
+    return write_central(out, run, summary, overwrite, recording, every, bag, files)
