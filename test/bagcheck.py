@@ -187,9 +187,10 @@ def assert_bag_holds_run(run: Path) -> None:
 
 def assert_rubenstein_bag_holds_run(run: Path, interrupted: bool = False) -> None:
     """A rubenstein run's bag: the metrics rows of every tick (a tick's again after a world's restart, the same)
-    equal metrics.csv; every robot's row every ``bag_robots_every``-th tick and at the last, and the last rebuilds
-    final_state.csv; the status ends with the outcome. ``interrupted``: the run was written up to its last record,
-    and the bag also holds the metrics of the ticks the monitor took after it; no outcome went out."""
+    equal metrics.csv; every robot's row every ``bag_robots_every``-th tick and at the last, each robot once in a
+    record (from one message or, with world shards, one a shard), and the last rebuilds final_state.csv; the status
+    ends with the outcome. ``interrupted``: the run was written up to its last record, and the bag also holds the
+    metrics of the ticks the monitor took after it; no outcome went out."""
     from swarm_ros.core.rubenstein.rule import STATE_NAMES
     from swarm_ros.core.rubenstein.run import COLUMNS
     from swarm_ros.protocol.central_rows import metrics_row
@@ -208,10 +209,13 @@ def assert_rubenstein_bag_holds_run(run: Path, interrupted: bool = False) -> Non
     assert np.array_equal(got, got[first][got[:, 0].astype(int)]), "a tick's rows sent again differ"
     assert np.array_equal(got[first][: len(table)] if interrupted else got[first], table)
     last = int(table[-1, 0])
-    robots = messages["/swarm/rubenstein/robots"]
-    ticks = [m.header.stamp.sec for m in robots]
-    assert ticks == sorted({*range(0, last + 1, summary["bag_robots_every"]), last})
-    final = np.frombuffer(robots[-1].data, dtype=RUBENSTEIN_ROW)
+    records: dict[int, list[np.ndarray]] = {}  # tick -> its messages' rows (S world shards: one message each)
+    for m in messages["/swarm/rubenstein/robots"]:
+        records.setdefault(m.header.stamp.sec, []).append(np.frombuffer(m.data, dtype=RUBENSTEIN_ROW))
+    assert list(records) == sorted({*range(0, last + 1, summary["bag_robots_every"]), last})
+    wholes = [np.concatenate(parts) for parts in records.values()]
+    assert all(np.array_equal(np.sort(w["id"]), np.arange(summary["robots"])) for w in wholes), "a robot not once"
+    final = wholes[-1][np.argsort(wholes[-1]["id"])]
     with open(run / "final_state.csv", newline="") as f:
         state = list(csv.DictReader(f))
     assert [float(r["x"]) for r in state] == final["x"].tolist()

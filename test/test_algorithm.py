@@ -80,33 +80,37 @@ def test_an_unknown_algorithm_or_a_second_of_a_name_is_refused_in_one_line():
     assert names()[0] == DARR_NIAZI  # the default first
 
 
-def test_what_a_graph_cannot_do_is_refused_with_the_algorithms_reason_and_allowed_elsewhere():
+def test_what_a_graph_cannot_do_is_refused_with_the_algorithms_reason_and_allowed_elsewhere(monkeypatch):
     for check, given in ((check_world_shards, True), (check_loss_policy, "remove")):
         check(DARR_NIAZI, given, "--flag")  # the study's model's graph does both
-        check(RUBENSTEIN, False if check is check_world_shards else "restart", "--flag")  # nothing asked: no refusal
+    check_world_shards(RUBENSTEIN, True, "--world-shards")  # a central world's graph has world shards
+    check_loss_policy(RUBENSTEIN, "restart", "--flag")  # nothing asked: no refusal
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    registry.register(replace(algorithm_of(RUBENSTEIN), name="one-world", no_world_shards="it settles in one place"))
     with pytest.raises(
-        ParameterError, match=r"^--world-shards is not for the rubenstein algorithm's graph \(its world"
+        ParameterError, match=r"^--world-shards is not for the one-world algorithm's graph \(it settles"
     ):
-        check_world_shards(RUBENSTEIN, True, "--world-shards")
+        check_world_shards("one-world", True, "--world-shards")
     with pytest.raises(ParameterError, match=r"^x: remove is not for the rubenstein .* has no robot failure\)$"):
         check_loss_policy(RUBENSTEIN, "remove", "x:")
     assert algorithm_of(DARR_NIAZI).removes_lost_robots and not algorithm_of(RUBENSTEIN).removes_lost_robots
 
 
-def test_each_role_runs_its_algorithms_node_and_a_role_its_graph_has_not_is_refused():
-    """One set of executables: the world role is each algorithm's own world node, the robot batch one node over
-    each algorithm's batch host; the rubenstein graph has no world shard, and an engine of one algorithm refuses
-    another's run."""
+def test_each_role_runs_its_algorithms_node_and_a_role_its_graph_has_not_is_refused(monkeypatch):
+    """One set of executables: the world role is each algorithm's own world node (a world shard, the world with
+    peers), the robot batch one node over each algorithm's batch host; a role an entry names no node for is refused,
+    and an engine of one algorithm refuses another's run."""
     assert node_of(RUBENSTEIN, "world").__name__ == "CentralWorldNode"
+    assert node_of(RUBENSTEIN, "world") is node_of(RUBENSTEIN, "world_shard")
     assert node_of(DARR_NIAZI, "world") is node_of(DARR_NIAZI, "world_shard")  # a shard is the world, with peers
     assert len({node_of(a, r) for a in (DARR_NIAZI, RUBENSTEIN) for r in ("world", "monitor")}) == 4
     assert node_of(DARR_NIAZI, "robot_batch") is node_of(RUBENSTEIN, "robot_batch")
     hosts = {algorithm_of(a).hook("batch_host").__name__ for a in (DARR_NIAZI, RUBENSTEIN)}
     assert hosts == {"StudyBatch", "CentralBatch"}
-    with pytest.raises(
-        ParameterError, match="^the world_shard node is not a node of the rubenstein algorithm's graph$"
-    ):
-        node_of(RUBENSTEIN, "world_shard")
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    registry.register(replace(algorithm_of(RUBENSTEIN), name="one-world", world_shard_node=""))
+    with pytest.raises(ParameterError, match="^the world_shard node is not a node of the one-world algorithm's graph$"):
+        node_of("one-world", "world_shard")
     engine = algorithm_of(DARR_NIAZI).hook("engine")
     check_engine(DARR_NIAZI, engine)
     with pytest.raises(ParameterError, match="^Simulation does not run the rubenstein algorithm$"):

@@ -86,6 +86,30 @@ def test_world_shards_each_holding_its_columns_and_a_halo_give_the_in_process_ru
     assert (whole.robots.state == JOINED).sum() > 4 and min(w.present.size for w in world) < 40
 
 
+def test_a_world_shard_serves_its_batches_only_and_refuses_a_strip_that_is_no_batchs():
+    """World shard 1 of 2 over 4 batches admits batches 2 and 3: another shard's batch's announcement is not its
+    concern (not dropped), a strip of no batch is, and the run starts once its own batches are in."""
+    from swarm_ros.core.central_shards import CentralShard
+    from swarm_ros.protocol.central_shard_world import ShardLockstep
+
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=5))
+    strips = strips_for(run, 4)
+    ls = ShardLockstep(CentralShard(run, strips, 1, 2), RubensteinWire, port=None)
+    assert ls.mine == [2, 3] and ls.shard_index == 1
+    assert ls.announce("robot_batch_0", strips.strip(0)) == [] and not ls.hosts  # shard 0's
+    with pytest.raises(Rejected, match="no batch's strip"):
+        ls.announce("robot_batch_9", (0, strips.strip(1)[1]))
+    assert ls.announce("robot_batch_3", strips.strip(3)) == [] and not ls.started
+    assert ls.announce("robot_batch_2", strips.strip(2)) == [2, 3] and ls.started
+    with pytest.raises(Rejected, match="announced the strip of robot_batch_3"):
+        ls.announce("robot_batch_7", strips.strip(3))
+    assert ls.announce("robot_batch_2", strips.strip(2)) == [2]  # a batch's process again
+    assert (
+        set(ls.recorded()) <= set(ls.shard.present)
+        and ls.own(2).size + ls.own(3).size == ls.shard.own.size - (run.robots.state[ls.shard.own] == JOINED).sum()
+    )
+
+
 def test_strips_share_the_robots_at_the_start_and_an_area_is_its_strip_and_one_column_either_side():
     start = np.array([0, 0, 0, 1, 1, 2, 5, 5, 9, 9, 9, 9])  # each robot's cell column at tick 0
     strips = Strips.balanced(start, 12, 3)

@@ -57,19 +57,21 @@ def _launch(square: Path, out: Path, processes: int, *flags: str) -> subprocess.
     )
 
 
-@pytest.mark.parametrize("processes, cuts", [(1, ""), (4, ""), (3, "-9,5")])
-def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_path, processes, cuts):
+@pytest.mark.parametrize("processes, cuts, shards", [(1, "", 1), (4, "", 1), (3, "-9,5", 1), (3, "", 2)])
+def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_path, processes, cuts, shards):
     """K = 2 is every restart test's below, each compared with simulate's run the same way; K = 3 with the strips
-    cut where the user says (x positions in d: the grid's cell columns 0-1, 2-5 and 6-9)."""
+    cut where the user says (x positions in d: the grid's cell columns 0-1, 2-5 and 6-9), and with S = 2 world
+    shards, each holding its strips' robots and a halo."""
     out = tmp_path / "run"
-    launcher = _launch(square, out, processes, *([f"--region-cuts={cuts}"] if cuts else []))
+    flags = [*([f"--region-cuts={cuts}"] if cuts else []), *(["--world-shards", str(shards)] if shards > 1 else [])]
+    launcher = _launch(square, out, processes, *flags)
     _, err = launcher.communicate(timeout=300)
     assert launcher.returncode == 0, err.decode()
     summary = assert_same_run(reference, out)
     assert summary["processes"] == processes
     assert (out / "recording.rrd").stat().st_size > 0 and (out / "final.png").stat().st_size > 0
     assert_rubenstein_bag_holds_run(out)
-    world = (out / "logs" / "world.log").read_text()
+    world = "".join(p.read_text() for p in (out / "logs").glob("world*.log"))
     assert "dropped" not in world, world  # no message of the run's own was refused
     if cuts:
         assert all(f"columns {strip}" in world for strip in ("0..1", "2..5", "6..9")), world
@@ -128,9 +130,32 @@ def test_a_run_stopped_mid_way_is_written_up_to_its_last_record_as_simulate_writ
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
+def test_a_world_shard_killed_ends_the_run_in_one_line_and_the_run_so_far_is_written(square, tmp_path):
+    """A world shard keeps no checkpoint yet: its restarted process ends the run in one line, and the monitor writes
+    the run up to its last record, outcome interrupted, as simulate --max-ticks writes it."""
+    out = tmp_path / "run"
+    launcher = _launch(square, out, 2, "--world-shards", "2")
+    partial = out.parent / f"{out.name}.partial.rrd"
+    size = wait_for(lambda: partial.exists() and partial.stat().st_size, 120, "the recording")
+    for _ in range(2):  # the recording's header, then 64 records (1,280 ticks) at a write
+        size = wait_for(lambda was=size: partial.stat().st_size > was and partial.stat().st_size, 120, "records")
+    os.kill(node_pid(out, "world_shard_1", timeout=10), signal.SIGKILL)
+    _, err = launcher.communicate(timeout=120)
+    err = err.decode()
+    assert launcher.returncode == 1 and "a restarted world shard of this algorithm cannot go on yet" in err, err
+    assert err.splitlines()[-1].startswith("swarm-ros: error: world_shard_1 exited with status 1"), err
+    summary = json.loads((out / "summary.json").read_text())
+    tick = summary["convergence_tick"]
+    assert summary["outcome"] == "interrupted" and tick > 0
+    ref = tmp_path / "ref"
+    assert cli.main(["simulate", "--shape", str(square), *RUN, "--max-ticks", str(tick), "--out", str(ref)]) == 0
+    for name in ("metrics.csv", "final_state.csv"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    assert not processes_mentioning(str(out)), "a process outlived the run"
+
+
 def test_the_graph_refuses_what_the_rubenstein_graph_does_not_do_in_one_line(square, tmp_path, capsys):
     for flags, message in (
-        (["--world-shards", "2", "--processes", "2"], "--world-shards is not for the rubenstein algorithm's graph"),
         (["--processes", "500"], "processes must be between 1 and the"),
         (["--on-batch-loss", "remove"], "--on-batch-loss remove is not for the rubenstein algorithm's graph"),
     ):

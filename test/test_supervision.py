@@ -282,8 +282,8 @@ def test_the_launch_file_starts_the_rubenstein_algorithms_nodes_from_the_same_ex
         ("world", "world"),
     ]
     assert _written(setup)["/**"]["ros__parameters"]["algorithm"] == "rubenstein"
-    with pytest.raises(InputError, match=r"^world_shards is not for the rubenstein algorithm's graph \(its world"):
-        launch_setup(str(CONFIG), {**BLANK, "algorithm": "rubenstein"}, "", tmp_path / "log2", 2, "", "", 2)
+    sharded = launch_setup(str(CONFIG), {**BLANK, "algorithm": "rubenstein"}, "", tmp_path / "log2", 2, "", "", 2)
+    assert [name for name, _, _ in sharded.plan][-2:] == ["world_shard_0", "world_shard_1"]
     removing = tmp_path / "remove.yaml"
     removing.write_text(CONFIG.read_text() + "\n/world:\n  ros__parameters:\n    on_batch_loss: remove\n")
     with pytest.raises(InputError, match="on_batch_loss: remove is not for the rubenstein algorithm's graph"):

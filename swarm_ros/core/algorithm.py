@@ -259,19 +259,19 @@ def check_engine(name: str, engine: type) -> None:
         raise ParameterError(f"{engine.__qualname__} does not run the {name} algorithm")
 
 
-#: The hooks of an algorithm whose world is one process holding every robot (a central world: core.strips), all
+#: The hooks of an algorithm whose world holds every robot (a central world: core.strips), all
 #: but its own (``engine``, ``summary``, ``wire``): ``Algorithm(**CENTRAL, ...)`` takes the graph's nodes, plan and
 #: checks, and a plain recording and run directory, which an entry may replace with its own.
 CENTRAL: dict[str, Any] = {
-    "plan": "swarm_ros.protocol.plan:central_plan",
+    "plan": "swarm_ros.protocol.plan:graph_plan",
     "check_graph": "swarm_ros.app.processes:check_central_graph",
     "world_node": "swarm_ros.nodes.central.world:CentralWorldNode",
+    "world_shard_node": "swarm_ros.nodes.central.world:CentralWorldNode",
     "robot_batch_node": "swarm_ros.nodes.robot_batch:RobotBatchNode",
     "batch_host": "swarm_ros.protocol.central_batch:CentralBatch",
     "monitor_node": "swarm_ros.nodes.central.monitor:CentralMonitorNode",
     "recording": "swarm_ros.artifacts.central_recording:open_recording",
     "write_run": "swarm_ros.artifacts.central_run_dir:write_simulation",
-    "no_world_shards": "its world is one process: world shards are not built for a central world yet",
 }
 
 register(

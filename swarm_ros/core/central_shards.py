@@ -38,6 +38,8 @@ from .strips import CentralRun, Strips
 class ShardedRun(CentralRun, Protocol):
     """What an engine gives beside :class:`~swarm_ros.core.strips.CentralRun` to run in world shards."""
 
+    def deciding(self, among: np.ndarray | None = None) -> np.ndarray: ...  # of robots ``among`` (all), ascending
+
     def counts(self, ids: np.ndarray) -> np.ndarray: ...  # robots ``ids``' share of the tick's counts (summed)
 
     def settle_shard(self, own: np.ndarray, decided: Any, halo: np.ndarray, halo_decided: Any, present: np.ndarray):
@@ -51,12 +53,12 @@ class ShardedRun(CentralRun, Protocol):
         ...
 
 
-def _take(robots: Any, ids: np.ndarray | slice) -> Any:
+def take(robots: Any, ids: np.ndarray | slice) -> Any:
     """The rows of robots ``ids`` of every robot's arrays ``robots`` (a NamedTuple of arrays)."""
     return type(robots)(*(a[ids] for a in robots))
 
 
-def _concat(parts: list[tuple[np.ndarray, Any]]) -> tuple[np.ndarray, Any]:
+def concat(parts: list[tuple[np.ndarray, Any]]) -> tuple[np.ndarray, Any]:
     """(ids, rows) of several, in ascending id order."""
     ids = np.concatenate([p[0] for p in parts]).astype(np.int64)
     order = np.argsort(ids, kind="stable")
@@ -118,7 +120,7 @@ class CentralShard:
         """After a tick: it holds its robots ``mine`` still within reach, and the peers' robots ``rows`` (ids,
         every array's rows) they sent it (:meth:`reach`)."""
         kept = self._within(mine, self.first - 1, self.last + 1)
-        ids, got = _concat([(kept, _take(self.run.robots, kept)), *rows])
+        ids, got = concat([(kept, take(self.run.robots, kept)), *rows])
         for a, b in zip(self.run.robots, got):
             a[ids] = b
         self.present = ids
@@ -159,7 +161,7 @@ class CentralExchange:
         self.mine, self.own, self.decided_ = self.shard.own, ids, decided
         for peer in self.neighbours:
             keep = self.shard.border(peer, ids)
-            self.port.send_border(peer, tick, ids[keep], _take(decided, keep))
+            self.port.send_border(peer, tick, ids[keep], take(decided, keep))
         self.phase = BORDER
         self._advance()
 
@@ -189,19 +191,19 @@ class CentralExchange:
     def _advance(self) -> None:
         shard, run = self.shard, self.shard.run
         if self.phase == BORDER and (borders := self._all("border", self.neighbours)) is not None:
-            empty = (self.own[:0], _take(self.decided_, slice(0, 0)))
-            halo, halo_decided = _concat([empty, *borders.values()])
+            empty = (self.own[:0], take(self.decided_, slice(0, 0)))
+            halo, halo_decided = concat([empty, *borders.values()])
             ids = run.settle_shard(self.own, self.decided_, halo, halo_decided, shard.present)
-            rows, counts = _take(run.robots, ids), run.counts(self.mine)
+            rows, counts = take(run.robots, ids), run.counts(self.mine)
             self.inbox.setdefault(("shared", self.tick), {})[shard.index] = (ids, rows, counts)
             self.port.send_shared(self.tick, ids, rows, counts)
             self.phase = SHARED
         if self.phase == SHARED and (shared := self._all("shared", [*self.peers, shard.index])) is not None:
-            ids, rows = _concat([(i, r) for i, r, _ in shared.values()])
+            ids, rows = concat([(i, r) for i, r, _ in shared.values()])
             run.close_shard(ids, rows, np.sum([c for _, _, c in shared.values()], axis=0))
             for peer in self.neighbours:
                 keep = shard.reach(peer, self.mine)
-                self.port.send_rows(peer, self.tick, self.mine[keep], _take(run.robots, self.mine[keep]))
+                self.port.send_rows(peer, self.tick, self.mine[keep], take(run.robots, self.mine[keep]))
             self.phase = ROWS
         if self.phase == ROWS and (rows_in := self._all("rows", self.neighbours)) is not None:
             shard.receive(self.mine, list(rows_in.values()))
@@ -269,8 +271,8 @@ def run_sharded(
     while world[0].run.outcome is None and (left is None or left > 0):
         tick, mail.closed = world[0].run.tick + 1, []
         for w, exchange in zip(world, mail.exchanges):  # the batches decide, from their areas alone
-            parts = [hosts[k].decide(tick, ids, _take(w.run.robots, ids)) for k in w.batches for ids in [w.area(k)]]
-            exchange.decided(tick, *_concat(parts))
+            parts = [hosts[k].decide(tick, ids, take(w.run.robots, ids)) for k in w.batches for ids in [w.area(k)]]
+            exchange.decided(tick, *concat(parts))
         mail.deliver()
         if sorted(mail.closed) != list(range(shards)):
             raise ContractError(f"tick {tick}: shards {mail.closed} closed it, not every shard")

@@ -31,6 +31,8 @@ class Wire(Protocol):
 
     def robots_of(self, rows: np.ndarray) -> tuple[np.ndarray, Any]: ...  # (ids, arrays) of checked rows
 
+    def decisions_of(self, rows: np.ndarray) -> tuple[np.ndarray, Any]: ...  # (ids, decisions) of checked rows
+
     def check_rows(self, run: Any, rows: np.ndarray, tick: int) -> None: ...  # rows of ``run`` at ``tick``? Rejected
 
     def check_decisions(self, run: Any, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Any]:

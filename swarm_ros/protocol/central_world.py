@@ -78,10 +78,21 @@ class CentralLockstep:
         self.decided: dict[int, tuple[np.ndarray, Any]] = {}  #: the decisions in for the next tick, by batch
         self.started = False
         self._columns_at: tuple[int, np.ndarray] = (-1, np.empty(0, dtype=np.int64))
+        self.on_settled: Callable[[], None] = lambda: None  #: told when a tick settles later than its decisions
+        self.shard_index: int | None = None  #: a world shard's index (``central_shards``), None for the world
 
     @property
     def batches(self) -> int:
         return 0 if self.strips is None else self.strips.batches
+
+    @property
+    def mine(self) -> list[int]:
+        """The batches it serves: every one."""
+        return list(range(self.batches))
+
+    def recorded(self) -> np.ndarray:
+        """The robots whose rows its records hold: every robot."""
+        return np.arange(self.run.params.robots)
 
     def announce(self, name: str, strip: tuple[int, int]) -> list[int]:
         """Node ``name`` is up and decides for the cell columns ``strip`` (first, last): the batches to send their
@@ -167,8 +178,12 @@ class CentralLockstep:
             return False  # a restarted batch's second answer: the same, by the rule
         ids, decided = self.wire.check_decisions(self.run, rows, tick, self.own(k))
         self.decided[k] = (ids, decided)
-        if len(self.decided) < self.batches:
+        if len(self.decided) < len(self.mine):
             return False
+        return self.settle()
+
+    def settle(self) -> bool:
+        """Every batch's decisions are in: settle the tick (here, at once: True)."""
         self.run.settle([self.decided[b] for b in range(self.batches)])
         self.decided.clear()
         return True
@@ -237,13 +252,15 @@ class CentralWorld:
         port: Any,
         log: Any,
         clock: Callable[[], float] = time.monotonic,
+        lockstep: CentralLockstep | None = None,
     ) -> None:
-        self.ls = CentralLockstep(run, wire)
+        self.ls = lockstep or CentralLockstep(run, wire)  # a world shard's: central_shard_world.ShardLockstep
+        self.ls.on_settled = self._settled
         self.port, self.log, self.clock = port, log, clock
         self.every = int(own["record_every"]) or auto_every(run.params)
         self.save_every = save_every(self.every)
         self.reach = monitor_reach(int(own["monitor_window"]), self.every)
-        self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] else None
+        self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] and self.ls.shard_index is None else None
         self.start_timeout = float(own["start_timeout"])
         self.created = clock()
         self.held, self.held_end = -1, False  # the monitor's last held record, and whether it holds the outcome
@@ -265,7 +282,13 @@ class CentralWorld:
     def _resume(self) -> None:
         """Go on from the checkpoint the process before saved: the run at its tick, the batches it served (their
         announcements, latched, come again and are sent their areas of that tick), and the metrics rows from the
-        last record before it sent again (the monitor drops what it holds)."""
+        last record before it sent again (the monitor drops what it holds).
+
+        Raises:
+            RunFailed: a world shard's process (it cannot go on after a restart yet), or no checkpoint to go on from.
+        """
+        if self.ls.shard_index is not None:
+            raise RunFailed("a restarted world shard of this algorithm cannot go on yet: the run ends")
         if self.checkpoint is None:
             raise RunFailed("a restarted world has no checkpoint to go on from (the checkpoint parameter is empty)")
         if not self.checkpoint.exists():  # tick 0 is saved before anything of it goes out: nothing did
@@ -300,8 +323,11 @@ class CentralWorld:
         if self.run.outcome is not None or self.first or k is None:  # before its first tick: the process before's
             return
         if self.ls.decisions(k, tick, rows):
-            self.pending = True
-            self._go_on()
+            self._settled()
+
+    def _settled(self) -> None:
+        self.pending = True
+        self._go_on()
 
     def held_report(self, values: np.ndarray) -> None:
         """The monitor's report on /swarm/<algorithm>/held (:func:`check_held`).
@@ -344,15 +370,15 @@ class CentralWorld:
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
             checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts)
         if ended or tick % self.every == 0:
-            everyone = self.ls.wire.rows(np.arange(run.params.robots), run.robots)
+            robots = self.ls.wire.rows(self.ls.recorded(), run.robots)
             metrics = metrics_rows(run.history[self.sent_metrics + 1 :], run.columns)
-            self.port.publish_record(tick, metrics, everyone)
+            self.port.publish_record(tick, metrics if not self.ls.shard_index else None, robots)  # shard 0's
             self.sent_metrics = tick
         if ended:
             self.ended_at = self.clock()
             self.status(str(run.outcome), f"the run ended at tick {tick}: {run.outcome}")
         else:
-            self._send_areas(list(range(self.ls.batches)))
+            self._send_areas(self.ls.mine)
 
     def status(self, outcome: str, message: str) -> None:
         self.port.publish_status(self.run.tick, outcome, message, ",".join(sorted(self.watch.lapsed)))
@@ -371,7 +397,7 @@ class CentralWorld:
             batches, self.waiting = sorted(set(self.waiting)), []
             if self.first:  # tick 0, or the checkpoint's: the robots, the metrics and the areas
                 self.first = False
-                self.status(RUNNING, f"{self.ls.batches} robot batches in: tick {self.run.tick}")
+                self.status(RUNNING, f"{len(self.ls.mine)} robot batches in: tick {self.run.tick}")
                 self.pending = True
                 self._go_on()
             elif not self.pending:  # a batch process that came back: its area at the current tick (if it went out:

@@ -64,19 +64,6 @@ def graph_plan(
     ]
 
 
-def central_plan(
-    processes: int, region_cuts: str = "", world_shards: int = 1
-) -> list[tuple[str, str, dict[str, int | str]]]:
-    """:func:`graph_plan` of a central world's run (an algorithm whose world is one process: core.strips): the
-    monitor, ``processes`` robot batches (batch k decides for strip k, cut at ``region_cuts`` if given), the world.
-    No world shards (the commands refuse them: core.algorithm's ``no_world_shards``)."""
-    cuts: dict[str, int | str] = {"region_cuts": region_cuts} if region_cuts else {}
-    batches: list[tuple[str, str, dict[str, int | str]]] = [
-        (batch_name(k), ROBOT_BATCH, {"batch": k, "batches": processes, **cuts}) for k in range(processes)
-    ]
-    return [(MONITOR, MONITOR, {}), *batches, (WORLD, WORLD, {})]
-
-
 def plan_for(
     algorithm: str, processes: int, region_cuts: str = "", world_shards: int = 1
 ) -> list[tuple[str, str, dict[str, int | str]]]:
@@ -178,6 +165,12 @@ def part_topic(i: int, j: int) -> str:
 
 def counts_topic(i: int) -> str:
     return f"{SHARDS}/shard_{i}/counts"
+
+
+def shard_topic(i: int, what: str) -> str:
+    """A central world's shard i's topic ``what``: ``border_to_<j>`` (its decisions in shard j's halo), ``shared``
+    (the rows every shard shares; its counts on :func:`counts_topic`), ``rows_to_<j>`` (its robots in j's reach)."""
+    return f"{SHARDS}/shard_{i}/{what}"
 
 
 def again_topic(i: int) -> str:

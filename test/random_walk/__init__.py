@@ -31,6 +31,8 @@ class Wire:
     def robots_of(rows: np.ndarray) -> tuple[np.ndarray, Robots]:
         return rows["id"].astype(np.int64), Robots(*(rows[f].astype(t) for f, t in zip(Robots._fields, "qqb")))
 
+    decisions_of = robots_of
+
     @staticmethod
     def check_rows(run: RandomWalk, rows: np.ndarray, tick: int) -> None:
         ids, (h, w) = rows["id"].astype(np.int64), run.mask.shape

@@ -57,6 +57,8 @@ class CentralMonitorNode:
         self.algorithm = algorithm_of(self.params.algorithm)
         self.wire, self.topics = self.algorithm.hook("wire"), CentralTopics.of(self.algorithm.name)
         self.incarnation = int(own["incarnation"])
+        self.shards = int(own["world_shards"])  # world processes whose records hold each a part of the robots
+        self.parts: dict[int, list[np.ndarray]] = {}  # record tick -> the world shards' rows of it so far
         p = self.params
         self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)
         self.overwrite = bool(own["overwrite"])
@@ -151,20 +153,44 @@ class CentralMonitorNode:
     def _on_robots(self, msg: Cloud) -> None:
         try:
             tick = checks.tick_stamp(msg.header)
-            rows = checks.cloud(msg, self.wire.row, self.params.robots, min_rows=self.params.robots)
+            whole = self.params.robots if self.shards == 1 else 0  # a world shard's: its own robots
+            rows = checks.cloud(msg, self.wire.row, self.params.robots, min_rows=whole)
             self.wire.check_rows(self.copy, rows, tick)
+            if tick <= self.robots_tick:
+                return
+            record = self._whole(tick, rows)
         except Rejected as fault:
             self.rejections.drop(self.topics.robots, fault)
             return
-        if tick <= self.robots_tick:
-            return
-        self.robots_tick = tick
         self._into_bag(self.topics.robots)
-        _, robots = self.wire.robots_of(rows)
+        if record is None:
+            return  # the other shards' robots of the record are still on their way
+        self.robots_tick = tick
+        _, robots = self.wire.robots_of(record)
         self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
         if self.recorder is not None and tick > 0:  # (tick 0's: logged as the recorder opened)
             self.recorder.log(self.copy)
         self._report()
+
+    def _whole(self, tick: int, rows: np.ndarray) -> np.ndarray | None:
+        """Every robot's rows of record ``tick`` once the world's (or every world shard's) are in, ascending; None
+        until then.
+
+        Raises:
+            Rejected: rows of a robot the record holds already.
+        """
+        if self.shards == 1:
+            return rows
+        parts = self.parts.setdefault(tick, [])
+        held = np.concatenate([p["id"] for p in parts]) if parts else np.empty(0, dtype=np.int64)
+        if np.isin(rows["id"], held).any():
+            raise Rejected("conflict", f"a robot's row twice in the record of tick {tick}")
+        parts.append(rows)
+        if held.size + rows.size < self.params.robots:
+            return None
+        self.parts = {t: p for t, p in self.parts.items() if t > tick}
+        whole = np.concatenate(parts)
+        return whole[np.argsort(whole["id"], kind="stable")]
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         self._into_bag(STATUS)

@@ -32,13 +32,16 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core.algorithm import algorithm_of
+from swarm_ros.core.central_shards import CentralShard
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.params import Settings
+from swarm_ros.core.strips import strips_for
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.central_shard_world import ShardLockstep
 from swarm_ros.protocol.central_world import CentralWorld
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
-from swarm_ros.protocol.plan import BATCHES, MONITOR, STATUS, CentralTopics
+from swarm_ros.protocol.plan import BATCHES, MONITOR, STATUS, CentralTopics, counts_topic, shard_topic
 from swarm_ros.protocol.status import STARTING
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import SignedPublisher, open_auth
@@ -61,11 +64,81 @@ class CentralWorldNode:
         self.pub_metrics = self.signer.publisher(PointCloud2, self.topics.metrics, msgs.CENTRAL_QOS)
         self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
         engine = algorithm.hook("engine")(shape, self.params)
-        self.world = CentralWorld(engine, self.wire, own, self, node.get_logger())
+        lockstep = self._shard(engine, own) if int(own.get("shards", 1)) > 1 else None
+        self.world = CentralWorld(engine, self.wire, own, self, node.get_logger(), lockstep=lockstep)
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.gate.subscribe(Int64MultiArray, self.topics.held, self._on_held, msgs.LATCHED_QOS)
         self._watch_alive(MONITOR)
         self.world.status(STARTING, "waiting for robot batches and the monitor")
+
+    def _shard(self, engine: Any, own: dict[str, Any]) -> ShardLockstep:
+        """World shard ``shard`` of ``shards``: its lockstep, and its links to its peers (plan.shard_topic)."""
+        strips = strips_for(engine, int(own["batches"]), str(own["region_cuts"]))
+        ls = ShardLockstep(CentralShard(engine, strips, int(own["shard"]), int(own["shards"])), self.wire, self)
+        i, ex, qos = ls.shard.index, ls.exchange, msgs.SHARDS_QOS
+        self.to_peer = {
+            (what, j): self.signer.publisher(PointCloud2, shard_topic(i, f"{what}_to_{j}"), qos)
+            for j in ex.neighbours
+            for what in ("border", "rows")
+        }
+        self.pub_shared = self.signer.publisher(PointCloud2, shard_topic(i, "shared"), qos)
+        self.pub_counts = self.signer.publisher(Int64MultiArray, counts_topic(i), qos)
+        self.halves: dict[tuple[int, int], dict[str, np.ndarray]] = {}  # (peer, tick) -> its shared rows, counts
+        self.shard_ls = ls
+        for j in ex.neighbours:
+            for what, handler in (("border", ls.border), ("rows", ls.rows)):
+                topic = shard_topic(j, f"{what}_to_{i}")
+                row = self.wire.decision_row if what == "border" else self.wire.row
+                take = functools.partial(self._on_peer, handler, j, topic, row)
+                self.gate.subscribe(PointCloud2, topic, take, qos)
+        for j in ex.peers:
+            topic = shard_topic(j, "shared")
+            self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_shared, j, topic), qos)
+            self.gate.subscribe(Int64MultiArray, counts_topic(j), functools.partial(self._on_counts, j), qos)
+        return ls
+
+    def _on_peer(self, handler: Any, peer: int, topic: str, row: Any, msg: Cloud) -> None:
+        try:
+            handler(peer, checks.tick_stamp(msg.header), checks.cloud(msg, row, self.params.robots, min_rows=0))
+        except Rejected as fault:
+            self.rejections.drop(topic, fault)
+
+    def _on_shared(self, peer: int, topic: str, msg: Cloud) -> None:
+        try:
+            tick, rows = checks.tick_stamp(msg.header), checks.cloud(msg, self.wire.row, self.params.robots, min_rows=0)
+        except Rejected as fault:
+            self.rejections.drop(topic, fault)
+            return
+        self._half(peer, tick, "rows", rows, topic)
+
+    def _on_counts(self, peer: int, msg: Int64MultiArray) -> None:
+        values = np.asarray(msg.data, dtype=np.int64)
+        if values.size < 2:
+            self.rejections.drop(counts_topic(peer), Rejected("bad number", "no tick and counts"))
+            return
+        self._half(peer, int(values[0]), "counts", values[1:], counts_topic(peer))
+
+    def _half(self, peer: int, tick: int, what: str, values: np.ndarray, topic: str) -> None:
+        """Half of shard ``peer``'s shared message of ``tick`` (its rows, or its counts): on once both are in."""
+        got = self.halves.setdefault((peer, tick), {})
+        got.setdefault(what, values)
+        if len(got) == 2:
+            del self.halves[(peer, tick)]
+            try:
+                self.shard_ls.shared(peer, tick, got["rows"], got["counts"])
+            except Rejected as fault:
+                self.rejections.drop(topic, fault)
+
+    # -- a world shard's port to its peers (ShardLockstep) ------------------------------------------------------
+    def send_border(self, peer: int, tick: int, rows: np.ndarray) -> None:
+        self.to_peer[("border", peer)].publish_rows(rows, tick)
+
+    def send_rows(self, peer: int, tick: int, rows: np.ndarray) -> None:
+        self.to_peer[("rows", peer)].publish_rows(rows, tick)
+
+    def send_shared(self, tick: int, rows: np.ndarray, counts: np.ndarray) -> None:
+        self.pub_shared.publish_rows(rows, tick)
+        self.pub_counts.publish(msgs.ids_message(np.concatenate([[tick], counts]).astype(np.int64), "counts"))
 
     def load(self) -> None:
         """Nothing heavy: the kernels compile (or load from numba's cache) on the first tick."""
@@ -119,8 +192,9 @@ class CentralWorldNode:
     def send_area(self, name: str, tick: int, rows: np.ndarray) -> None:
         self.areas[name].publish_rows(rows, tick)
 
-    def publish_record(self, tick: int, metrics: np.ndarray, robots: np.ndarray) -> None:
-        self.pub_metrics.publish_rows(metrics, tick)
+    def publish_record(self, tick: int, metrics: np.ndarray | None, robots: np.ndarray) -> None:
+        if metrics is not None:  # (a world shard other than shard 0 sends no metrics: shard 0's are the same)
+            self.pub_metrics.publish_rows(metrics, tick)
         self.pub_robots.publish_rows(robots, tick)
 
     def publish_status(self, tick: int, outcome: str, message: str, waiting: str) -> None:

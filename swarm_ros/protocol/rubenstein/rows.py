@@ -125,6 +125,7 @@ class RubensteinWire:
     rows = staticmethod(rubenstein_rows)
     decision_rows = staticmethod(rubenstein_rows)
     robots_of = staticmethod(robots_of_rows)
+    decisions_of = staticmethod(decided_of_rows)
     check_decisions = staticmethod(check_decisions)
     batch = RubensteinBatch
 

@@ -1,0 +1,120 @@
+"""World shard i's half of a central world's run in the graph (``--world-shards S``), as plain code: the batches of
+its strips only, the robots of its columns and halo (:class:`~swarm_ros.core.central_shards.CentralShard`), and a
+tick settled with its peers (:class:`~swarm_ros.core.central_shards.CentralExchange`) once its batches' decisions
+are in. The rest of the world's logic is :class:`~swarm_ros.protocol.central_world.CentralWorld`'s, as the one
+world's: the monitor's reach, records (each shard's of its own robots; shard 0 sends the metrics, the same on every
+shard), liveliness, a still run, the end. A world shard keeps no checkpoint yet: its restarted process ends the run.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from swarm_ros.core.central_shards import CentralExchange, CentralShard, concat
+from swarm_ros.core.errors import Rejected
+
+from .central_rows import Wire
+from .central_world import CentralLockstep
+
+
+class ShardLockstep(CentralLockstep):
+    """A :class:`CentralLockstep` for world shard ``shard.index``: ``port`` sends its messages to its peers
+    (``send_border``, ``send_shared``, ``send_rows``: :class:`~swarm_ros.core.central_shards.ShardPort`)."""
+
+    def __init__(self, shard: CentralShard, wire: Wire, port: Any) -> None:
+        super().__init__(shard.run, wire)
+        self.shard, self.expected, self.port = shard, shard.strips, port
+        self.shard_index = shard.index
+        self.exchange = CentralExchange(shard, self)
+
+    @property
+    def batches(self) -> int:
+        return self.expected.batches
+
+    @property
+    def mine(self) -> list[int]:
+        """The batches it serves: those of its strips."""
+        return list(self.shard.batches)
+
+    def recorded(self) -> np.ndarray:
+        """Its own robots: each shard's record holds those."""
+        return self.shard.own
+
+    def announce(self, name: str, strip: tuple[int, int]) -> list[int]:
+        """As :meth:`CentralLockstep.announce`, for its batches: another shard's batch's strip is not its concern.
+
+        Raises:
+            Rejected: a strip that is no batch's of the run, or of one of its batches another node announced.
+        """
+        k = next((k for k in range(self.expected.batches) if self.expected.strip(k) == tuple(strip)), None)
+        if k is None:
+            raise Rejected("strip", f"{name}'s columns {strip[0]}..{strip[1]} are no batch's strip of the run")
+        if k not in self.shard.batches:
+            return []
+        if self.hosts.get(k, name) != name:
+            raise Rejected("strip", f"{name} announced the strip of {self.hosts[k]}")
+        self.hosts[k] = name
+        if self.started:
+            return [k]
+        if len(self.hosts) < len(self.mine):
+            return []
+        self.strips, self.started = self.expected, True
+        return self.mine
+
+    def area(self, k: int) -> np.ndarray:
+        return self.wire.rows(self.shard.area(k), self.run.robots)
+
+    def own(self, k: int) -> np.ndarray:
+        deciding = self.shard.run.deciding(self.shard.present)
+        return deciding[self.expected.in_strip(self.run.grid.columns(self.run.robots.x[deciding]), k)]
+
+    def settle(self) -> bool:
+        """Its batches' decisions are in: to its peers; the tick settles when theirs are in (``on_settled``)."""
+        ids, decided = concat([self.decided[k] for k in self.mine])
+        self.decided.clear()
+        self.exchange.decided(self.run.tick + 1, ids, decided)
+        return False
+
+    # -- the exchange's port, and what comes from the peers ---------------------------------------------------
+    def send_border(self, peer: int, tick: int, ids: np.ndarray, decided: Any) -> None:
+        self.port.send_border(peer, tick, self.wire.decision_rows(ids, decided))
+
+    def send_shared(self, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray) -> None:
+        self.port.send_shared(tick, self.wire.rows(ids, self.run.robots), counts)
+
+    def send_rows(self, peer: int, tick: int, ids: np.ndarray, rows: Any) -> None:
+        self.port.send_rows(peer, tick, self.wire.rows(ids, self.run.robots))
+
+    def closed(self, tick: int) -> None:
+        self.on_settled()
+
+    def border(self, peer: int, tick: int, rows: np.ndarray) -> None:
+        """Shard ``peer``'s decisions of tick ``tick`` for robots in this shard's halo.
+
+        Raises:
+            Rejected: rows that fail the wire's checks, or a message the exchange refuses.
+        """
+        self.wire.check_rows(self.run, rows, tick)
+        self.exchange.border(peer, tick, *self.wire.decisions_of(rows))
+
+    def shared(self, peer: int, tick: int, rows: np.ndarray, counts: np.ndarray) -> None:
+        """Shard ``peer``'s rows every shard shares, and its counts, of tick ``tick``.
+
+        Raises:
+            Rejected: as :meth:`border`.
+        """
+        self.wire.check_rows(self.run, rows, tick)
+        if counts.size != self.shard.run.counts(np.empty(0, dtype=np.int64)).size or np.any(counts < 0):
+            raise Rejected("bad number", f"counts {counts.tolist()}")
+        self.exchange.shared(peer, tick, *self.wire.robots_of(rows), counts)
+
+    def rows(self, peer: int, tick: int, rows: np.ndarray) -> None:
+        """Shard ``peer``'s robots in this shard's columns or halo after tick ``tick``.
+
+        Raises:
+            Rejected: as :meth:`border`.
+        """
+        self.wire.check_rows(self.run, rows, tick)
+        self.exchange.rows(peer, tick, *self.wire.robots_of(rows))
