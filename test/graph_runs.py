@@ -145,6 +145,19 @@ def wait_rubenstein_saved(out: Path, tick: int, timeout: float = 120) -> None:
     wait_for(past, timeout, f"the world saving tick {tick}", poll=0.02)
 
 
+def wait_monitor_holds(out: Path, topic: str, messages: int, timeout: float = 120) -> None:
+    """Wait until the monitor's bag holds ``messages`` messages of ``topic`` durably: it makes its bag durable each
+    time it holds one more whole record, so that many messages of a record's parts mean the records before are
+    whole in it. For a run without a checkpoint to watch (a central world's shards)."""
+    from swarm_ros.ros.bag_writer import unfinished_messages
+
+    def held() -> bool:
+        holder = next(out.parent.glob(f".{out.name}.bag-*"), None)
+        return holder is not None and sum(t == topic for t, _, _ in unfinished_messages(holder)) >= messages
+
+    wait_for(held, timeout, f"{messages} messages of {topic} in the monitor's bag", poll=0.05)
+
+
 def staged_logs(out: Path, timeout: float = 60) -> Path:
     return wait_for(lambda: next(out.parent.glob(f".{out.name}.logs-*"), None), timeout, "its logs", poll=0.01)
 

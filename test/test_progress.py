@@ -1,8 +1,11 @@
-"""The launcher's progress display follows the world's /swarm/status alone (swarm_ros.tools.progress)."""
+"""The launcher's progress display follows the world's /swarm/status alone (swarm_ros.tools.progress); the command
+line's own participants (it, ``topics``, ``replay``) are made with Ctrl-C and SIGTERM held (swarm_ros.ros.runtime)."""
 
 from __future__ import annotations
 
 import io
+import os
+import signal
 
 import pytest
 
@@ -11,6 +14,7 @@ pytest.importorskip("rclpy")
 from tqdm import tqdm
 
 from swarm_ros.ros import graph as msgs
+from swarm_ros.ros.runtime import signals_held
 from swarm_ros.tools.progress import Progress
 
 pytestmark = pytest.mark.unit
@@ -40,3 +44,24 @@ def test_values_that_are_not_counts_do_not_break_the_bar():
     p = _progress()
     p._on_status(msgs.status_message(3, "running", "running", extra={"localized": "x", "moving": -2}))
     assert p.started and p.tick == 3 and p.bar.n == 0
+
+
+def test_a_sigterm_while_a_participant_is_made_is_acted_on_once_it_is_whole():
+    """A tool's SIGTERM handler raises KeyboardInterrupt; one that landed inside rclpy's making of a node left a
+    half-made logger whose ``__del__`` printed a traceback (CI). Held, it is raised as the block ends, once."""
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    before = signal.signal(signal.SIGTERM, interrupt)
+    steps: list[str] = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with signals_held():
+                os.kill(os.getpid(), signal.SIGTERM)
+                steps.extend(str(i) for i in range(1000))  # many bytecodes: the handler would have run by now
+                steps.append("whole")
+        assert steps[-1] == "whole"
+        assert signal.getsignal(signal.SIGTERM) is interrupt  # the tool's handler is back
+    finally:
+        signal.signal(signal.SIGTERM, before)

@@ -13,10 +13,12 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Protocol
 
 import rclpy
+from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
@@ -33,6 +35,58 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ORPHANED = 0, 1, 2, 129  # and EXIT_INTER
 TOOL_ROS_ARGS = ("--ros-args", "--disable-external-lib-logs")
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
 _TEARDOWN_S = 5.0  # seconds rclpy's and DDS's teardown may take once the node is closed
+
+
+_HELD: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)  #: what a tool's handlers turn into KeyboardInterrupt
+
+
+@contextmanager
+def signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM only noted for the block, then handed to their handlers as it ends: a KeyboardInterrupt a
+    handler raises comes never halfway through rclpy making or unmaking its objects (CI once saw the ``__del__`` of
+    a logger a node was making fail, printed as "Exception ignored" under the command's one line). The handlers
+    are swapped, not the signal mask: the kernel gives a process's signal to any thread that does not block it.
+    Off the main thread (where handlers cannot be set, and none run) it holds nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    noted: list[int] = []
+    before = {sig: signal.signal(sig, lambda signum, frame: noted.append(signum)) for sig in _HELD}
+    try:
+        yield
+    finally:
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
+        for sig in dict.fromkeys(noted):
+            signal.raise_signal(sig)
+
+
+@contextmanager
+def tool_node(name: str, domain_id: int, extra_args: tuple[str, ...] = ()) -> Iterator[Node]:
+    """The node of a command-line tool's own short-lived participant (the launcher's progress bar, ``topics``,
+    ``replay``) on ``domain_id``: its own context, rclpy's signal handlers off (the tool's own act on Ctrl-C and
+    SIGTERM), rcl's log file off (:data:`TOOL_ROS_ARGS`). Made and closed with SIGINT and SIGTERM held: one that
+    comes meanwhile is acted on once the participant is whole, or closed. An executor the caller made for it must
+    be shut down before the block ends."""
+    context = Context()
+    with signals_held():
+        rclpy.init(
+            args=[*TOOL_ROS_ARGS, *extra_args],
+            context=context,
+            domain_id=domain_id,
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
+        try:
+            node = Node(name, context=context, start_parameter_services=False)
+        except BaseException:
+            rclpy.shutdown(context=context)
+            raise
+    try:
+        yield node
+    finally:
+        with signals_held():
+            node.destroy_node()
+            rclpy.shutdown(context=context)
 
 
 def load_type_support() -> int:

@@ -9,20 +9,17 @@ from __future__ import annotations
 
 import sys
 import time
+from contextlib import ExitStack
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
-from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.status import STARTING, has_ended, has_started
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import Gate
 from swarm_ros.ros.dds import apply_dds_defaults
-from swarm_ros.ros.runtime import TOOL_ROS_ARGS
+from swarm_ros.ros.runtime import tool_node
 
 _MAX_BATCH = 10_000  # messages handled per spin() at most
 
@@ -36,16 +33,20 @@ class Progress:
         from tqdm import tqdm
 
         apply_dds_defaults()  # as the nodes have them (launcher.node_env)
-        self.context = Context()
-        # Ctrl-C stays a KeyboardInterrupt for the launcher, which then stops its children.
-        args = [*TOOL_ROS_ARGS, *(["--enclave", f"{enclaves}/swarm_ros_launcher"] if enclaves else [])]
-        rclpy.init(args=args, context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = Node("swarm_ros_launcher", context=self.context, start_parameter_services=False)
-        # only what the run's nodes tagged (auth.Gate): a stranger's status cannot end the run here
-        self.gate = Gate(self.node, key, Rejections(self.node.get_logger()))
-        self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.STATUS_QOS)
-        self.executor = EventsExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        # Ctrl-C stays the launcher's, which then stops its children.
+        enclave = ("--enclave", f"{enclaves}/swarm_ros_launcher") if enclaves else ()
+        self.participant = ExitStack()  # closed by __exit__
+        self.node = self.participant.enter_context(tool_node("swarm_ros_launcher", domain_id, enclave))
+        try:
+            # only what the run's nodes tagged (auth.Gate): a stranger's status cannot end the run here
+            self.gate = Gate(self.node, key, Rejections(self.node.get_logger()))
+            self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.STATUS_QOS)
+            self.executor = EventsExecutor(context=self.node.context)
+            self.executor.add_node(self.node)
+        except BaseException:
+            self.participant.close()
+            raise
+        self.participant.callback(self.executor.shutdown)
         self.bar = tqdm(
             total=patches,
             unit="patch",
@@ -89,6 +90,4 @@ class Progress:
 
     def __exit__(self, *exc: object) -> None:
         self.bar.close()
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
+        self.participant.close()

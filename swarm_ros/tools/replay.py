@@ -19,7 +19,7 @@ from pathlib import Path
 
 from swarm_ros.core.errors import InputError
 from swarm_ros.ros.graph import message_class
-from swarm_ros.ros.runtime import TOOL_ROS_ARGS
+from swarm_ros.ros.runtime import tool_node
 
 _ACK_WAIT_S = 2.0  # seconds to let readers acknowledge the last messages before exiting
 
@@ -83,23 +83,14 @@ def replay(
 def _publish(
     reader, classes: dict, domain_id: int, rate: float, delay: float, quiet: bool, offset: int, loop: bool
 ) -> int:
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.node import Node
     from rclpy.qos import DurabilityPolicy, QoSProfile
-    from rclpy.signals import SignalHandlerOptions
     from tqdm import tqdm
 
     from swarm_ros.ros.bag_writer import ros_qos
     from swarm_ros.ros.dds import apply_dds_defaults
 
     apply_dds_defaults()  # on this host, as a run's nodes (set ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET to share it)
-    context = Context()
-    rclpy.init(
-        args=list(TOOL_ROS_ARGS), context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
-    )
-    node = Node("swarm_ros_replay", context=context, start_parameter_services=False)
-    try:
+    with tool_node("swarm_ros_replay", domain_id) as node:
         pubs, latched = {}, set()
         for c in reader.connections:
             offered = c.ext.offered_qos_profiles
@@ -137,9 +128,6 @@ def _publish(
         for pub in pubs.values():
             pub.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 0.0)))
         return 0
-    finally:
-        node.destroy_node()
-        rclpy.shutdown(context=context)
 
 
 def _play(reader, pubs: dict, first: int, rate: float, latched: set, bar) -> None:

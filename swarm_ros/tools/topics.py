@@ -13,17 +13,14 @@ import time
 from typing import Any
 
 import numpy as np
-import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 
 from swarm_ros.core.errors import ContractError, InputError
 from swarm_ros.protocol.rows import ROW_TYPES, VOXEL_ROW, check_fields
 from swarm_ros.ros.graph import message_class
-from swarm_ros.ros.runtime import TOOL_ROS_ARGS
+from swarm_ros.ros.runtime import signals_held, tool_node
 
 _SHOWN_ITEMS = 8  # array items printed without --full
 _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
@@ -91,17 +88,10 @@ def decoded_rows(msg: Any, full: bool = False) -> str:
 
 
 class _Inspector:
-    def __init__(self, domain_id: int) -> None:
-        self.context = Context()
-        rclpy.init(
-            args=list(TOOL_ROS_ARGS),
-            context=self.context,
-            domain_id=domain_id,
-            signal_handler_options=SignalHandlerOptions.NO,
-        )
-        self.node = Node("swarm_ros_topics", context=self.context, start_parameter_services=False)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self.executor = SingleThreadedExecutor(context=node.context)
+        self.executor.add_node(node)
 
     def spin_for(self, seconds: float, until=lambda: False) -> None:
         end = time.monotonic() + seconds
@@ -133,25 +123,21 @@ class _Inspector:
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
         )
 
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
-
 
 def run_topics(
     domain_id: int, echo: str | None = None, count: int = 1, seconds: float = 2.0, full: bool = False
 ) -> int:
     """List the topics on ``domain_id`` with rates, or echo ``count`` messages of one. Returns an exit code."""
     deadline = time.monotonic() + seconds
-    inspector = _Inspector(domain_id)
-    try:
-        if echo:
-            return _echo(inspector, echo, count, seconds, deadline, full)
-        inspector.discover(seconds)
-        return _list(inspector, domain_id, seconds)
-    finally:
-        inspector.close()
+    with tool_node("swarm_ros_topics", domain_id) as node:
+        inspector = _Inspector(node)
+        try:
+            if echo:
+                return _echo(inspector, echo, count, seconds, deadline, full)
+            inspector.discover(seconds)
+            return _list(inspector, domain_id, seconds)
+        finally:
+            inspector.executor.shutdown()
 
 
 def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
@@ -163,12 +149,13 @@ def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
     best_effort = QoSProfile(
         depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE
     )
-    for name, type_name in topics.items():
+    with signals_held():  # (each subscription makes a logger: a Ctrl-C then is acted on after them)
+        for name, type_name in topics.items():
 
-        def bump(_msg: bytes, name: str = name) -> None:
-            counts[name] += 1
+            def bump(_msg: bytes, name: str = name) -> None:
+                counts[name] += 1
 
-        inspector.node.create_subscription(_message_class(type_name), name, bump, best_effort, raw=True)
+            inspector.node.create_subscription(_message_class(type_name), name, bump, best_effort, raw=True)
     start = time.monotonic()
     inspector.spin_for(seconds)
     elapsed = time.monotonic() - start
@@ -201,7 +188,10 @@ def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: 
             f"(topics seen: {', '.join(sorted(topics)) or 'none'})"
         )
     got: list[object] = []
-    inspector.node.create_subscription(_message_class(topics[topic]), topic, got.append, inspector.publisher_qos(topic))
+    with signals_held():
+        inspector.node.create_subscription(
+            _message_class(topics[topic]), topic, got.append, inspector.publisher_qos(topic)
+        )
     # A latched stream replays its history first; of that burst only the newest messages matter. On a loaded
     # machine the burst takes longer than its usual 0.3 s (CI once printed a status from before tick 0): go on
     # while it still pours in, _BURST or more a 0.1 s step, for at most _BURST_S (a fast topic always pours).
