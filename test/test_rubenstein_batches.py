@@ -471,6 +471,25 @@ def test_the_world_names_the_batches_it_waits_for():
     assert ls.awaited() == ["robot_batch_1"]
 
 
+def test_a_world_shard_names_its_batches_then_the_peer_shards_it_waits_for():
+    """A still run's error names what the shard waits for: its batches' decisions, then, once they are in and sent
+    on, the peer shard whose border decisions of the tick are not in."""
+    from swarm_ros.core.central_shards import CentralShard
+    from swarm_ros.protocol.central_shard_world import ShardLockstep
+
+    class Port:
+        def __getattr__(self, name):
+            return lambda *args: None  # the messages to its peers: not looked at here
+
+    run = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    strips = strips_for(run, 2)
+    ls = ShardLockstep(CentralShard(run, strips, 0, 2), RubensteinWire, port=Port())
+    ls.announce("robot_batch_0", strips.strip(0))
+    assert ls.awaited() == ["robot_batch_0"]  # not shard 1's batch
+    ls.decisions(0, 1, decisions_of_batch_0(run, ls))
+    assert ls.awaited() == ["world_shard_1"]
+
+
 def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_what_it_waits_for():
     """The watch behind the rubenstein world's liveliness lines and its STILL_S bound (a peer started by hand that
     died would otherwise keep the run waiting for ever)."""

@@ -184,6 +184,15 @@ class CentralExchange:
         self.inbox.setdefault((kind, tick), {}).setdefault(peer, message)
         self._advance()
 
+    def awaited(self) -> list[int]:
+        """The peers whose messages of the tick being settled it waits for (none while its batches decide)."""
+        waits = {BORDER: ("border", self.neighbours), SHARED: ("shared", self.peers), ROWS: ("rows", self.neighbours)}
+        if self.phase not in waits:
+            return []
+        kind, senders = waits[self.phase]
+        got = self.inbox.get((kind, self.tick), {})
+        return [p for p in senders if p not in got]
+
     def _all(self, kind: str, senders: list[int]) -> dict[int, tuple] | None:
         got = self.inbox.get((kind, self.tick), {})
         return got if all(p in got for p in senders) else None

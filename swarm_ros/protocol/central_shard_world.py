@@ -12,11 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from swarm_ros.core.central_shards import CentralExchange, CentralShard, concat
+from swarm_ros.core.central_shards import DECIDING, CentralExchange, CentralShard, concat
 from swarm_ros.core.errors import Rejected
 
 from .central_rows import Wire
 from .central_world import CentralLockstep
+from .plan import shard_name
 
 
 class ShardLockstep(CentralLockstep):
@@ -65,6 +66,12 @@ class ShardLockstep(CentralLockstep):
 
     def area(self, k: int) -> np.ndarray:
         return self.wire.rows(self.shard.area(k), self.run.robots)
+
+    def awaited(self) -> list[str]:
+        """Its batches whose decisions are not in yet, or, once they are, the peer shards whose messages of the tick
+        it waits for, by node name."""
+        peers = self.exchange.awaited()
+        return [shard_name(j) for j in peers] if self.exchange.phase != DECIDING else super().awaited()
 
     def own(self, k: int) -> np.ndarray:
         deciding = self.shard.run.deciding(self.shard.present)
