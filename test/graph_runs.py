@@ -146,9 +146,8 @@ def wait_rubenstein_saved(out: Path, tick: int, timeout: float = 120) -> None:
 
 
 def wait_monitor_holds(out: Path, topic: str, messages: int, timeout: float = 120) -> None:
-    """Wait until the monitor's bag holds ``messages`` messages of ``topic`` durably: it makes its bag durable each
-    time it holds one more whole record, so that many messages of a record's parts mean the records before are
-    whole in it. For a run without a checkpoint to watch (a central world's shards)."""
+    """Wait until the monitor's bag holds ``messages`` messages of ``topic`` durably (it makes its bag durable each
+    time it holds one more whole record): read as a restarted monitor reads it."""
     from swarm_ros.ros.bag_writer import unfinished_messages
 
     def held() -> bool:

@@ -95,17 +95,17 @@ def test_k_batches_fed_the_worlds_messages_decide_as_the_in_process_engine(batch
     assert np.array_equal(plain.history, whole.history)
 
 
-@pytest.mark.parametrize("shards, batches, seed", [(2, 2, 0), (3, 3, 1), (3, 4, 2)])
-def test_world_shards_give_the_in_process_run(shards, batches, seed, shape):
+@pytest.mark.parametrize("shards, batches, seed, restarts", [(2, 2, 0, {}), (3, 3, 1, {21: 1}), (3, 4, 2, {})])
+def test_world_shards_give_the_in_process_run(shards, batches, seed, restarts, shape):
     """The shared world-shard split (swarm_ros.core.central_shards) serves it as it is: each shard holds its columns
-    and a halo, its messages delivered in a shuffled order, and every shard's metrics, and each robot's row at its
-    owner, are the one world's."""
+    and a halo, its messages delivered in a shuffled order, a shard restarted from its last save, and every shard's
+    metrics, and each robot's row at its owner, are the one world's."""
     from swarm_ros.core.central_shards import run_sharded
 
     whole = random_walk.RandomWalk(shape, params())
     whole.run()
     make = lambda: random_walk.RandomWalk(shape, params())
-    world = run_sharded(make, random_walk.Batch, shards, batches, seed=seed)
+    world = run_sharded(make, random_walk.Batch, shards, batches, seed=seed, restarts=restarts)
     assert all(np.array_equal(w.run.history, whole.history) for w in world) and whole.history[-1, 1] > 10
     assert all(np.array_equal(a[w.own], b[w.own]) for w in world for a, b in zip(w.run.robots, whole.robots))
     assert np.array_equal(np.sort(np.concatenate([w.own for w in world])), np.arange(40))

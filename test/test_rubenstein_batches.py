@@ -86,6 +86,24 @@ def test_world_shards_each_holding_its_columns_and_a_halo_give_the_in_process_ru
     assert (whole.robots.state == JOINED).sum() > 4 and min(w.present.size for w in world) < 40
 
 
+@pytest.mark.parametrize("shards, restarts", [(2, {1: 0, 37: 1, 91: 0}), (3, {41: 1, 42: 2, 201: 1})])
+def test_a_restarted_world_shard_goes_on_from_its_save_and_the_run_is_the_unbroken_one(shards, restarts):
+    """A shard restarted from its last save, given again what its peers sent it since, decides those ticks again:
+    every shard's metrics and robots are the one world's. Restarted as it was to decide tick 91 (or 41, 201), it
+    had not saved tick 90 yet: it goes on from tick 80, as far behind as it can be (its peers sent it tick 91's);
+    restarted before its first save, it starts from tick 0."""
+    from swarm_ros.core.central_shards import run_sharded
+
+    params = RunParams(40, algorithm="rubenstein", seed=5, range_noise=0.04)
+    whole = RubensteinRun(square(6), params)
+    whole.run(400)
+    make = lambda: RubensteinRun(square(6), params)
+    world = run_sharded(make, RubensteinBatch, shards, 4, 400, restarts=restarts, save_every=10)
+    for w in world:
+        assert np.array_equal(w.run.history, whole.history)
+        assert all(np.array_equal(a[w.own], b[w.own]) for a, b in zip(w.run.robots, whole.robots))
+
+
 def test_a_world_shard_serves_its_batches_only_and_refuses_a_strip_that_is_no_batchs():
     """World shard 1 of 2 over 4 batches admits batches 2 and 3: another shard's batch's announcement is not its
     concern (not dropped), a strip of no batch is, and the run starts once its own batches are in."""
@@ -402,6 +420,35 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
         checkpoint.load(path, fresh)
     with pytest.raises(RunFailed, match="found no checkpoint"):
         checkpoint.load(tmp_path / "none", fresh)
+
+
+def test_a_world_shards_checkpoint_holds_its_robots_and_another_shards_is_refused(tmp_path):
+    """A world shard saves the robots it holds beside the run; resumed, it holds them again and its exchanges go on
+    from the saved tick. Another shard's checkpoint (its batches and robots) fails in one line."""
+    from swarm_ros.core.central_shards import CentralShard
+    from swarm_ros.core.errors import RunFailed
+    from swarm_ros.protocol import central_checkpoint as checkpoint
+    from swarm_ros.protocol.central_shard_world import ShardLockstep
+
+    params = RunParams(40, algorithm="rubenstein", seed=6)
+    whole = RubensteinRun(square(6), params)
+    whole.run(300)
+    strips = strips_for(whole, 4)
+    shard = ShardLockstep(CentralShard(whole, strips, 1, 2), RubensteinWire, port=None)
+    shard.resume({2: "robot_batch_2", 3: "robot_batch_3"}, strips.cuts, {"present": shard.shard.present})
+    path = tmp_path / "world.checkpoint.1"
+    checkpoint.save(path, whole, shard.hosts, strips.cuts, shard.kept())
+    fresh = RubensteinRun(square(6), params)
+    again = ShardLockstep(CentralShard(fresh, strips, 1, 2), RubensteinWire, port=None)
+    saved = checkpoint.load(path, fresh)
+    again.resume(saved.hosts, saved.cuts, saved.kept)
+    assert np.array_equal(again.shard.present, shard.shard.present) and again.exchange.tick == 301
+    assert again.started and again.mine == [2, 3] and again.hosts == shard.hosts
+    other = ShardLockstep(CentralShard(RubensteinRun(square(6), params), strips, 0, 2), RubensteinWire, port=None)
+    with pytest.raises(RunFailed, match="not of this shard"):
+        other.resume(saved.hosts, saved.cuts, saved.kept)
+    with pytest.raises(RunFailed, match="not of this run"):
+        again.resume(saved.hosts, saved.cuts, {"present": np.array([5, 3])})
 
 
 def test_metrics_rows_a_restarted_world_sends_again_are_taken_once_and_must_equal_those_held():

@@ -131,26 +131,28 @@ def test_a_run_stopped_mid_way_is_written_up_to_its_last_record_as_simulate_writ
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
-def test_a_world_shard_killed_ends_the_run_in_one_line_and_the_run_so_far_is_written(square, tmp_path):
-    """A world shard keeps no checkpoint yet: its restarted process ends the run in one line, and the monitor writes
-    the run up to its last record, outcome interrupted, as simulate --max-ticks writes it."""
+def test_a_world_shard_killed_goes_on_from_its_checkpoint_and_the_run_is_the_same(square, reference, tmp_path):
+    """World shard 1 of 2, killed mid-run (past its checkpoint of tick 300, saved every 100 ticks), goes on from its
+    last checkpoint: its peer waits, the topics give it again what its peer sent it since, its batches decide those
+    ticks again, the monitor takes its records' parts again as repeats: the run directory is simulate's, and its bag
+    holds the run."""
     out = tmp_path / "run"
     launcher = _launch(square, out, 2, "--world-shards", "2")
-    # Records 0 and 20 whole (two shards' parts each) and a part of 40. Not the partial recording's size: CI saw
-    # it grow twice with the record of tick 0 alone.
-    wait_monitor_holds(out, CentralTopics.of("rubenstein").robots, 5)
+    checkpoint = staged_logs(out) / "world.checkpoint.1"
+    wait_for(lambda: saved_tick(checkpoint) >= 300, 120, "shard 1's checkpoint of tick 300", poll=0.01)
+    # then the records up to tick 340 (each shard's part of each 20th tick): its process is ticks past a checkpoint
+    # (40 or more, unless it saved again meanwhile), which its new one decides again from what its peer sent it
+    wait_monitor_holds(out, CentralTopics.of("rubenstein").robots, 2 * (340 // 20 + 1))
     os.kill(node_pid(out, "world_shard_1", timeout=10), signal.SIGKILL)
-    _, err = launcher.communicate(timeout=120)
-    err = err.decode()
-    assert launcher.returncode == 1 and "a restarted world shard of this algorithm cannot go on yet" in err, err
-    assert err.splitlines()[-1].startswith("swarm-ros: error: world_shard_1 exited with status 1"), err
-    summary = json.loads((out / "summary.json").read_text())
-    tick = summary["convergence_tick"]
-    assert summary["outcome"] == "interrupted" and tick > 0
-    ref = tmp_path / "ref"
-    assert cli.main(["simulate", "--shape", str(square), *RUN, "--max-ticks", str(tick), "--out", str(ref)]) == 0
-    for name in ("metrics.csv", "final_state.csv"):
-        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    _, err = launcher.communicate(timeout=300)
+    assert launcher.returncode == 0, err.decode()
+    summary = assert_same_run(reference, out)
+    assert [r["node"] for r in summary["restarts"]] == ["world_shard_1"]
+    said = (out / "logs" / "world_shard_1.log").read_text()
+    assert "restarted: on from the checkpoint of tick" in said, said
+    assert "dropped" not in (out / "logs" / "monitor.log").read_text()  # the parts again were repeats, not faults
+    assert_rubenstein_bag_holds_run(out)
+    assert not list((out / "logs").glob("world.checkpoint*")), "a checkpoint outlived the run"
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 

@@ -20,6 +20,11 @@ A robot moves less than a column a tick, and a decision or a grant reads the rob
 decides, settles and closes as the one world does. :class:`CentralExchange` is a shard's side of those messages,
 whatever order they come in; :func:`run_sharded` runs S shards end to end in one process over it, delivering the
 messages in a shuffled order, for tests.
+
+A restarted shard goes on from its last save (its engine's :meth:`~swarm_ros.core.strips.CentralRun.saved` and the
+robots it held, :attr:`CentralShard.present`), at most ``ahead - 1`` ticks behind its peers, which wait for it:
+every message its peers sent it since is given to it again (the graph keeps them in its topics' histories), and it
+keeps those ``ahead`` ticks ahead of its own until they are due. What it sends again, its peers have: repeats.
 """
 
 from __future__ import annotations
@@ -116,6 +121,21 @@ class CentralShard:
         columns = self.run.grid.columns(self.run.robots.x[ids])
         return (columns >= first - 1) & (columns <= last + 1)
 
+    def restore(self, present: np.ndarray) -> None:
+        """Go on holding robots ``present`` (a save's, its engine restored to the same tick).
+
+        Raises:
+            ContractError: ids that are not robots of the run, or not ascending.
+        """
+        ids = np.asarray(present, dtype=np.int64)
+        if (
+            ids.ndim != 1
+            or (ids.size and (ids[0] < 0 or ids[-1] >= self.run.params.robots))
+            or np.any(np.diff(ids) <= 0)
+        ):
+            raise ContractError("a world shard's robots that are not ascending ids of the run")
+        self.present = ids
+
     def receive(self, mine: np.ndarray, rows: list[tuple[np.ndarray, Any]]) -> None:
         """After a tick: it holds its robots ``mine`` still within reach, and the peers' robots ``rows`` (ids,
         every array's rows) they sent it (:meth:`reach`)."""
@@ -143,15 +163,21 @@ DECIDING, BORDER, SHARED, ROWS = range(4)  #: what a shard waits for in a tick: 
 
 class CentralExchange:
     """A world shard's side of each tick's exchanges (the module's steps 2 to 5), messages in any order: what comes
-    for the tick being settled or the next is kept until it is due, a repeat of a closed tick is ignored, anything
-    else is refused (:class:`~swarm_ros.core.errors.Rejected`, by kind). It answers through a :class:`ShardPort`."""
+    for the tick being settled or the ``ahead - 1`` after it is kept until it is due, a repeat of a closed tick is
+    ignored, anything else is refused (:class:`~swarm_ros.core.errors.Rejected`, by kind). It answers through a
+    :class:`ShardPort`."""
 
-    def __init__(self, shard: CentralShard, port: ShardPort) -> None:
-        self.shard, self.port = shard, port
+    def __init__(self, shard: CentralShard, port: ShardPort, ahead: int = 2) -> None:
+        self.shard, self.port, self.ahead = shard, port, ahead
         self.neighbours = shard.neighbours()
         self.peers = [o for o in range(len(shard.ranges)) if o != shard.index]
-        self.tick, self.phase = shard.run.tick + 1, DECIDING  # the tick being settled, and what it waits for
         self.inbox: dict[tuple[str, int], dict[int, tuple]] = {}
+        self.restart()
+
+    def restart(self) -> None:
+        """Go on from the shard's tick (its engine restored from a save): what is kept of later ticks stays."""
+        self.tick, self.phase = self.shard.run.tick + 1, DECIDING  # the tick being settled, and what it waits for
+        self.inbox = {key: got for key, got in self.inbox.items() if key[1] >= self.tick}
         self.mine = self.own = self.decided_ = None  # type: Any
 
     def decided(self, tick: int, ids: np.ndarray, decided: Any) -> None:
@@ -179,7 +205,7 @@ class CentralExchange:
             raise Rejected("not its peer", f"{kind} from shard {peer}, which sends this shard none")
         if tick < self.tick:
             return  # a repeat of a closed tick
-        if tick > self.tick + 1:
+        if tick >= self.tick + self.ahead:
             raise Rejected("stale tick", f"{kind} of tick {tick}; the shard is at tick {self.tick}")
         self.inbox.setdefault((kind, tick), {}).setdefault(peer, message)
         self._advance()
@@ -223,35 +249,49 @@ class CentralExchange:
 
 
 class _Mail:
-    """An in-process transport: every message into one bag, delivered in a shuffled order."""
+    """An in-process transport: every message into one bag, delivered in a shuffled order; every message to a shard
+    kept, as the graph's topics keep their histories, to give a restarted shard again."""
 
     def __init__(self, seed: int) -> None:
         self.bag: list[Callable[[], None]] = []
         self.rng = random.Random(seed)
         self.exchanges: list[CentralExchange] = []
-        self.closed: list[int] = []
+        self.sent: list[list[tuple[int, Callable[[], None]]]] = []  # by receiver: (tick, delivery)
 
     def port(self, s: int) -> ShardPort:
-        mail, others = self, lambda: [o for o in range(len(self.exchanges)) if o != s]
+        mail = self
+
+        def post(peer: int, tick: int, deliver: Callable[[CentralExchange], None]) -> None:
+            def thunk() -> None:
+                deliver(mail.exchanges[peer])  # to the peer's process at delivery
+
+            mail.bag.append(thunk)
+            mail.sent[peer].append((tick, thunk))
 
         class Port:
             def send_border(self, peer, tick, ids, decided):
-                mail.bag.append(lambda: mail.exchanges[peer].border(s, tick, ids, decided))
+                post(peer, tick, lambda ex: ex.border(s, tick, ids, decided))
 
             def send_shared(self, tick, ids, rows, counts):
-                mail.bag += [lambda o=o: mail.exchanges[o].shared(s, tick, ids, rows, counts) for o in others()]
+                for o in range(len(mail.exchanges)):
+                    if o != s:
+                        post(o, tick, lambda ex: ex.shared(s, tick, ids, rows, counts))
 
             def send_rows(self, peer, tick, ids, rows):
-                mail.bag.append(lambda: mail.exchanges[peer].rows(s, tick, ids, rows))
+                post(peer, tick, lambda ex: ex.rows(s, tick, ids, rows))
 
             def closed(self, tick):
-                mail.closed.append(s)
+                pass
 
         return Port()
 
     def deliver(self) -> None:
         while self.bag:
             self.bag.pop(self.rng.randrange(len(self.bag)))()
+
+    def again(self, s: int, after: int) -> None:
+        """Give shard ``s`` again every message sent to it for the ticks after ``after``."""
+        self.bag += [thunk for tick, thunk in self.sent[s] if tick > after]
 
 
 def run_sharded(
@@ -262,12 +302,19 @@ def run_sharded(
     max_ticks: int | None = None,
     region_cuts: str = "",
     seed: int = 0,
+    restarts: dict[int, int] | None = None,
+    save_every: int = 10,
 ) -> list[CentralShard]:
     """Run a central world as ``shards`` world shards of ``batches`` batches (``batch(run, strips, k)`` gives batch
     k, as the algorithm's wire does), from ``make_run()`` (a fresh engine, one per shard), to its end or
     ``max_ticks`` ticks: each shard a :class:`CentralExchange`, their messages delivered in an order shuffled by
-    ``seed``. Returns the shards: each one's engine has the run's metrics and outcome, and the rows of its own
-    robots."""
+    ``seed``. Each shard saves every ``save_every`` ticks; ``restarts`` (tick -> shard) restarts a shard as it is
+    about to decide that tick: a fresh engine from its last save, given again what its peers sent it since. Returns
+    the shards: each one's engine has the run's metrics and outcome, and the rows of its own robots.
+
+    Raises:
+        ContractError: the shards did not end at the same tick, or a restart never came.
+    """
     from .strips import strips_for
 
     runs = [make_run() for _ in range(shards)]
@@ -275,15 +322,43 @@ def run_sharded(
     world = [CentralShard(runs[s], strips, s, shards) for s in range(shards)]
     hosts = {k: batch(w.run, strips, k) for w in world for k in w.batches}
     mail = _Mail(seed)
-    mail.exchanges = [CentralExchange(w, mail.port(s)) for s, w in enumerate(world)]
-    left = max_ticks
-    while world[0].run.outcome is None and (left is None or left > 0):
-        tick, mail.closed = world[0].run.tick + 1, []
-        for w, exchange in zip(world, mail.exchanges):  # the batches decide, from their areas alone
-            parts = [hosts[k].decide(tick, ids, take(w.run.robots, ids)) for k in w.batches for ids in [w.area(k)]]
-            exchange.decided(tick, *concat(parts))
+    mail.sent = [[] for _ in range(shards)]
+    ahead = save_every + 2  # the ticks a restarted shard may be behind its peers, and the one they are at
+    mail.exchanges = [CentralExchange(w, mail.port(s), ahead) for s, w in enumerate(world)]
+    end = None if max_ticks is None else runs[0].tick + max_ticks
+    saves: dict[int, tuple[int, dict[str, np.ndarray], np.ndarray]] = {}
+    pending = dict(restarts or {})
+    while True:
+        due = [
+            s
+            for s, (w, ex) in enumerate(zip(world, mail.exchanges))
+            if ex.phase == DECIDING and w.run.outcome is None and (end is None or ex.tick <= end)
+        ]
+        if not due and not mail.bag:
+            break
+        for s in due:
+            w = world[s]
+            if pending.get(w.run.tick + 1) == s:  # (killed before it saved the tick it closed: the most behind)
+                del pending[w.run.tick + 1]
+                fresh = make_run()
+                w = world[s] = CentralShard(fresh, strips, s, shards)
+                tick = 0  # killed before its first save: from the start
+                if s in saves:
+                    tick, arrays, present = saves[s]
+                    fresh.restore(tick, arrays)
+                    w.restore(present)
+                hosts.update({k: batch(fresh, strips, k) for k in w.batches})
+                mail.exchanges[s] = CentralExchange(w, mail.port(s), ahead)
+                mail.again(s, tick)
+            if w.run.tick % save_every == 0:  # as the graph saves: before the tick's areas go out
+                saves[s] = (w.run.tick, {k: np.copy(v) for k, v in w.run.saved().items()}, w.present.copy())
+            parts = [
+                hosts[k].decide(w.run.tick + 1, ids, take(w.run.robots, ids)) for k in w.batches for ids in [w.area(k)]
+            ]
+            mail.exchanges[s].decided(w.run.tick + 1, *concat(parts))
         mail.deliver()
-        if sorted(mail.closed) != list(range(shards)):
-            raise ContractError(f"tick {tick}: shards {mail.closed} closed it, not every shard")
-        left = None if left is None else left - 1
+    if len({(w.run.tick, w.run.outcome) for w in world}) != 1:
+        raise ContractError(f"the shards ended at ticks {[w.run.tick for w in world]}")
+    if pending:
+        raise ContractError(f"the run ended before the restarts at ticks {sorted(pending)}")
     return world

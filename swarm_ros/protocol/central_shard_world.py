@@ -3,7 +3,8 @@ its strips only, the robots of its columns and halo (:class:`~swarm_ros.core.cen
 tick settled with its peers (:class:`~swarm_ros.core.central_shards.CentralExchange`) once its batches' decisions
 are in. The rest of the world's logic is :class:`~swarm_ros.protocol.central_world.CentralWorld`'s, as the one
 world's: the monitor's reach, records (each shard's of its own robots; shard 0 sends the metrics, the same on every
-shard), liveliness, a still run, the end. A world shard keeps no checkpoint yet: its restarted process ends the run.
+shard), liveliness, a still run, the end, and a checkpoint (:mod:`~swarm_ros.protocol.central_checkpoint`), which
+also holds the robots the shard holds: a restarted shard process goes on from it, its peers waiting for it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from swarm_ros.core.central_shards import DECIDING, CentralExchange, CentralShard, concat
-from swarm_ros.core.errors import Rejected
+from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 
 from .central_rows import Wire
 from .central_world import CentralLockstep
@@ -24,11 +25,11 @@ class ShardLockstep(CentralLockstep):
     """A :class:`CentralLockstep` for world shard ``shard.index``: ``port`` sends its messages to its peers
     (``send_border``, ``send_shared``, ``send_rows``: :class:`~swarm_ros.core.central_shards.ShardPort`)."""
 
-    def __init__(self, shard: CentralShard, wire: Wire, port: Any) -> None:
+    def __init__(self, shard: CentralShard, wire: Wire, port: Any, ahead: int = 2) -> None:
         super().__init__(shard.run, wire)
         self.shard, self.expected, self.port = shard, shard.strips, port
         self.shard_index = shard.index
-        self.exchange = CentralExchange(shard, self)
+        self.exchange = CentralExchange(shard, self, ahead)
 
     @property
     def batches(self) -> int:
@@ -63,6 +64,25 @@ class ShardLockstep(CentralLockstep):
             return []
         self.strips, self.started = self.expected, True
         return self.mine
+
+    def kept(self) -> dict[str, np.ndarray]:
+        """The robots it holds (its columns' and its halo's): saved with the run."""
+        return {"present": self.shard.present}
+
+    def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray]) -> None:
+        """As :meth:`CentralLockstep.resume`, holding the robots it held, its exchanges on from the run's tick.
+
+        Raises:
+            RunFailed: a checkpoint that is not of this shard of this run.
+        """
+        if not np.array_equal(cuts, self.expected.cuts) or set(hosts) != set(self.mine) or "present" not in kept:
+            raise RunFailed("the world shard's checkpoint is not of this shard of this run")
+        try:
+            self.shard.restore(kept["present"])
+        except ContractError as exc:
+            raise RunFailed(f"the world shard's checkpoint is not of this run ({exc})") from exc
+        super().resume(hosts, cuts, kept)
+        self.exchange.restart()
 
     def area(self, k: int) -> np.ndarray:
         return self.wire.rows(self.shard.area(k), self.run.robots)

@@ -30,7 +30,7 @@ from swarm_ros.core.params import MAX_TICKS, auto_every
 from swarm_ros.core.strips import CentralRun, Strips
 
 from . import central_checkpoint as checkpoint
-from .central_checkpoint import save_every
+from .central_checkpoint import SAVE_TICKS, SHARD_SAVE_TICKS, save_every
 from .central_rows import Wire, metrics_rows
 from .plan import CENTRAL_KEPT as KEPT
 from .plan import MONITOR
@@ -134,10 +134,18 @@ class CentralLockstep:
         """The batch number of node ``name``, once the run has started; None for a node that is no batch of it."""
         return next((k for k, who in self.hosts.items() if who == name), None)
 
-    def resume(self, hosts: dict[int, str], cuts: np.ndarray) -> None:
+    def kept(self) -> dict[str, np.ndarray]:
+        """What it saves beside the run in a checkpoint: nothing (a world shard's: its robots)."""
+        return {}
+
+    def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray]) -> None:
         """Serve again, from a checkpoint, the batches named ``hosts`` (batch number -> node name) of the strips cut
         at ``cuts`` (:attr:`Strips.cuts`): their announcements are taken as a restarted batch's, each sent its area
-        of the run's tick."""
+        of the run's tick. ``kept``: what :meth:`kept` gave.
+
+        Raises:
+            RunFailed: a checkpoint that is not of this run.
+        """
         self.strips = Strips(np.asarray(cuts, dtype=np.int64))
         self.hosts = dict(hosts)
         self.started = True
@@ -234,7 +242,8 @@ class Watch:
 class CentralWorld:
     """The world node's logic, on a :class:`CentralLockstep`: tick 0 once the strips tile the grid and the monitor
     reads the run's topics; each settled tick sent unless it is past the monitor's reach (``monitor_window`` past
-    the last record the monitor reports held: :func:`monitor_reach`); a checkpoint every :func:`save_every` ticks,
+    the last record the monitor reports held: :func:`monitor_reach`); a checkpoint every :func:`save_every` ticks
+    (1,000 or so; a world shard's, 100 or so),
     before the tick goes out; the records (every robot's row and the metrics rows since the last) every
     ``record_every`` ticks and at the end; the peers' liveliness and a still run's failure (:class:`Watch`);
     the end once the monitor holds it (or, with no window, once its readers have everything, or after ``LINGER``).
@@ -258,9 +267,10 @@ class CentralWorld:
         self.ls.on_settled = self._settled
         self.port, self.log, self.clock = port, log, clock
         self.every = int(own["record_every"]) or auto_every(run.params)
-        self.save_every = save_every(self.every)
+        sharded = self.ls.shard_index is not None
+        self.save_every = save_every(self.every, SHARD_SAVE_TICKS if sharded else SAVE_TICKS)
         self.reach = monitor_reach(int(own["monitor_window"]), self.every)
-        self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] and self.ls.shard_index is None else None
+        self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] else None
         self.start_timeout = float(own["start_timeout"])
         self.created = clock()
         self.held, self.held_end = -1, False  # the monitor's last held record, and whether it holds the outcome
@@ -282,20 +292,19 @@ class CentralWorld:
     def _resume(self) -> None:
         """Go on from the checkpoint the process before saved: the run at its tick, the batches it served (their
         announcements, latched, come again and are sent their areas of that tick), and the metrics rows from the
-        last record before it sent again (the monitor drops what it holds).
+        last record before it sent again (the monitor drops what it holds). A world shard's peers wait for it; what
+        they sent it since, their topics keep (:func:`~swarm_ros.protocol.central_checkpoint.shard_kept`).
 
         Raises:
-            RunFailed: a world shard's process (it cannot go on after a restart yet), or no checkpoint to go on from.
+            RunFailed: no checkpoint to go on from, or one that is not of this run.
         """
-        if self.ls.shard_index is not None:
-            raise RunFailed("a restarted world shard of this algorithm cannot go on yet: the run ends")
         if self.checkpoint is None:
             raise RunFailed("a restarted world has no checkpoint to go on from (the checkpoint parameter is empty)")
         if not self.checkpoint.exists():  # tick 0 is saved before anything of it goes out: nothing did
             self.log.info("restarted before tick 0 went out: the run starts from tick 0")
             return
         saved = checkpoint.load(self.checkpoint, self.run)
-        self.ls.resume(saved.hosts, saved.cuts)
+        self.ls.resume(saved.hosts, saved.cuts, saved.kept)
         self.sent_metrics = saved.tick - self.every if saved.tick else -1
         self.log.info(f"restarted: on from the checkpoint of tick {saved.tick}")
 
@@ -368,7 +377,7 @@ class CentralWorld:
         tick, ended = run.tick, run.outcome is not None
         self.watch.moved(self.clock())
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
-            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts)
+            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts, self.ls.kept())
         if ended or tick % self.every == 0:
             robots = self.ls.wire.rows(self.ls.recorded(), run.robots)
             metrics = metrics_rows(run.history[self.sent_metrics + 1 :], run.columns)

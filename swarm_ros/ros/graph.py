@@ -113,6 +113,20 @@ CENTRAL_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+
+
+def central_shards_qos(kept: int) -> QoSProfile:
+    """Between a central world's shards: each tick's messages, the last ``kept`` ticks' kept for a peer's restarted
+    process, which goes on from a save at most that many ticks back
+    (:func:`swarm_ros.protocol.central_checkpoint.shard_kept`)."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=kept,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+
+
 CLOCK_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=1,

@@ -12,7 +12,7 @@ most ``monitor_window`` ticks past the last record the monitor reports held on /
 (:func:`~swarm_ros.protocol.central_world.monitor_reach`), so a restarted monitor finds in the topics' histories
 every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it (or, with no
 window, once its readers have everything or after a grace period). It saves a checkpoint at tick 0 and every 1,000
-ticks or so, before the tick goes out; a restarted process goes on from the last one
+ticks or so (a world shard: every 100 or so), before the tick goes out; a restarted process goes on from the last one
 (:mod:`swarm_ros.protocol.central_checkpoint`). The algorithm's name's hyphens are underscores in the topics.
 
     ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
@@ -34,10 +34,11 @@ from std_msgs.msg import Empty, Int64MultiArray
 from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.central_shards import CentralShard
 from swarm_ros.core.errors import Rejected
-from swarm_ros.core.params import Settings
+from swarm_ros.core.params import Settings, auto_every
 from swarm_ros.core.strips import strips_for
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.central_checkpoint import shard_kept
 from swarm_ros.protocol.central_shard_world import ShardLockstep
 from swarm_ros.protocol.central_world import CentralWorld
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
@@ -74,8 +75,10 @@ class CentralWorldNode:
     def _shard(self, engine: Any, own: dict[str, Any]) -> ShardLockstep:
         """World shard ``shard`` of ``shards``: its lockstep, and its links to its peers (plan.shard_topic)."""
         strips = strips_for(engine, int(own["batches"]), str(own["region_cuts"]))
-        ls = ShardLockstep(CentralShard(engine, strips, int(own["shard"]), int(own["shards"])), self.wire, self)
-        i, ex, qos = ls.shard.index, ls.exchange, msgs.SHARDS_QOS
+        kept = shard_kept(int(own["record_every"]) or auto_every(self.params))  # ticks a restarted peer may be behind
+        shard = CentralShard(engine, strips, int(own["shard"]), int(own["shards"]))
+        ls = ShardLockstep(shard, self.wire, self, ahead=kept)
+        i, ex, qos = ls.shard.index, ls.exchange, msgs.central_shards_qos(kept)
         self.to_peer = {
             (what, j): self.signer.publisher(PointCloud2, shard_topic(i, f"{what}_to_{j}"), qos)
             for j in ex.neighbours
