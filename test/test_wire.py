@@ -24,14 +24,14 @@ pytestmark = pytest.mark.unit
 
 
 def test_row_layouts_are_the_documented_point_fields():
-    assert point_fields(ROBOT_ROW) == [
+    assert point_fields(ROBOT_ROW) == (
         ("x", 0, FLOAT64, 1),
         ("y", 8, FLOAT64, 1),
         ("z", 16, FLOAT64, 1),
         ("heading", 24, FLOAT64, 1),
         ("id", 32, UINT32, 1),
         ("state", 36, UINT8, 1),
-    ]
+    )
     assert ROBOT_ROW.itemsize == DECISION_ROW.itemsize == 40
     check_fields(point_fields(DECISION_ROW), 40, DECISION_ROW)
     with pytest.raises(ContractError, match="unexpected point layout"):

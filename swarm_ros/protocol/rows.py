@@ -11,6 +11,8 @@ simulation time (:data:`TICK_SECONDS`), so a message of tick t is stamped t s, 0
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -125,15 +127,13 @@ def decision_row(dims: int) -> np.dtype:
     return DECISION_ROW if dims == 2 else DECISION_ROW_3D
 
 
-def point_fields(dtype: np.dtype) -> list[tuple[str, int, int, int]]:
-    """(name, offset, PointField datatype, count) of each field of a row type."""
-    out = []
+@functools.lru_cache(maxsize=64)
+def point_fields(dtype: np.dtype) -> tuple[tuple[str, int, int, int], ...]:
+    """(name, offset, PointField datatype, count) of each field of a row type (found once a type: every message a
+    node checks compares its fields with them)."""
     fields = dtype.fields
     assert fields is not None and dtype.names is not None  # a row type is a structured dtype
-    for name in dtype.names:
-        sub, offset = fields[name][:2]
-        out.append((name, offset, _CODE_OF[sub.str[1:]], 1))
-    return out
+    return tuple((name, fields[name][1], _CODE_OF[fields[name][0].str[1:]], 1) for name in dtype.names)
 
 
 TAG_PREFIX = "swarm_ros.tag"  #: a message's tag starts so (swarm_ros.protocol.tag); in a cloud, a last field's name
@@ -144,16 +144,16 @@ def is_tag(text: str) -> bool:
     return text.startswith(TAG_PREFIX + ":")
 
 
-def check_fields(fields: list[tuple[str, int, int, int]], point_step: int, dtype: np.dtype) -> None:
+def check_fields(fields: Sequence[tuple[str, int, int, int]], point_step: int, dtype: np.dtype) -> None:
     """Raise ContractError unless a message's fields and point step are exactly those of ``dtype``, and a
     last field that holds nothing (count 0) and is named by a tag, which is skipped."""
-    fields = list(fields)
-    if fields and fields[-1][3] == 0 and is_tag(fields[-1][0]):
-        fields.pop()
-    if point_step != dtype.itemsize or fields != point_fields(dtype):
+    got = tuple(fields)
+    if got and got[-1][3] == 0 and is_tag(got[-1][0]):
+        got = got[:-1]
+    if point_step != dtype.itemsize or got != point_fields(dtype):
         raise ContractError(
-            f"unexpected point layout {fields} (step {point_step}); "
-            f"expected {point_fields(dtype)} (step {dtype.itemsize})"
+            f"unexpected point layout {list(got)} (step {point_step}); "
+            f"expected {list(point_fields(dtype))} (step {dtype.itemsize})"
         )
 
 
