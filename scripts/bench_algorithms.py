@@ -13,7 +13,12 @@ tick). Cases, one seed each, ``--rounds`` rounds alternating the two:
 Only ``run()`` is timed (set-up and compilation are not). Pinned to one CPU. Prints each case's
 robot-steps per second per round, the median and the range, and the ticks per second.
 
+``--before DIR`` measures both cases instead in this tree and in DIR, another checkout (``git archive <commit> |
+tar -x -C DIR``), alternating, ``--rounds`` times, each in a fresh process started inside its tree
+(``scripts/alternate.py``): each tree's median rate and the ratio this tree / DIR (median and range).
+
     .venv/bin/python scripts/bench_algorithms.py [--rounds 3] [--ticks 4000] [--smoke]
+    .venv/bin/python scripts/bench_algorithms.py --before /tmp/base [--rounds 7]
 """
 
 from __future__ import annotations
@@ -25,9 +30,20 @@ import time
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
+from pathlib import Path
+
+from alternate import alternate, child_report, print_ratios
+
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.params import RUBENSTEIN
-from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
+
+try:
+    from swarm_ros.core.rubenstein.run import COLUMNS, RubensteinRun
+except ImportError:  # a tree before the class's rename (--before): the same engine under its old name
+    from swarm_ros.core.rubenstein.run import COLUMNS
+    from swarm_ros.core.rubenstein.run import KilobotRun as RubensteinRun
+
+ROOT = Path(__file__).resolve().parent.parent
 
 ROBOTS = 1024
 
@@ -57,9 +73,18 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--ticks", type=int, default=4000, help="rubenstein ticks timed (default 4000)")
     parser.add_argument("--smoke", action="store_true", help="one round of 300 ticks: that the bench runs (CI)")
+    parser.add_argument("--before", type=Path, help="another checkout: measure both cases in both, alternating")
+    parser.add_argument("--measure", action="store_true", help=argparse.SUPPRESS)  # a child of --before
     args = parser.parse_args()
     if args.smoke:
         args.rounds, args.ticks = 1, 300
+    if args.before is not None:
+        print(f"The two algorithms, this tree against {args.before}, {args.rounds} alternating rounds (1 CPU)")
+        flags = ["--measure", "--ticks", str(args.ticks)]
+        rates = alternate(Path(__file__).resolve(), flags, {"this tree": ROOT, "before": args.before}, args.rounds)
+        print(f"M robot-steps/s, median of {args.rounds} rounds:")
+        print_ratios(rates, "this tree", "before")
+        return 0
     try:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     except (AttributeError, OSError):
@@ -67,6 +92,10 @@ def main() -> int:
     shape = Shape.load("star")
     Simulation(shape, RunParams(50, max_ticks=3)).run()  # load the kernels
     RubensteinRun(shape, RunParams(50, algorithm=RUBENSTEIN, max_ticks=3)).run()
+    if args.measure:  # one round of each, for --before
+        (secs, _, steps), (ksecs, _, ksteps) = darr_niazi(shape), rubenstein(shape, args.ticks)
+        child_report({"darr-niazi, whole run": steps / secs, f"rubenstein, ticks 1-{args.ticks}": ksteps / ksecs})
+        return 0
     results: dict[str, list[tuple[float, int, int]]] = {"darr-niazi": [], "rubenstein": []}
     for r in range(args.rounds):
         order = ("darr-niazi", "rubenstein") if r % 2 == 0 else ("rubenstein", "darr-niazi")

@@ -10,12 +10,19 @@ imports and ROS start-up are not a tick's work. The robot batches' share should 
 host: a batch's CPU per tick against the in-process tick shows it. Prints, per K, the wall time, the world's,
 the monitor's and each batch's CPU per tick in ms, and the in-process tick in ms.
 
+``--before DIR`` runs the graph instead in this tree and in DIR, another checkout (``git archive <commit> | tar -x
+-C DIR``), each ``swarm-ros run`` started inside its tree, alternating which goes first, after one run in each
+that is not counted (it may compile the tree's kernels): each node's CPU per tick, median and range per tree,
+and the ratio this tree / DIR.
+
     .venv/bin/python scripts/bench_rubenstein_graph.py [--rounds 3] [--ticks 2000] [--processes 1 2 4] [--smoke]
+    .venv/bin/python scripts/bench_rubenstein_graph.py --before /tmp/base --processes 2 [--rounds 10]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import statistics
 import subprocess
@@ -27,6 +34,7 @@ from pathlib import Path
 from swarm_ros.core.params import Settings
 from swarm_ros.core.rubenstein.run import RubensteinRun
 
+ROOT = Path(__file__).resolve().parent.parent
 DONE = re.compile(r"\[(\w+)\]: done, [\d.]+ s after the process started \(([\d.]+) s of CPU\)")
 READY = re.compile(r"\[(\w+)\]: ready, [\d.]+ s after the process started \(([\d.]+) s of CPU")
 
@@ -40,14 +48,17 @@ def in_process_ms(shape: str, robots: int, ticks: int) -> float:
     return (time.process_time() - t0) * 1000 / ticks
 
 
-def graph(shape: str, robots: int, ticks: int, processes: int) -> tuple[float, dict[str, float]]:
-    """(wall seconds, CPU seconds by node) of one ``swarm-ros run``."""
+def graph(shape: str, robots: int, ticks: int, processes: int, tree: Path = ROOT) -> tuple[float, dict[str, float]]:
+    """(wall seconds, CPU seconds by node) of one ``swarm-ros run`` of ``tree``'s package."""
     with tempfile.TemporaryDirectory(prefix="bench-rubenstein-") as tmp:
         out = Path(tmp) / "run"
         command = [sys.executable, "-m", "swarm_ros", "run", "--algorithm", "rubenstein", "--shape", shape]
         command += ["--robots", str(robots), "--seed", "1", "--max-ticks", str(ticks), "--quiet", "--out", str(out)]
+        env = {**os.environ, "PYTHONPATH": str(tree)}  # run from inside the tree: its package, not this one's
         t0 = time.perf_counter()
-        done = subprocess.run([*command, "--processes", str(processes)], capture_output=True, text=True)
+        done = subprocess.run(
+            [*command, "--processes", str(processes)], capture_output=True, text=True, cwd=tree, env=env
+        )
         wall = time.perf_counter() - t0
         if done.returncode != 0:
             raise SystemExit(f"bench: swarm-ros run failed: {done.stderr.strip()[-500:]}")
@@ -61,6 +72,32 @@ def graph(shape: str, robots: int, ticks: int, processes: int) -> tuple[float, d
         return wall, cpu
 
 
+def compare(before: Path, args: argparse.Namespace) -> None:
+    """Each node's CPU per tick in this tree and in ``before``, alternating (see the module's docstring)."""
+    trees = {"this tree": ROOT, "before": before}
+    for k in args.processes:
+        for tree in trees.values():
+            graph(args.shape, args.robots, args.ticks, k, tree)  # not counted: the tree's kernels may compile
+        got: dict[str, list[dict[str, float]]] = {name: [] for name in trees}
+        for r in range(args.rounds):
+            for name, tree in list(trees.items())[:: 1 if r % 2 else -1]:
+                _, cpu = graph(args.shape, args.robots, args.ticks, k, tree)
+                got[name].append({_role(node): s * 1000 / args.ticks for node, s in cpu.items()})
+        print(f"K = {k}, CPU per tick in ms, median (range) of {args.rounds} rounds; this tree / before")
+        for role in sorted(got["this tree"][0]):
+            new, old = ([r[role] for r in got[name]] for name in trees)
+            print(
+                f"  {role:<14} {statistics.median(new):7.3f} ({min(new):.3f}-{max(new):.3f})  before "
+                f"{statistics.median(old):7.3f} ({min(old):.3f}-{max(old):.3f})  "
+                f"{statistics.median(new) / statistics.median(old):.3f}"
+            )
+
+
+def _role(node: str) -> str:
+    """A node's role whatever a tree names its executable: world, monitor or robot_batch_<k>."""
+    return next((role for role in ("world", "monitor") if role in node), node)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
@@ -69,9 +106,14 @@ def main() -> int:
     parser.add_argument("--shape", default="star")
     parser.add_argument("--processes", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--smoke", action="store_true", help="one round of 50 ticks, 100 robots, K = 2 (CI)")
+    parser.add_argument("--before", type=Path, help="another checkout: the graph in both, alternating")
     args = parser.parse_args()
     if args.smoke:
         args.rounds, args.ticks, args.robots, args.processes = 1, 50, 100, [2]
+    if args.before is not None:
+        print(f"{args.shape}, {args.robots} robots, ticks 1-{args.ticks}: this tree against {args.before}")
+        compare(args.before, args)
+        return 0
     ref = [in_process_ms(args.shape, args.robots, args.ticks) for _ in range(args.rounds)]
     print(f"{args.shape}, {args.robots} robots, ticks 1-{args.ticks}, {args.rounds} rounds")
     print(f"in-process tick: {statistics.median(ref):.3f} ms (range {min(ref):.3f}-{max(ref):.3f})")

@@ -177,6 +177,17 @@ def test_bench_algorithms_smoke_prints_both_algorithms_rates():
     assert "ticks 1-300 (300 ticks)" in out and float(rows["rubenstein"][-2]) > 0, out
 
 
+def test_bench_algorithms_before_measures_both_algorithms_in_both_trees():
+    """--before DIR (this tree against itself here): each algorithm's rate in both trees and their ratio."""
+    command = [sys.executable, str(SCRIPTS / "bench_algorithms.py"), "--smoke", "--before", str(SCRIPTS.parent)]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    row = r"^  (darr-niazi|rubenstein)[^\n]*? +([\d.]+) +([\d.]+) +([\d.]+)  [\d.]+-[\d.]+$"
+    cases = re.findall(row, done.stdout, re.M)
+    assert [c[0] for c in cases] == ["darr-niazi", "rubenstein"], done.stdout
+    assert all(float(a) > 0 and float(b) > 0 for _, a, b, _ in cases), done.stdout
+
+
 def test_bench_rubenstein_graph_smoke_prints_each_process_cpu_per_tick_against_the_in_process_tick():
     out = _smoke("bench_rubenstein_graph.py")
     nodes = re.findall(r"^  (\w+) +CPU +([\d.]+) ms/tick .* ([\d.]+)x the in-process tick$", out, re.M)
