@@ -141,11 +141,7 @@ class CentralLockstep:
     def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray]) -> None:
         """Serve again, from a checkpoint, the batches named ``hosts`` (batch number -> node name) of the strips cut
         at ``cuts`` (:attr:`Strips.cuts`): their announcements are taken as a restarted batch's, each sent its area
-        of the run's tick. ``kept``: what :meth:`kept` gave.
-
-        Raises:
-            RunFailed: a checkpoint that is not of this run.
-        """
+        of the run's tick. ``kept``: what :meth:`kept` gave (nothing to take back here)."""
         self.strips = Strips(np.asarray(cuts, dtype=np.int64))
         self.hosts = dict(hosts)
         self.started = True
