@@ -232,7 +232,9 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
         lock.close()
     assert launcher.returncode == 130, err
     assert f"swarm-ros: ROS domain {domain}, 2 robot-batch processes, logs in {tmp_path}/.live.logs-" in err
-    assert time.monotonic() - start < 5, "the launcher and its children took 5 s or more to stop"
+    # every process stopped and the run so far written: 1.5 s on a quiet machine; 5.7 s once in CI beside a colcon
+    # build and a ros2 launch run (2 cores): the bound holds on a machine half as fast under that load
+    assert time.monotonic() - start < 12, "the launcher and its children took 12 s or more to stop"
     assert not processes_mentioning(str(out)), "a node process outlived the interrupted run"
     # the monitor wrote the run so far: summary 'interrupted', metrics, final state, recording, logs
     summary = json.loads((out / "summary.json").read_text())
