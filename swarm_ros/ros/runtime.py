@@ -7,6 +7,7 @@ the launcher died (SIGHUP, sent by the kernel: see :func:`follow_parent`).
 
 from __future__ import annotations
 
+import ctypes
 import faulthandler
 import os
 import signal
@@ -35,6 +36,8 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_ORPHANED = 0, 1, 2, 129  # and EXIT_INTER
 TOOL_ROS_ARGS = ("--ros-args", "--disable-external-lib-logs")
 _SPIN_TIMEOUT = 0.05  # seconds; how often poll() runs when no message arrives
 _TEARDOWN_S = 5.0  # seconds rclpy's and DDS's teardown may take once the node is closed
+_DUMP_S = 0.5  # seconds faulthandler's dump of a hung teardown's stacks is given before the process ends
+_CLOCK_MONOTONIC, _SIGEV_THREAD = 1, 2  # <time.h>'s and <signal.h>'s values on Linux
 
 
 _HELD: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)  #: what a tool's handlers turn into KeyboardInterrupt
@@ -280,12 +283,52 @@ def guard_teardown(name: str, code: int) -> None:
     it, failing a finished run). That watchdog is Python's and needs the GIL, which rclpy keeps while it waits
     inside Fast DDS: a batch whose launcher was SIGKILLed hung for good in a deadlock of Fast DDS 2.14 (its
     event thread and a receive thread, each waiting on the other, as the dead launcher's participant was
-    removed). So faulthandler's C thread, which needs no GIL, ends it at twice that: the threads' stacks into
-    the log, exit status 1."""
+    removed), and a finished batch hung the same way in ``destroy_node`` on a four-host run. So at one and a half
+    times that, faulthandler's C thread writes the threads' stacks into the log, and a timer of the C library,
+    whose thread needs no GIL either, ends the process just after with ``code``: a hung teardown never turns a
+    node's finished work into a failure (it exited 1 there, before), and it is over before the launcher's 10 s
+    grace for a node to exit by itself."""
     watchdog = threading.Timer(_TEARDOWN_S, _hung_teardown, (name, code))
     watchdog.daemon = True
     watchdog.start()
-    faulthandler.dump_traceback_later(2 * _TEARDOWN_S, exit=True)
+    faulthandler.dump_traceback_later(1.5 * _TEARDOWN_S, exit=False)
+    _exit_later(1.5 * _TEARDOWN_S + _DUMP_S, code)
+
+
+class _SigEvent(ctypes.Structure):
+    """glibc's ``struct sigevent`` on a 64-bit Linux (64 bytes), for ``SIGEV_THREAD``."""
+
+    _fields_ = (
+        ("value", ctypes.c_long),  # union sigval: the function's argument, here _exit's status
+        ("signo", ctypes.c_int),
+        ("notify", ctypes.c_int),
+        ("function", ctypes.c_void_p),
+        ("attributes", ctypes.c_void_p),
+        ("pad", ctypes.c_int * 8),
+    )
+
+
+class _TimerSpec(ctypes.Structure):
+    """``struct itimerspec``: the interval (none) and the first expiry, each as seconds and nanoseconds."""
+
+    _fields_ = (("every", ctypes.c_long * 2), ("first", ctypes.c_long * 2))
+
+
+def _exit_later(seconds: float, code: int) -> None:
+    """``_exit(code)`` in ``seconds``, from a thread glibc starts (POSIX timer, ``SIGEV_THREAD``): no Python runs
+    in it, so it fires while another thread keeps the GIL. The status is handed to ``_exit`` as the timer's
+    ``sigval``, which the x86-64 and AArch64 calling conventions pass in the register an ``int`` argument
+    uses."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    event = _SigEvent(value=code, notify=_SIGEV_THREAD, function=ctypes.cast(libc._exit, ctypes.c_void_p).value)
+    timer = ctypes.c_void_p()
+    whole = int(seconds)
+    spec = _TimerSpec(first=(ctypes.c_long * 2)(whole, int((seconds - whole) * 1e9)))
+    if (
+        libc.timer_create(_CLOCK_MONOTONIC, ctypes.byref(event), ctypes.byref(timer)) != 0
+        or libc.timer_settime(timer, 0, ctypes.byref(spec), None) != 0
+    ):  # not expected on Linux: the faulthandler fallback, with status 1
+        faulthandler.dump_traceback_later(1.5 * _TEARDOWN_S, exit=True)
 
 
 def _hung_teardown(name: str, code: int) -> None:
