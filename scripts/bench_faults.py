@@ -8,7 +8,7 @@ world has saved tick ``--at``. Reported per kind, as median (min-max) over the t
 
 - kill -> moving: from the SIGKILL until the run moves again. For a robot batch and the world: the world saves
   a tick past the one it had stopped at 50 ms after the kill (read from its checkpoint's header, as a
-  restarted world reads it). For the monitor: the world hears a metrics report past the last one it had then
+  restarted world reads it). For the monitor: the world hears a held report past the last one it had then
   (the same header); the world runs on up to ``monitor_window`` ticks without the monitor, then waits.
 - slowdown: the faulted command's wall time over the unfaulted one's, in the same trial.
 - same: metrics.csv and final_state.csv byte-identical to the unfaulted run's.

@@ -185,12 +185,13 @@ def test_a_replay_is_refused_and_a_restarted_sender_is_taken():
         ("robot_batch_0", msgs.ROBOTS),
         ("robot_batch_1", "/swarm/decisions/robot_batch_0"),
         ("world", msgs.METRICS),
+        ("robot_batch_0", msgs.HELD),
         ("monitor", msgs.BATCHES),
     ],
 )
 def test_a_node_of_the_run_is_taken_only_on_its_own_topics(sender, topic):
     node = _Node(sender)
-    kind = Int64MultiArray if topic in (msgs.METRICS, msgs.BATCHES) else PointCloud2
+    kind = Int64MultiArray if topic in (msgs.METRICS, msgs.HELD, msgs.BATCHES) else PointCloud2
     pub = auth.Signer(node, KEY).publisher(kind, topic, None)
     if kind is PointCloud2:
         pub.publish_rows(_rows(DECISION_ROW, 1), 1)

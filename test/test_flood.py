@@ -81,6 +81,7 @@ def test_a_flood_on_every_topic_slows_the_run_and_leaves_its_result_unchanged(tm
         "/swarm/status",
         "/swarm/batches",
         "/swarm/metrics",
+        "/swarm/held",
         "/swarm/decisions",
         "/swarm/decisions/robot_batch_0",
         "/swarm/decisions/robot_batch_1",

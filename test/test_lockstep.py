@@ -15,6 +15,7 @@ from lockstep_fakes import ROBOTS, LockstepRun
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.regions import columns
 from swarm_ros.core.state import RobotState
+from swarm_ros.protocol.checks import held_report
 from swarm_ros.protocol.plan import MONITOR, batch_name
 from swarm_ros.protocol.world_port import (
     DECISIONS_LINGER,
@@ -237,7 +238,7 @@ def test_the_world_waits_for_the_monitor_within_its_window_and_for_a_lost_one_up
     r.run(ticks=6)
     # published up to the window; the next tick applied and held, and the one after not applied while it waits
     assert r.port.ticks == [0, 1] and r.ls.sim.tick == 2, "published up to the window, the next one held"
-    r.ls.metrics(1)
+    r.ls.held(1)
     assert r.port.ticks == [0, 1, 2, 3] and r.ls.sim.tick == 3, "tick 3 went on from the decisions in already"
     r.run(ticks=3)
     assert r.port.ticks == [0, 1, 2, 3] and r.ls.sim.tick == 4, "tick 4 held for the monitor"
@@ -259,6 +260,15 @@ def test_the_world_waits_for_the_monitor_within_its_window_and_for_a_lost_one_up
     assert r.ls.lost == [] and r.ls.window == 2
 
 
+def test_the_monitors_held_report_is_checked_against_the_ticks_published():
+    """/swarm/held, every algorithm's backpressure: ``[tick, ended]``, the tick one the world published (or -1)."""
+    assert held_report(np.array([-1, 0]), 5) == (-1, False)
+    assert held_report(np.array([5, 1]), 5) == (5, True)
+    for values in ([5], [1, 0, 0], [-2, 0], [6, 0], [0, 2], [0, -1]):
+        with pytest.raises(Rejected, match="held"):
+            held_report(np.array(values), 5)
+
+
 @pytest.mark.parametrize("who", ["monitor", "batch"])
 def test_a_live_process_whose_messages_do_not_come_is_never_lost_and_the_run_fails_loudly(who):
     """Its liveliness holds, its messages do not arrive (drowned by a flood, or it hangs): waited for, never
@@ -268,7 +278,7 @@ def test_a_live_process_whose_messages_do_not_come_is_never_lost_and_the_run_fai
         r.start()
         r.ls.monitor_liveliness(1, 0)
         r.run(ticks=6)  # the world waits for the monitor after tick 1, and holds tick 2
-        what = "the monitor's metrics did not arrive for 60 s at tick 2"
+        what = "the monitor's held reports did not arrive for 60 s at tick 2"
     else:
         r = LockstepRun(on_batch_loss="remove")
         r.start()

@@ -403,6 +403,7 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
         for line in (
             "/swarm/robots [sensor_msgs/msg/PointCloud2]",
             "/swarm/metrics [std_msgs/msg/Int64MultiArray]",
+            "/swarm/held [std_msgs/msg/Int64MultiArray]",
             "/swarm/shape [nav_msgs/msg/OccupancyGrid]",
             "/clock [rosgraph_msgs/msg/Clock]",
             "/swarm/status [diagnostic_msgs/msg/DiagnosticArray]",

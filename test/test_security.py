@@ -74,14 +74,14 @@ class _Batches:
         # hears the genuine batches first (from two writers, the intruder's could come first and take its columns)
         self.intruder = SignedPublisher(Sealer(key, "intruder"), self.announce[-1].pub, msgs.BATCHES)
         self.robots_pub = Signer(node, key, "world").publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
-        self.metrics_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
+        self.held_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.HELD, msgs.HELD_QOS)
         # an outsider's: well-formed messages without a valid tag
         self.forged = {
             topic: node.create_publisher(kind, topic, qos)
             for topic, kind, qos in (
                 (msgs.decisions_topic(self.names[0]), PointCloud2, msgs.DECISIONS_QOS),
                 (msgs.BATCHES, msgs.Int64MultiArray, msgs.BATCHES_QOS),
-                (msgs.METRICS, msgs.Int64MultiArray, msgs.METRICS_QOS),
+                (msgs.HELD, msgs.Int64MultiArray, msgs.HELD_QOS),
                 (msgs.STATUS, DiagnosticArray, msgs.LATCHED_QOS),
                 (msgs.ROBOTS, PointCloud2, msgs.ROBOTS_QOS),
             )
@@ -197,9 +197,9 @@ class _Batches:
             hello.layout.dim[0].label = "intruder/0"
             self.intruder.publish(hello)
             self.sent["world: announcement"] = 1
-        elif tick == 14:  # metrics of a tick the world has not reached
-            self.metrics_pub.publish(self.msgs.metrics_message([10**6] + [0] * 6))
-            self.sent["world: metrics"] = 1
+        elif tick == 14:  # the monitor's report of a tick the world has not reached
+            self.held_pub.publish(self.msgs.held_message(10**6, False))
+            self.sent["world: held"] = 1
         elif tick >= 16 and not self.localized_sent:  # a localized robot of the batch, once there is one
             s = self.view.state
             localized = np.flatnonzero(s.state == RobotState.LOCALIZED)
@@ -226,9 +226,9 @@ class _Batches:
             rows["heading"] = (rows["heading"] + 1.0) % (2 * np.pi)
             self.forged[self.msgs.decisions_topic(self.names[0])].publish(self._cloud(rows, tick))
             self.sent["world: untagged decisions"] = 1
-        elif tick == 3:  # the monitor's metrics of a tick the world published
-            self.forged[self.msgs.METRICS].publish(self.msgs.metrics_message([tick - 1] + [0] * 6))
-            self.sent["world: untagged metrics"] = 1
+        elif tick == 3:  # the monitor's report of a tick the world published
+            self.forged[self.msgs.HELD].publish(self.msgs.held_message(tick - 1, False))
+            self.sent["world: untagged held"] = 1
         elif tick == 4:  # the world's status, with an outcome
             self.forged[self.msgs.STATUS].publish(self.msgs.status_message(tick, "complete", "complete"))
             self.sent["monitor: untagged status"] = 1

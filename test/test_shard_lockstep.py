@@ -186,7 +186,7 @@ class ShardedGraph:
     # -- the monitor's port
     def tick_counted(self, tick, metrics, occupancy, first, changed, messages) -> None:
         for j in range(len(self.shards)):
-            self.send(("metrics", j), lambda j=j, t=tick: self.shards[j].metrics(t, "monitor-1"))
+            self.send(("held", j), lambda j=j, t=tick: self.shards[j].held(t, "monitor-1"))
 
     def decisions_taken(self, tick: int) -> None:
         pass
@@ -222,7 +222,7 @@ class ShardedGraph:
             return
         for channel in list(self.channels):
             to_it = channel[2] == s if channel[0] in ("claims", "part", "again") else channel[1] == s
-            if channel[0] in ("claims", "part", "again", "metrics") and to_it:
+            if channel[0] in ("claims", "part", "again", "held") and to_it:
                 self.channels[channel].clear()
             if channel[0] == "decisions" and self.shard_of[channel[1]] == s:
                 self.channels[channel].clear()
@@ -231,8 +231,8 @@ class ShardedGraph:
         ls.monitor_liveliness(1, 0)
         ls.restore(saved, self.incarnations[s])
         self.restarts += 1
-        if self.monitor.last >= 0:  # the new process's readers get the writers' histories (metrics: depth 64)
-            self.send(("metrics", s), lambda t=self.monitor.last: ls.metrics(t, "monitor-1"))
+        if self.monitor.last >= 0:  # the new process's readers get the writers' histories (held: latched)
+            self.send(("held", s), lambda t=self.monitor.last: ls.held(t, "monitor-1"))
         for b in self.batches:
             if self.shard_of[b.k] == s:
                 ls.announce(batch_name(b.k), 0, b.strip)

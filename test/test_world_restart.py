@@ -135,24 +135,24 @@ def test_a_restored_world_sends_the_ticks_the_monitor_may_lack_again(tmp_path):
     _with_checkpoint(r, tmp_path / "ck")
     r.start()
     r.ls.monitor_liveliness(1, 0)
-    r.ls.metrics(0, "m1")
+    r.ls.held(0, "m1")
     for _ in range(3):
         r.tick()
     assert r.port.ticks == [0, 1, 2, 3]
-    r.ls.metrics(1, "m1")
+    r.ls.held(1, "m1")
     r.port.saver.monitor_reported(1)
     ls = _restarted(r, tmp_path / "ck")
     assert r.port.ticks == [2, 3], "from the monitor's last report on"
     assert ls.monitor_tick == 1 and ls.monitor_nonce == "m1"
     ls.monitor_liveliness(1, 0)
-    ls.metrics(3, "m1")  # the same monitor: no restart
+    ls.held(3, "m1")  # the same monitor: no restart
     assert ls.restarts == [(3, "world")]
-    ls.metrics(3, "m2")  # a new monitor process
+    ls.held(3, "m2")  # a new monitor process
     assert ls.restarts == [(3, "world"), (3, MONITOR)]
     assert ls.status().values["restarts"] == "3:world;3:monitor"
     while not ls.sim.done:  # the monitor reports each tick published: the world is never held for long
         r.run()
-        ls.metrics(ls.published_tick, "m2")
+        ls.held(ls.published_tick, "m2")
     assert np.array_equal(ls.sim.history, r.engine().history)
 
 

@@ -2,7 +2,7 @@
 
 The launcher loads the kernels every node uses, then forks the monitor, K robot-batch processes
 and the world from itself (:mod:`swarm_ros.app.forking`; a restarted node is started afresh), follows the
-run's progress on /swarm/metrics, and waits for the monitor to write the run
+run's progress on /swarm/status, and waits for the monitor to write the run
 directory. Then it lets every process end by itself, and stops those that do not
 (SIGTERM, then SIGKILL, to the process group of each). If any process
 fails, or the user interrupts, it stops them all the same way.

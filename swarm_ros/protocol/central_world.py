@@ -32,6 +32,7 @@ from swarm_ros.core.strips import CentralRun, Strips
 from . import central_checkpoint as checkpoint
 from .central_checkpoint import SAVE_TICKS, SHARD_SAVE_TICKS, save_every
 from .central_rows import Wire, metrics_rows
+from .checks import held_report
 from .plan import CENTRAL_KEPT as KEPT
 from .plan import MONITOR
 from .status import RUNNING, STARTING
@@ -50,17 +51,13 @@ def monitor_reach(window: int, every: int) -> int | None:
 
 
 def check_held(values: np.ndarray, run: CentralRun) -> tuple[int, bool]:
-    """The monitor's report on /swarm/<algorithm>/held, ``[tick, ended]``: the last tick whose record it holds, and
-    whether it holds the outcome too, which only the run's last tick can carry.
+    """The monitor's report on /swarm/held (:func:`~swarm_ros.protocol.checks.held_report`), of any tick (a restarted
+    world's monitor may be past it: a checkpoint is every 1,000 ticks or so); the outcome only with the run's last.
 
     Raises:
         Rejected: ("held") anything else.
     """
-    if values.size != 2:
-        raise Rejected("held", f"{values.size} values, expected the tick and whether the run ended")
-    tick, ended = int(values[0]), int(values[1])
-    if not -1 <= tick <= MAX_TICKS or ended not in (0, 1):
-        raise Rejected("held", f"tick {tick}, ended {ended}")
+    tick, ended = held_report(values, MAX_TICKS)
     if ended and (run.outcome is None or tick != run.tick):
         raise Rejected("held", f"the end at tick {tick}; the run is at tick {run.tick}, outcome {run.outcome}")
     return tick, bool(ended)
@@ -335,7 +332,7 @@ class CentralWorld:
         self._go_on()
 
     def held_report(self, values: np.ndarray) -> None:
-        """The monitor's report on /swarm/<algorithm>/held (:func:`check_held`).
+        """The monitor's report on /swarm/held (:func:`check_held`).
 
         Raises:
             Rejected: ("held") a report that cannot be of this run.

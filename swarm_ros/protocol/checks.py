@@ -173,19 +173,19 @@ def tick_stamp(header) -> int:
     return int(header.stamp.sec) // TICK_SECONDS
 
 
-def metrics_tick(msg, labels: tuple[str, ...], newest: int) -> int:
-    """The tick of a /swarm/metrics message, checked: the monitor's columns, and a tick the world published.
+def held_report(values: np.ndarray, newest: int) -> tuple[int, bool]:
+    """The monitor's report on /swarm/held, ``[tick, ended]``, checked: the last tick whose record its bag holds
+    (-1: none yet), at most ``newest``, and whether it holds the run's outcome too.
 
     Raises:
-        Rejected: other columns, or a tick after ``newest`` (the last tick the world published).
+        Rejected: ("held") not two values, a tick out of range, or ``ended`` neither 0 nor 1.
     """
-    label = msg.layout.dim[0].label if msg.layout.dim else ""
-    if label != ",".join(labels) or len(msg.data) != len(labels):
-        raise Rejected("metrics layout", f"columns {label[:80]!r} with {len(msg.data)} values")
-    tick = int(msg.data[labels.index("tick")])
-    if not 0 <= tick <= newest:
-        raise Rejected("future tick", f"metrics of tick {tick}; the world published up to {newest}")
-    return tick
+    if values.size != 2:
+        raise Rejected("held", f"{values.size} values, expected the tick and whether the run ended")
+    tick, ended = int(values[0]), int(values[1])
+    if not -1 <= tick <= newest or ended not in (0, 1):
+        raise Rejected("held", f"tick {tick}, ended {ended}; the world published up to tick {newest}")
+    return tick, bool(ended)
 
 
 def checked_robots(view: SwarmView, msg, radius: int, part: bool = False) -> tuple[int, np.ndarray]:

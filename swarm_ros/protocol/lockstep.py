@@ -143,7 +143,7 @@ class Lockstep(WorldRecords):
         self.restarts: list[tuple[int, str]] = []  # (tick, node) of every restart: batches, world processes, monitor
         self.known: dict[int, int] = {}  # restored: batch -> incarnation of the process the one before knew
         self.restored = False  # this process went on from a save (a process before it was lost)
-        self.monitor_nonce = ""  # the tag nonce of the monitor process whose metrics came last
+        self.monitor_nonce = ""  # the tag nonce of the monitor process whose held report came last
         self.monitor_down_since: float | None = None  # the monitor lost and waited for: since when
         self.started_wall = 0.0  # time.time() at tick 0 (a restored process's wall_seconds count from it)
         self.lost: list[str] = []  # batches (and the monitor) lost for good
@@ -157,8 +157,8 @@ class Lockstep(WorldRecords):
         self.monitor_tick = -1
         self.monitor_alive = False
         self.published_tick = -1
-        self.progress_at = clock()  # the last tick published or metrics received (or a stall dealt with)
-        self.moved_at = self.progress_at  # the last tick published or metrics received
+        self.progress_at = clock()  # the last tick published or more reported held (or a stall dealt with)
+        self.moved_at = self.progress_at  # the last tick published or more reported held
         self.status_at = -1.0
         self.start_time: float | None = None
         self.startup_seconds = float("nan")
@@ -427,9 +427,9 @@ class Lockstep(WorldRecords):
             f"({time.process_time():.2f} s of CPU)"
         )
 
-    def metrics(self, tick: int, nonce: str = "") -> None:
-        """The monitor's report of ``tick`` (checked: a tick this process published), from the monitor process
-        whose tags carry ``nonce``: a new one after another is a restarted monitor."""
+    def held(self, tick: int, nonce: str = "") -> None:
+        """The monitor's report that its bag holds ``tick`` (checked: a tick this process published, or -1), from
+        the monitor process whose tags carry ``nonce``: a new one after another is a restarted monitor."""
         if nonce != self.monitor_nonce:
             if self.monitor_nonce and self.started:
                 self.restarts.append((self.sim.tick, MONITOR))
@@ -630,9 +630,9 @@ class Lockstep(WorldRecords):
             limit = STALL_S if self.monitor_tick >= 0 else FIRST_STALL_S
             if self.window and now - self.progress_at >= limit:
                 if not self.monitor_alive:
-                    self.monitor_down(f"no metrics for {limit:g} s")
+                    self.monitor_down(f"nothing more held for {limit:g} s")
                 elif now - self.progress_at >= DROWNED_S:
-                    self._drowned("the monitor's metrics")
+                    self._drowned("the monitor's held reports")
             return
         limit = STALL_S if self.sim.tick > 0 else FIRST_STALL_S
         if now - self.progress_at < limit:

@@ -54,7 +54,7 @@ class MonitorPort(Protocol):
         first: bool,
         changed: bool,
         messages: list[tuple[str, bytes]],
-    ) -> None: ...  # the tick's `messages` (topic, as they came) into the bag, durable, then its metrics out
+    ) -> None: ...  # the tick's `messages` (topic, as they came) into the bag, durable, then its metrics and held out
     # (occupancy: None when not known, at a tick whose rows did not come: record_every)
     def decisions_taken(self, tick: int) -> None: ...  # the decisions message being handled, into the bag
     def take_missed(self) -> int: ...  # hand over what waits in the readers; how many messages
@@ -280,6 +280,7 @@ class MonitorCore:
         self.rows.append(metrics)
         joined = len(self.rows) < 2 or metrics[_LOCALIZED] != self.rows[-2][_LOCALIZED]
         self.occupancy_changed |= joined or removed > removed_before
+        self.outcome = self._outcome(metrics, removed)  # (before the port hears of the tick: it reports the end)
         if not self.replaying:
             occupancy = self.view.state.occupancy if recorded else None
             changed, messages = recorded and self.occupancy_changed, self.held.pop(tick)
@@ -289,7 +290,6 @@ class MonitorCore:
         if removed > removed_before:
             self.losses.append((tick, removed - removed_before))
             self.removed = removed
-        self.outcome = self._outcome(metrics, removed)
         if self.recorder is not None:
             self.recorder.metrics([metrics])
             if recorded:

@@ -86,6 +86,10 @@ SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
 OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
 STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
 METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
+#: monitor -> every world process, every algorithm's run: ``[tick, ended]`` (Int64MultiArray, latched), the last
+#: tick whose record its bag holds durably, and 1 once it holds the run's outcome too. A world runs at most
+#: ``monitor_window`` ticks (or records) past it: the run's one backpressure.
+HELD = "/swarm/held"
 #: world -> monitor, each tick when the robots' rows go out only every ``record_every``-th (> 1): its robots by
 #: state (a world shard's: those in its strips), the monitor's count of the ticks between (Int64MultiArray)
 TALLY = "/swarm/tally"
@@ -102,13 +106,12 @@ MONITOR_READS = (ROBOTS, DECISIONS, STATUS, TALLY)
 #: algorithm's rows: swarm_ros.protocol.central_world): ``robots``: world -> monitor and viewers, every robot's row at
 #: tick 0, every ``record_every``-th tick and the last; ``metrics``: world -> monitor, the metrics rows of the ticks
 #: since the last message, as often; ``area/<batch>``: world -> one batch, after each tick, its area's rows;
-#: ``decisions/<batch>``: one batch -> world, its strip's decisions; ``held``: monitor -> world (Int64MultiArray,
-#: latched), the last tick whose record is in its bag, and 1 once the run's outcome is too.
+#: ``decisions/<batch>``: one batch -> world, its strip's decisions. (The monitor's report back is ``HELD``.)
 #: The robots and metrics messages the world keeps for a late reader (a restarted monitor): one each per record,
 #: so the world runs at most ``CENTRAL_KEPT - 2`` records past the monitor's last held one
 #: (swarm_ros.protocol.central_world.monitor_reach).
 CENTRAL_KEPT = 32
-_CENTRAL = re.compile(r"/swarm/([a-z][a-z0-9_]*)/(held|decisions/(.+))")
+_CENTRAL = re.compile(r"/swarm/([a-z][a-z0-9_]*)/decisions/(.+)")
 
 
 @dataclass(frozen=True)
@@ -129,10 +132,6 @@ class CentralTopics:
     def metrics(self) -> str:
         return f"{self.root}/metrics"
 
-    @property
-    def held(self) -> str:
-        return f"{self.root}/held"
-
     def area(self, node_name: str) -> str:
         return f"{self.root}/area/{node_name}"
 
@@ -141,12 +140,10 @@ class CentralTopics:
 
 
 def central_sender(topic: str) -> str | None:
-    """Who alone sends on ``topic`` if it is a central world's run's monitor's or batch's (``held``: the monitor;
-    ``decisions/<batch>``: that batch), else None."""
+    """Who alone sends on ``topic`` if it is a central world's run's batch's (``decisions/<batch>``: that batch), else
+    None."""
     got = _CENTRAL.fullmatch(topic)
-    if got is None:
-        return None
-    return MONITOR if got.group(2) == "held" else got.group(3)
+    return None if got is None else got.group(2)
 
 
 #: /swarm/shards/shard_<i>/...: world shard i -> its peers, each tick: ``claims_to_<j>`` and ``part_to_<j>``

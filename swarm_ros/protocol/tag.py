@@ -31,6 +31,7 @@ from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.protocol.plan import (
     BATCHES,
     DECISIONS,
+    HELD,
     METRICS,
     MONITOR,
     central_sender,
@@ -119,15 +120,15 @@ def _mac(key: bytes, topic: str, parts) -> str:
 
 def may_send(sender: str, topic: str) -> bool:
     """Whether a node named ``sender`` publishes on ``topic`` in the graph: the world (or a world shard) its
-    topics, the monitor the metrics (a central world's run's: what it holds), a batch its announcement and its own
-    decisions topic (a central world's run's batch too), world shard i the topics under /swarm/shards/<i>."""
-    if topic == METRICS:
+    topics, the monitor the metrics and what it holds, a batch its announcement and its own decisions topic (a
+    central world's run's batch too), world shard i the topics under /swarm/shards/<i>."""
+    if topic in (METRICS, HELD):
         return sender == MONITOR
     if topic == BATCHES:
         return not is_world(sender) and sender != MONITOR
     if topic.startswith(DECISIONS + "/"):
         return topic == f"{DECISIONS}/{sender}"
-    central = central_sender(topic)  # a central world's run's monitor or batch, likewise
+    central = central_sender(topic)  # a central world's run's batch, likewise
     if central is not None:
         return sender == central
     shard = shard_of_topic(topic)

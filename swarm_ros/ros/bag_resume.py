@@ -13,7 +13,7 @@ bag of its own, and replays it through its handlers: the view, the metrics rows 
 recording come out as they were (:meth:`swarm_ros.protocol.monitoring.MonitorCore.replay`).
 
 A central world's monitor (:mod:`swarm_ros.nodes.central.monitor`) goes on the same way: it makes
-its bag durable before it reports a record held on /swarm/<algorithm>/held, the world runs at most a window
+its bag durable before it reports a record held on /swarm/held, the world runs at most a window
 past that. Its bag is not cut: each of its messages is whole alone (the robots at a record tick, the
 metrics rows of a run of ticks, a status), and the handlers check each as they would a live one.
 """

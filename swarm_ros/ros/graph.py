@@ -31,6 +31,7 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     CENTRAL_KEPT,
     CLOCK,
     DECISIONS,
+    HELD,
     METRICS,
     MONITOR_READS,
     OCCUPANCY,
@@ -89,13 +90,17 @@ LATCHED_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
-#: Kept for late readers: a restarted world takes the monitor's last report from it.
+#: The study's model's metrics, monitor -> viewers and the bag: kept for a late reader.
 METRICS_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=64,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+#: The monitor's held reports, monitor -> every world process: kept for a late reader (a restarted world takes the
+#: monitor's last report from it), and 64 deep at the reader, so that a flood of forged reports does not push a
+#: genuine one out before the world takes it (it runs at most ``monitor_window`` past the last one it took).
+HELD_QOS = METRICS_QOS
 #: The run's state, ten a second and on every event; the last 256 (25 s) are kept for a late reader: a
 #: restarted monitor records in the bag those sent while it was down.
 STATUS_QOS = QoSProfile(
@@ -190,6 +195,11 @@ def ids_message(ids: np.ndarray, label: str = "robot_id") -> Int64MultiArray:
     data.frombytes(np.ascontiguousarray(ids, dtype="<i8").tobytes())
     msg.data = data
     return msg
+
+
+def held_message(tick: int, ended: bool) -> Int64MultiArray:
+    """The monitor's report on /swarm/held: the last tick whose record its bag holds, and whether the outcome too."""
+    return ids_message(np.array([tick, int(ended)], dtype=np.int64), "held")
 
 
 def metrics_message(row: np.ndarray | Sequence[int]) -> Int64MultiArray:

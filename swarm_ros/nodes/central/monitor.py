@@ -10,7 +10,7 @@ to the last tick are in, writes the run directory as ``swarm-ros simulate`` does
 ``write_run``), whole or not at all, with the run's bag (``bag/``: every message it took, as it came).
 
 Each time it holds a further record (the robots and the metrics up to their tick), and once it holds the
-outcome, it makes its bag durable and reports so on /swarm/<algorithm>/held (``[tick, ended]``, latched); the world
+outcome, it makes its bag durable and reports so on /swarm/held (``[tick, ended]``, latched); the world
 runs at most a window past it. A restarted process (``incarnation`` > 0) reads back the bag its process before
 left, through the same handlers (:mod:`swarm_ros.ros.bag_resume`), and takes the rest from the topics' histories:
 the run directory is the one an unbroken run writes.
@@ -41,7 +41,7 @@ from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.central_rows import check_metrics_rows, metrics_row
 from swarm_ros.protocol.checks import Rejections
-from swarm_ros.protocol.plan import MONITOR, STATUS, CentralTopics
+from swarm_ros.protocol.plan import HELD, MONITOR, STATUS, CentralTopics
 from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
@@ -83,7 +83,7 @@ class CentralMonitorNode:
         self.raw: bytes | None = b""  # the message being handled, as it came (into the bag once its handler took it)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
-        self.pub_held = self.signer.publisher(Int64MultiArray, self.topics.held, msgs.LATCHED_QOS)
+        self.pub_held = self.signer.publisher(Int64MultiArray, HELD, msgs.HELD_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(MONITOR), msgs.ALIVE_QOS)  # liveliness only
         self.handlers = {
             self.topics.robots: self._on_robots,
@@ -127,7 +127,7 @@ class CentralMonitorNode:
         if held != self.reported and self.raw is not None:  # not while replaying: once, after
             if self.bag is not None:
                 self.bag.durable()
-            self.pub_held.publish(msgs.ids_message(np.array([held[0], int(held[1])], dtype=np.int64), "held"))
+            self.pub_held.publish(msgs.held_message(*held))
             self.reported = held
 
     def load(self) -> None:

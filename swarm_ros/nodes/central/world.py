@@ -8,7 +8,7 @@ topics, tick 0 goes out: each batch's area rows on /swarm/<algorithm>/area/<batc
 /swarm/<algorithm>/robots, the metrics on /swarm/<algorithm>/metrics and ``running`` on /swarm/status. Each tick,
 once every batch's decisions are in (checked, or dropped and counted), it settles them and sends the next areas;
 every ``record_every``-th tick and at the end it sends the robots and the metrics rows since the last. It runs at
-most ``monitor_window`` ticks past the last record the monitor reports held on /swarm/<algorithm>/held
+most ``monitor_window`` ticks past the last record the monitor reports held on /swarm/held
 (:func:`~swarm_ros.protocol.central_world.monitor_reach`), so a restarted monitor finds in the topics' histories
 every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it (or, with no
 window, once its readers have everything or after a grace period). It saves a checkpoint at tick 0 and every 1,000
@@ -42,7 +42,7 @@ from swarm_ros.protocol.central_checkpoint import shard_kept
 from swarm_ros.protocol.central_shard_world import ShardLockstep
 from swarm_ros.protocol.central_world import CentralWorld
 from swarm_ros.protocol.checks import Rejections, parse_batch_label
-from swarm_ros.protocol.plan import BATCHES, MONITOR, STATUS, CentralTopics, counts_topic, shard_topic
+from swarm_ros.protocol.plan import BATCHES, HELD, MONITOR, STATUS, CentralTopics, counts_topic, shard_topic
 from swarm_ros.protocol.status import STARTING
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import SignedPublisher, open_auth
@@ -68,7 +68,7 @@ class CentralWorldNode:
         lockstep = self._shard(engine, own) if int(own.get("shards", 1)) > 1 else None
         self.world = CentralWorld(engine, self.wire, own, self, node.get_logger(), lockstep=lockstep)
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
-        self.gate.subscribe(Int64MultiArray, self.topics.held, self._on_held, msgs.LATCHED_QOS)
+        self.gate.subscribe(Int64MultiArray, HELD, self._on_held, msgs.HELD_QOS)
         self._watch_alive(MONITOR)
         self.world.status(STARTING, "waiting for robot batches and the monitor")
 
@@ -172,7 +172,7 @@ class CentralWorldNode:
         try:
             self.world.held_report(np.asarray(msg.data, dtype=np.int64))
         except Rejected as fault:
-            self.rejections.drop(self.topics.held, fault)
+            self.rejections.drop(HELD, fault)
 
     def _watch_alive(self, name: str) -> None:
         """Follow the liveliness of peer ``name``'s silent writer (DDS tells when its process dies or stalls)."""

@@ -2,7 +2,8 @@
 
 It rebuilds the swarm's state from /swarm/robots (:class:`swarm_ros.core.swarm_view.SwarmView`), counts it
 with the in-process engine's own functions (:func:`swarm_ros.core.metrics.tick_metrics`, :func:`~.outcome_of`),
-publishes each tick's metrics on /swarm/metrics, records the run with the in-process
+publishes each tick's metrics on /swarm/metrics and, its bag durable, the tick as held on /swarm/held (the world
+runs at most ``monitor_window`` ticks past it), records the run with the in-process
 engine's own :class:`~swarm_ros.artifacts.rerun_recording.Recorder` (streamed to ``<out_dir>.partial.rrd``
 while the run goes on), and when the run ends writes the run directory exactly as
 ``swarm-ros simulate`` does, with ``engine: ros2``. It checks its outcome against the world's /swarm/status.
@@ -71,6 +72,7 @@ class MonitorNode:
 
         self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_metrics = self.signer.publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
+        self.pub_held = self.signer.publisher(Int64MultiArray, msgs.HELD, msgs.HELD_QOS)
         # Serialized subscriptions to the tagged topics it records (plan.MONITOR_READS): see _bagger.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
         self.handlers = {
@@ -212,6 +214,7 @@ class MonitorNode:
             take_waiting(self.readers[msgs.DECISIONS])  # one the executor lost the event of: in, now
             self.bag.durable()
         self.pub_metrics.send(data)
+        self.pub_held.publish(msgs.held_message(tick, self.counter.outcome is not None))
 
     def decisions_taken(self, tick: int) -> None:
         if self.bag is not None:

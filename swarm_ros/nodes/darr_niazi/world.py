@@ -30,7 +30,6 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.core.errors import ConfigError, ParameterError, Rejected
-from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.params import Settings
 from swarm_ros.core.shards import ShardPlan, WorldShard
 from swarm_ros.core.signals import run_age
@@ -88,7 +87,7 @@ class WorldNode:
         self.lockstep: Lockstep | None = None  # made in load(), before the first callback can run
         self.saver: ShardSaver | None = None  # made in load(), with a checkpoint path
         self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
-        self.gate.subscribe(Int64MultiArray, msgs.METRICS, self._on_metrics, msgs.METRICS_QOS)
+        self.gate.subscribe(Int64MultiArray, msgs.HELD, self._on_held, msgs.HELD_QOS)
         self._watch(msgs.alive_topic(MONITOR), self._on_monitor_liveliness)
         # the peers' topics (none for the world alone), and the exchange's sends to them
         robots, dims = self.params.robots, self.shape.dims
@@ -158,14 +157,14 @@ class WorldNode:
         except Rejected as fault:
             self.rejections.drop(topic, fault)
 
-    def _on_metrics(self, msg: Int64MultiArray) -> None:
+    def _on_held(self, msg: Int64MultiArray) -> None:
         try:
-            tick = checks.metrics_tick(msg, METRIC_COLUMNS, self.ls.published_tick)
+            tick, _ = checks.held_report(np.asarray(msg.data, dtype=np.int64), self.ls.published_tick)
         except Rejected as fault:
-            self.rejections.drop(msgs.METRICS, fault)
+            self.rejections.drop(msgs.HELD, fault)
             return
         tag = self.gate.last_tag  # the tag of this message, which the gate proved
-        self.ls.metrics(tick, tag.nonce if tag is not None else "")
+        self.ls.held(tick, tag.nonce if tag is not None else "")
         self._monitor_reported(self.ls.monitor_tick)
 
     def _monitor_reported(self, tick: int) -> None:
