@@ -89,8 +89,8 @@ def test_every_tagged_type_reaches_its_handler_whole_and_without_its_tag():
     auth.Signer(world, KEY).publisher(DiagnosticArray, msgs.STATUS, None).publish(
         msgs.status_message(7, "running", "running", extra={"robots": 9})
     )
-    auth.Signer(monitor, KEY).publisher(Int64MultiArray, msgs.METRICS, None).publish(
-        msgs.metrics_message([7] + [1] * (len(METRIC_COLUMNS) - 1))
+    auth.Signer(monitor, KEY).publisher(Int64MultiArray, msgs.METRICS, None).publish_ints(
+        np.array([7] + [1] * (len(METRIC_COLUMNS) - 1)), msgs.METRICS_LABEL
     )
     hello = msgs.ids_message(np.array([4, 5, 6]))
     hello.layout.dim[0].label = batch_label("robot_batch_0", 2)

@@ -1,5 +1,5 @@
-"""PointCloud2 serialized with numpy alone (swarm_ros.protocol.cdr): the same messages as rclpy's serializer, read back
-in place, and bytes from anybody refused cleanly."""
+"""PointCloud2 (and Int64MultiArray) serialized with numpy alone (swarm_ros.protocol.cdr): the same messages as
+rclpy's serializer, read back in place, and bytes from anybody refused cleanly."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ pytest.importorskip("rclpy")
 from rclpy.serialization import deserialize_message, serialize_message
 from runs import make_cloud
 from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.errors import Rejected
 from swarm_ros.protocol import checks
-from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
+from swarm_ros.protocol.cdr import decode_cloud, encode_cloud, encode_ints
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
 from swarm_ros.protocol.tag import aligned
 
@@ -41,6 +42,23 @@ def test_rclpy_reads_the_bytes_as_the_same_message_and_they_read_rclpys(dtype, n
     assert deserialize_message(ours, PointCloud2) == theirs
     back = decode_cloud(aligned(serialize_message(theirs)))
     assert back.header.stamp.sec == 41 and bytes(back.data) == rows.tobytes() and back.width == n
+
+
+@pytest.mark.parametrize("label", ["held", "tick,stationary,localized", "x" * 33])
+@pytest.mark.parametrize("n", [0, 1, 2, 9])
+@pytest.mark.parametrize("tag", ["", "swarm_ros.tag:monitor:ab12:7:" + "0" * 32])
+def test_an_int64_array_is_the_message_rclpy_serializes_both_ways_round(label, n, tag):
+    """The graph's Int64MultiArray messages (held, metrics, tallies, counts) as bytes: rclpy reads them as the
+    message they stand for, and they are as long as its own (whose padding holds what was in memory)."""
+    values = np.arange(n, dtype=np.int64) * -(10**12) + 3
+    msg = Int64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label=label, size=n, stride=n)]
+    if tag:
+        msg.layout.dim.append(MultiArrayDimension(label=tag, size=1, stride=1))
+    msg.data = values.tolist()
+    ours = encode_ints(values, label, tag)
+    assert len(ours) == len(serialize_message(msg))
+    assert deserialize_message(ours, Int64MultiArray) == msg
 
 
 @pytest.mark.parametrize("n", [1, 7])

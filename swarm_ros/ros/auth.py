@@ -33,7 +33,7 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.errors import ContractError, Rejected
-from swarm_ros.protocol.cdr import TAG_DATATYPE, cloud_parts, decode_cloud
+from swarm_ros.protocol.cdr import TAG_DATATYPE, cloud_parts, decode_cloud, encode_ints
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.plan import BATCHES
 from swarm_ros.protocol.rows import TAG_PREFIX, is_tag, parse_batch_label
@@ -101,6 +101,18 @@ class SignedPublisher:
         blank = self.sealer.blank()
         put_tag(msg, blank)
         return self.sealer.seal(self.topic, serialize_message(msg), blank)
+
+    def seal_ints(self, values: np.ndarray, label: str) -> bytes:
+        """An Int64MultiArray of ``values`` labelled ``label`` (:func:`encode_ints`), tagged and sealed, not sent:
+        the bytes :meth:`seal` makes of the same message, without building it."""
+        blank = self.sealer.blank()
+        return self.sealer.seal(self.topic, encode_ints(values, label, tag=blank), blank)
+
+    def publish_ints(self, values: np.ndarray, label: str) -> bytes:
+        """Publish :meth:`seal_ints`'s bytes; returns them."""
+        data = self.seal_ints(values, label)
+        self.pub.publish(data)
+        return data
 
     def send(self, data: bytes) -> None:
         """Publish bytes :meth:`seal` made."""

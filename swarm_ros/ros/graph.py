@@ -9,6 +9,7 @@ bytes (:mod:`swarm_ros.protocol.cdr`), which keeps a tick's messages at microsec
 from __future__ import annotations
 
 import array
+import functools
 import sys
 from collections.abc import Sequence
 
@@ -197,30 +198,38 @@ def ids_message(ids: np.ndarray, label: str = "robot_id") -> Int64MultiArray:
     return msg
 
 
-def held_message(tick: int, ended: bool) -> Int64MultiArray:
+#: The labels of the Int64MultiArray messages the graph sends each tick: one layout dimension, so labelled, holds
+#: the values. Nodes send them as bytes (SignedPublisher.publish_ints); the message objects below are for tools.
+HELD_LABEL = "held"  #: /swarm/held: the tick, and 1 if the outcome is held too
+METRICS_LABEL = ",".join(METRIC_COLUMNS)  #: /swarm/metrics: the study's model's metrics columns, in order
+
+
+@functools.cache
+def tally_label() -> str:
+    """/swarm/tally's label: the tick, the world's ``record_every``, then its robots in each state (a function: the
+    core's state loads numba, which the launcher does without)."""
+    from swarm_ros.core.state import RobotState
+
+    return ",".join(("tick", "every", *(s.label for s in RobotState)))
+
+
+def held_values(tick: int, ended: bool) -> np.ndarray:
     """The monitor's report on /swarm/held: the last tick whose record its bag holds, and whether the outcome too."""
-    return ids_message(np.array([tick, int(ended)], dtype=np.int64), "held")
+    return np.array([tick, int(ended)], dtype=np.int64)
+
+
+def held_message(tick: int, ended: bool) -> Int64MultiArray:
+    return ids_message(held_values(tick, ended), HELD_LABEL)
 
 
 def metrics_message(row: np.ndarray | Sequence[int]) -> Int64MultiArray:
     """One tick's metrics, labelled: dim[0].label lists the columns in order."""
-    msg = Int64MultiArray()
-    n = len(METRIC_COLUMNS)
-    msg.layout.dim = [MultiArrayDimension(label=",".join(METRIC_COLUMNS), size=n, stride=n)]
-    msg.data = array.array("q", [int(v) for v in row])
-    return msg
+    return ids_message(np.asarray(row, dtype=np.int64), METRICS_LABEL)
 
 
-def tally_message(tick: int, every: int, counts: np.ndarray) -> Int64MultiArray:
-    """One world process's tally of a tick (:data:`TALLY`), labelled: dim[0].label lists its numbers' meanings
-    in order: the tick, the world's ``record_every``, then its robots in each state."""
-    from swarm_ros.core.state import RobotState  # here: the core's state loads numba, which the launcher does without
-
-    fields = ("tick", "every", *(s.label for s in RobotState))
-    msg = Int64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=",".join(fields), size=len(fields), stride=len(fields))]
-    msg.data = array.array("q", [int(tick), int(every), *(int(c) for c in counts)])
-    return msg
+def tally_values(tick: int, every: int, counts: np.ndarray) -> np.ndarray:
+    """One world process's tally of a tick (:data:`TALLY`, labelled :func:`tally_label`)."""
+    return np.concatenate([[tick, every], counts]).astype(np.int64)
 
 
 def metrics_of(msg: Int64MultiArray) -> dict[str, int]:

@@ -140,7 +140,7 @@ class ShardLinks:
         assert self.pub_counts is not None  # a shard with peers
         self.pub_parts[peer].publish_rows(part_rows(part, self.dims), tick)
         if (tick, peer) in self.parts_sent or all(t != tick for t, _ in self.parts_sent):
-            self.pub_counts.publish(msgs.ids_message(counts_data(part), "shard_counts"))
+            self.pub_counts.publish_ints(counts_data(part), "shard_counts")
         self.parts_sent = {(t, j) for t, j in self.parts_sent if t > tick - 1 - KEPT_TICKS} | {(tick, peer)}
 
     def ask_again(self, peer: int) -> None:

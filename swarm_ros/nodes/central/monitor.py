@@ -127,7 +127,7 @@ class CentralMonitorNode:
         if held != self.reported and self.raw is not None:  # not while replaying: once, after
             if self.bag is not None:
                 self.bag.durable()
-            self.pub_held.publish(msgs.held_message(*held))
+            self.pub_held.publish_ints(msgs.held_values(*held), msgs.HELD_LABEL)
             self.reported = held
 
     def load(self) -> None:

@@ -141,7 +141,7 @@ class CentralWorldNode:
 
     def send_shared(self, tick: int, rows: np.ndarray, counts: np.ndarray) -> None:
         self.pub_shared.publish_rows(rows, tick)
-        self.pub_counts.publish(msgs.ids_message(np.concatenate([[tick], counts]).astype(np.int64), "counts"))
+        self.pub_counts.publish_ints(np.concatenate([[tick], counts]).astype(np.int64), "counts")
 
     def load(self) -> None:
         """Nothing heavy: the kernels compile (or load from numba's cache) on the first tick."""

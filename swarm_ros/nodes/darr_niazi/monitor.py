@@ -205,7 +205,7 @@ class MonitorNode:
 
     # -- the core's port ---------------------------------------------------------------
     def tick_counted(self, tick, metrics, occupancy, first, changed, messages) -> None:
-        data = self.pub_metrics.seal(msgs.metrics_message(metrics))
+        data = self.pub_metrics.seal_ints(np.asarray(metrics, dtype=np.int64), msgs.METRICS_LABEL)
         if self.bag is not None:  # the tick's messages are durable before the world hears of it
             for topic, raw in messages:
                 self.bag.write(topic, raw)
@@ -214,7 +214,7 @@ class MonitorNode:
             take_waiting(self.readers[msgs.DECISIONS])  # one the executor lost the event of: in, now
             self.bag.durable()
         self.pub_metrics.send(data)
-        self.pub_held.publish(msgs.held_message(tick, self.counter.outcome is not None))
+        self.pub_held.publish_ints(msgs.held_values(tick, self.counter.outcome is not None), msgs.HELD_LABEL)
 
     def decisions_taken(self, tick: int) -> None:
         if self.bag is not None:

@@ -211,7 +211,7 @@ class WorldNode:
         if applied is not None and applied.size:  # a world shard whose strips hold no moving robot: none
             self.pub_decisions.publish_rows(applied, tick)
         if tally is not None:
-            self.pub_tally.publish(msgs.tally_message(tick, self.ls.every, tally))
+            self.pub_tally.publish_ints(msgs.tally_values(tick, self.ls.every, tally), msgs.tally_label())
         if rows is not None:
             self.pub_robots.publish_rows(rows, tick)
         if joined:
