@@ -441,9 +441,16 @@ def test_a_world_shards_checkpoint_holds_its_robots_and_another_shards_is_refuse
     fresh = RubensteinRun(square(6), params)
     again = ShardLockstep(CentralShard(fresh, strips, 1, 2), RubensteinWire, port=None)
     saved = checkpoint.load(path, fresh)
-    again.resume(saved.hosts, saved.cuts, saved.kept)
+    again.resume(saved.hosts, saved.cuts, saved.kept, before=400)
     assert np.array_equal(again.shard.present, shard.shard.present) and again.exchange.tick == 301
     assert again.started and again.mine == [2, 3] and again.hosts == shard.hosts
+    # what a batch sent the process before comes again from its topic's history, of ticks settled in the checkpoint
+    # or past it, up to the process before's next save: no fault; past that, a fault
+    none = np.zeros(0, dtype=RubensteinWire.decision_row)
+    assert again.decisions(2, 300, none) is False and again.decisions(2, 400, none) is False and again.decided == {}
+    with pytest.raises(Rejected, match="stale tick"):
+        again.decisions(2, 401, none)
+    assert again.decisions(2, 301, none) is False and 2 in again.decided  # the tick being decided: taken
     other = ShardLockstep(CentralShard(RubensteinRun(square(6), params), strips, 0, 2), RubensteinWire, port=None)
     with pytest.raises(RunFailed, match="not of this shard"):
         other.resume(saved.hosts, saved.cuts, saved.kept)

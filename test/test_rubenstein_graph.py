@@ -150,6 +150,7 @@ def test_a_world_shard_killed_goes_on_from_its_checkpoint_and_the_run_is_the_sam
     assert [r["node"] for r in summary["restarts"]] == ["world_shard_1"]
     said = (out / "logs" / "world_shard_1.log").read_text()
     assert "restarted: on from the checkpoint of tick" in said, said
+    assert "dropped" not in said, said  # its batches' decisions of settled ticks, again from their histories
     assert "dropped" not in (out / "logs" / "monitor.log").read_text()  # the parts again were repeats, not faults
     assert_rubenstein_bag_holds_run(out)
     assert not list((out / "logs").glob("world.checkpoint*")), "a checkpoint outlived the run"
@@ -213,6 +214,7 @@ def test_a_world_killed_goes_on_from_its_checkpoint_and_the_run_is_the_same(squa
     assert [r["node"] for r in summary["restarts"]] == ["world"]
     said = (out / "logs" / "world.log").read_text()
     assert "restarted: on from the checkpoint of tick" in said or "restarted before tick 0 went out" in said
+    assert "dropped" not in said, said  # the batches' decisions of settled ticks, again from their histories
     assert_rubenstein_bag_holds_run(out)
     assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint outlived the run"
     assert not processes_mentioning(str(out)), "a process outlived the run"

@@ -69,7 +69,7 @@ class ShardLockstep(CentralLockstep):
         """The robots it holds (its columns' and its halo's): saved with the run."""
         return {"present": self.shard.present}
 
-    def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray]) -> None:
+    def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray], before: int = -1) -> None:
         """As :meth:`CentralLockstep.resume`, holding the robots it held, its exchanges on from the run's tick.
 
         Raises:
@@ -81,7 +81,7 @@ class ShardLockstep(CentralLockstep):
             self.shard.restore(kept["present"])
         except ContractError as exc:
             raise RunFailed(f"the world shard's checkpoint is not of this run ({exc})") from exc
-        super().resume(hosts, cuts, kept)
+        super().resume(hosts, cuts, kept, before)
         self.exchange.restart()
 
     def area(self, k: int) -> np.ndarray:

@@ -74,6 +74,9 @@ class CentralLockstep:
         self.announced: dict[str, tuple[int, int]] = {}  #: before the start: node name -> its strip
         self.decided: dict[int, tuple[np.ndarray, Any]] = {}  #: the decisions in for the next tick, by batch
         self.started = False
+        #: after a resume from a checkpoint: the last tick the process before may have had decisions of (the tick of
+        #: its next save); the batches' topics' histories hand them to this process too
+        self.before = -1
         self._columns_at: tuple[int, np.ndarray] = (-1, np.empty(0, dtype=np.int64))
         self.on_settled: Callable[[], None] = lambda: None  #: told when a tick settles later than its decisions
         self.shard_index: int | None = None  #: a world shard's index (``central_shards``), None for the world
@@ -135,13 +138,14 @@ class CentralLockstep:
         """What it saves beside the run in a checkpoint: nothing (a world shard's: its robots)."""
         return {}
 
-    def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray]) -> None:
+    def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray], before: int = -1) -> None:
         """Serve again, from a checkpoint, the batches named ``hosts`` (batch number -> node name) of the strips cut
         at ``cuts`` (:attr:`Strips.cuts`): their announcements are taken as a restarted batch's, each sent its area
-        of the run's tick. ``kept``: what :meth:`kept` gave (nothing to take back here)."""
+        of the run's tick. ``kept``: what :meth:`kept` gave (nothing to take back here). Decisions of other ticks
+        than the one being decided, up to ``before``, are the process before's: ignored, not faults."""
         self.strips = Strips(np.asarray(cuts, dtype=np.int64))
         self.hosts = dict(hosts)
-        self.started = True
+        self.started, self.before = True, before
 
     def _columns(self) -> np.ndarray:
         """Every robot's cell column at the current tick (found once a tick)."""
@@ -173,6 +177,8 @@ class CentralLockstep:
         """
         if not self.started:
             raise Rejected("stale tick", "no tick has gone out yet")
+        if tick != self.run.tick + 1 and tick <= self.before:
+            return False  # sent to the process before this one (settled in its checkpoint, or past it): no fault
         if tick != self.run.tick + 1:
             raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {self.run.tick + 1}")
         if k in self.decided:
@@ -297,7 +303,7 @@ class CentralWorld:
             self.log.info("restarted before tick 0 went out: the run starts from tick 0")
             return
         saved = checkpoint.load(self.checkpoint, self.run)
-        self.ls.resume(saved.hosts, saved.cuts, saved.kept)
+        self.ls.resume(saved.hosts, saved.cuts, saved.kept, before=saved.tick + self.save_every)
         self.sent_metrics = saved.tick - self.every if saved.tick else -1
         self.log.info(f"restarted: on from the checkpoint of tick {saved.tick}")
 
