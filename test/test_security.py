@@ -74,14 +74,14 @@ class _Batches:
         # hears the genuine batches first (from two writers, the intruder's could come first and take its columns)
         self.intruder = SignedPublisher(Sealer(key, "intruder"), self.announce[-1].pub, msgs.BATCHES)
         self.robots_pub = Signer(node, key, "world").publisher(PointCloud2, msgs.ROBOTS, msgs.ROBOTS_QOS)
-        self.held_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.HELD, msgs.HELD_QOS)
+        self.held_pub = Signer(node, key, "monitor").publisher(msgs.Int64MultiArray, msgs.HELD, msgs.LATCHED_QOS)
         # an outsider's: well-formed messages without a valid tag
         self.forged = {
             topic: node.create_publisher(kind, topic, qos)
             for topic, kind, qos in (
                 (msgs.decisions_topic(self.names[0]), PointCloud2, msgs.DECISIONS_QOS),
                 (msgs.BATCHES, msgs.Int64MultiArray, msgs.BATCHES_QOS),
-                (msgs.HELD, msgs.Int64MultiArray, msgs.HELD_QOS),
+                (msgs.HELD, msgs.Int64MultiArray, msgs.LATCHED_QOS),
                 (msgs.STATUS, DiagnosticArray, msgs.LATCHED_QOS),
                 (msgs.ROBOTS, PointCloud2, msgs.ROBOTS_QOS),
             )

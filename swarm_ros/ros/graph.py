@@ -98,10 +98,6 @@ METRICS_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
-#: The monitor's held reports, monitor -> every world process: kept for a late reader (a restarted world takes the
-#: monitor's last report from it), and 64 deep at the reader, so that a flood of forged reports does not push a
-#: genuine one out before the world takes it (it runs at most ``monitor_window`` past the last one it took).
-HELD_QOS = METRICS_QOS
 #: The run's state, ten a second and on every event; the last 256 (25 s) are kept for a late reader: a
 #: restarted monitor records in the bag those sent while it was down.
 STATUS_QOS = QoSProfile(

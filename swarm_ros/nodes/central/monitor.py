@@ -83,7 +83,7 @@ class CentralMonitorNode:
         self.raw: bytes | None = b""  # the message being handled, as it came (into the bag once its handler took it)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
-        self.pub_held = self.signer.publisher(Int64MultiArray, HELD, msgs.HELD_QOS)
+        self.pub_held = self.signer.publisher(Int64MultiArray, HELD, msgs.LATCHED_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(MONITOR), msgs.ALIVE_QOS)  # liveliness only
         self.handlers = {
             self.topics.robots: self._on_robots,

@@ -68,7 +68,7 @@ class CentralWorldNode:
         lockstep = self._shard(engine, own) if int(own.get("shards", 1)) > 1 else None
         self.world = CentralWorld(engine, self.wire, own, self, node.get_logger(), lockstep=lockstep)
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
-        self.gate.subscribe(Int64MultiArray, HELD, self._on_held, msgs.HELD_QOS)
+        self.gate.subscribe(Int64MultiArray, HELD, self._on_held, msgs.LATCHED_QOS)
         self._watch_alive(MONITOR)
         self.world.status(STARTING, "waiting for robot batches and the monitor")
 

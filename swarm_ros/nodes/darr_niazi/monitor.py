@@ -72,7 +72,7 @@ class MonitorNode:
 
         self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_metrics = self.signer.publisher(Int64MultiArray, msgs.METRICS, msgs.METRICS_QOS)
-        self.pub_held = self.signer.publisher(Int64MultiArray, msgs.HELD, msgs.HELD_QOS)
+        self.pub_held = self.signer.publisher(Int64MultiArray, msgs.HELD, msgs.LATCHED_QOS)
         # Serialized subscriptions to the tagged topics it records (plan.MONITOR_READS): see _bagger.
         self.bag: BagRecorder | None = None  # opened below, with the heavy part
         self.handlers = {

@@ -87,7 +87,7 @@ class WorldNode:
         self.lockstep: Lockstep | None = None  # made in load(), before the first callback can run
         self.saver: ShardSaver | None = None  # made in load(), with a checkpoint path
         self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
-        self.gate.subscribe(Int64MultiArray, msgs.HELD, self._on_held, msgs.HELD_QOS)
+        self.gate.subscribe(Int64MultiArray, msgs.HELD, self._on_held, msgs.LATCHED_QOS)
         self._watch(msgs.alive_topic(MONITOR), self._on_monitor_liveliness)
         # the peers' topics (none for the world alone), and the exchange's sends to them
         robots, dims = self.params.robots, self.shape.dims
