@@ -2,6 +2,8 @@
 central world's graph code (swarm_ros.protocol.central_world) over it:
 K batches, each sent only its area's robots, give the in-process engine's run byte for byte."""
 
+import types
+
 import numpy as np
 import pytest
 from lockstep_fakes import Log
@@ -451,6 +453,10 @@ def test_a_world_shards_checkpoint_holds_its_robots_and_another_shards_is_refuse
     with pytest.raises(Rejected, match="stale tick"):
         again.decisions(2, 401, none)
     assert again.decisions(2, 301, none) is False and 2 in again.decided  # the tick being decided: taken
+    sent: list[str] = []
+    again.port = types.SimpleNamespace(**{f"send_{w}": lambda *_, w=w: sent.append(w) for w in ("border", "rows")})
+    assert again.decisions(3, 301, none) is False and sent == ["border"]  # with its peer now, not settled yet
+    assert again.decisions(2, 301, none) is False and again.decided == {}  # again (history and anew): a repeat
     other = ShardLockstep(CentralShard(RubensteinRun(square(6), params), strips, 0, 2), RubensteinWire, port=None)
     with pytest.raises(RunFailed, match="not of this shard"):
         other.resume(saved.hosts, saved.cuts, saved.kept)

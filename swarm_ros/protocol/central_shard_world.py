@@ -97,6 +97,13 @@ class ShardLockstep(CentralLockstep):
         deciding = self.shard.run.deciding(self.shard.present)
         return deciding[self.expected.in_strip(self.run.grid.columns(self.run.robots.x[deciding]), k)]
 
+    def decisions(self, k: int, tick: int, rows: np.ndarray) -> bool:
+        """As :meth:`CentralLockstep.decisions`; those of a tick its batches' decisions went to the peers for
+        already are a repeat (a restarted process's batch answers twice: from its topic's history, and anew)."""
+        if tick == self.exchange.tick and self.exchange.phase != DECIDING:
+            return False
+        return super().decisions(k, tick, rows)
+
     def settle(self) -> bool:
         """Its batches' decisions are in: to its peers; the tick settles when theirs are in (``on_settled``)."""
         ids, decided = concat([self.decided[k] for k in self.mine])
