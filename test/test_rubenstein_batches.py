@@ -677,3 +677,78 @@ def test_the_world_holds_a_tick_past_the_monitors_reach_until_the_monitor_report
     whole = RubensteinRun(square(6), params)
     whole.run()
     assert same(whole, run)
+
+
+def _cloud(rows: np.ndarray, tick: int):
+    return decode_cloud(encode_cloud(rows, tick))
+
+
+def _monitor(shards: int = 1):
+    from swarm_ros.protocol.central_monitor import CentralMonitor
+
+    logged: list[int] = []
+    recorder = types.SimpleNamespace(log=lambda copy: logged.append(copy.tick))
+    copy = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    return CentralMonitor(copy, RubensteinWire, shards, recorder, clock=lambda: 0.0), logged
+
+
+@pytest.fixture(scope="module")
+def recorded():
+    """A run of the world's logic with a record every 7 ticks, and what it sent the monitor (its port)."""
+    run, _, port = world_run(0, 7)
+    return run, port
+
+
+def test_the_monitor_holds_each_record_once_its_metrics_are_in_and_ends_with_the_run_the_world_ran(recorded):
+    run, port = recorded
+    monitor, logged = _monitor()
+    held = -1
+    for tick, metrics, robots in port.records:
+        assert not monitor.due()
+        assert monitor.robots_record(_cloud(robots, tick))
+        assert monitor.held() == (held, False)  # the record's metrics are still to come
+        monitor.metrics(_cloud(metrics, tick))
+        assert monitor.held() == (tick, False)
+        held = tick
+        assert not monitor.robots_record(_cloud(robots, tick))  # a record held: again, not taken
+        monitor.metrics(_cloud(metrics, tick))  # rows of ticks held, again: equal, so nothing changes
+        assert monitor.last_tick == tick
+    changed = port.records[-1][1].copy()
+    changed["covered"][-1] += 1
+    with pytest.raises(Rejected, match="conflict"):
+        monitor.metrics(_cloud(changed, run.tick))
+    monitor.status({"outcome": "running"}, run.tick)
+    assert not monitor.due()
+    monitor.status({"outcome": str(run.outcome)}, run.tick)
+    assert monitor.held() == (run.tick, True) and monitor.due()
+    monitor.finish(run.outcome)
+    assert same(run, monitor.copy)
+    assert logged == [tick for tick, _, _ in port.records[1:]]  # each record but tick 0's, recorded once
+
+
+def test_the_monitor_takes_a_record_whole_from_the_world_shards_parts_in_any_order(recorded):
+    run, port = recorded
+    monitor, _ = _monitor(shards=2)
+    for tick, metrics, robots in port.records:
+        monitor.metrics(_cloud(metrics, tick))
+        west, east = robots[robots["id"] % 2 == 0], robots[robots["id"] % 2 == 1]
+        assert monitor.robots_record(_cloud(east, tick)) and monitor.robots_tick < tick  # half a record
+        assert not monitor.robots_record(_cloud(east, tick))  # the same part again (a restarted shard's)
+        with pytest.raises(Rejected, match="conflict"):
+            monitor.robots_record(_cloud(east[:1], tick))  # a robot the record holds already
+        assert monitor.robots_record(_cloud(west, tick)) and monitor.held() == (tick, False)
+    monitor.status({"outcome": str(run.outcome)}, run.tick)
+    monitor.finish(run.outcome)
+    assert monitor.due() and same(run, monitor.copy)
+
+
+def test_a_monitor_stopped_mid_run_keeps_the_metrics_up_to_its_last_record(recorded):
+    _, port = recorded
+    monitor, _ = _monitor()
+    assert not monitor.cut_at_record()  # nothing in: nothing to write
+    (t0, m0, r0), (t1, m1, _) = port.records[:2]
+    monitor.robots_record(_cloud(r0, t0))
+    monitor.metrics(_cloud(m0, t0))
+    monitor.metrics(_cloud(m1, t1))  # the metrics of the next 7 ticks, whose record did not come
+    assert monitor.last_tick == t1 and monitor.cut_at_record()
+    assert monitor.last_tick == t0 == 0 and len(monitor.history) == 1

@@ -1,16 +1,16 @@
 """The monitor node of a central world's run (:mod:`swarm_ros.nodes.central.world`): records the run to Rerun as it
 goes and writes the run directory at the end.
 
-It reads what the world publishes: every robot's row every ``record_every``-th tick and at the end
-(/swarm/<algorithm>/robots), the metrics rows of every tick (/swarm/<algorithm>/metrics), and the outcome
-(/swarm/status). Each message is checked (dropped and counted if it fails); the metrics must come one a tick, in
-order. It keeps a copy of the run (the engine's :meth:`~swarm_ros.core.strips.CentralRun.load`), streams it to
-``<out_dir>.partial.rrd`` (the algorithm's ``recording``), and once the outcome, the last robots and the metrics up
-to the last tick are in, writes the run directory as ``swarm-ros simulate`` does (the algorithm's ``summary`` and
-``write_run``), whole or not at all, with the run's bag (``bag/``: every message it took, as it came).
+A thin shell around :class:`swarm_ros.protocol.central_monitor.CentralMonitor`, which holds the run: it reads what
+the world publishes, every robot's row every ``record_every``-th tick and at the end (/swarm/<algorithm>/robots), the
+metrics rows of every tick (/swarm/<algorithm>/metrics) and the outcome (/swarm/status), checks each message (and
+drops and counts what fails), streams the run to ``<out_dir>.partial.rrd`` (the algorithm's ``recording``), and once
+the outcome, the last robots and the metrics up to the last tick are in, writes the run directory as ``swarm-ros
+simulate`` does (the algorithm's ``summary`` and ``write_run``), whole or not at all, with the run's bag (``bag/``:
+every message it took, as it came).
 
-Each time it holds a further record (the robots and the metrics up to their tick), and once it holds the
-outcome, it makes its bag durable and reports so on /swarm/held (``[tick, ended]``, latched); the world
+Each time the core holds a further record (the robots and the metrics up to their tick), and once it holds the
+outcome, the node makes its bag durable and reports so on /swarm/held (``[tick, ended]``, latched); the world
 runs at most a window past it. A restarted process (``incarnation`` > 0) reads back the bag its process before
 left, through the same handlers (:mod:`swarm_ros.ros.bag_resume`), and takes the rest from the topics' histories:
 the run directory is the one an unbroken run writes.
@@ -21,11 +21,9 @@ the run directory is the one an unbroken run writes.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
@@ -37,12 +35,10 @@ from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import Settings, auto_every
-from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
-from swarm_ros.protocol.central_rows import check_metrics_rows, metrics_row
+from swarm_ros.protocol.central_monitor import CentralMonitor
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.plan import HELD, MONITOR, STATUS, CentralTopics
-from swarm_ros.protocol.status import has_ended
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.bag_resume import resume
@@ -51,32 +47,27 @@ from swarm_ros.ros.runtime import EXIT_INTERRUPTED, handle_missed
 
 
 class CentralMonitorNode:
+    """The endpoints, the bag and the run directory around a :class:`CentralMonitor`."""
+
     def __init__(self, node: Node, run: Settings, own: dict[str, Any]) -> None:
         self.node = node
         self.shape, self.params = run.resolve()
         self.algorithm = algorithm_of(self.params.algorithm)
-        self.wire, self.topics = self.algorithm.hook("wire"), CentralTopics.of(self.algorithm.name)
+        wire, self.topics = self.algorithm.hook("wire"), CentralTopics.of(self.algorithm.name)
         self.incarnation = int(own["incarnation"])
-        self.shards = int(own["world_shards"])  # world processes whose records hold each a part of the robots
-        self.parts: dict[int, list[np.ndarray]] = {}  # record tick -> the world shards' rows of it so far
         p = self.params
         self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)
         self.overwrite = bool(own["overwrite"])
         run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
-        self.copy = self.algorithm.hook("engine")(self.shape, self.params)  # the run as the world reports it
-        self.columns = tuple(self.copy.columns)
-        self.history = np.empty((0, len(self.columns)))  # the metrics of every tick, as the world sends them
-        self.robots_tick = -1
-        self.outcome: str | None = None
-        self.outcome_tick = -1
+        copy = self.algorithm.hook("engine")(self.shape, self.params)  # the run as the world reports it
         self.reported = (-1, False)  # the last [tick, ended] reported held
-        self.started_at: float | None = None
         self.rrd = run_dir.partial_recording(self.out) if own["record"] else None
         if self.rrd is not None and self.incarnation:
             self.rrd.unlink(missing_ok=True)  # its process before's: rebuilt from its bag (_resume, below)
         self.every = int(own["record_every"]) or auto_every(self.params)
         options = RecordingOptions(self.rrd is not None, self.every, connect=str(own["viewer_url"]) or None)
-        self.recorder = self.algorithm.hook("recording")(self.rrd, self.copy, options) if options.active else None
+        self.recorder = self.algorithm.hook("recording")(self.rrd, copy, options) if options.active else None
+        self.core = CentralMonitor(copy, wire, int(own["world_shards"]), self.recorder)
         self.finished = False
         recorded = central_topics(self.algorithm.name)
         self.bag = BagRecorder(self.out, recorded=recorded) if own["bag"] else None
@@ -108,8 +99,8 @@ class CentralMonitorNode:
         self.raw = b""
         self.gate.verifier.taken_before()
         self.node.get_logger().warn(
-            f"monitor restarted (incarnation {self.incarnation}): went on from tick {self.last_tick} of the bag its "
-            f"process before wrote ({replayed} messages)"
+            f"monitor restarted (incarnation {self.incarnation}): went on from tick {self.core.last_tick} of the bag "
+            f"its process before wrote ({replayed} messages)"
         )
         self._report()
 
@@ -121,9 +112,8 @@ class CentralMonitorNode:
             self.bag.write(topic, self.raw)
 
     def _report(self) -> None:
-        """Report held the last tick whose record is in (and whether the outcome is), once the bag holds it durably."""
-        tick = min(self.robots_tick, self.last_tick)
-        held = (tick, self.outcome is not None and tick == self.outcome_tick)
+        """Report what the core holds (:meth:`CentralMonitor.held`) once the bag holds it durably."""
+        held = self.core.held()
         if held != self.reported and self.raw is not None:  # not while replaying: once, after
             if self.bag is not None:
                 self.bag.durable()
@@ -133,97 +123,50 @@ class CentralMonitorNode:
     def load(self) -> None:
         """Nothing heavy."""
 
-    @property
-    def last_tick(self) -> int:
-        return int(self.history[-1, 0]) if len(self.history) else -1
-
     def _on_metrics(self, msg: Cloud) -> None:
         try:
-            rows = checks.cloud(msg, metrics_row(self.columns), 10**9)
-            history = check_metrics_rows(rows, self.history, self.columns)
+            self.core.metrics(msg)
         except Rejected as fault:
             self.rejections.drop(self.topics.metrics, fault)
             return
-        if self.started_at is None:
-            self.started_at = time.perf_counter()
-        self.history = np.concatenate([self.history, history]) if len(self.history) else history
         self._into_bag(self.topics.metrics)
         self._report()
 
     def _on_robots(self, msg: Cloud) -> None:
         try:
-            tick = checks.tick_stamp(msg.header)
-            whole = self.params.robots if self.shards == 1 else 0  # a world shard's: its own robots
-            rows = checks.cloud(msg, self.wire.row, self.params.robots, min_rows=whole)
-            self.wire.check_rows(self.copy, rows, tick)
-            if tick <= self.robots_tick or any(np.array_equal(p, rows) for p in self.parts.get(tick, ())):
-                return  # a record it holds, or a restarted world shard's part of one again
-            record = self._whole(tick, rows)
+            taken = self.core.robots_record(msg)
         except Rejected as fault:
             self.rejections.drop(self.topics.robots, fault)
             return
-        self._into_bag(self.topics.robots)
-        if record is None:
-            return  # the other shards' robots of the record are still on their way
-        self.robots_tick = tick
-        _, robots = self.wire.robots_of(record)
-        self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
-        if self.recorder is not None and tick > 0:  # (tick 0's: logged as the recorder opened)
-            self.recorder.log(self.copy)
-        self._report()
-
-    def _whole(self, tick: int, rows: np.ndarray) -> np.ndarray | None:
-        """Every robot's rows of record ``tick`` once the world's (or every world shard's) are in, ascending; None
-        until then.
-
-        Raises:
-            Rejected: rows of a robot the record holds already.
-        """
-        if self.shards == 1:
-            return rows
-        parts = self.parts.setdefault(tick, [])
-        held = np.concatenate([p["id"] for p in parts]) if parts else np.empty(0, dtype=np.int64)
-        if np.isin(rows["id"], held).any():
-            raise Rejected("conflict", f"a robot's row twice in the record of tick {tick}")
-        parts.append(rows)
-        if held.size + rows.size < self.params.robots:
-            return None
-        self.parts = {t: p for t, p in self.parts.items() if t > tick}
-        whole = np.concatenate(parts)
-        return whole[np.argsort(whole["id"], kind="stable")]
+        if taken:
+            self._into_bag(self.topics.robots)
+            self._report()
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         self._into_bag(STATUS)
-        values = msgs.status_values(msg)
-        outcome = values.get("outcome")
-        if self.outcome is None and has_ended(outcome):
-            self.outcome, self.outcome_tick = outcome, msgs.tick_of(msg.header)
-            self._report()
+        self.core.status(msgs.status_values(msg), msgs.tick_of(msg.header))
+        self._report()
 
     def poll(self) -> None:
-        if self.outcome is None or self.finished:
-            return
-        end = self.outcome_tick  # the outcome may come before the last tick's robots and metrics (other topics)
-        if self.robots_tick != end or self.last_tick != end:
-            return  # the last robots or metrics are still on their way
-        self._write(Outcome(self.outcome))
+        if not self.finished and self.core.due():
+            self._write(Outcome(self.core.outcome))
 
     def _write(self, outcome: Outcome) -> None:
-        self.copy.load(self.robots_tick, self.copy.robots, self.history, outcome)
-        wall = time.perf_counter() - self.started_at if self.started_at is not None else 0.0
-        summary = self.algorithm.hook("summary")(self.copy, wall)
+        copy = self.core.copy
+        wall = self.core.finish(outcome)
+        summary = self.algorithm.hook("summary")(copy, wall)
         summary.update(engine="ros2", restarts=[], processes=None, shutdown_seconds=None)  # the launcher's to fill
         if self.recorder is not None:
-            self.recorder.finish(self.copy, summary["outcome"])
+            self.recorder.finish(copy, summary["outcome"])
         summary["recording_robots_every"] = self.every if self.rrd is not None else None
         if self.bag is not None:
             summary["bag_robots_every"] = self.every
         bag = self.bag.close() if self.bag is not None else None
         write = self.algorithm.hook("write_run")
-        write(self.out, self.copy, summary, overwrite=self.overwrite, recording=self.rrd, every=self.every, bag=bag)
+        write(self.out, copy, summary, overwrite=self.overwrite, recording=self.rrd, every=self.every, bag=bag)
         if self.bag is not None:
             self.bag.discard_holder()
-        self.node.get_logger().info(f"wrote {self.out}: {summary['outcome']} at tick {self.copy.tick}")
+        self.node.get_logger().info(f"wrote {self.out}: {summary['outcome']} at tick {copy.tick}")
         self.finished = True
 
     def wake_in(self) -> float | None:
@@ -237,16 +180,17 @@ class CentralMonitorNode:
         first process interrupted before any tick came keeps neither."""
         if self.finished:
             return
-        if code == EXIT_INTERRUPTED and self.outcome is None:
+        core = self.core
+        if code == EXIT_INTERRUPTED and core.outcome is None:
             handle_missed(self.node)  # what the world sent before it stopped is the run so far
-            if 0 <= self.robots_tick <= self.last_tick:
-                self.history = self.history[: self.robots_tick + 1]  # one row a tick from tick 0: up to the record
+            if core.cut_at_record():
                 self._write(Outcome.INTERRUPTED)
                 return
-        unstarted = code == EXIT_INTERRUPTED and not len(self.history) and not self.incarnation
+        taken = core.last_tick >= 0
+        unstarted = code == EXIT_INTERRUPTED and not taken and not self.incarnation
         if self.recorder is not None:
-            self.recorder.finish(self.copy, "interrupted")
+            self.recorder.finish(core.copy, "interrupted")
         if unstarted and self.rrd is not None:
             self.rrd.unlink(missing_ok=True)  # its own, of no tick
         if self.bag is not None:
-            self.bag.move_to(run_dir.partial_bag(self.out)) if len(self.history) else self.bag.discard()
+            self.bag.move_to(run_dir.partial_bag(self.out)) if taken else self.bag.discard()

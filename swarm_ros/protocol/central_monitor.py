@@ -1,0 +1,144 @@
+"""The monitor's side of a central world's run (:mod:`swarm_ros.protocol.central_world`) as plain code: no rclpy,
+no files, an injectable clock. The monitor node (:mod:`swarm_ros.nodes.central.monitor`) feeds it the world's
+messages and does the rest: the bag, the report on /swarm/held, the run directory.
+
+:class:`CentralMonitor` keeps a copy of the run (the algorithm's engine, loaded with what the world reports:
+:meth:`~swarm_ros.core.strips.CentralRun.load`). It takes the metrics rows of every tick, one a tick and in order
+(a restarted world sends again the ticks since its last record: they must equal those held), and the robots' rows
+every ``record_every``-th tick and at the end (with world shards, each shard's robots: the record is whole once
+every robot's row is in). It holds a tick once its record and its metrics are in, and the run may be written once
+the world's outcome, the last record and the metrics up to it are.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from swarm_ros.core.errors import Rejected
+from swarm_ros.core.metrics import Outcome
+
+from . import checks
+from .cdr import Cloud
+from .central_rows import Wire, check_metrics_rows, metrics_row
+from .status import has_ended
+
+
+class CentralMonitor:
+    """What the monitor holds of a central world's run. ``copy``: the algorithm's engine at tick 0 (loaded as
+    records come); ``shards``: the world processes whose records each hold a part of the robots; ``recorder``:
+    told each record (``log(copy)``), or None."""
+
+    def __init__(
+        self,
+        copy: Any,
+        wire: Wire,
+        shards: int = 1,
+        recorder: Any = None,
+        clock: Callable[[], float] = time.perf_counter,
+    ) -> None:
+        self.copy, self.wire, self.shards, self.recorder, self.clock = copy, wire, shards, recorder, clock
+        self.robots = int(copy.params.robots)
+        self.columns = tuple(copy.columns)
+        self.history = np.empty((0, len(self.columns)))  #: the metrics of every tick taken, as the world sent them
+        self.robots_tick = -1  #: the tick of the last whole record
+        self.parts: dict[int, list[np.ndarray]] = {}  #: record tick -> the world shards' rows of it so far
+        self.outcome: str | None = None  #: the world's outcome, once its status reports one
+        self.outcome_tick = -1
+        self.started_at: float | None = None  #: clock() at the first metrics taken
+
+    @property
+    def last_tick(self) -> int:
+        """The last tick whose metrics are in (-1: none)."""
+        return int(self.history[-1, 0]) if len(self.history) else -1
+
+    def metrics(self, msg: Cloud) -> None:
+        """The world's metrics rows since its last record (:func:`~swarm_ros.protocol.central_rows
+        .check_metrics_rows`).
+
+        Raises:
+            Rejected: rows that are not the next ticks' (or the held ones' again), or out of bounds.
+        """
+        rows = checks.cloud(msg, metrics_row(self.columns), 10**9)
+        history = check_metrics_rows(rows, self.history, self.columns)
+        if self.started_at is None:
+            self.started_at = self.clock()
+        self.history = np.concatenate([self.history, history]) if len(self.history) else history
+
+    def robots_record(self, msg: Cloud) -> bool:
+        """A record's robots (a world shard's: its own); returns whether it was taken (False: a record held
+        already, or a shard's part of one again). The copy is loaded once the record is whole.
+
+        Raises:
+            Rejected: rows out of bounds, not of the run at their tick, or of a robot the record holds already.
+        """
+        tick = checks.tick_stamp(msg.header)
+        whole = self.robots if self.shards == 1 else 0  # a world shard's: its own robots
+        rows = checks.cloud(msg, self.wire.row, self.robots, min_rows=whole)
+        self.wire.check_rows(self.copy, rows, tick)
+        if tick <= self.robots_tick or any(np.array_equal(p, rows) for p in self.parts.get(tick, ())):
+            return False
+        record = self._whole(tick, rows)
+        if record is None:
+            return True  # the other shards' robots of the record are still on their way
+        self.robots_tick = tick
+        _, robots = self.wire.robots_of(record)
+        self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
+        if self.recorder is not None and tick > 0:  # (tick 0's: logged as the recorder opened)
+            self.recorder.log(self.copy)
+        return True
+
+    def _whole(self, tick: int, rows: np.ndarray) -> np.ndarray | None:
+        """Every robot's rows of record ``tick`` once the world's (or every world shard's) are in, ascending; None
+        until then.
+
+        Raises:
+            Rejected: rows of a robot the record holds already.
+        """
+        if self.shards == 1:
+            return rows
+        parts = self.parts.setdefault(tick, [])
+        held = np.concatenate([p["id"] for p in parts]) if parts else np.empty(0, dtype=np.int64)
+        if np.isin(rows["id"], held).any():
+            raise Rejected("conflict", f"a robot's row twice in the record of tick {tick}")
+        parts.append(rows)
+        if held.size + rows.size < self.robots:
+            return None
+        self.parts = {t: p for t, p in self.parts.items() if t > tick}
+        whole = np.concatenate(parts)
+        return whole[np.argsort(whole["id"], kind="stable")]
+
+    def status(self, values: dict[str, str], tick: int) -> None:
+        """The world's status (its values, its stamp's tick): the first outcome it reports is the run's."""
+        outcome = values.get("outcome")
+        if self.outcome is None and has_ended(outcome):
+            self.outcome, self.outcome_tick = outcome, tick
+
+    def held(self) -> tuple[int, bool]:
+        """What to report held once the bag holds what was taken: the last tick whose record and metrics are in,
+        and whether the outcome is, at that tick."""
+        tick = min(self.robots_tick, self.last_tick)
+        return tick, self.outcome is not None and tick == self.outcome_tick
+
+    def due(self) -> bool:
+        """Whether the run may be written: the outcome came, and the last record and the metrics up to its tick
+        (the outcome may come before them: they travel on other topics)."""
+        end = self.outcome_tick
+        return self.outcome is not None and self.robots_tick == end and self.last_tick == end
+
+    def cut_at_record(self) -> bool:
+        """A run stopped before its end: keep the metrics up to its last record (one row a tick from tick 0), so
+        that the files written of it agree on its tick; returns whether there is a record to write."""
+        if not 0 <= self.robots_tick <= self.last_tick:
+            return False
+        self.history = self.history[: self.robots_tick + 1]
+        return True
+
+    def finish(self, outcome: Outcome) -> float:
+        """The copy as the run directory gives it (its last record, the metrics, ``outcome``); returns the run's wall
+        seconds, from the first metrics taken."""
+        self.copy.load(self.robots_tick, self.copy.robots, self.history, outcome)
+        return self.clock() - self.started_at if self.started_at is not None else 0.0
