@@ -18,6 +18,7 @@ from swarm_ros.core.strips import Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_batch import CentralBatch
 from swarm_ros.protocol.central_world import CentralLockstep, monitor_reach
+from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.rubenstein.rows import (
     RubensteinWire,
     check_rubenstein_rows,
@@ -584,7 +585,7 @@ class WorldPort:
         self.watched: list[str] = []
         self.areas: list[tuple[str, int, np.ndarray]] = []
         self.records: list[tuple[int, np.ndarray, np.ndarray]] = []
-        self.statuses: list[tuple[int, str, str, str]] = []
+        self.statuses: list[tuple[int, str, str, dict]] = []
 
     def watch_batch(self, name):
         self.watched.append(name)
@@ -595,8 +596,8 @@ class WorldPort:
     def publish_record(self, tick, metrics, robots):
         self.records.append((tick, metrics, robots))
 
-    def publish_status(self, tick, outcome, message, waiting):
-        self.statuses.append((tick, outcome, message, waiting))
+    def publish_status(self, tick, outcome, message, values):
+        self.statuses.append((tick, outcome, message, values))
 
     def monitor_reads(self):
         return True
@@ -604,8 +605,8 @@ class WorldPort:
     def delivered(self):
         return True
 
-    def dropped(self):
-        return ""
+    def startup_seconds(self):
+        return 1.5
 
 
 def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
@@ -618,7 +619,7 @@ def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
     run, port, log, now = RubensteinRun(square(6), params), WorldPort(), Log(), [0.0]
     own = {"record_every": every, "monitor_window": window, "start_timeout": 60.0, "incarnation": 0}
     own["checkpoint"] = str(tmp_path / "world.npz") if tmp_path else ""
-    world = CentralWorld(run, RubensteinWire, own, port, log, clock=lambda: now[0])
+    world = CentralWorld(run, RubensteinWire, own, port, log, Rejections(log), clock=lambda: now[0])
     hosts = {}
     for k in reversed(range(2)):
         name = f"robot_batch_{k}"
@@ -667,6 +668,10 @@ def test_the_worlds_logic_over_a_fake_port_runs_the_in_process_run_with_a_record
     metrics = np.concatenate([m for _, m, _ in port.records])
     assert len(metrics) == run.tick + 1  # every tick's metrics row once, in order
     assert port.statuses[-1][:2] == (run.tick, str(run.outcome)) and world.finished
+    said = port.statuses[-1][3]  # what the study's model's world says too: the monitor's summary takes it
+    assert said["startup_seconds"] == "1.500" and float(said["wall_seconds"]) > 0 and said["rejected_messages"] == 0
+    first = port.statuses[0]
+    assert first[:2] == (0, "running") and "startup_seconds" in first[3] and "wall_seconds" not in first[3]
     assert (tmp_path / "world.npz").exists()
 
 
@@ -719,10 +724,13 @@ def test_the_monitor_holds_each_record_once_its_metrics_are_in_and_ends_with_the
         monitor.metrics(_cloud(changed, run.tick))
     monitor.status({"outcome": "running"}, run.tick)
     assert not monitor.due()
-    monitor.status({"outcome": str(run.outcome)}, run.tick)
+    said = {"outcome": str(run.outcome), "wall_seconds": "2.500", "startup_seconds": "1.250", "rejected_messages": "3"}
+    monitor.status(said, run.tick)
     assert monitor.held() == (run.tick, True) and monitor.due()
-    monitor.finish(run.outcome)
+    assert monitor.finish(run.outcome) == 2.5  # tick 0 to the outcome, on the world's clock
     assert same(run, monitor.copy)
+    fields = {"startup_seconds": 1.25, "rejected_messages": {"world": 3, "monitor": 2}, "world_shards": 1}
+    assert monitor.graph_fields(2) == fields
     assert logged == [tick for tick, _, _ in port.records[1:]]  # each record but tick 0's, recorded once
 
 
@@ -752,3 +760,16 @@ def test_a_monitor_stopped_mid_run_keeps_the_metrics_up_to_its_last_record(recor
     monitor.metrics(_cloud(m1, t1))  # the metrics of the next 7 ticks, whose record did not come
     assert monitor.last_tick == t1 and monitor.cut_at_record()
     assert monitor.last_tick == t0 == 0 and len(monitor.history) == 1
+
+
+def test_a_restarted_world_keeps_the_runs_clock_from_its_checkpoint(tmp_path):
+    """startup_seconds and wall_seconds are the run's, not the restarted process's (the study's model's world keeps
+    them in its book the same way)."""
+    from swarm_ros.protocol.central_world import CentralWorld
+
+    world_run(0, 20, tmp_path)  # its last checkpoint stays (the fake port never removes it)
+    params, log = RunParams(40, algorithm="rubenstein", seed=6), Log()
+    own = {"record_every": 20, "monitor_window": 0, "start_timeout": 60.0, "incarnation": 1}
+    own["checkpoint"] = str(tmp_path / "world.npz")
+    again = CentralWorld(RubensteinRun(square(6), params), RubensteinWire, own, WorldPort(), log, Rejections(log))
+    assert again.startup == 1.5 and again.started_at is not None and again.run.tick % 1000 == 0  # a checkpoint's

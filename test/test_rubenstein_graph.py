@@ -48,6 +48,9 @@ def assert_same_run(reference: Path, out: Path) -> dict:
     differ = {k for k in ref if got.get(k) != ref[k]}
     assert differ <= {"engine", "wall_seconds", "recording_robots_every", "bag_robots_every"}, differ
     assert got["engine"] == "ros2" and got["outcome"] == "complete"
+    # what every graph run's summary says beside the algorithm's own fields (docs/usage.md)
+    assert isinstance(got["startup_seconds"], float) and 0 < got["startup_seconds"] < 120
+    assert got["rejected_messages"] == {"world": 0, "monitor": 0} and got["world_shards"] >= 1
     return got
 
 

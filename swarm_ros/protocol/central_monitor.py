@@ -24,7 +24,8 @@ from swarm_ros.core.metrics import Outcome
 from . import checks
 from .cdr import Cloud
 from .central_rows import Wire, check_metrics_rows, metrics_row
-from .status import has_ended
+from .plan import WORLD
+from .status import WorldReport, has_ended
 
 
 class CentralMonitor:
@@ -49,6 +50,7 @@ class CentralMonitor:
         self.outcome: str | None = None  #: the world's outcome, once its status reports one
         self.outcome_tick = -1
         self.started_at: float | None = None  #: clock() at the first metrics taken
+        self.world = WorldReport()  #: what the world's (or world shards') status said: its clock, its drops
 
     @property
     def last_tick(self) -> int:
@@ -111,8 +113,10 @@ class CentralMonitor:
         whole = np.concatenate(parts)
         return whole[np.argsort(whole["id"], kind="stable")]
 
-    def status(self, values: dict[str, str], tick: int) -> None:
-        """The world's status (its values, its stamp's tick): the first outcome it reports is the run's."""
+    def status(self, values: dict[str, str], tick: int, sender: str = WORLD) -> None:
+        """The status of the world, or of world shard ``sender`` (its values, its stamp's tick): the first outcome
+        one reports is the run's."""
+        self.world.update(values, sender)
         outcome = values.get("outcome")
         if self.outcome is None and has_ended(outcome):
             self.outcome, self.outcome_tick = outcome, tick
@@ -139,6 +143,18 @@ class CentralMonitor:
 
     def finish(self, outcome: Outcome) -> float:
         """The copy as the run directory gives it (its last record, the metrics, ``outcome``); returns the run's wall
-        seconds, from the first metrics taken."""
+        seconds: tick 0 to the outcome on the world's clock, as its status said, or else from the first metrics
+        taken."""
         self.copy.load(self.robots_tick, self.copy.robots, self.history, outcome)
-        return self.clock() - self.started_at if self.started_at is not None else 0.0
+        own = self.clock() - self.started_at if self.started_at is not None else 0.0
+        return self.world.times.get("wall_seconds", own)
+
+    def graph_fields(self, rejected: int) -> dict[str, Any]:
+        """What summary.json says of a run over the graph beside the algorithm's own summary (docs/usage.md), as
+        the study's model's monitor says it: ``startup_seconds`` (the world's), ``rejected_messages`` (the world's
+        and, ``rejected``, the monitor's), ``world_shards``."""
+        return {
+            "startup_seconds": self.world.times.get("startup_seconds"),
+            "rejected_messages": {"world": self.world.rejected, "monitor": rejected},
+            "world_shards": self.shards,
+        }

@@ -32,7 +32,7 @@ from swarm_ros.core.strips import CentralRun, Strips
 from . import central_checkpoint as checkpoint
 from .central_checkpoint import SAVE_TICKS, SHARD_SAVE_TICKS, save_every
 from .central_rows import Wire, metrics_rows
-from .checks import held_report
+from .checks import Rejections, held_report
 from .plan import CENTRAL_KEPT as KEPT
 from .plan import MONITOR
 from .status import RUNNING, STARTING
@@ -40,6 +40,7 @@ from .world_port import STILL_S
 
 #: seconds, at most, for the last messages to be acknowledged before exiting, when the world waits for no monitor
 LINGER = 5.0
+_CLOCK = "clock"  #: in a checkpoint: the run's wall clock at tick 0 and its startup seconds
 
 
 def monitor_reach(window: int, every: int) -> int | None:
@@ -249,8 +250,11 @@ class CentralWorld:
 
     Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writer, decisions
     reader and liveliness), ``send_area(name, tick, rows)``, ``publish_record(tick, metrics_rows, robot_rows)``,
-    ``publish_status(tick, outcome, message, waiting)``, and answers ``monitor_reads()`` (the monitor reads the
-    run's topics) and ``delivered()`` (every reader has the last messages)."""
+    ``publish_status(tick, outcome, message, values)`` (the status's values, as the study's model's world gives
+    them: ``waiting_for``, ``rejected_messages``, ``rejected``; from tick 0 ``startup_seconds``, at the end
+    ``wall_seconds``), and answers ``monitor_reads()`` (the monitor reads the run's topics), ``delivered()`` (every
+    reader has the last messages) and ``startup_seconds()`` (from the start of the run's command, or of this
+    process, to now). ``rejections``: the messages its node dropped."""
 
     def __init__(
         self,
@@ -259,12 +263,13 @@ class CentralWorld:
         own: dict,
         port: Any,
         log: Any,
+        rejections: Rejections,
         clock: Callable[[], float] = time.monotonic,
         lockstep: CentralLockstep | None = None,
     ) -> None:
         self.ls = lockstep or CentralLockstep(run, wire)  # a world shard's: central_shard_world.ShardLockstep
         self.ls.on_settled = self._settled
-        self.port, self.log, self.clock = port, log, clock
+        self.port, self.log, self.rejections, self.clock = port, log, rejections, clock
         self.every = int(own["record_every"]) or auto_every(run.params)
         sharded = self.ls.shard_index is not None
         self.save_every = save_every(self.every, SHARD_SAVE_TICKS if sharded else SAVE_TICKS)
@@ -278,6 +283,9 @@ class CentralWorld:
         self.first = True  # the first tick this process publishes is still to go out
         self.watched: set[str] = set()  # the batches whose endpoints the port made
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
+        self.started_at: float | None = None  # clock() at tick 0 (a resumed world's: as its checkpoint says)
+        self.started_wall = 0.0  # time.time() at tick 0, saved in the checkpoint
+        self.startup = 0.0  # seconds from the start of the run's command to tick 0 (port.startup_seconds)
         self.ended_at: float | None = None
         self.finished = False
         self.watch = Watch(self.created)
@@ -303,7 +311,11 @@ class CentralWorld:
             self.log.info("restarted before tick 0 went out: the run starts from tick 0")
             return
         saved = checkpoint.load(self.checkpoint, self.run)
-        self.ls.resume(saved.hosts, saved.cuts, saved.kept, before=saved.tick + self.save_every)
+        kept = dict(saved.kept)
+        if _CLOCK in kept:
+            self.started_wall, self.startup = (float(v) for v in kept.pop(_CLOCK))
+            self.started_at = self.clock() - max(0.0, time.time() - self.started_wall)
+        self.ls.resume(saved.hosts, saved.cuts, kept, before=saved.tick + self.save_every)
         self.sent_metrics = saved.tick - self.every if saved.tick else -1
         self.log.info(f"restarted: on from the checkpoint of tick {saved.tick}")
 
@@ -376,7 +388,8 @@ class CentralWorld:
         tick, ended = run.tick, run.outcome is not None
         self.watch.moved(self.clock())
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
-            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts, self.ls.kept())
+            clock = {_CLOCK: np.array([self.started_wall, self.startup])}  # the run's, for a restarted world
+            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts, {**self.ls.kept(), **clock})
         if ended or tick % self.every == 0:
             robots = self.ls.wire.rows(self.ls.recorded(), run.robots)
             metrics = metrics_rows(run.history[self.sent_metrics + 1 :], run.columns)
@@ -389,7 +402,16 @@ class CentralWorld:
             self._send_areas(self.ls.mine)
 
     def status(self, outcome: str, message: str) -> None:
-        self.port.publish_status(self.run.tick, outcome, message, ",".join(sorted(self.watch.lapsed)))
+        values: dict[str, object] = {
+            "waiting_for": ",".join(sorted(self.watch.lapsed)),
+            "rejected_messages": self.rejections.total,
+            "rejected": self.rejections.text(),
+        }
+        if self.started_at is not None:
+            values["startup_seconds"] = f"{self.startup:.3f}"
+        if self.started_at is not None and self.ended_at is not None:
+            values["wall_seconds"] = f"{self.ended_at - self.started_at:.3f}"
+        self.port.publish_status(self.run.tick, outcome, message, values)
 
     # -- between messages ---------------------------------------------------------------------
     def poll(self) -> None:
@@ -405,6 +427,9 @@ class CentralWorld:
             batches, self.waiting = sorted(set(self.waiting)), []
             if self.first:  # tick 0, or the checkpoint's: the robots, the metrics and the areas
                 self.first = False
+                if self.started_at is None:  # (a resumed world's is the run's, from its checkpoint)
+                    self.started_at, self.startup = now, self.port.startup_seconds()
+                    self.started_wall = time.time()
                 self.status(RUNNING, f"{len(self.ls.mine)} robot batches in: tick {self.run.tick}")
                 self.pending = True
                 self._go_on()
@@ -415,7 +440,7 @@ class CentralWorld:
         if self.ls.started and self.ended_at is None and self.watch.still(now):  # for STILL_S
             unheard = [name for name in self.ls.hosts.values() if name not in self.watched]  # a resumed world's
             awaited = (unheard or [MONITOR]) if self.first or self.pending else self.ls.awaited()
-            raise self.watch.failure(self.run.tick, awaited, self.port.dropped())
+            raise self.watch.failure(self.run.tick, awaited, self.rejections.text())
         if self.ended_at is not None and self.reach is not None:  # the monitor holds the end: nothing more to keep
             self.finished = self.held_end
         elif self.ended_at is not None:

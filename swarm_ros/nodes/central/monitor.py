@@ -38,7 +38,7 @@ from swarm_ros.core.params import Settings, auto_every
 from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.central_monitor import CentralMonitor
 from swarm_ros.protocol.checks import Rejections
-from swarm_ros.protocol.plan import HELD, MONITOR, STATUS, CentralTopics
+from swarm_ros.protocol.plan import HELD, MONITOR, STATUS, WORLD, CentralTopics
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.bag_resume import resume
@@ -144,7 +144,8 @@ class CentralMonitorNode:
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         self._into_bag(STATUS)
-        self.core.status(msgs.status_values(msg), msgs.tick_of(msg.header))
+        tag = self.gate.last_tag  # the tag of this message, which the gate proved: the world or a world shard
+        self.core.status(msgs.status_values(msg), msgs.tick_of(msg.header), tag.sender if tag is not None else WORLD)
         self._report()
 
     def poll(self) -> None:
@@ -156,6 +157,7 @@ class CentralMonitorNode:
         wall = self.core.finish(outcome)
         summary = self.algorithm.hook("summary")(copy, wall)
         summary.update(engine="ros2", restarts=[], processes=None, shutdown_seconds=None)  # the launcher's to fill
+        summary.update(self.core.graph_fields(self.rejections.total))
         if self.recorder is not None:
             self.recorder.finish(copy, summary["outcome"])
         summary["recording_robots_every"] = self.every if self.rrd is not None else None

@@ -35,6 +35,7 @@ from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.central_shards import CentralShard
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.params import Settings, auto_every
+from swarm_ros.core.signals import run_age
 from swarm_ros.core.strips import strips_for
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
@@ -66,7 +67,7 @@ class CentralWorldNode:
         self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
         engine = algorithm.hook("engine")(shape, self.params)
         lockstep = self._shard(engine, own) if int(own.get("shards", 1)) > 1 else None
-        self.world = CentralWorld(engine, self.wire, own, self, node.get_logger(), lockstep=lockstep)
+        self.world = CentralWorld(engine, self.wire, own, self, node.get_logger(), self.rejections, lockstep=lockstep)
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.gate.subscribe(Int64MultiArray, HELD, self._on_held, msgs.LATCHED_QOS)
         self._watch_alive(MONITOR)
@@ -200,8 +201,8 @@ class CentralWorldNode:
             self.pub_metrics.publish_rows(metrics, tick)
         self.pub_robots.publish_rows(robots, tick)
 
-    def publish_status(self, tick: int, outcome: str, message: str, waiting: str) -> None:
-        self.pub_status.publish(msgs.status_message(tick, outcome, message, extra={"waiting_for": waiting}))
+    def publish_status(self, tick: int, outcome: str, message: str, values: dict[str, object]) -> None:
+        self.pub_status.publish(msgs.status_message(tick, outcome, message, extra=values))
 
     def monitor_reads(self) -> bool:
         return all(
@@ -212,8 +213,8 @@ class CentralWorldNode:
     def delivered(self) -> bool:
         return all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots, self.pub_metrics))
 
-    def dropped(self) -> str:
-        return self.rejections.text()
+    def startup_seconds(self) -> float:
+        return run_age()
 
     # -- the node runtime's hooks ----------------------------------------------------------
     def poll(self) -> None:
