@@ -586,12 +586,15 @@ class WorldPort:
         self.areas: list[tuple[str, int, np.ndarray]] = []
         self.records: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.statuses: list[tuple[int, str, str, dict]] = []
+        self.sent_at: list[float] = []  # the clock at each area sent
+        self.clock = lambda: 0.0
 
     def watch_batch(self, name):
         self.watched.append(name)
 
     def send_area(self, name, tick, rows):
         self.areas.append((name, tick, rows))
+        self.sent_at.append(self.clock())
 
     def publish_record(self, tick, metrics, robots):
         self.records.append((tick, metrics, robots))
@@ -609,7 +612,7 @@ class WorldPort:
         return 1.5
 
 
-def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
+def world_run(window: int, every: int, tmp_path=None, slow: bool = False, tick_rate: float = 0.0):
     """A CentralWorld over a fake port and clock, its batches' hosts fed the areas it sends, and a monitor that
     reports each record held as it goes out (``slow``: only once the world waits for it). Checks, throughout, that
     the world never runs past the monitor's reach."""
@@ -618,8 +621,9 @@ def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
     params = RunParams(40, algorithm="rubenstein", seed=6)
     run, port, log, now = RubensteinRun(square(6), params), WorldPort(), Log(), [0.0]
     own = {"record_every": every, "monitor_window": window, "start_timeout": 60.0, "incarnation": 0}
-    own["checkpoint"] = str(tmp_path / "world.npz") if tmp_path else ""
-    world = CentralWorld(run, RubensteinWire, own, port, log, Rejections(log), clock=lambda: now[0])
+    own.update(checkpoint=str(tmp_path / "world.npz") if tmp_path else "", tick_rate=tick_rate)
+    port.clock = lambda: now[0]
+    world = CentralWorld(run, RubensteinWire, own, port, log, Rejections(log), clock=port.clock)
     hosts = {}
     for k in reversed(range(2)):
         name = f"robot_batch_{k}"
@@ -648,6 +652,10 @@ def world_run(window: int, every: int, tmp_path=None, slow: bool = False):
             held = last
             moved = True
             world.held_report(np.array([held, int(ended)]))
+        if tick_rate:  # the node polls when the world says a held tick is due; the fake clock gets there
+            wait = world.wake_in()
+            assert wait is None or wait <= 1 / tick_rate
+            moved = moved or wait is not None
         world.poll()
         if world.finished:
             return run, world, port
@@ -773,3 +781,16 @@ def test_a_restarted_world_keeps_the_runs_clock_from_its_checkpoint(tmp_path):
     own["checkpoint"] = str(tmp_path / "world.npz")
     again = CentralWorld(RubensteinRun(square(6), params), RubensteinWire, own, WorldPort(), log, Rejections(log))
     assert again.startup == 1.5 and again.started_at is not None and again.run.tick % 1000 == 0  # a checkpoint's
+
+
+def test_tick_rate_paces_the_world_and_the_run_is_the_same():
+    """The world parameter tick_rate (to watch a run live), as the study's model's world has it: no two ticks go
+    out less than 1 / tick_rate apart."""
+    params = RunParams(40, algorithm="rubenstein", seed=6)
+    whole = RubensteinRun(square(6), params)
+    whole.run()
+    run, _, port = world_run(0, 20, tick_rate=200.0)
+    assert same(whole, run)
+    ticks = np.array([tick for _, tick, _ in port.areas])
+    first = np.unique(ticks, return_index=True)[1]  # the first area of each tick: when the tick went out
+    assert np.diff(np.array(port.sent_at)[first]).min() >= 1 / 200 - 1e-9

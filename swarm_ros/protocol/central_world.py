@@ -242,10 +242,10 @@ class Watch:
 class CentralWorld:
     """The world node's logic, on a :class:`CentralLockstep`: tick 0 once the strips tile the grid and the monitor
     reads the run's topics; each settled tick sent unless it is past the monitor's reach (``monitor_window`` past
-    the last record the monitor reports held: :func:`monitor_reach`); a checkpoint every :func:`save_every` ticks
-    (1,000 or so; a world shard's, 100 or so),
-    before the tick goes out; the records (every robot's row and the metrics rows since the last) every
-    ``record_every`` ticks and at the end; the peers' liveliness and a still run's failure (:class:`Watch`);
+    the last record the monitor reports held: :func:`monitor_reach`), and at most ``tick_rate`` ticks a second if
+    set; a checkpoint every :func:`save_every` ticks (1,000 or so; a world shard's, 100 or so), before the tick
+    goes out; the records (every robot's row and the metrics rows since the last) every ``record_every`` ticks and
+    at the end; the peers' liveliness and a still run's failure (:class:`Watch`);
     the end once the monitor holds it (or, with no window, once its readers have everything, or after ``LINGER``).
 
     Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writer, decisions
@@ -276,6 +276,8 @@ class CentralWorld:
         self.reach = monitor_reach(int(own["monitor_window"]), self.every)
         self.checkpoint = Path(str(own["checkpoint"])) if own["checkpoint"] else None
         self.start_timeout = float(own["start_timeout"])
+        rate = float(own.get("tick_rate", 0.0))
+        self.period, self.paced_at = (1.0 / rate if rate else 0.0), 0.0  # tick_rate: a run paced to watch it live
         self.created = clock()
         self.held, self.held_end = -1, False  # the monitor's last held record, and whether it holds the outcome
         self.pending = False  # a settled tick waits for the monitor to catch up before it goes out
@@ -374,10 +376,23 @@ class CentralWorld:
 
     # -- what goes out ----------------------------------------------------------------------
     def _go_on(self) -> None:
-        """Send the settled tick, unless it is past the monitor's reach (then once the monitor reports more held)."""
+        """Send the settled tick, unless it is past the monitor's reach (then once the monitor reports more held), or
+        sooner than ``tick_rate`` allows (then when :meth:`wake_in` says)."""
         if self.pending and (self.reach is None or self.run.tick <= self.held + self.reach):
+            if self.period:  # tick_rate: each tick goes out at least a period after the one before
+                now = self.clock()
+                if now < self.paced_at:
+                    return
+                self.paced_at = now + self.period
             self.pending = False
             self._publish_tick()
+
+    def wake_in(self) -> float | None:
+        """Seconds until the settled tick may go out under ``tick_rate`` (the node polls by then); None: nothing
+        waits for the clock."""
+        if not self.period or not self.pending:
+            return None
+        return max(0.0, self.paced_at - self.clock())
 
     def _send_areas(self, batches: list[int]) -> None:
         for k in batches:
@@ -422,6 +437,7 @@ class CentralWorld:
             RunFailed: the batches did not all announce themselves within ``start_timeout``, or the run is still.
         """
         now = self.clock()
+        self._go_on()  # a tick held for tick_rate, due now
         heard = self.ls.started and all(name in self.watched for name in self.ls.hosts.values())  # resumed: all
         if self.waiting and heard and (not self.first or self.port.monitor_reads()):
             batches, self.waiting = sorted(set(self.waiting)), []

@@ -221,7 +221,7 @@ class CentralWorldNode:
         self.world.poll()
 
     def wake_in(self) -> float | None:
-        return None
+        return self.world.wake_in()
 
     def close(self, code: int) -> None:
         self.node.get_logger().info(f"the world ended at tick {self.world.run.tick}")
