@@ -37,7 +37,15 @@ def test_a_run_through_the_lockstep_is_the_engines_run_tick_for_tick():
     assert r.ls.sim.done and r.port.ticks == list(range(r.ls.sim.tick + 1))
     ref = r.engine()
     assert np.array_equal(r.ls.sim.history, ref.history) and r.ls.sim.outcome == ref.outcome
-    assert r.port.statuses[-1].outcome == ref.outcome.value and r.port.statuses[-1].values["restarts"] == ""
+    last = r.port.statuses[-1]
+    assert last.outcome == ref.outcome.value and last.values["restarts"] == ""
+    done, total, words = ref.progress()  # the progress bar's values, as simulate's bar has them
+    assert (last.values["progress"], last.values["progress_total"], last.values["progress_words"]) == (
+        done,
+        total,
+        "moving",
+    )
+    assert str(last.values["moving"]) == words["moving"]
     r.ls.poll()
     assert r.ls.finished
 

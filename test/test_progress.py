@@ -32,18 +32,29 @@ def test_the_bar_follows_the_status_from_tick_0_to_the_outcome():
     p = _progress()
     p._on_status(msgs.status_message(0, "starting", "waiting for robot batches"))
     assert not p.started and p.tick == -1 and p.bar.n == 0
-    p._on_status(msgs.status_message(40, "running", "running", extra={"localized": 300, "moving": 700}))
+    said = {"progress": 300, "progress_total": 1036, "progress_words": "moving", "moving": 700}
+    p._on_status(msgs.status_message(40, "running", "running", extra=said))
     assert p.started and p.tick == 40 and p.bar.n == 300 and p.ended_at is None
-    p._on_status(msgs.status_message(30, "running", "running", extra={"localized": 250}))  # an older one, late
+    assert set(p.bar.postfix.split(", ")) == {"tick=40", "moving=700"}
+    p._on_status(msgs.status_message(30, "running", "running", extra={"progress": 250}))  # an older one, late
     assert p.tick == 40
-    p._on_status(msgs.status_message(405, "complete", "complete at tick 405", extra={"localized": 1036}))
+    p._on_status(msgs.status_message(405, "complete", "complete at tick 405", extra={"progress": 1036}))
     assert p.tick == 405 and p.bar.n == 1036 and p.ended_at is not None
+
+
+def test_the_bar_counts_what_the_worlds_algorithm_counts():
+    """A rubenstein world's status: pixels covered of the shape's, and the robots joined (as simulate's bar)."""
+    p = _progress()
+    said = {"progress": 12, "progress_total": 600, "progress_words": "joined", "joined": 31}
+    p._on_status(msgs.status_message(2000, "running", "running", extra=said))
+    assert p.bar.total == 600 and p.bar.n == 12 and set(p.bar.postfix.split(", ")) == {"tick=2000", "joined=31"}
 
 
 def test_values_that_are_not_counts_do_not_break_the_bar():
     p = _progress()
-    p._on_status(msgs.status_message(3, "running", "running", extra={"localized": "x", "moving": -2}))
-    assert p.started and p.tick == 3 and p.bar.n == 0
+    said = {"progress": "x", "progress_total": -2, "progress_words": "moving,gone", "moving": -2}
+    p._on_status(msgs.status_message(3, "running", "running", extra=said))
+    assert p.started and p.tick == 3 and p.bar.n == 0 and p.bar.total == 1036
 
 
 def test_a_sigterm_while_a_participant_is_made_is_acted_on_once_it_is_whole():

@@ -680,6 +680,13 @@ def test_the_worlds_logic_over_a_fake_port_runs_the_in_process_run_with_a_record
     assert said["startup_seconds"] == "1.500" and float(said["wall_seconds"]) > 0 and said["rejected_messages"] == 0
     first = port.statuses[0]
     assert first[:2] == (0, "running") and "startup_seconds" in first[3] and "wall_seconds" not in first[3]
+    done, total, words = run.progress()  # what the launcher's bar shows, as simulate's does
+    assert (said["progress"], said["progress_total"], said["progress_words"], said["joined"]) == (
+        done,
+        total,
+        "joined",
+        words["joined"],
+    )
     assert (tmp_path / "world.npz").exists()
 
 
@@ -794,3 +801,31 @@ def test_tick_rate_paces_the_world_and_the_run_is_the_same():
     ticks = np.array([tick for _, tick, _ in port.areas])
     first = np.unique(ticks, return_index=True)[1]  # the first area of each tick: when the tick went out
     assert np.diff(np.array(port.sent_at)[first]).min() >= 1 / 200 - 1e-9
+
+
+def test_a_running_world_says_its_progress_ten_times_a_second():
+    """The launcher's progress bar follows the status alone: a central world sends one every STATUS_PERIOD while
+    it runs, as the study's model's world does, not only on events."""
+    from swarm_ros.protocol.central_world import CentralWorld
+    from swarm_ros.protocol.world_port import STATUS_PERIOD
+
+    params, log, now = RunParams(40, algorithm="rubenstein", seed=6), Log(), [0.0]
+    port = WorldPort()
+    own = {"record_every": 20, "monitor_window": 0, "start_timeout": 60.0, "incarnation": 0, "checkpoint": ""}
+    world = CentralWorld(
+        RubensteinRun(square(6), params), RubensteinWire, own, port, log, Rejections(log), lambda: now[0]
+    )
+    for k in range(2):
+        batch = CentralBatch(
+            square(6), params, {"batch": k, "batches": 2, "region_cuts": "", "name": f"b{k}"}, _no_drop
+        )
+        world.batch(f"b{k}", batch.strip)
+    world.poll()  # tick 0 goes out, with a status
+    said = len(port.statuses)
+    now[0] += STATUS_PERIOD / 2
+    world.poll()
+    assert len(port.statuses) == said  # not yet
+    now[0] += STATUS_PERIOD / 2
+    world.poll()
+    assert len(port.statuses) == said + 1 and port.statuses[-1][1] == "running"
+    assert port.statuses[-1][3]["progress_total"] == world.run.progress()[1]

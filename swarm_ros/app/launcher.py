@@ -325,9 +325,18 @@ class Launch:
         # (Signal handlers can only be set from the main thread; a Dask worker runs this in another.)
         stop = StopFlag() if threading.current_thread() is threading.main_thread() else None
         key = self.env[KEY_ENV].encode()
+        algorithm = algorithm_of(self.params.algorithm)
         with (
             stop or nullcontext(),
-            Progress(self.domain, self.shape.patches, key, quiet=self.quiet, enclaves=self.enclaves) as progress,
+            Progress(
+                self.domain,
+                self.shape.patches,
+                key,
+                quiet=self.quiet,
+                enclaves=self.enclaves,
+                unit=algorithm.progress_unit,
+                what=algorithm.progress_what,
+            ) as progress,
         ):
             while True:
                 if stop is not None and stop.signum:

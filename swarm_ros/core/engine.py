@@ -31,6 +31,7 @@ from swarm_ros.core.metrics import (
     OUTCOME_OF_CODE,
     Outcome,
     TickMetrics,
+    progress_of,
 )
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
@@ -141,8 +142,7 @@ class Simulation:
     def progress(self) -> tuple[int, int, dict[str, str]]:
         """The patches localized on so far, the shape's patches, and the tick and the robots moving (simulate's
         progress bar)."""
-        m = self.metrics
-        return m.localized, self.shape.patches, {"tick": str(m.tick), "moving": str(m.moving)}
+        return progress_of(self.metrics, self.shape.patches)
 
     @property
     def history(self) -> np.ndarray:

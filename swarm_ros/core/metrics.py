@@ -58,6 +58,14 @@ class TickMetrics(NamedTuple):
 
 
 METRIC_COLUMNS: tuple[str, ...] = TickMetrics._fields
+
+
+def progress_of(m: TickMetrics, patches: int) -> tuple[int, int, dict[str, str]]:
+    """A run's progress at the tick of ``m``, as its progress bars show it: the patches localized on, the shape's
+    ``patches``, and the tick and the robots moving."""
+    return m.localized, patches, {"tick": str(m.tick), "moving": str(m.moving)}
+
+
 _LOCALIZED = METRIC_COLUMNS.index("localized")
 
 

@@ -56,6 +56,8 @@ class CentralRun(Protocol):
 
     def deciding(self) -> np.ndarray: ...  # the robots that decide the next tick, ascending ids
 
+    def progress(self) -> tuple[int, int, dict[str, str]]: ...  # cells done, all of them, words (progress bars)
+
     def settle(self, decided: list[tuple[np.ndarray, Any]]) -> Any: ...  # a tick from each batch's (ids, decisions)
 
     def load(self, tick: int, robots: Any, history: np.ndarray, outcome: Any = None) -> None: ...

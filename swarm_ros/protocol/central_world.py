@@ -35,8 +35,8 @@ from .central_rows import Wire, metrics_rows
 from .checks import Rejections, held_report
 from .plan import CENTRAL_KEPT as KEPT
 from .plan import MONITOR
-from .status import RUNNING, STARTING
-from .world_port import STILL_S
+from .status import RUNNING, STARTING, progress_values
+from .world_port import STATUS_PERIOD, STILL_S
 
 #: seconds, at most, for the last messages to be acknowledged before exiting, when the world waits for no monitor
 LINGER = 5.0
@@ -251,10 +251,10 @@ class CentralWorld:
     Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writer, decisions
     reader and liveliness), ``send_area(name, tick, rows)``, ``publish_record(tick, metrics_rows, robot_rows)``,
     ``publish_status(tick, outcome, message, values)`` (the status's values, as the study's model's world gives
-    them: ``waiting_for``, ``rejected_messages``, ``rejected``; from tick 0 ``startup_seconds``, at the end
-    ``wall_seconds``), and answers ``monitor_reads()`` (the monitor reads the run's topics), ``delivered()`` (every
-    reader has the last messages) and ``startup_seconds()`` (from the start of the run's command, or of this
-    process, to now). ``rejections``: the messages its node dropped."""
+    them: ``waiting_for``, ``rejected_messages``, ``rejected``; from tick 0 ``startup_seconds`` and the run's
+    progress, ten a second; at the end ``wall_seconds``), and answers ``monitor_reads()`` (the monitor reads the
+    run's topics), ``delivered()`` (every reader has the last messages) and ``startup_seconds()`` (from the start
+    of the run's command, or of this process, to now). ``rejections``: the messages its node dropped."""
 
     def __init__(
         self,
@@ -289,6 +289,7 @@ class CentralWorld:
         self.started_wall = 0.0  # time.time() at tick 0, saved in the checkpoint
         self.startup = 0.0  # seconds from the start of the run's command to tick 0 (port.startup_seconds)
         self.ended_at: float | None = None
+        self.status_at = 0.0  # when the last status went out
         self.finished = False
         self.watch = Watch(self.created)
         if int(own["incarnation"]):  # a restarted process: on from the last checkpoint
@@ -417,6 +418,7 @@ class CentralWorld:
             self._send_areas(self.ls.mine)
 
     def status(self, outcome: str, message: str) -> None:
+        self.status_at = self.clock()
         values: dict[str, object] = {
             "waiting_for": ",".join(sorted(self.watch.lapsed)),
             "rejected_messages": self.rejections.total,
@@ -424,6 +426,7 @@ class CentralWorld:
         }
         if self.started_at is not None:
             values["startup_seconds"] = f"{self.startup:.3f}"
+            values.update(progress_values(self.run.progress()))  # (its tick is the one published, or the end)
         if self.started_at is not None and self.ended_at is not None:
             values["wall_seconds"] = f"{self.ended_at - self.started_at:.3f}"
         self.port.publish_status(self.run.tick, outcome, message, values)
@@ -438,6 +441,8 @@ class CentralWorld:
         """
         now = self.clock()
         self._go_on()  # a tick held for tick_rate, due now
+        if not self.first and self.ended_at is None and now - self.status_at >= STATUS_PERIOD:
+            self.status(RUNNING, RUNNING)  # ten a second: the launcher's progress bar follows them
         heard = self.ls.started and all(name in self.watched for name in self.ls.hosts.values())  # resumed: all
         if self.waiting and heard and (not self.first or self.port.monitor_reads()):
             batches, self.waiting = sorted(set(self.waiting)), []

@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
-from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome
+from swarm_ros.core.metrics import METRIC_COLUMNS, Outcome, TickMetrics, progress_of
 from swarm_ros.core.params import auto_every
 from swarm_ros.core.regions import columns
 from swarm_ros.core.rules import Decider, Decisions
@@ -37,7 +37,7 @@ from swarm_ros.protocol.plan import BATCHES, MONITOR
 from swarm_ros.protocol.rows import decision_rows, decisions_of, robot_rows, state_rows
 from swarm_ros.protocol.shard_exchange import RunView, ShardExchange
 from swarm_ros.protocol.shard_save import ShardSave
-from swarm_ros.protocol.status import RUNNING, STARTING, Status, restarts_text
+from swarm_ros.protocol.status import RUNNING, STARTING, Status, progress_values, restarts_text
 from swarm_ros.protocol.world_port import (
     DECISIONS_LINGER,
     DROWNED_S,
@@ -582,6 +582,7 @@ class Lockstep(WorldRecords):
         if self.started:
             m = sim.history[min(tick, sim.tick)]
             values.update({key: int(m[METRIC_COLUMNS.index(key)]) for key in ("localized", "moving", "walking")})
+            values.update(progress_values(progress_of(TickMetrics(*m), sim.shape.patches)))  # at the tick published
             values["startup_seconds"] = f"{self.startup_seconds:.3f}"
         if self.ended_at is not None:
             values["separated"] = int((sim.state.state == RobotState.SEPARATED).sum())

@@ -32,6 +32,15 @@ def has_ended(outcome: str | None) -> bool:
     return outcome is not None and outcome not in NOT_ENDED
 
 
+def progress_values(progress: tuple[int, int, dict[str, str]]) -> dict[str, object]:
+    """The status values of a run's progress, as ``simulate``'s bar shows it (an engine's ``progress()``: the cells
+    done, all of them, and words by name): ``progress``, ``progress_total``, ``progress_words`` (the words' names,
+    comma-separated) and each word but the tick (the status has its own)."""
+    done, total, words = progress
+    shown = {name: value for name, value in words.items() if name != "tick"}
+    return {"progress": done, "progress_total": total, "progress_words": ",".join(shown), **shown}
+
+
 @dataclass
 class Status:
     """One /swarm/status message's content: the tick it speaks for, the outcome (or run state), a line

@@ -24,11 +24,23 @@ from swarm_ros.ros.runtime import tool_node
 _MAX_BATCH = 10_000  # messages handled per spin() at most
 
 
+_COUNTS = ("tick", "progress", "progress_total")  #: the status values the bar counts with
+
+
 class Progress:
-    """Follows /swarm/status on ``domain_id`` and shows localized robots against the shape's patches."""
+    """Follows /swarm/status on ``domain_id`` and shows the run's progress as ``simulate``'s bar does: the cells of
+    the shape done (the world's ``progress`` of ``progress_total``), named as the algorithm names them (``unit``,
+    ``what``: the registry's ``progress_unit`` and ``progress_what``), with the tick and the world's words."""
 
     def __init__(
-        self, domain_id: int, patches: int, key: bytes, quiet: bool = False, enclaves: str | None = None
+        self,
+        domain_id: int,
+        cells: int,
+        key: bytes,
+        quiet: bool = False,
+        enclaves: str | None = None,
+        unit: str = "patch",
+        what: str = "localized",
     ) -> None:
         from tqdm import tqdm
 
@@ -48,9 +60,9 @@ class Progress:
             raise
         self.participant.callback(self.executor.shutdown)
         self.bar = tqdm(
-            total=patches,
-            unit="patch",
-            desc="localized",
+            total=cells,
+            unit=unit,
+            desc=what,
             disable=True if quiet else None,
             file=sys.stderr,
             dynamic_ncols=True,
@@ -67,11 +79,14 @@ class Progress:
             if not self.started:  # rate and time left count from tick 0, not from start-up
                 self.bar.reset(total=self.bar.total)
             self.started = True
-            counts = {k: int(v) for k, v in values.items() if k in ("tick", "localized", "moving") and v.isdigit()}
+            counts = {k: int(v) for k, v in values.items() if k in _COUNTS and v.isdigit()}
             if counts.get("tick", -1) >= self.tick:  # not an older status that came late
                 self.tick = counts.get("tick", self.tick)
-                self.bar.update(counts.get("localized", self.bar.n) - self.bar.n)
-                self.bar.set_postfix(tick=str(self.tick), moving=str(counts.get("moving", "")), refresh=False)
+                if counts.get("progress_total", 0) > 0:
+                    self.bar.total = counts["progress_total"]
+                self.bar.update(counts.get("progress", self.bar.n) - self.bar.n)
+                words = [w for w in values.get("progress_words", "").split(",") if w in values]
+                self.bar.set_postfix(tick=str(self.tick), **{w: values[w] for w in words}, refresh=False)
         if self.ended_at is None and has_ended(outcome):
             self.ended_at = time.monotonic()
 
