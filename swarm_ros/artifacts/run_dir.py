@@ -366,48 +366,66 @@ def write_run(
     bag: Path | None = None,
     robots_every: int | None = None,
 ) -> Path:
-    """Write the run's files into ``out`` atomically (temp dir + rename). Returns ``out``.
+    """Write a run of the study's model into ``out`` (:func:`write_files`): summary.json, metrics.csv,
+    final_state.csv, final.png and convergence.png, the ``recording`` and the ``bag``. ``robots_every``: the
+    recording holds every robot's pose every this many ticks; summary.json says so (``recording_robots_every``,
+    null without a recording); a run's ``bag`` holds every robot's row as often (``bag_robots_every``, written
+    with a bag only).
 
-    ``recording``, a finished .rrd file, is moved in as ``recording.rrd``, and ``bag``, a
-    finished rosbag2 directory, as ``bag/`` (each back where it was if the write fails).
-    ``robots_every``: the recording holds every robot's pose every this many ticks; summary.json says so
-    (``recording_robots_every``, null without a recording); a run's ``bag`` holds every robot's row as often
-    (``bag_robots_every``, written with a bag only).
+    Raises:
+        OutputError: the directory cannot be written.
+    """
+    from swarm_ros.artifacts.model_files import final_state_csv, metrics_csv
+
+    def pictures(path: Path, save: str) -> None:
+        from swarm_ros.artifacts import plots  # matplotlib: only when a run is written
+
+        getattr(plots, save)(record, path)
+
+    summary = {**record.summary, "recording_robots_every": robots_every if recording is not None else None}
+    if bag is not None:
+        summary["bag_robots_every"] = robots_every
+    files: dict[str, Callable[[Path], object]] = {
+        "metrics.csv": lambda path: path.write_text(metrics_csv(record.history), encoding="utf-8"),
+        "final_state.csv": lambda path: path.write_text(final_state_csv(record.state), encoding="utf-8"),
+        "final.png": lambda path: pictures(path, "save_final_png"),
+        "convergence.png": lambda path: pictures(path, "save_convergence_png"),
+    }
+    return write_files(out, summary, files, overwrite=overwrite, recording=recording, bag=bag)
+
+
+def write_files(
+    out: Path,
+    summary: dict,
+    files: dict[str, Callable[[Path], object]],
+    overwrite: bool = False,
+    recording: Path | None = None,
+    bag: Path | None = None,
+) -> Path:
+    """Write summary.json and ``files`` (name -> a function that writes the file at the path it is given) into
+    ``out``, whole or not at all (:func:`write_dir`), ``recording`` (a finished .rrd) moved in as ``recording.rrd``
+    and ``bag`` (a finished rosbag2 directory, the graph's) as ``bag/``, each back where it was if the write fails:
+    every algorithm's run directory. Returns ``out``.
 
     Raises:
         OutputError: the directory cannot be written.
     """
 
     def fill(tmp: Path) -> None:
-        summary = {**record.summary, "recording_robots_every": robots_every if recording is not None else None}
-        if bag is not None:
-            summary["bag_robots_every"] = robots_every
         (tmp / "summary.json").write_text(summary_json(summary), encoding="utf-8")
-        from swarm_ros.artifacts.model_files import final_state_csv, metrics_csv
-
-        (tmp / "metrics.csv").write_text(metrics_csv(record.history), encoding="utf-8")
-        (tmp / "final_state.csv").write_text(final_state_csv(record.state), encoding="utf-8")
-        from swarm_ros.artifacts.plots import (  # matplotlib: only when a run is written
-            save_convergence_png,
-            save_final_png,
-        )
-
-        save_final_png(record, tmp / "final.png")
-        save_convergence_png(record, tmp / "convergence.png")
+        for name, write in files.items():
+            write(tmp / name)
         if recording is not None:
             recording.rename(tmp / RECORDING_FILE)
         if bag is not None:
             bag.rename(tmp / BAG_DIR)
 
     def restore(tmp: Path) -> str:
-        kept = ""
         if recording is not None and (tmp / RECORDING_FILE).exists():
             (tmp / RECORDING_FILE).rename(recording)
-        if recording is not None and recording.exists():
-            kept = f"; the recording is kept in {recording}"
         if bag is not None and (tmp / BAG_DIR).exists():
             (tmp / BAG_DIR).rename(bag)
-        return kept
+        return f"; the recording is kept in {recording}" if recording is not None and recording.exists() else ""
 
     return write_dir(out, overwrite, fill, restore)
 

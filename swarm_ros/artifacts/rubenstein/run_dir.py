@@ -1,5 +1,5 @@
 """A rubenstein run's directory: summary.json, metrics.csv, final_state.csv and final.png, written whole or not at
-all (:func:`~swarm_ros.artifacts.central_run_dir.write_central_run`)."""
+all (:func:`~swarm_ros.artifacts.run_dir.write_files`)."""
 
 from __future__ import annotations
 
