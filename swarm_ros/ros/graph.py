@@ -11,16 +11,17 @@ from __future__ import annotations
 import array
 import functools
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import OccupancyGrid
 from rclpy.duration import Duration
+from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Header, Int64MultiArray, MultiArrayDimension
+from std_msgs.msg import Empty, Header, Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.shapes import Shape
@@ -34,6 +35,7 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     DECISIONS,
     HELD,
     METRICS,
+    MONITOR,
     MONITOR_READS,
     OCCUPANCY,
     REGION,
@@ -49,6 +51,8 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     snapshot_topic,
 )
 from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS
+
+_NO_WAIT = Duration(seconds=0)
 
 # -- topics: swarm_ros.protocol.plan names them (a contract between processes) -------------------
 # -- QoS ----------------------------------------------------------------------------
@@ -322,3 +326,25 @@ def message_class(type_name: str) -> type | None:
         return getattr(importlib.import_module(f"{package}.msg"), name)
     except (ImportError, AttributeError, ValueError):
         return None
+
+
+def watch_liveliness(node, peer: str, on_change: Callable[[int, int], None]) -> None:
+    """Follow the liveliness of node ``peer``'s silent writer (``/swarm/alive/<peer>``): DDS tells when its process
+    dies or stalls, and ``on_change(alive, not_alive)`` hears the writers alive and lapsed."""
+
+    def changed(info: QoSLivelinessChangedInfo) -> None:
+        on_change(info.alive_count, info.not_alive_count)
+
+    callbacks = SubscriptionEventCallbacks(liveliness=changed)
+    node.create_subscription(Empty, alive_topic(peer), lambda _: None, ALIVE_QOS, event_callbacks=callbacks)
+
+
+def monitor_reads(node, topics: Sequence[str]) -> bool:
+    """Whether ``node`` has discovered the monitor's reader of each of ``topics``: its writers match it then, and
+    a reader that matched after a topic's first messages would keep only the last of a latched one."""
+    return all(any(i.node_name == MONITOR for i in node.get_subscriptions_info_by_topic(t)) for t in topics)
+
+
+def acknowledged(publishers) -> bool:
+    """Whether every reader of each of ``publishers`` has acknowledged what it sent so far."""
+    return all(p.wait_for_all_acked(_NO_WAIT) for p in publishers)

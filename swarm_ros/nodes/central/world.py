@@ -25,11 +25,9 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.duration import Duration
-from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Empty, Int64MultiArray
+from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.central_shards import CentralShard
@@ -47,8 +45,6 @@ from swarm_ros.protocol.plan import BATCHES, HELD, MONITOR, STATUS, CentralTopic
 from swarm_ros.protocol.status import STARTING
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import SignedPublisher, open_auth
-
-_NO_WAIT = Duration(seconds=0)
 
 
 class CentralWorldNode:
@@ -176,15 +172,7 @@ class CentralWorldNode:
             self.rejections.drop(HELD, fault)
 
     def _watch_alive(self, name: str) -> None:
-        """Follow the liveliness of peer ``name``'s silent writer (DDS tells when its process dies or stalls)."""
-        on_change = functools.partial(self._on_liveliness, name)
-        callbacks = SubscriptionEventCallbacks(liveliness=on_change)
-        self.node.create_subscription(
-            Empty, msgs.alive_topic(name), lambda _: None, msgs.ALIVE_QOS, event_callbacks=callbacks
-        )
-
-    def _on_liveliness(self, name: str, info: QoSLivelinessChangedInfo) -> None:
-        self.world.liveliness(name, info.alive_count, info.not_alive_count)
+        msgs.watch_liveliness(self.node, name, functools.partial(self.world.liveliness, name))
 
     # -- the world's port -------------------------------------------------------------------
     def watch_batch(self, name: str) -> None:
@@ -205,13 +193,10 @@ class CentralWorldNode:
         self.pub_status.publish(msgs.status_message(tick, outcome, message, extra=values))
 
     def monitor_reads(self) -> bool:
-        return all(
-            any(info.node_name == MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
-            for topic in (self.topics.robots, self.topics.metrics, STATUS)
-        )
+        return msgs.monitor_reads(self.node, (self.topics.robots, self.topics.metrics, STATUS))
 
     def delivered(self) -> bool:
-        return all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots, self.pub_metrics))
+        return msgs.acknowledged((self.pub_status, self.pub_robots, self.pub_metrics))
 
     def startup_seconds(self) -> float:
         return run_age()

@@ -22,12 +22,10 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.duration import Duration
-from rclpy.event_handler import QoSLivelinessChangedInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Empty, Int64MultiArray
+from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.core.errors import ConfigError, ParameterError, Rejected
 from swarm_ros.core.params import Settings
@@ -46,8 +44,6 @@ from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.auth import open_auth
 from swarm_ros.ros.runtime import EXIT_INTERRUPTED, EXIT_OK
 from swarm_ros.ros.shard_links import ShardLinks
-
-_NO_WAIT = Duration(seconds=0)
 
 
 class WorldNode:
@@ -88,7 +84,7 @@ class WorldNode:
         self.saver: ShardSaver | None = None  # made in load(), with a checkpoint path
         self.gate.subscribe(Int64MultiArray, msgs.BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.gate.subscribe(Int64MultiArray, msgs.HELD, self._on_held, msgs.LATCHED_QOS)
-        self._watch(msgs.alive_topic(MONITOR), self._on_monitor_liveliness)
+        msgs.watch_liveliness(node, MONITOR, lambda alive, lapsed: self.ls.monitor_liveliness(alive, lapsed))
         # the peers' topics (none for the world alone), and the exchange's sends to them
         robots, dims = self.params.robots, self.shape.dims
         self.links = links = ShardLinks(self.signer, self.gate, self.rejections, self.index, self.shards, robots, dims)
@@ -171,28 +167,13 @@ class WorldNode:
         if self.saver is not None:
             self.saver.monitor_reported(tick)
 
-    def _watch(self, topic: str, on_change) -> None:
-        self.node.create_subscription(
-            Empty,
-            topic,
-            lambda msg: None,
-            msgs.ALIVE_QOS,
-            event_callbacks=SubscriptionEventCallbacks(liveliness=on_change),
-        )
-
-    def _on_batch_liveliness(self, k: int, info: QoSLivelinessChangedInfo) -> None:
-        self.ls.batch_liveliness(k, info.alive_count, info.not_alive_count)
-
-    def _on_monitor_liveliness(self, info: QoSLivelinessChangedInfo) -> None:
-        self.ls.monitor_liveliness(info.alive_count, info.not_alive_count)
-
     # -- the lockstep's port ---------------------------------------------------------------
     def watch_batch(self, k: int, name: str) -> None:
         self.snapshot_pubs.append(self.signer.publisher(PointCloud2, msgs.snapshot_topic(name), msgs.LATCHED_QOS))
         self.region_pubs.append(self.signer.publisher(PointCloud2, msgs.region_topic(name), msgs.ROBOTS_QOS))
         topic = msgs.decisions_topic(name)
         self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_decisions, k, topic), msgs.DECISIONS_QOS)
-        self._watch(msgs.alive_topic(name), functools.partial(self._on_batch_liveliness, k))
+        msgs.watch_liveliness(self.node, name, functools.partial(self.ls.batch_liveliness, k))
 
     def send_snapshot(self, k: int, tick: int, rows: np.ndarray) -> None:
         self.snapshot_pubs[k].publish_rows(rows, tick)
@@ -250,16 +231,13 @@ class WorldNode:
         monitor's liveliness, keeps the bag whole from tick 0: a reader that matched after a
         topic's first messages would keep only the last of a latched one (``/swarm/status``).
         """
-        return all(
-            any(info.node_name == MONITOR for info in self.node.get_subscriptions_info_by_topic(topic))
-            for topic in msgs.MONITOR_READS
-        )
+        return msgs.monitor_reads(self.node, msgs.MONITOR_READS)
 
     def delivered(self) -> bool:
-        return all(p.wait_for_all_acked(_NO_WAIT) for p in (self.pub_status, self.pub_robots, self.pub_tally))
+        return msgs.acknowledged((self.pub_status, self.pub_robots, self.pub_tally))
 
     def decisions_delivered(self) -> bool:
-        return self.pub_decisions.wait_for_all_acked(_NO_WAIT)
+        return msgs.acknowledged((self.pub_decisions,))
 
     def startup_seconds(self) -> float:
         return run_age()
