@@ -829,3 +829,20 @@ def test_a_running_world_says_its_progress_ten_times_a_second():
     world.poll()
     assert len(port.statuses) == said + 1 and port.statuses[-1][1] == "running"
     assert port.statuses[-1][3]["progress_total"] == world.run.progress()[1]
+
+
+def test_a_restarted_batchs_second_answer_to_the_tick_just_settled_is_a_repeat_not_a_fault():
+    """A batch process restarted mid-run answers the area its topic kept (which may settle the tick), then the same
+    area again, which the world sent it as it announced itself: the second answer is the first's, not a stale tick
+    (a run with a batch killed once reported a message dropped). Older ticks' still are."""
+    params = RunParams(40, algorithm="rubenstein", seed=6)
+    run = RubensteinRun(square(6), params)
+    ls = CentralLockstep(run, RubensteinWire)
+    ls.announce("robot_batch_0", strips_for(run, 1).strip(0))
+    for _ in range(3):
+        rows = decisions_of_batch_0(run, ls)
+        assert ls.decisions(0, run.tick + 1, rows)
+    assert run.tick == 3
+    assert not ls.decisions(0, run.tick, rows)  # tick 3's decisions again: taken as the repeat they are
+    with pytest.raises(Rejected, match="stale tick"):
+        ls.decisions(0, run.tick - 1, rows)

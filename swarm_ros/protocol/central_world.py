@@ -180,6 +180,10 @@ class CentralLockstep:
             raise Rejected("stale tick", "no tick has gone out yet")
         if tick != self.run.tick + 1 and tick <= self.before:
             return False  # sent to the process before this one (settled in its checkpoint, or past it): no fault
+        if tick == self.run.tick and self.run.tick > 0:
+            # a restarted batch's second answer to the tick just settled: it answered the area its topic kept, which
+            # settled the tick, and then the same area, which the world sent it again as it announced itself
+            return False
         if tick != self.run.tick + 1:
             raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {self.run.tick + 1}")
         if k in self.decided:
