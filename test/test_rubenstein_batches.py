@@ -555,8 +555,7 @@ def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_wh
     """The watch behind the rubenstein world's liveliness lines and its STILL_S bound (a peer started by hand that
     died would otherwise keep the run waiting for ever)."""
     from swarm_ros.core.errors import RunFailed
-    from swarm_ros.protocol.central_world import Watch
-    from swarm_ros.protocol.world_port import STILL_S
+    from swarm_ros.protocol.world_port import STILL_S, Watch
 
     watch = Watch(now=100.0)
     assert watch.liveliness("robot_batch_1", 1, 0) == "robot_batch_1 is alive (liveliness)"

@@ -23,9 +23,7 @@ from swarm_ros.core.errors import InputError, RunFailed
 from swarm_ros.core.inputs import path_too_long, shown
 
 if TYPE_CHECKING:
-    from swarm_ros.core.engine import Simulation
     from swarm_ros.core.params import RunParams
-    from swarm_ros.core.run_result import RunRecord
 
 RUNS_DIR = Path("runs")
 RECORDING_FILE = "recording.rrd"
@@ -339,59 +337,6 @@ def partial_recording(out: Path) -> Path:
     interrupted, crashes or is killed leaves it here, readable up to that point.
     """
     return out.parent / f"{out.name}.partial.rrd"
-
-
-def write_simulation(
-    out: Path,
-    sim: Simulation,
-    summary: dict,
-    overwrite: bool = False,
-    recording: Path | None = None,
-    every: int | None = None,
-    bag: Path | None = None,
-) -> Path:
-    """:func:`write_run` of a run of the study's model and its summary (core.algorithm's part ``write_run``)."""
-    from swarm_ros.core.metrics import Outcome
-    from swarm_ros.core.run_result import RunRecord
-
-    record = RunRecord(sim.shape, sim.params, sim.state, sim.history, Outcome(summary["outcome"]), summary)
-    return write_run(out, record, overwrite=overwrite, recording=recording, bag=bag, robots_every=every)
-
-
-def write_run(
-    out: Path,
-    record: RunRecord,
-    overwrite: bool = False,
-    recording: Path | None = None,
-    bag: Path | None = None,
-    robots_every: int | None = None,
-) -> Path:
-    """Write a run of the study's model into ``out`` (:func:`write_files`): summary.json, metrics.csv,
-    final_state.csv, final.png and convergence.png, the ``recording`` and the ``bag``. ``robots_every``: the
-    recording holds every robot's pose every this many ticks; summary.json says so (``recording_robots_every``,
-    null without a recording); a run's ``bag`` holds every robot's row as often (``bag_robots_every``, written
-    with a bag only).
-
-    Raises:
-        OutputError: the directory cannot be written.
-    """
-    from swarm_ros.artifacts.model_files import final_state_csv, metrics_csv
-
-    def pictures(path: Path, save: str) -> None:
-        from swarm_ros.artifacts import plots  # matplotlib: only when a run is written
-
-        getattr(plots, save)(record, path)
-
-    summary = {**record.summary, "recording_robots_every": robots_every if recording is not None else None}
-    if bag is not None:
-        summary["bag_robots_every"] = robots_every
-    files: dict[str, Callable[[Path], object]] = {
-        "metrics.csv": lambda path: path.write_text(metrics_csv(record.history), encoding="utf-8"),
-        "final_state.csv": lambda path: path.write_text(final_state_csv(record.state), encoding="utf-8"),
-        "final.png": lambda path: pictures(path, "save_final_png"),
-        "convergence.png": lambda path: pictures(path, "save_convergence_png"),
-    }
-    return write_files(out, summary, files, overwrite=overwrite, recording=recording, bag=bag)
 
 
 def write_files(

@@ -300,7 +300,7 @@ register(
         monitor_node="swarm_ros.nodes.darr_niazi.monitor:MonitorNode",
         checked_step="swarm_ros.core.invariants:checked_step",
         recording="swarm_ros.artifacts.recording_options:open_recording",
-        write_run="swarm_ros.artifacts.run_dir:write_simulation",
+        write_run="swarm_ros.artifacts.model_files:write_simulation",
         print_summary="swarm_ros.app.summary_print:print_summary",
     )
 )

@@ -1,11 +1,13 @@
 """What the world's :class:`~swarm_ros.protocol.lockstep.Lockstep` is configured by and talks to: its policy,
-its timing, and the port the node around it implements (docs/faults.md)."""
+its timing, and the port the node around it implements (docs/faults.md); and a central world's watch on its peers
+(:class:`Watch`), on the same timing."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
+from swarm_ros.core.errors import RunFailed
 from swarm_ros.core.params import node_defaults
 
 if TYPE_CHECKING:
@@ -101,3 +103,45 @@ class WorldPort(Protocol):
     def delivered(self) -> bool: ...  # every reader acknowledged the last status, rows and tallies
     def decisions_delivered(self) -> bool: ...  # every reader acknowledged the applied decisions
     def startup_seconds(self) -> float: ...  # from the start of the run's command (or this process) to now
+
+
+class Watch:
+    """What the world knows of its peers' processes, and whether the run still moves.
+
+    Each batch and the monitor hold a silent writer whose DDS liveliness lapses when its process dies or stalls. A
+    lapsed peer is only waited for (a launcher starts its process again, and the new one takes the run up where it
+    is); it is named in the status, so a run started by hand says what it waits for. Whatever the liveliness says, a
+    run whose world has neither sent a tick nor heard the monitor hold a further record for ``STILL_S`` fails: a peer
+    started by hand that died, or a transport that stopped delivering, would otherwise keep it waiting for ever."""
+
+    def __init__(self, now: float) -> None:
+        self.moved_at = now  #: when a tick last went out, or the monitor last reported more held
+        self.seen: set[str] = set()  #: the peers whose liveliness was ever seen
+        self.lapsed: set[str] = set()  #: the peers whose liveliness lapsed and has not come back
+
+    def liveliness(self, name: str, alive: int, not_alive: int) -> str | None:
+        """Peer ``name``'s liveliness changed (``alive`` writers alive, ``not_alive`` lapsed): what to log, if any."""
+        if alive > 0:
+            back, first = name in self.lapsed, name not in self.seen
+            self.seen.add(name)
+            self.lapsed.discard(name)
+            return f"{name} is alive (liveliness)" if first else f"{name} is back (liveliness)" if back else None
+        if not_alive > 0 and name not in self.lapsed:
+            self.lapsed.add(name)
+            return f"{name} was lost (liveliness lapsed): the run waits for it"
+        return None
+
+    def moved(self, now: float) -> None:
+        self.moved_at = now
+
+    def still(self, now: float) -> bool:
+        """Whether the run has not moved for ``STILL_S``: it fails then (:meth:`failure`)."""
+        return now - self.moved_at >= STILL_S
+
+    def failure(self, tick: int, awaited: list[str], dropped: str) -> RunFailed:
+        """The error of a run still at ``tick``, waiting for the peers ``awaited``, with ``dropped`` messages."""
+        waits = ", ".join(f"{n} (liveliness lapsed)" if n in self.lapsed else n for n in awaited) or "nothing"
+        return RunFailed(
+            f"the run has not moved for {STILL_S:g} s at tick {tick} (waiting for: {waits}; messages dropped: "
+            f"{dropped or 'nothing'}): its processes are gone or their messages do not get through"
+        )

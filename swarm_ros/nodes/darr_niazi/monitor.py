@@ -27,6 +27,7 @@ from rclpy.publisher import Publisher
 from std_msgs.msg import Empty, Int64MultiArray
 
 from swarm_ros.artifacts import run_dir
+from swarm_ros.artifacts.model_files import write_run
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome
@@ -233,7 +234,7 @@ class MonitorNode:
             self.finished = True
 
     def _write(self, outcome: Outcome | None = None) -> None:
-        self.written = run_dir.write_run(
+        self.written = write_run(
             self.out,
             self.counter.record(self.rejections.total, outcome),
             overwrite=self.overwrite,
