@@ -1,13 +1,13 @@
 """A central world cut into S world shards (:mod:`swarm_ros.core.strips`): each shard holds the robots of a run of
-consecutive batches' strips (its own columns) and of one column either side (its halo), never the whole swarm's,
-and the run is the one world's, exactly.
+consecutive batches' strips (its own columns) and of the grid's ``reach`` columns either side (its halo), never
+the whole swarm's, and the run is the one world's, exactly.
 
 A shard's engine (the algorithm's, a :class:`ShardedRun`) holds every robot's arrays, of which
 only the robots it holds (``present``) are read. A tick, for shard s:
 
 1. its batches decide from the robots of their areas, which lie in its own columns and its halo;
 2. every shard sends each other the decisions of its own deciding robots that lie in the other's halo (*border*):
-   a grant reads the decisions of the robots within one column;
+   a grant reads the decisions of the robots within reach;
 3. it settles and applies its own robots' moves (the engine's ``settle_shard``), and names those whose rows change
    what every shard shares (the rubenstein algorithm's: the robots that joined, which cover pixels and enter the
    running counts);
@@ -16,7 +16,7 @@ only the robots it holds (``present``) are read. A tick, for shard s:
 5. every shard sends each other the rows of its robots now in the other's own columns or halo: robots that crossed
    into the other's columns are handed over, and the other's halo is what its neighbours' robots are now.
 
-A robot moves less than a column a tick, and a decision or a grant reads the robots within one column, so each shard
+A robot moves less than its reach a tick, and a decision or a grant reads the robots within reach, so each shard
 decides, settles and closes as the one world does. :class:`CentralExchange` is a shard's side of those messages,
 whatever order they come in; :func:`run_sharded` runs S shards end to end in one process over it, delivering the
 messages in a shuffled order, for tests.
@@ -87,7 +87,8 @@ class CentralShard:
         self.batches = shard_batches(shard, shards, strips.batches)
         self.ranges = ranges(strips, shards)
         self.first, self.last = self.ranges[shard]
-        self.present = self._within(np.arange(run.params.robots), self.first - 1, self.last + 1)
+        self.halo = strips.reach  #: its halo's columns either side
+        self.present = self._within(np.arange(run.params.robots), self.first - self.halo, self.last + self.halo)
 
     def _within(self, ids: np.ndarray, first: int, last: int) -> np.ndarray:
         columns = self.run.grid.columns(self.run.robots.x[ids])
@@ -99,27 +100,30 @@ class CentralShard:
         return self._within(self.present, self.first, self.last)
 
     def area(self, k: int) -> np.ndarray:
-        """The robots of batch k's area (one of its batches), ascending: what the shard sends it."""
+        """The robots batch k (one of its batches) sees, ascending: what the shard sends it (those of its area, and
+        those known to all: :func:`~swarm_ros.core.strips.area_of`)."""
         first, last = self.strips.area(k)
-        return self._within(self.present, first, last)
+        return np.union1d(self._within(self.present, first, last), self.run.known_to_all())
 
     def neighbours(self) -> list[int]:
         """The shards whose own columns or halo touch its own: those it sends border decisions and rows to."""
         return [
-            o for o, (a, b) in enumerate(self.ranges) if o != self.index and a - 1 <= self.last and b + 1 >= self.first
+            o
+            for o, (a, b) in enumerate(self.ranges)
+            if o != self.index and a - self.halo <= self.last and b + self.halo >= self.first
         ]
 
     def border(self, peer: int, ids: np.ndarray) -> np.ndarray:
         """Which of robots ``ids`` (its own) lie in shard ``peer``'s halo."""
         first, last = self.ranges[peer]
         columns = self.run.grid.columns(self.run.robots.x[ids])
-        return (columns == first - 1) | (columns == last + 1)
+        return ((columns >= first - self.halo) & (columns < first)) | ((columns > last) & (columns <= last + self.halo))
 
     def reach(self, peer: int, ids: np.ndarray) -> np.ndarray:
         """Which of robots ``ids`` (its own) lie in shard ``peer``'s own columns or halo."""
         first, last = self.ranges[peer]
         columns = self.run.grid.columns(self.run.robots.x[ids])
-        return (columns >= first - 1) & (columns <= last + 1)
+        return (columns >= first - self.halo) & (columns <= last + self.halo)
 
     def restore(self, present: np.ndarray) -> None:
         """Go on holding robots ``present`` (a save's, its engine restored to the same tick).
@@ -139,7 +143,7 @@ class CentralShard:
     def receive(self, mine: np.ndarray, rows: list[tuple[np.ndarray, Any]]) -> None:
         """After a tick: it holds its robots ``mine`` still within reach, and the peers' robots ``rows`` (ids,
         every array's rows) they sent it (:meth:`reach`)."""
-        kept = self._within(mine, self.first - 1, self.last + 1)
+        kept = self._within(mine, self.first - self.halo, self.last + self.halo)
         ids, got = concat([(kept, take(self.run.robots, kept)), *rows])
         for a, b in zip(self.run.robots, got):
             a[ids] = b

@@ -34,11 +34,13 @@ from swarm_ros.core.metrics import (
     progress_of,
 )
 from swarm_ros.core.params import RunParams
+from swarm_ros.core.regions import halo
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
 from swarm_ros.core.rules import Decisions
 from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import RobotState, SwarmState, initial_state
+from swarm_ros.core.state import IS_MOVING, Poses, Poses3D, RobotState, SwarmState, initial_state, poses_of
+from swarm_ros.core.strips import StripGrid
 from swarm_ros.core.tick_kernel import End, Scratch, close_tick, compact_moving, run_kernel
 
 _STATIONARY_LOCALIZED = (int(RobotState.SEED), int(RobotState.LOCALIZED))
@@ -319,6 +321,77 @@ class Simulation:
     def removed(self) -> int:
         """Robots removed so far."""
         return self.params.robots - self._alive
+
+    # -- a central world's run (core.strips.CentralRun) ------------------------
+    columns = METRIC_COLUMNS
+
+    @property
+    def grid(self) -> StripGrid:
+        """The world's patch columns (a robot's is its nearest patch's, :func:`~swarm_ros.core.regions.columns`); a
+        decision reads the robots within :func:`~swarm_ros.core.regions.halo` columns of its own."""
+        return StripGrid(-self._radius - 0.5, 1.0, self._size, "patches", halo(self.params.vision_radius))
+
+    @property
+    def robots(self) -> Poses | Poses3D:
+        """Every robot's pose and state (the state's own arrays)."""
+        return poses_of(self.state)
+
+    def deciding(self, among: np.ndarray | None = None) -> np.ndarray:
+        """The robots that decide the next tick, ascending: the moving ones (of ``among``, ascending, if given)."""
+        if among is None:
+            return self.moving_ids()
+        return among[IS_MOVING[self.state.state[among]]]
+
+    def known_to_all(self) -> np.ndarray:
+        """The stationary robots, ascending: a robot finds the frontier anywhere, from the localized ones."""
+        return np.flatnonzero(~IS_MOVING[self.state.state])
+
+    def settle(self, decided: list[tuple[np.ndarray, Decisions]]) -> Outcome | None:
+        """Advance one tick with each robot batch's (ids, decisions): :meth:`apply` of them all."""
+        self.apply(Decisions.concatenate([d for _, d in decided]))
+        return self.outcome
+
+    def load(self, tick: int, robots: Poses | Poses3D, history: np.ndarray, outcome: Outcome | None = None) -> None:
+        """Take a state this run reached elsewhere: every robot as at ``tick``, the metrics of every tick up to it
+        and the outcome (None: going on). The occupancy and the frontier follow from the robots, as a robot batch's
+        view rebuilds them (:meth:`~swarm_ros.core.swarm_view.SwarmView.load`).
+
+        Raises:
+            ContractError: robots that cannot be a state of the run (two on a patch, one off the shape).
+        """
+        from swarm_ros.core.swarm_view import SwarmView  # (it imports the state's kernels, as this does)
+
+        view, pose = SwarmView(self.shape, self.params.robots), robots._asdict()
+        state = pose.pop("state")
+        view.load(tick, np.arange(self.params.robots), state, **pose)
+        self.state = view.state
+        rows = np.asarray(history, dtype=np.int64)
+        self._rows, self._nrows = rows.copy(), rows.shape[0]
+        self._moving = self.state.moving_ids()
+        self._m, self._decided = int(self._moving.size), 0
+        counts = self.state.counts()
+        self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
+        self._set_kernel_args(self.params.robots - int(counts[RobotState.REMOVED]))
+        self.outcome = outcome
+
+    def saved(self) -> dict[str, np.ndarray]:
+        """Every robot and the metrics of every tick so far: all a restarted world needs to go on exactly."""
+        return {**{f"robot_{name}": a for name, a in self.robots._asdict().items()}, "history": self.history}
+
+    def restore(self, tick: int, arrays: dict[str, np.ndarray]) -> None:
+        """Go on from :meth:`saved`'s ``arrays`` of ``tick``, a run still going.
+
+        Raises:
+            KeyError, ContractError: arrays that are not a save of a run of these parameters.
+        """
+        mine = self.robots
+        saved = [arrays[f"robot_{name}"] for name in mine._fields]
+        if any(a.shape != b.shape or a.dtype != b.dtype for a, b in zip(saved, mine)):
+            raise ContractError("a save of other robots than the run's")
+        history = arrays["history"]
+        if history.shape != (tick + 1, len(METRIC_COLUMNS)):
+            raise ContractError(f"{history.shape[0]} metrics rows for tick {tick}")
+        self.load(tick, type(mine)(*(a.copy() for a in saved)), history)
 
     # -- bookkeeping ------------------------------------------------------------
     def _failure_pending(self) -> bool:

@@ -6,6 +6,7 @@ import itertools
 import math
 from dataclasses import dataclass, fields
 from enum import IntEnum
+from typing import NamedTuple
 
 import numpy as np
 
@@ -115,6 +116,34 @@ class SwarmState:
     def moving_ids(self) -> np.ndarray:
         """Ids of moving robots, ascending (int64)."""
         return np.flatnonzero(IS_MOVING[self.state])
+
+
+class Poses(NamedTuple):
+    """A 2D swarm's robots as a central world's graph carries them (:mod:`swarm_ros.core.strips`): arrays indexed by
+    robot id, in patches and radians."""
+
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    state: np.ndarray
+
+
+class Poses3D(NamedTuple):
+    """A 3D swarm's robots, as :class:`Poses`, with z and the heading's elevation."""
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    heading: np.ndarray
+    pitch: np.ndarray
+    state: np.ndarray
+
+
+def poses_of(s: SwarmState) -> Poses | Poses3D:
+    """The robots of ``s`` (its own arrays, not copies)."""
+    if s.z is not None and s.pitch is not None:
+        return Poses3D(s.x, s.y, s.z, s.heading, s.pitch, s.state)
+    return Poses(s.x, s.y, s.heading, s.state)
 
 
 def frontier_of(shape: Shape, occupancy: np.ndarray) -> np.ndarray:

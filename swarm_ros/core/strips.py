@@ -28,12 +28,14 @@ from .regions import parse_cuts
 
 class StripGrid(NamedTuple):
     """Columns ``side`` wide from x = ``x0``, ``nx`` of them: a robot's column is where its x falls (clipped);
-    ``unit``: the unit of x, as an error names it."""
+    ``unit``: the unit of x, as an error names it; ``reach``: the columns either side of its own whose robots a
+    robot's decision reads (a batch's halo)."""
 
     x0: float
     side: float
     nx: int
     unit: str = ""
+    reach: int = 1
 
     def columns(self, x: np.ndarray) -> np.ndarray:
         """The column of each x."""
@@ -56,6 +58,12 @@ class CentralRun(Protocol):
 
     def deciding(self) -> np.ndarray: ...  # the robots that decide the next tick, ascending ids
 
+    def known_to_all(self) -> np.ndarray:
+        """The robots every batch sees wherever they stand, ascending ids, beside its area's (the study's model's
+        stationary robots, from which its rule finds the frontier anywhere); none for a rule that reads only the
+        robots within its reach. With world shards they must be among the rows every shard shares."""
+        ...
+
     def progress(self) -> tuple[int, int, dict[str, str]]: ...  # cells done, all of them, words (progress bars)
 
     def settle(self, decided: list[tuple[np.ndarray, Any]]) -> Any: ...  # a tick from each batch's (ids, decisions)
@@ -69,12 +77,14 @@ class CentralRun(Protocol):
 
 @dataclass(frozen=True)
 class Strips:
-    """K strips of whole columns: strip k is the columns ``cuts[k]`` to ``cuts[k + 1] - 1``."""
+    """K strips of whole columns: strip k is the columns ``cuts[k]`` to ``cuts[k + 1] - 1``; a batch's area is its
+    strip and ``reach`` columns either side (the grid's :attr:`StripGrid.reach`)."""
 
     cuts: np.ndarray  #: int64, K + 1 ascending column numbers, the first 0 and the last the grid's width
+    reach: int = 1
 
     @staticmethod
-    def balanced(start_columns: np.ndarray, columns: int, batches: int) -> Strips:
+    def balanced(start_columns: np.ndarray, columns: int, batches: int, reach: int = 1) -> Strips:
         """``batches`` strips of whole columns holding, at the start, as nearly equal numbers of robots as whole
         columns allow (``start_columns``: each robot's column at tick 0), each at least one column wide.
 
@@ -88,7 +98,7 @@ class Strips:
         for k in range(1, batches):
             at = int(np.searchsorted(held, k * held[-1] / batches)) + 1  # columns before it hold k/K of them
             cuts.append(min(max(at, cuts[-1] + 1), columns - (batches - k)))
-        return Strips(np.array([*cuts, columns], dtype=np.int64))
+        return Strips(np.array([*cuts, columns], dtype=np.int64), reach)
 
     @staticmethod
     def cut(at: np.ndarray, grid: StripGrid, batches: int) -> Strips:
@@ -108,10 +118,10 @@ class Strips:
                 f"region_cuts {at.tolist()} leave a strip with no cell column (the grid's {grid.nx} columns, "
                 f"{grid.side:g}{unit} wide, span x = {grid.x0:g} to {end:g}{unit})"
             )
-        return Strips(cuts)
+        return Strips(cuts, grid.reach)
 
     @staticmethod
-    def tiling(strips: list[tuple[int, int]], columns: int) -> Strips | None:
+    def tiling(strips: list[tuple[int, int]], columns: int, reach: int = 1) -> Strips | None:
         """The strips ``strips`` ((first, last) columns, in any order) make, if they tile the ``columns`` columns
         of the grid with no gap or overlap; None if they do not (yet)."""
         ordered = sorted(strips)
@@ -119,7 +129,7 @@ class Strips:
             return None
         if any(before[1] + 1 != after[0] for before, after in zip(ordered, ordered[1:])):
             return None
-        return Strips(np.array([first for first, _ in ordered] + [columns], dtype=np.int64))
+        return Strips(np.array([first for first, _ in ordered] + [columns], dtype=np.int64), reach)
 
     @property
     def batches(self) -> int:
@@ -130,9 +140,9 @@ class Strips:
         return int(self.cuts[k]), int(self.cuts[k + 1]) - 1
 
     def area(self, k: int) -> tuple[int, int]:
-        """The first and last column of batch k's area: its strip and the halo column either side."""
+        """The first and last column of batch k's area: its strip and the halo, ``reach`` columns either side."""
         first, last = self.strip(k)
-        return max(first - 1, 0), min(last + 1, int(self.cuts[-1]) - 1)
+        return max(first - self.reach, 0), min(last + self.reach, int(self.cuts[-1]) - 1)
 
     def in_strip(self, columns: np.ndarray, k: int) -> np.ndarray:
         """Which of the robots in ``columns`` lie in strip k."""
@@ -156,12 +166,15 @@ def strips_for(start: CentralRun, batches: int, region_cuts: str = "") -> Strips
     grid = start.grid
     if region_cuts:
         return Strips.cut(parse_cuts(region_cuts), grid, batches)
-    return Strips.balanced(grid.columns(start.robots.x), grid.nx, batches)
+    return Strips.balanced(grid.columns(start.robots.x), grid.nx, batches, grid.reach)
 
 
-def area_of(run: CentralRun, strips: Strips, k: int) -> np.ndarray:
-    """The ids of the robots in batch k's area, as they stand at the run's tick (what the world sends it)."""
-    return np.flatnonzero(strips.in_area(run.grid.columns(run.robots.x), k))
+def area_of(run: CentralRun, strips: Strips, k: int, columns: np.ndarray | None = None) -> np.ndarray:
+    """The ids of the robots batch k sees, as they stand at the run's tick (what the world sends it): those of its
+    area, and those :meth:`~CentralRun.known_to_all` (``columns``: every robot's, if known)."""
+    if columns is None:
+        columns = run.grid.columns(run.robots.x)
+    return np.union1d(np.flatnonzero(strips.in_area(columns, k)), run.known_to_all())
 
 
 def run_batched(run: CentralRun, hosts: list[Any], max_ticks: int | None = None) -> None:

@@ -27,7 +27,7 @@ import numpy as np
 
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.params import MAX_TICKS, auto_every
-from swarm_ros.core.strips import CentralRun, Strips
+from swarm_ros.core.strips import CentralRun, Strips, area_of
 
 from . import central_checkpoint as checkpoint
 from .central_checkpoint import SAVE_TICKS, SHARD_SAVE_TICKS, save_every
@@ -117,7 +117,7 @@ class CentralLockstep:
         if any(other != name and not (b < first or a > last) for other, (a, b) in self.announced.items()):
             raise Rejected("strip", f"{name}'s cell columns {first}..{last} overlap another batch's")
         self.announced[name] = (first, last)
-        strips = Strips.tiling(list(self.announced.values()), columns)
+        strips = Strips.tiling(list(self.announced.values()), columns, self.run.grid.reach)
         if strips is None:
             return []
         by_strip = {where: who for who, where in self.announced.items()}
@@ -144,7 +144,7 @@ class CentralLockstep:
         at ``cuts`` (:attr:`Strips.cuts`): their announcements are taken as a restarted batch's, each sent its area
         of the run's tick. ``kept``: what :meth:`kept` gave (nothing to take back here). Decisions of other ticks
         than the one being decided, up to ``before``, are the process before's: ignored, not faults."""
-        self.strips = Strips(np.asarray(cuts, dtype=np.int64))
+        self.strips = Strips(np.asarray(cuts, dtype=np.int64), self.run.grid.reach)
         self.hosts = dict(hosts)
         self.started, self.before = True, before
 
@@ -155,9 +155,9 @@ class CentralLockstep:
         return self._columns_at[1]
 
     def area(self, k: int) -> np.ndarray:
-        """Batch k's area's rows at the current tick."""
+        """The rows batch k sees at the current tick (:func:`~swarm_ros.core.strips.area_of`)."""
         assert self.strips is not None
-        return self.wire.rows(np.flatnonzero(self.strips.in_area(self._columns(), k)), self.run.robots)
+        return self.wire.rows(area_of(self.run, self.strips, k, self._columns()), self.run.robots)
 
     def awaited(self) -> list[str]:
         """The batches whose decisions for the next tick are not in yet, by node name."""

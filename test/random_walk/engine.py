@@ -59,6 +59,7 @@ class RandomWalk:
 
     history = property(lambda self: np.array(self._rows, dtype=float))  #: a row of ``columns`` a tick
     done = property(lambda self: self.outcome is not None)
+    known_to_all = staticmethod(lambda: np.empty(0, dtype=np.int64))  #: none: a walker sees only its neighbours
 
     def progress(self) -> tuple[int, int, dict[str, str]]:
         return int(self._rows[-1][3]), int(self.mask.sum()), {"tick": str(self.tick)}

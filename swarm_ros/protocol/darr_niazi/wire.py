@@ -1,0 +1,120 @@
+"""The study's model in a central world's graph (:mod:`swarm_ros.core.strips`): its rows and their checks (a
+:class:`~swarm_ros.protocol.central_rows.Wire`), and its robot batch.
+
+A batch decides for the moving robots of its strip of patch columns from what it is sent after each tick: the robots
+of its area (its strip and :func:`~swarm_ros.core.regions.halo` columns either side) and every stationary robot
+(:meth:`~swarm_ros.core.engine.Simulation.known_to_all`: the ``walk`` rule finds the frontier anywhere). It rebuilds
+its regional view of the swarm from them (:meth:`~swarm_ros.core.swarm_view.SwarmView.load`, as a batch of the
+study's own graph does from a snapshot) and runs the core's rule (:class:`~swarm_ros.core.rules.Decider`), so it
+decides as the in-process engine does. The rows are the study's graph's (:mod:`swarm_ros.protocol.rows`): a robot's
+pose and state, and a decision's claim and pose.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarm_ros.core.engine import Simulation
+from swarm_ros.core.errors import Rejected
+from swarm_ros.core.legality import illegal
+from swarm_ros.core.rules import Decider, Decisions
+from swarm_ros.core.state import STATE_COUNT, Poses, Poses3D
+from swarm_ros.core.strips import Strips
+from swarm_ros.core.swarm_view import SwarmView
+
+from .. import checks
+from ..rows import decision_row, decision_rows, pose_of, robot_row, robot_rows
+
+
+class StudyStrip:
+    """One robot batch of the study's model: decides for the moving robots of strip ``k`` from what it sees."""
+
+    def __init__(self, run: Simulation, strips: Strips, k: int) -> None:
+        self.strips, self.k, self.grid = strips, k, run.grid
+        self.view = SwarmView(run.shape, run.params.robots, strips.area(k))  # its area's moving robots, and the rest
+        self.decider = Decider(run.shape, run.params)
+
+    def decide(self, tick: int, ids: np.ndarray, robots: Poses | Poses3D) -> tuple[np.ndarray, Decisions]:
+        """Take the robots ``ids`` it sees as they stood after ``tick - 1`` and decide ``tick`` for the moving robots
+        of its strip: their ids (ascending) and decisions."""
+        pose = robots._asdict()
+        self.view.load(tick - 1, ids, pose.pop("state"), **pose)
+        moving = self.view.moving_ids()
+        own = moving[self.strips.in_strip(self.grid.columns(self.view.state.x[moving]), self.k)]
+        return own, self.decider.decide(self.view.state, own, tick, moving)
+
+
+class StudyWire:
+    """The study's model's rows in a world of ``dims`` dimensions (a :class:`~swarm_ros.protocol.central_rows.Wire`)."""
+
+    batch = StudyStrip
+
+    def __init__(self, dims: int) -> None:
+        self.row, self.decision_row = robot_row(dims), decision_row(dims)
+
+    @staticmethod
+    def rows(ids: np.ndarray, robots: Poses | Poses3D) -> np.ndarray:
+        solid = robots if isinstance(robots, Poses3D) else None
+        return robot_rows(
+            ids,
+            robots.state,
+            robots.x,
+            robots.y,
+            robots.heading,
+            solid.z if solid else None,
+            solid.pitch if solid else None,
+        )
+
+    @staticmethod
+    def decision_rows(ids: np.ndarray, decided: Decisions) -> np.ndarray:
+        return decision_rows(decided)
+
+    @staticmethod
+    def robots_of(rows: np.ndarray) -> tuple[np.ndarray, Poses | Poses3D]:
+        pose = pose_of(rows)
+        state = rows["state"].astype(np.int8)
+        robots = Poses3D(**pose, state=state) if "z" in pose else Poses(**pose, state=state)
+        return rows["id"].astype(np.int64), robots
+
+    @staticmethod
+    def decisions_of(rows: np.ndarray, tick: int = -1) -> tuple[np.ndarray, Decisions]:
+        """(ids, decisions) of checked decision rows, decided for ``tick``."""
+        ids = rows["id"].astype(np.int64)
+        return ids, Decisions(tick=tick, ids=ids, claim=rows["claim"].astype(np.int64), **pose_of(rows))
+
+    @staticmethod
+    def check_rows(run: Simulation, rows: np.ndarray, tick: int) -> None:
+        """Whether rows can be robots of ``run``: ids ascending within the run's, states in their set, poses inside
+        the world.
+
+        Raises:
+            Rejected: by kind.
+        """
+        ids = rows["id"].astype(np.int64)
+        checks.ids_in_range(ids, 0, run.params.robots)
+        if np.any(np.diff(ids) <= 0):
+            raise Rejected("bad ids", "robot ids must ascend")
+        if rows.size and rows["state"].max() >= STATE_COUNT:
+            raise Rejected("robot state out of range", f"state {int(rows['state'].max())}")
+        checks.inside_world(rows, run.shape.world.radius)
+
+    @staticmethod
+    def check_decisions(run: Simulation, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Decisions]:
+        """(ids, decisions) of decision rows for ``tick`` that must be exactly the robots ``own``, each within the
+        rule's bounds from where it stands in ``run`` (:func:`~swarm_ros.core.legality.illegal`).
+
+        Raises:
+            Rejected: by kind.
+        """
+        ids = rows["id"].astype(np.int64)
+        if not np.array_equal(ids, own):
+            raise Rejected("not its robots", f"{ids.size} decisions for the batch's {own.size} robots")
+        checks.inside_world(rows, run.shape.world.radius)
+        s = run.state
+        solid = {"z0": s.z[ids], "z": rows["z"], "pitch": rows["pitch"]} if s.z is not None else {}
+        claim = rows["claim"].astype(np.int64)
+        bad = illegal(run.params, run.shape.world.radius, s.frontier, s.x[ids], s.y[ids], claim, rows["x"],
+                      rows["y"], rows["heading"], **solid)  # fmt: skip
+        if bad.any():
+            raise Rejected("illegal decision", f"robot {int(ids[np.flatnonzero(bad)[0]])}")
+        return StudyWire.decisions_of(rows, tick)

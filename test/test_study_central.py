@@ -1,0 +1,162 @@
+"""The study's model as a central world's run (:mod:`swarm_ros.core.strips`): its engine gives what the central
+world's graph asks of one (``Simulation`` as a ``CentralRun``), and its batches, fed only the rows the world sends
+(:mod:`swarm_ros.protocol.darr_niazi.wire`), decide as the in-process engine does, in 2D and 3D, for any number of
+strips and any cuts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from runs import disc_shape
+
+from swarm_ros.core import RunParams, Shape, Simulation, World
+from swarm_ros.core.errors import ContractError, Rejected
+from swarm_ros.core.state import IS_MOVING
+from swarm_ros.core.strips import Strips, area_of, run_batched, strips_for
+from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
+from swarm_ros.protocol.central_world import CentralLockstep
+from swarm_ros.protocol.checks import cloud
+from swarm_ros.protocol.darr_niazi.wire import StudyWire
+
+pytestmark = pytest.mark.unit
+
+DISC = disc_shape(World(radius=12), 7.0)
+_STATE = ("x", "y", "heading", "state", "z", "pitch", "occupancy", "frontier", "frontier_blocks")
+
+
+def _ball() -> Shape:
+    world = World(6, 3)
+    c = np.arange(-world.radius, world.radius + 1)
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    return Shape(name="ball", mask=np.sqrt(x * x + y * y + z * z) <= 3.5, world=world, source="test ball")
+
+
+def same(a: Simulation, b: Simulation) -> bool:
+    """The same run: every tick's metrics, the outcome and every array of the state."""
+    if not np.array_equal(a.history, b.history) or a.outcome != b.outcome or a.tick != b.tick:
+        return False
+    return all(
+        getattr(a.state, name) is None or np.array_equal(getattr(a.state, name), getattr(b.state, name))
+        for name in _STATE
+    )
+
+
+def _whole(shape: Shape, params: RunParams) -> Simulation:
+    sim = Simulation(shape, params)
+    sim.run()
+    return sim
+
+
+def _batched(shape: Shape, params: RunParams, batches: int, cuts: str = "") -> Simulation:
+    run = Simulation(shape, params)
+    strips = strips_for(run, batches, cuts)
+    wire = StudyWire(shape.dims)
+    run_batched(run, [wire.batch(run, strips, k) for k in range(batches)])
+    return run
+
+
+@pytest.mark.parametrize("rules", ["paper", "local", "literal"])
+@pytest.mark.parametrize("batches", [1, 2, 3])
+def test_batches_that_see_only_their_area_and_the_stationary_robots_give_the_in_process_run(rules, batches):
+    """Crowded (robots left over, separated), sparse (incomplete at the tick limit) and with failures."""
+    for robots, extra in ((DISC.patches + 30, {}), (DISC.patches - 20, {"max_ticks": 400})):
+        params = RunParams(robots=robots, seed=5 + batches, rules=rules, vision_radius=2.0, **extra)
+        assert same(_whole(DISC, params), _batched(DISC, params, batches))
+    failing = RunParams(robots=DISC.patches + 10, seed=3, rules=rules, fail_fraction=0.2, fail_tick=15)
+    assert same(_whole(DISC, failing), _batched(DISC, failing, batches, "-4,3"[: 2 * batches - 2]))
+
+
+def test_a_3d_run_in_batches_is_the_in_process_run():
+    ball = _ball()
+    params = RunParams(robots=ball.patches + 15, seed=2, vision_radius=2.0)
+    assert same(_whole(ball, params), _batched(ball, params, 3))
+
+
+def test_the_columns_are_the_patch_columns_and_a_batch_sees_the_halo_and_every_stationary_robot():
+    run = Simulation(DISC, RunParams(robots=DISC.patches + 30, seed=4, vision_radius=2.0))
+    grid = run.grid
+    assert (grid.nx, grid.reach, grid.unit) == (25, 2 + 5, "patches")  # the halo: vision radius + REACH
+    assert np.array_equal(grid.columns(np.array([-12.0, -0.5001, -0.5, 0.49, 12.0])), [0, 11, 12, 12, 24])
+    run.run(60)
+    strips = Strips.cut(np.array([-3.0]), grid, 2)  # strip 0: columns 0..8 (x up to -3.5), strip 1: 9..24
+    assert strips.area(0) == (0, 8 + 7) and strips.area(1) == (9 - 7, 24)
+    stationary = np.flatnonzero(~IS_MOVING[run.state.state])
+    assert stationary.size > 4 and np.array_equal(run.known_to_all(), stationary)
+    columns = grid.columns(run.robots.x)
+    assert np.array_equal(area_of(run, strips, 0), np.union1d(np.flatnonzero(columns <= 15), stationary))
+
+
+def test_the_worlds_lockstep_over_the_wire_with_checked_rows_and_decisions_gives_the_in_process_run():
+    """Every area and every decision through a PointCloud2's bytes, checked as the graph checks them."""
+    params = RunParams(robots=DISC.patches + 30, seed=9, vision_radius=2.0)
+    run, wire = Simulation(DISC, params), StudyWire(2)
+    ls = CentralLockstep(run, wire)
+    start = Simulation(DISC, params)
+    strips = strips_for(start, 2)
+    for k in (1, 0):
+        ls.announce(f"robot_batch_{k}", strips.strip(k))
+    hosts = [wire.batch(start, ls.strips, k) for k in range(2)]
+    while run.outcome is None:
+        for k in range(2):
+            rows = cloud(decode_cloud(encode_cloud(ls.area(k), run.tick)), wire.row, params.robots, min_rows=0)
+            wire.check_rows(start, rows, run.tick)
+            own, decided = hosts[k].decide(run.tick + 1, *wire.robots_of(rows))
+            answer = cloud(decode_cloud(encode_cloud(wire.decision_rows(own, decided), run.tick + 1)),
+                           wire.decision_row, params.robots, min_rows=0)  # fmt: skip
+            ls.decisions(k, run.tick + 1, answer)
+    assert same(_whole(DISC, params), run)
+
+
+def test_the_checks_refuse_rows_and_decisions_that_cannot_be_the_runs():
+    params = RunParams(robots=DISC.patches + 30, seed=9, vision_radius=2.0)
+    run, wire = Simulation(DISC, params), StudyWire(2)
+    run.run(20)
+    ids = run.moving_ids()
+    rows = wire.rows(np.arange(params.robots), run.robots)
+    wire.check_rows(run, rows, run.tick)
+    for bad, kind in (
+        (rows[::-1], "bad ids"),
+        (np.concatenate([rows, rows[:1]]), "repeated robot id"),
+        (_with(rows, "state", 9), "robot state out of range"),
+        (_with(rows, "x", 99.0), "pose outside the world"),
+    ):
+        with pytest.raises(Rejected) as refused:
+            wire.check_rows(run, bad, run.tick)
+        assert refused.value.kind == kind
+    host = wire.batch(run, strips_for(run, 1), 0)
+    own, d = host.decide(run.tick + 1, np.arange(params.robots), run.robots)
+    answer = wire.decision_rows(own, d)
+    got, taken = wire.check_decisions(run, answer, run.tick + 1, ids)
+    assert np.array_equal(got, ids) and taken.tick == run.tick + 1
+    with pytest.raises(Rejected, match="decisions for the batch's"):
+        wire.check_decisions(run, answer[1:], run.tick + 1, ids)
+    wrong = answer.copy()
+    wrong["claim"][0] = 0  # a corner of the world's wall
+    with pytest.raises(Rejected) as refused:
+        wire.check_decisions(run, wrong, run.tick + 1, ids)
+    assert refused.value.kind == "illegal decision"
+
+
+def _with(rows: np.ndarray, field: str, value) -> np.ndarray:
+    out = rows.copy()
+    out[field] = value
+    return out
+
+
+@pytest.mark.parametrize("shape", [DISC, _ball()], ids=["2d", "3d"])
+def test_a_run_saved_and_restored_or_loaded_goes_on_as_the_run_would_have(shape):
+    """A restarted world's checkpoint (``saved``, ``restore``) and a monitor's copy (``load``)."""
+    params = RunParams(robots=shape.patches + 20, seed=11, vision_radius=2.0, fail_fraction=0.1, fail_tick=40)
+    whole = _whole(shape, params)
+    run = Simulation(shape, params)
+    run.run(25)
+    saved = {name: a.copy() for name, a in run.saved().items()}
+    again = Simulation(shape, params)
+    again.restore(25, saved)
+    again.run()
+    assert same(whole, again)
+    copy = Simulation(shape, params)
+    copy.load(run.tick, run.robots, run.history)
+    assert same(run, copy)
+    with pytest.raises(ContractError):
+        Simulation(shape, params).restore(24, saved)  # 26 rows of metrics for tick 24
