@@ -15,7 +15,14 @@ that change (a ``Simulation`` inside, a ``Checkpoint`` for its save), so one scr
 Cases: the star (1,036 robots, its 405 ticks) and a disc of 50,000 robots at the star's density (world radius
 226, ``--ticks`` ticks), seed 1, K = 2 batches; median (min-max) over ``--repeats``.
 
-    .venv/bin/python scripts/bench_world.py [--repeats 5] [--ticks 60] [--robots 50000] [--smoke]
+``--central`` adds the study's model on a central world, the one design the rubenstein algorithm's graph runs on
+(issue 62: the study's graph is to move onto it): its world's work a tick (every batch's area out as a PointCloud2,
+the decisions checked, the tick settled), each batch's (its rows checked, its view rebuilt, its decisions), and the
+bytes each batch is sent a tick, once over the star (K = 2) and the disc (K = 4) from tick 0 and from tick 1,000.
+A central world sends each batch its whole area and every stationary robot every tick, where the study's graph
+sends only the rows that changed: the late disc shows what that costs.
+
+    .venv/bin/python scripts/bench_world.py [--repeats 5] [--ticks 60] [--robots 50000] [--central] [--smoke]
 """
 
 from __future__ import annotations
@@ -127,15 +134,69 @@ def world_tick_ms(shape: Shape, params: RunParams, max_ticks: int) -> tuple[floa
     return 1000 * spent / ticks, ticks
 
 
+def central_tick(shape: Shape, params: RunParams, batches: int, ticks: int, skip: int = 0) -> tuple[float, list, list]:
+    """The study's model on a central world (``Simulation`` as a ``CentralRun``, its wire and strip batches, every
+    message through a PointCloud2's bytes): milliseconds per tick of the world (the areas out, the decisions checked,
+    the tick settled), of each batch (its area's rows checked, its decisions), and each batch's bytes of rows a tick,
+    over at most ``ticks`` ticks from tick ``skip`` (to the run's end)."""
+    from swarm_ros.core.strips import strips_for
+    from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
+    from swarm_ros.protocol.central_world import CentralLockstep
+    from swarm_ros.protocol.checks import cloud
+    from swarm_ros.protocol.darr_niazi.wire import StudyWire
+
+    run, start, wire = Simulation(shape, params), Simulation(shape, params), StudyWire(shape.dims)
+    if skip:
+        run.run(skip)
+    ls = CentralLockstep(run, wire)
+    strips = strips_for(start, batches)
+    for k in range(batches):
+        ls.announce(batch_name(k), strips.strip(k))
+    hosts = [wire.batch(start, strips, k) for k in range(batches)]
+    world, spent, sent, ran = 0.0, np.zeros(batches), np.zeros(batches), 0
+    while run.outcome is None and ran < ticks:
+        tick, ran = run.tick, ran + 1
+        for k in range(batches):
+            began = time.process_time()
+            message = encode_cloud(ls.area(k), tick)
+            between = time.process_time()
+            rows = cloud(decode_cloud(message), wire.row, params.robots, min_rows=0)
+            wire.check_rows(start, rows, tick)
+            answer = encode_cloud(wire.decision_rows(*hosts[k].decide(tick + 1, *wire.robots_of(rows))), tick + 1)
+            after = time.process_time()
+            ls.decisions(k, tick + 1, cloud(decode_cloud(answer), wire.decision_row, params.robots, min_rows=0))
+            world += between - began + time.process_time() - after
+            spent[k] += after - between
+            sent[k] += len(message)
+    return 1000 * world / ran, list(1000 * spent / ran), list(sent / ran)
+
+
+def central(args: argparse.Namespace, disc: Path, radius: int) -> None:
+    """The study's model on a central world (``--central``): what its world and its batches would do a tick."""
+    print("the study's model on a central world: the world's ms a tick | each batch's ms | each batch's bytes a tick")
+    late = 10 if args.smoke else 1000
+    cases = [
+        ("star, K = 2", Shape.load("star"), 1036, 2, 10_000, 0),
+        (f"disc {args.robots:,}, K = 4", Shape.load(disc, World(radius=radius)), args.robots, 4, args.ticks, 0),
+        (f"from tick {late:,}", Shape.load(disc, World(radius=radius)), args.robots, 4, args.ticks // 3 or 1, late),
+    ]
+    for name, shape, robots, batches, ticks, skip in cases:
+        params = RunParams(robots=robots, seed=1)
+        world, spent, sent = central_tick(shape, params, batches, ticks, skip)
+        each = " ".join(f"{m:.2f}" for m in spent)
+        print(f"  {name:>22}: {world:7.2f} | {each} | {' '.join(f'{b / 1000:.0f} kB' for b in sent)}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--ticks", type=int, default=60, help="ticks of the large disc (the star runs to its end)")
     ap.add_argument("--robots", type=int, default=50_000, help="the large disc's robots")
     ap.add_argument("--smoke", action="store_true", help="small and quick: checks the script runs (test_scripts)")
+    ap.add_argument("--central", action="store_true", help="the study's model on a central world too (this tree only)")
     args = ap.parse_args()
     if args.smoke:
-        args.repeats, args.ticks, args.robots = 1, 3, 2000
+        args.repeats, args.ticks, args.robots, args.central = 1, 3, 2000, True
     print(f"the world's tick, {'as a shard with no peers' if UNIFIED else 'a Simulation inside (before issue 46)'}")
     with tempfile.TemporaryDirectory() as tmp:
         disc, radius = disc_file(args.robots, Path(tmp))
@@ -152,6 +213,8 @@ def main() -> None:
                 f"  {name:>14}: {statistics.median(ms):7.3f} ms a tick ({min(ms):.3f}-{max(ms):.3f}), "
                 f"{runs[0][1]} ticks, median of {args.repeats}"
             )
+        if args.central:
+            central(args, disc, radius)
 
 
 if __name__ == "__main__":

@@ -325,3 +325,4 @@ def test_bench_world_smoke_times_the_worlds_tick_on_the_star_and_a_disc():
     assert "as a shard with no peers" in out
     assert re.search(r"star: +[0-9.]+ ms a tick .*405 ticks", out), out
     assert re.search(r"disc 2,000: +[0-9.]+ ms a tick .*3 ticks", out), out
+    assert re.search(r"star, K = 2: +[0-9.]+ \| [0-9.]+ [0-9.]+ \| \d+ kB \d+ kB$", out, re.M), out  # a central world
