@@ -82,9 +82,9 @@ def test_k_batches_fed_the_worlds_messages_decide_as_the_in_process_engine(batch
     for k, host in enumerate(hosts):
         ls.announce(f"b{k}", host.strip)
     assert ls.started and sum(len(ls.own(k)) for k in range(batches)) == 39
-    while split.outcome is None:
-        for k, host in enumerate(hosts):
-            rows, tick = host.inboxes[0].take(decode_cloud(encode_cloud(ls.area(k), split.tick)))
+    while split.outcome is None:  # each batch's whole view at tick 0, then each tick's changes
+        for k, (sent, entire) in ls.areas(list(range(batches)), set()).items():
+            rows, tick = hosts[k].inboxes[0 if entire else 1].take(decode_cloud(encode_cloud(sent, split.tick)))
             ls.decisions(k, tick, rows)
     assert split.tick == whole.tick and np.array_equal(split.history, whole.history)
     assert all(np.array_equal(a, b) for a, b in zip(split.robots, whole.robots))
@@ -133,8 +133,7 @@ def test_a_shard_keeps_what_comes_early_ignores_repeats_and_refuses_the_rest(sha
     with pytest.raises(Rejected, match="not its peer"):
         middle.border(5, 1, np.empty(0, dtype=np.int64), no_rows)
     own = run.deciding(middle.shard.own)
-    area = random_walk.Robots(*(a[own] for a in run.robots))
-    middle.decided(1, *random_walk.Batch(run, None, 0).decide(1, own, area))
+    middle.decided(1, *random_walk.Batch(run, None, 0).decide(1, own, None, run.robots))
     assert sorted(sent) == [("send_border", 0), ("send_border", 2)] and not run.tick  # waits for its neighbours
     with pytest.raises(Rejected, match="stale tick"):
         middle.decided(1, own, no_rows)
@@ -150,7 +149,7 @@ def test_the_world_rejects_hostile_rows_and_decisions_by_kind(shape):
         bad[field][-1] = value
         with pytest.raises(Rejected, match=kind):
             random_walk.Wire.check_rows(run, bad, 0)
-    ids, decided = random_walk.Batch(run, ls.strips, 0).decide(1, *random_walk.Wire.robots_of(area))
+    ids, decided = random_walk.Batch(run, ls.strips, 0).decide(1, area["id"].astype(np.int64), None, run.robots)
     rows = random_walk.Wire.decision_rows(ids, decided)
     jump = rows.copy()
     jump["x"][0] = (jump["x"][0] + 2) % 13

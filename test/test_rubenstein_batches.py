@@ -14,7 +14,7 @@ from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.batch import RubensteinBatch
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
 from swarm_ros.core.rubenstein.run import RubensteinRun
-from swarm_ros.core.strips import Strips, area_of, run_batched, strips_for
+from swarm_ros.core.strips import AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_batch import CentralBatch
 from swarm_ros.protocol.central_world import CentralLockstep, monitor_reach
@@ -160,13 +160,13 @@ def test_a_batch_reads_only_its_area_and_decides_only_its_strip():
     strips = strips_for(run, 4)
     k = 1  # half its area is the pack's edge, its strip's robots leaving it
     ids = area_of(run, strips, k)
-    rows = Robots(*(a[ids] for a in run.robots))
     clean, dirty = RubensteinBatch(run, strips, k), RubensteinBatch(run, strips, k)
     rng = np.random.default_rng(0)
-    for a in dirty.robots:
-        a[:] = rng.integers(-5, 5, a.size).astype(a.dtype)
-    own, decided = clean.decide(run.tick + 1, ids, rows)
-    own2, decided2 = dirty.decide(run.tick + 1, ids, rows)
+    garbage = Robots(*(rng.integers(-5, 5, a.size).astype(a.dtype) for a in run.robots))
+    for a, b in zip(garbage, run.robots):
+        a[ids] = b[ids]
+    own, decided = clean.decide(run.tick + 1, ids, None, run.robots)
+    own2, decided2 = dirty.decide(run.tick + 1, ids, None, garbage)
     assert np.array_equal(own, own2) and all(np.array_equal(a, b) for a, b in zip(decided, decided2))
     column = np.clip(np.floor((run.robots.x - run.cells.x0) / run.cells.side), 0, run.cells.nx - 1)
     first, last = strips.strip(k)
@@ -181,7 +181,7 @@ def test_the_world_refuses_parts_that_miss_or_repeat_a_robot():
     parts = []
     for k, host in enumerate(hosts):
         ids = area_of(run, strips, k)
-        parts.append(host.decide(1, ids, Robots(*(a[ids] for a in run.robots))))
+        parts.append(host.decide(1, ids, None, run.robots))
     with pytest.raises(ContractError, match="not one for each robot not joined"):
         run.settle(parts[:1] if parts[1][0].size else parts[1:])
     with pytest.raises(ContractError, match="not one for each robot not joined"):
@@ -204,7 +204,7 @@ def test_the_batches_give_the_in_process_run_through_the_wire_rows():
         for k, host in enumerate(hosts):
             rows = rubenstein_rows(area_of(split, strips, k), split.robots)
             check_rubenstein_rows(rows, params.robots, split.tick)
-            own, decided = host.decide(tick, *robots_of_rows(rows))
+            own, decided = host.decide(tick, *from_rows(split, strips, k, rows))
             answer = rubenstein_rows(own, decided)
             check_rubenstein_rows(answer, params.robots, tick)
             parts.append(decided_of_rows(answer))
@@ -282,15 +282,24 @@ def lockstep_run(params: RunParams, batches: int, region_cuts: str = "") -> tupl
     for k in reversed(range(batches)):
         sent = ls.announce(f"robot_batch_{k}", hosts[k].strip)
     assert sent == list(range(batches)) and ls.started
-    while run.outcome is None:
-        for k in range(batches):
-            area = hosts[k].inboxes[0]
-            assert area.topic == f"/swarm/rubenstein/area/robot_batch_{k}" and area.latched
-            decided = area.take(decode_cloud(encode_cloud(ls.area(k), run.tick)))
+    while run.outcome is None:  # each batch's whole view at tick 0, then each tick's changes
+        for k, (rows, whole) in ls.areas(list(range(batches)), set()).items():
+            inbox = hosts[k].inboxes[0 if whole else 1]
+            topic = "area" if whole else "changes"
+            assert inbox.topic == f"/swarm/rubenstein/{topic}/robot_batch_{k}" and inbox.latched
+            assert whole == (run.tick == 0)
+            decided = inbox.take(decode_cloud(encode_cloud(rows, run.tick)))
             assert decided is not None
             settled = ls.decisions(k, decided[1], decided[0])
             assert settled == (k == batches - 1)
     return run, ls
+
+
+def from_rows(run: RubensteinRun, strips: Strips, k: int, rows: np.ndarray) -> tuple:
+    """What batch k decides from, given the rows of its whole view: (seen, changed, every robot's arrays)."""
+    store = AreaStore(run, strips, k)
+    changed = store.take(run.tick, *robots_of_rows(rows), True)
+    return store.seen, changed, store.robots
 
 
 def _no_drop(topic: str, fault: Rejected) -> None:
@@ -325,7 +334,7 @@ def test_region_cuts_cut_the_strips_where_they_say_and_the_run_is_still_the_in_p
 
 def decisions_of_batch_0(run: RubensteinRun, ls: CentralLockstep) -> np.ndarray:
     host = RubensteinBatch(run, ls.strips, 0)
-    own, decided = host.decide(run.tick + 1, *robots_of_rows(ls.area(0)))
+    own, decided = host.decide(run.tick + 1, *from_rows(run, ls.strips, 0, ls.area(0)))
     return rubenstein_rows(own, decided)
 
 
@@ -582,7 +591,7 @@ class WorldPort:
 
     def __init__(self) -> None:
         self.watched: list[str] = []
-        self.areas: list[tuple[str, int, np.ndarray]] = []
+        self.areas: list[tuple[str, int, np.ndarray, bool]] = []
         self.records: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.statuses: list[tuple[int, str, str, dict]] = []
         self.sent_at: list[float] = []  # the clock at each area sent
@@ -591,8 +600,8 @@ class WorldPort:
     def watch_batch(self, name):
         self.watched.append(name)
 
-    def send_area(self, name, tick, rows):
-        self.areas.append((name, tick, rows))
+    def send_area(self, name, tick, rows, whole):
+        self.areas.append((name, tick, rows, whole))
         self.sent_at.append(self.clock())
 
     def publish_record(self, tick, metrics, robots):
@@ -638,9 +647,9 @@ def world_run(window: int, every: int, tmp_path=None, slow: bool = False, tick_r
         now[0] += 0.001
         moved = sent < len(port.areas)
         while sent < len(port.areas):  # the world sends the next areas as the last batch's decisions come in
-            name, tick, rows = port.areas[sent]
+            name, tick, rows, whole = port.areas[sent]
             sent += 1
-            rows_out, at = hosts[name].inboxes[0].take(decode_cloud(encode_cloud(rows, tick)))
+            rows_out, at = hosts[name].inboxes[0 if whole else 1].take(decode_cloud(encode_cloud(rows, tick)))
             world.decisions(name, at, rows_out)
         out = max(port.areas[-1][1], port.records[-1][0])  # the last tick that went out
         assert reach is None or held < 0 or out <= held + reach
@@ -797,7 +806,7 @@ def test_tick_rate_paces_the_world_and_the_run_is_the_same():
     whole.run()
     run, _, port = world_run(0, 20, tick_rate=200.0)
     assert same(whole, run)
-    ticks = np.array([tick for _, tick, _ in port.areas])
+    ticks = np.array([tick for _, tick, _, _ in port.areas])
     first = np.unique(ticks, return_index=True)[1]  # the first area of each tick: when the tick went out
     assert np.diff(np.array(port.sent_at)[first]).min() >= 1 / 200 - 1e-9
 
@@ -845,3 +854,49 @@ def test_a_restarted_batchs_second_answer_to_the_tick_just_settled_is_a_repeat_n
     assert not ls.decisions(0, run.tick, rows)  # tick 3's decisions again: taken as the repeat they are
     with pytest.raises(Rejected, match="stale tick"):
         ls.decisions(0, run.tick - 1, rows)
+
+
+def test_a_batch_process_that_came_back_is_sent_its_whole_view_and_the_run_is_the_unbroken_one():
+    """After tick 0 a batch is sent only the rows that changed (it keeps the rest). A process that comes back
+    finds in its topics' histories the last whole view (tick 0's) and the last changes, which it cannot follow: it
+    answers the first (the world takes that for what it is, not a fault) and leaves the second; the whole view the
+    world sends it as it announces itself again brings it back into the run."""
+    params = RunParams(40, algorithm="rubenstein", seed=6)
+    whole = RubensteinRun(square(6), params)
+    whole.run()
+    run = RubensteinRun(square(6), params)
+    ls = CentralLockstep(run, RubensteinWire)
+
+    def batch(k):
+        own = {"batch": k, "batches": 2, "region_cuts": "", "name": f"robot_batch_{k}"}
+        return CentralBatch(run.shape, params, own, _no_drop)
+
+    hosts = [batch(0), batch(1)]
+    for k in (0, 1):
+        ls.announce(f"robot_batch_{k}", hosts[k].strip)
+    kept: dict[tuple[int, bool], bytes] = {}  # the last message of each batch's two topics
+
+    def deliver(k: int, entire: bool) -> None:
+        reply = hosts[k].inboxes[0 if entire else 1].take(decode_cloud(kept[k, entire]))
+        assert reply is not None
+        ls.decisions(k, reply[1], reply[0])
+
+    back = False
+    while run.outcome is None:
+        tick = run.tick
+        for k, (rows, entire) in ls.areas([0, 1], set()).items():
+            assert entire == (tick == 0)
+            kept[k, entire] = encode_cloud(rows, tick)
+            if not (k == 1 and tick == 30):  # batch 1's process is gone before it answers tick 30's changes
+                deliver(k, entire)
+        if tick == 30 and not back:
+            back, hosts[1] = True, batch(1)
+            assert hosts[1].inboxes[1].take(decode_cloud(kept[1, False])) is None  # tick 30's changes: left
+            rows, decides = hosts[1].inboxes[0].take(decode_cloud(kept[1, True]))  # tick 0's whole view
+            assert decides == 1 and not ls.decisions(1, decides, rows)  # no fault
+            assert ls.announce("robot_batch_1", hosts[1].strip) == [1]
+            (rows, entire), *_ = ls.areas([1], {1}).values()
+            kept[1, True] = encode_cloud(rows, run.tick)
+            assert entire and ls.whole_at[1] == 30
+            deliver(1, True)
+    assert back and same(whole, run)

@@ -12,7 +12,7 @@ from runs import disc_shape
 from swarm_ros.core import RunParams, Shape, Simulation, World
 from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.state import IS_MOVING
-from swarm_ros.core.strips import Strips, area_of, run_batched, strips_for
+from swarm_ros.core.strips import AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_world import CentralLockstep
 from swarm_ros.protocol.checks import cloud
@@ -81,7 +81,7 @@ def test_the_columns_are_the_patch_columns_and_a_batch_sees_the_halo_and_every_s
     strips = Strips.cut(np.array([-3.0]), grid, 2)  # strip 0: columns 0..8 (x up to -3.5), strip 1: 9..24
     assert strips.area(0) == (0, 8 + 7) and strips.area(1) == (9 - 7, 24)
     stationary = np.flatnonzero(~IS_MOVING[run.state.state])
-    assert stationary.size > 4 and np.array_equal(run.known_to_all(), stationary)
+    assert stationary.size > 4 and np.array_equal(np.flatnonzero(run.seen_by_all(run.robots.state)), stationary)
     columns = grid.columns(run.robots.x)
     assert np.array_equal(area_of(run, strips, 0), np.union1d(np.flatnonzero(columns <= 15), stationary))
 
@@ -96,15 +96,20 @@ def test_the_worlds_lockstep_over_the_wire_with_checked_rows_and_decisions_gives
     for k in (1, 0):
         ls.announce(f"robot_batch_{k}", strips.strip(k))
     hosts = [wire.batch(start, ls.strips, k) for k in range(2)]
+    stores = [AreaStore(start, ls.strips, k) for k in range(2)]
+    wholes = 0
     while run.outcome is None:
-        for k in range(2):
-            rows = cloud(decode_cloud(encode_cloud(ls.area(k), run.tick)), wire.row, params.robots, min_rows=0)
+        for k, (sent, whole) in ls.areas([0, 1], set()).items():
+            rows = cloud(decode_cloud(encode_cloud(sent, run.tick)), wire.row, params.robots, min_rows=0)
             wire.check_rows(start, rows, run.tick)
-            own, decided = hosts[k].decide(run.tick + 1, *wire.robots_of(rows))
+            assert whole or stores[k].follows(run.tick)
+            wholes += whole
+            changed = stores[k].take(run.tick, *wire.robots_of(rows), whole)
+            own, decided = hosts[k].decide(run.tick + 1, stores[k].seen, changed, stores[k].robots)
             answer = cloud(decode_cloud(encode_cloud(wire.decision_rows(own, decided), run.tick + 1)),
                            wire.decision_row, params.robots, min_rows=0)  # fmt: skip
             ls.decisions(k, run.tick + 1, answer)
-    assert same(_whole(DISC, params), run)
+    assert same(_whole(DISC, params), run) and wholes == 2  # each batch's whole view once, then the changes
 
 
 def test_the_checks_refuse_rows_and_decisions_that_cannot_be_the_runs():
@@ -124,7 +129,7 @@ def test_the_checks_refuse_rows_and_decisions_that_cannot_be_the_runs():
             wire.check_rows(run, bad, run.tick)
         assert refused.value.kind == kind
     host = wire.batch(run, strips_for(run, 1), 0)
-    own, d = host.decide(run.tick + 1, np.arange(params.robots), run.robots)
+    own, d = host.decide(run.tick + 1, np.arange(params.robots), None, run.robots)
     answer = wire.decision_rows(own, d)
     got, taken = wire.check_decisions(run, answer, run.tick + 1, ids)
     assert np.array_equal(got, ids) and taken.tick == run.tick + 1

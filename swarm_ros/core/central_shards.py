@@ -101,9 +101,10 @@ class CentralShard:
 
     def area(self, k: int) -> np.ndarray:
         """The robots batch k (one of its batches) sees, ascending: what the shard sends it (those of its area, and
-        those known to all: :func:`~swarm_ros.core.strips.area_of`)."""
+        those seen by all: :func:`~swarm_ros.core.strips.area_of`)."""
         first, last = self.strips.area(k)
-        return np.union1d(self._within(self.present, first, last), self.run.known_to_all())
+        everywhere = self.present[self.run.seen_by_all(self.run.robots.state[self.present])]
+        return np.union1d(self._within(self.present, first, last), everywhere)
 
     def neighbours(self) -> list[int]:
         """The shards whose own columns or halo touch its own: those it sends border decisions and rows to."""
@@ -356,9 +357,7 @@ def run_sharded(
                 mail.again(s, tick)
             if w.run.tick % save_every == 0:  # as the graph saves: before the tick's areas go out
                 saves[s] = (w.run.tick, {k: np.copy(v) for k, v in w.run.saved().items()}, w.present.copy())
-            parts = [
-                hosts[k].decide(w.run.tick + 1, ids, take(w.run.robots, ids)) for k in w.batches for ids in [w.area(k)]
-            ]
+            parts = [hosts[k].decide(w.run.tick + 1, ids, None, w.run.robots) for k in w.batches for ids in [w.area(k)]]
             mail.exchanges[s].decided(w.run.tick + 1, *concat(parts))
         mail.deliver()
     if len({(w.run.tick, w.run.outcome) for w in world}) != 1:

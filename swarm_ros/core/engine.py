@@ -342,9 +342,11 @@ class Simulation:
             return self.moving_ids()
         return among[IS_MOVING[self.state.state[among]]]
 
-    def known_to_all(self) -> np.ndarray:
-        """The stationary robots, ascending: a robot finds the frontier anywhere, from the localized ones."""
-        return np.flatnonzero(~IS_MOVING[self.state.state])
+    @staticmethod
+    def seen_by_all(state: np.ndarray) -> np.ndarray:
+        """Which robots every batch sees, by their ``state``: the stationary ones (a robot finds the frontier
+        anywhere, from the localized ones)."""
+        return ~IS_MOVING[state]
 
     def settle(self, decided: list[tuple[np.ndarray, Decisions]]) -> Outcome | None:
         """Advance one tick with each robot batch's (ids, decisions): :meth:`apply` of them all."""

@@ -49,7 +49,7 @@ class CentralRun(Protocol):
     params: Any
     tick: int
     outcome: Any
-    robots: Any  #: a NamedTuple of arrays indexed by robot id, ``x`` among them
+    robots: Any  #: a NamedTuple of arrays indexed by robot id, ``x`` and ``state`` among them
     grid: StripGrid  #: the columns the batches' strips are cut in
     columns: tuple[str, ...]  #: metrics.csv's columns, the first ``tick``: a row of them a tick (``history``)
 
@@ -58,10 +58,11 @@ class CentralRun(Protocol):
 
     def deciding(self) -> np.ndarray: ...  # the robots that decide the next tick, ascending ids
 
-    def known_to_all(self) -> np.ndarray:
-        """The robots every batch sees wherever they stand, ascending ids, beside its area's (the study's model's
-        stationary robots, from which its rule finds the frontier anywhere); none for a rule that reads only the
-        robots within its reach. With world shards they must be among the rows every shard shares."""
+    def seen_by_all(self, state: np.ndarray) -> np.ndarray:
+        """Which robots, by their ``state`` (``robots.state``), every batch sees wherever they stand, beside its
+        area's (the study's model's stationary robots, from which its rule finds the frontier anywhere); none for a
+        rule that reads only the robots within its reach. With world shards they must be among the rows every shard
+        shares."""
         ...
 
     def progress(self) -> tuple[int, int, dict[str, str]]: ...  # cells done, all of them, words (progress bars)
@@ -170,24 +171,94 @@ def strips_for(start: CentralRun, batches: int, region_cuts: str = "") -> Strips
 
 
 def area_of(run: CentralRun, strips: Strips, k: int, columns: np.ndarray | None = None) -> np.ndarray:
-    """The ids of the robots batch k sees, as they stand at the run's tick (what the world sends it): those of its
-    area, and those :meth:`~CentralRun.known_to_all` (``columns``: every robot's, if known)."""
+    """The ids of the robots batch k sees, as they stand at the run's tick: those of its area, and those every batch
+    sees (:meth:`~CentralRun.seen_by_all`); ``columns``: every robot's, if known."""
     if columns is None:
         columns = run.grid.columns(run.robots.x)
-    return np.union1d(np.flatnonzero(strips.in_area(columns, k)), run.known_to_all())
+    return np.flatnonzero(strips.in_area(columns, k) | run.seen_by_all(run.robots.state))
+
+
+class AreaFeed:
+    """The world's side of what each batch is sent after a tick: the first time, and whenever asked (a batch process
+    that came back, a world that went on from its checkpoint), the rows of every robot it sees (its *whole* view);
+    after that, of the robots it saw after the last tick or sees now, those whose rows changed in the tick (a robot
+    that left its view is among them: it moved). A batch keeps what it was sent (:class:`AreaStore`), so a robot
+    that stands still, as most stationary ones do, is sent once."""
+
+    def __init__(self, run: CentralRun, strips: Strips) -> None:
+        self.run, self.strips = run, strips
+        self.seen: dict[int, np.ndarray] = {}  #: batch -> the robots it saw, as last sent
+        self.last: tuple[np.ndarray, ...] = ()  #: every robot's arrays at tick ``at``, as last compared
+        self.at = -1
+
+    def send(self, batches: list[int], whole: set[int] | frozenset[int] = frozenset()) -> dict[int, tuple]:
+        """What to send each of ``batches`` at the run's tick: (ids, whether they are its whole view); the whole view
+        to the batches ``whole``, and to every one unless the last call was at the tick before."""
+        run = self.run
+        columns = run.grid.columns(run.robots.x)
+        changed = None
+        if self.at == run.tick - 1 and self.last:
+            changed = np.zeros(run.params.robots, dtype=bool)
+            for now, before in zip(run.robots, self.last):
+                changed |= now != before
+        out = {}
+        for k in batches:
+            view = area_of(run, self.strips, k, columns)
+            if changed is None or k in whole or k not in self.seen:
+                out[k] = (view, True)
+            else:
+                both = np.union1d(self.seen[k], view)
+                out[k] = (both[changed[both]], False)
+            self.seen[k] = view
+        self.last, self.at = tuple(a.copy() for a in run.robots), run.tick
+        return out
+
+
+class AreaStore:
+    """A batch's copy of the robots it sees, kept from tick to tick (what an :class:`AreaFeed` sends): every robot's
+    arrays, of which those it was sent hold their rows as last sent; ``seen``, the robots it sees (ascending), those
+    of them in its area (``strips``' area k, by the columns of ``start``'s grid) or seen by all."""
+
+    def __init__(self, start: CentralRun, strips: Strips, k: int) -> None:
+        self.start, self.strips, self.k = start, strips, k
+        self.robots = type(start.robots)(*(np.zeros_like(a) for a in start.robots))
+        self.seen = np.empty(0, dtype=np.int64)
+        self.tick = -1  #: the tick its rows are of (-1: none yet)
+
+    def take(self, tick: int, ids: np.ndarray, robots: Any, whole: bool) -> np.ndarray | None:
+        """The rows (``robots``: arrays, position k robot ``ids[k]``'s, ids ascending) the world sent at ``tick``: its
+        whole view, or the changes of the tick after its last (check :meth:`follows` first). Returns the ids that
+        changed, or None for a whole view."""
+        for mine, theirs in zip(self.robots, robots):
+            mine[ids] = theirs
+        self.tick = tick
+        if whole:
+            self.seen = np.asarray(ids, dtype=np.int64).copy()
+            return None
+        columns = self.start.grid.columns(self.robots.x[ids])
+        sees = self.strips.in_area(columns, self.k) | self.start.seen_by_all(self.robots.state[ids])
+        kept = self.seen[~np.isin(self.seen, ids)]
+        self.seen = np.union1d(kept, ids[sees]).astype(np.int64)
+        return ids
+
+    def follows(self, tick: int) -> bool:
+        """Whether changes of ``tick`` follow what it holds."""
+        return self.tick >= 0 and tick == self.tick + 1
 
 
 def run_batched(run: CentralRun, hosts: list[Any], max_ticks: int | None = None) -> None:
     """Run ``run`` to its end (or ``max_ticks`` more ticks) with its robots' decisions made by ``hosts`` (one per
-    strip, each ``decide(tick, ids, robots)`` -> (ids, decisions) from its area's robots alone): the result equals
-    the in-process run's."""
+    strip, each ``decide(tick, seen, changed, robots)`` -> (ids, decisions) from the robots it sees alone), each
+    sent what the graph's world sends (an :class:`AreaFeed`, into an :class:`AreaStore`): the result equals the
+    in-process run's."""
     strips = hosts[0].strips
+    feed = AreaFeed(run, strips)
+    stores = [AreaStore(run, strips, k) for k in range(len(hosts))]
     left = max_ticks
     while run.outcome is None and (left is None or left > 0):
-        tick = run.tick + 1
-        decided = []
-        for k, host in enumerate(hosts):
-            ids = area_of(run, strips, k)
-            decided.append(host.decide(tick, ids, type(run.robots)(*(a[ids] for a in run.robots))))
+        tick, decided = run.tick, []
+        for k, (ids, whole) in feed.send(list(range(len(hosts)))).items():
+            changed = stores[k].take(tick, ids, type(run.robots)(*(a[ids] for a in run.robots)), whole)
+            decided.append(hosts[k].decide(tick + 1, stores[k].seen, changed, stores[k].robots))
         run.settle(decided)
         left = None if left is None else left - 1

@@ -2,15 +2,18 @@
 (:mod:`swarm_ros.core.strips`).
 
 Batch k of K announces its strip, ``[first, last]`` column (the strips cut at ``region_cuts``, x positions, or
-balanced over the robots at tick 0: :func:`~swarm_ros.core.strips.strips_for`). The world sends it, after each tick,
-the rows of its area (its strip and one column of halo) on /swarm/<algorithm>/area/<batch>: what the robots there
-broadcast. The batch checks them, decides the next tick for its strip's deciding robots (the algorithm's ``wire``:
-its rows and its batch) and answers on /swarm/<algorithm>/decisions/<batch>. It keeps nothing between ticks, so a
-restarted batch decides as the one it replaces would have.
+balanced over the robots at tick 0: :func:`~swarm_ros.core.strips.strips_for`). The world sends it the rows of every
+robot it sees (its area: its strip and the grid's reach either side; and those every batch sees) at tick 0 on
+/swarm/<algorithm>/area/<batch>, then after each tick the rows of those that changed on
+/swarm/<algorithm>/changes/<batch>: what the robots there broadcast. The batch checks them, keeps them
+(:class:`~swarm_ros.core.strips.AreaStore`), decides the next tick for its strip's deciding robots (the
+algorithm's ``wire``: its rows and its batch) and answers on /swarm/<algorithm>/decisions/<batch>. A restarted batch
+is sent its whole view again, so it decides as the one it replaces would have.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -18,7 +21,7 @@ from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import Rejected
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.strips import strips_for
+from swarm_ros.core.strips import AreaStore, strips_for
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.batch_host import Inbox, Reply
 from swarm_ros.protocol.cdr import Cloud
@@ -37,11 +40,15 @@ class CentralBatch:
         self.start = algorithm.hook("engine")(shape, params)  # the grid, the rule and the shape; robots at tick 0
         strips = strips_for(self.start, int(own["batches"]), str(own["region_cuts"]))
         self.host = self.wire.batch(self.start, strips, int(own["batch"]))
+        self.store = AreaStore(self.start, strips, int(own["batch"]))  # what it was sent, kept
         self.strip = strips.strip(int(own["batch"]))
-        self.tick = -1  # the last tick whose area came in
+        self.tick = -1  # the last tick it decided from
         name, topics = str(own["name"]), CentralTopics.of(params.algorithm)
         self.decisions = topics.decisions(name)
-        self.inboxes = (Inbox(topics.area(name), True, self._on_area),)
+        self.inboxes = (
+            Inbox(topics.area(name), True, functools.partial(self._take, True)),
+            Inbox(topics.changes(name), True, functools.partial(self._take, False)),
+        )
 
     def describe(self) -> str:
         return f"columns {self.strip[0]}..{self.strip[1]}"
@@ -52,10 +59,17 @@ class CentralBatch:
     def summary(self) -> str:
         return f"decided up to tick {self.tick + 1}"
 
-    def _on_area(self, msg: Cloud) -> Reply:
+    def _take(self, whole: bool, msg: Cloud) -> Reply:
+        """The whole view the world sent (at the start, or to this process as it came back, or from a world that went
+        on from its checkpoint: an older tick's, then), or the changes of the tick after the one it holds (others:
+        none it can follow, as a process that just came back finds the last in its topic's history)."""
         tick = checks.tick_stamp(msg.header)
         rows = checks.cloud(msg, self.wire.row, self.robots, min_rows=0)
+        if not whole and not self.store.follows(tick):
+            return None
         self.wire.check_rows(self.start, rows, tick)
-        self.tick = max(self.tick, tick)  # an older tick's area is a restarted world's, from its checkpoint: decided
-        own, decided = self.host.decide(tick + 1, *self.wire.robots_of(rows))
+        ids, robots = self.wire.robots_of(rows)
+        changed = self.store.take(tick, ids, robots, whole)
+        own, decided = self.host.decide(tick + 1, self.store.seen, changed, self.store.robots)
+        self.tick = max(self.tick, tick)
         return self.wire.decision_rows(own, decided), tick + 1

@@ -84,8 +84,12 @@ class ShardLockstep(CentralLockstep):
         super().resume(hosts, cuts, kept, before)
         self.exchange.restart()
 
-    def area(self, k: int) -> np.ndarray:
-        return self.wire.rows(self.shard.area(k), self.run.robots)
+    def areas(self, batches: list[int], whole: set[int]) -> dict[int, tuple[np.ndarray, bool]]:
+        """Each of ``batches``' whole view, every tick: a shard does not yet hand its batches only the changes (the
+        rows of a robot that leaves its halo do not come to it)."""
+        for k in batches:
+            self.whole_at[k] = self.run.tick
+        return {k: (self.wire.rows(self.shard.area(k), self.run.robots), True) for k in batches}
 
     def awaited(self) -> list[str]:
         """Its batches whose decisions are not in yet, or, once they are, the peer shards whose messages of the tick

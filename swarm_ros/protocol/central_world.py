@@ -4,10 +4,13 @@ are in, what each is sent, and when a tick is settled. A central world is one pr
 
 A robot batch announces the strip of columns it decides for (``[first, last]``: the study's model's batches
 announce theirs in patch columns); once the batches' strips tile the grid, batch k being the k-th from the west,
-the world sends each batch its area's rows of tick 0. A batch answers each area with its strip's decisions for the
-next tick; when every batch has answered, the world settles the tick (the engine's
-:meth:`~swarm_ros.core.strips.CentralRun.settle`) and sends the next areas. A batch process that announces itself
-again (restarted) is sent its area of the current tick: a batch keeps nothing between ticks, so it decides as the one
+the world sends each batch the rows of tick 0 of every robot it sees (its *whole view*: its area's, and those every
+batch sees) on /swarm/<algorithm>/area/<batch>. A batch answers with its strip's decisions for the next tick; when
+every batch has answered, the world settles the tick (the engine's :meth:`~swarm_ros.core.strips.CentralRun.settle`)
+and sends each batch the rows that changed in it, of the robots it saw or sees now, on
+/swarm/<algorithm>/changes/<batch> (:class:`~swarm_ros.core.strips.AreaFeed`): a batch keeps what it was sent. A
+batch process that announces itself again (restarted) is sent its whole view of the current tick, and so is every
+batch by a world that went on from its checkpoint; a batch keeps nothing else between ticks, so it decides as the one
 it replaces would have.
 
 What is the algorithm's own here is its :class:`~swarm_ros.protocol.central_rows.Wire` (the registry's ``wire``
@@ -27,7 +30,7 @@ import numpy as np
 
 from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.params import MAX_TICKS, auto_every
-from swarm_ros.core.strips import CentralRun, Strips, area_of
+from swarm_ros.core.strips import AreaFeed, CentralRun, Strips
 
 from . import central_checkpoint as checkpoint
 from .central_checkpoint import SAVE_TICKS, SHARD_SAVE_TICKS, save_every
@@ -81,6 +84,9 @@ class CentralLockstep:
         self._columns_at: tuple[int, np.ndarray] = (-1, np.empty(0, dtype=np.int64))
         self.on_settled: Callable[[], None] = lambda: None  #: told when a tick settles later than its decisions
         self.shard_index: int | None = None  #: a world shard's index (``central_shards``), None for the world
+        self.feed: AreaFeed | None = None  #: what each batch is sent, made once the strips are known
+        #: batch -> the tick of the last whole view sent it: its topic keeps that one for a process that comes back
+        self.whole_at: dict[int, int] = {}
 
     @property
     def batches(self) -> int:
@@ -155,9 +161,21 @@ class CentralLockstep:
         return self._columns_at[1]
 
     def area(self, k: int) -> np.ndarray:
-        """The rows batch k sees at the current tick (:func:`~swarm_ros.core.strips.area_of`)."""
+        """The rows of the robots batch k sees at the current tick, all of them (its whole view)."""
+        return self.areas([k], {k})[k][0]
+
+    def areas(self, batches: list[int], whole: set[int]) -> dict[int, tuple[np.ndarray, bool]]:
+        """What to send each of ``batches`` at the current tick: (rows, whether they are its whole view); the whole
+        view to the batches ``whole`` and to every one the first time (:class:`~swarm_ros.core.strips.AreaFeed`)."""
         assert self.strips is not None
-        return self.wire.rows(area_of(self.run, self.strips, k, self._columns()), self.run.robots)
+        if self.feed is None:
+            self.feed = AreaFeed(self.run, self.strips)
+        out = {}
+        for k, (ids, entire) in self.feed.send(batches, whole).items():
+            out[k] = (self.wire.rows(ids, self.run.robots), entire)
+            if entire:
+                self.whole_at[k] = self.run.tick
+        return out
 
     def awaited(self) -> list[str]:
         """The batches whose decisions for the next tick are not in yet, by node name."""
@@ -184,6 +202,8 @@ class CentralLockstep:
             # a restarted batch's second answer to the tick just settled: it answered the area its topic kept, which
             # settled the tick, and then the same area, which the world sent it again as it announced itself
             return False
+        if tick == self.whole_at.get(k, -2) + 1 and tick < self.run.tick:
+            return False  # a restarted batch's answer to the last whole view its topic kept, before the one it asked
         if tick != self.run.tick + 1:
             raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {self.run.tick + 1}")
         if k in self.decided:
@@ -210,8 +230,9 @@ class CentralWorld:
     at the end; the peers' liveliness and a still run's failure (:class:`Watch`);
     the end once the monitor holds it (or, with no window, once its readers have everything, or after ``LINGER``).
 
-    Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writer, decisions
-    reader and liveliness), ``send_area(name, tick, rows)``, ``publish_record(tick, metrics_rows, robot_rows)``,
+    Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writers, decisions
+    reader and liveliness), ``send_area(name, tick, rows, whole)`` (its whole view, or the changes),
+    ``publish_record(tick, metrics_rows, robot_rows)``,
     ``publish_status(tick, outcome, message, values)`` (the status's values, as the study's model's world gives
     them: ``waiting_for``, ``rejected_messages``, ``rejected``; from tick 0 ``startup_seconds`` and the run's
     progress, ten a second; at the end ``wall_seconds``), and answers ``monitor_reads()`` (the monitor reads the
@@ -247,6 +268,7 @@ class CentralWorld:
         self.first = True  # the first tick this process publishes is still to go out
         self.watched: set[str] = set()  # the batches whose endpoints the port made
         self.waiting: list[int] = []  # batches announced before the monitor read the run's topics
+        self.fresh: set[int] = set()  # batch processes that came back while a tick waited: sent it whole
         self.started_at: float | None = None  # clock() at tick 0 (a resumed world's: as its checkpoint says)
         self.started_wall = 0.0  # time.time() at tick 0, saved in the checkpoint
         self.startup = 0.0  # seconds from the start of the run's command to tick 0 (port.startup_seconds)
@@ -357,9 +379,9 @@ class CentralWorld:
             return None
         return max(0.0, self.paced_at - self.clock())
 
-    def _send_areas(self, batches: list[int]) -> None:
-        for k in batches:
-            self.port.send_area(self.ls.hosts[k], self.run.tick, self.ls.area(k))
+    def _send_areas(self, batches: list[int], whole: set[int]) -> None:
+        for k, (rows, entire) in self.ls.areas(batches, whole).items():
+            self.port.send_area(self.ls.hosts[k], self.run.tick, rows, entire)
 
     def _publish_tick(self) -> None:
         run = self.run
@@ -377,7 +399,8 @@ class CentralWorld:
             self.ended_at = self.clock()
             self.status(str(run.outcome), f"the run ended at tick {tick}: {run.outcome}")
         else:
-            self._send_areas(self.ls.mine)
+            self._send_areas(self.ls.mine, self.fresh)
+            self.fresh = set()
 
     def status(self, outcome: str, message: str) -> None:
         self.status_at = self.clock()
@@ -416,8 +439,10 @@ class CentralWorld:
                 self.status(RUNNING, f"{len(self.ls.mine)} robot batches in: tick {self.run.tick}")
                 self.pending = True
                 self._go_on()
-            elif not self.pending:  # a batch process that came back: its area at the current tick (if it went out:
-                self._send_areas(batches)  # a tick waiting for the monitor goes to every batch when it does)
+            elif not self.pending:  # a batch process that came back: its whole view at the current tick
+                self._send_areas(batches, set(batches))
+            else:  # (a tick waiting for the monitor goes to every batch when it does: to these, whole)
+                self.fresh.update(batches)
         if not self.ls.started and now - self.created > self.start_timeout:
             raise RunFailed(f"robot batches did not all announce themselves within {self.start_timeout:g} s")
         if self.ls.started and self.ended_at is None and self.watch.still(now):  # for STILL_S

@@ -135,6 +135,9 @@ class CentralTopics:
     def area(self, node_name: str) -> str:
         return f"{self.root}/area/{node_name}"
 
+    def changes(self, node_name: str) -> str:
+        return f"{self.root}/changes/{node_name}"
+
     def decisions(self, node_name: str) -> str:
         return f"{self.root}/decisions/{node_name}"
 

@@ -29,8 +29,8 @@ class Batch:
     def __init__(self, run: RandomWalk, strips, k: int) -> None:
         self.mask, self.seed, self.strips, self.k, self.grid = run.mask, run.params.seed, strips, k, run.grid
 
-    def decide(self, tick: int, ids: np.ndarray, area: Robots) -> tuple[np.ndarray, Robots]:
-        rows, cols = self.mask.shape
+    def decide(self, tick: int, ids: np.ndarray, changed, robots: Robots) -> tuple[np.ndarray, Robots]:
+        (rows, cols), area = self.mask.shape, Robots(*(a[ids] for a in robots))  # (the robots it sees: ids)
         stopped = np.zeros((rows + 2, cols + 2), dtype=bool)  # a border of cells that never hold a robot
         stopped[area.y[area.state == 1] + 1, area.x[area.state == 1] + 1] = True
         mine = (area.state == 0) & (self.strips is None or self.strips.in_strip(self.grid.columns(area.x), self.k))
@@ -59,7 +59,7 @@ class RandomWalk:
 
     history = property(lambda self: np.array(self._rows, dtype=float))  #: a row of ``columns`` a tick
     done = property(lambda self: self.outcome is not None)
-    known_to_all = staticmethod(lambda: np.empty(0, dtype=np.int64))  #: none: a walker sees only its neighbours
+    seen_by_all = staticmethod(lambda state: state < 0)  #: none: a walker sees only its neighbours
 
     def progress(self) -> tuple[int, int, dict[str, str]]:
         return int(self._rows[-1][3]), int(self.mask.sum()), {"tick": str(self.tick)}
@@ -79,7 +79,7 @@ class RandomWalk:
     def run(self, max_ticks: int | None = None) -> Outcome | None:
         everyone = np.arange(self.params.robots)
         while self.outcome is None and (max_ticks is None or max_ticks > 0):
-            self.settle([Batch(self, None, 0).decide(self.tick + 1, everyone, self.robots)])
+            self.settle([Batch(self, None, 0).decide(self.tick + 1, everyone, None, self.robots)])
             max_ticks = None if max_ticks is None else max_ticks - 1
         return self.outcome
 

@@ -20,26 +20,23 @@ from .run import RubensteinRun, anchor_capacity
 class RubensteinBatch:
     """One robot batch: decides for the robots of its strip from the rows of its area alone.
 
-    Its arrays are indexed by robot id, but only its area's rows are written and read a tick: the
-    rest is never looked at (its cell list holds its area's robots only).
+    The robots' arrays it is given are indexed by robot id, but only its area's rows are read: the rest is never
+    looked at (its cell list holds its area's robots only).
     """
 
     def __init__(self, run: RubensteinRun, strips: Strips, k: int) -> None:
         n = run.params.robots
         self.rule, self.bitmap, self.strips, self.k, self.grid = run.rule, run.bitmap, strips, k, run.grid
-        self.robots = Robots(*(np.zeros(n, dtype=a.dtype) for a in run.robots))
         c = run.cells
         self.cells = Cells(np.full(c.head.size, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64), *c[2:])
         self._out = decided_for(n)
         cap = anchor_capacity(run.params.comm_range)
         self._anchors = (np.empty(cap), np.empty(cap), np.empty(cap))
 
-    def decide(self, tick: int, ids: np.ndarray, rows: Robots) -> tuple[np.ndarray, Decided]:
-        """Take the rows of the area's robots ``ids`` (ascending) as they stood after ``tick - 1`` and decide
-        ``tick`` for the robots of the strip not joined: their ids and decisions (position k robot k's)."""
-        s = self.robots
-        for mine, theirs in zip(s, rows):
-            mine[ids] = theirs
+    def decide(self, tick: int, ids: np.ndarray, changed: np.ndarray | None, s: Robots) -> tuple[np.ndarray, Decided]:
+        """Decide ``tick`` for the robots of the strip not joined from ``s`` (every robot's arrays, of which those of
+        its area, ``ids``, ascending, hold their rows after ``tick - 1``; what ``changed`` in the tick is not
+        needed: it decides from the whole area): their ids and decisions (position k robot k's)."""
         own = ids[self.strips.in_strip(self.grid.columns(s.x[ids]), self.k) & (s.state[ids] != JOINED)]
         build_cells(ids, s.x, s.y, self.cells)
         decide_kernel(own, s, self.rule, self.bitmap, self.cells, tick, self._out, *self._anchors)

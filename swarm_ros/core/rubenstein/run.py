@@ -287,9 +287,10 @@ class RubensteinRun:
             return _deciding(self.robots.state)
         return among[self.robots.state[among] != JOINED]
 
-    def known_to_all(self) -> np.ndarray:
+    @staticmethod
+    def seen_by_all(state: np.ndarray) -> np.ndarray:
         """None: a robot reads only the robots within its communication range."""
-        return np.empty(0, dtype=np.int64)
+        return np.zeros(state.shape, dtype=bool)
 
     def counts(self, ids: np.ndarray) -> np.ndarray:
         """Robots ``ids``' share of the tick's counts: joined, moving, waiting (a world shard's, summed over the

@@ -60,7 +60,8 @@ class CentralWorldNode:
         self.pub_status = self.signer.publisher(DiagnosticArray, STATUS, msgs.STATUS_QOS)
         self.pub_robots = self.signer.publisher(PointCloud2, self.topics.robots, msgs.CENTRAL_QOS)
         self.pub_metrics = self.signer.publisher(PointCloud2, self.topics.metrics, msgs.CENTRAL_QOS)
-        self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its area's publisher
+        self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its whole view's publisher
+        self.changes: dict[str, SignedPublisher] = {}  # batch node name -> its changes' publisher
         engine = algorithm.hook("engine")(shape, self.params)
         lockstep = self._shard(engine, own) if int(own.get("shards", 1)) > 1 else None
         self.world = CentralWorld(engine, self.wire, own, self, node.get_logger(), self.rejections, lockstep=lockstep)
@@ -177,12 +178,15 @@ class CentralWorldNode:
     # -- the world's port -------------------------------------------------------------------
     def watch_batch(self, name: str) -> None:
         self.areas[name] = self.signer.publisher(PointCloud2, self.topics.area(name), msgs.LATCHED_QOS)
+        # (latched too: the changes after a whole view go out once the batch answered it, maybe before its reader of
+        # them matched)
+        self.changes[name] = self.signer.publisher(PointCloud2, self.topics.changes(name), msgs.LATCHED_QOS)
         topic = self.topics.decisions(name)
         self.gate.subscribe(PointCloud2, topic, functools.partial(self._on_decisions, name, topic), msgs.DECISIONS_QOS)
         self._watch_alive(name)
 
-    def send_area(self, name: str, tick: int, rows: np.ndarray) -> None:
-        self.areas[name].publish_rows(rows, tick)
+    def send_area(self, name: str, tick: int, rows: np.ndarray, whole: bool) -> None:
+        (self.areas if whole else self.changes)[name].publish_rows(rows, tick)
 
     def publish_record(self, tick: int, metrics: np.ndarray | None, robots: np.ndarray) -> None:
         if metrics is not None:  # (a world shard other than shard 0 sends no metrics: shard 0's are the same)

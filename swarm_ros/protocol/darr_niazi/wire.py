@@ -3,11 +3,12 @@
 
 A batch decides for the moving robots of its strip of patch columns from what it is sent after each tick: the robots
 of its area (its strip and :func:`~swarm_ros.core.regions.halo` columns either side) and every stationary robot
-(:meth:`~swarm_ros.core.engine.Simulation.known_to_all`: the ``walk`` rule finds the frontier anywhere). It rebuilds
-its regional view of the swarm from them (:meth:`~swarm_ros.core.swarm_view.SwarmView.load`, as a batch of the
-study's own graph does from a snapshot) and runs the core's rule (:class:`~swarm_ros.core.rules.Decider`), so it
-decides as the in-process engine does. The rows are the study's graph's (:mod:`swarm_ros.protocol.rows`): a robot's
-pose and state, and a decision's claim and pose.
+(:meth:`~swarm_ros.core.engine.Simulation.seen_by_all`: the ``walk`` rule finds the frontier anywhere), whole at
+first and then the rows that changed. It keeps a regional view of the swarm from them (loaded from a whole view,
+then updated with each tick's changes: :class:`~swarm_ros.core.swarm_view.SwarmView`, as a batch of the study's own
+graph does from its snapshot and region rows) and runs the core's rule (:class:`~swarm_ros.core.rules.Decider`),
+so it decides as the in-process engine does. The rows are the study's graph's (:mod:`swarm_ros.protocol.rows`): a
+robot's pose and state, and a decision's claim and pose.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarm_ros.core.engine import Simulation
-from swarm_ros.core.errors import Rejected
+from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.legality import illegal
 from swarm_ros.core.rules import Decider, Decisions
 from swarm_ros.core.state import STATE_COUNT, Poses, Poses3D
@@ -34,11 +35,26 @@ class StudyStrip:
         self.view = SwarmView(run.shape, run.params.robots, strips.area(k))  # its area's moving robots, and the rest
         self.decider = Decider(run.shape, run.params)
 
-    def decide(self, tick: int, ids: np.ndarray, robots: Poses | Poses3D) -> tuple[np.ndarray, Decisions]:
-        """Take the robots ``ids`` it sees as they stood after ``tick - 1`` and decide ``tick`` for the moving robots
-        of its strip: their ids (ascending) and decisions."""
-        pose = robots._asdict()
-        self.view.load(tick - 1, ids, pose.pop("state"), **pose)
+    def decide(
+        self, tick: int, seen: np.ndarray, changed: np.ndarray | None, robots: Poses | Poses3D
+    ) -> tuple[np.ndarray, Decisions]:
+        """Decide ``tick`` for the moving robots of its strip from ``robots`` (every robot's arrays, of which those
+        ``seen`` hold their rows after ``tick - 1``; ``changed``: those that changed in it, None for a whole view):
+        their ids (ascending) and decisions.
+
+        Raises:
+            Rejected: rows its view cannot take (a robot localized on a patch that is not an empty shape patch).
+        """
+        ids = seen if changed is None else changed
+        pose = {name: a[ids] for name, a in robots._asdict().items()}
+        state = pose.pop("state")
+        try:
+            if changed is None:
+                self.view.load(tick - 1, ids, state, **pose)
+            else:
+                self.view.update(tick - 1, ids, state, **pose)
+        except ContractError as exc:
+            raise Rejected("inconsistent rows", str(exc)) from None
         moving = self.view.moving_ids()
         own = moving[self.strips.in_strip(self.grid.columns(self.view.state.x[moving]), self.k)]
         return own, self.decider.decide(self.view.state, own, tick, moving)
