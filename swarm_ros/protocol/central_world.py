@@ -171,7 +171,7 @@ class CentralLockstep:
         if self.feed is None:
             self.feed = AreaFeed(self.run, self.strips)
         out = {}
-        for k, (ids, entire) in self.feed.send(batches, whole).items():
+        for k, (ids, entire) in self.feed.send(batches, whole, self._columns()).items():
             out[k] = (self.wire.rows(ids, self.run.robots), entire)
             if entire:
                 self.whole_at[k] = self.run.tick
