@@ -19,8 +19,8 @@ Cases: the star (1,036 robots, its 405 ticks) and a disc of 50,000 robots at the
 (issue 62: the study's graph is to move onto it): its world's work a tick (every batch's area out as a PointCloud2,
 the decisions checked, the tick settled), each batch's (its rows checked, its view rebuilt, its decisions), and the
 bytes each batch is sent a tick, once over the star (K = 2) and the disc (K = 4) from tick 0 and from tick 1,000.
-A central world sends each batch its whole area and every stationary robot every tick, where the study's graph
-sends only the rows that changed: the late disc shows what that costs.
+A central world sends each batch its whole view (its area, and every stationary robot) at first and then, as the
+study's graph does, only the rows that changed.
 
     .venv/bin/python scripts/bench_world.py [--repeats 5] [--ticks 60] [--robots 50000] [--central] [--smoke]
 """
@@ -139,7 +139,7 @@ def central_tick(shape: Shape, params: RunParams, batches: int, ticks: int, skip
     message through a PointCloud2's bytes): milliseconds per tick of the world (the areas out, the decisions checked,
     the tick settled), of each batch (its area's rows checked, its decisions), and each batch's bytes of rows a tick,
     over at most ``ticks`` ticks from tick ``skip`` (to the run's end)."""
-    from swarm_ros.core.strips import strips_for
+    from swarm_ros.core.strips import AreaStore, strips_for
     from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
     from swarm_ros.protocol.central_world import CentralLockstep
     from swarm_ros.protocol.checks import cloud
@@ -153,19 +153,25 @@ def central_tick(shape: Shape, params: RunParams, batches: int, ticks: int, skip
     for k in range(batches):
         ls.announce(batch_name(k), strips.strip(k))
     hosts = [wire.batch(start, strips, k) for k in range(batches)]
+    stores = [AreaStore(start, strips, k) for k in range(batches)]
     world, spent, sent, ran = 0.0, np.zeros(batches), np.zeros(batches), 0
     while run.outcome is None and ran < ticks:
         tick, ran = run.tick, ran + 1
-        for k in range(batches):
-            began = time.process_time()
-            message = encode_cloud(ls.area(k), tick)
+        began = time.process_time()
+        messages = {
+            k: (encode_cloud(rows, tick), whole) for k, (rows, whole) in ls.areas(list(range(batches)), set()).items()
+        }
+        world += time.process_time() - began
+        for k, (message, whole) in messages.items():
             between = time.process_time()
             rows = cloud(decode_cloud(message), wire.row, params.robots, min_rows=0)
             wire.check_rows(start, rows, tick)
-            answer = encode_cloud(wire.decision_rows(*hosts[k].decide(tick + 1, *wire.robots_of(rows))), tick + 1)
+            changed = stores[k].take(tick, *wire.robots_of(rows), whole)
+            decided = hosts[k].decide(tick + 1, stores[k].seen, changed, stores[k].robots)
+            answer = encode_cloud(wire.decision_rows(*decided), tick + 1)
             after = time.process_time()
             ls.decisions(k, tick + 1, cloud(decode_cloud(answer), wire.decision_row, params.robots, min_rows=0))
-            world += between - began + time.process_time() - after
+            world += time.process_time() - after
             spent[k] += after - between
             sent[k] += len(message)
     return 1000 * world / ran, list(1000 * spent / ran), list(sent / ran)
