@@ -14,7 +14,7 @@ from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.batch import RubensteinBatch
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
 from swarm_ros.core.rubenstein.run import RubensteinRun
-from swarm_ros.core.strips import AreaStore, Strips, area_of, run_batched, strips_for
+from swarm_ros.core.strips import AreaFeed, AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_batch import CentralBatch
 from swarm_ros.protocol.central_world import CentralLockstep, monitor_reach
@@ -87,6 +87,31 @@ def test_world_shards_each_holding_its_columns_and_a_halo_give_the_in_process_ru
         assert np.array_equal(w.run.history, whole.history)
         assert all(np.array_equal(a[w.own], b[w.own]) for a, b in zip(w.run.robots, whole.robots))
     assert (whole.robots.state == JOINED).sum() > 4 and min(w.present.size for w in world) < 40
+
+
+def test_world_shards_send_their_batches_a_whole_view_once_then_the_changes(monkeypatch):
+    """A shard holds only what lies within its reach; a robot that leaves it comes with the row that puts it outside,
+    so its batches are sent their whole view once and then only the changes, as one world's are, and the run is
+    still the one world's (a restarted shard sends its batches their whole views again)."""
+    from swarm_ros.core.central_shards import run_sharded
+
+    sent: list[bool] = []
+    send = AreaFeed.send
+
+    def spy(feed, *args, **kwargs):
+        out = send(feed, *args, **kwargs)
+        sent.extend(whole for _, whole in out.values())
+        return out
+
+    monkeypatch.setattr(AreaFeed, "send", spy)
+    params = RunParams(40, algorithm="rubenstein", seed=5, range_noise=0.04)
+    whole = RubensteinRun(square(6), params)
+    whole.run(300)
+    world = run_sharded(lambda: RubensteinRun(square(6), params), RubensteinBatch, 2, 3, 300, restarts={150: 1})
+    assert all(np.array_equal(w.run.history, whole.history) for w in world)
+    # the 3 batches' whole views at tick 0, and shard 1's 2 batches' again as it came back (from its save of tick 140);
+    # all else changes: every batch a tick, and shard 1's two again for the ticks after its save
+    assert sent.count(True) == 3 + 2 and sent.count(False) >= 3 * 299
 
 
 @pytest.mark.parametrize("shards, restarts", [(2, {1: 0, 37: 1, 91: 0}), (3, {41: 1, 42: 2, 201: 1})])

@@ -13,8 +13,10 @@ only the robots it holds (``present``) are read. A tick, for shard s:
    running counts);
 4. every shard sends every other those rows and its counts; each closes the tick alike (``close_shard``: the shared
    state, the tick's metrics and the end, the same on every shard);
-5. every shard sends each other the rows of its robots now in the other's own columns or halo: robots that crossed
-   into the other's columns are handed over, and the other's halo is what its neighbours' robots are now.
+5. every shard sends each other the rows of its robots now in the other's own columns or halo, or that were at the
+   tick's start: robots that crossed into the other's columns are handed over, the other's halo is what its
+   neighbours' robots are now, and a robot that left it comes with the row that puts it outside (for the batches'
+   changes: :class:`~swarm_ros.core.strips.AreaFeed`).
 
 A robot moves less than its reach a tick, and a decision or a grant reads the robots within reach, so each shard
 decides, settles and closes as the one world does. :class:`CentralExchange` is a shard's side of those messages,
@@ -99,19 +101,15 @@ class CentralShard:
         """Its robots: those present in its own columns, ascending."""
         return self._within(self.present, self.first, self.last)
 
-    def area(self, k: int) -> np.ndarray:
-        """The robots batch k (one of its batches) sees, ascending: what the shard sends it (those of its area, and
-        those seen by all: :func:`~swarm_ros.core.strips.area_of`)."""
-        first, last = self.strips.area(k)
-        everywhere = self.present[self.run.seen_by_all(self.run.robots.state[self.present])]
-        return np.union1d(self._within(self.present, first, last), everywhere)
-
     def neighbours(self) -> list[int]:
-        """The shards whose own columns or halo touch its own: those it sends border decisions and rows to."""
+        """The shards whose own columns or halo touch its own or its halo: those it sends border decisions and rows
+        to (a robot of its own moves less than the reach a tick, so it may enter the halo of a shard past a narrow
+        one)."""
+        h = self.halo
         return [
             o
             for o, (a, b) in enumerate(self.ranges)
-            if o != self.index and a - self.halo <= self.last and b + self.halo >= self.first
+            if o != self.index and a - h <= self.last + h and b + h >= self.first - h
         ]
 
     def border(self, peer: int, ids: np.ndarray) -> np.ndarray:
@@ -120,10 +118,12 @@ class CentralShard:
         columns = self.run.grid.columns(self.run.robots.x[ids])
         return ((columns >= first - self.halo) & (columns < first)) | ((columns > last) & (columns <= last + self.halo))
 
-    def reach(self, peer: int, ids: np.ndarray) -> np.ndarray:
-        """Which of robots ``ids`` (its own) lie in shard ``peer``'s own columns or halo."""
+    def reach(self, peer: int, ids: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
+        """Which of robots ``ids`` (its own) lie in shard ``peer``'s own columns or halo (``columns``: theirs, if not
+        where they stand now)."""
         first, last = self.ranges[peer]
-        columns = self.run.grid.columns(self.run.robots.x[ids])
+        if columns is None:
+            columns = self.run.grid.columns(self.run.robots.x[ids])
         return (columns >= first - self.halo) & (columns <= last + self.halo)
 
     def restore(self, present: np.ndarray) -> None:
@@ -143,12 +143,19 @@ class CentralShard:
 
     def receive(self, mine: np.ndarray, rows: list[tuple[np.ndarray, Any]]) -> None:
         """After a tick: it holds its robots ``mine`` still within reach, and the peers' robots ``rows`` (ids,
-        every array's rows) they sent it (:meth:`reach`)."""
+        every array's rows) they sent it (:meth:`reach`) that are within it: the rows of those that left it come too
+        (they were within it before the tick), so what it sends its batches shows them gone."""
         kept = self._within(mine, self.first - self.halo, self.last + self.halo)
         ids, got = concat([(kept, take(self.run.robots, kept)), *rows])
         for a, b in zip(self.run.robots, got):
             a[ids] = b
-        self.present = ids
+        self.present = self._within(ids, self.first - self.halo, self.last + self.halo)
+
+    def holding(self) -> np.ndarray:
+        """Which robots it holds (a mask over the run's)."""
+        mask = np.zeros(self.run.params.robots, dtype=bool)
+        mask[self.present] = True
+        return mask
 
 
 class ShardPort(Protocol):
@@ -190,6 +197,7 @@ class CentralExchange:
         if tick != self.tick or self.phase != DECIDING:
             raise Rejected("stale tick", f"decisions for tick {tick}; the shard is at tick {self.tick}")
         self.mine, self.own, self.decided_ = self.shard.own, ids, decided
+        self.before = self.shard.run.grid.columns(self.shard.run.robots.x[self.mine])  # where its robots were
         for peer in self.neighbours:
             keep = self.shard.border(peer, ids)
             self.port.send_border(peer, tick, ids[keep], take(decided, keep))
@@ -241,8 +249,8 @@ class CentralExchange:
         if self.phase == SHARED and (shared := self._all("shared", [*self.peers, shard.index])) is not None:
             ids, rows = concat([(i, r) for i, r, _ in shared.values()])
             run.close_shard(ids, rows, np.sum([c for _, _, c in shared.values()], axis=0))
-            for peer in self.neighbours:
-                keep = shard.reach(peer, self.mine)
+            for peer in self.neighbours:  # its robots within the peer's reach, or that were at the tick's start
+                keep = shard.reach(peer, self.mine) | shard.reach(peer, self.mine, self.before)
                 self.port.send_rows(peer, self.tick, self.mine[keep], take(run.robots, self.mine[keep]))
             self.phase = ROWS
         if self.phase == ROWS and (rows_in := self._all("rows", self.neighbours)) is not None:
@@ -251,6 +259,29 @@ class CentralExchange:
                 self.inbox.pop((kind, self.tick), None)
             self.tick, self.phase = self.tick + 1, DECIDING
             self.port.closed(self.tick - 1)
+
+
+def _owned(world: list[CentralShard]) -> Any:
+    """Every robot's arrays as its owner holds them (the shards at one tick)."""
+    truth = type(world[0].run.robots)(*(np.zeros_like(a) for a in world[0].run.robots))
+    for w in world:
+        for a, b in zip(truth, w.run.robots):
+            a[w.own] = b[w.own]
+    return truth
+
+
+def _check_view(store: Any, truth: Any) -> None:
+    """That a batch sees what it would in one world, as it stands (:class:`~swarm_ros.core.strips.AreaStore`).
+
+    Raises:
+        ContractError: it does not (a robot that left its view still in it, or a row not the robot's).
+    """
+    start, k = store.start, store.k
+    view = np.flatnonzero(store.strips.in_area(start.grid.columns(truth.x), k) | start.seen_by_all(truth.state))
+    if not np.array_equal(store.seen, view) or any(
+        not np.array_equal(a[view], b[view]) for a, b in zip(store.robots, truth)
+    ):
+        raise ContractError(f"batch {k} does not see what it would in one world at tick {store.tick}")
 
 
 class _Mail:
@@ -320,12 +351,14 @@ def run_sharded(
     Raises:
         ContractError: the shards did not end at the same tick, or a restart never came.
     """
-    from .strips import strips_for
+    from .strips import AreaFeed, AreaStore, strips_for
 
     runs = [make_run() for _ in range(shards)]
     strips = strips_for(runs[0], batches, region_cuts)
     world = [CentralShard(runs[s], strips, s, shards) for s in range(shards)]
     hosts = {k: batch(w.run, strips, k) for w in world for k in w.batches}
+    feeds = [AreaFeed(w.run, strips) for w in world]  # what each shard sends its batches: whole views, then changes
+    stores = {k: AreaStore(w.run, strips, k) for w in world for k in w.batches}
     mail = _Mail(seed)
     mail.sent = [[] for _ in range(shards)]
     ahead = save_every + 2  # the ticks a restarted shard may be behind its peers, and the one they are at
@@ -341,6 +374,8 @@ def run_sharded(
         ]
         if not due and not mail.bag:
             break
+        ticks = {w.run.tick for w in world}
+        truth = _owned(world) if len(ticks) == 1 else None  # every robot as its owner has it, at that tick
         for s in due:
             w = world[s]
             if pending.get(w.run.tick + 1) == s:  # (killed before it saved the tick it closed: the most behind)
@@ -353,11 +388,17 @@ def run_sharded(
                     fresh.restore(tick, arrays)
                     w.restore(present)
                 hosts.update({k: batch(fresh, strips, k) for k in w.batches})
+                feeds[s] = AreaFeed(fresh, strips)  # (its batches are sent their whole views again)
                 mail.exchanges[s] = CentralExchange(w, mail.port(s), ahead)
                 mail.again(s, tick)
             if w.run.tick % save_every == 0:  # as the graph saves: before the tick's areas go out
                 saves[s] = (w.run.tick, {k: np.copy(v) for k, v in w.run.saved().items()}, w.present.copy())
-            parts = [hosts[k].decide(w.run.tick + 1, ids, None, w.run.robots) for k in w.batches for ids in [w.area(k)]]
+            parts = []
+            for k, (ids, whole) in feeds[s].send(list(w.batches), among=w.holding()).items():
+                changed = stores[k].take(w.run.tick, ids, take(w.run.robots, ids), whole)
+                if truth is not None and ticks == {w.run.tick}:  # (not a shard just restarted from its save)
+                    _check_view(stores[k], truth)
+                parts.append(hosts[k].decide(w.run.tick + 1, stores[k].seen, changed, stores[k].robots))
             mail.exchanges[s].decided(w.run.tick + 1, *concat(parts))
         mail.deliver()
     if len({(w.run.tick, w.run.outcome) for w in world}) != 1:

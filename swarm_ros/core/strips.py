@@ -193,11 +193,15 @@ class AreaFeed:
         self._changed, self._differs = np.zeros(run.params.robots, dtype=bool), np.zeros(run.params.robots, dtype=bool)
 
     def send(
-        self, batches: list[int], whole: set[int] | frozenset[int] = frozenset(), columns: np.ndarray | None = None
+        self,
+        batches: list[int],
+        whole: set[int] | frozenset[int] = frozenset(),
+        columns: np.ndarray | None = None,
+        among: np.ndarray | None = None,
     ) -> dict[int, tuple]:
         """What to send each of ``batches`` at the run's tick: (ids, whether they are its whole view); the whole view
         to the batches ``whole``, and to every one unless the last call was at the tick before (``columns``: every
-        robot's, if known)."""
+        robot's, if known; ``among``: the robots a world shard holds, a mask, None for every one)."""
         run = self.run
         columns = run.grid.columns(run.robots.x) if columns is None else columns
         everywhere = run.seen_by_all(run.robots.state)
@@ -205,6 +209,8 @@ class AreaFeed:
         out = {}
         for k in batches:
             view = self.strips.in_area(columns, k) | everywhere
+            if among is not None:
+                view &= among
             if changed is None or k in whole or k not in self.seen:
                 out[k] = (np.flatnonzero(view), True)
             else:

@@ -84,12 +84,13 @@ class ShardLockstep(CentralLockstep):
         super().resume(hosts, cuts, kept, before)
         self.exchange.restart()
 
-    def areas(self, batches: list[int], whole: set[int]) -> dict[int, tuple[np.ndarray, bool]]:
-        """Each of ``batches``' whole view, every tick: a shard does not yet hand its batches only the changes (the
-        rows of a robot that leaves its halo do not come to it)."""
-        for k in batches:
-            self.whole_at[k] = self.run.tick
-        return {k: (self.wire.rows(self.shard.area(k), self.run.robots), True) for k in batches}
+    def holding(self) -> np.ndarray:
+        """The robots it holds: its columns' and its halo's."""
+        return self.shard.holding()
+
+    def _columns(self) -> np.ndarray:
+        """Every robot's column as its arrays hold it now (its peers' rows come in after its tick is closed)."""
+        return self.run.grid.columns(self.run.robots.x)
 
     def awaited(self) -> list[str]:
         """Its batches whose decisions are not in yet, or, once they are, the peer shards whose messages of the tick

@@ -171,11 +171,15 @@ class CentralLockstep:
         if self.feed is None:
             self.feed = AreaFeed(self.run, self.strips)
         out = {}
-        for k, (ids, entire) in self.feed.send(batches, whole, self._columns()).items():
+        for k, (ids, entire) in self.feed.send(batches, whole, self._columns(), self.holding()).items():
             out[k] = (self.wire.rows(ids, self.run.robots), entire)
             if entire:
                 self.whole_at[k] = self.run.tick
         return out
+
+    def holding(self) -> np.ndarray | None:
+        """The robots it holds, a mask; None: every one."""
+        return None
 
     def awaited(self) -> list[str]:
         """The batches whose decisions for the next tick are not in yet, by node name."""
