@@ -85,8 +85,9 @@ class CentralLockstep:
         self.on_settled: Callable[[], None] = lambda: None  #: told when a tick settles later than its decisions
         self.shard_index: int | None = None  #: a world shard's index (``central_shards``), None for the world
         self.feed: AreaFeed | None = None  #: what each batch is sent, made once the strips are known
-        #: batch -> the tick of the last whole view sent it: its topic keeps that one for a process that comes back
-        self.whole_at: dict[int, int] = {}
+        #: batch -> the ticks of the whole views sent it: a process that comes back answers the last its topic kept,
+        #: maybe after the world sent it the next as it announced itself
+        self.wholes: dict[int, set[int]] = {}
 
     @property
     def batches(self) -> int:
@@ -174,7 +175,7 @@ class CentralLockstep:
         for k, (ids, entire) in self.feed.send(batches, whole, self._columns(), self.holding()).items():
             out[k] = (self.wire.rows(ids, self.run.robots), entire)
             if entire:
-                self.whole_at[k] = self.run.tick
+                self.wholes.setdefault(k, set()).add(self.run.tick)
         return out
 
     def holding(self) -> np.ndarray | None:
@@ -206,8 +207,8 @@ class CentralLockstep:
             # a restarted batch's second answer to the tick just settled: it answered the area its topic kept, which
             # settled the tick, and then the same area, which the world sent it again as it announced itself
             return False
-        if tick == self.whole_at.get(k, -2) + 1 and tick < self.run.tick:
-            return False  # a restarted batch's answer to the last whole view its topic kept, before the one it asked
+        if tick - 1 in self.wholes.get(k, ()) and tick <= self.run.tick:
+            return False  # a restarted batch's answer to a whole view its topic kept, older than the one it asked for
         if tick != self.run.tick + 1:
             raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {self.run.tick + 1}")
         if k in self.decided:
