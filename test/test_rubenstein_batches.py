@@ -925,3 +925,44 @@ def test_a_batch_process_that_came_back_is_sent_its_whole_view_and_the_run_is_th
             assert decides == 1 and not ls.decisions(1, decides, old)  # its answer to tick 0's, come late: no fault
             deliver(1, True)
     assert back and same(whole, run)
+
+
+def test_a_whole_view_older_than_the_batch_holds_is_kept_beside_it_and_the_changes_tell_which_to_follow():
+    """A whole view the world sent a batch process as it came back may reach it after changes it had already followed;
+    a world that went on from its checkpoint sends every batch the whole view of that older tick. The batch keeps such
+    a view beside what it holds and follows whichever the next changes follow: the run is the in-process one both
+    ways, and the late view's answer is no fault."""
+    params = RunParams(40, algorithm="rubenstein", seed=6)
+    whole = RubensteinRun(square(6), params)
+    whole.run()
+    host = CentralBatch(
+        square(6), params, {"batch": 0, "batches": 1, "region_cuts": "", "name": "robot_batch_0"}, _no_drop
+    )
+
+    def world(run, saved=None):
+        ls = CentralLockstep(run, RubensteinWire)
+        if saved is None:
+            ls.announce("robot_batch_0", host.strip)
+        else:
+            ls.resume({0: "robot_batch_0"}, saved, {})
+        return ls
+
+    run = RubensteinRun(square(6), params)
+    ls, late, saved, checkpoint = world(run), None, None, None
+    while run.outcome is None:
+        (rows, entire), *_ = ls.areas([0], set()).values()
+        if run.tick == 20:
+            late = encode_cloud(ls.area(0), 20)  # the whole view sent as it came back, after the changes of tick 20
+        reply = host.inboxes[0 if entire else 1].take(decode_cloud(encode_cloud(rows, run.tick)))
+        assert reply is not None
+        ls.decisions(0, reply[1], reply[0])
+        if run.tick == 22:  # it reaches the batch only now, two ticks on: answered, no fault, and the run goes on
+            old, decides = host.inboxes[0].take(decode_cloud(late))
+            assert decides == 21 and not ls.decisions(0, decides, old)
+        if run.tick == 30 and checkpoint is None:
+            checkpoint = ({k: np.copy(v) for k, v in run.saved().items()}, ls.cuts)
+        if run.tick == 40 and saved is None and checkpoint is not None:  # the world goes back to that checkpoint
+            run, saved = RubensteinRun(square(6), params), checkpoint[1]
+            run.restore(30, checkpoint[0])
+            ls = world(run, saved)
+    assert late is not None and saved is not None and same(whole, run)

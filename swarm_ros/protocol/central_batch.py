@@ -40,7 +40,10 @@ class CentralBatch:
         self.start = algorithm.hook("engine")(shape, params)  # the grid, the rule and the shape; robots at tick 0
         strips = strips_for(self.start, int(own["batches"]), str(own["region_cuts"]))
         self.host = self.wire.batch(self.start, strips, int(own["batch"]))
-        self.store = AreaStore(self.start, strips, int(own["batch"]))  # what it was sent, kept
+        self.strips, self.k = strips, int(own["batch"])
+        self.store = AreaStore(self.start, strips, self.k)  # what it was sent, kept
+        self.rewound: AreaStore | None = None  # from a whole view older than the store: see _take
+        self.decided_from: AreaStore | None = None  # the store the host decided from last
         self.strip = strips.strip(int(own["batch"]))
         self.tick = -1  # the last tick it decided from
         name, topics = str(own["name"]), CentralTopics.of(params.algorithm)
@@ -60,16 +63,31 @@ class CentralBatch:
         return f"decided up to tick {self.tick + 1}"
 
     def _take(self, whole: bool, msg: Cloud) -> Reply:
-        """The whole view the world sent (at the start, or to this process as it came back, or from a world that went
-        on from its checkpoint: an older tick's, then), or the changes of the tick after the one it holds (others:
-        none it can follow, as a process that just came back finds the last in its topic's history)."""
+        """The whole view the world sent (at the start, to this process as it came back, from a world that went on
+        from its checkpoint), or the changes of the tick after the one it holds (others: none it can follow, as a
+        process that just came back finds the last in its topic's history).
+
+        A whole view older than what it holds is kept beside it (``rewound``), not in its place: it is either a world's
+        that went on from its checkpoint, whose next changes follow that view, or one sent as this process came back
+        that reached it after changes it had followed, whose next changes follow the store. The changes that follow
+        one of the two decide which it was."""
         tick = checks.tick_stamp(msg.header)
         rows = checks.cloud(msg, self.wire.row, self.robots, min_rows=0)
-        if not whole and not self.store.follows(tick):
+        if whole:
+            store = self.store if tick >= self.store.tick else AreaStore(self.start, self.strips, self.k)
+            self.rewound = None if store is self.store else store
+        elif self.store.follows(tick):
+            store, self.rewound = self.store, None
+        elif self.rewound is not None and self.rewound.follows(tick):
+            store = self.store = self.rewound
+            self.rewound = None
+        else:
             return None
         self.wire.check_rows(self.start, rows, tick)
         ids, robots = self.wire.robots_of(rows)
-        changed = self.store.take(tick, ids, robots, whole)
-        own, decided = self.host.decide(tick + 1, self.store.seen, changed, self.store.robots)
+        changed = store.take(tick, ids, robots, whole)
+        if store is not self.decided_from:  # the host last decided from the other store: it takes this one whole
+            changed, self.decided_from = None, store
+        own, decided = self.host.decide(tick + 1, store.seen, changed, store.robots)
         self.tick = max(self.tick, tick)
         return self.wire.decision_rows(own, decided), tick + 1
