@@ -141,7 +141,7 @@ def central_tick(shape: Shape, params: RunParams, batches: int, ticks: int, skip
     over at most ``ticks`` ticks from tick ``skip`` (to the run's end)."""
     from swarm_ros.core.strips import AreaStore, strips_for
     from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
-    from swarm_ros.protocol.central_world import CentralLockstep
+    from swarm_ros.protocol.central_lockstep import CentralLockstep
     from swarm_ros.protocol.checks import cloud
     from swarm_ros.protocol.darr_niazi.wire import StudyWire
 

@@ -18,7 +18,7 @@ from swarm_ros.core.params import RunParams
 from swarm_ros.core.strips import run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_batch import CentralBatch
-from swarm_ros.protocol.central_world import CentralLockstep
+from swarm_ros.protocol.central_lockstep import CentralLockstep
 
 pytestmark = pytest.mark.unit
 

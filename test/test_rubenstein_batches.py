@@ -17,7 +17,8 @@ from swarm_ros.core.rubenstein.run import RubensteinRun
 from swarm_ros.core.strips import AreaFeed, AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_batch import CentralBatch
-from swarm_ros.protocol.central_world import CentralLockstep, monitor_reach
+from swarm_ros.protocol.central_lockstep import CentralLockstep
+from swarm_ros.protocol.central_world import monitor_reach
 from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.rubenstein.rows import (
     RubensteinWire,

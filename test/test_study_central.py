@@ -14,7 +14,7 @@ from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.state import IS_MOVING
 from swarm_ros.core.strips import AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
-from swarm_ros.protocol.central_world import CentralLockstep
+from swarm_ros.protocol.central_lockstep import CentralLockstep
 from swarm_ros.protocol.checks import cloud
 from swarm_ros.protocol.darr_niazi.wire import StudyWire
 

@@ -276,12 +276,13 @@ def _check_view(store: Any, truth: Any) -> None:
     Raises:
         ContractError: it does not (a robot that left its view still in it, or a row not the robot's).
     """
-    start, k = store.start, store.k
-    view = np.flatnonzero(store.strips.in_area(start.grid.columns(truth.x), k) | start.seen_by_all(truth.state))
+    from .strips import view_of
+
+    view = np.flatnonzero(view_of(store.start, store.strips, store.k, truth))
     if not np.array_equal(store.seen, view) or any(
         not np.array_equal(a[view], b[view]) for a, b in zip(store.robots, truth)
     ):
-        raise ContractError(f"batch {k} does not see what it would in one world at tick {store.tick}")
+        raise ContractError(f"batch {store.k} does not see what it would in one world at tick {store.tick}")
 
 
 class _Mail:

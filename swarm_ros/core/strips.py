@@ -170,12 +170,17 @@ def strips_for(start: CentralRun, batches: int, region_cuts: str = "") -> Strips
     return Strips.balanced(grid.columns(start.robots.x), grid.nx, batches, grid.reach)
 
 
-def area_of(run: CentralRun, strips: Strips, k: int, columns: np.ndarray | None = None) -> np.ndarray:
-    """The ids of the robots batch k sees, as they stand at the run's tick: those of its area, and those every batch
-    sees (:meth:`~CentralRun.seen_by_all`); ``columns``: every robot's, if known."""
+def view_of(run: CentralRun, strips: Strips, k: int, robots: Any, columns: np.ndarray | None = None) -> np.ndarray:
+    """Which of ``robots`` (arrays of ``run``'s kind, their ``columns`` on its grid if known) batch k sees: those of
+    its area, and those every batch sees (:meth:`~CentralRun.seen_by_all`); a mask."""
     if columns is None:
-        columns = run.grid.columns(run.robots.x)
-    return np.flatnonzero(strips.in_area(columns, k) | run.seen_by_all(run.robots.state))
+        columns = run.grid.columns(robots.x)
+    return strips.in_area(columns, k) | run.seen_by_all(robots.state)
+
+
+def area_of(run: CentralRun, strips: Strips, k: int) -> np.ndarray:
+    """The ids of the robots batch k sees, as they stand at the run's tick (:func:`view_of`)."""
+    return np.flatnonzero(view_of(run, strips, k, run.robots))
 
 
 class AreaFeed:
@@ -204,11 +209,10 @@ class AreaFeed:
         robot's, if known; ``among``: the robots a world shard holds, a mask, None for every one)."""
         run = self.run
         columns = run.grid.columns(run.robots.x) if columns is None else columns
-        everywhere = run.seen_by_all(run.robots.state)
         changed = self._changes() if self.at == run.tick - 1 else None
         out = {}
         for k in batches:
-            view = self.strips.in_area(columns, k) | everywhere
+            view = view_of(run, self.strips, k, run.robots, columns)
             if among is not None:
                 view &= among
             if changed is None or k in whole or k not in self.seen:
@@ -255,8 +259,7 @@ class AreaStore:
             self.sees[:] = False
             self.sees[ids] = True
         else:
-            columns = self.start.grid.columns(self.robots.x[ids])
-            self.sees[ids] = self.strips.in_area(columns, self.k) | self.start.seen_by_all(self.robots.state[ids])
+            self.sees[ids] = view_of(self.start, self.strips, self.k, robots)
         self.seen = np.flatnonzero(self.sees)
         return None if whole else ids
 

@@ -16,8 +16,8 @@ import numpy as np
 from swarm_ros.core.central_shards import DECIDING, CentralExchange, CentralShard, concat
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 
+from .central_lockstep import CentralLockstep
 from .central_rows import Wire
-from .central_world import CentralLockstep
 from .plan import shard_name
 
 
