@@ -5,12 +5,15 @@ strips and any cuts."""
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import pytest
 from runs import disc_shape
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
 from swarm_ros.core.errors import ContractError, Rejected
+from swarm_ros.core.run_result import summary_of
 from swarm_ros.core.state import IS_MOVING
 from swarm_ros.core.strips import AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
@@ -132,7 +135,7 @@ def test_the_checks_refuse_rows_and_decisions_that_cannot_be_the_runs():
     own, d = host.decide(run.tick + 1, np.arange(params.robots), None, run.robots)
     answer = wire.decision_rows(own, d)
     got, taken = wire.check_decisions(run, answer, run.tick + 1, ids)
-    assert np.array_equal(got, ids) and taken.tick == run.tick + 1
+    assert np.array_equal(got, ids) and np.array_equal(taken.claim, d.claim)
     with pytest.raises(Rejected, match="decisions for the batch's"):
         wire.check_decisions(run, answer[1:], run.tick + 1, ids)
     wrong = answer.copy()
@@ -163,5 +166,43 @@ def test_a_run_saved_and_restored_or_loaded_goes_on_as_the_run_would_have(shape)
     copy = Simulation(shape, params)
     copy.load(run.tick, run.robots, run.history)
     assert same(run, copy)
+    ended = Simulation(shape, params)  # a monitor's copy at the end: the summary of the run, its losses too
+    ended.load(whole.tick, whole.robots, whole.history, whole.outcome)
+    assert whole.losses and summary_of(ended) == summary_of(whole)
     with pytest.raises(ContractError):
         Simulation(shape, params).restore(24, saved)  # 26 rows of metrics for tick 24
+
+
+def _owners_agree(world, whole: Simulation) -> None:
+    """Every shard has the run's metrics and outcome, and each robot's row is its owner's as in ``whole``."""
+    owners = np.concatenate([w.own for w in world])
+    assert np.array_equal(np.sort(owners), np.arange(whole.params.robots))
+    for w in world:
+        assert np.array_equal(w.run.history, whole.history) and w.run.outcome == whole.outcome
+        assert all(np.array_equal(a[w.own], b[w.own]) for a, b in zip(w.run.robots, whole.robots))
+
+
+@pytest.mark.parametrize("rules", ["paper", "local", "literal"])
+@pytest.mark.parametrize("shards, batches, cuts", [(2, 2, ""), (2, 3, "-4,3"), (3, 3, "")])
+def test_world_shards_of_the_study_give_the_in_process_run(rules, shards, batches, cuts):
+    """S world shards (swarm_ros.core.central_shards), each holding the robots of its columns, its halo and every
+    stationary robot, passing only the decisions within its rivals' reach, the robots that localized, counts and
+    handovers: crowded (robots separated at the end) and with failures, as the in-process run."""
+    from swarm_ros.core.central_shards import run_sharded
+
+    for extra in ({}, {"fail_fraction": 0.2, "fail_tick": 15}):
+        params = RunParams(robots=DISC.patches + 25, seed=3 + shards, rules=rules, vision_radius=2.0, **extra)
+        world = run_sharded(partial(Simulation, DISC, params), StudyWire.batch, shards, batches, region_cuts=cuts)
+        _owners_agree(world, _whole(DISC, params))
+    early = run_sharded(partial(Simulation, DISC, params), StudyWire.batch, shards, batches, 10, region_cuts=cuts)
+    assert min(w.present.size for w in early) < params.robots  # (the disc is 25 columns; the halo 7)
+
+
+def test_world_shards_of_a_3d_study_run_restarted_go_on_as_the_unbroken_run():
+    from swarm_ros.core.central_shards import run_sharded
+
+    ball = _ball()
+    params = RunParams(robots=ball.patches + 15, seed=2, vision_radius=1.5, fail_fraction=0.1, fail_tick=30)
+    make = lambda: Simulation(ball, params)
+    world = run_sharded(make, StudyWire.batch, 2, 3, restarts={12: 1, 31: 0}, save_every=10)
+    _owners_agree(world, _whole(ball, params))

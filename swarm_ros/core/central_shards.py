@@ -6,8 +6,9 @@ A shard's engine (the algorithm's, a :class:`ShardedRun`) holds every robot's ar
 only the robots it holds (``present``) are read. A tick, for shard s:
 
 1. its batches decide from the robots of their areas, which lie in its own columns and its halo;
-2. every shard sends each other the decisions of its own deciding robots that lie in the other's halo (*border*):
-   a grant reads the decisions of the robots within reach;
+2. every shard sends each other the decisions of its own deciding robots that lie within the grid's ``rivals``
+   columns of the other's own, or in its halo (*border*): a grant reads the decisions of the robots within reach,
+   and a claim's lottery those of the robots that can claim the same cell;
 3. it settles and applies its own robots' moves (the engine's ``settle_shard``), and names those whose rows change
    what every shard shares (the rubenstein algorithm's: the robots that joined, which cover pixels and enter the
    running counts);
@@ -18,10 +19,11 @@ only the robots it holds (``present``) are read. A tick, for shard s:
    neighbours' robots are now, and a robot that left it comes with the row that puts it outside (for the batches'
    changes: :class:`~swarm_ros.core.strips.AreaFeed`).
 
-A robot moves less than its reach a tick, and a decision or a grant reads the robots within reach, so each shard
-decides, settles and closes as the one world does. :class:`CentralExchange` is a shard's side of those messages,
-whatever order they come in; :func:`run_sharded` runs S shards end to end in one process over it, delivering the
-messages in a shuffled order, for tests.
+A robot moves less than its reach a tick, a decision or a grant reads the robots within reach, and every robot
+that every batch sees (:meth:`~swarm_ros.core.strips.CentralRun.seen_by_all`) is among those every shard shares,
+so each shard decides, settles and closes as the one world does. :class:`CentralExchange` is a shard's side of those
+messages, whatever order they come in; :func:`run_sharded` runs S shards end to end in one process over it, delivering
+the messages in a shuffled order, for tests.
 
 A restarted shard goes on from its last save (its engine's :meth:`~swarm_ros.core.strips.CentralRun.saved` and the
 robots it held, :attr:`CentralShard.present`), at most ``ahead - 1`` ticks behind its peers, which wait for it:
@@ -90,11 +92,20 @@ class CentralShard:
         self.ranges = ranges(strips, shards)
         self.first, self.last = self.ranges[shard]
         self.halo = strips.reach  #: its halo's columns either side
-        self.present = self._within(np.arange(run.params.robots), self.first - self.halo, self.last + self.halo)
+        self.rivals = max(run.grid.rivals, self.halo)  #: the columns either side whose decisions it is sent
+        self.present = self._held(np.arange(run.params.robots))
 
     def _within(self, ids: np.ndarray, first: int, last: int) -> np.ndarray:
         columns = self.run.grid.columns(self.run.robots.x[ids])
         return ids[(columns >= first) & (columns <= last)]
+
+    def _held(self, ids: np.ndarray) -> np.ndarray:
+        """Of robots ``ids`` (ascending), those it holds as they stand: within its own columns or halo, or seen by
+        every batch."""
+        robots = self.run.robots
+        columns = self.run.grid.columns(robots.x[ids])
+        near = (columns >= self.first - self.halo) & (columns <= self.last + self.halo)
+        return ids[near | self.run.seen_by_all(robots.state[ids])]
 
     @property
     def own(self) -> np.ndarray:
@@ -102,10 +113,10 @@ class CentralShard:
         return self._within(self.present, self.first, self.last)
 
     def neighbours(self) -> list[int]:
-        """The shards whose own columns or halo touch its own or its halo: those it sends border decisions and rows
-        to (a robot of its own moves less than the reach a tick, so it may enter the halo of a shard past a narrow
-        one)."""
-        h = self.halo
+        """The shards whose own columns or halo touch its own or its halo, or lie within its rivals' columns: those
+        it sends border decisions and rows to (a robot of its own moves less than the reach a tick, so it may enter
+        the halo of a shard past a narrow one)."""
+        h = max(self.halo, (self.rivals + 1) // 2)
         return [
             o
             for o, (a, b) in enumerate(self.ranges)
@@ -113,10 +124,11 @@ class CentralShard:
         ]
 
     def border(self, peer: int, ids: np.ndarray) -> np.ndarray:
-        """Which of robots ``ids`` (its own) lie in shard ``peer``'s halo."""
+        """Which of robots ``ids`` (its own) lie within the rivals' columns of shard ``peer``'s own."""
         first, last = self.ranges[peer]
         columns = self.run.grid.columns(self.run.robots.x[ids])
-        return ((columns >= first - self.halo) & (columns < first)) | ((columns > last) & (columns <= last + self.halo))
+        r = self.rivals
+        return ((columns >= first - r) & (columns < first)) | ((columns > last) & (columns <= last + r))
 
     def reach(self, peer: int, ids: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
         """Which of robots ``ids`` (its own) lie in shard ``peer``'s own columns or halo (``columns``: theirs, if not
@@ -141,15 +153,17 @@ class CentralShard:
             raise ContractError("a world shard's robots that are not ascending ids of the run")
         self.present = ids
 
-    def receive(self, mine: np.ndarray, rows: list[tuple[np.ndarray, Any]]) -> None:
-        """After a tick: it holds its robots ``mine`` still within reach, and the peers' robots ``rows`` (ids,
-        every array's rows) they sent it (:meth:`reach`) that are within it: the rows of those that left it come too
-        (they were within it before the tick), so what it sends its batches shows them gone."""
-        kept = self._within(mine, self.first - self.halo, self.last + self.halo)
-        ids, got = concat([(kept, take(self.run.robots, kept)), *rows])
-        for a, b in zip(self.run.robots, got):
-            a[ids] = b
-        self.present = self._within(ids, self.first - self.halo, self.last + self.halo)
+    def receive(self, rows: list[tuple[np.ndarray, Any]], shared: np.ndarray) -> None:
+        """After a tick (the ``shared`` robots' rows in): the peers' robots ``rows`` (ids, every array's rows) they
+        sent it (:meth:`reach`) in, it holds those of them, of the ``shared`` and of those it held that are within
+        reach or seen by every batch (:meth:`_held`). The rows of robots that left its reach come too (they were
+        within it before the tick), so what it sends its batches shows them gone."""
+        if rows:
+            ids, got = concat(rows)
+            for a, b in zip(self.run.robots, got):
+                a[ids] = b
+            shared = np.concatenate([shared, ids])
+        self.present = self._held(np.union1d(self.present, shared))
 
     def holding(self) -> np.ndarray:
         """Which robots it holds (a mask over the run's)."""
@@ -190,7 +204,7 @@ class CentralExchange:
         """Go on from the shard's tick (its engine restored from a save): what is kept of later ticks stays."""
         self.tick, self.phase = self.shard.run.tick + 1, DECIDING  # the tick being settled, and what it waits for
         self.inbox = {key: got for key, got in self.inbox.items() if key[1] >= self.tick}
-        self.mine = self.own = self.decided_ = None  # type: Any
+        self.mine = self.own = self.decided_ = self.everyones = None  # type: Any
 
     def decided(self, tick: int, ids: np.ndarray, decided: Any) -> None:
         """Its batches' decisions for ``tick`` (every deciding robot of its own, ascending): on to its peers."""
@@ -249,12 +263,13 @@ class CentralExchange:
         if self.phase == SHARED and (shared := self._all("shared", [*self.peers, shard.index])) is not None:
             ids, rows = concat([(i, r) for i, r, _ in shared.values()])
             run.close_shard(ids, rows, np.sum([c for _, _, c in shared.values()], axis=0))
+            self.everyones = ids  # the rows every shard now shares
             for peer in self.neighbours:  # its robots within the peer's reach, or that were at the tick's start
                 keep = shard.reach(peer, self.mine) | shard.reach(peer, self.mine, self.before)
                 self.port.send_rows(peer, self.tick, self.mine[keep], take(run.robots, self.mine[keep]))
             self.phase = ROWS
         if self.phase == ROWS and (rows_in := self._all("rows", self.neighbours)) is not None:
-            shard.receive(self.mine, list(rows_in.values()))
+            shard.receive(list(rows_in.values()), self.everyones)
             for kind in ("border", "shared", "rows"):
                 self.inbox.pop((kind, self.tick), None)
             self.tick, self.phase = self.tick + 1, DECIDING

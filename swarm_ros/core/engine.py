@@ -18,15 +18,18 @@ running counts.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
 
 from swarm_ros.core.algorithm import check_engine
-from swarm_ros.core.arbitration import resolve_kernel, vacate
+from swarm_ros.core.arbitration import occupy, resolve_kernel, vacate
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
+from swarm_ros.core.legality import reach
 from swarm_ros.core.metrics import (
+    END_EXTRAS,
     METRIC_COLUMNS,
     OUTCOME_OF_CODE,
     Outcome,
@@ -36,14 +39,25 @@ from swarm_ros.core.metrics import (
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.regions import halo
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
-from swarm_ros.core.rules import Decisions
+from swarm_ros.core.rules import Decided, Decided3D, Decisions
 from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import IS_MOVING, Poses, Poses3D, RobotState, SwarmState, initial_state, poses_of
+from swarm_ros.core.state import (
+    IS_MOVING,
+    STATE_COUNT,
+    Poses,
+    Poses3D,
+    RobotState,
+    SwarmState,
+    initial_state,
+    poses_of,
+)
 from swarm_ros.core.strips import StripGrid
-from swarm_ros.core.tick_kernel import End, Scratch, close_tick, compact_moving, run_kernel
+from swarm_ros.core.tick_kernel import End, Scratch, close_tick, compact_moving, end_tick, run_kernel
 
 _STATIONARY_LOCALIZED = (int(RobotState.SEED), int(RobotState.LOCALIZED))
+_STATIONARY, _MOVING = METRIC_COLUMNS.index("stationary"), METRIC_COLUMNS.index("moving")
+_COUNTED = [RobotState.MOVING_INSIDE, RobotState.MOVING_OUTSIDE, RobotState.WALKING]  #: the moving, as metrics count
 
 
 def failing_robots(params: RunParams) -> np.ndarray:
@@ -220,27 +234,7 @@ class Simulation:
         m = self._m
         if decisions.ids.size != m or not np.array_equal(np.sort(decisions.ids), self._moving[:m]):
             raise ContractError("decisions must cover every moving robot exactly once")
-        mv, sc = self._moves, self._scratch
-        if self._solid and (decisions.z is None or decisions.pitch is None):
-            raise ContractError("decisions in a 3D world need z and pitch")
-        sc.last_ids[:m] = decisions.ids
-        mv.claim[:m] = decisions.claim
-        mv.x[:m], mv.y[:m], mv.heading[:m] = decisions.x, decisions.y, decisions.heading
-        if self._solid:
-            mv.z[:m], mv.pitch[:m] = decisions.z, decisions.pitch
-        joined, inside, outside, walking = resolve_kernel(
-            sc.last_ids[:m],
-            mv,
-            self._robots,
-            self._grid,
-            self._rules,
-            decisions.tick,
-            sc.best,
-            self._localized,
-            self.shape.patches,
-            sc.outcome,
-            m,
-        )
+        joined, inside, outside, walking = self._resolve(decisions, m)
         self._localized += joined
         self._decided = m
         self._m = compact_moving(self._moving, m, self.state.state)
@@ -263,6 +257,31 @@ class Simulation:
         self._after_tick()
         return self.metrics
 
+    def _resolve(self, decisions: Decisions, applied: int) -> tuple[int, int, int, int]:
+        """The lottery of every patch ``decisions`` claim, and the moves of its first ``applied`` robots
+        (:func:`~swarm_ros.core.arbitration.resolve_kernel`): the counts of those after the tick."""
+        mv, sc, m = self._moves, self._scratch, decisions.ids.size
+        if self._solid and (decisions.z is None or decisions.pitch is None):
+            raise ContractError("decisions in a 3D world need z and pitch")
+        sc.last_ids[:m] = decisions.ids
+        mv.claim[:m] = decisions.claim
+        mv.x[:m], mv.y[:m], mv.heading[:m] = decisions.x, decisions.y, decisions.heading
+        if self._solid:
+            mv.z[:m], mv.pitch[:m] = decisions.z, decisions.pitch
+        return resolve_kernel(
+            sc.last_ids[:m],
+            mv,
+            self._robots,
+            self._grid,
+            self._rules,
+            decisions.tick,
+            sc.best,
+            self._localized,
+            self.shape.patches,
+            sc.outcome,
+            applied,
+        )
+
     def remove(self, ids: np.ndarray) -> int:
         """Take robots out of the world at the end of the current tick (failures, a lost process).
 
@@ -279,27 +298,9 @@ class Simulation:
             return 0
         if ids[0] < 0 or ids[-1] >= s.robots:
             raise ContractError(f"robot ids must be in [0, {s.robots - 1}]")
-        ids = ids[s.state[ids] != RobotState.REMOVED]
-        for i in ids.tolist():
-            if s.state[i] in _STATIONARY_LOCALIZED:
-                z = s.z[i] if s.z is not None else 0.0
-                vacate(
-                    cell_index(s.x[i], s.y[i], z, self._solid, self._radius, self._size),
-                    s.occupancy,
-                    s.frontier,
-                    s.frontier_blocks,
-                    self._shape,
-                    self._nbrs,
-                    self._size,
-                )
-        s.state[ids] = RobotState.REMOVED
-        self.last_removed = ids
-        if ids.size:
-            self.losses.append((self.tick, int(ids.size)))
+        ids = self._take_out(ids)
         counts = s.counts()
-        self._localized = int(counts[RobotState.SEED] + counts[RobotState.LOCALIZED])
         self._m = compact_moving(self._moving, self._m, s.state)
-        self._set_kernel_args(self._alive - int(ids.size))
         code, self._m = close_tick(
             self._moving,
             self._m,
@@ -317,6 +318,31 @@ class Simulation:
         self.outcome = OUTCOME_OF_CODE[code]
         return int(ids.size)
 
+    def _take_out(self, ids: np.ndarray) -> np.ndarray:
+        """Robots ``ids`` (ascending) leave the world at the end of the tick: those not removed yet, which it
+        returns, are; a localized one frees its patch (the frontier follows)."""
+        s = self.state
+        ids = ids[s.state[ids] != RobotState.REMOVED]
+        for i in ids.tolist():
+            if s.state[i] in _STATIONARY_LOCALIZED:
+                z = s.z[i] if s.z is not None else 0.0
+                vacate(
+                    cell_index(s.x[i], s.y[i], z, self._solid, self._radius, self._size),
+                    s.occupancy,
+                    s.frontier,
+                    s.frontier_blocks,
+                    self._shape,
+                    self._nbrs,
+                    self._size,
+                )
+                self._localized -= 1
+        s.state[ids] = RobotState.REMOVED
+        self.last_removed = ids
+        if ids.size:
+            self.losses.append((self.tick, int(ids.size)))
+        self._set_kernel_args(self._alive - int(ids.size))
+        return ids
+
     @property
     def removed(self) -> int:
         """Robots removed so far."""
@@ -328,8 +354,11 @@ class Simulation:
     @property
     def grid(self) -> StripGrid:
         """The world's patch columns (a robot's is its nearest patch's, :func:`~swarm_ros.core.regions.columns`); a
-        decision reads the robots within :func:`~swarm_ros.core.regions.halo` columns of its own."""
-        return StripGrid(-self._radius - 0.5, 1.0, self._size, "patches", halo(self.params.vision_radius))
+        decision reads the robots within :func:`~swarm_ros.core.regions.halo` columns of its own, and two robots
+        can claim one patch from up to twice a claim's :func:`~swarm_ros.core.legality.reach` apart (a column of
+        rounding each)."""
+        rivals = 2 * (math.ceil(reach(self.params, self.shape.world.dims)) + 1)
+        return StripGrid(-self._radius - 0.5, 1.0, self._size, "patches", halo(self.params.vision_radius), rivals)
 
     @property
     def robots(self) -> Poses | Poses3D:
@@ -348,15 +377,16 @@ class Simulation:
         anywhere, from the localized ones)."""
         return ~IS_MOVING[state]
 
-    def settle(self, decided: list[tuple[np.ndarray, Decisions]]) -> Outcome | None:
+    def settle(self, decided: list[tuple[np.ndarray, Decided | Decided3D]]) -> Outcome | None:
         """Advance one tick with each robot batch's (ids, decisions): :meth:`apply` of them all."""
-        self.apply(Decisions.concatenate([d for _, d in decided]))
+        self.apply(Decisions.concatenate([Decisions.of(self.tick + 1, ids, d) for ids, d in decided]))
         return self.outcome
 
     def load(self, tick: int, robots: Poses | Poses3D, history: np.ndarray, outcome: Outcome | None = None) -> None:
         """Take a state this run reached elsewhere: every robot as at ``tick``, the metrics of every tick up to it
         and the outcome (None: going on). The occupancy and the frontier follow from the robots, as a robot batch's
-        view rebuilds them (:meth:`~swarm_ros.core.swarm_view.SwarmView.load`).
+        view rebuilds them (:meth:`~swarm_ros.core.swarm_view.SwarmView.load`), and the losses from the metrics (a
+        tick's removals, failures and a lost batch's robots alike, as one loss).
 
         Raises:
             ContractError: robots that cannot be a state of the run (two on a patch, one off the shape).
@@ -369,6 +399,8 @@ class Simulation:
         self.state = view.state
         rows = np.asarray(history, dtype=np.int64)
         self._rows, self._nrows = rows.copy(), rows.shape[0]
+        gone = self.params.robots - rows[:, _STATIONARY] - rows[:, _MOVING]  # removed by each tick's end
+        self.losses = [(int(rows[t, 0]), int(gone[t] - gone[t - 1])) for t in np.flatnonzero(np.diff(gone) > 0) + 1]
         self._moving = self.state.moving_ids()
         self._m, self._decided = int(self._moving.size), 0
         counts = self.state.counts()
@@ -395,14 +427,81 @@ class Simulation:
             raise ContractError(f"{history.shape[0]} metrics rows for tick {tick}")
         self.load(tick, type(mine)(*(a.copy() for a in saved)), history)
 
+    # -- a world shard's run (core.central_shards.ShardedRun) ------------------
+    def counts(self, ids: np.ndarray) -> np.ndarray:
+        """Robots ``ids``' share of the next tick's counts (summed over the shards: :meth:`close_shard`): the
+        localized, those moving inside, outside and walking, and of these the ones failing at the tick's end."""
+        state = self.state.state
+        here = np.bincount(state[ids], minlength=STATE_COUNT)
+        failing = np.zeros(STATE_COUNT, dtype=np.int64)
+        if self._fails_at(self.tick + 1):
+            failing = np.bincount(state[np.intersect1d(failing_robots(self.params), ids)], minlength=STATE_COUNT)
+        localized = here[RobotState.SEED] + here[RobotState.LOCALIZED]
+        return np.array([localized, *here[_COUNTED], *failing[_COUNTED]], dtype=np.int64)
+
+    def settle_shard(
+        self,
+        own: np.ndarray,
+        decided: Decided | Decided3D,
+        halo: np.ndarray,
+        halo_decided: Decided | Decided3D,
+        present: np.ndarray,
+    ) -> np.ndarray:
+        """A world shard's half of the next tick (:mod:`swarm_ros.core.central_shards`): ``own`` its deciding robots
+        and ``halo`` its peers' within its rivals' columns (ascending each, with their decisions). The lottery of
+        every patch claimed, and its own robots' moves, as :meth:`apply`'s. Returns its robots that localized or fail
+        at the tick's end: every shard holds every stationary robot (:meth:`seen_by_all`)."""
+        self._check_running()
+        joined = type(decided)(*(np.concatenate(f) for f in zip(decided, halo_decided)))
+        self._resolve(Decisions.of(self.tick + 1, np.concatenate([own, halo]), joined), own.size)
+        stopped = self.state.state[own] == RobotState.LOCALIZED
+        if self._fails_at(self.tick + 1):
+            stopped |= np.isin(own, failing_robots(self.params))
+        return own[stopped]
+
+    def close_shard(self, shared: np.ndarray, rows: Poses | Poses3D, counts: np.ndarray) -> Outcome | None:
+        """Close the next tick on a world shard, as every shard does alike: the robots that localized (among
+        ``shared``, ascending, and their ``rows``) hold their patches; the tick's metrics and end follow from ``counts``
+        (:meth:`counts`, summed over the shards), then the scheduled failures, as :meth:`apply`'s (``shared`` has
+        the moving robots that fail too). The outcome."""
+        s, tick, localized = self.state, self.tick + 1, RobotState.LOCALIZED
+        theirs = shared[(rows.state == localized) & (s.state[shared] != localized)]  # (its own hold theirs already)
+        for name, a in rows._asdict().items():
+            getattr(s, name)[shared] = a
+        for i in theirs.tolist():
+            z = s.z[i] if s.z is not None else 0.0
+            p = cell_index(s.x[i], s.y[i], z, self._solid, self._radius, self._size)
+            occupy(p, i, s.occupancy, s.frontier, s.frontier_blocks, self._shape, self._nbrs, self._size)
+        self._localized = int(counts[0])
+        self._reserve(1)
+        self._record(1, 1, self._end_shard(tick, counts[1:4], self._rows[self._nrows]))
+        if self.outcome is None and self._fails_at(tick):
+            self._take_out(failing_robots(self.params))
+            code = self._end_shard(tick, counts[1:4] - counts[4:7], self._rows[self._nrows - 1])
+            self.outcome = OUTCOME_OF_CODE[code]
+        return self.outcome
+
+    def _end_shard(self, tick: int, moving: np.ndarray, row: np.ndarray) -> int:
+        """The end of ``tick`` on a shard, ``moving`` robots inside, outside and walking (its metrics into ``row``);
+        robots left over separate (each shard marks those it holds)."""
+        code, _ = end_tick(tick, self._localized, *(int(c) for c in moving), self.shape.patches, self._alive,
+                           self.params.max_ticks, row)  # fmt: skip
+        if code == END_EXTRAS:
+            self.state.state[IS_MOVING[self.state.state]] = RobotState.SEPARATED
+        return int(code)
+
     # -- bookkeeping ------------------------------------------------------------
+    def _fails_at(self, tick: int) -> bool:
+        """Whether the scheduled failures come at the end of ``tick``."""
+        return self.params.failures > 0 and tick == self.params.fail_tick
+
     def _failure_pending(self) -> bool:
         return self.params.failures > 0 and self.tick < self.params.fail_tick
 
     def _after_tick(self) -> None:
         """Scheduled failures (``params.fail_fraction`` at the end of ``params.fail_tick``)."""
         self.last_removed = np.empty(0, dtype=np.int64)
-        if self.params.failures > 0 and self.tick == self.params.fail_tick and self.outcome is None:
+        if self._fails_at(self.tick) and self.outcome is None:
             self.remove(failing_robots(self.params))
 
     def _check_running(self) -> None:

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -288,6 +289,27 @@ def decide_robots(moving, ids, robots, grid, rules, tick, head, nxt, out):
         index_clear(moving, robots.x, robots.y, grid.radius, grid.size, head)
 
 
+class Decided(NamedTuple):
+    """A 2D batch's decisions as a central world's graph carries them (:mod:`swarm_ros.core.strips`): arrays
+    aligned with the ids sent beside them, as :class:`Decisions`' own."""
+
+    claim: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+
+
+class Decided3D(NamedTuple):
+    """A 3D batch's decisions, as :class:`Decided`, with z and the heading's elevation."""
+
+    claim: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    z: np.ndarray
+    pitch: np.ndarray
+
+
 @dataclass(frozen=True)
 class Decisions:
     """What a batch of robots decided at one tick; arrays are aligned with ``ids``.
@@ -327,6 +349,18 @@ class Decisions:
             heading=view.heading[ids].copy(),
             **solid,
         )
+
+    @staticmethod
+    def of(tick: int, ids: np.ndarray, decided: Decided | Decided3D) -> Decisions:
+        """The decisions ``decided`` of robots ``ids`` for ``tick``."""
+        return Decisions(tick, ids, *decided)
+
+    @property
+    def decided(self) -> Decided | Decided3D:
+        """Its arrays as the central world's graph carries them."""
+        if self.z is not None and self.pitch is not None:
+            return Decided3D(self.claim, self.x, self.y, self.heading, self.z, self.pitch)
+        return Decided(self.claim, self.x, self.y, self.heading)
 
     @staticmethod
     def concatenate(parts: list[Decisions]) -> Decisions:

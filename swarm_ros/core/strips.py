@@ -29,13 +29,16 @@ from .regions import parse_cuts
 class StripGrid(NamedTuple):
     """Columns ``side`` wide from x = ``x0``, ``nx`` of them: a robot's column is where its x falls (clipped);
     ``unit``: the unit of x, as an error names it; ``reach``: the columns either side of its own whose robots a
-    robot's decision reads (a batch's halo)."""
+    robot's decision reads (a batch's halo); ``rivals``: the columns either side whose robots' decisions settling a
+    robot's reads (those that can claim what it claims), if more than ``reach`` (world shards send them each other).
+    """
 
     x0: float
     side: float
     nx: int
     unit: str = ""
     reach: int = 1
+    rivals: int = 0
 
     def columns(self, x: np.ndarray) -> np.ndarray:
         """The column of each x."""

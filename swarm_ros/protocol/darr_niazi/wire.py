@@ -18,7 +18,7 @@ import numpy as np
 from swarm_ros.core.engine import Simulation
 from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.legality import illegal
-from swarm_ros.core.rules import Decider, Decisions
+from swarm_ros.core.rules import Decided, Decided3D, Decider, Decisions
 from swarm_ros.core.state import STATE_COUNT, Poses, Poses3D
 from swarm_ros.core.strips import Strips
 from swarm_ros.core.swarm_view import SwarmView
@@ -37,7 +37,7 @@ class StudyStrip:
 
     def decide(
         self, tick: int, seen: np.ndarray, changed: np.ndarray | None, robots: Poses | Poses3D
-    ) -> tuple[np.ndarray, Decisions]:
+    ) -> tuple[np.ndarray, Decided | Decided3D]:
         """Decide ``tick`` for the moving robots of its strip from ``robots`` (every robot's arrays, of which those
         ``seen`` hold their rows after ``tick - 1``; ``changed``: those that changed in it, None for a whole view):
         their ids (ascending) and decisions.
@@ -57,7 +57,7 @@ class StudyStrip:
             raise Rejected("inconsistent rows", str(exc)) from None
         moving = self.view.moving_ids()
         own = moving[self.strips.in_strip(self.grid.columns(self.view.state.x[moving]), self.k)]
-        return own, self.decider.decide(self.view.state, own, tick, moving)
+        return own, self.decider.decide(self.view.state, own, tick, moving).decided
 
 
 class StudyWire:
@@ -82,8 +82,8 @@ class StudyWire:
         )
 
     @staticmethod
-    def decision_rows(ids: np.ndarray, decided: Decisions) -> np.ndarray:
-        return decision_rows(decided)
+    def decision_rows(ids: np.ndarray, decided: Decided | Decided3D) -> np.ndarray:
+        return decision_rows(Decisions.of(-1, ids, decided))
 
     @staticmethod
     def robots_of(rows: np.ndarray) -> tuple[np.ndarray, Poses | Poses3D]:
@@ -93,10 +93,10 @@ class StudyWire:
         return rows["id"].astype(np.int64), robots
 
     @staticmethod
-    def decisions_of(rows: np.ndarray, tick: int = -1) -> tuple[np.ndarray, Decisions]:
-        """(ids, decisions) of checked decision rows, decided for ``tick``."""
+    def decisions_of(rows: np.ndarray) -> tuple[np.ndarray, Decided | Decided3D]:
+        """(ids, decisions) of checked decision rows."""
         ids = rows["id"].astype(np.int64)
-        return ids, Decisions(tick=tick, ids=ids, claim=rows["claim"].astype(np.int64), **pose_of(rows))
+        return ids, Decisions(tick=-1, ids=ids, claim=rows["claim"].astype(np.int64), **pose_of(rows)).decided
 
     @staticmethod
     def check_rows(run: Simulation, rows: np.ndarray, tick: int) -> None:
@@ -115,7 +115,9 @@ class StudyWire:
         checks.inside_world(rows, run.shape.world.radius)
 
     @staticmethod
-    def check_decisions(run: Simulation, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Decisions]:
+    def check_decisions(
+        run: Simulation, rows: np.ndarray, tick: int, own: np.ndarray
+    ) -> tuple[np.ndarray, Decided | Decided3D]:
         """(ids, decisions) of decision rows for ``tick`` that must be exactly the robots ``own``, each within the
         rule's bounds from where it stands in ``run`` (:func:`~swarm_ros.core.legality.illegal`).
 
@@ -133,4 +135,4 @@ class StudyWire:
                       rows["y"], rows["heading"], **solid)  # fmt: skip
         if bad.any():
             raise Rejected("illegal decision", f"robot {int(ids[np.flatnonzero(bad)[0]])}")
-        return StudyWire.decisions_of(rows, tick)
+        return StudyWire.decisions_of(rows)
