@@ -6,6 +6,7 @@ import types
 
 import numpy as np
 import pytest
+from central_fakes import WorldPort
 from lockstep_fakes import Log
 
 from swarm_ros.core import Shape, World
@@ -610,40 +611,6 @@ def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_wh
     )
     assert watch.liveliness("robot_batch_1", 1, 0) == "robot_batch_1 is back (liveliness)"
     assert watch.lapsed == set()
-
-
-class WorldPort:
-    """What a CentralWorld sends, recorded; the monitor reads from the start, readers acknowledge at once."""
-
-    def __init__(self) -> None:
-        self.watched: list[str] = []
-        self.areas: list[tuple[str, int, np.ndarray, bool]] = []
-        self.records: list[tuple[int, np.ndarray, np.ndarray]] = []
-        self.statuses: list[tuple[int, str, str, dict]] = []
-        self.sent_at: list[float] = []  # the clock at each area sent
-        self.clock = lambda: 0.0
-
-    def watch_batch(self, name):
-        self.watched.append(name)
-
-    def send_area(self, name, tick, rows, whole):
-        self.areas.append((name, tick, rows, whole))
-        self.sent_at.append(self.clock())
-
-    def publish_record(self, tick, metrics, robots):
-        self.records.append((tick, metrics, robots))
-
-    def publish_status(self, tick, outcome, message, values):
-        self.statuses.append((tick, outcome, message, values))
-
-    def monitor_reads(self):
-        return True
-
-    def delivered(self):
-        return True
-
-    def startup_seconds(self):
-        return 1.5
 
 
 def world_run(window: int, every: int, tmp_path=None, slow: bool = False, tick_rate: float = 0.0):

@@ -18,7 +18,7 @@ from swarm_ros.core.state import IS_MOVING
 from swarm_ros.core.strips import AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_lockstep import CentralLockstep
-from swarm_ros.protocol.checks import cloud
+from swarm_ros.protocol.checks import Rejections, cloud
 from swarm_ros.protocol.darr_niazi.wire import StudyWire
 
 pytestmark = pytest.mark.unit
@@ -194,8 +194,10 @@ def test_world_shards_of_the_study_give_the_in_process_run(rules, shards, batche
         params = RunParams(robots=DISC.patches + 25, seed=3 + shards, rules=rules, vision_radius=2.0, **extra)
         world = run_sharded(partial(Simulation, DISC, params), StudyWire.batch, shards, batches, region_cuts=cuts)
         _owners_agree(world, _whole(DISC, params))
-    early = run_sharded(partial(Simulation, DISC, params), StudyWire.batch, shards, batches, 10, region_cuts=cuts)
-    assert min(w.present.size for w in early) < params.robots  # (the disc is 25 columns; the halo 7)
+    wide = disc_shape(World(radius=40), 12.0)  # 81 columns: more than a shard and its halo (up to 14 columns)
+    params = RunParams(robots=wide.patches + 25, seed=3 + shards, rules=rules, vision_radius=2.0)
+    early = run_sharded(partial(Simulation, wide, params), StudyWire.batch, shards, batches, 10, region_cuts=cuts)
+    assert max(w.present.size for w in early) < params.robots  # no shard holds the whole swarm
 
 
 def test_world_shards_of_a_3d_study_run_restarted_go_on_as_the_unbroken_run():
@@ -206,3 +208,139 @@ def test_world_shards_of_a_3d_study_run_restarted_go_on_as_the_unbroken_run():
     make = lambda: Simulation(ball, params)
     world = run_sharded(make, StudyWire.batch, 2, 3, restarts={12: 1, 31: 0}, save_every=10)
     _owners_agree(world, _whole(ball, params))
+
+
+def _lockstep_run(params: RunParams, remove_at: dict[int, int], kept_at: int = -1):
+    """A central world's lockstep over the study's wire, its batches fed what it sends: batch ``remove_at[t]``
+    removed (lost for good) as the world decides tick t + 1. At tick ``kept_at``, after that, the lockstep is
+    replaced by one resumed from a checkpoint's ``kept``."""
+    run, wire = Simulation(DISC, params), StudyWire(2)
+    ls, start = CentralLockstep(run, wire), Simulation(DISC, params)
+    strips = strips_for(start, 3)
+    for k in range(3):
+        ls.announce(f"robot_batch_{k}", strips.strip(k))
+    hosts = [wire.batch(start, ls.strips, k) for k in range(3)]
+    stores = [AreaStore(start, ls.strips, k) for k in range(3)]
+    removed: dict[int, np.ndarray] = {}
+    while run.outcome is None:
+        sent = ls.areas([0, 1, 2], set())
+        assert set(sent) == {0, 1, 2} - set(ls.removed)  # a removed batch is sent nothing: the world decides it
+        if run.tick in remove_at:
+            removed[run.tick + 1] = ls.remove_batch(remove_at[run.tick])
+        if run.tick == kept_at:  # the world goes on from a checkpoint saved now, a removal pending
+            kept = {name: a.copy() for name, a in ls.kept().items()}
+            ls = CentralLockstep(run, wire)
+            ls.resume(dict(enumerate(f"robot_batch_{k}" for k in range(3))), strips.cuts, kept)
+            sent = ls.areas([0, 1, 2], {0, 1, 2})
+        for k, (rows, whole) in sent.items():
+            changed = stores[k].take(run.tick, *wire.robots_of(rows), whole)
+            answer = wire.decision_rows(*hosts[k].decide(run.tick + 1, stores[k].seen, changed, stores[k].robots))
+            if k in ls.removed:  # its process answered the area it was sent before it was removed: too late
+                with pytest.raises(Rejected, match="robots were removed"):
+                    ls.decisions(k, run.tick + 1, answer)
+            else:
+                ls.decisions(k, run.tick + 1, answer)
+    return run, removed
+
+
+def _with_removals(params: RunParams, removed: dict[int, np.ndarray]) -> Simulation:
+    sim = Simulation(DISC, params)
+    while sim.outcome is None:
+        sim.step()
+        if sim.tick in removed and sim.outcome is None:
+            sim.remove(removed[sim.tick])
+    return sim
+
+
+def test_a_batch_removed_leaves_its_robots_at_the_next_ticks_end_and_the_world_decides_its_strip():
+    """on_batch_loss: remove on a central world: the robots deciding in the lost batch's strip leave at the end of
+    the next tick and the world decides its strip from then on, so the run is the in-process run with those robots
+    removed then; a world resumed from a checkpoint's ``kept`` (a removal still to come) goes on alike."""
+    params = RunParams(robots=DISC.patches + 30, seed=9, vision_radius=2.0)
+    run, removed = _lockstep_run(params, {20: 1, 45: 0})
+    assert [t for t in removed] == [21, 46] and all(ids.size for ids in removed.values())
+    assert same(_with_removals(params, removed), run) and run.losses == [(t, ids.size) for t, ids in removed.items()]
+    again, _ = _lockstep_run(params, {20: 1, 45: 0}, kept_at=20)
+    assert same(run, again)
+
+
+def _world_with_a_loss(tmp_path, policy: str, restarts: int, then: str):
+    """A central world of the study's model over a fake port and clock, its three batches fed what it sends; batch 1's
+    liveliness lapses as tick 21 is decided and it answers no more, and then ``then``: ``"wait"`` (nothing comes back
+    within the loss's confirmation), ``"back"`` (it is alive again within it) or ``"new"`` (a new process of it
+    announces itself). Returns the world and its log."""
+    from central_fakes import WorldPort
+    from lockstep_fakes import Log
+
+    from swarm_ros.protocol.central_batch import CentralBatch
+    from swarm_ros.protocol.central_world import CentralWorld
+    from swarm_ros.protocol.world_port import LOSS_CONFIRM_S
+
+    params = RunParams(robots=DISC.patches + 30, seed=9, vision_radius=2.0)
+    port, log, now = WorldPort(), Log(), [0.0]
+    own = {"record_every": 1, "monitor_window": 0, "start_timeout": 60.0, "incarnation": 0, "tick_rate": 0.0}
+    own.update(checkpoint=str(tmp_path / "world.npz"), on_batch_loss=policy, max_restarts=restarts)
+    port.clock = lambda: now[0]
+    world = CentralWorld(
+        Simulation(DISC, params), StudyWire(2), own, port, log, Rejections(log), port.clock, None, True
+    )
+    names = [f"robot_batch_{k}" for k in range(3)]
+    own_of = {name: {"batch": k, "batches": 3, "region_cuts": "", "name": name} for k, name in enumerate(names)}
+    hosts = {name: CentralBatch(DISC, params, own_of[name], _no_drop) for name in names}
+    for name, host in hosts.items():
+        world.batch(name, host.strip)
+    world.poll()
+    sent, lost = 0, False
+    while world.ended_at is None and now[0] < 100:
+        now[0] += 0.01
+        while sent < len(port.areas):
+            name, tick, rows, whole = port.areas[sent]
+            sent += 1
+            if tick == 20 and name == "robot_batch_1" and not lost:
+                lost = True
+                world.liveliness(name, 0, 1)
+            if name == "robot_batch_1" and lost and then != "back":
+                continue  # it answers no more
+            world.decisions(
+                name, *hosts[name].inboxes[0 if whole else 1].take(decode_cloud(encode_cloud(rows, tick)))[::-1]
+            )
+        if lost and then == "back" and now[0] > LOSS_CONFIRM_S / 2:
+            world.liveliness("robot_batch_1", 1, 0)
+        if lost and then == "new" and not world.ls.removed:
+            with pytest.raises(Rejected, match="robots were removed"):
+                world.batch("robot_batch_1", hosts["robot_batch_1"].strip, 1)
+        world.poll()
+    return world, log
+
+
+def _no_drop(topic: str, fault: Rejected) -> None:
+    raise AssertionError(f"{topic}: {fault}")
+
+
+@pytest.mark.parametrize(
+    "policy, restarts, then", [("remove", 3, "wait"), ("restart", 0, "wait"), ("remove", 3, "new")]
+)
+def test_a_world_removes_a_batch_lost_for_good_and_the_run_is_the_in_process_one_with_its_robots_removed(
+    tmp_path, policy, restarts, then
+):
+    """on_batch_loss: remove, or no restarts left: a batch whose liveliness lapsed and that is not back within
+    LOSS_CONFIRM_S (or whose new process announced itself: the loss confirmed at once) is removed; a checkpoint
+    says so; the world decides its strip, and the run is the in-process run with its robots removed."""
+    from swarm_ros.protocol import central_checkpoint
+
+    world, log = _world_with_a_loss(tmp_path, policy, restarts, then)
+    run = world.run
+    (tick, count), *more = run.losses
+    assert not more and tick == 21 and any("robot_batch_1 lost for good" in line for line in log.lines)
+    gone = np.flatnonzero(run.state.state == 5)
+    assert gone.size == count and same(_with_removals(run.params, {21: gone}), run)
+    saved = central_checkpoint.load(tmp_path / "world.npz", Simulation(DISC, run.params))
+    assert saved.kept["removed"].tolist() == [1]
+
+
+@pytest.mark.parametrize("policy, restarts, then", [("remove", 3, "back"), ("restart", 3, "wait")])
+def test_a_batch_back_within_the_confirmation_or_with_restarts_left_is_waited_for(tmp_path, policy, restarts, then):
+    """Back within LOSS_CONFIRM_S, a lapse was a pause; under restart with restarts left, the world waits (the
+    launcher starts the batch again): nothing is removed."""
+    world, _ = _world_with_a_loss(tmp_path, policy, restarts, then)
+    assert world.run.losses == [] and not world.ls.removed

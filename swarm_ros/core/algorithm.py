@@ -100,8 +100,9 @@ class Algorithm:
     #: :class:`~swarm_ros.protocol.batch_host.BatchHost`), for the one robot-batch node (``robot_batch_node``
     #: ``swarm_ros.nodes.robot_batch:RobotBatchNode``)
     batch_host: str = ""
-    #: a central world's graph (one world process holding every robot: core.strips): its rows on the wire, their
-    #: checks and its batch (a :class:`~swarm_ros.protocol.central_rows.Wire`); "" for a graph of its own
+    #: ``(dims) -> Wire``: in a central world's graph (one world process holding every robot: core.strips), its rows on
+    #: the wire in a world of ``dims`` dimensions, their checks and its batch (a
+    #: :class:`~swarm_ros.protocol.central_rows.Wire`); "" for none
     wire: str = ""
     #: its graph's node classes, one per role its graph runs, each ``(node, settings, own parameters)``: an rclpy node
     #: made, and its parameters read, by the role's executable (nodes/roles.py); "" for a role its graph has not
@@ -288,6 +289,7 @@ register(
         progress_what="localized",
         engine="swarm_ros.core.engine:Simulation",
         summary="swarm_ros.core.run_result:summary_of",
+        wire="swarm_ros.protocol.darr_niazi.wire:StudyWire",
         check_shape="swarm_ros.core.params:check_vision_fits",
         compile="swarm_ros.core.warmup:compile_kernels",
         warm_up="swarm_ros.core.warmup:warm_up",

@@ -1,14 +1,14 @@
 """A central world cut into S world shards (:mod:`swarm_ros.core.strips`): each shard holds the robots of a run of
-consecutive batches' strips (its own columns) and of the grid's ``reach`` columns either side (its halo), never
-the whole swarm's, and the run is the one world's, exactly.
+consecutive batches' strips (its own columns) and of the grid's ``reach`` (or ``rivals``, if more) columns either side
+(its halo), and those every batch sees, never the whole swarm's, and the run is the one world's, exactly.
 
 A shard's engine (the algorithm's, a :class:`ShardedRun`) holds every robot's arrays, of which
 only the robots it holds (``present``) are read. A tick, for shard s:
 
 1. its batches decide from the robots of their areas, which lie in its own columns and its halo;
-2. every shard sends each other the decisions of its own deciding robots that lie within the grid's ``rivals``
-   columns of the other's own, or in its halo (*border*): a grant reads the decisions of the robots within reach,
-   and a claim's lottery those of the robots that can claim the same cell;
+2. every shard sends each other the decisions of its own deciding robots that lie in the other's halo (*border*):
+   a grant reads the decisions of the robots within reach, and a claim's lottery those of the robots that can claim
+   the same cell (within the grid's ``rivals``);
 3. it settles and applies its own robots' moves (the engine's ``settle_shard``), and names those whose rows change
    what every shard shares (the rubenstein algorithm's: the robots that joined, which cover pixels and enter the
    running counts);
@@ -91,8 +91,9 @@ class CentralShard:
         self.batches = shard_batches(shard, shards, strips.batches)
         self.ranges = ranges(strips, shards)
         self.first, self.last = self.ranges[shard]
-        self.halo = strips.reach  #: its halo's columns either side
-        self.rivals = max(run.grid.rivals, self.halo)  #: the columns either side whose decisions it is sent
+        #: its halo's columns either side: the batches' (the grid's reach), or those of the rivals of its robots'
+        #: claims (the grid's ``rivals``) if more
+        self.halo = max(strips.reach, run.grid.rivals)
         self.present = self._held(np.arange(run.params.robots))
 
     def _within(self, ids: np.ndarray, first: int, last: int) -> np.ndarray:
@@ -113,10 +114,10 @@ class CentralShard:
         return self._within(self.present, self.first, self.last)
 
     def neighbours(self) -> list[int]:
-        """The shards whose own columns or halo touch its own or its halo, or lie within its rivals' columns: those
-        it sends border decisions and rows to (a robot of its own moves less than the reach a tick, so it may enter
-        the halo of a shard past a narrow one)."""
-        h = max(self.halo, (self.rivals + 1) // 2)
+        """The shards whose own columns or halo touch its own or its halo: those it sends border decisions and rows
+        to (a robot of its own moves less than the reach a tick, so it may enter the halo of a shard past a narrow
+        one)."""
+        h = self.halo
         return [
             o
             for o, (a, b) in enumerate(self.ranges)
@@ -124,11 +125,10 @@ class CentralShard:
         ]
 
     def border(self, peer: int, ids: np.ndarray) -> np.ndarray:
-        """Which of robots ``ids`` (its own) lie within the rivals' columns of shard ``peer``'s own."""
+        """Which of robots ``ids`` (its own) lie in shard ``peer``'s halo."""
         first, last = self.ranges[peer]
         columns = self.run.grid.columns(self.run.robots.x[ids])
-        r = self.rivals
-        return ((columns >= first - r) & (columns < first)) | ((columns > last) & (columns <= last + r))
+        return ((columns >= first - self.halo) & (columns < first)) | ((columns > last) & (columns <= last + self.halo))
 
     def reach(self, peer: int, ids: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
         """Which of robots ``ids`` (its own) lie in shard ``peer``'s own columns or halo (``columns``: theirs, if not

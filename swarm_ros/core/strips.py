@@ -78,6 +78,11 @@ class CentralRun(Protocol):
 
     def restore(self, tick: int, arrays: dict[str, np.ndarray]) -> None: ...  # from saved(); ContractError if not
 
+    def remove(self, ids: np.ndarray) -> int:
+        """Robots ``ids`` leave the world at the end of the tick (a batch lost for good): only an algorithm whose
+        robots can be removed (its registry entry's ``no_removal`` empty) has it. How many left."""
+        ...
+
 
 @dataclass(frozen=True)
 class Strips:

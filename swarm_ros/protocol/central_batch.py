@@ -36,7 +36,7 @@ class CentralBatch:
     ) -> None:
         algorithm = algorithm_of(params.algorithm)
         self.robots = params.robots
-        self.wire = algorithm.hook("wire")
+        self.wire = algorithm.hook("wire")(shape.world.dims)
         self.start = algorithm.hook("engine")(shape, params)  # the grid, the rule and the shape; robots at tick 0
         strips = strips_for(self.start, int(own["batches"]), str(own["region_cuts"]))
         self.host = self.wire.batch(self.start, strips, int(own["batch"]))

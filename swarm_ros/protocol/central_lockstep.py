@@ -14,6 +14,11 @@ batch process that announces itself again (restarted) is sent its whole view of 
 batch by a world that went on from its checkpoint; a batch keeps nothing else between ticks, so it decides as the one
 it replaces would have.
 
+A batch lost for good (``on_batch_loss: remove``, for an algorithm whose robots can be removed) is *removed*
+(:meth:`CentralLockstep.remove_batch`): the robots that decide in its strip as it is lost leave the world at the end
+of the next tick, and from then on the world decides for the robots in its strip itself, with the algorithm's batch
+fed what the batch would have been sent, so the run is the in-process run with those robots removed then.
+
 What is the algorithm's own here is its :class:`~swarm_ros.protocol.central_rows.Wire` (the registry's ``wire``
 hook): its rows and their checks.
 Decisions are checked before they are used: the tick, then the wire's ``check_decisions`` (the rows' own bounds,
@@ -27,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from swarm_ros.core.errors import Rejected
-from swarm_ros.core.strips import AreaFeed, CentralRun, Strips
+from swarm_ros.core.errors import ContractError, Rejected
+from swarm_ros.core.strips import AreaFeed, AreaStore, CentralRun, Strips
 
 from .central_rows import Wire
 
@@ -54,6 +59,9 @@ class CentralLockstep:
         #: batch -> the ticks of the whole views sent it: a process that comes back answers the last its topic kept,
         #: maybe after the world sent it the next as it announced itself
         self.wholes: dict[int, set[int]] = {}
+        #: the batches removed (lost for good): the world's own batch for each strip, and what it was sent
+        self.removed: dict[int, tuple[Any, AreaStore]] = {}
+        self.removing: list[tuple[int, np.ndarray]] = []  #: (tick, robots removed at its end), ticks ascending
 
     @property
     def batches(self) -> int:
@@ -109,17 +117,67 @@ class CentralLockstep:
         return next((k for k, who in self.hosts.items() if who == name), None)
 
     def kept(self) -> dict[str, np.ndarray]:
-        """What it saves beside the run in a checkpoint: nothing (a world shard's: its robots)."""
-        return {}
+        """What it saves beside the run in a checkpoint: the batches removed and the robots still to remove, at
+        which tick's end (a world shard's: its robots too)."""
+        if not self.removed:
+            return {}
+        removing = [[tick, ids.size, *ids.tolist()] for tick, ids in self.removing]
+        return {"removed": np.array(sorted(self.removed)), "removing": np.array(sum(removing, []), dtype=np.int64)}
 
     def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray], before: int = -1) -> None:
         """Serve again, from a checkpoint, the batches named ``hosts`` (batch number -> node name) of the strips cut
         at ``cuts`` (:attr:`Strips.cuts`): their announcements are taken as a restarted batch's, each sent its area
-        of the run's tick. ``kept``: what :meth:`kept` gave (nothing to take back here). Decisions of other ticks
-        than the one being decided, up to ``before``, are the process before's: ignored, not faults."""
+        of the run's tick. ``kept``: what :meth:`kept` gave (the batches removed, and the robots to remove). Decisions
+        of other ticks than the one being decided, up to ``before``, are the process before's: ignored, not faults.
+
+        Raises:
+            ContractError: ``kept`` that is not what :meth:`kept` gives for these batches.
+        """
         self.strips = Strips(np.asarray(cuts, dtype=np.int64), self.run.grid.reach)
         self.hosts = dict(hosts)
         self.started, self.before = True, before
+        removed, flat = kept.get("removed", np.empty(0, dtype=np.int64)), kept.get("removing", np.empty(0)).tolist()
+        if not set(removed.tolist()) <= set(hosts):
+            raise ContractError(f"removed batches {removed.tolist()} of a checkpoint that has batches {sorted(hosts)}")
+        for k in removed.tolist():
+            self._host_locally(int(k))
+        while flat:
+            tick, n = int(flat[0]), int(flat[1])
+            self.removing.append((tick, np.array(flat[2 : 2 + n], dtype=np.int64)))
+            flat = flat[2 + n :]
+
+    # -- batches removed (lost for good) --------------------------------------------------------------------
+    def remove_batch(self, k: int) -> np.ndarray:
+        """Batch k is lost for good: the robots deciding in its strip now leave the world at the end of the next
+        tick, and from then on the world decides for its strip itself (its decisions for the next tick, if in
+        already, stand). Returns those robots (none if it was removed already)."""
+        if k in self.removed or self.strips is None:
+            return np.empty(0, dtype=np.int64)
+        ids = self.own(k)
+        self.removing.append((self.run.tick + 1, ids))
+        self._host_locally(k)
+        if k not in self.decided:
+            self._decide_locally(k, whole=True)
+        return ids
+
+    def _host_locally(self, k: int) -> None:
+        assert self.strips is not None
+        self.removed[k] = (self.wire.batch(self.run, self.strips, k), AreaStore(self.run, self.strips, k))
+
+    def _decide_locally(self, k: int, whole: bool) -> None:
+        """Removed batch k's decisions for the next tick, made here from what it would be sent."""
+        host, store = self.removed[k]
+        assert self.feed is not None and self.strips is not None
+        (ids, entire), robots = (
+            self.feed.send([k], {k} if whole else set(), self._columns(), self.holding())[k],
+            self.run.robots,
+        )
+        changed = store.take(self.run.tick, ids, type(robots)(*(a[ids] for a in robots)), entire)
+        self.decided[k] = host.decide(self.run.tick + 1, store.seen, changed, store.robots)
+
+    def ready(self) -> bool:
+        """Whether every batch's decisions for the next tick are in (the removed ones' are the world's own)."""
+        return self.started and len(self.decided) == len(self.mine)
 
     def _columns(self) -> np.ndarray:
         """Every robot's cell column at the current tick (found once a tick)."""
@@ -137,8 +195,11 @@ class CentralLockstep:
         assert self.strips is not None
         if self.feed is None:
             self.feed = AreaFeed(self.run, self.strips)
+        for k in [k for k in batches if k in self.removed]:
+            self._decide_locally(k, k in whole)
         out = {}
-        for k, (ids, entire) in self.feed.send(batches, whole, self._columns(), self.holding()).items():
+        remote = [k for k in batches if k not in self.removed]
+        for k, (ids, entire) in self.feed.send(remote, whole, self._columns(), self.holding()).items():
             out[k] = (self.wire.rows(ids, self.run.robots), entire)
             if entire:
                 self.wholes.setdefault(k, set()).add(self.run.tick)
@@ -150,7 +211,7 @@ class CentralLockstep:
 
     def awaited(self) -> list[str]:
         """The batches whose decisions for the next tick are not in yet, by node name."""
-        return [name for k, name in sorted(self.hosts.items()) if k not in self.decided]
+        return [name for k, name in sorted(self.hosts.items()) if k not in self.decided and k not in self.removed]
 
     def own(self, k: int) -> np.ndarray:
         """The robots batch k decides for at the next tick: its strip's deciding robots, ascending."""
@@ -177,16 +238,23 @@ class CentralLockstep:
             return False  # a restarted batch's answer to a whole view its topic kept, older than the one it asked for
         if tick != self.run.tick + 1:
             raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {self.run.tick + 1}")
+        if k in self.removed:
+            raise Rejected("removed batch", f"{self.hosts[k]}'s robots were removed; the world decides its strip")
         if k in self.decided:
             return False  # a restarted batch's second answer: the same, by the rule
         ids, decided = self.wire.check_decisions(self.run, rows, tick, self.own(k))
         self.decided[k] = (ids, decided)
-        if len(self.decided) < len(self.mine):
+        if not self.ready():
             return False
         return self.settle()
 
     def settle(self) -> bool:
-        """Every batch's decisions are in: settle the tick (here, at once: True)."""
+        """Every batch's decisions are in: settle the tick (here, at once: True), then remove the robots due to
+        leave at its end."""
         self.run.settle([self.decided[b] for b in range(self.batches)])
         self.decided.clear()
+        while self.removing and self.removing[0][0] <= self.run.tick:
+            _, ids = self.removing.pop(0)
+            if self.run.outcome is None:
+                self.run.remove(ids)
         return True

@@ -33,7 +33,14 @@ class Wire(Protocol):
 
     def decisions_of(self, rows: np.ndarray) -> tuple[np.ndarray, Any]: ...  # (ids, decisions) of checked rows
 
-    def check_rows(self, run: Any, rows: np.ndarray, tick: int) -> None: ...  # rows of ``run`` at ``tick``? Rejected
+    def check_rows(self, run: Any, rows: np.ndarray, tick: int) -> None:
+        """Whether ``rows``, of robots (``row``) or their decisions (``decision_row``: a world shard's peer's, checked
+        where the robots they are of may not be known), can be of ``run`` at ``tick``: their own bounds.
+
+        Raises:
+            Rejected: by kind.
+        """
+        ...
 
     def check_decisions(self, run: Any, rows: np.ndarray, tick: int, own: np.ndarray) -> tuple[np.ndarray, Any]:
         """(ids, decisions) of rows for ``tick`` that must be exactly the robots ``own``, within the rule's bounds.

@@ -26,7 +26,7 @@ from .checks import Rejections, held_report
 from .plan import CENTRAL_KEPT as KEPT
 from .plan import MONITOR
 from .status import RUNNING, STARTING, progress_values
-from .world_port import STATUS_PERIOD, Watch
+from .world_port import LOSS_CONFIRM_S, STATUS_PERIOD, Watch
 
 #: seconds, at most, for the last messages to be acknowledged before exiting, when the world waits for no monitor
 LINGER = 5.0
@@ -62,6 +62,11 @@ class CentralWorld:
     goes out; the records (every robot's row and the metrics rows since the last) every ``record_every`` ticks and
     at the end; the peers' liveliness and a still run's failure (:class:`Watch`);
     the end once the monitor holds it (or, with no window, once its readers have everything, or after ``LINGER``).
+    A batch whose liveliness lapsed is waited for while the launcher restarts it (``on_batch_loss: restart`` and
+    restarts left, by the incarnations it announced); otherwise, for an algorithm whose robots can be removed
+    (``removes``), it is removed (:meth:`CentralLockstep.remove_batch`) unless it is back within
+    :data:`~swarm_ros.protocol.world_port.LOSS_CONFIRM_S` (a new process of it confirms the loss at once), and the
+    world saves a checkpoint then.
 
     Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writers, decisions
     reader and liveliness), ``send_area(name, tick, rows, whole)`` (its whole view, or the changes),
@@ -82,6 +87,7 @@ class CentralWorld:
         rejections: Rejections,
         clock: Callable[[], float] = time.monotonic,
         lockstep: CentralLockstep | None = None,
+        removes: bool = False,
     ) -> None:
         self.ls = lockstep or CentralLockstep(run, wire)  # a world shard's: central_shard_world.ShardLockstep
         self.ls.on_settled = self._settled
@@ -109,6 +115,13 @@ class CentralWorld:
         self.status_at = 0.0  # when the last status went out
         self.finished = False
         self.watch = Watch(self.created)
+        self.removes = removes and (own.get("on_batch_loss") == "remove", int(own.get("max_restarts", 0)))
+        if self.removes and sharded:
+            self.removes = False  # (ShardLockstep.remove_batch: not built) a batch out of restarts fails the run
+            if own.get("on_batch_loss") == "remove":
+                raise RunFailed("on_batch_loss: remove is not built for a central world's shards yet")
+        self.incarnations: dict[str, int] = {}  #: batch name -> the last incarnation it announced
+        self.losing: dict[str, float] = {}  #: batch name -> when its loss is confirmed, unless it is back
         if int(own["incarnation"]):  # a restarted process: on from the last checkpoint
             self._resume()
 
@@ -140,12 +153,20 @@ class CentralWorld:
         self.log.info(f"restarted: on from the checkpoint of tick {saved.tick}")
 
     # -- what comes in ----------------------------------------------------------------------
-    def batch(self, name: str, strip: tuple[int, int]) -> None:
-        """Node ``name`` announced the columns ``strip`` (:meth:`CentralLockstep.announce`).
+    def batch(self, name: str, strip: tuple[int, int], incarnation: int = 0) -> None:
+        """Node ``name`` (its process ``incarnation``) announced the columns ``strip``
+        (:meth:`CentralLockstep.announce`); a new process of a batch being lost confirms the loss.
 
         Raises:
-            Rejected: a strip that does not fit the run.
+            Rejected: a strip that does not fit the run, or a batch removed.
         """
+        k = self.ls.number(name)
+        if k is not None and k in self.ls.removed:
+            raise Rejected("removed batch", f"{name}'s robots were removed; the world decides its strip")
+        if name in self.losing and incarnation > self.incarnations.get(name, 0):
+            self._remove(name, "a new process of it announced itself")
+            raise Rejected("removed batch", f"{name}'s robots were removed; the world decides its strip")
+        self.incarnations[name] = max(incarnation, self.incarnations.get(name, 0))
         send = self.ls.announce(name, strip)
         if name not in self.watched:
             self.watched.add(name)
@@ -189,8 +210,31 @@ class CentralWorld:
             self.log.warning(said)  # event callback crashed the process inside rclpy, 3 runs of 3)
         else:
             self.log.info(said)
+            self.losing.pop(name, None)  # back in time: a pause, not a loss
         if self.ended_at is None:
             self.status(RUNNING if self.ls.started and not self.first else STARTING, said)
+        k = self.ls.number(name)
+        if name in self.watch.lapsed and self.removes and k is not None and k not in self.ls.removed:
+            remove, restarts = self.removes
+            if remove or self.incarnations.get(name, 0) >= restarts:  # lost for good, unless back in time
+                self.losing[name] = self.clock() + LOSS_CONFIRM_S
+
+    def _remove(self, name: str, why: str) -> None:
+        """Batch ``name`` is lost for good: its robots are removed at the end of the next tick, the world decides
+        its strip from then on, and a checkpoint says so."""
+        self.losing.pop(name, None)
+        k = self.ls.number(name)
+        if k is None or self.run.outcome is not None:
+            return
+        ids = self.ls.remove_batch(k)
+        said = f"{name} lost for good ({why}): its {ids.size} robots are removed at the end of tick {self.run.tick + 1}"
+        self.log.warning(said)
+        self.status(RUNNING, said)
+        if self.checkpoint is not None:
+            self._save()
+        if self.ls.ready() and not self.pending:  # its decisions were the last awaited
+            if self.ls.settle():
+                self._settled()
 
     # -- what goes out ----------------------------------------------------------------------
     def _go_on(self) -> None:
@@ -221,8 +265,7 @@ class CentralWorld:
         tick, ended = run.tick, run.outcome is not None
         self.watch.moved(self.clock())
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
-            clock = {_CLOCK: np.array([self.started_wall, self.startup])}  # the run's, for a restarted world
-            checkpoint.save(self.checkpoint, run, self.ls.hosts, self.ls.cuts, {**self.ls.kept(), **clock})
+            self._save()
         if ended or tick % self.every == 0:
             robots = self.ls.wire.rows(self.ls.recorded(), run.robots)
             metrics = metrics_rows(run.history[self.sent_metrics + 1 :], run.columns)
@@ -234,6 +277,11 @@ class CentralWorld:
         else:
             self._send_areas(self.ls.mine, self.fresh)
             self.fresh = set()
+
+    def _save(self) -> None:
+        assert self.checkpoint is not None
+        clock = {_CLOCK: np.array([self.started_wall, self.startup])}  # the run's, for a restarted world
+        checkpoint.save(self.checkpoint, self.run, self.ls.hosts, self.ls.cuts, {**self.ls.kept(), **clock})
 
     def status(self, outcome: str, message: str) -> None:
         self.status_at = self.clock()
@@ -258,6 +306,12 @@ class CentralWorld:
             RunFailed: the batches did not all announce themselves within ``start_timeout``, or the run is still.
         """
         now = self.clock()
+        for name, due in list(self.losing.items()):
+            if now >= due:
+                self._remove(name, f"not back within {LOSS_CONFIRM_S:g} s")
+        if self.ls.started and not self.first and not self.pending and self.ls.ready():  # every batch removed
+            if self.ls.settle():
+                self._settled()
         self._go_on()  # a tick held for tick_rate, due now
         if not self.first and self.ended_at is None and now - self.status_at >= STATUS_PERIOD:
             self.status(RUNNING, RUNNING)  # ten a second: the launcher's progress bar follows them

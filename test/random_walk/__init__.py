@@ -1,6 +1,5 @@
-"""A third, minimal algorithm, to show that an algorithm is a plug-in of swarm_ros (docs/adding_an_algorithm.md): a
-random walk that stops on a shape cell next to a stopped robot. Its world is one process holding every robot, so it
-takes the central world's graph as it is (``CENTRAL``). ``SWARM_ROS_ALGORITHMS=random_walk`` registers it."""
+"""A third, minimal algorithm (docs/adding_an_algorithm.md): a random walk that stops on a shape cell next to a stopped
+robot, on the central world's graph as it is (``CENTRAL``). ``SWARM_ROS_ALGORITHMS=random_walk`` registers it."""
 
 from __future__ import annotations
 
@@ -17,6 +16,7 @@ class Wire:
 
     row = decision_row = np.dtype({"names": [*"xyz", "id", "state"], "formats": ["<f4", "<f4", "<f4", "<u4", "<u1"]})
     batch = Batch
+    __init__ = lambda self, dims: None  # (a grid of cells, whatever the world's dimensions)
 
     @staticmethod
     def rows(ids: np.ndarray, robots: Robots) -> np.ndarray:

@@ -53,7 +53,7 @@ class CentralMonitorNode:
         self.node = node
         self.shape, self.params = run.resolve()
         self.algorithm = algorithm_of(self.params.algorithm)
-        wire, self.topics = self.algorithm.hook("wire"), CentralTopics.of(self.algorithm.name)
+        wire, self.topics = self.algorithm.hook("wire")(self.shape.world.dims), CentralTopics.of(self.algorithm.name)
         self.incarnation = int(own["incarnation"])
         p = self.params
         self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)

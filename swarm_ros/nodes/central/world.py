@@ -54,7 +54,7 @@ class CentralWorldNode:
         self.node = node
         shape, self.params = run.resolve()
         algorithm = algorithm_of(self.params.algorithm)
-        self.wire, self.topics = algorithm.hook("wire"), CentralTopics.of(algorithm.name)
+        self.wire, self.topics = algorithm.hook("wire")(shape.world.dims), CentralTopics.of(algorithm.name)
         self.rejections = Rejections(node.get_logger())
         self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_status = self.signer.publisher(DiagnosticArray, STATUS, msgs.STATUS_QOS)
@@ -64,7 +64,10 @@ class CentralWorldNode:
         self.changes: dict[str, SignedPublisher] = {}  # batch node name -> its changes' publisher
         engine = algorithm.hook("engine")(shape, self.params)
         lockstep = self._shard(engine, own) if int(own.get("shards", 1)) > 1 else None
-        self.world = CentralWorld(engine, self.wire, own, self, node.get_logger(), self.rejections, lockstep=lockstep)
+        self.world = CentralWorld(
+            engine, self.wire, own, self, node.get_logger(), self.rejections, lockstep=lockstep,
+            removes=algorithm.removes_lost_robots,
+        )  # fmt: skip
         self.gate.subscribe(Int64MultiArray, BATCHES, self._on_batch, msgs.BATCHES_QOS)
         self.gate.subscribe(Int64MultiArray, HELD, self._on_held, msgs.LATCHED_QOS)
         self._watch_alive(MONITOR)
@@ -151,10 +154,10 @@ class CentralWorldNode:
     # -- inbound ---------------------------------------------------------------------------
     def _on_batch(self, msg: Int64MultiArray) -> None:
         try:
-            name, _ = parse_batch_label(msg.layout.dim[0].label if msg.layout.dim else "")
+            name, incarnation = parse_batch_label(msg.layout.dim[0].label if msg.layout.dim else "")
             if len(msg.data) != 2:
                 raise Rejected("strip", f"{len(msg.data)} values, expected its first and last column")
-            self.world.batch(name, (int(msg.data[0]), int(msg.data[1])))
+            self.world.batch(name, (int(msg.data[0]), int(msg.data[1])), incarnation)
         except Rejected as fault:
             self.rejections.drop(BATCHES, fault)
 

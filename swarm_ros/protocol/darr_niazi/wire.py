@@ -100,8 +100,8 @@ class StudyWire:
 
     @staticmethod
     def check_rows(run: Simulation, rows: np.ndarray, tick: int) -> None:
-        """Whether rows can be robots of ``run``: ids ascending within the run's, states in their set, poses inside
-        the world.
+        """Whether rows can be robots of ``run`` (or their decisions, a world shard's peer's): ids ascending within
+        the run's, states in their set (claims, a patch of the world or none), poses inside the world.
 
         Raises:
             Rejected: by kind.
@@ -110,8 +110,12 @@ class StudyWire:
         checks.ids_in_range(ids, 0, run.params.robots)
         if np.any(np.diff(ids) <= 0):
             raise Rejected("bad ids", "robot ids must ascend")
-        if rows.size and rows["state"].max() >= STATE_COUNT:
+        decisions = "claim" in (rows.dtype.names or ())
+        if rows.size and not decisions and rows["state"].max() >= STATE_COUNT:
             raise Rejected("robot state out of range", f"state {int(rows['state'].max())}")
+        cells = run.shape.world.patch_count
+        if rows.size and decisions and (rows["claim"].min() < -1 or rows["claim"].max() >= cells):
+            raise Rejected("claim out of range", f"a claim outside the world's {cells} patches")
         checks.inside_world(rows, run.shape.world.radius)
 
     @staticmethod

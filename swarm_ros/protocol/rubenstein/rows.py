@@ -129,6 +129,8 @@ class RubensteinWire:
     check_decisions = staticmethod(check_decisions)
     batch = RubensteinBatch
 
+    def __init__(self, dims: int = 2) -> None: ...  # (its world is a plane)
+
     @staticmethod
     def check_rows(run: RubensteinRun, rows: np.ndarray, tick: int) -> None:
         check_rubenstein_rows(rows, run.params.robots, tick)

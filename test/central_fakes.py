@@ -1,0 +1,39 @@
+"""A central world's logic (swarm_ros.protocol.central_world) driven with a fake port, no ROS."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class WorldPort:
+    """What a CentralWorld sends, recorded; the monitor reads from the start, readers acknowledge at once."""
+
+    def __init__(self) -> None:
+        self.watched: list[str] = []
+        self.areas: list[tuple[str, int, np.ndarray, bool]] = []
+        self.records: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self.statuses: list[tuple[int, str, str, dict]] = []
+        self.sent_at: list[float] = []  # the clock at each area sent
+        self.clock = lambda: 0.0
+
+    def watch_batch(self, name):
+        self.watched.append(name)
+
+    def send_area(self, name, tick, rows, whole):
+        self.areas.append((name, tick, rows, whole))
+        self.sent_at.append(self.clock())
+
+    def publish_record(self, tick, metrics, robots):
+        self.records.append((tick, metrics, robots))
+
+    def publish_status(self, tick, outcome, message, values):
+        self.statuses.append((tick, outcome, message, values))
+
+    def monitor_reads(self):
+        return True
+
+    def delivered(self):
+        return True
+
+    def startup_seconds(self):
+        return 1.5
