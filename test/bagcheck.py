@@ -39,6 +39,9 @@ RUBENSTEIN_TYPES = {
     "/swarm/rubenstein/robots": "sensor_msgs/msg/PointCloud2",
     "/swarm/rubenstein/metrics": "sensor_msgs/msg/PointCloud2",
     "/swarm/status": "diagnostic_msgs/msg/DiagnosticArray",
+    "/swarm/shape": "nav_msgs/msg/OccupancyGrid",
+    "/swarm/occupancy": "nav_msgs/msg/OccupancyGrid",
+    "/clock": "rosgraph_msgs/msg/Clock",
 }
 
 
@@ -188,9 +191,11 @@ def assert_bag_holds_run(run: Path) -> None:
 def assert_rubenstein_bag_holds_run(run: Path, interrupted: bool = False) -> None:
     """A rubenstein run's bag: the metrics rows of every tick (a tick's again after a world's restart, the same)
     equal metrics.csv; every robot's row every ``bag_robots_every``-th tick and at the last, each robot once in a
-    record (from one message or, with world shards, one a shard), and the last rebuilds final_state.csv; the status
-    ends with the outcome. ``interrupted``: the run was written up to its last record, and the bag also holds the
-    metrics of the ticks the monitor took after it; no outcome went out."""
+    record (from one message or, with world shards, one a shard), and the last rebuilds final_state.csv; the statuses
+    hold the outcome at the last tick and no other (world shards' statuses come in any order: a shard's "running" may
+    come after another's outcome); the clock of every tick, the shape, and the occupancy at each record that covered
+    more pixels (the monitor encodes them from the rows). ``interrupted``: the run was written up to its last record,
+    and the bag also holds the metrics of the ticks the monitor took after it; no outcome went out."""
     from swarm_ros.core.rubenstein.rule import STATE_NAMES
     from swarm_ros.core.rubenstein.run import COLUMNS
     from swarm_ros.protocol.central_rows import metrics_row
@@ -220,5 +225,26 @@ def assert_rubenstein_bag_holds_run(run: Path, interrupted: bool = False) -> Non
         state = list(csv.DictReader(f))
     assert [float(r["x"]) for r in state] == final["x"].tolist()
     assert [r["state"] for r in state] == [STATE_NAMES[c] for c in final["state"]]
-    outcomes = [v.value for m in messages["/swarm/status"] for st in m.status for v in st.values if v.key == "outcome"]
-    assert outcomes[-1] == ("running" if interrupted else summary["outcome"])
+    held = got[first]  # every tick's metrics the monitor took
+    assert [m.clock.sec for m in messages["/clock"]] == list(range(len(held))), "not each tick's clock once"
+    (shape,) = messages["/swarm/shape"]  # the shape's pixels, and the covered ones at each record that covered more
+    assert sum(np.asarray(shape.data) == 0) == summary["shape_pixels"]
+    covered, ticks = held[:, COLUMNS.index("covered")], sorted(records)
+    grown = [t for i, t in enumerate(ticks) if i == 0 or covered[t] != covered[ticks[i - 1]]]
+    grids = messages["/swarm/occupancy"]
+    assert [g.header.stamp.sec for g in grids] == grown
+    assert [sum(np.asarray(g.data) == 100) for g in grids] == [covered[t] for t in grown]
+    assert all((g.info.width, g.info.height) == (shape.info.width, shape.info.height) for g in grids)
+    statuses = [
+        (m.header.stamp.sec, v.value)
+        for m in messages["/swarm/status"]
+        for st in m.status
+        for v in st.values
+        if v.key == "outcome"
+    ]  # (tick, outcome); world shards' statuses interleave in the order they came
+    ended = {outcome for _, outcome in statuses if outcome not in ("starting", "running")}
+    if interrupted:
+        assert not ended, ended
+    else:
+        assert ended == {summary["outcome"]}, ended
+        assert (last, summary["outcome"]) in statuses and max(t for t, _ in statuses) == last

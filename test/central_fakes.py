@@ -13,6 +13,7 @@ class WorldPort:
         self.areas: list[tuple[str, int, np.ndarray, bool]] = []
         self.records: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.statuses: list[tuple[int, str, str, dict]] = []
+        self.clocks: list[int] = []  # each tick as it went out
         self.sent_at: list[float] = []  # the clock at each area sent
         self.clock = lambda: 0.0
 
@@ -25,6 +26,9 @@ class WorldPort:
 
     def publish_record(self, tick, metrics, robots):
         self.records.append((tick, metrics, robots))
+
+    def publish_clock(self, tick):
+        self.clocks.append(tick)
 
     def publish_status(self, tick, outcome, message, values):
         self.statuses.append((tick, outcome, message, values))

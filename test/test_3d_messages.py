@@ -54,16 +54,19 @@ def test_a_3d_pose_out_of_range_is_rejected(torus_run):
 
 def test_a_3d_worlds_maps_are_voxel_clouds(torus_run):
     shape, s = torus_run.shape, torus_run.state
-    maps = msgs.WorldMaps(shape)
+    maps = msgs.WorldMaps(msgs.study_cells(shape))
     assert maps.kind is PointCloud2
     whole = deserialize_message(maps.shape_message(0), PointCloud2)
     voxels = msgs.cloud_rows(whole, VOXEL_ROW)
     assert voxels.size == shape.patches and whole.header.frame_id == "world"
     flat = shape.world.flat_of(*(voxels[a].astype(np.int64) for a in "xyz"))
     assert shape.mask.ravel()[flat].all()
-    filled = msgs.cloud_rows(deserialize_message(maps.occupancy_message(s.occupancy, 40), PointCloud2), VOXEL_ROW)
+    filled = msgs.cloud_rows(
+        deserialize_message(maps.occupancy_message(s.occupancy.reshape(shape.mask.shape) >= 0, 40), PointCloud2),
+        VOXEL_ROW,
+    )
     assert filled.size == int((s.occupancy >= 0).sum()) > 4
-    assert msgs.WorldMaps(Shape.load("star")).kind.__name__ == "OccupancyGrid"
+    assert msgs.WorldMaps(msgs.study_cells(Shape.load("star"))).kind.__name__ == "OccupancyGrid"
 
 
 def test_topics_prints_3d_rows_with_z_and_pitch(torus_run):

@@ -50,13 +50,31 @@ def test_metrics_message_is_labelled_and_exact():
 
 def test_occupancy_grid_places_patch_centres_on_cells():
     shape = Shape.load("tyre")
-    grid = deserialize_message(msgs.grid_message(shape, msgs.shape_cells(shape), 3), OccupancyGrid)
+    grid = deserialize_message(msgs.WorldMaps(msgs.study_cells(shape)).shape_message(3), OccupancyGrid)
     w = shape.world.size
     assert (grid.info.width, grid.info.height, grid.info.resolution) == (w, w, 1.0)
     assert grid.info.origin.position.x == -(shape.world.radius + 0.5)
     cells = np.asarray(grid.data, dtype=np.int8)
     assert (cells == msgs.CELL_EMPTY).sum() == shape.patches
     assert (cells == msgs.CELL_OFF_SHAPE).sum() == w * w - shape.patches
+
+
+def test_a_rubenstein_runs_maps_are_its_shape_pixels_in_d_from_the_bitmaps_corner():
+    """A central world's maps come from its engine's cells (CellMap): here a bitmap of unequal sides, in d."""
+    from swarm_ros.core.rubenstein.run import RubensteinRun
+
+    run = RubensteinRun(Shape.load("star"), RunParams(200, algorithm="rubenstein", seed=1))
+    cells, b = run.cell_map(), run.bitmap
+    maps = msgs.WorldMaps(cells)
+    shape = deserialize_message(maps.shape_message(0), OccupancyGrid)
+    assert (shape.info.width, shape.info.height) == (b.cols, b.rows) and b.cols != b.rows
+    assert shape.info.resolution == pytest.approx(b.pixel)
+    assert (shape.info.origin.position.x, shape.info.origin.position.y) == (b.x0, b.y0)
+    assert np.array_equal(np.asarray(shape.data) == msgs.CELL_EMPTY, b.mask)  # row 0 the bottom, as the bitmap's
+    run.run(2000)
+    grid = deserialize_message(maps.occupancy_message(run.cell_map().filled, run.tick), OccupancyGrid)
+    full = np.asarray(grid.data) == msgs.CELL_FULL
+    assert full.sum() == run.progress()[0] > 0 and np.array_equal(full, run.covered > 0)
 
 
 @pytest.fixture

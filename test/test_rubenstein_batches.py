@@ -676,6 +676,7 @@ def test_the_worlds_logic_over_a_fake_port_runs_the_in_process_run_with_a_record
     assert ticks == [*range(0, run.tick, every), run.tick] or ticks == list(range(0, run.tick + 1, every))
     metrics = np.concatenate([m for _, m, _ in port.records])
     assert len(metrics) == run.tick + 1  # every tick's metrics row once, in order
+    assert port.clocks == list(range(run.tick + 1))  # /clock: each tick once, as it goes out
     assert port.statuses[-1][:2] == (run.tick, str(run.outcome)) and world.finished
     said = port.statuses[-1][3]  # what the study's model's world says too: the monitor's summary takes it
     assert said["startup_seconds"] == "1.500" and float(said["wall_seconds"]) > 0 and said["rejected_messages"] == 0

@@ -26,6 +26,7 @@ import numpy as np
 from swarm_ros.core.algorithm import check_engine
 from swarm_ros.core.arbitration import occupy, resolve_kernel, vacate
 from swarm_ros.core.errors import ContractError
+from swarm_ros.core.grid import CellMap
 from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.legality import reach
 from swarm_ros.core.metrics import (
@@ -159,6 +160,11 @@ class Simulation:
         """The patches localized on so far, the shape's patches, and the tick and the robots moving (simulate's
         progress bar)."""
         return progress_of(self.metrics, self.shape.patches)
+
+    def cell_map(self) -> CellMap:
+        """The shape's patches, and those a localized robot stands on (the graph's maps)."""
+        mask = self.shape.mask
+        return self.shape.world.cell_map(mask, self.state.occupancy.reshape(mask.shape) >= 0)
 
     @property
     def history(self) -> np.ndarray:

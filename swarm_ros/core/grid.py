@@ -15,10 +15,24 @@ indices are those of the 3D world's bottom layer. "Patch" means a voxel there.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from swarm_ros.core.errors import ParameterError
+
+
+class CellMap(NamedTuple):
+    """A run's shape as cells, for viewers (the graph's /swarm/shape and /swarm/occupancy): ``mask`` (bool, ``[y,
+    x]`` or ``[z, y, x]``, index 0 at the low corner) the shape's cells, ``filled`` (bool, as ``mask``) those done
+    so far, ``side`` a cell's side and ``corner`` the low corner of cell 0 (x, y[, z]), in the unit of the robots'
+    positions on the wire."""
+
+    mask: np.ndarray
+    filled: np.ndarray
+    side: float
+    corner: tuple[float, ...]
+
 
 DEFAULT_RADIUS = 32
 MIN_RADIUS = 3  # a wall ring, the seeds' 2 x 2 block and room to move
@@ -75,6 +89,11 @@ class World:
         weights = self.size ** np.arange(self.dims - 1, -1, -1)
         offsets = sum(g.ravel() * w for g, w in zip(grids, weights))
         return np.sort(offsets[offsets != 0]).astype(np.int64)
+
+    def cell_map(self, mask: np.ndarray, filled: np.ndarray) -> CellMap:
+        """A shape ``mask`` over this world's patches (``grid_shape``) and the ``filled`` ones, as cells one patch
+        wide, cell 0's centre at patch (-R, -R[, -R])."""
+        return CellMap(mask, filled, 1.0, (-(self.radius + 0.5),) * self.dims)
 
     def patch_coords(self, flat: np.ndarray | int) -> tuple[np.ndarray, ...]:
         """Patch coordinates ``(px, py)`` or ``(px, py, pz)`` of flat indices."""

@@ -23,6 +23,7 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 
 from .errors import ParameterError
+from .grid import CellMap
 from .regions import parse_cuts
 
 
@@ -69,6 +70,8 @@ class CentralRun(Protocol):
         ...
 
     def progress(self) -> tuple[int, int, dict[str, str]]: ...  # cells done, all of them, words (progress bars)
+
+    def cell_map(self) -> CellMap: ...  # the shape's cells and the ones done now (the graph's maps)
 
     def settle(self, decided: list[tuple[np.ndarray, Any]]) -> Any: ...  # a tick from each batch's (ids, decisions)
 

@@ -129,16 +129,17 @@ def encode_clock(tick: int) -> bytes:
 
 
 def encode_grid(
-    cells: np.ndarray, size: int, resolution: float, origin: float, tick: int, frame_id: str = FRAME_ID
+    cells: np.ndarray, resolution: float, origin: tuple[float, float], tick: int, frame_id: str = FRAME_ID
 ) -> bytes:
-    """A serialized ``nav_msgs/OccupancyGrid`` of ``size`` x ``size`` ``cells`` (int8, row-major), stamped and
-    loaded at ``tick``, its cell (0, 0)'s corner at (``origin``, ``origin``), unrotated."""
+    """A serialized ``nav_msgs/OccupancyGrid`` of ``cells`` (int8, ``[row, column]``, row 0 the bottom), stamped and
+    loaded at ``tick``, its cell (0, 0)'s corner at ``origin`` (x, y), unrotated."""
+    height, width = cells.shape
     stamp = _STAMP.pack(int(tick) * TICK_SECONDS, 0)
     out = bytearray(stamp + _string(frame_id))
     out += _pad(len(out))
-    out += stamp + struct.pack("<fII", resolution, size, size)
+    out += stamp + struct.pack("<fII", resolution, width, height)
     out += bytes(-len(out) % 8)  # the origin's float64s
-    out += struct.pack("<7d", origin, origin, 0.0, 0.0, 0.0, 0.0, 1.0)
+    out += struct.pack("<7d", *origin, 0.0, 0.0, 0.0, 0.0, 1.0)
     data = np.ascontiguousarray(cells, dtype=np.int8).tobytes()
     out += _U32.pack(len(data))
     return ENCAPSULATION + bytes(out) + data

@@ -70,7 +70,7 @@ class CentralWorld:
 
     Its port (the world node) sends what it decides: ``watch_batch(name)`` (the batch's area writers, decisions
     reader and liveliness), ``send_area(name, tick, rows, whole)`` (its whole view, or the changes),
-    ``publish_record(tick, metrics_rows, robot_rows)``,
+    ``publish_record(tick, metrics_rows, robot_rows)``, ``publish_clock(tick)`` (each tick as it goes out),
     ``publish_status(tick, outcome, message, values)`` (the status's values, as the study's model's world gives
     them: ``waiting_for``, ``rejected_messages``, ``rejected``; from tick 0 ``startup_seconds`` and the run's
     progress, ten a second; at the end ``wall_seconds``), and answers ``monitor_reads()`` (the monitor reads the
@@ -264,6 +264,7 @@ class CentralWorld:
         run = self.run
         tick, ended = run.tick, run.outcome is not None
         self.watch.moved(self.clock())
+        self.port.publish_clock(tick)
         if self.checkpoint is not None and not ended and tick % self.save_every == 0:  # before the tick goes out
             self._save()
         if ended or tick % self.every == 0:

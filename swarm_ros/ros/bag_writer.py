@@ -32,6 +32,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.artifacts.run_dir import BAG_DIR
+from swarm_ros.core.grid import CellMap
 from swarm_ros.protocol.plan import CentralTopics
 from swarm_ros.ros import graph as msgs
 
@@ -48,14 +49,19 @@ TOPICS: dict[str, tuple[type, QoSProfile]] = {
 }
 
 
-def central_topics(algorithm: str) -> dict[str, tuple[type, QoSProfile]]:
-    """The recorded topics of a central world's run of ``algorithm`` (its monitor reads no decisions: every robot's
-    row every record_every-th tick, the metrics of every tick, the status)."""
-    topics = CentralTopics.of(algorithm)
+def central_topics(algorithm: str, dims: int = 2) -> dict[str, tuple[type, QoSProfile]]:
+    """The recorded topics of a central world's run of ``algorithm`` in a world of ``dims`` dimensions (its monitor
+    reads no decisions): every robot's row every record_every-th tick, the metrics of every tick, the status; and,
+    as the monitor encodes them from those, the shape, the occupancy at each record that changed it and the clock
+    of every tick (:mod:`swarm_ros.nodes.central.monitor`)."""
+    topics, kind = CentralTopics.of(algorithm), msgs.map_type(dims)
     return {
         topics.robots: (PointCloud2, msgs.CENTRAL_QOS),
         topics.metrics: (PointCloud2, msgs.CENTRAL_QOS),
         msgs.STATUS: (DiagnosticArray, msgs.STATUS_QOS),
+        msgs.SHAPE: (kind, msgs.LATCHED_QOS),
+        msgs.OCCUPANCY: (kind, msgs.LATCHED_QOS),
+        msgs.CLOCK: (Clock, msgs.CLOCK_QOS),
     }
 
 
@@ -213,16 +219,16 @@ class BagRecorder:
             storage.close_chunk()  # type: ignore[attr-defined]
             storage.bio.flush()  # type: ignore[attr-defined]
 
-    def write_world(self, shape, occupancy, tick: int, first: bool, changed: bool) -> None:
-        """/swarm/shape once (``first``), /swarm/occupancy first and when it ``changed``, /clock every tick: the
-        world's messages on them, encoded here from the verified rows as the world encodes them. These
-        types carry no tag (:mod:`swarm_ros.ros.auth`), so the monitor takes none of them from the network."""
+    def write_world(self, cells: CellMap, tick: int, first: bool, changed: bool) -> None:
+        """/swarm/shape once (``first``), /swarm/occupancy (``cells.filled``) first and when it ``changed``, /clock:
+        the world's messages on them, encoded here from the verified rows as the world encodes them. These types
+        carry no tag (:mod:`swarm_ros.ros.auth`), so the monitor takes none of them from the network."""
         if self._maps is None:
-            self._maps = msgs.WorldMaps(shape)
+            self._maps = msgs.WorldMaps(cells)
         if first:
             self.write(msgs.SHAPE, self._maps.shape_message(tick))
         if changed:
-            self.write(msgs.OCCUPANCY, self._maps.occupancy_message(occupancy, tick))
+            self.write(msgs.OCCUPANCY, self._maps.occupancy_message(cells.filled, tick))
         self.write(msgs.CLOCK, msgs.clock_message(tick))
 
     def close(self) -> Path:

@@ -23,6 +23,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProf
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Header, Int64MultiArray, MultiArrayDimension
 
+from swarm_ros.core.grid import CellMap
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.shapes import Shape
 from swarm_ros.protocol.cdr import encode_clock, encode_cloud, encode_grid
@@ -50,7 +51,7 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     region_topic,
     snapshot_topic,
 )
-from swarm_ros.protocol.rows import FRAME_ID, PATCH_METRES, TICK_SECONDS
+from swarm_ros.protocol.rows import FRAME_ID, TICK_SECONDS
 
 _NO_WAIT = Duration(seconds=0)
 
@@ -237,59 +238,60 @@ def metrics_of(msg: Int64MultiArray) -> dict[str, int]:
     return dict(zip(labels, (int(v) for v in msg.data)))
 
 
-def grid_message(shape: Shape, cells: np.ndarray, tick: int) -> bytes:
-    """An OccupancyGrid over the whole world (walls included), one cell per patch, origin at the corner;
-    serialized, as it is published (:func:`swarm_ros.protocol.cdr.encode_grid`)."""
-    world = shape.world
-    return encode_grid(cells, world.size, PATCH_METRES, -(world.radius + 0.5) * PATCH_METRES, tick)
-
-
-def shape_cells(shape: Shape) -> np.ndarray:
-    return np.where(shape.mask.ravel(), CELL_EMPTY, CELL_OFF_SHAPE).astype(np.int8)
-
-
 def map_type(dims: int) -> type:
     """The message type of /swarm/shape and /swarm/occupancy in a world of ``dims`` dimensions."""
     return OccupancyGrid if dims == 2 else PointCloud2
 
 
-class WorldMaps:
-    """The world's /swarm/shape and /swarm/occupancy messages, serialized as published.
+def study_cells(shape: Shape, occupancy: np.ndarray | None = None) -> CellMap:
+    """The study's model's shape as cells, those a robot holds filled (``occupancy``: flat, a robot id or -1 a
+    patch; None: none filled)."""
+    filled = np.zeros_like(shape.mask) if occupancy is None else occupancy.reshape(shape.mask.shape) >= 0
+    return shape.world.cell_map(shape.mask, filled)
 
-    2D: ``nav_msgs/OccupancyGrid`` over the whole world (shape patches 0, filled ones 100,
-    the rest -1). 3D: ``sensor_msgs/PointCloud2`` of voxel centres (:data:`~swarm_ros.protocol.rows.VOXEL_ROW`):
-    every shape voxel on /swarm/shape, the filled ones on /swarm/occupancy; RViz shows either
-    as boxes, one voxel wide (PointCloud2, style Boxes, size 1).
+
+class WorldMaps:
+    """A run's /swarm/shape and /swarm/occupancy messages, serialized as published, from the engine's
+    :class:`~swarm_ros.core.grid.CellMap` (its mask, its cells' side and corner: they stay for the run).
+
+    2D: ``nav_msgs/OccupancyGrid`` over the cells (shape cells 0, filled ones 100, the rest -1). 3D:
+    ``sensor_msgs/PointCloud2`` of voxel centres (:data:`~swarm_ros.protocol.rows.VOXEL_ROW`): every shape voxel on
+    /swarm/shape, the filled ones on /swarm/occupancy; RViz shows either as boxes, one voxel wide (PointCloud2, style
+    Boxes, size 1).
     """
 
-    def __init__(self, shape: Shape) -> None:
-        self.shape = shape
-        self.solid = shape.dims == 3
-        self.kind = map_type(shape.dims)
-        self.cells = None if self.solid else shape_cells(shape)
+    def __init__(self, cells: CellMap) -> None:
+        self.mask, self.side, self.corner = cells.mask, cells.side, cells.corner
+        self.solid = cells.mask.ndim == 3
+        self.kind = map_type(cells.mask.ndim)
+        self.cells = None if self.solid else np.where(cells.mask, CELL_EMPTY, CELL_OFF_SHAPE).astype(np.int8)
 
     def _voxels(self, flags: np.ndarray, tick: int) -> bytes:
         from swarm_ros.protocol.rows import VOXEL_ROW
 
-        coords = self.shape.world.patch_coords(np.flatnonzero(flags))
-        rows = np.zeros(coords[0].size, dtype=VOXEL_ROW)
-        for name, c in zip("xyz", coords):
-            rows[name] = c * PATCH_METRES
+        index = np.unravel_index(np.flatnonzero(flags), flags.shape)  # (iz, iy, ix)
+        rows = np.zeros(index[0].size, dtype=VOXEL_ROW)
+        for name, i, corner in zip("xyz", reversed(index), self.corner):
+            rows[name] = corner + (i + 0.5) * self.side
         return encode_cloud(rows, tick)
+
+    def _grid(self, cells: np.ndarray, tick: int) -> bytes:
+        return encode_grid(cells, self.side, (self.corner[0], self.corner[1]), tick)
 
     def shape_message(self, tick: int) -> bytes:
         if self.solid:
-            return self._voxels(self.shape.mask.ravel(), tick)
+            return self._voxels(self.mask, tick)
         assert self.cells is not None  # a 2D world's
-        return grid_message(self.shape, self.cells, tick)
+        return self._grid(self.cells, tick)
 
-    def occupancy_message(self, occupancy: np.ndarray, tick: int) -> bytes:
+    def occupancy_message(self, filled: np.ndarray, tick: int) -> bytes:
+        """The cells ``filled`` (bool, as the mask) at ``tick``."""
         if self.solid:
-            return self._voxels(occupancy >= 0, tick)
+            return self._voxels(filled, tick)
         assert self.cells is not None  # a 2D world's
         cells = self.cells.copy()
-        cells[occupancy >= 0] = CELL_FULL
-        return grid_message(self.shape, cells, tick)
+        cells[filled] = CELL_FULL
+        return self._grid(cells, tick)
 
 
 def status_message(

@@ -8,6 +8,7 @@ from typing import NamedTuple
 import numpy as np
 
 from swarm_ros.core.errors import ContractError
+from swarm_ros.core.grid import CellMap
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import RUN_PARAMETER
 from swarm_ros.core.rng import uniform_array
@@ -60,12 +61,14 @@ class RandomWalk:
     history = property(lambda self: np.array(self._rows, dtype=float))  #: a row of ``columns`` a tick
     done = property(lambda self: self.outcome is not None)
     seen_by_all = staticmethod(lambda state: state < 0)  #: none: a walker sees only its neighbours
+    progress = lambda self: (int(self._rows[-1][3]), int(self.mask.sum()), {"tick": str(self.tick)})
+    empty_curve = lambda self: np.stack([self.history[:, 0], self.mask.sum() - self.history[:, 3]], axis=1)
+    saved = lambda self: {**self.robots._asdict(), "history": self.history}  # a checkpoint's arrays
 
-    def progress(self) -> tuple[int, int, dict[str, str]]:
-        return int(self._rows[-1][3]), int(self.mask.sum()), {"tick": str(self.tick)}
-
-    def empty_curve(self) -> np.ndarray:
-        return np.stack([self.history[:, 0], self.mask.sum() - self.history[:, 3]], axis=1)
+    def cell_map(self) -> CellMap:  # the shape's cells, and those a stopped robot stands on
+        filled, s = np.zeros_like(self.mask), self.robots
+        filled[s.y[s.state == 1], s.x[s.state == 1]] = True
+        return CellMap(self.mask, filled & self.mask, 1.0, (-0.5, -0.5))
 
     def deciding(self, among: np.ndarray | None = None) -> np.ndarray:
         ids = np.arange(self.params.robots) if among is None else among
@@ -120,9 +123,6 @@ class RandomWalk:
         for mine, theirs in zip(self.robots, robots):
             mine[:] = theirs
         self.tick, self.outcome, self._rows = tick, outcome, history.tolist()
-
-    def saved(self) -> dict[str, np.ndarray]:
-        return {**self.robots._asdict(), "history": self.history}
 
     def restore(self, tick: int, arrays: dict[str, np.ndarray]) -> None:  # another run's: ValueError, in load
         self.load(tick, Robots(*(arrays[f] for f in Robots._fields)), arrays["history"][: tick + 1])

@@ -21,6 +21,7 @@ import numpy as np
 
 from swarm_ros.core.algorithm import check_engine
 from swarm_ros.core.errors import ContractError
+from swarm_ros.core.grid import CellMap
 from swarm_ros.core.metrics import OUTCOME_OF_CODE, Outcome, fill_ticks
 from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETER, RunParams
 from swarm_ros.core.rng import STREAM_PLACE_HEADING, uniform_array
@@ -179,13 +180,8 @@ class RubensteinRun:
         self._rows: list[np.ndarray] = [row]
 
     # -- reading ---------------------------------------------------------------------------------------------
-    @property
-    def done(self) -> bool:
-        return self.outcome is not None
-
-    @property
-    def pixels(self) -> int:
-        return self.frame.pixels
+    done = property(lambda self: self.outcome is not None)
+    pixels = property(lambda self: self.frame.pixels)  #: the shape's
 
     @property
     def history(self) -> np.ndarray:
@@ -208,6 +204,11 @@ class RubensteinRun:
         progress bar)."""
         m = self.metrics
         return int(m["covered"]), self.pixels, {"tick": str(self.tick), "joined": str(int(m["joined"]))}
+
+    def cell_map(self) -> CellMap:
+        """The shape's pixels, and those a joined robot's disc meets (the graph's maps)."""
+        b = self.bitmap
+        return CellMap(b.mask.reshape(b.rows, b.cols), self.covered.reshape(b.rows, b.cols) > 0, b.pixel, (b.x0, b.y0))
 
     # -- running ---------------------------------------------------------------------------------------------
     def step(self) -> None:

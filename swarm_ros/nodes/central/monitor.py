@@ -24,6 +24,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
@@ -69,7 +70,7 @@ class CentralMonitorNode:
         self.recorder = self.algorithm.hook("recording")(self.rrd, copy, options) if options.active else None
         self.core = CentralMonitor(copy, wire, int(own["world_shards"]), self.recorder)
         self.finished = False
-        recorded = central_topics(self.algorithm.name)
+        recorded = central_topics(self.algorithm.name, self.shape.world.dims)
         self.bag = BagRecorder(self.out, recorded=recorded) if own["bag"] else None
         self.raw: bytes | None = b""  # the message being handled, as it came (into the bag once its handler took it)
         self.rejections = Rejections(node.get_logger())
@@ -81,6 +82,12 @@ class CentralMonitorNode:
             self.topics.metrics: self._on_metrics,
             STATUS: self._on_status,
         }
+        cells = copy.cell_map()
+        self.maps = msgs.WorldMaps(cells)  # the shape and the occupancy as the copy holds them, at each record
+        self.filled = cells.filled.copy()  # the occupancy last published
+        self.pub_shape = node.create_publisher(self.maps.kind, msgs.SHAPE, msgs.LATCHED_QOS)
+        self.pub_occupancy = node.create_publisher(self.maps.kind, msgs.OCCUPANCY, msgs.LATCHED_QOS)
+        self.pub_shape.publish(self.maps.shape_message(0))
         if self.incarnation:
             self._resume()
         for topic, handler in self.handlers.items():
@@ -93,10 +100,13 @@ class CentralMonitorNode:
 
         def take(topic: str, data: bytes) -> None:
             self.raw = None  # in the bag already
-            self.handlers[topic](self.gate.open(DiagnosticArray if topic == STATUS else PointCloud2, topic, data))
+            if topic in self.handlers:  # (not the maps and the clock: this node's own, from these)
+                self.handlers[topic](self.gate.open(DiagnosticArray if topic == STATUS else PointCloud2, topic, data))
 
         replayed = resume(self.bag, self.out, take, marker=None)
         self.raw = b""
+        self.filled = self.core.copy.cell_map().filled.copy()
+        self.pub_occupancy.publish(self.maps.occupancy_message(self.filled, self.core.robots_tick))
         self.gate.verifier.taken_before()
         self.node.get_logger().warn(
             f"monitor restarted (incarnation {self.incarnation}): went on from tick {self.core.last_tick} of the bag "
@@ -124,15 +134,20 @@ class CentralMonitorNode:
         """Nothing heavy."""
 
     def _on_metrics(self, msg: Cloud) -> None:
+        before = self.core.last_tick
         try:
             self.core.metrics(msg)
         except Rejected as fault:
             self.rejections.drop(self.topics.metrics, fault)
             return
         self._into_bag(self.topics.metrics)
+        if self.bag is not None and self.raw is not None:
+            for tick in range(before + 1, self.core.last_tick + 1):  # the world's clock, a tick a message
+                self.bag.write(msgs.CLOCK, msgs.clock_message(tick))
         self._report()
 
     def _on_robots(self, msg: Cloud) -> None:
+        before = self.core.robots_tick
         try:
             taken = self.core.robots_record(msg)
         except Rejected as fault:
@@ -140,7 +155,24 @@ class CentralMonitorNode:
             return
         if taken:
             self._into_bag(self.topics.robots)
+            if self.core.robots_tick != before and self.raw is not None:
+                self._maps()
             self._report()
+
+    def _maps(self) -> None:
+        """A new whole record: the shape into the bag with the first, and the occupancy, published and into the
+        bag, if the record changed it (and with the first)."""
+        tick, filled = self.core.robots_tick, self.core.copy.cell_map().filled
+        first = tick == 0
+        if not first and np.array_equal(filled, self.filled):
+            return
+        self.filled = filled.copy()
+        data = self.maps.occupancy_message(filled, tick)
+        self.pub_occupancy.publish(data)
+        if self.bag is not None:
+            if first:
+                self.bag.write(msgs.SHAPE, self.maps.shape_message(tick))
+            self.bag.write(msgs.OCCUPANCY, data)
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         self._into_bag(STATUS)

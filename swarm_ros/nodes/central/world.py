@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
@@ -60,6 +61,8 @@ class CentralWorldNode:
         self.pub_status = self.signer.publisher(DiagnosticArray, STATUS, msgs.STATUS_QOS)
         self.pub_robots = self.signer.publisher(PointCloud2, self.topics.robots, msgs.CENTRAL_QOS)
         self.pub_metrics = self.signer.publisher(PointCloud2, self.topics.metrics, msgs.CENTRAL_QOS)
+        first = int(own.get("shard", 0)) == 0  # the world, or world shard 0: /clock (untagged, as ROS tools read it)
+        self.pub_clock = node.create_publisher(Clock, msgs.CLOCK, msgs.CLOCK_QOS) if first else None
         self.areas: dict[str, SignedPublisher] = {}  # batch node name -> its whole view's publisher
         self.changes: dict[str, SignedPublisher] = {}  # batch node name -> its changes' publisher
         engine = algorithm.hook("engine")(shape, self.params)
@@ -195,6 +198,10 @@ class CentralWorldNode:
         if metrics is not None:  # (a world shard other than shard 0 sends no metrics: shard 0's are the same)
             self.pub_metrics.publish_rows(metrics, tick)
         self.pub_robots.publish_rows(robots, tick)
+
+    def publish_clock(self, tick: int) -> None:
+        if self.pub_clock is not None:
+            self.pub_clock.publish(msgs.clock_message(tick))
 
     def publish_status(self, tick: int, outcome: str, message: str, values: dict[str, object]) -> None:
         self.pub_status.publish(msgs.status_message(tick, outcome, message, extra=values))

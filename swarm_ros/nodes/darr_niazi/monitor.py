@@ -211,7 +211,7 @@ class MonitorNode:
             for topic, raw in messages:
                 self.bag.write(topic, raw)
             self.bag.write(msgs.METRICS, data)
-            self.bag.write_world(self.shape, occupancy, tick, first, changed)
+            self.bag.write_world(msgs.study_cells(self.shape, occupancy), tick, first, changed)
             take_waiting(self.readers[msgs.DECISIONS])  # one the executor lost the event of: in, now
             self.bag.durable()
         self.pub_metrics.send(data)

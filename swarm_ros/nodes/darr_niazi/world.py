@@ -73,7 +73,7 @@ class WorldNode:
         self.pub_decisions = signed(PointCloud2, msgs.DECISIONS, msgs.DECISIONS_QOS)  # applied
         self.pub_tally = signed(Int64MultiArray, msgs.TALLY, msgs.ROBOTS_QOS)  # record_every > 1
         # for viewers only: these types have no field for a tag, and no node of the run reads them (auth)
-        self.maps = msgs.WorldMaps(self.shape)  # OccupancyGrids in 2D, voxel clouds in 3D
+        self.maps = msgs.WorldMaps(msgs.study_cells(self.shape))  # OccupancyGrids in 2D, voxel clouds in 3D
         self.pub_shape = node.create_publisher(self.maps.kind, msgs.SHAPE, msgs.LATCHED_QOS)
         self.pub_occupancy = node.create_publisher(self.maps.kind, msgs.OCCUPANCY, msgs.LATCHED_QOS)
         self.pub_clock = node.create_publisher(Clock, msgs.CLOCK, msgs.CLOCK_QOS)
@@ -220,7 +220,8 @@ class WorldNode:
         sim = self.ls.sim
         self.occupancy_at = time.monotonic()
         if self.viewers:
-            self.pub_occupancy.publish(self.maps.occupancy_message(sim.state.occupancy, sim.tick))
+            filled = msgs.study_cells(self.shape, sim.state.occupancy).filled
+            self.pub_occupancy.publish(self.maps.occupancy_message(filled, sim.tick))
 
     def monitor_reads_all(self) -> bool:
         """Whether this node has discovered the monitor's reader of every topic it takes from the network.
