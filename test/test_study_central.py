@@ -264,6 +264,50 @@ def test_a_batch_removed_leaves_its_robots_at_the_next_ticks_end_and_the_world_d
     assert same(run, again)
 
 
+@pytest.mark.parametrize("shards, restarts", [(2, {}), (3, {22: 0, 47: 2})])
+def test_world_shards_remove_a_batch_lost_for_good_as_one_world_does(shards, restarts):
+    """on_batch_loss: remove with world shards: the shard of the lost batch tells every shard, with its shared rows,
+    the robots that leave at the end of the next tick (counted as failing), so the run is the one world's with those
+    robots removed then; a shard restarted from a save before the removal removes them again, alike."""
+    from swarm_ros.core.central_shards import run_sharded
+
+    params = RunParams(robots=DISC.patches + 30, seed=9, vision_radius=2.0)
+    _, removed = _lockstep_run(params, {20: 1, 45: 0})  # what one central world removes, and when
+    whole = _with_removals(params, removed)
+    make = partial(Simulation, DISC, params)
+    world = run_sharded(make, StudyWire.batch, shards, 3, removals={20: 1, 45: 0}, restarts=restarts, save_every=10)
+    _owners_agree(world, whole)
+    assert all(w.run.losses == whole.losses for w in world) and len(whole.losses) == 2
+
+
+def test_a_shards_robots_that_leave_are_checked_as_its_peers_own():
+    """The counts message of a peer shard carries, after its counts, the robots that leave at the tick's end: ids
+    of the run, ascending, none of them this shard's own robots, or the message is dropped."""
+    from swarm_ros.core.central_shards import CentralShard
+    from swarm_ros.protocol.central_shard_world import ShardLockstep
+
+    class Port:
+        def __getattr__(self, name):
+            return lambda *args: None  # the messages to its peers: not looked at here
+
+    params = RunParams(robots=DISC.patches + 30, seed=9, vision_radius=2.0)
+    run, wire = Simulation(DISC, params), StudyWire(2)
+    ls = ShardLockstep(CentralShard(run, strips_for(run, 2), 0, 2), wire, port=Port())
+    none, counts = wire.rows(np.empty(0, dtype=np.int64), run.robots), run.counts(np.empty(0, dtype=np.int64))
+    mine, theirs = ls.shard.own[-1], np.setdiff1d(np.arange(params.robots), ls.shard.own)[:3]
+    for values, kind in [
+        (counts[1:], "bad number"),
+        (np.concatenate([counts, [mine]]), "bad ids"),
+        (np.concatenate([counts, theirs[::-1]]), "bad ids"),
+        (np.concatenate([counts, [params.robots]]), "bad ids"),
+    ]:
+        with pytest.raises(Rejected) as refused:
+            ls.shared(1, 1, none, values)
+        assert refused.value.kind == kind
+    ls.shared(1, 1, none, np.concatenate([counts, theirs]))
+    assert ls.exchange.inbox[("shared", 1)][1][3].tolist() == theirs.tolist()
+
+
 def _world_with_a_loss(tmp_path, policy: str, restarts: int, then: str):
     """A central world of the study's model over a fake port and clock, its three batches fed what it sends; batch 1's
     liveliness lapses as tick 21 is decided and it answers no more, and then ``then``: ``"wait"`` (nothing comes back

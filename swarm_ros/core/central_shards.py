@@ -61,6 +61,12 @@ class ShardedRun(CentralRun, Protocol):
         outcome."""
         ...
 
+    def leave(self, tick: int, ids: np.ndarray) -> None:
+        """Robots ``ids`` leave the world at the end of ``tick`` (a batch lost for good), as :meth:`CentralRun.remove`
+        would then: told before the tick's counts (the owner) or its close (every shard). Only an algorithm whose
+        robots can be removed has it."""
+        ...
+
 
 def take(robots: Any, ids: np.ndarray | slice) -> Any:
     """The rows of robots ``ids`` of every robot's arrays ``robots`` (a NamedTuple of arrays)."""
@@ -177,7 +183,9 @@ class ShardPort(Protocol):
 
     def send_border(self, peer: int, tick: int, ids: np.ndarray, decided: Any) -> None: ...
 
-    def send_shared(self, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray) -> None: ...  # to every peer
+    def send_shared(self, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray, leaving: np.ndarray) -> None:
+        """To every peer: its robots whose rows every shard shares, its counts, and its robots that leave."""
+        ...
 
     def send_rows(self, peer: int, tick: int, ids: np.ndarray, rows: Any) -> None: ...
 
@@ -205,6 +213,18 @@ class CentralExchange:
         self.tick, self.phase = self.shard.run.tick + 1, DECIDING  # the tick being settled, and what it waits for
         self.inbox = {key: got for key, got in self.inbox.items() if key[1] >= self.tick}
         self.mine = self.own = self.decided_ = self.everyones = None  # type: Any
+        self.leaving = np.empty(0, dtype=np.int64)  # its robots that leave at the end of the tick being settled
+
+    def leave(self, ids: np.ndarray) -> None:
+        """Its robots ``ids`` (ascending) leave the world at the end of the tick being settled: every shard is told
+        with its shared rows (:meth:`ShardedRun.leave`).
+
+        Raises:
+            ContractError: its shared rows of the tick went out already (the caller waits for the tick's close).
+        """
+        if self.phase not in (DECIDING, BORDER):
+            raise ContractError(f"robots that leave at the end of tick {self.tick}, whose shared rows went out")
+        self.leaving = np.union1d(self.leaving, ids)
 
     def decided(self, tick: int, ids: np.ndarray, decided: Any) -> None:
         """Its batches' decisions for ``tick`` (every deciding robot of its own, ascending): on to its peers."""
@@ -221,8 +241,9 @@ class CentralExchange:
     def border(self, peer: int, tick: int, ids: np.ndarray, decided: Any) -> None:
         self._keep("border", peer, tick, (ids, decided), self.neighbours)
 
-    def shared(self, peer: int, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray) -> None:
-        self._keep("shared", peer, tick, (ids, rows, counts), self.peers)
+    def shared(self, peer: int, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray, leaving: Any = None) -> None:
+        gone = np.empty(0, dtype=np.int64) if leaving is None else leaving
+        self._keep("shared", peer, tick, (ids, rows, counts, gone), self.peers)
 
     def rows(self, peer: int, tick: int, ids: np.ndarray, rows: Any) -> None:
         self._keep("rows", peer, tick, (ids, rows), self.neighbours)
@@ -255,14 +276,19 @@ class CentralExchange:
         if self.phase == BORDER and (borders := self._all("border", self.neighbours)) is not None:
             empty = (self.own[:0], take(self.decided_, slice(0, 0)))
             halo, halo_decided = concat([empty, *borders.values()])
+            if self.leaving.size:  # (before it settles and counts: its rows are shared, its counts say they fail)
+                run.leave(self.tick, self.leaving)
             ids = run.settle_shard(self.own, self.decided_, halo, halo_decided, shard.present)
             rows, counts = take(run.robots, ids), run.counts(self.mine)
-            self.inbox.setdefault(("shared", self.tick), {})[shard.index] = (ids, rows, counts)
-            self.port.send_shared(self.tick, ids, rows, counts)
+            self.inbox.setdefault(("shared", self.tick), {})[shard.index] = (ids, rows, counts, self.leaving)
+            self.port.send_shared(self.tick, ids, rows, counts, self.leaving)
             self.phase = SHARED
         if self.phase == SHARED and (shared := self._all("shared", [*self.peers, shard.index])) is not None:
-            ids, rows = concat([(i, r) for i, r, _ in shared.values()])
-            run.close_shard(ids, rows, np.sum([c for _, _, c in shared.values()], axis=0))
+            ids, rows = concat([(i, r) for i, r, _, _ in shared.values()])
+            leaving = np.concatenate([gone for *_, gone in shared.values()])
+            if leaving.size:
+                run.leave(self.tick, np.unique(leaving))
+            run.close_shard(ids, rows, np.sum([c for _, _, c, _ in shared.values()], axis=0))
             self.everyones = ids  # the rows every shard now shares
             for peer in self.neighbours:  # its robots within the peer's reach, or that were at the tick's start
                 keep = shard.reach(peer, self.mine) | shard.reach(peer, self.mine, self.before)
@@ -272,7 +298,7 @@ class CentralExchange:
             shard.receive(list(rows_in.values()), self.everyones)
             for kind in ("border", "shared", "rows"):
                 self.inbox.pop((kind, self.tick), None)
-            self.tick, self.phase = self.tick + 1, DECIDING
+            self.tick, self.phase, self.leaving = self.tick + 1, DECIDING, self.leaving[:0]
             self.port.closed(self.tick - 1)
 
 
@@ -324,10 +350,10 @@ class _Mail:
             def send_border(self, peer, tick, ids, decided):
                 post(peer, tick, lambda ex: ex.border(s, tick, ids, decided))
 
-            def send_shared(self, tick, ids, rows, counts):
+            def send_shared(self, tick, ids, rows, counts, leaving):
                 for o in range(len(mail.exchanges)):
                     if o != s:
-                        post(o, tick, lambda ex: ex.shared(s, tick, ids, rows, counts))
+                        post(o, tick, lambda ex: ex.shared(s, tick, ids, rows, counts, leaving))
 
             def send_rows(self, peer, tick, ids, rows):
                 post(peer, tick, lambda ex: ex.rows(s, tick, ids, rows))
@@ -356,12 +382,15 @@ def run_sharded(
     seed: int = 0,
     restarts: dict[int, int] | None = None,
     save_every: int = 10,
+    removals: dict[int, int] | None = None,
 ) -> list[CentralShard]:
     """Run a central world as ``shards`` world shards of ``batches`` batches (``batch(run, strips, k)`` gives batch
     k, as the algorithm's wire does), from ``make_run()`` (a fresh engine, one per shard), to its end or
     ``max_ticks`` ticks: each shard a :class:`CentralExchange`, their messages delivered in an order shuffled by
     ``seed``. Each shard saves every ``save_every`` ticks; ``restarts`` (tick -> shard) restarts a shard as it is
-    about to decide that tick: a fresh engine from its last save, given again what its peers sent it since. Returns
+    about to decide that tick: a fresh engine from its last save, given again what its peers sent it since;
+    ``removals`` (tick t -> batch k) removes batch k as tick t + 1 is decided: the robots deciding in its strip leave
+    at that tick's end (the world goes on deciding its strip, here with the same batch). Returns
     the shards: each one's engine has the run's metrics and outcome, and the rows of its own robots.
 
     Raises:
@@ -415,6 +444,10 @@ def run_sharded(
                 if truth is not None and ticks == {w.run.tick}:  # (not a shard just restarted from its save)
                     _check_view(stores[k], truth)
                 parts.append(hosts[k].decide(w.run.tick + 1, stores[k].seen, changed, stores[k].robots))
+            if (removals or {}).get(w.run.tick) in w.batches:
+                deciding = w.run.deciding(w.present)
+                k = (removals or {})[w.run.tick]
+                mail.exchanges[s].leave(deciding[strips.in_strip(w.run.grid.columns(w.run.robots.x[deciding]), k)])
             mail.exchanges[s].decided(w.run.tick + 1, *concat(parts))
         mail.deliver()
     if len({(w.run.tick, w.run.outcome) for w in world}) != 1:

@@ -113,6 +113,7 @@ class Simulation:
         self._rows = np.zeros((1024, len(METRIC_COLUMNS)), dtype=np.int64)
         self._nrows = 0
         self.losses: list[tuple[int, int]] = []  #: (tick, robots removed at its end), in tick order
+        self._leaving: dict[int, np.ndarray] = {}  # tick -> robots that leave at its end on a world shard (leave)
         self.last_removed = np.empty(0, dtype=np.int64)  #: ids removed at the end of the last tick
         s = self.state
         self._set_kernel_args(params.robots)
@@ -441,7 +442,7 @@ class Simulation:
         here = np.bincount(state[ids], minlength=STATE_COUNT)
         failing = np.zeros(STATE_COUNT, dtype=np.int64)
         if self._fails_at(self.tick + 1):
-            failing = np.bincount(state[np.intersect1d(failing_robots(self.params), ids)], minlength=STATE_COUNT)
+            failing = np.bincount(state[np.intersect1d(self._failing(self.tick + 1), ids)], minlength=STATE_COUNT)
         localized = here[RobotState.SEED] + here[RobotState.LOCALIZED]
         return np.array([localized, *here[_COUNTED], *failing[_COUNTED]], dtype=np.int64)
 
@@ -462,7 +463,7 @@ class Simulation:
         self._resolve(Decisions.of(self.tick + 1, np.concatenate([own, halo]), joined), own.size)
         stopped = self.state.state[own] == RobotState.LOCALIZED
         if self._fails_at(self.tick + 1):
-            stopped |= np.isin(own, failing_robots(self.params))
+            stopped |= np.isin(own, self._failing(self.tick + 1))
         return own[stopped]
 
     def close_shard(self, shared: np.ndarray, rows: Poses | Poses3D, counts: np.ndarray) -> Outcome | None:
@@ -482,7 +483,8 @@ class Simulation:
         self._reserve(1)
         self._record(1, 1, self._end_shard(tick, counts[1:4], self._rows[self._nrows]))
         if self.outcome is None and self._fails_at(tick):
-            self._take_out(failing_robots(self.params))
+            self._take_out(self._failing(tick))
+            self._leaving.pop(tick, None)
             code = self._end_shard(tick, counts[1:4] - counts[4:7], self._rows[self._nrows - 1])
             self.outcome = OUTCOME_OF_CODE[code]
         return self.outcome
@@ -497,9 +499,19 @@ class Simulation:
         return int(code)
 
     # -- bookkeeping ------------------------------------------------------------
+    def leave(self, tick: int, ids: np.ndarray) -> None:
+        """Robots ``ids`` leave the world at the end of ``tick`` on a world shard, as the scheduled failures do (a
+        batch lost for good: :meth:`remove` at that tick's end in one world); every shard is told alike."""
+        self._leaving[tick] = np.union1d(self._leaving.get(tick, ids[:0]), ids)
+
     def _fails_at(self, tick: int) -> bool:
-        """Whether the scheduled failures come at the end of ``tick``."""
-        return self.params.failures > 0 and tick == self.params.fail_tick
+        """Whether robots fail or leave at the end of ``tick``."""
+        return (self.params.failures > 0 and tick == self.params.fail_tick) or tick in self._leaving
+
+    def _failing(self, tick: int) -> np.ndarray:
+        """The robots that fail or leave at the end of ``tick``, ascending."""
+        leaving = self._leaving.get(tick, np.empty(0, dtype=np.int64))
+        return np.union1d(failing_robots(self.params), leaving) if tick == self.params.fail_tick else leaving
 
     def _failure_pending(self) -> bool:
         return self.params.failures > 0 and self.tick < self.params.fail_tick
@@ -508,7 +520,7 @@ class Simulation:
         """Scheduled failures (``params.fail_fraction`` at the end of ``params.fail_tick``)."""
         self.last_removed = np.empty(0, dtype=np.int64)
         if self._fails_at(self.tick) and self.outcome is None:
-            self.remove(failing_robots(self.params))
+            self.remove(self._failing(self.tick))
 
     def _check_running(self) -> None:
         if self.outcome is not None:

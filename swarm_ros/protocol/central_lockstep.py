@@ -147,6 +147,10 @@ class CentralLockstep:
             flat = flat[2 + n :]
 
     # -- batches removed (lost for good) --------------------------------------------------------------------
+    def can_remove(self) -> bool:
+        """Whether a batch can be removed now (a world's: always)."""
+        return True
+
     def remove_batch(self, k: int) -> np.ndarray:
         """Batch k is lost for good: the robots deciding in its strip now leave the world at the end of the next
         tick, and from then on the world decides for its strip itself (its decisions for the next tick, if in

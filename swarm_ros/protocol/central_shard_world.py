@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm_ros.core.central_shards import DECIDING, CentralExchange, CentralShard, concat
+from swarm_ros.core.central_shards import BORDER, DECIDING, CentralExchange, CentralShard, concat
 from swarm_ros.core.errors import ContractError, Rejected, RunFailed
 
 from .central_lockstep import CentralLockstep
@@ -66,8 +66,8 @@ class ShardLockstep(CentralLockstep):
         return self.mine
 
     def kept(self) -> dict[str, np.ndarray]:
-        """The robots it holds (its columns' and its halo's): saved with the run."""
-        return {"present": self.shard.present}
+        """The robots it holds (its columns' and its halo's), and its batches removed: saved with the run."""
+        return {**super().kept(), "present": self.shard.present}
 
     def resume(self, hosts: dict[int, str], cuts: np.ndarray, kept: dict[str, np.ndarray], before: int = -1) -> None:
         """As :meth:`CentralLockstep.resume`, holding the robots it held, its exchanges on from the run's tick.
@@ -83,6 +83,9 @@ class ShardLockstep(CentralLockstep):
             raise RunFailed(f"the world shard's checkpoint is not of this run ({exc})") from exc
         super().resume(hosts, cuts, kept, before)
         self.exchange.restart()
+        for tick, ids in self.removing:  # (saved as they were removed: at the end of the tick it goes on deciding)
+            if tick == self.exchange.tick:
+                self.exchange.leave(ids)
 
     def holding(self) -> np.ndarray:
         """The robots it holds: its columns' and its halo's."""
@@ -109,6 +112,25 @@ class ShardLockstep(CentralLockstep):
             return False
         return super().decisions(k, tick, rows)
 
+    # -- batches removed (lost for good) --------------------------------------------------------------------
+    def can_remove(self) -> bool:
+        """Whether a batch can be removed now: not while its shared rows of the tick being settled are out and the
+        tick not closed (every shard must hear of the robots that leave with those rows)."""
+        return self.exchange.phase in (DECIDING, BORDER)
+
+    def remove_batch(self, k: int) -> np.ndarray:
+        """As :meth:`CentralLockstep.remove_batch`: the robots leave at the end of the tick being settled, every
+        shard told with its shared rows (:meth:`~swarm_ros.core.central_shards.CentralExchange.leave`)."""
+        if k in self.removed or k not in self.shard.batches or self.strips is None:
+            return np.empty(0, dtype=np.int64)
+        ids = self.own(k)
+        self.exchange.leave(ids)
+        self.removing.append((self.exchange.tick, ids))
+        self._host_locally(k)
+        if k not in self.decided and self.exchange.phase == DECIDING:
+            self._decide_locally(k, whole=True)
+        return ids
+
     def settle(self) -> bool:
         """Its batches' decisions are in: to its peers; the tick settles when theirs are in (``on_settled``)."""
         ids, decided = concat([self.decided[k] for k in self.mine])
@@ -120,13 +142,14 @@ class ShardLockstep(CentralLockstep):
     def send_border(self, peer: int, tick: int, ids: np.ndarray, decided: Any) -> None:
         self.port.send_border(peer, tick, self.wire.decision_rows(ids, decided))
 
-    def send_shared(self, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray) -> None:
-        self.port.send_shared(tick, self.wire.rows(ids, self.run.robots), counts)
+    def send_shared(self, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray, leaving: np.ndarray) -> None:
+        self.port.send_shared(tick, self.wire.rows(ids, self.run.robots), np.concatenate([counts, leaving]))
 
     def send_rows(self, peer: int, tick: int, ids: np.ndarray, rows: Any) -> None:
         self.port.send_rows(peer, tick, self.wire.rows(ids, self.run.robots))
 
     def closed(self, tick: int) -> None:
+        self.removing = [(t, ids) for t, ids in self.removing if t > tick]
         self.on_settled()
 
     def border(self, peer: int, tick: int, rows: np.ndarray) -> None:
@@ -138,16 +161,24 @@ class ShardLockstep(CentralLockstep):
         self.wire.check_rows(self.run, rows, tick)
         self.exchange.border(peer, tick, *self.wire.decisions_of(rows))
 
-    def shared(self, peer: int, tick: int, rows: np.ndarray, counts: np.ndarray) -> None:
-        """Shard ``peer``'s rows every shard shares, and its counts, of tick ``tick``.
+    def shared(self, peer: int, tick: int, rows: np.ndarray, values: np.ndarray) -> None:
+        """Shard ``peer``'s rows every shard shares, and its counts, of tick ``tick``, then its robots that leave at
+        the tick's end (``values``: the counts, then those ids).
 
         Raises:
-            Rejected: as :meth:`border`.
+            Rejected: as :meth:`border`; counts out of bounds, or robots that leave that are not the peer's.
         """
         self.wire.check_rows(self.run, rows, tick)
-        if counts.size != self.shard.run.counts(np.empty(0, dtype=np.int64)).size or np.any(counts < 0):
+        n = self.shard.run.counts(np.empty(0, dtype=np.int64)).size
+        counts, leaving = values[:n], values[n:]
+        if counts.size != n or np.any(counts < 0):
             raise Rejected("bad number", f"counts {counts.tolist()}")
-        self.exchange.shared(peer, tick, *self.wire.robots_of(rows), counts)
+        if leaving.size and (
+            leaving[0] < 0 or leaving[-1] >= self.run.params.robots or np.any(np.diff(leaving) <= 0)
+            or np.intersect1d(leaving, self.shard.own).size
+        ):  # fmt: skip
+            raise Rejected("bad ids", "robots that leave must be ascending ids of the peer's own robots")
+        self.exchange.shared(peer, tick, *self.wire.robots_of(rows), counts, leaving)
 
     def rows(self, peer: int, tick: int, rows: np.ndarray) -> None:
         """Shard ``peer``'s robots in this shard's columns or halo after tick ``tick``.

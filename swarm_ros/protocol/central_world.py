@@ -116,12 +116,9 @@ class CentralWorld:
         self.finished = False
         self.watch = Watch(self.created)
         self.removes = removes and (own.get("on_batch_loss") == "remove", int(own.get("max_restarts", 0)))
-        if self.removes and sharded:
-            self.removes = False  # (ShardLockstep.remove_batch: not built) a batch out of restarts fails the run
-            if own.get("on_batch_loss") == "remove":
-                raise RunFailed("on_batch_loss: remove is not built for a central world's shards yet")
         self.incarnations: dict[str, int] = {}  #: batch name -> the last incarnation it announced
-        self.losing: dict[str, float] = {}  #: batch name -> when its loss is confirmed, unless it is back
+        #: batch name -> when its loss is confirmed, unless it is back, and why then
+        self.losing: dict[str, tuple[float, str]] = {}
         if int(own["incarnation"]):  # a restarted process: on from the last checkpoint
             self._resume()
 
@@ -164,7 +161,8 @@ class CentralWorld:
         if k is not None and k in self.ls.removed:
             raise Rejected("removed batch", f"{name}'s robots were removed; the world decides its strip")
         if name in self.losing and incarnation > self.incarnations.get(name, 0):
-            self._remove(name, "a new process of it announced itself")
+            self.losing[name] = (self.clock(), "a new process of it announced itself")
+            self._remove(name)
             raise Rejected("removed batch", f"{name}'s robots were removed; the world decides its strip")
         self.incarnations[name] = max(incarnation, self.incarnations.get(name, 0))
         send = self.ls.announce(name, strip)
@@ -217,13 +215,16 @@ class CentralWorld:
         if name in self.watch.lapsed and self.removes and k is not None and k not in self.ls.removed:
             remove, restarts = self.removes
             if remove or self.incarnations.get(name, 0) >= restarts:  # lost for good, unless back in time
-                self.losing[name] = self.clock() + LOSS_CONFIRM_S
+                self.losing[name] = (self.clock() + LOSS_CONFIRM_S, f"not back within {LOSS_CONFIRM_S:g} s")
 
-    def _remove(self, name: str, why: str) -> None:
-        """Batch ``name`` is lost for good: its robots are removed at the end of the next tick, the world decides
-        its strip from then on, and a checkpoint says so."""
-        self.losing.pop(name, None)
+    def _remove(self, name: str) -> None:
+        """Batch ``name`` is lost for good (``losing``): its robots are removed at the end of the next tick, the
+        world decides its strip from then on, and a checkpoint says so. A world shard whose tick is half settled
+        removes it once the tick is closed (the next poll)."""
         k = self.ls.number(name)
+        if k is not None and self.run.outcome is None and not self.ls.can_remove():
+            return
+        _, why = self.losing.pop(name)
         if k is None or self.run.outcome is not None:
             return
         ids = self.ls.remove_batch(k)
@@ -307,9 +308,9 @@ class CentralWorld:
             RunFailed: the batches did not all announce themselves within ``start_timeout``, or the run is still.
         """
         now = self.clock()
-        for name, due in list(self.losing.items()):
+        for name, (due, _) in list(self.losing.items()):
             if now >= due:
-                self._remove(name, f"not back within {LOSS_CONFIRM_S:g} s")
+                self._remove(name)
         if self.ls.started and not self.first and not self.pending and self.ls.ready():  # every batch removed
             if self.ls.settle():
                 self._settled()
