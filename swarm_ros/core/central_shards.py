@@ -62,9 +62,8 @@ class ShardedRun(CentralRun, Protocol):
         ...
 
     def leave(self, tick: int, ids: np.ndarray) -> None:
-        """Robots ``ids`` leave the world at the end of ``tick`` (a batch lost for good), as :meth:`CentralRun.remove`
-        would then: told before the tick's counts (the owner) or its close (every shard). Only an algorithm whose
-        robots can be removed has it."""
+        """Robots ``ids`` leave at the end of ``tick``, as :meth:`CentralRun.remove` would then (before the owner's
+        counts, and every shard's close); only an algorithm whose robots can be removed has it."""
         ...
 
 
@@ -183,9 +182,9 @@ class ShardPort(Protocol):
 
     def send_border(self, peer: int, tick: int, ids: np.ndarray, decided: Any) -> None: ...
 
-    def send_shared(self, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray, leaving: np.ndarray) -> None:
-        """To every peer: its robots whose rows every shard shares, its counts, and its robots that leave."""
-        ...
+    def send_shared(
+        self, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray, leaving: np.ndarray
+    ) -> None: ...  # to every peer: its robots whose rows every shard shares, its counts, and its robots that leave
 
     def send_rows(self, peer: int, tick: int, ids: np.ndarray, rows: Any) -> None: ...
 
@@ -216,12 +215,8 @@ class CentralExchange:
         self.leaving = np.empty(0, dtype=np.int64)  # its robots that leave at the end of the tick being settled
 
     def leave(self, ids: np.ndarray) -> None:
-        """Its robots ``ids`` (ascending) leave the world at the end of the tick being settled: every shard is told
-        with its shared rows (:meth:`ShardedRun.leave`).
-
-        Raises:
-            ContractError: its shared rows of the tick went out already (the caller waits for the tick's close).
-        """
+        """Its robots ``ids`` (ascending) leave at the end of the tick being settled, every shard told with its shared
+        rows (:meth:`ShardedRun.leave`); ContractError once those went out (the caller waits for the tick's close)."""
         if self.phase not in (DECIDING, BORDER):
             raise ContractError(f"robots that leave at the end of tick {self.tick}, whose shared rows went out")
         self.leaving = np.union1d(self.leaving, ids)
@@ -241,9 +236,8 @@ class CentralExchange:
     def border(self, peer: int, tick: int, ids: np.ndarray, decided: Any) -> None:
         self._keep("border", peer, tick, (ids, decided), self.neighbours)
 
-    def shared(self, peer: int, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray, leaving: Any = None) -> None:
-        gone = np.empty(0, dtype=np.int64) if leaving is None else leaving
-        self._keep("shared", peer, tick, (ids, rows, counts, gone), self.peers)
+    def shared(self, peer: int, tick: int, ids: np.ndarray, rows: Any, counts: np.ndarray, leaving: np.ndarray) -> None:
+        self._keep("shared", peer, tick, (ids, rows, counts, leaving), self.peers)
 
     def rows(self, peer: int, tick: int, ids: np.ndarray, rows: Any) -> None:
         self._keep("rows", peer, tick, (ids, rows), self.neighbours)
@@ -444,10 +438,9 @@ def run_sharded(
                 if truth is not None and ticks == {w.run.tick}:  # (not a shard just restarted from its save)
                     _check_view(stores[k], truth)
                 parts.append(hosts[k].decide(w.run.tick + 1, stores[k].seen, changed, stores[k].robots))
-            if (removals or {}).get(w.run.tick) in w.batches:
-                deciding = w.run.deciding(w.present)
-                k = (removals or {})[w.run.tick]
-                mail.exchanges[s].leave(deciding[strips.in_strip(w.run.grid.columns(w.run.robots.x[deciding]), k)])
+            if (k := (removals or {}).get(w.run.tick, -1)) in w.batches:  # its robots deciding in k's strip leave
+                mine = w.run.deciding(w.present)
+                mail.exchanges[s].leave(mine[strips.in_strip(w.run.grid.columns(w.run.robots.x[mine]), k)])
             mail.exchanges[s].decided(w.run.tick + 1, *concat(parts))
         mail.deliver()
     if len({(w.run.tick, w.run.outcome) for w in world}) != 1:
