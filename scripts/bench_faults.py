@@ -6,18 +6,18 @@ Each trial runs ``swarm-ros run`` on the star (rules local, seed 5, 3,604 ticks,
 the README's defaults) once without a fault, then once for each node kind with that process SIGKILLed once the
 world has saved tick ``--at``. Reported per kind, as median (min-max) over the trials:
 
-- kill -> moving: from the SIGKILL until the run moves again. For a robot batch and the world: the world saves
-  a tick past the one it had stopped at 50 ms after the kill (read from its checkpoint's header, as a
-  restarted world reads it). For the monitor: the world hears a held report past the last one it had then
-  (the same header); the world runs on up to ``monitor_window`` ticks without the monitor, then waits.
+- kill -> moving: from the SIGKILL until the run moves again: the monitor's bag holds a tick past the one it held
+  50 ms after the kill (its /clock, written as it takes each tick's metrics; a restarted monitor's bag is a new
+  one). The world runs on up to ``monitor_window`` ticks without the monitor, then waits.
 - slowdown: the faulted command's wall time over the unfaulted one's, in the same trial.
 - same: metrics.csv and final_state.csv byte-identical to the unfaulted run's.
 
 Then, as before, the launcher itself is killed: the time until none of its node processes is alive (they get
 SIGHUP from the kernel through PR_SET_PDEATHSIG).
 
-First, in this process, what being restartable costs each tick: the world's checkpoint write, and the
-monitor's making its bag durable (a tick of the star: 300 changed rows, a 12-kB rows message).
+First, in this process, what being restartable costs: the world's checkpoint of the star's run (saved every
+1,000 ticks), and the monitor's bag writes of a tick, without and with making them durable (a 12-kB rows
+message).
 """
 
 from __future__ import annotations
@@ -37,7 +37,6 @@ import numpy as np
 
 RUN = ["--shape", "star", "--seed", "5", "--rules", "local", "--processes", "3", "--quiet"]
 KINDS = ("robot_batch_1", "world", "monitor")
-_MAGIC, _DONE, _MONITOR = 0, 7, 8  # the checkpoint header's int64s (swarm_ros.protocol.checkpoint)
 
 
 def _nodes(out: Path) -> dict[str, int]:
@@ -57,26 +56,21 @@ def _nodes(out: Path) -> dict[str, int]:
     return found
 
 
-def _header(out: Path) -> np.ndarray | None:
-    for logs in out.parent.glob(f".{out.name}.logs-*"):
-        try:
-            head = np.fromfile(logs / "world.checkpoint", dtype=np.int64, count=9)
-        except (OSError, ValueError):
-            return None
-        if head.size == 9 and head[_MAGIC] != 0:
-            return head
-    return None
+def _held(out: Path) -> int:
+    """The last tick the run's monitor holds durably in its bag (its /clock); -1 before tick 0."""
+    from swarm_ros.ros.bag_writer import held_tick
+
+    return held_tick(out.parent.glob(f".{out.name}.bag-*"))
 
 
-def _wait(out: Path, column: int, above: int, timeout: float = 180) -> float:
-    """Poll the checkpoint header until ``column`` exceeds ``above``; return time.monotonic() then."""
+def _wait(out: Path, above: int, timeout: float = 180) -> float:
+    """Poll the monitor's bag until it holds a tick past ``above``; return time.monotonic() then."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        head = _header(out)
-        if head is not None and head[column] > above:
+        if _held(out) > above:
             return time.monotonic()
-        time.sleep(0.001)
-    raise SystemExit(f"the run never passed {above} (header column {column})")
+        time.sleep(0.005)
+    raise SystemExit(f"the run never passed tick {above}")
 
 
 def one_run(base: Path, name: str, victim: str | None, at: int) -> tuple[float, float | None, Path]:
@@ -91,16 +85,14 @@ def one_run(base: Path, name: str, victim: str | None, at: int) -> tuple[float, 
     )
     moving = None
     if victim is not None:
-        _wait(out, _DONE, at - 1)
+        _wait(out, at - 1)
         pid = _nodes(out)[victim]
-        column = _MONITOR if victim == "monitor" else _DONE
         os.kill(pid, signal.SIGKILL)
         killed = time.monotonic()
         # where the run stops: what was under way when the process died lands within moments (the world
-        # applies a tick whose decisions were in, a report in flight arrives); a restart takes over a second
+        # applies a tick whose decisions were in, a record in flight arrives); a restart takes over a second
         time.sleep(0.05)
-        before = int(_header(out)[column])
-        moving = _wait(out, column, before) - killed
+        moving = _wait(out, _held(out)) - killed
     _, err = launcher.communicate(timeout=600)
     if launcher.returncode != 0:
         raise SystemExit(f"{name}: run failed: {err.strip()}")
@@ -114,7 +106,7 @@ def launcher_trial(base: Path, at: int = 300) -> float:
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    _wait(out, _DONE, at)
+    _wait(out, at)
     pids = list(_nodes(out).values())
     launcher.kill()
     killed = time.monotonic()
@@ -133,29 +125,33 @@ def launcher_trial(base: Path, at: int = 300) -> float:
 
 
 def tick_costs(base: Path, ticks: int = 3000) -> tuple[float, float, float]:
-    """Microseconds per tick: the world's checkpoint write; the monitor's bag writes of a tick without and with
-    making them durable."""
-    from swarm_ros.core.metrics import METRIC_COLUMNS
-    from swarm_ros.protocol.checkpoint import Checkpoint
-    from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+    """Microseconds per tick: the world's checkpoint of the star's run at tick 1,000 over the 1,000 ticks between
+    saves; the monitor's bag writes of a tick without and with making them durable."""
+    from swarm_ros.core.algorithm import algorithm_of
+    from swarm_ros.core.params import Settings
+    from swarm_ros.protocol import central_checkpoint as checkpoint
+    from swarm_ros.protocol.plan import CentralTopics
     from swarm_ros.ros import graph as msgs
-    from swarm_ros.ros.bag_writer import BagRecorder
+    from swarm_ros.ros.bag_writer import BagRecorder, central_topics
 
-    ck = Checkpoint(base / "ck", 1036, 100_000, len(METRIC_COLUMNS), 130)
-    ck.create()
-    rows, applied = np.zeros(300, ROBOT_ROW), np.zeros(300, DECISION_ROW)
-    rows["id"] = np.arange(300) + 4
-    metrics = np.zeros(len(METRIC_COLUMNS), dtype=np.int64)
+    shape, params = Settings(shape="star", seed=5, rules="local").resolve()
+    run = algorithm_of(params.algorithm).hook("engine")(shape, params)
+    run.run(max_ticks=1000)
+    saves = max(1, ticks // 300)
     began = time.perf_counter()
-    for t in range(ticks):
-        ck.write(t, rows, applied, metrics)
-    write = (time.perf_counter() - began) / ticks * 1e6
-    bag, out = BagRecorder(base / "run"), []
+    for _ in range(saves):
+        checkpoint.save(base / "world.checkpoint", run, {0: "robot_batch_0"}, np.array([0, run.grid.nx]))
+    write = (time.perf_counter() - began) / saves / checkpoint.SAVE_TICKS * 1e6
+    bag, out, topics = (
+        BagRecorder(base / "run", recorded=central_topics(params.algorithm)),
+        [],
+        CentralTopics.of(params.algorithm),
+    )
     for durable in (False, True):
         began = time.perf_counter()
         for _ in range(ticks):
-            bag.write(msgs.ROBOTS, bytes(12_000))
-            bag.write(msgs.METRICS, bytes(200))
+            bag.write(topics.robots, bytes(12_000))
+            bag.write(topics.metrics, bytes(200))
             bag.write(msgs.CLOCK, bytes(20))
             if durable:
                 bag.durable()
@@ -175,7 +171,7 @@ def _spread(values: list[float], fmt: str = "{:.2f}") -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=3)
-    parser.add_argument("--at", type=int, default=1000, help="kill once the world has saved this tick")
+    parser.add_argument("--at", type=int, default=1000, help="kill once the monitor's bag holds this tick")
     parser.add_argument(
         "--smoke",
         action="store_true",
@@ -215,7 +211,7 @@ def main() -> int:
         )
     print(
         f"\nstar, rules local, seed 5, K = 3, recording and bag on{'; --smoke: 400 ticks' if args.smoke else ''}; "
-        f"kill once tick {args.at} is saved; "
+        f"kill once the bag holds tick {args.at}; "
         f"{args.trials} trials; unfaulted command {_spread(plain)} s"
     )
     print(f"{'killed':>14} {'kill -> moving s':>22} {'slowdown':>22} {'same':>6}")

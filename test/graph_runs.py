@@ -14,10 +14,6 @@ from bagcheck import assert_bag_holds_run
 from recordings import Recording
 from waiting import wait_for
 
-from swarm_ros.protocol.checkpoint import MAGIC
-
-_DONE = 7  # the checkpoint header's int64 holding the last tick saved (swarm_ros.protocol.checkpoint)
-
 
 def run_env() -> dict[str, str]:
     env = dict(os.environ)
@@ -161,20 +157,30 @@ def staged_logs(out: Path, timeout: float = 60) -> Path:
     return wait_for(lambda: next(out.parent.glob(f".{out.name}.logs-*"), None), timeout, "its logs", poll=0.01)
 
 
-def saved_tick(logs: Path, name: str = "world.checkpoint") -> int:
-    """The last tick the world saved (``name``: world.checkpoint.<i> for world shard i); -1 before its first."""
-    try:
-        head = np.fromfile(logs / name, dtype=np.int64, count=8)
-    except (OSError, ValueError):
-        return -1
-    return int(head[_DONE]) if head.size == 8 and head[0] == MAGIC else -1
+def _run_of(logs: Path) -> Path:
+    """The run directory whose staged logs are ``logs`` (``.<run>.logs-XXXX`` beside it)."""
+    return logs.parent / logs.name[1:].split(".logs-")[0]
 
 
-def wait_saved(logs: Path, tick: int, timeout: float = 180, name: str = "world.checkpoint") -> int:
-    """Wait (polling fast) until the world (the shard whose save is ``name``) has saved ``tick``; return the tick
-    saved when seen."""
+def saved_tick(logs: Path, name: str = "") -> int:
+    """The last tick the run's monitor holds durably in its bag (:func:`bag_tick`), from the run's staged logs.
+    (``name``: unused, the world process's; every world process's tick is the run's.)"""
+    return bag_tick(_run_of(logs))
+
+
+def bag_tick(out: Path) -> int:
+    """The last tick the monitor of the run into ``out`` holds durably in its bag (its /clock, written as it takes
+    each tick's metrics); -1 before tick 0."""
+    from swarm_ros.ros.bag_writer import held_tick
+
+    return held_tick(out.parent.glob(f".{out.name}.bag-*"))
+
+
+def wait_saved(logs: Path, tick: int, timeout: float = 180, name: str = "") -> int:
+    """Wait until the run's monitor holds ``tick`` (:func:`saved_tick`): the world got there, and a restarted world
+    goes on from its last checkpoint at or before it; return the tick held when seen."""
     saved = wait_for(  # a one-item list: true even for tick 0
-        lambda: [t for t in (saved_tick(logs, name),) if t >= tick], timeout, f"tick {tick} saved", poll=0.0005
+        lambda: [t for t in (saved_tick(logs),) if t >= tick], timeout, f"tick {tick} held", poll=0.1
     )
     return saved[0]
 

@@ -76,3 +76,15 @@ def test_topics_prints_3d_rows_with_z_and_pitch(torus_run):
     decisions = decoded_rows(make_cloud(decision_rows(torus_run.last_decisions()), 40))
     assert "pitch" in decisions.splitlines()[0] and "claim" in decisions.splitlines()[0]
     assert "z" not in decoded_rows(make_cloud(np.zeros(3, dtype=ROBOT_ROW), 1)).split()  # 2D: as before
+
+
+def test_topics_prints_any_algorithms_rows_as_their_fields_say():
+    """An algorithm's own rows and the metrics rows have no layout of the study's: the table follows the fields."""
+    from swarm_ros.core.metrics import METRIC_COLUMNS
+    from swarm_ros.protocol.central_rows import metrics_row
+
+    rows = np.zeros(2, dtype=metrics_row(tuple(METRIC_COLUMNS)))
+    rows["tick"], rows["empty_patches"] = [40, 41], [7, 6]
+    text = decoded_rows(make_cloud(rows, 41)).splitlines()
+    assert text[0].split()[4:] == list(METRIC_COLUMNS) and text[1].split()[0] == "#"
+    assert [float(v) for v in text[2].split()[1:]] == [41, 0, 0, 0, 0, 6, 0]

@@ -15,14 +15,13 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
-from bagcheck import read_bag
+from bagcheck import assert_bag_holds_run, read_bag
 from graph_runs import run_env
 from runs import shape_file
 from waiting import wait_for
 
-from swarm_ros.protocol.rows import ROBOT_ROW
+from swarm_ros.protocol.plan import CentralTopics
 
 pytestmark = pytest.mark.process
 
@@ -104,11 +103,9 @@ def test_an_interrupted_run_keeps_a_readable_bag_of_its_ticks(tmp_path):
             proc.kill()
             proc.wait()
     assert proc.returncode == 130, err
-    info, messages = read_bag(out / "bag")
     with open(out / "metrics.csv", newline="") as f:
-        ticks = len(list(csv.reader(f))) - 1
-    assert ticks >= 1 and len(messages["/swarm/robots"]) >= ticks
-    assert [m.header.stamp.sec for m in messages["/swarm/robots"]][:ticks] == list(range(ticks))
+        assert len(list(csv.reader(f))) - 1 >= 1  # tick 0 at least
+    assert_bag_holds_run(out, interrupted=True)
     assert not list(tmp_path.glob(".run.bag-*")), "the hidden bag folder is gone"
 
 
@@ -118,7 +115,6 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from sensor_msgs.msg import PointCloud2
-    from std_msgs.msg import Int64MultiArray
 
     from swarm_ros.ros import graph as msgs
     from swarm_ros.ros.dds import dds_defaults
@@ -134,8 +130,9 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
     try:
         node = Node("replay_listener", context=context, start_parameter_services=False)
         robots, metrics = [], []
-        node.create_subscription(PointCloud2, msgs.ROBOTS, robots.append, msgs.reader_qos(msgs.ROBOTS_QOS))
-        node.create_subscription(Int64MultiArray, msgs.METRICS, metrics.append, msgs.reader_qos(msgs.METRICS_QOS))
+        topics = CentralTopics.of("darr-niazi")
+        node.create_subscription(PointCloud2, topics.robots, robots.append, msgs.CENTRAL_QOS)
+        node.create_subscription(PointCloud2, topics.metrics, metrics.append, msgs.CENTRAL_QOS)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         replay = subprocess.Popen(
@@ -160,7 +157,7 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
         )
         deadline = time.monotonic() + 60
         _, bagged = read_bag(ring_run / "bag")
-        want = len(bagged["/swarm/metrics"])
+        want = len(bagged[topics.metrics])
         while time.monotonic() < deadline and (replay.poll() is None or len(metrics) < want):
             executor.spin_once(timeout_sec=0.05)
         _, err = replay.communicate(timeout=30)
@@ -172,12 +169,10 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
-    with open(ring_run / "metrics.csv", newline="") as f:
-        table = list(csv.reader(f))[1:]
-    assert [[str(v) for v in m.data] for m in metrics] == table
-    assert [m.header.stamp.sec for m in robots] == list(range(len(table)))
-    first = np.frombuffer(bytes(robots[0].data), dtype=ROBOT_ROW)
-    assert first.size == len(np.frombuffer(bagged["/swarm/robots"][0].data, dtype=ROBOT_ROW))
+    # every message again, as the bag holds it
+    assert [bytes(m.data) for m in metrics] == [bytes(m.data) for m in bagged[topics.metrics]]
+    assert [bytes(m.data) for m in robots] == [bytes(m.data) for m in bagged[topics.robots]]
+    assert [m.header.stamp.sec for m in robots] == [m.header.stamp.sec for m in bagged[topics.robots]]
 
 
 def test_replay_refuses_a_start_offset_past_the_bags_end_in_one_line(ring_run):
@@ -214,3 +209,20 @@ def test_a_bag_that_cannot_be_closed_leaves_no_hidden_folder(tmp_path, monkeypat
     else:
         assert bag.move_to(tmp_path / "r.partial-bag") is None
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_held_tick_reads_the_last_clock_a_monitor_made_durable(tmp_path):
+    """What the tests and scripts/bench_faults.py watch a run's progress by: only what was made durable counts."""
+    from swarm_ros.ros import graph as msgs
+    from swarm_ros.ros.bag_writer import BagRecorder, central_topics, held_tick
+
+    out = tmp_path / "run"
+    holders = lambda: tmp_path.glob(".run.bag-*")
+    bag = BagRecorder(out, recorded=central_topics("darr-niazi"))
+    assert held_tick(holders()) == -1
+    for tick in range(5):
+        bag.write(msgs.CLOCK, msgs.clock_message(tick))
+    assert held_tick(holders()) == -1  # written, not yet durable
+    bag.durable()
+    assert held_tick(holders()) == 4
+    bag.discard()

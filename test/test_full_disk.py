@@ -87,4 +87,4 @@ def test_run_whose_disk_fills_says_so_and_leaves_no_hidden_or_broken_file(small_
         from rosbags.highlevel import AnyReader
 
         with AnyReader([disk / "r.partial-bag"]) as reader:
-            assert any(c.topic == "/swarm/robots" for c in reader.connections)
+            assert any(c.topic == "/swarm/darr_niazi/robots" for c in reader.connections)

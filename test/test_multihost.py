@@ -159,7 +159,7 @@ def test_world_and_batches_on_two_hosts_over_udp_equal_the_in_process_engine(two
     plan = [(0, "world", "world", []), (0, "monitor", "monitor", []), *_batches([1, 1], 2)]
     run = _run_on_hosts(tmp_path, [a, b], [link, "swrb" + link.removeprefix("swra")], settings, plan, 120)
     world_log = (tmp_path / "world.log").read_text()
-    assert "robot_batch_0 hosts" in world_log and "robot_batch_1 hosts" in world_log
+    assert "robot_batch_0: columns" in world_log and "robot_batch_1: columns" in world_log
     assert_same_run(ref, run, launched=False)
     # and the traffic really crossed the link between the hosts. Lower bounds that must hold:
     # host A received every decision row (one per moving robot per tick) from host B, and sent
@@ -216,7 +216,7 @@ def test_four_hosts_each_hosting_regions_equal_the_in_process_engine(four_hosts,
     )
     _say_times("four hosts", simulated, began, run)
     world_log = (tmp_path / "world.log").read_text()
-    assert all(f"robot_batch_{b} hosts" in world_log for b in range(4))
+    assert all(f"robot_batch_{b}: columns" in world_log for b in range(4))
     assert_same_run(ref, run, launched=False)
     # every other host took rows from host 0 and sent it decisions: each sent at least its robots' decisions
     # for the ticks where a quarter of the swarm moved in its strip, and received more than its snapshot's rows
@@ -245,5 +245,5 @@ def test_four_hosts_each_with_a_world_shard_and_its_batch_equal_the_in_process_e
     _say_times("four hosts, four world shards", simulated, began, run)
     for i in range(4):
         log = (tmp_path / f"world_shard_{i}.log").read_text()
-        assert f"robot_batch_{i} hosts" in log and "tick 0" in log, log[-2000:]
+        assert f"robot_batch_{i}: columns" in log and "tick 0" in log, log[-2000:]
     assert_same_run(ref, run, launched=False)

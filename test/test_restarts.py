@@ -25,6 +25,7 @@ from graph_runs import (
     STAR_SHORT,
     alive,
     assert_identical_run,
+    bag_tick,
     node_pid,
     processes_mentioning,
     run_env,
@@ -37,6 +38,7 @@ from graph_runs import (
     wait_ticks_recorded,
 )
 from recordings import Recording, rrd_verify
+from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.app.launcher import Launch
@@ -131,21 +133,20 @@ def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_iden
     assert restart["node"] == "robot_batch_2" and 0 < restart["tick"] < summary["max_ticks"]
     back = re.search(
         r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_2 is back \(restart 1\) at tick (\d+); "
-        r"sending it a snapshot",
+        r"sending it its area",
         _world_log(out),
     )
-    assert back and int(back.group(2)) == restart["tick"]
+    # the launcher's tick is the last the world's status had said as the process died: the world may be on past it
+    assert back and int(back.group(2)) >= restart["tick"]
     # forked from the launcher at the start; its restart started afresh (rclpy runs in the launcher by then)
     launched = re.findall(r"started robot_batch_2 \(pid \d+(, forked)?\)", (out / "logs" / "launcher.log").read_text())
     assert launched == [", forked", ""]
     print(f"restart to resume: {float(back.group(1)) - killed:.2f} s after the SIGKILL")
     # robots were being handed over to and from its strip when it died: the snapshot carried them
-    assert _handovers(2, range(restart["tick"] - 1, restart["tick"] + 2)) > 0
+    assert _handovers(2, range(int(back.group(2)) - 1, int(back.group(2)) + 2)) > 0
     events = Recording(out / "recording.rrd").events
-    assert (
-        restart["tick"],
-        f"robot_batch_2 restarted at tick {restart['tick']}: a new process took over its robots",
-    ) in events
+    at = int(back.group(2))
+    assert (at, f"robot_batch_2 restarted at tick {at}: a new process took over its robots") in events
 
 
 def test_a_batch_killed_twice_in_a_row_is_restarted_twice_and_the_run_is_identical(reference, tmp_path):
@@ -194,7 +195,7 @@ def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference
     os.kill(pid, signal.SIGKILL)
     again = node_pid(out, "robot_batch_1", not_pid=pid)
     deadline = time.monotonic() + 60
-    while "sending it a snapshot" not in (logs / "world.log").read_text() and time.monotonic() < deadline:
+    while "sending it its area" not in (logs / "world.log").read_text() and time.monotonic() < deadline:
         time.sleep(0.05)
     wait_saved(logs, saved_tick(logs) + 20)  # the new process decides: the run has gone on with it
     os.kill(again, signal.SIGKILL)
@@ -299,7 +300,7 @@ def test_every_node_ends_within_moments_of_a_sigkilled_launcher(tmp_path):
     from rosbags.highlevel import AnyReader
 
     with AnyReader([tmp_path / "run.partial-bag"]) as reader:
-        robots = [c for c in reader.connections if c.topic == "/swarm/robots"]
+        robots = [c for c in reader.connections if c.topic == "/swarm/darr_niazi/robots"]
         assert robots and sum(1 for _ in reader.messages(connections=robots)) >= 1
 
 
@@ -315,7 +316,7 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
         params_yaml(
             Settings(shape="star", seed=5, rules="local", max_ticks=1000),
             {
-                "monitor": {"out_dir": str(out), "record": False, "bag": False},
+                "monitor": {"out_dir": str(out), "record": False},  # (its bag tells how far the run is)
                 "world": {"checkpoint": str(tmp_path / "world.checkpoint")},
             },
         )
@@ -356,7 +357,7 @@ def test_a_batch_respawned_with_its_first_command_is_taken_back(reference, tmp_p
         "robot_batch_1": start("robot_batch_1", "robot_batch", *batch),
     }
     try:
-        wait_saved(tmp_path, 100)  # mid-run: the world's checkpoint holds tick 100
+        wait_for(lambda: bag_tick(out) >= 100, 180, "tick 100 held")  # mid-run: the monitor's bag holds tick 100
         procs["robot_batch_1"].kill()
         procs["robot_batch_1"].wait()
         procs["robot_batch_1"] = start("robot_batch_1", "robot_batch", *batch)  # the same command again

@@ -20,26 +20,25 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
 from bagcheck import assert_bag_holds_run
-from graph_runs import assert_same_run, descendants_of, processes_mentioning, shm_group, shm_left
+from graph_runs import assert_same_run, bag_tick, descendants_of, processes_mentioning, shm_group, shm_left
 from ros2_tools import NODES, Ros2, build_workspace, ctrl_c, install_ros2_tools, stop
 from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.core.params import RUBENSTEIN, RUN_PARAMETERS
-from swarm_ros.protocol.checkpoint import MAGIC
+from swarm_ros.protocol.plan import CentralTopics
 from swarm_ros.ros.shm import in_use, shm_locks
 
 pytestmark = pytest.mark.process
 
+STUDY = CentralTopics.of("darr-niazi")  #: the study's model's run's topics
 LAUNCH = "ros2 launch swarm_ros swarm.launch.py"
 #: The star under the local rule, cut at 1,500 ticks: a few seconds of run, long enough to kill in
 SHORT = {"shape": "star", "seed": "5", "rules": "local", "max_ticks": "1500"}
 RATE = 40  #: ticks a second of the live run the ros2 tools inspect: paced, it leaves the CPU to them
-_DONE = 7  # the checkpoint header's int64 holding the last tick saved (swarm_ros.protocol.checkpoint)
 
 
 @pytest.fixture(scope="module")
@@ -65,14 +64,6 @@ def _clean(output: str) -> None:
 def _simulate(out: Path, *flags: str) -> Path:
     assert cli.main(["simulate", *flags, "--out", str(out), "--quiet"]) == 0
     return out
-
-
-def _saved_tick(checkpoint: Path) -> int:
-    try:
-        head = np.fromfile(checkpoint, dtype=np.int64, count=8)
-    except (OSError, ValueError):
-        return -1
-    return int(head[_DONE]) if head.size == 8 and head[0] == MAGIC else -1
 
 
 def _launch_dir(ros: Ros2, before: list[Path]) -> Path:
@@ -192,7 +183,7 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
     foreign = {p.name for p in RUN_PARAMETERS if p.algorithm == RUBENSTEIN}
     assert {k: v for k, v in written.items() if k not in foreign} == typed, "what every node reads"
     assert {k: written[k] for k in foreign} == {p.name: p.default for p in RUN_PARAMETERS if p.name in foreign}
-    assert len(re.findall(r"\[robot_batch_\d\]: robot_batch_\d: strip x ", done.stdout + done.stderr)) == 3
+    assert len(re.findall(r"\[robot_batch_\d\]: robot_batch_\d: columns ", done.stdout + done.stderr)) == 3
     ref_params = tmp_path / "ref.yaml"
     ref_params.write_text(yaml.safe_dump({"/**": {"ros__parameters": typed}}))
     ref = _simulate(tmp_path / "ref", "--params-file", str(ref_params), "--no-recording")
@@ -233,7 +224,7 @@ def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros,
     proc = ros.start(f"{LAUNCH} out_dir:={out}", log=log)
     # while the nodes load, before tick 0 (a Ctrl-C in the first tenth of a second of a Python process, while
     # the interpreter itself starts, ends in its own traceback: docs/guides/ros2_tools.md)
-    wait_for(lambda: "robot_batch_1: strip" in log.read_text(), 60, "the nodes' start")
+    wait_for(lambda: "robot_batch_1: columns" in log.read_text(), 60, "the nodes' start")
     ctrl_c(proc)
     assert "tick 0" not in log.read_text()
     proc.wait(timeout=60)
@@ -245,7 +236,7 @@ def test_ctrl_c_at_start_up_leaves_nothing_and_mid_run_keeps_the_run_so_far(ros,
     before = ros.launch_logs()
     proc = ros.start(f"{LAUNCH} out_dir:={out} world_radius:=120 max_ticks:=20000", log=tmp_path / "late.log")
     checkpoint = _launch_dir(ros, before) / "world.checkpoint"
-    wait_for(lambda: _saved_tick(checkpoint) >= 200, 120, "tick 200")
+    wait_for(lambda: bag_tick(out) >= 200, 120, "tick 200")
     ctrl_c(proc)
     proc.wait(timeout=60)
     text = (tmp_path / "late.log").read_text()
@@ -266,9 +257,8 @@ def test_a_batch_the_world_and_the_monitor_sigkilled_under_ros2_launch_come_back
     log = tmp_path / "launch.log"
     proc = ros.start(f"{LAUNCH} out_dir:={out} {_arguments(SHORT)}", log=log)
     logs = _launch_dir(ros, before)
-    checkpoint = logs / "world.checkpoint"
     for tick, node in ((150, "robot_batch_1"), (450, "world"), (800, "monitor")):
-        wait_for(lambda t=tick: _saved_tick(checkpoint) >= t, 120, f"tick {tick}", poll=0.001)
+        wait_for(lambda t=tick: bag_tick(out) >= t, 120, f"tick {tick}", poll=0.01)
         os.kill(_node_pid(logs, node), signal.SIGKILL)
     assert proc.wait(timeout=240) == 0, log.read_text()[-4000:]
     text = log.read_text()
@@ -293,7 +283,7 @@ def test_world_shards_under_ros2_launch_a_sigkilled_one_comes_back_and_the_run_i
     run = _arguments({**SHORT, "max_ticks": "500"})  # killed at tick 200
     proc = ros.start(f"{LAUNCH} out_dir:={out} processes:=4 world_shards:=2 {run}", log=log)
     logs = _launch_dir(ros, before)
-    wait_for(lambda: _saved_tick(logs / "world.checkpoint.1") >= 200, 120, "tick 200", poll=0.001)
+    wait_for(lambda: bag_tick(out) >= 200, 120, "tick 200", poll=0.01)
     # the shared-memory files the nodes hold: a SIGKILLed node leaves its own and its peers' ports (before, 10
     # fastrtps_port* and 10 sem.*_mutex files stayed in /dev/shm after this test); the launch removes them
     nodes = ["monitor", "world_shard_0", "world_shard_1", *(f"robot_batch_{k}" for k in range(4))]
@@ -385,7 +375,7 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
     )
     try:
         logs = _launch_dir(ros, before)
-        wait_for(lambda: _saved_tick(logs / "world.checkpoint") >= 50, 120, "tick 50")
+        wait_for(lambda: bag_tick(out) >= 50, 120, "tick 50")
 
         def listed():
             done = ros.run("ros2 node list")
@@ -393,33 +383,33 @@ def test_ros2_topic_node_and_param_on_a_live_run(ros, tmp_path):
 
         wait_for(listed, 30, "all four nodes in ros2 node list", poll=0.5)
 
-        info = _ask_until(
-            ros, "ros2 node info /world", "/swarm/robots: sensor_msgs", "/world's writers in ros2 node info"
-        )
-        assert "/swarm/robots: sensor_msgs/msg/PointCloud2" in info.split("Publishers:")[1].split("Service")[0]
-        assert "/swarm/decisions/robot_batch_0: sensor_msgs/msg/PointCloud2" in info.split("Subscribers:")[1]
+        robots, metrics = STUDY.robots, STUDY.metrics
+        info = _ask_until(ros, "ros2 node info /world", f"{robots}: sensor_msgs", "/world's writers in ros2 node info")
+        assert f"{robots}: sensor_msgs/msg/PointCloud2" in info.split("Publishers:")[1].split("Service")[0]
+        assert f"{STUDY.decisions('robot_batch_0')}: sensor_msgs/msg/PointCloud2" in info.split("Subscribers:")[1]
 
         topics = _ask_until(ros, "ros2 topic list -t", "/swarm/status [", "every topic in ros2 topic list")
         for line in (
-            "/swarm/robots [sensor_msgs/msg/PointCloud2]",
-            "/swarm/metrics [std_msgs/msg/Int64MultiArray]",
+            f"{robots} [sensor_msgs/msg/PointCloud2]",
+            f"{metrics} [sensor_msgs/msg/PointCloud2]",
             "/swarm/held [std_msgs/msg/Int64MultiArray]",
             "/swarm/shape [nav_msgs/msg/OccupancyGrid]",
             "/clock [rosgraph_msgs/msg/Clock]",
             "/swarm/status [diagnostic_msgs/msg/DiagnosticArray]",
         ):
             assert line in topics.splitlines(), topics
-        verbose = _ask_until(ros, "ros2 topic info -v /swarm/robots", "Node name: world", "/swarm/robots' writer")
+        verbose = _ask_until(ros, f"ros2 topic info -v {robots}", "Node name: world", f"{robots}' writer")
         assert "Publisher count: 1" in verbose
         assert "Reliability: RELIABLE" in verbose and "Durability: TRANSIENT_LOCAL" in verbose
 
-        echo = ros.run("ros2 topic echo --once --no-lost-messages /swarm/metrics").stdout
-        metrics = yaml.safe_load(echo.split("---")[0])
-        assert metrics["layout"]["dim"][0]["label"] == "tick,stationary,localized,inside,moving,empty_patches,walking"
-        assert len(metrics["data"]) == 7 and metrics["data"][0] >= 50
+        echo = ros.run(f"ros2 topic echo --once --no-lost-messages {metrics}").stdout
+        cloud = yaml.safe_load(echo.split("---")[0])  # the metrics rows, a field each column
+        names = [f["name"] for f in cloud["fields"]][:7]  # (then the tag's field)
+        assert names == ["tick", "stationary", "localized", "inside", "moving", "empty_patches", "walking"], names
+        assert cloud["header"]["stamp"]["sec"] >= 50
         clock = yaml.safe_load(ros.run("ros2 topic echo --once --no-lost-messages /clock").stdout.split("---")[0])
         assert clock["clock"]["sec"] >= 50
-        hz = ros.run("timeout -s INT 5 ros2 topic hz /swarm/robots", timeout=30).stdout
+        hz = ros.run(f"timeout -s INT 5 ros2 topic hz {robots}", timeout=30).stdout
         rates = [float(r) for r in re.findall(r"average rate: ([\d.]+)", hz)]
         # paced: about RATE, where the run unpaced goes at hundreds a second. hz times its own receipt of each
         # message, and a reader that falls behind takes a few at once (CI's first window once said 44 at 40)
@@ -466,11 +456,12 @@ def test_swarm_ros_replay_is_watched_with_ros2_topic_echo(ros, tmp_path):
     )
     try:
         echo = ros.run(
-            "ros2 topic echo --once --no-lost-messages /swarm/metrics std_msgs/msg/Int64MultiArray", timeout=60
+            f"ros2 topic echo --once --no-lost-messages {STUDY.metrics} sensor_msgs/msg/PointCloud2",
+            timeout=60,
         )  # with its type, echo waits for the replay's publisher
         metrics = yaml.safe_load(echo.stdout.split("---")[0])
-        assert isinstance(metrics, dict) and "data" in metrics, echo.stdout + echo.stderr
-        assert metrics["data"][0] > 0, "from the offset on, not the first tick"
+        assert isinstance(metrics, dict) and "header" in metrics, echo.stdout + echo.stderr
+        assert metrics["header"]["stamp"]["sec"] > 0, "from the offset on, not the first tick"
         # without --loop the replay would have ended by now: its delay, one pass over the bag at rate 2, and
         # its wait for acknowledgements; with it, it is still going
         from rosbags.rosbag2 import Reader

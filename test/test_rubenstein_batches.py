@@ -709,7 +709,9 @@ def _monitor(shards: int = 1):
     from swarm_ros.protocol.central_monitor import CentralMonitor
 
     logged: list[int] = []
-    recorder = types.SimpleNamespace(log=lambda copy: logged.append(copy.tick))
+    recorder = types.SimpleNamespace(
+        log=lambda copy: logged.append(copy.tick), event=lambda t, text: logged.append(text)
+    )
     copy = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
     return CentralMonitor(copy, RubensteinWire, shards, recorder, clock=lambda: 0.0), logged
 
@@ -742,13 +744,51 @@ def test_the_monitor_holds_each_record_once_its_metrics_are_in_and_ends_with_the
     monitor.status({"outcome": "running"}, run.tick)
     assert not monitor.due()
     said = {"outcome": str(run.outcome), "wall_seconds": "2.500", "startup_seconds": "1.250", "rejected_messages": "3"}
+    said["restarts"] = "12:robot_batch_1"  # (as the world lists them: its own and its batches')
     monitor.status(said, run.tick)
     assert monitor.held() == (run.tick, True) and monitor.due()
     assert monitor.finish(run.outcome) == 2.5  # tick 0 to the outcome, on the world's clock
     assert same(run, monitor.copy)
     fields = {"startup_seconds": 1.25, "rejected_messages": {"world": 3, "monitor": 2}, "world_shards": 1}
-    assert monitor.graph_fields(2) == fields
-    assert logged == [tick for tick, _, _ in port.records[1:]]  # each record but tick 0's, recorded once
+    assert monitor.graph_fields(2) == {**fields, "restarts": [{"tick": 12, "node": "robot_batch_1"}]}
+    restart = "robot_batch_1 restarted at tick 12: a new process took over its robots"
+    assert logged == [tick for tick, _, _ in port.records[1:]] + [restart]  # each record but tick 0's, once
+
+
+def test_records_that_come_ahead_of_their_metrics_are_each_recorded_in_order_once_they_are_in(recorded):
+    """As a restarted monitor reads the topics' histories: every record first, then every metrics message."""
+    run, port = recorded
+    monitor, logged = _monitor()
+    for tick, _, robots in port.records:
+        assert monitor.robots_record(_cloud(robots, tick))
+    assert logged == []
+    half = len(port.records) // 2
+    for tick, metrics, _ in port.records[:half]:
+        monitor.metrics(_cloud(metrics, tick))
+    assert logged == [tick for tick, _, _ in port.records[1:half]]
+    for tick, metrics, _ in port.records[half:]:
+        monitor.metrics(_cloud(metrics, tick))
+    assert logged == [tick for tick, _, _ in port.records[1:]]
+    monitor.status({"outcome": str(run.outcome)}, run.tick)
+    monitor.finish(run.outcome)
+    assert same(run, monitor.copy)  # left at the last record
+
+
+def test_a_monitor_fails_rather_than_waits_once_the_outcome_came_without_its_record():
+    from swarm_ros.protocol.central_monitor import STATUS_WAIT, CentralMonitor
+
+    now = [0.0]
+    copy = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6))
+    monitor = CentralMonitor(copy, RubensteinWire, clock=lambda: now[0])
+    monitor.status({"outcome": "running"}, 3)
+    now[0] = 100.0
+    assert monitor.world_end_failure() is None  # no outcome: a run may take any time
+    monitor.status({"outcome": "complete"}, 40)
+    now[0] += STATUS_WAIT - 0.1
+    assert monitor.world_end_failure() is None
+    now[0] += 0.1
+    failure = monitor.world_end_failure()
+    assert failure is not None and "reached the monitor only up to tick -1 within 5 s" in str(failure)
 
 
 def test_the_monitor_takes_a_record_whole_from_the_world_shards_parts_in_any_order(recorded):
@@ -935,3 +975,50 @@ def test_a_whole_view_older_than_the_batch_holds_is_kept_beside_it_and_the_chang
             run.restore(30, checkpoint[0])
             ls = world(run, saved)
     assert late is not None and saved is not None and same(whole, run)
+
+
+def test_the_restarts_a_world_lists_are_taken_even_when_a_restarted_world_lists_others():
+    """A world restarted from its checkpoint of tick 0 forgets a batch's restart it had listed, and lists it again at
+    its own tick when the batch announces itself: its longer list replaces the shorter, each new item is told once."""
+    from swarm_ros.protocol.status import WorldReport
+
+    report = WorldReport()
+    assert report.update({"restarts": "150:robot_batch_1"}) == [(150, "robot_batch_1")]
+    assert report.update({"restarts": "0:world"}) == []  # not longer: the list it had stays
+    assert report.update({"restarts": "0:world;200:robot_batch_1"}) == [(0, "world"), (200, "robot_batch_1")]
+    assert report.restarts == [(0, "world"), (200, "robot_batch_1")]
+
+
+def test_the_world_lists_each_new_batch_process_and_its_own_restart_in_its_status_and_checkpoint(tmp_path):
+    """A later incarnation, or one started with the same command after the last one's liveliness lapsed (ros2 launch's
+    respawn), is a restart; an announcement heard again (a latched one) is not. A restarted world keeps the list of its
+    checkpoint and adds itself at the checkpoint's tick."""
+    from swarm_ros.protocol.central_world import CentralWorld
+    from swarm_ros.protocol.status import restarts_of
+
+    params, log = RunParams(40, algorithm="rubenstein", seed=6), Log()
+    own = {"record_every": 20, "monitor_window": 0, "start_timeout": 60.0, "incarnation": 0}
+    own["checkpoint"] = str(tmp_path / "world.npz")
+    world = CentralWorld(RubensteinRun(square(6), params), RubensteinWire, own, WorldPort(), log, Rejections(log))
+    strips = {
+        f"b{k}": CentralBatch(
+            square(6), params, {"batch": k, "batches": 2, "region_cuts": "", "name": f"b{k}"}, _no_drop
+        ).strip
+        for k in range(2)
+    }
+    for name, strip in strips.items():
+        world.batch(name, strip)
+    world.poll()  # tick 0 goes out, and is saved
+    world.batch("b0", strips["b0"])  # heard again: no new process
+    world.batch("b1", strips["b1"], incarnation=1)
+    world.liveliness("b0", 0, 1)
+    world.batch("b0", strips["b0"])  # the same command again, after a lapse
+    assert world.restarts == [(0, "b1"), (0, "b0")]
+    world.status("running", "running")
+    assert restarts_of(world.port.statuses[-1][3]["restarts"]) == world.restarts
+    world._save()
+    own["incarnation"] = 1
+    again = CentralWorld(RubensteinRun(square(6), params), RubensteinWire, own, WorldPort(), log, Rejections(log))
+    assert again.restarts == [(0, "b1"), (0, "b0"), (0, "world")]
+    again.batch("b1", strips["b1"], incarnation=1)  # its announcement, latched, again: known
+    assert len(again.restarts) == 3

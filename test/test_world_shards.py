@@ -113,7 +113,7 @@ def test_a_world_shard_killed_mid_run_goes_on_from_its_save(reference, tmp_path)
     [restart] = summary["restarts"]
     assert 0 < restart["tick"] < summary["convergence_tick"]
     log = (out / "logs" / "world_shard_1.log").read_text()
-    assert "world_shard_1 restarted: going on from tick" in log
+    assert "restarted: on from the checkpoint of tick" in log
 
 
 def test_a_world_shard_killed_while_starting_is_restarted_and_the_run_is_identical(small_reference, tmp_path):

@@ -315,7 +315,13 @@ def check_central_graph(shape, params, processes: int, region_cuts: str, flag: s
     from swarm_ros.core.algorithm import algorithm_of
     from swarm_ros.core.strips import strips_for
 
-    strips_for(algorithm_of(params.algorithm).hook("engine")(shape, params), processes, region_cuts)
+    engine = algorithm_of(params.algorithm).hook("engine")(shape, params)
+    if processes > engine.grid.nx:
+        raise InputError(
+            f"a world of {engine.grid.nx} columns cannot be cut into {processes} strips, one per "
+            f"robot-batch process ({flag}, default 2); each strip needs at least one column"
+        )
+    strips_for(engine, processes, region_cuts)
 
 
 def compile_first(algorithm: str, quiet: bool) -> bool:

@@ -31,7 +31,7 @@ class CentralRecorder:
         self, path: Path | None, run: Any, every: int = 1, spawn: bool = False, connect: str | None = None
     ) -> None:
         p = run.params
-        self.every, self._last = every, -1
+        self.every, self._last, self.ended = every, -1, False
         self.rec = open_stream(f"{run.shape.name} n{p.robots} {p.algorithm} s{p.seed}", path, spawn, connect)
         self.rec.log("world", rr.Transform3D(mat3x3=[[1, 0, 0], [0, -1, 0], [0, 0, 1]]), static=True)  # y up
         states = [rr.AnnotationInfo(id=k, label=f"state {k}", color=c.tolist()) for k, c in enumerate(PALETTE)]
@@ -51,10 +51,17 @@ class CentralRecorder:
         if run.tick % self.every == 0 or run.done:
             self.robots(run)
 
+    def event(self, tick: int, text: str) -> None:
+        """Log a text event (a restarted process) at ``tick``, unless the recording has ended."""
+        if not self.ended:
+            self.rec.set_time(TIMELINE, sequence=tick)
+            self.rec.log(EVENTS, rr.TextLog(text, level="WARN"))
+
     def finish(self, run: Any, outcome: str) -> None:
         """Log the last robots, the metrics of every tick and the outcome, and end the recording."""
         if run.tick != self._last:
             self.robots(run)
+        self.ended = True
         end_recording(self.rec, run, outcome)
 
 

@@ -116,12 +116,19 @@ class SimulationRecording:
         self.recorder.robots(sim.state, force=sim.done)
         self._logged = sim.tick
 
+    def event(self, tick: int, text: str) -> None:
+        """Log a text event (a restarted process) at ``tick``, unless the recording has ended."""
+        if not self.recorder.closed:
+            self.recorder.event(tick, text)
+
     def finish(self, sim: Simulation, outcome: str) -> None:
-        """Log the outcome and end the file.
+        """Log the robots at the end if not yet (a graph's monitor is told its last record before the outcome), the
+        outcome, and end the file.
 
         Raises:
             RecordingError: the file could not be written whole (it is removed).
         """
+        self.recorder.robots(sim.state, force=sim.done)
         self.recorder.outcome(outcome, sim.metrics)
         self.recorder.close()
 

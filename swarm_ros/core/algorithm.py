@@ -293,17 +293,13 @@ register(
         check_shape="swarm_ros.core.params:check_vision_fits",
         compile="swarm_ros.core.warmup:compile_kernels",
         warm_up="swarm_ros.core.warmup:warm_up",
-        plan="swarm_ros.protocol.plan:graph_plan",
-        check_graph="swarm_ros.app.processes:check_study_graph",
-        world_node="swarm_ros.nodes.darr_niazi.world:WorldNode",
-        world_shard_node="swarm_ros.nodes.darr_niazi.world:WorldNode",
-        robot_batch_node="swarm_ros.nodes.robot_batch:RobotBatchNode",
-        batch_host="swarm_ros.protocol.darr_niazi.batch_host:StudyBatch",
-        monitor_node="swarm_ros.nodes.darr_niazi.monitor:MonitorNode",
+        **{
+            **CENTRAL,  # its own recording, run directory and printed summary:
+            "recording": "swarm_ros.artifacts.recording_options:open_recording",
+            "write_run": "swarm_ros.artifacts.model_files:write_simulation",
+            "print_summary": "swarm_ros.app.summary_print:print_summary",
+        },
         checked_step="swarm_ros.core.invariants:checked_step",
-        recording="swarm_ros.artifacts.recording_options:open_recording",
-        write_run="swarm_ros.artifacts.model_files:write_simulation",
-        print_summary="swarm_ros.app.summary_print:print_summary",
     )
 )
 register(

@@ -126,9 +126,10 @@ class Strips:
         cuts = np.concatenate([[0], starts, [grid.nx]]).astype(np.int64)
         if (np.diff(cuts) < 1).any():
             end, unit = grid.x0 + grid.nx * grid.side, f" {grid.unit}" if grid.unit else ""
+            one = unit.removesuffix("es") if grid.side == 1 else unit  # (1 patch wide)
             raise ParameterError(
                 f"region_cuts {at.tolist()} leave a strip with no cell column (the grid's {grid.nx} columns, "
-                f"{grid.side:g}{unit} wide, span x = {grid.x0:g} to {end:g}{unit})"
+                f"{grid.side:g}{one} wide, span x = {grid.x0:g} to {end:g}{unit})"
             )
         return Strips(cuts, grid.reach)
 

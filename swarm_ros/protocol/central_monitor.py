@@ -18,14 +18,17 @@ from typing import Any
 
 import numpy as np
 
-from swarm_ros.core.errors import Rejected
+from swarm_ros.core.errors import Rejected, RunFailed
 from swarm_ros.core.metrics import Outcome
 
 from . import checks
 from .cdr import Cloud
 from .central_rows import Wire, check_metrics_rows, metrics_row
 from .plan import WORLD
-from .status import WorldReport, has_ended
+from .status import WorldReport, has_ended, restart_event
+
+#: seconds a monitor waits, once the world's outcome came, for the records and metrics up to it, before it fails
+STATUS_WAIT = 5.0
 
 
 class CentralMonitor:
@@ -46,11 +49,16 @@ class CentralMonitor:
         self.columns = tuple(copy.columns)
         self.history = np.empty((0, len(self.columns)))  #: the metrics of every tick taken, as the world sent them
         self.robots_tick = -1  #: the tick of the last whole record
+        self.recorded = 0  #: the tick of the last record the recorder was told
+        #: the whole records not yet told the recorder, (tick, robots) in order: their metrics are still on their way
+        self.untold: list[tuple[int, Any]] = []
         self.parts: dict[int, list[np.ndarray]] = {}  #: record tick -> the world shards' rows of it so far
         self.outcome: str | None = None  #: the world's outcome, once its status reports one
         self.outcome_tick = -1
+        self.outcome_at = 0.0  #: clock() as the outcome came
         self.started_at: float | None = None  #: clock() at the first metrics taken
         self.world = WorldReport()  #: what the world's (or world shards') status said: its clock, its drops
+        self.restarts: list[tuple[int, str]] = []  #: (tick, node) of each restart: as the world listed them, and own
 
     @property
     def last_tick(self) -> int:
@@ -69,6 +77,7 @@ class CentralMonitor:
         if self.started_at is None:
             self.started_at = self.clock()
         self.history = np.concatenate([self.history, history]) if len(self.history) else history
+        self._record()
 
     def robots_record(self, msg: Cloud) -> bool:
         """A record's robots (a world shard's: its own); returns whether it was taken (False: a record held
@@ -89,9 +98,24 @@ class CentralMonitor:
         self.robots_tick = tick
         _, robots = self.wire.robots_of(record)
         self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
-        if self.recorder is not None and tick > 0:  # (tick 0's: logged as the recorder opened)
-            self.recorder.log(self.copy)
+        if self.recorder is not None and tick > self.recorded:
+            self.untold.append((tick, robots))
+        self._record()
         return True
+
+    def _record(self) -> None:
+        """Tell the recorder each record, in order, once the metrics up to its tick are in too (they travel on another
+        topic, and may lag several records, as when a restarted monitor reads the topics' histories): it logs the
+        ticks since the one before, metrics and all. (Tick 0's: logged as the recorder opened.) The copy is left at
+        the last record."""
+        told = False
+        while self.untold and self.untold[0][0] <= self.last_tick:
+            tick, robots = self.untold.pop(0)
+            self.copy.load(tick, robots, self.history[: tick + 1])
+            self.recorder.log(self.copy)
+            self.recorded, told = tick, True
+        if told and self.recorded != self.robots_tick:  # later records wait for their metrics
+            self.copy.load(self.robots_tick, self.untold[-1][1], self.history)
 
     def _whole(self, tick: int, rows: np.ndarray) -> np.ndarray | None:
         """Every robot's rows of record ``tick`` once the world's (or every world shard's) are in, ascending; None
@@ -116,10 +140,18 @@ class CentralMonitor:
     def status(self, values: dict[str, str], tick: int, sender: str = WORLD) -> None:
         """The status of the world, or of world shard ``sender`` (its values, its stamp's tick): the first outcome
         one reports is the run's."""
-        self.world.update(values, sender)
+        for at, node in self.world.update(values, sender):
+            self.restarted(at, node)
         outcome = values.get("outcome")
         if self.outcome is None and has_ended(outcome):
-            self.outcome, self.outcome_tick = outcome, tick
+            self.outcome, self.outcome_tick, self.outcome_at = outcome, tick, self.clock()
+
+    def restarted(self, tick: int, node: str) -> None:
+        """A node's process was restarted at ``tick`` (as the world's status lists it, or the monitor's own): in the
+        summary's ``restarts``, and an event in the recording."""
+        self.restarts.append((tick, node))
+        if self.recorder is not None:
+            self.recorder.event(tick, restart_event(tick, node))
 
     def held(self) -> tuple[int, bool]:
         """What to report held once the bag holds what was taken: the last tick whose record and metrics are in,
@@ -132,6 +164,17 @@ class CentralMonitor:
         (the outcome may come before them: they travel on other topics)."""
         end = self.outcome_tick
         return self.outcome is not None and self.robots_tick == end and self.last_tick == end
+
+    def world_end_failure(self) -> RunFailed | None:
+        """The failure of a run whose outcome came ``STATUS_WAIT`` seconds ago or more while its last record or
+        metrics did not (lost: a monitor not under ``swarm-ros run`` or ``ros2 launch`` has nobody else to stop it);
+        None while it may still wait."""
+        if self.outcome is None or self.due() or self.clock() - self.outcome_at < STATUS_WAIT:
+            return None
+        return RunFailed(
+            f"the world ended the run ('{self.outcome}') at tick {self.outcome_tick}, but the robots' messages reached "
+            f"the monitor only up to tick {self.held()[0]} within {STATUS_WAIT:g} s"
+        )
 
     def cut_at_record(self) -> bool:
         """A run stopped before its end: keep the metrics up to its last record (one row a tick from tick 0), so
@@ -152,8 +195,10 @@ class CentralMonitor:
     def graph_fields(self, rejected: int) -> dict[str, Any]:
         """What summary.json says of a run over the graph beside the algorithm's own summary (docs/usage.md), as
         the study's model's monitor says it: ``startup_seconds`` (the world's), ``rejected_messages`` (the world's
-        and, ``rejected``, the monitor's), ``world_shards``."""
+        and, ``rejected``, the monitor's), ``world_shards``, and the ``restarts`` it knows of (the launcher adds
+        those it saw that are not there)."""
         return {
+            "restarts": [{"tick": t, "node": n} for t, n in sorted(self.restarts, key=lambda r: r[0])],
             "startup_seconds": self.world.times.get("startup_seconds"),
             "rejected_messages": {"world": self.world.rejected, "monitor": rejected},
             "world_shards": self.shards,

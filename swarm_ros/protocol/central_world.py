@@ -24,13 +24,14 @@ from .central_lockstep import CentralLockstep
 from .central_rows import Wire, metrics_rows
 from .checks import Rejections, held_report
 from .plan import CENTRAL_KEPT as KEPT
-from .plan import MONITOR
-from .status import RUNNING, STARTING, progress_values
+from .plan import MONITOR, WORLD, shard_name
+from .status import RUNNING, STARTING, progress_values, restarts_of, restarts_text
 from .world_port import LOSS_CONFIRM_S, STATUS_PERIOD, Watch
 
 #: seconds, at most, for the last messages to be acknowledged before exiting, when the world waits for no monitor
 LINGER = 5.0
 _CLOCK = "clock"  #: in a checkpoint: the run's wall clock at tick 0 and its startup seconds
+_RESTARTS = "restarts"  #: in a checkpoint: the restarts so far (:func:`~swarm_ros.protocol.status.restarts_text`)
 
 
 def monitor_reach(window: int, every: int) -> int | None:
@@ -117,16 +118,21 @@ class CentralWorld:
         self.watch = Watch(self.created)
         self.removes = removes and (own.get("on_batch_loss") == "remove", int(own.get("max_restarts", 0)))
         self.incarnations: dict[str, int] = {}  #: batch name -> the last incarnation it announced
+        self.lapsed: set[str] = set()  #: batches whose liveliness lapsed since they last announced themselves
         #: batch name -> when its loss is confirmed, unless it is back, and why then
         self.losing: dict[str, tuple[float, str]] = {}
+        index = self.ls.shard_index
+        self.name = WORLD if index is None else shard_name(index)
+        #: (tick, node) of each restart of this process and of its batches' (the status's ``restarts``; saved)
+        self.restarts: list[tuple[int, str]] = []
         if int(own["incarnation"]):  # a restarted process: on from the last checkpoint
-            self._resume()
+            self._resume(int(own["incarnation"]))
 
     @property
     def run(self) -> CentralRun:
         return self.ls.run
 
-    def _resume(self) -> None:
+    def _resume(self, incarnation: int) -> None:
         """Go on from the checkpoint the process before saved: the run at its tick, the batches it served (their
         announcements, latched, come again and are sent their areas of that tick), and the metrics rows from the
         last record before it sent again (the monitor drops what it holds). A world shard's peers wait for it; what
@@ -139,9 +145,15 @@ class CentralWorld:
             raise RunFailed("a restarted world has no checkpoint to go on from (the checkpoint parameter is empty)")
         if not self.checkpoint.exists():  # tick 0 is saved before anything of it goes out: nothing did
             self.log.info("restarted before tick 0 went out: the run starts from tick 0")
+            self.restarts = [(0, self.name)] * incarnation
             return
         saved = checkpoint.load(self.checkpoint, self.run)
         kept = dict(saved.kept)
+        self.restarts = restarts_of(str(kept.pop(_RESTARTS, "")))
+        self.restarts += [(saved.tick, self.name)] * max(1, incarnation - sum(n == self.name for _, n in self.restarts))
+        for _, name in self.restarts:
+            if name != self.name:
+                self.incarnations[name] = self.incarnations.get(name, 0) + 1
         if _CLOCK in kept:
             self.started_wall, self.startup = (float(v) for v in kept.pop(_CLOCK))
             self.started_at = self.clock() - max(0.0, time.time() - self.started_wall)
@@ -164,8 +176,18 @@ class CentralWorld:
             self.losing[name] = (self.clock(), "a new process of it announced itself")
             self._remove(name)
             raise Rejected("removed batch", f"{name}'s robots were removed; the world decides its strip")
-        self.incarnations[name] = max(incarnation, self.incarnations.get(name, 0))
+        before = self.incarnations.get(name, 0)
+        self.incarnations[name] = max(incarnation, before)
         send = self.ls.announce(name, strip)
+        k = self.ls.number(name)
+        # a new process: a later incarnation, or one started with the same command (ros2 launch's respawn) after
+        # the last one's liveliness lapsed
+        again = incarnation - before if incarnation > before else int(name in self.lapsed and self.ls.started)
+        self.lapsed.discard(name)
+        if again and (self.ls.shard_index is None or k in self.ls.mine):  # its own batches only
+            self.restarts += [(max(self.run.tick, 0), name)] * again
+            n = sum(r == name for _, r in self.restarts)
+            self.log.warning(f"{name} is back (restart {n}) at tick {self.run.tick}; sending it its area")
         if name not in self.watched:
             self.watched.add(name)
             self.port.watch_batch(name)
@@ -206,6 +228,7 @@ class CentralWorld:
             return
         if name in self.watch.lapsed:  # (a logger method picked by a conditional expression and called in an rclpy
             self.log.warning(said)  # event callback crashed the process inside rclpy, 3 runs of 3)
+            self.lapsed.add(name)
         else:
             self.log.info(said)
             self.losing.pop(name, None)  # back in time: a pause, not a loss
@@ -283,6 +306,7 @@ class CentralWorld:
     def _save(self) -> None:
         assert self.checkpoint is not None
         clock = {_CLOCK: np.array([self.started_wall, self.startup])}  # the run's, for a restarted world
+        clock[_RESTARTS] = np.array(restarts_text(self.restarts))
         checkpoint.save(self.checkpoint, self.run, self.ls.hosts, self.ls.cuts, {**self.ls.kept(), **clock})
 
     def status(self, outcome: str, message: str) -> None:
@@ -291,10 +315,16 @@ class CentralWorld:
             "waiting_for": ",".join(sorted(self.watch.lapsed)),
             "rejected_messages": self.rejections.total,
             "rejected": self.rejections.text(),
+            "restarts": restarts_text(self.restarts),
         }
         if self.started_at is not None:
             values["startup_seconds"] = f"{self.startup:.3f}"
             values.update(progress_values(self.run.progress()))  # (its tick is the one published, or the end)
+            row = self.run.history[-1]  # the tick's metrics by name, as metrics.csv has them (the status has the tick)
+            values.update(
+                {n: int(v) if float(v).is_integer() else v for n, v in zip(self.run.columns[1:], row[1:].tolist())}
+            )
+            values["robots"] = self.run.params.robots
         if self.started_at is not None and self.ended_at is not None:
             values["wall_seconds"] = f"{self.ended_at - self.started_at:.3f}"
         self.port.publish_status(self.run.tick, outcome, message, values)
@@ -325,7 +355,9 @@ class CentralWorld:
                 if self.started_at is None:  # (a resumed world's is the run's, from its checkpoint)
                     self.started_at, self.startup = now, self.port.startup_seconds()
                     self.started_wall = time.time()
-                self.status(RUNNING, f"{len(self.ls.mine)} robot batches in: tick {self.run.tick}")
+                said = f"{len(self.ls.mine)} robot batches in: tick {self.run.tick}"
+                self.status(RUNNING, said)
+                self.log.info(f"{said} goes out")
                 self.pending = True
                 self._go_on()
             elif not self.pending:  # a batch process that came back: its whole view at the current tick

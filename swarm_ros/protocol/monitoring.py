@@ -29,12 +29,12 @@ from swarm_ros.core.state import STATE_COUNT, RobotState
 from swarm_ros.core.swarm_view import SwarmView
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import Cloud
+from swarm_ros.protocol.central_monitor import STATUS_WAIT
 from swarm_ros.protocol.checks import apply_robots, checked_robots, tally_values
 from swarm_ros.protocol.plan import ROBOTS, TALLY, WORLD, shard_name
 from swarm_ros.protocol.status import WorldReport, restart_event
 
 PARTS_AHEAD = 1024  #: ticks ahead of the count for which world shards' parts are kept (the world window is 128)
-STATUS_WAIT = 5.0  #: seconds to wait for the world's outcome after the monitor saw the end (and the reverse)
 #: seconds to wait, after the end, for the last tick's decisions to reach the bag: they go out before the tick's rows,
 #: but over UDP a message of 100,000 rows was seen to come more than 1 s after them (four namespace hosts)
 BAG_WAIT = 5.0

@@ -8,6 +8,7 @@ tick 0 started, and the batches and the monitor that the run ended, from it.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -104,14 +105,14 @@ class WorldReport:
 
     def update(self, values: dict[str, str], sender: str = WORLD) -> list[tuple[int, str]]:
         """Take in one status message's values (from ``sender``: the world, or one of the world shards, whose
-        reports are joined); return the restarts it adds."""
+        reports are joined); return the restarts it adds. A sender's longer list replaces its shorter one, which
+        it need not hold: a world restarted from an older checkpoint lists a batch's restart it saw again at its
+        own tick."""
         restarts = restarts_of(values.get("restarts", ""))
         self.said[sender] = max(self.said.get(sender, []), restarts, key=len)  # each list only grows
-        before = list(self.restarts)
+        before = Counter(self.restarts)
         self.restarts = joined_restarts(list(self.said.values()))
-        new = list(self.restarts)
-        for item in before:
-            new.remove(item)
+        new = list((Counter(self.restarts) - before).elements())
         for key in ("wall_seconds", "startup_seconds"):
             try:
                 seconds = float(values[key])

@@ -21,6 +21,7 @@ import shutil
 import struct
 import tempfile
 import time
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -136,6 +137,19 @@ def ros_qos(qos: Qos) -> QoSProfile:
         liveliness=policy(LivelinessPolicy, qos.liveliness),
         liveliness_lease_duration=duration(qos.liveliness_lease_duration),
     )
+
+
+def held_tick(holders: Iterable[Path]) -> int:
+    """The last tick a run's monitor holds durably in the bags in ``holders`` (a restarted monitor's is a new one):
+    the last second of its /clock messages, one written as it takes each tick's metrics; -1 before tick 0. For
+    watching a run from outside (tests, benchmarks)."""
+    seconds = [
+        struct.unpack_from("<i", data, 4)[0]  # (the CDR header, then the clock's sec)
+        for holder in holders
+        for topic, _, data in unfinished_messages(holder)
+        if topic == msgs.CLOCK and len(data) >= 8
+    ]
+    return max(seconds, default=-1)
 
 
 def unfinished_messages(holder: Path) -> list[tuple[str, int, bytes]]:

@@ -63,17 +63,38 @@ def to_yaml(msg: Any, full: bool = False, indent: int = 0) -> str:
     return "\n".join(lines)
 
 
+#: PointField datatype -> numpy type (sensor_msgs/PointField's constants, little-endian)
+_POINT_TYPES = {1: "i1", 2: "u1", 3: "<i2", 4: "<u2", 5: "<i4", 6: "<u4", 7: "<f4", 8: "<f8"}
+
+
+def _layout(fields: list[tuple[str, int, int, int]], step: int) -> np.dtype | None:
+    """The rows' numpy type as a cloud's fields give it (an algorithm's rows, its metrics rows), or None if a
+    field is not one number; fields of no bytes (a tag) are left out."""
+    kept = [(name, offset, kind) for name, offset, kind, count in fields if count != 0]
+    if not kept or any(kind not in _POINT_TYPES for _, _, kind in kept) or any(c > 1 for *_, c in fields):
+        return None
+    return np.dtype(
+        {
+            "names": [n for n, _, _ in kept],
+            "formats": [_POINT_TYPES[k] for _, _, k in kept],
+            "offsets": [o for _, o, _ in kept],
+            "itemsize": step,
+        }
+    )
+
+
 def decoded_rows(msg: Any, full: bool = False) -> str:
     """The rows of a swarm_ros PointCloud2 as a table, or '' for any other message."""
     if type(msg).__name__ != "PointCloud2":
         return ""
     fields = [(f.name, f.offset, f.datatype, f.count) for f in msg.fields]
-    for dtype in (*ROW_TYPES, VOXEL_ROW):  # a 2D or 3D run's rows, or a 3D world's voxels
+    generic = _layout(fields, msg.point_step)
+    for dtype in (*ROW_TYPES, VOXEL_ROW, *([generic] if generic is not None else [])):  # known rows, or the fields
         try:
             check_fields(fields, msg.point_step, dtype)
-        except ContractError:
+            rows = np.frombuffer(msg.data, dtype=dtype)
+        except (ContractError, ValueError, TypeError):
             continue
-        rows = np.frombuffer(msg.data, dtype=dtype)
         fields_of = dtype.names or ()
         names = [n for n in fields_of if n != "z" or "pitch" in fields_of or dtype is VOXEL_ROW]
         out = [f"# {rows.size} rows decoded: " + "  ".join(f"{n:>10}" for n in names)]

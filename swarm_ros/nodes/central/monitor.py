@@ -21,6 +21,7 @@ the run directory is the one an unbroken run writes.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +89,7 @@ class CentralMonitorNode:
         self.pub_shape = node.create_publisher(self.maps.kind, msgs.SHAPE, msgs.LATCHED_QOS)
         self.pub_occupancy = node.create_publisher(self.maps.kind, msgs.OCCUPANCY, msgs.LATCHED_QOS)
         self.pub_shape.publish(self.maps.shape_message(0))
+        self.occupancy: tuple[float, bytes] | None = None  # (monotonic time, message) of the last occupancy published
         if self.incarnation:
             self._resume()
         for topic, handler in self.handlers.items():
@@ -106,8 +108,10 @@ class CentralMonitorNode:
         replayed = resume(self.bag, self.out, take, marker=None)
         self.raw = b""
         self.filled = self.core.copy.cell_map().filled.copy()
-        self.pub_occupancy.publish(self.maps.occupancy_message(self.filled, self.core.robots_tick))
+        self._publish_occupancy(self.maps.occupancy_message(self.filled, self.core.robots_tick))
         self.gate.verifier.taken_before()
+        for _ in range(self.incarnation - sum(n == MONITOR for _, n in self.core.restarts)):  # (killed as it began too)
+            self.core.restarted(max(self.core.last_tick, 0), MONITOR)
         self.node.get_logger().warn(
             f"monitor restarted (incarnation {self.incarnation}): went on from tick {self.core.last_tick} of the bag "
             f"its process before wrote ({replayed} messages)"
@@ -168,7 +172,7 @@ class CentralMonitorNode:
             return
         self.filled = filled.copy()
         data = self.maps.occupancy_message(filled, tick)
-        self.pub_occupancy.publish(data)
+        self._publish_occupancy(data)
         if self.bag is not None:
             if first:
                 self.bag.write(msgs.SHAPE, self.maps.shape_message(tick))
@@ -180,15 +184,26 @@ class CentralMonitorNode:
         self.core.status(msgs.status_values(msg), msgs.tick_of(msg.header), tag.sender if tag is not None else WORLD)
         self._report()
 
+    def _publish_occupancy(self, data: bytes) -> None:
+        self.occupancy = (time.monotonic(), data)
+        self.pub_occupancy.publish(data)
+
     def poll(self) -> None:
+        if not self.finished and self.core.world_end_failure() is not None:
+            handle_missed(self.node)  # (what came meanwhile, taken first)
+            failure = self.core.world_end_failure()
+            if failure is not None:
+                raise failure
         if not self.finished and self.core.due():
             self._write(Outcome(self.core.outcome))
+        if self.occupancy is not None and time.monotonic() - self.occupancy[0] >= 1.0:
+            self._publish_occupancy(self.occupancy[1])  # once a second at least, for a viewer that reads it volatile
 
     def _write(self, outcome: Outcome) -> None:
         copy = self.core.copy
         wall = self.core.finish(outcome)
         summary = self.algorithm.hook("summary")(copy, wall)
-        summary.update(engine="ros2", restarts=[], processes=None, shutdown_seconds=None)  # the launcher's to fill
+        summary.update(engine="ros2", processes=None, shutdown_seconds=None)  # the launcher's to fill
         summary.update(self.core.graph_fields(self.rejections.total))
         if self.recorder is not None:
             self.recorder.finish(copy, summary["outcome"])
@@ -218,13 +233,18 @@ class CentralMonitorNode:
         if code == EXIT_INTERRUPTED and core.outcome is None:
             handle_missed(self.node)  # what the world sent before it stopped is the run so far
             if core.cut_at_record():
-                self._write(Outcome.INTERRUPTED)
+                try:
+                    self._write(Outcome.INTERRUPTED)
+                except (OSError, run_dir.OutputError, run_dir.RecordingError):  # a full disk: the bag goes beside it
+                    if self.bag is not None and self.bag.holder.exists():
+                        self.bag.move_to(run_dir.partial_bag(self.out))
+                    raise
                 return
         taken = core.last_tick >= 0
         unstarted = code == EXIT_INTERRUPTED and not taken and not self.incarnation
+        if self.bag is not None:  # first: a recording that cannot be ended (a full disk) fails the close below
+            self.bag.move_to(run_dir.partial_bag(self.out)) if taken else self.bag.discard()
         if self.recorder is not None:
             self.recorder.finish(core.copy, "interrupted")
         if unstarted and self.rrd is not None:
             self.rrd.unlink(missing_ok=True)  # its own, of no tick
-        if self.bag is not None:
-            self.bag.move_to(run_dir.partial_bag(self.out)) if taken else self.bag.discard()
