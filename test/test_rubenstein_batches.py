@@ -687,7 +687,7 @@ def test_the_worlds_logic_over_a_fake_port_runs_the_in_process_run_with_a_record
         done,
         total,
         "joined",
-        words["joined"],
+        int(words["joined"]),  # (the tick's metrics by name too: a number; on the wire, text)
     )
     assert (tmp_path / "world.npz").exists()
 
