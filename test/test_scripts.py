@@ -326,3 +326,15 @@ def test_bench_world_smoke_times_the_worlds_tick_on_the_star_and_a_disc():
     assert re.search(r"star: +[0-9.]+ ms a tick .*405 ticks", out), out
     assert re.search(r"disc 2,000: +[0-9.]+ ms a tick .*3 ticks", out), out
     assert re.search(r"star, K = 2: +[0-9.]+ \| [0-9.]+ [0-9.]+ \| \d+ kB \d+ kB$", out, re.M), out  # a central world
+
+
+def test_bench_run_times_the_readme_command_against_a_base_tree_and_checks_both_runs_agree(tmp_path):
+    base = [sys.executable, str(SCRIPTS / "bench_run.py")]
+    refused = subprocess.run([*base, "--before", str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2 and "no swarm_ros package there" in refused.stderr, refused.stderr
+    flags = ["--", "--shape", "rectangle", "--robots", "60", "--processes", "1"]
+    done = subprocess.run(
+        [*base, "--before", str(SCRIPTS.parent), "--pairs", "1", *flags], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert re.search(r"^this/base\s+[\d.]+ \(", done.stdout, re.M) and "identical in every pair" in done.stdout

@@ -54,8 +54,7 @@ class CentralRecorder:
     def event(self, tick: int, text: str) -> None:
         """Log a text event (a restarted process) at ``tick``, unless the recording has ended."""
         if not self.ended:
-            self.rec.set_time(TIMELINE, sequence=tick)
-            self.rec.log(EVENTS, rr.TextLog(text, level="WARN"))
+            log_event(self.rec, tick, text)
 
     def finish(self, run: Any, outcome: str) -> None:
         """Log the last robots, the metrics of every tick and the outcome, and end the recording."""
@@ -63,6 +62,12 @@ class CentralRecorder:
             self.robots(run)
         self.ended = True
         end_recording(self.rec, run, outcome)
+
+
+def log_event(rec: rr.RecordingStream, tick: int, text: str) -> None:
+    """A text event (a restarted process) at ``tick``, on the events entity every recording shows."""
+    rec.set_time(TIMELINE, sequence=tick)
+    rec.log(EVENTS, rr.TextLog(text, level="WARN"))
 
 
 def end_recording(rec: rr.RecordingStream, run: Any, outcome: str) -> None:

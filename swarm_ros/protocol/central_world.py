@@ -298,7 +298,9 @@ class CentralWorld:
             self.sent_metrics = tick
         if ended:
             self.ended_at = self.clock()
-            self.status(str(run.outcome), f"the run ended at tick {tick}: {run.outcome}")
+            said = f"the run ended at tick {tick}: {run.outcome}"
+            self.status(str(run.outcome), said)
+            self.log.info(said)
         else:
             self._send_areas(self.ls.mine, self.fresh)
             self.fresh = set()

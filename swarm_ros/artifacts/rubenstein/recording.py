@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from swarm_ros.artifacts.central_recording import end_recording
+from swarm_ros.artifacts.central_recording import end_recording, log_event
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.rerun_recording import TIMELINE, open_stream
 from swarm_ros.core.rubenstein.rule import UNKNOWN_G
@@ -53,7 +53,7 @@ class RubensteinRecorder:
         self, path: Path | None, run: RubensteinRun, every: int = 1, spawn: bool = False, connect: str | None = None
     ) -> None:
         self.path, self.every = path, every
-        self._last = -1
+        self._last, self.ended = -1, False
         self._ticks: list[int] = []
         self._pos: list[np.ndarray] = []
         self._state: list[np.ndarray] = []
@@ -119,6 +119,11 @@ class RubensteinRecorder:
         if self.due(run.tick) or run.done:
             self.robots(run)
 
+    def event(self, tick: int, text: str) -> None:
+        """Log a text event (a restarted process) at ``tick``, unless the recording has ended."""
+        if not self.ended:
+            log_event(self.rec, tick, text)
+
     def finish(self, run: RubensteinRun, outcome: str) -> None:
         """:meth:`close`, as simulate's driver ends a recording."""
         self.close(run, outcome)
@@ -128,6 +133,7 @@ class RubensteinRecorder:
         if run.tick != self._last:
             self.robots(run)
         self._send()
+        self.ended = True
         end_recording(self.rec, run, outcome)
 
 
