@@ -97,17 +97,17 @@ class CentralMonitor:
             return True  # the other shards' robots of the record are still on their way
         self.robots_tick = tick
         _, robots = self.wire.robots_of(record)
-        self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
         if self.recorder is not None and tick > self.recorded:
             self.untold.append((tick, robots))
-        self._record()
+        if not self._record():  # (which leaves the copy at this record: one load of the swarm, not two)
+            self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
         return True
 
-    def _record(self) -> None:
+    def _record(self) -> bool:
         """Tell the recorder each record, in order, once the metrics up to its tick are in too (they travel on another
         topic, and may lag several records, as when a restarted monitor reads the topics' histories): it logs the
         ticks since the one before, metrics and all. (Tick 0's: logged as the recorder opened.) The copy is left at
-        the last record."""
+        the last record; returns whether it told any."""
         told = False
         while self.untold and self.untold[0][0] <= self.last_tick:
             tick, robots = self.untold.pop(0)
@@ -116,6 +116,7 @@ class CentralMonitor:
             self.recorded, told = tick, True
         if told and self.recorded != self.robots_tick:  # later records wait for their metrics
             self.copy.load(self.robots_tick, self.untold[-1][1], self.history)
+        return told
 
     def _whole(self, tick: int, rows: np.ndarray) -> np.ndarray | None:
         """Every robot's rows of record ``tick`` once the world's (or every world shard's) are in, ascending; None
