@@ -1022,3 +1022,25 @@ def test_the_world_lists_each_new_batch_process_and_its_own_restart_in_its_statu
     assert again.restarts == [(0, "b1"), (0, "b0"), (0, "world")]
     again.batch("b1", strips["b1"], incarnation=1)  # its announcement, latched, again: known
     assert len(again.restarts) == 3
+
+
+def test_a_new_batch_process_that_announces_itself_counts_as_alive_and_its_next_lapse_is_a_loss():
+    """Should the liveliness event of a restarted batch's process be lost (CI saw the world then miss its second death
+    and wait 120 s), its announcement says it is alive: its next lapse is seen."""
+    from swarm_ros.protocol.central_world import CentralWorld
+
+    params, log = RunParams(40, algorithm="rubenstein", seed=6), Log()
+    own = {"record_every": 20, "monitor_window": 0, "start_timeout": 60.0, "incarnation": 0, "checkpoint": ""}
+    world = CentralWorld(RubensteinRun(square(6), params), RubensteinWire, own, WorldPort(), log, Rejections(log))
+    strips = {}
+    for k in range(2):
+        own_k = {"batch": k, "batches": 2, "region_cuts": "", "name": f"b{k}"}
+        strips[f"b{k}"] = CentralBatch(square(6), params, own_k, _no_drop).strip
+        world.batch(f"b{k}", strips[f"b{k}"])
+    world.poll()
+    world.liveliness("b1", 0, 1)
+    assert world.watch.lapsed == {"b1"}
+    world.batch("b1", strips["b1"], incarnation=1)  # (its liveliness event, lost)
+    assert world.watch.lapsed == set()
+    world.liveliness("b1", 0, 1)  # it dies again
+    assert world.watch.lapsed == {"b1"}

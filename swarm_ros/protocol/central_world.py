@@ -184,6 +184,8 @@ class CentralWorld:
         # the last one's liveliness lapsed
         again = incarnation - before if incarnation > before else int(name in self.lapsed and self.ls.started)
         self.lapsed.discard(name)
+        if again:  # alive: its announcement says so, should DDS's liveliness event of it be lost (rclpy's
+            self.watch.lapsed.discard(name)  # EventsExecutor loses some), so that its next lapse is seen as one
         if again and (self.ls.shard_index is None or k in self.ls.mine):  # its own batches only
             self.restarts += [(max(self.run.tick, 0), name)] * again
             n = sum(r == name for _, r in self.restarts)
