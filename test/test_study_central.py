@@ -312,7 +312,8 @@ def _world_with_a_loss(tmp_path, policy: str, restarts: int, then: str):
     """A central world of the study's model over a fake port and clock, its three batches fed what it sends; batch 1's
     liveliness lapses as tick 21 is decided and it answers no more, and then ``then``: ``"wait"`` (nothing comes back
     within the loss's confirmation), ``"back"`` (it is alive again within it) or ``"new"`` (a new process of it
-    announces itself). Returns the world and its log."""
+    announces itself); or, ``"silent"``, it only stops answering (its liveliness never seen: a process that died
+    before DDS matched its writer). Returns the world and its log."""
     from central_fakes import WorldPort
     from lockstep_fakes import Log
 
@@ -342,7 +343,8 @@ def _world_with_a_loss(tmp_path, policy: str, restarts: int, then: str):
             sent += 1
             if tick == 20 and name == "robot_batch_1" and not lost:
                 lost = True
-                world.liveliness(name, 0, 1)
+                if then != "silent":
+                    world.liveliness(name, 0, 1)
             if name == "robot_batch_1" and lost and then != "back":
                 continue  # it answers no more
             world.decisions(
@@ -362,14 +364,15 @@ def _no_drop(topic: str, fault: Rejected) -> None:
 
 
 @pytest.mark.parametrize(
-    "policy, restarts, then", [("remove", 3, "wait"), ("restart", 0, "wait"), ("remove", 3, "new")]
+    "policy, restarts, then",
+    [("remove", 3, "wait"), ("restart", 0, "wait"), ("remove", 3, "new"), ("restart", 0, "silent")],
 )
 def test_a_world_removes_a_batch_lost_for_good_and_the_run_is_the_in_process_one_with_its_robots_removed(
     tmp_path, policy, restarts, then
 ):
     """on_batch_loss: remove, or no restarts left: a batch whose liveliness lapsed and that is not back within
-    LOSS_CONFIRM_S (or whose new process announced itself: the loss confirmed at once) is removed; a checkpoint
-    says so; the world decides its strip, and the run is the in-process run with its robots removed."""
+    LOSS_CONFIRM_S (or whose new process announced itself: the loss confirmed at once) is removed, and so is one
+    never seen alive that the run waited STALL_S for; a checkpoint says so; the world decides its strip, and the run is the in-process run with its robots removed."""
     from swarm_ros.protocol import central_checkpoint
 
     world, log = _world_with_a_loss(tmp_path, policy, restarts, then)

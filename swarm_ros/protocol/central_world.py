@@ -26,7 +26,7 @@ from .checks import Rejections, held_report
 from .plan import CENTRAL_KEPT as KEPT
 from .plan import MONITOR, WORLD, shard_name
 from .status import RUNNING, STARTING, progress_values, restarts_of, restarts_text
-from .world_port import LOSS_CONFIRM_S, STATUS_PERIOD, Watch
+from .world_port import LOSS_CONFIRM_S, STALL_S, STATUS_PERIOD, Watch
 
 #: seconds, at most, for the last messages to be acknowledged before exiting, when the world waits for no monitor
 LINGER = 5.0
@@ -119,6 +119,8 @@ class CentralWorld:
         self.removes = removes and (own.get("on_batch_loss") == "remove", int(own.get("max_restarts", 0)))
         self.incarnations: dict[str, int] = {}  #: batch name -> the last incarnation it announced
         self.lapsed: set[str] = set()  #: batches whose liveliness lapsed since they last announced themselves
+        #: batch name -> when a new process of it announced itself, until DDS reports its liveliness (:meth:`_unseen`)
+        self.unseen: dict[str, float] = {}
         #: batch name -> when its loss is confirmed, unless it is back, and why then
         self.losing: dict[str, tuple[float, str]] = {}
         index = self.ls.shard_index
@@ -186,6 +188,8 @@ class CentralWorld:
         self.lapsed.discard(name)
         if again:  # alive: its announcement says so, should DDS's liveliness event of it be lost (rclpy's
             self.watch.lapsed.discard(name)  # EventsExecutor loses some), so that its next lapse is seen as one
+        if again or name not in self.watched:
+            self.unseen[name] = self.clock()
         if again and (self.ls.shard_index is None or k in self.ls.mine):  # its own batches only
             self.restarts += [(max(self.run.tick, 0), name)] * again
             n = sum(r == name for _, r in self.restarts)
@@ -225,9 +229,31 @@ class CentralWorld:
         self._go_on()
 
     def liveliness(self, name: str, alive: int, not_alive: int) -> None:
+        if alive > 0:
+            self.unseen.pop(name, None)
         said = self.watch.liveliness(name, alive, not_alive)
-        if said is None:
-            return
+        if said is not None:
+            self._heard(name, said)
+
+    def _unseen(self, now: float) -> None:
+        """A batch process that dies before DDS matched its liveliness writer has no lapse to report (CI saw a
+        restarted batch killed half a second after it announced itself, under load): one whose liveliness is still
+        unseen ``STALL_S`` after it announced itself, while the run has waited ``STALL_S`` for its decisions, is
+        lost as if it had lapsed. (Should it be alive after all, its liveliness says so when it comes.)"""
+        awaited = None
+        for name, since in list(self.unseen.items()):
+            if now - max(since, self.watch.moved_at) < STALL_S or name in self.watch.lapsed:
+                continue
+            awaited = self.ls.awaited() if awaited is None else awaited
+            if name in awaited:
+                del self.unseen[name]
+                self.watch.lapsed.add(name)
+                self._heard(
+                    name, f"{name} was lost (no liveliness and no decisions for {STALL_S:g} s): the run waits for it"
+                )
+
+    def _heard(self, name: str, said: str) -> None:
+        """What the world does when peer ``name``'s liveliness lapsed or came back (``said``)."""
         if name in self.watch.lapsed:  # (a logger method picked by a conditional expression and called in an rclpy
             self.log.warning(said)  # event callback crashed the process inside rclpy, 3 runs of 3)
             self.lapsed.add(name)
@@ -342,6 +368,8 @@ class CentralWorld:
             RunFailed: the batches did not all announce themselves within ``start_timeout``, or the run is still.
         """
         now = self.clock()
+        if self.ls.started and not self.first and not self.pending and self.run.outcome is None:
+            self._unseen(now)  # (a tick held for the monitor awaits no batch)
         for name, (due, _) in list(self.losing.items()):
             if now >= due:
                 self._remove(name)
