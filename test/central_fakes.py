@@ -1,8 +1,20 @@
-"""A central world's logic (swarm_ros.protocol.central_world) driven with a fake port, no ROS."""
+"""A central world's logic (swarm_ros.protocol.central_world) driven with a fake port and log, no ROS."""
 
 from __future__ import annotations
 
 import numpy as np
+
+
+class Log:
+    """A logger that keeps its lines."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def info(self, text: str) -> None:
+        self.lines.append(text)
+
+    warn = warning = info
 
 
 class WorldPort:

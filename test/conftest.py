@@ -1,5 +1,5 @@
 """Fixtures shared by the test modules (the helpers they share are modules by topic: runs.py, recordings.py,
-graph_runs.py, lockstep_fakes.py, netns.py, layering.py, waiting.py, bagcheck.py, ros2_tools.py), and the rule
+graph_runs.py, central_fakes.py, netns.py, layering.py, waiting.py, bagcheck.py, ros2_tools.py), and the rule
 that every test module says which kind it is: ``pytestmark = pytest.mark.unit`` or ``pytest.mark.process``
 (pytest.ini)."""
 

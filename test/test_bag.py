@@ -195,9 +195,9 @@ def test_a_bag_that_cannot_be_closed_leaves_no_hidden_folder(tmp_path, monkeypat
     was written in (no reader could open an unclosed bag)."""
     import errno
 
-    from swarm_ros.ros.bag_writer import BagRecorder
+    from swarm_ros.ros.bag_writer import BagRecorder, central_topics
 
-    bag = BagRecorder(tmp_path / "r")
+    bag = BagRecorder(tmp_path / "r", central_topics("darr-niazi"))
     assert bag.holder.is_dir() and bag.holder.name.startswith(".r.bag-")
 
     def full(*args) -> None:

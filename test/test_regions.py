@@ -1,8 +1,4 @@
-"""Strips, halos and routing (swarm_ros.core.regions, swarm_ros.protocol.hosting): no ROS needed.
-
-The lockstep tests (test_lockstep.py) run whole swarms through several partitions and check each
-batch's regional view against the world tick by tick; these check the parts on their own.
-"""
+"""Strips, halos and compact rows (swarm_ros.core.regions, swarm_ros.protocol.rows): no ROS needed."""
 
 from __future__ import annotations
 
@@ -14,8 +10,7 @@ from hypothesis import strategies as st
 from swarm_ros.core import Shape
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.regions import balanced_cuts, columns, halo, parse_cuts, strip
-from swarm_ros.core.state import RobotState, initial_state
-from swarm_ros.protocol import hosting
+from swarm_ros.core.state import initial_state
 from swarm_ros.protocol.rows import REGION_ROW, REGION_ROW_3D, ROBOT_ROW, compact, point_fields, robot_rows
 
 pytestmark = pytest.mark.unit
@@ -83,20 +78,6 @@ def _rows(x, states):
     return robot_rows(np.arange(n), s, np.asarray(x, float), np.zeros(n), np.zeros(n))
 
 
-def test_routing_sends_movers_where_they_were_or_are_and_stationary_robots_everywhere():
-    radius = 10
-    moving, localized = RobotState.MOVING_OUTSIDE, RobotState.LOCALIZED
-    rows = _rows([-8.0, -2.0, 3.0, 9.0, 0.0], [moving, moving, moving, moving, localized])
-    before = np.array([2, 10, 12, 19, 10])  # robot 1 moved from column 10 (x 0) to 8; the others stayed
-    west, east = (0, 9), (11, 20)
-    parts = hosting.route(rows, before, [west, east], radius)
-    assert parts[0]["id"].tolist() == [0, 1, 4]  # robot 1 moved west: it stays known to the west
-    assert parts[1]["id"].tolist() == [2, 3, 4]
-    assert all(p.dtype == REGION_ROW for p in parts)
-    snap = hosting.snapshot(rows, west, radius)
-    assert snap["id"].tolist() == [0, 1, 4]
-
-
 def test_compact_rows_hold_the_exact_pose_in_fewer_bytes():
     rng = np.random.default_rng(3)
     rows = np.zeros(50, dtype=ROBOT_ROW)
@@ -108,25 +89,3 @@ def test_compact_rows_hold_the_exact_pose_in_fewer_bytes():
         assert np.array_equal(back[name], rows[name])
     assert REGION_ROW.itemsize == 29 and REGION_ROW_3D.itemsize == 45
     assert [f[0] for f in point_fields(REGION_ROW)] == ["x", "y", "heading", "id", "state"]
-
-
-def test_a_decider_whose_row_did_not_change_is_sent_to_no_batch():
-    """A walker that lost its claim stands as it was: its row is the same, so no batch receives it again."""
-    from types import SimpleNamespace
-
-    moving = RobotState.WALKING
-    state = SimpleNamespace(
-        state=np.full(4, moving, dtype=np.int8),
-        x=np.array([-5.0, 0.0, 5.0, 7.0]),
-        y=np.zeros(4),
-        heading=np.zeros(4),
-        z=None,
-        pitch=None,
-    )
-    deciders = np.arange(3)
-    before = hosting.poses(state, deciders)
-    state.x[2] = 6.0  # robot 2 moved; robots 0 and 1 stood as they were
-    state.heading[1] = 1.0  # robot 1 turned where it stood
-    state.x[3] = 8.0  # robot 3 did not decide (a peer's, or removed): not a decider that stood
-    assert hosting.stood(before, state, np.arange(4)).tolist() == [True, False, False, False]
-    assert hosting.stood(before, state, np.empty(0, np.int64)).size == 0

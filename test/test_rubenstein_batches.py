@@ -6,8 +6,7 @@ import types
 
 import numpy as np
 import pytest
-from central_fakes import WorldPort
-from lockstep_fakes import Log
+from central_fakes import Log, WorldPort
 
 from swarm_ros.core import Shape, World
 from swarm_ros.core.errors import ContractError, ParameterError, Rejected

@@ -312,10 +312,10 @@ def _world_with_a_loss(tmp_path, policy: str, restarts: int, then: str):
     """A central world of the study's model over a fake port and clock, its three batches fed what it sends; batch 1's
     liveliness lapses as tick 21 is decided and it answers no more, and then ``then``: ``"wait"`` (nothing comes back
     within the loss's confirmation), ``"back"`` (it is alive again within it) or ``"new"`` (a new process of it
-    announces itself); or, ``"silent"``, it only stops answering (its liveliness never seen: a process that died
-    before DDS matched its writer). Returns the world and its log."""
-    from central_fakes import WorldPort
-    from lockstep_fakes import Log
+    announces itself); or it only stops answering: ``"silent"``, its liveliness never seen (a process that died
+    before DDS matched its writer), or ``"mute"``, its liveliness holding throughout. Returns the world and its
+    log."""
+    from central_fakes import Log, WorldPort
 
     from swarm_ros.protocol.central_batch import CentralBatch
     from swarm_ros.protocol.central_world import CentralWorld
@@ -334,16 +334,18 @@ def _world_with_a_loss(tmp_path, policy: str, restarts: int, then: str):
     hosts = {name: CentralBatch(DISC, params, own_of[name], _no_drop) for name in names}
     for name, host in hosts.items():
         world.batch(name, host.strip)
+        if then == "mute":
+            world.liveliness(name, 1, 0)
     world.poll()
     sent, lost = 0, False
-    while world.ended_at is None and now[0] < 100:
+    while world.ended_at is None and now[0] < (200 if then == "mute" else 100):
         now[0] += 0.01
         while sent < len(port.areas):
             name, tick, rows, whole = port.areas[sent]
             sent += 1
             if tick == 20 and name == "robot_batch_1" and not lost:
                 lost = True
-                if then != "silent":
+                if then not in ("silent", "mute"):
                     world.liveliness(name, 0, 1)
             if name == "robot_batch_1" and lost and then != "back":
                 continue  # it answers no more
@@ -372,7 +374,8 @@ def test_a_world_removes_a_batch_lost_for_good_and_the_run_is_the_in_process_one
 ):
     """on_batch_loss: remove, or no restarts left: a batch whose liveliness lapsed and that is not back within
     LOSS_CONFIRM_S (or whose new process announced itself: the loss confirmed at once) is removed, and so is one
-    never seen alive that the run waited STALL_S for; a checkpoint says so; the world decides its strip, and the run is the in-process run with its robots removed."""
+    never seen alive that the run waited STALL_S for; a checkpoint says so; the world decides its strip, and the run
+    is the in-process run with its robots removed."""
     from swarm_ros.protocol import central_checkpoint
 
     world, log = _world_with_a_loss(tmp_path, policy, restarts, then)
@@ -383,6 +386,15 @@ def test_a_world_removes_a_batch_lost_for_good_and_the_run_is_the_in_process_one
     assert gone.size == count and same(_with_removals(run.params, {21: gone}), run)
     saved = central_checkpoint.load(tmp_path / "world.npz", Simulation(DISC, run.params))
     assert saved.kept["removed"].tolist() == [1]
+
+
+def test_a_batch_alive_but_mute_is_never_removed_and_the_run_fails_once_still(tmp_path):
+    """A batch whose liveliness holds is not lost for its silence, whatever the policy (its messages may be drowned
+    by a flood): the world waits, and fails the run once it has not moved for STILL_S."""
+    from swarm_ros.core.errors import RunFailed
+
+    with pytest.raises(RunFailed, match="has not moved for 120 s at tick 20 .waiting for: robot_batch_1;"):
+        _world_with_a_loss(tmp_path, "remove", 0, "mute")
 
 
 @pytest.mark.parametrize("policy, restarts, then", [("remove", 3, "back"), ("restart", 3, "wait")])

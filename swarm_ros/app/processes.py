@@ -287,24 +287,6 @@ def recover_killed(out: Path) -> list[Path]:
     return kept
 
 
-def check_study_graph(shape, params, processes: int, region_cuts: str, flag: str) -> None:
-    """Refuse, in one line, more batches than the study's model's world has columns, or region cuts (x positions in
-    patches) that do not cut it into ``processes`` strips (``flag``: how the user named the batch count).
-
-    Raises:
-        InputError: that.
-    """
-    if processes > shape.world.size:
-        raise InputError(
-            f"a world of {shape.world.size} columns cannot be cut into {processes} strips, one per "
-            f"robot-batch process ({flag}, default 2); each strip needs at least one column"
-        )
-    if region_cuts:
-        from swarm_ros.core.regions import parse_cuts, strip
-
-        strip(0, processes, parse_cuts(region_cuts), shape.world.radius)
-
-
 def check_central_graph(shape, params, processes: int, region_cuts: str, flag: str) -> None:
     """Refuse, in one line, a batch count (``processes``, whatever ``flag`` named it) or region cuts (x positions in
     its unit) a central world's grid of columns (core.strips) cannot be cut by.

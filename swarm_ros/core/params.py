@@ -273,16 +273,10 @@ NODE_PARAMETERS: dict[str, tuple[Param, ...]] = {
             low=0,
         ),
         Param(
-            "restart_timeout",
-            30.0,
-            "seconds to wait for a lost batch or monitor to come back before going on without it",
-            low=0,
-            low_open=True,
-        ),
-        Param(
             "checkpoint",
             "",
-            "file the world saves each tick into, from which a restarted world goes on",
+            "file the world saves its checkpoint into (tick 0, then every 1,000 ticks or so), from which a restarted "
+            "world goes on",
             blank="none: a lost world ends the run",
         ),
         Param("incarnation", 0, "0 for the world's first process; the launcher counts restarts up from 1", low=0),
@@ -337,19 +331,6 @@ def node_parameter(kind: str, name: str) -> Param:
 def node_defaults(kind: str) -> dict[str, Any]:
     """A node's own parameters and their defaults."""
     return {p.name: p.default for p in NODE_PARAMETERS[kind]}
-
-
-def check_node_values(kind: str, values: dict[str, object], where: str = "") -> dict[str, object]:
-    """A node's own parameters, each checked by its declaration (``where`` prefixes the error).
-
-    Raises:
-        ParameterError: an unknown parameter or a bad value, in one line naming it.
-    """
-    own = {p.name: p for p in NODE_PARAMETERS[kind]}
-    try:
-        return {key: own[key].check(value) for key, value in values.items()}
-    except ParameterError as exc:
-        raise ParameterError(f"{where}: {exc}" if where else str(exc)) from None
 
 
 @dataclass(frozen=True)

@@ -129,17 +129,6 @@ def shard_batches(shard: int, shards: int, batches: int) -> range:
     return range(shard * batches // shards, (shard + 1) * batches // shards)
 
 
-def shard_cuts(cuts: np.ndarray, shards: int, batches: int) -> np.ndarray:
-    """Of the batches' ``cuts``, those between shards (:func:`shard_batches`): each shard's strips are whole
-    batches' strips."""
-    return np.asarray([cuts[shard_batches(k, shards, batches)[0] - 1] for k in range(1, shards)], dtype=np.int64)
-
-
 def area(strip: tuple[int, int], halo_columns: int, width: int) -> tuple[int, int]:
     """(first, last) column a batch with ``strip`` follows: the strip and ``halo_columns`` each side, in the world."""
     return max(strip[0] - halo_columns, 0), min(strip[1] + halo_columns, width - 1)
-
-
-def format_strip(first: int, last: int, radius: int) -> str:
-    """A strip as a user reads it: the x range of its columns."""
-    return f"x {first - radius}..{last - radius}"

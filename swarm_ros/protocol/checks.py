@@ -12,41 +12,22 @@ import math
 import re
 import time
 from collections import Counter
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarm_ros.core.errors import ContractError, Rejected, RunFailed
+from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.protocol.rows import (
     PATCH_METRES,
     TICK_SECONDS,
     check_fields,
-    decision_row,
     parse_batch_label,
-    pose_of,
     region_row,
     robot_row,
 )
 
 if TYPE_CHECKING:
-    from swarm_ros.core.params import RunParams
-    from swarm_ros.core.shapes import Shape
-    from swarm_ros.core.state import SwarmState
-    from swarm_ros.core.swarm_view import SwarmView
-
-
-class WorldView(Protocol):
-    """What the checks of a batch's decisions read of the world process's run: the last tick, the state (exact
-    where the batch's robots are), the run's parameters and shape."""
-
-    @property
-    def tick(self) -> int: ...
-    @property
-    def state(self) -> SwarmState: ...
-
-    params: RunParams
-    shape: Shape
+    pass
 
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
@@ -188,34 +169,6 @@ def held_report(values: np.ndarray, newest: int) -> tuple[int, bool]:
     return tick, bool(ended)
 
 
-def checked_robots(view: SwarmView, msg, radius: int, part: bool = False) -> tuple[int, np.ndarray]:
-    """(tick, rows) of a /swarm/robots message (a regional ``view``: of a /swarm/region/<batch> message;
-    ``part``: a world shard's part of a tick's), checked as a message (:func:`robot_rows`).
-
-    Raises:
-        Rejected: malformed, out of range or outside the world.
-    """
-    tick = tick_stamp(msg.header)
-    return tick, robot_rows(msg, view.state.robots, radius, view.shape.dims, view.area is not None, part)
-
-
-def apply_robots(view: SwarmView, tick: int, rows: np.ndarray) -> None:
-    """Apply checked rows of ``tick`` (:func:`checked_robots`) to ``view``.
-
-    Raises:
-        Rejected: they cannot be the world's next rows (:meth:`SwarmView.inconsistent`); the
-            view is unchanged.
-    """
-    pose = pose_of(rows)
-    why = view.inconsistent(tick, rows["id"], rows["state"], pose["x"], pose["y"], pose.get("z"))
-    if why is not None:
-        raise Rejected("inconsistent rows", why)
-    try:
-        view.update(tick, rows["id"], rows["state"], **pose)
-    except ContractError as exc:  # checked above: a gap in those checks
-        raise RunFailed(str(exc)) from None
-
-
 def tally_values(data, robots: int) -> tuple[int, int, np.ndarray]:
     """(tick, every, robots by state) of a /swarm/tally message's data (the tick, the world's ``record_every``, then
     its robots in each state), checked in form.
@@ -233,69 +186,6 @@ def tally_values(data, robots: int) -> tuple[int, int, np.ndarray]:
     if tick < 0 or every < 2 or (counts < 0).any() or int(counts.sum()) > robots:
         raise Rejected("malformed tally", f"tick {tick}, every {every}, counts {counts.tolist()}")
     return tick, every, counts
-
-
-def decision_message(msg, robots: int, dims: int = 2) -> tuple[int, np.ndarray]:
-    """(tick, rows) of a batch's decisions message, checked as a message: stamp, layout, ids in range."""
-    tick = tick_stamp(msg.header)
-    rows = cloud(msg, decision_row(dims), robots)
-    ids_in_range(rows["id"].astype(np.int64), 0, robots)
-    return tick, rows
-
-
-def decisions_allowed(
-    rows: np.ndarray,
-    tick: int,
-    sim: WorldView,
-    hosts: Callable[[np.ndarray], np.ndarray],
-    batch: int,
-    decided: np.ndarray,
-    name: str,
-) -> None:
-    """Whether batch ``batch`` (node ``name``) may send these decision rows for ``tick`` now.
-
-    Raises:
-        Rejected: a tick other than the one being decided, a robot not hosted by the batch
-            (``hosts``: the batch hosting each of some robots now), not moving or decided already this
-            tick (``decided``), or a decision out of the rules' bounds (:mod:`swarm_ros.core.legality`).
-    """
-    from swarm_ros.core.legality import illegal  # here: compiled (numba), which readers of rows do without
-    from swarm_ros.core.state import IS_MOVING
-
-    now = sim.tick
-    if tick <= now:
-        raise Rejected("stale tick", f"tick {tick}; the world is deciding tick {now + 1}")
-    if tick > now + 1:
-        raise Rejected("future tick", f"tick {tick}; the world is deciding tick {now + 1}")
-    ids = rows["id"].astype(np.int64)
-    s = sim.state
-    moving = IS_MOVING[s.state[ids]]
-    if not moving.all():
-        raise Rejected("robot not moving", f"robot {int(ids[~moving][0])}")
-    other = hosts(ids) != batch
-    if other.any():
-        raise Rejected("not the batch's robot", f"robot {int(ids[other][0])} is not in the strip of {name}")
-    if decided[ids].any():
-        raise Rejected("decided already", f"robot {int(ids[decided[ids]][0])} at tick {tick}")
-    solid = {"z0": s.z[ids], "z": rows["z"], "pitch": rows["pitch"]} if s.z is not None else {}
-    bad = illegal(
-        sim.params,
-        sim.shape.world.radius,
-        s.frontier,
-        s.x[ids],
-        s.y[ids],
-        rows["claim"].astype(np.int64),
-        rows["x"],
-        rows["y"],
-        rows["heading"],
-        **solid,
-    )
-    if bad.any():
-        row = rows[int(np.flatnonzero(bad)[0])]
-        raise Rejected(
-            "illegal decision",
-            f"robot {int(row['id'])}: claim {int(row['claim'])}, pose ({row['x']!r}, {row['y']!r}, {row['heading']!r})",
-        )
 
 
 def snapshot(msg, robots: int, radius: int, dims: int = 2) -> tuple[int, np.ndarray]:

@@ -75,13 +75,9 @@ def plan_for(
 # -- topics -----------------------------------------------------------------------
 ROBOTS_DEPTH = 512  #: ticks of rows a reader of /swarm/robots or /swarm/region/<batch> keeps (its history depth)
 ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
-#: world -> all: the decisions it applied in the tick (PointCloud2); under it, /swarm/decisions/<batch>:
-#: one batch -> world: its robots' decisions (decisions_topic)
+#: world -> all: the decisions it applied in the tick (PointCloud2)
 DECISIONS = "/swarm/decisions"
 BATCHES = "/swarm/batches"  # robot batches -> world: the columns (strip) each batch hosts (Int64MultiArray)
-#: /swarm/region/<batch>: world -> one batch, after each tick: the rows its strip and halo need (PointCloud2,
-#: compact rows)
-REGION = "/swarm/region"
 SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
 OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
 STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
@@ -94,12 +90,7 @@ HELD = "/swarm/held"
 #: state (a world shard's: those in its strips), the monitor's count of the ticks between (Int64MultiArray)
 TALLY = "/swarm/tally"
 CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
-SNAPSHOT = "/swarm/snapshot"  # /swarm/snapshot/<batch>: world -> one batch: its region's rows at a tick (PointCloud2)
 ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
-#: What the monitor reads, bag or no bag: its bag records these, its own METRICS, and SHAPE, OCCUPANCY and
-#: CLOCK as it derives them from the rows (these types carry no tag: swarm_ros.ros.auth). The world starts
-#: tick 0 once it has discovered the monitor's reader of each (so the bag misses none of their messages).
-MONITOR_READS = (ROBOTS, DECISIONS, STATUS, TALLY)
 
 
 #: A central world's run talks under /swarm/<algorithm> (the name's hyphens as underscores; PointCloud2, the
@@ -155,14 +146,6 @@ def central_sender(topic: str) -> str | None:
 SHARDS = "/swarm/shards"
 
 
-def claims_topic(i: int, j: int) -> str:
-    return f"{SHARDS}/shard_{i}/claims_to_{j}"
-
-
-def part_topic(i: int, j: int) -> str:
-    return f"{SHARDS}/shard_{i}/part_to_{j}"
-
-
 def counts_topic(i: int) -> str:
     return f"{SHARDS}/shard_{i}/counts"
 
@@ -173,10 +156,6 @@ def shard_topic(i: int, what: str) -> str:
     return f"{SHARDS}/shard_{i}/{what}"
 
 
-def again_topic(i: int) -> str:
-    return f"{SHARDS}/shard_{i}/again"
-
-
 def shard_of_topic(topic: str) -> int | None:
     """The shard that publishes on ``topic`` (one under /swarm/shards/<i>), or None."""
     m = _SHARD_TOPIC.match(topic)
@@ -185,16 +164,3 @@ def shard_of_topic(topic: str) -> int | None:
 
 def alive_topic(node_name: str) -> str:
     return f"{ALIVE}/{node_name}"
-
-
-def region_topic(node_name: str) -> str:
-    return f"{REGION}/{node_name}"
-
-
-def snapshot_topic(node_name: str) -> str:
-    return f"{SNAPSHOT}/{node_name}"
-
-
-def decisions_topic(node_name: str) -> str:
-    """A batch's own decisions topic: the world takes a robot's decisions only from its batch's topic."""
-    return f"{DECISIONS}/{node_name}"

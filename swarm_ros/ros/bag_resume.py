@@ -69,7 +69,7 @@ def left_by_earlier_process(out: Path, own_holder: Path, marker: str | None = ms
         if not (folder / BAG_DIR).is_dir():
             continue
         found = unfinished_messages(folder)
-        # a tick's messages end with its /clock (BagRecorder.write_world), and are made durable then
+        # a record's messages end with its /clock (the monitor's), and are made durable then
         if marker is not None:
             last = max((i for i, (topic, _, _) in enumerate(found) if topic == marker), default=-1)
             found = found[: last + 1]

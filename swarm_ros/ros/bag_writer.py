@@ -6,8 +6,8 @@ and hands each message its tag proved to :class:`BagRecorder`, which stores it u
 ``ros2 bag record -s mcap``, with each topic's type, QoS and full message definition,
 so Foxglove, PlotJuggler, ``ros2 bag play`` or any MCAP reader open it with no ROS
 install. Timestamps are the monitor's receive times (wall clock, ns), as rosbag2's. The
-untagged topics (shape, occupancy, clock) are encoded from the verified rows
-(:meth:`BagRecorder.write_world`).
+untagged topics (shape, occupancy, clock) are the monitor's own, encoded from the verified rows
+(:mod:`swarm_ros.nodes.central.monitor`).
 
 While the run goes on the bag is written beside the run directory (a hidden
 ``.<run>.bag-XXXX/bag``); the run directory gets it as ``bag/`` when it is written. A
@@ -26,28 +26,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from diagnostic_msgs.msg import DiagnosticArray
-from nav_msgs.msg import OccupancyGrid
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.artifacts.run_dir import BAG_DIR
-from swarm_ros.core.grid import CellMap
 from swarm_ros.protocol.plan import CentralTopics
 from swarm_ros.ros import graph as msgs
-
-#: The recorded topics of a 2D run: name -> (message class, QoS its publisher offers); :func:`topics` for either.
-TOPICS: dict[str, tuple[type, QoSProfile]] = {
-    msgs.ROBOTS: (PointCloud2, msgs.ROBOTS_QOS),
-    msgs.DECISIONS: (PointCloud2, msgs.DECISIONS_QOS),
-    msgs.OCCUPANCY: (OccupancyGrid, msgs.LATCHED_QOS),
-    msgs.SHAPE: (OccupancyGrid, msgs.LATCHED_QOS),
-    msgs.STATUS: (DiagnosticArray, msgs.STATUS_QOS),
-    msgs.METRICS: (Int64MultiArray, msgs.METRICS_QOS),
-    msgs.TALLY: (Int64MultiArray, msgs.ROBOTS_QOS),
-    msgs.CLOCK: (Clock, msgs.CLOCK_QOS),
-}
 
 
 def central_topics(algorithm: str, dims: int = 2) -> dict[str, tuple[type, QoSProfile]]:
@@ -64,15 +49,6 @@ def central_topics(algorithm: str, dims: int = 2) -> dict[str, tuple[type, QoSPr
         msgs.OCCUPANCY: (kind, msgs.LATCHED_QOS),
         msgs.CLOCK: (Clock, msgs.CLOCK_QOS),
     }
-
-
-def topics(dims: int) -> dict[str, tuple[type, QoSProfile]]:
-    """The recorded topics of a run in a world of ``dims`` dimensions: a 3D world's shape and occupancy are
-    PointCloud2s of voxels (:class:`swarm_ros.ros.graph.WorldMaps`)."""
-    if dims == 2:
-        return TOPICS
-    kind = msgs.map_type(dims)
-    return {**TOPICS, msgs.OCCUPANCY: (kind, msgs.LATCHED_QOS), msgs.SHAPE: (kind, msgs.LATCHED_QOS)}
 
 
 STORE = "ros2_jazzy"  #: the rosbags type store of the message definitions (rosbags.typesys.Stores)
@@ -197,9 +173,9 @@ def _name_first_file(bag: Path) -> None:
 class BagRecorder:
     """Writes the recorded topics' serialized messages into a new rosbag2 (MCAP storage)."""
 
-    def __init__(self, out: Path, dims: int = 2, recorded: dict[str, tuple[type, QoSProfile]] | None = None) -> None:
-        """Open a bag for the run directory ``out`` (in a fresh hidden place beside it), of a run in a world of
-        ``dims`` dimensions: the topics :func:`topics` names, or ``recorded``."""
+    def __init__(self, out: Path, recorded: dict[str, tuple[type, QoSProfile]]) -> None:
+        """Open a bag for the run directory ``out`` (in a fresh hidden place beside it) of the topics ``recorded``
+        (:func:`central_topics`)."""
         from rosbags.rosbag2 import StoragePlugin, Writer
         from rosbags.typesys import Stores, get_typestore
 
@@ -208,13 +184,12 @@ class BagRecorder:
         self.path = self.holder / BAG_DIR
         self.writer = Writer(self.path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
-        self._maps: msgs.WorldMaps | None = None  # the world's map messages (write_world)
         store = get_typestore(Stores(STORE))
         self.connections = {
             topic: self.writer.add_connection(
                 topic, type_name(kind), typestore=store, offered_qos_profiles=[bag_qos(qos)]
             )
-            for topic, (kind, qos) in (recorded or topics(dims)).items()
+            for topic, (kind, qos) in recorded.items()
         }
         self.closed = False
 
@@ -232,18 +207,6 @@ class BagRecorder:
         if not self.closed and storage is not None and storage.chunk.bio.tell():  # type: ignore[attr-defined]
             storage.close_chunk()  # type: ignore[attr-defined]
             storage.bio.flush()  # type: ignore[attr-defined]
-
-    def write_world(self, cells: CellMap, tick: int, first: bool, changed: bool) -> None:
-        """/swarm/shape once (``first``), /swarm/occupancy (``cells.filled``) first and when it ``changed``, /clock:
-        the world's messages on them, encoded here from the verified rows as the world encodes them. These types
-        carry no tag (:mod:`swarm_ros.ros.auth`), so the monitor takes none of them from the network."""
-        if self._maps is None:
-            self._maps = msgs.WorldMaps(cells)
-        if first:
-            self.write(msgs.SHAPE, self._maps.shape_message(tick))
-        if changed:
-            self.write(msgs.OCCUPANCY, self._maps.occupancy_message(cells.filled, tick))
-        self.write(msgs.CLOCK, msgs.clock_message(tick))
 
     def close(self) -> Path:
         """Finish the bag (the MCAP summary and metadata.yaml); return its directory. Safe to call again."""

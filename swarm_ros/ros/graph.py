@@ -9,7 +9,6 @@ bytes (:mod:`swarm_ros.protocol.cdr`), which keeps a tick's messages at microsec
 from __future__ import annotations
 
 import array
-import functools
 import sys
 from collections.abc import Callable, Sequence
 
@@ -37,19 +36,13 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     HELD,
     METRICS,
     MONITOR,
-    MONITOR_READS,
     OCCUPANCY,
-    REGION,
     ROBOTS,
     ROBOTS_DEPTH,
     SHAPE,
-    SNAPSHOT,
     STATUS,
     TALLY,
     alive_topic,
-    decisions_topic,
-    region_topic,
-    snapshot_topic,
 )
 from swarm_ros.protocol.rows import FRAME_ID, TICK_SECONDS
 
@@ -79,16 +72,6 @@ BATCHES_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
-#: Between world shards: a tick's claims, parts and counts, kept for a peer's restarted process (which asks for
-#: them again as well: swarm_ros.protocol.shard_exchange keeps the last ticks' for it)
-SHARDS_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=8,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
-#: A shard's requests to a peer to send its kept messages again: only for the peer's process now
-AGAIN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=16, reliability=ReliabilityPolicy.RELIABLE)
 #: State that a late joiner needs once: the latest message is kept for it ("latched").
 LATCHED_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
@@ -205,32 +188,14 @@ HELD_LABEL = "held"  #: /swarm/held: the tick, and 1 if the outcome is held too
 METRICS_LABEL = ",".join(METRIC_COLUMNS)  #: /swarm/metrics: the study's model's metrics columns, in order
 
 
-@functools.cache
-def tally_label() -> str:
-    """/swarm/tally's label: the tick, the world's ``record_every``, then its robots in each state (a function: the
-    core's state loads numba, which the launcher does without)."""
-    from swarm_ros.core.state import RobotState
-
-    return ",".join(("tick", "every", *(s.label for s in RobotState)))
-
-
 def held_values(tick: int, ended: bool) -> np.ndarray:
     """The monitor's report on /swarm/held: the last tick whose record its bag holds, and whether the outcome too."""
     return np.array([tick, int(ended)], dtype=np.int64)
 
 
-def held_message(tick: int, ended: bool) -> Int64MultiArray:
-    return ids_message(held_values(tick, ended), HELD_LABEL)
-
-
 def metrics_message(row: np.ndarray | Sequence[int]) -> Int64MultiArray:
     """One tick's metrics, labelled: dim[0].label lists the columns in order."""
     return ids_message(np.asarray(row, dtype=np.int64), METRICS_LABEL)
-
-
-def tally_values(tick: int, every: int, counts: np.ndarray) -> np.ndarray:
-    """One world process's tally of a tick (:data:`TALLY`, labelled :func:`tally_label`)."""
-    return np.concatenate([[tick, every], counts]).astype(np.int64)
 
 
 def metrics_of(msg: Int64MultiArray) -> dict[str, int]:
