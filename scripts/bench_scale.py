@@ -7,7 +7,7 @@ A disc of N patches (N robots) in a world whose area holds N robots at the star'
 ticks. Printed per engine: seconds of the run (tick 0 to its end) and of the whole command,
 median and range over ``--repeats``, and each node's CPU per tick (its CPU from "ready" to
 "done" in its log, the monitor's to its "last tick" line, over the ticks); then the bytes of rows
-each batch took from its region topic per tick (its log's last line), and K against the smallest K
+each batch took from its area and changes topics per tick (its log's last line), and K against the smallest K
 as ratios.
 ``--bare`` turns the recording and the bag off. docs/benchmarks.md ("At scale") discusses the numbers.
 
@@ -158,7 +158,7 @@ def node_cpu(logs: Path, ticks: int) -> dict[str, float]:
 
 
 def received(logs: Path, ticks: int) -> dict[str, float]:
-    """Bytes of rows each batch took from its region topic per tick (the 'received ...' line of its log)."""
+    """Bytes of rows each batch took from its area and changes topics per tick (the 'received ...' line of its log)."""
     out = {}
     for log in sorted(logs.glob("robot_batch_*.log")):
         m = _RECEIVED.search(log.read_text(errors="replace"))
@@ -288,7 +288,7 @@ def scale(
                 moving_per_tick(out),
                 peer_rows(out / "logs", ticks),
             )
-        print("bytes of rows each batch received per tick (its region topic, the last run):")
+        print("bytes of rows each batch received per tick (its area and changes topics, the last run):")
         for k, per in traffic.items():
             print(
                 f"  K = {k}: "

@@ -926,6 +926,8 @@ def test_a_batch_process_that_came_back_is_sent_its_whole_view_and_the_run_is_th
             back, hosts[1] = True, batch(1)
             assert hosts[1].inboxes[1].take(decode_cloud(kept[1, False])) is None  # tick 30's changes: left
             old, decides = hosts[1].inboxes[0].take(decode_cloud(kept[1, True]))  # tick 0's whole view
+            taken = decode_cloud(kept[1, True]).width * RubensteinWire.row.itemsize  # (the benches read it)
+            assert hosts[1].received == taken and f"received {taken} bytes of rows" in hosts[1].summary()
             assert ls.announce("robot_batch_1", hosts[1].strip) == [1]
             (rows, entire), *_ = ls.areas([1], {1}).values()
             kept[1, True] = encode_cloud(rows, run.tick)

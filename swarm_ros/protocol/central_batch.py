@@ -46,6 +46,7 @@ class CentralBatch:
         self.decided_from: AreaStore | None = None  # the store the host decided from last
         self.strip = strips.strip(int(own["batch"]))
         self.tick = -1  # the last tick it decided from
+        self.received = 0  # bytes of rows taken from its area and changes topics (its log's last line says)
         name, topics = str(own["name"]), CentralTopics.of(params.algorithm)
         self.decisions = topics.decisions(name)
         self.inboxes = (
@@ -60,7 +61,7 @@ class CentralBatch:
         """Nothing heavy: the kernels load on the first area."""
 
     def summary(self) -> str:
-        return f"decided up to tick {self.tick + 1}"
+        return f"decided up to tick {self.tick + 1}; received {self.received} bytes of rows on its area and changes"
 
     def _take(self, whole: bool, msg: Cloud) -> Reply:
         """The whole view the world sent (at the start, to this process as it came back, from a world that went on
@@ -84,6 +85,7 @@ class CentralBatch:
         else:
             return None
         self.wire.check_rows(self.start, rows, tick)
+        self.received += rows.nbytes
         ids, robots = self.wire.robots_of(rows)
         changed = store.take(tick, ids, robots, whole)
         if store is not self.decided_from:  # the host last decided from the other store: it takes this one whole
