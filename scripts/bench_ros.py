@@ -50,7 +50,6 @@ import argparse
 import json
 import os
 import re
-import resource
 import statistics
 import subprocess
 import sys
@@ -61,6 +60,7 @@ from pathlib import Path
 from swarm_ros.core import RunParams, Shape, Simulation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_run import timed
 from bench_scale import USER_ENV, cpu_lines
 
 #: the tree this script belongs to: its commands run there, so `python -m swarm_ros` imports this tree's package
@@ -217,21 +217,10 @@ def readme_command(repeats: int, tmp: Path) -> float:
     print("\nThe README's command against simulate, the star with the defaults, back to back (seconds)")
     for r in range(repeats):
         for command in ("run", "simulate") if r % 2 == 0 else ("simulate", "run"):
-            used = resource.getrusage(resource.RUSAGE_CHILDREN)
-            began = time.perf_counter()
-            done = subprocess.run(
-                [*exe, command, "--shape", "star", "--out", str(tmp / f"readme-{command}-{r}"), "--quiet"],
-                capture_output=True,
-                text=True,
-                cwd=ROOT,
-                env=env,
-            )
-            took = time.perf_counter() - began
-            after = resource.getrusage(resource.RUSAGE_CHILDREN)
-            if done.returncode != 0:
-                raise SystemExit(f"{command} failed: {done.stderr.strip()[-500:]}")
+            argv = [*exe, command, "--shape", "star", "--out", str(tmp / f"readme-{command}-{r}"), "--quiet"]
+            took, used, _ = timed(argv, env, ROOT)
             times[command].append(took)
-            cpu[command].append(after.ru_utime - used.ru_utime + after.ru_stime - used.ru_stime)
+            cpu[command].append(used)
             if command == "run":
                 for name, lines in cpu_lines(tmp / f"readme-{command}-{r}" / "logs").items():
                     if "done" in lines:

@@ -27,24 +27,24 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parents[1]
 
 
+def timed(argv: list[str], env: dict[str, str], cwd: Path | None = None) -> tuple[float, float, str]:
+    """(seconds, CPU seconds of it and its children) of one command, and its stderr; exits in one line if it fails."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    began = time.perf_counter()
+    done = subprocess.run(argv, env=env, cwd=cwd, capture_output=True, text=True)
+    took = time.perf_counter() - began
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(argv[2:4])} failed: {done.stderr.strip()[-2000:]}")
+    return took, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), done.stderr
+
+
 def one(tree: Path, out: Path, flags: list[str]) -> tuple[float, float, float]:
     """(command seconds, run seconds, CPU seconds) of one ``swarm-ros run`` with the package from ``tree``."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     env.pop("ROS_DOMAIN_ID", None)
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # as a user runs it: bytecode caches written (docs/benchmarks.md)
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    began = time.perf_counter()
-    done = subprocess.run(
-        [sys.executable, "-m", "swarm_ros", "run", *flags, "--out", str(out), "--quiet"],
-        env=env,
-        capture_output=True,
-        text=True,
-    )
-    took = time.perf_counter() - began
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if done.returncode != 0:
-        raise SystemExit(f"{tree}: the run failed: {done.stderr.strip()[-2000:]}")
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    took, cpu, _ = timed([sys.executable, "-m", "swarm_ros", "run", *flags, "--out", str(out), "--quiet"], env)
     return took, float(json.loads((out / "summary.json").read_text())["wall_seconds"]), cpu
 
 
