@@ -186,8 +186,8 @@ class CentralWorld:
         # the last one's liveliness lapsed
         again = incarnation - before if incarnation > before else int(name in self.lapsed and self.ls.started)
         self.lapsed.discard(name)
-        if again:  # alive: its announcement says so, should DDS's liveliness event of it be lost (rclpy's
-            self.watch.lapsed.discard(name)  # EventsExecutor loses some), so that its next lapse is seen as one
+        if again:  # a new process: not the one whose liveliness lapsed; until DDS reports this one's, _unseen
+            self.watch.lapsed.discard(name)  # watches it (one killed before its writer matched reports no lapse)
         if again or name not in self.watched:
             self.unseen[name] = self.clock()
         if again and (self.ls.shard_index is None or k in self.ls.mine):  # its own batches only
