@@ -28,6 +28,7 @@ class WorldPort:
         self.clocks: list[int] = []  # each tick as it went out
         self.sent_at: list[float] = []  # the clock at each area sent
         self.clock = lambda: 0.0
+        self.status_acked = True  # whether every reader of the status has the last one (told())
 
     def watch_batch(self, name):
         self.watched.append(name)
@@ -50,6 +51,9 @@ class WorldPort:
 
     def delivered(self):
         return True
+
+    def told(self):
+        return self.status_acked
 
     def startup_seconds(self):
         return 1.5

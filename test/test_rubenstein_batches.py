@@ -612,17 +612,17 @@ def test_a_lapsed_peer_is_said_once_and_a_run_still_for_too_long_fails_naming_wh
     assert watch.lapsed == set()
 
 
-def world_run(window: int, every: int, tmp_path=None, slow: bool = False, tick_rate: float = 0.0):
+def world_run(window: int, every: int, tmp_path=None, slow: bool = False, tick_rate: float = 0.0, told: bool = True):
     """A CentralWorld over a fake port and clock, its batches' hosts fed the areas it sends, and a monitor that
-    reports each record held as it goes out (``slow``: only once the world waits for it). Checks, throughout, that
-    the world never runs past the monitor's reach."""
+    reports each record held as it goes out (``slow``: only once the world waits for it); ``told``: whether the
+    status's readers acknowledge it. Checks, throughout, that the world never runs past the monitor's reach."""
     from swarm_ros.protocol.central_world import CentralWorld
 
     params = RunParams(40, algorithm="rubenstein", seed=6)
     run, port, log, now = RubensteinRun(square(6), params), WorldPort(), Log(), [0.0]
     own = {"record_every": every, "monitor_window": window, "start_timeout": 60.0, "incarnation": 0}
     own.update(checkpoint=str(tmp_path / "world.npz") if tmp_path else "", tick_rate=tick_rate)
-    port.clock = lambda: now[0]
+    port.clock, port.status_acked = (lambda: now[0]), told
     world = CentralWorld(run, RubensteinWire, own, port, log, Rejections(log), clock=port.clock)
     hosts = {}
     for k in reversed(range(2)):
@@ -659,7 +659,7 @@ def world_run(window: int, every: int, tmp_path=None, slow: bool = False, tick_r
         world.poll()
         if world.finished:
             return run, world, port
-        if not moved:
+        if not moved and not world.held_end:  # (at the end, with no acknowledgement, the fake clock runs on)
             raise AssertionError(f"stuck at tick {run.tick}")
     raise AssertionError("no end")
 
@@ -689,6 +689,18 @@ def test_the_worlds_logic_over_a_fake_port_runs_the_in_process_run_with_a_record
         int(words["joined"]),  # (the tick's metrics by name too: a number; on the wire, text)
     )
     assert (tmp_path / "world.npz").exists()
+
+
+def test_a_world_whose_batches_have_not_acknowledged_the_outcome_waits_for_them_at_most_linger_seconds():
+    """The monitor holds the end, but a batch has not acknowledged the status: the world's exit would lose the
+    outcome the batch stops on, so the world stays, for LINGER seconds at most (a dead batch never acknowledges)."""
+    from swarm_ros.protocol.central_world import LINGER
+
+    run, world, port = world_run(40, 20, told=False)
+    assert world.held_end and world.finished
+    assert port.clock() - world.ended_at == pytest.approx(LINGER, abs=0.01)  # it waited the whole grace
+    _, at_once, quick = world_run(40, 20)  # every reader acknowledges: it ends once the monitor holds the end
+    assert at_once.finished and quick.clock() - at_once.ended_at < 0.01
 
 
 def test_the_world_holds_a_tick_past_the_monitors_reach_until_the_monitor_reports_more():

@@ -62,7 +62,8 @@ class CentralWorld:
     set; a checkpoint every :func:`save_every` ticks (1,000 or so; a world shard's, 100 or so), before the tick
     goes out; the records (every robot's row and the metrics rows since the last) every ``record_every`` ticks and
     at the end; the peers' liveliness and a still run's failure (:class:`Watch`);
-    the end once the monitor holds it (or, with no window, once its readers have everything, or after ``LINGER``).
+    the end once the monitor holds it and every reader of the status has the outcome (with no window, once its
+    readers have everything), or ``LINGER`` after it at most for what the readers still lack.
     A batch whose liveliness lapsed is waited for while the launcher restarts it (``on_batch_loss: restart`` and
     restarts left, by the incarnations it announced); otherwise, for an algorithm whose robots can be removed
     (``removes``), it is removed (:meth:`CentralLockstep.remove_batch`) unless it is back within
@@ -75,7 +76,8 @@ class CentralWorld:
     ``publish_status(tick, outcome, message, values)`` (the status's values, as the study's model's world gives
     them: ``waiting_for``, ``rejected_messages``, ``rejected``; from tick 0 ``startup_seconds`` and the run's
     progress, ten a second; at the end ``wall_seconds``), and answers ``monitor_reads()`` (the monitor reads the
-    run's topics), ``delivered()`` (every reader has the last messages) and ``startup_seconds()`` (from the start
+    run's topics), ``delivered()`` (every reader has the last messages), ``told()`` (every reader of the status,
+    each batch too, has the last status) and ``startup_seconds()`` (from the start
     of the run's command, or of this process, to now). ``rejections``: the messages its node dropped."""
 
     def __init__(
@@ -403,6 +405,8 @@ class CentralWorld:
             awaited = (unheard or [MONITOR]) if self.first or self.pending else self.ls.awaited()
             raise self.watch.failure(self.run.tick, awaited, self.rejections.text())
         if self.ended_at is not None and self.reach is not None:  # the monitor holds the end: nothing more to keep
-            self.finished = self.held_end
+            # and each batch has the outcome it stops on (the status of a world that exited is lost to a batch
+            # that had not acknowledged it: the batch then ran on until the launcher stopped it)
+            self.finished = self.held_end and (self.port.told() or now - self.ended_at > LINGER)
         elif self.ended_at is not None:
             self.finished = self.port.delivered() or now - self.ended_at > LINGER

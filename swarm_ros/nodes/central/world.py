@@ -10,10 +10,10 @@ once every batch's decisions are in (checked, or dropped and counted), it settle
 every ``record_every``-th tick and at the end it sends the robots and the metrics rows since the last. It runs at
 most ``monitor_window`` ticks past the last record the monitor reports held on /swarm/held
 (:func:`~swarm_ros.protocol.central_world.monitor_reach`), so a restarted monitor finds in the topics' histories
-every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it (or, with no
-window, once its readers have everything or after a grace period). It saves a checkpoint at tick 0 and every 1,000
-ticks or so (a world shard: every 100 or so), before the tick goes out; a restarted process goes on from the last one
-(:mod:`swarm_ros.protocol.central_checkpoint`). The algorithm's name's hyphens are underscores in the topics.
+every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it and each batch
+has the outcome (or, with no window, once its readers have everything), or after a grace period. It saves a
+checkpoint at tick 0 and every 1,000 ticks or so (a world shard: every 100 or so), before the tick goes out; a
+restarted process goes on from the last one (:mod:`swarm_ros.protocol.central_checkpoint`). The algorithm's name's hyphens are underscores in the topics.
 
     ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
 """
@@ -211,6 +211,9 @@ class CentralWorldNode:
 
     def delivered(self) -> bool:
         return msgs.acknowledged((self.pub_status, self.pub_robots, self.pub_metrics))
+
+    def told(self) -> bool:
+        return msgs.acknowledged((self.pub_status,))
 
     def startup_seconds(self) -> float:
         return run_age()
