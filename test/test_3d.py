@@ -337,7 +337,6 @@ def test_a_view_fed_the_changed_rows_equals_the_world_in_3d():
     while not sim.done:
         sim.step()
         ids = np.union1d(sim.last_joins()[0], sim.last_removed)
-        assert view.inconsistent(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.z[ids]) is None
         view.update(sim.tick, ids, s.state[ids], s.x[ids], s.y[ids], s.heading[ids], s.z[ids], s.pitch[ids])
     r = view.state
     for name in ("x", "y", "z", "heading", "pitch", "state", "occupancy", "frontier", "frontier_blocks"):

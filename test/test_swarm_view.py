@@ -122,39 +122,3 @@ def test_a_snapshot_must_hold_every_robot_once(small_disc):
         view.load(5, ids[1:], s.state[1:], s.x[1:], s.y[1:], s.heading[1:])
     with pytest.raises(ContractError, match="a snapshot of tick -1"):
         view.load(-1, ids, s.state, s.x, s.y, s.heading)
-
-
-def test_a_leap_to_every_robots_row_ticks_later_equals_the_world_and_refuses_what_cannot_follow(small_ring):
-    """SwarmView.leap (a world that sends the rows every k-th tick): from tick 0 to tick 25, then to 30, in one step
-    each, equals the world; rows that move a stationary robot, bring back a removed one, or miss a robot are
-    refused and leave the view as it was."""
-    sim = Simulation(small_ring, params(small_ring.patches, seed=3, fail_fraction=0.2, fail_tick=5))
-    view = SwarmView(small_ring, sim.params.robots)
-    everyone = np.arange(sim.params.robots)
-    _feed(view, sim, everyone)
-
-    def leap(state=None, x=None, ids=everyone):
-        s = sim.state
-        state, x = s.state if state is None else state, s.x if x is None else x
-        return view.leap(sim.tick, ids, state[ids], x[ids], s.y[ids], s.heading[ids])
-
-    for _ in range(25):
-        sim.step()
-    s = sim.state
-    moved = s.x.copy()
-    moved[np.flatnonzero(np.isin(s.state, [RobotState.SEED, RobotState.LOCALIZED]))[0]] += 1.0
-    assert "stationary" in leap(x=moved)
-    assert "every robot once" in leap(ids=everyone[1:])
-    assert view.tick == 0
-    assert leap() is None
-    _assert_same(view.state, sim.state)
-    removed = np.flatnonzero(s.state == RobotState.REMOVED)
-    assert removed.size
-    for _ in range(5):
-        sim.step()
-    back = sim.state.state.copy()
-    back[removed[0]] = RobotState.MOVING_OUTSIDE
-    assert "removed" in leap(state=back)
-    assert view.tick == 25
-    assert leap() is None
-    _assert_same(view.state, sim.state)

@@ -1,12 +1,10 @@
-"""A copy of the world's state rebuilt from what the world broadcasts, for robot batches and the monitor.
+"""A copy of the world's state rebuilt from the rows the world sends, for the study's model's robot batches.
 
-The distributed engine's world publishes, after each tick, one row per robot whose
-row changed in that tick (at tick 0, every robot): id, state, x, y, heading (3D: and z,
-pitch). Only
-moving robots change, so those rows are exactly the robots that decided in the tick.
-A :class:`SwarmView` applies the rows in tick order and keeps the occupancy and frontier
-grids in step, so after tick t it holds the same :class:`~swarm_ros.core.state.SwarmState`
-as the world: the monitor counts it.
+The world sends, after each tick, one row per robot whose row changed in that tick (at tick 0,
+every robot): id, state, x, y, heading (3D: and z, pitch). Only moving robots change, so those
+rows are exactly the robots that decided in the tick. A :class:`SwarmView` applies the rows in
+tick order and keeps the occupancy and frontier grids in step, so after tick t it holds the same
+:class:`~swarm_ros.core.state.SwarmState` as the world.
 
 A robot batch keeps a *regional* view (``area``: the columns of its strip and halo,
 :mod:`swarm_ros.core.regions`): it receives the rows of the robots in that area, the
@@ -28,7 +26,7 @@ from swarm_ros.core.errors import ContractError
 from swarm_ros.core.kernel_state import Robots, grid_of, robots_of
 from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of, has_repeats
+from swarm_ros.core.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
 
 _SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
 _REMOVED, _SEPARATED = np.int8(RobotState.REMOVED), np.int8(RobotState.SEPARATED)
@@ -168,53 +166,6 @@ class SwarmView:
         self._apply(0, ids, state, x, y, heading, z, pitch)  # the checks of a tick-0 message: every robot once
         self.state.tick = tick
 
-    def leap(
-        self,
-        tick: int,
-        ids: np.ndarray,
-        state: np.ndarray,
-        x: np.ndarray,
-        y: np.ndarray,
-        heading: np.ndarray,
-        z: np.ndarray | None = None,
-        pitch: np.ndarray | None = None,
-    ) -> str | None:
-        """Go on to ``tick`` from every robot's row at it, ticks after the last one applied (a world that sends the
-        rows only every k-th tick); why not (the view unchanged), or None.
-
-        Besides :meth:`load`'s checks (every robot once, each localized one on its own shape patch), the rows
-        must be able to follow the view's: a robot that was stationary (a seed, localized or separated) is
-        where it was, in the same state, or removed; a removed robot stays removed.
-        """
-        s = self.state
-        ids = np.asarray(ids, dtype=np.int64)
-        if self.area is not None or tick <= s.tick:
-            return f"of tick {tick} cannot follow tick {s.tick}"
-        if ids.size != s.robots or has_repeats(ids) or (ids.size and (ids.min() < 0 or ids.max() >= s.robots)):
-            return f"must hold every robot once ({s.robots}), got {ids.size} rows"
-        if s.tick >= 0:
-            after = np.empty(s.robots, dtype=np.int8)
-            after[ids] = state
-            new_x, new_y = np.empty(s.robots), np.empty(s.robots)
-            new_x[ids], new_y[ids] = x, y
-            before = s.state
-            fixed = (before == _SEED) | (before == _LOCALIZED) | (before == _SEPARATED)
-            moved = (new_x != s.x) | (new_y != s.y)
-            if z is not None and self._solid:
-                new_z = np.empty(s.robots)
-                new_z[ids] = z
-                moved |= new_z != s.z
-            kept = after == before
-            if ((before == _REMOVED) & ~kept).any() or (fixed & ~(kept & ~moved) & (after != _REMOVED)).any():
-                return "move a robot that was stationary, or bring back a removed one"
-        saved = self.state
-        try:
-            self.load(tick, ids, state, x, y, heading, z, pitch)
-        except ContractError as exc:
-            self.state = saved
-            return str(exc)
-        return None
-
     @property
     def tick(self) -> int:
         return self.state.tick
@@ -240,24 +191,6 @@ class SwarmView:
         if tick != self.state.tick + 1:
             raise ContractError(f"rows for tick {tick} arrived after tick {self.state.tick}")
         self._apply(tick, ids, state, x, y, heading, z, pitch)
-
-    def merge(
-        self,
-        ids: np.ndarray,
-        state: np.ndarray,
-        x: np.ndarray,
-        y: np.ndarray,
-        heading: np.ndarray,
-        z: np.ndarray | None = None,
-        pitch: np.ndarray | None = None,
-    ) -> None:
-        """Apply more rows of the tick already applied (a world shard's: its neighbours' rows of the tick it has
-        applied its own robots' part of, :mod:`swarm_ros.core.shards`).
-
-        Raises:
-            ContractError: as :meth:`update`.
-        """
-        self._apply(self.state.tick, ids, state, x, y, heading, z, pitch)
 
     def _apply(
         self,
@@ -296,48 +229,6 @@ class SwarmView:
                 f"localizes on a patch that is not an empty shape patch, or returns after removal"
             )
         s.tick = tick
-
-    def inconsistent(
-        self, tick: int, ids: np.ndarray, state: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray | None = None
-    ) -> str | None:
-        """Why the rows of ``tick`` cannot be the world's next ones (None if they can), changing nothing.
-
-        Checks what :meth:`update` would otherwise find half-way through, leaving the view
-        unusable: the tick follows the last one; tick 0 holds every robot once; after tick 0,
-        only robots that were moving change, except that any robot may be removed, once; a
-        robot that localizes does so on a frontier patch, one robot per patch. A regional view
-        also takes any row of a robot it does not follow (one entering its area), and cannot check
-        that tick 0 holds every robot. Ids and state
-        codes must be in range (:mod:`swarm_ros.protocol.checks` checks them first).
-        """
-        s = self.state
-        if tick != s.tick + 1:
-            return f"rows for tick {tick} after tick {s.tick}"
-        ids = np.asarray(ids, dtype=np.int64)
-        if tick == 0 and self.area is None:
-            if ids.size != s.robots or not np.array_equal(np.sort(ids), np.arange(s.robots)):
-                return f"tick 0 must hold every robot once ({s.robots}), got {ids.size} rows"
-            return None
-        before, after = s.state[ids], np.asarray(state, dtype=np.int8)
-        moving = IS_MOVING[before] & (before != UNKNOWN)
-        if self.area is not None or tick == 0:
-            moving |= before == UNKNOWN  # entering the area (or, at tick 0, every robot)
-        if (~moving & ((after != _REMOVED) | (before == _REMOVED))).any():
-            return "a robot that was not moving changed"
-        joins = moving & ((after == _LOCALIZED) | (after == _SEED))
-        if joins.any():
-            axes = (x, y) if not self._solid else (x, y, z)
-            if any(a is None for a in axes):
-                return "rows of a 3D world without z"
-            cells = [np.floor(np.asarray(a)[joins] + 0.5).astype(np.int64) + self._radius for a in axes]
-            if min(c.min() for c in cells) < 0 or max(c.max() for c in cells) >= self._size:
-                return "a robot localizes outside the world"
-            p = cells[-1]
-            for c in reversed(cells[:-1]):
-                p = p * self._size + c
-            if not s.frontier[p].all() or has_repeats(p):
-                return "a robot localizes off the frontier, or two on one patch"
-        return None
 
     def moving_ids(self) -> np.ndarray:
         """Ids of the moving robots (a regional view: those in its area), ascending."""
