@@ -52,9 +52,13 @@ def test_a_3d_pose_out_of_range_is_rejected(torus_run):
         checks.robot_rows(make_cloud(rows, 40), s.robots, 32, dims=3)
 
 
+def _cells(shape: Shape):
+    return shape.world.cell_map(shape.mask, np.zeros_like(shape.mask))
+
+
 def test_a_3d_worlds_maps_are_voxel_clouds(torus_run):
     shape, s = torus_run.shape, torus_run.state
-    maps = msgs.WorldMaps(msgs.study_cells(shape))
+    maps = msgs.WorldMaps(_cells(shape))
     assert maps.kind is PointCloud2
     whole = deserialize_message(maps.shape_message(0), PointCloud2)
     voxels = msgs.cloud_rows(whole, VOXEL_ROW)
@@ -66,7 +70,7 @@ def test_a_3d_worlds_maps_are_voxel_clouds(torus_run):
         VOXEL_ROW,
     )
     assert filled.size == int((s.occupancy >= 0).sum()) > 4
-    assert msgs.WorldMaps(msgs.study_cells(Shape.load("star"))).kind.__name__ == "OccupancyGrid"
+    assert msgs.WorldMaps(_cells(Shape.load("star"))).kind.__name__ == "OccupancyGrid"
 
 
 def test_topics_prints_3d_rows_with_z_and_pitch(torus_run):

@@ -15,10 +15,10 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.core.errors import ConfigError, ContractError, Rejected
-from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.protocol import tag as tags
 from swarm_ros.protocol.cdr import cloud_parts, encode_cloud
 from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.plan import CentralTopics
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, TAG_PREFIX, batch_label, is_tag
 from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key
 from swarm_ros.ros import auth
@@ -27,6 +27,8 @@ from swarm_ros.ros import graph as msgs
 pytestmark = pytest.mark.unit
 
 KEY = b"k" * 32
+TOPICS = CentralTopics.of("darr-niazi")  # a run's topics: the world's robots, a batch's decisions
+ROBOTS, DECISIONS = TOPICS.robots, TOPICS.decisions("robot_batch_0")
 
 
 class _Log:
@@ -85,31 +87,31 @@ def _rows(dtype, n: int) -> np.ndarray:
 
 def test_every_tagged_type_reaches_its_handler_whole_and_without_its_tag():
     world, batch, monitor = _Node("world"), _Node("robot_batch_0"), _Node("monitor")
-    auth.Signer(world, KEY).publisher(PointCloud2, msgs.ROBOTS, None).publish_rows(_rows(ROBOT_ROW, 3), 7)
+    auth.Signer(world, KEY).publisher(PointCloud2, ROBOTS, None).publish_rows(_rows(ROBOT_ROW, 3), 7)
     auth.Signer(world, KEY).publisher(DiagnosticArray, msgs.STATUS, None).publish(
         msgs.status_message(7, "running", "running", extra={"robots": 9})
     )
-    auth.Signer(monitor, KEY).publisher(Int64MultiArray, msgs.METRICS, None).publish_ints(
-        np.array([7] + [1] * (len(METRIC_COLUMNS) - 1)), msgs.METRICS_LABEL
+    auth.Signer(monitor, KEY).publisher(Int64MultiArray, msgs.HELD, None).publish_ints(
+        msgs.held_values(7, False), msgs.HELD_LABEL
     )
     hello = msgs.ids_message(np.array([4, 5, 6]))
     hello.layout.dim[0].label = batch_label("robot_batch_0", 2)
     auth.Signer(batch, KEY).publisher(Int64MultiArray, msgs.BATCHES, None).publish(hello)
     rx, gate, got = _gate(
         {
-            msgs.ROBOTS: PointCloud2,
+            ROBOTS: PointCloud2,
             msgs.STATUS: DiagnosticArray,
-            msgs.METRICS: Int64MultiArray,
+            msgs.HELD: Int64MultiArray,
             msgs.BATCHES: Int64MultiArray,
         }
     )
     _deliver(rx, world.sent + monitor.sent + batch.sent)
-    assert gate.rejections.total == 0 and [t for t, _ in got] == [msgs.ROBOTS, msgs.STATUS, msgs.METRICS, msgs.BATCHES]
-    cloud, status, metrics, batches = (m for _, m in got)
+    assert gate.rejections.total == 0 and [t for t, _ in got] == [ROBOTS, msgs.STATUS, msgs.HELD, msgs.BATCHES]
+    cloud, status, held, batches = (m for _, m in got)
     assert [f.name for f in cloud.fields] == list(ROBOT_ROW.names) and cloud.tag.startswith("swarm_ros.tag:world:")
     assert np.array_equal(np.frombuffer(cloud.data, ROBOT_ROW)["id"], [4, 5, 6])
     assert msgs.status_values(status) == {"tick": "7", "outcome": "running", "robots": "9"}
-    assert msgs.metrics_of(metrics)["tick"] == 7 and len(metrics.layout.dim) == 1
+    assert list(held.data) == [7, 0] and [d.label for d in held.layout.dim] == [msgs.HELD_LABEL]
     assert batches.layout.dim[0].label == "robot_batch_0/2" and list(batches.data) == [4, 5, 6]
 
 
@@ -117,7 +119,7 @@ def test_outside_readers_see_the_standard_type_with_one_more_field():
     """rclpy's own deserializer reads a tagged message; the tag is where docs/security.md says."""
     node = _Node("world")
     signer = auth.Signer(node, KEY)
-    signer.publisher(PointCloud2, msgs.ROBOTS, None).publish_rows(_rows(ROBOT_ROW, 2), 3)
+    signer.publisher(PointCloud2, ROBOTS, None).publish_rows(_rows(ROBOT_ROW, 2), 3)
     signer.publisher(DiagnosticArray, msgs.STATUS, None).publish(msgs.status_message(3, "running", "x"))
     cloud = deserialize_message(node.sent[0][1], PointCloud2)
     assert cloud.width == 2 and len(cloud.data) == 2 * ROBOT_ROW.itemsize
@@ -128,17 +130,17 @@ def test_outside_readers_see_the_standard_type_with_one_more_field():
     assert status.status[0].values[-1].key == TAG_PREFIX and is_tag(status.status[0].values[-1].value)
 
 
-def _one_cloud(sender: str = "world", topic: str = msgs.ROBOTS, key: bytes = KEY) -> bytes:
+def _one_cloud(sender: str = "world", topic: str = ROBOTS, key: bytes = KEY) -> bytes:
     node = _Node(sender)
     auth.Signer(node, key).publisher(PointCloud2, topic, None).publish_rows(_rows(DECISION_ROW, 4), 5)
     return node.sent[0][1]
 
 
 def test_a_message_without_a_tag_or_with_another_keys_is_dropped_at_once():
-    rx, gate, got = _gate({msgs.ROBOTS: PointCloud2})
-    rx.callbacks[msgs.ROBOTS](tags.aligned(encode_cloud(_rows(DECISION_ROW, 4), 5)))  # no tag
-    rx.callbacks[msgs.ROBOTS](_one_cloud(key=b"x" * 32))  # a tag under another key
-    assert got == [] and gate.rejections.counts == {f"{msgs.ROBOTS}: unauthenticated": 2}
+    rx, gate, got = _gate({ROBOTS: PointCloud2})
+    rx.callbacks[ROBOTS](tags.aligned(encode_cloud(_rows(DECISION_ROW, 4), 5)))  # no tag
+    rx.callbacks[ROBOTS](_one_cloud(key=b"x" * 32))  # a tag under another key
+    assert got == [] and gate.rejections.counts == {f"{ROBOTS}: unauthenticated": 2}
 
 
 @pytest.mark.parametrize("where", ["rows", "stamp", "tag's sender", "mac"])
@@ -152,46 +154,46 @@ def test_a_changed_byte_anywhere_makes_the_tag_fail(where):
         "mac": text.index("swarm_ros.tag:world") + 60,
     }[where]
     data[at] = data[at] ^ 0x01 if where != "tag's sender" else ord("o")  # 'world' -> 'oorld'
-    rx, gate, got = _gate({msgs.ROBOTS: PointCloud2})
-    rx.callbacks[msgs.ROBOTS](bytes(data))
+    rx, gate, got = _gate({ROBOTS: PointCloud2})
+    rx.callbacks[ROBOTS](bytes(data))
     assert got == [] and sum(gate.rejections.counts.values()) == 1
 
 
 def test_the_topic_is_part_of_what_the_tag_proves():
-    data = _one_cloud(topic=msgs.DECISIONS)  # the world's applied decisions, sent on as its rows
-    rx, gate, got = _gate({msgs.ROBOTS: PointCloud2})
-    rx.callbacks[msgs.ROBOTS](data)
-    assert got == [] and gate.rejections.counts == {f"{msgs.ROBOTS}: unauthenticated": 1}
+    data = _one_cloud(topic=DECISIONS)  # a batch's decisions, sent on as the world's rows
+    rx, gate, got = _gate({ROBOTS: PointCloud2})
+    rx.callbacks[ROBOTS](data)
+    assert got == [] and gate.rejections.counts == {f"{ROBOTS}: unauthenticated": 1}
 
 
 def test_a_replay_is_refused_and_a_restarted_sender_is_taken():
-    rx, gate, got = _gate({msgs.ROBOTS: PointCloud2})
+    rx, gate, got = _gate({ROBOTS: PointCloud2})
     node = _Node("world")
-    pub = auth.Signer(node, KEY).publisher(PointCloud2, msgs.ROBOTS, None)
+    pub = auth.Signer(node, KEY).publisher(PointCloud2, ROBOTS, None)
     for tick in (1, 2):
         pub.publish_rows(_rows(ROBOT_ROW, 1), tick)
     _deliver(rx, node.sent)
     _deliver(rx, node.sent[:1])  # tick 1's message again, later
     restarted = _Node("world")
-    auth.Signer(restarted, KEY).publisher(PointCloud2, msgs.ROBOTS, None).publish_rows(_rows(ROBOT_ROW, 1), 3)
+    auth.Signer(restarted, KEY).publisher(PointCloud2, ROBOTS, None).publish_rows(_rows(ROBOT_ROW, 1), 3)
     _deliver(rx, restarted.sent)
     assert [m.header.stamp.sec for _, m in got] == [1, 2, 3]
-    assert gate.rejections.counts == {f"{msgs.ROBOTS}: replayed": 1}
+    assert gate.rejections.counts == {f"{ROBOTS}: replayed": 1}
 
 
 @pytest.mark.parametrize(
     "sender, topic",
     [
-        ("robot_batch_0", msgs.ROBOTS),
-        ("robot_batch_1", "/swarm/decisions/robot_batch_0"),
-        ("world", msgs.METRICS),
+        ("robot_batch_0", ROBOTS),
+        ("robot_batch_1", DECISIONS),
+        ("world", msgs.HELD),
         ("robot_batch_0", msgs.HELD),
         ("monitor", msgs.BATCHES),
     ],
 )
 def test_a_node_of_the_run_is_taken_only_on_its_own_topics(sender, topic):
     node = _Node(sender)
-    kind = Int64MultiArray if topic in (msgs.METRICS, msgs.HELD, msgs.BATCHES) else PointCloud2
+    kind = Int64MultiArray if topic in (msgs.HELD, msgs.BATCHES) else PointCloud2
     pub = auth.Signer(node, KEY).publisher(kind, topic, None)
     if kind is PointCloud2:
         pub.publish_rows(_rows(DECISION_ROW, 1), 1)
@@ -216,9 +218,9 @@ def test_a_batch_announces_only_itself():
 
 @pytest.mark.parametrize("data", [b"", b"\x00\x01\x00\x00", b"\x00\x01\x00\x00" + b"\xff" * 64, bytes(range(256))])
 def test_bytes_that_are_not_the_type_are_dropped_as_malformed(data):
-    rx, gate, got = _gate({msgs.STATUS: DiagnosticArray, msgs.ROBOTS: PointCloud2})
+    rx, gate, got = _gate({msgs.STATUS: DiagnosticArray, ROBOTS: PointCloud2})
     rx.callbacks[msgs.STATUS](data)
-    rx.callbacks[msgs.ROBOTS](data)
+    rx.callbacks[ROBOTS](data)
     assert got == [] and gate.rejections.total == 2 and gate.received == 2
 
 
@@ -260,12 +262,12 @@ def test_a_cloud_sealed_in_parts_is_the_cloud_sealed_whole(n):
     parts_sealer, whole_sealer = tags.Sealer(KEY, "world"), tags.Sealer(KEY, "world")
     whole_sealer.nonce = parts_sealer.nonce
     blank, same_blank = parts_sealer.blank(), whole_sealer.blank()
-    sealed = parts_sealer.seal(msgs.ROBOTS, cloud_parts(rows, 7, tag=blank), blank)
-    assert sealed == whole_sealer.seal(msgs.ROBOTS, encode_cloud(rows, 7, tag=same_blank), same_blank)
+    sealed = parts_sealer.seal(ROBOTS, cloud_parts(rows, 7, tag=blank), blank)
+    assert sealed == whole_sealer.seal(ROBOTS, encode_cloud(rows, 7, tag=same_blank), same_blank)
     assert len(sealed) % 4 == 0
-    assert tags.Verifier(KEY).verify(msgs.ROBOTS, sealed).sender == "world"
+    assert tags.Verifier(KEY).verify(ROBOTS, sealed).sender == "world"
     with pytest.raises(ContractError, match="blank tag"):  # a blank among the rows is not where a tag belongs
-        parts_sealer.seal(msgs.ROBOTS, (b"head", memoryview(blank.encode())), blank)
+        parts_sealer.seal(ROBOTS, (b"head", memoryview(blank.encode())), blank)
 
 
 def test_the_run_key_comes_from_the_environment():
@@ -278,9 +280,9 @@ def test_the_run_key_comes_from_the_environment():
 
 
 def test_only_a_key_holders_bytes_reach_a_parser_and_they_must_parse_with_the_tag_in_its_place():
-    rx, gate, got = _gate({msgs.STATUS: DiagnosticArray, msgs.ROBOTS: PointCloud2})
+    rx, gate, got = _gate({msgs.STATUS: DiagnosticArray, ROBOTS: PointCloud2})
     sealer = tags.Sealer(KEY, "world")
-    for topic in (msgs.STATUS, msgs.ROBOTS):  # sealed garbage: proven, then refused by the parser
+    for topic in (msgs.STATUS, ROBOTS):  # sealed garbage: proven, then refused by the parser
         blank = sealer.blank()
         rx.callbacks[topic](sealer.seal(topic, b"\x00\x01\x00\x00" + blank.encode() + b"\xff" * 40, blank))
     status = msgs.status_message(1, "running", "x")
@@ -289,6 +291,6 @@ def test_only_a_key_holders_bytes_reach_a_parser_and_they_must_parse_with_the_ta
     rx.callbacks[msgs.STATUS](sealer.seal(msgs.STATUS, serialize_message(status), blank))
     assert got == [] and gate.rejections.counts == {
         f"{msgs.STATUS}: malformed CDR": 1,
-        f"{msgs.ROBOTS}: malformed CDR": 1,
+        f"{ROBOTS}: malformed CDR": 1,
         f"{msgs.STATUS}: unauthenticated": 1,
     }

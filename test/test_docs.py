@@ -239,7 +239,7 @@ def test_every_topic_is_a_row_of_the_topic_table():
     section = _section(ROOT / "docs" / "protocol.md", "## Topics")
     first_cells = [ln.split("|")[1] for ln in section.splitlines() if ln.startswith("| `/")]
     topics = [v for k, v in vars(plan).items() if k.isupper() and isinstance(v, str) and v.startswith("/")]
-    assert len(topics) >= 12
+    assert {plan.STATUS, plan.HELD, plan.BATCHES, plan.CLOCK} <= set(topics)  # the scan finds them
     missing = [t for t in topics if not any(f"`{t}`" in cell or f"`{t}/" in cell for cell in first_cells)]
     assert not missing, missing
 

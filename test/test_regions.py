@@ -11,7 +11,6 @@ from swarm_ros.core import Shape
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.regions import balanced_cuts, columns, halo, parse_cuts, strip
 from swarm_ros.core.state import initial_state
-from swarm_ros.protocol.rows import REGION_ROW, REGION_ROW_3D, ROBOT_ROW, compact, point_fields, robot_rows
 
 pytestmark = pytest.mark.unit
 
@@ -70,22 +69,3 @@ def test_cuts_that_do_not_fit_the_batches_are_refused(cuts, batches, why):
 def test_the_halo_covers_what_a_decision_reads():
     # three literal moves, the crowding test's centre one patch ahead, its vision radius, a patch of rounding
     assert halo(1.0) == 6 and halo(2.5) == 8
-
-
-def _rows(x, states):
-    n = len(x)
-    s = np.asarray(states, dtype=np.int8)
-    return robot_rows(np.arange(n), s, np.asarray(x, float), np.zeros(n), np.zeros(n))
-
-
-def test_compact_rows_hold_the_exact_pose_in_fewer_bytes():
-    rng = np.random.default_rng(3)
-    rows = np.zeros(50, dtype=ROBOT_ROW)
-    for name in ("x", "y", "heading"):
-        rows[name] = rng.uniform(-30, 30, 50)
-    rows["id"], rows["state"] = np.arange(50), 1
-    back = np.frombuffer(compact(rows).tobytes(), dtype=REGION_ROW)
-    for name in REGION_ROW.names:
-        assert np.array_equal(back[name], rows[name])
-    assert REGION_ROW.itemsize == 29 and REGION_ROW_3D.itemsize == 45
-    assert [f[0] for f in point_fields(REGION_ROW)] == ["x", "y", "heading", "id", "state"]

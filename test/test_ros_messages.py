@@ -14,11 +14,9 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
 from runs import make_cloud
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Int64MultiArray
 
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.errors import ConfigError, Rejected
-from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.params import RUN_PARAMETERS, Settings
 from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, robot_rows
 from swarm_ros.ros import graph as msgs
@@ -42,15 +40,11 @@ def test_robot_rows_survive_serialization_exactly_and_carry_the_tick():
         msgs.cloud_rows(msg, DECISION_ROW)
 
 
-def test_metrics_message_is_labelled_and_exact():
-    row = [12, 400, 390, 17, 600, 646]
-    msg = deserialize_message(serialize_message(msgs.metrics_message(row)), Int64MultiArray)
-    assert msgs.metrics_of(msg) == dict(zip(METRIC_COLUMNS, row))
-
-
 def test_occupancy_grid_places_patch_centres_on_cells():
     shape = Shape.load("tyre")
-    grid = deserialize_message(msgs.WorldMaps(msgs.study_cells(shape)).shape_message(3), OccupancyGrid)
+    grid = deserialize_message(
+        msgs.WorldMaps(shape.world.cell_map(shape.mask, np.zeros_like(shape.mask))).shape_message(3), OccupancyGrid
+    )
     w = shape.world.size
     assert (grid.info.width, grid.info.height, grid.info.resolution) == (w, w, 1.0)
     assert grid.info.origin.position.x == -(shape.world.radius + 0.5)

@@ -22,7 +22,6 @@ from swarm_ros.protocol.rows import (
     TICK_SECONDS,
     check_fields,
     parse_batch_label,
-    region_row,
     robot_row,
 )
 
@@ -116,13 +115,12 @@ def inside_world(rows: np.ndarray, radius: int) -> None:
         raise Rejected("pose outside the world", f"({x[i]!r}, {y[i]!r}, heading {heading[i]!r}{z})")
 
 
-def robot_rows(msg, robots: int, radius: int, dims: int = 2, regional: bool = False, part: bool = False) -> np.ndarray:
-    """The rows of a /swarm/robots message (``regional``: a /swarm/region/<batch> or snapshot message, compact
-    rows; ``part``: a world shard's part of one, which may be empty), checked: layout, ids, states, poses."""
+def robot_rows(msg, robots: int, radius: int, dims: int = 2) -> np.ndarray:
+    """The robot rows (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`, 3D ``ROBOT_ROW_3D``) of a message, checked: layout,
+    ids, states, poses."""
     from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
 
-    # a region may have no rows in a tick (the tick still comes); the whole swarm always has some
-    rows = cloud(msg, region_row(dims) if regional else robot_row(dims), robots, min_rows=0 if regional or part else 1)
+    rows = cloud(msg, robot_row(dims), robots, min_rows=1)
     if not rows.size:
         return rows
     ids_in_range(rows["id"].astype(np.int64), 0, robots)
@@ -167,29 +165,3 @@ def held_report(values: np.ndarray, newest: int) -> tuple[int, bool]:
     if not -1 <= tick <= newest or ended not in (0, 1):
         raise Rejected("held", f"tick {tick}, ended {ended}; the world published up to tick {newest}")
     return tick, bool(ended)
-
-
-def tally_values(data, robots: int) -> tuple[int, int, np.ndarray]:
-    """(tick, every, robots by state) of a /swarm/tally message's data (the tick, the world's ``record_every``, then
-    its robots in each state), checked in form.
-
-    Raises:
-        Rejected: not one number per field, a negative tick or count, ``every`` below 2, or more robots than
-            the run has.
-    """
-    from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
-
-    values = np.asarray(data, dtype=np.int64)
-    if values.ndim != 1 or values.size != 2 + STATE_COUNT:
-        raise Rejected("malformed tally", f"{values.size} numbers, not {2 + STATE_COUNT}")
-    tick, every, counts = int(values[0]), int(values[1]), values[2:].copy()
-    if tick < 0 or every < 2 or (counts < 0).any() or int(counts.sum()) > robots:
-        raise Rejected("malformed tally", f"tick {tick}, every {every}, counts {counts.tolist()}")
-    return tick, every, counts
-
-
-def snapshot(msg, robots: int, radius: int, dims: int = 2) -> tuple[int, np.ndarray]:
-    """(tick, rows) of a snapshot for a batch, checked as a message of compact rows (its region's robots:
-    :mod:`swarm_ros.protocol.hosting`)."""
-    tick = tick_stamp(msg.header)
-    return tick, robot_rows(msg, robots, radius, dims, regional=True)

@@ -73,22 +73,15 @@ def plan_for(
 
 
 # -- topics -----------------------------------------------------------------------
-ROBOTS_DEPTH = 512  #: ticks of rows a reader of /swarm/robots or /swarm/region/<batch> keeps (its history depth)
-ROBOTS = "/swarm/robots"  # world -> all: rows of the robots that changed in the tick (PointCloud2)
-#: world -> all: the decisions it applied in the tick (PointCloud2)
-DECISIONS = "/swarm/decisions"
+ROBOTS_DEPTH = 512  #: messages a batch's reader of its area's changes keeps (its history depth)
 BATCHES = "/swarm/batches"  # robot batches -> world: the columns (strip) each batch hosts (Int64MultiArray)
 SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
 OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)
 STATUS = "/swarm/status"  # world: running / outcome (DiagnosticArray, latched)
-METRICS = "/swarm/metrics"  # monitor: the tick's metrics (Int64MultiArray, labelled)
 #: monitor -> every world process, every algorithm's run: ``[tick, ended]`` (Int64MultiArray, latched), the last
 #: tick whose record its bag holds durably, and 1 once it holds the run's outcome too. A world runs at most
 #: ``monitor_window`` ticks (or records) past it: the run's one backpressure.
 HELD = "/swarm/held"
-#: world -> monitor, each tick when the robots' rows go out only every ``record_every``-th (> 1): its robots by
-#: state (a world shard's: those in its strips), the monitor's count of the ticks between (Int64MultiArray)
-TALLY = "/swarm/tally"
 CLOCK = "/clock"  # world: simulation time, one tick = one second (rosgraph_msgs/Clock)
 ALIVE = "/swarm/alive"  # /swarm/alive/<node>: each batch's and the monitor's liveliness (std_msgs/Empty, silent)
 

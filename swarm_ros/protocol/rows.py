@@ -73,31 +73,11 @@ DECISION_ROW_3D = np.dtype(
         "itemsize": 48,
     }
 )
-#: World -> one robot batch, each tick (/swarm/region/<batch>, its snapshots): a robot row without padding or a
-#: 2D world's z, the exact pose in the fewest bytes (29; 3D 45; /swarm/robots rows take 40 and 48).
-REGION_ROW = np.dtype(
-    {
-        "names": ["x", "y", "heading", "id", "state"],
-        "formats": ["<f8", "<f8", "<f8", "<u4", "<u1"],
-        "offsets": [0, 8, 16, 24, 28],
-        "itemsize": 29,
-    }
-)
-REGION_ROW_3D = np.dtype(
-    {
-        "names": ["x", "y", "z", "heading", "pitch", "id", "state"],
-        "formats": ["<f8", "<f8", "<f8", "<f8", "<f8", "<u4", "<u1"],
-        "offsets": [0, 8, 16, 24, 32, 40, 44],
-        "itemsize": 45,
-    }
-)
 ROW_TYPES = (
     ROBOT_ROW,
     DECISION_ROW,
     ROBOT_ROW_3D,
     DECISION_ROW_3D,
-    REGION_ROW,
-    REGION_ROW_3D,
 )  #: every row layout, for readers of any
 #: World -> viewers, in a 3D world: a voxel's centre, metres (/swarm/shape: every shape voxel; /swarm/occupancy:
 #: the filled ones). A 2D world sends nav_msgs/OccupancyGrid on those topics instead.
@@ -107,19 +87,6 @@ VOXEL_ROW = np.dtype({"names": ["x", "y", "z"], "formats": ["<f4", "<f4", "<f4"]
 def robot_row(dims: int) -> np.dtype:
     """The robot row layout of a world of ``dims`` dimensions."""
     return ROBOT_ROW if dims == 2 else ROBOT_ROW_3D
-
-
-def region_row(dims: int) -> np.dtype:
-    """The compact robot row layout (a batch's region topic) of a world of ``dims`` dimensions."""
-    return REGION_ROW if dims == 2 else REGION_ROW_3D
-
-
-def compact(rows: np.ndarray) -> np.ndarray:
-    """Robot rows (:data:`ROBOT_ROW`, :data:`ROBOT_ROW_3D`) in the compact layout, field for field."""
-    out = np.empty(rows.size, dtype=REGION_ROW if "pitch" not in (rows.dtype.names or ()) else REGION_ROW_3D)
-    for name in out.dtype.names or ():
-        out[name] = rows[name]
-    return out
 
 
 def decision_row(dims: int) -> np.dtype:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from swarm_ros.protocol.plan import MONITOR, WORLD
@@ -40,18 +39,6 @@ def progress_values(progress: tuple[int, int, dict[str, str]]) -> dict[str, obje
     done, total, words = progress
     shown = {name: value for name, value in words.items() if name != "tick"}
     return {"progress": done, "progress_total": total, "progress_words": ",".join(shown), **shown}
-
-
-@dataclass
-class Status:
-    """One /swarm/status message's content: the tick it speaks for, the outcome (or run state), a line
-    for people, whether something needs attention, and named values (``docs/protocol.md`` lists them)."""
-
-    tick: int
-    outcome: str
-    message: str
-    warn: bool = False
-    values: dict[str, object] = field(default_factory=dict)
 
 
 def restarts_text(restarts: list[tuple[int, str]]) -> str:

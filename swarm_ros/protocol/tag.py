@@ -30,9 +30,7 @@ from dataclasses import dataclass
 from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.protocol.plan import (
     BATCHES,
-    DECISIONS,
     HELD,
-    METRICS,
     MONITOR,
     central_sender,
     is_world,
@@ -120,15 +118,13 @@ def _mac(key: bytes, topic: str, parts) -> str:
 
 def may_send(sender: str, topic: str) -> bool:
     """Whether a node named ``sender`` publishes on ``topic`` in the graph: the world (or a world shard) its
-    topics, the monitor the metrics and what it holds, a batch its announcement and its own decisions topic (a
-    central world's run's batch too), world shard i the topics under /swarm/shards/<i>."""
-    if topic in (METRICS, HELD):
+    topics, the monitor what it holds, a batch its announcement and its own decisions topic, world shard i the
+    topics under /swarm/shards/<i>."""
+    if topic == HELD:
         return sender == MONITOR
     if topic == BATCHES:
         return not is_world(sender) and sender != MONITOR
-    if topic.startswith(DECISIONS + "/"):
-        return topic == f"{DECISIONS}/{sender}"
-    central = central_sender(topic)  # a central world's run's batch, likewise
+    central = central_sender(topic)  # a batch's decisions
     if central is not None:
         return sender == central
     shard = shard_of_topic(topic)

@@ -23,8 +23,6 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Empty, Header, Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.grid import CellMap
-from swarm_ros.core.metrics import METRIC_COLUMNS
-from swarm_ros.core.shapes import Shape
 from swarm_ros.protocol.cdr import encode_clock, encode_cloud, encode_grid
 from swarm_ros.protocol.checks import cloud
 from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
@@ -32,16 +30,12 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     BATCHES,
     CENTRAL_KEPT,
     CLOCK,
-    DECISIONS,
     HELD,
-    METRICS,
     MONITOR,
     OCCUPANCY,
-    ROBOTS,
     ROBOTS_DEPTH,
     SHAPE,
     STATUS,
-    TALLY,
     alive_topic,
 )
 from swarm_ros.protocol.rows import FRAME_ID, TICK_SECONDS
@@ -76,13 +70,6 @@ BATCHES_QOS = QoSProfile(
 LATCHED_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
-#: The study's model's metrics, monitor -> viewers and the bag: kept for a late reader.
-METRICS_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=64,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
@@ -185,7 +172,6 @@ def ids_message(ids: np.ndarray, label: str = "robot_id") -> Int64MultiArray:
 #: The labels of the Int64MultiArray messages the graph sends each tick: one layout dimension, so labelled, holds
 #: the values. Nodes send them as bytes (SignedPublisher.publish_ints); the message objects below are for tools.
 HELD_LABEL = "held"  #: /swarm/held: the tick, and 1 if the outcome is held too
-METRICS_LABEL = ",".join(METRIC_COLUMNS)  #: /swarm/metrics: the study's model's metrics columns, in order
 
 
 def held_values(tick: int, ended: bool) -> np.ndarray:
@@ -193,26 +179,9 @@ def held_values(tick: int, ended: bool) -> np.ndarray:
     return np.array([tick, int(ended)], dtype=np.int64)
 
 
-def metrics_message(row: np.ndarray | Sequence[int]) -> Int64MultiArray:
-    """One tick's metrics, labelled: dim[0].label lists the columns in order."""
-    return ids_message(np.asarray(row, dtype=np.int64), METRICS_LABEL)
-
-
-def metrics_of(msg: Int64MultiArray) -> dict[str, int]:
-    labels = msg.layout.dim[0].label.split(",") if msg.layout.dim else []
-    return dict(zip(labels, (int(v) for v in msg.data)))
-
-
 def map_type(dims: int) -> type:
     """The message type of /swarm/shape and /swarm/occupancy in a world of ``dims`` dimensions."""
     return OccupancyGrid if dims == 2 else PointCloud2
-
-
-def study_cells(shape: Shape, occupancy: np.ndarray | None = None) -> CellMap:
-    """The study's model's shape as cells, those a robot holds filled (``occupancy``: flat, a robot id or -1 a
-    patch; None: none filled)."""
-    filled = np.zeros_like(shape.mask) if occupancy is None else occupancy.reshape(shape.mask.shape) >= 0
-    return shape.world.cell_map(shape.mask, filled)
 
 
 class WorldMaps:

@@ -1,8 +1,8 @@
 """The launcher's view of a run: a progress bar fed by the world's /swarm/status (ten a second).
 
-It does not read /swarm/metrics: one message a tick, hundreds a second, taken by one more
-Python process on the cores the run needs (9% of a run's time on the 2-core machine), for a
-display a person reads a few times a second.
+It does not read the run's robots or metrics: every robot's row in each record, taken by one
+more Python process on the cores the run needs, for a display a person reads a few times a
+second.
 """
 
 from __future__ import annotations

@@ -13,7 +13,8 @@ most ``monitor_window`` ticks past the last record the monitor reports held on /
 every record its bag lacks. At the end it publishes the outcome and exits once the monitor holds it and each batch
 has the outcome (or, with no window, once its readers have everything), or after a grace period. It saves a
 checkpoint at tick 0 and every 1,000 ticks or so (a world shard: every 100 or so), before the tick goes out; a
-restarted process goes on from the last one (:mod:`swarm_ros.protocol.central_checkpoint`). The algorithm's name's hyphens are underscores in the topics.
+restarted process goes on from the last one (:mod:`swarm_ros.protocol.central_checkpoint`). The algorithm's name's
+hyphens are underscores in the topics.
 
     ros2 run swarm_ros world --ros-args --params-file config/swarm_ros.yaml -p algorithm:=rubenstein
 """
