@@ -115,7 +115,7 @@ def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape
     in place: the lottery of each claimed patch, then each robot's new pose and state
     (:mod:`swarm_ros.core.kernel_state`). The robots after ``applied`` only take part in the lottery: their
     claims can beat an applied robot's, and what becomes of them is left to whoever applies them (a world
-    shard is given its neighbours' claims on the patches its own robots claim, :mod:`swarm_ros.core.shards`).
+    shard is given its neighbours' claims on the patches its own robots claim, :mod:`swarm_ros.core.central_shards`).
 
     ``best`` is a W^d int array of -1 (scratch; left as found). ``localized`` is the number of
     localized robots (seeds included) before the tick. Writes each applied robot's :class:`JoinOutcome`

@@ -8,8 +8,9 @@ end of the run and, if the shape is complete with robots left over, separates th
 (``run`` many ticks per call); :meth:`Simulation.apply` applies decisions made elsewhere. All
 these share every kernel and the end of a tick (:func:`~swarm_ros.core.tick_kernel.end_tick`, through
 :func:`~swarm_ros.core.tick_kernel.close_tick`), so they give identical runs. The ROS 2 graph's world
-applies a tick with the same kernel through a :class:`~swarm_ros.core.shards.WorldShard` (the world is
-the shard with no peers), which sums the shards' counts and ends the tick with the same ``end_tick``.
+applies its batches' decisions with :meth:`Simulation.apply`; a world shard's half of a tick is
+:meth:`Simulation.settle_shard` and :meth:`Simulation.close_shard` (:mod:`swarm_ros.core.central_shards`),
+which sum the shards' counts and end the tick with the same ``end_tick``.
 
 Only moving robots cost anything per tick: the cell list, the claims and the list of
 moving robots are touched only where moving robots are, and the metrics are kept as

@@ -6,9 +6,8 @@ takes the rows the world sends it on the topics its algorithm's host reads (:mod
 and publishes what the host decides on its decisions topic. It takes only messages whose tag proves them the
 world's (:mod:`swarm_ros.ros.auth`), and tags its own; one that fails a check is dropped, counted and logged. It
 keeps a silent liveliness writer on /swarm/alive/<name>, and stops when /swarm/status reports the run's outcome,
-once its last decisions are acknowledged (or after :data:`_LINGER`). The study's model's host is
-:mod:`swarm_ros.protocol.darr_niazi.batch_host`; a central world's (the rubenstein algorithm's, a plug-in's)
-:mod:`swarm_ros.protocol.central_batch`.
+once its last decisions are acknowledged (or after :data:`_LINGER`). Its host, every algorithm's, is
+:class:`swarm_ros.protocol.central_batch.CentralBatch` over the algorithm's wire.
 
     ros2 run swarm_ros robot_batch --ros-args --params-file config/swarm_ros.yaml -p batch:=0 -p batches:=2
 """

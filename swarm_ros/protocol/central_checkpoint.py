@@ -18,7 +18,7 @@ died between saving and sending) and the monitor drops what it already holds, on
 its own.
 
 The file holds no key and is not signed: it is the world's own, in the run's log directory, which only the user who
-runs it can write (the same trust as the study's model's world checkpoint, :mod:`swarm_ros.protocol.checkpoint`).
+runs it can write.
 """
 
 from __future__ import annotations

@@ -1,21 +1,18 @@
 """Where a restarted monitor process goes on from: the bag its process before wrote.
 
-The monitor makes each tick's messages durable before it publishes the tick's metrics
-(:meth:`swarm_ros.ros.bag_writer.BagRecorder.durable`), and the world runs at most
-``monitor_window`` ticks past the last metrics it received. So the bag a killed monitor leaves
-holds every tick up to the last it reported, and the topics' histories (``ROBOTS_DEPTH`` ticks
-of rows, :data:`~swarm_ros.ros.graph.STATUS_QOS`'s statuses) hold the rest for the new process.
+The monitor (:mod:`swarm_ros.nodes.central.monitor`) makes its bag durable
+(:meth:`swarm_ros.ros.bag_writer.BagRecorder.durable`) before it reports a record held on
+/swarm/held, and the world runs at most ``monitor_window`` past that. So the bag a killed monitor
+leaves holds every record up to the last it reported, and the topics' histories (the world's last
+robots and metrics messages, :data:`~swarm_ros.ros.graph.STATUS_QOS`'s statuses) hold the rest for
+the new process.
 
 A killed monitor's bag is in its hidden holder (``.<run>.bag-XXXX/bag``), or, if it was killed
 while writing the run directory, in that directory's temporary one (``.<run>.tmp-XXXX/bag``).
-The new process takes the longest of them up to the end of its last whole tick, copies that into a
-bag of its own, and replays it through its handlers: the view, the metrics rows and the
-recording come out as they were (:meth:`swarm_ros.protocol.monitoring.MonitorCore.replay`).
-
-A central world's monitor (:mod:`swarm_ros.nodes.central.monitor`) goes on the same way: it makes
-its bag durable before it reports a record held on /swarm/held, the world runs at most a window
-past that. Its bag is not cut: each of its messages is whole alone (the robots at a record tick, the
-metrics rows of a run of ticks, a status), and the handlers check each as they would a live one.
+The new process takes the longest of them, copies it into a bag of its own, and replays it
+through its handlers, which check each message as they would a live one: the view, the metrics
+rows and the recording come out as they were. The bag is not cut: each of its messages is whole
+alone (the robots at a record tick, the metrics rows of a run of ticks, a status).
 """
 
 from __future__ import annotations
