@@ -9,6 +9,8 @@ from functools import partial
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from runs import disc_shape
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
@@ -180,6 +182,15 @@ def _owners_agree(world, whole: Simulation) -> None:
     for w in world:
         assert np.array_equal(w.run.history, whole.history) and w.run.outcome == whole.outcome
         assert all(np.array_equal(a[w.own], b[w.own]) for a, b in zip(w.run.robots, whole.robots))
+
+
+@given(st.lists(st.integers(0, 60), max_size=40, unique=True).map(sorted), st.lists(st.integers(0, 60), max_size=40))
+def test_a_shard_merges_the_robots_it_holds_with_those_it_took_as_union1d_does(held, took):
+    """What a world shard holds after a tick (central_shards.merged): union1d's result, without sorting the whole."""
+    from swarm_ros.core.central_shards import merged
+
+    ours, theirs = merged(np.array(held, np.int64), np.array(took, np.int64)), np.union1d(held, took)
+    assert np.array_equal(ours, theirs) and ours.dtype == np.int64
 
 
 @pytest.mark.parametrize("rules", ["paper", "local", "literal"])

@@ -72,6 +72,17 @@ def take(robots: Any, ids: np.ndarray | slice) -> Any:
     return type(robots)(*(a[ids] for a in robots))
 
 
+def merged(ascending: np.ndarray, more: np.ndarray) -> np.ndarray:
+    """The ids of ``ascending`` (ascending, no repeats) and ``more`` (any order, repeats), ascending, each once:
+    ``np.union1d``'s result, but it sorts only ``more`` (a shard's peer rows), not both (its whole robots)."""
+    more = np.unique(more)
+    if not ascending.size:
+        return more
+    at = np.searchsorted(ascending, more)
+    fresh = (at == ascending.size) | (ascending[np.minimum(at, ascending.size - 1)] != more)
+    return np.insert(ascending, at[fresh], more[fresh]) if fresh.any() else ascending
+
+
 def concat(parts: list[tuple[np.ndarray, Any]]) -> tuple[np.ndarray, Any]:
     """(ids, rows) of several, in ascending id order."""
     ids = np.concatenate([p[0] for p in parts]).astype(np.int64)
@@ -168,7 +179,7 @@ class CentralShard:
             for a, b in zip(self.run.robots, got):
                 a[ids] = b
             shared = np.concatenate([shared, ids])
-        self.present = self._held(np.union1d(self.present, shared))
+        self.present = self._held(merged(self.present, shared))
 
     def holding(self) -> np.ndarray:
         """Which robots it holds (a mask over the run's)."""
