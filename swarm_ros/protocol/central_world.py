@@ -189,7 +189,7 @@ class CentralWorld:
         again = incarnation - before if incarnation > before else int(name in self.lapsed and self.ls.started)
         self.lapsed.discard(name)
         if again:  # a new process: not the one whose liveliness lapsed; until DDS reports this one's, _unseen
-            self.watch.lapsed.discard(name)  # watches it (one killed before its writer matched reports no lapse)
+            self.watch.replaced(name)  # watches it (one killed before its writer matched reports no lapse)
         if again or name not in self.watched:
             self.unseen[name] = self.clock()
         if again and (self.ls.shard_index is None or k in self.ls.mine):  # its own batches only
@@ -249,7 +249,7 @@ class CentralWorld:
             awaited = self.ls.awaited() if awaited is None else awaited
             if name in awaited:
                 del self.unseen[name]
-                self.watch.lapsed.add(name)
+                self.watch.unheard(name)
                 self._heard(
                     name, f"{name} was lost (no liveliness and no decisions for {STALL_S:g} s): the run waits for it"
                 )

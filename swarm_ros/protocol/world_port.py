@@ -45,6 +45,14 @@ class Watch:
             return f"{name} was lost (liveliness lapsed): the run waits for it"
         return None
 
+    def replaced(self, name: str) -> None:
+        """A new process of peer ``name`` announced itself: it is not the one whose liveliness lapsed."""
+        self.lapsed.discard(name)
+
+    def unheard(self, name: str) -> None:
+        """Peer ``name``'s new process was never seen alive, and is silent: it counts as lapsed."""
+        self.lapsed.add(name)
+
     def moved(self, now: float) -> None:
         self.moved_at = now
 
