@@ -187,7 +187,7 @@ def _owners_agree(world, whole: Simulation) -> None:
 @given(st.lists(st.integers(0, 60), max_size=40, unique=True).map(sorted), st.lists(st.integers(0, 60), max_size=40))
 def test_a_shard_merges_the_robots_it_holds_with_those_it_took_as_union1d_does(held, took):
     """What a world shard holds after a tick (central_shards.merged): union1d's result, without sorting the whole."""
-    from swarm_ros.core.central_shards import merged
+    from swarm_ros.core.strips import merged
 
     ours, theirs = merged(np.array(held, np.int64), np.array(took, np.int64)), np.union1d(held, took)
     assert np.array_equal(ours, theirs) and ours.dtype == np.int64

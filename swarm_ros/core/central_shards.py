@@ -41,7 +41,7 @@ import numpy as np
 
 from .errors import ContractError, Rejected
 from .regions import shard_batches
-from .strips import CentralRun, Strips
+from .strips import CentralRun, Strips, merged
 
 
 class ShardedRun(CentralRun, Protocol):
@@ -70,17 +70,6 @@ class ShardedRun(CentralRun, Protocol):
 def take(robots: Any, ids: np.ndarray | slice) -> Any:
     """The rows of robots ``ids`` of every robot's arrays ``robots`` (a NamedTuple of arrays)."""
     return type(robots)(*(a[ids] for a in robots))
-
-
-def merged(ascending: np.ndarray, more: np.ndarray) -> np.ndarray:
-    """The ids of ``ascending`` (ascending, no repeats) and ``more`` (any order, repeats), ascending, each once:
-    ``np.union1d``'s result, but it sorts only ``more`` (a shard's peer rows), not both (its whole robots)."""
-    more = np.unique(more)
-    if not ascending.size:
-        return more
-    at = np.searchsorted(ascending, more)
-    fresh = (at == ascending.size) | (ascending[np.minimum(at, ascending.size - 1)] != more)
-    return np.insert(ascending, at[fresh], more[fresh]) if fresh.any() else ascending
 
 
 def concat(parts: list[tuple[np.ndarray, Any]]) -> tuple[np.ndarray, Any]:

@@ -296,3 +296,15 @@ def run_batched(run: CentralRun, hosts: list[Any], max_ticks: int | None = None)
             decided.append(hosts[k].decide(tick + 1, stores[k].seen, changed, stores[k].robots))
         run.settle(decided)
         left = None if left is None else left - 1
+
+
+def merged(ascending: np.ndarray, more: np.ndarray) -> np.ndarray:
+    """The ids of ``ascending`` (ascending, no repeats) and ``more`` (any order, repeats), ascending, each once:
+    ``np.union1d``'s result, but it sorts only ``more`` (a world shard's peer rows,
+    :mod:`swarm_ros.core.central_shards`), not both (the robots it holds)."""
+    more = np.unique(more)
+    if not ascending.size:
+        return more
+    at = np.searchsorted(ascending, more)
+    fresh = (at == ascending.size) | (ascending[np.minimum(at, ascending.size - 1)] != more)
+    return np.insert(ascending, at[fresh], more[fresh]) if fresh.any() else ascending
