@@ -56,8 +56,7 @@ class RobotBatchNode:
         self.signer, self.gate = open_auth(node, self.rejections)
         self.pub_decisions = self.signer.publisher(PointCloud2, self.host.decisions, msgs.DECISIONS_QOS)
         for inbox in self.host.inboxes:
-            qos = msgs.LATCHED_QOS if inbox.latched else msgs.ROBOTS_QOS
-            self.gate.subscribe(PointCloud2, inbox.topic, self._taker(inbox), qos)
+            self.gate.subscribe(PointCloud2, inbox.topic, self._taker(inbox), msgs.LATCHED_QOS)
         self.gate.subscribe(DiagnosticArray, msgs.STATUS, self._on_status, msgs.STATUS_QOS)
         self.alive = node.create_publisher(Empty, msgs.alive_topic(name), msgs.ALIVE_QOS)  # liveliness only
         announce = self.signer.publisher(Int64MultiArray, msgs.BATCHES, msgs.BATCHES_QOS)

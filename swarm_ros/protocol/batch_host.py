@@ -26,13 +26,11 @@ Reply = tuple[np.ndarray, int] | None
 
 @dataclass(frozen=True)
 class Inbox:
-    """A topic the batch takes rows from (PointCloud2, tagged by the world): ``take`` checks a message, raising
-    :class:`~swarm_ros.core.errors.Rejected` if it fails (the node drops and counts it), and gives what to send.
-    ``latched``: the world sends it once for a batch that may come late (a snapshot, a tick's area: kept for a
-    late reader); otherwise a stream of every tick's rows."""
+    """A topic the batch takes rows from (PointCloud2, tagged by the world, latched: kept for a batch that comes
+    late): ``take`` checks a message, raising :class:`~swarm_ros.core.errors.Rejected` if it fails (the node drops
+    and counts it), and gives what to send."""
 
     topic: str
-    latched: bool
     take: Callable[[Cloud], Reply]
 
 

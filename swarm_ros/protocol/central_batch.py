@@ -50,8 +50,8 @@ class CentralBatch:
         name, topics = str(own["name"]), CentralTopics.of(params.algorithm)
         self.decisions = topics.decisions(name)
         self.inboxes = (
-            Inbox(topics.area(name), True, functools.partial(self._take, True)),
-            Inbox(topics.changes(name), True, functools.partial(self._take, False)),
+            Inbox(topics.area(name), functools.partial(self._take, True)),
+            Inbox(topics.changes(name), functools.partial(self._take, False)),
         )
 
     def describe(self) -> str:

@@ -121,8 +121,6 @@ def robot_rows(msg, robots: int, radius: int, dims: int = 2) -> np.ndarray:
     from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
 
     rows = cloud(msg, robot_row(dims), robots, min_rows=1)
-    if not rows.size:
-        return rows
     ids_in_range(rows["id"].astype(np.int64), 0, robots)
     if rows["state"].max() >= STATE_COUNT:
         raise Rejected("robot state out of range", f"state {int(rows['state'].max())}")

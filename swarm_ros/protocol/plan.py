@@ -73,7 +73,6 @@ def plan_for(
 
 
 # -- topics -----------------------------------------------------------------------
-ROBOTS_DEPTH = 512  #: messages a batch's reader of its area's changes keeps (its history depth)
 BATCHES = "/swarm/batches"  # robot batches -> world: the columns (strip) each batch hosts (Int64MultiArray)
 SHAPE = "/swarm/shape"  # world: the shape mask (OccupancyGrid, latched)
 OCCUPANCY = "/swarm/occupancy"  # world: localized robots on the shape (OccupancyGrid, latched)

@@ -33,7 +33,6 @@ from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for th
     HELD,
     MONITOR,
     OCCUPANCY,
-    ROBOTS_DEPTH,
     SHAPE,
     STATUS,
     alive_topic,
@@ -44,14 +43,6 @@ _NO_WAIT = Duration(seconds=0)
 
 # -- topics: swarm_ros.protocol.plan names them (a contract between processes) -------------------
 # -- QoS ----------------------------------------------------------------------------
-#: Lockstep traffic: nothing may be lost, and a reader that matches late (a monitor
-#: started after the world) still gets the ticks it missed, up to the depth.
-ROBOTS_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=ROBOTS_DEPTH,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
 #: A KEEP_LAST reader keeps ``depth`` samples over all the writers of a topic (the batches on
 #: /swarm/batches), so the depth must exceed the batches that can announce at once.
 DECISIONS_QOS = QoSProfile(
