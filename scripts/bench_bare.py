@@ -3,12 +3,12 @@
 
 A world process and K batch processes, on a domain of their own, exchange per tick exactly the
 rows the product's graph exchanges for the star (read from the in-process engine's run of the
-same seed): the world publishes the tick's changed rows on one topic (40 bytes per row, as the
-study's earlier graph sent its robots), each batch answers with its share of the moving robots'
-decisions (48 bytes per row, as a batch's decisions topic), and the world starts the next tick
-once every batch has answered. Messages are PointCloud2 bytes built once (:func:`encode_cloud`),
-published serialized and taken raw, through the product's decisions QoS (the rows': the earlier
-graph's, :func:`_rows_qos`) and DDS profile and an EventsExecutor, the executor the nodes use. No checks, no tags, no state: the transport alone. ``bench_ros.py``
+same seed): the world publishes the tick's changed rows on one topic (40 bytes per row, as
+``/swarm/robots``), each batch answers with its share of the moving robots' decisions (48
+bytes per row, as ``/swarm/decisions/<batch>``), and the world starts the next tick once every
+batch has answered. Messages are PointCloud2 bytes built once (:func:`encode_cloud`), published
+serialized and taken raw, through the product's QoS and DDS profile and an EventsExecutor, the
+executor the nodes use. No checks, no tags, no state: the transport alone. ``bench_ros.py``
 runs it in the same session as the graph and reports the graph's ticks/s as a share of it.
 
     .venv/bin/python scripts/bench_bare.py --processes 2 [--seed 1] [--repeats 3]
@@ -79,19 +79,6 @@ def _cloud(dtype, n: int, tick: int) -> bytes:
     return encode_cloud(np.zeros(n, dtype=dtype), tick)
 
 
-def _rows_qos():
-    """The rows' QoS, as the study's earlier graph sent its robots (reliable, transient local, the last 512 kept): the
-    bare lockstep keeps the transport it was first measured with."""
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=512,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL,
-    )
-
-
 def world(domain: int, k: int, sizes: Path, out: Path) -> None:
     from sensor_msgs.msg import PointCloud2
 
@@ -100,7 +87,7 @@ def world(domain: int, k: int, sizes: Path, out: Path) -> None:
 
     sent, _ = np.load(sizes)
     node, executor = _node("bare_world", domain)
-    pub = node.create_publisher(PointCloud2, "/bare/robots", _rows_qos())
+    pub = node.create_publisher(PointCloud2, "/bare/robots", msgs.ROBOTS_QOS)
     answered: dict[int, int] = {}
 
     def on_reply(data: bytes) -> None:
@@ -146,7 +133,7 @@ def batch(domain: int, b: int, k: int, sizes: Path) -> None:
             return
         pub.publish(_cloud(DECISION_ROW, share[tick], tick))
 
-    node.create_subscription(PointCloud2, "/bare/robots", on_robots, msgs.reader_qos(_rows_qos()), raw=True)
+    node.create_subscription(PointCloud2, "/bare/robots", on_robots, msgs.reader_qos(msgs.ROBOTS_QOS), raw=True)
     last = time.monotonic()
     while not done and time.monotonic() - last < 30:  # the world gone without its last message: stop too
         if _spin(node, executor):

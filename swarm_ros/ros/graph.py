@@ -43,6 +43,14 @@ _NO_WAIT = Duration(seconds=0)
 
 # -- topics: swarm_ros.protocol.plan names them (a contract between processes) -------------------
 # -- QoS ----------------------------------------------------------------------------
+#: The bare lockstep's rows (scripts/bench_bare.py), as the study's earlier graph sent its robots: reliable, and a
+#: reader that matches late still gets the ticks it missed, up to the depth.
+ROBOTS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=512,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 #: A KEEP_LAST reader keeps ``depth`` samples over all the writers of a topic (the batches on
 #: /swarm/batches), so the depth must exceed the batches that can announce at once.
 DECISIONS_QOS = QoSProfile(
