@@ -17,7 +17,7 @@ setup(
     # source's contents, so the installed copy loads it instead of compiling again (swarm_ros/core/kernels.py)
     package_data={
         f"{PACKAGE}.{sub}": ["__pycache__/*.nbi", "__pycache__/*.nbc", "__pycache__/swarm_ros-kernels-*.compiled"]
-        for sub in ("core", "core.rubenstein", "protocol")
+        for sub in ("core", "core.darr_niazi", "core.rubenstein", "protocol.rubenstein")
     },
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),

@@ -92,7 +92,7 @@ def main() -> int:
     from swarm_ros.app.published import load_reference
     from swarm_ros.app.results_file import read_results
     from swarm_ros.core import Shape
-    from swarm_ros.core.state import RobotState, initial_state
+    from swarm_ros.core.darr_niazi.state import RobotState, initial_state
 
     reference = load_reference(args.reference)
     rows = read_results(args.results / "results.csv")

@@ -10,9 +10,9 @@ import numpy as np
 import yaml
 
 from swarm_ros.core import RunParams, Shape, Simulation, World, decide
-from swarm_ros.core.invariants import check_state, check_tick
-from swarm_ros.core.rules import Decisions
-from swarm_ros.core.state import FRONTIER_BLOCK
+from swarm_ros.core.darr_niazi.invariants import check_state, check_tick
+from swarm_ros.core.darr_niazi.rules import Decisions
+from swarm_ros.core.darr_niazi.state import FRONTIER_BLOCK
 
 # Robot counts that complete each built-in shape in the original study (docs/model.md, "Shapes").
 STUDY_PATCHES = {"star": 1036, "wrench": 566, "k-letter": 1352, "rectangle": 438, "tyre": 1282, "spinner": 1040}

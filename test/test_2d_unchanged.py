@@ -12,7 +12,7 @@ import pytest
 from runs import run_digest
 
 from swarm_ros.core import RunParams, Shape, Simulation
-from swarm_ros.core.rules import Decider
+from swarm_ros.core.darr_niazi.rules import Decider
 
 pytestmark = pytest.mark.unit
 

@@ -12,13 +12,13 @@ from hypothesis import strategies as st
 from runs import run_checked, run_in_batches
 
 from swarm_ros.core import RunParams, Shape, ShapeError, Simulation, World
+from swarm_ros.core.darr_niazi.invariants import nearest_frontier_patch
+from swarm_ros.core.darr_niazi.legality import illegal
+from swarm_ros.core.darr_niazi.rules3d import direction, nearest_frontier3, random_direction, wiggled
+from swarm_ros.core.darr_niazi.state import FRONTIER_BLOCK, FRONTIER_SUPER, RobotState, frontier_blocks_of, near_any
+from swarm_ros.core.darr_niazi.swarm_view import SwarmView
 from swarm_ros.core.errors import ContractError, ParameterError
-from swarm_ros.core.invariants import nearest_frontier_patch
-from swarm_ros.core.legality import illegal
-from swarm_ros.core.rules3d import direction, nearest_frontier3, random_direction, wiggled
 from swarm_ros.core.shapes import builtin_shapes_3d, read_text_grid, write_text_grid
-from swarm_ros.core.state import FRONTIER_BLOCK, FRONTIER_SUPER, RobotState, frontier_blocks_of, near_any
-from swarm_ros.core.swarm_view import SwarmView
 
 pytestmark = pytest.mark.unit
 
@@ -371,7 +371,7 @@ def test_the_legality_bounds_hold_for_3d_decisions_and_catch_a_jump_in_z():
 def test_the_3d_final_png_legend_sits_below_every_view_and_no_label_is_cut(tmp_path, monkeypatch, name):
     import matplotlib.figure
 
-    from swarm_ros.artifacts.plots import save_final_png
+    from swarm_ros.artifacts.darr_niazi.plots import save_final_png
     from swarm_ros.core.run_result import RunRecord
 
     shape = Shape.load(name)

@@ -4,7 +4,7 @@ The hashes below were computed by commit 519da07's code (positional kernel argum
 signalled by empty z arrays). Each covers the final positions, headings, pitches, states, occupancy,
 frontier and every tick's metrics of one run with failures (10% of the robots at tick 50), vision 2,
 400 ticks, through both of the engine's paths: ``Simulation.run`` (the compiled loop of ticks) and a
-:class:`~swarm_ros.core.rules.Decider`'s decisions applied tick by tick (what the ROS graph does).
+:class:`~swarm_ros.core.darr_niazi.rules.Decider`'s decisions applied tick by tick (what the ROS graph does).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 from runs import run_digest
 
 from swarm_ros.core import RunParams, Shape, Simulation
-from swarm_ros.core.rules import Decider
+from swarm_ros.core.darr_niazi.rules import Decider
 
 pytestmark = pytest.mark.unit
 

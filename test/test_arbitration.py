@@ -5,9 +5,9 @@ import pytest
 from runs import disc_shape, params
 
 from swarm_ros.core import JoinOutcome, Outcome, RobotState, Shape, Simulation, World
+from swarm_ros.core.darr_niazi.rules import Decisions
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.rng import STREAM_PRIORITY, draw_bits
-from swarm_ros.core.rules import Decisions
 
 pytestmark = pytest.mark.unit
 

@@ -235,7 +235,7 @@ def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch, ca
     def broken(sim, path):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr("swarm_ros.artifacts.plots.save_final_png", broken)
+    monkeypatch.setattr("swarm_ros.artifacts.darr_niazi.plots.save_final_png", broken)
     assert simulate(tmp_path / "run") == 2
     err = capsys.readouterr().err
     assert "No space left on device" in err and err.count("\n") == 1

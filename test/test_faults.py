@@ -26,7 +26,7 @@ from graph_runs import command_args, processes_mentioning, run_env
 from recordings import Recording, rrd_verify
 
 from swarm_ros.core import RunParams, Shape
-from swarm_ros.core.engine import Simulation
+from swarm_ros.core.darr_niazi.engine import Simulation
 from swarm_ros.core.strips import strips_for
 from swarm_ros.protocol.world_port import LOSS_CONFIRM_S, STALL_S
 

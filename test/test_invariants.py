@@ -5,9 +5,9 @@ import pytest
 from runs import disc_shape, params
 
 from swarm_ros.core import RobotState, Shape, Simulation, World
-from swarm_ros.core.arbitration import JoinOutcome
+from swarm_ros.core.darr_niazi.arbitration import JoinOutcome
+from swarm_ros.core.darr_niazi.invariants import check_state, check_tick
 from swarm_ros.core.errors import InvariantError
-from swarm_ros.core.invariants import check_state, check_tick
 
 pytestmark = pytest.mark.unit
 

@@ -13,15 +13,15 @@ pytestmark = pytest.mark.unit
 
 @pytest.fixture
 def core(tmp_path, monkeypatch):
-    """A fake core: one module whose kernels are all inlined, one with a kernel of its own."""
+    """A fake core: a shared module whose kernels are all inlined, and each algorithm's package with a kernel
+    module of its own."""
     cache = tmp_path / "__pycache__"
     cache.mkdir()
     (tmp_path / "rng.py").write_text('@numba.njit(cache=True, inline="always")\n')
-    (tmp_path / "engine.py").write_text("@numba.njit(cache=True)\n")
     (tmp_path / "plain.py").write_text("x = 1\n")
-    other = tmp_path / "rubenstein"  # the second algorithm's package: one kernel module
-    (other / "__pycache__").mkdir(parents=True)
-    (other / "rule.py").write_text("@numba.njit(cache=True)\n")
+    for package, module in (("darr_niazi", "engine.py"), ("rubenstein", "rule.py")):
+        (tmp_path / package / "__pycache__").mkdir(parents=True)
+        (tmp_path / package / module).write_text("@numba.njit(cache=True)\n")
     monkeypatch.setattr(kernels, "_CORE", tmp_path)
     monkeypatch.setattr(kernels, "_CACHE", cache)
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
@@ -33,11 +33,14 @@ def _at(path, seconds):
 
 
 def test_indexes_newer_than_their_sources_mean_filled(core):
-    for name in ("rng.draw-1.py311.nbi", "engine.tick-2.py311.nbi"):
-        (core / "__pycache__" / name).touch()
-        _at(core / "__pycache__" / name, 2000)
+    for index in (
+        core / "__pycache__" / "rng.draw-1.py311.nbi",
+        core / "darr_niazi/__pycache__/engine.tick-2.py311.nbi",
+    ):
+        index.touch()
+        _at(index, 2000)
     _at(core / "rng.py", 1000)
-    _at(core / "engine.py", 1000)
+    _at(core / "darr_niazi" / "engine.py", 1000)
     assert kernels.kernels_cached("darr-niazi")
     assert not kernels.kernels_cached(), "the rubenstein algorithm's are not"
     _at(core / "rng.py", 3000)  # edited: its inlined kernels' index is never written again
@@ -49,7 +52,7 @@ def test_a_stamp_newer_than_every_kernel_module_means_filled(core):
     stamp.touch()
     _at(stamp, 4000)
     _at(core / "rng.py", 3000)
-    _at(core / "engine.py", 3000)
+    _at(core / "darr_niazi" / "engine.py", 3000)
     assert kernels.kernels_cached("darr-niazi"), "compile_kernels ran after the last change"
     assert not kernels.kernels_cached("rubenstein"), "each algorithm has a stamp of its own"
     other = core / "__pycache__" / kernels._STAMP.format("rubenstein")
@@ -57,7 +60,7 @@ def test_a_stamp_newer_than_every_kernel_module_means_filled(core):
     _at(other, 4000)
     _at(core / "rubenstein" / "rule.py", 3000)
     assert kernels.kernels_cached(), "both algorithms' stamps are newer than their modules"
-    _at(core / "engine.py", 5000)
+    _at(core / "darr_niazi" / "engine.py", 5000)
     assert not kernels.kernels_cached("darr-niazi"), "a kernel module changed since"
     assert kernels.kernels_cached("rubenstein"), "a change to the study's model's kernels is not the other's"
     _at(core / "rng.py", 5000)  # but a change to a core kernel the other calls is (kernels.SHARED)
@@ -70,14 +73,14 @@ def test_no_cache_at_all_is_not_filled(core):
 
 def test_drop_stale_removes_the_core_caches_written_before_the_last_change_to_a_kernel_module(core):
     cache = core / "__pycache__"
-    old, new = cache / "engine.tick-2.py311.nbi", cache / "rng.draw-1.py311.nbc"
+    old, new = core / "darr_niazi" / "__pycache__" / "engine.tick-2.py311.nbi", cache / "rng.draw-1.py311.nbc"
     other, stamp = cache / "plain.x-1.py311.nbi", cache / kernels._STAMP.format("darr-niazi")  # plain.py: no kernel
     for path, at in ((old, 1000), (new, 3000), (other, 1000), (stamp, 1000)):
         path.touch()
         _at(path, at)
     _at(core / "rng.py", 500)
     _at(core / "rubenstein" / "rule.py", 500)
-    _at(core / "engine.py", 2000)  # edited after old was written, before new
+    _at(core / "darr_niazi" / "engine.py", 2000)  # edited after old was written, before new
     assert kernels.drop_stale() == 1
     assert not old.exists() and new.exists() and other.exists() and stamp.exists()
     assert kernels.drop_stale() == 0

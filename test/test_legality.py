@@ -1,4 +1,5 @@
-"""The world's bounds on decisions (core/legality.py): every decision the rules make keeps them; wrong ones do not."""
+"""The world's bounds on decisions (core/darr_niazi/legality.py): every decision the rules make keeps them; wrong
+ones do not."""
 
 from __future__ import annotations
 
@@ -10,10 +11,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from swarm_ros.core import Shape
-from swarm_ros.core.engine import Simulation
-from swarm_ros.core.legality import SLACK, illegal, max_step, reach
+from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.legality import SLACK, illegal, max_step, reach
+from swarm_ros.core.darr_niazi.rules import Decider, Decisions
 from swarm_ros.core.params import RunParams
-from swarm_ros.core.rules import Decider, Decisions
 
 pytestmark = pytest.mark.unit
 

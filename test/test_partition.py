@@ -7,7 +7,7 @@ claims of robots outside its strip on the patches its own robots claim (the lott
 asserts, against :meth:`Simulation.apply` of the whole tick, that every robot's new row is its shard's, that
 the occupancy and the frontier every shard derives from all shards' localizations are the world's, that the
 per-shard counts sum to the tick's metrics, and that every claim a shard needs from outside comes from a
-robot within the halo of its strip (:func:`swarm_ros.core.regions.halo`): from a neighbour, never from
+robot within the halo of its strip (:func:`swarm_ros.core.darr_niazi.legality.halo`): from a neighbour, never from
 anywhere.
 """
 
@@ -18,11 +18,11 @@ import pytest
 from runs import disc_shape
 
 from swarm_ros.core import RunParams, Simulation, World
-from swarm_ros.core.arbitration import occupy, resolve_kernel
-from swarm_ros.core.kernel_state import Moves, grid_of, robots_of, rules_of
-from swarm_ros.core.regions import columns, halo
-from swarm_ros.core.rules import Decider
-from swarm_ros.core.state import IS_MOVING, STATE_COUNT, RobotState
+from swarm_ros.core.darr_niazi.arbitration import occupy, resolve_kernel
+from swarm_ros.core.darr_niazi.kernel_state import Moves, grid_of, robots_of, rules_of
+from swarm_ros.core.darr_niazi.legality import halo
+from swarm_ros.core.darr_niazi.rules import Decider
+from swarm_ros.core.darr_niazi.state import IS_MOVING, STATE_COUNT, RobotState
 
 pytestmark = pytest.mark.unit
 
@@ -86,7 +86,7 @@ def _check_one_tick(params: RunParams, ticks: int, cuts: np.ndarray) -> int:
         return 0
     moving = sim.moving_ids()
     decisions = Decider(SHAPE, params).decide(sim.state, moving, sim.tick + 1)
-    strip_of = np.searchsorted(cuts, columns(sim.state.x[decisions.ids], WORLD.radius), side="right")
+    strip_of = np.searchsorted(cuts, sim.grid.columns(sim.state.x[decisions.ids]), side="right")
     reach = halo(params.vision_radius)
     before = sim.state.copy()
     shards, taken = [], 0
@@ -95,7 +95,7 @@ def _check_one_tick(params: RunParams, ticks: int, cuts: np.ndarray) -> int:
         state, outside = _shard_apply(sim, decisions, mine)
         first = cuts[k - 1] if k else 0
         last = cuts[k] - 1 if k < cuts.size else 2 * WORLD.radius
-        cols = columns(before.x[outside], WORLD.radius)
+        cols = sim.grid.columns(before.x[outside])
         assert ((cols >= first - reach) & (cols <= last + reach)).all()  # a neighbour's claims, from the halo
         shards.append((decisions.ids[mine], state))
         taken += outside.size

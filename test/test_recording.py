@@ -23,10 +23,10 @@ from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.artifacts.rerun_scene import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
-from swarm_ros.core.engine import Simulation
+from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.state import RobotState
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.params import RunParams
-from swarm_ros.core.state import RobotState
 
 pytestmark = pytest.mark.process
 
@@ -265,7 +265,7 @@ def test_a_killed_run_leaves_a_recording_readable_up_to_the_last_batch(tmp_path)
     """SIGKILL: no footer is written, but what was sent before is in the file and reads back."""
     out = tmp_path / "killed"
     code = (
-        "import sys, numpy as np; from swarm_ros.app import cli; from swarm_ros.core.engine import "
+        "import sys, numpy as np; from swarm_ros.app import cli; from swarm_ros.core.darr_niazi.engine import "
         "Simulation\n"
         "real = Simulation.run\n"
         "def run(self, max_ticks=None, on_tick=None):\n"

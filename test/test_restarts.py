@@ -85,16 +85,15 @@ def _handovers(batch: int, ticks: range) -> int:
     """Robots that crossed into or out of ``batch``'s strip (of 3, the default cuts) in ``ticks``, in the
     in-process run of STAR_SHORT: the handovers a batch killed then had to get right."""
     from swarm_ros.core import Simulation
-    from swarm_ros.core.regions import batch_strip, columns
+    from swarm_ros.core.strips import strips_for
 
     shape, params = Settings(shape="star", seed=5, rules="local", max_ticks=1000).resolve()
-    radius = shape.world.radius
-    first, last = batch_strip(shape, params, batch, 3)
     sim, crossed = Simulation(shape, params), 0
+    strips = strips_for(sim, 3)
     while sim.tick < ticks.stop and not sim.done:
-        inside = (columns(sim.state.x, radius) >= first) & (columns(sim.state.x, radius) <= last)
+        inside = strips.in_strip(sim.grid.columns(sim.state.x), batch)
         sim.step()
-        now = (columns(sim.state.x, radius) >= first) & (columns(sim.state.x, radius) <= last)
+        now = strips.in_strip(sim.grid.columns(sim.state.x), batch)
         if sim.tick in ticks:
             crossed += int((inside != now).sum())
     return crossed

@@ -460,7 +460,7 @@ def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_si
     assert {"localized robots", "empty shape patches"} <= labels["square_paper_v1.png"]
     # each grid point's repetition 0 left its step curve, which the report draws without running anything again
     from swarm_ros.app.curves import curve_name, read_curve
-    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.darr_niazi.engine import Simulation
 
     firsts = [r for r in rows if r["repetition"] == 0]
     assert sorted(p.name for p in (out / "curves").iterdir()) == sorted(curve_name(r) for r in firsts)

@@ -10,11 +10,11 @@ from hypothesis import strategies as st
 from runs import disc_shape, params
 
 from swarm_ros.core import RobotState, Shape, Simulation, World, decide
+from swarm_ros.core.darr_niazi.invariants import nearest_frontier_patch
+from swarm_ros.core.darr_niazi.rules import Decisions
+from swarm_ros.core.darr_niazi.rules2d import block_distances, nearest_frontier
+from swarm_ros.core.darr_niazi.state import FRONTIER_BLOCK, SwarmState, frontier_blocks_of, initial_state
 from swarm_ros.core.errors import ContractError
-from swarm_ros.core.invariants import nearest_frontier_patch
-from swarm_ros.core.rules import Decisions
-from swarm_ros.core.rules2d import block_distances, nearest_frontier
-from swarm_ros.core.state import FRONTIER_BLOCK, SwarmState, frontier_blocks_of, initial_state
 
 pytestmark = pytest.mark.unit
 

@@ -10,7 +10,7 @@ from hypothesis.extra.numpy import arrays
 from scipy import ndimage
 
 from swarm_ros.core import ParameterError, RobotState, Shape
-from swarm_ros.core.state import frontier_of, has_repeats, initial_state, near_any
+from swarm_ros.core.darr_niazi.state import frontier_of, initial_state, near_any
 
 pytestmark = pytest.mark.unit
 
@@ -74,14 +74,6 @@ def test_near_any_is_a_3x3_binary_dilation(grid):
     assert np.array_equal(near_any(grid), ndimage.binary_dilation(grid, structure=np.ones((3, 3), bool)))
 
 
-@settings(max_examples=200, deadline=None)
-@given(arrays(np.int64, st.integers(0, 40), elements=st.integers(-5, 30)), st.booleans())
-def test_has_repeats_says_whether_a_value_occurs_twice(values, ordered):
-    """Increasing input takes a shortcut (the graph's rows come sorted by id); anything else is sorted first."""
-    values = np.sort(values) if ordered else values
-    assert has_repeats(values) == (len(set(values.tolist())) < values.size)
-
-
 #: numpy's transcendental ufuncs: on a CPU with AVX-512 numpy computes them with other code (its SIMD dispatch),
 #: whose last bits differ from the C library's, so a run's result would depend on the machine
 _CPU_DEPENDENT = {
@@ -112,8 +104,8 @@ def test_the_model_uses_no_numpy_function_whose_last_bits_depend_on_the_cpu():
 
 
 def test_initial_pitches_are_the_c_librarys_arcsine_of_their_draws():
+    from swarm_ros.core.darr_niazi.state import STREAM_PLACE_PITCH
     from swarm_ros.core.rng import uniform_array
-    from swarm_ros.core.state import STREAM_PLACE_PITCH
 
     shape = Shape.load("torus")
     s = initial_state(shape, 300, 7)

@@ -14,9 +14,9 @@ from hypothesis import strategies as st
 from runs import disc_shape
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
+from swarm_ros.core.darr_niazi.state import IS_MOVING
 from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.run_result import summary_of
-from swarm_ros.core.state import IS_MOVING
 from swarm_ros.core.strips import AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_lockstep import CentralLockstep
@@ -191,6 +191,15 @@ def test_a_shard_merges_the_robots_it_holds_with_those_it_took_as_union1d_does(h
 
     ours, theirs = merged(np.array(held, np.int64), np.array(took, np.int64)), np.union1d(held, took)
     assert np.array_equal(ours, theirs) and ours.dtype == np.int64
+
+
+@given(st.lists(st.integers(-5, 30), max_size=40), st.booleans())
+def test_has_repeats_says_whether_a_value_occurs_twice(values, ordered):
+    """Increasing input takes a shortcut (the graph's rows come sorted by id); anything else is sorted first."""
+    from swarm_ros.core.strips import has_repeats
+
+    ids = np.array(sorted(values) if ordered else values, np.int64)
+    assert has_repeats(ids) == (len(set(values)) < len(values))
 
 
 @pytest.mark.parametrize("rules", ["paper", "local", "literal"])

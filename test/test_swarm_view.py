@@ -7,10 +7,10 @@ import pytest
 from runs import params
 
 from swarm_ros.core import RunParams, Shape, Simulation
+from swarm_ros.core.darr_niazi.rules import Decider, Decisions, decide
+from swarm_ros.core.darr_niazi.state import RobotState
+from swarm_ros.core.darr_niazi.swarm_view import SwarmView
 from swarm_ros.core.errors import ContractError
-from swarm_ros.core.rules import Decider, Decisions, decide
-from swarm_ros.core.state import RobotState
-from swarm_ros.core.swarm_view import SwarmView
 
 pytestmark = pytest.mark.unit
 

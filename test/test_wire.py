@@ -40,7 +40,7 @@ def test_row_layouts_are_the_documented_point_fields():
 
 def test_rows_carry_state_and_decisions_bit_for_bit():
     sim = Simulation(Shape.load("star"), RunParams(robots=300, seed=4))
-    from swarm_ros.core.rules import decide
+    from swarm_ros.core.darr_niazi.rules import decide
 
     d = decide(sim.state, sim.moving_ids(), sim.shape, sim.params, 1)
     back = decisions_of(1, np.frombuffer(decision_rows(d).tobytes(), dtype=DECISION_ROW))

@@ -1,11 +1,11 @@
 """Node processes forked from the launcher after it has loaded what every node loads, instead of started afresh.
 
 A node started with ``python -m`` spends about 1 s of CPU before it does anything of its own: numpy, numba
-(which imports scipy.linalg to find a BLAS), numba's cache load of the kernels (:mod:`swarm_ros.core.warmup`),
-rclpy and its node module. Four such processes on 2 cores were most of the README's command. ``swarm-ros run``
-therefore loads these once, in its own process, and forks each node from it: the child starts with all of it in
-memory and goes straight to ``rclpy.init``. What the child does from there is what ``python -m
-swarm_ros.nodes.<node>`` does.
+(which imports scipy.linalg to find a BLAS), numba's cache load of the kernels (the algorithm's ``warm_up`` hook,
+e.g. :mod:`swarm_ros.core.darr_niazi.warmup`), rclpy and its node module. Four such processes on 2 cores were most
+of the README's command. ``swarm-ros run`` therefore loads these once, in its own process, and forks each node from
+it: the child starts with all of it in memory and goes straight to ``rclpy.init``. What the child does from there is
+what ``python -m swarm_ros.nodes.<node>`` does.
 
 Forking is only safe from a process without threads that hold locks the child would need. numpy's OpenBLAS
 pool is fork-aware (it stops its threads before a fork and starts them again when next used). rclpy's import

@@ -13,9 +13,9 @@ from scipy import stats as st
 
 from swarm_ros.app.published import Reference
 from swarm_ros.core.algorithm import DARR_NIAZI, names
+from swarm_ros.core.darr_niazi.rulesets import RULE_SETS, RuleSet
 from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import RUN_PARAMETER
-from swarm_ros.core.rulesets import RULE_SETS, RuleSet
 
 STATS_CSV, STATS_MD, FIGURES = "stats.csv", "stats.md", "figures"
 OUTCOMES = tuple(o.value for o in Outcome)

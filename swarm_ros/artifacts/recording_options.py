@@ -15,7 +15,7 @@ from swarm_ros.core.params import RECORD_EVERY, auto_every
 
 if TYPE_CHECKING:
     from swarm_ros.artifacts.rerun_recording import Recorder
-    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.darr_niazi.engine import Simulation
     from swarm_ros.core.params import RunParams
     from swarm_ros.core.shapes import Shape
 

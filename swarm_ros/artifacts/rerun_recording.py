@@ -27,11 +27,11 @@ import rerun.blueprint as rrb
 
 from swarm_ros.artifacts.rerun_scene import EVENTS, FILLED, FREE, METRICS, OCCUPANCY, ROBOTS, blueprint, log_scene
 from swarm_ros.artifacts.run_dir import RecordingError
+from swarm_ros.core.darr_niazi.state import SwarmState
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import SwarmState
 
 APP_ID = "swarm_ros"
 TIMELINE = "tick"

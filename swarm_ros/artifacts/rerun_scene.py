@@ -7,7 +7,7 @@ What is logged, on one timeline ``tick`` (sequence):
 ``world/occupancy``           SegmentationImage of the filled shape patches, logged when it changed
 ``world/robots``              :class:`rerun.Points2D` of every robot in id order (instance i is
                               robot i), positions in patches, ``class_ids`` = the robot's
-                              :class:`~swarm_ros.core.state.RobotState` code (0-6)
+                              :class:`~swarm_ros.core.darr_niazi.state.RobotState` code (0-6)
 ``metrics/<column>``          :class:`rerun.Scalars`, one series per ``metrics.csv`` column, every tick
 ``events``                    :class:`rerun.TextLog`: the outcome, at the final tick; restarts
 ``run`` (static)              :class:`rerun.TextDocument`: the run's parameters, rule set included
@@ -27,10 +27,10 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from swarm_ros.core.darr_niazi.state import RobotState
 from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import RobotState
 
 WORLD, MAP, OCCUPANCY, ROBOTS, EVENTS, RUN_INFO = (
     "world",

@@ -1,4 +1,5 @@
-"""The ROS-free core of swarm_ros: world, shapes, robot rule, arbitration, metrics, engine.
+"""The ROS-free core of swarm_ros: world, shapes, parameters, metrics, and each
+algorithm's package (the study's model: :mod:`swarm_ros.core.darr_niazi`; :mod:`swarm_ros.core.rubenstein`).
 
 Nothing here imports rclpy, ROS message packages or rerun; the ROS 2 nodes and the
 recorder convert to and from these types at their edges.
@@ -12,8 +13,8 @@ from __future__ import annotations
 import importlib
 
 _HOME = {
-    "JoinOutcome": "arbitration",
-    "Simulation": "engine",
+    "JoinOutcome": "darr_niazi.arbitration",
+    "Simulation": "darr_niazi.engine",
     "ParameterError": "errors",
     "ShapeError": "errors",
     "SwarmError": "errors",
@@ -23,12 +24,12 @@ _HOME = {
     "Outcome": "metrics",
     "TickMetrics": "metrics",
     "RunParams": "params",
-    "Decisions": "rules",
-    "decide": "rules",
+    "Decisions": "darr_niazi.rules",
+    "decide": "darr_niazi.rules",
     "Shape": "shapes",
     "builtin_shapes": "shapes",
-    "RobotState": "state",
-    "SwarmState": "state",
+    "RobotState": "darr_niazi.state",
+    "SwarmState": "darr_niazi.state",
     "World": "grid",
 }
 __all__ = sorted(_HOME)

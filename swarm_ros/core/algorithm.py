@@ -56,7 +56,7 @@ class Algorithm:
     max_ticks: int
     #: memory a run takes per robot, in bytes (peak RSS growth per robot; core.resources checks a run against it)
     bytes_per_robot: int
-    #: its kernel modules' directory, relative to swarm_ros/core ("" the core's own), for core.kernels' cache stamps
+    #: its kernel modules' package, relative to swarm_ros/core ("" if it has none), for core.kernels' cache stamps
     kernel_dir: str
     #: about how long its kernels take to compile, in seconds (scripts/bench_compile.py, a quiet 2-core machine)
     compile_seconds: int
@@ -282,24 +282,25 @@ register(
         # peak RSS of `swarm-ros simulate --world-radius 300 --max-ticks 1` (recording on) grew by 210 bytes per robot
         # from 20,000 to 200,000 robots, rounded up
         bytes_per_robot=250,
-        kernel_dir="",
+        kernel_dir="darr_niazi",
         compile_seconds=40,
         run_dir_setting="v{vision_radius:g}",
         progress_unit="patch",
         progress_what="localized",
-        engine="swarm_ros.core.engine:Simulation",
+        engine="swarm_ros.core.darr_niazi.engine:Simulation",
         summary="swarm_ros.core.run_result:summary_of",
         wire="swarm_ros.protocol.darr_niazi.wire:StudyWire",
         check_shape="swarm_ros.core.params:check_vision_fits",
-        compile="swarm_ros.core.warmup:compile_kernels",
-        warm_up="swarm_ros.core.warmup:warm_up",
+        compile="swarm_ros.core.darr_niazi.warmup:compile_kernels",
+        warm_up="swarm_ros.core.darr_niazi.warmup:warm_up",
+        shared_kernels=("rng.py",),
         **{
             **CENTRAL,  # its own recording, run directory and printed summary:
             "recording": "swarm_ros.artifacts.recording_options:open_recording",
-            "write_run": "swarm_ros.artifacts.model_files:write_simulation",
+            "write_run": "swarm_ros.artifacts.darr_niazi.run_dir:write_simulation",
             "print_summary": "swarm_ros.app.summary_print:print_summary",
         },
-        checked_step="swarm_ros.core.invariants:checked_step",
+        checked_step="swarm_ros.core.darr_niazi.invariants:checked_step",
     )
 )
 register(

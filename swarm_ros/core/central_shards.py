@@ -40,8 +40,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from .errors import ContractError, Rejected
-from .regions import shard_batches
-from .strips import CentralRun, Strips, merged
+from .strips import CentralRun, Strips, merged, shard_batches
 
 
 class ShardedRun(CentralRun, Protocol):
@@ -82,7 +81,7 @@ def concat(parts: list[tuple[np.ndarray, Any]]) -> tuple[np.ndarray, Any]:
 
 def ranges(strips: Strips, shards: int) -> list[tuple[int, int]]:
     """Each shard's own columns (first, last): the strips of its batches
-    (:func:`~swarm_ros.core.regions.shard_batches`)."""
+    (:func:`~swarm_ros.core.strips.shard_batches`)."""
     spans = [shard_batches(s, shards, strips.batches) for s in range(shards)]
     return [(int(strips.cuts[b[0]]), int(strips.cuts[b[-1] + 1]) - 1) for b in spans]
 

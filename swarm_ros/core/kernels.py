@@ -48,33 +48,24 @@ def compiling_note(algorithm: str) -> str:
     )
 
 
-def _package(algorithm: str) -> Path:
-    """``algorithm``'s package of kernel modules (core.algorithm's ``kernel_dir``; the study's model's are the
-    core's own)."""
-    return _CORE / algorithm_of(algorithm).kernel_dir
-
-
-def _packages() -> tuple[Path, ...]:
-    """Every algorithm's package, once each."""
-    return tuple(dict.fromkeys(_package(a) for a in names()))
-
-
 def _kernel_modules(algorithm: str | None = None) -> list[Path]:
-    """The modules with a cached kernel: ``algorithm``'s, or every algorithm's. An algorithm's own include the
-    core's modules its kernels call (core.algorithm's ``shared_kernels``): a change to one leaves its cache stale."""
-    packages = _packages() if algorithm is None else (_package(algorithm),)
-    shared = [_CORE / name for name in (algorithm_of(algorithm).shared_kernels if algorithm else ())]
-    return [
-        p
-        for package in packages
-        for p in [*sorted(package.glob("*.py")), *shared]
-        if p.name != "kernels.py" and _MARK in p.read_text("utf-8")
-    ]
+    """The modules with a cached kernel: ``algorithm``'s, or every algorithm's, once each. An algorithm's are those
+    of its package (core.algorithm's ``kernel_dir``) and the core's modules its kernels call (its
+    ``shared_kernels``): a change to one leaves its cache stale."""
+    modules: dict[Path, None] = {}
+    for name in names() if algorithm is None else (algorithm,):
+        entry = algorithm_of(name)
+        own = sorted((_CORE / entry.kernel_dir).glob("*.py")) if entry.kernel_dir else []
+        for path in [*own, *(_CORE / m for m in entry.shared_kernels)]:
+            if _MARK in path.read_text("utf-8"):
+                modules[path] = None
+    return list(modules)
 
 
 def _cached(suffix: str) -> list[Path]:
-    """numba's cache files of every package (their module names are unique: test_layers)."""
-    return [path for package in _packages() for path in (package / "__pycache__").glob(f"*.{suffix}")]
+    """numba's cache files beside every algorithm's kernel modules (their module names are unique: test_layers)."""
+    folders = dict.fromkeys(path.parent / "__pycache__" for path in _kernel_modules())
+    return [path for folder in folders for path in folder.glob(f"*.{suffix}")]
 
 
 def kernels_cached(algorithm: str | None = None) -> bool:

@@ -20,10 +20,10 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from .algorithm import DARR_NIAZI, RUBENSTEIN, algorithm_of, names
+from .darr_niazi.rulesets import CROWDING_VALUES, DEFAULT_RULES, JOIN_VALUES, RULE_SETS, STEPS_VALUES, RuleSet
 from .errors import ParameterError
 from .grid import DEFAULT_RADIUS, MIN_RADIUS, World
 from .param_decl import INT64_MAX, Param
-from .rulesets import CROWDING_VALUES, DEFAULT_RULES, JOIN_VALUES, RULE_SETS, STEPS_VALUES, RuleSet
 
 if TYPE_CHECKING:
     from .shapes import Shape

@@ -7,12 +7,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarm_ros.core.engine import Simulation
+from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.state import RobotState, SwarmState
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.metrics import Outcome, TickMetrics, run_summary
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import RobotState, SwarmState
 
 INPROCESS, ROS2 = "inprocess", "ros2"
 ENGINES = (INPROCESS, ROS2)  #: the engines, as summary.json and results.csv name them

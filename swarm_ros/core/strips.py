@@ -1,6 +1,5 @@
-"""A run cut among K robot batches by strips of columns, for an algorithm whose world is one process holding every
-robot (a *central world*: the rubenstein algorithm's, and a plug-in's; the study's model cuts its world by
-:mod:`swarm_ros.core.regions` instead).
+"""A run cut among K robot batches by strips of columns, for an algorithm whose world holds every robot (a *central
+world*, one process or S world shards: :mod:`swarm_ros.core.central_shards`), as every algorithm's graph does.
 
 The algorithm's engine lays a grid of columns over its world (:class:`StripGrid`: columns ``side`` wide from
 ``x0``), wide enough that a robot decides from the robots within one column either side of its own. The world is
@@ -24,7 +23,38 @@ import numpy as np
 
 from .errors import ParameterError
 from .grid import CellMap
-from .regions import parse_cuts
+
+
+def parse_cuts(text: str) -> np.ndarray:
+    """Cut positions from a list like ``"-20,0,20"`` (x in patches, ascending): empty for none.
+
+    Raises:
+        ParameterError: not a list of integers, or not strictly ascending.
+    """
+    compact = text.replace(" ", "")
+    parts = compact.split(",") if compact else []
+    if "" in parts:  # '-10,,10' or '10,': a position left out is a typo, not a cut fewer
+        raise ParameterError(f"region_cuts must be whole x positions like '-20,0,20', got {text!r} (an empty one)")
+    try:
+        cuts = np.array([int(p) for p in parts], dtype=np.int64)
+    except ValueError:
+        raise ParameterError(f"region_cuts must be whole x positions like '-20,0,20', got {text!r}") from None
+    if cuts.size > 1 and (np.diff(cuts) <= 0).any():
+        raise ParameterError(f"region_cuts must be strictly ascending, got {text!r}")
+    return cuts
+
+
+def shard_batches(shard: int, shards: int, batches: int) -> range:
+    """The batches world shard ``shard`` of ``shards`` admits: a run of consecutive strips, as many as can be.
+
+    Raises:
+        ParameterError: more shards than batches, or ``shard`` not one of them.
+    """
+    if not 1 <= shards <= batches:
+        raise ParameterError(f"world_shards must be in [1, {batches}] (one batch at least each), got {shards}")
+    if not 0 <= shard < shards:
+        raise ParameterError(f"shard must be in [0, {shards}), got {shard}")
+    return range(shard * batches // shards, (shard + 1) * batches // shards)
 
 
 class StripGrid(NamedTuple):
@@ -308,3 +338,12 @@ def merged(ascending: np.ndarray, more: np.ndarray) -> np.ndarray:
     at = np.searchsorted(ascending, more)
     fresh = (at == ascending.size) | (ascending[np.minimum(at, ascending.size - 1)] != more)
     return np.insert(ascending, at[fresh], more[fresh]) if fresh.any() else ascending
+
+
+def has_repeats(values: np.ndarray) -> bool:
+    """Whether a value occurs twice in ``values`` (a sort: ``np.unique`` costs several times more; none for
+    values in increasing order, as the graph's rows come: 0.03 ms instead of 0.45 for 50,000 ids)."""
+    if (values[1:] > values[:-1]).all():
+        return False
+    ordered = np.sort(values)
+    return bool((ordered[1:] == ordered[:-1]).any())

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarm_ros.core.errors import ContractError, Rejected
+from swarm_ros.core.strips import has_repeats
 from swarm_ros.protocol.rows import (
     PATCH_METRES,
     TICK_SECONDS,
@@ -87,8 +88,6 @@ def cloud(msg, dtype: np.dtype, max_rows: int, min_rows: int = 1) -> np.ndarray:
 
 def ids_in_range(ids: np.ndarray, low: int, robots: int) -> None:
     """Raises Rejected unless every id is in ``low``..``robots - 1`` and none repeats."""
-    from swarm_ros.core.state import has_repeats  # here: core.state loads numba, which the launcher must not
-
     if not ids.size:
         return
     if ids.min() < low or ids.max() >= robots:
@@ -118,7 +117,9 @@ def inside_world(rows: np.ndarray, radius: int) -> None:
 def robot_rows(msg, robots: int, radius: int, dims: int = 2) -> np.ndarray:
     """The robot rows (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`, 3D ``ROBOT_ROW_3D``) of a message, checked: layout,
     ids, states, poses."""
-    from swarm_ros.core.state import STATE_COUNT  # here: the core's state loads numba, which the launcher does without
+    from swarm_ros.core.darr_niazi.state import (
+        STATE_COUNT,  # here: the core's state loads numba, which the launcher does without
+    )
 
     rows = cloud(msg, robot_row(dims), robots, min_rows=1)
     ids_in_range(rows["id"].astype(np.int64), 0, robots)

@@ -44,9 +44,9 @@ def graph_plan(
     processes: int, region_cuts: str = "", world_shards: int = 1
 ) -> list[tuple[str, str, dict[str, int | str]]]:
     """The node processes, in start order: (node name, executable, its own parameters beyond the file's):
-    batch k of ``processes`` hosts strip k, cut at ``region_cuts`` if given (``swarm_ros.core.regions``); then
+    batch k of ``processes`` hosts strip k, cut at ``region_cuts`` if given (``swarm_ros.core.strips``); then
     the world, or ``world_shards`` > 1 world shards, shard i owning the strips of a run of consecutive batches
-    (:func:`swarm_ros.core.regions.shard_batches`)."""
+    (:func:`swarm_ros.core.strips.shard_batches`)."""
     cuts: dict[str, int | str] = {"region_cuts": region_cuts} if region_cuts else {}
     monitor: dict[str, int | str] = {"world_shards": world_shards} if world_shards > 1 else {}
     world: list[tuple[str, str, dict[str, int | str]]] = (

@@ -20,7 +20,7 @@ import numpy as np
 from swarm_ros.core.errors import ContractError
 
 if TYPE_CHECKING:  # the rules load numba: readers of rows (the launcher's progress) do without it
-    from swarm_ros.core.rules import Decisions
+    from swarm_ros.core.darr_niazi.rules import Decisions
 
 PATCH_METRES = 1.0
 TICK_SECONDS = 1
@@ -147,13 +147,13 @@ def robot_rows(
 
 
 def state_rows(ids: np.ndarray, s) -> np.ndarray:
-    """Rows of the robots ``ids`` of a :class:`~swarm_ros.core.state.SwarmState` (2D or 3D)."""
+    """Rows of the robots ``ids`` of a :class:`~swarm_ros.core.darr_niazi.state.SwarmState` (2D or 3D)."""
     return robot_rows(ids, s.state, s.x, s.y, s.heading, s.z, s.pitch)
 
 
 def pose_of(rows: np.ndarray) -> dict[str, np.ndarray]:
     """The pose a message's robot rows carry, in patches: x, y, heading and (3D rows) z, pitch, as keyword
-    arguments of :meth:`~swarm_ros.core.swarm_view.SwarmView.update`."""
+    arguments of :meth:`~swarm_ros.core.darr_niazi.swarm_view.SwarmView.update`."""
     pose = {"x": rows["x"] / PATCH_METRES, "y": rows["y"] / PATCH_METRES, "heading": rows["heading"].astype(np.float64)}
     if "pitch" in (rows.dtype.names or ()):
         pose["z"] = rows["z"] / PATCH_METRES
@@ -176,7 +176,7 @@ def decision_rows(decisions: Decisions) -> np.ndarray:
 
 def decisions_of(tick: int, rows: np.ndarray) -> Decisions:
     """The :class:`Decisions` a message of DECISION_ROW (or DECISION_ROW_3D) rows carries."""
-    from swarm_ros.core.rules import Decisions
+    from swarm_ros.core.darr_niazi.rules import Decisions
 
     return Decisions(tick=tick, ids=rows["id"].astype(np.int64), claim=rows["claim"].astype(np.int64), **pose_of(rows))
 

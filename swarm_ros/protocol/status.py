@@ -134,9 +134,9 @@ class WorldReport:
         ``shards``: the world processes (the robot batches' count, ``processes``, is the launcher's to fill in)."""
         import numpy as np  # the engine's modules (numba) load only where a run is written
 
+        from swarm_ros.core.darr_niazi.state import STATE_COUNT
         from swarm_ros.core.metrics import tick_metrics
         from swarm_ros.core.run_result import ROS2, RunRecord, summarize
-        from swarm_ros.core.state import STATE_COUNT
 
         history = np.array(rows, dtype=np.int64)
         final = tick_metrics(state.tick, np.bincount(state.state, minlength=STATE_COUNT), shape.patches)

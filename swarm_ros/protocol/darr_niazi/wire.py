@@ -2,26 +2,25 @@
 :class:`~swarm_ros.protocol.central_rows.Wire`), and its robot batch.
 
 A batch decides for the moving robots of its strip of patch columns from what it is sent after each tick: the robots
-of its area (its strip and :func:`~swarm_ros.core.regions.halo` columns either side) and every stationary robot
-(:meth:`~swarm_ros.core.engine.Simulation.seen_by_all`: the ``walk`` rule finds the frontier anywhere), whole at
-first and then the rows that changed. It keeps a regional view of the swarm from them (loaded from a whole view,
-then updated with each tick's changes: :class:`~swarm_ros.core.swarm_view.SwarmView`, as a batch of the study's own
-graph does from its snapshot and region rows) and runs the core's rule (:class:`~swarm_ros.core.rules.Decider`),
-so it decides as the in-process engine does. The rows are the study's graph's (:mod:`swarm_ros.protocol.rows`): a
-robot's pose and state, and a decision's claim and pose.
+of its area (its strip and :func:`~swarm_ros.core.darr_niazi.legality.halo` columns either side) and every stationary
+robot (:meth:`~swarm_ros.core.darr_niazi.engine.Simulation.seen_by_all`: the ``walk`` rule finds the frontier
+anywhere), whole at first and then the rows that changed. It keeps a regional view of the swarm from them (loaded
+from a whole view, then updated with each tick's changes: :class:`~swarm_ros.core.darr_niazi.swarm_view.SwarmView`)
+and runs the core's rule (:class:`~swarm_ros.core.darr_niazi.rules.Decider`), so it decides as the in-process engine
+does. The rows are :mod:`swarm_ros.protocol.rows`': a robot's pose and state, and a decision's claim and pose.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from swarm_ros.core.engine import Simulation
+from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.legality import illegal
+from swarm_ros.core.darr_niazi.rules import Decided, Decided3D, Decider, Decisions
+from swarm_ros.core.darr_niazi.state import STATE_COUNT, Poses, Poses3D
+from swarm_ros.core.darr_niazi.swarm_view import SwarmView
 from swarm_ros.core.errors import ContractError, Rejected
-from swarm_ros.core.legality import illegal
-from swarm_ros.core.rules import Decided, Decided3D, Decider, Decisions
-from swarm_ros.core.state import STATE_COUNT, Poses, Poses3D
 from swarm_ros.core.strips import Strips
-from swarm_ros.core.swarm_view import SwarmView
 
 from .. import checks
 from ..rows import decision_row, decision_rows, pose_of, robot_row, robot_rows
@@ -123,7 +122,7 @@ class StudyWire:
         run: Simulation, rows: np.ndarray, tick: int, own: np.ndarray
     ) -> tuple[np.ndarray, Decided | Decided3D]:
         """(ids, decisions) of decision rows for ``tick`` that must be exactly the robots ``own``, each within the
-        rule's bounds from where it stands in ``run`` (:func:`~swarm_ros.core.legality.illegal`).
+        rule's bounds from where it stands in ``run`` (:func:`~swarm_ros.core.darr_niazi.legality.illegal`).
 
         Raises:
             Rejected: by kind.

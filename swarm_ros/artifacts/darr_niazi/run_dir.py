@@ -16,9 +16,9 @@ import numpy as np
 from swarm_ros.artifacts.run_dir import write_files
 
 if TYPE_CHECKING:
-    from swarm_ros.core.engine import Simulation
+    from swarm_ros.core.darr_niazi.engine import Simulation
+    from swarm_ros.core.darr_niazi.state import SwarmState
     from swarm_ros.core.run_result import RunRecord
-    from swarm_ros.core.state import SwarmState
 
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
 FINAL_STATE_COLUMNS_3D = ("id", "x", "y", "z", "heading", "pitch", "state")  #: a 3D run's
@@ -35,7 +35,7 @@ def metrics_csv(history: np.ndarray) -> str:
 
 
 def final_state_csv(s: SwarmState) -> str:
-    from swarm_ros.core.state import RobotState
+    from swarm_ros.core.darr_niazi.state import RobotState
 
     labels = [st.label for st in RobotState]
     if s.z is not None and s.pitch is not None:
@@ -88,7 +88,7 @@ def write_run(
     """
 
     def pictures(path: Path, save: str) -> None:
-        from swarm_ros.artifacts import plots  # matplotlib: only when a run is written
+        from swarm_ros.artifacts.darr_niazi import plots  # matplotlib: only when a run is written
 
         getattr(plots, save)(record, path)
 

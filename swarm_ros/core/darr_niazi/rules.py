@@ -4,9 +4,9 @@ A decision depends only on the robot's own state, the shape and its fill state (
 frontier), the moving robots it senses, and its own random stream, so any batch of
 robots can decide in any process and the union of the batches' decisions equals the
 decision of the whole swarm. The world then settles the claims and sets the new states
-(:mod:`swarm_ros.core.arbitration`).
+(:mod:`swarm_ros.core.darr_niazi.arbitration`).
 
-A moving robot, each tick, under the run's rule set (:mod:`swarm_ros.core.rulesets`;
+A moving robot, each tick, under the run's rule set (:mod:`swarm_ros.core.darr_niazi.rulesets`;
 docs/model.md states the rule in full):
 
 * ``join: walk``, a robot inside the shape or already walking: it targets the nearest
@@ -36,19 +36,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from swarm_ros.core.errors import ContractError
-from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
-from swarm_ros.core.params import RunParams
-from swarm_ros.core.rng import (
-    SPIN,
-    STREAM_TURN,
-    STREAM_TURN_2,
-    STREAM_WIGGLE,
-    STREAM_WIGGLE_2,
-    STREAM_WIGGLE_3,
-    draw_uniform,
-)
-from swarm_ros.core.rules2d import (
+from swarm_ros.core.darr_niazi.kernel_state import grid_of, moves_for, robots_of, rules_of
+from swarm_ros.core.darr_niazi.rules2d import (
     block_distances,
     cell_index,
     crowded,
@@ -57,7 +46,7 @@ from swarm_ros.core.rules2d import (
     join_target,
     nearest_frontier,
 )
-from swarm_ros.core.rules3d import (
+from swarm_ros.core.darr_niazi.rules3d import (
     angles,
     crowded3,
     direction,
@@ -68,9 +57,20 @@ from swarm_ros.core.rules3d import (
     random_direction,
     wiggled,
 )
-from swarm_ros.core.rulesets import JOIN_LOCAL, JOIN_WALK, STEPS_ONE
+from swarm_ros.core.darr_niazi.rulesets import JOIN_LOCAL, JOIN_WALK, STEPS_ONE
+from swarm_ros.core.darr_niazi.state import IS_MOVING, RobotState, SwarmState
+from swarm_ros.core.errors import ContractError
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.rng import (
+    SPIN,
+    STREAM_TURN,
+    STREAM_TURN_2,
+    STREAM_WIGGLE,
+    STREAM_WIGGLE_2,
+    STREAM_WIGGLE_3,
+    draw_uniform,
+)
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import IS_MOVING, RobotState, SwarmState
 
 TWO_PI = 2.0 * math.pi
 _WALKING = np.int8(RobotState.WALKING)
@@ -182,14 +182,14 @@ def _rule_for(solid: bool):
     @numba.njit(cache=True)
     def decide_kernel(ids, robots, grid, rules, tick, head, nxt, out, near):
         """Decide for robots ``ids`` (moving, all inserted in the cell list ``head``, ``nxt``) at ``tick`` under
-        ``rules`` (:class:`~swarm_ros.core.kernel_state.Rules`), in a world of this kernel's dimension (3D: the
-        robots' geometry is :mod:`swarm_ros.core.rules3d`'s; the rule is this one control flow for both).
+        ``rules`` (:class:`~swarm_ros.core.darr_niazi.kernel_state.Rules`), in a world of this kernel's dimension (3D:
+        the robots' geometry is :mod:`swarm_ros.core.darr_niazi.rules3d`'s; the rule is this one control flow for both).
 
-        Writes ``out`` (:class:`~swarm_ros.core.kernel_state.Moves`), per position k of ``ids``: the claimed
+        Writes ``out`` (:class:`~swarm_ros.core.darr_niazi.kernel_state.Moves`), per position k of ``ids``: the claimed
         patch (flat index, or -1) and the pose the robot takes if it does not win a claim. Reads only the
         previous tick's ``robots`` and ``grid``, and ``near`` (2D, ``join: walk``: each block's distance to the
-        frontier, :func:`~swarm_ros.core.rules2d.block_distances`, which only speeds the search up); writes only
-        ``out``.
+        frontier, :func:`~swarm_ros.core.darr_niazi.rules2d.block_distances`, which only speeds the search up); writes
+        only ``out``.
         """
         x, y, z, heading, pitch, state = robots.x, robots.y, robots.z, robots.heading, robots.pitch, robots.state
         shape, wall, frontier, blocks, radius, size = (

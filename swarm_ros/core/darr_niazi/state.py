@@ -50,15 +50,6 @@ MOVING_STATES = (RobotState.MOVING_OUTSIDE, RobotState.MOVING_INSIDE, RobotState
 IS_MOVING = np.isin(np.arange(STATE_COUNT), MOVING_STATES)
 
 
-def has_repeats(values: np.ndarray) -> bool:
-    """Whether a value occurs twice in ``values`` (a sort: ``np.unique`` costs several times more; none for
-    values in increasing order, as the graph's rows come: 0.03 ms instead of 0.45 for 50,000 ids)."""
-    if (values[1:] > values[:-1]).all():
-        return False
-    ordered = np.sort(values)
-    return bool((ordered[1:] == ordered[:-1]).any())
-
-
 @dataclass
 class SwarmState:
     """The whole swarm at the end of one tick.

@@ -1,13 +1,13 @@
 """The simulation: the world's state, one tick at a time, and the fast in-process engine.
 
 A tick has two halves. Robots decide from the state at the end of the last tick
-(:func:`swarm_ros.core.rules.decide`, any batch of robots, anywhere); the world
+(:func:`swarm_ros.core.darr_niazi.rules.decide`, any batch of robots, anywhere); the world
 applies all decisions at once (:meth:`Simulation.apply`), then counts, checks for the
 end of the run and, if the shape is complete with robots left over, separates them.
 :meth:`Simulation.step` and :meth:`Simulation.run` do both halves in compiled code
 (``run`` many ticks per call); :meth:`Simulation.apply` applies decisions made elsewhere. All
-these share every kernel and the end of a tick (:func:`~swarm_ros.core.tick_kernel.end_tick`, through
-:func:`~swarm_ros.core.tick_kernel.close_tick`), so they give identical runs. The ROS 2 graph's world
+these share every kernel and the end of a tick (:func:`~swarm_ros.core.darr_niazi.tick_kernel.end_tick`, through
+:func:`~swarm_ros.core.darr_niazi.tick_kernel.close_tick`), so they give identical runs. The ROS 2 graph's world
 applies its batches' decisions with :meth:`Simulation.apply`; a world shard's half of a tick is
 :meth:`Simulation.settle_shard` and :meth:`Simulation.close_shard` (:mod:`swarm_ros.core.central_shards`),
 which sum the shards' counts and end the tick with the same ``end_tick``.
@@ -25,26 +25,12 @@ from collections.abc import Callable
 import numpy as np
 
 from swarm_ros.core.algorithm import check_engine
-from swarm_ros.core.arbitration import occupy, resolve_kernel, vacate
-from swarm_ros.core.errors import ContractError
-from swarm_ros.core.grid import CellMap
-from swarm_ros.core.kernel_state import grid_of, moves_for, robots_of, rules_of
-from swarm_ros.core.legality import reach
-from swarm_ros.core.metrics import (
-    END_EXTRAS,
-    METRIC_COLUMNS,
-    OUTCOME_OF_CODE,
-    Outcome,
-    TickMetrics,
-    progress_of,
-)
-from swarm_ros.core.params import RunParams
-from swarm_ros.core.regions import halo
-from swarm_ros.core.rng import STREAM_FAIL, uniform_array
-from swarm_ros.core.rules import Decided, Decided3D, Decisions
-from swarm_ros.core.rules2d import cell_index
-from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import (
+from swarm_ros.core.darr_niazi.arbitration import occupy, resolve_kernel, vacate
+from swarm_ros.core.darr_niazi.kernel_state import grid_of, moves_for, robots_of, rules_of
+from swarm_ros.core.darr_niazi.legality import halo, reach
+from swarm_ros.core.darr_niazi.rules import Decided, Decided3D, Decisions
+from swarm_ros.core.darr_niazi.rules2d import cell_index
+from swarm_ros.core.darr_niazi.state import (
     IS_MOVING,
     STATE_COUNT,
     Poses,
@@ -54,8 +40,21 @@ from swarm_ros.core.state import (
     initial_state,
     poses_of,
 )
+from swarm_ros.core.darr_niazi.tick_kernel import End, Scratch, close_tick, compact_moving, end_tick, run_kernel
+from swarm_ros.core.errors import ContractError
+from swarm_ros.core.grid import CellMap
+from swarm_ros.core.metrics import (
+    END_EXTRAS,
+    METRIC_COLUMNS,
+    OUTCOME_OF_CODE,
+    Outcome,
+    TickMetrics,
+    progress_of,
+)
+from swarm_ros.core.params import RunParams
+from swarm_ros.core.rng import STREAM_FAIL, uniform_array
+from swarm_ros.core.shapes import Shape
 from swarm_ros.core.strips import StripGrid
-from swarm_ros.core.tick_kernel import End, Scratch, close_tick, compact_moving, end_tick, run_kernel
 
 _STATIONARY_LOCALIZED = (int(RobotState.SEED), int(RobotState.LOCALIZED))
 _STATIONARY, _MOVING = METRIC_COLUMNS.index("stationary"), METRIC_COLUMNS.index("moving")
@@ -138,7 +137,8 @@ class Simulation:
         self._record(0, 1, code)
 
     def _set_kernel_args(self, alive: int) -> None:
-        """What the kernels take, by name (:mod:`swarm_ros.core.kernel_state`), with ``alive`` robots not removed."""
+        """What the kernels take, by name (:mod:`swarm_ros.core.darr_niazi.kernel_state`), with ``alive`` robots not
+        removed."""
         self._alive = alive
         self._robots = robots_of(self.state)
         self._grid = grid_of(self.shape, self.state, self._shape, self._wall, self._nbrs)
@@ -267,7 +267,7 @@ class Simulation:
 
     def _resolve(self, decisions: Decisions, applied: int) -> tuple[int, int, int, int]:
         """The lottery of every patch ``decisions`` claim, and the moves of its first ``applied`` robots
-        (:func:`~swarm_ros.core.arbitration.resolve_kernel`): the counts of those after the tick."""
+        (:func:`~swarm_ros.core.darr_niazi.arbitration.resolve_kernel`): the counts of those after the tick."""
         mv, sc, m = self._moves, self._scratch, decisions.ids.size
         if self._solid and (decisions.z is None or decisions.pitch is None):
             raise ContractError("decisions in a 3D world need z and pitch")
@@ -361,10 +361,9 @@ class Simulation:
 
     @property
     def grid(self) -> StripGrid:
-        """The world's patch columns (a robot's is its nearest patch's, :func:`~swarm_ros.core.regions.columns`); a
-        decision reads the robots within :func:`~swarm_ros.core.regions.halo` columns of its own, and two robots
-        can claim one patch from up to twice a claim's :func:`~swarm_ros.core.legality.reach` apart (a column of
-        rounding each)."""
+        """The world's patch columns (a robot's is its nearest patch's); a decision reads the robots within
+        :func:`~swarm_ros.core.darr_niazi.legality.halo` columns of its own, and two robots can claim one patch from
+        up to twice a claim's :func:`~swarm_ros.core.darr_niazi.legality.reach` apart (a column of rounding each)."""
         rivals = 2 * (math.ceil(reach(self.params, self.shape.world.dims)) + 1)
         return StripGrid(-self._radius - 0.5, 1.0, self._size, "patches", halo(self.params.vision_radius), rivals)
 
@@ -393,13 +392,13 @@ class Simulation:
     def load(self, tick: int, robots: Poses | Poses3D, history: np.ndarray, outcome: Outcome | None = None) -> None:
         """Take a state this run reached elsewhere: every robot as at ``tick``, the metrics of every tick up to it
         and the outcome (None: going on). The occupancy and the frontier follow from the robots, as a robot batch's
-        view rebuilds them (:meth:`~swarm_ros.core.swarm_view.SwarmView.load`), and the losses from the metrics (a
-        tick's removals, failures and a lost batch's robots alike, as one loss).
+        view rebuilds them (:meth:`~swarm_ros.core.darr_niazi.swarm_view.SwarmView.load`), and the losses from the
+        metrics (a tick's removals, failures and a lost batch's robots alike, as one loss).
 
         Raises:
             ContractError: robots that cannot be a state of the run (two on a patch, one off the shape).
         """
-        from swarm_ros.core.swarm_view import SwarmView  # (it imports the state's kernels, as this does)
+        from swarm_ros.core.darr_niazi.swarm_view import SwarmView  # (it imports the state's kernels, as this does)
 
         view, pose = SwarmView(self.shape, self.params.robots), robots._asdict()
         state = pose.pop("state")

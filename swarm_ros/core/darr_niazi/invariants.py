@@ -2,7 +2,7 @@
 and of the rule set's moves.
 
 :func:`check_tick` compares the state before and after one tick of a
-:class:`~swarm_ros.core.engine.Simulation` and raises :class:`InvariantError` naming
+:class:`~swarm_ros.core.darr_niazi.engine.Simulation` and raises :class:`InvariantError` naming
 the first broken rule. Besides the Z schemas it checks each robot's move against its
 rule set, with plain numpy re-statements of the rules (the nearest frontier patch by
 brute force, not the engine's block search). It costs O(N + W^2 + walkers x frontier)
@@ -16,11 +16,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from swarm_ros.core.arbitration import JoinOutcome
-from swarm_ros.core.engine import Simulation
+from swarm_ros.core.darr_niazi.arbitration import JoinOutcome
+from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.state import MOVING_STATES, RobotState, SwarmState, frontier_blocks_of, frontier_of
 from swarm_ros.core.errors import InvariantError
 from swarm_ros.core.metrics import Outcome, tick_metrics
-from swarm_ros.core.state import MOVING_STATES, RobotState, SwarmState, frontier_blocks_of, frontier_of
 
 _STATIONARY = (RobotState.SEED, RobotState.LOCALIZED)
 _MOVING = MOVING_STATES

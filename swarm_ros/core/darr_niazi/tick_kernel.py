@@ -1,8 +1,8 @@
 """The compiled tick, shared by every path of the engine: the whole-run kernel and the end-of-tick bookkeeping.
 
-:meth:`~swarm_ros.core.engine.Simulation.run` runs many ticks per call of :func:`run_kernel`;
-:meth:`~swarm_ros.core.engine.Simulation.apply` (a distributed engine's decisions) and
-:meth:`~swarm_ros.core.engine.Simulation.remove` (failures) end their tick with the same
+:meth:`~swarm_ros.core.darr_niazi.engine.Simulation.run` runs many ticks per call of :func:`run_kernel`;
+:meth:`~swarm_ros.core.darr_niazi.engine.Simulation.apply` (a distributed engine's decisions) and
+:meth:`~swarm_ros.core.darr_niazi.engine.Simulation.remove` (failures) end their tick with the same
 :func:`compact_moving` and :func:`close_tick`, so every path gives identical runs.
 """
 
@@ -14,10 +14,10 @@ import numba
 import numpy as np
 
 from swarm_ros.core import metrics
-from swarm_ros.core.arbitration import resolve_kernel
+from swarm_ros.core.darr_niazi.arbitration import resolve_kernel
+from swarm_ros.core.darr_niazi.rules import decide_robots
+from swarm_ros.core.darr_niazi.state import RobotState
 from swarm_ros.core.metrics import END_EXTRAS, RUNNING
-from swarm_ros.core.rules import decide_robots
-from swarm_ros.core.state import RobotState
 
 _MOVING_OUTSIDE, _MOVING_INSIDE = int(RobotState.MOVING_OUTSIDE), int(RobotState.MOVING_INSIDE)
 _WALKING = int(RobotState.WALKING)

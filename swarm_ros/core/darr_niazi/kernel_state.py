@@ -1,12 +1,12 @@
 """What the compiled kernels take, by name: the robots, the grid, the rule set, the moves decided.
 
-The kernels of :mod:`~swarm_ros.core.rules`, :mod:`~swarm_ros.core.rules3d`,
-:mod:`~swarm_ros.core.arbitration` and :mod:`~swarm_ros.core.engine` read and write numpy arrays.
+The kernels of :mod:`~swarm_ros.core.darr_niazi.rules`, :mod:`~swarm_ros.core.darr_niazi.rules3d`,
+:mod:`~swarm_ros.core.darr_niazi.arbitration` and :mod:`~swarm_ros.core.darr_niazi.engine` read and write numpy arrays.
 They take them grouped in these named tuples, which numba passes as records: a kernel reads
 ``robots.x`` or ``grid.radius``, so two arrays of one type cannot be swapped by position, and a
 caller builds each group in one place (:func:`robots_of`, :func:`grid_of`, :func:`rules_of`).
 Building a tuple copies nothing: its fields are the arrays themselves, and what a kernel writes
-into them lands in the :class:`~swarm_ros.core.state.SwarmState` they belong to.
+into them lands in the :class:`~swarm_ros.core.darr_niazi.state.SwarmState` they belong to.
 
 The world's dimension is data, ``grid.solid``. In a 2D world ``robots.z``, ``robots.pitch``,
 ``moves.z`` and ``moves.pitch`` are empty arrays that no kernel reads.
@@ -18,9 +18,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from swarm_ros.core.darr_niazi.state import SwarmState
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import SwarmState
 
 _EMPTY = np.empty(0)
 
@@ -51,7 +51,7 @@ class Grid(NamedTuple):
 
 
 class Rules(NamedTuple):
-    """The run's parameters the kernels use, and its rule set's codes (:mod:`swarm_ros.core.rulesets`)."""
+    """The run's parameters the kernels use, and its rule set's codes (:mod:`swarm_ros.core.darr_niazi.rulesets`)."""
 
     vision: float
     wiggle: float  #: radians

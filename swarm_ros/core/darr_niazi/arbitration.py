@@ -27,10 +27,10 @@ from enum import IntEnum
 import numba
 import numpy as np
 
+from swarm_ros.core.darr_niazi.rules2d import cell_index
+from swarm_ros.core.darr_niazi.rulesets import JOIN_WALK
+from swarm_ros.core.darr_niazi.state import FRONTIER_BLOCK, FRONTIER_SUPER, RobotState
 from swarm_ros.core.rng import STREAM_PRIORITY, draw_bits
-from swarm_ros.core.rules2d import cell_index
-from swarm_ros.core.rulesets import JOIN_WALK
-from swarm_ros.core.state import FRONTIER_BLOCK, FRONTIER_SUPER, RobotState
 
 _MOVING_OUTSIDE = np.int8(RobotState.MOVING_OUTSIDE)
 _MOVING_INSIDE = np.int8(RobotState.MOVING_INSIDE)
@@ -60,7 +60,7 @@ def _wins(a, b, ids, seed, tick):
 @numba.njit(cache=True, inline="always")
 def _mark(q, on, frontier, blocks, size):
     """Set patch ``q``'s frontier flag to ``on``, keeping its block's count, its super-block's and the total in
-    step (:func:`swarm_ros.core.state.frontier_blocks_of`).
+    step (:func:`swarm_ros.core.darr_niazi.state.frontier_blocks_of`).
 
     Blocks and super-blocks are numbered in flat order, ``(bz * nb + by) * nb + bx``; a 2D world's (its
     ``frontier`` is ``size`` squared) have no z.
@@ -113,7 +113,7 @@ def vacate(p, occupancy, frontier, blocks, shape, nbrs, size):
 def resolve_kernel(ids, moves, robots, grid, rules, tick, best, localized, shape_patches, outcome, applied):
     """Apply the ``moves`` of robots ``ids[:applied]`` (position k: robot ``ids[k]``'s) to ``robots`` and ``grid``
     in place: the lottery of each claimed patch, then each robot's new pose and state
-    (:mod:`swarm_ros.core.kernel_state`). The robots after ``applied`` only take part in the lottery: their
+    (:mod:`swarm_ros.core.darr_niazi.kernel_state`). The robots after ``applied`` only take part in the lottery: their
     claims can beat an applied robot's, and what becomes of them is left to whoever applies them (a world
     shard is given its neighbours' claims on the patches its own robots claim, :mod:`swarm_ros.core.central_shards`).
 

@@ -1,6 +1,6 @@
 """The robot's geometry in a 3D world, compiled with numba: a position (x, y, z) and a heading that is a
 direction. The rule itself is one control flow for both dimensions,
-:func:`swarm_ros.core.rules.decide_kernel`, which calls these where a 3D world differs.
+:func:`swarm_ros.core.darr_niazi.rules.decide_kernel`, which calls these where a 3D world differs.
 
 The rule is the 2D rule read in 3D (docs/model.md, "Three dimensions"): a wiggle turns the
 heading to a direction uniform on the spherical cap of angular radius ``wiggle`` about it; a
@@ -20,8 +20,8 @@ import math
 
 import numba
 
-from swarm_ros.core.rulesets import CROWD_AHEAD
-from swarm_ros.core.state import FRONTIER_BLOCK
+from swarm_ros.core.darr_niazi.rulesets import CROWD_AHEAD
+from swarm_ros.core.darr_niazi.state import FRONTIER_BLOCK
 
 TWO_PI = 2.0 * math.pi
 
@@ -71,7 +71,7 @@ def random_direction(u, v):
 
 @numba.njit(cache=True)
 def index_build3(ids, x, y, z, radius, size, head, nxt):
-    """Insert robots ``ids`` into the voxel cell list (:func:`swarm_ros.core.rules2d.index_build` in 3D)."""
+    """Insert robots ``ids`` into the voxel cell list (:func:`swarm_ros.core.darr_niazi.rules2d.index_build` in 3D)."""
     for k in range(ids.size):
         i = ids[k]
         c = voxel_index(x[i], y[i], z[i], radius, size)
@@ -189,7 +189,8 @@ def _scan_cube(ux, uy, uz, xi, yi, zi, frontier, blocks, radius, size, nb, best,
 @numba.njit(cache=True)
 def nearest_frontier3(xi, yi, zi, frontier, blocks, radius, size) -> int:
     """Flat index of the nearest frontier voxel anywhere (``join: walk``), or -1 if there is none; ties to the
-    lowest flat index. Searches shells of blocks outward, as :func:`swarm_ros.core.rules2d.nearest_frontier`."""
+    lowest flat index. Searches shells of blocks outward, as
+    :func:`swarm_ros.core.darr_niazi.rules2d.nearest_frontier`."""
     if blocks[blocks.size - 1] == 0:
         return -1
     b = FRONTIER_BLOCK

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from swarm_ros.artifacts.mpl import ListedColormap, Patch, plt
+from swarm_ros.core.darr_niazi.state import RobotState
 from swarm_ros.core.run_result import RunRecord
-from swarm_ros.core.state import RobotState
 
 # Patch classes of the picture and their colours (colour-blind safe, Okabe-Ito based).
 _CLASSES = (

@@ -26,8 +26,8 @@ import math
 import numba
 import numpy as np
 
+from swarm_ros.core.darr_niazi.rulesets import JOIN_VALUES
 from swarm_ros.core.params import RunParams
-from swarm_ros.core.rulesets import JOIN_VALUES
 
 #: Longest move of a tick, in patches, by ``steps`` value.
 MAX_STEP = {"one": 1.0, "literal": 3.0}
@@ -36,6 +36,17 @@ SLACK = 1e-9  # rounding in the robots' own arithmetic
 
 def max_step(params: RunParams) -> float:
     return MAX_STEP[params.ruleset.steps]
+
+
+#: Patches a robot's decision can reach beyond its vision radius: three moves of one patch (the ``literal``
+#: steps outside the shape), the point one patch ahead that the crowding test is centred on, and a patch
+#: of margin for rounding positions to patches.
+REACH = 5
+
+
+def halo(vision_radius: float) -> int:
+    """Columns on each side of a strip whose robots a batch must see to decide for the strip's robots."""
+    return int(math.ceil(vision_radius)) + REACH
 
 
 def reach(params: RunParams, dims: int = 2) -> float:

@@ -4,10 +4,10 @@ The world sends, after each tick, one row per robot whose row changed in that ti
 every robot): id, state, x, y, heading (3D: and z, pitch). Only moving robots change, so those
 rows are exactly the robots that decided in the tick. A :class:`SwarmView` applies the rows in
 tick order and keeps the occupancy and frontier grids in step, so after tick t it holds the same
-:class:`~swarm_ros.core.state.SwarmState` as the world.
+:class:`~swarm_ros.core.darr_niazi.state.SwarmState` as the world.
 
 A robot batch keeps a *regional* view (``area``: the columns of its strip and halo,
-:mod:`swarm_ros.core.regions`): it receives the rows of the robots in that area, the
+:class:`swarm_ros.core.strips.Strips`): it receives the rows of the robots in that area, the
 rows of robots that left it, and every robot's change to a stationary state. It holds
 every stationary robot (so the occupancy and frontier are whole) and the moving robots
 in its area; a moving robot whose row takes it out of the area is forgotten (state
@@ -21,12 +21,12 @@ import math
 import numba
 import numpy as np
 
-from swarm_ros.core.arbitration import occupy, vacate
+from swarm_ros.core.darr_niazi.arbitration import occupy, vacate
+from swarm_ros.core.darr_niazi.kernel_state import Robots, grid_of, robots_of
+from swarm_ros.core.darr_niazi.rules2d import cell_index
+from swarm_ros.core.darr_niazi.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
 from swarm_ros.core.errors import ContractError
-from swarm_ros.core.kernel_state import Robots, grid_of, robots_of
-from swarm_ros.core.rules2d import cell_index
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import IS_MOVING, NO_ROBOT, RobotState, SwarmState, frontier_blocks_of
 
 _SEED, _LOCALIZED = np.int8(RobotState.SEED), np.int8(RobotState.LOCALIZED)
 _REMOVED, _SEPARATED = np.int8(RobotState.REMOVED), np.int8(RobotState.SEPARATED)
@@ -35,8 +35,8 @@ UNKNOWN = np.int8(-1)  #: state of a robot before the tick-0 rows arrive, or (re
 
 @numba.njit(cache=True)
 def _apply_rows(ids, rows, robots, grid, first, last):
-    """Write ``rows`` (a :class:`~swarm_ros.core.kernel_state.Robots` of the rows' poses and states, row k robot
-    ``ids[k]``'s) into ``robots``; occupy in ``grid`` the patch of every robot that became stationary-localized,
+    """Write ``rows`` (a :class:`~swarm_ros.core.darr_niazi.kernel_state.Robots` of the rows' poses and states, row k
+    robot ``ids[k]``'s) into ``robots``; occupy in ``grid`` the patch of every robot that became stationary-localized,
     free the patch of every localized robot that was removed; forget (:data:`UNKNOWN`) a moving robot whose
     column is outside ``first``..``last``.
 

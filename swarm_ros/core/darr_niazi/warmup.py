@@ -14,14 +14,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from swarm_ros.core.engine import Simulation
-from swarm_ros.core.legality import illegal
+from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.legality import illegal
+from swarm_ros.core.darr_niazi.rules import Decider
+from swarm_ros.core.darr_niazi.state import STATE_COUNT
+from swarm_ros.core.darr_niazi.swarm_view import SwarmView
 from swarm_ros.core.metrics import tick_metrics
 from swarm_ros.core.params import RunParams
-from swarm_ros.core.rules import Decider
 from swarm_ros.core.shapes import Shape
-from swarm_ros.core.state import STATE_COUNT
-from swarm_ros.core.swarm_view import SwarmView
 
 #: robots of the throw-away run: the kernels' types do not depend on the swarm's size, and placing 50,000
 #: robots took a monitor 1.4 s of its start-up

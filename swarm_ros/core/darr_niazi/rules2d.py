@@ -1,7 +1,7 @@
 """The robot's geometry in a 2D world, compiled with numba: patch indices, the cell list of moving robots,
 crowding, and the search for the nearest frontier patch within vision (``join: local``) or anywhere
 (``join: walk``). The rule itself is one control flow for both dimensions,
-:func:`swarm_ros.core.rules.decide_kernel`; :mod:`swarm_ros.core.rules3d` is the 3D geometry.
+:func:`swarm_ros.core.darr_niazi.rules.decide_kernel`; :mod:`swarm_ros.core.darr_niazi.rules3d` is the 3D geometry.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import math
 import numba
 import numpy as np
 
-from swarm_ros.core.rulesets import CROWD_AHEAD
-from swarm_ros.core.state import FRONTIER_BLOCK, FRONTIER_SUPER
+from swarm_ros.core.darr_niazi.rulesets import CROWD_AHEAD
+from swarm_ros.core.darr_niazi.state import FRONTIER_BLOCK, FRONTIER_SUPER
 
 
 @numba.njit(cache=True, inline="always")

@@ -1,0 +1,1 @@
+"""The study's model's (darr-niazi) files: its run directory and its pictures."""
