@@ -44,7 +44,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
-from swarm_ros.core.darr_niazi.rulesets import RULE_SETS
+from swarm_ros.core.params import RULE_SETS  # here in trees from before core/darr_niazi too (--before)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from alternate import alternate, child_report, print_ratios
