@@ -82,7 +82,7 @@ def _cloud(dtype, n: int, tick: int) -> bytes:
 def world(domain: int, k: int, sizes: Path, out: Path) -> None:
     from sensor_msgs.msg import PointCloud2
 
-    from swarm_ros.protocol.rows import ROBOT_ROW
+    from swarm_ros.protocol.darr_niazi.rows import ROBOT_ROW
     from swarm_ros.ros import graph as msgs
 
     sent, _ = np.load(sizes)
@@ -117,7 +117,7 @@ def world(domain: int, k: int, sizes: Path, out: Path) -> None:
 def batch(domain: int, b: int, k: int, sizes: Path) -> None:
     from sensor_msgs.msg import PointCloud2
 
-    from swarm_ros.protocol.rows import DECISION_ROW
+    from swarm_ros.protocol.darr_niazi.rows import DECISION_ROW
     from swarm_ros.ros import graph as msgs
 
     _, moving = np.load(sizes)

@@ -34,7 +34,7 @@ def _messages(type_name: str, topic: str) -> list[bytes]:
     from rclpy.serialization import serialize_message
 
     from swarm_ros.protocol.cdr import encode_cloud
-    from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+    from swarm_ros.protocol.darr_niazi.rows import DECISION_ROW, ROBOT_ROW
     from swarm_ros.protocol.tag import Sealer
     from swarm_ros.ros import graph as msgs
     from swarm_ros.ros.auth import put_tag

@@ -13,7 +13,9 @@ from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.errors import Rejected
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
-from swarm_ros.protocol.rows import ROBOT_ROW, ROBOT_ROW_3D, VOXEL_ROW, decision_rows, state_rows
+from swarm_ros.protocol.darr_niazi.rows import ROBOT_ROW, ROBOT_ROW_3D, decision_rows, state_rows
+from swarm_ros.protocol.darr_niazi.wire import StudyWire
+from swarm_ros.protocol.rows import VOXEL_ROW
 from swarm_ros.ros import graph as msgs
 from swarm_ros.tools.topics import decoded_rows
 
@@ -34,9 +36,11 @@ def test_3d_robot_rows_survive_serialization_exactly_and_carry_z_and_pitch(torus
     msg = deserialize_message(serialize_message(make_cloud(sent, 40)), PointCloud2)
     assert (msg.point_step, msg.width) == (48, s.robots)
     assert msgs.cloud_rows(msg, ROBOT_ROW_3D).tobytes() == sent.tobytes()
-    assert checks.robot_rows(msg, s.robots, 32, dims=3).tobytes() == sent.tobytes()
+    checked = checks.cloud(msg, ROBOT_ROW_3D, s.robots)
+    StudyWire.check_rows(torus_run, checked, torus_run.tick)
+    assert checked.tobytes() == sent.tobytes()
     with pytest.raises(Rejected, match="point layout"):  # a 2D reader drops a 3D cloud, and the other way round
-        checks.robot_rows(msg, s.robots, 32, dims=2)
+        checks.cloud(msg, ROBOT_ROW, s.robots)
     own = decode_cloud(encode_cloud(sent, 40))  # the graph's own writer and reader agree with rclpy's
     assert bytes(own.data) == sent.tobytes()
 
@@ -46,10 +50,10 @@ def test_a_3d_pose_out_of_range_is_rejected(torus_run):
     rows = state_rows(np.arange(s.robots), s).copy()
     rows["pitch"][7] = 2.0
     with pytest.raises(Rejected, match="pose outside the world"):
-        checks.robot_rows(make_cloud(rows, 40), s.robots, 32, dims=3)
+        StudyWire.check_rows(torus_run, checks.cloud(make_cloud(rows, 40), ROBOT_ROW_3D, s.robots), 40)
     rows["pitch"][7], rows["z"][9] = 0.0, 40.0
     with pytest.raises(Rejected, match="pose outside the world"):
-        checks.robot_rows(make_cloud(rows, 40), s.robots, 32, dims=3)
+        StudyWire.check_rows(torus_run, checks.cloud(make_cloud(rows, 40), ROBOT_ROW_3D, s.robots), 40)
 
 
 def _cells(shape: Shape):

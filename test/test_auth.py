@@ -18,8 +18,9 @@ from swarm_ros.core.errors import ConfigError, ContractError, Rejected
 from swarm_ros.protocol import tag as tags
 from swarm_ros.protocol.cdr import cloud_parts, encode_cloud
 from swarm_ros.protocol.checks import Rejections
+from swarm_ros.protocol.darr_niazi.rows import DECISION_ROW, ROBOT_ROW
 from swarm_ros.protocol.plan import CentralTopics
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, TAG_PREFIX, batch_label, is_tag
+from swarm_ros.protocol.rows import TAG_PREFIX, batch_label, is_tag
 from swarm_ros.protocol.runkey import KEY_ENV, PUBLIC_KEY, run_key, with_run_key
 from swarm_ros.ros import auth
 from swarm_ros.ros import graph as msgs

@@ -17,7 +17,7 @@ from std_msgs.msg import Int64MultiArray, MultiArrayDimension
 from swarm_ros.core.errors import Rejected
 from swarm_ros.protocol import checks
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud, encode_ints
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+from swarm_ros.protocol.darr_niazi.rows import DECISION_ROW, ROBOT_ROW
 from swarm_ros.protocol.tag import aligned
 
 pytestmark = pytest.mark.unit

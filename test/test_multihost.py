@@ -29,7 +29,7 @@ from runs import shape_file
 from swarm_ros.app import cli
 from swarm_ros.app.param_file import params_yaml
 from swarm_ros.core.params import Settings
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW
+from swarm_ros.protocol.darr_niazi.rows import DECISION_ROW, ROBOT_ROW
 from swarm_ros.protocol.runkey import KEY_ENV, new_key
 
 pytestmark = pytest.mark.process

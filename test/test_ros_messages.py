@@ -18,7 +18,7 @@ from sensor_msgs.msg import PointCloud2
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.errors import ConfigError, Rejected
 from swarm_ros.core.params import RUN_PARAMETERS, Settings
-from swarm_ros.protocol.rows import DECISION_ROW, ROBOT_ROW, robot_rows
+from swarm_ros.protocol.darr_niazi.rows import DECISION_ROW, ROBOT_ROW, robot_rows
 from swarm_ros.ros import graph as msgs
 from swarm_ros.ros.node_params import read_parameters
 

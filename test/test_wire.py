@@ -7,18 +7,8 @@ import pytest
 
 from swarm_ros.core import RunParams, Shape, Simulation
 from swarm_ros.core.errors import ContractError
-from swarm_ros.protocol.rows import (
-    DECISION_ROW,
-    FLOAT64,
-    ROBOT_ROW,
-    UINT8,
-    UINT32,
-    check_fields,
-    decision_rows,
-    decisions_of,
-    point_fields,
-    robot_rows,
-)
+from swarm_ros.protocol.darr_niazi.rows import DECISION_ROW, ROBOT_ROW, decision_rows, decisions_of, robot_rows
+from swarm_ros.protocol.rows import FLOAT64, UINT8, UINT32, check_fields, point_fields
 
 pytestmark = pytest.mark.unit
 

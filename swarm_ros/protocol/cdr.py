@@ -75,7 +75,7 @@ def _fields_block(frame_id: str, dtype: np.dtype, tagged: bool) -> tuple[bytes, 
 
 
 def encode_cloud(rows: np.ndarray, tick: int, frame_id: str = FRAME_ID, tag: str = "") -> bytes:
-    """A serialized PointCloud2 of ``rows`` (a record array of a :mod:`swarm_ros.protocol.rows` type), stamped
+    """A serialized PointCloud2 of ``rows`` (a record array of a row type: :mod:`swarm_ros.protocol.rows`), stamped
     with ``tick``: one row of ``rows.size`` points, little-endian, dense. With a ``tag``, one more point
     field after the layout's, named by the tag, holding nothing (:mod:`swarm_ros.protocol.tag`)."""
     return b"".join(cloud_parts(rows, tick, frame_id, tag))
@@ -269,13 +269,13 @@ def decode_cloud(buf: bytes) -> Cloud:
 
 
 _LAYOUTS: list[tuple[bytes, tuple[Field, ...], int]] = []
-_MORE_TYPES: list[np.dtype] = []  #: row layouts other modules made known (register_row_types)
+_ROW_TYPES: list[np.dtype] = []  #: the row layouts the modules that define them made known (register_row_types)
 
 
 def register_row_types(*dtypes: np.dtype) -> None:
-    """Make the decoder know these row layouts too (another algorithm's rows, when their module is imported: the
-    study's model's nodes never import it)."""
-    _MORE_TYPES.extend(d for d in dtypes if d not in _MORE_TYPES)
+    """Make the decoder know these row layouts (an algorithm's rows, when their module is imported: a node of one
+    algorithm never imports another's)."""
+    _ROW_TYPES.extend(d for d in dtypes if d not in _ROW_TYPES)
     _LAYOUTS.clear()
 
 
@@ -284,9 +284,7 @@ def _known_layout(r: _Reader) -> tuple[tuple[Field, ...], int | None]:
     :func:`encode_cloud` writes for one of the graph's own row layouts (then ``r`` moves past them);
     else ((), None), and ``r`` stays."""
     if not _LAYOUTS:
-        from swarm_ros.protocol.rows import ROW_TYPES
-
-        for dtype in (*ROW_TYPES, *_MORE_TYPES):
+        for dtype in _ROW_TYPES:
             for tagged in (True, False):
                 block, height_at = _fields_block(FRAME_ID, dtype, tagged)
                 _LAYOUTS.append((block[height_at + 8 :], tuple(Field(*f) for f in point_fields(dtype)), int(tagged)))

@@ -12,23 +12,12 @@ import math
 import re
 import time
 from collections import Counter
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.strips import has_repeats
-from swarm_ros.protocol.rows import (
-    PATCH_METRES,
-    TICK_SECONDS,
-    check_fields,
-    parse_batch_label,
-    robot_row,
-)
-
-if TYPE_CHECKING:
-    pass
-
+from swarm_ros.protocol.rows import TICK_SECONDS, check_fields, parse_batch_label
 
 LOG_PERIOD = 5.0  # seconds between two log lines about one kind of fault
 _NODE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,127}")  # a ROS node name, as batch names are
@@ -96,37 +85,6 @@ def ids_in_range(ids: np.ndarray, low: int, robots: int) -> None:
         )
     if has_repeats(ids):
         raise Rejected("repeated robot id")
-
-
-def inside_world(rows: np.ndarray, radius: int) -> None:
-    """Raises Rejected unless every row's pose is finite, inside the world and headed in [0, 2 pi]
-    (3D rows: with z inside the world too and an elevation in [-pi/2, pi/2])."""
-    limit = (radius + 0.5) * PATCH_METRES
-    x, y, heading = rows["x"], rows["y"], rows["heading"]
-    solid = "pitch" in (rows.dtype.names or ())
-    with np.errstate(invalid="ignore"):
-        ok = (np.abs(x) <= limit) & (np.abs(y) <= limit) & (heading >= 0) & (heading <= 2 * math.pi)
-        if solid:
-            ok &= (np.abs(rows["z"]) <= limit) & (np.abs(rows["pitch"]) <= math.pi / 2)
-    if not ok.all():
-        i = int(np.flatnonzero(~ok)[0])
-        z = f", z {rows['z'][i]!r}, pitch {rows['pitch'][i]!r}" if solid else ""
-        raise Rejected("pose outside the world", f"({x[i]!r}, {y[i]!r}, heading {heading[i]!r}{z})")
-
-
-def robot_rows(msg, robots: int, radius: int, dims: int = 2) -> np.ndarray:
-    """The robot rows (:data:`~swarm_ros.protocol.rows.ROBOT_ROW`, 3D ``ROBOT_ROW_3D``) of a message, checked: layout,
-    ids, states, poses."""
-    from swarm_ros.core.darr_niazi.state import (
-        STATE_COUNT,  # here: the core's state loads numba, which the launcher does without
-    )
-
-    rows = cloud(msg, robot_row(dims), robots, min_rows=1)
-    ids_in_range(rows["id"].astype(np.int64), 0, robots)
-    if rows["state"].max() >= STATE_COUNT:
-        raise Rejected("robot state out of range", f"state {int(rows['state'].max())}")
-    inside_world(rows, radius)
-    return rows
 
 
 def announcement(msg, width: int) -> tuple[str, int, tuple[int, int]]:

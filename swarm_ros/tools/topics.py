@@ -18,7 +18,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from swarm_ros.core.errors import ContractError, InputError
-from swarm_ros.protocol.rows import ROW_TYPES, VOXEL_ROW, check_fields
+from swarm_ros.protocol.rows import VOXEL_ROW, check_fields
 from swarm_ros.ros.graph import message_class
 from swarm_ros.ros.runtime import signals_held, tool_node
 
@@ -89,7 +89,7 @@ def decoded_rows(msg: Any, full: bool = False) -> str:
         return ""
     fields = [(f.name, f.offset, f.datatype, f.count) for f in msg.fields]
     generic = _layout(fields, msg.point_step)
-    for dtype in (*ROW_TYPES, VOXEL_ROW, *([generic] if generic is not None else [])):  # known rows, or the fields
+    for dtype in (VOXEL_ROW, *([generic] if generic is not None else [])):  # the voxels, or the fields given
         try:
             check_fields(fields, msg.point_step, dtype)
             rows = np.frombuffer(msg.data, dtype=dtype)

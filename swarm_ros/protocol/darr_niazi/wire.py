@@ -7,7 +7,7 @@ robot (:meth:`~swarm_ros.core.darr_niazi.engine.Simulation.seen_by_all`: the ``w
 anywhere), whole at first and then the rows that changed. It keeps a regional view of the swarm from them (loaded
 from a whole view, then updated with each tick's changes: :class:`~swarm_ros.core.darr_niazi.swarm_view.SwarmView`)
 and runs the core's rule (:class:`~swarm_ros.core.darr_niazi.rules.Decider`), so it decides as the in-process engine
-does. The rows are :mod:`swarm_ros.protocol.rows`': a robot's pose and state, and a decision's claim and pose.
+does. The rows are :mod:`swarm_ros.protocol.darr_niazi.rows`': a robot's pose and state, a decision's claim and pose.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from swarm_ros.core.errors import ContractError, Rejected
 from swarm_ros.core.strips import Strips
 
 from .. import checks
-from ..rows import decision_row, decision_rows, pose_of, robot_row, robot_rows
+from .rows import decision_row, decision_rows, inside_world, pose_of, robot_row, robot_rows
 
 
 class StudyStrip:
@@ -115,7 +115,7 @@ class StudyWire:
         cells = run.shape.world.patch_count
         if rows.size and decisions and (rows["claim"].min() < -1 or rows["claim"].max() >= cells):
             raise Rejected("claim out of range", f"a claim outside the world's {cells} patches")
-        checks.inside_world(rows, run.shape.world.radius)
+        inside_world(rows, run.shape.world.radius)
 
     @staticmethod
     def check_decisions(
@@ -130,7 +130,7 @@ class StudyWire:
         ids = rows["id"].astype(np.int64)
         if not np.array_equal(ids, own):
             raise Rejected("not its robots", f"{ids.size} decisions for the batch's {own.size} robots")
-        checks.inside_world(rows, run.shape.world.radius)
+        inside_world(rows, run.shape.world.radius)
         s = run.state
         solid = {"z0": s.z[ids], "z": rows["z"], "pitch": rows["pitch"]} if s.z is not None else {}
         claim = rows["claim"].astype(np.int64)
