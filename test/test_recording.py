@@ -22,7 +22,7 @@ from recordings import Recording, rrd_verify
 from waiting import wait_for
 
 from swarm_ros.app import cli
-from swarm_ros.artifacts.rerun_scene import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
+from swarm_ros.artifacts.darr_niazi.scene import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
 from swarm_ros.core.darr_niazi.engine import Simulation
 from swarm_ros.core.darr_niazi.state import RobotState
 from swarm_ros.core.metrics import METRIC_COLUMNS
@@ -201,35 +201,43 @@ def _stop_at_tick_120(monkeypatch, error):
     monkeypatch.setattr(Simulation, "run", run)
 
 
-def test_a_close_stuck_on_a_full_disk_gives_up_and_removes_the_file_one_that_ends_is_kept(tmp_path, monkeypatch):
+@pytest.mark.parametrize("algorithm, shape, robots", [("darr-niazi", "rectangle", 460), ("rubenstein", "star", 200)])
+def test_a_close_stuck_on_a_full_disk_gives_up_and_removes_the_file_one_that_ends_is_kept(
+    tmp_path, monkeypatch, algorithm, shape, robots
+):
     """Rerun's disconnect() can hang for good after the disk filled (a monitor was killed in it in CI, leaving a
     recording without its footer): on a full disk, a file that stops growing for STUCK_S is given up on and
-    removed; with free space the close waits for a slow disconnect, however long, and keeps a whole file."""
+    removed; with free space the close waits for a slow disconnect, however long, and keeps a whole file. Every
+    algorithm's recording ends so (rerun_recording.close_stream)."""
     import threading
 
-    from swarm_ros.artifacts import rerun_recording
-    from swarm_ros.artifacts.rerun_recording import Recorder
-    from swarm_ros.artifacts.run_dir import RecordingError
-    from swarm_ros.core import RunParams, Shape
+    import rerun as rr
 
-    shape = Shape.load("rectangle")
-    params = RunParams(robots=460, seed=3)
-    stuck = Recorder(tmp_path / "stuck.rrd", shape, params)
-    never = threading.Event()
-    monkeypatch.setattr(stuck.rec, "disconnect", lambda: never.wait(60))  # rerun stuck on the full disk
+    from swarm_ros.artifacts import rerun_recording
+    from swarm_ros.artifacts.recording_options import RecordingOptions
+    from swarm_ros.artifacts.run_dir import RecordingError
+    from swarm_ros.core import Shape
+    from swarm_ros.core.algorithm import algorithm_of
+
+    entry = algorithm_of(algorithm)
+    run = entry.hook("engine")(Shape.load(shape), RunParams(robots=robots, seed=3, algorithm=algorithm))
+    stuck = entry.hook("recording")(tmp_path / "stuck.rrd", run, RecordingOptions())
+    never, disconnect = threading.Event(), rr.RecordingStream.disconnect
+    monkeypatch.setattr(rr.RecordingStream, "disconnect", lambda rec: never.wait(60))  # stuck on the full disk
     monkeypatch.setattr(rerun_recording, "_disk_full", lambda path: True)
     began = time.monotonic()
     with pytest.raises(RecordingError, match="could not be written whole .no space left on device.; it is removed"):
-        stuck.close()
+        stuck.finish(run, "failed")
     assert time.monotonic() - began < rerun_recording.STUCK_S + 5  # given up on, not waited out
     assert not (tmp_path / "stuck.rrd").exists()
     never.set()
 
     monkeypatch.setattr(rerun_recording, "_disk_full", lambda path: False)
-    slow = Recorder(tmp_path / "slow.rrd", shape, params)
-    disconnect = slow.rec.disconnect
-    monkeypatch.setattr(slow.rec, "disconnect", lambda: (time.sleep(rerun_recording.STUCK_S + 0.5), disconnect()))
-    slow.close()
+    slow = entry.hook("recording")(tmp_path / "slow.rrd", run, RecordingOptions())
+    monkeypatch.setattr(
+        rr.RecordingStream, "disconnect", lambda rec: (time.sleep(rerun_recording.STUCK_S + 0.5), disconnect(rec))
+    )
+    slow.finish(run, "failed")
     assert rrd_verify(tmp_path / "slow.rrd").returncode == 0
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import rerun as rr
 
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.artifacts.rerun_recording import TIMELINE, open_stream
+from swarm_ros.artifacts.rerun_recording import TIMELINE, close_stream, open_stream
 
 #: the colour of each state code, in turn (a state code past the last takes the colours again from the first)
 PALETTE = np.array(
@@ -31,7 +31,7 @@ class CentralRecorder:
         self, path: Path | None, run: Any, every: int = 1, spawn: bool = False, connect: str | None = None
     ) -> None:
         p = run.params
-        self.every, self._last, self.ended = every, -1, False
+        self.path, self.every, self._last, self.ended = path, every, -1, False
         self.rec = open_stream(f"{run.shape.name} n{p.robots} {p.algorithm} s{p.seed}", path, spawn, connect)
         self.rec.log("world", rr.Transform3D(mat3x3=[[1, 0, 0], [0, -1, 0], [0, 0, 1]]), static=True)  # y up
         states = [rr.AnnotationInfo(id=k, label=f"state {k}", color=c.tolist()) for k, c in enumerate(PALETTE)]
@@ -57,11 +57,15 @@ class CentralRecorder:
             log_event(self.rec, tick, text)
 
     def finish(self, run: Any, outcome: str) -> None:
-        """Log the last robots, the metrics of every tick and the outcome, and end the recording."""
+        """Log the last robots, the metrics of every tick and the outcome, and end the recording.
+
+        Raises:
+            RecordingError: the file could not be written whole (it is removed).
+        """
         if run.tick != self._last:
             self.robots(run)
         self.ended = True
-        end_recording(self.rec, run, outcome)
+        end_recording(self.rec, self.path, run, outcome)
 
 
 def log_event(rec: rr.RecordingStream, tick: int, text: str) -> None:
@@ -70,17 +74,20 @@ def log_event(rec: rr.RecordingStream, tick: int, text: str) -> None:
     rec.log(EVENTS, rr.TextLog(text, level="WARN"))
 
 
-def end_recording(rec: rr.RecordingStream, run: Any, outcome: str) -> None:
+def end_recording(rec: rr.RecordingStream, path: Path | None, run: Any, outcome: str) -> None:
     """Send a run's metrics of every tick (``metrics/<column>`` of its ``columns``) and its outcome (``events``), and
-    end the recording ``rec``."""
+    end the recording ``rec`` of the file ``path`` (:func:`~swarm_ros.artifacts.rerun_recording.close_stream`).
+
+    Raises:
+        RecordingError: the file could not be written whole (it is removed).
+    """
     history = run.history
     ticks = [rr.TimeColumn(TIMELINE, sequence=history[:, 0].astype(np.int64))]
     for k, name in enumerate(run.columns[1:], start=1):
         rec.send_columns(f"{METRICS}/{name}", indexes=ticks, columns=rr.Scalars.columns(scalars=history[:, k]))
     rec.set_time(TIMELINE, sequence=run.tick)
     rec.log(EVENTS, rr.TextLog(f"outcome: {outcome}", level="INFO"))
-    rec.flush()
-    rec.disconnect()
+    close_stream(rec, path)
 
 
 def open_recording(path: Path, run: Any, options: RecordingOptions) -> CentralRecorder | None:

@@ -1,23 +1,19 @@
 """How a run is recorded, the same for both engines (CLI flags, monitor parameters).
 
-Apart from :mod:`swarm_ros.artifacts.rerun_recording` so that the launcher can read the
+Apart from the recordings (:mod:`swarm_ros.artifacts.rerun_recording`) so that the launcher can read the
 options without loading Rerun, which only the process that records needs.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from swarm_ros.core.errors import ParameterError
 from swarm_ros.core.params import RECORD_EVERY, auto_every
 
 if TYPE_CHECKING:
-    from swarm_ros.artifacts.rerun_recording import Recorder
-    from swarm_ros.core.darr_niazi.engine import Simulation
     from swarm_ros.core.params import RunParams
-    from swarm_ros.core.shapes import Shape
 
 _URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 
@@ -83,58 +79,3 @@ class RecordingOptions:
     def active(self) -> bool:
         """Whether anything is recorded at all (to a file or a viewer)."""
         return self.enabled or self.spawn or bool(self.connect)
-
-    def open(self, path: Path, shape: Shape, params: RunParams) -> Recorder | None:
-        """A :class:`Recorder` streaming to ``path`` (if enabled) and the viewer, or None if nothing is recorded."""
-        if not self.active:
-            return None
-        from swarm_ros.artifacts.rerun_recording import Recorder
-
-        return Recorder(
-            path if self.enabled else None,
-            shape,
-            params,
-            every=self.every_for(params),
-            spawn=self.spawn,
-            connect=self.connect,
-        )
-
-
-class SimulationRecording:
-    """The recording of an in-process run of the study's model (core.algorithm's part ``recording``): the
-    metrics of every tick and the robots every ``every``-th tick and at the end, as the run goes."""
-
-    def __init__(self, recorder: Recorder, sim: Simulation) -> None:
-        self.recorder, self.every = recorder, recorder.every
-        recorder.metrics(sim.history)
-        recorder.robots(sim.state)
-        self._logged = sim.tick
-
-    def log(self, sim: Simulation) -> None:
-        """Log the ticks run since the last call: their metrics, and the robots if due (or the run is done)."""
-        self.recorder.metrics(sim.history[self._logged + 1 :])
-        self.recorder.robots(sim.state, force=sim.done)
-        self._logged = sim.tick
-
-    def event(self, tick: int, text: str) -> None:
-        """Log a text event (a restarted process) at ``tick``, unless the recording has ended."""
-        if not self.recorder.closed:
-            self.recorder.event(tick, text)
-
-    def finish(self, sim: Simulation, outcome: str) -> None:
-        """Log the robots at the end if not yet (a graph's monitor is told its last record before the outcome), the
-        outcome, and end the file.
-
-        Raises:
-            RecordingError: the file could not be written whole (it is removed).
-        """
-        self.recorder.robots(sim.state, force=sim.done)
-        self.recorder.outcome(outcome, sim.metrics)
-        self.recorder.close()
-
-
-def open_recording(path: Path, sim: Simulation, options: RecordingOptions) -> SimulationRecording | None:
-    """The recording of ``sim`` to ``path`` (if the options write a file) and a viewer, or None if nothing is
-    recorded."""
-    recorder = options.open(path, sim.shape, sim.params)
-    return None if recorder is None else SimulationRecording(recorder, sim)

@@ -296,7 +296,7 @@ register(
         shared_kernels=("rng.py",),
         **{
             **CENTRAL,  # its own recording, run directory and printed summary:
-            "recording": "swarm_ros.artifacts.recording_options:open_recording",
+            "recording": "swarm_ros.artifacts.darr_niazi.recording:open_recording",
             "write_run": "swarm_ros.artifacts.darr_niazi.run_dir:write_simulation",
             "print_summary": "swarm_ros.app.summary_print:print_summary",
         },

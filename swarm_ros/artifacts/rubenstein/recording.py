@@ -47,7 +47,7 @@ ROBOTS, GRADIENT, ESTIMATES, SHAPE, METRICS, EVENTS = (
 
 
 class RubensteinRecorder:
-    """Writes ``path`` (an .rrd file) as a rubenstein run goes on; :meth:`close` sends the metrics and ends it."""
+    """Writes ``path`` (an .rrd file) as a rubenstein run goes on; :meth:`finish` sends the metrics and ends it."""
 
     def __init__(
         self, path: Path | None, run: RubensteinRun, every: int = 1, spawn: bool = False, connect: str | None = None
@@ -125,16 +125,16 @@ class RubensteinRecorder:
             log_event(self.rec, tick, text)
 
     def finish(self, run: RubensteinRun, outcome: str) -> None:
-        """:meth:`close`, as simulate's driver ends a recording."""
-        self.close(run, outcome)
+        """Send what is buffered, the metrics of every tick and the outcome, and end the file.
 
-    def close(self, run: RubensteinRun, outcome: str) -> None:
-        """Send what is buffered, the metrics of every tick and the outcome, and end the file."""
+        Raises:
+            RecordingError: the file could not be written whole (it is removed).
+        """
         if run.tick != self._last:
             self.robots(run)
         self._send()
         self.ended = True
-        end_recording(self.rec, run, outcome)
+        end_recording(self.rec, self.path, run, outcome)
 
 
 def open_recording(path: Path, run: RubensteinRun, options: RecordingOptions) -> RubensteinRecorder | None:
