@@ -53,6 +53,16 @@ def params(robots: int, **kw) -> RunParams:
     return RunParams(robots=robots, **kw)
 
 
+def cloud_rows(msg, dtype: np.dtype) -> np.ndarray:
+    """The rows of a PointCloud2 of ``dtype`` rows, none or more, as a node reads them (``checks.cloud``; Rejected if
+    its layout is not ``dtype``'s)."""
+    import sys
+
+    from swarm_ros.protocol.checks import cloud
+
+    return cloud(msg, dtype, max_rows=sys.maxsize, min_rows=0)
+
+
 def make_cloud(rows: np.ndarray, tick: int):
     """A PointCloud2 message object holding ``rows``, built field by field as an outside ROS tool builds one:
     the reference the graph's own CDR writer is compared with, and what tests reshape into bad messages."""

@@ -11,6 +11,7 @@ pytest.importorskip("rclpy")
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import OccupancyGrid
 from rclpy.serialization import deserialize_message, serialize_message
+from runs import cloud_rows
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Int64MultiArray
 
@@ -126,7 +127,7 @@ def test_outside_readers_see_the_standard_type_with_one_more_field():
     assert cloud.width == 2 and len(cloud.data) == 2 * ROBOT_ROW.itemsize
     last = cloud.fields[-1]
     assert is_tag(last.name) and (last.offset, last.count) == (0, 0)
-    assert np.array_equal(msgs.cloud_rows(cloud, ROBOT_ROW)["id"], [4, 5])  # a reader of rows skips it
+    assert np.array_equal(cloud_rows(cloud, ROBOT_ROW)["id"], [4, 5])  # a reader of rows skips it
     status = deserialize_message(node.sent[1][1], DiagnosticArray)
     assert status.status[0].values[-1].key == TAG_PREFIX and is_tag(status.status[0].values[-1].value)
 

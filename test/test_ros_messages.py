@@ -12,7 +12,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
-from runs import make_cloud
+from runs import cloud_rows, make_cloud
 from sensor_msgs.msg import PointCloud2
 
 from swarm_ros.core import RunParams, Shape, Simulation
@@ -34,10 +34,10 @@ def test_robot_rows_survive_serialization_exactly_and_carry_the_tick():
     msg = deserialize_message(wire, PointCloud2)
     assert msgs.tick_of(msg.header) == 40 and msg.header.frame_id == "world"
     assert (msg.width, msg.point_step, msg.row_step) == (1036, 40, 1036 * 40)
-    got = msgs.cloud_rows(msg, ROBOT_ROW)
+    got = cloud_rows(msg, ROBOT_ROW)
     assert got.tobytes() == sent.tobytes()
     with pytest.raises(Rejected, match="unexpected point layout"):
-        msgs.cloud_rows(msg, DECISION_ROW)
+        cloud_rows(msg, DECISION_ROW)
 
 
 def test_occupancy_grid_places_patch_centres_on_cells():

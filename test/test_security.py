@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from netns import host_env
-from runs import make_cloud
+from runs import cloud_rows, make_cloud
 
 from swarm_ros.app import cli
 from swarm_ros.app.processes import DomainLock
@@ -209,7 +209,7 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
 
         def on_robots(msg) -> None:  # the world's rows of record t, sent again as the next tick's
             try:
-                rows = msgs.cloud_rows(msg, row)
+                rows = cloud_rows(msg, row)
             except Rejected:
                 return  # this stranger's own garbage, back
             if rows.size and rows["z"][0] == 0.0 and rows["id"][0] != 7:  # not ours (they come back here)

@@ -9,7 +9,6 @@ bytes (:mod:`swarm_ros.protocol.cdr`), which keeps a tick's messages at microsec
 from __future__ import annotations
 
 import array
-import sys
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -24,7 +23,6 @@ from std_msgs.msg import Empty, Header, Int64MultiArray, MultiArrayDimension
 
 from swarm_ros.core.grid import CellMap
 from swarm_ros.protocol.cdr import encode_clock, encode_cloud, encode_grid
-from swarm_ros.protocol.checks import cloud
 from swarm_ros.protocol.plan import (  # noqa: F401 - the graph's topics, for the nodes that use this module
     ALIVE,
     BATCHES,
@@ -148,15 +146,6 @@ def stamp(tick: int) -> Time:
 
 def tick_of(header: Header) -> int:
     return int(header.stamp.sec) // TICK_SECONDS
-
-
-def cloud_rows(msg: PointCloud2, dtype: np.dtype) -> np.ndarray:
-    """The records of a PointCloud2 of ``dtype`` rows, none or more (a read-only view of its bytes).
-
-    Raises:
-        Rejected: the message's layout is not ``dtype``'s.
-    """
-    return cloud(msg, dtype, max_rows=sys.maxsize, min_rows=0)
 
 
 def ids_message(ids: np.ndarray, label: str = "robot_id") -> Int64MultiArray:
