@@ -430,6 +430,26 @@ def test_announcements_that_do_not_fit_the_run_are_rejected():
             ls.announce(name, strip)
 
 
+@pytest.mark.parametrize(
+    "label, data, kind",
+    [("robot_batch_1/2", [3, 5], None), ("x y", [3, 5], "batch name"), ("/swarm/x", [3, 5], "batch name"),
+     ("robot_batch_1", [3], "strip"), ("robot_batch_1", [5, 3], "strip"), ("robot_batch_1", [3, 10], "strip")],
+)  # fmt: skip
+def test_an_announcement_is_read_whole_or_rejected_before_the_world_takes_its_name(label, data, kind):
+    """What the world node reads of a /swarm/batches message (checks.announcement): a name the world makes topics
+    of must be a node name, and the strip two columns of the grid, before CentralWorld.batch sees either."""
+    from types import SimpleNamespace
+
+    from swarm_ros.protocol.checks import announcement
+
+    msg = SimpleNamespace(layout=SimpleNamespace(dim=[SimpleNamespace(label=label)]), data=data)
+    if kind is None:
+        assert announcement(msg, 10) == ("robot_batch_1", 2, (3, 5))
+    else:
+        with pytest.raises(Rejected, match=f"^{kind}"):
+            announcement(msg, 10)
+
+
 def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbroken_one(tmp_path):
     """Saved at a tick and resumed in a fresh run, the run continues exactly as the one never broken, to its end;
     a file that is not a checkpoint, or is another run's, fails in one line."""

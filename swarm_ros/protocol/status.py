@@ -9,13 +9,8 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 from swarm_ros.protocol.plan import MONITOR, WORLD
-
-if TYPE_CHECKING:
-    from swarm_ros.core.run_result import RunRecord
 
 STARTING = "starting"  #: waiting for robot batches (and the monitor) before tick 0
 RUNNING = "running"  #: tick 0 went out; no outcome yet
@@ -113,52 +108,3 @@ class WorldReport:
         if has_ended(values.get("outcome")):
             self.outcome = values["outcome"]
         return new
-
-    def record(
-        self,
-        shape,
-        params,
-        state,
-        rows: Sequence[tuple[int, ...]],
-        outcome,
-        wall: float,
-        losses: list[tuple[int, int]],
-        rejected: int,
-        monitor: tuple[int, int] = (0, 0),
-        shards: int = 1,
-    ) -> RunRecord:
-        """The record of a run over the graph: the monitor's ``rows`` (metrics of every tick) and final
-        ``state``, with what the world reported (its clock, restarts, drops); ``rejected``: the monitor's drops.
-        ``monitor``: (the writing monitor's incarnation, the tick it went on from). The world sees a new monitor
-        process when its first metrics come; one killed before that is a restart too, listed at that tick.
-        ``shards``: the world processes (the robot batches' count, ``processes``, is the launcher's to fill in)."""
-        import numpy as np  # the engine's modules (numba) load only where a run is written
-
-        from swarm_ros.core.darr_niazi.state import STATE_COUNT
-        from swarm_ros.core.metrics import tick_metrics
-        from swarm_ros.core.run_result import ROS2, RunRecord, summarize
-
-        history = np.array(rows, dtype=np.int64)
-        final = tick_metrics(state.tick, np.bincount(state.state, minlength=STATE_COUNT), shape.patches)
-        restarts = list(self.restarts)
-        unseen = monitor[0] - sum(node == MONITOR for _, node in restarts)
-        restarts = sorted(restarts + [(monitor[1], MONITOR)] * unseen, key=lambda r: r[0])
-        summary = summarize(
-            shape=shape,
-            params=params,
-            state=state,
-            final=final,
-            outcome=outcome,
-            engine=ROS2,
-            wall_seconds=self.times.get("wall_seconds", wall),
-            losses=losses,
-            restarts=restarts,
-            overhead={
-                "startup_seconds": self.times.get("startup_seconds"),
-                "shutdown_seconds": None,
-            },  # swarm-ros run fills it in at the end
-            rejected={"world": self.rejected, "monitor": rejected},
-            graph={"processes": None, "world_shards": shards},  # swarm-ros run fills processes in at the end
-            history=history,
-        )
-        return RunRecord(shape=shape, params=params, state=state, history=history, outcome=outcome, summary=summary)

@@ -42,7 +42,7 @@ from swarm_ros.protocol.cdr import Cloud
 from swarm_ros.protocol.central_checkpoint import shard_kept
 from swarm_ros.protocol.central_shard_world import ShardLockstep
 from swarm_ros.protocol.central_world import CentralWorld
-from swarm_ros.protocol.checks import Rejections, parse_batch_label
+from swarm_ros.protocol.checks import Rejections
 from swarm_ros.protocol.plan import BATCHES, HELD, MONITOR, STATUS, CentralTopics, counts_topic, shard_topic
 from swarm_ros.protocol.status import STARTING
 from swarm_ros.ros import graph as msgs
@@ -158,10 +158,8 @@ class CentralWorldNode:
     # -- inbound ---------------------------------------------------------------------------
     def _on_batch(self, msg: Int64MultiArray) -> None:
         try:
-            name, incarnation = parse_batch_label(msg.layout.dim[0].label if msg.layout.dim else "")
-            if len(msg.data) != 2:
-                raise Rejected("strip", f"{len(msg.data)} values, expected its first and last column")
-            self.world.batch(name, (int(msg.data[0]), int(msg.data[1])), incarnation)
+            name, incarnation, strip = checks.announcement(msg, self.world.run.grid.nx)
+            self.world.batch(name, strip, incarnation)
         except Rejected as fault:
             self.rejections.drop(BATCHES, fault)
 
