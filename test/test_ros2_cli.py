@@ -112,9 +112,9 @@ def test_ros2_launch_with_its_defaults_compiles_once_and_writes_the_run_simulate
     runs/<time>_star_n1036_v1_s1 under the launch's directory, equal to simulate's; the launch ends by itself,
     cleanly, with exit status 0."""
     site = next(ros.install.glob("swarm_ros/lib/python3*/site-packages/swarm_ros"))
-    for path in site.glob("core/__pycache__/*"):  # the study's model's (the core's own), as a build without them
-        if path.suffix in (".nbi", ".nbc", ".compiled"):
-            path.unlink()
+    for path in [*site.glob("core/__pycache__/*"), *site.glob("core/darr_niazi/__pycache__/*")]:  # the study's
+        if path.suffix in (".nbi", ".nbc", ".compiled"):  # model's kernels (and the core's it calls), as a build
+            path.unlink()  # without them
     before = ros.launch_logs()
     done = ros.run(LAUNCH, cwd=tmp_path, timeout=300)
     output = done.stdout + done.stderr
