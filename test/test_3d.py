@@ -372,7 +372,7 @@ def test_the_3d_final_png_legend_sits_below_every_view_and_no_label_is_cut(tmp_p
     import matplotlib.figure
 
     from swarm_ros.artifacts.darr_niazi.plots import save_final_png
-    from swarm_ros.core.run_result import RunRecord
+    from swarm_ros.core.darr_niazi.run_result import RunRecord
 
     shape = Shape.load(name)
     sim = Simulation(shape, RunParams(robots=shape.patches, max_ticks=300))  # robots left all round the shape

@@ -87,7 +87,7 @@ def test_topics_prints_3d_rows_with_z_and_pitch(torus_run):
 
 def test_topics_prints_any_algorithms_rows_as_their_fields_say():
     """An algorithm's own rows and the metrics rows have no layout of the study's: the table follows the fields."""
-    from swarm_ros.core.metrics import METRIC_COLUMNS
+    from swarm_ros.core.darr_niazi.metrics import METRIC_COLUMNS
     from swarm_ros.protocol.central_rows import metrics_row
 
     rows = np.zeros(2, dtype=metrics_row(tuple(METRIC_COLUMNS)))

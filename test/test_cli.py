@@ -11,7 +11,7 @@ from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.artifacts import run_dir as output
-from swarm_ros.core.metrics import METRIC_COLUMNS
+from swarm_ros.core.darr_niazi.metrics import METRIC_COLUMNS
 
 pytestmark = pytest.mark.process
 

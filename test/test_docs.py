@@ -70,7 +70,7 @@ def test_the_usage_page_lists_every_summary_field():
     import re
 
     from swarm_ros.core import RunParams, Shape, Simulation, World
-    from swarm_ros.core.run_result import summary_of
+    from swarm_ros.core.darr_niazi.run_result import summary_of
 
     sim = Simulation(Shape.load("rectangle", World()), RunParams(robots=442, max_ticks=3))
     sim.run()

@@ -5,8 +5,8 @@ import pytest
 from runs import disc_shape, final_of, params, run_checked, run_in_batches
 
 from swarm_ros.core import METRIC_COLUMNS, Outcome, RobotState, Shape, Simulation, World
+from swarm_ros.core.darr_niazi.run_result import summary_of
 from swarm_ros.core.errors import ContractError
-from swarm_ros.core.run_result import summary_of
 
 pytestmark = pytest.mark.unit
 

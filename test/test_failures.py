@@ -11,10 +11,10 @@ from swarm_ros.app import cli
 from swarm_ros.core import RunParams, Simulation, World
 from swarm_ros.core.darr_niazi.arbitration import JoinOutcome
 from swarm_ros.core.darr_niazi.engine import failing_robots
+from swarm_ros.core.darr_niazi.run_result import summary_of
 from swarm_ros.core.darr_niazi.state import RobotState, frontier_of
 from swarm_ros.core.darr_niazi.swarm_view import SwarmView
 from swarm_ros.core.errors import ContractError, ParameterError
-from swarm_ros.core.run_result import summary_of
 
 pytestmark = pytest.mark.unit
 

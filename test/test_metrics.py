@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from swarm_ros.core.metrics import Outcome, TickMetrics, convergence_rate, outcome_of, tick_metrics
+from swarm_ros.core.darr_niazi.metrics import TickMetrics, convergence_rate, outcome_of, tick_metrics
+from swarm_ros.core.metrics import Outcome
 
 pytestmark = pytest.mark.unit
 

@@ -24,8 +24,8 @@ from waiting import wait_for
 from swarm_ros.app import cli
 from swarm_ros.artifacts.darr_niazi.scene import FILLED, FREE, MAP, OCCUPANCY, ROBOTS, RUN_INFO, SERIES, WORLD
 from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.metrics import METRIC_COLUMNS
 from swarm_ros.core.darr_niazi.state import RobotState
-from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.params import RunParams
 
 pytestmark = pytest.mark.process

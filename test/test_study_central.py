@@ -14,9 +14,9 @@ from hypothesis import strategies as st
 from runs import disc_shape
 
 from swarm_ros.core import RunParams, Shape, Simulation, World
+from swarm_ros.core.darr_niazi.run_result import summary_of
 from swarm_ros.core.darr_niazi.state import IS_MOVING
 from swarm_ros.core.errors import ContractError, Rejected
-from swarm_ros.core.run_result import summary_of
 from swarm_ros.core.strips import AreaStore, Strips, area_of, run_batched, strips_for
 from swarm_ros.protocol.cdr import decode_cloud, encode_cloud
 from swarm_ros.protocol.central_lockstep import CentralLockstep

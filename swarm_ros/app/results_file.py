@@ -15,9 +15,8 @@ from pathlib import Path
 from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.errors import InputError, ParameterError
 from swarm_ros.core.inputs import RESULTS_LIMIT, read_bounded
-from swarm_ros.core.metrics import SEEDS, Outcome
-from swarm_ros.core.params import DARR_NIAZI, EXPERIMENT_AXES, RUBENSTEIN, RUN_PARAMETERS, foreign_defaults
-from swarm_ros.core.run_result import ENGINES
+from swarm_ros.core.metrics import ENGINES, Outcome
+from swarm_ros.core.params import DARR_NIAZI, EXPERIMENT_AXES, RUN_PARAMETERS, foreign_defaults
 
 RESULTS_FILE = "results.csv"
 REFERENCE_FILE = "reference.csv"  #: the experiment's reference numbers, copied into its directory
@@ -283,22 +282,3 @@ def result_row(spec, summary: dict) -> dict:
         "repetition": spec.repetition,
     }
     return {col: row[col] for col in RESULT_COLUMNS}
-
-
-def rubenstein_as_study_row(summary: dict) -> dict:
-    """A rubenstein run's summary in results.csv's columns: its shape pixels are the shape's patches, its joined
-    robots the localized ones (seeds included), its uncovered pixels the empty patches, and the parameters of
-    the study's model their defaults."""
-    robots, joined, pixels = summary["robots"], summary["joined"], summary["shape_pixels"]
-    tick = summary["convergence_tick"]
-    return {
-        **foreign_defaults(RUBENSTEIN),
-        **summary,
-        "shape_patches": pixels,
-        "localized": joined,
-        "unlocalized": robots - joined,
-        "separated": 0,
-        "empty_patches": pixels - round(summary["coverage"] * pixels),
-        "lost_robots": 0,
-        "convergence_rate": round((joined - SEEDS) / tick, 6) if tick > 0 else 0.0,
-    }

@@ -288,7 +288,7 @@ register(
         progress_unit="patch",
         progress_what="localized",
         engine="swarm_ros.core.darr_niazi.engine:Simulation",
-        summary="swarm_ros.core.run_result:summary_of",
+        summary="swarm_ros.core.darr_niazi.run_result:summary_of",
         wire="swarm_ros.protocol.darr_niazi.wire:StudyWire",
         check_shape="swarm_ros.core.params:check_vision_fits",
         compile="swarm_ros.core.darr_niazi.warmup:compile_kernels",
@@ -298,7 +298,7 @@ register(
             **CENTRAL,  # its own recording, run directory and printed summary:
             "recording": "swarm_ros.artifacts.darr_niazi.recording:open_recording",
             "write_run": "swarm_ros.artifacts.darr_niazi.run_dir:write_simulation",
-            "print_summary": "swarm_ros.app.summary_print:print_summary",
+            "print_summary": "swarm_ros.app.darr_niazi.summary:print_summary",
         },
         checked_step="swarm_ros.core.darr_niazi.invariants:checked_step",
     )
@@ -324,7 +324,7 @@ register(
             **CENTRAL,  # its own recording, run directory and printed summary:
             "recording": "swarm_ros.artifacts.rubenstein.recording:open_recording",
             "write_run": "swarm_ros.artifacts.rubenstein.run_dir:write_simulation",
-            "print_summary": "swarm_ros.app.summary_print:print_rubenstein_summary",
+            "print_summary": "swarm_ros.app.rubenstein.summary:print_summary",
         },
         no_removal="a lost batch is restarted: the algorithm has no robot failure",
         engine="swarm_ros.core.rubenstein.run:RubensteinRun",
@@ -334,6 +334,6 @@ register(
         compile="swarm_ros.core.rubenstein.run:compile_kernels",
         wire="swarm_ros.protocol.rubenstein.rows:RubensteinWire",
         checked_step="swarm_ros.core.rubenstein.tick_checks:checked_step",
-        as_study_row="swarm_ros.app.results_file:rubenstein_as_study_row",
+        as_study_row="swarm_ros.app.rubenstein.summary:as_study_row",
     )
 )

@@ -56,6 +56,6 @@ class Wire:
 register(Algorithm(
     name=NAME, max_ticks=20_000, bytes_per_robot=200, kernel_dir="", compile_seconds=0, run_dir_setting="walk",
     progress_unit="cell", progress_what="covered", engine="random_walk.engine:RandomWalk", wire="random_walk:Wire",
-    summary="random_walk.engine:summary_of", print_summary="swarm_ros.app.summary_print:print_summary", **CENTRAL,
+    summary="random_walk.engine:summary_of", print_summary="swarm_ros.app.darr_niazi.summary:print_summary", **CENTRAL,
     no_removal="its robots do not fail",
 ))  # fmt: skip

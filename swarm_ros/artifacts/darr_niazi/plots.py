@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from swarm_ros.artifacts.mpl import ListedColormap, Patch, plt
+from swarm_ros.core.darr_niazi.run_result import RunRecord
 from swarm_ros.core.darr_niazi.state import RobotState
-from swarm_ros.core.run_result import RunRecord
 
 # Patch classes of the picture and their colours (colour-blind safe, Okabe-Ito based).
 _CLASSES = (
@@ -171,7 +171,7 @@ _CONVERGENCE_SERIES = (
 def save_convergence_png(run: RunRecord, path: Path) -> None:
     """Stationary, localized, wandering-inside and walking robots, and empty patches against ticks, with the
     outcome marked."""
-    from swarm_ros.core.metrics import METRIC_COLUMNS
+    from swarm_ros.core.darr_niazi.metrics import METRIC_COLUMNS
 
     h = run.history
     ticks = h[:, 0]

@@ -22,9 +22,9 @@ import rerun as rr
 from swarm_ros.artifacts.darr_niazi.scene import EVENTS, FILLED, FREE, METRICS, OCCUPANCY, ROBOTS, blueprint, log_scene
 from swarm_ros.artifacts.recording_options import RecordingOptions
 from swarm_ros.artifacts.rerun_recording import TIMELINE, close_stream, open_stream
+from swarm_ros.core.darr_niazi.metrics import METRIC_COLUMNS, TickMetrics
 from swarm_ros.core.darr_niazi.state import SwarmState
 from swarm_ros.core.errors import ParameterError
-from swarm_ros.core.metrics import METRIC_COLUMNS, TickMetrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
 

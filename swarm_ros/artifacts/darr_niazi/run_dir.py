@@ -17,8 +17,8 @@ from swarm_ros.artifacts.run_dir import write_files
 
 if TYPE_CHECKING:
     from swarm_ros.core.darr_niazi.engine import Simulation
+    from swarm_ros.core.darr_niazi.run_result import RunRecord
     from swarm_ros.core.darr_niazi.state import SwarmState
-    from swarm_ros.core.run_result import RunRecord
 
 FINAL_STATE_COLUMNS = ("id", "x", "y", "heading", "state")
 FINAL_STATE_COLUMNS_3D = ("id", "x", "y", "z", "heading", "pitch", "state")  #: a 3D run's
@@ -27,7 +27,9 @@ FINAL_STATE_COLUMNS_3D = ("id", "x", "y", "z", "heading", "pitch", "state")  #: 
 def metrics_csv(history: np.ndarray) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    from swarm_ros.core.metrics import METRIC_COLUMNS  # the core's compiled modules load only when a run is written
+    from swarm_ros.core.darr_niazi.metrics import (
+        METRIC_COLUMNS,  # the core's compiled modules load only when a run is written
+    )
 
     writer.writerow(METRIC_COLUMNS)
     writer.writerows(history.tolist())
@@ -62,8 +64,8 @@ def write_simulation(
 ) -> Path:
     """:func:`write_run` of an in-process run of the study's model and its summary (core.algorithm's part
     ``write_run``)."""
+    from swarm_ros.core.darr_niazi.run_result import RunRecord
     from swarm_ros.core.metrics import Outcome
-    from swarm_ros.core.run_result import RunRecord
 
     record = RunRecord(sim.shape, sim.params, sim.state, sim.history, Outcome(summary["outcome"]), summary)
     return write_run(out, record, overwrite=overwrite, recording=recording, bag=bag, robots_every=every)

@@ -27,8 +27,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from swarm_ros.core.darr_niazi.metrics import METRIC_COLUMNS
 from swarm_ros.core.darr_niazi.state import RobotState
-from swarm_ros.core.metrics import METRIC_COLUMNS
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
 

@@ -28,6 +28,7 @@ from swarm_ros.core.algorithm import check_engine
 from swarm_ros.core.darr_niazi.arbitration import occupy, resolve_kernel, vacate
 from swarm_ros.core.darr_niazi.kernel_state import grid_of, moves_for, robots_of, rules_of
 from swarm_ros.core.darr_niazi.legality import halo, reach
+from swarm_ros.core.darr_niazi.metrics import METRIC_COLUMNS, TickMetrics, progress_of
 from swarm_ros.core.darr_niazi.rules import Decided, Decided3D, Decisions
 from swarm_ros.core.darr_niazi.rules2d import cell_index
 from swarm_ros.core.darr_niazi.state import (
@@ -43,14 +44,7 @@ from swarm_ros.core.darr_niazi.state import (
 from swarm_ros.core.darr_niazi.tick_kernel import End, Scratch, close_tick, compact_moving, end_tick, run_kernel
 from swarm_ros.core.errors import ContractError
 from swarm_ros.core.grid import CellMap
-from swarm_ros.core.metrics import (
-    END_EXTRAS,
-    METRIC_COLUMNS,
-    OUTCOME_OF_CODE,
-    Outcome,
-    TickMetrics,
-    progress_of,
-)
+from swarm_ros.core.metrics import END_EXTRAS, OUTCOME_OF_CODE, Outcome
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.rng import STREAM_FAIL, uniform_array
 from swarm_ros.core.shapes import Shape

@@ -18,9 +18,10 @@ import numpy as np
 
 from swarm_ros.core.darr_niazi.arbitration import JoinOutcome
 from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.metrics import tick_metrics
 from swarm_ros.core.darr_niazi.state import MOVING_STATES, RobotState, SwarmState, frontier_blocks_of, frontier_of
 from swarm_ros.core.errors import InvariantError
-from swarm_ros.core.metrics import Outcome, tick_metrics
+from swarm_ros.core.metrics import Outcome
 
 _STATIONARY = (RobotState.SEED, RobotState.LOCALIZED)
 _MOVING = MOVING_STATES

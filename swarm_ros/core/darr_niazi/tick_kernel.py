@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from swarm_ros.core import metrics
+from swarm_ros.core.darr_niazi import metrics
 from swarm_ros.core.darr_niazi.arbitration import resolve_kernel
 from swarm_ros.core.darr_niazi.rules import decide_robots
 from swarm_ros.core.darr_niazi.state import RobotState
@@ -83,7 +83,7 @@ class Scratch(NamedTuple):
 
 
 class End(NamedTuple):
-    """What the end check of a tick compares with (:func:`swarm_ros.core.metrics.end_code`)."""
+    """What the end check of a tick compares with (:func:`swarm_ros.core.darr_niazi.metrics.end_code`)."""
 
     shape_patches: int
     robots: int  #: robots not removed

@@ -16,10 +16,10 @@ import numpy as np
 
 from swarm_ros.core.darr_niazi.engine import Simulation
 from swarm_ros.core.darr_niazi.legality import illegal
+from swarm_ros.core.darr_niazi.metrics import tick_metrics
 from swarm_ros.core.darr_niazi.rules import Decider
 from swarm_ros.core.darr_niazi.state import STATE_COUNT
 from swarm_ros.core.darr_niazi.swarm_view import SwarmView
-from swarm_ros.core.metrics import tick_metrics
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
 

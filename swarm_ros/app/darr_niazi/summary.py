@@ -1,4 +1,5 @@
-"""What ``swarm-ros simulate`` and ``run`` print when a run is over (the study's model's, or a rubenstein run's)."""
+"""What ``swarm-ros simulate`` and ``run`` print when a run of the study's model is over (or of another algorithm
+that reports on its grid, as the test suite's random walk does)."""
 
 from __future__ import annotations
 
@@ -41,24 +42,6 @@ def print_summary(s: dict, out: Path, dims: int) -> None:
         ),
         ("convergence rate", f"{s['convergence_rate']:.4f} robots/tick"),
         ("wall time", f"{s['wall_seconds']:.2f} s  ({rate:,.0f} ticks/s, {_TIMED[s['engine']]})"),
-        ("output", str(out)),
-    ]
-    for key, value in rows:
-        print(f"{key:<17} {value}")
-
-
-def print_rubenstein_summary(s: dict, out: Path, _dims: int = 2) -> None:
-    """A rubenstein run's summary.json, as ``simulate`` and ``run`` print it."""
-    rows = [
-        ("shape", f"{s['shape']} ({s['shape_pixels']} pixels of {s['pixel_size']:g} d)"),
-        ("robots", f"{s['robots']}  (algorithm rubenstein, seed {s['seed']}, engine {s['engine']})"),
-        ("outcome", s["outcome"]),
-        ("end tick", str(s["convergence_tick"])),
-        ("50% / 90% tick", f"{s['fill_50_tick']} / {s['fill_90_tick']}"),
-        ("covered", f"{s['coverage']:.1%} of the pixels"),
-        ("joined", f"{s['joined']}  (outside the shape {s['joined_outside']})"),
-        ("loc. error", f"{s['loc_error']:.3f} d (mean over the joined)"),
-        ("wall time", f"{s['wall_seconds']:.2f} s"),
         ("output", str(out)),
     ]
     for key, value in rows:

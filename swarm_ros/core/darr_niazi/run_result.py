@@ -1,5 +1,5 @@
-"""What a finished run leaves behind, whichever engine ran it: its summary and the data a run directory is
-written from. Both engines build their summary here (:func:`summarize`)."""
+"""What a finished run of the study's model leaves behind, whichever engine ran it: its summary and the data a run
+directory is written from. Both engines build its summary here (:func:`summarize`)."""
 
 from __future__ import annotations
 
@@ -8,14 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarm_ros.core.darr_niazi.engine import Simulation
+from swarm_ros.core.darr_niazi.metrics import TickMetrics, run_summary
 from swarm_ros.core.darr_niazi.state import RobotState, SwarmState
 from swarm_ros.core.errors import ContractError
-from swarm_ros.core.metrics import Outcome, TickMetrics, run_summary
+from swarm_ros.core.metrics import INPROCESS, Outcome
 from swarm_ros.core.params import RunParams
 from swarm_ros.core.shapes import Shape
-
-INPROCESS, ROS2 = "inprocess", "ros2"
-ENGINES = (INPROCESS, ROS2)  #: the engines, as summary.json and results.csv name them
 
 
 def summarize(
@@ -34,7 +32,8 @@ def summarize(
     graph=None,
     history=None,
 ) -> dict:
-    """The summary.json record of a run, from either engine (fields: :func:`swarm_ros.core.metrics.run_summary`)."""
+    """The summary.json record of a run, from either engine (fields:
+    :func:`swarm_ros.core.darr_niazi.metrics.run_summary`)."""
     return run_summary(
         shape=shape.name,
         shape_patches=shape.patches,
@@ -83,7 +82,7 @@ class RunRecord:
         state: the swarm at the last tick.
         history: metrics of every tick, tick 0 first (int64, columns ``METRIC_COLUMNS``).
         outcome: how the run ended.
-        summary: the summary.json record (:func:`swarm_ros.core.metrics.run_summary`).
+        summary: the summary.json record (:func:`swarm_ros.core.darr_niazi.metrics.run_summary`).
     """
 
     shape: Shape
