@@ -1,7 +1,7 @@
 """Fixtures shared by the test modules (the helpers they share are modules by topic: runs.py, recordings.py,
-graph_runs.py, central_fakes.py, netns.py, layering.py, waiting.py, bagcheck.py, ros2_tools.py), and the rule
-that every test module says which kind it is: ``pytestmark = pytest.mark.unit`` or ``pytest.mark.process``
-(pytest.ini)."""
+graph_runs.py, central_fakes.py, netns.py, layering.py, waiting.py, bagcheck.py, ros2_tools.py, isolation.py), and
+the rule that every test module says which kind it is: ``pytestmark = pytest.mark.unit`` or
+``pytest.mark.process`` (pytest.ini), a unit test kept in its process."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import os
 import shutil
 
 import pytest
+from isolation import children_refused
 from netns import SUBNET, _wait_until_up, ip_in
 from runs import disc_shape
 
@@ -37,6 +38,26 @@ def pytest_collection_modifyitems(config, items):
                 f"{item.nodeid}: mark the module with exactly one of {', '.join(KINDS)} "
                 f"(got {sorted(set(kinds)) or 'none'})"
             )
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _fonts_found_once():
+    """matplotlib lists the system's fonts with fc-list (a child process) the first time it loads without a font
+    cache: done here, once a session, so that a unit test that draws does not do it."""
+    import matplotlib.font_manager  # noqa: F401
+
+
+@pytest.fixture(autouse=True)
+def _a_unit_test_stays_in_its_process(request):
+    """What ``unit`` promises (pytest.ini), enforced: a unit test that starts a child process or a ROS 2 context
+    fails, naming what it did (:func:`isolation.children_refused`)."""
+    if request.node.get_closest_marker("unit") is None:
+        yield
+        return
+    with children_refused() as attempts:
+        yield
+    if attempts:
+        pytest.fail(f"a unit test {attempts[0]}: move it to a module marked process (pytest.ini)", pytrace=False)
 
 
 @pytest.fixture(scope="session")

@@ -23,6 +23,7 @@ from swarm_ros.app.experiment_file import load_experiment, run_seed
 from swarm_ros.app.published import ReferenceFileError, load_reference
 from swarm_ros.app.report_stats import group_stats
 from swarm_ros.app.results_file import RESULT_COLUMNS, ExperimentError, read_results
+from swarm_ros.core.rubenstein.run import RubensteinRun
 
 pytestmark = pytest.mark.process
 
@@ -590,3 +591,87 @@ def test_jobs_beyond_the_experiments_runs_are_not_started_nor_claimed(tmp_path, 
     config = small_config(tmp_path, repetitions=1, vision_radius=[1], shapes={"disc.txt": [50]})
     assert cli.main(["experiment", str(config), "--out", str(tmp_path / "e"), "--jobs", "1000000"]) == 0
     assert "(1 job, engine inprocess)" in capsys.readouterr().out
+
+
+def test_an_experiment_runs_both_algorithms_on_the_same_grid_and_reports_them_side_by_side(tmp_path, monkeypatch):
+    import yaml
+
+    from swarm_ros.app import cli, report
+
+    labels: dict[str, set[str]] = {}
+    save = report._save
+
+    def keep_labels(fig, path):
+        labels[path.name] = {ax.get_ylabel() for ax in fig.axes}
+        save(fig, path)
+
+    monkeypatch.setattr(report, "_save", keep_labels)
+    from swarm_ros.app.experiment_file import load_experiment
+    from swarm_ros.app.results_file import read_results
+
+    (tmp_path / "square.txt").write_text("######\n" * 6)
+    config = tmp_path / "h2h.yaml"
+    config.write_text(
+        yaml.safe_dump(
+            {
+                "name": "h2h",
+                "seed": 5,
+                "repetitions": 2,
+                "vision_radius": [1, 2],
+                "algorithm": ["darr-niazi", "rubenstein"],
+                "max_ticks": 30000,
+                "shapes": {"square.txt": [36, 40]},
+            }
+        )
+    )
+    exp = load_experiment(config)
+    algorithms = [s.algorithm for s in exp.runs()]
+    assert (
+        algorithms.count("darr-niazi") == 2 * 2 * 2 and algorithms.count("rubenstein") == 2 * 2
+    )  # once, not per radius
+    out = tmp_path / "out"
+    assert cli.main(["experiment", str(config), "--out", str(out), "--quiet", "--jobs", "2"]) == 0
+    rows = read_results(out / "results.csv")
+    theirs = [r for r in rows if r["algorithm"] == "rubenstein"]
+    assert len(theirs) == 4 and all(r["vision_radius"] == 1.0 and r["rules"] == "paper" for r in theirs)
+    assert all(r["shape_patches"] == 36 and 0 < r["coverage"] <= 1 for r in theirs)
+    assert all(r["coverage"] > 0.9 and r["fill_50_tick"] <= r["fill_90_tick"] for r in theirs)
+    studied = [r for r in rows if r["algorithm"] == "darr-niazi"]
+    assert all(
+        r["joined_outside"] == r["hole_filled"] == 0
+        and r["loc_error"] == 0.0
+        and r["fill_50_tick"] <= r["fill_90_tick"]
+        for r in studied
+    )
+    stats = (out / "stats.md").read_text()
+    table = stats[stats.index("## Time and accuracy") :]
+    assert "| square | 40 | rubenstein | – | 2 |" in table and "| square | 40 | paper | 2 | 2 |" in table
+    assert (out / "figures" / "square_rubenstein.png").stat().st_size > 0  # no vision radius in its name
+    assert (out / "figures" / "algorithms.png").stat().st_size > 0  # both algorithms on shared axes
+    assert "### The rubenstein algorithm" in stats and "| joined | not joined | uncovered pixels |" in stats
+    # each algorithm's counts in its own words: rubenstein's robots join and cover pixels
+    assert {"joined robots", "uncovered pixels"} <= labels["square_rubenstein.png"]
+    assert {"localized robots", "empty shape patches"} <= labels["square_paper_v1.png"]
+    # each grid point's repetition 0 left its step curve, which the report draws without running anything again
+    from swarm_ros.app.curves import curve_name, read_curve
+    from swarm_ros.core.darr_niazi.engine import Simulation
+
+    firsts = [r for r in rows if r["repetition"] == 0]
+    assert sorted(p.name for p in (out / "curves").iterdir()) == sorted(curve_name(r) for r in firsts)
+    for r in firsts:
+        curve = read_curve(out, r)
+        assert curve[0, 0] == 0 and curve[-1, 0] == r["convergence_tick"] and curve[-1, 1] == r["empty_patches"]
+        assert np.all(np.diff(curve[:, 0]) > 0) and np.all(np.diff(curve[:-1, 1]) != 0)  # the changes only
+
+    gone = out / "curves" / curve_name(firsts[-1])
+    kept = gone.read_text()
+    gone.unlink()
+    report.build_report(out)  # runs that run again, checks it against its row, and keeps its curve again
+    assert gone.read_text() == kept
+
+    def no_runs(*args, **kwargs):
+        raise AssertionError("the report ran a run")
+
+    monkeypatch.setattr(RubensteinRun, "run", no_runs)
+    monkeypatch.setattr(Simulation, "run", no_runs)
+    report.build_report(out)

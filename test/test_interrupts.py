@@ -508,3 +508,39 @@ def test_a_ctrl_c_where_python_drops_exceptions_prints_no_traceback_and_still_in
     assert sys.unraisablehook is before
     err = capfd.readouterr().err
     assert "Exception ignored" not in err and "Traceback" not in err, err
+
+
+def test_ctrl_c_mid_rubenstein_run_keeps_an_interrupted_run_directory_and_its_recording(tmp_path):
+    """Ctrl-C during a rubenstein simulate: exit 130, one line, and the run so far written whole (outcome
+    interrupted), its recording ended and moved in; nothing left beside it."""
+    import json
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swarm_ros", "simulate", "--algorithm", "rubenstein", "--shape", "star"]
+        + ["--out", str(out), "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    partial = tmp_path / "run.partial.rrd"
+    deadline = time.monotonic() + 120
+    while not partial.exists() and time.monotonic() < deadline:  # the run has started: its recording is open
+        time.sleep(0.05)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("swarm-ros: interrupted at tick"), err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["outcome"] == "interrupted" and summary["convergence_tick"] > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+    metrics = (out / "metrics.csv").read_text().splitlines()
+    assert len(metrics) == summary["convergence_tick"] + 2  # the header, tick 0 and every tick run
+    from recordings import rrd_verify
+
+    assert rrd_verify(out / "recording.rrd").returncode == 0

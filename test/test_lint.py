@@ -1,6 +1,7 @@
 """The code passes the project's linter and formatter (ruff, configured in pyproject.toml): imports in order, no
 unused names, no likely bugs, one layout. Run ``.venv/bin/ruff check --fix . && .venv/bin/ruff format .`` to fix
-most of what they find."""
+most of what they find. No tracked file links to or cites the project's private inputs (the behaviour-contract
+folder beside the repository and its notes): the repository stands on its own."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.process
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -90,3 +91,37 @@ def test_mypy_finds_nothing_in_the_layers_it_checks():
         timeout=300,
     )
     assert done.returncode == 0, done.stdout + done.stderr
+
+
+# Built from pieces so that this file does not match itself.
+FORBIDDEN = ("../" + "shared", "ROS2" + "_NOTES", "MODEL" + ".md", "STYLE" + ".md")
+
+
+def tracked_text_files() -> list[Path]:
+    try:
+        names = (
+            subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True, timeout=60)
+            .stdout.decode()
+            .split("\0")
+        )
+        files = [ROOT / n for n in names if n]
+    except (OSError, subprocess.CalledProcessError):  # not a git checkout: every file but the venv's
+        files = [p for p in ROOT.rglob("*") if p.is_file() and ".venv" not in p.parts and ".git" not in p.parts]
+    out = []
+    for path in files:
+        data = path.read_bytes() if path.is_file() else b""
+        if b"\0" not in data[:4096]:
+            out.append(path)
+    return out
+
+
+def test_no_file_links_to_or_cites_the_private_inputs():
+    files = tracked_text_files()
+    assert len(files) > 50  # the listing found the repository
+    hits = [
+        f"{p.relative_to(ROOT)}:{n}: {line.strip()[:100]}"
+        for p in files
+        for n, line in enumerate(p.read_text(errors="replace").splitlines(), start=1)
+        if any(word in line for word in FORBIDDEN)
+    ]
+    assert not hits, "\n".join(hits)

@@ -398,3 +398,51 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def test_a_rubenstein_simulate_writes_the_run_and_a_recording_of_state_gradient_and_estimates(tmp_path):
+    import json
+    import subprocess
+    import sys
+    import warnings
+
+    from recordings import rrd_verify
+    from rerun.chunk import RrdReader
+
+    grid = tmp_path / "square.txt"
+    grid.write_text("######\n" * 6)
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "swarm_ros", "simulate", "--algorithm", "rubenstein", "--shape", str(grid)]
+    done = subprocess.run([*cmd, "--robots", "40", "--out", str(out), "--quiet"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["algorithm"] == "rubenstein" and summary["outcome"].startswith("complete")
+    assert summary["coverage"] == 1.0 and summary["fill_50_tick"] <= summary["fill_90_tick"]
+    assert "vision_radius" not in summary and summary["comm_range"] == 3.5  # its own algorithm's parameters
+    assert {p.name for p in tmp_path.iterdir()} == {"square.txt", "run"}  # nothing half-written beside it
+    final = np.genfromtxt(out / "final_state.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert rrd_verify(out / "recording.rrd").returncode == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        chunks = RrdReader(str(out / "recording.rrd")).stream().to_chunks()
+    last: dict[str, tuple[int, object]] = {}
+    for chunk in chunks:
+        if chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        for k, tick in enumerate(batch.column("tick").to_numpy().tolist()):
+            if tick >= last.get(chunk.entity_path, (-1, None))[0]:
+                last[chunk.entity_path] = (tick, {n: batch.column(n)[k] for n in batch.schema.names})
+    tick, robots = last["/world/robots"]
+    assert tick == summary["convergence_tick"]
+    xy = robots["Points2D:positions"].values.flatten().to_numpy(zero_copy_only=False).reshape(-1, 2)
+    assert np.allclose(xy, np.stack([final["x"], final["y"]], axis=1), atol=1e-5)
+    colours = robots["Points2D:colors"].values.to_numpy(zero_copy_only=False)
+    from swarm_ros.artifacts.rubenstein.recording import STATE_COLOURS
+    from swarm_ros.core.rubenstein.rule import STATE_NAMES
+
+    packed = [int.from_bytes(bytes([*STATE_COLOURS[STATE_NAMES.index(st)], 255]), "big") for st in final["state"]]
+    assert colours.tolist() == packed  # each robot's colour is its state's
+    assert "/world/gradient" in last and "/world/estimates" in last
+    assert last["/metrics/covered"][1]["Scalars:scalars"].values.to_numpy()[0] == 36
+    assert "outcome: complete" in str(last["/events"][1]["TextLog:text"])
