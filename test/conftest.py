@@ -1,6 +1,6 @@
 """Fixtures shared by the test modules (the helpers they share are modules by topic: runs.py, recordings.py,
-graph_runs.py, central_fakes.py, netns.py, layering.py, waiting.py, bagcheck.py, ros2_tools.py, isolation.py), and
-the rule that every test module says which kind it is: ``pytestmark = pytest.mark.unit`` or
+graph_runs.py, central_fakes.py, netns.py, layering.py, waiting.py, bagcheck.py, ros2_tools.py, isolation.py,
+bad_inputs.py), and the rule that every test module says which kind it is: ``pytestmark = pytest.mark.unit`` or
 ``pytest.mark.process`` (pytest.ini), a unit test kept in its process."""
 
 from __future__ import annotations

@@ -205,32 +205,6 @@ def test_a_parameter_files_monitor_section_sets_the_recording_and_flags_override
     assert (tmp_path / "there" / "recording.rrd").exists()
 
 
-BAD = [
-    (["--shape", "nosuch"], "no such shape file or built-in shape"),
-    (["--robots", "2.5"], "invalid integer '2.5'"),
-    (["--robots", "-5"], "robots must be an integer >= 4 (0 = the shape's patch count), got -5"),
-    (["--robots", "abc"], "invalid integer"),
-    (["--robots", "5000"], "5000 robots do not fit on the 3969 free patches"),
-    (["--robots", "3"], "robots must be an integer >= 4"),
-    (["--vision", "0"], "vision_radius must be a number >= 1 and <= 100, got 0"),
-    (["--vision", "nan"], "vision_radius must be a number >= 1 and <= 100, got nan"),
-    (["--max-ticks", "-1"], "max_ticks must be an integer >= 1 and <= 1000000000 (0 = 100000 under darr-niazi, "),
-    (["--seed", "-1"], "seed must be an integer >= 0 and <= 9223372036854775807, got -1"),
-    (["--world-radius", "27"], "touches the wall"),
-    (["--world-radius", "20"], "reaches beyond the walls"),
-    (["--frobnicate"], "unrecognized arguments"),
-]
-
-
-@pytest.mark.parametrize("args,message", BAD, ids=[" ".join(a) for a, _ in BAD])
-def test_bad_input_gets_one_line_exit_2_and_writes_nothing(tmp_path, capsys, args, message):
-    out = tmp_path / "run"
-    assert cli.main(["simulate", "--quiet", "--out", str(out), *args]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("swarm-ros: error: ") and message in err and err.count("\n") == 1
-    assert list(tmp_path.iterdir()) == []
-
-
 def test_a_failure_while_writing_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
     def broken(sim, path):
         raise OSError(28, "No space left on device")
