@@ -153,16 +153,17 @@ def _with(rows: np.ndarray, field: str, value) -> np.ndarray:
     return out
 
 
-@pytest.mark.parametrize("shape", [DISC, _ball()], ids=["2d", "3d"])
-def test_a_run_saved_and_restored_or_loaded_goes_on_as_the_run_would_have(shape):
-    """A restarted world's checkpoint (``saved``, ``restore``) and a monitor's copy (``load``)."""
+@pytest.mark.parametrize("shape, tick", [(DISC, 0), (DISC, 25), (_ball(), 25)], ids=["2d-tick0", "2d", "3d"])
+def test_a_run_saved_and_restored_or_loaded_goes_on_as_the_run_would_have(shape, tick):
+    """A restarted world's checkpoint (``saved``, ``restore``; tick 0 is the one a world saves before anything of it
+    goes out) and a monitor's copy (``load``)."""
     params = RunParams(robots=shape.patches + 20, seed=11, vision_radius=2.0, fail_fraction=0.1, fail_tick=40)
     whole = _whole(shape, params)
     run = Simulation(shape, params)
-    run.run(25)
+    run.run(tick)
     saved = {name: a.copy() for name, a in run.saved().items()}
     again = Simulation(shape, params)
-    again.restore(25, saved)
+    again.restore(tick, saved)
     again.run()
     assert same(whole, again)
     copy = Simulation(shape, params)
@@ -172,7 +173,7 @@ def test_a_run_saved_and_restored_or_loaded_goes_on_as_the_run_would_have(shape)
     ended.load(whole.tick, whole.robots, whole.history, whole.outcome)
     assert whole.losses and summary_of(ended) == summary_of(whole)
     with pytest.raises(ContractError):
-        Simulation(shape, params).restore(24, saved)  # 26 rows of metrics for tick 24
+        Simulation(shape, params).restore(tick + 1, saved)  # too few rows of metrics for the tick
 
 
 def _owners_agree(world, whole: Simulation) -> None:
