@@ -1,7 +1,8 @@
 """A third algorithm, registered from outside the package (test/random_walk, named in SWARM_ROS_ALGORITHMS), runs in
 ``simulate``, over the ROS 2 graph and in an experiment beside the study's model with no edit to shared code: the
-graph's run, with K = 1, 2, 3 robot-batch processes, is the one ``simulate`` writes, byte for byte; what it does not
-supply (``--check``) is refused in one line, before anything is written."""
+graph's run, with K = 1 robot-batch process, with K = 3 over S = 2 world shards, and with the default K = 2 in the
+experiment, is the one ``simulate`` writes, byte for byte; what it does not supply (``--check``) is refused in one
+line, before anything is written."""
 
 from __future__ import annotations
 
@@ -55,7 +56,7 @@ def reference(block) -> Path:
     return block.parent / "a"
 
 
-@pytest.mark.parametrize("processes, shards", [(1, 1), (2, 1), (3, 1), (3, 2)])
+@pytest.mark.parametrize("processes, shards", [(1, 1), (3, 2)])
 def test_the_graph_with_k_batch_processes_writes_the_run_simulate_writes(block, reference, tmp_path, processes, shards):
     k, s = str(processes), str(shards)
     done = _swarm(
@@ -84,7 +85,7 @@ def test_what_it_does_not_supply_is_refused_in_one_line_and_nothing_is_written(t
 
 def test_an_experiment_runs_it_beside_the_studys_model_and_over_the_graph_gives_the_same_rows(tmp_path, block):
     (tmp_path / "walk.yaml").write_text(
-        "name: walk\nseed: 5\nrepetitions: 2\nvision_radius: 1\nrules: paper\nalgorithm: [darr-niazi, random-walk]\n"
+        "name: walk\nseed: 5\nrepetitions: 1\nvision_radius: 1\nrules: paper\nalgorithm: [darr-niazi, random-walk]\n"
         f"max_ticks: 400\nshapes:\n  {block}: [12]\nworld_radius: 8\n"
     )
     rows = {}
@@ -98,6 +99,6 @@ def test_an_experiment_runs_it_beside_the_studys_model_and_over_the_graph_gives_
                 {k: v for k, v in r.items() if k not in ("wall_seconds", "engine")} for r in csv.DictReader(f)
             ]
     assert rows["inprocess"] == rows["ros2"]
-    assert sorted(r["algorithm"] for r in rows["ros2"]) == ["darr-niazi"] * 2 + ["random-walk"] * 2
-    walk = [r for r in rows["ros2"] if r["algorithm"] == "random-walk"]
-    assert walk[0]["seed"] != walk[1]["seed"] and all(int(r["localized"]) >= 1 for r in walk)
+    assert sorted(r["algorithm"] for r in rows["ros2"]) == ["darr-niazi", "random-walk"]
+    [walk] = [r for r in rows["ros2"] if r["algorithm"] == "random-walk"]
+    assert int(walk["localized"]) >= 1
