@@ -91,9 +91,11 @@ def test_the_columns_are_the_patch_columns_and_a_batch_sees_the_halo_and_every_s
     assert np.array_equal(area_of(run, strips, 0), np.union1d(np.flatnonzero(columns <= 15), stationary))
 
 
-def test_the_worlds_lockstep_over_the_wire_with_checked_rows_and_decisions_gives_the_in_process_run():
-    """Every area and every decision through a PointCloud2's bytes, checked as the graph checks them."""
-    params = RunParams(robots=DISC.patches + 30, seed=9, vision_radius=2.0)
+@pytest.mark.parametrize("rules", ["paper", "literal"])
+def test_the_worlds_lockstep_over_the_wire_with_checked_rows_and_decisions_gives_the_in_process_run(rules):
+    """Every area and every decision through a PointCloud2's bytes, checked as the graph checks them: under the paper's
+    rules and the literal ones (moves of several steps), so the graph's runs need not repeat each rule set."""
+    params = RunParams(robots=DISC.patches + 30, seed=9, vision_radius=2.0, rules=rules)
     run, wire = Simulation(DISC, params), StudyWire(2)
     ls = CentralLockstep(run, wire)
     start = Simulation(DISC, params)
