@@ -5,6 +5,7 @@ import pytest
 from runs import disc_shape, final_of, params, run_checked, run_in_batches
 
 from swarm_ros.core import METRIC_COLUMNS, Outcome, RobotState, Shape, Simulation, World
+from swarm_ros.core.darr_niazi.invariants import check_state
 from swarm_ros.core.darr_niazi.run_result import summary_of
 from swarm_ros.core.errors import ContractError
 
@@ -19,8 +20,15 @@ RULES = ["paper", "local", "literal"]
 @pytest.mark.parametrize("rules", RULES)
 @pytest.mark.parametrize("name", BUILTINS)
 def test_builtin_shape_completes_with_its_patch_count_and_every_invariant_holds(name, rules):
+    """Every invariant after every tick under the paper's rules; under the others, at the end (every tick under each
+    rule set is test_properties', on 60 random shapes: checked here too, these 12 runs took 2 minutes in a process)."""
     shape = Shape.load(name)
-    sim = run_checked(Simulation(shape, params(shape.patches, seed=2, rules=rules)))
+    sim = Simulation(shape, params(shape.patches, seed=2, rules=rules))
+    if rules == "paper":
+        run_checked(sim)
+    else:
+        sim.run()
+        check_state(sim)
     assert sim.outcome is Outcome.COMPLETE
     assert sim.metrics.empty_patches == 0 and sim.metrics.moving == 0
 
