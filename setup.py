@@ -49,7 +49,9 @@ setup(
         "dask[distributed]>=2024.1",
         "distributed>=2024.1",  # imported directly too: a LocalCluster worker plugin (app/dask_workers.py)
     ],
-    extras_require={"test": ["pytest>=8", "pytest-xdist>=3.5", "hypothesis>=6.100", "pytest-cov>=7", "mcap-ros2-support>=0.6"]},
+    extras_require={
+        "test": ["pytest>=8", "pytest-xdist>=3.5", "hypothesis>=6.100", "pytest-cov>=7", "mcap-ros2-support>=0.6"]
+    },
     # `ros2 run swarm_ros <node>` finds the node scripts in lib/swarm_ros (setup.cfg) after colcon build.
     entry_points={
         "console_scripts": [
