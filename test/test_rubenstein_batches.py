@@ -32,7 +32,7 @@ pytestmark = pytest.mark.unit
 
 #: where most runs here stop (outcome timeout): past the start-up's 200 ticks, with robots joined and crossing strips;
 #: the square's whole run is some 5,000 ticks, which test_two_batches_give_the_in_process_run_to_its_end runs
-TICKS = 1200
+TICKS = 800
 
 
 def square(side: int) -> Shape:
@@ -70,8 +70,8 @@ def test_two_batches_give_the_in_process_run_to_its_end():
 def test_k_batches_give_the_in_process_star_while_robots_cross_strips(batches):
     shape, params = Settings(shape="star", algorithm="rubenstein", robots=150, seed=2).resolve()
     whole, split = RubensteinRun(shape, params), RubensteinRun(shape, params)
-    whole.run(2500)
-    strips = batched(split, batches, 2500)
+    whole.run(1500)
+    strips = batched(split, batches, 1500)
     assert strips.batches == batches and same(whole, split)
     assert (whole.robots.state == JOINED).sum() > 4  # robots left the pack and joined: some crossed strips
 
@@ -85,8 +85,8 @@ def test_world_shards_each_holding_its_columns_and_a_halo_give_the_in_process_ru
 
     params = RunParams(40, algorithm="rubenstein", seed=5, range_noise=0.04)
     whole = RubensteinRun(square(6), params)
-    whole.run(1200)
-    world = run_sharded(lambda: RubensteinRun(square(6), params), RubensteinBatch, shards, batches, 1200)
+    whole.run(TICKS)
+    world = run_sharded(lambda: RubensteinRun(square(6), params), RubensteinBatch, shards, batches, TICKS)
     owners = np.concatenate([w.own for w in world])
     assert np.array_equal(np.sort(owners), np.arange(40))
     for w in world:
