@@ -296,3 +296,37 @@ def test_only_a_key_holders_bytes_reach_a_parser_and_they_must_parse_with_the_ta
         f"{ROBOTS}: malformed CDR": 1,
         f"{msgs.STATUS}: unauthenticated": 1,
     }
+
+
+class _RosNode(_Node):
+    """The stub, with what a node class also uses: a logger, and subscriptions with event callbacks."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.log = _Log()
+
+    def get_logger(self) -> _Log:
+        return self.log
+
+    def create_subscription(self, msg_type, topic, callback, qos, raw=False, event_callbacks=None):
+        self.callbacks[topic] = callback
+        return object()
+
+
+def test_the_world_node_counts_a_key_holders_decisions_that_its_checks_refuse(monkeypatch):
+    """A batch's decisions sealed under the run's key, whose rows are not decision rows: the gate proves them,
+    the node's checks refuse them, and the world node counts them by topic and goes on (no tick is decided)."""
+    from swarm_ros.core.params import NODE_PARAMETERS, Settings
+    from swarm_ros.nodes.central.world import CentralWorldNode
+
+    monkeypatch.setenv(KEY_ENV, KEY.decode())
+    node = _RosNode("world")
+    own = {p.name: p.default for p in NODE_PARAMETERS["world"]}
+    world = CentralWorldNode(node, Settings(shape="star", algorithm="rubenstein", robots=150), own)
+    world.watch_batch("robot_batch_0")
+    topic = CentralTopics.of("rubenstein").decisions("robot_batch_0")
+    assert topic in node.callbacks
+    batch = _Node("robot_batch_0")
+    auth.Signer(batch, KEY).publisher(PointCloud2, topic, None).publish_rows(_rows(ROBOT_ROW, 2), 1)
+    node.callbacks[topic](batch.sent[0][1])
+    assert world.rejections.counts == {f"{topic}: point layout": 1}, world.rejections.counts
