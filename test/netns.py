@@ -5,9 +5,8 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import time
 
-import pytest
+from waiting import wait_for
 
 SUBNET = "10.231.{}.{}"
 
@@ -29,14 +28,11 @@ def _wait_until_up(*links: tuple[str, str], limit: float = 10.0) -> None:
     up; it usually takes milliseconds. Fast DDS lists a host's interfaces once, when a
     participant starts, so a node must not start before its interface is really up.
     """
-    deadline = time.monotonic() + limit
-    while True:
-        states = {
-            dev: json.loads(ip_in("-n", ns, "-j", "link", "show", "dev", dev).stdout or "[{}]")[0].get("operstate")
+
+    def up() -> bool:
+        return all(
+            json.loads(ip_in("-n", ns, "-j", "link", "show", "dev", dev).stdout or "[{}]")[0].get("operstate") == "UP"
             for ns, dev in links
-        }
-        if all(state == "UP" for state in states.values()):
-            return
-        if time.monotonic() > deadline:
-            pytest.fail(f"the veth pair did not come up within {limit:g} s: {states}")
-        time.sleep(0.05)
+        )
+
+    wait_for(up, limit, f"the veth pair {links} coming up")

@@ -12,7 +12,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -155,11 +154,14 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
             text=True,
             env=env,
         )
-        deadline = time.monotonic() + 60
         _, bagged = read_bag(ring_run / "bag")
         want = len(bagged[topics.metrics])
-        while time.monotonic() < deadline and (replay.poll() is None or len(metrics) < want):
+
+        def replayed() -> bool:
             executor.spin_once(timeout_sec=0.05)
+            return replay.poll() is not None and len(metrics) >= want
+
+        wait_for(replayed, 60, f"the replay's {want} metrics messages", poll=0)
         _, err = replay.communicate(timeout=30)
         assert replay.returncode == 0, err
     finally:

@@ -7,11 +7,11 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import psutil
 import pytest
+from waiting import wait_for
 
 from swarm_ros.app.results_file import read_results
 
@@ -119,12 +119,11 @@ def _started(config: Path, out: Path, env: dict | None = None) -> subprocess.Pop
 
 
 def _wait_for_rows(results: Path, proc: subprocess.Popen, n: int = 1, limit: float = 60) -> None:
-    deadline = time.monotonic() + limit
-    while time.monotonic() < deadline and proc.poll() is None:
-        if results.exists() and len(results.read_text(encoding="utf-8").splitlines()) > n:  # header + n rows
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"no {n} finished runs within {limit} s: {proc.poll()}")
+    def rows() -> bool:
+        assert proc.poll() is None, f"the experiment ended (exit {proc.returncode}) before {n} runs were written"
+        return results.exists() and len(results.read_text(encoding="utf-8").splitlines()) > n  # header + n rows
+
+    wait_for(rows, limit, f"{n} finished runs")
 
 
 def _workers(proc: subprocess.Popen) -> list[psutil.Process]:

@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 from graph_runs import command_args, processes_mentioning, run_env
 from recordings import Recording, rrd_verify
+from waiting import wait_for
 
 from swarm_ros.core import RunParams, Shape
 from swarm_ros.core.darr_niazi.engine import Simulation
@@ -72,8 +73,8 @@ def _wait_until_running(out: Path, launcher: subprocess.Popen, batches: int = 3,
     world has seen every batch's liveliness: a batch killed before that is noticed by the 5 s fallback, as
     designed (a CI run once killed one 0.2 s after tick 0, before its liveliness had matched)."""
     partial = out.parent / f"{out.name}.partial.rrd"
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+
+    def running() -> Path | None:
         if launcher.poll() is not None:
             raise AssertionError(f"the run ended (exit {launcher.returncode}) before the test saw it running")
         logs = list(out.parent.glob(f".{out.name}.logs-*"))
@@ -85,8 +86,9 @@ def _wait_until_running(out: Path, launcher: subprocess.Popen, batches: int = 3,
             and (logs[0] / "world.log").read_text().count(" is alive (liveliness)") >= batches
         ):
             return logs[0]
-        time.sleep(0.05)
-    raise AssertionError("the run never got going")
+        return None
+
+    return wait_for(running, timeout, "the run getting going")
 
 
 def _pid_of(node: str, logs: Path) -> int:
@@ -183,9 +185,8 @@ def test_a_stalled_robot_batch_is_dropped_and_cannot_corrupt_the_world_when_it_r
     victim = _pid_of("robot_batch_2", logs)
     os.kill(victim, signal.SIGSTOP)
     try:
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline and not _REMOVED.search((logs / "world.log").read_text()):
-            time.sleep(0.05)  # its liveliness back before LOSS_CONFIRM_S would make it a pause
+        # stopped until it is removed: its liveliness back before LOSS_CONFIRM_S would make it a pause
+        wait_for(lambda: _REMOVED.search((logs / "world.log").read_text()), 120, "the stopped batch's removal")
     finally:
         os.kill(victim, signal.SIGCONT)  # back, with decisions for ticks long gone and robots it no longer has
     _, err = launcher.communicate(timeout=240)

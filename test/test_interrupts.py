@@ -16,7 +16,16 @@ import time
 from pathlib import Path
 
 import pytest
-from graph_runs import alive, children_of, descendants_of, processes_mentioning, run_processes, shm_group, shm_left
+from graph_runs import (
+    alive,
+    children_of,
+    descendants_of,
+    processes_mentioning,
+    run_processes,
+    shm_group,
+    shm_left,
+    wait_ticks_recorded,
+)
 from recordings import Recording, rrd_verify
 from runs import small_config
 from waiting import wait_for
@@ -205,9 +214,7 @@ def test_ctrl_c_as_run_shuts_down_says_the_run_ended_and_keeps_it_whole(tmp_path
             stderr=subprocess.PIPE,
             text=True,
         )
-        deadline = time.monotonic() + 180
-        while not (out / "summary.json").exists() and time.monotonic() < deadline:
-            time.sleep(0.005)
+        wait_for(lambda: (out / "summary.json").exists(), 180, "the run's summary.json", poll=0.005)
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
         if proc.returncode != 0:
@@ -517,7 +524,6 @@ def test_ctrl_c_mid_rubenstein_run_keeps_an_interrupted_run_directory_and_its_re
     import signal
     import subprocess
     import sys
-    import time
 
     out = tmp_path / "run"
     proc = subprocess.Popen(
@@ -527,11 +533,7 @@ def test_ctrl_c_mid_rubenstein_run_keeps_an_interrupted_run_directory_and_its_re
         stderr=subprocess.PIPE,
         text=True,
     )
-    partial = tmp_path / "run.partial.rrd"
-    deadline = time.monotonic() + 120
-    while not partial.exists() and time.monotonic() < deadline:  # the run has started: its recording is open
-        time.sleep(0.05)
-    time.sleep(1.0)
+    wait_ticks_recorded(out, 100_000)  # ticks are in the recording (it opens with about 14 kB: the shape)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err

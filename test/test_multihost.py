@@ -25,6 +25,7 @@ import pytest
 from graph_runs import assert_same_run
 from netns import SUBNET, host_env, ip_in
 from runs import shape_file
+from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.app.param_file import params_yaml
@@ -112,17 +113,16 @@ def _run_on_hosts(tmp_path: Path, hosts: list[str], links: list[str], settings: 
                 log,
             )
         monitor = procs["monitor"][0]
-        deadline = time.monotonic() + timeout  # a node that failed ends the wait
-        while (
-            monitor.poll() is None
-            and time.monotonic() < deadline
-            and not any(p.poll() not in (None, 0) for p, _ in procs.values())
-        ):
-            time.sleep(0.1)
+
+        def ended() -> bool:  # the monitor's end, or a node that failed
+            return monitor.poll() is not None or any(p.poll() not in (None, 0) for p, _ in procs.values())
+
+        try:
+            wait_for(ended, timeout, "the monitor's end", poll=0.1)
+        except AssertionError as late:
+            raise AssertionError(f"{late}\n{_logs(tmp_path, procs, hosts, links)}") from None
         assert monitor.poll() == 0, _logs(tmp_path, procs, hosts, links)
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and any(p.poll() is None for p, _ in procs.values()):
-            time.sleep(0.1)
+        wait_for(lambda: all(p.poll() is not None for p, _ in procs.values()), 30, "every node's exit", poll=0.1)
     finally:
         for proc, log in procs.values():
             if proc.poll() is None:

@@ -20,7 +20,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -37,6 +36,7 @@ from graph_runs import (
     wait_saved,
 )
 from recordings import Recording
+from waiting import wait_for
 
 from swarm_ros.app import cli
 
@@ -132,10 +132,8 @@ def test_a_world_killed_more_often_than_the_bound_fails_the_run_and_claims_no_ou
 def test_a_monitor_killed_while_it_writes_the_run_directory_writes_it_again(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out)
-    deadline = time.monotonic() + 180
-    while not list(tmp_path.glob(".run.tmp-*")):  # write_run's temporary directory: the writing has begun
-        assert time.monotonic() < deadline, "the run directory was never written"
-        time.sleep(0.001)
+    # write_run's temporary directory: the writing has begun
+    wait_for(lambda: list(tmp_path.glob(".run.tmp-*")), 180, "the run directory's writing", poll=0.001)
     kill_node(out, "monitor")
     _, err = launcher.communicate(timeout=300)
     assert launcher.returncode == 0, err
@@ -150,10 +148,8 @@ def _restarting(out: Path, node: str) -> None:
     (importing); the monitor's once it has made its own bag, before it has copied its process before's into it
     and gone on from it (what a third process must then find and go on from)."""
     if node == "monitor":
-        deadline = time.monotonic() + 60
-        while len(list(out.parent.glob(f".{out.name}.bag-*"))) < 2:
-            assert time.monotonic() < deadline, "the restarted monitor never made its bag"
-            time.sleep(0.001)
+        bags = out.parent.glob
+        wait_for(lambda: len(list(bags(f".{out.name}.bag-*"))) >= 2, 60, "the restarted monitor's bag", poll=0.001)
 
 
 @pytest.mark.parametrize(

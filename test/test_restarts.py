@@ -73,14 +73,15 @@ def _launch(out: Path, *extra: str) -> subprocess.Popen:
 
 def _wait_for_tick_0(out: Path, timeout: float = 120) -> Path:
     """Wait until the world has sent tick 0; return the run's staged log directory."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+
+    def sent() -> Path | None:
         for logs in out.parent.glob(f".{out.name}.logs-*"):
             world = logs / "world.log"
             if world.exists() and ": tick 0" in world.read_text(errors="replace"):
                 return logs
-        time.sleep(0.05)
-    raise AssertionError("tick 0 never came")
+        return None
+
+    return wait_for(sent, timeout, "tick 0")
 
 
 def _handovers(batch: int, ticks: range) -> int:
@@ -180,9 +181,7 @@ def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference
     wait_saved(logs, 50)  # mid-run
     os.kill(pid, signal.SIGKILL)
     again = node_pid(out, "robot_batch_1", not_pid=pid)
-    deadline = time.monotonic() + 60
-    while "sending it its area" not in (logs / "world.log").read_text() and time.monotonic() < deadline:
-        time.sleep(0.05)
+    wait_for(lambda: "sending it its area" in (logs / "world.log").read_text(), 60, "the new process's area")
     wait_saved(logs, saved_tick(logs) + 20)  # the new process decides: the run has gone on with it
     os.kill(again, signal.SIGKILL)
     thread.join(240)
@@ -220,20 +219,16 @@ def test_a_killed_batch_leaves_no_shared_memory_of_the_run_behind(tmp_path):
         return set(found[0].read_text().split()) if found else set()
 
     wait_saved(_wait_for_tick_0(out), 20)  # mid-run
-    deadline = time.monotonic() + 60
-    # every node process (world, monitor, 3 batches) has its participant's segments, and the launcher lists them
-    while time.monotonic() < deadline and not (
-        len(nodes := run_processes(out)) == 5
-        and all(locks := [shm_locks(p) for p in nodes])
-        and set().union(*locks) <= listed()
-    ):
-        look()
-        time.sleep(0.1)
-    look()
+
+    def all_listed() -> bool:  # every node process (world, monitor, 3 batches) has its participant's segments,
+        look()  # and the launcher lists them
+        nodes = run_processes(out)
+        locks = [shm_locks(p) for p in nodes]
+        return len(nodes) == 5 and all(locks) and set().union(*locks) <= listed()
+
+    wait_for(all_listed, 60, "every node's shared memory in the launcher's list", poll=0.1)
     os.kill(victim, signal.SIGKILL)
-    while launcher.poll() is None:
-        look()
-        time.sleep(0.1)
+    wait_for(lambda: look() or launcher.poll() is not None, 240, "the run's end", poll=0.1)
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
     ports = {p for p in held if Path(p).name.startswith("fastrtps_port")}
@@ -260,8 +255,7 @@ def test_every_node_ends_within_moments_of_a_sigkilled_launcher(tmp_path):
     assert len(nodes) == 5
     launcher.kill()
     killed = time.monotonic()
-    while any(Path(f"/proc/{pid}").exists() and alive(pid) for pid in nodes) and time.monotonic() - killed < 10:
-        time.sleep(0.01)
+    wait_for(lambda: not any(Path(f"/proc/{p}").exists() and alive(p) for p in nodes), 10, "the nodes' exit", poll=0.01)
     took = time.monotonic() - killed
     launcher.communicate()
     print(f"all {len(nodes)} nodes gone {took:.2f} s after the launcher's SIGKILL")

@@ -20,6 +20,7 @@ from bad_inputs import listing, make_fixtures, split_assignments, starts_node, t
 from graph_runs import assert_same_run, processes_mentioning, run_env
 from recordings import Recording, rrd_verify
 from runs import shape_file
+from waiting import wait_for
 
 from swarm_ros.app.cli import main as cli_main
 from swarm_ros.app.processes import Child, DomainLock, stop
@@ -216,7 +217,7 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
         status = swarm_ros("topics", "--domain-id", domain, "--echo", "/swarm/status").stdout
         assert "value: 'running'" in status
         # a reader that joins at any moment hears the live state within a second or so (not only at start/end)
-        heard = _listen_volatile(int(domain), seconds=3.5)
+        heard = _listen_volatile(int(domain), statuses=4, maps=3)
         ticks = [int(v["tick"]) for v in heard["status"]]
         assert len(ticks) >= 3 and ticks == sorted(ticks) and ticks[-1] > ticks[0], ticks
         last = heard["status"][-1]
@@ -248,8 +249,9 @@ def test_topics_lists_and_echoes_a_live_run_and_ctrl_c_stops_every_process(tmp_p
     assert len(rec.events) == 1 and rec.events[0][0] == last and rec.events[0][1].startswith("interrupted at tick")
 
 
-def _listen_volatile(domain: int, seconds: float) -> dict:
-    """/swarm/status values and the number of /swarm/occupancy messages a VOLATILE reader hears in ``seconds``."""
+def _listen_volatile(domain: int, statuses: int, maps: int) -> dict:
+    """/swarm/status values and the number of /swarm/occupancy messages a VOLATILE reader hears from its first status
+    on, until it has heard ``statuses`` statuses and ``maps`` maps (or for 30 s: the caller's check then fails)."""
     code = f"""
 import json, time, rclpy
 from rclpy.context import Context
@@ -271,7 +273,7 @@ while time.monotonic() < end:
     ex.spin_once(timeout_sec=0.05)
     if start is None and heard["status"]:
         start = time.monotonic(); heard = {{"status": heard["status"][-1:], "occupancy": 0}}
-    if start is not None and time.monotonic() - start > {seconds}:
+    if len(heard["status"]) >= {statuses} and heard["occupancy"] >= {maps}:
         break
 print(json.dumps(heard))
 """
@@ -288,8 +290,7 @@ def test_stop_escalates_to_sigkill_for_a_process_that_ignores_int_and_term(tmp_p
     log = tmp_path / "stubborn.log"
     f = open(log, "wb")
     proc = subprocess.Popen([PY, "-c", code], stdout=f, start_new_session=True)
-    while b"ready" not in log.read_bytes():
-        time.sleep(0.05)
+    wait_for(lambda: b"ready" in log.read_bytes(), 60, "the stubborn process's start")
     start = time.monotonic()
     stop([Child("stubborn", proc, log, f)])
     assert proc.returncode == -signal.SIGKILL

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from netns import host_env
 from runs import cloud_rows, make_cloud
+from waiting import wait_for
 
 from swarm_ros.app import cli
 from swarm_ros.app.processes import DomainLock
@@ -223,7 +224,8 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
         node.create_subscription(PointCloud2, topics.robots, on_robots, msgs.CENTRAL_QOS)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        while run.poll() is None:
+
+        def forge() -> bool:  # one round of forgeries; then 50 ms of listening (and copying); true once the run ended
             bad = make_cloud(np.zeros(3, dtype=row), 10**6)
             bad.point_step = 13  # another layout
             pub.publish(bad)
@@ -238,6 +240,9 @@ def test_a_stranger_without_the_key_is_kept_out_by_real_batches_and_the_monitor(
             end = time.monotonic() + 0.05
             while time.monotonic() < end:
                 executor.spin_once(timeout_sec=0.01)
+            return run.poll() is not None
+
+        wait_for(forge, 300, "the run's end under forgeries", poll=0)
         _, err = run.communicate(timeout=120)
     finally:
         rclpy.shutdown(context=context)
