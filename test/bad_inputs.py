@@ -6,6 +6,8 @@ from __future__ import annotations
 import os
 import re
 import shlex
+import shutil
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +22,30 @@ def table() -> list[tuple[str, str, str]]:
     """(number, command, message) of every row."""
     rows = [ROW.match(line) for line in (ROOT / "docs" / "bad_input.md").read_text().splitlines()]
     return [(m.group(1), m.group(3), m.group(4)) for m in rows if m]
+
+
+def fixtures_for(command: str, source: Path, d: Path) -> None:
+    """Copy into ``d`` the entries of ``source`` (a directory :func:`make_fixtures` filled) that a row's ``command``
+    names, by name or by the name before its first dot (``--out left``: left.partial.rrd beside it), and the entries
+    those files name in turn (an experiment file's reference). A row's directory holds only what it needs (a whole
+    set in each, 134 times, was most of the files a session left to delete)."""
+    words = set(re.findall(r"[\w.-]+", command))
+    entries = {p.name: p for p in source.iterdir()}
+    wanted = {name for name in entries if name in words or name.split(".")[0] in words}
+    for name in list(wanted):
+        if entries[name].is_file() and not entries[name].is_symlink():
+            text = entries[name].read_bytes().decode("utf-8", "replace")
+            wanted |= {other for other in entries if other in text}
+    for name in wanted:
+        src, dst = entries[name], d / name
+        if src.is_symlink():
+            dst.symlink_to(os.readlink(src))
+        elif stat.S_ISFIFO(src.lstat().st_mode):
+            os.mkfifo(dst)
+        elif src.is_dir():
+            shutil.copytree(src, dst, symlinks=True)
+        else:
+            shutil.copy2(src, dst)
 
 
 def make_fixtures(d: Path) -> None:

@@ -8,8 +8,10 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+from pathlib import Path
 
 import pytest
+from bad_inputs import make_fixtures
 from isolation import children_refused
 from netns import SUBNET, _wait_until_up, ip_in
 from runs import disc_shape
@@ -58,6 +60,15 @@ def _a_unit_test_stays_in_its_process(request):
         yield
     if attempts:
         pytest.fail(f"a unit test {attempts[0]}: move it to a module marked process (pytest.ini)", pytrace=False)
+
+
+@pytest.fixture(scope="module")
+def bad_input_files(tmp_path_factory) -> Path:
+    """Every file docs/bad_input.md names, made once a module; each row copies those it names
+    (:func:`bad_inputs.fixtures_for`)."""
+    d = tmp_path_factory.mktemp("bad-input-files")
+    make_fixtures(d)
+    return d
 
 
 @pytest.fixture(scope="session")

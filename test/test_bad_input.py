@@ -8,7 +8,7 @@ import re
 import shlex
 
 import pytest
-from bad_inputs import ROOT, listing, make_fixtures, split_assignments, starts_node, table
+from bad_inputs import ROOT, fixtures_for, listing, split_assignments, starts_node, table
 
 from swarm_ros.app import cli
 
@@ -31,8 +31,8 @@ def test_the_usage_page_counts_the_rows_of_the_table():
 
 
 @pytest.mark.parametrize("number,command,message", CLI_ROWS, ids=[f"row{n}" for n, _, _ in CLI_ROWS])
-def test_bad_input_row(tmp_path, monkeypatch, capsys, number, command, message):
-    make_fixtures(tmp_path)
+def test_bad_input_row(tmp_path, bad_input_files, monkeypatch, capsys, number, command, message):
+    fixtures_for(command, bad_input_files, tmp_path)
     before = listing(tmp_path)
     words = shlex.split(command)
     for name, value in split_assignments(words).items():

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from bad_inputs import listing, make_fixtures, split_assignments, starts_node, table
+from bad_inputs import fixtures_for, listing, split_assignments, starts_node, table
 from graph_runs import assert_same_run, processes_mentioning, run_env
 from recordings import Recording, rrd_verify
 from runs import shape_file
@@ -301,10 +301,12 @@ NODE_ROWS = [row for row in table() if starts_node(row[1])]
 
 
 @pytest.mark.parametrize("number,command,message", NODE_ROWS, ids=[f"row{n}" for n, _, _ in NODE_ROWS])
-def test_a_nodes_bad_input_row_gets_one_line_exit_2_and_writes_nothing(tmp_path, number, command, message):
+def test_a_nodes_bad_input_row_gets_one_line_exit_2_and_writes_nothing(
+    tmp_path, bad_input_files, number, command, message
+):
     """The rows of docs/bad_input.md that start a node (``ros2 run swarm_ros <node>``: its module here, ros2cli need
     not be installed); test_bad_input.py runs the command line's rows in-process."""
-    make_fixtures(tmp_path)
+    fixtures_for(command, bad_input_files, tmp_path)
     before = listing(tmp_path)
     words = shlex.split(command)
     assigned = split_assignments(words)
