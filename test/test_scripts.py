@@ -4,6 +4,7 @@ shape generators' check mode, the study's bounds, the README's screenshot."""
 from __future__ import annotations
 
 import re
+import shutil
 import socket
 import subprocess
 import sys
@@ -322,3 +323,23 @@ def test_bench_run_times_the_readme_command_against_a_base_tree_and_checks_both_
     )
     assert done.returncode == 0, done.stdout + done.stderr
     assert re.search(r"^this/base\s+[\d.]+ \(", done.stdout, re.M) and "identical in every pair" in done.stdout
+
+
+def test_bench_suite_prints_pytests_own_count_and_seconds_and_keeps_the_log_of_a_run_that_failed():
+    """Two repeats of a small module, in this tree: pytest's count and seconds each, then the median. A run with
+    no test to run fails (pytest exits 5): exit 1, and its log kept where the script says. Bad input: one line."""
+    base = [sys.executable, str(SCRIPTS / "bench_suite.py")]
+    done = subprocess.run([*base, "--repeats", "2", "--", "test/test_errors.py", "-n", "0"], capture_output=True,
+                          text=True, timeout=300, cwd=SCRIPTS.parent)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    runs = re.findall(r"^run (\d): (\d+) passed, 0 failed, (\d+) s", done.stdout, re.M)
+    assert [r[0] for r in runs] == ["1", "2"] and all(int(r[1]) > 0 for r in runs), done.stdout
+    assert re.search(r"^median \d+ s \(\d+-\d+\)$", done.stdout, re.M), done.stdout
+    none = subprocess.run([*base, "--tier", "unit", "--", "test/test_scripts.py", "-n", "0"], capture_output=True,
+                          text=True, timeout=300, cwd=SCRIPTS.parent)  # fmt: skip
+    assert none.returncode == 1 and "run 1: 0 passed" in none.stdout, none.stdout + none.stderr
+    (kept,) = re.findall(r"the logs are in (\S+)", none.stderr)
+    assert "deselected" in (Path(kept) / "pytest-1.log").read_text()
+    shutil.rmtree(kept)  # the script's own temporary directory, kept for this check
+    bad = subprocess.run([*base, "--repeats", "0"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and bad.stderr.strip().splitlines()[-1].endswith("--repeats 0: at least 1"), bad.stderr
