@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import signal
 from pathlib import Path
 
 import pytest
@@ -24,7 +25,13 @@ KINDS = ("unit", "process")
 
 def pytest_configure(config):
     """Before any test process loads a kernel: drop the core's kernel caches older than its newest kernel
-    module (numba would run a cached caller with the code of a callee edited since: swarm_ros.core.kernels)."""
+    module (numba would run a cached caller with the code of a callee edited since: swarm_ros.core.kernels).
+
+    And Ctrl-C as a terminal gives it: a suite started in the background by a script (``pytest &`` in a shell
+    without job control, as a batch job may be) inherits SIGINT ignored, and so would every process a test starts
+    (Python keeps an ignored SIGINT ignored): the tests of Ctrl-C would see their commands never interrupted."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     if not hasattr(config, "workerinput"):  # the controller, before xdist starts its workers
         dropped = drop_stale()
         if dropped:
