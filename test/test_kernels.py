@@ -89,3 +89,17 @@ def test_drop_stale_removes_the_core_caches_written_before_the_last_change_to_a_
 def test_the_command_names_an_algorithm_it_does_not_know_in_one_line(capsys):
     assert kernels.main(["kilobots"]) == 2
     assert capsys.readouterr().err == "swarm_ros: no algorithm 'kilobots' (known: darr-niazi, rubenstein)\n"
+
+
+def test_count_compiles_counts_what_numba_compiles_in_this_process_from_then_on():
+    import numba
+
+    compiled = kernels.count_compiles()
+
+    @numba.njit
+    def plus_one(x):
+        return x + 1
+
+    assert compiled() == 0
+    assert plus_one(1) == 2 and compiled() == 1
+    assert plus_one(2) == 3 and compiled() == 1, "the same signature is not compiled again"

@@ -298,3 +298,22 @@ def test_the_launch_file_starts_the_rubenstein_algorithms_nodes_from_the_same_ex
     assert [own.get("region_cuts") for _, _, own in cut.plan] == [None, "0", "0", None]  # to the batches
     with pytest.raises(InputError, match=r"launch argument vision_radius:=1: vision_radius is a parameter of the "):
         _setup(tmp_path, shape="rectangle", algorithm="rubenstein", vision_radius="1")  # even at its default
+
+
+def test_a_domain_id_another_runs_lock_holds_is_passed_over(monkeypatch, tmp_path):
+    """Two runs on one machine, whose random first pick is the same id: the second takes the next one."""
+    import random
+    import tempfile
+
+    from swarm_ros.app.processes import DOMAIN_IDS, DomainLock
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # the lock files: swarm_ros-domains/<id>.lock
+    monkeypatch.setattr(random, "randrange", lambda n: 0)
+    first = DomainLock()
+    try:
+        second = DomainLock()
+        assert (first.domain_id, second.domain_id) == (DOMAIN_IDS[0], DOMAIN_IDS[1])
+        second.close()
+    finally:
+        first.close()
+    assert DomainLock().domain_id == DOMAIN_IDS[0], "a closed lock is free again"
