@@ -488,7 +488,7 @@ def test_a_world_checkpoint_round_trips_and_the_resumed_run_goes_on_as_the_unbro
 def test_a_world_shards_checkpoint_holds_its_robots_and_another_shards_is_refused(tmp_path):
     """A world shard saves the robots it holds beside the run; resumed, it holds them again and its exchanges go on
     from the saved tick. Another shard's checkpoint (its batches and robots) fails in one line."""
-    from swarm_ros.core.central_shards import CentralShard
+    from swarm_ros.core.central_shards import CentralShard, take
     from swarm_ros.core.errors import RunFailed
     from swarm_ros.protocol import central_checkpoint as checkpoint
     from swarm_ros.protocol.central_shard_world import ShardLockstep
@@ -518,6 +518,19 @@ def test_a_world_shards_checkpoint_holds_its_robots_and_another_shards_is_refuse
     again.port = types.SimpleNamespace(**{f"send_{w}": lambda *_, w=w: sent.append(w) for w in ("border", "rows")})
     assert again.decisions(3, 301, none) is False and sent == ["border"]  # with its peer now, not settled yet
     assert again.decisions(2, 301, none) is False and again.decided == {}  # again (history and anew): a repeat
+    # its peer's border and shared rows in, the shard's run is at tick 301 while it waits for its peer's rows to close
+    # it. Decisions for tick 302 were not asked for yet: the process before's (up to its next save) are no fault, and
+    # none is kept
+    again.port.send_shared = lambda *_: sent.append("shared")
+    none_ids = np.zeros(0, dtype=np.int64)
+    again.exchange.border(0, 301, none_ids, take(again.exchange.decided_, slice(0, 0)))
+    again.exchange.shared(0, 301, none_ids, take(again.run.robots, none_ids), np.zeros(3, np.int64), none_ids)
+    assert again.run.tick == 301 and again.exchange.tick == 301 and sent == ["border", "shared", "rows"]
+    assert again.decisions(2, 302, none) is False and again.decisions(3, 400, none) is False and again.decided == {}
+    again.before = -1  # a process that was not restarted: decisions it did not ask for are a fault
+    with pytest.raises(Rejected, match="decisions for tick 302; the shard is settling tick 301"):
+        again.decisions(2, 302, none)
+    assert again.decided == {}
     other = ShardLockstep(CentralShard(RubensteinRun(square(6), params), strips, 0, 2), RubensteinWire, port=None)
     with pytest.raises(RunFailed, match="not of this shard"):
         other.resume(saved.hosts, saved.cuts, saved.kept)

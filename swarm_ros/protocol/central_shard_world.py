@@ -107,9 +107,19 @@ class ShardLockstep(CentralLockstep):
 
     def decisions(self, k: int, tick: int, rows: np.ndarray) -> bool:
         """As :meth:`CentralLockstep.decisions`; those of a tick its batches' decisions went to the peers for
-        already are a repeat (a restarted process's batch answers twice: from its topic's history, and anew)."""
+        already are a repeat (a restarted process's batch answers twice: from its topic's history, and anew). Those of
+        a later tick than the one it settles with its peers were not asked for yet (its run's tick moves on as it
+        settles, before the peers close the tick): the process before's, up to its next save, or a fault.
+
+        Raises:
+            Rejected: as :meth:`CentralLockstep.decisions`, and decisions of a tick not asked for yet.
+        """
         if tick == self.exchange.tick and self.exchange.phase != DECIDING:
             return False
+        if self.started and tick > self.exchange.tick:
+            if tick <= self.before:
+                return False  # sent to the process before this one, which had got further
+            raise Rejected("stale tick", f"decisions for tick {tick}; the shard is settling tick {self.exchange.tick}")
         return super().decisions(k, tick, rows)
 
     # -- batches removed (lost for good) --------------------------------------------------------------------
