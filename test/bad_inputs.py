@@ -28,7 +28,7 @@ def fixtures_for(command: str, source: Path, d: Path) -> None:
     """Copy into ``d`` the entries of ``source`` (a directory :func:`make_fixtures` filled) that a row's ``command``
     names, by name or by the name before its first dot (``--out left``: left.partial.rrd beside it), and the entries
     those files name in turn (an experiment file's reference). A row's directory holds only what it needs (a whole
-    set in each, 134 times, was most of the files a session left to delete)."""
+    set in each, for every row, was most of the files a session left to delete)."""
     words = set(re.findall(r"[\w.-]+", command))
     entries = {p.name: p for p in source.iterdir()}
     wanted = {name for name in entries if name in words or name.split(".")[0] in words}

@@ -122,8 +122,8 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
     env = {**run_env(), **dds_defaults()}
     saved = {k: os.environ.get(k) for k in env if k in dds_defaults()}
     os.environ.update(dds_defaults())  # this process's participant discovers as the replay's does
-    # (if this process made a participant before, Fast DDS kept its first profile: announcing every 3 s,
-    # so the replay waits 4 s for the listener to be matched before its first message)
+    # (if this process made a participant before, Fast DDS kept its first profile: announcing every 3 s; the replay
+    # waits for the listener's two subscriptions to be matched before its first message)
     context = Context()
     rclpy.init(args=[], context=context, domain_id=domain)
     try:
@@ -145,8 +145,10 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
                 str(domain),
                 "--rate",
                 "0.5",
+                "--wait-for-subscribers",
+                "2",  # this listener's two topics: matched, however long discovery takes under load
                 "--delay",
-                "4",
+                "0",
                 "--quiet",
             ],
             stdout=subprocess.PIPE,
@@ -161,7 +163,12 @@ def test_replay_publishes_the_bag_again_with_its_types_and_qos(ring_run, tmp_pat
             executor.spin_once(timeout_sec=0.05)
             return replay.poll() is not None and len(metrics) >= want
 
-        wait_for(replayed, 60, f"the replay's {want} metrics messages", poll=0)
+        try:
+            wait_for(replayed, 60, f"the replay's {want} metrics messages", poll=0)
+        except AssertionError as exc:
+            state = "ended" if replay.poll() is not None else "still ran"
+            replay.kill()
+            raise AssertionError(f"{exc}: {len(metrics)} heard, the replay {state}") from None
         _, err = replay.communicate(timeout=30)
         assert replay.returncode == 0, err
     finally:

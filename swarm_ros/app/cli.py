@@ -39,6 +39,7 @@ _OWN = {
         Param("jobs", 1, "worker processes", low=1),
         Param("rate", 1.0, "replay speed", low=0.0, low_open=True),
         Param("delay", 1.0, "seconds before replaying", low=0.0),
+        Param("wait_for_subscribers", 0, "subscriptions to wait for", low=0),
         Param("start_offset", 0.0, "seconds into the bag", low=0.0),
         Param("count", 1, "messages to print", low=1),
         Param("seconds", 1.0, "seconds to listen", low=0.0, low_open=True),
@@ -203,6 +204,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=1.0,
         help="seconds between creating the publishers and the first message (default: 1), "
         "for subscribers to be matched",
+    )
+    replay.add_argument(
+        "--wait-for-subscribers",
+        type=_checked(_OWN["wait_for_subscribers"]),
+        default=0,
+        metavar="N",
+        help="first wait until N subscriptions are matched, over all its topics (a reader of two topics counts "
+        "two; default: 0), then --delay",
     )
     replay.add_argument(
         "--start-offset",

@@ -313,6 +313,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         0 if domain is None else domain,
         rate=args.rate,
         delay=args.delay,
+        subscribers=args.wait_for_subscribers,
         quiet=args.quiet,
         start_offset=args.start_offset,
         loop=args.loop,

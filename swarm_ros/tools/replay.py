@@ -5,7 +5,8 @@ its topic, with the message type and the QoS its publisher offered (from metadat
 paced by the recorded receive times divided by ``rate``. RViz, Foxglove, ``ros2 topic``
 or ``swarm-ros topics`` on the same ROS domain then see the past run as if it were live.
 Like ``ros2 bag play``, it waits ``delay`` seconds after creating the publishers, so that
-subscribers started beforehand are matched before the first message, starts ``start_offset``
+subscribers started beforehand are matched before the first message (and first, until its publishers
+have ``subscribers`` matched subscriptions between them: a condition, where a delay is a guess), starts ``start_offset``
 seconds into the bag, and with ``loop`` plays it again and again until Ctrl-C. From an offset,
 the last message before it of each latched topic (transient local, depth 1: the shape and the
 occupancy) is published first, as a reader that joined a live run then would have it.
@@ -22,6 +23,7 @@ from swarm_ros.ros.graph import message_class
 from swarm_ros.ros.runtime import tool_node
 
 _ACK_WAIT_S = 2.0  # seconds to let readers acknowledge the last messages before exiting
+_MATCH_POLL_S = 0.02  # how often it looks for the subscriptions it waits for
 
 
 class ReplayError(InputError):
@@ -61,6 +63,7 @@ def replay(
     quiet: bool = False,
     start_offset: float = 0.0,
     loop: bool = False,
+    subscribers: int = 0,
 ) -> int:
     """Publish the bag's messages on ``domain_id``; return an exit code (0, or 130 if interrupted).
 
@@ -75,14 +78,15 @@ def replay(
         length = (reader.end_time - reader.start_time) / 1e9
         if start_offset > length:
             raise ReplayError(f"--start-offset {start_offset:g} is past the bag's end (it lasts {length:.3f} s)")
-        return _publish(reader, classes, domain_id, rate, delay, quiet, int(start_offset * 1e9), loop)
+        return _publish(reader, classes, domain_id, rate, (subscribers, delay), quiet, int(start_offset * 1e9), loop)
     finally:
         reader.close()
 
 
 def _publish(
-    reader, classes: dict, domain_id: int, rate: float, delay: float, quiet: bool, offset: int, loop: bool
+    reader, classes: dict, domain_id: int, rate: float, wait: tuple[int, float], quiet: bool, offset: int, loop: bool
 ) -> int:
+    """Publish the bag (``wait``: the subscriptions every topic must have matched, then the seconds of delay)."""
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from tqdm import tqdm
 
@@ -105,7 +109,13 @@ def _publish(
                 file=sys.stderr,
                 flush=True,
             )
-        time.sleep(delay)
+        subscribers, delay = wait
+        try:
+            while sum(pub.get_subscription_count() for pub in pubs.values()) < subscribers:
+                time.sleep(_MATCH_POLL_S)
+            time.sleep(delay)
+        except KeyboardInterrupt:
+            return 130
         first = reader.start_time + offset
         with tqdm(
             total=None if loop else reader.message_count,
