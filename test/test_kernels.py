@@ -32,7 +32,9 @@ def _at(path, seconds):
     os.utime(path, (seconds, seconds))
 
 
-def test_indexes_newer_than_their_sources_mean_filled(core):
+def test_indexes_newer_than_their_sources_without_a_stamp_do_not_mean_filled(core):
+    """A process that compiled some kernels on first use leaves their indexes, newer than every module, beside a
+    cache that is only partly filled: only compile_kernels' stamp says it is filled."""
     for index in (
         core / "__pycache__" / "rng.draw-1.py311.nbi",
         core / "darr_niazi/__pycache__/engine.tick-2.py311.nbi",
@@ -41,9 +43,6 @@ def test_indexes_newer_than_their_sources_mean_filled(core):
         _at(index, 2000)
     _at(core / "rng.py", 1000)
     _at(core / "darr_niazi" / "engine.py", 1000)
-    assert kernels.kernels_cached("darr-niazi")
-    assert not kernels.kernels_cached(), "the rubenstein algorithm's are not"
-    _at(core / "rng.py", 3000)  # edited: its inlined kernels' index is never written again
     assert not kernels.kernels_cached("darr-niazi")
 
 

@@ -13,10 +13,12 @@ them. The cache travels with the package: setup.py installs ``__pycache__``'s ke
 sources, and numba keys a cached kernel by its source's contents, so a colcon or pip install made after
 ``scripts/setup.sh`` loads what setup compiled.
 
-:func:`kernels_cached` loads neither numba nor the kernels: it only looks at files. A kernel
-that is only ever inlined into others (``inline="always"``) is not saved again when its module
-changes, so its index can stay older than its source for good: :func:`compile_kernels` leaves a
-stamp file per algorithm, and a stamp newer than every kernel module of the algorithm says its cache is filled.
+:func:`kernels_cached` loads neither numba nor the kernels: it only looks at files. :func:`compile_kernels`
+leaves a stamp file per algorithm, and only a stamp newer than every kernel module of the algorithm says its cache
+is filled. numba's own index files cannot say it: a kernel that is only ever inlined into others
+(``inline="always"``) is not saved again when its module changes, so its index can stay older than its source for
+good; and a process that compiled some kernels on first use (``ros2 launch`` resolving a rubenstein run's pack
+compiles three) leaves indexes beside a cache that is only partly filled.
 
 numba keys a kernel's cache by its own module's source only, yet links into it the code of the
 kernels it calls: after an edit to ``rules.py`` the cached ``run_kernel`` (``tick_kernel.py``) would
@@ -70,8 +72,8 @@ def _cached(suffix: str) -> list[Path]:
 
 def kernels_cached(algorithm: str | None = None) -> bool:
     """Whether ``algorithm``'s cache (or every algorithm's) is filled: :func:`compile_kernels`' stamp is newer than
-    every module of it with a cached kernel, or each such module has an index in numba's cache newer than its
-    source.
+    every module of it with a cached kernel. (A read-only install shipped without the stamp answers False each
+    time: the commands then run :func:`compile_kernels`, which loads what numba cached where it could write.)
 
     Answers True when the cache is somewhere this function does not look
     (``NUMBA_CACHE_DIR`` set): it never claims work it cannot see; and for an algorithm with no ``compile`` hook
@@ -84,18 +86,10 @@ def kernels_cached(algorithm: str | None = None) -> bool:
     if not algorithm_of(algorithm).compile:  # no kernels of its own to compile
         return True
     try:
-        sources = _kernel_modules(algorithm)
         stamp = _CACHE / _STAMP.format(algorithm)
-        if stamp.exists() and stamp.stat().st_mtime >= max(p.stat().st_mtime for p in sources):
-            return True
-        indexes = {p.name: p.stat().st_mtime for p in _cached("nbi")}
-        for source in sources:
-            changed = source.stat().st_mtime
-            if not any(name.startswith(f"{source.stem}.") and at >= changed for name, at in indexes.items()):
-                return False
-    except OSError:
+        return stamp.stat().st_mtime >= max(p.stat().st_mtime for p in _kernel_modules(algorithm))
+    except OSError:  # no stamp
         return False
-    return True
 
 
 def drop_stale() -> int:
@@ -151,7 +145,7 @@ def compile_kernels(algorithm: str | None = None) -> None:
         try:
             (_CACHE / _STAMP.format(name)).touch()
         except OSError:
-            pass  # a read-only install: the indexes alone answer kernels_cached()
+            pass  # a read-only install: kernels_cached() answers False, and the next command loads what it cached
 
 
 def main(argv: list[str] | None = None) -> int:
