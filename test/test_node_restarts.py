@@ -4,6 +4,7 @@ byte-identical to the unfaulted run's: metrics.csv, final_state.csv and the outc
 each in the middle, the monitor while it writes the run directory, and each during its restart (killed again). Past
 the restart bound the command fails (the run so far is written, as interrupted). The kills in the middle run with the
 robots every 6th tick (``--record-every 6``, as large swarms run by default); the others with the robots every tick.
+Kills at moments that do not overlap share a run: the world's, then the monitor's.
 
 A world's checkpoint of tick 0 or one mid-run, restored, goes on as the unbroken run on plain code
 (test_study_central); the rubenstein algorithm's world and monitor are killed at their own moments, the monitor's
@@ -23,10 +24,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from bagcheck import assert_bag_holds_run
 from graph_runs import (
     STAR_SHORT,
-    assert_identical_run,
     finish_restarted_run,
     kill_node,
     node_pid,
@@ -75,43 +74,52 @@ def _final_tick(reference: Path) -> int:
     return (reference / "metrics.csv").read_text().count("\n") - 2  # a header, then one line per tick from 0
 
 
-# -- the world ------------------------------------------------------------------------------------------
-def test_a_world_killed_before_tick_0_starts_again_and_the_run_is_identical(reference, tmp_path):
+# -- the world and the monitor ----------------------------------------------------------------------------
+def test_a_world_killed_before_tick_0_and_a_monitor_killed_while_it_writes_the_run_directory_come_back(
+    reference, tmp_path
+):
+    """The world as soon as its process exists (still importing) starts again; the monitor killed once the writing
+    of the run directory has begun (write_run's temporary directory) writes it again, whole."""
     out = tmp_path / "run"
-    launcher = _launch(out, "--no-recording")
-    kill_node(out, "world")  # seen as soon as it exists: still importing
-    summary = finish_restarted_run(launcher, reference, out, ["world"])
+    launcher = _launch(out)
+    kill_node(out, "world")
+    wait_for(lambda: list(tmp_path.glob(".run.tmp-*")), 180, "the run directory's writing", poll=0.001)
+    kill_node(out, "monitor")
+    summary = finish_restarted_run(launcher, reference, out, ["world", "monitor"])
     assert summary["restarts"][0]["tick"] == 0
+    _recording_whole(out)
+    assert not list(tmp_path.glob(".run.*")), "nothing of the run left beside it"
 
 
-@pytest.mark.parametrize(
-    ("node", "went_on", "logged"),
-    [
-        ("world", "a new world process went on from its checkpoint", "restarted: on from the checkpoint of tick"),
-        ("monitor", "a new monitor process went on from its bag", "went on from tick"),
-    ],
-)
-def test_a_node_killed_mid_run_goes_on_and_the_run_is_identical_and_whole(reference, tmp_path, node, went_on, logged):
-    """The world from its checkpoint, the monitor from its bag; the recording shows the restart at its tick.
+def test_a_world_then_a_monitor_killed_mid_run_go_on_and_the_run_is_identical_and_whole(reference, tmp_path):
+    """The world from its checkpoint, then the monitor from its bag; the recording shows each restart at its tick.
     With ``--record-every 6`` the world sends its tally every tick and every robot's row every 6th: a new world
     sends again, from its checkpoint, the tallies and rows the monitor has not confirmed; a new monitor counts
     the ticks of its bag from their tallies and its view from their rows. (Every other kill here runs with
     the robots every tick.)"""
     out = tmp_path / "run"
     launcher = _launch(out, "--record-every", "6")
-    wait_saved(staged_logs(out), 300)
-    kill_node(out, node)
-    summary = finish_restarted_run(launcher, reference, out, [node])
-    # at the tick it went on from: the world's checkpoint's (tick 0 here: it saves every 1,000 ticks), the last the
+    logs = staged_logs(out)
+    wait_saved(logs, 300)
+    kill_node(out, "world")
+    wait_saved(logs, 600)  # the new world went on past what the monitor held when the world was killed
+    kill_node(out, "monitor")
+    summary = finish_restarted_run(launcher, reference, out, ["world", "monitor"])
+    # at the tick each went on from: the world's checkpoint's (tick 0 here: it saves every 1,000 ticks), the last the
     # monitor's bag held
-    tick = summary["restarts"][0]["tick"]
-    assert (0 <= tick if node == "world" else 0 < tick) and tick < _final_tick(reference)
+    ticks = {r["node"]: r["tick"] for r in summary["restarts"]}
+    assert 0 <= ticks["world"] < 300 <= ticks["monitor"] < _final_tick(reference), ticks
     assert summary["bag_robots_every"] == summary["recording_robots_every"] == 6
     rec = _recording_whole(out, every=6)
-    assert [e for e in rec.events if e[1].startswith(f"{node} restarted")] == [
-        (tick, f"{node} restarted at tick {tick}: {went_on}")
-    ]
-    assert logged in (out / "logs" / f"{node}.log").read_text()
+    for node, went_on, logged in (
+        ("world", "a new world process went on from its checkpoint", "restarted: on from the checkpoint of tick"),
+        ("monitor", "a new monitor process went on from its bag", "went on from tick"),
+    ):
+        tick = ticks[node]
+        assert [e for e in rec.events if e[1].startswith(f"{node} restarted")] == [
+            (tick, f"{node} restarted at tick {tick}: {went_on}")
+        ]
+        assert logged in (out / "logs" / f"{node}.log").read_text()
 
 
 def test_a_world_killed_more_often_than_the_bound_fails_the_run_and_claims_no_outcome(reference, tmp_path):
@@ -128,21 +136,6 @@ def test_a_world_killed_more_often_than_the_bound_fails_the_run_and_claims_no_ou
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
-# -- the monitor ----------------------------------------------------------------------------------------
-def test_a_monitor_killed_while_it_writes_the_run_directory_writes_it_again(reference, tmp_path):
-    out = tmp_path / "run"
-    launcher = _launch(out)
-    # write_run's temporary directory: the writing has begun
-    wait_for(lambda: list(tmp_path.glob(".run.tmp-*")), 180, "the run directory's writing", poll=0.001)
-    kill_node(out, "monitor")
-    _, err = launcher.communicate(timeout=300)
-    assert launcher.returncode == 0, err
-    assert_identical_run(reference, out)
-    assert_bag_holds_run(out)
-    _recording_whole(out)
-    assert not list(tmp_path.glob(".run.*")), "nothing of the run left beside it"
-
-
 def _restarting(out: Path, node: str) -> None:
     """Wait for the moment a restarted ``node`` process is killed again: the world's as soon as it exists
     (importing); the monitor's once it has made its own bag, before it has copied its process before's into it
@@ -152,18 +145,18 @@ def _restarting(out: Path, node: str) -> None:
         wait_for(lambda: len(list(bags(f".{out.name}.bag-*"))) >= 2, 60, "the restarted monitor's bag", poll=0.001)
 
 
-@pytest.mark.parametrize(
-    ("node", "went_on"),
-    [("world", "restarted: on from the checkpoint of tick"), ("monitor", "went on from tick")],
-)
-def test_a_node_killed_again_while_it_restarts_comes_back_twice(reference, tmp_path, node, went_on):
+def test_a_world_then_a_monitor_killed_again_while_they_restart_each_come_back_twice(reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch(out, "--no-recording")
-    wait_saved(staged_logs(out), 500)
-    first = kill_node(out, node)
-    second = node_pid(out, node, not_pid=first)
-    _restarting(out, node)
-    os.kill(second, signal.SIGKILL)
-    finish_restarted_run(launcher, reference, out, [node, node])
-    # the moment was the one meant: the second process never went on, the third did
-    assert (out / "logs" / f"{node}.log").read_text().count(went_on) == 1
+    logs = staged_logs(out)
+    for node, tick in (("world", 300), ("monitor", 600)):
+        wait_saved(logs, tick)
+        first = kill_node(out, node)
+        second = node_pid(out, node, not_pid=first)
+        _restarting(out, node)
+        os.kill(second, signal.SIGKILL)
+        node_pid(out, node, not_pid=second)  # the third process, which goes on
+    finish_restarted_run(launcher, reference, out, ["world", "world", "monitor", "monitor"])
+    # the moments were the ones meant: the second process of each never went on, the third did
+    for node, went_on in (("world", "restarted: on from the checkpoint of tick"), ("monitor", "went on from tick")):
+        assert (out / "logs" / f"{node}.log").read_text().count(went_on) == 1
