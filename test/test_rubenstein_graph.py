@@ -200,50 +200,51 @@ def saved_tick(checkpoint: Path) -> int:
         return -1
 
 
-@pytest.mark.parametrize("moment", ["starting", "mid-run"])
-def test_a_world_killed_goes_on_from_its_checkpoint_and_the_run_is_the_same(square, reference, tmp_path, moment):
-    """The restarted world takes the last checkpoint (saved every 1,000 ticks, and at tick 0 before anything of it
-    goes out; killed before that, it starts afresh), the batches decide the ticks after it again, the monitor
-    drops the metrics it already holds: the run directory is simulate's, and its bag holds the run."""
-    out = tmp_path / "run"
-    launcher = _launch(square, out, 2)
-    checkpoint = staged_logs(out) / "world.checkpoint"
-    if moment == "mid-run":
-        wait_for(lambda: saved_tick(checkpoint) >= 1000, 120, "the checkpoint of tick 1000", poll=0.01)
-    os.kill(node_pid(out, "world", timeout=30), signal.SIGKILL)  # "starting": as soon as it is there
-    _, err = launcher.communicate(timeout=300)
-    assert launcher.returncode == 0, err.decode()
-    summary = assert_same_run(reference, out)
-    assert [r["node"] for r in summary["restarts"]] == ["world"]
-    said = (out / "logs" / "world.log").read_text()
-    assert "restarted: on from the checkpoint of tick" in said or "restarted before tick 0 went out" in said
-    assert "dropped" not in said, said  # the batches' decisions of settled ticks, again from their histories
-    assert_bag_holds_run(out)
-    assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint outlived the run"
-    assert not processes_mentioning(str(out)), "a process outlived the run"
-
-
-@pytest.mark.parametrize("moment", ["starting", "mid-run", "writing"])
-def test_a_monitor_killed_goes_on_from_its_bag_and_the_run_is_the_same(square, reference, tmp_path, moment):
-    """The restarted monitor reads back the bag its process before left and takes the records since from the topics'
-    histories (the world never runs past what they keep; "writing": the world has ended and exited, the bag is all
-    there is): the run directory is simulate's, its bag holds the run once (robots by tick), and its recording is
-    whole."""
-    out = tmp_path / "run"
-    launcher = _launch(square, out, 2)
+def _kill_at(out: Path, node: str, moment: str) -> None:
+    """SIGKILL ``node`` of the run into ``out`` at ``moment``: "starting" (as soon as its process is there),
+    "mid-run" (past the world's checkpoint of tick 1000), or "writing" (the monitor: the run directory's temporary
+    folder is there)."""
     if moment == "mid-run":
         wait_rubenstein_saved(out, 1000)
-    if moment == "writing":  # the run directory's temporary folder is there: the monitor writes it
-        wait_for(lambda: any(tmp_path.glob(".run.tmp-*")), 240, "the monitor writing the run", poll=0.002)
-    os.kill(node_pid(out, "monitor", timeout=30), signal.SIGKILL)
+    if moment == "writing":
+        wait_for(lambda: any(out.parent.glob(".run.tmp-*")), 240, "the monitor writing the run", poll=0.002)
+    os.kill(node_pid(out, node, timeout=30), signal.SIGKILL)
+
+
+@pytest.mark.parametrize(
+    "kills",
+    [
+        (("world", "starting"), ("monitor", "writing")),
+        (("monitor", "starting"), ("world", "mid-run")),
+        (("monitor", "mid-run"),),
+    ],
+    ids=["world starting, monitor writing", "monitor starting, world mid-run", "monitor mid-run"],
+)
+def test_a_world_and_a_monitor_killed_go_on_and_the_run_is_the_same(square, reference, tmp_path, kills):
+    """The restarted world takes the last checkpoint (saved every 1,000 ticks, and at tick 0 before anything of it
+    goes out; killed before that, it starts afresh), the batches decide the ticks after it again, the monitor
+    drops the metrics it already holds. The restarted monitor reads back the bag its process before left and takes
+    the records since from the topics' histories (the world never runs past what they keep; "writing": the world has
+    ended and exited, the bag is all there is). The run directory is simulate's, its bag holds the run once (robots
+    by tick), and its recording is whole. Kills at moments that do not overlap share a run."""
+    out = tmp_path / "run"
+    launcher = _launch(square, out, 2)
+    for node, moment in kills:
+        _kill_at(out, node, moment)
     _, err = launcher.communicate(timeout=300)
     assert launcher.returncode == 0, err.decode()
     summary = assert_same_run(reference, out)
-    assert [r["node"] for r in summary["restarts"]] == ["monitor"]
-    said = (out / "logs" / "monitor.log").read_text()
-    [resumed_at] = re.findall(r"monitor restarted \(incarnation 1\): went on from tick (-?\d+)", said)
-    assert int(resumed_at) > 0 if moment == "mid-run" else int(resumed_at) >= -1, said
+    assert [r["node"] for r in summary["restarts"]] == [node for node, _ in kills]
+    for node, moment in kills:
+        said = (out / "logs" / f"{node}.log").read_text()
+        if node == "world":
+            assert "restarted: on from the checkpoint of tick" in said or "restarted before tick 0 went out" in said
+            assert "dropped" not in said, said  # the batches' decisions of settled ticks, again from their histories
+        else:
+            [resumed_at] = re.findall(r"monitor restarted \(incarnation 1\): went on from tick (-?\d+)", said)
+            assert int(resumed_at) > 0 if moment == "mid-run" else int(resumed_at) >= -1, said
     assert_bag_holds_run(out)
     assert (out / "recording.rrd").stat().st_size > 0
-    assert not list(tmp_path.glob(".run.*")), "a folder of the killed monitor outlived the run"
+    assert not list((out / "logs").glob("world.checkpoint*")), "the checkpoint outlived the run"
+    assert not list(tmp_path.glob(".run.*")), "a folder of a killed node outlived the run"
     assert not processes_mentioning(str(out)), "a process outlived the run"
