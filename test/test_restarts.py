@@ -106,23 +106,12 @@ def _world_log(out: Path) -> str:
     return (out / "logs" / "world.log").read_text()
 
 
-def test_a_batch_killed_before_tick_0_is_restarted_and_the_run_is_identical(reference, tmp_path):
-    out = tmp_path / "run"
-    launcher = _launch(out, "--no-recording")
-    victim = node_pid(out, "robot_batch_1")  # seen as soon as it exists: still importing, long before tick 0
-    os.kill(victim, signal.SIGKILL)
-    _, err = launcher.communicate(timeout=240)
-    assert launcher.returncode == 0, err
-    assert "robot_batch_1 was killed by SIGKILL; restarted (1 of 3)" in err and "[INFO]" not in err
-    summary = assert_identical_run(reference, out)
-    assert summary["restarts"] == [{"tick": 0, "node": "robot_batch_1"}]
-    assert "robot_batch_1 is back (restart 1) at tick 0" in _world_log(out)
-    assert not processes_mentioning(str(out)), "a process outlived the run"
-
-
-def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_identical(reference, tmp_path):
+def test_a_batch_killed_before_tick_0_and_another_mid_run_are_restarted_and_the_run_is_identical(reference, tmp_path):
+    """Batch 1 as soon as its process exists (still importing, long before tick 0) starts again; batch 2 killed
+    mid-run starts again from the world's snapshot of its area."""
     out = tmp_path / "run"
     launcher = _launch(out)
+    os.kill(node_pid(out, "robot_batch_1"), signal.SIGKILL)
     # killed once the world has saved tick 81: robots cross its strip's edges at every tick from 80 to 84 (ticks
     # 77-79 have none, and a kill that once landed there left the test nothing to check)
     wait_saved(staged_logs(out), 81)
@@ -130,8 +119,11 @@ def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_iden
     killed = time.time()
     _, err = launcher.communicate(timeout=240)
     assert launcher.returncode == 0, err
+    assert "robot_batch_1 was killed by SIGKILL; restarted (1 of 3)" in err and "[INFO]" not in err
     summary = assert_identical_run(reference, out)
-    [restart] = summary["restarts"]
+    early, restart = summary["restarts"]
+    assert early == {"tick": 0, "node": "robot_batch_1"}
+    assert "robot_batch_1 is back (restart 1) at tick 0" in _world_log(out)
     assert restart["node"] == "robot_batch_2" and 0 < restart["tick"] < summary["max_ticks"]
     back = re.search(
         r"\[WARN\] \[(\d+\.\d+)\] \[world\]: robot_batch_2 is back \(restart 1\) at tick (\d+); "
@@ -149,6 +141,7 @@ def test_a_batch_killed_mid_run_is_restarted_from_a_snapshot_and_the_run_is_iden
     events = Recording(out / "recording.rrd").events
     at = int(back.group(2))
     assert (at, f"robot_batch_2 restarted at tick {at}: a new process took over its robots") in events
+    assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
 def test_a_batch_lost_more_often_than_the_bound_has_its_robots_removed(reference, tmp_path):
