@@ -29,10 +29,15 @@ def _wait_until_up(*links: tuple[str, str], limit: float = 10.0) -> None:
     participant starts, so a node must not start before its interface is really up.
     """
 
-    def up() -> bool:
-        return all(
-            json.loads(ip_in("-n", ns, "-j", "link", "show", "dev", dev).stdout or "[{}]")[0].get("operstate") == "UP"
+    def states() -> dict[str, str]:
+        return {
+            f"{ns}/{dev}": json.loads(ip_in("-n", ns, "-j", "link", "show", "dev", dev).stdout or "[{}]")[0].get(
+                "operstate", "absent"
+            )
             for ns, dev in links
-        )
+        }
 
-    wait_for(up, limit, f"the veth pair {links} coming up")
+    try:
+        wait_for(lambda: set(states().values()) == {"UP"}, limit, f"the veth pair {links} coming up")
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}: operstate {states()}") from None

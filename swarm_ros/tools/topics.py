@@ -24,8 +24,7 @@ from swarm_ros.ros.runtime import signals_held, tool_node
 
 _SHOWN_ITEMS = 8  # array items printed without --full
 _SHOWN_ROWS = 5  # decoded point-cloud rows printed without --full
-_BURST = 5  #: messages a 0.1 s step that mean a latched topic's history is still arriving (the status: 1 a step)
-_BURST_S = 1.5  #: seconds at most that --echo waits, beyond its first 0.3 s, for that history to end
+_LIVE_S = 1.0  #: --echo waits this long for a live message once a latched topic's history stops arriving
 
 
 def _message_class(type_name: str) -> type:
@@ -195,6 +194,15 @@ def _list(inspector: _Inspector, domain_id: int, seconds: float) -> int:
     return 0
 
 
+def _show(msg: object, full: bool) -> None:
+    print(to_yaml(msg, full))
+    rows = decoded_rows(msg, full)
+    if rows:
+        print(rows)
+    print("---")
+    sys.stdout.flush()
+
+
 def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: float, full: bool) -> int:
     """Print ``count`` messages of ``topic``; give up at ``deadline`` (``wait`` seconds after the start)."""
     # A busy graph can take seconds to show every participant: wait for the topic's publishers.
@@ -208,34 +216,39 @@ def _echo(inspector: _Inspector, topic: str, count: int, wait: float, deadline: 
             f"no publisher of {topic} on this domain within {wait:g} s "
             f"(topics seen: {', '.join(sorted(topics)) or 'none'})"
         )
-    got: list[object] = []
-    with signals_held():
+    # A latched stream replays its history first, oldest first, and on a loaded machine that burst can take longer
+    # than any wait guessed for it (CI once printed a status from before tick 0). Each message's publisher says when
+    # it sent it: those sent after this subscription are live, the rest the history. Echo prints live messages; a
+    # topic that sends none once its history is in (the shape, sent once), the newest of its history.
+    live: list[object] = []
+    kept: list[object] = []
+    since = time.time_ns()
+
+    def take(msg: object, info: dict) -> None:
+        (live if info.get("source_timestamp", 0) >= since else kept).append(msg)
+
+    with signals_held():  # (rclpy's hint names only the one-argument callback; it passes the info to two)
         inspector.node.create_subscription(
-            _message_class(topics[topic]), topic, got.append, inspector.publisher_qos(topic)
+            _message_class(topics[topic]),
+            topic,
+            take,  # type: ignore[arg-type]
+            inspector.publisher_qos(topic),
         )
-    # A latched stream replays its history first; of that burst only the newest messages matter. On a loaded
-    # machine the burst takes longer than its usual 0.3 s (CI once printed a status from before tick 0): go on
-    # while it still pours in, _BURST or more a 0.1 s step, for at most _BURST_S (a fast topic always pours).
-    inspector.spin_for(min(0.3, max(0.0, deadline - time.monotonic())))
-    until = min(deadline, time.monotonic() + _BURST_S)
-    while time.monotonic() < until:
-        before = len(got)
-        inspector.spin_for(0.1)
-        if len(got) - before < _BURST:
+    while not live and time.monotonic() < deadline:  # (a history still pouring in: a live message is near)
+        before = len(kept)
+        inspector.spin_for(min(_LIVE_S, max(0.0, deadline - time.monotonic())), until=lambda: bool(live))
+        if kept and len(kept) == before:
             break
-    del got[: max(0, len(got) - count)]
     printed = 0
-    while printed < count and time.monotonic() < deadline:
-        inspector.spin_for(0.1, until=lambda shown=printed: len(got) > shown)
-        while got and printed < count:
-            msg = got.pop(0)
-            print(to_yaml(msg, full))
-            rows = decoded_rows(msg, full)
-            if rows:
-                print(rows)
-            print("---")
+    if not live:
+        for msg in kept[-count:]:
+            _show(msg, full)
             printed += 1
-            sys.stdout.flush()
+    while live and printed < count:
+        _show(live.pop(0), full)
+        printed += 1
+        if not live and printed < count:
+            inspector.spin_for(max(0.0, deadline - time.monotonic()), until=lambda: bool(live))
     if printed == 0:
         print(f"no message on {topic} within {wait:g} s", file=sys.stderr)
         return 1
