@@ -86,7 +86,8 @@ def replay(
 def _publish(
     reader, classes: dict, domain_id: int, rate: float, wait: tuple[int, float], quiet: bool, offset: int, loop: bool
 ) -> int:
-    """Publish the bag (``wait``: the subscriptions every topic must have matched, then the seconds of delay)."""
+    """Publish the bag (``wait``: the subscriptions its publishers must have matched between them, then the seconds
+    of delay)."""
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from tqdm import tqdm
 
