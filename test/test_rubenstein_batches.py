@@ -10,6 +10,7 @@ from central_fakes import Log, WorldPort
 
 from swarm_ros.core import Shape, World
 from swarm_ros.core.errors import ContractError, ParameterError, Rejected
+from swarm_ros.core.metrics import Outcome
 from swarm_ros.core.params import RunParams, Settings
 from swarm_ros.core.rubenstein.batch import RubensteinBatch
 from swarm_ros.core.rubenstein.rule import JOINED, Robots
@@ -868,6 +869,30 @@ def test_a_monitor_stopped_mid_run_keeps_the_metrics_up_to_its_last_record(recor
     assert monitor.last_tick == t0 == 0 and len(monitor.history) == 1
 
 
+@pytest.mark.parametrize("recorder", [True, False])
+def test_a_monitor_stopped_as_records_come_ahead_of_their_metrics_keeps_the_last_record_they_reached(
+    recorded, recorder
+):
+    """CI stopped a run 60 ms after tick 0: the robots of 14 records were in, the metrics of tick 0 only. The run so
+    far is tick 0's record, not none."""
+    from swarm_ros.protocol.central_monitor import CentralMonitor
+
+    _, port = recorded
+    monitor, _ = _monitor()
+    if not recorder:
+        monitor = CentralMonitor(monitor.copy, RubensteinWire, clock=lambda: 0.0)
+    t0, m0, _ = port.records[0]
+    for tick, _, robots in port.records[:4]:
+        monitor.robots_record(_cloud(robots, tick))
+    monitor.metrics(_cloud(m0, t0))
+    assert monitor.robots_tick == port.records[3][0] and monitor.cut_at_record()
+    assert monitor.robots_tick == monitor.last_tick == 0 and len(monitor.history) == 1
+    monitor.finish(Outcome.INTERRUPTED)
+    zero = RubensteinRun(square(6), RunParams(40, algorithm="rubenstein", seed=6, max_ticks=TICKS))
+    zero.outcome = Outcome.INTERRUPTED
+    assert same(zero, monitor.copy)  # tick 0, its robots, its metrics row
+
+
 def test_a_restarted_world_keeps_the_runs_clock_from_its_checkpoint(tmp_path):
     """startup_seconds and wall_seconds are the run's, not the restarted process's (the study's model's world keeps
     them in its book the same way)."""
@@ -1041,9 +1066,9 @@ def test_the_restarts_a_world_lists_are_taken_even_when_a_restarted_world_lists_
 
 
 def test_the_world_lists_each_new_batch_process_and_its_own_restart_in_its_status_and_checkpoint(tmp_path):
-    """A later incarnation, or one started with the same command after the last one's liveliness lapsed (ros2 launch's
-    respawn), is a restart; an announcement heard again (a latched one) is not. A restarted world keeps the list of its
-    checkpoint and adds itself at the checkpoint's tick."""
+    """A later incarnation, or one started with the same command (ros2 launch's respawn: another process's nonce,
+    heard before or after the last one's liveliness lapsed), is a restart; an announcement heard again (a latched one)
+    is not. A restarted world keeps the list of its checkpoint and adds itself at the checkpoint's tick."""
     from swarm_ros.protocol.central_world import CentralWorld
     from swarm_ros.protocol.status import restarts_of
 
@@ -1058,21 +1083,24 @@ def test_the_world_lists_each_new_batch_process_and_its_own_restart_in_its_statu
         for k in range(2)
     }
     for name, strip in strips.items():
-        world.batch(name, strip)
+        world.batch(name, strip, process=f"{name} first")
     world.poll()  # tick 0 goes out, and is saved
-    world.batch("b0", strips["b0"])  # heard again: no new process
-    world.batch("b1", strips["b1"], incarnation=1)
+    world.batch("b0", strips["b0"], process="b0 first")  # heard again: no new process
+    world.batch("b1", strips["b1"], incarnation=1, process="b1 second")
+    world.batch("b0", strips["b0"], process="b0 second")  # the same command again, its process's lapse not yet heard
     world.liveliness("b0", 0, 1)
-    world.batch("b0", strips["b0"])  # the same command again, after a lapse
-    assert world.restarts == [(0, "b1"), (0, "b0")]
+    world.batch("b0", strips["b0"], process="b0 second")  # heard again
+    world.batch("b0", strips["b0"], process="b0 third")  # the same command again, after a lapse
+    assert world.restarts == [(0, "b1"), (0, "b0"), (0, "b0")]
     world.status("running", "running")
     assert restarts_of(world.port.statuses[-1][3]["restarts"]) == world.restarts
     world._save()
     own["incarnation"] = 1
     again = CentralWorld(RubensteinRun(square(6), params), RubensteinWire, own, WorldPort(), log, Rejections(log))
-    assert again.restarts == [(0, "b1"), (0, "b0"), (0, "world")]
-    again.batch("b1", strips["b1"], incarnation=1)  # its announcement, latched, again: known
-    assert len(again.restarts) == 3
+    assert again.restarts == [(0, "b1"), (0, "b0"), (0, "b0"), (0, "world")]
+    again.batch("b1", strips["b1"], incarnation=1, process="b1 second")  # its announcement, latched, again: known
+    again.batch("b0", strips["b0"], process="b0 third")
+    assert len(again.restarts) == 4
 
 
 def test_a_new_batch_process_that_announces_itself_counts_as_alive_and_its_next_lapse_is_a_loss():

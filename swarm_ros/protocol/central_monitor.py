@@ -50,8 +50,9 @@ class CentralMonitor:
         self.history = np.empty((0, len(self.columns)))  #: the metrics of every tick taken, as the world sent them
         self.robots_tick = -1  #: the tick of the last whole record
         self.recorded = 0  #: the tick of the last record the recorder was told
-        #: the whole records not yet told the recorder, (tick, robots) in order: their metrics are still on their way
-        self.untold: list[tuple[int, Any]] = []
+        #: the whole records whose metrics are still on their way, (tick, robots) in order
+        self.waiting: list[tuple[int, Any]] = []
+        self.kept: tuple[int, Any] | None = None  #: the last whole record whose metrics are in: a stopped run's end
         self.parts: dict[int, list[np.ndarray]] = {}  #: record tick -> the world shards' rows of it so far
         self.outcome: str | None = None  #: the world's outcome, once its status reports one
         self.outcome_tick = -1
@@ -97,25 +98,25 @@ class CentralMonitor:
             return True  # the other shards' robots of the record are still on their way
         self.robots_tick = tick
         _, robots = self.wire.robots_of(record)
-        if self.recorder is not None and tick > self.recorded:
-            self.untold.append((tick, robots))
+        self.waiting.append((tick, robots))
         if not self._record():  # (which leaves the copy at this record: one load of the swarm, not two)
             self.copy.load(tick, robots, self.history if len(self.history) else self.copy.history)
         return True
 
     def _record(self) -> bool:
-        """Tell the recorder each record, in order, once the metrics up to its tick are in too (they travel on another
-        topic, and may lag several records, as when a restarted monitor reads the topics' histories): it logs the
-        ticks since the one before, metrics and all. (Tick 0's: logged as the recorder opened.) The copy is left at
-        the last record; returns whether it told any."""
+        """Keep each record, in order, once the metrics up to its tick are in too (they travel on another topic, and
+        may lag several records, as when a restarted monitor reads the topics' histories, or as a run is stopped),
+        and tell the recorder: it logs the ticks since the one before, metrics and all. (Tick 0's: logged as the
+        recorder opened.) The copy is left at the last record; returns whether the recorder was told any."""
         told = False
-        while self.untold and self.untold[0][0] <= self.last_tick:
-            tick, robots = self.untold.pop(0)
-            self.copy.load(tick, robots, self.history[: tick + 1])
-            self.recorder.log(self.copy)
-            self.recorded, told = tick, True
+        while self.waiting and self.waiting[0][0] <= self.last_tick:
+            self.kept = tick, robots = self.waiting.pop(0)
+            if self.recorder is not None and tick > self.recorded:
+                self.copy.load(tick, robots, self.history[: tick + 1])
+                self.recorder.log(self.copy)
+                self.recorded, told = tick, True
         if told and self.recorded != self.robots_tick:  # later records wait for their metrics
-            self.copy.load(self.robots_tick, self.untold[-1][1], self.history)
+            self.copy.load(self.robots_tick, self.waiting[-1][1], self.history)
         return told
 
     def _whole(self, tick: int, rows: np.ndarray) -> np.ndarray | None:
@@ -178,11 +179,16 @@ class CentralMonitor:
         )
 
     def cut_at_record(self) -> bool:
-        """A run stopped before its end: keep the metrics up to its last record (one row a tick from tick 0), so
-        that the files written of it agree on its tick; returns whether there is a record to write."""
-        if not 0 <= self.robots_tick <= self.last_tick:
+        """A run stopped before its end: the copy at its last record whose metrics are in (later records' metrics
+        may still be on their way), and the metrics up to it (one row a tick from tick 0), so that the files written
+        of it agree on its tick; returns whether there is such a record to write."""
+        if self.kept is None:
             return False
-        self.history = self.history[: self.robots_tick + 1]
+        tick, robots = self.kept
+        self.history = self.history[: tick + 1]
+        if tick != self.robots_tick:
+            self.robots_tick, self.waiting = tick, []
+            self.copy.load(tick, robots, self.history)
         return True
 
     def finish(self, outcome: Outcome) -> float:
