@@ -120,7 +120,8 @@ class CentralWorld:
         self.watch = Watch(self.created)
         self.removes = removes and (own.get("on_batch_loss") == "remove", int(own.get("max_restarts", 0)))
         self.incarnations: dict[str, int] = {}  #: batch name -> the last incarnation it announced
-        self.lapsed: set[str] = set()  #: batches whose liveliness lapsed since they last announced themselves
+        #: batch name -> the process that last announced it (its messages' nonce, :mod:`swarm_ros.protocol.tag`)
+        self.processes: dict[str, str] = {}
         #: batch name -> when a new process of it announced itself, until DDS reports its liveliness (:meth:`_unseen`)
         self.unseen: dict[str, float] = {}
         #: batch name -> when its loss is confirmed, unless it is back, and why then
@@ -166,9 +167,10 @@ class CentralWorld:
         self.log.info(f"restarted: on from the checkpoint of tick {saved.tick}")
 
     # -- what comes in ----------------------------------------------------------------------
-    def batch(self, name: str, strip: tuple[int, int], incarnation: int = 0) -> None:
-        """Node ``name`` (its process ``incarnation``) announced the columns ``strip``
-        (:meth:`CentralLockstep.announce`); a new process of a batch being lost confirms the loss.
+    def batch(self, name: str, strip: tuple[int, int], incarnation: int = 0, process: str = "") -> None:
+        """Node ``name`` (its process ``incarnation``; ``process``: the nonce of that process's messages, "" for
+        unknown) announced the columns ``strip`` (:meth:`CentralLockstep.announce`); a new process of a batch being
+        lost confirms the loss.
 
         Raises:
             Rejected: a strip that does not fit the run, or a batch removed.
@@ -184,10 +186,14 @@ class CentralWorld:
         self.incarnations[name] = max(incarnation, before)
         send = self.ls.announce(name, strip)
         k = self.ls.number(name)
-        # a new process: a later incarnation, or one started with the same command (ros2 launch's respawn) after
-        # the last one's liveliness lapsed
-        again = incarnation - before if incarnation > before else int(name in self.lapsed and self.ls.started)
-        self.lapsed.discard(name)
+        # a new process: a later incarnation, or one started with the same command (ros2 launch's respawn), whose
+        # messages carry another nonce; an announcement heard again (latched) is not. (Not the liveliness lapse of
+        # the process before: CI saw the new process announce itself before the world heard of that lapse.)
+        known = self.processes.get(name)
+        if process:
+            self.processes[name] = process
+        replaced = bool(process) and known is not None and known != process and self.ls.started
+        again = incarnation - before if incarnation > before else int(replaced)
         if again:  # a new process: not the one whose liveliness lapsed; until DDS reports this one's, _unseen
             self.watch.replaced(name)  # watches it (one killed before its writer matched reports no lapse)
         if again or name not in self.watched:
@@ -258,7 +264,6 @@ class CentralWorld:
         """What the world does when peer ``name``'s liveliness lapsed or came back (``said``)."""
         if name in self.watch.lapsed:  # (a logger method picked by a conditional expression and called in an rclpy
             self.log.warning(said)  # event callback crashed the process inside rclpy, 3 runs of 3)
-            self.lapsed.add(name)
         else:
             self.log.info(said)
             self.losing.pop(name, None)  # back in time: a pause, not a loss

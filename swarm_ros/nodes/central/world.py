@@ -159,7 +159,8 @@ class CentralWorldNode:
     def _on_batch(self, msg: Int64MultiArray) -> None:
         try:
             name, incarnation, strip = checks.announcement(msg, self.world.run.grid.nx)
-            self.world.batch(name, strip, incarnation)
+            tag = self.gate.last_tag  # the tag the gate proved: its nonce tells this batch's process from another
+            self.world.batch(name, strip, incarnation, tag.nonce if tag is not None else "")
         except Rejected as fault:
             self.rejections.drop(BATCHES, fault)
 
