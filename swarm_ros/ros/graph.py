@@ -263,10 +263,21 @@ def watch_liveliness(node, peer: str, on_change: Callable[[int, int], None]) -> 
     node.create_subscription(Empty, alive_topic(peer), lambda _: None, ALIVE_QOS, event_callbacks=callbacks)
 
 
+#: The node name the ROS graph gives an endpoint whose participant has not yet said which node owns it
+#: (rmw_dds_common's graph cache, until the participant's ``ros_discovery_info`` message comes)
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
+
+
 def monitor_reads(node, topics: Sequence[str]) -> bool:
     """Whether ``node`` has discovered the monitor's reader of each of ``topics``: its writers match it then, and
-    a reader that matched after a topic's first messages would keep only the last of a latched one."""
-    return all(any(i.node_name == MONITOR for i in node.get_subscriptions_info_by_topic(t)) for t in topics)
+    a reader that matched after a topic's first messages would keep only the last of a latched one.
+
+    A reader the graph knows but not yet its node counts too: CI once saw a world wait 120 s on a monitor whose
+    liveliness writer it matched, its readers never named. Should that reader be another's (a ``ros2 topic echo``),
+    the monitor still finds tick 0 in the topics' histories: the world runs no further past the monitor's last
+    report than those keep (:func:`swarm_ros.protocol.central_world.monitor_reach`)."""
+    readers = (MONITOR, UNKNOWN_NODE)
+    return all(any(i.node_name in readers for i in node.get_subscriptions_info_by_topic(t)) for t in topics)
 
 
 def acknowledged(publishers) -> bool:
