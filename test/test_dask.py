@@ -277,6 +277,22 @@ def test_a_closed_connection_at_a_heartbeat_is_the_one_worker_error_dropped():
     assert keep(_heartbeat_failure(CommClosedError("closed"), msg="Unexpected exception during heartbeat."))
 
 
+def test_the_heartbeat_filter_outlives_the_plugins_teardown():
+    """A worker's last heartbeat can fail after its plugins are torn down (CI printed its traceback under load)."""
+    import logging
+
+    from swarm_ros.app.dask_workers import QuietHeartbeatAtClose, keep
+
+    log = logging.getLogger("distributed.worker")
+    plugin = QuietHeartbeatAtClose()
+    try:
+        plugin.setup(None)
+        plugin.teardown(None)
+        assert keep in log.filters
+    finally:
+        log.removeFilter(keep)
+
+
 def _drops_heartbeat_failures() -> bool:
     import logging
 
