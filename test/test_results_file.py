@@ -13,7 +13,7 @@ import pytest
 
 from swarm_ros.app.report_stats import group_stats, time_and_accuracy
 from swarm_ros.app.results_file import ExperimentError, read_results, stored_shape_file
-from swarm_ros.artifacts.run_dir import fill_summary
+from swarm_ros.artifacts.run_dir import OutputError, fill_summary
 
 pytestmark = pytest.mark.unit
 
@@ -124,3 +124,13 @@ def test_the_launcher_lists_a_restart_the_monitor_did_not_at_the_tick_it_happene
     ]
     assert after["processes"] == 2 and after["shutdown_seconds"] is None
     assert not fill_summary(tmp_path, restarted, processes=3), "nothing left to fill"
+
+
+def test_a_summary_the_launcher_cannot_fill_is_an_error_naming_it_and_left_as_it_was(tmp_path):
+    """CI once found processes null after a run that passed every other check: the launcher's fill had failed
+    unsaid. Now it says why (the launcher warns with it)."""
+    (tmp_path / "summary.json").write_text('{"processes": null, "restarts": [')
+    with pytest.raises(OutputError, match=r"summary.json: could not fill in processes: "):
+        fill_summary(tmp_path, [], processes=2)
+    assert (tmp_path / "summary.json").read_text() == '{"processes": null, "restarts": ['
+    assert [p.name for p in tmp_path.iterdir()] == ["summary.json"]

@@ -59,7 +59,7 @@ from swarm_ros.app.processes import (
 )
 from swarm_ros.app.supervision import END_GRACE, LATE_STATUS, MONITOR_GRACE, Supervisor
 from swarm_ros.artifacts.recording_options import RecordingOptions
-from swarm_ros.artifacts.run_dir import fill_summary, partial_bag, partial_recording, public_mode
+from swarm_ros.artifacts.run_dir import OutputError, fill_summary, partial_bag, partial_recording, public_mode
 from swarm_ros.core.algorithm import algorithm_of
 from swarm_ros.core.params import RunParams, Settings, node_defaults
 from swarm_ros.core.shapes import Shape
@@ -194,12 +194,13 @@ class Launch:
                 self._note("all node processes gone")
                 kept = ok or (interrupted and self.result() is not None)  # Ctrl-C'd after the run was written
                 if kept:  # an interrupted run too; its shutdown time only once the world's outcome was heard
-                    shutdown = (
-                        {}
-                        if self.ended_at is None
-                        else {"shutdown_seconds": round(time.monotonic() - self.ended_at, 3)}
-                    )
-                    fill_summary(out, self.restarts, processes=self.processes, **shutdown)
+                    ended = self.ended_at
+                    shutdown = {} if ended is None else {"shutdown_seconds": round(time.monotonic() - ended, 3)}
+                    try:
+                        fill_summary(out, self.restarts, processes=self.processes, **shutdown)
+                    except OutputError as exc:  # the run stands; what the launcher adds to it is missing: said
+                        self._note(str(exc))
+                        self._warn(None, str(exc))
                 lock.close()
                 # its own node is shut down by now, but Fast DDS keeps the segments it mapped (a killed peer's
                 # too) mapped in this process: this process is not a user that keeps them
@@ -434,8 +435,9 @@ class Launch:
         path.write_text("".join(f"[{at:.6f}] {event}\n" for at, event in self.timeline), encoding="utf-8")
 
     def _warn(self, progress, text: str) -> None:
+        """Say ``text`` as a warning: above the progress bar, or on stderr once there is none."""
         self.warnings.append(text)
-        progress.bar.write(f"swarm-ros: warning: {text}", file=sys.stderr)
+        (progress.bar.write if progress is not None else print)(f"swarm-ros: warning: {text}", file=sys.stderr)
 
     def _keep_logs(self, logs: Path, out: Path, ok: bool) -> None:
         target = logs_target(out, ok)

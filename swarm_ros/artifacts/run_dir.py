@@ -201,8 +201,12 @@ def fill_summary(out: Path, restarted: Sequence[tuple[int, str]] = (), **values:
     after the run directory was written), and add to its ``restarts`` those of the node processes
     ``restarted`` ((tick, name) per restart, as the launcher saw them) it lacks: a name's last restarts, at the
     launcher's ticks (at most the run's last), in tick order. Written to a fresh name and renamed over. Return
-    whether it was."""
-    path = out / "summary.json"
+    whether it was (False: nothing to fill).
+
+    Raises:
+        OutputError: summary.json could not be read or written, and why (it is left as it was).
+    """
+    path, tmp = out / "summary.json", None
     try:
         summary = json.loads(path.read_text(encoding="utf-8"))
         fields = {key: value for key, value in values.items() if key in summary and summary[key] is None}
@@ -222,8 +226,10 @@ def fill_summary(out: Path, restarted: Sequence[tuple[int, str]] = (), **values:
             f.write(summary_json(summary))
         public_mode(Path(tmp))
         Path(tmp).replace(path)
-    except (OSError, ValueError, AttributeError):
-        return False
+    except (OSError, ValueError, AttributeError, KeyError, TypeError) as exc:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)  # (a full disk: not left half-written beside it)
+        raise OutputError(f"{path}: could not fill in {', '.join(values) or 'restarts'}: {exc}") from None
     return True
 
 
