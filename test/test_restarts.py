@@ -4,7 +4,7 @@ A decision is a pure function of the state, the seed, the robot and the tick, an
 world waits in lockstep for every moving robot's decision, so a batch process killed
 before tick 0 or in the middle of the run changes nothing the run writes but ``restarts``
 in summary.json (and the recording's events). Also here: the bound on restarts (past it,
-the batch's robots are removed), the launcher's death (every node ends within 2 s) and the
+the batch's robots are removed), the launcher's death (every node ends moments later) and the
 Fast DDS shared-memory files a killed process leaves in /dev/shm. A batch killed again while
 it starts is the same moment as the first test's; ``--on-batch-loss remove`` over the
 graph is test_world_shards'.
