@@ -29,6 +29,7 @@ class WorldPort:
         self.sent_at: list[float] = []  # the clock at each area sent
         self.clock = lambda: 0.0
         self.status_acked = True  # whether every reader of the status has the last one (told())
+        self.reads = True  # whether the monitor reads the run's topics (monitor_reads())
 
     def watch_batch(self, name):
         self.watched.append(name)
@@ -47,7 +48,10 @@ class WorldPort:
         self.statuses.append((tick, outcome, message, values))
 
     def monitor_reads(self):
-        return True
+        return self.reads
+
+    def monitor_seen(self):
+        return "/swarm/status: robot_batch_0"
 
     def delivered(self):
         return True

@@ -30,3 +30,10 @@ def test_the_world_waits_until_the_monitor_reads_every_topic_named_or_not_yet_na
     assert not msgs.monitor_reads(_node({**named, "/swarm/status": []}), TOPICS)
     assert not msgs.monitor_reads(_node({**named, "/swarm/status": ["robot_batch_0"]}), TOPICS)
     assert msgs.monitor_reads(_node({**named, "/swarm/status": ["robot_batch_0", "_NODE_NAME_UNKNOWN_"]}), TOPICS)
+
+
+def test_a_world_waiting_for_its_monitor_can_say_who_reads_each_topic():
+    readers = {TOPICS[0]: ["monitor"], TOPICS[2]: ["_NODE_NAME_UNKNOWN_", "echo"]}
+    assert msgs.readers_seen(_node(readers), TOPICS) == (
+        "/swarm/darr_niazi/robots: monitor; /swarm/darr_niazi/metrics: none; /swarm/status: _NODE_NAME_UNKNOWN_, echo"
+    )

@@ -1103,6 +1103,29 @@ def test_the_world_lists_each_new_batch_process_and_its_own_restart_in_its_statu
     assert len(again.restarts) == 4
 
 
+def test_a_world_still_at_its_first_tick_for_want_of_the_monitors_readers_says_what_its_graph_lists():
+    """CI saw a world wait 120 s for a monitor it heard alive; its error now says who reads the run's topics."""
+    from swarm_ros.core.errors import RunFailed
+    from swarm_ros.protocol.central_world import CentralWorld
+    from swarm_ros.protocol.world_port import STILL_S
+
+    params, log, now = RunParams(40, algorithm="rubenstein", seed=6, max_ticks=TICKS), Log(), [0.0]
+    own = {"record_every": 20, "monitor_window": 0, "start_timeout": 60.0, "incarnation": 0, "checkpoint": ""}
+    port = WorldPort()
+    port.reads = False
+    run = RubensteinRun(square(6), params)
+    world = CentralWorld(run, RubensteinWire, own, port, log, Rejections(log), clock=lambda: now[0])
+    for k in range(2):
+        own_k = {"batch": k, "batches": 2, "region_cuts": "", "name": f"b{k}"}
+        world.batch(f"b{k}", CentralBatch(square(6), params, own_k, _no_drop).strip)
+    world.poll()
+    assert world.first  # tick 0 waits
+    now[0] = STILL_S + 1
+    with pytest.raises(RunFailed, match=r"at tick 0 \(waiting for: monitor, whose readers this world's ROS graph "
+                       r"lists as /swarm/status: robot_batch_0;"):  # fmt: skip
+        world.poll()
+
+
 def test_a_new_batch_process_that_announces_itself_counts_as_alive_and_its_next_lapse_is_a_loss():
     """Should the liveliness event of a restarted batch's process be lost (CI saw the world then miss its second death
     and wait 120 s), its announcement says it is alive: its next lapse is seen."""

@@ -76,9 +76,10 @@ class CentralWorld:
     ``publish_status(tick, outcome, message, values)`` (the status's values, as the study's model's world gives
     them: ``waiting_for``, ``rejected_messages``, ``rejected``; from tick 0 ``startup_seconds`` and the run's
     progress, ten a second; at the end ``wall_seconds``), and answers ``monitor_reads()`` (the monitor reads the
-    run's topics), ``delivered()`` (every reader has the last messages), ``told()`` (every reader of the status,
-    each batch too, has the last status) and ``startup_seconds()`` (from the start
-    of the run's command, or of this process, to now). ``rejections``: the messages its node dropped."""
+    run's topics; ``monitor_seen()``: who reads them, for an error), ``delivered()`` (every reader has the last
+    messages), ``told()`` (every reader of the status, each batch too, has the last status) and
+    ``startup_seconds()`` (from the start of the run's command, or of this process, to now). ``rejections``: the
+    messages its node dropped."""
 
     def __init__(
         self,
@@ -408,6 +409,8 @@ class CentralWorld:
         if self.ls.started and self.ended_at is None and self.watch.still(now):  # for STILL_S
             unheard = [name for name in self.ls.hosts.values() if name not in self.watched]  # a resumed world's
             awaited = (unheard or [MONITOR]) if self.first or self.pending else self.ls.awaited()
+            if self.first and not unheard and self.waiting:  # its first tick waits for the monitor to read
+                awaited = [f"{MONITOR}, whose readers this world's ROS graph lists as {self.port.monitor_seen()}"]
             raise self.watch.failure(self.run.tick, awaited, self.rejections.text())
         if self.ended_at is not None and self.reach is not None:  # the monitor holds the end: nothing more to keep
             # and each batch has the outcome it stops on (the status of a world that exited is lost to a batch

@@ -280,6 +280,15 @@ def monitor_reads(node, topics: Sequence[str]) -> bool:
     return all(any(i.node_name in readers for i in node.get_subscriptions_info_by_topic(t)) for t in topics)
 
 
+def readers_seen(node, topics: Sequence[str]) -> str:
+    """The nodes of each of ``topics``' readers as ``node``'s ROS graph lists them, for an error that says why a
+    world still waits for its monitor: ``<topic>: <node>, ...`` (``none``), one topic after another."""
+    return "; ".join(
+        f"{t}: {', '.join(sorted(i.node_name for i in node.get_subscriptions_info_by_topic(t))) or 'none'}"
+        for t in topics
+    )
+
+
 def acknowledged(publishers) -> bool:
     """Whether every reader of each of ``publishers`` has acknowledged what it sent so far."""
     return all(p.wait_for_all_acked(_NO_WAIT) for p in publishers)

@@ -209,6 +209,9 @@ class CentralWorldNode:
     def monitor_reads(self) -> bool:
         return msgs.monitor_reads(self.node, (self.topics.robots, self.topics.metrics, STATUS))
 
+    def monitor_seen(self) -> str:
+        return msgs.readers_seen(self.node, (self.topics.robots, self.topics.metrics, STATUS))
+
     def delivered(self) -> bool:
         return msgs.acknowledged((self.pub_status, self.pub_robots, self.pub_metrics))
 
