@@ -85,22 +85,6 @@ def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_
     assert not processes_mentioning(str(out)), "a process outlived the run"
 
 
-def test_a_batch_process_killed_mid_run_is_restarted_and_the_run_is_the_same(square, reference, tmp_path):
-    """A batch keeps nothing between ticks: its restarted process is sent its area again and decides as the
-    killed one would have."""
-    out = tmp_path / "run"
-    launcher = _launch(square, out, 2)
-    wait_rubenstein_saved(out, 1000)  # ticks are flowing: the monitor has recorded some
-    os.kill(node_pid(out, "robot_batch_0", timeout=10), signal.SIGKILL)
-    _, err = launcher.communicate(timeout=300)
-    assert launcher.returncode == 0, err.decode()
-    summary = assert_same_run(reference, out)
-    assert [r["node"] for r in summary["restarts"]] == ["robot_batch_0"]
-    assert "started robot_batch_0" in (out / "logs" / "launcher.log").read_text()
-    world = (out / "logs" / "world.log").read_text()  # the world follows each peer's liveliness
-    assert all(f"{name} is alive (liveliness)" in world for name in ("robot_batch_0", "robot_batch_1", "monitor"))
-
-
 @pytest.mark.parametrize("stop", ["ctrl-c", "a batch lost past --max-restarts"])
 def test_a_run_stopped_mid_way_is_written_up_to_its_last_record_as_simulate_writes_it(square, tmp_path, stop):
     """Ctrl-C, or a batch lost more often than the restart bound (its robots cannot be removed under this algorithm:
@@ -214,19 +198,21 @@ def _kill_at(out: Path, node: str, moment: str) -> None:
 @pytest.mark.parametrize(
     "kills",
     [
-        (("world", "starting"), ("monitor", "writing")),
+        (("world", "starting"), ("robot_batch_0", "mid-run"), ("monitor", "writing")),
         (("monitor", "starting"), ("world", "mid-run")),
         (("monitor", "mid-run"),),
     ],
-    ids=["world starting, monitor writing", "monitor starting, world mid-run", "monitor mid-run"],
+    ids=["world starting, a batch mid-run, monitor writing", "monitor starting, world mid-run", "monitor mid-run"],
 )
-def test_a_world_and_a_monitor_killed_go_on_and_the_run_is_the_same(square, reference, tmp_path, kills):
+def test_a_world_a_batch_and_a_monitor_killed_go_on_and_the_run_is_the_same(square, reference, tmp_path, kills):
     """The restarted world takes the last checkpoint (saved every 1,000 ticks, and at tick 0 before anything of it
     goes out; killed before that, it starts afresh), the batches decide the ticks after it again, the monitor
-    drops the metrics it already holds. The restarted monitor reads back the bag its process before left and takes
-    the records since from the topics' histories (the world never runs past what they keep; "writing": the world has
-    ended and exited, the bag is all there is). The run directory is simulate's, its bag holds the run once (robots
-    by tick), and its recording is whole. Kills at moments that do not overlap share a run."""
+    drops the metrics it already holds. A batch keeps nothing between ticks: its restarted process is sent its
+    area again and decides as the killed one would have. The restarted monitor reads back the bag its process
+    before left and takes the records since from the topics' histories (the world never runs past what they keep;
+    "writing": the world has ended and exited, the bag is all there is). The run directory is simulate's, its bag
+    holds the run once (robots by tick), and its recording is whole. Kills at moments that do not overlap share a
+    run."""
     out = tmp_path / "run"
     launcher = _launch(square, out, 2)
     for node, moment in kills:
@@ -240,6 +226,11 @@ def test_a_world_and_a_monitor_killed_go_on_and_the_run_is_the_same(square, refe
         if node == "world":
             assert "restarted: on from the checkpoint of tick" in said or "restarted before tick 0 went out" in said
             assert "dropped" not in said, said  # the batches' decisions of settled ticks, again from their histories
+        elif node.startswith("robot_batch"):
+            assert f"started {node}" in (out / "logs" / "launcher.log").read_text()
+            world = (out / "logs" / "world.log").read_text()  # the world follows each peer's liveliness
+            peers = ("robot_batch_0", "robot_batch_1", "monitor")
+            assert all(f"{name} is alive (liveliness)" in world for name in peers)
         else:
             [resumed_at] = re.findall(r"monitor restarted \(incarnation 1\): went on from tick (-?\d+)", said)
             assert int(resumed_at) > 0 if moment == "mid-run" else int(resumed_at) >= -1, said
