@@ -278,7 +278,8 @@ def test_a_closed_connection_at_a_heartbeat_is_the_one_worker_error_dropped():
 
 
 def test_the_heartbeat_filter_outlives_the_plugins_teardown():
-    """A worker's last heartbeat can fail after its plugins are torn down (CI printed its traceback under load)."""
+    """A worker's last heartbeat can fail after its plugins are torn down (the suite on three workers printed its
+    traceback)."""
     import logging
 
     from swarm_ros.app.dask_workers import QuietHeartbeatAtClose, keep

@@ -23,8 +23,8 @@ def _node(readers: dict[str, list[str]]):
 
 
 def test_the_world_waits_until_the_monitor_reads_every_topic_named_or_not_yet_named():
-    """A reader whose participant has not yet said its node's name (rmw_dds_common's placeholder) counts: CI once
-    saw the monitor's readers stay unnamed for 120 s. Another node's reader does not."""
+    """A reader whose participant has not yet said its node's name (rmw_dds_common's placeholder) counts: a full run of
+    the suite saw the monitor's readers stay unnamed for 120 s. Another node's reader does not."""
     named = dict.fromkeys(TOPICS, ["monitor"])
     assert msgs.monitor_reads(_node(named), TOPICS)
     assert not msgs.monitor_reads(_node({**named, "/swarm/status": []}), TOPICS)

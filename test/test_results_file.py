@@ -127,8 +127,8 @@ def test_the_launcher_lists_a_restart_the_monitor_did_not_at_the_tick_it_happene
 
 
 def test_a_summary_the_launcher_cannot_fill_is_an_error_naming_it_and_left_as_it_was(tmp_path):
-    """CI once found processes null after a run that passed every other check: the launcher's fill had failed
-    unsaid. Now it says why (the launcher warns with it)."""
+    """A fresh clone's suite once found processes null after a run that passed every other check: the launcher's
+    fill had failed unsaid. Now it says why (the launcher warns with it)."""
     (tmp_path / "summary.json").write_text('{"processes": null, "restarts": [')
     with pytest.raises(OutputError, match=r"summary.json: could not fill in processes: "):
         fill_summary(tmp_path, [], processes=2)

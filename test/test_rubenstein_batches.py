@@ -1104,7 +1104,8 @@ def test_the_world_lists_each_new_batch_process_and_its_own_restart_in_its_statu
 
 
 def test_a_world_still_at_its_first_tick_for_want_of_the_monitors_readers_says_what_its_graph_lists():
-    """CI saw a world wait 120 s for a monitor it heard alive; its error now says who reads the run's topics."""
+    """A full run of the suite saw a world wait 120 s for a monitor it heard alive; its error now says who reads
+    the run's topics."""
     from swarm_ros.core.errors import RunFailed
     from swarm_ros.protocol.central_world import CentralWorld
     from swarm_ros.protocol.world_port import STILL_S

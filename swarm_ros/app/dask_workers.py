@@ -24,8 +24,8 @@ class QuietHeartbeatAtClose(WorkerPlugin):
     stopped. A LocalCluster's scheduler lives in the process that started it, so a connection to it closed under
     a worker means that process is closing it. Only that record is dropped: every other error a worker logs
     still shows. Given only to a LocalCluster's workers, never to those of a scheduler the user runs. The filter
-    stays once the plugin is torn down: the worker's last heartbeat can come after that (CI saw the record, under
-    load).
+    stays once the plugin is torn down: the worker's last heartbeat can come after that (the suite saw the record,
+    run on three workers).
     """
 
     name = "swarm-ros-quiet-heartbeat-at-close"

@@ -272,10 +272,10 @@ def monitor_reads(node, topics: Sequence[str]) -> bool:
     """Whether ``node`` has discovered the monitor's reader of each of ``topics``: its writers match it then, and
     a reader that matched after a topic's first messages would keep only the last of a latched one.
 
-    A reader the graph knows but not yet its node counts too: CI once saw a world wait 120 s on a monitor whose
-    liveliness writer it matched, its readers never named. Should that reader be another's (a ``ros2 topic echo``),
-    the monitor still finds tick 0 in the topics' histories: the world runs no further past the monitor's last
-    report than those keep (:func:`swarm_ros.protocol.central_world.monitor_reach`)."""
+    A reader the graph knows but not yet its node counts too: a full run of the suite saw a world wait 120 s on a
+    monitor whose liveliness writer it matched, its readers never named. Should that reader be another's (a
+    ``ros2 topic echo``), the monitor still finds tick 0 in the topics' histories: the world runs no further past the
+    monitor's last report than those keep (:func:`swarm_ros.protocol.central_world.monitor_reach`)."""
     readers = (MONITOR, UNKNOWN_NODE)
     return all(any(i.node_name in readers for i in node.get_subscriptions_info_by_topic(t)) for t in topics)
 
