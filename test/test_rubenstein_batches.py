@@ -738,8 +738,13 @@ def test_a_world_whose_batches_have_not_acknowledged_the_outcome_waits_for_them_
     run, world, port = world_run(40, 20, told=False)
     assert world.held_end and world.finished
     assert port.clock() - world.ended_at == pytest.approx(LINGER, abs=0.01)  # it waited the whole grace
+    assert (
+        world.log.lines[-1]
+        == f"exits {LINGER:g} s after the end with the outcome in the status unacknowledged by a reader"
+    )
     _, at_once, quick = world_run(40, 20)  # every reader acknowledges: it ends once the monitor holds the end
     assert at_once.finished and quick.clock() - at_once.ended_at < 0.01
+    assert not any("unacknowledged" in line for line in at_once.log.lines)
 
 
 def test_the_world_holds_a_tick_past_the_monitors_reach_until_the_monitor_reports_more():

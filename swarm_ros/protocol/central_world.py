@@ -415,6 +415,13 @@ class CentralWorld:
         if self.ended_at is not None and self.reach is not None:  # the monitor holds the end: nothing more to keep
             # and each batch has the outcome it stops on (the status of a world that exited is lost to a batch
             # that had not acknowledged it: the batch then ran on until the launcher stopped it)
-            self.finished = self.held_end and (self.port.told() or now - self.ended_at > LINGER)
+            if self.held_end:
+                self._finish(self.port.told(), now - self.ended_at, "the outcome in the status")
         elif self.ended_at is not None:
-            self.finished = self.port.delivered() or now - self.ended_at > LINGER
+            self._finish(self.port.delivered(), now - self.ended_at, "the last messages")
+
+    def _finish(self, acknowledged: bool, since_end: float, what: str) -> None:
+        """Finished once every reader ``acknowledged`` ``what``, or ``LINGER`` after the end at most (saying so)."""
+        self.finished = acknowledged or since_end > LINGER
+        if not acknowledged and self.finished:  # a reader of a process that died, until DDS forgets it (3 s)
+            self.log.warning(f"exits {LINGER:g} s after the end with {what} unacknowledged by a reader")
