@@ -97,6 +97,8 @@ def make_fixtures(d: Path) -> None:
             "floatexp.yaml": EXPERIMENT.format(shape="star", sizes="442.0"),
             "twice.yaml": "/**:\n  ros__parameters:\n    robots: 500\n    robots: 600\n",
             "torusexp.yaml": EXPERIMENT.format(shape="torus", sizes="100") + "algorithm: [darr-niazi, rubenstein]\n",
+            "scaledexp.yaml": EXPERIMENT.format(shape="star", sizes="1036") + "shape_scale: 3\n",
+            "scaled.yaml": "/**:\n  ros__parameters:\n    shape_scale: 1.5\n",
             "rbcuts.yaml": "/**:\n  ros__parameters:\n    algorithm: rubenstein\n"
             '/robot_batch:\n  ros__parameters:\n    region_cuts: "500"\n',
         }

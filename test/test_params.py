@@ -40,3 +40,49 @@ def test_settings_and_run_params_pickle_by_name_and_compare_equal():
     params = RunParams(robots=50, seed=3, vision_radius=2.0)
     assert pickle.loads(pickle.dumps(params)) == params
     assert type(settings).__module__ == type(params).__module__ == "swarm_ros.core.params"
+
+
+def test_shape_scale_reaches_the_shape_every_engine_and_summary_takes(tmp_path):
+    """Settings.resolve (what simulate, every node and an experiment's runs derive the run from) reads the shape at
+    ``shape_scale``; both algorithms' summaries say it, only where it is not 1."""
+    from swarm_ros.core.algorithm import algorithm_of
+
+    for algorithm, robots in (("darr-niazi", 0), ("rubenstein", 60)):
+        shape, params = Settings(
+            shape="rectangle", shape_scale=2, world_radius=60, robots=robots, algorithm=algorithm, max_ticks=3
+        ).resolve()
+        assert shape.scale == 2 and shape.patches == 4 * 442
+        assert params.robots == (4 * 442 if robots == 0 else robots)
+        entry = algorithm_of(algorithm)
+        run = entry.hook("engine")(shape, params)
+        run.run()
+        assert entry.hook("summary")(run, wall_seconds=0.0)["shape_scale"] == 2
+        plain = Settings(shape="rectangle", robots=60, algorithm=algorithm, max_ticks=3).resolve()
+        run = entry.hook("engine")(*plain)
+        run.run()
+        assert "shape_scale" not in entry.hook("summary")(run, wall_seconds=0.0)
+
+
+def test_an_experiment_files_shape_scale_scales_every_shape_and_reaches_every_run(tmp_path):
+    """``shape_scale`` is one value for a whole experiment: its shapes' patch counts ("patches" group sizes) are the
+    scaled shapes', and each run (in-process here; a graph run takes the same settings) runs the scaled shape."""
+    import yaml
+
+    from swarm_ros.app.executors import run_inprocess
+    from swarm_ros.app.experiment_file import load_experiment
+
+    config = tmp_path / "scaled.yaml"
+    data = {
+        "name": "scaled",
+        "seed": 1,
+        "repetitions": 1,
+        "vision_radius": 1,
+        "shape_scale": 2,
+        "world_radius": 60,
+        "max_ticks": 2,
+        "shapes": {"rectangle": ["patches"]},
+    }
+    config.write_text(yaml.safe_dump(data))
+    (run,) = load_experiment(config).runs()
+    assert run.shape_scale == 2 and run.settings.robots == 4 * 442
+    assert run_inprocess(run)["shape_patches"] == 4 * 442

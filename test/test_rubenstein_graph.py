@@ -45,12 +45,14 @@ def reference(square, tmp_path_factory) -> Path:
     return out
 
 
-def assert_same_run(reference: Path, out: Path) -> dict:
+def assert_same_run(reference: Path, out: Path, scaled: bool = False) -> dict:
+    """``scaled``: the run read its shape at another scale, so its summary names another shape file."""
     for name in ("metrics.csv", "final_state.csv"):
         assert (out / name).read_bytes() == (reference / name).read_bytes(), name
     got, ref = (json.loads((d / "summary.json").read_text()) for d in (out, reference))
     differ = {k for k in ref if got.get(k) != ref[k]}
-    assert differ <= {"engine", "wall_seconds", "recording_robots_every", "bag_robots_every"}, differ
+    allowed = {"engine", "wall_seconds", "recording_robots_every", "bag_robots_every", *["shape"] * scaled}
+    assert differ <= allowed, differ
     assert got["engine"] == "ros2" and got["outcome"] == "timeout"
     # what every graph run's summary says beside the algorithm's own fields (docs/usage.md)
     assert isinstance(got["startup_seconds"], float) and 0 < got["startup_seconds"] < 120
@@ -69,12 +71,18 @@ def _launch(square: Path, out: Path, processes: int, *flags: str) -> subprocess.
 def test_k_batch_processes_write_the_run_simulate_writes(square, reference, tmp_path, processes, cuts):
     """K = 2 is every restart test's below, each compared with simulate's run the same way (S = 2 world shards, each
     holding its strips' robots and a halo, is the world shard's); K = 3 with the strips cut where the user says (x
-    positions in d: the grid's cell columns 0-1, 2-5 and 6-9)."""
+    positions in d: the grid's cell columns 0-1, 2-5 and 6-9). K = 1 reads the square as a 3 x 3 one at
+    ``--shape-scale 2``: every node scales it, and the run is the 6 x 6 square's."""
     out = tmp_path / "run"
-    launcher = _launch(square, out, processes, *([f"--region-cuts={cuts}"] if cuts else []))
+    shape, scaled = square, ()
+    if processes == 1:
+        shape, scaled = tmp_path / "square3.txt", ("--shape-scale", "2")
+        shape.write_text("###\n" * 3)
+    launcher = _launch(shape, out, processes, *([f"--region-cuts={cuts}"] if cuts else []), *scaled)
     _, err = launcher.communicate(timeout=300)
     assert launcher.returncode == 0, err.decode()
-    summary = assert_same_run(reference, out)
+    summary = assert_same_run(reference, out, scaled=bool(scaled))
+    assert summary.get("shape_scale", 1) == (2 if scaled else 1)
     assert summary["processes"] == processes
     assert (out / "recording.rrd").stat().st_size > 0 and (out / "final.png").stat().st_size > 0
     assert_bag_holds_run(out)

@@ -196,3 +196,40 @@ def test_regions_label_grids_as_scipy_ndimage_does(mask, connectivity):
     assert np.array_equal(got == 0, want == 0)
     pairs = {(int(a), int(b)) for a, b in zip(got[mask], want[mask])}
     assert len(pairs) == count  # one ndimage label per cc3d label, and the other way round
+
+
+# -- shape_scale: an integer upscale of a 2D shape --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["rectangle", "tyre"])
+def test_shape_scale_makes_each_pixel_a_block_and_keeps_the_holes(name):
+    """Each patch becomes a k x k block of patches, placed by the same centring rule; the hole count stays."""
+    one, three = Shape.load(name), Shape.load(name, World(100), scale=3)
+    assert three.patches == 9 * one.patches and three.scale == 3 and one.scale == 1
+    assert three.label == f"{name}-x3" and one.label == name
+    assert regions(~three.mask, 4)[1] == regions(~one.mask, 4)[1]  # the same number of holes (and outside)
+    block = np.ones((3, 3), dtype=bool)  # the scaled grid is the file's grid with each pixel a block, re-centred
+    x0, y0, x1, y1 = one.bbox
+    r1, r3 = one.world.radius, three.world.radius
+    small = one.mask[y0 + r1 : y1 + r1 + 1, x0 + r1 : x1 + r1 + 1]
+    sx0, sy0, sx1, sy1 = three.bbox
+    assert np.array_equal(three.mask[sy0 + r3 : sy1 + r3 + 1, sx0 + r3 : sx1 + r3 + 1], np.kron(small, block))
+
+
+def test_a_3x3_square_at_scale_2_is_the_6x6_square(tmp_path):
+    (tmp_path / "s3.txt").write_text("###\n" * 3)
+    (tmp_path / "s6.txt").write_text("######\n" * 6)
+    scaled, six = Shape.load(tmp_path / "s3.txt", scale=2), Shape.load(tmp_path / "s6.txt")
+    assert np.array_equal(scaled.mask, six.mask) and np.array_equal(scaled.seed_patches, six.seed_patches)
+
+
+def test_shape_scale_is_refused_where_it_cannot_apply(tmp_path):
+    with pytest.raises(ShapeError, match=r"^torus: shape_scale applies to 2D shapes only, got 2 for a 3D grid$"):
+        Shape.load("torus", scale=2)
+    mesh = tmp_path / "m.stl"
+    mesh.write_text("solid m\nendsolid m\n")  # refused before it is read
+    with pytest.raises(ShapeError, match=r"shape_scale applies to 2D shapes only, got 2; a mesh scales with --mesh"):
+        Shape.load(mesh, scale=2)
+    with pytest.raises(ShapeError, match=r"the grid is 183 x 183 at shape_scale 3 \(--world-radius 81 or more holds"):
+        Shape.load("star", scale=3)
+    assert Shape.load("star", World(81), scale=3).patches == 9 * Shape.load("star").patches  # the radius it named

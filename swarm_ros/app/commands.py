@@ -126,7 +126,9 @@ def _prepare(
         spawn=args.spawn,
         connect=args.connect or str(monitor.get("viewer_url", "")) or None,
     )
-    out = args.out or (Path(str(monitor["out_dir"])) if monitor.get("out_dir") else default_run_dir(shape.name, params))
+    out = args.out or (
+        Path(str(monitor["out_dir"])) if monitor.get("out_dir") else default_run_dir(shape.label, params)
+    )
     args.overwrite = bool(_flag(args.overwrite, monitor, "overwrite"))
     check_out_dir(out, args.overwrite)
     if not graph:  # numba and the engine loaded first: from the claim to the driver's StopFlag is then a moment

@@ -33,13 +33,13 @@ _TASK_SECONDS = 0.25  # seconds of runs a Dask task holds, once the runs' length
 _MIN_TASK_SECONDS = 0.05  # ... and at least this, near the end of a sweep of short runs
 _IN_FLIGHT = 3  # Dask tasks submitted ahead per worker: it starts the next as soon as one ends
 
-_SHAPES: dict[tuple[str, int], Shape] = {}
+_SHAPES: dict[tuple[str, int, int], Shape] = {}
 
 
 def _shape(spec: RunSpec) -> Shape:
-    key = (spec.shape_file, spec.world_radius)
+    key = (spec.shape_file, spec.world_radius, spec.shape_scale)
     if key not in _SHAPES:
-        _SHAPES[key] = Shape.load(spec.shape_file, World(spec.world_radius))
+        _SHAPES[key] = Shape.load(spec.shape_file, World(spec.world_radius), scale=spec.shape_scale)
     return _SHAPES[key]
 
 

@@ -239,7 +239,7 @@ def load_experiment(path: str | Path) -> Experiment:
         except InputError as exc:
             raise _fail(path, f"vision_radius[{i}]", str(exc)) from None
     loaded: dict[str, tuple[str, Shape]] = {}
-    shapes = _load_shapes(path, data["shapes"], World(fixed.world_radius), loaded)
+    shapes = _load_shapes(path, data["shapes"], World(fixed.world_radius), loaded, fixed.shape_scale)
     runs = own["repetitions"] * sum(len(sizes) for *_, sizes in shapes) * math.prod(len(v) for v in axes.values())
     # (an upper bound: a rubenstein point comes once whatever the study's model's axes list)
     if runs > MAX_RUNS:
@@ -268,10 +268,14 @@ def load_experiment(path: str | Path) -> Experiment:
 
 
 def _load_shapes(
-    path: Path, shapes: object, world: World, loaded: dict[str, tuple[str, Shape]] | None = None
+    path: Path,
+    shapes: object,
+    world: World,
+    loaded: dict[str, tuple[str, Shape]] | None = None,
+    scale: int = 1,
 ) -> tuple[tuple[str, str, int, tuple[int, ...]], ...]:
-    """The experiment's shapes as (name, source, patches, group sizes), each loaded and its sizes checked; ``loaded``
-    (if given) receives each shape's key in the file and the shape, by name."""
+    """The experiment's shapes as (name, source, patches, group sizes), each loaded (at ``shape_scale`` ``scale``) and
+    its sizes checked; ``loaded`` (if given) receives each shape's key in the file and the shape, by name."""
     if not isinstance(shapes, dict) or not shapes:
         raise _fail(path, "shapes", "must map at least one shape to its group sizes, e.g. 'star: [1025, patches]'")
     out, names = [], set()
@@ -281,7 +285,7 @@ def _load_shapes(
         if Path(source).suffix.lower() in (".txt", ".png") or "/" in source:
             source = str((path.parent / source).resolve())
         try:
-            shape = Shape.load(source, world)
+            shape = Shape.load(source, world, scale=scale)
         except InputError as exc:
             raise _fail(path, where, str(exc)) from None
         if shape.name in names:

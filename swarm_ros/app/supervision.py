@@ -239,7 +239,7 @@ def launch_setup(
     if Path(settings.shape).suffix.lower() in (".txt", ".png"):
         settings = settings.updated(shape=str(Path(settings.shape).absolute()))
     settings = settings.updated(robots=params.robots)
-    out = Path(out_dir or str(nodes["monitor"].get("out_dir") or "") or default_run_dir(shape.name, params)).absolute()
+    out = Path(out_dir or str(nodes["monitor"].get("out_dir") or "") or default_run_dir(shape.label, params)).absolute()
     check_out_dir(out, bool(nodes["monitor"].get("overwrite", False)))
     every = record_every(nodes)  # as swarm-ros run sets it, for both
     world = {**node_defaults(WORLD), **nodes["world"], "record_every": every}

@@ -69,6 +69,14 @@ class _Where:
         experiment="",
         recorded=False,
     )
+    shape_scale: int = _param(
+        1,
+        "integer upscale of a 2D shape: each pixel becomes a k x k block (3: the star's 1,036 patches become "
+        "9,324); --world-radius must hold it",
+        low=1,
+        high=100,
+        recorded=False,
+    )
 
 
 @dataclass(frozen=True)
@@ -204,7 +212,7 @@ class Settings(_ModelRest, _World, _Model, _Where):
 
         RUN_PARAMETER["world_radius"].check(self.world_radius)
         check_world_memory(self.world_radius)
-        shape = Shape.load(self.shape, World(self.world_radius), mesh_scale=self.mesh_scale)
+        shape = Shape.load(self.shape, World(self.world_radius), mesh_scale=self.mesh_scale, scale=self.shape_scale)
         check_world_memory(self.world_radius, dims=shape.dims)
         params = self.run_params(self.robots or shape.patches)
         from .run_bounds import check_run

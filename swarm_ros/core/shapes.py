@@ -199,6 +199,13 @@ def read_grid(path: Path, mesh_scale: float = 1.0) -> np.ndarray:
     return read_text_grid(path)
 
 
+def upscaled(grid: np.ndarray, scale: int, source: str) -> np.ndarray:
+    """A 2D shape grid ``scale`` times larger each way, every pixel a ``scale`` x ``scale`` block (ShapeError: 3D)."""
+    if grid.ndim != 2:
+        raise ShapeError(f"{source}: shape_scale applies to 2D shapes only, got {scale} for a 3D grid")
+    return np.repeat(np.repeat(grid, scale, axis=0), scale, axis=1)
+
+
 @dataclass(frozen=True, eq=False)
 class Shape:
     """A validated shape placed in a world.
@@ -210,6 +217,8 @@ class Shape:
         world: the world the shape is placed in.
         source: where it came from (a file path, or a description).
         mesh_scale: voxels per mesh unit it was voxelized at (1 for every shape not read from a mesh).
+        scale: the integer upscale of a 2D shape's grid it was read at (``shape_scale``: each pixel a
+            ``scale`` x ``scale`` block), 1 for none.
     """
 
     name: str
@@ -217,6 +226,7 @@ class Shape:
     world: World
     source: str
     mesh_scale: float = 1.0
+    scale: int = 1
     seed_patches: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -231,9 +241,11 @@ class Shape:
 
     # -- construction -----------------------------------------------------------
     @classmethod
-    def from_grid(cls, grid: np.ndarray, world: World, name: str, source: str, mesh_scale: float = 1.0) -> Shape:
+    def from_grid(
+        cls, grid: np.ndarray, world: World, name: str, source: str, mesh_scale: float = 1.0, scale: int = 1
+    ) -> Shape:
         """Place a file grid (top row first; a 3D grid top layer first) in a world of ``world``'s radius
-        and the grid's dimensions, by the centring rule, and validate it."""
+        and the grid's dimensions, by the centring rule, and validate it (``scale``: the upscale it was read at)."""
         grid = np.asarray(grid, dtype=bool)
         if grid.ndim not in (2, 3) or grid.size == 0 or not grid.any():
             raise ShapeError(f"{source}: empty shape (no shape patches)")
@@ -253,20 +265,25 @@ class Shape:
             k = int(np.argmax(beyond))
             at = ", ".join(str(c[k]) for c in coords)
             size = " x ".join(str(n) for n in reversed(grid.shape))
+            holds = max(int(np.abs(c).max()) for c in coords) + 2  # off the two outer layers (_validate)
+            scaled = f" at shape_scale {scale} (--world-radius {holds} or more holds it)" if scale > 1 else ""
             raise ShapeError(
                 f"{source}: shape reaches beyond the walls of the {world.describe()} world "
-                f"at patch ({at}); the grid is {size}"
+                f"at patch ({at}); the grid is {size}{scaled}"
             )
         mask = np.zeros(world.grid_shape, dtype=bool)
         mask[tuple(c + r for c in reversed(coords))] = True
-        return cls(name=name, mask=mask, world=world, source=source, mesh_scale=mesh_scale)
+        return cls(name=name, mask=mask, world=world, source=source, mesh_scale=mesh_scale, scale=scale)
 
     @classmethod
-    def load(cls, name_or_path: str | Path, world: World | None = None, mesh_scale: float = 1.0) -> Shape:
+    def load(
+        cls, name_or_path: str | Path, world: World | None = None, mesh_scale: float = 1.0, scale: int = 1
+    ) -> Shape:
         """Load a built-in shape by name, or a shape file (text grid, PNG, layered text grid or mesh) by path.
 
         ``world`` gives the radius; a 3D shape goes into a cubic world of that radius.
-        ``mesh_scale`` (voxels per mesh unit) applies to meshes only.
+        ``mesh_scale`` (voxels per mesh unit) applies to meshes only; ``scale`` (``shape_scale``: an integer
+        upscale, each pixel a ``scale`` x ``scale`` block) to 2D shapes only.
 
         Raises:
             ShapeError: unknown name, unreadable file or invalid shape; the message names the file.
@@ -279,6 +296,10 @@ class Shape:
             raise ShapeError(f"the shape name is empty ({known}; or a .txt / .png file or a mesh)")
         if mesh_scale != 1.0 and Path(text).suffix.lower() not in MESH_SUFFIXES:
             raise ShapeError(f"{text}: mesh_scale applies to mesh shapes (.stl, .obj, .ply) only, got {mesh_scale:g}")
+        if scale != 1 and Path(text).suffix.lower() in MESH_SUFFIXES:
+            raise ShapeError(
+                f"{text}: shape_scale applies to 2D shapes only, got {scale}; a mesh scales with --mesh-scale"
+            )
         builtins = {**flat, **solid}
         if text in builtins:
             path = builtins[text]
@@ -293,8 +314,10 @@ class Shape:
             except OSError as exc:  # a name too long, a folder on the way not readable, ...
                 raise ShapeError(f"{shown(text)}: cannot read shape file ({exc.strerror or exc})") from None
         grid = read_grid(path, mesh_scale)
+        if scale != 1:
+            grid = upscaled(grid, scale, text)
         try:
-            return cls.from_grid(grid, world, name=name, source=str(path), mesh_scale=mesh_scale)
+            return cls.from_grid(grid, world, name=name, source=str(path), mesh_scale=mesh_scale, scale=scale)
         except ShapeError as exc:
             if path.suffix.lower() not in MESH_SUFFIXES:
                 raise
@@ -302,6 +325,11 @@ class Shape:
             raise ShapeError(f"{exc} (at mesh_scale {mesh_scale:g}; --mesh-scale sets another)") from None
 
     # -- properties -------------------------------------------------------------
+    @property
+    def label(self) -> str:
+        """Its name, with the upscale it was read at if any (``star-x3``): what a default run directory is named by."""
+        return self.name if self.scale == 1 else f"{self.name}-x{self.scale}"
+
     @property
     def patches(self) -> int:
         """Number of shape patches."""

@@ -119,6 +119,7 @@ def run_summary(
     overhead: dict[str, float | None] | None = None,
     rejected: dict[str, int] | None = None,
     mesh_scale: float = 1.0,
+    shape_scale: int = 1,
     graph: dict[str, int | None] | None = None,
     history=None,
 ) -> dict:
@@ -129,8 +130,9 @@ def run_summary(
     ``unlocalized`` counts the robots still in the world that did not localize;
     ``overhead`` (ROS graph only) adds ``startup_seconds`` and ``shutdown_seconds``, placed
     after ``wall_seconds``; ``rejected`` (ROS graph only) the messages the world and the
-    monitor dropped as malformed or illegal, as ``rejected_messages``; ``mesh_scale`` is a field
-    only where it is not 1 (a mesh shape at another scale), so that 2D summaries keep their fields;
+    monitor dropped as malformed or illegal, as ``rejected_messages``; ``mesh_scale`` and ``shape_scale`` are
+    fields only where they are not 1 (a mesh shape at another scale, a 2D shape upscaled), so that other summaries
+    keep their fields;
     ``graph`` (ROS graph only) how it ran: ``processes`` (robot batches K, null where no launcher said) and
     ``world_shards``. ``history`` (every tick's metrics) gives ``fill_50_tick`` and ``fill_90_tick``, the first
     ticks at whose end half and 90% of the shape's patches were filled (null: never), and ``coverage`` is the
@@ -142,6 +144,7 @@ def run_summary(
         "shape": shape,
         "shape_patches": shape_patches,
         **({"mesh_scale": mesh_scale} if mesh_scale != 1.0 else {}),
+        **({"shape_scale": shape_scale} if shape_scale != 1 else {}),
         **{
             p.name: robots if p.name == "robots" else world_radius if p.name == "world_radius" else params[p.name]
             for p in RUN_PARAMETERS

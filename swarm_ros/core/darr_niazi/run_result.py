@@ -49,6 +49,7 @@ def summarize(
         overhead=overhead,
         rejected=rejected,
         mesh_scale=shape.mesh_scale,
+        shape_scale=shape.scale,
         graph=graph,
         history=history,
     )

@@ -427,6 +427,7 @@ def summary_of(run: RubensteinRun, wall_seconds: float, stopped: Outcome | None 
     return {
         "shape": run.shape.name,
         "shape_pixels": run.pixels,
+        **({"shape_scale": run.shape.scale} if run.shape.scale != 1 else {}),  # (an upscaled shape's only)
         **{k: v for k, v in run.params.as_dict().items() if RUN_PARAMETER[k].algorithm in ("", RUBENSTEIN)},
         "world_radius": run.shape.world.radius,  # the grid the shape was read into
         "engine": "inprocess",

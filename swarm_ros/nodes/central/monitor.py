@@ -58,7 +58,7 @@ class CentralMonitorNode:
         wire, self.topics = self.algorithm.hook("wire")(self.shape.world.dims), CentralTopics.of(self.algorithm.name)
         self.incarnation = int(own["incarnation"])
         p = self.params
-        self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.name, p)
+        self.out = Path(own["out_dir"]) if own["out_dir"] else run_dir.default_run_dir(self.shape.label, p)
         self.overwrite = bool(own["overwrite"])
         run_dir.check_out_dir(self.out, self.overwrite)  # fail before the run, not after it
         copy = self.algorithm.hook("engine")(self.shape, self.params)  # the run as the world reports it
