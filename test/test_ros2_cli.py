@@ -145,6 +145,7 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
     values = {
         "shape": "rectangle",
         "mesh_scale": "1.0",
+        "shape_scale": "2",
         "robots": "300",
         "algorithm": "darr-niazi",
         "vision_radius": "1.5",
@@ -157,7 +158,7 @@ def test_ros2_launch_honours_a_parameter_file_an_output_directory_and_every_run_
         "wiggle_deg": "30.0",
         "fail_fraction": "0.05",
         "fail_tick": "100",
-        "world_radius": "20",
+        "world_radius": "30",
     }
     # every run argument the graph takes: the rubenstein algorithm's it refuses, so far
     assert set(values) == {p.name for p in RUN_PARAMETERS if p.algorithm != RUBENSTEIN}, "every run argument is given"
