@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """The README's main command, ``swarm-ros run --shape star`` (K = 2, recording and bag on), A/B against a base tree.
 
-    .venv/bin/python scripts/bench_run.py --before /tmp/base [--pairs 5] [-- extra run flags]
+    .venv/bin/python scripts/bench_run.py --before /tmp/base [--pairs 5] [--warm 1] [-- extra run flags]
 
 ``--before DIR`` is a checkout of the base revision (``git archive <rev> | tar -x -C DIR``); its runs take the package
-from there (PYTHONPATH), this tree's from here. The two alternate, pair by pair, after one unmeasured run of each
-(numba's cache, the OS's file cache). Per side: the whole command's seconds, the run's own (summary.json's
+from there (PYTHONPATH), this tree's from here. The two alternate, pair by pair, after ``--warm`` unmeasured runs
+of each (1: numba's cache, the OS's file cache). Per side: the whole command's seconds, the run's own (summary.json's
 ``wall_seconds``, tick 0 to the outcome) and the command's CPU seconds (its children's), as median (min-max); then
 this tree's over the base's, per pair, as median (min-max). Both runs' metrics.csv and final_state.csv must be
 byte-identical, or the script says so and exits 1.
@@ -56,8 +56,11 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", type=Path, required=True, help="a checkout of the base revision")
     parser.add_argument("--pairs", type=int, default=5)
+    parser.add_argument("--warm", type=int, default=1, help="unmeasured runs of each tree first (default: 1)")
     parser.add_argument("flags", nargs="*", help="run flags (default: --shape star)")
     args = parser.parse_args()
+    if args.pairs < 1 or args.warm < 0:
+        parser.error(f"--pairs {args.pairs} --warm {args.warm}: at least 1 pair, and no fewer than 0 warm runs")
     if not (args.before / "swarm_ros" / "__init__.py").is_file():
         parser.error(f"--before {args.before}: no swarm_ros package there")
     flags = args.flags or ["--shape", "star"]
@@ -65,8 +68,9 @@ def main() -> int:
     got: dict[str, list[tuple[float, float, float]]] = {name: [] for name in sides}
     with tempfile.TemporaryDirectory(prefix="swarm_ros-bench-run-") as tmp:
         base = Path(tmp)
-        for name, tree in sides.items():  # unmeasured: caches
-            one(tree, base / f"warm-{name}", flags)
+        for warm in range(args.warm):  # unmeasured: caches
+            for name, tree in sides.items():
+                one(tree, base / f"warm-{name}-{warm}", flags)
         for pair in range(args.pairs):
             for name, tree in sides.items():
                 out = base / f"{name}-{pair}"
