@@ -14,6 +14,8 @@ from bagcheck import assert_bag_holds_run
 from recordings import Recording
 from waiting import wait_for
 
+from swarm_ros.ros.shm import shm_locks
+
 
 def run_env() -> dict[str, str]:
     env = dict(os.environ)
@@ -183,6 +185,21 @@ def wait_saved(logs: Path, tick: int, timeout: float = 180, name: str = "") -> i
         lambda: [t for t in (saved_tick(logs),) if t >= tick], timeout, f"tick {tick} held", poll=0.1
     )
     return saved[0]
+
+
+def kill_starting(out: Path, node: str, timeout: float = 60) -> int:
+    """SIGKILL ``node``'s first process in the run into ``out`` as it starts, long before tick 0: once its DDS
+    participant holds its own two shared-memory ports. (A process forked from the launcher makes its participant at
+    once, and one killed while Fast DDS makes a port can leave a port that wedges every later participant on the
+    host: docs/faults.md. CI saw it once, with a batch killed as soon as its process existed.)"""
+    pid = node_pid(out, node, timeout=timeout)
+
+    def ported() -> bool:
+        return sum("fastrtps_port" in f for f in shm_locks(pid)) >= 2 or not os.path.exists(f"/proc/{pid}")
+
+    wait_for(ported, timeout, f"{node}'s shared-memory ports", poll=0.005)
+    os.kill(pid, signal.SIGKILL)
+    return pid
 
 
 def kill_node(out: Path, node: str, not_pid: int | None = None) -> int:

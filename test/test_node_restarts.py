@@ -28,6 +28,7 @@ from graph_runs import (
     STAR_SHORT,
     finish_restarted_run,
     kill_node,
+    kill_starting,
     node_pid,
     processes_mentioning,
     run_env,
@@ -78,11 +79,11 @@ def _final_tick(reference: Path) -> int:
 def test_a_world_killed_before_tick_0_and_a_monitor_killed_while_it_writes_the_run_directory_come_back(
     reference, tmp_path
 ):
-    """The world as soon as its process exists (still importing) starts again; the monitor killed once the writing
+    """The world killed as it starts (graph_runs.kill_starting) starts again; the monitor killed once the writing
     of the run directory has begun (write_run's temporary directory) writes it again, whole."""
     out = tmp_path / "run"
     launcher = _launch(out)
-    kill_node(out, "world")
+    kill_starting(out, "world")
     wait_for(lambda: list(tmp_path.glob(".run.tmp-*")), 180, "the run directory's writing", poll=0.001)
     kill_node(out, "monitor")
     summary = finish_restarted_run(launcher, reference, out, ["world", "monitor"])

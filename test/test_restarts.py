@@ -28,6 +28,7 @@ from graph_runs import (
     alive,
     assert_identical_run,
     bag_tick,
+    kill_starting,
     node_pid,
     processes_mentioning,
     run_env,
@@ -107,11 +108,11 @@ def _world_log(out: Path) -> str:
 
 
 def test_a_batch_killed_before_tick_0_and_another_mid_run_are_restarted_and_the_run_is_identical(reference, tmp_path):
-    """Batch 1 as soon as its process exists (still importing, long before tick 0) starts again; batch 2 killed
+    """Batch 1 killed as it starts (graph_runs.kill_starting: long before tick 0) starts again; batch 2 killed
     mid-run starts again from the world's snapshot of its area."""
     out = tmp_path / "run"
     launcher = _launch(out)
-    os.kill(node_pid(out, "robot_batch_1"), signal.SIGKILL)
+    kill_starting(out, "robot_batch_1")
     # killed once the world has saved tick 81: robots cross its strip's edges at every tick from 80 to 84 (ticks
     # 77-79 have none, and a kill that once landed there left the test nothing to check)
     wait_saved(staged_logs(out), 81)

@@ -18,7 +18,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bagcheck import assert_bag_holds_run
-from graph_runs import node_pid, processes_mentioning, run_env, staged_logs, wait_monitor_holds, wait_rubenstein_saved
+from graph_runs import (
+    kill_starting,
+    node_pid,
+    processes_mentioning,
+    run_env,
+    staged_logs,
+    wait_monitor_holds,
+    wait_rubenstein_saved,
+)
 from waiting import wait_for
 
 from swarm_ros.app import cli
@@ -193,14 +201,17 @@ def saved_tick(checkpoint: Path) -> int:
 
 
 def _kill_at(out: Path, node: str, moment: str) -> None:
-    """SIGKILL ``node`` of the run into ``out`` at ``moment``: "starting" (as soon as its process is there),
+    """SIGKILL ``node`` of the run into ``out`` at ``moment``: "starting" (graph_runs.kill_starting),
     "mid-run" (past the world's checkpoint of tick 1000), or "writing" (the monitor: the run directory's temporary
     folder is there)."""
     if moment == "mid-run":
         wait_rubenstein_saved(out, 1000)
     if moment == "writing":
         wait_for(lambda: any(out.parent.glob(".run.tmp-*")), 240, "the monitor writing the run", poll=0.002)
-    os.kill(node_pid(out, node, timeout=30), signal.SIGKILL)
+    if moment == "starting":
+        kill_starting(out, node, timeout=30)
+    else:
+        os.kill(node_pid(out, node, timeout=30), signal.SIGKILL)
 
 
 @pytest.mark.parametrize(

@@ -8,8 +8,6 @@ and test_rubenstein_graph's (a batch): the launcher's bound is the same for ever
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -19,7 +17,7 @@ from graph_runs import (
     assert_identical_run,
     finish_restarted_run,
     kill_node,
-    node_pid,
+    kill_starting,
     processes_mentioning,
     run_env,
     staged_logs,
@@ -97,7 +95,7 @@ def test_world_shards_keep_to_the_worlds_tick_rate_and_the_run_is_simulates(tmp_
 def test_a_run_over_three_world_shards_one_killed_while_starting_is_simulates(small_reference, tmp_path):
     out = tmp_path / "run"
     launcher = _launch_small(out)
-    os.kill(node_pid(out, "world_shard_0"), signal.SIGKILL)  # seen as soon as it exists: long before tick 0
+    kill_starting(out, "world_shard_0")  # long before tick 0
     summary = finish_restarted_run(launcher, small_reference, out, ["world_shard_0"])
     assert summary["restarts"] == [{"tick": 0, "node": "world_shard_0"}]
     assert summary["engine"] == "ros2"
