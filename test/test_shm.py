@@ -76,3 +76,28 @@ def test_a_later_run_tidies_what_a_killed_launcher_recorded_and_only_that(tmp_pa
         for pair in made:
             for path in pair:
                 path.unlink(missing_ok=True)
+
+
+def test_a_port_a_process_died_making_is_found_and_nothing_else(tmp_path, monkeypatch):
+    """An empty fastrtps_port file without its lock file, held by no process, is what a process killed while Fast
+    DDS made the port leaves (a CI run here: every later participant on the host waited on it in Node()); a port
+    with its lock file, one with contents, and an empty one a live process holds open (its maker at work) are not;
+    `swarm-ros run` and the launch file refuse to start on one, naming it."""
+    from swarm_ros.app.processes import LaunchError, check_shared_memory
+    from swarm_ros.ros import shm
+
+    wedged, done, full, held = (tmp_path / f"fastrtps_port{n}" for n in (7002, 7003, 7004, 7005))
+    wedged.touch()
+    done.touch()
+    (tmp_path / "fastrtps_port7003_el").touch()
+    full.write_bytes(bytes(64))
+    held.touch()
+    with open(held, "rb"):
+        assert shm.half_made_ports(tmp_path) == [str(wedged)]
+        monkeypatch.setattr(shm, "SHM_DIR", tmp_path)
+        with pytest.raises(LaunchError, match=r"fastrtps_port7002: a Fast DDS shared-memory port a killed"):
+            check_shared_memory()
+        monkeypatch.undo()
+    wedged.unlink()
+    assert shm.half_made_ports(tmp_path) == [str(held)]  # no longer held: its maker died
+    assert shm.half_made_ports(tmp_path / "none") == []

@@ -148,6 +148,7 @@ def check_graph(
             batches, region cuts that do not cut the world into ``processes`` strips (the algorithm's
             ``check_graph``), a bad enclave path; in one line (``flags``: how the user named the batch count and
             the enclaves).
+        LaunchError: a Fast DDS port in /dev/shm would keep the nodes from starting (:func:`check_shared_memory`).
     """
     from swarm_ros.core.algorithm import algorithm_of
     from swarm_ros.core.resources import check_world_memory
@@ -165,6 +166,24 @@ def check_graph(
         raise InputError(
             f"{flags[1]} must be an enclave path like /swarm_ros (names of letters, digits and _ "
             f"after each /), got {enclaves!r}"
+        )
+    check_shared_memory()
+
+
+def check_shared_memory() -> None:
+    """Refuse to start nodes that would wait for ever in Fast DDS's ``Node()`` on a port a killed process left half
+    made (:func:`swarm_ros.ros.shm.half_made_ports`).
+
+    Raises:
+        LaunchError: naming the file, and what to do.
+    """
+    from swarm_ros.ros.shm import half_made_ports
+
+    wedged = half_made_ports()
+    if wedged:
+        raise LaunchError(
+            f"{wedged[0]}: a Fast DDS shared-memory port a killed process left half made (0 bytes); every ROS 2 "
+            f"process on this host that opens it waits for ever. No process holds it: remove it, then run again"
         )
 
 

@@ -145,3 +145,22 @@ def tidy_dead_runs() -> list[str]:
         )
         record.unlink(missing_ok=True)
     return removed
+
+
+def half_made_ports(shm_dir: Path | None = None) -> list[str]:
+    """The Fast DDS port segments (``fastrtps_port*``) in ``shm_dir`` (/dev/shm) that a process died making: empty,
+    without the lock file their maker adds once it is done, and held by no live process (a maker at work holds its
+    file open). Every participant that opens such a port, in any ROS 2 process on the host, waits for it for ever
+    (docs/faults.md)."""
+    empty = []
+    try:
+        ports = list((shm_dir or SHM_DIR).glob("fastrtps_port*"))
+    except OSError:
+        return []
+    for port in ports:
+        try:
+            if not port.name.endswith("_el") and port.stat().st_size == 0 and not Path(f"{port}_el").exists():
+                empty.append(str(port))
+        except OSError:
+            continue  # gone meanwhile
+    return sorted(set(empty) - in_use(set(empty))) if empty else []
