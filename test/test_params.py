@@ -42,7 +42,7 @@ def test_settings_and_run_params_pickle_by_name_and_compare_equal():
     assert type(settings).__module__ == type(params).__module__ == "swarm_ros.core.params"
 
 
-def test_shape_scale_reaches_the_shape_every_engine_and_summary_takes(tmp_path):
+def test_shape_scale_reaches_the_shape_every_engine_and_summary_takes():
     """Settings.resolve (what simulate, every node and an experiment's runs derive the run from) reads the shape at
     ``shape_scale``; both algorithms' summaries say it, only where it is not 1."""
     from swarm_ros.core.algorithm import algorithm_of
